@@ -1,0 +1,31 @@
+"""ament_python package ssa_fusion (see README.md)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "ssa_fusion"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/launch", glob("launch_scripts/*.launch.py")),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="ssa_fusion developers",
+    maintainer_email="dev@ssa-fusion.invalid",
+    description="Hankel-DMD surrogate + Keplerian EKF for satellites observed with gaps",
+    license="Apache-2.0",
+    python_requires=">=3.10",
+    entry_points={
+        "console_scripts": [
+            "ssa-fusion = ssa_fusion.cli:main",
+        ],
+    },
+)

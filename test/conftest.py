@@ -1,0 +1,21 @@
+"""Shared fixtures. Graph tests get a `ros_graph` in a private ROS domain, loopback only."""
+
+import os
+
+import pytest
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+
+
+@pytest.fixture
+def ros_graph(tmp_path):
+    """A RosGraph (see test/ros_graph.py) torn down after the test, whatever happens."""
+    from ros_graph import RosGraph
+
+    graph = RosGraph(tmp_path)
+    try:
+        yield graph
+    finally:
+        problems = graph.close()
+    if problems:
+        pytest.fail("node process(es) ended badly:\n" + "\n\n".join(problems))

@@ -1,0 +1,52 @@
+"""Tests for ssa_fusion.core.measurement."""
+
+import numpy as np
+import pytest
+
+from ssa_fusion.core.frames import COLUMBUS, razel_eci, wrap_angle
+from ssa_fusion.core.measurement import POSITION, RANGE_AZ_EL, PositionModel, RazelModel
+
+
+def test_position_model_orbit_and_pendulum():
+    m = PositionModel()
+    assert m.kind == POSITION == 0 and m.angle_mask == (False, False, False)
+    x = np.arange(6.0) + 1
+    z, H = m.h_and_H(x, 0.0)
+    np.testing.assert_array_equal(z, x[:3])
+    np.testing.assert_array_equal(H, np.eye(3, 6))
+    z[0] = 99.0  # z is a copy, the state is untouched
+    assert x[0] == 1.0
+    with pytest.raises(ValueError):
+        H[0, 0] = 5.0  # the cached H is read-only
+
+    p = PositionModel(observed=(0,))
+    assert p.angle_mask == (False,)
+    z, H = p.h_and_H(np.array([0.3, -0.1]), 1.0)
+    np.testing.assert_array_equal(z, [0.3])
+    np.testing.assert_array_equal(H, [[1.0, 0.0]])
+
+    q = PositionModel(observed=(2, 0))
+    z, H = q.h_and_H(x, 0.0)
+    np.testing.assert_array_equal(z, [3.0, 1.0])
+    np.testing.assert_array_equal(H @ x, z)
+
+
+def test_razel_model_matches_frames_and_finite_differences():
+    jd0 = 2460310.5
+    m = RazelModel(COLUMBUS, jd0)
+    assert m.kind == RANGE_AZ_EL == 1 and m.angle_mask == (False, True, True)
+    x = np.array([1200.0, -5200.0, 4300.0, 5.1, 1.2, -4.4])
+    t = 3725.0
+    z, H = m.h_and_H(x, t)
+    np.testing.assert_allclose(z, razel_eci(x, jd0 + t / 86400.0, COLUMBUS), atol=1e-7)
+    np.testing.assert_array_equal(m.h(x, t), z)
+    np.testing.assert_array_equal(m.H(x, t), H)
+    assert 0.0 <= z[1] < 2 * np.pi
+    num = np.zeros((3, 6))
+    for k in range(6):
+        dx = np.zeros(6)
+        dx[k] = 1e-3
+        d = m.h(x + dx, t) - m.h(x - dx, t)
+        d[1:] = wrap_angle(d[1:])
+        num[:, k] = d / 2e-3
+    np.testing.assert_allclose(H, num, rtol=1e-6, atol=1e-12)
