@@ -31,7 +31,7 @@ def stamp_to_seconds(stamp: Time) -> float:
 
 def seconds_to_stamp(t: float) -> Time:
     """float seconds (>= 0) -> builtin_interfaces/Time, rounded to the nanosecond."""
-    ns = int(round(t * 1e9))
+    ns = round(float(t) * 1e9)
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 

@@ -140,7 +140,9 @@ class RosGraph:
         deadline = time.monotonic() + timeout
         while not predicate():
             if time.monotonic() > deadline:
-                raise TimeoutError(f"timed out after {timeout} s waiting for {what}\n{self.report()}")
+                raise TimeoutError(
+                    f"timed out after {timeout} s waiting for {what}\n{self.report()}"
+                )
             self.spin_once()
 
     def wait_for_publisher(self, topic: str, count: int = 1, timeout: float = 20.0) -> None:

@@ -194,6 +194,105 @@ def propagate(
     return out.reshape((t.size, *batch, n))
 
 
+def _jac_two_body(x: Array, mu: float = MU_EARTH) -> Array:
+    r = x[:3]
+    rn = math.sqrt(float(r @ r))
+    A = np.zeros((6, 6))
+    A[:3, 3:] = np.eye(3)
+    A[3:, :3] = mu / rn**3 * (3.0 * np.outer(r, r) / rn**2 - np.eye(3))
+    return A
+
+
+def _jac_cr3bp(x: Array, mu: float = MU_EARTH_MOON) -> Array:
+    px, py, pz = float(x[0]), float(x[1]), float(x[2])
+    d1 = np.array([px + mu, py, pz])
+    d2 = np.array([px - 1.0 + mu, py, pz])
+    r1, r2 = math.sqrt(float(d1 @ d1)), math.sqrt(float(d2 @ d2))
+    g = (
+        (1.0 - mu) * (3.0 * np.outer(d1, d1) / r1**5 - np.eye(3) / r1**3)
+        + mu * (3.0 * np.outer(d2, d2) / r2**5 - np.eye(3) / r2**3)
+    )
+    g[0, 0] += 1.0
+    g[1, 1] += 1.0
+    A = np.zeros((6, 6))
+    A[:3, 3:] = np.eye(3)
+    A[3:, :3] = g
+    A[3, 4], A[4, 3] = 2.0, -2.0
+    return A
+
+
+def _jac_pendulum(
+    x: Array, m: float = 0.5, c: float = 2e-3, L: float = 1.0, g: float = G0
+) -> Array:
+    return np.array([[0.0, 1.0], [-(g / L) * math.cos(float(x[0])), -c / m]])
+
+
+def _jac_vdp(x: Array, mu: float = 2.0) -> Array:
+    p, v = float(x[0]), float(x[1])
+    return np.array([[0.0, 1.0], [-2.0 * mu * p * v - 1.0, mu * (1.0 - p * p)]])
+
+
+_JACOBIANS: dict[str, Callable[..., Array]] = {
+    "two_body": _jac_two_body,
+    "cr3bp": _jac_cr3bp,
+    "pendulum": _jac_pendulum,
+    "vdp": _jac_vdp,
+}
+
+
+def jacobian(model: str, x: ArrayLike, **params: float) -> Array:
+    """State Jacobian A = d(dx/dt)/dx (n, n) at one state ``x`` (n,).
+
+    Analytic for "two_body", "cr3bp", "pendulum", "vdp"; central differences of the vectorised
+    right-hand side (one call) for "j2" and "drag".
+    """
+    xx = np.asarray(x, float)
+    if model in _JACOBIANS:
+        return _JACOBIANS[model](xx, **params)
+    fun, n = _MODELS[model]
+    h = 1e-6 * np.maximum(np.abs(xx), 1.0)
+    cols = np.concatenate([xx[:, None] + np.diag(h), xx[:, None] - np.diag(h)], axis=1)
+    f = fun(cols, **params)
+    return (f[:, :n] - f[:, n:]) / (2.0 * h)
+
+
+def propagate_stm(
+    model: str,
+    x0: ArrayLike,
+    dt_s: float,
+    rtol: float = 1e-11,
+    atol: float = 1e-12,
+    **params: float,
+) -> tuple[Array, Array]:
+    """Propagate one state ``x0`` (n,) by ``dt_s`` with its state transition matrix.
+
+    Integrates the variational equations dPhi/dt = A(x) Phi (DOP853) alongside the state;
+    for EKF placeholders that are not Keplerian (pendulum, Van der Pol, CR3BP).
+
+    Returns
+    -------
+    (x1 (n,), Phi (n, n)) with Phi = dx1/dx0.
+    """
+    fun, n = _MODELS[model]
+    x = np.asarray(x0, float)
+    if x.shape != (n,):
+        raise ValueError(f"model {model!r} needs a state of shape ({n},), got {x.shape}")
+    if dt_s == 0.0:
+        return x.copy(), np.eye(n)
+
+    def f(_t: float, y: Array) -> Array:
+        xs = y[:n]
+        phi = y[n:].reshape(n, n)
+        return np.concatenate([fun(xs, **params), (jacobian(model, xs, **params) @ phi).ravel()])
+
+    y0 = np.concatenate([x, np.eye(n).ravel()])
+    sol = solve_ivp(f, (0.0, dt_s), y0, method="DOP853", rtol=rtol, atol=atol)
+    if not sol.success:
+        raise RuntimeError(f"propagation failed: {sol.message}")
+    y1 = sol.y[:, -1]
+    return y1[:n].copy(), y1[n:].reshape(n, n).copy()
+
+
 # --------------------------------------------------------------------------------------------
 # Keplerian elements
 # --------------------------------------------------------------------------------------------
@@ -265,7 +364,10 @@ def state_to_elements(
 
 
 def _true_to_mean(nu: float, e: float) -> float:
-    ea = 2.0 * math.atan2(math.sqrt(1.0 - e) * math.sin(nu / 2), math.sqrt(1.0 + e) * math.cos(nu / 2))
+    """True anomaly -> mean anomaly (rad), elliptic orbits."""
+    ea = 2.0 * math.atan2(
+        math.sqrt(1.0 - e) * math.sin(nu / 2), math.sqrt(1.0 + e) * math.cos(nu / 2)
+    )
     return ea - e * math.sin(ea)
 
 

@@ -57,7 +57,10 @@ def _inv_sym(s: Array) -> Array:
     """Inverse of a small symmetric positive-definite innovation covariance."""
     m = s.shape[0]
     if m == 1:
-        return 1.0 / s
+        v = float(s[0, 0])
+        if math.isfinite(v) and v != 0.0:
+            return np.array(((1.0 / v,),))
+        return np.full((1, 1), math.nan)
     if m == 3:
         (a, b, c), (_, d, e), (_, _, f) = s.tolist()
         c11 = d * f - e * e
@@ -233,7 +236,7 @@ def _raise_non_finite(z: Array, R: Array, zp: Array, S: Array) -> None:
         raise ValueError(f"measurement covariance R contains NaN/inf: {R.tolist()}")
     if not np.isfinite(zp).all():
         raise ValueError(f"predicted measurement h(x) contains NaN/inf: {zp}")
-    raise ValueError(f"non-finite innovation covariance / NIS (S = {S.tolist()})")
+    raise ValueError(f"non-finite or singular innovation covariance (S = {S.tolist()})")
 
 
 def process_noise(dt_s: float, q: float, dim: int = 3) -> Array:

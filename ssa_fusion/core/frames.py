@@ -59,7 +59,7 @@ def earth_rotation_angle(jd_utc: ArrayLike) -> NDArray[np.float64] | float:
 
 
 def _rot_z(theta: ArrayLike) -> NDArray[np.float64]:
-    """Rotation matrices R3(theta) (frame rotation), shape (..., 3, 3): ECI -> ECEF for theta=ERA."""
+    """Frame rotations R3(theta), shape (..., 3, 3); ECI -> ECEF for theta = ERA."""
     th = np.asarray(theta, dtype=float)
     c, s = np.cos(th), np.sin(th)
     z, o = np.zeros_like(th), np.ones_like(th)

@@ -38,7 +38,7 @@ from ssa_fusion.core.constants import MU_EARTH
 
 __all__ = ["propagate", "stumpff"]
 
-_Z_SERIES = 0.1
+_Z_SERIES = 0.5
 """|z| below which the Stumpff functions c4, c5 are evaluated by their power series."""
 
 _MAX_ITER = 60
@@ -53,12 +53,12 @@ del _k, _i0, _j0, _d
 
 
 def _c45_series(z: float) -> tuple[float, float]:
-    """Stumpff c4(z), c5(z) by their power series (accurate for |z| <= 0.1)."""
-    # c_k(z) = sum_j (-z)^j / (k + 2j)!, 7 terms: truncation < 0.1^7 / 18! ~ 1e-23.
+    """Stumpff c4(z), c5(z) by their power series (accurate for |z| <= 0.5)."""
+    # c_k(z) = sum_j (-z)^j / (k + 2j)!, 8 terms: truncation < 0.5^8 / 20! ~ 2e-21.
     c4 = (1.0 / 24.0) * (1.0 - z / 30.0 * (1.0 - z / 56.0 * (1.0 - z / 90.0 * (
-        1.0 - z / 132.0 * (1.0 - z / 182.0 * (1.0 - z / 240.0))))))
+        1.0 - z / 132.0 * (1.0 - z / 182.0 * (1.0 - z / 240.0 * (1.0 - z / 306.0)))))))
     c5 = (1.0 / 120.0) * (1.0 - z / 42.0 * (1.0 - z / 72.0 * (1.0 - z / 110.0 * (
-        1.0 - z / 156.0 * (1.0 - z / 210.0 * (1.0 - z / 272.0))))))
+        1.0 - z / 156.0 * (1.0 - z / 210.0 * (1.0 - z / 272.0 * (1.0 - z / 342.0)))))))
     return c4, c5
 
 
@@ -173,6 +173,11 @@ def propagate(
     -----
     Works for ellipses (circular to highly eccentric), hyperbolas and near-parabolic
     orbits; the rectilinear/degenerate ``r0 = 0`` case is not supported.
+
+    Raises
+    ------
+    ValueError
+        If the state or ``dt_s`` is not finite or ``r0 = 0``.
     """
     if isinstance(x0_km, np.ndarray):
         x, y, z, vx, vy, vz = x0_km.tolist()
@@ -183,6 +188,11 @@ def propagate(
     r0 = math.sqrt(x * x + y * y + z * z)
     rv = x * vx + y * vy + z * vz
     sig0 = rv / smu
+    if not (r0 > 0.0 and math.isfinite(r0 + rv + dt + mu)) or not (
+        math.isfinite(vx * vx + vy * vy + vz * vz)
+    ):
+        raise ValueError(f"kepler.propagate: need a finite state with r0 > 0 and finite dt, "
+                         f"got x0={[x, y, z, vx, vy, vz]}, dt={dt}")
     alpha = 2.0 / r0 - (vx * vx + vy * vy + vz * vz) / mu
 
     chi = _solve_chi(r0, sig0, alpha, smu * dt)

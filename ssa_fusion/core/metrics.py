@@ -42,7 +42,7 @@ def _mahalanobis_sq(v: ArrayLike, C: ArrayLike) -> Array:
 
 
 def nees(err: ArrayLike, P: ArrayLike) -> Array:
-    """Normalised estimation error squared ``e^T P^-1 e`` per sample: err (k, n), P (k, n, n) -> (k,)."""
+    """Normalised estimation error squared ``e^T P^-1 e``: err (k, n), P (k, n, n) -> (k,)."""
     return _mahalanobis_sq(err, P)
 
 

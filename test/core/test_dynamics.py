@@ -1,4 +1,4 @@
-"""Tests for ssa_fusion.core.dynamics: analytic results, invariants, textbook and SGP4 references."""
+"""Tests for ssa_fusion.core.dynamics: analytic results, invariants, textbooks, SGP4 outputs."""
 
 import math
 from pathlib import Path
@@ -16,6 +16,7 @@ from ssa_fusion.core.dynamics import (
     elements_to_state,
     fit_sgp4_mean_elements,
     propagate,
+    propagate_stm,
     sgp4_ephemeris,
     state_to_elements,
 )
@@ -61,7 +62,7 @@ def test_two_body_conserves_energy_and_angular_momentum():
 
 def test_batch_propagation_matches_single():
     x0 = elements_to_state(**ISS_ELEMENTS)
-    batch = np.stack([x0, x0 + [1, 0, 0, 0, 1e-3, 0]])
+    batch = np.stack([x0, x0 + np.array([1, 0, 0, 0, 1e-3, 0])])
     t = np.linspace(0, 3000, 4)
     Xb = propagate("j2", batch, t)
     assert Xb.shape == (4, 2, 6)
@@ -76,7 +77,8 @@ def test_j2_nodal_regression_of_the_iss():
     rate = math.degrees(np.polyfit(t, raan, 1)[0]) * 86400  # deg/day
     a, e, i = ISS_ELEMENTS["a_km"], ISS_ELEMENTS["e"], ISS_ELEMENTS["i_rad"]
     n = math.sqrt(MU_EARTH / a**3)
-    analytic = math.degrees(-1.5 * n * J2 * (R_EARTH / (a * (1 - e * e))) ** 2 * math.cos(i)) * 86400
+    p = a * (1 - e * e)
+    analytic = math.degrees(-1.5 * n * J2 * (R_EARTH / p) ** 2 * math.cos(i)) * 86400
     assert analytic == pytest.approx(-4.95, abs=0.01)
     assert rate == pytest.approx(analytic, rel=2e-3)  # osculating vs mean a: 1e-4 level
 
@@ -107,8 +109,9 @@ def test_cr3bp_halo_jacobi_constant_and_periodicity():
     assert np.ptp(C) < 1e-10
     # the 5-digit initial condition closes to ~1e-4 after one revolution
     assert np.linalg.norm(X[-1, :3] - HALO_L1_STATE[:3]) < 1e-3
-    assert X[:, 0].min() > 0.8  # stays on the far side of L1 (x_L1 ~ 0.837) ... around L1
-    assert X[:, 0].max() < 1 - mu  # never passes the Moon
+    # a large halo between L1 (x ~ 0.837) and the Moon, passing ~0.046 (17,600 km) from the Moon
+    moon_dist = np.linalg.norm(X[:, :3] - [1 - mu, 0, 0], axis=1)
+    assert X[:, 0].min() > 0.8 and moon_dist.min() > 0.02
 
 
 def test_pendulum_small_angle_period_and_damping():
@@ -186,3 +189,28 @@ def test_bad_model_and_shape():
         propagate("nope", np.zeros(6), [0, 1])
     with pytest.raises(ValueError):
         propagate("pendulum", np.zeros(6), [0, 1])
+
+
+@pytest.mark.parametrize(("model", "x0", "dt", "params"), [
+    ("two_body", "iss", 600.0, {}),
+    ("j2", "iss", 600.0, {}),
+    ("cr3bp", "halo", 0.5, {}),
+    ("pendulum", np.array([0.8, -0.3]), 1.5, {}),
+    ("vdp", np.array([1.0, 0.5]), 2.0, {"mu": 1.3}),
+])
+def test_propagate_stm_matches_finite_differences(model, x0, dt, params):
+    if isinstance(x0, str):
+        x0 = elements_to_state(**ISS_ELEMENTS) if x0 == "iss" else HALO_L1_STATE
+    x1, phi = propagate_stm(model, x0, dt, **params)
+    np.testing.assert_allclose(x1, propagate(model, x0, [0.0, dt], **params)[-1], rtol=1e-9,
+                               atol=1e-9)
+    n = x0.size
+    num = np.zeros((n, n))
+    for k in range(n):
+        h = 1e-4 * max(abs(x0[k]), 1e-2)
+        d = np.zeros(n)
+        d[k] = h
+        xp = propagate(model, x0 + d, [0.0, dt], **params)[-1]
+        xm = propagate(model, x0 - d, [0.0, dt], **params)[-1]
+        num[:, k] = (xp - xm) / (2 * h)
+    np.testing.assert_allclose(phi, num, rtol=1e-5, atol=1e-7 * np.abs(num).max())

@@ -97,7 +97,8 @@ def test_site_ecef_vallado_example_3_1():
 
 def test_earth_rotation_angle_definition_and_rate():
     # IERS 2003: ERA(J2000 UT1) = 2 pi * 0.7790572732640
-    assert earth_rotation_angle(2451545.0) == pytest.approx(2 * math.pi * 0.7790572732640, abs=1e-12)
+    era0 = earth_rotation_angle(2451545.0)
+    assert era0 == pytest.approx(2 * math.pi * 0.7790572732640, abs=1e-12)
     jd = np.array([2460000.25, 2460000.25 + 0.1])
     era = earth_rotation_angle(jd)
     assert np.all((era >= 0) & (era < 2 * math.pi))
@@ -125,7 +126,7 @@ def test_azimuth_convention_north_clockwise():
     np.testing.assert_allclose(az, [0, math.pi / 2, math.pi, 3 * math.pi / 2], atol=1e-12)
     np.testing.assert_allclose(el, 0, atol=1e-12)
     np.testing.assert_allclose(rng, 100, atol=1e-9)
-    _, _, el_up = razel(site + [500.0, 0, 0], 0.0, 0.0, 0.0)
+    _, _, el_up = razel(site + np.array([500.0, 0, 0]), 0.0, 0.0, 0.0)
     assert el_up == pytest.approx(math.pi / 2)
 
 

@@ -1,0 +1,285 @@
+"""The estimator of one object: initial orbit determination, then an EKF over a stream of
+real and forecast measurements, with the input rules users rely on.
+
+`Tracker.process(m)` takes measurements in arrival order and returns what happened: an
+estimate (state + covariance at the measurement epoch) or the cause of a rejection. The
+rules (DESIGN.md "Behaviour users rely on"):
+
+* bad input is never fused: non-finite values, negative range, elevation outside
+  [-pi/2, pi/2], a kind or frame the tracker is not configured for, a non-symmetric or
+  non-finite covariance, a stamp older than the last real measurement fused, a duplicate
+  epoch, or an innovation beyond the NIS gate;
+* a real measurement always beats a forecast for the same epoch: a forecast for an epoch
+  that already has a real measurement is dropped, and a real measurement for an epoch at or
+  before fused forecasts rolls them back, fuses the real one and re-fuses the later forecasts;
+* `reset()` forgets everything (a backwards clock jump).
+
+It is the same code live (filter node) and offline (reproduce, replay), so both give the
+same estimates for the same input sequence.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import iod
+from .ekf import ExtendedKalmanFilter, process_noise
+from .measurement import RANGE_AZ_EL, PositionModel, RazelModel
+from .types import FORECAST, SENSOR, UPDATE_FORECAST, UPDATE_SENSOR, Measurement, StateEstimate
+
+Placeholder = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
+
+HALF_PI = 0.5 * math.pi
+
+
+@dataclass
+class TrackerConfig:
+    """Estimator settings.
+
+    p0_sigma : (n,) standard deviations added (in quadrature) to the IOD covariance;
+    q : white-noise acceleration spectral density of the process noise, (units/s^2)^2 s;
+    gate : NIS threshold beyond which an update is rejected (None: no gate);
+    iod_samples : real measurements used for the initial orbit determination (>= 2; 3 for
+    Herrick-Gibbs with range/az/el);
+    frame_id : frame (station id, or "eci") measurements must be expressed in; "" = any.
+    """
+
+    p0_sigma: tuple[float, ...] = (1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3)
+    q: float = 1e-10
+    gate: float | None = None
+    iod_samples: int = 3
+    frame_id: str = ""
+
+
+@dataclass
+class Outcome:
+    """What `Tracker.process` did: `estimate` when fused, else `rejected` (a cause key) and
+    `detail` (a sentence for the log). `rolled_back` counts forecasts undone by a real
+    measurement; `refused` lists forecasts re-fused after it."""
+
+    estimate: StateEstimate | None = None
+    rejected: str = ""
+    detail: str = ""
+    rolled_back: int = 0
+    refused: list[StateEstimate] = field(default_factory=list)
+
+
+@dataclass
+class _Snapshot:
+    t: float
+    x: np.ndarray
+    P: np.ndarray
+
+
+class Tracker:
+    """IOD + EKF for one object (see the module docstring for the rules)."""
+
+    def __init__(self, placeholder: Placeholder, model: PositionModel | RazelModel,
+                 config: TrackerConfig, n: int = 6, object_id: str = "") -> None:
+        self.f = placeholder
+        self.model = model
+        self.config = config
+        self.n = n
+        self.object_id = object_id
+        self.kind = model.kind
+        self._P0_floor = np.diag(np.asarray(config.p0_sigma, dtype=float) ** 2)
+        self.reset()
+
+    # ----------------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Forget the state and every buffered measurement."""
+        self.ekf: ExtendedKalmanFilter | None = None
+        self.t = -math.inf
+        self.t_real = -math.inf
+        self._iod: list[Measurement] = []
+        # forecasts fused since the last real measurement: (measurement, state before it)
+        self._forecasts: list[tuple[Measurement, _Snapshot]] = []
+
+    @property
+    def initialised(self) -> bool:
+        return self.ekf is not None
+
+    def estimate(self, source: int = 0, nis: float = 0.0) -> StateEstimate:
+        assert self.ekf is not None
+        return StateEstimate(self.t, self.ekf.x.copy(), self.ekf.P.copy(), self.object_id,
+                             source, nis)
+
+    def predicted(self, t: float) -> StateEstimate | None:
+        """Prediction to epoch `t` (no state change), or None before IOD or for t < epoch."""
+        if self.ekf is None or t < self.t:
+            return None
+        x, F = self.f(self.ekf.x, t - self.t)
+        P = F @ self.ekf.P @ F.T + self._Q(t - self.t)
+        return StateEstimate(t, x, 0.5 * (P + P.T), self.object_id, 0, 0.0)
+
+    # ----------------------------------------------------------------------------------
+    def process(self, m: Measurement) -> Outcome:
+        """Validate and fuse one measurement (real or forecast); see module docstring."""
+        cause, detail = self._validate(m)
+        if cause:
+            return Outcome(rejected=cause, detail=detail)
+        if self.ekf is None:
+            return self._initialise(m)
+        if m.source == FORECAST:
+            return self._fuse_forecast(m)
+        return self._fuse_real(m)
+
+    def _validate(self, m: Measurement) -> tuple[str, str]:
+        z = np.asarray(m.z, dtype=float)
+        R = np.asarray(m.R, dtype=float)
+        if m.kind != self.kind:
+            return "rejected_kind", f"kind {m.kind}, this filter is configured for {self.kind}"
+        want = self.config.frame_id
+        if want and m.frame_id != want:
+            return "rejected_frame", f"frame_id {m.frame_id!r}, configured for {want!r}"
+        if m.source not in (SENSOR, FORECAST):
+            return "rejected_source", f"unknown source {m.source}"
+        if not (math.isfinite(m.t) and np.isfinite(z).all() and np.isfinite(R).all()):
+            return "rejected_nonfinite", f"NaN or inf in stamp, z or covariance at t={m.t}"
+        if self.kind == RANGE_AZ_EL:
+            if z[0] < 0.0:
+                return "rejected_negative_range", f"range {z[0]} km < 0"
+            if not -HALF_PI <= z[2] <= HALF_PI:
+                return "rejected_elevation", f"elevation {z[2]} rad outside [-pi/2, pi/2]"
+        if not np.allclose(R, R.T, rtol=1e-9, atol=0.0) or (np.linalg.eigvalsh(R) < 0).any():
+            return "rejected_covariance", "covariance is not symmetric positive semi-definite"
+        return "", ""
+
+    def _Q(self, dt: float) -> np.ndarray:
+        return process_noise(abs(dt), self.config.q, dim=self.n // 2)
+
+    def _step(self, m: Measurement, source: int) -> Outcome:
+        """Predict to m.t and update with m (the EKF exists)."""
+        ekf = self.ekf
+        dt = m.t - self.t
+        if dt != 0.0:
+            ekf.predict(lambda x: self.f(x, dt), self._Q(dt))
+        model, t = self.model, m.t
+        result = ekf.update(m.z, lambda x: model.h_and_H(x, t), m.R, model.angle_mask,
+                            self.config.gate)
+        self.t = m.t
+        if not result.accepted:
+            return Outcome(rejected="rejected_gate",
+                           detail=f"NIS {result.nis:.1f} > gate {self.config.gate}")
+        return Outcome(estimate=self.estimate(source, result.nis))
+
+    def _fuse_forecast(self, m: Measurement) -> Outcome:
+        if m.t <= self.t_real:
+            return Outcome(rejected="forecast_superseded",
+                           detail=f"forecast for t={m.t} but a real measurement up to "
+                                  f"t={self.t_real} was fused")
+        if m.t <= self.t:
+            return Outcome(rejected="rejected_stale", detail=f"forecast t={m.t} <= t={self.t}")
+        before = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy())
+        out = self._step(m, UPDATE_FORECAST)
+        if out.estimate is not None:
+            self._forecasts.append((m, before))
+        else:
+            self._restore(before)
+        return out
+
+    def _fuse_real(self, m: Measurement) -> Outcome:
+        if m.t < self.t_real:
+            return Outcome(rejected="rejected_stale",
+                           detail=f"t={m.t} older than the last real measurement t={self.t_real}")
+        if m.t == self.t_real:
+            return Outcome(rejected="rejected_duplicate", detail=f"second measurement at t={m.t}")
+        later = [(f, s) for f, s in self._forecasts if f.t >= m.t]
+        if later:  # a real measurement beats forecasts at or before its epoch: roll back
+            self._restore(later[0][1])
+        before = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy())
+        out = self._step(m, UPDATE_SENSOR)
+        if out.estimate is None:
+            self._restore(before)
+            if later:  # put the forecasts back as they were
+                self._refuse(later, out)
+            return out
+        self.t_real = m.t
+        kept = [(f, s) for f, s in later if f.t > m.t]
+        self._forecasts = []
+        out.rolled_back = len(later)
+        self._refuse(kept, out)
+        return out
+
+    def _refuse(self, forecasts: list[tuple[Measurement, _Snapshot]], out: Outcome) -> None:
+        for f, _ in forecasts:
+            again = self._fuse_forecast(f)
+            if again.estimate is not None:
+                out.refused.append(again.estimate)
+
+    def _restore(self, s: _Snapshot) -> None:
+        self.t = s.t
+        self.ekf.x, self.ekf.P = s.x.copy(), s.P.copy()
+        self._forecasts = [(f, b) for f, b in self._forecasts if f.t <= s.t]
+
+    # ----------------------------------------------------------------------------------
+    def _initialise(self, m: Measurement) -> Outcome:
+        if m.source == FORECAST:
+            return Outcome(rejected="ignored_before_iod", detail="forecast before IOD")
+        if self._iod and m.t <= self._iod[-1].t:
+            return Outcome(rejected="rejected_stale" if m.t < self._iod[-1].t
+                           else "rejected_duplicate", detail=f"t={m.t} during IOD")
+        self._iod.append(m)
+        if len(self._iod) < max(2, self.config.iod_samples):
+            return Outcome(rejected="iod_pending", detail="collecting IOD measurements")
+        batch, self._iod = self._iod, []
+        t_init, x0, P_iod = self._iod_solution(batch)
+        if not np.isfinite(x0).all():
+            return Outcome(rejected="iod_failed", detail="initial orbit determination failed")
+        self.ekf = ExtendedKalmanFilter(x0, P_iod + self._P0_floor)
+        self.t = t_init
+        self.t_real = t_init
+        out = Outcome(estimate=self.estimate(UPDATE_SENSOR))
+        for later in (b for b in batch if b.t > t_init):
+            out = self._fuse_real(later)
+        return out
+
+    def _iod_solution(self, batch: list[Measurement]) -> tuple[float, np.ndarray, np.ndarray]:
+        """(epoch, state, covariance) from the IOD batch; covariance from the measurement
+        noise pushed through the IOD map (numerical Jacobian, 1 evaluation per input)."""
+        t = np.array([b.t for b in batch])
+        Z = np.array([b.z for b in batch], dtype=float)
+        if self.kind == RANGE_AZ_EL:
+            mid = len(batch) // 2
+            i3 = [0, mid, len(batch) - 1]
+            t3 = t[i3]
+
+            def solve(zs: np.ndarray) -> np.ndarray:
+                r = iod.razel_to_eci(zs[i3], self.model.jd0_utc + t3 / 86400.0,
+                                     self.model.station)
+                v2 = iod.herrick_gibbs(r[0], r[1], r[2], t3[0], t3[1], t3[2])
+                return np.concatenate([r[1], v2])
+
+            t_init = float(t3[1])
+        else:
+            observed = list(self.model.observed)
+
+            def solve(zs: np.ndarray) -> np.ndarray:
+                x = np.zeros(self.n)
+                fd = iod.finite_difference_state(t, zs)
+                k = len(observed)
+                x[observed] = fd[:k]
+                x[[i + self.n // 2 for i in observed]] = fd[k:]
+                return x
+
+            t_init = float(t[-1])
+        x0 = solve(Z)
+        R = [np.asarray(b.R, dtype=float) for b in batch]
+        P = np.zeros((self.n, self.n))
+        for j, Rj in enumerate(R):
+            sig = np.sqrt(np.clip(np.diag(Rj), 0.0, None))
+            if not sig.any():
+                continue
+            J = np.zeros((self.n, Z.shape[1]))
+            for c in range(Z.shape[1]):
+                if sig[c] == 0.0:
+                    continue
+                dz = Z.copy()
+                dz[j, c] += sig[c]
+                J[:, c] = (solve(dz) - x0) / sig[c]
+            P += J @ Rj @ J.T
+        return t_init, x0, P

@@ -1,0 +1,170 @@
+"""Pieces every ssa_fusion node shares: running with clean shutdown, diagnostics counters,
+validated parameters."""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+from typing import Any
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile
+from rclpy.signals import SignalHandlerOptions
+
+from ssa_fusion.qos import TOPIC_DIAGNOSTICS
+
+
+class ParameterError(ValueError):
+    """A parameter value is invalid; the message names the parameter and the rule."""
+
+
+class Diagnostics:
+    """Counts events by cause, logs each cause once, publishes them on /diagnostics."""
+
+    def __init__(self, node: Node, period_s: float = 1.0) -> None:
+        self.node = node
+        self.counts: Counter[str] = Counter()
+        self.status: dict[str, str] = {}
+        self._logged: set[str] = set()
+        self._pub = node.create_publisher(DiagnosticArray, TOPIC_DIAGNOSTICS, QoSProfile(depth=10))
+        node.create_timer(period_s, self.publish)
+
+    def count(self, cause: str, detail: str = "", warn: bool = True) -> None:
+        """Count one `cause`; the first occurrence of each cause is logged (with detail)."""
+        self.counts[cause] += 1
+        if cause not in self._logged:
+            self._logged.add(cause)
+            log = self.node.get_logger().warning if warn else self.node.get_logger().info
+            log(f"{cause}: {detail} (logged once; counted on {TOPIC_DIAGNOSTICS})")
+
+    def publish(self) -> None:
+        msg = DiagnosticArray()
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        st = DiagnosticStatus()
+        st.name = f"{self.node.get_name()}"
+        st.hardware_id = "ssa_fusion"
+        rejected = sum(v for k, v in self.counts.items() if k.startswith("rejected"))
+        st.level = DiagnosticStatus.WARN if rejected else DiagnosticStatus.OK
+        st.message = "; ".join(f"{k}={v}" for k, v in self.status.items()) or "ok"
+        st.values = [KeyValue(key=k, value=str(v)) for k, v in sorted(self.counts.items())]
+        st.values += [KeyValue(key=k, value=v) for k, v in sorted(self.status.items())]
+        msg.status = [st]
+        self._pub.publish(msg)
+
+
+def declare(node: Node, name: str, default: Any, description: str,
+            check: Callable[[Any], str | None] | None = None) -> Any:
+    """Declare a parameter with a description; validate it now and on every later set.
+
+    `check(value)` returns None when valid, else the reason. An invalid start-up value
+    raises ParameterError; a later invalid `ros2 param set` is refused (old value kept).
+    """
+    node.declare_parameter(name, default, ParameterDescriptor(description=description))
+    value = node.get_parameter(name).value
+    if check is not None:
+        reason = check(value)
+        if reason:
+            raise ParameterError(f"parameter '{name}' = {value!r}: {reason}")
+        checks = node.__dict__.setdefault("_ssa_param_checks", {})
+        checks[name] = check
+        if len(checks) == 1:
+            node.add_on_set_parameters_callback(lambda ps: _validate(node, ps))
+    return value
+
+
+def _validate(node: Node, params: list[Parameter]) -> SetParametersResult:
+    checks = node.__dict__.get("_ssa_param_checks", {})
+    for p in params:
+        check = checks.get(p.name)
+        reason = check(p.value) if check else None
+        if reason:
+            node.get_logger().warning(f"refused parameter '{p.name}' = {p.value!r}: {reason}")
+            return SetParametersResult(successful=False, reason=f"{p.name}: {reason}")
+    return SetParametersResult(successful=True)
+
+
+def positive(value: Any) -> str | None:
+    return None if isinstance(value, (int, float)) and value > 0 else "must be > 0"
+
+
+def non_negative(value: Any) -> str | None:
+    return None if isinstance(value, (int, float)) and value >= 0 else "must be >= 0"
+
+
+def one_of(*choices: str) -> Callable[[Any], str | None]:
+    def check(value: Any) -> str | None:
+        return None if value in choices else f"must be one of {', '.join(choices)}"
+
+    return check
+
+
+def run(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
+    """rclpy main loop of one node with the behaviour users rely on.
+
+    SIGINT/SIGTERM (also twice, also during shutdown) end the loop; pending callbacks are
+    drained for a moment (so a recorder writes what already reached it), the node's
+    ``close()`` runs, and the process exits 0. An invalid parameter at start-up exits 2 with
+    a message naming the parameter. A callback may call `finish()` to end with exit 0.
+    """
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: Any) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    code = 0
+    executor = SingleThreadedExecutor()
+    try:
+        node = make_node()
+        executor.add_node(node)
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.1)
+        _drain(executor, node)
+    except ParameterError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        code = 2
+    except _FinishedSignal:
+        pass
+    finally:
+        if node is not None:
+            close = getattr(node, "close", None)
+            if close is not None:
+                close()
+            node.destroy_node()
+        executor.shutdown()
+        rclpy.try_shutdown()
+    return code
+
+
+def _drain(executor: SingleThreadedExecutor, node: Node, quiet_s: float = 0.2,
+           limit_s: float = 3.0) -> None:
+    """Run callbacks already pending until `node.activity` stays still for `quiet_s`."""
+    if not hasattr(node, "activity"):
+        return
+    deadline = time.monotonic() + limit_s
+    last, last_change = node.activity, time.monotonic()
+    while time.monotonic() < deadline and time.monotonic() - last_change < quiet_s:
+        executor.spin_once(timeout_sec=0.02)
+        if node.activity != last:
+            last, last_change = node.activity, time.monotonic()
+
+
+class _FinishedSignal(Exception):  # noqa: N818 (control flow, not an error)
+    """Raised from a callback to end `run` normally (the node's job is done)."""
+
+
+def finish() -> None:
+    """End the node's loop from a callback; `run` then closes the node and exits 0."""
+    raise _FinishedSignal()

@@ -1,0 +1,113 @@
+"""recorder: write every /ssa/* topic and /clock to a rosbag2 (MCAP, version 9) bag.
+
+Raw subscriptions hand over the CDR bytes as they arrived; they are written unchanged with
+`rosbags`, stamped with the node's ROS time at reception (sim time under use_sim_time), as
+`ros2 bag record` does. Topics are discovered as publishers appear. The pending MCAP chunk
+is flushed to disk every `flush_period` s, which bounds what a SIGKILL can lose; SIGINT or
+SIGTERM close the bag with everything received.
+
+    ros2 run ssa_fusion recorder --ros-args -p bag:=bags/run1
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+from pathlib import Path
+
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from ssa_fusion.bagio import BagWriter, qos_from_rclpy
+from ssa_fusion.nodes.common import Diagnostics, ParameterError, declare, positive, run
+from ssa_fusion.qos import DATA_DEPTH, TOPIC_CLOCK
+
+DEFAULT_TOPICS = [TOPIC_CLOCK]
+DEFAULT_PREFIX = "/ssa/"
+
+
+def _import_type(type_name: str):
+    pkg, _, name = type_name.split("/")
+    return getattr(importlib.import_module(f"{pkg}.msg"), name)
+
+
+class Recorder(Node):
+    def __init__(self) -> None:
+        super().__init__("recorder")
+        default_bag = f"bags/ssa_{time.strftime('%Y%m%d_%H%M%S')}"
+        bag = declare(self, "bag", default_bag, "output bag directory (must not exist)",
+                      lambda v: None if v else "must be a directory path")
+        self.topics = set(declare(self, "topics", DEFAULT_TOPICS,
+                                  "topics recorded besides every topic under prefix"))
+        self.prefix = declare(self, "prefix", DEFAULT_PREFIX,
+                              "record every topic whose name starts with this")
+        flush = declare(self, "flush_period", 1.0,
+                        "s of wall time between flushes of the bag to disk", positive)
+        discover = declare(self, "discover_period", 0.1, "s between topic discovery scans",
+                           positive)
+        if Path(bag).exists():
+            raise ParameterError(f"parameter 'bag' = {bag!r}: exists already, not overwriting")
+        self.writer = BagWriter(bag)
+        self.diag = Diagnostics(self)
+        self._subs = {}
+        self.activity = 0
+        self.create_timer(discover, self.discover, clock=self._wall_clock())
+        self.create_timer(flush, self.writer.flush, clock=self._wall_clock())
+        self.get_logger().info(f"recording to {bag}")
+        self.discover()
+
+    def _wall_clock(self):
+        from rclpy.clock import Clock, ClockType
+
+        return Clock(clock_type=ClockType.STEADY_TIME)
+
+    def wanted(self, topic: str) -> bool:
+        return topic in self.topics or topic.startswith(self.prefix)
+
+    def discover(self) -> None:
+        """Subscribe to wanted topics that gained a publisher since the last scan."""
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self._subs or not self.wanted(topic):
+                continue
+            pubs = self.get_publishers_info_by_topic(topic)
+            if not pubs:
+                continue
+            type_name = types[0]
+            try:
+                msg_class = _import_type(type_name)
+                self.writer.add_topic(topic, type_name, [qos_from_rclpy(p.qos_profile)
+                                                         for p in pubs])
+            except Exception as exc:  # an unknown type must not stop the others
+                self.diag.count("unrecordable_topic", f"{topic} ({type_name}): {exc}")
+                self._subs[topic] = None
+                continue
+            reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in pubs)
+            qos = QoSProfile(
+                history=HistoryPolicy.KEEP_LAST,
+                depth=DATA_DEPTH,
+                reliability=ReliabilityPolicy.RELIABLE if reliable
+                else ReliabilityPolicy.BEST_EFFORT,
+                durability=DurabilityPolicy.VOLATILE,
+            )
+            self._subs[topic] = self.create_subscription(
+                msg_class, topic, lambda data, t=topic: self.on_message(t, data), qos, raw=True
+            )
+            self.get_logger().info(f"recording {topic} [{type_name}]")
+
+    def on_message(self, topic: str, data: bytes) -> None:
+        self.writer.write(topic, self.get_clock().now().nanoseconds, data)
+        self.activity += 1
+        self.diag.counts[f"recorded {topic}"] += 1
+
+    def close(self) -> None:
+        self.writer.close()
+        total = sum(self.writer.counts.values())
+        self.get_logger().info(f"bag closed: {self.writer.path} ({total} messages)")
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(Recorder, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
