@@ -26,6 +26,10 @@ setup(
     entry_points={
         "console_scripts": [
             "ssa-fusion = ssa_fusion.cli:main",
+            "sensor_sim = ssa_fusion.nodes.sensor_sim:main",
+            "surrogate = ssa_fusion.nodes.surrogate:main",
+            "filter = ssa_fusion.nodes.filter:main",
+            "recorder = ssa_fusion.nodes.recorder:main",
         ],
     },
 )

@@ -161,8 +161,9 @@ def read_bag(path: Path | str, topics: Iterable[str] | None = None) -> Iterator[
         with AnyReader([path], default_typestore=typestore()) as reader:
             conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
             for conn, t_ns, raw in reader.messages(connections=conns):
-                yield BagMessage(conn.topic, conn.msgtype, t_ns,
-                                 reader.deserialize(raw, conn.msgtype))
+                yield BagMessage(
+                    conn.topic, conn.msgtype, t_ns, reader.deserialize(raw, conn.msgtype)
+                )
     except BagError:
         raise
     except Exception as exc:  # rosbags raises several unrelated types; name the file

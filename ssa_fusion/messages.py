@@ -62,7 +62,10 @@ def measurement_to_msg(m: types.Measurement) -> MeasurementMsg:
 
 
 def measurement_from_msg(msg: MeasurementMsg) -> types.Measurement:
-    """ssa_fusion_msgs/Measurement (m) -> core Measurement (km); ValueError for an unknown kind."""
+    """Measurement message (m) -> core Measurement (km); ValueError for an unknown kind.
+
+    Works for rclpy messages and for rosbags-deserialized ones (same field names).
+    """
     s = z_scale(msg.kind)
     return types.Measurement(
         t=stamp_to_seconds(msg.header.stamp),
@@ -99,3 +102,4 @@ def estimate_from_msg(msg: StateEstimateMsg) -> types.StateEstimate:
         update_source=int(msg.update_source),
         nis=float(msg.nis),
     )
+

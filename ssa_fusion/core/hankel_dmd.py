@@ -63,6 +63,7 @@ from scipy.optimize import linear_sum_assignment
 __all__ = ["HankelDMD", "svht_rank"]
 
 _TWO_PI = 2.0 * np.pi
+_COV_BUDGET = 400_000  # max (horizon, column) pairs in the covariance estimator
 FloatArray = NDArray[np.float64]
 
 
@@ -184,8 +185,8 @@ class HankelDMD:
     max_rank : int
         Upper bound of the automatic rank (cost and noise-free-data guard).
 
-    Attributes (after :meth:`fit`)
-    ------------------------------
+    Attributes
+    ----------
     rank_ : int
         Rank used.
     eigs : ndarray, shape (rank_,), complex
@@ -205,7 +206,7 @@ class HankelDMD:
         rank: int | None = None,
         angle_channels: Sequence[int] = (),
         *,
-        max_rank: int = 64,
+        max_rank: int = 48,
     ) -> None:
         if delays < 1:
             raise ValueError("delays must be >= 1")
@@ -270,9 +271,10 @@ class HankelDMD:
         # Transient growth is allowed up to a factor 2 over the fitted span (ncol steps);
         # beyond that span the operator is fully stabilised (|lambda| <= 1).
         self._k_switch = ncol
-        t, _ = _clip_schur(t_raw, 2.0 ** (1.0 / ncol))
-        t_stab, eigs_stable = _clip_schur(t_raw, 1.0)
         _, eigs = _clip_schur(t_raw, np.inf)
+        rho = np.abs(eigs).max()
+        t = _clip_schur(t_raw, 2.0 ** (1.0 / ncol))[0] if rho > 2.0 ** (1.0 / ncol) else t_raw
+        t_stab, eigs_stable = _clip_schur(t_raw, 1.0) if rho > 1.0 else (t_raw, eigs)
 
         self._u = u
         self._t_raw = t_raw
@@ -349,18 +351,24 @@ class HankelDMD:
             out[idx] = np.mod(out[idx], _TWO_PI)
         return out
 
-    def _empirical_cov(self) -> FloatArray:
-        """In-sample error second moments per horizon 1..k_max, shape (k_max, m, m)."""
-        if self._cov_cache is None:
-            b = self._b
-            ncol = b.shape[1]
+    def _empirical_cov(self, k_need: int) -> FloatArray:
+        """In-sample error second moments per horizon 1..k, shape (k, m, m).
+
+        ``k = min(k_need, k_max)`` with ``k_max = ncol // 2`` (at least half of the
+        Hankel columns contribute at every horizon). Cached.
+        """
+        ncol = self._b.shape[1]
+        k_max = max(1, min(k_need, ncol // 2))
+        if self._cov_cache is None or self._cov_cache.shape[0] < k_max:
+            # Column stride bounds the work array to ~_COV_BUDGET error vectors.
+            stride = max(1, -(-k_max * ncol // _COV_BUDGET))
+            j = np.arange(0, ncol, stride)
+            b = self._b[:, j]
             d = self.delays
-            k_max = max(1, ncol // 2)
             read = _stacked_powers(self._c, self._t, k_max)  # (k, m, r)
             kk, m, r = read.shape
-            pred = (read.reshape(kk * m, r) @ b).reshape(kk, m, ncol)
+            pred = (read.reshape(kk * m, r) @ b).reshape(kk, m, j.size)
             k = np.arange(1, k_max + 1)
-            j = np.arange(ncol)
             tgt = (d - 1) + k[:, None] + j[None, :]  # sample index predicted
             valid = tgt < self.n_samples_
             tgt = np.where(valid, tgt, 0)
@@ -368,7 +376,7 @@ class HankelDMD:
             err *= valid[:, None, :]
             cnt = valid.sum(axis=1).astype(float)
             self._cov_cache = np.einsum("kaj,kbj->kab", err, err) / cnt[:, None, None]
-        return self._cov_cache
+        return self._cov_cache[:k_max]
 
     def forecast_covariance(self, n_steps: int) -> FloatArray:
         """Covariance of the forecast errors for horizons 1..n_steps.
@@ -389,7 +397,7 @@ class HankelDMD:
         m = self.n_channels_
         if n_steps < 1:
             return np.zeros((0, m, m))
-        emp = self._empirical_cov()
+        emp = self._empirical_cov(n_steps)
         k_max = emp.shape[0]
         if n_steps <= k_max:
             cov = emp[:n_steps].copy()

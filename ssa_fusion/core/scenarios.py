@@ -79,6 +79,10 @@ class Scenario:
     rank: int | None = None
     p0_sigma: tuple[float, ...] = (1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3)
     q: float = 1e-12
+    iod_samples: int = 3
+    buffer_s: float = 0.0
+    retrain_period_s: float = 1e18
+    lift: str = ""
     t0: float = ORBIT_EPOCH_UNIX
     truth_params: dict = field(default_factory=dict)
     placeholder_params: dict = field(default_factory=dict)
@@ -122,7 +126,7 @@ ISS_PERIOD_S = 2 * math.pi * math.sqrt(6796.9**3 / 398600.4418)
 _ISS = dict(
     x0=_iss_state(), placeholder="kepler", cadence_s=30.0, track_s=720 * 30.0,
     gap_s=186 * 30.0, delays=120,
-    p0_sigma=(0.1, 0.1, 0.1, 1e-4, 1e-4, 1e-4), q=1e-10,
+    p0_sigma=(0.1, 0.1, 0.1, 1e-4, 1e-4, 1e-4), q=1e-7,
 )
 
 SCENARIOS: dict[str, Scenario] = {
@@ -146,7 +150,7 @@ SCENARIOS: dict[str, Scenario] = {
                  **{**_ISS, "p0_sigma": (10.0, 10.0, 10.0, 1e-2, 1e-2, 1e-2)},
                  finding="close to hypothetical, within 3σ"),
         Scenario(name="iss_j2_rae", truth="j2", kind=RANGE_AZ_EL, station="columbus",
-                 noise_sigma=(1.0, 0.01, 0.01),
+                 noise_sigma=(1.0, 0.01, 0.01), lift="eci",
                  **{**_ISS, "p0_sigma": (1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3)},
                  finding="≈ hypothetical"),
         Scenario(

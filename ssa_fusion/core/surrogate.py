@@ -11,6 +11,13 @@ and offline replays give the same forecasts.
 
 Each forecast carries the covariance R + Var(e(h)) of paper section 4: the sensor noise
 plus the surrogate's forecast error covariance at horizon h, which grows with h.
+
+Optionally (`SurrogateConfig.lift`) the DMD learns a *lifted* observable instead of the raw
+measurement: for range/az/el from a known station, `EciLift` turns each measurement into the
+ECI position it implies (station position + line of sight, no dynamics), Hankel-DMD learns
+and forecasts that (nearly linear, like the position scenarios), and each forecast is mapped
+back to range/az/el with its covariance pushed through the Jacobian (J C J^T). The filter
+still receives range/az/el forecasts.
 """
 
 from __future__ import annotations
@@ -22,7 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .hankel_dmd import HankelDMD
-from .measurement import RANGE_AZ_EL
+from .iod import razel_to_eci
+from .measurement import RANGE_AZ_EL, RazelModel
 from .types import FORECAST, Measurement
 
 
@@ -34,7 +42,8 @@ class SurrogateConfig:
     delays, rank : Hankel-DMD settings (rank None: automatic);
     max_horizon_s : no forecast beyond this many s after the last real measurement;
     cadence_s : expected measurement interval (0: the median interval of the buffer);
-    grace : fraction of a cadence after an epoch before it counts as missed."""
+    grace : fraction of a cadence after an epoch before it counts as missed;
+    lift : optional observable map (e.g. `EciLift`) the DMD learns instead of z (None: z)."""
 
     buffer_s: float = 21600.0
     retrain_period_s: float = 600.0
@@ -43,6 +52,34 @@ class SurrogateConfig:
     max_horizon_s: float = 7200.0
     cadence_s: float = 0.0
     grace: float = 0.5
+    lift: EciLift | None = None
+
+
+class EciLift:
+    """Range/az/el from a known station <-> the ECI position it implies (km).
+
+    `model` is the tracker's `RazelModel` (station and reference epoch); times are on its
+    clock (s since `model.jd0_utc`)."""
+
+    def __init__(self, model: RazelModel) -> None:
+        self.model = model
+
+    def forward(self, z: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """(N, 3) range/az/el at epochs t (N,) -> (N, 3) ECI positions, km."""
+        return razel_to_eci(z, self.model.jd0_utc + np.asarray(t) / 86400.0,
+                            self.model.station)
+
+    def back(self, r: np.ndarray, C: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, ...]:
+        """ECI forecasts r (k, 3) with covariances C (k, 3, 3) at epochs t (k,) -> range/az/el
+        (k, 3) and covariances J C J^T (k, 3, 3)."""
+        z = np.empty_like(r)
+        out = np.empty_like(C)
+        for i, (ri, Ci, ti) in enumerate(zip(r, C, t, strict=True)):
+            zi, H = self.model.h_and_H(np.concatenate([ri, np.zeros(3)]), float(ti))
+            J = H[:, :3]
+            z[i] = zi
+            out[i] = J @ Ci @ J.T
+        return z, out
 
 
 class Surrogate:
@@ -127,6 +164,11 @@ class Surrogate:
             return False
         self._forecast = self._model.forecast(n_steps)
         self._cov = self._model.forecast_covariance(n_steps)
+        lift = self.config.lift
+        if lift is not None:
+            t = self.last.t + self.cadence() * np.arange(1, n_steps + 1)
+            z, self._cov = lift.back(self._forecast.T, self._cov, t)
+            self._forecast = z.T
         return True
 
     def _fit(self) -> None:
@@ -155,6 +197,9 @@ class Surrogate:
             self.status = "cannot fit: constant or non-finite data"
             return
         angles = (1,) if last.kind == RANGE_AZ_EL else ()
+        if cfg.lift is not None:
+            Z = cfg.lift.forward(Z.T, t[-Z.shape[1]:]).T
+            angles = ()
         try:
             self._model = HankelDMD(cfg.delays, cfg.rank, angle_channels=angles).fit(Z)
         except (ValueError, np.linalg.LinAlgError) as exc:

@@ -35,6 +35,9 @@ Placeholder = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
 
 HALF_PI = 0.5 * math.pi
 
+DEFAULT_GATE = 1000.0
+"""Default NIS gate: rejects gross glitches only (a 3-channel innovation ~30 sigma away)."""
+
 
 @dataclass
 class TrackerConfig:
@@ -42,7 +45,8 @@ class TrackerConfig:
 
     p0_sigma : (n,) standard deviations added (in quadrature) to the IOD covariance;
     q : white-noise acceleration spectral density of the process noise, (units/s^2)^2 s;
-    gate : NIS threshold beyond which an update is rejected (None: no gate);
+    gate : NIS threshold beyond which an update is rejected (None: no gate; the default
+    only catches gross glitches, the estimate's consistency is not gated away);
     iod_samples : real measurements used for the initial orbit determination (>= 2; 3 for
     Herrick-Gibbs with range/az/el);
     frame_id : frame (station id, or "eci") measurements must be expressed in; "" = any.
@@ -50,7 +54,7 @@ class TrackerConfig:
 
     p0_sigma: tuple[float, ...] = (1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3)
     q: float = 1e-10
-    gate: float | None = None
+    gate: float | None = DEFAULT_GATE
     iod_samples: int = 3
     frame_id: str = ""
 

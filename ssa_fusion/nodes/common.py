@@ -7,6 +7,7 @@ import signal
 import sys
 import threading
 import time
+import traceback
 from collections import Counter
 from collections.abc import Callable
 from typing import Any
@@ -14,6 +15,7 @@ from typing import Any
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -43,8 +45,25 @@ class Diagnostics:
         self.counts[cause] += 1
         if cause not in self._logged:
             self._logged.add(cause)
-            log = self.node.get_logger().warning if warn else self.node.get_logger().info
-            log(f"{cause}: {detail} (logged once; counted on {TOPIC_DIAGNOSTICS})")
+            text = f"{cause}: {detail} (logged once; counted on {TOPIC_DIAGNOSTICS})"
+            if warn:
+                self.node.get_logger().warning(text)
+            else:
+                self.node.get_logger().info(text)
+
+    def guard(self, callback: Callable[..., None]) -> Callable[..., None]:
+        """Wrap a subscription/timer callback: an unexpected exception is counted as
+        'internal_error' (traceback logged once) instead of killing the node."""
+
+        def guarded(*args: Any) -> None:
+            try:
+                callback(*args)
+            except Exception as exc:
+                self.count(
+                    "internal_error", f"{type(exc).__name__}: {exc}\n" + traceback.format_exc()
+                )
+
+        return guarded
 
     def publish(self) -> None:
         msg = DiagnosticArray()
@@ -61,8 +80,20 @@ class Diagnostics:
         self._pub.publish(msg)
 
 
-def declare(node: Node, name: str, default: Any, description: str,
-            check: Callable[[Any], str | None] | None = None) -> Any:
+def wall_timer(node: Node, period_s: float, callback: Callable[[], None]) -> Any:
+    """A timer on the steady (wall) clock. Sim-time timers fire once per elapsed period and
+    so, at a high time scale, back to back; checks that read sim time inside the callback
+    run on this instead."""
+    return node.create_timer(period_s, callback, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+
+def declare(
+    node: Node,
+    name: str,
+    default: Any,
+    description: str,
+    check: Callable[[Any], str | None] | None = None,
+) -> Any:
     """Declare a parameter with a description; validate it now and on every later set.
 
     `check(value)` returns None when valid, else the reason. An invalid start-up value
@@ -148,8 +179,9 @@ def run(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
     return code
 
 
-def _drain(executor: SingleThreadedExecutor, node: Node, quiet_s: float = 0.2,
-           limit_s: float = 3.0) -> None:
+def _drain(
+    executor: SingleThreadedExecutor, node: Node, quiet_s: float = 0.2, limit_s: float = 3.0
+) -> None:
     """Run callbacks already pending until `node.activity` stays still for `quiet_s`."""
     if not hasattr(node, "activity"):
         return

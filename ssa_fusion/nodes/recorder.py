@@ -19,7 +19,14 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ssa_fusion.bagio import BagWriter, qos_from_rclpy
-from ssa_fusion.nodes.common import Diagnostics, ParameterError, declare, positive, run
+from ssa_fusion.nodes.common import (
+    Diagnostics,
+    ParameterError,
+    declare,
+    positive,
+    run,
+    wall_timer,
+)
 from ssa_fusion.qos import DATA_DEPTH, TOPIC_CLOCK
 
 DEFAULT_TOPICS = [TOPIC_CLOCK]
@@ -35,31 +42,37 @@ class Recorder(Node):
     def __init__(self) -> None:
         super().__init__("recorder")
         default_bag = f"bags/ssa_{time.strftime('%Y%m%d_%H%M%S')}"
-        bag = declare(self, "bag", default_bag, "output bag directory (must not exist)",
-                      lambda v: None if v else "must be a directory path")
-        self.topics = set(declare(self, "topics", DEFAULT_TOPICS,
-                                  "topics recorded besides every topic under prefix"))
-        self.prefix = declare(self, "prefix", DEFAULT_PREFIX,
-                              "record every topic whose name starts with this")
-        flush = declare(self, "flush_period", 1.0,
-                        "s of wall time between flushes of the bag to disk", positive)
-        discover = declare(self, "discover_period", 0.1, "s between topic discovery scans",
-                           positive)
+        bag = declare(
+            self,
+            "bag",
+            default_bag,
+            "output bag directory (must not exist)",
+            lambda v: None if v else "must be a directory path",
+        )
+        self.topics = set(
+            declare(
+                self, "topics", DEFAULT_TOPICS, "topics recorded besides every topic under prefix"
+            )
+        )
+        self.prefix = declare(
+            self, "prefix", DEFAULT_PREFIX, "record every topic whose name starts with this"
+        )
+        flush = declare(
+            self, "flush_period", 1.0, "s of wall time between flushes of the bag to disk", positive
+        )
+        discover = declare(
+            self, "discover_period", 0.1, "s between topic discovery scans", positive
+        )
         if Path(bag).exists():
             raise ParameterError(f"parameter 'bag' = {bag!r}: exists already, not overwriting")
         self.writer = BagWriter(bag)
         self.diag = Diagnostics(self)
         self._subs = {}
         self.activity = 0
-        self.create_timer(discover, self.discover, clock=self._wall_clock())
-        self.create_timer(flush, self.writer.flush, clock=self._wall_clock())
+        wall_timer(self, discover, self.diag.guard(self.discover))
+        wall_timer(self, flush, self.writer.flush)
         self.get_logger().info(f"recording to {bag}")
         self.discover()
-
-    def _wall_clock(self):
-        from rclpy.clock import Clock, ClockType
-
-        return Clock(clock_type=ClockType.STEADY_TIME)
 
     def wanted(self, topic: str) -> bool:
         return topic in self.topics or topic.startswith(self.prefix)
@@ -75,8 +88,9 @@ class Recorder(Node):
             type_name = types[0]
             try:
                 msg_class = _import_type(type_name)
-                self.writer.add_topic(topic, type_name, [qos_from_rclpy(p.qos_profile)
-                                                         for p in pubs])
+                self.writer.add_topic(
+                    topic, type_name, [qos_from_rclpy(p.qos_profile) for p in pubs]
+                )
             except Exception as exc:  # an unknown type must not stop the others
                 self.diag.count("unrecordable_topic", f"{topic} ({type_name}): {exc}")
                 self._subs[topic] = None
@@ -85,7 +99,8 @@ class Recorder(Node):
             qos = QoSProfile(
                 history=HistoryPolicy.KEEP_LAST,
                 depth=DATA_DEPTH,
-                reliability=ReliabilityPolicy.RELIABLE if reliable
+                reliability=ReliabilityPolicy.RELIABLE
+                if reliable
                 else ReliabilityPolicy.BEST_EFFORT,
                 durability=DurabilityPolicy.VOLATILE,
             )

@@ -1,0 +1,123 @@
+"""Benchmark: ssa_fusion HankelDMD vs PyDMD HankelDMD on ISS two-body + J2 positions.
+
+3 channels x 720 samples at 30 s, 120 delays, fit + 200-step forecast. Runs are
+interleaved (ours, PyDMD, ours, ...) so machine load affects both alike. Prints
+parseable ``key: value`` lines. Run: ``/work/devvenv/bin/python bench/bench_dmd.py``.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+import warnings
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+from ssa_fusion.core.hankel_dmd import HankelDMD
+
+MU, J2, RE = 398600.4418, 1.08262668e-3, 6378.137
+N_TRAIN, N_FC, DELAYS, DT, REPEATS = 720, 200, 120, 30.0, 41
+
+
+def iss_positions(n: int) -> np.ndarray:
+    """ISS two-body + J2 ECI positions (3, n), km, every DT s."""
+    a, e = 6796.9, 0.0007
+    i, raan, argp, nu = np.radians([51.639, 113.73, 51.197, 358.89])
+    p = a * (1 - e * e)
+    r = p / (1 + e * np.cos(nu))
+    r_pf = np.array([r * np.cos(nu), r * np.sin(nu), 0.0])
+    v_pf = np.sqrt(MU / p) * np.array([-np.sin(nu), e + np.cos(nu), 0.0])
+    co, so, ci, si, cw, sw = (
+        np.cos(raan),
+        np.sin(raan),
+        np.cos(i),
+        np.sin(i),
+        np.cos(argp),
+        np.sin(argp),
+    )
+    rot = np.array(
+        [
+            [co * cw - so * sw * ci, -co * sw - so * cw * ci, so * si],
+            [so * cw + co * sw * ci, -so * sw + co * cw * ci, -co * si],
+            [sw * si, cw * si, ci],
+        ]
+    )
+
+    def rhs(_t: float, x: np.ndarray) -> np.ndarray:
+        rr = x[:3]
+        rn = np.linalg.norm(rr)
+        z2 = (rr[2] / rn) ** 2
+        k = 1.5 * J2 * MU * RE**2 / rn**5
+        acc = -MU * rr / rn**3 + k * rr * np.array([5 * z2 - 1, 5 * z2 - 1, 5 * z2 - 3])
+        return np.concatenate([x[3:], acc])
+
+    t = np.arange(n) * DT
+    x0 = np.concatenate([rot @ r_pf, rot @ v_pf])
+    return solve_ivp(rhs, (0.0, t[-1]), x0, t_eval=t, method="DOP853", rtol=1e-12, atol=1e-12).y[:3]
+
+
+def ours(z: np.ndarray) -> np.ndarray:
+    return HankelDMD(DELAYS).fit(z).forecast(N_FC)
+
+
+def pydmd_run(z: np.ndarray) -> np.ndarray:
+    from pydmd import HankelDMD as PyHankelDMD
+
+    dmd = PyHankelDMD(svd_rank=0, exact=True, d=DELAYS).fit(z)
+    dmd.dmd_time["tend"] = z.shape[1] + N_FC - 1
+    return dmd.reconstructed_data[:, z.shape[1] :].real
+
+
+def timed(fn, *args) -> tuple[float, object]:
+    t0 = time.perf_counter()
+    out = fn(*args)
+    return (time.perf_counter() - t0) * 1e3, out
+
+
+def bench(label: str) -> None:
+    pos = iss_positions(N_TRAIN + N_FC)
+    z, truth = pos[:, :N_TRAIN], pos[:, N_TRAIN:]
+    t_ours, t_py, t_cov = [], [], []
+    for _ in range(3):  # warm-up
+        ours(z)
+        pydmd_run(z)
+    for _ in range(REPEATS):
+        dt, f_ours = timed(ours, z)
+        t_ours.append(dt)
+        dt, f_py = timed(pydmd_run, z)
+        t_py.append(dt)
+        model = HankelDMD(DELAYS).fit(z)
+        dt, cov = timed(model.forecast_covariance, N_FC)
+        t_cov.append(dt)
+    err_ours = np.linalg.norm(f_ours - truth, axis=0).max()
+    err_py = np.linalg.norm(f_py - truth, axis=0).max()
+    med_o, med_p = float(np.median(t_ours)), float(np.median(t_py))
+    sfx = label
+    print(f"dmd_fit_forecast_ms_median{sfx}: {med_o:.2f}")
+    print(f"dmd_fit_forecast_ms_min{sfx}: {min(t_ours):.2f}")
+    print(f"pydmd_ms_median{sfx}: {med_p:.2f}")
+    print(f"speedup{sfx}: {med_p / med_o:.1f}")
+    print(f"dmd_forecast_cov_ms_median{sfx}: {float(np.median(t_cov)):.2f}")
+    print(f"rank ours: {model.rank_}")
+    print(f"max_err_km ours: {err_ours:.3e} pydmd: {err_py:.3e}")
+    sig = np.sqrt(np.trace(cov, axis1=1, axis2=2))
+    print(f"cov_sqrt_trace_km h1: {sig[0]:.3e} h100: {sig[99]:.3e} h200: {sig[-1]:.3e}")
+
+
+def main() -> None:
+    warnings.simplefilter("ignore")
+    print(f"cpus: {os.cpu_count()} load_avg_1min: {os.getloadavg()[0]:.2f}")
+    bench("")
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return
+    with threadpool_limits(1):
+        bench("_1thread")
+
+
+if __name__ == "__main__":
+    main()

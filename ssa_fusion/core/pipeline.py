@@ -1,0 +1,22 @@
+"""Estimator and surrogate built from a scenario's settings: one place, so the live nodes'
+defaults, the live evaluation, the offline replay and the experiments agree."""
+
+from __future__ import annotations
+
+from .scenarios import Scenario, measurement_model, placeholder
+from .surrogate import Surrogate, SurrogateConfig
+from .tracker import Tracker, TrackerConfig
+
+
+def make_tracker(s: Scenario, object_id: str = "", **overrides) -> Tracker:
+    """The scenario's EKF (placeholder model, measurement model, P0 floor, q, frame)."""
+    config = TrackerConfig(p0_sigma=s.p0_sigma, q=s.q, frame_id=s.station or "", **overrides)
+    return Tracker(placeholder(s), measurement_model(s), config, n=s.n, object_id=object_id)
+
+
+def make_surrogate(s: Scenario, **overrides) -> Surrogate:
+    """The scenario's Hankel-DMD surrogate (buffer = tracking window, delays, rank)."""
+    settings = dict(buffer_s=s.track_s, delays=s.delays, rank=s.rank, cadence_s=s.cadence_s,
+                    max_horizon_s=s.gap_s + s.cadence_s)
+    settings.update(overrides)
+    return Surrogate(SurrogateConfig(**settings))

@@ -1,0 +1,161 @@
+"""filter: EKF of one satellite with the Keplerian two-body placeholder model.
+
+Initialises from its first real measurements (Herrick–Gibbs for range/az/el, finite
+differences for position), then fuses real measurements from ``/ssa/measurement`` and,
+for epochs without one, forecasts from ``/ssa/forecast``. Publishes ``/ssa/estimate``
+(state + full 6x6 covariance, stamped with the measurement epoch) for every fused epoch;
+when nothing is fused for `predict_period` sim s it publishes a prediction (update_source
+NONE) whose covariance grows. Rejected input is counted by cause on ``/diagnostics``.
+
+    ros2 run ssa_fusion filter --ros-args -p use_sim_time:=true -p kind:=range_az_el
+"""
+
+from __future__ import annotations
+
+from rclpy.clock import JumpThreshold
+from rclpy.duration import Duration
+from rclpy.node import Node
+from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
+from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
+
+from ssa_fusion import messages
+from ssa_fusion.core import kepler, scenarios
+from ssa_fusion.core.measurement import POSITION, RANGE_AZ_EL, PositionModel, RazelModel
+from ssa_fusion.core.tracker import DEFAULT_GATE, Tracker, TrackerConfig
+from ssa_fusion.core.types import StateEstimate
+from ssa_fusion.nodes.common import Diagnostics, declare, non_negative, one_of, run, wall_timer
+from ssa_fusion.qos import DATA_QOS, TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_MEASUREMENT
+
+KINDS = {"position": POSITION, "range_az_el": RANGE_AZ_EL}
+SOURCE_NAMES = ("prediction", "sensor", "forecast")
+
+
+def _p0_check(v: list) -> str | None:
+    return None if len(v) == 6 and min(v) >= 0 else "needs 6 standard deviations >= 0"
+
+
+def tracker_from(node: Node) -> Tracker:
+    """Declare the filter's parameters on `node` and build its Tracker (shared with the
+    offline replay so both use the same defaults)."""
+    base = scenarios.DEFAULT_LIVE
+    kind = declare(
+        node, "kind", "range_az_el", "measurement kind: position | range_az_el", one_of(*KINDS)
+    )
+    station = declare(
+        node,
+        "station",
+        base.station,
+        "station id of range/az/el measurements (frame_id)",
+        one_of(*scenarios.STATIONS),
+    )
+    p0 = declare(
+        node,
+        "p0_sigma",
+        [v * 1000.0 for v in base.p0_sigma],
+        "std floor added to the IOD covariance: 3 x m, 3 x m/s",
+        _p0_check,
+    )
+    q = declare(
+        node,
+        "q",
+        base.q * 1e6,
+        "process noise: white-noise acceleration spectral density, m^2/s^3",
+        non_negative,
+    )
+    gate = declare(
+        node,
+        "gate",
+        DEFAULT_GATE,
+        "NIS beyond which an update is rejected (0 = no gate)",
+        non_negative,
+    )
+    object_id = declare(node, "object_id", "", "only track this object ('' = any)")
+    if KINDS[kind] == RANGE_AZ_EL:
+        model = RazelModel(scenarios.STATIONS[station], scenarios.UNIX_EPOCH_JD)
+        frame = station
+    else:
+        model, frame = PositionModel(), "eci"
+    config = TrackerConfig(
+        p0_sigma=tuple(v / 1000.0 for v in p0), q=q * 1e-6, gate=gate or None, frame_id=frame
+    )
+    return Tracker(kepler.propagate, model, config, n=6, object_id=object_id)
+
+
+class FilterNode(Node):
+    def __init__(self) -> None:
+        super().__init__("filter")
+        self.tracker = tracker_from(self)
+        self.predict_period = declare(
+            self,
+            "predict_period",
+            300.0,
+            "sim s without an update after which a prediction is published (0 = never)",
+            non_negative,
+        )
+        self.diag = Diagnostics(self)
+        self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, DATA_QOS)
+        self.create_subscription(
+            MeasurementMsg, TOPIC_MEASUREMENT, self.diag.guard(self.on_measurement), DATA_QOS
+        )
+        self.create_subscription(
+            MeasurementMsg, TOPIC_FORECAST, self.diag.guard(self.on_measurement), DATA_QOS
+        )
+        if self.predict_period > 0:
+            wall_timer(self, 0.1, self.diag.guard(self.predict))
+        self._jump = self.get_clock().create_jump_callback(
+            JumpThreshold(
+                min_forward=None, min_backward=Duration(nanoseconds=-1), on_clock_change=False
+            ),
+            post_callback=self.on_jump,
+        )
+        self.activity = 0
+        self.last_object = ""
+
+    def on_jump(self, jump) -> None:
+        self.tracker.reset()
+        self.diag.count("reset_clock_jump", "sim time jumped backwards: filter reset", warn=False)
+
+    def on_measurement(self, msg: MeasurementMsg) -> None:
+        self.activity += 1
+        wanted = self.tracker.object_id
+        if wanted and msg.object_id != wanted:
+            self.diag.count("ignored_other_object", f"object_id {msg.object_id!r}", warn=False)
+            return
+        try:
+            m = messages.measurement_from_msg(msg)
+        except ValueError as exc:
+            self.diag.count("rejected_kind", str(exc))
+            return
+        out = self.tracker.process(m)
+        if out.rejected:
+            if out.rejected == "iod_pending":
+                self.diag.counts["iod_pending"] += 1
+            else:
+                self.diag.count(out.rejected, out.detail, warn=out.rejected.startswith("rej"))
+            return
+        if out.rolled_back:
+            self.diag.counts["forecasts_rolled_back"] += out.rolled_back
+        self.last_object = msg.object_id
+        for e in (out.estimate, *out.refused):
+            self.publish(e)
+
+    def publish(self, e: StateEstimate) -> None:
+        e.object_id = e.object_id or self.last_object
+        self.pub.publish(messages.estimate_to_msg(e))
+        self.diag.counts[f"published_{SOURCE_NAMES[e.update_source]}"] += 1
+
+    def predict(self) -> None:
+        now = self.get_clock().now().nanoseconds * 1e-9
+        if self.tracker.t >= now - self.predict_period:
+            return
+        e = self.tracker.predicted(now)
+        if e is not None:
+            self.publish(e)
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(FilterNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

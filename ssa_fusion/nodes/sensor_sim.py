@@ -1,0 +1,230 @@
+"""sensor_sim: simulate a tracked satellite and its sensor, and drive sim time.
+
+Propagates the scenario's true orbit (two-body + J2, drag, or SGP4/SDP4), and publishes at
+the scenario cadence:
+
+* ``/ssa/measurement`` (ssa_fusion_msgs/Measurement): what the sensor measured;
+* ``/ssa/withheld``: what it would have measured during a gap (evaluation only);
+* ``/ssa/truth`` (ssa_fusion_msgs/StateEstimate, zero covariance): the true state;
+* ``/clock``: sim time, UTC (Unix seconds), advancing `time_scale` sim s per wall s.
+
+It exits 0 when the schedule is done.
+
+    ros2 run ssa_fusion sensor_sim --ros-args -p scenario:=iss_j2_rae -p time_scale:=500.0
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
+from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
+
+from ssa_fusion import messages
+from ssa_fusion.core import scenarios, types
+from ssa_fusion.core.simulate import Simulation, simulate
+from ssa_fusion.nodes.common import (
+    Diagnostics,
+    ParameterError,
+    declare,
+    finish,
+    non_negative,
+    positive,
+    run,
+)
+from ssa_fusion.qos import (
+    DATA_QOS,
+    TOPIC_CLOCK,
+    TOPIC_MEASUREMENT,
+    TOPIC_TRUTH,
+    TOPIC_WITHHELD,
+)
+
+ORBIT_SCENARIOS = [name for name, s in scenarios.SCENARIOS.items() if s.is_orbit]
+
+
+def _scenario_check(value: str) -> str | None:
+    return None if value in ORBIT_SCENARIOS else f"unknown scenario; known: {ORBIT_SCENARIOS}"
+
+
+def _gaps_check(value: list) -> str | None:
+    if len(value) % 2:
+        return "needs pairs [start_s, length_s, ...]"
+    if any(v < 0 for v in value):
+        return "starts and lengths must be >= 0"
+    return None
+
+
+def _wait_check(value: list) -> str | None:
+    for item in value:
+        topic, _, count = item.partition("=")
+        if not topic.startswith("/") or not count.isdigit():
+            return f"{item!r} is not '/topic=count'"
+    return None
+
+
+class SensorSim(Node):
+    def __init__(self) -> None:
+        super().__init__("sensor_sim")
+        name = declare(
+            self,
+            "scenario",
+            scenarios.DEFAULT_LIVE.name,
+            "orbit scenario (truth model, orbit, measurement kind)",
+            _scenario_check,
+        )
+        base = scenarios.get(name)
+        self.object_id = declare(self, "object_id", name, "object id put in every message")
+        cadence = declare(self, "cadence", base.cadence_s, "s between measurements", positive)
+        track = declare(
+            self,
+            "gap_start",
+            base.track_s,
+            "s of tracking before the gap (ignored when 'gaps' is set)",
+            non_negative,
+        )
+        gap = declare(self, "gap_length", base.gap_s, "s of the sensor outage", non_negative)
+        gaps = declare(
+            self,
+            "gaps",
+            [0.0],
+            "optional list [start_s, length_s, ...] of "
+            "outages after the start; [0.0] = use gap_start/gap_length",
+            lambda v: None if list(v) == [0.0] else _gaps_check(v),
+        )
+        after = declare(
+            self, "after_gap", base.after_s, "s of tracking after the (last) gap", non_negative
+        )
+        noise = declare(
+            self,
+            "noise_sigma",
+            [-1.0],
+            "measurement noise std per channel (m, or m, rad, rad for "
+            "range/az/el); [-1.0] = the scenario's noise",
+            lambda v: (
+                None
+                if list(v) == [-1.0] or (len(v) == 3 and min(v) >= 0)
+                else "needs 3 values >= 0 (or [-1.0])"
+            ),
+        )
+        self.time_scale = declare(
+            self, "time_scale", 100.0, "sim seconds per wall second", positive
+        )
+        seed = declare(self, "seed", 0, "noise random seed")
+        self.wait_for = declare(
+            self,
+            "wait_for",
+            [""],
+            "start only when each '/topic=count' has that many "
+            "subscribers (e.g. /ssa/measurement=3)",
+            lambda v: _wait_check([x for x in v if x]),
+        )
+        tick = declare(self, "tick", 0.01, "wall s between publication ticks", positive)
+
+        gap_list = list(gaps) if list(gaps) != [0.0] else [track, gap]
+        windows = [(gap_list[i], gap_list[i] + gap_list[i + 1]) for i in range(0, len(gap_list), 2)]
+        last_end = max(end for _, end in windows)
+        scenario = base.with_(
+            cadence_s=cadence,
+            track_s=gap_list[0],
+            gap_s=gap_list[1],
+            after_s=max(0.0, last_end + after - gap_list[0] - gap_list[1]),
+        )
+        if len(noise) == 3:
+            scenario = scenario.with_(
+                noise_sigma=tuple(
+                    v / s for v, s in zip(noise, messages.z_scale(scenario.kind), strict=True)
+                ),
+                noise_rel=0.0,
+            )
+        try:
+            self.sim: Simulation = simulate(scenario, seed=seed)
+        except ValueError as exc:
+            raise ParameterError(f"cannot simulate scenario {name!r}: {exc}") from exc
+        rel = self.sim.t - scenario.t0
+        self.in_gap = np.zeros(len(rel), dtype=bool)
+        for start, end in windows:
+            self.in_gap |= (rel >= start) & (rel < end)
+        self.scenario = scenario
+
+        self.pub_clock = self.create_publisher(Clock, TOPIC_CLOCK, DATA_QOS)
+        self.pub_meas = self.create_publisher(MeasurementMsg, TOPIC_MEASUREMENT, DATA_QOS)
+        self.pub_withheld = self.create_publisher(MeasurementMsg, TOPIC_WITHHELD, DATA_QOS)
+        self.pub_truth = self.create_publisher(StateEstimateMsg, TOPIC_TRUTH, DATA_QOS)
+        self.diag = Diagnostics(self)
+        self.next = 0
+        self.wall0: float | None = None
+        self.create_timer(tick, self.step)
+        self.get_logger().info(
+            f"{name}: {len(self.sim.t)} epochs every {cadence} s, gaps {windows} s, "
+            f"time scale {self.time_scale}x"
+        )
+
+    def ready(self) -> bool:
+        for item in self.wait_for:
+            if not item:
+                continue
+            topic, _, count = item.partition("=")
+            if self.count_subscribers(topic) < int(count):
+                return False
+        return True
+
+    def step(self) -> None:
+        if self.wall0 is None:
+            if not self.ready():
+                return
+            self.wall0 = time.monotonic()
+            self.get_logger().info("subscribers matched; starting")
+        sim = self.sim
+        now = sim.t[0] + (time.monotonic() - self.wall0) * self.time_scale
+        stop = int(np.searchsorted(sim.t, now, side="right"))
+        for i in range(self.next, stop):
+            self.publish_epoch(i)
+        self.next = max(self.next, stop)
+        self.publish_clock(min(now, sim.t[-1]))
+        if self.next >= len(sim.t):
+            self.done()
+
+    def publish_clock(self, t: float) -> None:
+        msg = Clock()
+        msg.clock = messages.seconds_to_stamp(t)
+        self.pub_clock.publish(msg)
+
+    def publish_epoch(self, i: int) -> None:
+        sim, s = self.sim, self.scenario
+        t = float(sim.t[i])
+        self.publish_clock(t)
+        frame = s.station or "eci"
+        m = types.Measurement(
+            t=t, z=sim.z[i], R=sim.R, kind=s.kind, object_id=self.object_id, frame_id=frame
+        )
+        if self.in_gap[i]:
+            self.pub_withheld.publish(messages.measurement_to_msg(m))
+            self.diag.counts["withheld"] += 1
+        else:
+            self.pub_meas.publish(messages.measurement_to_msg(m))
+            self.diag.counts["published"] += 1
+        truth = types.StateEstimate(t=t, x=sim.x[i], object_id=self.object_id)
+        self.pub_truth.publish(messages.estimate_to_msg(truth))
+
+    def done(self) -> None:
+        for pub in (self.pub_meas, self.pub_withheld, self.pub_truth, self.pub_clock):
+            pub.wait_for_all_acked(Duration(seconds=5.0))
+        self.diag.publish()
+        self.get_logger().info(
+            f"schedule done: {self.diag.counts['published']} measurements, "
+            f"{self.diag.counts['withheld']} withheld"
+        )
+        finish()
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(SensorSim, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

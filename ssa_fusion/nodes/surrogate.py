@@ -1,0 +1,162 @@
+"""surrogate: learn the measurement stream with Hankel-DMD and forecast it through gaps.
+
+Keeps a sliding buffer of real measurements from ``/ssa/measurement``, retrains on it, and
+publishes on ``/ssa/forecast`` one forecast measurement (source FORECAST) for each epoch
+the sensor missed, with a covariance that grows with the horizon; never past
+`max_horizon`. A backwards jump of sim time (a looping bag) empties the buffer. If it
+cannot fit, it publishes nothing and says why on ``/diagnostics``.
+
+    ros2 run ssa_fusion surrogate --ros-args -p use_sim_time:=true
+"""
+
+from __future__ import annotations
+
+import math
+
+from rclpy.clock import JumpThreshold
+from rclpy.duration import Duration
+from rclpy.node import Node
+from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
+
+from ssa_fusion import messages
+from ssa_fusion.core import scenarios
+from ssa_fusion.core.measurement import RANGE_AZ_EL
+from ssa_fusion.core.surrogate import Surrogate, SurrogateConfig
+from ssa_fusion.core.types import SENSOR
+from ssa_fusion.nodes.common import (
+    Diagnostics,
+    ParameterError,
+    declare,
+    non_negative,
+    positive,
+    run,
+    wall_timer,
+)
+from ssa_fusion.qos import DATA_QOS, TOPIC_FORECAST, TOPIC_MEASUREMENT
+
+
+def surrogate_config_from(node: Node) -> SurrogateConfig:
+    """Declare the surrogate's parameters on `node` and build its config (shared with the
+    offline replay so both use the same defaults)."""
+    base = scenarios.DEFAULT_LIVE
+    buffer_s = declare(
+        node, "buffer_length", base.track_s, "s of real measurements kept for training", positive
+    )
+    retrain = declare(
+        node,
+        "retrain_period",
+        600.0,
+        "sim s between refits while measurements arrive",
+        non_negative,
+    )
+    delays = declare(node, "delays", base.delays, "Hankel-DMD time delays", positive)
+    rank = declare(node, "rank", 0, "Hankel-DMD rank (0 = automatic)", non_negative)
+    horizon = declare(
+        node,
+        "max_horizon",
+        7200.0,
+        "s after the last real measurement beyond which nothing is forecast",
+        positive,
+    )
+    grace = declare(
+        node,
+        "grace",
+        2.0,
+        "cadences after a missed epoch before it is forecast (absorbs message latency)",
+        non_negative,
+    )
+    cadence = declare(
+        node,
+        "cadence",
+        0.0,
+        "expected s between measurements (0 = infer from the buffer)",
+        non_negative,
+    )
+    if cadence > 0 and delays * cadence * 2 > buffer_s:
+        raise ParameterError(
+            f"parameter 'delays' = {delays}: needs a buffer of at least 2 x delays x cadence "
+            f"= {2 * delays * cadence} s, but 'buffer_length' = {buffer_s} s"
+        )
+    return SurrogateConfig(
+        buffer_s=buffer_s,
+        retrain_period_s=retrain,
+        delays=delays,
+        rank=rank or None,
+        max_horizon_s=horizon,
+        cadence_s=cadence,
+        grace=grace,
+    )
+
+
+class SurrogateNode(Node):
+    def __init__(self) -> None:
+        super().__init__("surrogate")
+        self.core = Surrogate(surrogate_config_from(self))
+        check = declare(
+            self, "check_period", 0.02, "wall s between checks for missed epochs", positive
+        )
+        self.diag = Diagnostics(self)
+        self.pub = self.create_publisher(MeasurementMsg, TOPIC_FORECAST, DATA_QOS)
+        self.create_subscription(
+            MeasurementMsg, TOPIC_MEASUREMENT, self.diag.guard(self.on_measurement), DATA_QOS
+        )
+        wall_timer(self, check, self.diag.guard(self.check))
+        self._jump = self.get_clock().create_jump_callback(
+            JumpThreshold(
+                min_forward=None, min_backward=Duration(nanoseconds=-1), on_clock_change=False
+            ),
+            post_callback=self.on_jump,
+        )
+        self.activity = 0
+
+    def on_jump(self, jump) -> None:
+        self.core.reset()
+        self.diag.count("reset_clock_jump", "sim time jumped backwards: buffer emptied", warn=False)
+
+    def on_measurement(self, msg: MeasurementMsg) -> None:
+        self.activity += 1
+        try:
+            m = messages.measurement_from_msg(msg)
+        except ValueError as exc:
+            self.diag.count("rejected_kind", str(exc))
+            return
+        if m.source != SENSOR:
+            self.diag.count("ignored_forecast_input", "forecast on the measurement topic")
+            return
+        last = self.core.last
+        if last is not None and m.t <= last.t:
+            self.diag.count("rejected_stale", f"t={m.t} not after the last sample t={last.t}")
+            return
+        if not all(map(_finite, m.z)):
+            self.diag.count("rejected_nonfinite", f"NaN/inf in z at t={m.t}")
+            return
+        self.publish(self.core.add(m))
+        self.diag.counts["buffered"] += 1
+
+    def check(self) -> None:
+        now = self.get_clock().now().nanoseconds * 1e-9
+        self.publish(self.core.due(now))
+        self.diag.status["model"] = self.core.status
+
+    def publish(self, forecasts: list) -> None:
+        for f in forecasts:
+            if f.kind == RANGE_AZ_EL and (f.z[0] < 0 or abs(f.z[2]) > 0.5 * math.pi):
+                self.diag.count(
+                    "forecast_invalid",
+                    f"forecast {f.z} at t={f.t} is not a valid range/az/el; not published",
+                )
+                continue
+            self.pub.publish(messages.measurement_to_msg(f))
+            self.diag.counts["forecasts"] += 1
+
+
+def _finite(v: float) -> bool:
+    return v == v and abs(v) != float("inf")
+
+
+def main(args: list[str] | None = None) -> int:
+    return run(SurrogateNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
