@@ -2,6 +2,10 @@
 # idempotent: a few seconds when nothing changed).
 .PHONY: demo test bootstrap
 
+# Many single-threaded processes share 2 cores: a spinning multi-threaded BLAS slows all.
+export OPENBLAS_NUM_THREADS ?= 1
+export ROS_AUTOMATIC_DISCOVERY_RANGE = LOCALHOST
+
 bootstrap:
 	@bash tools/bootstrap.sh
 

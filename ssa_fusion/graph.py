@@ -1,0 +1,196 @@
+"""Run ssa_fusion node executables as separate processes over real DDS, loopback only.
+
+`Graph` starts executables (the files `ros2 run ssa_fusion <node>` runs) with
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and a ROS domain id of its own, gives the
+caller a probe node in that domain to wait for topic matches and to receive messages
+(never a fixed sleep), and tears every process down with SIGTERM (SIGKILL after a
+timeout), reporting exit codes and log tails. Used by `ssa-fusion live`/`replay` and by
+the headless graph tests.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+
+from ssa_fusion.qos import DATA_QOS
+
+NODE_BIN = Path(sys.prefix) / "lib" / "ssa_fusion"
+"""Where the bootstrap places node executables (as `ros2 run ssa_fusion <node>` finds them)."""
+
+_domain_counter = itertools.count()
+
+
+def fresh_domain_id() -> int:
+    """A ROS domain id in 1..100 unlikely to be shared with another graph or test run."""
+    return 1 + (os.getpid() * 7 + next(_domain_counter)) % 100
+
+
+def node_command(executable: str) -> list[str]:
+    """Command running node `executable`: the installed file, else the module."""
+    path = NODE_BIN / executable
+    if path.exists():
+        return [str(path)]
+    return [sys.executable, "-m", f"ssa_fusion.nodes.{executable}"]
+
+
+@dataclass
+class Proc:
+    """A started executable and its log files."""
+
+    name: str
+    popen: subprocess.Popen
+    stdout_path: Path
+    stderr_path: Path
+    expect_returncode: int | None = 0
+
+    @property
+    def returncode(self) -> int | None:
+        return self.popen.poll()
+
+    def stdout(self) -> str:
+        return self.stdout_path.read_text(errors="replace")
+
+    def stderr(self) -> str:
+        return self.stderr_path.read_text(errors="replace")
+
+    def describe(self) -> str:
+        tail = "\n".join(self.stderr().splitlines()[-30:])
+        return f"process {self.name!r} (pid {self.popen.pid}) exit {self.returncode}:\n{tail}"
+
+
+class Graph:
+    """Processes plus an in-process probe node, all in one private ROS domain."""
+
+    def __init__(self, workdir: Path, domain_id: int | None = None) -> None:
+        self.workdir = Path(workdir)
+        self.workdir.mkdir(parents=True, exist_ok=True)
+        self.domain_id = fresh_domain_id() if domain_id is None else domain_id
+        self.procs: list[Proc] = []
+        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        self.env = dict(os.environ)
+        self.env.update(ROS_DOMAIN_ID=str(self.domain_id), PYTHONUNBUFFERED="1")
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=self.domain_id)
+        self.probe: Node = rclpy.create_node("ssa_fusion_probe", context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.probe)
+
+    # processes ---------------------------------------------------------------------------
+    def start(self, name: str, cmd: list[str], expect_returncode: int | None = 0) -> Proc:
+        """Start `cmd` in this graph's domain; output goes to workdir/<name>.{out,err}."""
+        out = self.workdir / f"{name}.out"
+        err = self.workdir / f"{name}.err"
+        popen = subprocess.Popen(cmd, env=self.env, stdout=out.open("wb"),
+                                 stderr=err.open("wb"), stdin=subprocess.DEVNULL,
+                                 start_new_session=True)
+        proc = Proc(name, popen, out, err, expect_returncode)
+        self.procs.append(proc)
+        return proc
+
+    def start_node(self, executable: str, *ros_args: str, params: dict[str, Any] | None = None,
+                   params_file: Path | None = None, name: str | None = None,
+                   **kw: Any) -> Proc:
+        """Start an ssa_fusion node executable with parameters (`-p key:=value`)."""
+        cmd = [*node_command(executable), "--ros-args"]
+        if params_file is not None:
+            cmd += ["--params-file", str(params_file)]
+        for key, value in (params or {}).items():
+            cmd += ["-p", f"{key}:={_ros_value(value)}"]
+        return self.start(name or executable, cmd + list(ros_args), **kw)
+
+    def start_python(self, script: Path | str, *args: str, name: str, **kw: Any) -> Proc:
+        """Start a Python script with this interpreter."""
+        return self.start(name, [sys.executable, str(script), *args], **kw)
+
+    def wait_exit(self, proc: Proc, timeout: float) -> int:
+        """Wait for `proc` to end by itself, spinning the probe meanwhile."""
+        self.wait_for(lambda: proc.popen.poll() is not None, timeout, f"{proc.name} to exit")
+        return proc.popen.returncode
+
+    def stop(self, proc: Proc, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int:
+        """Send `sig`; SIGKILL if still alive after `timeout` s. Returns the exit code."""
+        if proc.popen.poll() is None:
+            proc.popen.send_signal(sig)
+            try:
+                proc.popen.wait(timeout)
+            except subprocess.TimeoutExpired:
+                proc.popen.kill()
+                proc.popen.wait(5)
+        return proc.popen.returncode
+
+    # probe -------------------------------------------------------------------------------
+    def spin_once(self, timeout: float = 0.05) -> None:
+        self.executor.spin_once(timeout_sec=timeout)
+
+    def wait_for(self, predicate: Callable[[], bool], timeout: float, what: str) -> None:
+        """Spin the probe until `predicate()`; on timeout raise with the processes' stderr."""
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > deadline:
+                raise TimeoutError(
+                    f"timed out after {timeout} s waiting for {what}\n{self.report()}"
+                )
+            self.spin_once()
+
+    def wait_for_publisher(self, topic: str, count: int = 1, timeout: float = 20.0) -> None:
+        self.wait_for(lambda: self.probe.count_publishers(topic) >= count, timeout,
+                      f"{count} publisher(s) on {topic}")
+
+    def wait_for_subscriber(self, topic: str, count: int = 1, timeout: float = 20.0) -> None:
+        self.wait_for(lambda: self.probe.count_subscribers(topic) >= count, timeout,
+                      f"{count} subscriber(s) on {topic}")
+
+    def collect(self, msg_type: Any, topic: str, qos: Any = DATA_QOS) -> list:
+        """Subscribe the probe to `topic`; the returned list fills as messages arrive."""
+        received: list = []
+        self.probe.create_subscription(msg_type, topic, received.append, qos)
+        return received
+
+    def wait_quiet(self, counts: Callable[[], Any], quiet_s: float, limit_s: float) -> None:
+        """Spin until `counts()` has not changed for `quiet_s` s (at most `limit_s`)."""
+        deadline = time.monotonic() + limit_s
+        last, since = counts(), time.monotonic()
+        while time.monotonic() < deadline and time.monotonic() - since < quiet_s:
+            self.spin_once()
+            now = counts()
+            if now != last:
+                last, since = now, time.monotonic()
+
+    def report(self) -> str:
+        return "\n".join(p.describe() for p in self.procs)
+
+    # teardown ----------------------------------------------------------------------------
+    def close(self) -> list[str]:
+        """Stop every process still running (newest first); describe unexpected exits."""
+        problems = []
+        for p in reversed(self.procs):
+            self.stop(p)
+            if p.expect_returncode is not None and p.returncode != p.expect_returncode:
+                problems.append(p.describe())
+        self.executor.shutdown()
+        self.probe.destroy_node()
+        self.context.try_shutdown()
+        return problems
+
+
+def _ros_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (list, tuple)):
+        return "[" + ",".join(_ros_value(v) if not isinstance(v, str) else f'"{v}"'
+                              for v in value) + "]"
+    return str(value)
