@@ -115,9 +115,20 @@ class Surrogate:
 
     # ----------------------------------------------------------------------------------
     def add(self, m: Measurement) -> list[Measurement]:
-        """Buffer a real measurement; returns forecasts still owed for epochs before it."""
-        owed = self.due(m.t - 1e-9 * max(1.0, abs(m.t)), _closing=True)
+        """Buffer a real measurement; returns forecasts still owed for epochs before it.
+
+        A measurement with a non-finite stamp, z or covariance, or not newer than the last
+        one buffered, is ignored (it would stop every fit while it stays in the buffer);
+        `status` says so. A real backwards clock jump goes through `reset()`.
+        """
         last = self.last
+        if not (math.isfinite(m.t) and np.isfinite(m.z).all() and np.isfinite(m.R).all()):
+            self.status = f"ignored a non-finite measurement at t={m.t}"
+            return []
+        if last is not None and m.t <= last.t:
+            self.status = f"ignored t={m.t}: not after the last buffered t={last.t}"
+            return []
+        owed = self.due(m.t - 1e-9 * max(1.0, abs(m.t)), _closing=True)
         if last is not None and m.kind != last.kind:
             self.reset()
         self._buf.append(m)

@@ -157,14 +157,26 @@ class Tracker:
         return process_noise(abs(dt), self.config.q, dim=self.n // 2)
 
     def _step(self, m: Measurement, source: int) -> Outcome:
-        """Predict to m.t and update with m (the EKF exists)."""
+        """Predict to m.t and update with m (the EKF exists). Numerically hopeless input
+        (overflowing values) is rejected with the state left as it was."""
         ekf = self.ekf
         dt = m.t - self.t
-        if dt != 0.0:
-            ekf.predict(lambda x: self.f(x, dt), self._Q(dt))
+        before = _Snapshot(self.t, ekf.x, ekf.P)
         model, t = self.model, m.t
-        result = ekf.update(m.z, lambda x: model.h_and_H(x, t), m.R, model.angle_mask,
-                            self.config.gate)
+        try:
+            with np.errstate(over="raise", invalid="raise"):
+                if dt != 0.0:
+                    ekf.predict(lambda x: self.f(x, dt), self._Q(dt))
+                result = ekf.update(m.z, lambda x: model.h_and_H(x, t), m.R,
+                                    model.angle_mask, self.config.gate)
+            ok = np.isfinite(ekf.x).all() and np.isfinite(ekf.P).all()
+        except (ValueError, OverflowError, FloatingPointError, np.linalg.LinAlgError) as exc:
+            ok, result, reason = False, None, f"{type(exc).__name__}: {exc}"
+        if not ok:
+            self.t, ekf.x, ekf.P = before.t, before.x, before.P
+            return Outcome(rejected="rejected_numeric",
+                           detail=f"t={m.t}: update not computable "
+                                  f"({reason if result is None else 'non-finite state'})")
         self.t = m.t
         if not result.accepted:
             return Outcome(rejected="rejected_gate",
@@ -234,13 +246,14 @@ class Tracker:
         t_init, x0, P_iod = self._iod_solution(batch)
         if not np.isfinite(x0).all():
             return Outcome(rejected="iod_failed", detail="initial orbit determination failed")
-        self.ekf = ExtendedKalmanFilter(x0, P_iod + self._P0_floor)
-        self.t = t_init
-        self.t_real = t_init
-        out = Outcome(estimate=self.estimate(UPDATE_SENSOR))
-        for later in (b for b in batch if b.t > t_init):
-            out = self._fuse_real(later)
-        return out
+        t_last = batch[-1].t
+        P0 = P_iod + self._P0_floor
+        if t_last != t_init:  # Herrick-Gibbs solves at the middle epoch: move to the last
+            x0, F = self.f(x0, t_last - t_init)
+            P0 = F @ P0 @ F.T
+        self.ekf = ExtendedKalmanFilter(x0, 0.5 * (P0 + P0.T))
+        self.t = self.t_real = t_last
+        return Outcome(estimate=self.estimate(UPDATE_SENSOR))
 
     def _iod_solution(self, batch: list[Measurement]) -> tuple[float, np.ndarray, np.ndarray]:
         """(epoch, state, covariance) from the IOD batch; covariance from the measurement

@@ -291,15 +291,6 @@ def test_kind_change_restarts_the_buffer():
 
 
 # ------------------------------------------------------------------------------ bad input
-_BAD_INPUT_REASON = (
-    "BUG: Surrogate.add() buffers any measurement. A single non-finite z makes every later fit "
-    "fail ('cannot fit: constant or non-finite data') until it leaves the buffer (buffer_s, "
-    "6 h by default); a duplicate or out-of-order stamp as the newest sample makes the buffer "
-    "look irregular so the following gap gets no forecast; a non-finite covariance on the last "
-    "sample is copied into every forecast's R. Fix: in add(), ignore (return [] without "
-    "buffering) measurements with non-finite t/z/R or t <= last.t (a genuine backwards jump "
-    "is handled by reset()).")
-
 
 def _with_bad(bad_at: int, make_bad) -> tuple[list[Measurement], list[Measurement]]:
     sim = _sim()
@@ -317,7 +308,6 @@ def _replace(m: Measurement, **changes) -> Measurement:
     return Measurement(**{**m.__dict__, **changes})
 
 
-@pytest.mark.xfail(strict=True, reason=_BAD_INPUT_REASON)
 @pytest.mark.parametrize(("case", "bad_at", "make_bad"), [
     ("nan_z_mid_buffer", 200, lambda m: [_replace(m, z=m.z * np.nan)]),
     ("duplicate_last", TRACK_N - 1, lambda m: [m, m]),

@@ -1,0 +1,122 @@
+"""Graph test of the product: sensor_sim, surrogate, filter and recorder as separate
+processes over DDS, on a shortened default scenario (range/az/el of the ISS)."""
+
+from collections import Counter
+
+import numpy as np
+import pytest
+from rosgraph_msgs.msg import Clock
+from ssa_fusion_msgs.msg import Measurement, StateEstimate
+
+from ssa_fusion import bagio, evaluate, messages
+from ssa_fusion.core import scenarios
+from ssa_fusion.live import node_parameters
+
+TOPICS = {
+    "/ssa/measurement": Measurement,
+    "/ssa/forecast": Measurement,
+    "/ssa/estimate": StateEstimate,
+    "/ssa/truth": StateEstimate,
+    "/ssa/withheld": Measurement,
+}
+SHORT = scenarios.DEFAULT_LIVE.with_(track_s=3000.0, gap_s=900.0, after_s=600.0, delays=40)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    """Run the graph once; the tests below check what arrived and what was recorded."""
+    from ssa_fusion.graph import Graph
+
+    tmp = tmp_path_factory.mktemp("live")
+    bag = tmp / "bag"
+    params = node_parameters(SHORT, time_scale=1500.0, seed=3, bag=bag)
+    params["sensor_sim"]["wait_for"] = [
+        "/ssa/measurement=4", "/ssa/forecast=3", "/ssa/estimate=2", "/ssa/truth=2",
+        "/ssa/withheld=2", "/clock=4",
+    ]
+    g = Graph(tmp)
+    try:
+        got = {topic: g.collect(t, topic) for topic, t in TOPICS.items()}
+        clock = g.collect(Clock, "/clock")
+        nodes = {n: g.start_node(n, params=params[n]) for n in ("recorder", "surrogate", "filter")}
+        g.wait_for_subscriber("/ssa/forecast", 3)  # filter, recorder, probe
+        sensor = g.start_node("sensor_sim", params=params["sensor_sim"])
+        sensor_code = g.wait_exit(sensor, timeout=90)
+        g.wait_quiet(lambda: tuple(len(v) for v in got.values()), quiet_s=1.0, limit_s=20)
+        codes = {n: g.stop(p) for n, p in nodes.items()}
+        report = g.report()
+    finally:
+        problems = g.close()
+    yield {"got": got, "clock": clock, "bag": bag, "sensor_code": sensor_code,
+           "codes": codes, "report": report, "problems": problems}
+
+
+def test_all_nodes_exit_0(run):
+    assert run["sensor_code"] == 0, run["report"]
+    assert run["codes"] == {"recorder": 0, "surrogate": 0, "filter": 0}, run["report"]
+    assert not run["problems"]
+
+
+def test_estimates_arrive_and_forecasts_only_in_the_gap(run):
+    got = run["got"]
+    gap0 = SHORT.t0 + SHORT.track_s
+    gap1 = gap0 + SHORT.gap_s
+    withheld = {messages.stamp_to_seconds(m.header.stamp) for m in got["/ssa/withheld"]}
+    assert len(withheld) == round(SHORT.gap_s / SHORT.cadence_s)
+    forecasts = [messages.measurement_from_msg(m) for m in got["/ssa/forecast"]]
+    assert forecasts, "no forecast arrived"
+    assert all(gap0 <= f.t < gap1 and f.source == 1 for f in forecasts)
+    assert all(f.horizon > 0 for f in forecasts)
+    est = [messages.estimate_from_msg(m) for m in got["/ssa/estimate"]]
+    by_source = Counter(e.update_source for e in est)
+    assert by_source[1] > 100  # real measurements before and after the gap
+    fused_forecast = [e for e in est if e.update_source == 2]
+    assert len(fused_forecast) >= 0.9 * len(withheld)  # forecasts were fused
+    assert all(gap0 <= e.t < gap1 for e in fused_forecast)
+    after = [e for e in est if e.t >= gap1]
+    assert after and all(e.update_source == 1 for e in after)  # real ones take over
+    # estimates are stamped with measurement epochs on the 30 s grid
+    assert all(abs((e.t - SHORT.t0) / 30.0 - round((e.t - SHORT.t0) / 30.0)) < 1e-6
+               for e in est if e.update_source)
+
+
+def test_estimate_tracks_truth(run):
+    got = run["got"]
+    truth = {messages.stamp_to_seconds(m.header.stamp): np.array(m.state) for m in
+             got["/ssa/truth"]}
+    last = messages.estimate_from_msg(got["/ssa/estimate"][-1])
+    err_km = np.linalg.norm(last.x[:3] - truth[last.t][:3] / 1000.0)
+    sigma_km = np.sqrt(np.trace(last.P[:3, :3]))
+    assert err_km < 200.0, err_km  # a few hundredths of a radian at ~5000 km range
+    assert err_km < 5 * sigma_km, (err_km, sigma_km)
+
+
+def test_every_published_message_is_in_the_bag(run):
+    got = run["got"]
+    counts = Counter(m.topic for m in bagio.read_bag(run["bag"]))
+    for topic, msgs in got.items():
+        assert counts[topic] == len(msgs), topic
+    assert counts["/clock"] == len(run["clock"])
+
+
+def test_bag_reads_with_rosbags_and_mcap(run):
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    bag = run["bag"]
+    meta = (bag / "metadata.yaml").read_text()
+    assert "version: 9" in meta and "ros_distro: kilted" in meta
+    assert "offered_qos_profiles" in meta and "RIHS01_" in meta
+    data = evaluate.load(bag)
+    assert data.counts["/ssa/estimate"] == len(run["got"]["/ssa/estimate"])
+    mcap_file = next(bag.glob("*.mcap"))
+    with mcap_file.open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        n = 0
+        for schema, channel, _message, decoded in reader.iter_decoded_messages(
+                topics=["/ssa/estimate"]):
+            assert schema.encoding == "ros2msg" and channel.message_encoding == "cdr"
+            assert len(decoded.state) == 6 and len(decoded.covariance) == 36
+            n += 1
+        assert reader.get_header().profile == "ros2"
+    assert n == data.counts["/ssa/estimate"]
