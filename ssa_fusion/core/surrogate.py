@@ -89,6 +89,7 @@ class Surrogate:
         self.config = config
         self.status = "waiting for measurements"
         self.fits = 0
+        self.invalid = 0  # forecasts withheld because they are not valid measurements
         self.reset()
 
     def reset(self) -> None:
@@ -156,6 +157,11 @@ class Surrogate:
             return []
         out = []
         for k in range(self._emitted + 1, n_due + 1):
+            z = self._forecast[:, k - 1]
+            if last.kind == RANGE_AZ_EL and (z[0] < 0.0 or abs(z[2]) > 0.5 * math.pi):
+                self.invalid += 1  # not a possible range/az/el: withheld, not clipped
+                self.status = f"forecast at t={last.t + k * dt} is not a valid range/az/el"
+                continue
             R = last.R + self._cov[k - 1]
             out.append(Measurement(
                 t=last.t + k * dt, z=self._forecast[:, k - 1].copy(), R=0.5 * (R + R.T),

@@ -11,8 +11,6 @@ cannot fit, it publishes nothing and says why on ``/diagnostics``.
 
 from __future__ import annotations
 
-import math
-
 from rclpy.clock import JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -20,7 +18,6 @@ from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
 
 from ssa_fusion import messages
 from ssa_fusion.core import scenarios
-from ssa_fusion.core.measurement import RANGE_AZ_EL
 from ssa_fusion.core.surrogate import Surrogate, SurrogateConfig
 from ssa_fusion.core.types import SENSOR
 from ssa_fusion.nodes.common import (
@@ -136,16 +133,13 @@ class SurrogateNode(Node):
     def check(self) -> None:
         now = self.get_clock().now().nanoseconds * 1e-9
         self.publish(self.core.due(now))
+        if self.core.invalid > self.diag.counts["forecast_invalid"]:
+            self.diag.count("forecast_invalid", self.core.status)
+            self.diag.counts["forecast_invalid"] = self.core.invalid
         self.diag.status["model"] = self.core.status
 
     def publish(self, forecasts: list) -> None:
         for f in forecasts:
-            if f.kind == RANGE_AZ_EL and (f.z[0] < 0 or abs(f.z[2]) > 0.5 * math.pi):
-                self.diag.count(
-                    "forecast_invalid",
-                    f"forecast {f.z} at t={f.t} is not a valid range/az/el; not published",
-                )
-                continue
             self.pub.publish(messages.measurement_to_msg(f))
             self.diag.counts["forecasts"] += 1
 
