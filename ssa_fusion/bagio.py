@@ -83,6 +83,15 @@ def qos_from_rclpy(profile: Any) -> Qos:
     )
 
 
+def rosbags_classes() -> Any:
+    """`messages.MsgClasses` of the typestore, to build messages for bags without ROS."""
+    from ssa_fusion.messages import MsgClasses
+
+    t = typestore().types
+    return MsgClasses(t["builtin_interfaces/msg/Time"], t["std_msgs/msg/Header"],
+                      t[f"{MSG_PACKAGE}/msg/Measurement"], t[f"{MSG_PACKAGE}/msg/StateEstimate"])
+
+
 class BagWriter:
     """Append CDR messages to a new rosbag2 v9 MCAP bag.
 
@@ -149,22 +158,126 @@ class BagMessage:
 
 
 def read_bag(path: Path | str, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
-    """Messages of a rosbag2 directory (or a bare .mcap), in log-time order, deserialized with
-    the Kilted + ssa_fusion_msgs typestore."""
-    from rosbags.highlevel import AnyReader
+    """Messages of a bag in log-time order, deserialized with the Kilted + ssa_fusion_msgs
+    typestore.
 
+    `path` is a rosbag2 directory (metadata.yaml + storage files, as this project or
+    `ros2 bag record` writes them) or a bare ``.mcap`` file. Unknown message types raise
+    BagError naming topic and type.
+    """
     path = Path(path)
     if not path.exists():
         raise BagError(f"{path}: no such bag")
     wanted = set(topics) if topics is not None else None
+    if path.is_file() and path.suffix == ".mcap":
+        if _mcap_finished(path):
+            yield from _read_mcap_file(path, wanted)
+        else:
+            yield from _recover_mcap_file(path, wanted)
+        return
+    if not (path / "metadata.yaml").exists():
+        # metadata.yaml and the MCAP summary are written at close: a recorder killed
+        # (SIGKILL, power loss) leaves neither. Recover what was flushed to the .mcap.
+        files = sorted(path.glob("*.mcap")) if path.is_dir() else []
+        if not files:
+            raise BagError(
+                f"{path}: not a rosbag2 directory (no metadata.yaml) nor an .mcap file"
+            )
+        recovered = [m for f in files for m in _recover_mcap_file(f, wanted)]
+        yield from sorted(recovered, key=lambda m: m.t_ns)
+        return
+    from rosbags.highlevel import AnyReader
+
     try:
         with AnyReader([path], default_typestore=typestore()) as reader:
             conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
+            _check_types(path, [(c.topic, c.msgtype) for c in conns])
             for conn, t_ns, raw in reader.messages(connections=conns):
-                yield BagMessage(
-                    conn.topic, conn.msgtype, t_ns, reader.deserialize(raw, conn.msgtype)
-                )
+                yield BagMessage(conn.topic, conn.msgtype, t_ns,
+                                 reader.deserialize(raw, conn.msgtype))
     except BagError:
         raise
     except Exception as exc:  # rosbags raises several unrelated types; name the file
         raise BagError(f"{path}: cannot read bag: {exc}") from exc
+
+
+def _check_types(path: Path, topic_types: list[tuple[str, str]]) -> None:
+    store = typestore()
+    for topic, msgtype in topic_types:
+        if msgtype not in store.fielddefs:
+            raise BagError(f"{path}: topic {topic} has unknown message type {msgtype}")
+
+
+def _read_mcap_file(path: Path, wanted: set[str] | None) -> Iterator[BagMessage]:
+    """A bare MCAP file (ROS 2 profile, CDR): log-time order via its index when it has
+    one, else in file order."""
+    from mcap.exceptions import McapError
+    from mcap.reader import make_reader
+
+    store = typestore()
+    try:
+        with path.open("rb") as f:
+            reader = make_reader(f)
+            for schema, channel, message in reader.iter_messages(
+                    topics=list(wanted) if wanted is not None else None, log_time_order=True):
+                if channel.message_encoding != "cdr":
+                    raise BagError(f"{path}: topic {channel.topic} is not CDR encoded")
+                if schema is None or schema.name not in store.fielddefs:
+                    name = schema.name if schema else "(no schema)"
+                    raise BagError(f"{path}: topic {channel.topic} has unknown type {name}")
+                yield BagMessage(channel.topic, schema.name, message.log_time,
+                                 store.deserialize_cdr(message.data, schema.name))
+    except BagError:
+        raise
+    except (McapError, OSError, ValueError, EOFError) as exc:
+        raise BagError(f"{path}: cannot read MCAP file: {exc}") from exc
+
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def _mcap_finished(path: Path) -> bool:
+    """True when the MCAP file ends with its closing magic (its writer closed it)."""
+    with path.open("rb") as f:
+        f.seek(0, os.SEEK_END)
+        if f.tell() < 2 * len(MCAP_MAGIC):
+            return False
+        f.seek(-len(MCAP_MAGIC), os.SEEK_END)
+        return f.read() == MCAP_MAGIC
+
+
+def _recover_mcap_file(path: Path, wanted: set[str] | None) -> Iterator[BagMessage]:
+    """Messages of an MCAP file its writer never closed (no summary, no footer; maybe a
+    torn last record): read record by record up to the last complete one, in log-time
+    order. Everything the recorder flushed (a whole chunk per `flush_period`) is there."""
+    import struct
+
+    from mcap.exceptions import McapError
+    from mcap.records import Channel, Message, Schema
+    from mcap.stream_reader import StreamReader
+
+    store = typestore()
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    out: list[BagMessage] = []
+    with path.open("rb") as f:
+        try:
+            for record in StreamReader(f, validate_crcs=True).records:
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message):
+                    channel = channels.get(record.channel_id)
+                    if channel is None or (wanted is not None and channel.topic not in wanted):
+                        continue
+                    schema = schemas.get(channel.schema_id)
+                    if schema is None or schema.name not in store.fielddefs:
+                        name = schema.name if schema else "(no schema)"
+                        raise BagError(f"{path}: topic {channel.topic} has unknown type {name}")
+                    out.append(BagMessage(channel.topic, schema.name, record.log_time,
+                                          store.deserialize_cdr(record.data, schema.name)))
+        except (McapError, EOFError, ValueError, struct.error):
+            pass  # the torn end of an unfinished file: keep what came before
+    out.sort(key=lambda m: m.t_ns)
+    yield from out

@@ -6,6 +6,10 @@ import argparse
 import importlib
 import sys
 
+from ssa_fusion import limit_blas_threads
+
+limit_blas_threads()
+
 # subcommand -> module providing add_arguments(parser) and run(args) -> int
 _COMMANDS = {
     "live": ("ssa_fusion.live", "run the node graph on a scenario, record a bag, evaluate it"),

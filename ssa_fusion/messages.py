@@ -1,15 +1,18 @@
-"""The one place where ROS messages (SI: m, m/s, rad) meet core types (km, km/s, rad).
+"""The one place where messages (SI: m, m/s, rad) meet core types (km, km/s, rad).
 
 Every node and every bag tool converts through these functions, so a unit or layout change
-happens here and nowhere else.
+happens here and nowhere else. Conversions *from* messages accept any object with the
+message's fields (rclpy messages, rosbags-deserialized ones); conversions *to* messages
+build rclpy messages by default, or the classes of another implementation (`MsgClasses`,
+e.g. `bagio.ROSBAGS_CLASSES` for writing bags without ROS).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Any
+
 import numpy as np
-from builtin_interfaces.msg import Time
-from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
-from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 
 from ssa_fusion.core import types
 
@@ -24,15 +27,45 @@ _Z_SCALE = {
 _X_SCALE = np.full(6, KM)
 
 
-def stamp_to_seconds(stamp: Time) -> float:
+@dataclass(frozen=True)
+class MsgClasses:
+    """Constructors of builtin_interfaces/Time, std_msgs/Header and the two messages."""
+
+    time: Any
+    header: Any
+    measurement: Any
+    estimate: Any
+
+
+def rclpy_classes() -> MsgClasses:
+    from builtin_interfaces.msg import Time
+    from ssa_fusion_msgs.msg import Measurement, StateEstimate
+    from std_msgs.msg import Header
+
+    return MsgClasses(Time, Header, Measurement, StateEstimate)
+
+
+_RCLPY: MsgClasses | None = None
+
+
+def _default(classes: MsgClasses | None) -> MsgClasses:
+    global _RCLPY
+    if classes is not None:
+        return classes
+    if _RCLPY is None:
+        _RCLPY = rclpy_classes()
+    return _RCLPY
+
+
+def stamp_to_seconds(stamp: Any) -> float:
     """builtin_interfaces/Time -> float seconds."""
     return stamp.sec + stamp.nanosec * 1e-9
 
 
-def seconds_to_stamp(t: float) -> Time:
+def seconds_to_stamp(t: float, classes: MsgClasses | None = None) -> Any:
     """float seconds (>= 0) -> builtin_interfaces/Time, rounded to the nanosecond."""
     ns = round(float(t) * 1e9)
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    return _default(classes).time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
 def z_scale(kind: int) -> np.ndarray:
@@ -46,26 +79,23 @@ def z_scale(kind: int) -> np.ndarray:
         ) from None
 
 
-def measurement_to_msg(m: types.Measurement) -> MeasurementMsg:
+def measurement_to_msg(m: types.Measurement, classes: MsgClasses | None = None) -> Any:
     """Core Measurement (km) -> ssa_fusion_msgs/Measurement (m)."""
+    c = _default(classes)
     s = z_scale(m.kind)
-    msg = MeasurementMsg()
-    msg.header.stamp = seconds_to_stamp(m.t)
-    msg.header.frame_id = m.frame_id
-    msg.object_id = m.object_id
-    msg.kind = m.kind
-    msg.source = m.source
-    msg.z = (np.asarray(m.z, dtype=float) * s).tolist()
-    msg.covariance = (np.asarray(m.R, dtype=float) * np.outer(s, s)).ravel().tolist()
-    msg.horizon = float(m.horizon)
-    return msg
+    return c.measurement(
+        header=c.header(stamp=seconds_to_stamp(m.t, c), frame_id=m.frame_id),
+        object_id=m.object_id,
+        kind=m.kind,
+        source=m.source,
+        z=np.asarray(m.z, dtype=float) * s,
+        covariance=(np.asarray(m.R, dtype=float) * np.outer(s, s)).ravel(),
+        horizon=float(m.horizon),
+    )
 
 
-def measurement_from_msg(msg: MeasurementMsg) -> types.Measurement:
-    """Measurement message (m) -> core Measurement (km); ValueError for an unknown kind.
-
-    Works for rclpy messages and for rosbags-deserialized ones (same field names).
-    """
+def measurement_from_msg(msg: Any) -> types.Measurement:
+    """Measurement message (m) -> core Measurement (km); ValueError for an unknown kind."""
     s = z_scale(msg.kind)
     return types.Measurement(
         t=stamp_to_seconds(msg.header.stamp),
@@ -79,21 +109,21 @@ def measurement_from_msg(msg: MeasurementMsg) -> types.Measurement:
     )
 
 
-def estimate_to_msg(e: types.StateEstimate) -> StateEstimateMsg:
+def estimate_to_msg(e: types.StateEstimate, classes: MsgClasses | None = None) -> Any:
     """Core StateEstimate (km, km/s) -> ssa_fusion_msgs/StateEstimate (m, m/s)."""
-    msg = StateEstimateMsg()
-    msg.header.stamp = seconds_to_stamp(e.t)
-    msg.header.frame_id = "eci"
-    msg.object_id = e.object_id
-    msg.state = (np.asarray(e.x, dtype=float) * _X_SCALE).tolist()
-    msg.covariance = (np.asarray(e.P, dtype=float) * KM * KM).ravel().tolist()
-    msg.update_source = e.update_source
-    msg.nis = float(e.nis)
-    return msg
+    c = _default(classes)
+    return c.estimate(
+        header=c.header(stamp=seconds_to_stamp(e.t, c), frame_id="eci"),
+        object_id=e.object_id,
+        state=np.asarray(e.x, dtype=float) * _X_SCALE,
+        covariance=(np.asarray(e.P, dtype=float) * KM * KM).ravel(),
+        update_source=e.update_source,
+        nis=float(e.nis),
+    )
 
 
-def estimate_from_msg(msg: StateEstimateMsg) -> types.StateEstimate:
-    """ssa_fusion_msgs/StateEstimate (m, m/s) -> core StateEstimate (km, km/s)."""
+def estimate_from_msg(msg: Any) -> types.StateEstimate:
+    """StateEstimate message (m, m/s) -> core StateEstimate (km, km/s)."""
     return types.StateEstimate(
         t=stamp_to_seconds(msg.header.stamp),
         x=np.asarray(msg.state, dtype=float) / _X_SCALE,
@@ -102,4 +132,3 @@ def estimate_from_msg(msg: StateEstimateMsg) -> types.StateEstimate:
         update_source=int(msg.update_source),
         nis=float(msg.nis),
     )
-

@@ -82,6 +82,11 @@ class EciLift:
         return z, out
 
 
+LIVE_SURROGATE = SurrogateConfig(retrain_period_s=600.0, grace=2.0)
+"""Timing defaults of the live surrogate node (and so of the offline replay): forecast an
+epoch two cadences after it was missed, which absorbs message latency between topics."""
+
+
 class Surrogate:
     """Hankel-DMD forecaster of one measurement stream (see the module docstring)."""
 

@@ -16,6 +16,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.exceptions import ParameterException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -38,7 +39,7 @@ class Diagnostics:
         self.status: dict[str, str] = {}
         self._logged: set[str] = set()
         self._pub = node.create_publisher(DiagnosticArray, TOPIC_DIAGNOSTICS, QoSProfile(depth=10))
-        node.create_timer(period_s, self.publish)
+        wall_timer(node, period_s, self.publish)  # sim time may stand still (no /clock)
 
     def count(self, cause: str, detail: str = "", warn: bool = True) -> None:
         """Count one `cause`; the first occurrence of each cause is logged (with detail)."""
@@ -99,7 +100,10 @@ def declare(
     `check(value)` returns None when valid, else the reason. An invalid start-up value
     raises ParameterError; a later invalid `ros2 param set` is refused (old value kept).
     """
-    node.declare_parameter(name, default, ParameterDescriptor(description=description))
+    try:
+        node.declare_parameter(name, default, ParameterDescriptor(description=description))
+    except ParameterException as exc:  # e.g. a string given for a number
+        raise ParameterError(f"parameter '{name}': {exc}") from exc
     value = node.get_parameter(name).value
     if check is not None:
         reason = check(value)

@@ -12,6 +12,8 @@ NONE) whose covariance grows. Rejected input is counted by cause on ``/diagnosti
 
 from __future__ import annotations
 
+import math
+
 from rclpy.clock import JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -110,9 +112,11 @@ class FilterNode(Node):
         )
         self.activity = 0
         self.last_object = ""
+        self._predicted_at = -math.inf  # sim time of the last prediction published
 
     def on_jump(self, jump) -> None:
         self.tracker.reset()
+        self._predicted_at = -math.inf
         self.diag.count("reset_clock_jump", "sim time jumped backwards: filter reset", warn=False)
 
     def on_measurement(self, msg: MeasurementMsg) -> None:
@@ -146,11 +150,12 @@ class FilterNode(Node):
 
     def predict(self) -> None:
         now = self.get_clock().now().nanoseconds * 1e-9
-        if self.tracker.t >= now - self.predict_period:
-            return
+        if self.tracker.t >= now - self.predict_period or now <= self._predicted_at:
+            return  # recently updated, or sim time has not moved since the last prediction
         e = self.tracker.predicted(now)
         if e is not None:
             self.publish(e)
+            self._predicted_at = now
 
 
 def main(args: list[str] | None = None) -> int:

@@ -11,6 +11,8 @@ cannot fit, it publishes nothing and says why on ``/diagnostics``.
 
 from __future__ import annotations
 
+import math
+
 from rclpy.clock import JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -18,8 +20,8 @@ from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
 
 from ssa_fusion import messages
 from ssa_fusion.core import scenarios
-from ssa_fusion.core.surrogate import Surrogate, SurrogateConfig
-from ssa_fusion.core.types import SENSOR
+from ssa_fusion.core.surrogate import LIVE_SURROGATE, Surrogate, SurrogateConfig
+from ssa_fusion.core.types import RANGE_AZ_EL, SENSOR
 from ssa_fusion.nodes.common import (
     Diagnostics,
     ParameterError,
@@ -42,7 +44,7 @@ def surrogate_config_from(node: Node) -> SurrogateConfig:
     retrain = declare(
         node,
         "retrain_period",
-        600.0,
+        LIVE_SURROGATE.retrain_period_s,
         "sim s between refits while measurements arrive",
         non_negative,
     )
@@ -58,7 +60,7 @@ def surrogate_config_from(node: Node) -> SurrogateConfig:
     grace = declare(
         node,
         "grace",
-        2.0,
+        LIVE_SURROGATE.grace,
         "cadences after a missed epoch before it is forecast (absorbs message latency)",
         non_negative,
     )
@@ -121,11 +123,25 @@ class SurrogateNode(Node):
             self.diag.count("ignored_forecast_input", "forecast on the measurement topic")
             return
         last = self.core.last
+        if last is not None and m.kind != last.kind:  # would empty the buffer
+            self.diag.count("rejected_kind", f"kind {m.kind}, the buffer holds kind {last.kind}")
+            return
+        if last is not None and m.frame_id != last.frame_id:
+            self.diag.count(
+                "rejected_frame", f"frame_id {m.frame_id!r}, the buffer holds {last.frame_id!r}"
+            )
+            return
         if last is not None and m.t <= last.t:
             self.diag.count("rejected_stale", f"t={m.t} not after the last sample t={last.t}")
             return
-        if not all(map(_finite, m.z)):
-            self.diag.count("rejected_nonfinite", f"NaN/inf in z at t={m.t}")
+        if not all(map(_finite, [*m.z, *m.R.ravel()])):
+            self.diag.count("rejected_nonfinite", f"NaN/inf in z or covariance at t={m.t}")
+            return
+        if m.kind == RANGE_AZ_EL and m.z[0] < 0:  # never train on impossible data
+            self.diag.count("rejected_negative_range", f"range {m.z[0]} km < 0 at t={m.t}")
+            return
+        if m.kind == RANGE_AZ_EL and abs(m.z[2]) > 0.5 * math.pi:
+            self.diag.count("rejected_elevation", f"elevation {m.z[2]} rad at t={m.t}")
             return
         self.publish(self.core.add(m))
         self.diag.counts["buffered"] += 1

@@ -1,0 +1,562 @@
+"""Graph tests: bad input, faults and shutdown. The graph keeps working and loses nothing.
+
+Every test runs real node processes in a private ROS domain (loopback only). The test
+process publishes crafted messages from its probe node straight to a filter or surrogate
+process (no sensor_sim unless the case needs one) and asserts on /ssa/estimate,
+/ssa/forecast, /diagnostics (counts by cause) and the nodes' logs. The property-based test
+of the filter core (arbitrary Measurement fields never raise, never give NaN or a
+non-symmetric covariance) is in test/core/test_tracker.py.
+"""
+
+from __future__ import annotations
+
+import signal
+import time
+from collections import Counter
+from itertools import pairwise
+from pathlib import Path
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import GetParameters, SetParameters
+from rclpy.qos import QoSProfile
+from rosgraph_msgs.msg import Clock
+from ssa_fusion_msgs.msg import Measurement, StateEstimate
+
+from ssa_fusion import bagio, messages
+from ssa_fusion.core import kepler, scenarios, types
+from ssa_fusion.core.measurement import RazelModel
+from ssa_fusion.core.simulate import simulate
+from ssa_fusion.core.tracker import DEFAULT_GATE, Tracker, TrackerConfig
+from ssa_fusion.live import node_parameters
+from ssa_fusion.qos import DATA_QOS
+
+SHORT = scenarios.DEFAULT_LIVE.with_(track_s=1200.0, gap_s=0.0, after_s=0.0, delays=5)
+SIM = simulate(SHORT, seed=1)
+T = SIM.t  # 41 epochs 30 s apart, range/az/el of the ISS from Columbus (km, rad)
+PARAMS = node_parameters(SHORT, time_scale=1000.0, seed=1, bag=Path("unused"))
+KM = 1000.0
+
+
+# helpers ---------------------------------------------------------------------------------
+def meas(i: int, dt: float = 0.0, z: np.ndarray | None = None, source: int = types.SENSOR,
+         R: np.ndarray | None = None) -> Measurement:
+    """The simulated measurement of epoch i (optionally moved by dt s or with other z)."""
+    m = types.Measurement(t=float(T[i]) + dt, z=SIM.z[i] if z is None else z,
+                          R=SIM.R if R is None else R, kind=types.RANGE_AZ_EL, source=source,
+                          object_id="iss", frame_id="columbus",
+                          horizon=30.0 if source == types.FORECAST else 0.0)
+    return messages.measurement_to_msg(m)
+
+
+def publisher(g, msg_type, topic: str, n_subs: int):
+    """A probe publisher matched with `n_subs` subscriptions (no fixed sleep)."""
+    pub = g.probe.create_publisher(msg_type, topic, DATA_QOS)
+    g.wait_for(lambda: pub.get_subscription_count() >= n_subs, 20.0,
+               f"{n_subs} subscription(s) matched on {topic}")
+    return pub
+
+
+class Diag:
+    """The latest /diagnostics status of each node."""
+
+    def __init__(self, g) -> None:
+        self.msgs: list = g.collect(DiagnosticArray, "/diagnostics", QoSProfile(depth=100))
+
+    def status(self, node: str):
+        for arr in reversed(self.msgs):
+            for st in arr.status:
+                if st.name == node:
+                    return st
+        return None
+
+    def counts(self, node: str) -> dict[str, str]:
+        st = self.status(node)
+        return {} if st is None else {kv.key: kv.value for kv in st.values}
+
+    def wait(self, g, node: str, want: dict[str, int], timeout: float = 15.0) -> dict:
+        def ok() -> bool:
+            c = self.counts(node)
+            return all(c.get(k) == str(v) for k, v in want.items())
+
+        g.wait_for(ok, timeout, f"{node} diagnostics {want} (last: {self.counts(node)})")
+        return self.counts(node)
+
+
+def estimates(received: list) -> list[types.StateEstimate]:
+    return [messages.estimate_from_msg(m) for m in received]
+
+
+def assert_sane(est: list[types.StateEstimate]) -> None:
+    for e in est:
+        assert np.isfinite(e.x).all() and np.isfinite(e.P).all(), e
+        assert np.allclose(e.P, e.P.T, rtol=1e-12, atol=0.0), e.t
+        assert (np.linalg.eigvalsh(e.P) > -1e-9 * np.abs(e.P).max()).all(), e.t
+
+
+def offline_tracker() -> Tracker:
+    """The filter node's Tracker for SHORT, built from the core alone."""
+    model = RazelModel(scenarios.STATIONS["columbus"], scenarios.UNIX_EPOCH_JD)
+    config = TrackerConfig(p0_sigma=SHORT.p0_sigma, q=SHORT.q, gate=DEFAULT_GATE,
+                           frame_id="columbus")
+    return Tracker(kepler.propagate, model, config, n=6)
+
+
+def filter_params(**extra) -> dict:
+    return {**PARAMS["filter"], **extra}
+
+
+def surrogate_params(**extra) -> dict:
+    return {**PARAMS["surrogate"], **extra}
+
+
+# bad input -------------------------------------------------------------------------------
+def bad_messages(i: int) -> list[tuple[str, Measurement]]:
+    """(cause, message) for each kind of bad input, stamped between epochs i and i + 1."""
+    out = []
+    m = meas(i, 10.0)
+    m.z[0] = float("nan")
+    out.append(("rejected_nonfinite", m))
+    m = meas(i, 11.0)
+    m.covariance[4] = float("inf")
+    out.append(("rejected_nonfinite", m))
+    m = meas(i, 12.0)
+    m.z[0] = -1000.0
+    out.append(("rejected_negative_range", m))
+    m = meas(i, 13.0)
+    m.z[2] = 2.0
+    out.append(("rejected_elevation", m))
+    m = meas(i, 14.0)
+    m.z[2] = -1.6
+    out.append(("rejected_elevation", m))
+    m = meas(i, 15.0)
+    m.kind = 7  # unknown kind
+    out.append(("rejected_kind", m))
+    m = meas(i, 16.0)
+    m.kind = Measurement.POSITION  # a kind this filter is not configured for
+    m.header.frame_id = "eci"
+    out.append(("rejected_kind", m))
+    m = meas(i, 17.0)
+    m.header.frame_id = "goldstone"  # a station this filter is not configured for
+    out.append(("rejected_frame", m))
+    return out
+
+
+def test_bad_input_is_never_fused_and_counted_by_cause(ros_graph):
+    g = ros_graph
+    got = g.collect(StateEstimate, "/ssa/estimate")
+    diag = Diag(g)
+    filt = g.start_node("filter", params=filter_params())
+    surr = g.start_node("surrogate", params=surrogate_params())
+    pub = publisher(g, Measurement, "/ssa/measurement", 2)
+
+    def outlier(i: int) -> Measurement:  # 3000 km off in range: beyond the NIS gate
+        return meas(i, z=SIM.z[i] + np.array([3000.0, 0.0, 0.0]))
+
+    sequence = [meas(i) for i in range(4)]
+    sequence += [m for _, m in bad_messages(3)] + [meas(4)]
+    sequence += [meas(2), meas(4), outlier(5), meas(5)]  # stale, duplicate, gate
+    sequence += [m for _, m in bad_messages(5)] + [meas(6)]
+    sequence += [meas(3), meas(6), outlier(7)]  # again: logged once, counted twice
+    sequence += [meas(i) for i in range(7, 10)]
+    for m in sequence:
+        pub.publish(m)
+
+    want = {k: 2 * v for k, v in Counter(c for c, _ in bad_messages(0)).items()}
+    want.update(rejected_stale=2, rejected_duplicate=2, rejected_gate=2, published_sensor=8)
+    counts = diag.wait(g, "filter", want)
+    assert "internal_error" not in counts and "rejected_numeric" not in counts
+
+    # estimates continue: exactly one per good epoch after IOD, none at a bad stamp
+    est = estimates(got)
+    assert [e.t for e in est] == [float(T[i]) for i in range(2, 10)]
+    assert all(e.update_source == types.UPDATE_SENSOR for e in est)
+    assert_sane(est)
+    # and they are what the core gives for the good measurements alone
+    tracker = offline_tracker()
+    for i in range(10):
+        out = tracker.process(messages.measurement_from_msg(meas(i)))
+    np.testing.assert_allclose(est[-1].x, out.estimate.x, rtol=1e-9)
+
+    # the surrogate buffers only good measurements and says why it dropped the others
+    # (it has no gate: the two outliers replace their epochs' good measurements)
+    want_s = {k: 2 * v for k, v in Counter(c for c, _ in bad_messages(0)).items()}
+    want_s.update(rejected_stale=6, buffered=10)
+    counts_s = diag.wait(g, "surrogate", want_s)
+    assert "internal_error" not in counts_s
+
+    # still up, and each cause was logged once although counted more often
+    assert filt.returncode is None and surr.returncode is None
+    for proc, causes in ((filt, want), (surr, want_s)):
+        log = proc.stderr()
+        for cause in causes:
+            if cause.startswith("rejected"):
+                assert log.count(f"{cause}: ") == 1, (proc.name, cause, log)
+
+
+def test_a_real_measurement_beats_a_forecast_for_the_same_epoch(ros_graph):
+    g = ros_graph
+    got = g.collect(StateEstimate, "/ssa/estimate")
+    diag = Diag(g)
+    g.start_node("filter", params=filter_params())
+    real = publisher(g, Measurement, "/ssa/measurement", 1)
+    fcst = publisher(g, Measurement, "/ssa/forecast", 1)
+
+    def forecast(i: int) -> Measurement:  # a plausible forecast: 2 km off, honest R
+        return meas(i, z=SIM.z[i] + np.array([2.0, 0.0, 0.0]), source=types.FORECAST,
+                    R=4.0 * SIM.R)
+
+    def wait_estimates(n: int) -> None:
+        g.wait_for(lambda: len(got) >= n, 15.0, f"{n} estimates")
+
+    for i in range(4):
+        real.publish(meas(i))
+    wait_estimates(2)
+    fcst.publish(forecast(4))
+    fcst.publish(forecast(5))
+    wait_estimates(4)
+    real.publish(meas(4))  # rolls back both forecasts, fuses it, re-fuses forecast 5
+    wait_estimates(6)
+    fcst.publish(forecast(4))  # too late: the real one is in
+    real.publish(meas(5))  # rolls back forecast 5 again
+    wait_estimates(7)
+    diag.wait(g, "filter", {"forecast_superseded": 1, "forecasts_rolled_back": 3})
+
+    est = estimates(got)
+    assert [(e.t, e.update_source) for e in est[2:]] == [
+        (T[4], types.UPDATE_FORECAST), (T[5], types.UPDATE_FORECAST),
+        (T[4], types.UPDATE_SENSOR), (T[5], types.UPDATE_FORECAST),
+        (T[5], types.UPDATE_SENSOR)]
+    assert_sane(est)
+    # the final estimates are exactly those of the real measurements without any forecast
+    tracker = offline_tracker()
+    want = {}
+    for i in range(6):
+        out = tracker.process(messages.measurement_from_msg(meas(i)))
+        if out.estimate is not None:
+            want[out.estimate.t] = out.estimate
+    for e in (est[4], est[6]):
+        np.testing.assert_allclose(e.x, want[e.t].x, rtol=1e-9)
+        np.testing.assert_allclose(e.P, want[e.t].P, rtol=1e-6, atol=1e-15)
+
+
+# clock -----------------------------------------------------------------------------------
+def clock_msg(t: float) -> Clock:
+    return Clock(clock=messages.seconds_to_stamp(t))
+
+
+def set_clock(g, pub, diag: Diag, t: float, nodes: tuple[str, ...]) -> None:
+    """Publish sim time `t` until every node's diagnostics are stamped with it (/clock is
+    best effort: republish until taken)."""
+    def seen() -> bool:
+        return all(abs(_node_stamp(diag, n) - t) < 1e-3 for n in nodes)
+
+    deadline = time.monotonic() + 15.0
+    while not seen():
+        assert time.monotonic() < deadline, f"nodes did not take /clock {t}\n{g.report()}"
+        pub.publish(clock_msg(t))
+        until = time.monotonic() + 0.3
+        while time.monotonic() < until and not seen():
+            g.spin_once(0.05)
+
+
+def publish_until(g, pub, msg, done, what: str, timeout: float = 10.0) -> None:
+    """Publish `msg` (best effort /clock) every 0.2 s until `done()`."""
+    deadline = time.monotonic() + timeout
+    while not done():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}\n{g.report()}"
+        pub.publish(msg)
+        until = time.monotonic() + 0.2
+        while time.monotonic() < until and not done():
+            g.spin_once(0.02)
+
+
+def _node_stamp(diag: Diag, node: str) -> float:
+    for arr in reversed(diag.msgs):
+        if any(st.name == node for st in arr.status):
+            return messages.stamp_to_seconds(arr.header.stamp)
+    return -1.0
+
+
+def test_backwards_clock_jump_resets_filter_and_surrogate(ros_graph):
+    g = ros_graph
+    got = g.collect(StateEstimate, "/ssa/estimate")
+    diag = Diag(g)
+    g.start_node("filter", params=filter_params())
+    g.start_node("surrogate", params=surrogate_params())
+    clock = publisher(g, Clock, "/clock", 2)
+    pub = publisher(g, Measurement, "/ssa/measurement", 2)
+    nodes = ("filter", "surrogate")
+
+    set_clock(g, clock, diag, float(T[6]), nodes)
+    for i in range(6):
+        pub.publish(meas(i))
+    g.wait_for(lambda: len(got) >= 4, 15.0, "4 estimates")
+    set_clock(g, clock, diag, float(T[0]) - 60.0, nodes)  # the bag loops
+    for node in nodes:
+        diag.wait(g, node, {"reset_clock_jump": 1})
+    for i in range(6):  # the same epochs again: accepted, not stale
+        pub.publish(meas(i))
+    g.wait_for(lambda: len(got) >= 8, 15.0, "8 estimates")
+    c = diag.wait(g, "surrogate", {"buffered": 12, "reset_clock_jump": 1})
+    assert "rejected_stale" not in c and "internal_error" not in c
+    c = diag.wait(g, "filter", {"published_sensor": 8})
+    assert "rejected_stale" not in c and "rejected_duplicate" not in c
+    assert "internal_error" not in c
+    est = estimates(got)
+    assert [e.t for e in est] == [float(T[i]) for i in (2, 3, 4, 5)] * 2
+    assert_sane(est)
+    for a, b in zip(est[:4], est[4:], strict=True):  # a fresh start gives the same result
+        np.testing.assert_allclose(a.x, b.x, rtol=1e-12)
+
+
+# surrogate cannot fit --------------------------------------------------------------------
+def test_surrogate_that_cannot_fit_forecasts_nothing_and_filter_keeps_predicting(ros_graph):
+    g = ros_graph
+    got = g.collect(StateEstimate, "/ssa/estimate")
+    forecasts = g.collect(Measurement, "/ssa/forecast")
+    diag = Diag(g)
+    g.start_node("filter", params=filter_params(predict_period=60.0))
+    g.start_node("surrogate", params=surrogate_params(check_period=0.01))
+    clock = publisher(g, Clock, "/clock", 2)
+    pub = publisher(g, Measurement, "/ssa/measurement", 2)
+    nodes = ("filter", "surrogate")
+
+    def model_status() -> str:
+        st = diag.status("surrogate")
+        return "" if st is None else {kv.key: kv.value for kv in st.values}.get("model", "")
+
+    def predictions() -> list[types.StateEstimate]:
+        return [e for e in estimates(got) if e.update_source == types.UPDATE_NONE]
+
+    # 1. too few samples (4; the fit needs 2 x delays + 2 = 12)
+    set_clock(g, clock, diag, float(T[0]), nodes)
+    for i in range(4):
+        pub.publish(meas(i))
+    g.wait_for(lambda: len(got) >= 2, 15.0, "IOD")
+    for k in range(3, 9):  # sim time moves on through the gap, cadence by cadence
+        t = float(T[3]) + 30.0 * k
+        publish_until(g, clock, clock_msg(t), lambda t=t: any(e.t == t for e in predictions()),
+                      f"prediction at {t}")
+    g.wait_for(lambda: "cannot fit" in model_status(), 10.0, "surrogate status")
+    assert "need 12" in model_status()
+    pred = predictions()
+    assert [e.t for e in pred] == [float(T[3]) + 30.0 * k for k in range(3, 9)]
+    sig = [np.trace(e.P[:3, :3]) for e in pred]
+    assert all(b > a for a, b in pairwise(sig)), sig  # covariance grows
+    assert_sane(estimates(got))
+
+    # 2. constant (degenerate) data; 3. not at a fixed cadence. A clock jump starts afresh.
+    cases = [
+        ([meas(0, 30.0 * k, z=SIM.z[0]) for k in range(14)], "constant"),
+        ([meas(0, t, z=SIM.z[k]) for k, t in
+          enumerate(np.cumsum([0.0, *([30.0, 30.0, 45.0] * 5)]))], "fixed cadence"),
+    ]
+    for msgs, reason in cases:
+        set_clock(g, clock, diag, float(T[0]) - 100.0, nodes)
+        set_clock(g, clock, diag, float(T[0]), nodes)
+        for m in msgs:
+            pub.publish(m)
+        g.wait_for(lambda r=reason: r in model_status(), 10.0, f"status '{reason}'")
+        t_end = messages.stamp_to_seconds(msgs[-1].header.stamp) + 300.0  # well into a gap
+        set_clock(g, clock, diag, t_end, nodes)
+
+    c = diag.counts("surrogate")
+    assert c.get("reset_clock_jump") == "2" and "internal_error" not in c
+    assert "internal_error" not in diag.counts("filter")
+    assert forecasts == []  # nothing was ever forecast
+
+
+# parameters ------------------------------------------------------------------------------
+def test_invalid_parameters_refuse_to_start(ros_graph, tmp_path):
+    g = ros_graph
+    existing = tmp_path / "existing_bag"
+    existing.mkdir()
+    cases = {
+        "scenario": ("sensor_sim", {"scenario": "no_such_orbit"}),
+        "cadence": ("sensor_sim", {"cadence": -30.0}),
+        "time_scale": ("sensor_sim", {"time_scale": "fast"}),
+        "delays": ("surrogate", {"delays": 200, "buffer_length": 3000.0, "cadence": 30.0}),
+        "p0_sigma": ("filter", {"p0_sigma": [1.0, 2.0]}),
+        "kind": ("filter", {"kind": "sonar"}),
+        "bag": ("recorder", {"bag": str(existing)}),
+    }
+    procs = {name: g.start_node(node, params=p, name=f"{node}_{name}", expect_returncode=2)
+             for name, (node, p) in cases.items()}
+    for name, proc in procs.items():
+        assert g.wait_exit(proc, timeout=30.0) == 2, proc.describe()
+        assert f"parameter '{name}'" in proc.stderr(), proc.describe()
+        assert "Traceback" not in proc.stderr(), proc.describe()
+
+
+def _call(g, client, request, what: str):
+    g.wait_for(lambda: client.service_is_ready(), 20.0, f"service {what}")
+    future = client.call_async(request)
+    g.wait_for(future.done, 10.0, f"reply of {what}")
+    return future.result()
+
+
+def test_bad_param_set_at_run_time_is_refused_and_old_value_kept(ros_graph):
+    g = ros_graph
+    filt = g.start_node("filter", params=filter_params(gate=500.0))
+    set_client = g.probe.create_client(SetParameters, "/filter/set_parameters")
+    get_client = g.probe.create_client(GetParameters, "/filter/get_parameters")
+
+    def set_param(name: str, value: ParameterValue):
+        req = SetParameters.Request(parameters=[ParameterMsg(name=name, value=value)])
+        return _call(g, set_client, req, "/filter/set_parameters").results[0]
+
+    def get(name: str) -> ParameterValue:
+        req = GetParameters.Request(names=[name])
+        return _call(g, get_client, req, "/filter/get_parameters").values[0]
+
+    def double(v: float) -> ParameterValue:
+        return ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=v)
+
+    bad = [
+        ("gate", double(-5.0)),
+        ("gate", ParameterValue(type=ParameterType.PARAMETER_STRING, string_value="wide")),
+        ("kind", ParameterValue(type=ParameterType.PARAMETER_STRING, string_value="sonar")),
+        ("p0_sigma", ParameterValue(type=ParameterType.PARAMETER_DOUBLE_ARRAY,
+                                    double_array_value=[1.0, 2.0])),
+        ("predict_period", double(-1.0)),
+    ]
+    for name, value in bad:
+        result = set_param(name, value)
+        assert not result.successful, (name, value)
+        assert result.reason
+    assert get("gate").double_value == 500.0
+    assert get("kind").string_value == "range_az_el"
+    assert list(get("p0_sigma").double_array_value) == PARAMS["filter"]["p0_sigma"]
+    assert get("predict_period").double_value == 300.0
+    assert "refused parameter 'gate'" in filt.stderr()
+    good = set_param("gate", double(50.0))  # a valid value is still accepted
+    assert good.successful and get("gate").double_value == 50.0
+    assert filt.returncode is None
+
+
+# shutdown --------------------------------------------------------------------------------
+TOPICS = {"/ssa/measurement": Measurement, "/ssa/forecast": Measurement,
+          "/ssa/estimate": StateEstimate, "/ssa/truth": StateEstimate,
+          "/ssa/withheld": Measurement, "/clock": Clock}
+RUN = scenarios.DEFAULT_LIVE.with_(track_s=900.0, gap_s=300.0, after_s=600.0, delays=5)
+
+
+def sensor_params(time_scale: float, **extra) -> dict:
+    p = node_parameters(RUN, time_scale=time_scale, seed=2, bag=Path("unused"))["sensor_sim"]
+    return {**p, **extra}
+
+
+def start_graph(g, bag: Path, time_scale: float, wait_for: list[str], stamped=False):
+    """Recorder, surrogate, filter, then sensor_sim; the probe collects every topic."""
+    params = node_parameters(RUN, time_scale=time_scale, seed=2, bag=bag)
+    received: dict[str, list] = {}
+    for topic, t in TOPICS.items():
+        lst = received.setdefault(topic, [])
+        cb = (lambda m, lst=lst: lst.append(time.monotonic())) if stamped else lst.append
+        g.probe.create_subscription(t, topic, cb, DATA_QOS)
+    nodes = {n: g.start_node(n, params=params[n]) for n in ("recorder", "surrogate", "filter")}
+    g.wait_for_subscriber("/ssa/forecast", 3)  # filter, recorder, probe
+    nodes["sensor_sim"] = g.start_node("sensor_sim", params=sensor_params(
+        time_scale, wait_for=wait_for))
+    return nodes, received
+
+
+ALL_SUBSCRIBED = ["/ssa/measurement=4", "/ssa/forecast=3", "/ssa/estimate=2",
+                  "/ssa/truth=2", "/ssa/withheld=2", "/clock=4"]
+
+
+def test_sigint_and_sigterm_mid_run_even_twice_exit_0_and_bag_holds_everything(ros_graph,
+                                                                               tmp_path):
+    g = ros_graph
+    bag = tmp_path / "bag"
+    nodes, received = start_graph(g, bag, time_scale=200.0, wait_for=ALL_SUBSCRIBED)
+    g.wait_for(lambda: len(received["/ssa/estimate"]) >= 5, 30.0, "estimates mid-run")
+    sensor = nodes["sensor_sim"]
+    assert sensor.returncode is None  # really mid-run
+    sensor.popen.send_signal(signal.SIGINT)
+    sensor.popen.send_signal(signal.SIGINT)  # twice, at once
+    nodes["surrogate"].popen.send_signal(signal.SIGTERM)
+    nodes["surrogate"].popen.send_signal(signal.SIGTERM)
+    nodes["filter"].popen.send_signal(signal.SIGINT)
+    nodes["filter"].popen.send_signal(signal.SIGTERM)
+    for name in ("sensor_sim", "surrogate", "filter"):
+        assert g.wait_exit(nodes[name], timeout=15.0) == 0, nodes[name].describe()
+    g.wait_quiet(lambda: tuple(len(v) for v in received.values()), quiet_s=0.5, limit_s=10.0)
+    rec = nodes["recorder"]
+    rec.popen.send_signal(signal.SIGINT)
+    rec.popen.send_signal(signal.SIGINT)
+    assert g.wait_exit(rec, timeout=15.0) == 0, rec.describe()
+
+    assert (bag / "metadata.yaml").exists()
+    counts = Counter(m.topic for m in bagio.read_bag(bag))
+    for topic, msgs in received.items():  # every publisher had stopped: the recorder got
+        assert counts[topic] == len(msgs), (topic, counts, {k: len(v) for k, v in
+                                                            received.items()})
+    assert counts["/ssa/measurement"] > 0
+
+
+def test_recorder_stopped_during_a_burst_keeps_every_message_it_received(ros_graph, tmp_path):
+    g = ros_graph
+    bag = tmp_path / "bag"
+    nodes, received = start_graph(g, bag, time_scale=2000.0, wait_for=ALL_SUBSCRIBED)
+    g.wait_for(lambda: len(received["/clock"]) >= 20, 30.0, "data flowing")
+    rec = nodes["recorder"]
+    rec.popen.send_signal(signal.SIGTERM)
+    assert g.wait_exit(rec, timeout=15.0) == 0, rec.describe()
+    logged = int(rec.stderr().split("bag closed:")[1].split("(")[1].split()[0])
+    total = sum(1 for _ in bagio.read_bag(bag))
+    assert total == logged > 0
+    for name in ("sensor_sim", "surrogate", "filter"):
+        assert g.stop(nodes[name], signal.SIGTERM) == 0, nodes[name].describe()
+
+
+def test_sigterm_right_after_start_exits_0(ros_graph, tmp_path):
+    g = ros_graph
+    procs = [g.start_node("filter", params=filter_params()),
+             g.start_node("recorder", params={"bag": str(tmp_path / "bag")})]
+    for p in procs:  # as soon as the node exists: its parameters are on the graph
+        g.wait_for(lambda p=p: any(n == p.name for n in g.probe.get_node_names()), 20.0,
+                   f"{p.name} up")
+        assert g.stop(p, signal.SIGTERM) == 0, p.describe()
+    assert (tmp_path / "bag" / "metadata.yaml").exists()
+
+
+def test_sigkill_of_the_recorder_leaves_a_bag_readable_up_to_its_last_flush(ros_graph,
+                                                                          tmp_path):
+    g = ros_graph
+    bag = tmp_path / "bag"
+    flush = 1.0  # the recorder's default flush_period, wall s
+    nodes, received = start_graph(g, bag, time_scale=300.0, wait_for=ALL_SUBSCRIBED,
+                                  stamped=True)
+    g.wait_for(lambda: len(received["/clock"]) >= 1, 30.0, "data flowing")
+    t_first = time.monotonic()
+    g.wait_for(lambda: time.monotonic() > t_first + 2.5 * flush, 10.0, "2.5 flush periods")
+    rec = nodes["recorder"]
+    rec.expect_returncode = None
+    t_kill = time.monotonic()
+    assert g.stop(rec, signal.SIGKILL) == -signal.SIGKILL
+
+    assert not (bag / "metadata.yaml").exists()  # written at close only
+    got = Counter(m.topic for m in bagio.read_bag(bag))
+    lost_bound = t_kill - flush - 0.5  # everything received before this was flushed
+    for topic, stamps in received.items():
+        before = sum(1 for t in stamps if t < lost_bound)
+        assert before <= got[topic] <= len(stamps), (topic, before, got[topic], len(stamps))
+    assert got["/clock"] > 0 and got["/ssa/measurement"] > 0
+    for name in ("sensor_sim", "surrogate", "filter"):
+        assert g.stop(nodes[name], signal.SIGTERM) == 0, nodes[name].describe()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_sensor_sim_interrupted_twice_during_shutdown_exits_0(ros_graph, sig):
+    g = ros_graph
+    sensor = g.start_node("sensor_sim", params=sensor_params(2000.0, wait_for=[""]))
+    g.wait_for(lambda: g.probe.count_publishers("/clock") >= 1, 20.0, "sensor_sim up")
+    sensor.popen.send_signal(sig)
+    time.sleep(0.05)  # a second interrupt while it is already shutting down
+    sensor.popen.send_signal(sig)
+    assert g.wait_exit(sensor, timeout=15.0) == 0, sensor.describe()
