@@ -180,6 +180,10 @@ def run(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
             node.destroy_node()
         executor.shutdown()
         rclpy.try_shutdown()
+        # Python's finalization resets handlers it installed to SIG_DFL, so a late second
+        # interrupt would kill the exiting process (-15/-2); ignored signals stay ignored.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
     return code
 
 

@@ -360,9 +360,9 @@ def test_surrogate_that_cannot_fit_forecasts_nothing_and_filter_keeps_predicting
         set_clock(g, clock, diag, float(T[0]), nodes)
         for m in msgs:
             pub.publish(m)
-        g.wait_for(lambda r=reason: r in model_status(), 10.0, f"status '{reason}'")
         t_end = messages.stamp_to_seconds(msgs[-1].header.stamp) + 300.0  # well into a gap
         set_clock(g, clock, diag, t_end, nodes)
+        g.wait_for(lambda r=reason: r in model_status(), 10.0, f"status '{reason}'")
 
     c = diag.counts("surrogate")
     assert c.get("reset_clock_jump") == "2" and "internal_error" not in c
