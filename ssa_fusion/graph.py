@@ -23,9 +23,9 @@ from typing import Any
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
+from ssa_fusion.nodes.common import make_executor
 from ssa_fusion.qos import DATA_QOS
 
 NODE_BIN = Path(sys.prefix) / "lib" / "ssa_fusion"
@@ -86,7 +86,7 @@ class Graph:
         self.context = Context()
         rclpy.init(context=self.context, domain_id=self.domain_id)
         self.probe: Node = rclpy.create_node("ssa_fusion_probe", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor = make_executor(self.context)
         self.executor.add_node(self.probe)
 
     # processes ---------------------------------------------------------------------------

@@ -25,12 +25,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import dynamics
+from . import dynamics, pipeline
 from .metrics import chi2_bounds, epsilon, nees
 from .scenarios import Scenario, measurement_model, placeholder
 from .simulate import Simulation, simulate
-from .surrogate import EciLift, Surrogate, SurrogateConfig
-from .tracker import Tracker, TrackerConfig
+from .surrogate import Surrogate
+from .tracker import Tracker
 from .types import Measurement
 
 N_PARTICLES = 200
@@ -50,25 +50,15 @@ class Arm:
     extra: dict = field(default_factory=dict)
 
 
-def tracker_config(s: Scenario) -> TrackerConfig:
-    return TrackerConfig(p0_sigma=s.p0_sigma, q=s.q, iod_samples=s.iod_samples)
-
-
 def make_tracker(s: Scenario) -> Tracker:
-    return Tracker(placeholder(s), measurement_model(s), tracker_config(s), n=s.n,
-                   object_id=s.name)
+    """The scenario's EKF, built exactly as the live filter node builds it."""
+    return pipeline.make_tracker(s, object_id=s.name, iod_samples=s.iod_samples)
 
 
-def surrogate_config(s: Scenario) -> SurrogateConfig:
-    """The surrogate of a scenario: trained on the tracking window (one-shot at the start of
-    the gap), forecasts for every missed epoch of the gap."""
-    return SurrogateConfig(
-        buffer_s=s.buffer_s if s.buffer_s > 0 else s.track_s,
-        retrain_period_s=s.retrain_period_s,
-        delays=s.delays, rank=s.rank,
-        max_horizon_s=s.gap_s + s.cadence_s, cadence_s=s.cadence_s,
-        lift=EciLift(measurement_model(s)) if s.lift == "eci" else None,
-    )
+def make_surrogate(s: Scenario) -> Surrogate:
+    """The scenario's surrogate, built as the live surrogate node builds it: trained on the
+    tracking window, one fit at the start of the gap, forecasts for every missed epoch."""
+    return pipeline.make_surrogate(s)
 
 
 def _measurement(s: Scenario, sim: Simulation, i: int) -> Measurement:
@@ -104,7 +94,7 @@ def run_dmd_ekf(s: Scenario, sim: Simulation) -> tuple[Arm, Arm, list[Measuremen
 
     Returns (dmd_ekf arm, ekf_coast arm, the forecasts the surrogate issued)."""
     tr = make_tracker(s)
-    su = Surrogate(surrogate_config(s))
+    su = make_surrogate(s)
     est: dict[int, object] = {}
     forecasts: list[Measurement] = []
     grace = su.config.grace

@@ -4,7 +4,7 @@ defaults, the live evaluation, the offline replay and the experiments agree."""
 from __future__ import annotations
 
 from .scenarios import Scenario, measurement_model, placeholder
-from .surrogate import Surrogate, SurrogateConfig
+from .surrogate import EciLift, Surrogate, SurrogateConfig
 from .tracker import Tracker, TrackerConfig
 
 
@@ -15,8 +15,11 @@ def make_tracker(s: Scenario, object_id: str = "", **overrides) -> Tracker:
 
 
 def make_surrogate(s: Scenario, **overrides) -> Surrogate:
-    """The scenario's Hankel-DMD surrogate (buffer = tracking window, delays, rank)."""
-    settings = dict(buffer_s=s.track_s, delays=s.delays, rank=s.rank, cadence_s=s.cadence_s,
-                    max_horizon_s=s.gap_s + s.cadence_s)
+    """The scenario's Hankel-DMD surrogate (buffer = tracking window, delays, rank, lifted
+    observable, retrain period)."""
+    settings = dict(buffer_s=s.buffer_s or s.track_s, delays=s.delays, rank=s.rank,
+                    cadence_s=s.cadence_s, max_horizon_s=s.gap_s + s.cadence_s,
+                    retrain_period_s=s.retrain_period_s,
+                    lift=EciLift(measurement_model(s)) if s.lift == "eci" else None)
     settings.update(overrides)
     return Surrogate(SurrogateConfig(**settings))

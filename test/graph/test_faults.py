@@ -502,7 +502,7 @@ def test_sigint_and_sigterm_mid_run_even_twice_exit_0_and_bag_holds_everything(r
 def test_recorder_stopped_during_a_burst_keeps_every_message_it_received(ros_graph, tmp_path):
     g = ros_graph
     bag = tmp_path / "bag"
-    nodes, received = start_graph(g, bag, time_scale=2000.0, wait_for=ALL_SUBSCRIBED)
+    nodes, received = start_graph(g, bag, time_scale=600.0, wait_for=ALL_SUBSCRIBED)
     g.wait_for(lambda: len(received["/clock"]) >= 20, 30.0, "data flowing")
     rec = nodes["recorder"]
     rec.popen.send_signal(signal.SIGTERM)
@@ -554,8 +554,9 @@ def test_sigkill_of_the_recorder_leaves_a_bag_readable_up_to_its_last_flush(ros_
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_sensor_sim_interrupted_twice_during_shutdown_exits_0(ros_graph, sig):
     g = ros_graph
-    sensor = g.start_node("sensor_sim", params=sensor_params(2000.0, wait_for=[""]))
-    g.wait_for(lambda: g.probe.count_publishers("/clock") >= 1, 20.0, "sensor_sim up")
+    clock = g.collect(Clock, "/clock")
+    sensor = g.start_node("sensor_sim", params=sensor_params(100.0, wait_for=["/clock=1"]))
+    g.wait_for(lambda: len(clock) >= 1, 20.0, "sensor_sim running")
     sensor.popen.send_signal(sig)
     time.sleep(0.05)  # a second interrupt while it is already shutting down
     sensor.popen.send_signal(sig)
