@@ -156,7 +156,7 @@ SCENARIOS: dict[str, Scenario] = {
         Scenario(
             name="molniya_sdp4_pos", truth="sgp4", x0=_molniya_state(), placeholder="kepler",
             cadence_s=600.0, track_s=720 * 600.0, gap_s=72 * 600.0, after_s=6 * 600.0,
-            delays=120, p0_sigma=(0.1, 0.1, 0.1, 1e-4, 1e-4, 1e-4), q=1e-10,
+            delays=120, p0_sigma=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0), q=1e-10,
             finding="~100× worse than hypothetical",
         ),
         Scenario(

@@ -18,6 +18,14 @@ ECI position it implies (station position + line of sight, no dynamics), Hankel-
 and forecasts that (nearly linear, like the position scenarios), and each forecast is mapped
 back to range/az/el with its covariance pushed through the Jacobian (J C J^T). The filter
 still receives range/az/el forecasts.
+
+Correlation (`SurrogateConfig.inflate_correlated`, default on): all forecasts of one gap come
+from one model fitted on one buffer, so their errors are nearly the same systematic error,
+not independent draws. Fused as independent measurements, k of them would shrink the
+filter's covariance k-fold while the error stays (NEES of hundreds). The k-th forecast
+after the last real measurement therefore carries k * Var(e(k)): k fully correlated copies
+then carry no more information than about one, and the filter's covariance grows through
+the gap instead of pretending forecasts are fresh measurements.
 """
 
 from __future__ import annotations
@@ -43,7 +51,8 @@ class SurrogateConfig:
     max_horizon_s : no forecast beyond this many s after the last real measurement;
     cadence_s : expected measurement interval (0: the median interval of the buffer);
     grace : fraction of a cadence after an epoch before it counts as missed;
-    lift : optional observable map (e.g. `EciLift`) the DMD learns instead of z (None: z)."""
+    lift : optional observable map (e.g. `EciLift`) the DMD learns instead of z (None: z);
+    inflate_correlated : scale the k-th forecast's covariance of a gap by k (see below)."""
 
     buffer_s: float = 21600.0
     retrain_period_s: float = 600.0
@@ -53,6 +62,7 @@ class SurrogateConfig:
     cadence_s: float = 0.0
     grace: float = 0.5
     lift: EciLift | None = None
+    inflate_correlated: bool = True
 
 
 class EciLift:
@@ -191,6 +201,8 @@ class Surrogate:
             t = self.last.t + self.cadence() * np.arange(1, n_steps + 1)
             z, self._cov = lift.back(self._forecast.T, self._cov, t)
             self._forecast = z.T
+        if self.config.inflate_correlated:
+            self._cov = self._cov * np.arange(1, n_steps + 1, dtype=float)[:, None, None]
         return True
 
     def _fit(self) -> None:
