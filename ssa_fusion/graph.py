@@ -25,7 +25,7 @@ import rclpy
 from rclpy.context import Context
 from rclpy.node import Node
 
-from ssa_fusion.nodes.common import make_executor
+from ssa_fusion.executors import make_executor
 from ssa_fusion.qos import DATA_QOS
 
 NODE_BIN = Path(sys.prefix) / "lib" / "ssa_fusion"

@@ -135,7 +135,7 @@ SCENARIOS: dict[str, Scenario] = {
         Scenario(
             name="pendulum", truth="pendulum", x0=(0.5, 0.0), placeholder="pendulum",
             observed=(0,), noise_sigma=(0.0,), cadence_s=0.1, track_s=100.0, gap_s=400.0,
-            after_s=20.0, delays=60, t0=0.0, p0_sigma=(1e-3, 1e-2), q=1e-8,
+            after_s=20.0, delays=60, t0=0.0, p0_sigma=(1e-3, 1e-2), q=1e-5,
             truth_params={"m": 0.5, "c": 2e-3, "L": 1.0},
             placeholder_params={"m": 0.5, "c": 0.0, "L": 1.0},
             finding="DMD-EKF ≈ hypothetical for ~200 s, then diverges",
@@ -156,7 +156,7 @@ SCENARIOS: dict[str, Scenario] = {
         Scenario(
             name="molniya_sdp4_pos", truth="sgp4", x0=_molniya_state(), placeholder="kepler",
             cadence_s=600.0, track_s=720 * 600.0, gap_s=72 * 600.0, after_s=6 * 600.0,
-            delays=120, p0_sigma=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0), q=1e-10,
+            delays=120, p0_sigma=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0), q=1e-7,
             finding="~100× worse than hypothetical",
         ),
         Scenario(
