@@ -42,13 +42,15 @@ def node_parameters(s: scenarios.Scenario, time_scale: float, seed: int,
               "gap_length": s.gap_s, "after_gap": s.after_s,
               "wait_for": ["/ssa/measurement=3", "/ssa/forecast=2", "/ssa/estimate=1",
                            "/ssa/truth=1", "/ssa/withheld=1", "/clock=3"]}
-    surrogate = {"use_sim_time": True, "buffer_length": s.track_s, "delays": s.delays,
-                 "rank": s.rank or 0, "cadence": s.cadence_s,
-                 "max_horizon": s.gap_s + s.cadence_s}
+    surrogate = {"use_sim_time": True, "buffer_length": s.buffer_s or s.track_s,
+                 "delays": s.delays, "rank": s.rank or 0, "cadence": s.cadence_s,
+                 "max_horizon": s.gap_s + s.cadence_s, "lift": s.lift or "none",
+                 "station": s.station or "columbus"}
     filt = {"use_sim_time": True,
             "kind": "range_az_el" if s.kind == 1 else "position",
             "station": s.station or "columbus",
-            "p0_sigma": [v * km for v in s.p0_sigma], "q": s.q * km * km}
+            "p0_sigma": [v * km for v in s.p0_sigma], "q": s.q * km * km,
+            "iod_samples": s.iod_samples}
     recorder = {"use_sim_time": True, "bag": str(bag)}
     return {"sensor_sim": sensor, "surrogate": surrogate, "filter": filt, "recorder": recorder}
 

@@ -98,11 +98,11 @@ def run_one(s: scenarios.Scenario, seed: int, nees_runs: int, out: Path, plots: 
     r["paper_finding"] = s.finding
     r["targets"] = targets(s.name, r)
     if plots:
-        from ssa_fusion import plots as P
+        from ssa_fusion import plots as pl
         unit = "h" if s.is_orbit else "s"
-        files = [P.error_plot(s.name, sim, arms, out / f"{s.name}_error.png", unit).name]
+        files = [pl.error_plot(s.name, sim, arms, out / f"{s.name}_error.png", unit).name]
         if r["noisy"]:
-            files.append(P.sigma_plot(s.name, sim, arms["dmd_ekf"],
+            files.append(pl.sigma_plot(s.name, sim, arms["dmd_ekf"],
                                       out / f"{s.name}_sigma.png", unit).name)
         r["plots"] = files
     r["seconds"] = round(time.monotonic() - t0, 2)
@@ -283,8 +283,8 @@ def run(args) -> int:
         mus = VDP_MUS_QUICK if args.quick else VDP_MUS
         results["vdp_sweep"] = experiments.vdp_sweep(sv, args.seed, mus)
         if plots:
-            from ssa_fusion import plots as P
-            P.vdp_sweep_plot(results["vdp_sweep"], out / "vdp_sweep.png")
+            from ssa_fusion import plots as pl
+            pl.vdp_sweep_plot(results["vdp_sweep"], out / "vdp_sweep.png")
         bar.step("vdp sweep")
     if do_cons:
         sc = scenarios.get(CONSISTENCY_SCENARIO)
@@ -293,8 +293,8 @@ def run(args) -> int:
         seeds = 3 if args.quick else CONSISTENCY_SEEDS
         results["consistency"] = consistency_study(sc, seeds, CONSISTENCY_RETRAIN_STEPS)
         if plots:
-            from ssa_fusion import plots as P
-            P.consistency_plot(results["consistency"], out / "consistency.png")
+            from ssa_fusion import plots as pl
+            pl.consistency_plot(results["consistency"], out / "consistency.png")
         bar.step("consistency study")
     results["seconds"] = round(time.monotonic() - t0, 1)
     (out / "results.json").write_text(json.dumps(_jsonable(results), indent=1))

@@ -26,12 +26,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import dynamics, pipeline
+from .ekf import process_noise
 from .metrics import chi2_bounds, epsilon, nees
 from .scenarios import Scenario, measurement_model, placeholder
 from .simulate import Simulation, simulate
 from .surrogate import Surrogate
 from .tracker import Tracker
-from .ekf import process_noise
 from .types import Measurement, StateEstimate
 
 N_PARTICLES = 200

@@ -10,7 +10,10 @@ from .tracker import Tracker, TrackerConfig
 
 def make_tracker(s: Scenario, object_id: str = "", **overrides) -> Tracker:
     """The scenario's EKF (placeholder model, measurement model, P0 floor, q, frame)."""
-    config = TrackerConfig(p0_sigma=s.p0_sigma, q=s.q, frame_id=s.station or "", **overrides)
+    settings = dict(p0_sigma=s.p0_sigma, q=s.q, frame_id=s.station or "",
+                    iod_samples=s.iod_samples)
+    settings.update(overrides)
+    config = TrackerConfig(**settings)
     return Tracker(placeholder(s), measurement_model(s), config, n=s.n, object_id=object_id)
 
 

@@ -60,6 +60,18 @@ class Scenario:
         Standard deviation floor added to the IOD covariance, per state (n,).
     q : float
         White-noise acceleration spectral density of the process noise, (km/s^2)^2 s.
+        Chosen from the size of what the placeholder leaves out, never from the gap:
+        q ~ a^2 tau with a the unmodelled acceleration and tau a quarter period (ISS and
+        Molniya: J2, a ~ 1.2e-5 km/s^2 -> 1e-7, which also makes the range/az/el
+        tracking-window NIS ~ 3; pendulum: damping (c/m) theta_dot ~ 5e-3 rad/s^2 -> 1e-5).
+    iod_samples : int
+        Real measurements used by the initial orbit determination.
+    buffer_s, retrain_period_s
+        Surrogate training buffer (0: the tracking window) and refit period (a gap always
+        starts from a fit up to the last real measurement).
+    lift : str
+        "" (DMD learns the measurement) or "eci" (range/az/el lifted to the ECI position it
+        implies, see `surrogate.EciLift`).
     """
 
     name: str

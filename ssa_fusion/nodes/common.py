@@ -208,5 +208,3 @@ class _FinishedSignal(Exception):  # noqa: N818 (control flow, not an error)
 def finish() -> None:
     """End the node's loop from a callback; `run` then closes the node and exits 0."""
     raise _FinishedSignal()
-
-

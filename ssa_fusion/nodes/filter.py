@@ -72,13 +72,24 @@ def tracker_from(node: Node) -> Tracker:
         non_negative,
     )
     object_id = declare(node, "object_id", "", "only track this object ('' = any)")
+    iod_samples = declare(
+        node,
+        "iod_samples",
+        base.iod_samples,
+        "real measurements used by the initial orbit determination (>= 3)",
+        lambda v: None if isinstance(v, int) and v >= 3 else "must be an integer >= 3",
+    )
     if KINDS[kind] == RANGE_AZ_EL:
         model = RazelModel(scenarios.STATIONS[station], scenarios.UNIX_EPOCH_JD)
         frame = station
     else:
         model, frame = PositionModel(), "eci"
     config = TrackerConfig(
-        p0_sigma=tuple(v / 1000.0 for v in p0), q=q * 1e-6, gate=gate or None, frame_id=frame
+        p0_sigma=tuple(v / 1000.0 for v in p0),
+        q=q * 1e-6,
+        gate=gate or None,
+        frame_id=frame,
+        iod_samples=iod_samples,
     )
     return Tracker(kepler.propagate, model, config, n=6, object_id=object_id)
 

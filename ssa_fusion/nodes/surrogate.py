@@ -20,13 +20,15 @@ from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
 
 from ssa_fusion import messages
 from ssa_fusion.core import scenarios
-from ssa_fusion.core.surrogate import LIVE_SURROGATE, Surrogate, SurrogateConfig
+from ssa_fusion.core.measurement import RazelModel
+from ssa_fusion.core.surrogate import LIVE_SURROGATE, EciLift, Surrogate, SurrogateConfig
 from ssa_fusion.core.types import RANGE_AZ_EL, SENSOR
 from ssa_fusion.nodes.common import (
     Diagnostics,
     ParameterError,
     declare,
     non_negative,
+    one_of,
     positive,
     run,
     wall_timer,
@@ -76,7 +78,26 @@ def surrogate_config_from(node: Node) -> SurrogateConfig:
             f"parameter 'delays' = {delays}: needs a buffer of at least 2 x delays x cadence "
             f"= {2 * delays * cadence} s, but 'buffer_length' = {buffer_s} s"
         )
+    lift = declare(
+        node,
+        "lift",
+        base.lift or "none",
+        "observable the DMD learns: none (the measurement itself) or eci (range/az/el "
+        "lifted to the ECI position it implies, forecasts mapped back)",
+        one_of("none", "eci"),
+    )
+    station = declare(
+        node,
+        "station",
+        base.station,
+        "station of range/az/el measurements (for lift eci)",
+        one_of(*scenarios.STATIONS),
+    )
+    lifter = None
+    if lift == "eci":
+        lifter = EciLift(RazelModel(scenarios.STATIONS[station], scenarios.UNIX_EPOCH_JD))
     return SurrogateConfig(
+        lift=lifter,
         buffer_s=buffer_s,
         retrain_period_s=retrain,
         delays=delays,

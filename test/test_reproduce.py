@@ -1,0 +1,68 @@
+"""`ssa-fusion reproduce --quick`: the JSON's shape, determinism under a seed, and the arms'
+ordering for the scenarios where the paper found the DMD-EKF close to hypothetical."""
+
+import json
+
+import pytest
+
+from ssa_fusion import cli
+
+ARMS = ("placeholder", "dmd_ekf", "hypothetical_ekf")
+SETTINGS = ("cadence_s", "training_window_s", "gap_s", "delays", "rank", "p0_sigma", "q",
+            "R_sigma")
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    """One quick run of the two ordering scenarios plus a noisy one (and the studies)."""
+    out = tmp_path_factory.mktemp("reproduce")
+    names = ["iss_j2_pos", "iss_j2_rae", "iss_j2_pos_noisy", "vdp"]
+    assert cli.main(["reproduce", "--quick", "--seed", "3", "--out", str(out),
+                     "--scenario", *names]) == 0
+    return out, json.loads((out / "results.json").read_text())
+
+
+def test_json_shape_and_files(quick):
+    out, res = quick
+    assert res["seed"] == 3 and res["quick"] is True
+    assert set(res["scenarios"]) == {"iss_j2_pos", "iss_j2_rae", "iss_j2_pos_noisy", "vdp"}
+    for name, r in res["scenarios"].items():
+        for arm in ARMS:
+            assert r["arms"][arm]["epsilon"] > 0.0, (name, arm)
+        for key in SETTINGS:
+            assert key in r["settings"], (name, key)
+        assert (out / f"{name}_error.png").stat().st_size > 1000
+    noisy = res["scenarios"]["iss_j2_pos_noisy"]
+    assert noisy["arms"]["dmd_ekf"]["nees_mean"] > 0.0
+    lo, hi = noisy["nees"]["band95"]
+    assert 0.0 < lo < 6.0 < hi
+    assert (out / "iss_j2_pos_noisy_sigma.png").exists()
+    sweep = res["vdp_sweep"]
+    assert len(sweep["mu_p"]) == len(sweep["dmd_ekf"]) >= 3
+    cons = res["consistency"]
+    assert len(cons["one_shot"]["empirical_var"]) == len(cons["horizon_s"])
+    assert (out / "results.md").read_text().startswith("# Reproduction")
+
+
+@pytest.mark.parametrize("name", ["iss_j2_pos", "iss_j2_rae"])
+def test_quick_keeps_the_ordering(quick, name):
+    eps = {a: quick[1]["scenarios"][name]["arms"][a]["epsilon"] for a in ARMS}
+    # placeholder far behind, the DMD-EKF much nearer the hypothetical EKF than the placeholder
+    assert max(eps["hypothetical_ekf"], eps["dmd_ekf"]) < eps["placeholder"]
+    assert eps["placeholder"] / eps["dmd_ekf"] >= 10
+    assert eps["dmd_ekf"] / eps["hypothetical_ekf"] < eps["placeholder"] / eps["dmd_ekf"]
+
+
+def test_same_seed_same_numbers(quick, tmp_path):
+    assert cli.main(["reproduce", "--quick", "--seed", "3", "--out", str(tmp_path),
+                     "--scenario", "iss_j2_pos", "--no-plots", "--no-studies"]) == 0
+    again = json.loads((tmp_path / "results.json").read_text())["scenarios"]["iss_j2_pos"]
+    first = quick[1]["scenarios"]["iss_j2_pos"]
+    assert again["arms"] == first["arms"]
+    assert again["settings"] == first["settings"]
+
+
+def test_unknown_scenario_is_an_error(tmp_path, capsys):
+    assert cli.main(["reproduce", "--quick", "--out", str(tmp_path),
+                     "--scenario", "nope"]) == 2
+    assert "unknown scenario" in capsys.readouterr().err
