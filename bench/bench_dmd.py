@@ -13,50 +13,18 @@ import time
 import warnings
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+from ssa_fusion.core.dynamics import ISS_ELEMENTS, elements_to_state, propagate
 from ssa_fusion.core.hankel_dmd import HankelDMD
 
-MU, J2, RE = 398600.4418, 1.08262668e-3, 6378.137
 N_TRAIN, N_FC, DELAYS, DT, REPEATS = 720, 200, 120, 30.0, 41
 
 
 def iss_positions(n: int) -> np.ndarray:
     """ISS two-body + J2 ECI positions (3, n), km, every DT s."""
-    a, e = 6796.9, 0.0007
-    i, raan, argp, nu = np.radians([51.639, 113.73, 51.197, 358.89])
-    p = a * (1 - e * e)
-    r = p / (1 + e * np.cos(nu))
-    r_pf = np.array([r * np.cos(nu), r * np.sin(nu), 0.0])
-    v_pf = np.sqrt(MU / p) * np.array([-np.sin(nu), e + np.cos(nu), 0.0])
-    co, so, ci, si, cw, sw = (
-        np.cos(raan),
-        np.sin(raan),
-        np.cos(i),
-        np.sin(i),
-        np.cos(argp),
-        np.sin(argp),
-    )
-    rot = np.array(
-        [
-            [co * cw - so * sw * ci, -co * sw - so * cw * ci, so * si],
-            [so * cw + co * sw * ci, -so * sw + co * cw * ci, -co * si],
-            [sw * si, cw * si, ci],
-        ]
-    )
-
-    def rhs(_t: float, x: np.ndarray) -> np.ndarray:
-        rr = x[:3]
-        rn = np.linalg.norm(rr)
-        z2 = (rr[2] / rn) ** 2
-        k = 1.5 * J2 * MU * RE**2 / rn**5
-        acc = -MU * rr / rn**3 + k * rr * np.array([5 * z2 - 1, 5 * z2 - 1, 5 * z2 - 3])
-        return np.concatenate([x[3:], acc])
-
-    t = np.arange(n) * DT
-    x0 = np.concatenate([rot @ r_pf, rot @ v_pf])
-    return solve_ivp(rhs, (0.0, t[-1]), x0, t_eval=t, method="DOP853", rtol=1e-12, atol=1e-12).y[:3]
+    x0 = elements_to_state(**ISS_ELEMENTS)
+    return np.asarray(propagate("j2", x0, np.arange(n) * DT))[:, :3].T.copy()
 
 
 def ours(z: np.ndarray) -> np.ndarray:

@@ -32,7 +32,7 @@ def test_sample_bag_is_small_and_complete():
     size = sum(f.stat().st_size for f in SAMPLE.iterdir())
     assert size <= 2 * 1024 * 1024
     counts = evaluate.load(SAMPLE).counts
-    for topic in replay.PLAYED + ("/ssa/estimate", "/ssa/forecast", "/clock"):
+    for topic in (*replay.PLAYED, "/ssa/estimate", "/ssa/forecast", "/clock"):
         assert counts.get(topic, 0) > 0, topic
 
 

@@ -6,66 +6,18 @@ import warnings
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 from scipy.stats import chi2
 
+from ssa_fusion.core.dynamics import ISS_ELEMENTS, elements_to_state, propagate
 from ssa_fusion.core.hankel_dmd import HankelDMD, svht_rank
 
-MU = 398600.4418  # km^3/s^2
-J2 = 1.08262668e-3
-RE = 6378.137  # km
-ISS = (6796.9, 0.0007, 51.639, 113.73, 51.197, 358.89)  # a km, e, i, RAAN, argp, nu (deg)
 FREQS = (0.011, 0.037, 0.071)  # cycles per sample
 
 
-def _elements_to_state(a: float, e: float, i: float, raan: float, argp: float, nu: float):
-    """Classical elements (km, deg) -> ECI state (km, km/s), independent of the core."""
-    i, raan, argp, nu = np.radians([i, raan, argp, nu])
-    p = a * (1 - e * e)
-    r = p / (1 + e * np.cos(nu))
-    r_pf = np.array([r * np.cos(nu), r * np.sin(nu), 0.0])
-    v_pf = np.sqrt(MU / p) * np.array([-np.sin(nu), e + np.cos(nu), 0.0])
-    co, so, ci, si, cw, sw = (
-        np.cos(raan),
-        np.sin(raan),
-        np.cos(i),
-        np.sin(i),
-        np.cos(argp),
-        np.sin(argp),
-    )
-    rot = np.array(
-        [
-            [co * cw - so * sw * ci, -co * sw - so * cw * ci, so * si],
-            [so * cw + co * sw * ci, -so * sw + co * cw * ci, -co * si],
-            [sw * si, cw * si, ci],
-        ]
-    )
-    return np.concatenate([rot @ r_pf, rot @ v_pf])
-
-
-def _rhs_j2(_t: float, x: np.ndarray) -> np.ndarray:
-    r = x[:3]
-    rn = np.linalg.norm(r)
-    z2 = (r[2] / rn) ** 2
-    k = 1.5 * J2 * MU * RE**2 / rn**5
-    acc = -MU * r / rn**3 + k * r * np.array([5 * z2 - 1, 5 * z2 - 1, 5 * z2 - 3])
-    return np.concatenate([x[3:], acc])
-
-
 def iss_positions(n: int, dt: float = 30.0) -> np.ndarray:
-    """ISS two-body + J2 ECI positions (3, n) in km at cadence dt s."""
-    x0 = _elements_to_state(*ISS)
-    t = np.arange(n) * dt
-    try:  # helper A's propagator if available
-        from ssa_fusion.core.dynamics import propagate
-
-        out = np.asarray(propagate("j2", x0, t))
-        if out.shape == (n, 6):
-            return out[:, :3].T.copy()
-    except (ImportError, AttributeError, TypeError, ValueError, NotImplementedError):
-        pass
-    sol = solve_ivp(_rhs_j2, (0.0, t[-1]), x0, t_eval=t, method="DOP853", rtol=1e-12, atol=1e-12)
-    return sol.y[:3]
+    """ISS two-body + J2 ECI positions (3, n) in km at cadence dt s (test data only)."""
+    x0 = elements_to_state(**ISS_ELEMENTS)
+    return np.asarray(propagate("j2", x0, np.arange(n) * dt))[:, :3].T.copy()
 
 
 def sinusoids(k: np.ndarray) -> np.ndarray:
