@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from ssa_fusion import bagio
-from ssa_fusion.core import kepler, metrics, scenarios, types
+from ssa_fusion.core import metrics, scenarios, types
+from ssa_fusion.core.montecarlo import placeholder_ensemble
 from ssa_fusion.core.pipeline import make_tracker
 from ssa_fusion.messages import estimate_from_msg, measurement_from_msg
 from ssa_fusion.qos import (
@@ -28,8 +29,6 @@ from ssa_fusion.qos import (
     TOPIC_TRUTH,
     TOPIC_WITHHELD,
 )
-
-N_PARTICLES = 200
 
 
 @dataclass
@@ -83,20 +82,6 @@ def run_tracker(s: scenarios.Scenario, stream: list[types.Measurement]) -> dict:
     return out
 
 
-def placeholder_mc(x0: np.ndarray, P0: np.ndarray, dts: np.ndarray,
-                   seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Mean and covariance (len(dts), 6[, 6]) of 200 particles ~ N(x0, P0) propagated by
-    the Keplerian placeholder over the offsets `dts` (s)."""
-    rng = np.random.default_rng(seed)
-    P = 0.5 * (P0 + P0.T)
-    particles = rng.multivariate_normal(x0, P, size=N_PARTICLES, method="eigh")
-    states = np.array([[kepler.propagate(p, float(dt))[0] for dt in dts] for p in particles])
-    mean = states.mean(axis=0)
-    dev = states - mean
-    cov = np.einsum("pti,ptj->tij", dev, dev) / (N_PARTICLES - 1)
-    return mean, cov
-
-
 @dataclass
 class Evaluation:
     t: np.ndarray  # gap epochs, s
@@ -131,7 +116,9 @@ def evaluate(data: BagData, scenario: str = "", seed: int = 0) -> Evaluation:
         raise ValueError("no estimate before the gap: the filter never initialised")
     start = max(before, key=lambda e: e.t)
 
-    mean, cov = placeholder_mc(start.x, start.P, t_gap - start.t, seed)
+    dt = np.concatenate([[0.0], t_gap - start.t])  # the ensemble starts at the estimate
+    mean, cov = placeholder_ensemble("kepler", start.x, start.P, dt, seed)
+    mean, cov = mean[1:], cov[1:]
     hyp = run_tracker(s, data.measurements + data.withheld)
     arms = {"placeholder": mean, "hypothetical_ekf": np.array([hyp[t].x for t in t_gap])}
     covs = {"placeholder": cov, "hypothetical_ekf": np.array([hyp[t].P for t in t_gap])}

@@ -249,7 +249,7 @@ class HankelDMD:
         h = _hankel(z, d)  # (m d, ncol)
         x = h[:, :-1]
         gram = x @ x.T
-        ev, vec = sla.eigh(gram, driver="evr", check_finite=False)  # ascending
+        ev, vec = sla.eigh(gram, driver="evd", check_finite=False)  # ascending; evd: fastest here
         sigma = np.sqrt(np.clip(ev[::-1], 0.0, None))
         rmax = min(x.shape)
         if self.rank is None:
