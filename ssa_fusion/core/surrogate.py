@@ -62,7 +62,8 @@ class SurrogateConfig:
     cadence_s: float = 0.0
     grace: float = 0.5
     lift: EciLift | None = None
-    inflate_correlated: bool = True
+    inflate_correlated: bool = False
+    whiten: bool = True
 
 
 class EciLift:
@@ -115,6 +116,7 @@ class Surrogate:
         self._model_fit_at = -math.inf
         self._forecast: np.ndarray | None = None
         self._cov: np.ndarray | None = None
+        self._scale: np.ndarray | None = None
         self._emitted = 0  # forecasts emitted in the current gap
 
     @property
@@ -177,7 +179,7 @@ class Surrogate:
                 self.invalid += 1  # not a possible range/az/el: withheld, not clipped
                 self.status = f"forecast at t={last.t + k * dt} is not a valid range/az/el"
                 continue
-            R = last.R + self._cov[k - 1]
+            R = self._cov[k - 1]
             out.append(Measurement(
                 t=last.t + k * dt, z=self._forecast[:, k - 1].copy(), R=0.5 * (R + R.T),
                 kind=last.kind, source=FORECAST, object_id=last.object_id,
@@ -196,11 +198,19 @@ class Surrogate:
             return False
         self._forecast = self._model.forecast(n_steps)
         self._cov = self._model.forecast_covariance(n_steps)
+        if self._scale is not None:
+            w = self._scale
+            self._forecast = self._forecast * w[:, None]
+            self._cov = self._cov * np.outer(w, w)[None]
         lift = self.config.lift
         if lift is not None:
             t = self.last.t + self.cadence() * np.arange(1, n_steps + 1)
             z, self._cov = lift.back(self._forecast.T, self._cov, t)
             self._forecast = z.T
+        # Var(e) >= R (paper section 4): floor at the sensor noise in the PSD sense
+        R = np.asarray(self.last.R, dtype=float)
+        w, v = np.linalg.eigh(self._cov - R)
+        self._cov = R + (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
         if self.config.inflate_correlated:
             self._cov = self._cov * np.arange(1, n_steps + 1, dtype=float)[:, None, None]
         return True
@@ -234,6 +244,14 @@ class Surrogate:
         if cfg.lift is not None:
             Z = cfg.lift.forward(Z.T, t[-Z.shape[1]:]).T
             angles = ()
+        # Whiten by the known sensor noise (each channel / its sigma) so that the noise is
+        # i.i.d. across channels, as the automatic rank threshold assumes; noise-free, lifted
+        # or angle data are learned in their own units (angles must stay in rad to unwrap).
+        sig = np.sqrt(np.clip(np.diag(np.asarray(last.R, dtype=float)), 0.0, None))
+        self._scale = (sig if cfg.whiten and cfg.lift is None and not angles
+                       and np.all(sig > 0) else None)
+        if self._scale is not None:
+            Z = Z / self._scale[:, None]
         try:
             self._model = HankelDMD(cfg.delays, cfg.rank, angle_channels=angles).fit(Z)
         except (ValueError, np.linalg.LinAlgError) as exc:

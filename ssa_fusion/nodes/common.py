@@ -98,37 +98,51 @@ def declare(
     default: Any,
     description: str,
     check: Callable[[Any], str | None] | None = None,
+    apply: Callable[[Any], None] | None = None,
 ) -> Any:
     """Declare a parameter with a description; validate it now and on every later set.
 
     `check(value)` returns None when valid, else the reason. An invalid start-up value
     raises ParameterError; a later invalid `ros2 param set` is refused (old value kept).
+    `apply(value)` puts a value accepted at run time into effect; a parameter without it is
+    read-only at run time (set at start-up; rclpy refuses later sets as read-only).
     """
+    descriptor = ParameterDescriptor(description=description, read_only=apply is None)
     try:
-        node.declare_parameter(name, default, ParameterDescriptor(description=description))
+        node.declare_parameter(name, default, descriptor)
     except ParameterException as exc:  # e.g. a string given for a number
         raise ParameterError(f"parameter '{name}': {exc}") from exc
     value = node.get_parameter(name).value
+    hooks = node.__dict__.setdefault("_ssa_param_hooks", {})
+    if not hooks:
+        node.add_on_set_parameters_callback(lambda ps: _validate(node, ps))
+        node.add_post_set_parameters_callback(lambda ps: _apply(node, ps))
+    hooks[name] = (check, apply)
     if check is not None:
         reason = check(value)
         if reason:
             raise ParameterError(f"parameter '{name}' = {value!r}: {reason}")
-        checks = node.__dict__.setdefault("_ssa_param_checks", {})
-        checks[name] = check
-        if len(checks) == 1:
-            node.add_on_set_parameters_callback(lambda ps: _validate(node, ps))
     return value
 
 
 def _validate(node: Node, params: list[Parameter]) -> SetParametersResult:
-    checks = node.__dict__.get("_ssa_param_checks", {})
+    hooks = node.__dict__.get("_ssa_param_hooks", {})
     for p in params:
-        check = checks.get(p.name)
+        check = hooks.get(p.name, (None, None))[0]
         reason = check(p.value) if check else None
         if reason:
             node.get_logger().warning(f"refused parameter '{p.name}' = {p.value!r}: {reason}")
             return SetParametersResult(successful=False, reason=f"{p.name}: {reason}")
     return SetParametersResult(successful=True)
+
+
+def _apply(node: Node, params: list[Parameter]) -> None:
+    hooks = node.__dict__.get("_ssa_param_hooks", {})
+    for p in params:
+        apply = hooks.get(p.name, (None, None))[1]
+        if apply is not None:
+            apply(p.value)
+            node.get_logger().info(f"parameter '{p.name}' = {p.value!r} in effect")
 
 
 def positive(value: Any) -> str | None:

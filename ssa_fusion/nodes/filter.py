@@ -13,6 +13,8 @@ NONE) whose covariance grows. Rejected input is counted by cause on ``/diagnosti
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 from rclpy.clock import JumpThreshold
 from rclpy.duration import Duration
@@ -50,12 +52,24 @@ def tracker_from(node: Node) -> Tracker:
         "station id of range/az/el measurements (frame_id)",
         one_of(*scenarios.STATIONS),
     )
+    config = TrackerConfig()
+
+    def setter(field: str, convert: Callable[[Any], Any]) -> Callable[[Any], None]:
+        def apply(value: Any) -> None:
+            setattr(config, field, convert(value))
+
+        return apply
+
+    def p0_km(v: Any) -> tuple[float, ...]:
+        return tuple(x / 1000.0 for x in v)
+
     p0 = declare(
         node,
         "p0_sigma",
         [v * 1000.0 for v in base.p0_sigma],
-        "std floor added to the IOD covariance: 3 x m, 3 x m/s",
+        "std floor added to the IOD covariance: 3 x m, 3 x m/s (applies at the next IOD)",
         _p0_check,
+        apply=setter("p0_sigma", p0_km),
     )
     q = declare(
         node,
@@ -63,6 +77,7 @@ def tracker_from(node: Node) -> Tracker:
         base.q * 1e6,
         "process noise: white-noise acceleration spectral density, m^2/s^3",
         non_negative,
+        apply=setter("q", lambda v: v * 1e-6),
     )
     gate = declare(
         node,
@@ -70,6 +85,7 @@ def tracker_from(node: Node) -> Tracker:
         DEFAULT_GATE,
         "NIS beyond which an update is rejected (0 = no gate)",
         non_negative,
+        apply=setter("gate", lambda v: v or None),
     )
     object_id = declare(node, "object_id", "", "only track this object ('' = any)")
     iod_samples = declare(
@@ -78,19 +94,15 @@ def tracker_from(node: Node) -> Tracker:
         base.iod_samples,
         "real measurements used by the initial orbit determination (>= 3)",
         lambda v: None if isinstance(v, int) and v >= 3 else "must be an integer >= 3",
+        apply=setter("iod_samples", int),
     )
     if KINDS[kind] == RANGE_AZ_EL:
         model = RazelModel(scenarios.STATIONS[station], scenarios.UNIX_EPOCH_JD)
         frame = station
     else:
         model, frame = PositionModel(), "eci"
-    config = TrackerConfig(
-        p0_sigma=tuple(v / 1000.0 for v in p0),
-        q=q * 1e-6,
-        gate=gate or None,
-        frame_id=frame,
-        iod_samples=iod_samples,
-    )
+    config.p0_sigma, config.q, config.gate = p0_km(p0), q * 1e-6, gate or None
+    config.frame_id, config.iod_samples = frame, iod_samples
     return Tracker(kepler.propagate, model, config, n=6, object_id=object_id)
 
 
@@ -104,6 +116,7 @@ class FilterNode(Node):
             300.0,
             "sim s without an update after which a prediction is published (0 = never)",
             non_negative,
+            apply=lambda v: setattr(self, "predict_period", v),
         )
         self.diag = Diagnostics(self)
         self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, DATA_QOS)
@@ -113,8 +126,7 @@ class FilterNode(Node):
         self.create_subscription(
             MeasurementMsg, TOPIC_FORECAST, self.diag.guard(self.on_measurement), DATA_QOS
         )
-        if self.predict_period > 0:
-            wall_timer(self, 0.1, self.diag.guard(self.predict))
+        wall_timer(self, 0.1, self.diag.guard(self.predict))
         self._jump = self.get_clock().create_jump_callback(
             JumpThreshold(
                 min_forward=None, min_backward=Duration(nanoseconds=-1), on_clock_change=False
@@ -160,6 +172,8 @@ class FilterNode(Node):
         self.diag.counts[f"published_{SOURCE_NAMES[e.update_source]}"] += 1
 
     def predict(self) -> None:
+        if self.predict_period <= 0:
+            return
         now = self.get_clock().now().nanoseconds * 1e-9
         if self.tracker.t >= now - self.predict_period or now <= self._predicted_at:
             return  # recently updated, or sim time has not moved since the last prediction

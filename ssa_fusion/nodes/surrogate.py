@@ -12,6 +12,8 @@ cannot fit, it publishes nothing and says why on ``/diagnostics``.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from typing import Any
 
 from rclpy.clock import JumpThreshold
 from rclpy.duration import Duration
@@ -38,37 +40,61 @@ from ssa_fusion.qos import DATA_QOS, TOPIC_FORECAST, TOPIC_MEASUREMENT
 
 def surrogate_config_from(node: Node) -> SurrogateConfig:
     """Declare the surrogate's parameters on `node` and build its config (shared with the
-    offline replay so both use the same defaults)."""
+    offline replay so both use the same defaults). Model settings can be changed at run
+    time (`ros2 param set`); they take effect at the next fit."""
     base = scenarios.DEFAULT_LIVE
-    buffer_s = declare(
-        node, "buffer_length", base.track_s, "s of real measurements kept for training", positive
+    config = SurrogateConfig()
+
+    def setting(
+        name: str,
+        field: str,
+        default: Any,
+        description: str,
+        check: Any,
+        convert: Callable[[Any], Any] = float,
+    ) -> Any:
+        def apply(value: Any) -> None:
+            setattr(config, field, convert(value))
+
+        value = declare(node, name, default, description, check, apply=apply)
+        apply(value)
+        return value
+
+    buffer_s = setting(
+        "buffer_length",
+        "buffer_s",
+        base.buffer_s or base.track_s,
+        "s of real measurements kept for training",
+        positive,
     )
-    retrain = declare(
-        node,
+    setting(
         "retrain_period",
+        "retrain_period_s",
         LIVE_SURROGATE.retrain_period_s,
         "sim s between refits while measurements arrive",
         non_negative,
     )
-    delays = declare(node, "delays", base.delays, "Hankel-DMD time delays", positive)
-    rank = declare(node, "rank", 0, "Hankel-DMD rank (0 = automatic)", non_negative)
-    horizon = declare(
-        node,
+    delays = setting("delays", "delays", base.delays, "Hankel-DMD time delays", positive, int)
+    setting(
+        "rank", "rank", 0, "Hankel-DMD rank (0 = automatic)", non_negative, lambda v: int(v) or None
+    )
+    setting(
         "max_horizon",
+        "max_horizon_s",
         7200.0,
         "s after the last real measurement beyond which nothing is forecast",
         positive,
     )
-    grace = declare(
-        node,
+    setting(
+        "grace",
         "grace",
         LIVE_SURROGATE.grace,
         "cadences after a missed epoch before it is forecast (absorbs message latency)",
         non_negative,
     )
-    cadence = declare(
-        node,
+    cadence = setting(
         "cadence",
+        "cadence_s",
         0.0,
         "expected s between measurements (0 = infer from the buffer)",
         non_negative,
@@ -93,19 +119,9 @@ def surrogate_config_from(node: Node) -> SurrogateConfig:
         "station of range/az/el measurements (for lift eci)",
         one_of(*scenarios.STATIONS),
     )
-    lifter = None
     if lift == "eci":
-        lifter = EciLift(RazelModel(scenarios.STATIONS[station], scenarios.UNIX_EPOCH_JD))
-    return SurrogateConfig(
-        lift=lifter,
-        buffer_s=buffer_s,
-        retrain_period_s=retrain,
-        delays=delays,
-        rank=rank or None,
-        max_horizon_s=horizon,
-        cadence_s=cadence,
-        grace=grace,
-    )
+        config.lift = EciLift(RazelModel(scenarios.STATIONS[station], scenarios.UNIX_EPOCH_JD))
+    return config
 
 
 class SurrogateNode(Node):

@@ -438,6 +438,34 @@ def test_bad_param_set_at_run_time_is_refused_and_old_value_kept(ros_graph):
     assert filt.returncode is None
 
 
+
+def test_valid_param_set_at_run_time_takes_effect_and_read_only_ones_are_refused(ros_graph):
+    g = ros_graph
+    diag = Diag(g)
+    g.start_node("filter", params=filter_params(predict_period=0.0))
+    got = g.collect(StateEstimate, "/ssa/estimate")
+    pub = publisher(g, Measurement, "/ssa/measurement", 1)
+    set_client = g.probe.create_client(SetParameters, "/filter/set_parameters")
+
+    def set_param(name: str, value: ParameterValue):
+        req = SetParameters.Request(parameters=[ParameterMsg(name=name, value=value)])
+        return _call(g, set_client, req, "/filter/set_parameters").results[0]
+
+    for i in range(6):  # IOD (3) + 3 fused updates
+        pub.publish(meas(i))
+    g.wait_for(lambda: len(got) >= 4, 15.0, "4 estimates")
+    # a gate of 1e-9 makes every further measurement an outlier: the new value is in effect
+    tiny = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=1e-9)
+    assert set_param("gate", tiny).successful
+    for i in range(6, 9):
+        pub.publish(meas(i))
+    diag.wait(g, "filter", {"rejected_gate": 3})
+    assert len(got) == 4
+    # kind and station are fixed at start-up: refused as read-only, old value kept
+    sonar = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value="position")
+    result = set_param("kind", sonar)
+    assert not result.successful and "read-only" in result.reason
+
 # shutdown --------------------------------------------------------------------------------
 TOPICS = {"/ssa/measurement": Measurement, "/ssa/forecast": Measurement,
           "/ssa/estimate": StateEstimate, "/ssa/truth": StateEstimate,
