@@ -69,11 +69,15 @@ def settings_of(s: scenarios.Scenario, sim) -> dict:
             "range_az_el" if s.kind == 1 else list(s.observed)),
         "cadence_s": s.cadence_s, "training_window_s": sc.buffer_s,
         "gap_s": s.gap_s, "gap_epochs": int(sim.in_gap.sum()),
-        "delays": s.delays, "rank": s.rank if s.rank is not None else "auto (SVHT, <= 64)",
+        "delays": s.delays,
+        "rank": s.rank if s.rank is not None else f"auto (SVHT, <= {HankelDMD(1).max_rank})",
         "surrogate_observable": "ECI position from range/az/el" if s.lift == "eci"
         else "measurement",
-        "forecast_covariance": "k * Var(e(k)) + R (k-th forecast of the gap)"
-        if sc.inflate_correlated else "Var(e(k)) + R",
+        "forecast_covariance": (f"k^{sc.correlation_power:g} * Var(e(k)), Var(e) >= R "
+                                "(k-th forecast of the gap)") if sc.inflate_correlated
+        else "Var(e(k)), Var(e) >= R",
+        "whitened": bool(sc.whiten and sc.lift is None and s.kind != 1
+                         and np.all(sim.sigma > 0)),
         "iod_samples": s.iod_samples,
         "P0": "IOD covariance (R through the IOD map) + diag(p0_sigma^2)",
         "p0_sigma": list(s.p0_sigma), "Q": "white-noise acceleration, q [units^2/s^3]",

@@ -249,7 +249,10 @@ class HankelDMD:
         h = _hankel(z, d)  # (m d, ncol)
         x = h[:, :-1]
         gram = x @ x.T
-        ev, vec = sla.eigh(gram, driver="evd", check_finite=False)  # ascending; evd: fastest here
+        # evr, not the ~1 ms faster evd: at the rank cap on noise-free data the trailing
+        # eigenvectors decide the fit, and evd's were measurably worse (iss_sgp4_pos quick run:
+        # DMD/hypothetical 52.8 with evd, 1.43 with evr).
+        ev, vec = sla.eigh(gram, driver="evr", check_finite=False)  # ascending
         sigma = np.sqrt(np.clip(ev[::-1], 0.0, None))
         rmax = min(x.shape)
         if self.rank is None:

@@ -9,8 +9,15 @@ trained on the buffer up to that measurement, and a real measurement that ends a
 releases the forecasts still owed for the epochs before it. This is what makes live runs
 and offline replays give the same forecasts.
 
-Each forecast carries the covariance R + Var(e(h)) of paper section 4: the sensor noise
-plus the surrogate's forecast error covariance at horizon h, which grows with h.
+Each forecast carries the covariance Var(e(h)) of paper section 4 (Var(e) = R + A E[zz^T] A^T):
+the in-sample error of h-step forecasts against the *measured* samples, so it already
+contains the sensor noise R once; it is floored at R (PSD sense) and grows with h.
+
+Noisy channels are whitened (`SurrogateConfig.whiten`): each is divided by its known noise
+sigma before the fit and the forecasts and covariances are scaled back, so that the noise
+is i.i.d. across channels as the automatic rank threshold (Gavish-Donoho) assumes. Without
+it a channel with a large offset (CR3BP x, noise 1 % of its RMS ~ 10x the others') sets
+the threshold and the other channels are fitted into their noise.
 
 Optionally (`SurrogateConfig.lift`) the DMD learns a *lifted* observable instead of the raw
 measurement: for range/az/el from a known station, `EciLift` turns each measurement into the
@@ -23,9 +30,13 @@ Correlation (`SurrogateConfig.inflate_correlated`, default on): all forecasts of
 from one model fitted on one buffer, so their errors are nearly the same systematic error,
 not independent draws. Fused as independent measurements, k of them would shrink the
 filter's covariance k-fold while the error stays (NEES of hundreds). The k-th forecast
-after the last real measurement therefore carries k * Var(e(k)): k fully correlated copies
-then carry no more information than about one, and the filter's covariance grows through
-the gap instead of pretending forecasts are fresh measurements.
+after the last real measurement therefore carries k * Var(e(k)) (`correlation_power` p
+gives k^p * Var(e(k)); p = 1 by default): the filter's covariance grows through the gap
+instead of pretending forecasts are fresh measurements. With p = 1 the information of K
+forecasts still grows like ln K; p = 2 bounds it (sum 1/k^2 < 1.7) but was not better in
+the experiments (see docs/RESULTS.md), and modelling the common error as a random-walk bias
+state in the EKF was tried and rejected (the DMD error oscillates with the orbit, a
+random walk does not, and the filter became grossly overconfident).
 """
 
 from __future__ import annotations
@@ -52,7 +63,9 @@ class SurrogateConfig:
     cadence_s : expected measurement interval (0: the median interval of the buffer);
     grace : fraction of a cadence after an epoch before it counts as missed;
     lift : optional observable map (e.g. `EciLift`) the DMD learns instead of z (None: z);
-    inflate_correlated : scale the k-th forecast's covariance of a gap by k (see below)."""
+    inflate_correlated : scale the k-th forecast's covariance of a gap by k (see below);
+    correlation_power : the exponent p of that scaling (k^p);
+    whiten : learn noisy channels divided by their noise sigma (see below)."""
 
     buffer_s: float = 21600.0
     retrain_period_s: float = 600.0
@@ -62,7 +75,8 @@ class SurrogateConfig:
     cadence_s: float = 0.0
     grace: float = 0.5
     lift: EciLift | None = None
-    inflate_correlated: bool = False
+    inflate_correlated: bool = True
+    correlation_power: float = 1.0
     whiten: bool = True
 
 
@@ -212,7 +226,8 @@ class Surrogate:
         w, v = np.linalg.eigh(self._cov - R)
         self._cov = R + (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
         if self.config.inflate_correlated:
-            self._cov = self._cov * np.arange(1, n_steps + 1, dtype=float)[:, None, None]
+            k = np.arange(1, n_steps + 1, dtype=float)
+            self._cov = self._cov * (k ** self.config.correlation_power)[:, None, None]
         return True
 
     def _fit(self) -> None:

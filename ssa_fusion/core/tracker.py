@@ -77,20 +77,6 @@ class _Snapshot:
     t: float
     x: np.ndarray
     P: np.ndarray
-    bias: _Bias | None = None
-
-
-@dataclass
-class _Bias:
-    """The forecast-error bias of the current gap, estimated jointly with the state.
-
-    b : (m,) bias estimate; Pxb : (n, m) state-bias cross-covariance; Pbb : (m, m) its
-    covariance; B : (m, m) the marginal bias covariance the last forecast stated."""
-
-    b: np.ndarray
-    Pxb: np.ndarray
-    Pbb: np.ndarray
-    B: np.ndarray
 
 
 class Tracker:
@@ -113,8 +99,6 @@ class Tracker:
         self.t = -math.inf
         self.t_real = -math.inf
         self._iod: list[Measurement] = []
-        self._R_real: np.ndarray | None = None  # noise of the last real measurement fused
-        self._bias: _Bias | None = None  # forecast-error bias of the current gap
         # forecasts fused since the last real measurement: (measurement, state before it)
         self._forecasts: list[tuple[Measurement, _Snapshot]] = []
 
@@ -198,72 +182,6 @@ class Tracker:
                            detail=f"NIS {result.nis:.1f} > gate {self.config.gate}")
         return Outcome(estimate=self.estimate(source, result.nis))
 
-    def _step_forecast(self, m: Measurement) -> Outcome:
-        """Predict to m.t and fuse forecast m, its error split into white noise and a bias.
-
-        All forecasts of one gap come from one fitted model, so their errors are one
-        systematic error that grows with the horizon, not independent draws. The forecast's
-        covariance C_k (paper section 4: Var(e) = R + growth, against the measurement the
-        sensor would have made) is read as: white noise R (the sensor's, as in the last real
-        measurement) plus a bias b_k with marginal covariance B_k = C_k - R, modelled as a
-        random walk over the gap (b_k = b_{k-1} + w_k, Cov w_k = B_k - B_{k-1}). The bias is
-        estimated jointly with the state (augmented EKF) and dropped at the next real
-        measurement. Fusing k forecasts therefore pins the state no tighter than the common
-        error allows, while their shape (relative motion) still informs it.
-        """
-        ekf, n = self.ekf, self.n
-        R_w = self._R_real if self._R_real is not None else np.zeros_like(m.R)
-        C = 0.5 * (np.asarray(m.R, float) + np.asarray(m.R, float).T)
-        k = C.shape[0]
-        bias = self._bias or _Bias(np.zeros(k), np.zeros((n, k)), np.zeros((k, k)),
-                                   np.zeros((k, k)))
-        B = _psd(C - R_w)
-        Qb = _psd(B - bias.B)
-        # the white part, with a floor so that noise-free forecasts keep S invertible
-        R = R_w + 1e-12 * max(float(np.trace(C)) / k, 1e-30) * np.eye(k)
-        xa = np.concatenate([ekf.x, bias.b])
-        Pa = np.block([[ekf.P, bias.Pxb], [bias.Pxb.T, bias.Pbb]])
-        aug = ExtendedKalmanFilter(xa, Pa)
-        dt = m.t - self.t
-        model, t = self.model, m.t
-        Qa = np.zeros((n + k, n + k))
-        Qa[:n, :n] = self._Q(dt)
-        Qa[n:, n:] = Qb
-
-        def f(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            x1, F = self.f(x[:n], dt)
-            Fa = np.eye(n + k)
-            Fa[:n, :n] = F
-            return np.concatenate([x1, x[n:]]), Fa
-
-        def h(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            z, H = model.h_and_H(x[:n], t)
-            return z + x[n:], np.hstack([H, np.eye(k)])
-
-        before = _Snapshot(self.t, ekf.x, ekf.P, self._bias)
-        try:
-            with np.errstate(over="raise", invalid="raise"):
-                if dt != 0.0:
-                    aug.predict(f, Qa)
-                result = aug.update(m.z, h, R, model.angle_mask, self.config.gate)
-            ok = np.isfinite(aug.x).all() and np.isfinite(aug.P).all()
-        except (ValueError, OverflowError, FloatingPointError, np.linalg.LinAlgError) as exc:
-            ok, result, reason = False, None, f"{type(exc).__name__}: {exc}"
-        if not ok:
-            self._restore(before)
-            return Outcome(rejected="rejected_numeric",
-                           detail=f"t={m.t}: update not computable "
-                                  f"({reason if result is None else 'non-finite state'})")
-        if not result.accepted:
-            self._restore(before)
-            return Outcome(rejected="rejected_gate",
-                           detail=f"NIS {result.nis:.1f} > gate {self.config.gate}")
-        self.t = m.t
-        xa, Pa = aug.x, aug.P
-        ekf.x, ekf.P = xa[:n].copy(), Pa[:n, :n].copy()
-        self._bias = _Bias(xa[n:].copy(), Pa[:n, n:].copy(), Pa[n:, n:].copy(), B)
-        return Outcome(estimate=self.estimate(UPDATE_FORECAST, result.nis))
-
     def _fuse_forecast(self, m: Measurement) -> Outcome:
         if m.t <= self.t_real:
             return Outcome(rejected="forecast_superseded",
@@ -271,8 +189,8 @@ class Tracker:
                                   f"t={self.t_real} was fused")
         if m.t <= self.t:
             return Outcome(rejected="rejected_stale", detail=f"forecast t={m.t} <= t={self.t}")
-        before = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy(), self._bias)
-        out = self._step_forecast(m)
+        before = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy())
+        out = self._step(m, UPDATE_FORECAST)
         if out.estimate is not None:
             self._forecasts.append((m, before))
         else:
@@ -296,8 +214,6 @@ class Tracker:
                 self._refuse(later, out)
             return out
         self.t_real = m.t
-        self._R_real = np.asarray(m.R, dtype=float)
-        self._bias = None
         kept = [(f, s) for f, s in later if f.t > m.t]
         self._forecasts = []
         out.rolled_back = len(later)
@@ -313,7 +229,6 @@ class Tracker:
     def _restore(self, s: _Snapshot) -> None:
         self.t = s.t
         self.ekf.x, self.ekf.P = s.x.copy(), s.P.copy()
-        self._bias = s.bias
         self._forecasts = [(f, b) for f, b in self._forecasts if f.t <= s.t]
 
     # ----------------------------------------------------------------------------------
@@ -337,8 +252,6 @@ class Tracker:
             P0 = F @ P0 @ F.T
         self.ekf = ExtendedKalmanFilter(x0, 0.5 * (P0 + P0.T))
         self.t = self.t_real = t_last
-        self._R_real = np.asarray(batch[-1].R, dtype=float)
-        self._bias = None
         return Outcome(estimate=self.estimate(UPDATE_SENSOR))
 
     def _iod_solution(self, batch: list[Measurement]) -> tuple[float, np.ndarray, np.ndarray]:
@@ -386,10 +299,3 @@ class Tracker:
                 J[:, c] = (solve(dz) - x0) / sig[c]
             P += J @ Rj @ J.T
         return t_init, x0, P
-
-
-def _psd(A: np.ndarray) -> np.ndarray:
-    """Nearest symmetric positive semi-definite matrix (negative eigenvalues set to 0)."""
-    A = 0.5 * (A + A.T)
-    w, v = np.linalg.eigh(A)
-    return (v * np.clip(w, 0.0, None)) @ v.T
