@@ -25,16 +25,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import dynamics, pipeline
+from . import pipeline
 from .ekf import process_noise
 from .metrics import chi2_bounds, epsilon, nees
+from .montecarlo import N_PARTICLES as MC_PARTICLES
+from .montecarlo import placeholder_ensemble
 from .scenarios import Scenario, measurement_model, placeholder
 from .simulate import Simulation, simulate
 from .surrogate import Surrogate
 from .tracker import Tracker
 from .types import Measurement, StateEstimate
 
-N_PARTICLES = 200
+N_PARTICLES = MC_PARTICLES
 
 
 @dataclass
@@ -161,17 +163,9 @@ def run_placeholder(s: Scenario, sim: Simulation, seed: int,
                     n_particles: int = N_PARTICLES) -> Arm:
     """Monte Carlo of the placeholder alone from the initial estimate and its covariance."""
     i0, x0, P0 = initial_estimate(s, sim)
-    rng = np.random.default_rng([seed, 7])
-    L = np.linalg.cholesky(P0 + 1e-30 * np.eye(s.n))
-    parts = x0 + rng.standard_normal((n_particles, s.n)) @ L.T
-    model = "two_body" if s.placeholder == "kepler" else s.placeholder
     idx = np.arange(i0, len(sim.t))
-    t = sim.t[idx] - sim.t[i0]
-    traj = dynamics.propagate(model, parts, t, rtol=1e-10, atol=1e-12,
-                              **s.placeholder_params)  # (k, p, n)
-    mean = traj.mean(axis=1)
-    dev = traj - mean[:, None, :]
-    P = np.einsum("kpi,kpj->kij", dev, dev) / (n_particles - 1)
+    mean, P = placeholder_ensemble(s.placeholder, x0, P0, sim.t[idx] - sim.t[i0], seed,
+                                   n_particles, **s.placeholder_params)
     return Arm(idx, mean, P)
 
 
