@@ -63,11 +63,8 @@ def load(path: Path | str) -> BagData:
 
 def scenario_for(data: BagData, name: str = "") -> scenarios.Scenario:
     """The scenario whose estimator settings evaluate this bag (by name, else by kind)."""
-    if name:
-        return scenarios.get(name)
-    if data.measurements and data.measurements[0].kind == types.RANGE_AZ_EL:
-        return scenarios.get("iss_j2_rae")
-    return scenarios.get("iss_j2_pos")
+    kind = data.measurements[0].kind if data.measurements else types.POSITION
+    return scenarios.settings_for(name, kind)
 
 
 def run_tracker(s: scenarios.Scenario, stream: list[types.Measurement]) -> dict:

@@ -93,10 +93,8 @@ def check_topics(path: Path, stream: list[bagio.BagMessage]) -> None:
 
 def settings(stream: list[bagio.BagMessage], name: str = "") -> scenarios.Scenario:
     """Estimator settings: `name`, else the default scenario of the measurement kind."""
-    if name:
-        return scenarios.get(name)
     first = next(m for m in stream if m.topic == TOPIC_MEASUREMENT)
-    return scenarios.get("iss_j2_rae" if first.msg.kind == types.RANGE_AZ_EL else "iss_j2_pos")
+    return scenarios.settings_for(name, first.msg.kind)
 
 
 @dataclass

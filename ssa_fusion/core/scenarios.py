@@ -203,6 +203,14 @@ def get(name: str) -> Scenario:
         ) from None
 
 
+def settings_for(name: str = "", kind: int = RANGE_AZ_EL) -> Scenario:
+    """Estimator settings for recorded data: scenario `name`, else the default orbit scenario
+    of the measurement `kind` (range/az/el: iss_j2_rae, position: iss_j2_pos)."""
+    if name:
+        return get(name)
+    return get("iss_j2_rae" if kind == RANGE_AZ_EL else "iss_j2_pos")
+
+
 def measurement_model(s: Scenario) -> PositionModel | RazelModel:
     """h(x, t) of the scenario; t on the scenario's clock (Unix s for orbits)."""
     if s.kind == RANGE_AZ_EL:
