@@ -19,6 +19,13 @@ ARM_STYLE = {
 STATE_NAMES = {6: ["x", "y", "z", "u", "v", "w"], 2: ["θ or x", "rate"]}
 
 
+def save(fig, path: Path, dpi: int = 110) -> None:
+    """Lay out, write as PNG and release a figure (every plot of the project ends here)."""
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
 def _pointwise_error(x_hat: np.ndarray, x_true: np.ndarray, pos_max: float,
                      vel_max: float) -> np.ndarray:
     d = x_hat.shape[1] // 2
@@ -46,9 +53,7 @@ def error_plot(name: str, sim, arms: dict, path: Path, time_unit: str) -> Path:
     ax.set_title(f"{name}: estimation error of the three arms")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="best")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path)
     return path
 
 
@@ -79,9 +84,7 @@ def sigma_plot(name: str, sim, arm, path: Path, time_unit: str) -> Path:
     fig.suptitle(f"{name}: DMD-EKF error and ±3σ (gap shaded)")
     for ax in np.atleast_1d(axes).ravel()[-2:]:
         ax.set_xlabel(f"time [{unit}]")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path)
     return path
 
 
@@ -95,9 +98,7 @@ def vdp_sweep_plot(sweep: dict, path: Path) -> Path:
     ax.set_title("Van der Pol: error against the placeholder's μ_p")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path)
     return path
 
 
@@ -117,7 +118,5 @@ def consistency_plot(study: dict, path: Path) -> Path:
     ax.set_title(f"Consistency of the surrogate ({study['scenario']})")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save(fig, path)
     return path

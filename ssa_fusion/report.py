@@ -54,12 +54,16 @@ def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
 
 
 def _plt():
-    import matplotlib
+    """pyplot with the Agg backend (imported on first use: `report` works without plots)."""
+    from ssa_fusion import plots
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    return plots.plt
 
-    return plt
+
+def save(fig, path: Path, dpi: int = 100) -> None:
+    from ssa_fusion import plots
+
+    plots.save(fig, path, dpi)
 
 
 def plot_arms(ev: evaluate.Evaluation, path: Path) -> None:
@@ -73,9 +77,7 @@ def plot_arms(ev: evaluate.Evaluation, path: Path) -> None:
     ax.set_ylabel("position error [km]")
     ax.legend()
     ax.grid(True, which="both", alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save(fig, path, dpi=100)
 
 
 def plot_sigma(data: evaluate.BagData, path: Path) -> None:
@@ -98,9 +100,7 @@ def plot_sigma(data: evaluate.BagData, path: Path) -> None:
     axes[0, 0].legend()
     for ax in axes[-1]:
         ax.set_xlabel("hours")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save(fig, path, dpi=100)
 
 
 def plot_forecasts(data: evaluate.BagData, path: Path) -> None:
@@ -121,9 +121,7 @@ def plot_forecasts(data: evaluate.BagData, path: Path) -> None:
         ax.grid(alpha=0.3)
     np.atleast_1d(axes)[0].legend()
     np.atleast_1d(axes)[-1].set_xlabel("hours into the gap")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save(fig, path, dpi=100)
 
 
 def plot_nis(data: evaluate.BagData, path: Path) -> None:
@@ -142,6 +140,4 @@ def plot_nis(data: evaluate.BagData, path: Path) -> None:
     ax.set_ylabel("NIS")
     ax.legend()
     ax.grid(alpha=0.3, which="both")
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    save(fig, path, dpi=100)
