@@ -29,8 +29,9 @@ from ssa_fusion_msgs.msg import Measurement, StateEstimate  # noqa: E402
 from ssa_fusion import bagio, messages  # noqa: E402
 from ssa_fusion.core import scenarios, simulate, types  # noqa: E402
 from ssa_fusion.graph import Graph  # noqa: E402
-from ssa_fusion.live import node_parameters  # noqa: E402
+from ssa_fusion.live import READERS, node_parameters  # noqa: E402
 from ssa_fusion.qos import DATA_QOS  # noqa: E402
+from ssa_fusion.readiness import ReadyNodes  # noqa: E402
 
 
 def run_stream(rate_hz: float, n: int, workdir: Path) -> dict:
@@ -59,6 +60,10 @@ def run_stream(rate_hz: float, n: int, workdir: Path) -> dict:
         g.wait_for_publisher("/ssa/estimate", 1)
         g.wait_for(lambda: g.probe.count_subscribers("/ssa/estimate") >= 2, 30,
                    "recorder on /ssa/estimate")
+        readers = ReadyNodes(g.probe)
+        needs = [r for r in READERS if r.split(":")[1] in ("/ssa/measurement", "/ssa/estimate",
+                                                           "/ssa/forecast", "/clock")]
+        g.wait_for(lambda: readers.ready(needs), 30, "readers matched")
         msgs = [messages.measurement_to_msg(types.Measurement(
             t=float(sim.t[i]), z=sim.z[i], R=sim.R, kind=s.kind, object_id="iss",
             frame_id=s.station)) for i in range(n)]

@@ -17,6 +17,14 @@ from pathlib import Path
 from ssa_fusion import evaluate, report
 from ssa_fusion.core import scenarios
 from ssa_fusion.graph import Graph
+from ssa_fusion.qos import (
+    TOPIC_CLOCK,
+    TOPIC_ESTIMATE,
+    TOPIC_FORECAST,
+    TOPIC_MEASUREMENT,
+    TOPIC_TRUTH,
+    TOPIC_WITHHELD,
+)
 
 LIVE_SCENARIOS = [n for n, s in scenarios.SCENARIOS.items() if s.is_orbit]
 
@@ -33,6 +41,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="ROS domain id (default: a free-looking one in 1..100)")
 
 
+READERS = [f"{node}:{topic}" for node, topics in (
+    ("surrogate", (TOPIC_MEASUREMENT,)),
+    ("filter", (TOPIC_MEASUREMENT, TOPIC_FORECAST)),
+    ("recorder", (TOPIC_MEASUREMENT, TOPIC_TRUTH, TOPIC_WITHHELD, TOPIC_FORECAST,
+                  TOPIC_ESTIMATE, TOPIC_CLOCK)),
+) for topic in topics]
+"""What the graph's nodes must have matched (their side) before measurements flow."""
+
+
 def node_parameters(s: scenarios.Scenario, time_scale: float, seed: int,
                     bag: Path) -> dict[str, dict]:
     """Per-node parameters (SI units) that run scenario `s` live."""
@@ -41,7 +58,8 @@ def node_parameters(s: scenarios.Scenario, time_scale: float, seed: int,
               "seed": seed, "cadence": s.cadence_s, "gap_start": s.track_s,
               "gap_length": s.gap_s, "after_gap": s.after_s,
               "wait_for": ["/ssa/measurement=3", "/ssa/forecast=2", "/ssa/estimate=1",
-                           "/ssa/truth=1", "/ssa/withheld=1", "/clock=3"]}
+                           "/ssa/truth=1", "/ssa/withheld=1", "/clock=3"],
+              "wait_for_readers": READERS}
     surrogate = {"use_sim_time": True, "buffer_length": s.buffer_s or s.track_s,
                  "delays": s.delays, "rank": s.rank or 0, "cadence": s.cadence_s,
                  "max_horizon": s.gap_s + s.cadence_s, "lift": s.lift or "none",

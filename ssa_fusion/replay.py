@@ -186,8 +186,9 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
                 s: scenarios.Scenario) -> int:
     """Play the bag into surrogate + filter processes and record the run."""
     from ssa_fusion.graph import Graph
-    from ssa_fusion.live import node_parameters
+    from ssa_fusion.live import READERS, node_parameters
     from ssa_fusion.player import Player
+    from ssa_fusion.readiness import ReadyNodes
 
     record = args.record or _sibling(args.bag, "_replay")
     if record.exists():
@@ -207,6 +208,9 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
                        30.0, "surrogate, filter and recorder to subscribe")
         graph.wait_for_subscriber(TOPIC_FORECAST, 2, timeout=30.0)
         graph.wait_for_subscriber(TOPIC_ESTIMATE, 1, timeout=30.0)
+        readers = ReadyNodes(graph.probe)
+        graph.wait_for(lambda: readers.ready(READERS), 30.0,
+                       "surrogate, filter and recorder to match their publishers")
         player.start()
         graph.wait_for(player.done, player.duration_s + 60.0, "playback to finish")
         player.finish()

@@ -16,6 +16,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -26,6 +27,7 @@ from rclpy.signals import SignalHandlerOptions
 from ssa_fusion.executors import make_executor
 from ssa_fusion.nodes import STOP
 from ssa_fusion.qos import TOPIC_DIAGNOSTICS
+from ssa_fusion.readiness import MATCHED_KEY
 
 
 class ParameterError(ValueError):
@@ -40,6 +42,7 @@ class Diagnostics:
         self.counts: Counter[str] = Counter()
         self.status: dict[str, str] = {}
         self._logged: set[str] = set()
+        self._watched: list[Any] = []
         self._pub = node.create_publisher(DiagnosticArray, TOPIC_DIAGNOSTICS, QoSProfile(depth=10))
         wall_timer(node, period_s, self.publish)  # sim time may stand still (no /clock)
 
@@ -53,6 +56,19 @@ class Diagnostics:
                 self.node.get_logger().warning(text)
             else:
                 self.node.get_logger().info(text)
+
+    def subscribe(self, msg_type: Any, topic: str, callback: Callable[[Any], None],
+                  qos: QoSProfile, raw: bool = False) -> Any:
+        """`create_subscription` whose matched-publisher count is reported on /diagnostics
+        (key `MATCHED_KEY + topic`), at once when it changes. A sender can then wait until this
+        reader has matched it, not only until its writer has matched the reader: DDS drops
+        what a writer sends before the reader's side of the match exists."""
+        sub = self.node.create_subscription(
+            msg_type, topic, callback, qos, raw=raw,
+            event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.publish()),
+        )
+        self._watched.append(sub)
+        return sub
 
     def guard(self, callback: Callable[..., None]) -> Callable[..., None]:
         """Wrap a subscription/timer callback: an unexpected exception is counted as
@@ -81,6 +97,8 @@ class Diagnostics:
         st.message = "; ".join(f"{k}={v}" for k, v in self.status.items()) or "ok"
         st.values = [KeyValue(key=k, value=str(v)) for k, v in sorted(self.counts.items())]
         st.values += [KeyValue(key=k, value=v) for k, v in sorted(self.status.items())]
+        st.values += [KeyValue(key=MATCHED_KEY + sub.topic_name,
+                               value=str(sub.get_publisher_count())) for sub in self._watched]
         msg.status = [st]
         self._pub.publish(msg)
 

@@ -120,12 +120,9 @@ class FilterNode(Node):
         )
         self.diag = Diagnostics(self)
         self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, DATA_QOS)
-        self.create_subscription(
-            MeasurementMsg, TOPIC_MEASUREMENT, self.diag.guard(self.on_measurement), DATA_QOS
-        )
-        self.create_subscription(
-            MeasurementMsg, TOPIC_FORECAST, self.diag.guard(self.on_measurement), DATA_QOS
-        )
+        for topic in (TOPIC_MEASUREMENT, TOPIC_FORECAST):
+            self.diag.subscribe(MeasurementMsg, topic, self.diag.guard(self.on_measurement),
+                                DATA_QOS)
         wall_timer(self, 0.1, self.diag.guard(self.predict))
         self._jump = self.get_clock().create_jump_callback(
             JumpThreshold(

@@ -104,7 +104,7 @@ class Recorder(Node):
                 else ReliabilityPolicy.BEST_EFFORT,
                 durability=DurabilityPolicy.VOLATILE,
             )
-            self._subs[topic] = self.create_subscription(
+            self._subs[topic] = self.diag.subscribe(
                 msg_class, topic, lambda data, t=topic: self.on_message(t, data), qos, raw=True
             )
             self.get_logger().info(f"recording {topic} [{type_name}]")

@@ -43,6 +43,7 @@ from ssa_fusion.qos import (
     TOPIC_TRUTH,
     TOPIC_WITHHELD,
 )
+from ssa_fusion.readiness import ReadyNodes, check_needs
 
 ORBIT_SCENARIOS = [name for name, s in scenarios.SCENARIOS.items() if s.is_orbit]
 
@@ -123,6 +124,15 @@ class SensorSim(Node):
             "subscribers (e.g. /ssa/measurement=3)",
             lambda v: _wait_check([x for x in v if x]),
         )
+        self.wait_for_readers = [x for x in declare(
+            self,
+            "wait_for_readers",
+            [""],
+            "start only when each 'node:/topic' reports a matched publisher on /diagnostics "
+            "(e.g. filter:/ssa/measurement): the readers' side of the match exists too",
+            lambda v: check_needs([x for x in v if x]),
+        ) if x]
+        self.readers = ReadyNodes(self)
         tick = declare(self, "tick", 0.01, "wall s between publication ticks", positive)
 
         gap_list = list(gaps) if list(gaps) != [0.0] else [track, gap]
@@ -171,7 +181,7 @@ class SensorSim(Node):
             topic, _, count = item.partition("=")
             if self.count_subscribers(topic) < int(count):
                 return False
-        return True
+        return self.readers.ready(self.wait_for_readers)
 
     def step(self) -> None:
         if self.wall0 is None:

@@ -133,7 +133,7 @@ class SurrogateNode(Node):
         )
         self.diag = Diagnostics(self)
         self.pub = self.create_publisher(MeasurementMsg, TOPIC_FORECAST, DATA_QOS)
-        self.create_subscription(
+        self.diag.subscribe(
             MeasurementMsg, TOPIC_MEASUREMENT, self.diag.guard(self.on_measurement), DATA_QOS
         )
         wall_timer(self, check, self.diag.guard(self.check))

@@ -33,6 +33,7 @@ from ssa_fusion.core.simulate import simulate
 from ssa_fusion.core.tracker import DEFAULT_GATE, Tracker, TrackerConfig
 from ssa_fusion.live import node_parameters
 from ssa_fusion.qos import DATA_QOS
+from ssa_fusion.readiness import ReadyNodes
 
 SHORT = scenarios.DEFAULT_LIVE.with_(track_s=1200.0, gap_s=0.0, after_s=0.0, delays=5)
 SIM = simulate(SHORT, seed=1)
@@ -52,11 +53,15 @@ def meas(i: int, dt: float = 0.0, z: np.ndarray | None = None, source: int = typ
     return messages.measurement_to_msg(m)
 
 
-def publisher(g, msg_type, topic: str, n_subs: int):
-    """A probe publisher matched with `n_subs` subscriptions (no fixed sleep)."""
+def publisher(g, msg_type, topic: str, readers: tuple[str, ...]):
+    """A probe publisher matched with the subscriptions of nodes `readers`, on both sides of
+    the match (no fixed sleep)."""
     pub = g.probe.create_publisher(msg_type, topic, DATA_QOS)
-    g.wait_for(lambda: pub.get_subscription_count() >= n_subs, 20.0,
-               f"{n_subs} subscription(s) matched on {topic}")
+    g.wait_for(lambda: pub.get_subscription_count() >= len(readers), 20.0,
+               f"{len(readers)} subscription(s) matched on {topic}")
+    if topic != "/clock":  # nodes report their own subscriptions, not their time source's
+        ready, needs = ReadyNodes(g.probe), [f"{r}:{topic}" for r in readers]
+        g.wait_for(lambda: ready.ready(needs), 20.0, f"{needs} to match the probe")
     return pub
 
 
@@ -151,7 +156,7 @@ def test_bad_input_is_never_fused_and_counted_by_cause(ros_graph):
     diag = Diag(g)
     filt = g.start_node("filter", params=filter_params())
     surr = g.start_node("surrogate", params=surrogate_params())
-    pub = publisher(g, Measurement, "/ssa/measurement", 2)
+    pub = publisher(g, Measurement, "/ssa/measurement", ("filter", "surrogate"))
 
     def outlier(i: int) -> Measurement:  # 3000 km off in range: beyond the NIS gate
         return meas(i, z=SIM.z[i] + np.array([3000.0, 0.0, 0.0]))
@@ -197,13 +202,26 @@ def test_bad_input_is_never_fused_and_counted_by_cause(ros_graph):
                 assert log.count(f"{cause}: ") == 1, (proc.name, cause, log)
 
 
+def test_nodes_report_when_their_subscriptions_have_matched(ros_graph):
+    """The readers' side of a DDS match, which senders wait for (`ssa_fusion.readiness`)."""
+    g = ros_graph
+    ready = ReadyNodes(g.probe)
+    g.start_node("filter", params=filter_params())
+    g.wait_for(lambda: "filter" in ready.reports, 20.0, "a report from the filter")
+    assert ready.unmatched(["filter:/ssa/measurement"]) == ["filter:/ssa/measurement"]
+    g.probe.create_publisher(Measurement, "/ssa/measurement", DATA_QOS)
+    g.wait_for(lambda: ready.ready(["filter:/ssa/measurement"]), 20.0, "filter matched")
+    # nothing publishes forecasts: that input is reported, and unmatched
+    assert ready.reports["filter"] == {"/ssa/measurement": 1, "/ssa/forecast": 0}
+
+
 def test_a_real_measurement_beats_a_forecast_for_the_same_epoch(ros_graph):
     g = ros_graph
     got = g.collect(StateEstimate, "/ssa/estimate")
     diag = Diag(g)
     g.start_node("filter", params=filter_params())
-    real = publisher(g, Measurement, "/ssa/measurement", 1)
-    fcst = publisher(g, Measurement, "/ssa/forecast", 1)
+    real = publisher(g, Measurement, "/ssa/measurement", ("filter",))
+    fcst = publisher(g, Measurement, "/ssa/forecast", ("filter",))
 
     def forecast(i: int) -> Measurement:  # a plausible forecast: 2 km off, honest R
         return meas(i, z=SIM.z[i] + np.array([2.0, 0.0, 0.0]), source=types.FORECAST,
@@ -287,8 +305,8 @@ def test_backwards_clock_jump_resets_filter_and_surrogate(ros_graph):
     diag = Diag(g)
     g.start_node("filter", params=filter_params())
     g.start_node("surrogate", params=surrogate_params())
-    clock = publisher(g, Clock, "/clock", 2)
-    pub = publisher(g, Measurement, "/ssa/measurement", 2)
+    clock = publisher(g, Clock, "/clock", ("filter", "surrogate"))
+    pub = publisher(g, Measurement, "/ssa/measurement", ("filter", "surrogate"))
     nodes = ("filter", "surrogate")
 
     set_clock(g, clock, diag, float(T[6]), nodes)
@@ -321,8 +339,8 @@ def test_surrogate_that_cannot_fit_forecasts_nothing_and_filter_keeps_predicting
     diag = Diag(g)
     g.start_node("filter", params=filter_params(predict_period=60.0))
     g.start_node("surrogate", params=surrogate_params(check_period=0.01))
-    clock = publisher(g, Clock, "/clock", 2)
-    pub = publisher(g, Measurement, "/ssa/measurement", 2)
+    clock = publisher(g, Clock, "/clock", ("filter", "surrogate"))
+    pub = publisher(g, Measurement, "/ssa/measurement", ("filter", "surrogate"))
     nodes = ("filter", "surrogate")
 
     def model_status() -> str:
@@ -444,7 +462,7 @@ def test_valid_param_set_at_run_time_takes_effect_and_read_only_ones_are_refused
     diag = Diag(g)
     g.start_node("filter", params=filter_params(predict_period=0.0))
     got = g.collect(StateEstimate, "/ssa/estimate")
-    pub = publisher(g, Measurement, "/ssa/measurement", 1)
+    pub = publisher(g, Measurement, "/ssa/measurement", ("filter",))
     set_client = g.probe.create_client(SetParameters, "/filter/set_parameters")
 
     def set_param(name: str, value: ParameterValue):
@@ -583,7 +601,8 @@ def test_sigkill_of_the_recorder_leaves_a_bag_readable_up_to_its_last_flush(ros_
 def test_sensor_sim_interrupted_twice_during_shutdown_exits_0(ros_graph, sig):
     g = ros_graph
     clock = g.collect(Clock, "/clock")
-    sensor = g.start_node("sensor_sim", params=sensor_params(100.0, wait_for=["/clock=1"]))
+    sensor = g.start_node("sensor_sim", params=sensor_params(
+        100.0, wait_for=["/clock=1"], wait_for_readers=[""]))
     g.wait_for(lambda: len(clock) >= 1, 20.0, "sensor_sim running")
     sensor.popen.send_signal(sig)
     time.sleep(0.05)  # a second interrupt while it is already shutting down

@@ -1,0 +1,59 @@
+"""Waiting until subscribers are really ready to receive.
+
+A publisher's matched-subscription count rises when *its* side of the DDS match exists; what
+it sends before the subscriber's side exists is lost to a volatile reader. ssa_fusion nodes
+report each input subscription's matched-publisher count on /diagnostics (see
+`nodes.common.Diagnostics.subscribe`); `ReadyNodes` reads those reports so that a sender
+(the sensor simulator, replay's player) starts only when each named node has matched a
+publisher on each named topic ('node:/topic').
+"""
+
+from __future__ import annotations
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+
+from ssa_fusion.qos import TOPIC_DIAGNOSTICS
+
+MATCHED_KEY = "matched_publishers "
+"""Diagnostics key prefix; the rest of the key is the subscribed topic."""
+
+
+class ReadyNodes:
+    """The latest matched-publisher counts each node reported on /diagnostics, by node name
+    and topic."""
+
+    def __init__(self, node: Node) -> None:
+        self.reports: dict[str, dict[str, int]] = {}
+        self._sub = node.create_subscription(DiagnosticArray, TOPIC_DIAGNOSTICS, self._on,
+                                             QoSProfile(depth=100))
+
+    def _on(self, msg: DiagnosticArray) -> None:
+        for st in msg.status:
+            counts = {kv.key[len(MATCHED_KEY):]: int(kv.value)
+                      for kv in st.values if kv.key.startswith(MATCHED_KEY)}
+            if counts:
+                self.reports[st.name] = counts
+
+    def unmatched(self, needs: list[str]) -> list[str]:
+        """The entries of `needs` ('node:/topic') whose node has not reported a matched
+        publisher on that topic yet."""
+        missing = []
+        for need in needs:
+            name, _, topic = need.partition(":")
+            if self.reports.get(name, {}).get(topic, 0) < 1:
+                missing.append(need)
+        return missing
+
+    def ready(self, needs: list[str]) -> bool:
+        return not self.unmatched(needs)
+
+
+def check_needs(needs: list[str]) -> str | None:
+    """Why a list of 'node:/topic' entries is malformed, or None."""
+    for need in needs:
+        name, _, topic = need.partition(":")
+        if not name or not topic.startswith("/"):
+            return f"{need!r} is not 'node:/topic'"
+    return None
