@@ -9,7 +9,7 @@ import pytest
 from scipy.stats import chi2
 
 from ssa_fusion.core.dynamics import ISS_ELEMENTS, elements_to_state, propagate
-from ssa_fusion.core.hankel_dmd import HankelDMD, svht_rank
+from ssa_fusion.core.hankel_dmd import HankelDMD, _leading_subspace, svht_rank
 
 FREQS = (0.011, 0.037, 0.071)  # cycles per sample
 
@@ -45,6 +45,24 @@ def pydmd_forecast(z: np.ndarray, d: int, rank: int, n: int) -> tuple[np.ndarray
 @pytest.fixture(scope="module")
 def iss() -> np.ndarray:
     return iss_positions(920)
+
+
+@pytest.mark.parametrize("shape", [(2, 9), (40, 70), (360, 600)])
+def test_leading_subspace_matches_numpy_svd(shape: tuple[int, int]) -> None:
+    """Partial MRRR on the Gram matrix against LAPACK's SVD of the matrix itself."""
+    rng = np.random.default_rng(4)
+    n, k = shape
+    # distinct, well-resolved singular values 1 .. 1e-3
+    left = np.linalg.qr(rng.standard_normal((n, n)))[0]
+    right = np.linalg.qr(rng.standard_normal((k, n)))[0]
+    s_true = np.logspace(0, -3, n)
+    x = (left * s_true) @ right.T
+    r = max(1, n // 3)
+    sigma, u = _leading_subspace(x, lambda s: r)
+    u_ref, s_ref, _ = np.linalg.svd(x, full_matrices=False)
+    np.testing.assert_allclose(sigma, s_ref, rtol=1e-9, atol=1e-12)
+    assert u.shape == (n, r)
+    np.testing.assert_allclose(np.abs(np.sum(u * u_ref[:, :r], axis=0)), 1.0, atol=1e-9)
 
 
 def test_svht_rank_matches_pydmd() -> None:
