@@ -66,3 +66,35 @@ def test_unknown_scenario_is_an_error(tmp_path, capsys):
     assert cli.main(["reproduce", "--quick", "--out", str(tmp_path),
                      "--scenario", "nope"]) == 2
     assert "unknown scenario" in capsys.readouterr().err
+
+
+def test_dmd_arm_predicts_where_no_forecast_arrives(monkeypatch):
+    """A surrogate that never forecasts: every gap epoch still has an estimate, the filter's
+    prediction, which is then the coasting EKF's state."""
+    import numpy as np
+
+    from ssa_fusion.core import experiments, scenarios
+    from ssa_fusion.core.simulate import simulate
+    from ssa_fusion.reproduce import quick_variant
+
+    s = quick_variant(scenarios.SCENARIOS["iss_j2_pos"])
+    sim = simulate(s, seed=1)
+    config = experiments.make_surrogate(s).config
+
+    class Silent:
+        def __init__(self) -> None:
+            self.config = config
+
+        def add(self, m):
+            return []
+
+        def due(self, t):
+            return []
+
+    monkeypatch.setattr(experiments, "make_surrogate", lambda s: Silent())
+    dmd, coast, forecasts = experiments.run_dmd_ekf(s, sim)
+    assert forecasts == []
+    x_dmd, _, P_dmd = experiments._gap_view(dmd, sim)  # raises if an epoch is missing
+    x_coast, _, _ = experiments._gap_view(coast, sim)
+    np.testing.assert_allclose(x_dmd, x_coast, rtol=1e-8)
+    assert np.all(np.diff(np.trace(P_dmd, axis1=1, axis2=2)) > 0)  # growing uncertainty

@@ -97,6 +97,8 @@ def run_hypothetical(s: Scenario, sim: Simulation) -> Arm:
 def run_dmd_ekf(s: Scenario, sim: Simulation) -> tuple[Arm, Arm, list[Measurement]]:
     """The DMD-EKF (surrogate forecasts fused through the gap) and the coasting EKF.
 
+    A gap epoch without a usable forecast (the surrogate could not fit, or the filter
+    refused the forecast) carries the filter's prediction, as the live filter publishes.
     Returns (dmd_ekf arm, ekf_coast arm, the forecasts the surrogate issued)."""
     tr = make_tracker(s)
     su = make_surrogate(s)
@@ -118,6 +120,10 @@ def run_dmd_ekf(s: Scenario, sim: Simulation) -> tuple[Arm, Arm, list[Measuremen
             forecasts.extend(fs)
             for f in fs:
                 feed(f)
+            if i not in est:  # no (usable) forecast for this epoch: the filter predicts
+                e = tr.predicted(float(sim.t[i]))
+                if e is not None:
+                    est[i] = e
             continue
         m = _measurement(s, sim, i)
         owed = su.add(m)
