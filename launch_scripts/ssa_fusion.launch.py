@@ -10,6 +10,8 @@ from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
+from ssa_fusion.live import READERS
+
 
 def generate_launch_description() -> LaunchDescription:
     default_params = os.path.join(
@@ -24,7 +26,9 @@ def generate_launch_description() -> LaunchDescription:
             ("recorder", [{"bag": bag, "use_sim_time": True}]),
             ("surrogate", [{"use_sim_time": True}]),
             ("filter", [{"use_sim_time": True}]),
-            ("sensor_sim", [{"wait_for": ["/ssa/measurement=3", "/ssa/estimate=1"]}]),
+            # start once every node has matched its inputs (both sides of each DDS match)
+            ("sensor_sim", [{"wait_for": ["/ssa/measurement=3", "/ssa/estimate=1"],
+                             "wait_for_readers": READERS}]),
         ]
     ]
     return LaunchDescription([
