@@ -208,8 +208,11 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
                        30.0, "surrogate, filter and recorder to subscribe")
         graph.wait_for_subscriber(TOPIC_FORECAST, 2, timeout=30.0)
         graph.wait_for_subscriber(TOPIC_ESTIMATE, 1, timeout=30.0)
+        # only topics with a publisher here: a bag need not hold /ssa/truth or /ssa/withheld
+        published = {*player.pubs, TOPIC_CLOCK, TOPIC_FORECAST, TOPIC_ESTIMATE}
+        needs = [r for r in READERS if r.split(":", 1)[1] in published]
         readers = ReadyNodes(graph.probe)
-        graph.wait_for(lambda: readers.ready(READERS), 30.0,
+        graph.wait_for(lambda: readers.ready(needs), 30.0,
                        "surrogate, filter and recorder to match their publishers")
         player.start()
         graph.wait_for(player.done, player.duration_s + 60.0, "playback to finish")

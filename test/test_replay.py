@@ -145,3 +145,21 @@ def test_replay_over_ros2_loses_nothing_and_matches_offline(tmp_path):
     offline = tmp_path / "offline"
     assert cli.main(["replay", str(record), "--offline", "--out", str(offline)]) == 0
     assert_same_estimates(fused(record), fused(offline))
+
+
+@pytest.mark.graph
+def test_replay_over_ros2_of_a_measurement_only_bag(tmp_path):
+    """A bag with nothing but /ssa/measurement (as a sensor's own recording would be) plays:
+    the graph starts without /ssa/truth or /ssa/withheld publishers and estimates."""
+    bag = tmp_path / "meas_only"
+    writer = bagio.BagWriter(bag)
+    writer.add_topic("/ssa/measurement", "ssa_fusion_msgs/msg/Measurement")
+    played = list(bagio.read_bag(SAMPLE, topics=["/ssa/measurement"]))[:40]
+    for m in played:
+        writer.write_msg("/ssa/measurement", m.t_ns, m.msg)
+    writer.close()
+    record = tmp_path / "replayed"
+    assert cli.main(["replay", str(bag), "--rate", "3000", "--record", str(record)]) == 0
+    counts = Counter(m.topic for m in bagio.read_bag(record))
+    assert counts["/ssa/measurement"] == len(played)
+    assert counts["/ssa/estimate"] >= len(played) - 2  # every epoch after IOD
