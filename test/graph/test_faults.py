@@ -397,6 +397,7 @@ def test_invalid_parameters_refuse_to_start(ros_graph, tmp_path):
         "scenario": ("sensor_sim", {"scenario": "no_such_orbit"}),
         "cadence": ("sensor_sim", {"cadence": -30.0}),
         "time_scale": ("sensor_sim", {"time_scale": "fast"}),
+        "wait_for_readers": ("sensor_sim", {"wait_for_readers": ["filter"]}),
         "delays": ("surrogate", {"delays": 200, "buffer_length": 3000.0, "cadence": 30.0}),
         "p0_sigma": ("filter", {"p0_sigma": [1.0, 2.0]}),
         "kind": ("filter", {"kind": "sonar"}),
