@@ -136,7 +136,9 @@ def table(ev: Evaluation) -> str:
     """Markdown table of the arms."""
     rows = ["| arm | ε over the gap | mean NEES |", "|---|---|---|"]
     for arm in ("placeholder", "dmd_ekf", "hypothetical_ekf"):
-        rows.append(f"| {arm} | {ev.epsilon[arm]:.3e} | {ev.nees_mean[arm]:.2f} |")
+        v = ev.nees_mean[arm]
+        rows.append(f"| {arm} | {ev.epsilon[arm]:.3e} | {v:.2f} |" if abs(v) < 1e4
+                    else f"| {arm} | {ev.epsilon[arm]:.3e} | {v:.2e} |")
     rows.append(f"\ngap: {len(ev.t)} epochs; live DMD-EKF estimates at "
                 f"{100 * ev.coverage:.0f} % of them")
     return "\n".join(rows)

@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
 
 from ssa_fusion import evaluate, report
+from ssa_fusion.cliargs import add_domain_id, positive_float
 from ssa_fusion.core import scenarios
 from ssa_fusion.graph import Graph
 from ssa_fusion.qos import (
@@ -27,18 +29,43 @@ from ssa_fusion.qos import (
 )
 
 LIVE_SCENARIOS = [n for n, s in scenarios.SCENARIOS.items() if s.is_orbit]
+LIVE_ROOT = Path("out/live")
+"""Where runs go by default, one directory each."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", default=scenarios.DEFAULT_LIVE.name, choices=LIVE_SCENARIOS)
-    p.add_argument("--time-scale", type=float, default=500.0,
+    p.add_argument("--time-scale", type=positive_float, default=500.0,
                    help="sim seconds per wall second (default 500)")
     p.add_argument("--bag", type=Path, default=None,
                    help="bag directory to record (default: OUT/bag)")
-    p.add_argument("--out", type=Path, default=Path("out/live"), help="output directory")
+    p.add_argument("--out", type=Path, default=None,
+                   help=f"output directory (default: {LIVE_ROOT}/<scenario>_<date-time>, "
+                        f"also linked as {LIVE_ROOT}/latest)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--domain-id", type=int, default=None,
-                   help="ROS domain id (default: a free-looking one in 1..100)")
+    add_domain_id(p)
+
+
+def default_out(scenario: str, root: Path = LIVE_ROOT) -> Path:
+    """A new run directory named like rosbag2's default bag names, never an existing one."""
+    stamp = time.strftime("%Y_%m_%d-%H_%M_%S")
+    out = root / f"{scenario}_{stamp}"
+    n = 1
+    while out.exists():
+        n += 1
+        out = root / f"{scenario}_{stamp}_{n}"
+    return out
+
+
+def link_latest(out: Path, root: Path = LIVE_ROOT) -> None:
+    """Point root/latest at `out` (replacing an older link, never a real directory)."""
+    latest = root / "latest"
+    if latest.exists() and not latest.is_symlink():
+        return
+    tmp = root / f".latest_{os.getpid()}"
+    tmp.unlink(missing_ok=True)
+    tmp.symlink_to(os.path.relpath(out.resolve(), root.resolve()), target_is_directory=True)
+    os.replace(tmp, latest)
 
 
 READERS = [f"{node}:{topic}" for node, topics in (
@@ -75,18 +102,21 @@ def node_parameters(s: scenarios.Scenario, time_scale: float, seed: int,
 
 def run(args: argparse.Namespace) -> int:
     s = scenarios.get(args.scenario)
-    out: Path = args.out
+    out: Path = args.out or default_out(s.name)
     bag = args.bag or out / "bag"
     if bag.exists():
         print(f"error: bag {bag} exists already; choose another --bag or --out",
               file=sys.stderr)
         return 2
     out.mkdir(parents=True, exist_ok=True)
+    if args.out is None:
+        link_latest(out)
     params = node_parameters(s, args.time_scale, args.seed, bag)
     sim_s = s.track_s + s.gap_s + s.after_s
-    print(f"live: {s.name}, {sim_s / 3600:.1f} h of sim time at {args.time_scale:g}x "
-          f"(~{sim_s / args.time_scale:.0f} s); logs in {out}/logs", flush=True)
     graph = Graph(out / "logs", args.domain_id)
+    print(f"live: {s.name}, {sim_s / 3600:.1f} h of sim time at {args.time_scale:g}x "
+          f"(~{sim_s / args.time_scale:.0f} s of simulation after start-up); ROS domain "
+          f"{graph.domain_id}; logs in {out}/logs", flush=True)
     t_start = time.monotonic()
     try:
         for name in ("recorder", "surrogate", "filter"):

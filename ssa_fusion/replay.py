@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ssa_fusion import bagio, messages
+from ssa_fusion.cliargs import add_domain_id, positive_float
 from ssa_fusion.core import scenarios, types
 from ssa_fusion.core.pipeline import make_surrogate, make_tracker
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
@@ -45,7 +46,7 @@ KNOWN = (*PLAYED, TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_CLOCK, "/diagnostics", "
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("bag", type=Path, help="rosbag2 directory or .mcap file")
-    p.add_argument("--rate", type=float, default=1.0,
+    p.add_argument("--rate", type=positive_float, default=1.0,
                    help="playback rate (sim seconds per wall second / bag timing), default 1")
     p.add_argument("--record", type=Path, default=None,
                    help="bag to record the new run to (default: BAG_replay)")
@@ -54,7 +55,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="with --offline: output bag (default: BAG_offline)")
     p.add_argument("--scenario", default="",
                    help="estimator settings (default: chosen by the measurement kind)")
-    p.add_argument("--domain-id", type=int, default=None)
+    add_domain_id(p)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -67,6 +68,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if args.offline:
         out = args.out or _sibling(args.bag, "_offline")
+        if out.exists():
+            print(f"error: {out} exists already; choose another --out", file=sys.stderr)
+            return 2
         result = replay_offline(stream, s)
         write_offline(out, stream, result)
         print(f"offline replay of {args.bag}: {len(result.estimates)} estimates, "
@@ -195,7 +199,10 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
         print(f"error: {record} exists already", file=sys.stderr)
         return 2
     params = node_parameters(s, 1.0, 0, record)
-    graph = Graph(record.with_name(record.name + "_logs"), args.domain_id)
+    logs = record.with_name(record.name + "_logs")
+    graph = Graph(logs, args.domain_id)
+    print(f"replay: {args.bag} at rate {args.rate:g} into surrogate + filter; ROS domain "
+          f"{graph.domain_id}; logs in {logs}", flush=True)
     t0 = time.monotonic()
     try:
         procs = [graph.start_node(n, params=params[n]) for n in ("recorder", "surrogate",

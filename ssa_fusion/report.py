@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
 
-from ssa_fusion import evaluate
+from ssa_fusion import bagio, evaluate
 from ssa_fusion.core import types
 
 ARMS = ("placeholder", "dmd_ekf", "hypothetical_ekf")
@@ -28,9 +29,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     out = args.out or args.bag.with_name(args.bag.name + "_report")
-    data = evaluate.load(args.bag)
-    ev = evaluate.evaluate(data, args.scenario)
-    write(data, ev, out)
+    try:
+        data = evaluate.load(args.bag)
+        ev = evaluate.evaluate(data, args.scenario)
+        write(data, ev, out)
+    except (bagio.BagError, ValueError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     print(evaluate.table(ev))
     print(f"\nwrote {out}/report.json and plots")
     return 0

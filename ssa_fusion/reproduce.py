@@ -251,10 +251,12 @@ def _jsonable(o):
 def add_arguments(parser) -> None:
     parser.add_argument("--scenario", nargs="+", metavar="NAME", default=None,
                         help=f"scenarios to run (default: all: {', '.join(scenarios.SCENARIOS)})")
-    parser.add_argument("--out", default="reproduce_out", help="output directory")
+    parser.add_argument("--out", default="out/reproduce",
+                        help="output directory (default out/reproduce)")
     parser.add_argument("--seed", type=int, default=1, help="noise and Monte Carlo seed")
     parser.add_argument("--quick", action="store_true",
-                        help="shorter windows and fewer runs (about a minute)")
+                        help="shorter windows and fewer runs (about 20 s; the shorter "
+                             "training windows miss some targets the full run meets)")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     parser.add_argument("--no-studies", action="store_true",
                         help="skip the Van der Pol sweep and the consistency study")
@@ -268,7 +270,11 @@ def run(args) -> int:
         print(f"ssa-fusion reproduce: {exc}", file=sys.stderr)
         return 2
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        print(f"ssa-fusion reproduce: cannot use --out {out}: {exc}", file=sys.stderr)
+        return 2
     plots = not args.no_plots
     studies = not args.no_studies
     do_vdp = studies and "vdp" in names

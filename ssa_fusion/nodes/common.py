@@ -202,8 +202,6 @@ def run(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
     except ParameterError as exc:
         print(f"error: {exc}", file=sys.stderr)
         code = 2
-    except _FinishedSignal:
-        pass
     finally:
         if node is not None:
             close = getattr(node, "close", None)
@@ -233,10 +231,8 @@ def _drain(
             last, last_change = node.activity, time.monotonic()
 
 
-class _FinishedSignal(Exception):  # noqa: N818 (control flow, not an error)
-    """Raised from a callback to end `run` normally (the node's job is done)."""
-
-
 def finish() -> None:
-    """End the node's loop from a callback; `run` then closes the node and exits 0."""
-    raise _FinishedSignal()
+    """End the node's loop from a callback (the node's job is done): `run` leaves its loop
+    after this callback returns, closes the node and exits 0. (Not an exception: rclpy's
+    executor logs an exception escaping a callback as FATAL with a traceback.)"""
+    STOP.set()

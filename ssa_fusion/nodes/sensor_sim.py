@@ -167,6 +167,7 @@ class SensorSim(Node):
         self.pub_truth = self.create_publisher(StateEstimateMsg, TOPIC_TRUTH, DATA_QOS)
         self.diag = Diagnostics(self)
         self.next = 0
+        self.finished = False
         self.wall0: float | None = None
         self.create_timer(tick, self.step)
         self.get_logger().info(
@@ -184,11 +185,15 @@ class SensorSim(Node):
         return self.readers.ready(self.wait_for_readers)
 
     def step(self) -> None:
+        if self.finished:
+            return
         if self.wall0 is None:
             if not self.ready():
                 return
             self.wall0 = time.monotonic()
-            self.get_logger().info("subscribers matched; starting")
+            waited = any(self.wait_for) or bool(self.wait_for_readers)
+            self.get_logger().info("subscribers matched; starting" if waited
+                                   else "starting (no subscribers awaited: wait_for is empty)")
         sim = self.sim
         now = sim.t[0] + (time.monotonic() - self.wall0) * self.time_scale
         stop = int(np.searchsorted(sim.t, now, side="right"))
@@ -222,6 +227,7 @@ class SensorSim(Node):
         self.pub_truth.publish(messages.estimate_to_msg(truth))
 
     def done(self) -> None:
+        self.finished = True
         for pub in (self.pub_meas, self.pub_withheld, self.pub_truth, self.pub_clock):
             pub.wait_for_all_acked(Duration(seconds=5.0))
         self.diag.publish()

@@ -1,0 +1,26 @@
+"""Argument types and options shared by the `ssa-fusion` subcommands."""
+
+from __future__ import annotations
+
+import argparse
+import os
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite float > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not value > 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return value
+
+
+def add_domain_id(p: argparse.ArgumentParser) -> None:
+    """`--domain-id`, defaulting to $ROS_DOMAIN_ID when that is set (so that ROS tools in
+    the same shell see the run), else to a free-looking id chosen by `graph.Graph`."""
+    env = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    p.add_argument("--domain-id", type=int, default=int(env) if env.isdigit() else None,
+                   help="ROS domain id (default: $ROS_DOMAIN_ID if set, else a free-looking "
+                        "one in 1..100)")

@@ -1,0 +1,69 @@
+"""`ssa-fusion` command line: user mistakes get a one-line error and exit 2 (no traceback),
+and `live` never overwrites an earlier run."""
+
+import argparse
+from pathlib import Path
+
+import pytest
+
+from ssa_fusion import cli, cliargs, live
+
+SAMPLE = str(Path(__file__).resolve().parents[1] / "bags" / "sample_iss_j2_rae")
+
+
+@pytest.mark.parametrize("argv", [
+    ["live", "--time-scale", "0"],
+    ["live", "--time-scale", "-1"],
+    ["live", "--time-scale", "fast"],
+    ["replay", SAMPLE, "--rate", "-5"],
+])
+def test_bad_numbers_are_refused_by_the_parser(argv, capsys):
+    with pytest.raises(SystemExit) as exc:
+        cli.main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "must be a finite number > 0" in err or "is not a number" in err
+
+
+def test_report_on_something_that_is_not_a_bag(tmp_path, capsys):
+    assert cli.main(["report", str(tmp_path)]) == 2
+    assert "not a rosbag2 directory" in capsys.readouterr().err
+    assert cli.main(["report", str(tmp_path / "nope")]) == 2
+    assert "no such bag" in capsys.readouterr().err
+
+
+def test_reproduce_out_that_is_a_file(tmp_path, capsys):
+    f = tmp_path / "file"
+    f.write_text("x")
+    assert cli.main(["reproduce", "--quick", "--scenario", "iss_j2_pos", "--out", str(f)]) == 2
+    assert "cannot use --out" in capsys.readouterr().err
+
+
+def test_offline_replay_never_overwrites(tmp_path, capsys):
+    out = tmp_path / "exists"
+    out.mkdir()
+    assert cli.main(["replay", SAMPLE, "--offline", "--out", str(out)]) == 2
+    assert "exists already" in capsys.readouterr().err
+
+
+def test_live_runs_get_new_directories_and_a_latest_link(tmp_path):
+    a = live.default_out("iss_j2_rae", tmp_path)
+    a.mkdir()
+    live.link_latest(a, tmp_path)
+    b = live.default_out("iss_j2_rae", tmp_path)  # same second: a suffix, never `a`
+    assert b != a and b.name.startswith("iss_j2_rae_")
+    b.mkdir()
+    live.link_latest(b, tmp_path)
+    assert (tmp_path / "latest").resolve() == b.resolve()
+    assert a.is_dir()  # the earlier run is kept
+
+
+def test_domain_id_defaults_to_the_environment(monkeypatch):
+    monkeypatch.setenv("ROS_DOMAIN_ID", "77")
+    p = argparse.ArgumentParser()
+    cliargs.add_domain_id(p)
+    assert p.parse_args([]).domain_id == 77
+    monkeypatch.delenv("ROS_DOMAIN_ID")
+    p = argparse.ArgumentParser()
+    cliargs.add_domain_id(p)
+    assert p.parse_args([]).domain_id is None
