@@ -36,8 +36,10 @@ CONSISTENCY_RETRAIN_STEPS = 31  # new measurements (and a refit) every 31 cadenc
 class Progress:
     """A one-line progress bar on stderr (no dependency)."""
 
-    def __init__(self, total: int, stream=sys.stderr, width: int = 30) -> None:
-        self.total, self.done, self.stream, self.width = total, 0, stream, width
+    def __init__(self, total: int, stream=None, width: int = 30) -> None:
+        # sys.stderr looked up now, not at import (it may have been replaced since)
+        self.total, self.done, self.width = total, 0, width
+        self.stream = stream if stream is not None else sys.stderr
         self.t0 = time.monotonic()
 
     def step(self, label: str) -> None:
