@@ -29,9 +29,9 @@ from ssa_fusion_msgs.msg import Measurement, StateEstimate  # noqa: E402
 from ssa_fusion import bagio, messages  # noqa: E402
 from ssa_fusion.core import scenarios, simulate, types  # noqa: E402
 from ssa_fusion.graph import Graph  # noqa: E402
-from ssa_fusion.live import READERS, node_parameters  # noqa: E402
+from ssa_fusion.live import node_parameters  # noqa: E402
 from ssa_fusion.qos import DATA_QOS  # noqa: E402
-from ssa_fusion.readiness import ReadyNodes  # noqa: E402
+from ssa_fusion.readiness import READERS, ReadyNodes  # noqa: E402
 
 
 def run_stream(rate_hz: float, n: int, workdir: Path) -> dict:

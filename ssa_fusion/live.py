@@ -19,14 +19,7 @@ from ssa_fusion import evaluate, report
 from ssa_fusion.cliargs import add_domain_id, positive_float
 from ssa_fusion.core import scenarios
 from ssa_fusion.graph import Graph
-from ssa_fusion.qos import (
-    TOPIC_CLOCK,
-    TOPIC_ESTIMATE,
-    TOPIC_FORECAST,
-    TOPIC_MEASUREMENT,
-    TOPIC_TRUTH,
-    TOPIC_WITHHELD,
-)
+from ssa_fusion.readiness import READERS
 
 LIVE_SCENARIOS = [n for n, s in scenarios.SCENARIOS.items() if s.is_orbit]
 LIVE_ROOT = Path("out/live")
@@ -66,15 +59,6 @@ def link_latest(out: Path, root: Path = LIVE_ROOT) -> None:
     tmp.unlink(missing_ok=True)
     tmp.symlink_to(os.path.relpath(out.resolve(), root.resolve()), target_is_directory=True)
     os.replace(tmp, latest)
-
-
-READERS = [f"{node}:{topic}" for node, topics in (
-    ("surrogate", (TOPIC_MEASUREMENT,)),
-    ("filter", (TOPIC_MEASUREMENT, TOPIC_FORECAST)),
-    ("recorder", (TOPIC_MEASUREMENT, TOPIC_TRUTH, TOPIC_WITHHELD, TOPIC_FORECAST,
-                  TOPIC_ESTIMATE, TOPIC_CLOCK)),
-) for topic in topics]
-"""What the graph's nodes must have matched (their side) before measurements flow."""
 
 
 def node_parameters(s: scenarios.Scenario, time_scale: float, seed: int,

@@ -14,10 +14,26 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
-from ssa_fusion.qos import TOPIC_DIAGNOSTICS
+from ssa_fusion.qos import (
+    TOPIC_CLOCK,
+    TOPIC_DIAGNOSTICS,
+    TOPIC_ESTIMATE,
+    TOPIC_FORECAST,
+    TOPIC_MEASUREMENT,
+    TOPIC_TRUTH,
+    TOPIC_WITHHELD,
+)
 
 MATCHED_KEY = "matched_publishers "
 """Diagnostics key prefix; the rest of the key is the subscribed topic."""
+
+READERS = [f"{node}:{topic}" for node, topics in (
+    ("surrogate", (TOPIC_MEASUREMENT,)),
+    ("filter", (TOPIC_MEASUREMENT, TOPIC_FORECAST)),
+    ("recorder", (TOPIC_MEASUREMENT, TOPIC_TRUTH, TOPIC_WITHHELD, TOPIC_FORECAST,
+                  TOPIC_ESTIMATE, TOPIC_CLOCK)),
+) for topic in topics]
+"""What the ssa_fusion graph's nodes must have matched (their side) before measurements flow."""
 
 
 class ReadyNodes:

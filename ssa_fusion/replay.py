@@ -190,9 +190,9 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
                 s: scenarios.Scenario) -> int:
     """Play the bag into surrogate + filter processes and record the run."""
     from ssa_fusion.graph import Graph
-    from ssa_fusion.live import READERS, node_parameters
+    from ssa_fusion.live import node_parameters
     from ssa_fusion.player import Player
-    from ssa_fusion.readiness import ReadyNodes
+    from ssa_fusion.readiness import READERS, ReadyNodes
 
     record = args.record or _sibling(args.bag, "_replay")
     if record.exists():
