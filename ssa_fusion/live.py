@@ -92,9 +92,13 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: bag {bag} exists already; choose another --bag or --out",
               file=sys.stderr)
         return 2
-    out.mkdir(parents=True, exist_ok=True)
-    if args.out is None:
-        link_latest(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        if args.out is None:
+            link_latest(out)
+    except OSError as exc:
+        print(f"error: cannot use {out}: {exc}", file=sys.stderr)
+        return 2
     params = node_parameters(s, args.time_scale, args.seed, bag)
     sim_s = s.track_s + s.gap_s + s.after_s
     graph = Graph(out / "logs", args.domain_id)

@@ -70,6 +70,6 @@ def check_needs(needs: list[str]) -> str | None:
     """Why a list of 'node:/topic' entries is malformed, or None."""
     for need in needs:
         name, _, topic = need.partition(":")
-        if not name or not topic.startswith("/"):
-            return f"{need!r} is not 'node:/topic'"
+        if not name or "/" in name or not topic.startswith("/"):
+            return f"{need!r} is not 'node:/topic' (node: the node's name, no namespace)"
     return None

@@ -72,7 +72,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"error: {out} exists already; choose another --out", file=sys.stderr)
             return 2
         result = replay_offline(stream, s)
-        write_offline(out, stream, result)
+        try:
+            write_offline(out, stream, result)
+        except OSError as exc:
+            print(f"error: cannot write {out}: {exc}", file=sys.stderr)
+            return 2
         print(f"offline replay of {args.bag}: {len(result.estimates)} estimates, "
               f"{len(result.forecasts)} forecasts -> {out}")
         return 0
@@ -200,7 +204,11 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
         return 2
     params = node_parameters(s, 1.0, 0, record)
     logs = record.with_name(record.name + "_logs")
-    graph = Graph(logs, args.domain_id)
+    try:
+        graph = Graph(logs, args.domain_id)
+    except OSError as exc:
+        print(f"error: cannot use {record}: {exc}", file=sys.stderr)
+        return 2
     print(f"replay: {args.bag} at rate {args.rate:g} into surrogate + filter; ROS domain "
           f"{graph.domain_id}; logs in {logs}", flush=True)
     t0 = time.monotonic()

@@ -206,6 +206,11 @@ def table(results: dict) -> str:
             f"| {_fmt(r['ratios']['dmd_over_hypothetical'])} "
             f"| {_fmt(r['ratios']['placeholder_over_dmd'])} | {nees} | {tgs} "
             f"| {r['paper_finding']} |")
+    for name, r in results["scenarios"].items():
+        frac = r["arms"]["dmd_ekf"].get("forecast_fraction", 1.0)
+        if frac < 1.0:
+            rows.append(f"\n{name}: the DMD-EKF fused forecasts at {100 * frac:.0f} % of the "
+                        "gap epochs; the others carry the filter's prediction.")
     return "\n".join(rows)
 
 

@@ -5,6 +5,9 @@ import os
 import pytest
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+# Every graph a test starts picks a domain of its own; a ROS_DOMAIN_ID exported in the
+# developer's shell (which `ssa-fusion live/replay` would honour) must not pull them together.
+os.environ.pop("ROS_DOMAIN_ID", None)
 
 
 @pytest.fixture

@@ -67,3 +67,20 @@ def test_domain_id_defaults_to_the_environment(monkeypatch):
     p = argparse.ArgumentParser()
     cliargs.add_domain_id(p)
     assert p.parse_args([]).domain_id is None
+
+
+def test_outputs_under_a_file_are_refused(tmp_path, capsys):
+    f = tmp_path / "afile"
+    f.write_text("x")
+    assert cli.main(["live", "--out", str(f)]) == 2
+    assert "cannot use" in capsys.readouterr().err
+    assert cli.main(["replay", SAMPLE, "--offline", "--out", str(f / "x")]) == 2
+    assert "cannot write" in capsys.readouterr().err
+
+
+def test_reader_entries_name_a_node_and_a_topic():
+    from ssa_fusion.readiness import READERS, check_needs
+
+    assert check_needs(READERS) is None
+    assert "no namespace" in check_needs(["/ns/filter:/ssa/measurement"])
+    assert "is not 'node:/topic'" in check_needs(["filter"])

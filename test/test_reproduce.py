@@ -31,6 +31,7 @@ def test_json_shape_and_files(quick):
             assert r["arms"][arm]["epsilon"] > 0.0, (name, arm)
         for key in SETTINGS:
             assert key in r["settings"], (name, key)
+        assert r["arms"]["dmd_ekf"]["forecast_fraction"] >= 0.9, name  # forecasts were fused
         assert (out / f"{name}_error.png").stat().st_size > 1000
     noisy = res["scenarios"]["iss_j2_pos_noisy"]
     assert noisy["arms"]["dmd_ekf"]["nees_mean"] > 0.0
@@ -98,3 +99,4 @@ def test_dmd_arm_predicts_where_no_forecast_arrives(monkeypatch):
     x_coast, _, _ = experiments._gap_view(coast, sim)
     np.testing.assert_allclose(x_dmd, x_coast, rtol=1e-8)
     assert np.all(np.diff(np.trace(P_dmd, axis1=1, axis2=2)) > 0)  # growing uncertainty
+    assert experiments.forecast_fraction(dmd, sim) == 0.0  # and the results say so

@@ -34,7 +34,7 @@ from .scenarios import Scenario, measurement_model, placeholder
 from .simulate import Simulation, simulate
 from .surrogate import Surrogate
 from .tracker import Tracker
-from .types import Measurement, StateEstimate
+from .types import UPDATE_FORECAST, Measurement, StateEstimate
 
 N_PARTICLES = MC_PARTICLES
 
@@ -186,6 +186,14 @@ def _gap_view(arm: Arm, sim: Simulation) -> tuple[np.ndarray, np.ndarray, np.nda
     return arm.x[k], sim.x[gap], None if arm.P is None else arm.P[k]
 
 
+def forecast_fraction(arm: Arm, sim: Simulation) -> float:
+    """Fraction of the gap epochs at which `arm` fused a forecast."""
+    gap = set(int(i) for i in sim.gap_index)
+    fused = sum(1 for i, src in zip(arm.idx, arm.source, strict=True)
+                if int(i) in gap and src == UPDATE_FORECAST)
+    return fused / max(1, len(gap))
+
+
 def score(arm: Arm, sim: Simulation) -> dict:
     """epsilon over the gap, and the NEES over the gap where a covariance exists."""
     xh, xt, P = _gap_view(arm, sim)
@@ -235,6 +243,8 @@ def run_scenario(s: Scenario, seed: int, nees_runs: int = 1) -> dict:
         if noisy and "nees" in sc:
             r["nees_mean"] = float(np.mean(sc["nees"]))
         result["arms"][k] = r
+    # how much of the DMD-EKF is forecasts (the rest: the filter's predictions, see run_dmd_ekf)
+    result["arms"]["dmd_ekf"]["forecast_fraction"] = forecast_fraction(dmd, sim)
     if noisy:
         runs = [scores["dmd_ekf"]["nees"]]
         hyp_runs = [scores["hypothetical_ekf"]["nees"]]

@@ -151,7 +151,10 @@ def _leading_subspace(x: FloatArray, choose_rank: Callable[[FloatArray], int]
         z = sla.eigh_tridiagonal(diag, off, select="i", select_range=(n - r, n - 1),
                                  lapack_driver="stebz", check_finite=False)[1]
     # Q of dsytrd(lower) = diag(1, Q'), Q' the QR-format reflectors stored below row 0
-    z[1:] = lapack.dormqr("L", "N", c[1:, : n - 1], tau, z[1:], max(1, 64 * r))[0]
+    qz, _, info = lapack.dormqr("L", "N", c[1:, : n - 1], tau, z[1:], max(1, 64 * r))
+    if info != 0:
+        raise np.linalg.LinAlgError(f"dormqr failed (info={info})")
+    z[1:] = qz
     return sigma, np.ascontiguousarray(z[:, ::-1])
 
 
@@ -267,6 +270,8 @@ class HankelDMD:
             raise ValueError("delays must be >= 1")
         if rank is not None and rank < 1:
             raise ValueError("rank must be >= 1 or None")
+        if max_rank < 1:
+            raise ValueError("max_rank must be >= 1")
         self.delays = int(delays)
         self.rank = rank
         self.angle_channels = tuple(int(c) for c in angle_channels)

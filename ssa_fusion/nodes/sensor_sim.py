@@ -168,6 +168,7 @@ class SensorSim(Node):
         self.diag = Diagnostics(self)
         self.next = 0
         self.finished = False
+        self._next_wait_log = time.monotonic() + 5.0  # quiet while discovery runs
         self.wall0: float | None = None
         self.create_timer(tick, self.step)
         self.get_logger().info(
@@ -175,14 +176,29 @@ class SensorSim(Node):
             f"time scale {self.time_scale}x"
         )
 
-    def ready(self) -> bool:
+    def waiting_for(self) -> list[str]:
+        """What start-up still waits for: '/topic=count' entries whose subscriber count is
+        short (matched by this node's own publishers where it publishes the topic), then
+        'node:/topic' entries not reported as matched on /diagnostics."""
+        own = {p.topic_name: p for p in (self.pub_clock, self.pub_meas, self.pub_withheld,
+                                         self.pub_truth)}
+        short = []
         for item in self.wait_for:
             if not item:
                 continue
             topic, _, count = item.partition("=")
-            if self.count_subscribers(topic) < int(count):
-                return False
-        return self.readers.ready(self.wait_for_readers)
+            have = (own[topic].get_subscription_count() if topic in own
+                    else self.count_subscribers(topic))
+            if have < int(count):
+                short.append(f"{item} (has {have})")
+        return short + self.readers.unmatched(self.wait_for_readers)
+
+    def ready(self) -> bool:
+        missing = self.waiting_for()
+        if missing and time.monotonic() >= self._next_wait_log:
+            self._next_wait_log = time.monotonic() + 5.0
+            self.get_logger().info(f"waiting for: {', '.join(missing)}")
+        return not missing
 
     def step(self) -> None:
         if self.finished:

@@ -207,6 +207,8 @@ def test_input_validation() -> None:
         HankelDMD(10).fit(z)
     with pytest.raises(RuntimeError):
         HankelDMD(10).forecast(3)
+    with pytest.raises(ValueError, match="max_rank"):
+        HankelDMD(10, max_rank=0)
     dmd = HankelDMD(10).fit(sinusoids(np.arange(100)))
     assert dmd.forecast(0).shape == (2, 0)
     assert dmd.forecast_covariance(0).shape == (0, 2, 2)

@@ -598,6 +598,17 @@ def test_sigkill_of_the_recorder_leaves_a_bag_readable_up_to_its_last_flush(ros_
         assert g.stop(nodes[name], signal.SIGTERM) == 0, nodes[name].describe()
 
 
+def test_sensor_sim_says_what_it_waits_for(ros_graph):
+    g = ros_graph
+    clock = g.collect(Clock, "/clock")
+    sensor = g.start_node("sensor_sim", params=sensor_params(
+        100.0, wait_for=[""], wait_for_readers=["nobody:/ssa/measurement"]))
+    g.wait_for(lambda: "waiting for: nobody:/ssa/measurement" in sensor.stderr(), 20.0,
+               "sensor_sim to log what it waits for")
+    assert clock == []  # nothing published while it waits
+    assert g.stop(sensor, signal.SIGTERM) == 0, sensor.describe()
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_sensor_sim_interrupted_twice_during_shutdown_exits_0(ros_graph, sig):
     g = ros_graph
