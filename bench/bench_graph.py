@@ -31,7 +31,7 @@ from ssa_fusion.core import scenarios, simulate, types  # noqa: E402
 from ssa_fusion.graph import Graph  # noqa: E402
 from ssa_fusion.live import node_parameters  # noqa: E402
 from ssa_fusion.qos import DATA_QOS  # noqa: E402
-from ssa_fusion.readiness import READERS, ReadyNodes  # noqa: E402
+from ssa_fusion.readiness import ReadyNodes, readers_of  # noqa: E402
 
 
 def run_stream(rate_hz: float, n: int, workdir: Path) -> dict:
@@ -61,8 +61,7 @@ def run_stream(rate_hz: float, n: int, workdir: Path) -> dict:
         g.wait_for(lambda: g.probe.count_subscribers("/ssa/estimate") >= 2, 30,
                    "recorder on /ssa/estimate")
         readers = ReadyNodes(g.probe)
-        needs = [r for r in READERS if r.split(":")[1] in ("/ssa/measurement", "/ssa/estimate",
-                                                           "/ssa/forecast", "/clock")]
+        needs = readers_of({"/ssa/measurement", "/ssa/estimate", "/ssa/forecast", "/clock"})
         g.wait_for(lambda: readers.ready(needs), 30, "readers matched")
         msgs = [messages.measurement_to_msg(types.Measurement(
             t=float(sim.t[i]), z=sim.z[i], R=sim.R, kind=s.kind, object_id="iss",

@@ -36,6 +36,12 @@ READERS = [f"{node}:{topic}" for node, topics in (
 """What the ssa_fusion graph's nodes must have matched (their side) before measurements flow."""
 
 
+def readers_of(topics: set[str] | tuple[str, ...]) -> list[str]:
+    """The `READERS` entries whose topic is in `topics` (those with a publisher in a graph
+    that lacks some topics, e.g. a bag without /ssa/withheld)."""
+    return [r for r in READERS if r.split(":", 1)[1] in topics]
+
+
 class ReadyNodes:
     """The latest matched-publisher counts each node reported on /diagnostics, by node name
     and topic."""

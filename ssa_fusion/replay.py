@@ -196,7 +196,7 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
     from ssa_fusion.graph import Graph
     from ssa_fusion.live import node_parameters
     from ssa_fusion.player import Player
-    from ssa_fusion.readiness import READERS, ReadyNodes
+    from ssa_fusion.readiness import ReadyNodes, readers_of
 
     record = args.record or _sibling(args.bag, "_replay")
     if record.exists():
@@ -225,7 +225,7 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
         graph.wait_for_subscriber(TOPIC_ESTIMATE, 1, timeout=30.0)
         # only topics with a publisher here: a bag need not hold /ssa/truth or /ssa/withheld
         published = {*player.pubs, TOPIC_CLOCK, TOPIC_FORECAST, TOPIC_ESTIMATE}
-        needs = [r for r in READERS if r.split(":", 1)[1] in published]
+        needs = readers_of(published)
         readers = ReadyNodes(graph.probe)
         graph.wait_for(lambda: readers.ready(needs), 30.0,
                        "surrogate, filter and recorder to match their publishers")
