@@ -80,6 +80,13 @@ class SurrogateConfig:
     whiten: bool = True
 
 
+def _psd_part(C: np.ndarray) -> np.ndarray:
+    """The positive semi-definite part of symmetric matrices C (..., n, n): negative
+    eigenvalues set to zero."""
+    w, v = np.linalg.eigh(C)
+    return (v * np.clip(w, 0.0, None)[..., None, :]) @ np.swapaxes(v, -1, -2)
+
+
 class EciLift:
     """Range/az/el from a known station <-> the ECI position it implies (km).
 
@@ -93,6 +100,19 @@ class EciLift:
         """(N, 3) range/az/el at epochs t (N,) -> (N, 3) ECI positions, km."""
         return razel_to_eci(z, self.model.jd0_utc + np.asarray(t) / 86400.0,
                             self.model.station)
+
+    def noise_cov(self, z: np.ndarray, t: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """Covariance (N, 3, 3), km^2, of the lifted positions of range/az/el samples z (N, 3)
+        at epochs t (N,) with sensor noise R (3, 3): L R L^T, L = d lift / d z (central
+        differences, all samples at once)."""
+        z = np.asarray(z, dtype=float)
+        step = np.array([1e-3, 1e-7, 1e-7])  # km, rad, rad
+        L = np.empty((*z.shape, 3))
+        for c in range(3):
+            dz = np.zeros(3)
+            dz[c] = step[c]
+            L[..., c] = (self.forward(z + dz, t) - self.forward(z - dz, t)) / (2 * step[c])
+        return L @ np.asarray(R, dtype=float) @ L.transpose(0, 2, 1)
 
     def back(self, r: np.ndarray, C: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, ...]:
         """ECI forecasts r (k, 3) with covariances C (k, 3, 3) at epochs t (k,) -> range/az/el
@@ -216,15 +236,18 @@ class Surrogate:
             w = self._scale
             self._forecast = self._forecast * w[:, None]
             self._cov = self._cov * np.outer(w, w)[None]
+        R = np.asarray(self.last.R, dtype=float)
         lift = self.config.lift
         if lift is not None:
+            # In the lifted space the error against the samples is model error + the lifted
+            # sensor noise of the training samples; only the model error maps back through
+            # J, then the sensor noise is R again (paper: Var(e) = R + model part).
             t = self.last.t + self.cadence() * np.arange(1, n_steps + 1)
-            z, self._cov = lift.back(self._forecast.T, self._cov, t)
+            z, self._cov = lift.back(self._forecast.T, _psd_part(self._cov - self._lift_noise), t)
             self._forecast = z.T
+            self._cov = self._cov + R
         # Var(e) >= R (paper section 4): floor at the sensor noise in the PSD sense
-        R = np.asarray(self.last.R, dtype=float)
-        w, v = np.linalg.eigh(self._cov - R)
-        self._cov = R + (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
+        self._cov = R + _psd_part(self._cov - R)
         if self.config.inflate_correlated:
             k = np.arange(1, n_steps + 1, dtype=float)
             self._cov = self._cov * (k ** self.config.correlation_power)[:, None, None]
@@ -257,7 +280,9 @@ class Surrogate:
             return
         angles = (1,) if last.kind == RANGE_AZ_EL else ()
         if cfg.lift is not None:
-            Z = cfg.lift.forward(Z.T, t[-Z.shape[1]:]).T
+            tz = t[-Z.shape[1]:]
+            self._lift_noise = cfg.lift.noise_cov(Z.T, tz, last.R).mean(axis=0)
+            Z = cfg.lift.forward(Z.T, tz).T
             angles = ()
         # Whiten by the known sensor noise (each channel / its sigma) so that the noise is
         # i.i.d. across channels, as the automatic rank threshold assumes; noise-free, lifted
