@@ -1,10 +1,10 @@
 """Study (not a test): the Hankel-DMD delay count chosen on the training window only.
 
 For each seed, the tracking window before the gap is split: the surrogate is fitted on all
-of it but its last gap length, forecasts that stretch, and is scored by the RMS error of
-the forecast against the *measurements* there (noisy: the sensor noise adds the same
-amount to every candidate, so the ranking is that of the forecast error). The gap itself
-is never looked at. Data are prepared as the surrogate prepares them (ECI lift for
+of it but its last gap length (at most half of it), forecasts that stretch, and is scored
+by the RMS error of the forecast against the *measurements* there (noisy: the sensor noise
+adds the same amount to every candidate, so the ranking is that of the forecast error).
+The gap itself is never looked at. Data are prepared as the surrogate prepares them (ECI lift for
 range/az/el, noisy position channels divided by their noise sigma).
 
 Usage::
@@ -41,7 +41,7 @@ def holdout_rms(s: scenarios.Scenario, seed: int, delays: list[int]) -> list[flo
         z = EciLift(scenarios.measurement_model(s)).forward(z, t)
     elif np.all(sim.sigma > 0):
         z = z / sim.sigma
-    h = round(s.gap_s / s.cadence_s)
+    h = min(round(s.gap_s / s.cadence_s), len(z) // 2)
     fit, held = z[:-h].T, z[-h:].T
     return [float(np.sqrt(np.mean(np.sum((HankelDMD(d).fit(fit).forecast(h) - held) ** 2,
                                          axis=0))))
@@ -57,10 +57,11 @@ def main() -> None:
     s = scenarios.get(args.scenario)
     rms = np.array([holdout_rms(s, seed, args.delays) for seed in range(1, args.seeds + 1)])
     print(f"scenario: {s.name}  training samples: {round(s.track_s / s.cadence_s)}  "
-          f"held out: {round(s.gap_s / s.cadence_s)}  configured delays: {s.delays}")
+          f"held out: {min(round(s.gap_s / s.cadence_s), round(s.track_s / s.cadence_s) // 2)}  "
+          f"configured delays: {s.delays}")
     for j, d in enumerate(args.delays):
-        print(f"delays: {d:4d}  holdout_rms_mean: {rms[:, j].mean():.4f}  "
-              f"per_seed: {np.round(rms[:, j], 3).tolist()}")
+        print(f"delays: {d:4d}  holdout_rms_mean: {rms[:, j].mean():.5g}  "
+              f"per_seed: {[float(format(v, '.4g')) for v in rms[:, j]]}")
 
 
 if __name__ == "__main__":

@@ -67,6 +67,7 @@ __all__ = ["HankelDMD", "svht_rank"]
 _TWO_PI = 2.0 * np.pi
 _COV_BUDGET = 400_000  # max (horizon, column) pairs in the covariance estimator
 FloatArray = NDArray[np.float64]
+Residual = Callable[[FloatArray, NDArray[np.intp]], FloatArray]
 
 
 def svht_rank(sigma: ArrayLike, rows: int, cols: int) -> int:
@@ -411,53 +412,67 @@ class HankelDMD:
             out[idx] = np.mod(out[idx], _TWO_PI)
         return out
 
-    def _empirical_cov(self, k_need: int) -> FloatArray:
-        """In-sample error second moments per horizon 1..k, shape (k, m, m).
+    def _empirical_cov(self, k_need: int, residual: Residual | None = None) -> FloatArray:
+        """In-sample error second moments per horizon 1..k, shape (k, m', m').
 
         ``k = min(k_need, k_max)`` with ``k_max = ncol // 2`` (at least half of the
-        Hankel columns contribute at every horizon). Cached.
+        Hankel columns contribute at every horizon). The error is ``pred - z[:, target]``
+        or ``residual(pred, target)``. Cached for the default error only.
         """
         ncol = self._b.shape[1]
         k_max = max(1, min(k_need, ncol // 2))
-        if self._cov_cache is None or self._cov_cache.shape[0] < k_max:
-            # Column stride bounds the work array to ~_COV_BUDGET error vectors.
-            stride = max(1, -(-k_max * ncol // _COV_BUDGET))
-            j = np.arange(0, ncol, stride)
-            b = self._b[:, j]
-            d = self.delays
-            read = _stacked_powers(self._c, self._t, k_max)  # (k, m, r)
-            kk, m, r = read.shape
-            pred = (read.reshape(kk * m, r) @ b).reshape(kk, m, j.size)
-            k = np.arange(1, k_max + 1)
-            tgt = (d - 1) + k[:, None] + j[None, :]  # sample index predicted
-            valid = tgt < self.n_samples_
-            tgt = np.where(valid, tgt, 0)
+        if residual is None and self._cov_cache is not None and (
+                self._cov_cache.shape[0] >= k_max):
+            return self._cov_cache[:k_max]
+        # Column stride bounds the work array to ~_COV_BUDGET error vectors.
+        stride = max(1, -(-k_max * ncol // _COV_BUDGET))
+        j = np.arange(0, ncol, stride)
+        b = self._b[:, j]
+        d = self.delays
+        read = _stacked_powers(self._c, self._t, k_max)  # (k, m, r)
+        kk, m, r = read.shape
+        pred = (read.reshape(kk * m, r) @ b).reshape(kk, m, j.size)
+        k = np.arange(1, k_max + 1)
+        tgt = (d - 1) + k[:, None] + j[None, :]  # sample index predicted
+        valid = tgt < self.n_samples_
+        tgt = np.where(valid, tgt, 0)
+        if residual is None:
             err = pred - self._z[:, tgt].transpose(1, 0, 2)
-            err *= valid[:, None, :]
-            cnt = valid.sum(axis=1).astype(float)
-            self._cov_cache = np.einsum("kaj,kbj->kab", err, err) / cnt[:, None, None]
-        return self._cov_cache[:k_max]
+        else:
+            err = np.asarray(residual(pred, tgt), dtype=np.float64)
+        err *= valid[:, None, :]
+        cnt = valid.sum(axis=1).astype(float)
+        cov = np.einsum("kaj,kbj->kab", err, err) / cnt[:, None, None]
+        if residual is None:
+            self._cov_cache = cov
+        return cov
 
-    def forecast_covariance(self, n_steps: int) -> FloatArray:
+    def forecast_covariance(self, n_steps: int,
+                            residual: Residual | None = None) -> FloatArray:
         """Covariance of the forecast errors for horizons 1..n_steps.
 
         Parameters
         ----------
         n_steps : int
             Number of forecast steps (as in :meth:`forecast`).
+        residual : callable, optional
+            ``residual(pred, target) -> err``: the error of in-sample predictions
+            ``pred`` (k, channels, J) of the training samples with indices ``target``
+            (k, J), shape (k, m', J), in another space than the training data's (e.g. the
+            measurement a lifted observable came from). Default ``pred - z[:, target]``.
 
         Returns
         -------
-        ndarray, shape (n_steps, channels, channels)
+        ndarray, shape (n_steps, m', m')
             Symmetric PSD covariances (measurement units squared, angles in rad^2)
-            of ``forecast - future measurement``; ``>= residual_cov_`` and with a
-            non-decreasing trace. See the module docstring for the estimator.
+            of ``forecast - future measurement``; ``>=`` the one-step covariance and
+            with a non-decreasing trace. See the module docstring for the estimator.
         """
         self._check()
-        m = self.n_channels_
         if n_steps < 1:
+            m = self.n_channels_
             return np.zeros((0, m, m))
-        emp = self._empirical_cov(n_steps)
+        emp = self._empirical_cov(n_steps, residual)
         k_max = emp.shape[0]
         if n_steps <= k_max:
             cov = emp[:n_steps].copy()
@@ -474,7 +489,7 @@ class HankelDMD:
             cov = np.concatenate((emp, ext), axis=0)
         cov = 0.5 * (cov + cov.transpose(0, 2, 1))
         # Floor: C_h >= R (one-step residual covariance) in the PSD sense.
-        r0 = self.residual_cov_
+        r0 = self.residual_cov_ if residual is None else emp[0]
         w, v = np.linalg.eigh(cov - r0)
         cov = r0 + (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
         # Non-decreasing trace: scale up any horizon that falls below the running max.

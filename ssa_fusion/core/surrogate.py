@@ -43,10 +43,12 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
+from .frames import razel_eci
 from .hankel_dmd import HankelDMD
 from .iod import razel_to_eci
 from .measurement import RANGE_AZ_EL, RazelModel
@@ -80,13 +82,6 @@ class SurrogateConfig:
     whiten: bool = True
 
 
-def _psd_part(C: np.ndarray) -> np.ndarray:
-    """The positive semi-definite part of symmetric matrices C (..., n, n): negative
-    eigenvalues set to zero."""
-    w, v = np.linalg.eigh(C)
-    return (v * np.clip(w, 0.0, None)[..., None, :]) @ np.swapaxes(v, -1, -2)
-
-
 class EciLift:
     """Range/az/el from a known station <-> the ECI position it implies (km).
 
@@ -96,35 +91,28 @@ class EciLift:
     def __init__(self, model: RazelModel) -> None:
         self.model = model
 
+    def _jd(self, t: np.ndarray) -> np.ndarray:
+        return self.model.jd0_utc + np.asarray(t, dtype=float) / 86400.0
+
     def forward(self, z: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """(N, 3) range/az/el at epochs t (N,) -> (N, 3) ECI positions, km."""
-        return razel_to_eci(z, self.model.jd0_utc + np.asarray(t) / 86400.0,
-                            self.model.station)
+        """(..., 3) range/az/el at epochs t (...) -> (..., 3) ECI positions, km."""
+        return razel_to_eci(z, self._jd(t), self.model.station)
 
-    def noise_cov(self, z: np.ndarray, t: np.ndarray, R: np.ndarray) -> np.ndarray:
-        """Covariance (N, 3, 3), km^2, of the lifted positions of range/az/el samples z (N, 3)
-        at epochs t (N,) with sensor noise R (3, 3): L R L^T, L = d lift / d z (central
-        differences, all samples at once)."""
-        z = np.asarray(z, dtype=float)
-        step = np.array([1e-3, 1e-7, 1e-7])  # km, rad, rad
-        L = np.empty((*z.shape, 3))
-        for c in range(3):
-            dz = np.zeros(3)
-            dz[c] = step[c]
-            L[..., c] = (self.forward(z + dz, t) - self.forward(z - dz, t)) / (2 * step[c])
-        return L @ np.asarray(R, dtype=float) @ L.transpose(0, 2, 1)
+    def to_measurement(self, r: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """(..., 3) ECI positions at epochs t (...) -> (..., 3) range/az/el (km, rad, rad)."""
+        return razel_eci(r, self._jd(t), self.model.station)
 
-    def back(self, r: np.ndarray, C: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, ...]:
-        """ECI forecasts r (k, 3) with covariances C (k, 3, 3) at epochs t (k,) -> range/az/el
-        (k, 3) and covariances J C J^T (k, 3, 3)."""
-        z = np.empty_like(r)
-        out = np.empty_like(C)
-        for i, (ri, Ci, ti) in enumerate(zip(r, C, t, strict=True)):
-            zi, H = self.model.h_and_H(np.concatenate([ri, np.zeros(3)]), float(ti))
-            J = H[:, :3]
-            z[i] = zi
-            out[i] = J @ Ci @ J.T
-        return z, out
+    def residual(self, z: np.ndarray, t: np.ndarray) -> Callable[..., np.ndarray]:
+        """The error, in range/az/el, of lifted predictions of the samples z (N, 3) taken at
+        t (N,): for `HankelDMD.forecast_covariance` (pred (k, 3, J), target (k, J) ->
+        (k, 3, J)); the azimuth difference is wrapped to [-pi, pi)."""
+
+        def err(pred: np.ndarray, target: np.ndarray) -> np.ndarray:
+            e = self.to_measurement(pred.transpose(0, 2, 1), t[target]) - z[target]
+            e[..., 1] = (e[..., 1] + math.pi) % (2 * math.pi) - math.pi
+            return e.transpose(0, 2, 1)
+
+        return err
 
 
 LIVE_SURROGATE = SurrogateConfig(retrain_period_s=600.0, grace=2.0)
@@ -231,23 +219,26 @@ class Surrogate:
         if self._model is None:
             return False
         self._forecast = self._model.forecast(n_steps)
-        self._cov = self._model.forecast_covariance(n_steps)
+        lift = self.config.lift
+        if lift is None:
+            self._cov = self._model.forecast_covariance(n_steps)
+        else:
+            # Errors in the measurement space: the lifted samples carry the angle noise
+            # times the range (10-130 km across the line of sight), which is not the noise
+            # of a range/az/el at the forecast epoch; so the in-sample predictions are
+            # mapped back to range/az/el and compared with what the sensor measured.
+            self._cov = self._model.forecast_covariance(
+                n_steps, lift.residual(self._fit_z, self._fit_t))
+            t = self.last.t + self.cadence() * np.arange(1, n_steps + 1)
+            self._forecast = lift.to_measurement(self._forecast.T, t).T
         if self._scale is not None:
             w = self._scale
             self._forecast = self._forecast * w[:, None]
             self._cov = self._cov * np.outer(w, w)[None]
-        R = np.asarray(self.last.R, dtype=float)
-        lift = self.config.lift
-        if lift is not None:
-            # In the lifted space the error against the samples is model error + the lifted
-            # sensor noise of the training samples; only the model error maps back through
-            # J, then the sensor noise is R again (paper: Var(e) = R + model part).
-            t = self.last.t + self.cadence() * np.arange(1, n_steps + 1)
-            z, self._cov = lift.back(self._forecast.T, _psd_part(self._cov - self._lift_noise), t)
-            self._forecast = z.T
-            self._cov = self._cov + R
         # Var(e) >= R (paper section 4): floor at the sensor noise in the PSD sense
-        self._cov = R + _psd_part(self._cov - R)
+        R = np.asarray(self.last.R, dtype=float)
+        w, v = np.linalg.eigh(self._cov - R)
+        self._cov = R + (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
         if self.config.inflate_correlated:
             k = np.arange(1, n_steps + 1, dtype=float)
             self._cov = self._cov * (k ** self.config.correlation_power)[:, None, None]
@@ -280,9 +271,9 @@ class Surrogate:
             return
         angles = (1,) if last.kind == RANGE_AZ_EL else ()
         if cfg.lift is not None:
-            tz = t[-Z.shape[1]:]
-            self._lift_noise = cfg.lift.noise_cov(Z.T, tz, last.R).mean(axis=0)
-            Z = cfg.lift.forward(Z.T, tz).T
+            self._fit_t = t[-Z.shape[1]:]
+            self._fit_z = Z.T
+            Z = cfg.lift.forward(self._fit_z, self._fit_t).T
             angles = ()
         # Whiten by the known sensor noise (each channel / its sigma) so that the noise is
         # i.i.d. across channels, as the automatic rank threshold assumes; noise-free, lifted

@@ -325,21 +325,6 @@ def test_bad_measurement_does_not_disable_forecasts(case, bad_at, make_bad):
 
 
 # ------------------------------------------------------------------------------ ECI lift
-def test_eci_lift_noise_covariance_matches_monte_carlo():
-    """L R L^T of the lift against the sample covariance of 200 000 lifted noisy draws."""
-    sim = _sim("iss_j2_rae")
-    lift = EciLift(sc.measurement_model(sim.scenario))
-    R = np.diag([1.0, 0.01, 0.01]) ** 2
-    rng = np.random.default_rng(5)
-    for i in (0, 90, 200):  # different ranges and directions along the orbit
-        z, t = sim.z_true[i], float(sim.t[i])
-        draws = z + rng.multivariate_normal(np.zeros(3), R, size=200_000)
-        lifted = lift.forward(draws, np.full(len(draws), t))
-        got = lift.noise_cov(z[None], np.array([t]), R)[0]
-        np.testing.assert_allclose(got, np.cov(lifted.T), rtol=0.02,
-                                   atol=0.02 * np.trace(got) / 3)
-
-
 def test_lifted_forecast_covariance_is_not_the_lifted_noise():
     """Range/az/el learned through the ECI lift: the lifted samples carry the angle noise
     times the range (10-130 km); pushed back through J at the forecast epoch it used to
