@@ -24,6 +24,7 @@ from rosbags.interfaces import (
     QosTime,
 )
 from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
@@ -93,7 +94,7 @@ def rosbags_classes() -> Any:
 
 
 class BagWriter:
-    """Append CDR messages to a new rosbag2 v9 MCAP bag.
+    """Append CDR messages to a new rosbag2 v9 MCAP bag (zstd-compressed chunks).
 
     ``flush()`` closes the pending MCAP chunk and pushes it to the file so that, after a
     crash, a reader recovers everything written up to the last flush.
@@ -102,6 +103,8 @@ class BagWriter:
     def __init__(self, path: Path | str) -> None:
         self.path = Path(path)
         self._writer = Writer(self.path, version=9, storage_plugin=StoragePlugin.MCAP)
+        # zstd-compressed MCAP chunks, like rosbag2's mcap presets: any MCAP reader reads them
+        self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
         self._writer.open()
         self._connections: dict[str, Any] = {}
         self.counts: dict[str, int] = {}

@@ -11,7 +11,15 @@ rules (DESIGN.md "Behaviour users rely on"):
   epoch, or an innovation beyond the NIS gate;
 * a real measurement always beats a forecast for the same epoch: a forecast for an epoch
   that already has a real measurement is dropped, and a real measurement for an epoch at or
-  before fused forecasts rolls them back, fuses the real one and re-fuses the later forecasts;
+  before fused forecasts rolls them back, fuses the real one and re-fuses the later forecasts
+  whose model already knew it;
+* the newest model wins: a forecast's model ended at its *base* epoch ``t - horizon`` (the
+  last real measurement it was trained on). Forecasts from a model that ended before the
+  last real measurement fused are dropped, and a forecast for an epoch at or before fused
+  forecasts of an older model rolls those back and replaces them. The surrogate re-forecasts
+  every missed epoch after each real measurement, so a forecast issued while a real
+  measurement was still on its way (a surrogate stalled by a fit at a high time scale) is
+  replaced, and the result equals the offline replay's;
 * `reset()` forgets everything (a backwards clock jump).
 
 It is the same code live (filter node) and offline (reproduce, replay), so both give the
@@ -34,6 +42,16 @@ from .types import FORECAST, SENSOR, UPDATE_FORECAST, UPDATE_SENSOR, Measurement
 Placeholder = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
 
 HALF_PI = 0.5 * math.pi
+
+def _base(f: Measurement) -> float:
+    """Epoch of the last real measurement a forecast's model was trained on."""
+    return f.t - f.horizon
+
+
+def _before(a: float, b: float) -> bool:
+    """a < b beyond the round-off of t - horizon."""
+    return a < b - 1e-9 * max(1.0, abs(b))
+
 
 DEFAULT_GATE = 1000.0
 """Default NIS gate: rejects gross glitches only (a 3-channel innovation ~30 sigma away)."""
@@ -187,8 +205,18 @@ class Tracker:
             return Outcome(rejected="forecast_superseded",
                            detail=f"forecast for t={m.t} but a real measurement up to "
                                   f"t={self.t_real} was fused")
+        base = _base(m)
+        if _before(base, self.t_real):
+            return Outcome(rejected="forecast_superseded",
+                           detail=f"forecast for t={m.t} from a model that ended at t={base}, "
+                                  f"before the real measurement at t={self.t_real}")
         if m.t <= self.t:
-            return Outcome(rejected="rejected_stale", detail=f"forecast t={m.t} <= t={self.t}")
+            later = [(f, s) for f, s in self._forecasts if f.t >= m.t]
+            if not any(_before(_base(f), base) for f, _ in later):
+                return Outcome(rejected="rejected_stale",
+                               detail=f"forecast t={m.t} <= t={self.t}")
+            # a newer model's forecast replaces an older model's at and after its epoch
+            return self._replace(later, m, base)
         before = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy())
         out = self._step(m, UPDATE_FORECAST)
         if out.estimate is not None:
@@ -204,18 +232,28 @@ class Tracker:
         if m.t == self.t_real:
             return Outcome(rejected="rejected_duplicate", detail=f"second measurement at t={m.t}")
         later = [(f, s) for f, s in self._forecasts if f.t >= m.t]
-        if later:  # a real measurement beats forecasts at or before its epoch: roll back
+        return self._replace(later, m, m.t, UPDATE_SENSOR)
+
+    def _replace(self, later: list[tuple[Measurement, _Snapshot]], m: Measurement,
+                 base: float, source: int = UPDATE_FORECAST) -> Outcome:
+        """Roll back the fused forecasts `later` (epochs at or after m.t), fuse m, then
+        re-fuse those of them after m.t whose model ended at or after `base`; the others
+        wait for the surrogate's newer forecasts. If m cannot be fused, all of `later` are
+        put back as they were."""
+        if later:
             self._restore(later[0][1])
         before = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy())
-        out = self._step(m, UPDATE_SENSOR)
+        out = self._step(m, source)
         if out.estimate is None:
             self._restore(before)
-            if later:  # put the forecasts back as they were
-                self._refuse(later, out)
+            self._refuse(later, out)
             return out
-        self.t_real = m.t
-        kept = [(f, s) for f, s in later if f.t > m.t]
-        self._forecasts = []
+        if source == UPDATE_SENSOR:
+            self.t_real = m.t
+            self._forecasts = []  # nothing at or before a fused real measurement rolls back
+        else:
+            self._forecasts.append((m, before))
+        kept = [(f, s) for f, s in later if f.t > m.t and not _before(_base(f), base)]
         out.rolled_back = len(later)
         self._refuse(kept, out)
         return out

@@ -70,9 +70,11 @@ def surrogate_config_from(node: Node) -> SurrogateConfig:
     setting(
         "retrain_period",
         "retrain_period_s",
-        LIVE_SURROGATE.retrain_period_s,
-        "sim s between refits while measurements arrive",
+        0.0,
+        "sim s between refits while measurements arrive; 0 = none (every gap refits on the "
+        "buffer up to the last real measurement anyway)",
         non_negative,
+        lambda v: float(v) or math.inf,
     )
     delays = setting("delays", "delays", base.delays, "Hankel-DMD time delays", positive, int)
     setting(

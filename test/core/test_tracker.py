@@ -418,6 +418,71 @@ def test_gated_real_measurement_after_forecasts_restores_them():
     assert out.estimate is not None and out.rolled_back == 2
 
 
+def _model_forecast(sim: Simulation, i: int, base: int, bias: float = 0.0) -> Measurement:
+    """A forecast for epoch i from a model trained up to the real measurement at epoch base
+    (horizon = t_i - t_base), like the surrogate's."""
+    m = _meas(sim, i, source=FORECAST, R=sim.R * 9, bias=bias)
+    m.horizon = float(sim.t[i] - sim.t[base])
+    return m
+
+
+def _assert_same_filter(a: Tracker, b: Tracker) -> None:
+    assert a.t == b.t and a.t_real == b.t_real
+    np.testing.assert_allclose(a.ekf.x, b.ekf.x, rtol=1e-12)
+    np.testing.assert_allclose(a.ekf.P, b.ekf.P, rtol=1e-12, atol=1e-12 * abs(b.ekf.P).max())
+
+
+def test_forecast_of_a_model_older_than_the_last_real_measurement_is_dropped():
+    sim = _sim("iss_j2_rae")
+    tr = _tracker(sim)
+    _feed(tr, [_meas(sim, i) for i in range(11)])
+    before = _state(tr)
+    out = tr.process(_model_forecast(sim, 12, base=9))  # its model never saw epoch 10
+    assert out.rejected == "forecast_superseded" and "ended at" in out.detail
+    _assert_same_state(_state(tr), before)
+    assert tr.process(_model_forecast(sim, 12, base=10)).estimate is not None
+
+
+def test_forecasts_issued_while_a_real_measurement_was_late_are_replaced():
+    """Live, a surrogate stalled by a fit forecasts epochs 10-13 from its model up to 9 while
+    the real measurement 10 is still queued; a fresh forecast for 11 (model up to 10) can
+    even reach the filter before measurement 10 does. Whatever the order, the filter ends
+    where the offline order leaves it: real 0-10, then the model-10 forecasts 11-13."""
+    sim = _sim("iss_j2_rae")
+    history = [_meas(sim, i) for i in range(10)]
+    offline = _tracker(sim)
+    _feed(offline, [*history, _meas(sim, 10)])
+    for i in (11, 12, 13):
+        offline.process(_model_forecast(sim, i, base=10))
+
+    live = _tracker(sim)
+    _feed(live, history)
+    for i in (10, 11, 12, 13):  # stale, and biased so that keeping any of them shows
+        assert live.process(_model_forecast(sim, i, base=9, bias=20.0)).estimate is not None
+    out = live.process(_model_forecast(sim, 11, base=10))  # newer model: replaces 11-13
+    assert out.estimate is not None and out.rolled_back == 3 and out.refused == []
+    out = live.process(_meas(sim, 10))  # real 10: replaces stale 10, keeps the fresh 11
+    assert out.estimate.update_source == UPDATE_SENSOR and out.rolled_back == 2
+    assert [e.t for e in out.refused] == [sim.t[11]]
+    for i in (12, 13):
+        assert live.process(_model_forecast(sim, i, base=10)).estimate is not None
+    _assert_same_filter(live, offline)
+    # a late stale forecast changes nothing
+    assert live.process(_model_forecast(sim, 14, base=9)).rejected == "forecast_superseded"
+    _assert_same_filter(live, offline)
+
+
+def test_forecast_of_the_same_or_an_older_model_for_a_fused_epoch_is_stale():
+    sim = _sim("iss_j2_rae")
+    tr = _tracker(sim)
+    _feed(tr, [_meas(sim, i) for i in range(10)])
+    for i in (10, 11):
+        tr.process(_model_forecast(sim, i, base=9))
+    before = _state(tr)
+    assert tr.process(_model_forecast(sim, 10, base=9)).rejected == "rejected_stale"
+    _assert_same_state(_state(tr), before)
+
+
 # ------------------------------------------------------------------------------ reset
 @pytest.mark.parametrize("name", ["iss_j2_rae", "iss_j2_pos"])
 def test_reset_after_backwards_jump_reinitialises(name):
