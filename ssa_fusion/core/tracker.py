@@ -49,8 +49,8 @@ def _base(f: Measurement) -> float:
 
 
 def _before(a: float, b: float) -> bool:
-    """a < b beyond the round-off of t - horizon."""
-    return a < b - 1e-9 * max(1.0, abs(b))
+    """a < b beyond the round-off of t - horizon (~1e-16 relative; 2 ms on Unix time)."""
+    return a < b - 1e-12 * max(1.0, abs(b))
 
 
 DEFAULT_GATE = 1000.0
@@ -81,7 +81,8 @@ class TrackerConfig:
 class Outcome:
     """What `Tracker.process` did: `estimate` when fused, else `rejected` (a cause key) and
     `detail` (a sentence for the log). `rolled_back` counts forecasts undone by a real
-    measurement; `refused` lists forecasts re-fused after it."""
+    measurement or a newer model's forecast; `refused` lists the forecasts re-fused after it
+    (also when it was itself rejected: they are new estimates all the same)."""
 
     estimate: StateEstimate | None = None
     rejected: str = ""
@@ -159,8 +160,12 @@ class Tracker:
             return "rejected_frame", f"frame_id {m.frame_id!r}, configured for {want!r}"
         if m.source not in (SENSOR, FORECAST):
             return "rejected_source", f"unknown source {m.source}"
-        if not (math.isfinite(m.t) and np.isfinite(z).all() and np.isfinite(R).all()):
-            return "rejected_nonfinite", f"NaN or inf in stamp, z or covariance at t={m.t}"
+        if not (math.isfinite(m.t) and np.isfinite(z).all() and np.isfinite(R).all()
+                and math.isfinite(m.horizon)):
+            return ("rejected_nonfinite",
+                    f"NaN or inf in stamp, z, covariance or horizon at t={m.t}")
+        if m.horizon < 0.0:
+            return "rejected_horizon", f"forecast horizon {m.horizon} s < 0 at t={m.t}"
         if self.kind == RANGE_AZ_EL:
             if z[0] < 0.0:
                 return "rejected_negative_range", f"range {z[0]} km < 0"
@@ -238,17 +243,16 @@ class Tracker:
                  base: float, source: int = UPDATE_FORECAST) -> Outcome:
         """Roll back the fused forecasts `later` (epochs at or after m.t), fuse m, then
         re-fuse those of them after m.t whose model ended at or after `base`; the others
-        wait for the surrogate's newer forecasts. If m cannot be fused, all of `later` are
-        put back as they were."""
+        wait for the surrogate's newer forecasts, which knew m. That holds even if m itself
+        is rejected (the surrogate has buffered it all the same), so the filter ends as in
+        the offline order; `refused` then still lists the re-fused forecasts."""
         if later:
             self._restore(later[0][1])
         before = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy())
         out = self._step(m, source)
         if out.estimate is None:
             self._restore(before)
-            self._refuse(later, out)
-            return out
-        if source == UPDATE_SENSOR:
+        elif source == UPDATE_SENSOR:
             self.t_real = m.t
             self._forecasts = []  # nothing at or before a fused real measurement rolls back
         else:

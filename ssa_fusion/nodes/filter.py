@@ -151,17 +151,17 @@ class FilterNode(Node):
             self.diag.count("rejected_kind", str(exc))
             return
         out = self.tracker.process(m)
-        if out.rejected:
-            if out.rejected == "iod_pending":
-                self.diag.counts["iod_pending"] += 1
-            else:
-                self.diag.count(out.rejected, out.detail, warn=out.rejected.startswith("rej"))
-            return
+        if out.rejected == "iod_pending":
+            self.diag.counts["iod_pending"] += 1
+        elif out.rejected:
+            self.diag.count(out.rejected, out.detail, warn=out.rejected.startswith("rej"))
+        else:
+            self.last_object = msg.object_id
         if out.rolled_back:
             self.diag.counts["forecasts_rolled_back"] += out.rolled_back
-        self.last_object = msg.object_id
-        for e in (out.estimate, *out.refused):
-            self.publish(e)
+        for e in (out.estimate, *out.refused):  # re-fused forecasts even if m was rejected
+            if e is not None:
+                self.publish(e)
 
     def publish(self, e: StateEstimate) -> None:
         e.object_id = e.object_id or self.last_object

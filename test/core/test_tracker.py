@@ -403,19 +403,28 @@ def test_real_measurement_between_forecast_epochs_keeps_earlier_forecasts():
     assert tr.t == sim.t[12]
 
 
-def test_gated_real_measurement_after_forecasts_restores_them():
+def test_gated_real_measurement_drops_only_the_forecast_at_its_epoch():
+    """A rejected real measurement still supersedes the forecast for its own epoch (the
+    surrogate has buffered it and will not forecast that epoch); later forecasts stay."""
     sim = _sim("iss_j2_rae")
+    history = [_meas(sim, i) for i in range(10)]
+
+    def fc(i):
+        return _meas(sim, i, source=FORECAST, R=sim.R * 9)
+
     tr = _tracker(sim, gate=float(chi2.ppf(0.9999, 3)))
-    _feed(tr, [_meas(sim, i) for i in range(10)])
+    _feed(tr, history)
     for i in (10, 11, 12):
-        assert tr.process(_meas(sim, i, source=FORECAST, R=sim.R * 9)).estimate is not None
-    before = _state(tr)
+        assert tr.process(fc(i)).estimate is not None
     out = tr.process(_meas(sim, 11, bias=1000.0))
-    assert out.rejected == "rejected_gate"
-    _assert_same_state(_state(tr), before)
-    # the forecasts are still registered: a good real measurement at t11 rolls them back
+    assert out.rejected == "rejected_gate" and out.rolled_back == 2
+    assert [e.t for e in out.refused] == [sim.t[12]]
+    ref = _tracker(sim, gate=float(chi2.ppf(0.9999, 3)))
+    _feed(ref, [*history, fc(10), fc(12)])
+    _assert_same_filter(tr, ref)
+    # a good real measurement at t11 then rolls back the forecast at t12 only
     out = tr.process(_meas(sim, 11))
-    assert out.estimate is not None and out.rolled_back == 2
+    assert out.estimate is not None and out.rolled_back == 1
 
 
 def _model_forecast(sim: Simulation, i: int, base: int, bias: float = 0.0) -> Measurement:
@@ -470,6 +479,18 @@ def test_forecasts_issued_while_a_real_measurement_was_late_are_replaced():
     # a late stale forecast changes nothing
     assert live.process(_model_forecast(sim, 14, base=9)).rejected == "forecast_superseded"
     _assert_same_filter(live, offline)
+
+
+@pytest.mark.parametrize(("horizon", "cause"), [(math.nan, "rejected_nonfinite"),
+                                                (math.inf, "rejected_nonfinite"),
+                                                (-30.0, "rejected_horizon")])
+def test_forecast_with_an_impossible_horizon_is_rejected(horizon, cause):
+    sim = _sim("iss_j2_rae")
+    tr = _tracker(sim)
+    _feed(tr, [_meas(sim, i) for i in range(10)])
+    f = _model_forecast(sim, 11, base=9)
+    f.horizon = horizon
+    assert tr.process(f).rejected == cause
 
 
 def test_forecast_of_the_same_or_an_older_model_for_a_fused_epoch_is_stale():
