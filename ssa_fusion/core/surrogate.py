@@ -9,6 +9,11 @@ trained on the buffer up to that measurement, and a real measurement that ends a
 releases the forecasts still owed for the epochs before it. This is what makes live runs
 and offline replays give the same forecasts.
 
+When a real measurement ends a gap, the gap's epochs are filled in the buffer with the
+forecasts issued for them (`_fill_gap`), so the next fit still sees a regular window: with
+372 delays a fit needs 746 regular samples (6.2 h at 30 s), and without the fill a second
+outage within that time would get no forecasts at all.
+
 Each forecast carries the covariance Var(e(h)) of paper section 4 (Var(e) = R + A E[zz^T] A^T):
 the in-sample error of h-step forecasts against the *measured* samples, so it already
 contains the sensor noise R once; it is floored at R (PSD sense) and grows with h.
@@ -174,6 +179,8 @@ class Surrogate:
         owed = self.due(m.t - 1e-9 * max(1.0, abs(m.t)), _closing=True)
         if last is not None and m.kind != last.kind:
             self.reset()
+        elif last is not None:
+            self._fill_gap(last, m)
         self._buf.append(m)
         while self._buf and self._buf[0].t < m.t - self.config.buffer_s:
             self._buf.popleft()
@@ -217,6 +224,29 @@ class Surrogate:
             ))
         self._emitted = n_due
         return out
+
+    def _fill_gap(self, last: Measurement, m: Measurement) -> None:
+        """Fill the missed epochs between `last` and the real measurement `m` that ends a gap
+        with this gap's forecasts (source FORECAST), so that the buffer stays at a fixed
+        cadence and the next gap can still be fitted on the whole window. Nothing is filled
+        if m is off the cadence grid, the gap outlasted the forecasts, or a forecast is not a
+        possible measurement; the fit then keeps the regular tail after the gap."""
+        dt = self.cadence()
+        steps = (m.t - last.t) / dt if math.isfinite(dt) and dt > 0 else math.nan
+        n_miss = round(steps) - 1 if math.isfinite(steps) else 0
+        if n_miss < 1 or abs(steps - round(steps)) > 1e-3 or self._forecast is None:
+            return
+        if n_miss > self._forecast.shape[1]:
+            return
+        z = self._forecast[:, :n_miss]
+        if last.kind == RANGE_AZ_EL and (
+                (z[0] < 0.0).any() or (np.abs(z[2]) > 0.5 * math.pi).any()):
+            return
+        for k in range(1, n_miss + 1):
+            self._buf.append(Measurement(
+                t=last.t + k * dt, z=z[:, k - 1].copy(), R=self._cov[k - 1], kind=last.kind,
+                source=FORECAST, object_id=last.object_id, frame_id=last.frame_id,
+                horizon=k * dt))
 
     # ----------------------------------------------------------------------------------
     def _ensure_forecast(self, n_steps: int) -> bool:
@@ -298,4 +328,7 @@ class Surrogate:
             self._model = None
             return
         self.fits += 1
-        self.status = f"fitted on {Z.shape[1]} samples, rank {self._model.rank_}"
+        filled = sum(b.source == FORECAST for b in list(self._buf)[-Z.shape[1]:])
+        self.status = (f"fitted on {Z.shape[1]} samples"
+                       + (f" ({filled} of them forecasts filling a gap)" if filled else "")
+                       + f", rank {self._model.rank_}")

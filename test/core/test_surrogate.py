@@ -250,13 +250,15 @@ def test_constant_data_no_forecast_status_says_why():
 def test_gap_inside_buffer_keeps_regular_tail_or_says_why():
     sim = _sim()
     sur = Surrogate(_config())
-    for i in list(range(0, 200)) + list(range(210, 260)):  # only 50 regular samples at the end
+    # too few samples before the hole to forecast it (so it is not filled), and only 50
+    # regular samples after it
+    for i in list(range(0, 100)) + list(range(110, 160)):
         sur.add(_meas(sim, i, R_FREE))
-    assert sur.due(float(sim.t[259]) + 10 * DT) == []
+    assert sur.due(float(sim.t[159]) + 10 * DT) == []
     assert "cadence" in sur.status
-    for i in range(260, 340):  # 130 regular samples now: enough for 60 delays
+    for i in range(160, 240):  # 130 regular samples now: enough for 60 delays
         sur.add(_meas(sim, i, R_FREE))
-    assert len(sur.due(float(sim.t[339]) + 10.6 * DT)) == 10
+    assert len(sur.due(float(sim.t[239]) + 10.6 * DT)) == 10
     assert sur.status.startswith("fitted on 130 samples")
 
 
@@ -340,3 +342,35 @@ def test_lifted_forecast_covariance_is_not_the_lifted_noise():
     err[:, 1] = (err[:, 1] + math.pi) % (2 * math.pi) - math.pi
     nees = [e @ np.linalg.solve(m.R, e) for e, m in zip(err, got, strict=True)]
     assert np.mean(nees[:10]) < 3 * 3.0  # not overconfident where it is trusted most
+
+
+# ------------------------------------------------------------------------------ second gap
+def test_a_second_gap_soon_after_the_first_is_still_forecast():
+    """Noise-free ISS positions: 360 samples, a 20-epoch gap, 60 samples, a second gap. The
+    regular stretch after the first gap (60) is shorter than a fit needs (2 x 60 + 2); the
+    first gap's forecasts fill its epochs in the buffer, so the second gap is forecast from
+    the whole window, as accurately as the first."""
+    sim = _sim()
+    sur = Surrogate(_config())
+    _track(sur, sim, R=R_FREE)
+    gap1, back = range(TRACK_N, TRACK_N + 20), range(TRACK_N + 20, TRACK_N + 80)
+    owed = []
+    for i in back:
+        owed += sur.add(_meas(sim, i, R_FREE))
+    assert [m.t for m in owed] == [float(sim.t[i]) for i in gap1]
+    got = sur.due(float(sim.t[back[-1]]) + 30.6 * DT)
+    assert len(got) == 30 and "forecasts filling a gap" in sur.status
+    err = np.linalg.norm(np.array([m.z for m in got]) - sim.z_true[back[-1] + 1:back[-1] + 31],
+                         axis=1)
+    assert err.max() < 1.0  # km, as the one-orbit accuracy test
+
+
+def test_a_gap_longer_than_the_forecasts_is_not_filled():
+    sim = _sim()
+    sur = Surrogate(_config(max_horizon_s=10 * DT))
+    _track(sur, sim, R=R_FREE)
+    for i in range(TRACK_N + 20, TRACK_N + 30):  # 20 missed epochs, only 10 forecast
+        sur.add(_meas(sim, i, R_FREE))
+    assert not any(m.source == FORECAST for m in sur._buf)
+    assert sur.due(float(sim.t[TRACK_N + 29]) + 3 * DT) == []
+    assert "fixed cadence" in sur.status
