@@ -22,14 +22,18 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a source checkout
 
-from ssa_fusion.core import scenarios
-from ssa_fusion.core.hankel_dmd import HankelDMD
-from ssa_fusion.core.simulate import simulate
-from ssa_fusion.core.surrogate import EciLift
+from ssa_fusion import limit_blas_threads
+
+limit_blas_threads()  # before numpy: the nodes' round-off
+
+import numpy as np  # noqa: E402
+
+from ssa_fusion.core import scenarios  # noqa: E402
+from ssa_fusion.core.hankel_dmd import HankelDMD  # noqa: E402
+from ssa_fusion.core.simulate import simulate  # noqa: E402
+from ssa_fusion.core.surrogate import EciLift  # noqa: E402
 
 
 def holdout_rms(s: scenarios.Scenario, seed: int, delays: list[int]) -> list[float]:

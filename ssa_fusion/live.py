@@ -29,7 +29,7 @@ LIVE_ROOT = Path("out/live")
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", default=scenarios.DEFAULT_LIVE.name, choices=LIVE_SCENARIOS)
     p.add_argument("--time-scale", type=positive_float, default=1000.0,
-                   help="sim seconds per wall second (default 500)")
+                   help="sim seconds per wall second (default 1000)")
     p.add_argument("--bag", type=Path, default=None,
                    help="bag directory to record (default: OUT/bag)")
     p.add_argument("--out", type=Path, default=None,

@@ -118,7 +118,7 @@ def replay_offline(stream: list[bagio.BagMessage], s: scenarios.Scenario) -> Off
     """Surrogate + filter through the core over the bag's messages in log-time order."""
     tracker = make_tracker(s)
     # Forecasts always come from a fit on the buffer up to the last real measurement, so the
-    # live node's periodic refits (kept for readiness) change nothing and are skipped here.
+    # live node's optional periodic refits (retrain_period) would change nothing here.
     surrogate = make_surrogate(s, retrain_period_s=math.inf, grace=LIVE_SURROGATE.grace,
                                cadence_s=0.0)
     result = OfflineResult()

@@ -142,8 +142,8 @@ HALO_PERIOD = 2.17831
 # on the training window only, by `bench/holdout_delays.py` (fit on all but the last gap
 # length of the window, forecast that stretch, error against its measurements): two
 # periods for the ISS (372) and Molniya (144), one period for the halo orbit (200); the
-# pendulum's 60 and Van der Pol's 100 are at or within round-off of their holdout minimum.
-# Never on the gap.
+# pendulum's 60 is its holdout minimum; Van der Pol keeps 100 (100-200 all forecast to
+# ~1e-6, far below what its placeholder error lets show). Never on the gap.
 _ISS = dict(
     x0=_iss_state(), placeholder="kepler", cadence_s=30.0,
     track_s=30.0 * round(10 * ISS_PERIOD_S / 30.0), gap_s=186 * 30.0,
