@@ -262,7 +262,7 @@ def add_arguments(parser) -> None:
                         help="output directory (default out/reproduce)")
     parser.add_argument("--seed", type=int, default=1, help="noise and Monte Carlo seed")
     parser.add_argument("--quick", action="store_true",
-                        help="shorter windows and fewer runs (about 20 s; the shorter "
+                        help="shorter windows and fewer runs (about 45 s; the shorter "
                              "training windows miss some targets the full run meets)")
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     parser.add_argument("--no-studies", action="store_true",
