@@ -35,12 +35,13 @@ def _pointwise_error(x_hat: np.ndarray, x_true: np.ndarray, pos_max: float,
 
 
 def error_plot(name: str, sim, arms: dict, path: Path, time_unit: str) -> Path:
-    """Pointwise normalised error (the summand of epsilon) of every arm against time."""
+    """Pointwise normalised error (the summand of epsilon) of every arm against time;
+    `time_unit` "h" (sim seconds shown in hours) or the label of the sim's own unit."""
     d = sim.x.shape[1] // 2
     gap = sim.gap_index
     pos_max = np.max(np.linalg.norm(sim.x[gap, :d], axis=1))
     vel_max = np.max(np.linalg.norm(sim.x[gap, d:], axis=1))
-    scale, unit = (3600.0, "h") if time_unit == "h" else (1.0, "s")
+    scale, unit = (3600.0, "h") if time_unit == "h" else (1.0, time_unit)
     fig, ax = plt.subplots(figsize=(8, 4.2))
     for key, arm in arms.items():
         e = _pointwise_error(arm.x, sim.x[arm.idx], pos_max, vel_max)
@@ -67,7 +68,7 @@ def sigma_plot(name: str, sim, arm, path: Path, time_unit: str) -> Path:
     idx = arm.idx[keep]
     err = arm.x[keep] - sim.x[idx]
     sig = np.sqrt(np.einsum("kii->ki", arm.P[keep]))
-    scale, unit = (3600.0, "h") if time_unit == "h" else (1.0, "s")
+    scale, unit = (3600.0, "h") if time_unit == "h" else (1.0, time_unit)
     t = (sim.t[idx] - sim.t[0]) / scale
     names = STATE_NAMES.get(n, [f"x{i}" for i in range(n)])
     rows = (n + 1) // 2

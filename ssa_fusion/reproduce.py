@@ -105,7 +105,8 @@ def run_one(s: scenarios.Scenario, seed: int, nees_runs: int, out: Path, plots: 
     r["targets"] = targets(s.name, r)
     if plots:
         from ssa_fusion import plots as pl
-        unit = "h" if s.is_orbit else "s"
+        # orbits in hours; the CR3BP runs on its nondimensional time unit (TU)
+        unit = "h" if s.is_orbit else ("TU" if s.truth == "cr3bp" else "s")
         files = [pl.error_plot(s.name, sim, arms, out / f"{s.name}_error.png", unit).name]
         if r["noisy"]:
             files.append(pl.sigma_plot(s.name, sim, arms["dmd_ekf"],
