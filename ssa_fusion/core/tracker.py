@@ -43,6 +43,7 @@ Placeholder = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
 
 HALF_PI = 0.5 * math.pi
 
+
 def _base(f: Measurement) -> float:
     """Epoch of the last real measurement a forecast's model was trained on."""
     return f.t - f.horizon
