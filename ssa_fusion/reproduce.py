@@ -75,9 +75,9 @@ def settings_of(s: scenarios.Scenario, sim) -> dict:
         "rank": s.rank if s.rank is not None else f"auto (SVHT, <= {HankelDMD(1).max_rank})",
         "surrogate_observable": "ECI position from range/az/el" if s.lift == "eci"
         else "measurement",
-        "forecast_covariance": (f"k^{sc.correlation_power:g} * Var(e(k)), Var(e) >= R "
-                                "(k-th forecast of the gap)") if sc.inflate_correlated
-        else "Var(e(k)), Var(e) >= R",
+        "forecast_covariance": (f"R + k^{sc.correlation_power:g} * D(k), Var(e(k)) = R + D(k), "
+                                "D >= 0 (k-th forecast of the gap)") if sc.inflate_correlated
+        else "Var(e(k)) = R + D(k), D >= 0",
         "whitened": bool(sc.whiten and sc.lift is None and s.kind != 1
                          and np.all(sim.sigma > 0)),
         "iod_samples": s.iod_samples,

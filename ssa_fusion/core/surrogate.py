@@ -28,20 +28,24 @@ Optionally (`SurrogateConfig.lift`) the DMD learns a *lifted* observable instead
 measurement: for range/az/el from a known station, `EciLift` turns each measurement into the
 ECI position it implies (station position + line of sight, no dynamics), Hankel-DMD learns
 and forecasts that (nearly linear, like the position scenarios), and each forecast is mapped
-back to range/az/el with its covariance pushed through the Jacobian (J C J^T). The filter
-still receives range/az/el forecasts.
+back to range/az/el. Its covariance is measured in range/az/el too: the in-sample lifted
+predictions are mapped back at their own epochs and compared with what the sensor measured
+(`EciLift.residual`). The filter still receives range/az/el forecasts.
 
 Correlation (`SurrogateConfig.inflate_correlated`, default on): all forecasts of one gap come
-from one model fitted on one buffer, so their errors are nearly the same systematic error,
-not independent draws. Fused as independent measurements, k of them would shrink the
-filter's covariance k-fold while the error stays (NEES of hundreds). The k-th forecast
-after the last real measurement therefore carries k * Var(e(k)) (`correlation_power` p
-gives k^p * Var(e(k)); p = 1 by default): the filter's covariance grows through the gap
-instead of pretending forecasts are fresh measurements. With p = 1 the information of K
-forecasts still grows like ln K; p = 2 bounds it (sum 1/k^2 < 1.7) but was not better in
-the experiments (see docs/RESULTS.md), and modelling the common error as a random-walk bias
-state in the EKF was tried and rejected (the DMD error oscillates with the orbit, a
-random walk does not, and the filter became grossly overconfident).
+from one model fitted on one buffer, so their model errors are nearly the same systematic
+error, not independent draws. Fused as independent measurements, k of them would shrink the
+filter's covariance k-fold while the error stays (NEES of hundreds). Of Var(e(k)) = R + D(k)
+(sensor noise R, model part D(k) >= 0), only D is that common error: the in-sample noise R is
+independent from epoch to epoch. The k-th forecast after the last real measurement therefore
+carries R + k * D(k) (`correlation_power` p gives R + k^p * D(k); p = 1 by default): the
+filter's covariance grows through the gap as far as the model error says, while a forecast
+whose model error is small against R still counts as much as the measurement it replaces.
+Scaling all of Var(e(k)) by k (until session 4) also discounted R: iss_j2_rae forecasts,
+2-7x better than the sensor in angle, were fused as if 14-20x worse at the end of the gap. p = 2 was
+not better in the experiments (see docs/RESULTS.md), and modelling the common error as a
+random-walk bias state in the EKF was tried and rejected (the DMD error oscillates with the
+orbit, a random walk does not, and the filter became grossly overconfident).
 """
 
 from __future__ import annotations
@@ -70,8 +74,9 @@ class SurrogateConfig:
     cadence_s : expected measurement interval (0: the median interval of the buffer);
     grace : fraction of a cadence after an epoch before it counts as missed;
     lift : optional observable map (e.g. `EciLift`) the DMD learns instead of z (None: z);
-    inflate_correlated : scale the k-th forecast's covariance of a gap by k (see below);
-    correlation_power : the exponent p of that scaling (k^p);
+    inflate_correlated : scale the model part D of the k-th forecast's covariance of a gap
+    by k (R + k D, see below);
+    correlation_power : the exponent p of that scaling (R + k^p D);
     whiten : learn noisy channels divided by their noise sigma (see below)."""
 
     buffer_s: float = 21600.0
@@ -273,13 +278,14 @@ class Surrogate:
             w = self._scale
             self._forecast = self._forecast * w[:, None]
             self._cov = self._cov * np.outer(w, w)[None]
-        # Var(e) >= R (paper section 4): floor at the sensor noise in the PSD sense
+        # Var(e) = R + D (paper section 4): R the sensor noise, D >= 0 (PSD) the model part
         R = np.asarray(self.last.R, dtype=float)
         w, v = np.linalg.eigh(self._cov - R)
-        self._cov = R + (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
+        D = (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
         if self.config.inflate_correlated:
             k = np.arange(1, n_steps + 1, dtype=float)
-            self._cov = self._cov * (k ** self.config.correlation_power)[:, None, None]
+            D = D * (k ** self.config.correlation_power)[:, None, None]
+        self._cov = R + D
         return True
 
     def _fit(self) -> None:
