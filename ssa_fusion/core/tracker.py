@@ -13,6 +13,11 @@ rules (DESIGN.md "Behaviour users rely on"):
   that already has a real measurement is dropped, and a real measurement for an epoch at or
   before fused forecasts rolls them back, fuses the real one and re-fuses the later forecasts
   whose model already knew it;
+* a gap's last forecasts may arrive after the real measurement that ends the gap (the
+  surrogate releases them when that measurement reaches it, on another topic): a forecast
+  for an epoch after the estimate the last real measurement was fused onto, from a model
+  that knew every real measurement before it, is fused at its epoch and that real
+  measurement re-fused after it, so the result does not depend on which arrived first;
 * the newest model wins: a forecast's model ended at its *base* epoch ``t - horizon`` (the
   last real measurement it was trained on). Forecasts from a model that ended before the
   last real measurement fused are dropped, and a forecast for an epoch at or before fused
@@ -121,6 +126,8 @@ class Tracker:
         self._iod: list[Measurement] = []
         # forecasts fused since the last real measurement: (measurement, state before it)
         self._forecasts: list[tuple[Measurement, _Snapshot]] = []
+        # the last real measurement fused, the state before it, and the real one before it
+        self._real: tuple[Measurement, _Snapshot, float] | None = None
 
     @property
     def initialised(self) -> bool:
@@ -207,6 +214,8 @@ class Tracker:
         return Outcome(estimate=self.estimate(source, result.nis))
 
     def _fuse_forecast(self, m: Measurement) -> Outcome:
+        if m.t < self.t_real and self._missed_before_real(m):
+            return self._insert_before_real(m)
         if m.t <= self.t_real:
             return Outcome(rejected="forecast_superseded",
                            detail=f"forecast for t={m.t} but a real measurement up to "
@@ -229,6 +238,32 @@ class Tracker:
             self._forecasts.append((m, before))
         else:
             self._restore(before)
+        return out
+
+    def _missed_before_real(self, f: Measurement) -> bool:
+        """Whether forecast f is for an epoch the sensor missed just before the last real
+        measurement, from a model that knew every real measurement before that epoch."""
+        if self._real is None:
+            return False
+        real, before, t_prev = self._real
+        return before.t < f.t < real.t and not _before(_base(f), t_prev)
+
+    def _insert_before_real(self, f: Measurement) -> Outcome:
+        """Fuse the late forecast f at its epoch, then the last real measurement and the
+        forecasts fused after it again, as if f had arrived first."""
+        real, before, t_prev = self._real
+        after = list(self._forecasts)  # all after `real`, from models that knew it
+        self._restore(before)
+        self.t_real, self._real = t_prev, None
+        snap = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy())
+        out = self._step(f, UPDATE_FORECAST)
+        if out.estimate is None:
+            self._restore(snap)
+        again = self._replace([], real, real.t, UPDATE_SENSOR)
+        out.rolled_back = 1 + len(after)
+        if again.estimate is not None:
+            out.refused.append(again.estimate)
+        self._refuse(after, out)
         return out
 
     def _fuse_real(self, m: Measurement) -> Outcome:
@@ -254,6 +289,7 @@ class Tracker:
         if out.estimate is None:
             self._restore(before)
         elif source == UPDATE_SENSOR:
+            self._real = (m, before, self.t_real)
             self.t_real = m.t
             self._forecasts = []  # nothing at or before a fused real measurement rolls back
         else:
