@@ -13,18 +13,22 @@ rules (DESIGN.md "Behaviour users rely on"):
   that already has a real measurement is dropped, and a real measurement for an epoch at or
   before fused forecasts rolls them back, fuses the real one and re-fuses the later forecasts
   whose model already knew it;
-* a gap's last forecasts may arrive after the real measurement that ends the gap (the
-  surrogate releases them when that measurement reaches it, on another topic): a forecast
-  for an epoch after the estimate the last real measurement was fused onto, from a model
-  that knew every real measurement before it, is fused at its epoch and that real
-  measurement re-fused after it, so the result does not depend on which arrived first;
 * the newest model wins: a forecast's model ended at its *base* epoch ``t - horizon`` (the
-  last real measurement it was trained on). Forecasts from a model that ended before the
-  last real measurement fused are dropped, and a forecast for an epoch at or before fused
-  forecasts of an older model rolls those back and replaces them. The surrogate re-forecasts
-  every missed epoch after each real measurement, so a forecast issued while a real
-  measurement was still on its way (a surrogate stalled by a fit at a high time scale) is
-  replaced, and the result equals the offline replay's;
+  last real measurement it was trained on). A forecast whose model ended before the last
+  real measurement preceding its epoch is dropped, and a forecast for an epoch at or before
+  fused forecasts of an older model rolls those back and replaces them. The surrogate
+  re-forecasts every missed epoch after each real measurement, so a forecast issued while a
+  real measurement was still on its way (a surrogate stalled by a fit at a high time scale)
+  is replaced, and the result equals the offline replay's;
+* late forecasts still count: the filter keeps what it fused since `HISTORY_REAL` real
+  measurements back, and a valid forecast for an epoch inside that history with nothing
+  fused at it yet (typically a gap's last forecasts, which the surrogate releases when the
+  measurement ending the gap reaches it, on another topic) is fused at its epoch, with
+  everything fused after it fused again. So the final state, and the last estimate published
+  per epoch, do not depend on the order in which forecasts and the real measurements after
+  them arrive (real measurements themselves must arrive in order); the exception is a real
+  measurement that passes the gate on one state and not on the other (its earlier estimate
+  then stays published);
 * `reset()` forgets everything (a backwards clock jump).
 
 It is the same code live (filter node) and offline (reproduce, replay), so both give the
@@ -33,6 +37,7 @@ same estimates for the same input sequence.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -86,9 +91,10 @@ class TrackerConfig:
 @dataclass
 class Outcome:
     """What `Tracker.process` did: `estimate` when fused, else `rejected` (a cause key) and
-    `detail` (a sentence for the log). `rolled_back` counts forecasts undone by a real
-    measurement or a newer model's forecast; `refused` lists the forecasts re-fused after it
-    (also when it was itself rejected: they are new estimates all the same)."""
+    `detail` (a sentence for the log). `rolled_back` counts the fused forecasts undone to put
+    this measurement in front of them; `refused` lists the estimates of the measurements
+    (forecasts, and real ones after a late forecast) fused again after it, also when it was
+    itself rejected: they are new estimates all the same."""
 
     estimate: StateEstimate | None = None
     rejected: str = ""
@@ -102,6 +108,22 @@ class _Snapshot:
     t: float
     x: np.ndarray
     P: np.ndarray
+
+
+@dataclass
+class _Fused:
+    """A measurement the filter fused, the state before it and the last real epoch then."""
+
+    m: Measurement
+    before: _Snapshot
+    t_real: float
+
+
+HISTORY_REAL = 8
+"""Real measurements back to which the filter keeps its fused steps, so that a forecast that
+arrives after the real measurements that followed its epoch (a gap's last forecasts, which the
+surrogate releases when the measurement ending the gap reaches it) can still go in front of
+them; 8 cadences are 0.24 s of wall time at 1000x real time."""
 
 
 class Tracker:
@@ -124,10 +146,8 @@ class Tracker:
         self.t = -math.inf
         self.t_real = -math.inf
         self._iod: list[Measurement] = []
-        # forecasts fused since the last real measurement: (measurement, state before it)
-        self._forecasts: list[tuple[Measurement, _Snapshot]] = []
-        # the last real measurement fused, the state before it, and the real one before it
-        self._real: tuple[Measurement, _Snapshot, float] | None = None
+        # the steps fused since `HISTORY_REAL` real measurements back, oldest first
+        self._log: list[_Fused] = []
 
     @property
     def initialised(self) -> bool:
@@ -214,57 +234,32 @@ class Tracker:
         return Outcome(estimate=self.estimate(source, result.nis))
 
     def _fuse_forecast(self, m: Measurement) -> Outcome:
-        if m.t < self.t_real and self._missed_before_real(m):
-            return self._insert_before_real(m)
-        if m.t <= self.t_real:
-            return Outcome(rejected="forecast_superseded",
-                           detail=f"forecast for t={m.t} but a real measurement up to "
-                                  f"t={self.t_real} was fused")
         base = _base(m)
-        if _before(base, self.t_real):
+        if m.t > self.t:
+            if _before(base, self.t_real):
+                return Outcome(rejected="forecast_superseded",
+                               detail=f"forecast for t={m.t} from a model that ended at "
+                                      f"t={base}, before the real measurement at t={self.t_real}")
+            return self._insert(len(self._log), m, UPDATE_FORECAST)
+        # an epoch at or before the filter's: a late forecast or a newer model's
+        k = self._position(m.t)
+        at = self._log[k] if k < len(self._log) else None
+        if at is not None and at.m.t == m.t and at.m.source != FORECAST:
+            return Outcome(rejected="forecast_superseded",
+                           detail=f"forecast for t={m.t}, which has a real measurement")
+        if at is None or not at.before.t < m.t:
+            return Outcome(rejected="forecast_superseded",
+                           detail=f"forecast for t={m.t} is older than the filter's history "
+                                  f"(back to t={self._log[0].m.t if self._log else self.t})")
+        if _before(base, at.t_real):  # the last real measurement before m.t
             return Outcome(rejected="forecast_superseded",
                            detail=f"forecast for t={m.t} from a model that ended at t={base}, "
-                                  f"before the real measurement at t={self.t_real}")
-        if m.t <= self.t:
-            later = [(f, s) for f, s in self._forecasts if f.t >= m.t]
-            if not any(_before(_base(f), base) for f, _ in later):
-                return Outcome(rejected="rejected_stale",
-                               detail=f"forecast t={m.t} <= t={self.t}")
-            # a newer model's forecast replaces an older model's at and after its epoch
-            return self._replace(later, m, base)
-        before = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy())
-        out = self._step(m, UPDATE_FORECAST)
-        if out.estimate is not None:
-            self._forecasts.append((m, before))
-        else:
-            self._restore(before)
-        return out
-
-    def _missed_before_real(self, f: Measurement) -> bool:
-        """Whether forecast f is for an epoch the sensor missed just before the last real
-        measurement, from a model that knew every real measurement before that epoch."""
-        if self._real is None:
-            return False
-        real, before, t_prev = self._real
-        return before.t < f.t < real.t and not _before(_base(f), t_prev)
-
-    def _insert_before_real(self, f: Measurement) -> Outcome:
-        """Fuse the late forecast f at its epoch, then the last real measurement and the
-        forecasts fused after it again, as if f had arrived first."""
-        real, before, t_prev = self._real
-        after = list(self._forecasts)  # all after `real`, from models that knew it
-        self._restore(before)
-        self.t_real, self._real = t_prev, None
-        snap = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy())
-        out = self._step(f, UPDATE_FORECAST)
-        if out.estimate is None:
-            self._restore(snap)
-        again = self._replace([], real, real.t, UPDATE_SENSOR)
-        out.rolled_back = 1 + len(after)
-        if again.estimate is not None:
-            out.refused.append(again.estimate)
-        self._refuse(after, out)
-        return out
+                                  f"before the real measurement at t={at.t_real}")
+        if at.m.t == m.t and not _before(_base(at.m), base):
+            return Outcome(rejected="rejected_stale",
+                           detail=f"forecast t={m.t}: a forecast of the same or a newer model "
+                                  f"was fused for it")
+        return self._insert(k, m, UPDATE_FORECAST)
 
     def _fuse_real(self, m: Measurement) -> Outcome:
         if m.t < self.t_real:
@@ -272,43 +267,72 @@ class Tracker:
                            detail=f"t={m.t} older than the last real measurement t={self.t_real}")
         if m.t == self.t_real:
             return Outcome(rejected="rejected_duplicate", detail=f"second measurement at t={m.t}")
-        later = [(f, s) for f, s in self._forecasts if f.t >= m.t]
-        return self._replace(later, m, m.t, UPDATE_SENSOR)
+        return self._insert(self._position(m.t), m, UPDATE_SENSOR)
 
-    def _replace(self, later: list[tuple[Measurement, _Snapshot]], m: Measurement,
-                 base: float, source: int = UPDATE_FORECAST) -> Outcome:
-        """Roll back the fused forecasts `later` (epochs at or after m.t), fuse m, then
-        re-fuse those of them after m.t whose model ended at or after `base`; the others
-        wait for the surrogate's newer forecasts, which knew m. That holds even if m itself
-        is rejected (the surrogate has buffered it all the same), so the filter ends as in
-        the offline order; `refused` then still lists the re-fused forecasts."""
-        if later:
-            self._restore(later[0][1])
+    def _position(self, t: float) -> int:
+        """Index of the first fused step at or after epoch t (len(log) if none)."""
+        return bisect.bisect_left([e.m.t for e in self._log], t)
+
+    def _insert(self, k: int, m: Measurement, source: int) -> Outcome:
+        """Undo the fused steps from index k on (epochs at or after m.t), fuse m, then fuse
+        those steps again: every real measurement after m.t, and every forecast after m.t
+        whose model knew what m says (a real m: trained on it; a forecast m: a model no
+        older than m's). The dropped forecasts wait for the surrogate's newer ones. That
+        holds even if m itself is rejected (the surrogate has buffered it all the same), so
+        the filter ends as in the offline order; `refused` then still lists the re-fused."""
+        tail = self._log[k:]
+        if tail:
+            self._rollback(k)
         before = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy())
+        t_real = self.t_real
         out = self._step(m, source)
         if out.estimate is None:
             self._restore(before)
-        elif source == UPDATE_SENSOR:
-            self._real = (m, before, self.t_real)
-            self.t_real = m.t
-            self._forecasts = []  # nothing at or before a fused real measurement rolls back
         else:
-            self._forecasts.append((m, before))
-        kept = [(f, s) for f, s in later if f.t > m.t and not _before(_base(f), base)]
-        out.rolled_back = len(later)
-        self._refuse(kept, out)
+            self._append(_Fused(m, before, t_real))
+        base = m.t if source == UPDATE_SENSOR else _base(m)
+        out.rolled_back = sum(e.m.source == FORECAST for e in tail)
+        for e in tail:
+            if e.m.t <= m.t or (e.m.source == FORECAST and _before(_base(e.m), base)):
+                continue
+            again = self._refuse(e)
+            if again is not None:
+                out.refused.append(again)
         return out
 
-    def _refuse(self, forecasts: list[tuple[Measurement, _Snapshot]], out: Outcome) -> None:
-        for f, _ in forecasts:
-            again = self._fuse_forecast(f)
-            if again.estimate is not None:
-                out.refused.append(again.estimate)
+    def _refuse(self, e: _Fused) -> StateEstimate | None:
+        """Fuse an undone step again (it was valid; only the gate can refuse it now)."""
+        before = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy())
+        t_real = self.t_real
+        source = UPDATE_FORECAST if e.m.source == FORECAST else UPDATE_SENSOR
+        out = self._step(e.m, source)
+        if out.estimate is None:
+            self._restore(before)
+            return None
+        self._append(_Fused(e.m, before, t_real))
+        return out.estimate
+
+    def _append(self, e: _Fused) -> None:
+        """Log a fused step; a real one also advances t_real and ends the history that lies
+        more than `HISTORY_REAL` real measurements back."""
+        self._log.append(e)
+        if e.m.source == FORECAST:
+            return
+        self.t_real = e.m.t
+        reals = [i for i, f in enumerate(self._log) if f.m.source != FORECAST]
+        if len(reals) > HISTORY_REAL:
+            del self._log[:reals[-HISTORY_REAL]]
+
+    def _rollback(self, k: int) -> None:
+        """Back to the state before the k-th fused step; the steps from k on are forgotten."""
+        e = self._log[k]
+        self._restore(e.before)
+        self.t_real = e.t_real
+        del self._log[k:]
 
     def _restore(self, s: _Snapshot) -> None:
         self.t = s.t
         self.ekf.x, self.ekf.P = s.x.copy(), s.P.copy()
-        self._forecasts = [(f, b) for f, b in self._forecasts if f.t <= s.t]
 
     # ----------------------------------------------------------------------------------
     def _initialise(self, m: Measurement) -> Outcome:

@@ -30,7 +30,7 @@ from scipy.stats import chi2
 from ssa_fusion.core import iod
 from ssa_fusion.core import scenarios as sc
 from ssa_fusion.core.simulate import Simulation, simulate
-from ssa_fusion.core.tracker import Outcome, Tracker, TrackerConfig
+from ssa_fusion.core.tracker import HISTORY_REAL, Outcome, Tracker, TrackerConfig
 from ssa_fusion.core.types import (
     FORECAST,
     RANGE_AZ_EL,
@@ -484,24 +484,28 @@ def test_forecasts_issued_while_a_real_measurement_was_late_are_replaced():
 @pytest.mark.parametrize("order", [
     ("f11", "f12", "r13", "f14"),  # the offline order (reproduce)
     ("r13", "f11", "f12", "f14"),  # the gap's last forecasts reach the filter late
-    ("f11", "r13", "f14", "f12"),
+    ("f11", "r13", "f14", "f12"),  # ... after a forecast of the model that knew 13
+    ("r13", "f12", "f11", "f14"),  # ... in reverse order
+    ("r13", "f14", "r15", "f11", "f12"),  # ... after the next real measurement
 ])
 def test_a_gaps_last_forecasts_count_whichever_order_they_arrive_in(order):
     """Epochs 11-12 are missed; the surrogate (model up to 10) releases their forecasts when
     the real measurement 13 reaches it, and publishes them on another topic than 13's, so
-    live they can reach the filter after 13, and after forecast 14 of the model that knew
-    13. Every order ends where the offline order does, and the last estimate published per
-    epoch (what a recorder keeps) is the offline one."""
+    live they can reach the filter after 13, after forecast 14 of the model that knew 13,
+    or after the next real measurement. Every order ends where the offline order does, and
+    the last estimate published per epoch (what a recorder keeps) is the offline one."""
     sim = _sim("iss_j2_rae")
     msgs = {"f11": _model_forecast(sim, 11, base=10, bias=5.0),
             "f12": _model_forecast(sim, 12, base=10, bias=5.0),
-            "r13": _meas(sim, 13), "f14": _model_forecast(sim, 14, base=13)}
+            "r13": _meas(sim, 13), "f14": _model_forecast(sim, 14, base=13),
+            "r15": _meas(sim, 15)}
     history = [_meas(sim, i) for i in range(11)]
     offline, live = _tracker(sim), _tracker(sim)
     _feed(offline, history)
     want = {}
-    for k in ("f11", "f12", "r13", "f14"):
-        want[k] = offline.process(msgs[k]).estimate
+    for k in sorted(order, key=lambda k: int(k[1:])):
+        e = offline.process(msgs[k]).estimate
+        want[e.t] = e
     _feed(live, history)
     got = {}
     for k in order:
@@ -510,23 +514,31 @@ def test_a_gaps_last_forecasts_count_whichever_order_they_arrive_in(order):
         for e in (out.estimate, *out.refused):
             got[e.t] = e
     _assert_same_filter(live, offline)
-    for e in want.values():
-        np.testing.assert_allclose(got[e.t].x, e.x, rtol=1e-12)
-        assert got[e.t].update_source == e.update_source
+    assert sorted(got) == sorted(want)
+    for t, e in want.items():
+        np.testing.assert_allclose(got[t].x, e.x, rtol=1e-12)
+        assert got[t].update_source == e.update_source
 
 
-def test_a_late_forecast_older_than_the_gap_is_still_dropped():
-    """Only forecasts for epochs after the estimate the real measurement was fused onto
-    are put back in front of it: not a second forecast for an epoch already fused, nor a
-    forecast of a model that missed a real measurement before its epoch."""
+def test_a_late_forecast_is_dropped_when_it_cannot_count():
+    """A late forecast goes in front of later steps only if its epoch has no real measurement
+    and no forecast of the same or a newer model yet, its model knew every real measurement
+    before its epoch, and the filter still holds the steps after it (HISTORY_REAL real
+    measurements back)."""
     sim = _sim("iss_j2_rae")
     tr = _tracker(sim)
     _feed(tr, [_meas(sim, i) for i in range(11)])
     tr.process(_model_forecast(sim, 11, base=10))
     tr.process(_meas(sim, 13))
     before = _state(tr)
-    assert tr.process(_model_forecast(sim, 11, base=10)).rejected == "forecast_superseded"
+    assert tr.process(_model_forecast(sim, 11, base=10)).rejected == "rejected_stale"
     assert tr.process(_model_forecast(sim, 12, base=9)).rejected == "forecast_superseded"
+    assert tr.process(_model_forecast(sim, 13, base=10)).rejected == "forecast_superseded"
+    _assert_same_state(_state(tr), before)
+    _feed(tr, [_meas(sim, i) for i in range(14, 14 + HISTORY_REAL)])
+    before = _state(tr)
+    out = tr.process(_model_forecast(sim, 12, base=10))
+    assert out.rejected == "forecast_superseded" and "history" in out.detail
     _assert_same_state(_state(tr), before)
 
 
