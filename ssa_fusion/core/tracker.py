@@ -283,6 +283,21 @@ class Tracker:
         tail = self._log[k:]
         if tail:
             self._rollback(k)
+        out = self._fuse_step(m, source)
+        base = m.t if source == UPDATE_SENSOR else _base(m)
+        out.rolled_back = sum(e.m.source == FORECAST for e in tail)
+        for e in tail:
+            if e.m.t <= m.t or (e.m.source == FORECAST and _before(_base(e.m), base)):
+                continue
+            # it was valid before; only the gate can refuse it now
+            again = self._fuse_step(e.m, UPDATE_FORECAST if e.m.source == FORECAST
+                                    else UPDATE_SENSOR)
+            if again.estimate is not None:
+                out.refused.append(again.estimate)
+        return out
+
+    def _fuse_step(self, m: Measurement, source: int) -> Outcome:
+        """`_step`, logged when fused; the state is left unchanged when it is not."""
         before = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy())
         t_real = self.t_real
         out = self._step(m, source)
@@ -290,27 +305,7 @@ class Tracker:
             self._restore(before)
         else:
             self._append(_Fused(m, before, t_real))
-        base = m.t if source == UPDATE_SENSOR else _base(m)
-        out.rolled_back = sum(e.m.source == FORECAST for e in tail)
-        for e in tail:
-            if e.m.t <= m.t or (e.m.source == FORECAST and _before(_base(e.m), base)):
-                continue
-            again = self._refuse(e)
-            if again is not None:
-                out.refused.append(again)
         return out
-
-    def _refuse(self, e: _Fused) -> StateEstimate | None:
-        """Fuse an undone step again (it was valid; only the gate can refuse it now)."""
-        before = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy())
-        t_real = self.t_real
-        source = UPDATE_FORECAST if e.m.source == FORECAST else UPDATE_SENSOR
-        out = self._step(e.m, source)
-        if out.estimate is None:
-            self._restore(before)
-            return None
-        self._append(_Fused(e.m, before, t_real))
-        return out.estimate
 
     def _append(self, e: _Fused) -> None:
         """Log a fused step; a real one also advances t_real and ends the history that lies
