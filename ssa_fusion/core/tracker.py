@@ -235,27 +235,21 @@ class Tracker:
 
     def _fuse_forecast(self, m: Measurement) -> Outcome:
         base = _base(m)
-        if m.t > self.t:
-            if _before(base, self.t_real):
-                return Outcome(rejected="forecast_superseded",
-                               detail=f"forecast for t={m.t} from a model that ended at "
-                                      f"t={base}, before the real measurement at t={self.t_real}")
-            return self._insert(len(self._log), m, UPDATE_FORECAST)
-        # an epoch at or before the filter's: a late forecast or a newer model's
         k = self._position(m.t)
-        at = self._log[k] if k < len(self._log) else None
+        at = self._log[k] if k < len(self._log) else None  # None: after every fused step
         if at is not None and at.m.t == m.t and at.m.source != FORECAST:
             return Outcome(rejected="forecast_superseded",
                            detail=f"forecast for t={m.t}, which has a real measurement")
-        if at is None or not at.before.t < m.t:
+        if m.t <= self.t and (at is None or not at.before.t < m.t):
             return Outcome(rejected="forecast_superseded",
                            detail=f"forecast for t={m.t} is older than the filter's history "
                                   f"(back to t={self._log[0].m.t if self._log else self.t})")
-        if _before(base, at.t_real):  # the last real measurement before m.t
+        t_prev = self.t_real if at is None else at.t_real  # the last real before m.t
+        if _before(base, t_prev):
             return Outcome(rejected="forecast_superseded",
                            detail=f"forecast for t={m.t} from a model that ended at t={base}, "
-                                  f"before the real measurement at t={at.t_real}")
-        if at.m.t == m.t and not _before(_base(at.m), base):
+                                  f"before the real measurement at t={t_prev}")
+        if at is not None and at.m.t == m.t and not _before(_base(at.m), base):
             return Outcome(rejected="rejected_stale",
                            detail=f"forecast t={m.t}: a forecast of the same or a newer model "
                                   f"was fused for it")
