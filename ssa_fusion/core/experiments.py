@@ -60,10 +60,11 @@ def make_tracker(s: Scenario) -> Tracker:
     return pipeline.make_tracker(s, object_id=s.name, iod_samples=s.iod_samples, gate=None)
 
 
-def make_surrogate(s: Scenario) -> Surrogate:
+def make_surrogate(s: Scenario, **overrides) -> Surrogate:
     """The scenario's surrogate, built as the live surrogate node builds it: trained on the
-    tracking window, one fit at the start of the gap, forecasts for every missed epoch."""
-    return pipeline.make_surrogate(s)
+    tracking window, one fit at the start of the gap, forecasts for every missed epoch.
+    `overrides`: `SurrogateConfig` fields for studies."""
+    return pipeline.make_surrogate(s, **overrides)
 
 
 def _measurement(s: Scenario, sim: Simulation, i: int) -> Measurement:
@@ -94,14 +95,16 @@ def run_hypothetical(s: Scenario, sim: Simulation) -> Arm:
     return _collect(est, s.n)
 
 
-def run_dmd_ekf(s: Scenario, sim: Simulation) -> tuple[Arm, Arm, list[Measurement]]:
+def run_dmd_ekf(s: Scenario, sim: Simulation, **surrogate_overrides
+                ) -> tuple[Arm, Arm, list[Measurement]]:
     """The DMD-EKF (surrogate forecasts fused through the gap) and the coasting EKF.
 
     A gap epoch without a usable forecast (the surrogate could not fit, or the filter
     refused the forecast) carries the filter's prediction, as the live filter publishes.
+    `surrogate_overrides`: `SurrogateConfig` fields for studies (none in the reproduction).
     Returns (dmd_ekf arm, ekf_coast arm, the forecasts the surrogate issued)."""
     tr = make_tracker(s)
-    su = make_surrogate(s)
+    su = make_surrogate(s, **surrogate_overrides)
     est: dict[int, object] = {}
     forecasts: list[Measurement] = []
     grace = su.config.grace

@@ -78,6 +78,9 @@ class SurrogateConfig:
     inflate_correlated : scale the model part D of the k-th forecast's covariance of a gap
     by k (R + k D, see below);
     correlation_power : the exponent p of that scaling (R + k^p D);
+    noise_share : the share a of the sensor noise R that a forecast's covariance keeps
+    (a R + k^p D); 1 is the paper's floor Var(e) >= R, lower values only for studies
+    (`bench/consistency_tradeoff.py`), in (0, 1];
     whiten : learn noisy channels divided by their noise sigma (see below)."""
 
     buffer_s: float = 21600.0
@@ -90,7 +93,12 @@ class SurrogateConfig:
     lift: EciLift | None = None
     inflate_correlated: bool = True
     correlation_power: float = 1.0
+    noise_share: float = 1.0
     whiten: bool = True
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.noise_share <= 1.0:
+            raise ValueError(f"noise_share must be in (0, 1], got {self.noise_share}")
 
 
 class EciLift:
@@ -286,7 +294,7 @@ class Surrogate:
         if self.config.inflate_correlated:
             k = np.arange(1, n_steps + 1, dtype=float)
             D = D * (k ** self.config.correlation_power)[:, None, None]
-        self._cov = R + D
+        self._cov = self.config.noise_share * R + D
         return True
 
     def _fit(self) -> None:

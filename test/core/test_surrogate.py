@@ -399,3 +399,25 @@ def test_only_the_model_error_is_scaled_through_the_gap():
     err[:, 1] = (err[:, 1] + math.pi) % (2 * math.pi) - math.pi
     nees = [e @ np.linalg.solve(m.R, e) for e, m in zip(err, got, strict=True)]
     assert np.mean(nees) < 3 * 3.0
+
+
+def test_noise_share_scales_only_the_sensor_noise_part():
+    """`noise_share` a (for studies) keeps a R of the sensor noise: the k-th forecast carries
+    a R + k D(k), with the same model part D(k) as the paper's a = 1."""
+    sim = _sim("iss_j2_pos_noisy")
+    full, part = Surrogate(_config()), Surrogate(_config(noise_share=0.25))
+    now = float(sim.t[TRACK_N - 1]) + (GAP_N + 0.6) * DT
+    _track(full, sim)
+    _track(part, sim)
+    a, b = full.due(now), part.due(now)
+    assert len(a) == len(b) == GAP_N
+    for fa, fb in zip(a, b, strict=True):
+        np.testing.assert_array_equal(fa.z, fb.z)
+        np.testing.assert_allclose(fb.R - 0.25 * sim.R, fa.R - sim.R, rtol=1e-9,
+                                   atol=1e-9 * sim.R.max())
+
+
+@pytest.mark.parametrize("share", [0.0, -0.5, 1.5, math.nan])
+def test_noise_share_outside_zero_one_is_refused(share):
+    with pytest.raises(ValueError, match="noise_share"):
+        SurrogateConfig(noise_share=share)
