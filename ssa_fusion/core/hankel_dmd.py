@@ -93,6 +93,13 @@ def svht_rank(sigma: ArrayLike, rows: int, cols: int) -> int:
     return max(1, int(np.count_nonzero(s > omega * np.median(s))))
 
 
+def psd_part(c: FloatArray) -> FloatArray:
+    """The positive semi-definite part of symmetric matrices c (k, n, n): their negative
+    eigenvalues set to zero."""
+    w, v = np.linalg.eigh(c)
+    return (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
+
+
 def _hankel(z: FloatArray, delays: int) -> FloatArray:
     """Time-delay matrix, PyDMD ordering: column j = [z_j; z_{j+1}; ...; z_{j+d-1}].
 
@@ -490,8 +497,7 @@ class HankelDMD:
         cov = 0.5 * (cov + cov.transpose(0, 2, 1))
         # Floor: C_h >= R (one-step residual covariance) in the PSD sense.
         r0 = self.residual_cov_ if residual is None else emp[0]
-        w, v = np.linalg.eigh(cov - r0)
-        cov = r0 + (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
+        cov = r0 + psd_part(cov - r0)
         # Non-decreasing trace: scale up any horizon that falls below the running max.
         tr = np.trace(cov, axis1=1, axis2=2)
         run = np.maximum.accumulate(tr)

@@ -59,7 +59,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .frames import razel_eci
-from .hankel_dmd import HankelDMD
+from .hankel_dmd import HankelDMD, psd_part
 from .iod import razel_to_eci
 from .measurement import RANGE_AZ_EL, RazelModel
 from .types import FORECAST, Measurement
@@ -289,8 +289,7 @@ class Surrogate:
             self._cov = self._cov * np.outer(w, w)[None]
         # Var(e) = R + D (paper section 4): R the sensor noise, D >= 0 (PSD) the model part
         R = np.asarray(self.last.R, dtype=float)
-        w, v = np.linalg.eigh(self._cov - R)
-        D = (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
+        D = psd_part(self._cov - R)
         if self.config.inflate_correlated:
             k = np.arange(1, n_steps + 1, dtype=float)
             D = D * (k ** self.config.correlation_power)[:, None, None]
