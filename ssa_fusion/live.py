@@ -18,6 +18,7 @@ from pathlib import Path
 from ssa_fusion import evaluate, report
 from ssa_fusion.cliargs import add_domain_id, positive_float
 from ssa_fusion.core import scenarios
+from ssa_fusion.core.types import KIND_NAMES
 from ssa_fusion.graph import Graph
 from ssa_fusion.readiness import READERS
 
@@ -71,13 +72,11 @@ def node_parameters(s: scenarios.Scenario, time_scale: float, seed: int,
               "wait_for": ["/ssa/measurement=3", "/ssa/forecast=2", "/ssa/estimate=1",
                            "/ssa/truth=1", "/ssa/withheld=1", "/clock=3"],
               "wait_for_readers": READERS}
+    stream = {"kind": KIND_NAMES[s.kind], "station": s.station or "columbus"}
     surrogate = {"use_sim_time": True, "buffer_length": s.buffer_s or s.track_s,
                  "delays": s.delays, "rank": s.rank or 0, "cadence": s.cadence_s,
-                 "max_horizon": s.gap_s + s.cadence_s, "lift": s.lift or "none",
-                 "station": s.station or "columbus"}
-    filt = {"use_sim_time": True,
-            "kind": "range_az_el" if s.kind == 1 else "position",
-            "station": s.station or "columbus",
+                 "max_horizon": s.gap_s + s.cadence_s, "lift": s.lift or "none", **stream}
+    filt = {"use_sim_time": True, **stream,
             "p0_sigma": [v * km for v in s.p0_sigma], "q": s.q * km * km,
             "iod_samples": s.iod_samples}
     recorder = {"use_sim_time": True, "bag": str(bag)}
@@ -128,7 +127,8 @@ def run(args: argparse.Namespace) -> int:
     report.write(data, ev, out)
     summary = {"scenario": s.name, "time_scale": args.time_scale, "wall_s": wall,
                "bag": str(bag), "epsilon": ev.epsilon, "nees_mean": ev.nees_mean,
-               "dmd_ekf_coverage": ev.coverage, "message_counts": data.counts}
+               "dmd_ekf_coverage": ev.coverage, "dmd_ekf_propagated_epochs": ev.propagated,
+               "message_counts": data.counts}
     (out / "live.json").write_text(json.dumps(summary, indent=2))
     print(f"\nrecorded {sum(data.counts.values())} messages to {bag} in {wall:.1f} s")
     print(evaluate.table(ev))

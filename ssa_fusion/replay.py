@@ -29,6 +29,7 @@ from ssa_fusion.cliargs import add_domain_id, positive_float
 from ssa_fusion.core import scenarios, types
 from ssa_fusion.core.pipeline import make_surrogate, make_tracker
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
+from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S, ahead_of_clock
 from ssa_fusion.qos import (
     TOPIC_CLOCK,
     TOPIC_ESTIMATE,
@@ -127,10 +128,13 @@ def replay_offline(stream: list[bagio.BagMessage], s: scenarios.Scenario) -> Off
     pool: dict[float, types.Measurement] = {}
     last_clock = -float("inf")
 
+    def count(cause: str) -> None:
+        result.rejected[cause] = result.rejected.get(cause, 0) + 1
+
     def fuse(m: types.Measurement, t_ns: int) -> None:
         out = tracker.process(m)
         if out.rejected:
-            result.rejected[out.rejected] = result.rejected.get(out.rejected, 0) + 1
+            count(out.rejected)
         for e in (out.estimate, *out.refused):
             if e is not None:
                 e.object_id = e.object_id or m.object_id
@@ -151,6 +155,10 @@ def replay_offline(stream: list[bagio.BagMessage], s: scenarios.Scenario) -> Off
         elif msg.topic == TOPIC_MEASUREMENT:
             m = messages.measurement_from_msg(msg.msg)
             if m.source != types.SENSOR:
+                continue
+            cause, _ = ahead_of_clock(m.t, last_clock, MAX_CLOCK_LEAD_S)
+            if cause:  # as the nodes refuse it against their /clock
+                count(cause)
                 continue
             if not recorded:  # no recorded forecast timing: release them by the clock
                 for f in surrogate.due(m.t):

@@ -49,6 +49,7 @@ def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
         "nees_mean": ev.nees_mean,
         "gap_epochs": len(ev.t),
         "dmd_ekf_coverage": ev.coverage,
+        "dmd_ekf_propagated_epochs": ev.propagated,
         "message_counts": data.counts,
     }
     (out / "report.json").write_text(json.dumps(summary, indent=2))

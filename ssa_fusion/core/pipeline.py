@@ -22,7 +22,7 @@ def make_surrogate(s: Scenario, **overrides) -> Surrogate:
     observable, retrain period)."""
     settings = dict(buffer_s=s.buffer_s or s.track_s, delays=s.delays, rank=s.rank,
                     cadence_s=s.cadence_s, max_horizon_s=s.gap_s + s.cadence_s,
-                    retrain_period_s=s.retrain_period_s,
+                    retrain_period_s=s.retrain_period_s, kind=s.kind, frame_id=s.station or "",
                     lift=EciLift(measurement_model(s)) if s.lift == "eci" else None)
     settings.update(overrides)
     return Surrogate(SurrogateConfig(**settings))

@@ -62,7 +62,8 @@ from .frames import razel_eci
 from .hankel_dmd import HankelDMD, psd_part
 from .iod import razel_to_eci
 from .measurement import RANGE_AZ_EL, RazelModel
-from .types import FORECAST, Measurement
+from .types import FORECAST, SENSOR, Measurement
+from .validation import OK, Problem, measurement_problem
 
 
 @dataclass
@@ -72,7 +73,13 @@ class SurrogateConfig:
     never); a gap always starts from a model fitted up to the last real measurement;
     delays, rank : Hankel-DMD settings (rank None: automatic);
     max_horizon_s : no forecast beyond this many s after the last real measurement;
-    cadence_s : expected measurement interval (0: the median interval of the buffer);
+    cadence_s : expected measurement interval (0: inferred from the last `CADENCE_SAMPLES`
+    intervals in the buffer, the mean of those within `jitter` of their median);
+    jitter : largest deviation of a sampling interval from the cadence, as a fraction of the
+    cadence, that still counts as the cadence (stamp jitter; such samples are fitted as if
+    on the grid); a larger one is a gap or irregular sampling, and a fit keeps what follows;
+    kind, frame_id : the only measurement kind and frame_id accepted (None / "": those of
+    the first measurement buffered);
     grace : fraction of a cadence after an epoch before it counts as missed;
     lift : optional observable map (e.g. `EciLift`) the DMD learns instead of z (None: z);
     inflate_correlated : scale the model part D of the k-th forecast's covariance of a gap
@@ -90,6 +97,9 @@ class SurrogateConfig:
     max_horizon_s: float = 7200.0
     cadence_s: float = 0.0
     grace: float = 0.5
+    jitter: float = 0.1
+    kind: int | None = None
+    frame_id: str = ""
     lift: EciLift | None = None
     inflate_correlated: bool = True
     correlation_power: float = 1.0
@@ -99,6 +109,8 @@ class SurrogateConfig:
     def __post_init__(self) -> None:
         if not 0.0 < self.noise_share <= 1.0:
             raise ValueError(f"noise_share must be in (0, 1], got {self.noise_share}")
+        if not 0.0 <= self.jitter < 0.5:
+            raise ValueError(f"jitter must be in [0, 0.5) of a cadence, got {self.jitter}")
 
 
 class EciLift:
@@ -142,6 +154,11 @@ refit of a 15 h buffer takes ~0.2 s, during which a node at 1000x real time fall
 behind its measurements)."""
 
 
+CADENCE_SAMPLES = 64
+"""Intervals whose median is the cadence when none is configured: recent enough to follow
+the stream, few enough to keep `add` and `due` O(1)."""
+
+
 class Surrogate:
     """Hankel-DMD forecaster of one measurement stream (see the module docstring)."""
 
@@ -155,6 +172,7 @@ class Surrogate:
     def reset(self) -> None:
         """Forget the buffer and the model (a backwards clock jump)."""
         self._buf: deque[Measurement] = deque()
+        self._dt = math.nan  # cadence inferred from the buffer (config.cadence_s == 0)
         self._model: HankelDMD | None = None
         self._model_t = -math.inf  # epoch of the last sample the model was trained on
         self._model_fit_at = -math.inf
@@ -168,36 +186,55 @@ class Surrogate:
         return self._buf[-1] if self._buf else None
 
     def cadence(self) -> float:
-        if self.config.cadence_s > 0:
-            return self.config.cadence_s
-        if len(self._buf) < 2:
-            return math.nan
-        t = np.array([m.t for m in self._buf])
-        return float(np.median(np.diff(t)))
+        """The measurement interval, s: configured, else inferred from the buffer."""
+        return self.config.cadence_s if self.config.cadence_s > 0 else self._dt
+
+    def _infer_cadence(self) -> None:
+        n = min(len(self._buf), CADENCE_SAMPLES + 1)
+        if n < 2:
+            self._dt = math.nan
+            return
+        d = np.diff([self._buf[-i].t for i in range(n, 0, -1)])
+        dt = np.median(d)
+        # the mean of the regular intervals: jittered stamps average out, a gap does not count
+        self._dt = float(d[np.abs(d - dt) <= self.config.jitter * dt].mean())
+
+    def check(self, m: Measurement) -> Problem:
+        """Why `add` would refuse `m` (cause, reason), or ("", ""): a forecast; a wrong kind
+        or frame (against the configuration, else the buffer's); NaN/inf; an impossible
+        range/az/el or covariance; a stamp not after the last one buffered. Each would stop
+        every fit, or empty the buffer, while it stayed in it."""
+        if m.source != SENSOR:
+            return "ignored_forecast_input", f"source {m.source} at t={m.t}: not a sensor"
+        last = self.last
+        kind = self.config.kind if self.config.kind is not None else getattr(last, "kind", None)
+        frame = self.config.frame_id or getattr(last, "frame_id", "")
+        problem = measurement_problem(m, kind, frame)
+        if problem != OK:
+            return problem
+        if last is not None and m.t <= last.t:
+            return "rejected_stale", f"t={m.t} not after the last buffered t={last.t}"
+        return OK
 
     # ----------------------------------------------------------------------------------
     def add(self, m: Measurement) -> list[Measurement]:
         """Buffer a real measurement; returns forecasts still owed for epochs before it.
 
-        A measurement with a non-finite stamp, z or covariance, or not newer than the last
-        one buffered, is ignored (it would stop every fit while it stays in the buffer);
-        `status` says so. A real backwards clock jump goes through `reset()`.
+        A measurement `check` finds fault with is ignored and `status` says why. A real
+        backwards clock jump goes through `reset()`.
         """
+        cause, reason = self.check(m)
+        if cause:
+            self.status = f"ignored: {reason}"
+            return []
         last = self.last
-        if not (math.isfinite(m.t) and np.isfinite(m.z).all() and np.isfinite(m.R).all()):
-            self.status = f"ignored a non-finite measurement at t={m.t}"
-            return []
-        if last is not None and m.t <= last.t:
-            self.status = f"ignored t={m.t}: not after the last buffered t={last.t}"
-            return []
         owed = self.due(m.t - 1e-9 * max(1.0, abs(m.t)), _closing=True)
-        if last is not None and m.kind != last.kind:
-            self.reset()
-        elif last is not None:
+        if last is not None:
             self._fill_gap(last, m)
         self._buf.append(m)
         while self._buf and self._buf[0].t < m.t - self.config.buffer_s:
             self._buf.popleft()
+        self._infer_cadence()
         self._emitted = 0
         self._forecast = None
         if m.t - self._model_fit_at >= self.config.retrain_period_s:
@@ -248,7 +285,7 @@ class Surrogate:
         dt = self.cadence()
         steps = (m.t - last.t) / dt if math.isfinite(dt) and dt > 0 else math.nan
         n_miss = round(steps) - 1 if math.isfinite(steps) else 0
-        if n_miss < 1 or abs(steps - round(steps)) > 1e-3 or self._forecast is None:
+        if n_miss < 1 or abs(steps - round(steps)) > self.config.jitter or self._forecast is None:
             return
         if n_miss > self._forecast.shape[1]:
             return
@@ -309,15 +346,19 @@ class Surrogate:
             return
         Z = np.array([m.z for m in self._buf], dtype=float).T
         t = np.array([m.t for m in self._buf])
-        steps = np.diff(t)
         dt = self.cadence()
-        if np.abs(steps - dt).max() > 1e-3 * dt:
-            self.status = "cannot fit: samples not at a fixed cadence (a gap inside the buffer)"
-            # keep the regular tail only
-            cut = np.flatnonzero(np.abs(steps - dt) > 1e-3 * dt)[-1] + 1
+        off = np.flatnonzero(np.abs(np.diff(t) - dt) > cfg.jitter * dt)
+        tail = ""
+        if off.size:  # keep the regular tail only
+            cut = off[-1] + 1
             Z = Z[:, cut:]
+            tail = (f"the interval of {t[cut] - t[cut - 1]:.6g} s before t={t[cut]} is not "
+                    f"at a fixed cadence ({dt:.6g} s +- {cfg.jitter:.0%}: a gap or irregular "
+                    f"sampling)")
             if Z.shape[1] < need:
+                self.status = f"cannot fit: {tail}; {Z.shape[1]} samples after it, need {need}"
                 return
+            tail = f"; only after {tail}"
         if not np.isfinite(Z).all() or np.ptp(Z, axis=1).max() == 0.0:
             self.status = "cannot fit: constant or non-finite data"
             return
@@ -345,4 +386,4 @@ class Surrogate:
         filled = sum(b.source == FORECAST for b in list(self._buf)[-Z.shape[1]:])
         self.status = (f"fitted on {Z.shape[1]} samples"
                        + (f" ({filled} of them forecasts filling a gap)" if filled else "")
-                       + f", rank {self._model.rank_}")
+                       + f", rank {self._model.rank_}" + tail)

@@ -5,10 +5,11 @@ real and forecast measurements, with the input rules users rely on.
 estimate (state + covariance at the measurement epoch) or the cause of a rejection. The
 rules (DESIGN.md "Behaviour users rely on"):
 
-* bad input is never fused: non-finite values, negative range, elevation outside
-  [-pi/2, pi/2], a kind or frame the tracker is not configured for, a non-symmetric or
-  non-finite covariance, a stamp older than the last real measurement fused, a duplicate
-  epoch, or an innovation beyond the NIS gate;
+* bad input is never fused (`validation.measurement_problem`, shared with the surrogate):
+  non-finite values, negative range, elevation outside [-pi/2, pi/2], a kind or frame the
+  tracker is not configured for, a covariance that is not symmetric positive semi-definite
+  (to round-off), a negative forecast horizon, a stamp older than the last real
+  measurement fused, a duplicate epoch, or an innovation beyond the NIS gate;
 * a real measurement always beats a forecast for the same epoch: a forecast for an epoch
   that already has a real measurement is dropped, and a real measurement for an epoch at or
   before fused forecasts rolls them back, fuses the real one and re-fuses the later forecasts
@@ -48,10 +49,10 @@ from . import iod
 from .ekf import ExtendedKalmanFilter, process_noise
 from .measurement import RANGE_AZ_EL, PositionModel, RazelModel
 from .types import FORECAST, SENSOR, UPDATE_FORECAST, UPDATE_SENSOR, Measurement, StateEstimate
+from .validation import OK, measurement_problem
 
 Placeholder = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
 
-HALF_PI = 0.5 * math.pi
 
 
 def _base(f: Measurement) -> float:
@@ -179,29 +180,12 @@ class Tracker:
         return self._fuse_real(m)
 
     def _validate(self, m: Measurement) -> tuple[str, str]:
-        z = np.asarray(m.z, dtype=float)
-        R = np.asarray(m.R, dtype=float)
-        if m.kind != self.kind:
-            return "rejected_kind", f"kind {m.kind}, this filter is configured for {self.kind}"
-        want = self.config.frame_id
-        if want and m.frame_id != want:
-            return "rejected_frame", f"frame_id {m.frame_id!r}, configured for {want!r}"
         if m.source not in (SENSOR, FORECAST):
             return "rejected_source", f"unknown source {m.source}"
-        if not (math.isfinite(m.t) and np.isfinite(z).all() and np.isfinite(R).all()
-                and math.isfinite(m.horizon)):
-            return ("rejected_nonfinite",
-                    f"NaN or inf in stamp, z, covariance or horizon at t={m.t}")
-        if m.horizon < 0.0:
+        problem = measurement_problem(m, self.kind, self.config.frame_id)
+        if problem == OK and m.horizon < 0.0:
             return "rejected_horizon", f"forecast horizon {m.horizon} s < 0 at t={m.t}"
-        if self.kind == RANGE_AZ_EL:
-            if z[0] < 0.0:
-                return "rejected_negative_range", f"range {z[0]} km < 0"
-            if not -HALF_PI <= z[2] <= HALF_PI:
-                return "rejected_elevation", f"elevation {z[2]} rad outside [-pi/2, pi/2]"
-        if not np.allclose(R, R.T, rtol=1e-9, atol=0.0) or (np.linalg.eigvalsh(R) < 0).any():
-            return "rejected_covariance", "covariance is not symmetric positive semi-definite"
-        return "", ""
+        return problem
 
     def _Q(self, dt: float) -> np.ndarray:
         return process_noise(abs(dt), self.config.q, dim=self.n // 2)

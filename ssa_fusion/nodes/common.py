@@ -4,6 +4,7 @@ validated parameters."""
 from __future__ import annotations
 
 import inspect
+import math
 import signal
 import sys
 import time
@@ -24,6 +25,9 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
+from ssa_fusion.core import scenarios
+from ssa_fusion.core.types import KIND_NAMES, RANGE_AZ_EL
+from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S
 from ssa_fusion.executors import make_executor
 from ssa_fusion.nodes import STOP
 from ssa_fusion.qos import TOPIC_DIAGNOSTICS
@@ -163,12 +167,54 @@ def _apply(node: Node, params: list[Parameter]) -> None:
             node.get_logger().info(f"parameter '{p.name}' = {p.value!r} in effect")
 
 
+def _finite(value: Any) -> bool:
+    return isinstance(value, int) or (isinstance(value, float) and math.isfinite(value))
+
+
 def positive(value: Any) -> str | None:
-    return None if isinstance(value, (int, float)) and value > 0 else "must be > 0"
+    return None if _finite(value) and value > 0 else "must be a finite number > 0"
 
 
 def non_negative(value: Any) -> str | None:
-    return None if isinstance(value, (int, float)) and value >= 0 else "must be >= 0"
+    return None if _finite(value) and value >= 0 else "must be a finite number >= 0"
+
+
+def all_non_negative(values: Any) -> bool:
+    """Every element is a finite number >= 0 (``min(values) >= 0`` lets NaN through)."""
+    return all(non_negative(v) is None for v in values)
+
+
+KINDS = {name: kind for kind, name in KIND_NAMES.items()}
+"""The `kind` parameter's values: measurement kind by name."""
+
+
+def measurement_stream(node: Node) -> tuple[int, str]:
+    """Declare `kind` and `station` on `node`: the measurement kind it takes and the frame_id
+    those measurements come in (the station for range/az/el, "eci" for position)."""
+    kind = declare(
+        node, "kind", "range_az_el", "measurement kind: position | range_az_el", one_of(*KINDS)
+    )
+    station = declare(
+        node,
+        "station",
+        scenarios.DEFAULT_LIVE.station,
+        "station id of range/az/el measurements (their frame_id)",
+        one_of(*scenarios.STATIONS),
+    )
+    return KINDS[kind], station if KINDS[kind] == RANGE_AZ_EL else "eci"
+
+
+def clock_lead(node: Node) -> float:
+    """Declare `max_clock_lead` (s) on `node`: a measurement stamped further ahead of the
+    node's clock is refused as `rejected_future` (see `validation.ahead_of_clock`)."""
+
+    def apply(value: Any) -> None:
+        node.max_lead = float(value)
+
+    return float(declare(node, "max_clock_lead", MAX_CLOCK_LEAD_S,
+                         "s a measurement's stamp may be ahead of this node's clock; further "
+                         "is refused (a wall-time stamp in a sim-time graph)", positive,
+                         apply=apply))
 
 
 def one_of(*choices: str) -> Callable[[Any], str | None]:

@@ -24,34 +24,36 @@ from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 
 from ssa_fusion import messages
 from ssa_fusion.core import kepler, scenarios
-from ssa_fusion.core.measurement import POSITION, RANGE_AZ_EL, PositionModel, RazelModel
+from ssa_fusion.core.measurement import RANGE_AZ_EL, PositionModel, RazelModel
 from ssa_fusion.core.tracker import DEFAULT_GATE, Tracker, TrackerConfig
 from ssa_fusion.core.types import StateEstimate
-from ssa_fusion.nodes.common import Diagnostics, declare, non_negative, one_of, run, wall_timer
+from ssa_fusion.core.validation import ahead_of_clock
+from ssa_fusion.nodes.common import (
+    Diagnostics,
+    all_non_negative,
+    clock_lead,
+    declare,
+    measurement_stream,
+    non_negative,
+    run,
+    wall_timer,
+)
 from ssa_fusion.qos import DATA_QOS, TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_MEASUREMENT
 
-KINDS = {"position": POSITION, "range_az_el": RANGE_AZ_EL}
 SOURCE_NAMES = ("prediction", "sensor", "forecast")
 
 
 def _p0_check(v: list) -> str | None:
-    return None if len(v) == 6 and min(v) >= 0 else "needs 6 standard deviations >= 0"
+    if len(v) == 6 and all_non_negative(v):
+        return None
+    return "needs 6 standard deviations, each a finite number >= 0"
 
 
 def tracker_from(node: Node) -> Tracker:
     """Declare the filter's parameters on `node` and build its Tracker (shared with the
     offline replay so both use the same defaults)."""
     base = scenarios.DEFAULT_LIVE
-    kind = declare(
-        node, "kind", "range_az_el", "measurement kind: position | range_az_el", one_of(*KINDS)
-    )
-    station = declare(
-        node,
-        "station",
-        base.station,
-        "station id of range/az/el measurements (frame_id)",
-        one_of(*scenarios.STATIONS),
-    )
+    kind, frame = measurement_stream(node)
     config = TrackerConfig()
 
     def setter(field: str, convert: Callable[[Any], Any]) -> Callable[[Any], None]:
@@ -96,11 +98,8 @@ def tracker_from(node: Node) -> Tracker:
         lambda v: None if isinstance(v, int) and v >= 3 else "must be an integer >= 3",
         apply=setter("iod_samples", int),
     )
-    if KINDS[kind] == RANGE_AZ_EL:
-        model = RazelModel(scenarios.STATIONS[station], scenarios.UNIX_EPOCH_JD)
-        frame = station
-    else:
-        model, frame = PositionModel(), "eci"
+    model = (RazelModel(scenarios.STATIONS[frame], scenarios.UNIX_EPOCH_JD)
+             if kind == RANGE_AZ_EL else PositionModel())
     config.p0_sigma, config.q, config.gate = p0_km(p0), q * 1e-6, gate or None
     config.frame_id, config.iod_samples = frame, iod_samples
     return Tracker(kepler.propagate, model, config, n=6, object_id=object_id)
@@ -118,6 +117,7 @@ class FilterNode(Node):
             non_negative,
             apply=lambda v: setattr(self, "predict_period", v),
         )
+        self.max_lead = clock_lead(self)
         self.diag = Diagnostics(self)
         self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, DATA_QOS)
         for topic in (TOPIC_MEASUREMENT, TOPIC_FORECAST):
@@ -149,6 +149,11 @@ class FilterNode(Node):
             m = messages.measurement_from_msg(msg)
         except ValueError as exc:
             self.diag.count("rejected_kind", str(exc))
+            return
+        now = self.get_clock().now().nanoseconds * 1e-9
+        cause, reason = ahead_of_clock(m.t, now, self.max_lead)
+        if cause:
+            self.diag.count(cause, reason)
             return
         out = self.tracker.process(m)
         if out.rejected == "iod_pending":

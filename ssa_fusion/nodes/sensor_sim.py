@@ -30,6 +30,7 @@ from ssa_fusion.core.simulate import Simulation, simulate
 from ssa_fusion.nodes.common import (
     Diagnostics,
     ParameterError,
+    all_non_negative,
     declare,
     finish,
     non_negative,
@@ -55,9 +56,15 @@ def _scenario_check(value: str) -> str | None:
 def _gaps_check(value: list) -> str | None:
     if len(value) % 2:
         return "needs pairs [start_s, length_s, ...]"
-    if any(v < 0 for v in value):
-        return "starts and lengths must be >= 0"
+    if not all_non_negative(value):
+        return "starts and lengths must be finite numbers >= 0"
     return None
+
+
+def _noise_check(value: list) -> str | None:
+    if list(value) == [-1.0] or (len(value) == 3 and all_non_negative(value)):
+        return None
+    return "needs 3 values, each a finite number >= 0 (or [-1.0])"
 
 
 def _wait_check(value: list) -> str | None:
@@ -106,11 +113,7 @@ class SensorSim(Node):
             [-1.0],
             "measurement noise std per channel (m, or m, rad, rad for "
             "range/az/el); [-1.0] = the scenario's noise",
-            lambda v: (
-                None
-                if list(v) == [-1.0] or (len(v) == 3 and min(v) >= 0)
-                else "needs 3 values >= 0 (or [-1.0])"
-            ),
+            _noise_check,
         )
         self.time_scale = declare(
             self, "time_scale", 100.0, "sim seconds per wall second", positive

@@ -24,11 +24,14 @@ from ssa_fusion import messages
 from ssa_fusion.core import scenarios
 from ssa_fusion.core.measurement import RazelModel
 from ssa_fusion.core.surrogate import LIVE_SURROGATE, EciLift, Surrogate, SurrogateConfig
-from ssa_fusion.core.types import RANGE_AZ_EL, SENSOR
+from ssa_fusion.core.types import RANGE_AZ_EL
+from ssa_fusion.core.validation import ahead_of_clock
 from ssa_fusion.nodes.common import (
     Diagnostics,
     ParameterError,
+    clock_lead,
     declare,
+    measurement_stream,
     non_negative,
     one_of,
     positive,
@@ -106,6 +109,7 @@ def surrogate_config_from(node: Node) -> SurrogateConfig:
             f"parameter 'delays' = {delays}: needs a buffer of at least 2 x delays x cadence "
             f"= {2 * delays * cadence} s, but 'buffer_length' = {buffer_s} s"
         )
+    config.kind, config.frame_id = measurement_stream(node)
     lift = declare(
         node,
         "lift",
@@ -114,15 +118,11 @@ def surrogate_config_from(node: Node) -> SurrogateConfig:
         "lifted to the ECI position it implies, forecasts mapped back)",
         one_of("none", "eci"),
     )
-    station = declare(
-        node,
-        "station",
-        base.station,
-        "station of range/az/el measurements (for lift eci)",
-        one_of(*scenarios.STATIONS),
-    )
+    if lift == "eci" and config.kind != RANGE_AZ_EL:
+        raise ParameterError("parameter 'lift' = 'eci' needs 'kind' = 'range_az_el'")
     if lift == "eci":
-        config.lift = EciLift(RazelModel(scenarios.STATIONS[station], scenarios.UNIX_EPOCH_JD))
+        station = scenarios.STATIONS[config.frame_id]
+        config.lift = EciLift(RazelModel(station, scenarios.UNIX_EPOCH_JD))
     return config
 
 
@@ -133,6 +133,8 @@ class SurrogateNode(Node):
         check = declare(
             self, "check_period", 0.02, "wall s between checks for missed epochs", positive
         )
+        self.object_id = declare(self, "object_id", "", "only learn this object ('' = any)")
+        self.max_lead = clock_lead(self)
         self.diag = Diagnostics(self)
         self.pub = self.create_publisher(MeasurementMsg, TOPIC_FORECAST, DATA_QOS)
         self.diag.subscribe(
@@ -153,34 +155,20 @@ class SurrogateNode(Node):
 
     def on_measurement(self, msg: MeasurementMsg) -> None:
         self.activity += 1
+        if self.object_id and msg.object_id != self.object_id:
+            self.diag.count("ignored_other_object", f"object_id {msg.object_id!r}", warn=False)
+            return
         try:
             m = messages.measurement_from_msg(msg)
         except ValueError as exc:
             self.diag.count("rejected_kind", str(exc))
             return
-        if m.source != SENSOR:
-            self.diag.count("ignored_forecast_input", "forecast on the measurement topic")
-            return
-        last = self.core.last
-        if last is not None and m.kind != last.kind:  # would empty the buffer
-            self.diag.count("rejected_kind", f"kind {m.kind}, the buffer holds kind {last.kind}")
-            return
-        if last is not None and m.frame_id != last.frame_id:
-            self.diag.count(
-                "rejected_frame", f"frame_id {m.frame_id!r}, the buffer holds {last.frame_id!r}"
-            )
-            return
-        if last is not None and m.t <= last.t:
-            self.diag.count("rejected_stale", f"t={m.t} not after the last sample t={last.t}")
-            return
-        if not all(map(_finite, [*m.z, *m.R.ravel()])):
-            self.diag.count("rejected_nonfinite", f"NaN/inf in z or covariance at t={m.t}")
-            return
-        if m.kind == RANGE_AZ_EL and m.z[0] < 0:  # never train on impossible data
-            self.diag.count("rejected_negative_range", f"range {m.z[0]} km < 0 at t={m.t}")
-            return
-        if m.kind == RANGE_AZ_EL and abs(m.z[2]) > 0.5 * math.pi:
-            self.diag.count("rejected_elevation", f"elevation {m.z[2]} rad at t={m.t}")
+        now = self.get_clock().now().nanoseconds * 1e-9
+        cause, reason = ahead_of_clock(m.t, now, self.max_lead)
+        if not cause:
+            cause, reason = self.core.check(m)
+        if cause:  # never train on it: it would stop every fit or empty the buffer
+            self.diag.count(cause, reason)
             return
         self.publish(self.core.add(m))
         self.diag.counts["buffered"] += 1
@@ -197,10 +185,6 @@ class SurrogateNode(Node):
         for f in forecasts:
             self.pub.publish(messages.measurement_to_msg(f))
             self.diag.counts["forecasts"] += 1
-
-
-def _finite(v: float) -> bool:
-    return v == v and abs(v) != float("inf")
 
 
 def main(args: list[str] | None = None) -> int:

@@ -25,6 +25,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from ssa_fusion.core import iod
@@ -333,6 +334,36 @@ def test_rejections_before_iod():
     assert not tr.initialised
     assert tr.process(_meas(sim, 2)).rejected == "iod_pending"
     assert tr.process(_meas(sim, 3)).estimate is not None
+
+
+def _rotated(eigenvalues: list[float], seed: int) -> np.ndarray:
+    """Q diag(eigenvalues) Q^T for a random rotation Q, computed as a sensor would."""
+    Q = Rotation.random(random_state=seed).as_matrix()
+    return Q @ np.diag(eigenvalues) @ Q.T
+
+
+def test_covariance_valid_up_to_round_off_is_fused():
+    """A singular covariance Q D Q^T (one noise-free direction) has a smallest eigenvalue of
+    +-1e-17 after round-off, and entries that should be equal can differ in the last bit:
+    valid covariances, fused whatever the rotation."""
+    tr0, sim = _initialised("iss_j2_pos")
+    skewed = np.eye(3)
+    skewed[0, 1], skewed[1, 0] = 1e-17, -1e-17
+    for R in [skewed] + [_rotated([1.0, 1e-4, 0.0], seed) for seed in range(200)]:
+        out = copy.deepcopy(tr0).process(_meas(sim, 20, noisy=False, R=R))
+        assert out.estimate is not None, (out, np.linalg.eigvalsh(R))
+
+
+@pytest.mark.parametrize("eigenvalues", [[1.0, 1e-4, -1e-6], [1.0, -1e-4, 0.0]])
+def test_indefinite_covariance_is_rejected_whatever_the_rotation(eigenvalues):
+    tr0, sim = _initialised("iss_j2_pos")
+    for seed in range(20):
+        tr = copy.deepcopy(tr0)
+        before = _state(tr)
+        out = tr.process(_meas(sim, 20, R=_rotated(eigenvalues, seed)))
+        assert (out.rejected, out.detail) == (
+            "rejected_covariance", "covariance is not symmetric positive semi-definite")
+        _assert_same_state(_state(tr), before)
 
 
 # ------------------------------------------------------------------------------ real vs forecast

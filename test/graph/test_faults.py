@@ -331,6 +331,52 @@ def test_backwards_clock_jump_resets_filter_and_surrogate(ros_graph):
         np.testing.assert_allclose(a.x, b.x, rtol=1e-12)
 
 
+def test_a_stamp_far_ahead_of_the_clock_is_refused_and_nothing_is_lost(ros_graph):
+    """A sensor stamping wall time into a sim-time graph: fused, one such message would put
+    the filter and the surrogate past every later real measurement."""
+    g = ros_graph
+    got = g.collect(StateEstimate, "/ssa/estimate")
+    diag = Diag(g)
+    g.start_node("filter", params=filter_params())
+    g.start_node("surrogate", params=surrogate_params())
+    clock = publisher(g, Clock, "/clock", ("filter", "surrogate"))
+    pub = publisher(g, Measurement, "/ssa/measurement", ("filter", "surrogate"))
+    nodes = ("filter", "surrogate")
+
+    set_clock(g, clock, diag, float(T[7]), nodes)
+    year = 365.25 * 86400.0
+    for m in [meas(i) for i in range(4)] + [meas(4, year)] + [meas(i) for i in range(4, 8)]:
+        pub.publish(m)
+    c = diag.wait(g, "filter", {"rejected_future": 1, "published_sensor": 6})
+    assert "rejected_stale" not in c and "internal_error" not in c
+    c = diag.wait(g, "surrogate", {"rejected_future": 1, "buffered": 8})
+    assert "rejected_stale" not in c and "internal_error" not in c
+    est = estimates(got)
+    assert [e.t for e in est] == [float(T[i]) for i in range(2, 8)]
+    tracker = offline_tracker()
+    for i in range(8):
+        out = tracker.process(messages.measurement_from_msg(meas(i)))
+    np.testing.assert_allclose(est[-1].x, out.estimate.x, rtol=1e-9)
+
+
+def test_surrogate_learns_only_its_configured_object_and_kind(ros_graph):
+    """Strays before the real stream (another object, another kind) used to fix what the
+    surrogate's buffer accepted for the whole run."""
+    g = ros_graph
+    diag = Diag(g)
+    g.start_node("surrogate", params=surrogate_params(object_id="iss"))
+    pub = publisher(g, Measurement, "/ssa/measurement", ("surrogate",))
+    other = meas(0, -30.0)
+    other.object_id = "debris"
+    position = meas(0, -20.0)
+    position.kind, position.header.frame_id = Measurement.POSITION, "eci"
+    for m in [other, position] + [meas(i) for i in range(6)]:
+        pub.publish(m)
+    c = diag.wait(g, "surrogate", {"ignored_other_object": 1, "rejected_kind": 1,
+                                   "buffered": 6})
+    assert "rejected_stale" not in c and "internal_error" not in c
+
+
 # surrogate cannot fit --------------------------------------------------------------------
 def test_surrogate_that_cannot_fit_forecasts_nothing_and_filter_keeps_predicting(ros_graph):
     g = ros_graph
