@@ -150,8 +150,9 @@ def test_iod_noisy_is_near_truth_and_covered_by_covariance(name):
         # measurement (~110 km RMS for this pass geometry), 30 s spacing: ~1 km/s velocity
         assert np.linalg.norm(err[:3]) < 300.0
         assert np.linalg.norm(err[3:]) < 10.0
-    # position IOD is linear in the noise: NEES ~ chi2(6). (Range/az/el: see the xfail
-    # test_herrick_gibbs_first_estimate_is_consistent -- NEES 33 occurs in these 8 runs.)
+    # position IOD is linear in the noise: NEES ~ chi2(6). Range/az/el: Herrick-Gibbs is
+    # nonlinear at 20..120 km cross-range noise, so its first-order covariance is checked
+    # per component only (above); a NEES of 33 occurs in these 8 runs.
     if name == "iss_j2_pos":
         assert max(nees) < chi2.ppf(0.9999, 6)
 
