@@ -22,7 +22,6 @@ import numpy as np
 
 from ssa_fusion import bagio
 from ssa_fusion.core import metrics, scenarios, types
-from ssa_fusion.core.ekf import ExtendedKalmanFilter
 from ssa_fusion.core.montecarlo import placeholder_ensemble
 from ssa_fusion.core.pipeline import make_tracker
 from ssa_fusion.messages import estimate_from_msg, measurement_from_msg
@@ -86,16 +85,14 @@ def run_tracker(s: scenarios.Scenario, stream: list[types.Measurement]) -> dict:
 def dmd_ekf_arm(s: scenarios.Scenario, live: dict[float, types.StateEstimate],
                 t_gap: np.ndarray) -> list[types.StateEstimate]:
     """The live estimate at each gap epoch, else the filter's prediction there
-    (`Tracker.predicted`) from the last live estimate before it (one exists before the gap)."""
+    (`Tracker.predict_from`) from the last live estimate before it (one exists before the gap)."""
     tracker = make_tracker(s)
     times = sorted(live)
     out = []
     for t in t_gap:
         e = live.get(t)
         if e is None:
-            e = live[times[bisect.bisect_left(times, t) - 1]]
-            tracker.ekf, tracker.t = ExtendedKalmanFilter(e.x, e.P), e.t
-            e = tracker.predicted(float(t))
+            e = tracker.predict_from(live[times[bisect.bisect_left(times, t) - 1]], float(t))
         out.append(e)
     return out
 

@@ -67,6 +67,11 @@ def run(args: argparse.Namespace) -> int:
     except (bagio.BagError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    stream, ahead = drop_ahead_of_clock(stream)
+    if ahead:
+        print(f"replay: {ahead} measurement(s) stamped more than {MAX_CLOCK_LEAD_S:g} s after "
+              f"the recorder's clock (log time) not played: the nodes refuse them live "
+              f"(rejected_future)")
     if args.offline:
         out = args.out or _sibling(args.bag, "_offline")
         if out.exists():
@@ -100,6 +105,16 @@ def check_topics(path: Path, stream: list[bagio.BagMessage]) -> None:
         raise ValueError(f"{path}: no {TOPIC_MEASUREMENT} messages to replay")
 
 
+def drop_ahead_of_clock(stream: list[bagio.BagMessage]) -> tuple[list[bagio.BagMessage], int]:
+    """The stream without the measurements stamped more than `MAX_CLOCK_LEAD_S` after their
+    log time (the recorder's clock when they arrived), and how many those were. Live, the
+    nodes refuse them against their clock; a replay's clock follows the stamps, so they are
+    taken out before either replay (a year-ahead stamp would also stretch the playback)."""
+    kept = [m for m in stream if m.topic != TOPIC_MEASUREMENT or not ahead_of_clock(
+        messages.stamp_to_seconds(m.msg.header.stamp), m.t_ns * 1e-9, MAX_CLOCK_LEAD_S)[0]]
+    return kept, len(stream) - len(kept)
+
+
 def settings(stream: list[bagio.BagMessage], name: str = "") -> scenarios.Scenario:
     """Estimator settings: `name`, else the default scenario of the measurement kind."""
     first = next(m for m in stream if m.topic == TOPIC_MEASUREMENT)
@@ -120,21 +135,17 @@ def replay_offline(stream: list[bagio.BagMessage], s: scenarios.Scenario) -> Off
     tracker = make_tracker(s)
     # Forecasts always come from a fit on the buffer up to the last real measurement, so the
     # live node's optional periodic refits (retrain_period) would change nothing here.
-    surrogate = make_surrogate(s, retrain_period_s=math.inf, grace=LIVE_SURROGATE.grace,
-                               cadence_s=0.0)
+    surrogate = make_surrogate(s, retrain_period_s=math.inf, grace=LIVE_SURROGATE.grace)
     result = OfflineResult()
     recorded = {messages.stamp_to_seconds(m.msg.header.stamp)
                 for m in stream if m.topic == TOPIC_FORECAST}
     pool: dict[float, types.Measurement] = {}
     last_clock = -float("inf")
 
-    def count(cause: str) -> None:
-        result.rejected[cause] = result.rejected.get(cause, 0) + 1
-
     def fuse(m: types.Measurement, t_ns: int) -> None:
         out = tracker.process(m)
         if out.rejected:
-            count(out.rejected)
+            result.rejected[out.rejected] = result.rejected.get(out.rejected, 0) + 1
         for e in (out.estimate, *out.refused):
             if e is not None:
                 e.object_id = e.object_id or m.object_id
@@ -155,10 +166,6 @@ def replay_offline(stream: list[bagio.BagMessage], s: scenarios.Scenario) -> Off
         elif msg.topic == TOPIC_MEASUREMENT:
             m = messages.measurement_from_msg(msg.msg)
             if m.source != types.SENSOR:
-                continue
-            cause, _ = ahead_of_clock(m.t, last_clock, MAX_CLOCK_LEAD_S)
-            if cause:  # as the nodes refuse it against their /clock
-                count(cause)
                 continue
             if not recorded:  # no recorded forecast timing: release them by the clock
                 for f in surrogate.due(m.t):

@@ -1,6 +1,7 @@
 """Replay of recorded bags: offline through the core (equal to what was recorded live),
 over ROS 2 into real surrogate + filter processes, and clear errors for bad bags."""
 
+import copy
 import shutil
 from collections import Counter
 from pathlib import Path
@@ -54,6 +55,27 @@ def test_offline_replay_is_deterministic(tmp_path):
     assert [t for t, _ in a.estimates] == [t for t, _ in b.estimates]
     for (_, ea), (_, eb) in zip(a.estimates, b.estimates, strict=True):
         assert np.array_equal(ea.x, eb.x) and np.array_equal(ea.P, eb.P)
+
+
+def test_a_measurement_stamped_far_ahead_of_its_log_time_is_not_replayed():
+    """A wall-time stamp in a sim-time bag: the nodes refuse it against their clock
+    (rejected_future), but a replay's clock follows the stamps, so the replay drops it."""
+    stream = list(bagio.read_bag(SAMPLE))
+    k = next(i for i, m in enumerate(stream) if m.topic == "/ssa/measurement" and i > 500)
+
+    def moved(seconds: int) -> bagio.BagMessage:
+        m = copy.deepcopy(stream[k])
+        m.msg.header.stamp.sec += seconds
+        return m
+
+    year, minute = 31_557_600, 60
+    glitched = [*stream[:k + 1], moved(year), moved(minute), *stream[k + 1:]]
+    kept, dropped = replay.drop_ahead_of_clock(glitched)
+    assert dropped == 1
+    assert kept == [*stream[:k + 1], glitched[k + 2], *stream[k + 1:]]
+    # fused, the year-ahead stamp would have cost every later real measurement
+    s = replay.settings(stream)
+    assert replay.replay_offline(glitched, s).rejected.get("rejected_stale", 0) > 100
 
 
 def test_bare_mcap_like_ros2_bag_record(tmp_path):

@@ -10,7 +10,7 @@ from .tracker import Tracker, TrackerConfig
 
 def make_tracker(s: Scenario, object_id: str = "", **overrides) -> Tracker:
     """The scenario's EKF (placeholder model, measurement model, P0 floor, q, frame)."""
-    settings = dict(p0_sigma=s.p0_sigma, q=s.q, frame_id=s.station or "",
+    settings = dict(p0_sigma=s.p0_sigma, q=s.q, frame_id=s.station or "eci",
                     iod_samples=s.iod_samples)
     settings.update(overrides)
     config = TrackerConfig(**settings)
@@ -22,7 +22,7 @@ def make_surrogate(s: Scenario, **overrides) -> Surrogate:
     observable, retrain period)."""
     settings = dict(buffer_s=s.buffer_s or s.track_s, delays=s.delays, rank=s.rank,
                     cadence_s=s.cadence_s, max_horizon_s=s.gap_s + s.cadence_s,
-                    retrain_period_s=s.retrain_period_s, kind=s.kind, frame_id=s.station or "",
+                    retrain_period_s=s.retrain_period_s, kind=s.kind, frame_id=s.station or "eci",
                     lift=EciLift(measurement_model(s)) if s.lift == "eci" else None)
     settings.update(overrides)
     return Surrogate(SurrogateConfig(**settings))

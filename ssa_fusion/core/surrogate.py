@@ -63,7 +63,7 @@ from .hankel_dmd import HankelDMD, psd_part
 from .iod import razel_to_eci
 from .measurement import RANGE_AZ_EL, RazelModel
 from .types import FORECAST, SENSOR, Measurement
-from .validation import OK, Problem, measurement_problem
+from .validation import OK, Problem, measurement_problem, razel_possible
 
 
 @dataclass
@@ -155,7 +155,7 @@ behind its measurements)."""
 
 
 CADENCE_SAMPLES = 64
-"""Intervals whose median is the cadence when none is configured: recent enough to follow
+"""Intervals the cadence is inferred from when none is configured: recent enough to follow
 the stream, few enough to keep `add` and `due` O(1)."""
 
 
@@ -167,6 +167,7 @@ class Surrogate:
         self.status = "waiting for measurements"
         self.fits = 0
         self.invalid = 0  # forecasts withheld because they are not valid measurements
+        self.refused: Problem = OK  # why `add` refused its last measurement, if it did
         self.reset()
 
     def reset(self) -> None:
@@ -190,14 +191,21 @@ class Surrogate:
         return self.config.cadence_s if self.config.cadence_s > 0 else self._dt
 
     def _infer_cadence(self) -> None:
+        """The slope of a least-squares line through the last stamps against their slot
+        numbers on the grid of the median interval: jitter averages out, a gap of whole
+        cadences does not count. Regular stamps give the median interval itself."""
         n = min(len(self._buf), CADENCE_SAMPLES + 1)
-        if n < 2:
+        if self.config.cadence_s > 0 or n < 2:
             self._dt = math.nan
             return
-        d = np.diff([self._buf[-i].t for i in range(n, 0, -1)])
-        dt = np.median(d)
-        # the mean of the regular intervals: jittered stamps average out, a gap does not count
-        self._dt = float(d[np.abs(d - dt) <= self.config.jitter * dt].mean())
+        t = np.array([self._buf[-i].t for i in range(n, 0, -1)])
+        d = np.diff(t)
+        dt = float(np.median(d))
+        if np.abs(d - dt).max() <= 1e-9 * dt:
+            self._dt = dt
+            return
+        slot = np.concatenate(([0.0], np.cumsum(np.rint(d / dt))))
+        self._dt = float(np.polyfit(slot, t - t[0], 1)[0])
 
     def check(self, m: Measurement) -> Problem:
         """Why `add` would refuse `m` (cause, reason), or ("", ""): a forecast; a wrong kind
@@ -220,15 +228,16 @@ class Surrogate:
     def add(self, m: Measurement) -> list[Measurement]:
         """Buffer a real measurement; returns forecasts still owed for epochs before it.
 
-        A measurement `check` finds fault with is ignored and `status` says why. A real
-        backwards clock jump goes through `reset()`.
+        A measurement `check` finds fault with is ignored; `refused` holds the (cause,
+        reason), `status` says why. A real backwards clock jump goes through `reset()`.
         """
-        cause, reason = self.check(m)
+        self.refused = cause, reason = self.check(m)
         if cause:
             self.status = f"ignored: {reason}"
             return []
         last = self.last
-        owed = self.due(m.t - 1e-9 * max(1.0, abs(m.t)), _closing=True)
+        # forecasts owed for the epochs before m's own slot (m may be late by the jitter)
+        owed = self.due(m.t - max(self.config.jitter, 1e-6) * self.cadence(), _closing=True)
         if last is not None:
             self._fill_gap(last, m)
         self._buf.append(m)
@@ -263,7 +272,7 @@ class Surrogate:
         out = []
         for k in range(self._emitted + 1, n_due + 1):
             z = self._forecast[:, k - 1]
-            if last.kind == RANGE_AZ_EL and (z[0] < 0.0 or abs(z[2]) > 0.5 * math.pi):
+            if last.kind == RANGE_AZ_EL and not razel_possible(z):
                 self.invalid += 1  # not a possible range/az/el: withheld, not clipped
                 self.status = f"forecast at t={last.t + k * dt} is not a valid range/az/el"
                 continue
@@ -290,8 +299,7 @@ class Surrogate:
         if n_miss > self._forecast.shape[1]:
             return
         z = self._forecast[:, :n_miss]
-        if last.kind == RANGE_AZ_EL and (
-                (z[0] < 0.0).any() or (np.abs(z[2]) > 0.5 * math.pi).any()):
+        if last.kind == RANGE_AZ_EL and not razel_possible(z).all():
             return
         for k in range(1, n_miss + 1):
             self._buf.append(Measurement(

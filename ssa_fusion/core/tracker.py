@@ -163,9 +163,14 @@ class Tracker:
         """Prediction to epoch `t` (no state change), or None before IOD or for t < epoch."""
         if self.ekf is None or t < self.t:
             return None
-        x, F = self.f(self.ekf.x, t - self.t)
-        P = F @ self.ekf.P @ F.T + self._Q(t - self.t)
-        return StateEstimate(t, x, 0.5 * (P + P.T), self.object_id, 0, 0.0)
+        return self.predict_from(StateEstimate(self.t, self.ekf.x, self.ekf.P, self.object_id), t)
+
+    def predict_from(self, e: StateEstimate, t: float) -> StateEstimate:
+        """The prediction of estimate `e` to epoch `t` with this tracker's placeholder model
+        and process noise (x by the model, P = F P F^T + Q); the tracker is not changed."""
+        x, F = self.f(e.x, t - e.t)
+        P = F @ e.P @ F.T + self._Q(t - e.t)
+        return StateEstimate(t, x, 0.5 * (P + P.T), e.object_id, 0, 0.0)
 
     # ----------------------------------------------------------------------------------
     def process(self, m: Measurement) -> Outcome:

@@ -48,6 +48,13 @@ def measurement_problem(m: Measurement, kind: int | None, frame_id: str = "") ->
     return OK
 
 
+def razel_possible(z: np.ndarray) -> np.ndarray:
+    """z (3, ...) = range km, azimuth, elevation rad: range >= 0 and |elevation| <= pi/2
+    (a forecast that is not is withheld, not clipped)."""
+    z = np.asarray(z, dtype=float)
+    return (z[0] >= 0.0) & (np.abs(z[2]) <= HALF_PI)
+
+
 def is_covariance(R: np.ndarray) -> bool:
     """R is symmetric positive semi-definite up to round-off relative to its scale:
     asymmetry <= 1e-9 max|R| and eigenvalues >= -1e-12 max|eig| (a singular covariance

@@ -165,12 +165,14 @@ class SurrogateNode(Node):
             return
         now = self.get_clock().now().nanoseconds * 1e-9
         cause, reason = ahead_of_clock(m.t, now, self.max_lead)
-        if not cause:
-            cause, reason = self.core.check(m)
-        if cause:  # never train on it: it would stop every fit or empty the buffer
+        if cause:
             self.diag.count(cause, reason)
             return
-        self.publish(self.core.add(m))
+        forecasts = self.core.add(m)
+        if self.core.refused[0]:  # never trained on: it would stop every fit or empty the buffer
+            self.diag.count(*self.core.refused)
+            return
+        self.publish(forecasts)
         self.diag.counts["buffered"] += 1
 
     def check(self) -> None:

@@ -351,6 +351,26 @@ def test_stamp_jitter_within_tolerance_is_fitted_as_the_cadence():
         assert err < 1.0  # km: 0.2 s of a 7.7 km/s orbit is 1.5 km at most per sample
 
 
+@pytest.mark.parametrize("t0", [0.0, None])  # stamps from 0 (cr3bp, pendulum) or Unix time
+def test_a_late_stamp_is_its_own_epoch_not_a_missed_one(t0):
+    """Every other stamp 2.4 s (8 %) late: no forecast for the epoch a real measurement
+    covers, while tracking or when it ends a gap, and no refit forced by one."""
+    sim = _sim()
+    shift = (0.0 if t0 is None else t0 - float(sim.t[0]))
+    late = [0.08 * DT if i % 2 else 0.0 for i in range(TRACK_N)]
+    for cadence in (0.0, DT):
+        sur = Surrogate(_config(cadence_s=cadence))
+        released = []
+        for i in range(TRACK_N):
+            released += sur.add(_replace(_meas(sim, i, R_FREE), t=sim.t[i] + shift + late[i]))
+        assert released == [] and sur.fits == 0
+        assert abs(sur.cadence() - DT) < 1e-3
+        i = TRACK_N + 10  # the gap ends with a late stamp: forecasts for epochs before it only
+        end = _replace(_meas(sim, i, R_FREE), t=sim.t[i] + shift + 0.08 * DT)
+        owed = sur.add(end)
+        assert len(owed) == 10 and owed[-1].t < end.t - 0.5 * DT
+
+
 def test_an_interval_beyond_the_jitter_tolerance_says_so():
     sim = _sim()
     sur = Surrogate(_config(cadence_s=DT))
