@@ -215,7 +215,7 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
 
     record = args.record or _sibling(args.bag, "_replay")
     if record.exists():
-        print(f"error: {record} exists already", file=sys.stderr)
+        print(f"error: {record} exists already; choose another --record", file=sys.stderr)
         return 2
     params = node_parameters(s, 1.0, 0, record)
     logs = record.with_name(record.name + "_logs")
