@@ -15,6 +15,7 @@ import time
 from collections import Counter
 from itertools import pairwise
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -299,22 +300,32 @@ def _node_stamp(diag: Diag, node: str) -> float:
     return -1.0
 
 
-def test_backwards_clock_jump_resets_filter_and_surrogate(ros_graph):
-    g = ros_graph
+NODES = ("filter", "surrogate")
+
+
+def filter_and_surrogate(g, filter_extra: dict | None = None,
+                         surrogate_extra: dict | None = None) -> tuple[list, Diag, Any, Any]:
+    """Start a filter and a surrogate; (estimates received, diagnostics, /clock publisher,
+    /ssa/measurement publisher), both publishers matched with both nodes."""
     got = g.collect(StateEstimate, "/ssa/estimate")
     diag = Diag(g)
-    g.start_node("filter", params=filter_params())
-    g.start_node("surrogate", params=surrogate_params())
-    clock = publisher(g, Clock, "/clock", ("filter", "surrogate"))
-    pub = publisher(g, Measurement, "/ssa/measurement", ("filter", "surrogate"))
-    nodes = ("filter", "surrogate")
+    g.start_node("filter", params=filter_params(**(filter_extra or {})))
+    g.start_node("surrogate", params=surrogate_params(**(surrogate_extra or {})))
+    clock = publisher(g, Clock, "/clock", NODES)
+    pub = publisher(g, Measurement, "/ssa/measurement", NODES)
+    return got, diag, clock, pub
 
-    set_clock(g, clock, diag, float(T[6]), nodes)
+
+def test_backwards_clock_jump_resets_filter_and_surrogate(ros_graph):
+    g = ros_graph
+    got, diag, clock, pub = filter_and_surrogate(g)
+
+    set_clock(g, clock, diag, float(T[6]), NODES)
     for i in range(6):
         pub.publish(meas(i))
     g.wait_for(lambda: len(got) >= 4, 15.0, "4 estimates")
-    set_clock(g, clock, diag, float(T[0]) - 60.0, nodes)  # the bag loops
-    for node in nodes:
+    set_clock(g, clock, diag, float(T[0]) - 60.0, NODES)  # the bag loops
+    for node in NODES:
         diag.wait(g, node, {"reset_clock_jump": 1})
     for i in range(6):  # the same epochs again: accepted, not stale
         pub.publish(meas(i))
@@ -335,15 +346,8 @@ def test_a_stamp_far_ahead_of_the_clock_is_refused_and_nothing_is_lost(ros_graph
     """A sensor stamping wall time into a sim-time graph: fused, one such message would put
     the filter and the surrogate past every later real measurement."""
     g = ros_graph
-    got = g.collect(StateEstimate, "/ssa/estimate")
-    diag = Diag(g)
-    g.start_node("filter", params=filter_params())
-    g.start_node("surrogate", params=surrogate_params())
-    clock = publisher(g, Clock, "/clock", ("filter", "surrogate"))
-    pub = publisher(g, Measurement, "/ssa/measurement", ("filter", "surrogate"))
-    nodes = ("filter", "surrogate")
-
-    set_clock(g, clock, diag, float(T[7]), nodes)
+    got, diag, clock, pub = filter_and_surrogate(g)
+    set_clock(g, clock, diag, float(T[7]), NODES)
     year = 365.25 * 86400.0
     for m in [meas(i) for i in range(4)] + [meas(4, year)] + [meas(i) for i in range(4, 8)]:
         pub.publish(m)
@@ -380,14 +384,9 @@ def test_surrogate_learns_only_its_configured_object_and_kind(ros_graph):
 # surrogate cannot fit --------------------------------------------------------------------
 def test_surrogate_that_cannot_fit_forecasts_nothing_and_filter_keeps_predicting(ros_graph):
     g = ros_graph
-    got = g.collect(StateEstimate, "/ssa/estimate")
     forecasts = g.collect(Measurement, "/ssa/forecast")
-    diag = Diag(g)
-    g.start_node("filter", params=filter_params(predict_period=60.0))
-    g.start_node("surrogate", params=surrogate_params(check_period=0.01))
-    clock = publisher(g, Clock, "/clock", ("filter", "surrogate"))
-    pub = publisher(g, Measurement, "/ssa/measurement", ("filter", "surrogate"))
-    nodes = ("filter", "surrogate")
+    got, diag, clock, pub = filter_and_surrogate(g, {"predict_period": 60.0},
+                                                 {"check_period": 0.01})
 
     def model_status() -> str:
         st = diag.status("surrogate")
@@ -397,7 +396,7 @@ def test_surrogate_that_cannot_fit_forecasts_nothing_and_filter_keeps_predicting
         return [e for e in estimates(got) if e.update_source == types.UPDATE_NONE]
 
     # 1. too few samples (4; the fit needs 2 x delays + 2 = 12)
-    set_clock(g, clock, diag, float(T[0]), nodes)
+    set_clock(g, clock, diag, float(T[0]), NODES)
     for i in range(4):
         pub.publish(meas(i))
     g.wait_for(lambda: len(got) >= 2, 15.0, "IOD")
@@ -420,12 +419,12 @@ def test_surrogate_that_cannot_fit_forecasts_nothing_and_filter_keeps_predicting
           enumerate(np.cumsum([0.0, *([30.0, 30.0, 45.0] * 5)]))], "fixed cadence"),
     ]
     for msgs, reason in cases:
-        set_clock(g, clock, diag, float(T[0]) - 100.0, nodes)
-        set_clock(g, clock, diag, float(T[0]), nodes)
+        set_clock(g, clock, diag, float(T[0]) - 100.0, NODES)
+        set_clock(g, clock, diag, float(T[0]), NODES)
         for m in msgs:
             pub.publish(m)
         t_end = messages.stamp_to_seconds(msgs[-1].header.stamp) + 300.0  # well into a gap
-        set_clock(g, clock, diag, t_end, nodes)
+        set_clock(g, clock, diag, t_end, NODES)
         g.wait_for(lambda r=reason: r in model_status(), 10.0, f"status '{reason}'")
 
     c = diag.counts("surrogate")
