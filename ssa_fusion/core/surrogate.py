@@ -74,7 +74,7 @@ class SurrogateConfig:
     delays, rank : Hankel-DMD settings (rank None: automatic);
     max_horizon_s : no forecast beyond this many s after the last real measurement;
     cadence_s : expected measurement interval (0: inferred from the last `CADENCE_SAMPLES`
-    intervals in the buffer, the mean of those within `jitter` of their median);
+    intervals in the buffer, see `Surrogate._infer_cadence`);
     jitter : largest deviation of a sampling interval from the cadence, as a fraction of the
     cadence, that still counts as the cadence (stamp jitter; such samples are fitted as if
     on the grid); a larger one is a gap or irregular sampling, and a fit keeps what follows;

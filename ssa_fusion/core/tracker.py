@@ -54,7 +54,6 @@ from .validation import OK, measurement_problem
 Placeholder = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
 
 
-
 def _base(f: Measurement) -> float:
     """Epoch of the last real measurement a forecast's model was trained on."""
     return f.t - f.horizon

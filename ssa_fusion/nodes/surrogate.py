@@ -4,9 +4,12 @@ Keeps a sliding buffer of real measurements from ``/ssa/measurement``, retrains 
 publishes on ``/ssa/forecast`` one forecast measurement (source FORECAST) for each epoch
 the sensor missed, with a covariance that grows with the horizon; never past
 `max_horizon`. A backwards jump of sim time (a looping bag) empties the buffer. If it
-cannot fit, it publishes nothing and says why on ``/diagnostics``.
+cannot fit, it publishes nothing and says why on ``/diagnostics``. It learns only
+measurements of its `kind` from its `station` (frame_id), and of `object_id` if set; others,
+bad values and stamps more than `max_clock_lead` ahead of its clock are counted by cause and
+never trained on.
 
-    ros2 run ssa_fusion surrogate --ros-args -p use_sim_time:=true
+    ros2 run ssa_fusion surrogate --ros-args -p use_sim_time:=true -p kind:=range_az_el
 """
 
 from __future__ import annotations
