@@ -126,9 +126,7 @@ def run(args: argparse.Namespace) -> int:
     ev = evaluate.evaluate(data, s.name, seed=args.seed)
     report.write(data, ev, out)
     summary = {"scenario": s.name, "time_scale": args.time_scale, "wall_s": wall,
-               "bag": str(bag), "epsilon": ev.epsilon, "nees_mean": ev.nees_mean,
-               "dmd_ekf_coverage": ev.coverage, "dmd_ekf_propagated_epochs": ev.propagated,
-               "message_counts": data.counts}
+               "bag": str(bag), **report.summary(data, ev)}
     (out / "live.json").write_text(json.dumps(summary, indent=2))
     print(f"\nrecorded {sum(data.counts.values())} messages to {bag} in {wall:.1f} s")
     print(evaluate.table(ev))

@@ -41,10 +41,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
-    """results JSON + PNG plots into `out`."""
-    out.mkdir(parents=True, exist_ok=True)
-    summary = {
+def summary(data: evaluate.BagData, ev: evaluate.Evaluation) -> dict:
+    """What report.json (and live.json) hold of an evaluation."""
+    return {
         "epsilon": ev.epsilon,
         "nees_mean": ev.nees_mean,
         "gap_epochs": len(ev.t),
@@ -52,7 +51,12 @@ def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
         "dmd_ekf_propagated_epochs": ev.propagated,
         "message_counts": data.counts,
     }
-    (out / "report.json").write_text(json.dumps(summary, indent=2))
+
+
+def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
+    """results JSON + PNG plots into `out`."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "report.json").write_text(json.dumps(summary(data, ev), indent=2))
     plot_arms(ev, out / "arms.png")
     plot_sigma(data, out / "estimate_3sigma.png")
     plot_forecasts(data, out / "forecast_vs_withheld.png")
