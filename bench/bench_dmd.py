@@ -2,7 +2,7 @@
 
 3 channels x 720 samples at 30 s, 120 delays, fit + 200-step forecast. Runs are
 interleaved (ours, PyDMD, ours, ...) so machine load affects both alike. Prints
-parseable ``key: value`` lines. Run: ``/work/devvenv/bin/python bench/bench_dmd.py``.
+parseable ``key: value`` lines. Run: ``.venv/bin/python bench/bench_dmd.py``.
 """
 
 from __future__ import annotations
@@ -73,6 +73,10 @@ def bench(label: str) -> None:
     print(f"max_err_km ours: {err_ours:.3e} pydmd: {err_py:.3e}")
     sig = np.sqrt(np.trace(cov, axis1=1, axis2=2))
     print(f"cov_sqrt_trace_km h1: {sig[0]:.3e} h100: {sig[99]:.3e} h200: {sig[-1]:.3e}")
+    # what was timed really forecast the orbit (a bound far above both libraries' errors)
+    assert f_ours.shape == truth.shape and np.isfinite(f_ours).all()
+    assert err_ours < 0.1 and err_py < 0.1, (err_ours, err_py)  # km
+    assert cov.shape == (N_FC, 3, 3) and np.all(np.diff(sig) >= -1e-9 * sig[1:])
 
 
 def main() -> None:

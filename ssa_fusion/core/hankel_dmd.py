@@ -10,15 +10,18 @@ last training sample.
 Numerical choices (all float64):
 
 * The Hankel matrix ``X = H[:, :-1]`` (``channels*delays`` x ``samples-delays``) is
-  reduced through the eigen-decomposition of its small Gram matrix ``X X^T`` (much
-  cheaper than a full SVD), with eigenvectors only for the kept rank
-  (`_leading_subspace`).
-  The Gram eigenvalues are the squared singular values.
+  reduced by a thin SVD built on its smaller side (LQ factorisation, then the SVD of the
+  small triangular factor; `_leading_subspace`): every singular value to ``eps *
+  sigma_max``, so the kept subspace does not depend on the BLAS kernel's rounding.
 * Rank selection (``rank=None``): the optimal hard threshold of Gavish & Donoho (2014)
-  for unknown noise level, ``sigma > omega(beta) * median(sigma)`` -- the same rule as
-  PyDMD's ``svd_rank=0`` -- capped at ``max_rank``. On noise-free data the median
-  singular value is at the round-off floor, the threshold selects "everything" and
-  the cap decides; the operator fit below stays well posed in that case.
+  for unknown noise level, ``sigma > omega(beta) * median(sigma)`` over the
+  ``min(rows, cols)`` singular values -- the same rule as PyDMD's ``svd_rank=0`` --
+  capped at ``max_rank``. Whatever the rule (or a fixed ``rank``) asks for, no direction
+  at or below the SVD's resolution ``max(rows, cols) * eps * sigma_max`` is kept
+  (`resolvable_rank`): on noise-free data the median singular value sits at round-off,
+  the threshold selects "everything", and this floor or the cap decides. Forecasts of
+  the same data then agree across BLAS kernels to ~1e-7 of the data's scale (tested in
+  ``test/core/test_blas_kernels.py``, tolerance 1e-6).
 * The reduced operator is obtained by least squares in the reduced coordinates
   ``P = U^T H`` (QR of ``P_X^T``), i.e. ``Atilde = P_Y P_X^+``, together with the
   exact-DMD read-out ``C = Y_last P_X^+`` that maps reduced coordinates to the next
@@ -62,7 +65,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import linear_sum_assignment
 
-__all__ = ["HankelDMD", "svht_rank"]
+__all__ = ["HankelDMD", "resolvable_rank", "svht_rank"]
 
 _TWO_PI = 2.0 * np.pi
 _COV_BUDGET = 400_000  # max (horizon, column) pairs in the covariance estimator
@@ -110,60 +113,61 @@ def _hankel(z: FloatArray, delays: int) -> FloatArray:
     return np.ascontiguousarray(win.transpose(2, 0, 1).reshape(m * delays, n - delays + 1))
 
 
-def _leading_subspace(x: FloatArray, choose_rank: Callable[[FloatArray], int]
-                      ) -> tuple[FloatArray, FloatArray]:
-    """Singular values of ``x`` and its leading left singular vectors, via the Gram matrix.
+def resolvable_rank(sigma: ArrayLike, rows: int, cols: int) -> int:
+    """Number of singular values an SVD of a ``rows`` x ``cols`` matrix resolves.
 
-    The steps of LAPACK's ``dsyevr`` on ``gram = x x^T`` (tridiagonal reduction, MRRR,
-    back-transformation), except that eigenvectors are computed and back-transformed only
-    for the ``r = choose_rank(sigma)`` kept: half the cost of a full ``eigh`` for a
-    360 x 360 Gram matrix and ``r <= 48``.
+    A backward-stable SVD returns every singular value to an absolute accuracy of about
+    ``eps * sigma_max``, so values at or below ``max(rows, cols) * eps * sigma_max`` are
+    round-off, and their singular vectors are whatever the BLAS kernel's rounding made of
+    them (LAPACK's and ``numpy.linalg.matrix_rank``'s tolerance).
 
-    Precision: Gram eigenvectors resolve singular values only down to
-    ``sqrt(eps) * sigma_max``. On noise-free orbit data the kept rank reaches below that
-    floor, so the fit there depends on round-off: on the short (``--quick``)
-    ``iss_sgp4_pos`` window the DMD-EKF/hypothetical ratio was 1.43 with a full ``evr``,
-    52.8 with ``evd`` and 84.8 with this routine (on the full-length windows of the
-    reproduce run all ratios agree to 3 digits except ``iss_drag_pos``, 1.36 -> 1.42).
-    An SVD-precise basis (one subspace-iteration step on ``x``, tried) does not remove
-    that sensitivity -- truncating a noise-free Hankel-DMD is ill-conditioned in itself --
-    and costs 2 ms, so it is not used.
+    Parameters
+    ----------
+    sigma : array_like, shape (k,)
+        Singular values, descending (any unit).
+    rows, cols : int
+        Shape of the decomposed matrix.
 
     Returns
     -------
-    sigma : ndarray, shape (n,)
-        All singular values of ``x``, descending (square roots of clipped eigenvalues).
-    u : ndarray, shape (n, r)
-        Orthonormal eigenvectors of the ``r`` largest Gram eigenvalues, in that order.
+    int
+        Count of ``sigma > max(rows, cols) * eps * sigma[0]`` (at least 1).
     """
-    gram = x @ x.T
-    n = gram.shape[0]
-    if n < 3:
-        ev, vec = sla.eigh(gram, check_finite=False)
-        sigma = np.sqrt(np.clip(ev[::-1], 0.0, None))
-        return sigma, np.ascontiguousarray(vec[:, ::-1][:, : choose_rank(sigma)])
-    lapack = sla.lapack
-    lwork = int(lapack.dsytrd_lwork(n, lower=1)[0])
-    c, diag, off, tau, info = lapack.dsytrd(gram, lower=1, lwork=lwork)
-    if info != 0:
-        raise np.linalg.LinAlgError(f"dsytrd failed (info={info})")
-    ev = sla.eigh_tridiagonal(diag, off, eigvals_only=True, lapack_driver="stemr",
-                              check_finite=False)
-    sigma = np.sqrt(np.clip(ev[::-1], 0.0, None))
-    r = choose_rank(sigma)
-    # dstemr overwrites its off-diagonal argument (a fresh array here); range 2 = by index
-    found, _, z, info = lapack.dstemr(diag, np.append(off, 0.0), 2, 0.0, 0.0, n - r + 1, n)
-    if info == 0 and found == r:
-        z = z[:, :r]
-    else:  # MRRR can fail on clustered eigenvalues; dsyevr then uses bisection + inverse it.
-        z = sla.eigh_tridiagonal(diag, off, select="i", select_range=(n - r, n - 1),
-                                 lapack_driver="stebz", check_finite=False)[1]
-    # Q of dsytrd(lower) = diag(1, Q'), Q' the QR-format reflectors stored below row 0
-    qz, _, info = lapack.dormqr("L", "N", c[1:, : n - 1], tau, z[1:], max(1, 64 * r))
-    if info != 0:
-        raise np.linalg.LinAlgError(f"dormqr failed (info={info})")
-    z[1:] = qz
-    return sigma, np.ascontiguousarray(z[:, ::-1])
+    s = np.asarray(sigma, dtype=float)
+    tol = max(rows, cols) * np.finfo(np.float64).eps * s[0]
+    return max(1, int(np.count_nonzero(s > tol)))
+
+
+def _leading_subspace(x: FloatArray, choose_rank: Callable[[FloatArray], int]
+                      ) -> tuple[FloatArray, FloatArray]:
+    """Singular values of ``x`` and its leading left singular vectors, to full precision.
+
+    A thin SVD built on the smaller side: for a wide ``x`` (the usual Hankel matrix,
+    fewer rows than columns) the LQ factorisation ``x = L Q^T`` (QR of ``x^T``) first,
+    then the SVD of the small square ``L`` (``x`` and ``L`` share singular values and
+    left singular vectors); for a tall ``x`` the thin SVD of ``x`` itself. Either way
+    there are ``min(rows, cols)`` singular values, each accurate to ``eps * sigma_max``
+    (a Gram-matrix eigen-decomposition resolves only ``sqrt(eps) * sigma_max``, so the
+    directions it keeps below that depend on the BLAS kernel's rounding).
+
+    The kept rank is ``choose_rank(sigma)``, never above `resolvable_rank`: a direction
+    the decomposition cannot resolve is never kept.
+
+    Returns
+    -------
+    sigma : ndarray, shape (min(rows, cols),)
+        All singular values of ``x``, descending.
+    u : ndarray, shape (rows, r)
+        Orthonormal left singular vectors of the ``r`` kept singular values, in order.
+    """
+    rows, cols = x.shape
+    if cols > rows:
+        lower = sla.qr(x.T, mode="r", check_finite=False)[0][:rows].T
+        u, sigma, _ = sla.svd(lower, check_finite=False)
+    else:
+        u, sigma, _ = sla.svd(x, full_matrices=False, check_finite=False)
+    r = min(choose_rank(sigma), resolvable_rank(sigma, rows, cols))
+    return sigma, np.ascontiguousarray(u[:, :r])
 
 
 def _clip_schur(t: FloatArray, rho: float) -> tuple[FloatArray, NDArray[np.complex128]]:

@@ -9,7 +9,7 @@ import pytest
 from scipy.stats import chi2
 
 from ssa_fusion.core.dynamics import ISS_ELEMENTS, elements_to_state, propagate
-from ssa_fusion.core.hankel_dmd import HankelDMD, _leading_subspace, svht_rank
+from ssa_fusion.core.hankel_dmd import HankelDMD, _leading_subspace, resolvable_rank, svht_rank
 
 FREQS = (0.011, 0.037, 0.071)  # cycles per sample
 
@@ -47,19 +47,21 @@ def iss() -> np.ndarray:
     return iss_positions(920)
 
 
-@pytest.mark.parametrize("shape", [(2, 9), (40, 70), (360, 600)])
+@pytest.mark.parametrize("shape", [(2, 9), (40, 70), (360, 600), (70, 40)])
 def test_leading_subspace_matches_numpy_svd(shape: tuple[int, int]) -> None:
-    """Partial MRRR on the Gram matrix against LAPACK's SVD of the matrix itself."""
+    """The LQ + SVD route (wide) and the thin SVD (tall) against numpy's SVD."""
     rng = np.random.default_rng(4)
     n, k = shape
+    p = min(n, k)
     # distinct, well-resolved singular values 1 .. 1e-3
-    left = np.linalg.qr(rng.standard_normal((n, n)))[0]
-    right = np.linalg.qr(rng.standard_normal((k, n)))[0]
-    s_true = np.logspace(0, -3, n)
+    left = np.linalg.qr(rng.standard_normal((n, p)))[0]
+    right = np.linalg.qr(rng.standard_normal((k, p)))[0]
+    s_true = np.logspace(0, -3, p)
     x = (left * s_true) @ right.T
-    r = max(1, n // 3)
+    r = max(1, p // 3)
     sigma, u = _leading_subspace(x, lambda s: r)
     u_ref, s_ref, _ = np.linalg.svd(x, full_matrices=False)
+    np.testing.assert_allclose(sigma, s_true, rtol=1e-9)
     np.testing.assert_allclose(sigma, s_ref, rtol=1e-9, atol=1e-12)
     assert u.shape == (n, r)
     np.testing.assert_allclose(np.abs(np.sum(u * u_ref[:, :r], axis=0)), 1.0, atol=1e-9)
@@ -126,6 +128,31 @@ def test_rank_selection_finds_number_of_modes(sigma: float) -> None:
     z = sinusoids(np.arange(400))
     dmd = HankelDMD(50).fit(z + sigma * rng.standard_normal(z.shape))
     assert dmd.rank_ == 2 * len(FREQS)
+
+
+def test_rank_rule_on_a_tall_hankel_matrix() -> None:
+    """More Hankel rows (2 x 150) than columns (130): the threshold's median is taken over
+    the 130 singular values there are, not over 170 structural zeros besides them (which
+    put the median at 0 and selected the cap, 48)."""
+    rng = np.random.default_rng(7)
+    z = sinusoids(np.arange(280))
+    dmd = HankelDMD(150).fit(z + 1e-3 * rng.standard_normal(z.shape))
+    assert dmd.singular_values_.size == 130
+    assert dmd.rank_ == 2 * len(FREQS)
+
+
+@pytest.mark.parametrize("delays", [50, 300])
+def test_never_keeps_a_direction_the_svd_cannot_resolve(delays: int) -> None:
+    """Noise-free sinusoids are rank 6: every further singular value is round-off, below
+    max(rows, cols) * eps * sigma_max, so neither the automatic rule (whose median is at
+    round-off) nor a fixed rank 20 keeps one."""
+    z = sinusoids(np.arange(400))
+    for rank in (None, 20):
+        dmd = HankelDMD(delays, rank).fit(z)
+        s = dmd.singular_values_
+        assert dmd.rank_ == 6 == resolvable_rank(s, 2 * delays, 400 - delays)
+    assert resolvable_rank([2.0, 1e-12, 1e-14], 10, 100) == 2  # floor 2 * 100 * eps = 4.4e-14
+    assert resolvable_rank([0.0, 0.0], 3, 3) == 1
 
 
 def test_wrapping_angle_forecast() -> None:

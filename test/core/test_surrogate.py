@@ -439,23 +439,33 @@ def test_lifted_forecast_covariance_is_not_the_lifted_noise():
 
 # ------------------------------------------------------------------------------ second gap
 def test_a_second_gap_soon_after_the_first_is_still_forecast():
-    """Noise-free ISS positions: 360 samples, a 20-epoch gap, 60 samples, a second gap. The
-    regular stretch after the first gap (60) is shorter than a fit needs (2 x 60 + 2); the
-    first gap's forecasts fill its epochs in the buffer, so the second gap is forecast from
-    the whole window, as accurately as the first."""
-    sim = _sim()
+    """ISS positions with 10 m noise: 360 samples, a 20-epoch gap, 60 samples, a second gap.
+    The regular stretch after the first gap (60) is shorter than a fit needs (2 x 60 + 2);
+    the first gap's forecasts fill its epochs in the buffer, so the second gap is forecast
+    from the whole window, as accurately as the first (measured 0.19 km over the first
+    gap's 30 steps, 0.12 km over the second's). Noisy data: on noise-free windows of this
+    length the fit is ill-conditioned (30-step errors from 1e-4 to 4e3 km depending on
+    where the window starts, with the old Gram basis as with the SVD), so a noise-free
+    window tests luck, not the gap fill."""
+    sim = _sim(noise_sigma=(1e-2,) * 3)
+    first_sur = Surrogate(_config())
+    _track(first_sur, sim)
+    first = first_sur.due(float(sim.t[TRACK_N - 1]) + 30.6 * DT)
+    err_first = np.linalg.norm(np.array([m.z for m in first]) - sim.z_true[TRACK_N:TRACK_N + 30],
+                               axis=1)
     sur = Surrogate(_config())
-    _track(sur, sim, R=R_FREE)
+    _track(sur, sim)
     gap1, back = range(TRACK_N, TRACK_N + 20), range(TRACK_N + 20, TRACK_N + 80)
     owed = []
     for i in back:
-        owed += sur.add(_meas(sim, i, R_FREE))
+        owed += sur.add(_meas(sim, i))
     assert [m.t for m in owed] == [float(sim.t[i]) for i in gap1]
     got = sur.due(float(sim.t[back[-1]]) + 30.6 * DT)
     assert len(got) == 30 and "forecasts filling a gap" in sur.status
     err = np.linalg.norm(np.array([m.z for m in got]) - sim.z_true[back[-1] + 1:back[-1] + 31],
                          axis=1)
-    assert err.max() < 1.0  # km, as the one-orbit accuracy test
+    assert err.max() < 1.0  # km
+    assert err.max() < 2.0 * err_first.max()
 
 
 def test_a_gap_longer_than_the_forecasts_is_not_filled():
