@@ -73,7 +73,17 @@ class Proc:
 
 
 class Graph:
-    """Processes plus an in-process probe node, all in one private ROS domain."""
+    """Processes plus an in-process probe node, all in one private ROS domain.
+
+    Every wait below is a condition wait: it spins the probe until its condition holds and
+    gives up only after its timeout, which is multiplied by `timeout_factor`.
+    """
+
+    timeout_factor: float = 1.0
+    """Multiplies every timeout of this class's waits (`scaled`). 1 for `live`/`replay`; the
+    test suite sets it from ``SSA_TEST_TIMEOUT_FACTOR`` (test/ros_graph.py) so that its waits
+    hold on a loaded machine. A wait ends as soon as its condition holds, so a larger factor
+    lets a slow run take longer and never slows a passing one."""
 
     def __init__(self, workdir: Path, domain_id: int | None = None) -> None:
         self.workdir = Path(workdir)
@@ -116,17 +126,23 @@ class Graph:
         """Start a Python script with this interpreter."""
         return self.start(name, [sys.executable, str(script), *args], **kw)
 
+    def scaled(self, seconds: float) -> float:
+        """A nominal timeout of `seconds` times `timeout_factor`."""
+        return seconds * self.timeout_factor
+
     def wait_exit(self, proc: Proc, timeout: float) -> int:
-        """Wait for `proc` to end by itself, spinning the probe meanwhile."""
+        """Wait for `proc` to end by itself, spinning the probe meanwhile (`timeout` is
+        scaled)."""
         self.wait_for(lambda: proc.popen.poll() is not None, timeout, f"{proc.name} to exit")
         return proc.popen.returncode
 
     def stop(self, proc: Proc, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int:
-        """Send `sig`; SIGKILL if still alive after `timeout` s. Returns the exit code."""
+        """Send `sig`; SIGKILL if still alive after `timeout` s (scaled). Returns the exit
+        code."""
         if proc.popen.poll() is None:
             proc.popen.send_signal(sig)
             try:
-                proc.popen.wait(timeout)
+                proc.popen.wait(self.scaled(timeout))
             except subprocess.TimeoutExpired:
                 proc.popen.kill()
                 proc.popen.wait(5)
@@ -137,12 +153,16 @@ class Graph:
         self.executor.spin_once(timeout_sec=timeout)
 
     def wait_for(self, predicate: Callable[[], bool], timeout: float, what: str) -> None:
-        """Spin the probe until `predicate()`; on timeout raise with the processes' stderr."""
-        deadline = time.monotonic() + timeout
+        """Spin the probe until `predicate()`; after `timeout` s (scaled) raise with the
+        processes' stderr."""
+        limit = self.scaled(timeout)
+        deadline = time.monotonic() + limit
         while not predicate():
             if time.monotonic() > deadline:
+                scaling = (f" ({timeout:g} s x timeout factor {self.timeout_factor:g})"
+                           if self.timeout_factor != 1.0 else "")
                 raise TimeoutError(
-                    f"timed out after {timeout} s waiting for {what}\n{self.report()}"
+                    f"timed out after {limit:g} s{scaling} waiting for {what}\n{self.report()}"
                 )
             self.spin_once()
 
@@ -161,8 +181,9 @@ class Graph:
         return received
 
     def wait_quiet(self, counts: Callable[[], Any], quiet_s: float, limit_s: float) -> None:
-        """Spin until `counts()` has not changed for `quiet_s` s (at most `limit_s`)."""
-        deadline = time.monotonic() + limit_s
+        """Spin until `counts()` has not changed for `quiet_s` s (at most `limit_s`, scaled;
+        `quiet_s` is not: it is how long a run must stay still, not a timeout)."""
+        deadline = time.monotonic() + self.scaled(limit_s)
         last, since = counts(), time.monotonic()
         while time.monotonic() < deadline and time.monotonic() - since < quiet_s:
             self.spin_once()

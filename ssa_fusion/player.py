@@ -77,8 +77,10 @@ class Player:
     def done(self) -> bool:
         return self.next >= len(self.items)
 
-    def finish(self) -> None:
+    def finish(self, ack_timeout_s: float = 5.0) -> None:
+        """Stop playing; wait (up to `ack_timeout_s` per publisher) until the subscribers
+        acknowledged everything published."""
         if self.timer is not None:
             self.node.destroy_timer(self.timer)
         for pub in (*self.pubs.values(), self.clock_pub):
-            pub.wait_for_all_acked(Duration(seconds=5.0))
+            pub.wait_for_all_acked(Duration(seconds=ack_timeout_s))

@@ -246,7 +246,7 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
                        "surrogate, filter and recorder to match their publishers")
         player.start()
         graph.wait_for(player.done, player.duration_s + 60.0, "playback to finish")
-        player.finish()
+        player.finish(graph.scaled(5.0))
         from ssa_fusion_msgs.msg import Measurement, StateEstimate
 
         seen = [graph.collect(StateEstimate, TOPIC_ESTIMATE),

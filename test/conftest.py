@@ -15,12 +15,14 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 # developer's shell (which `ssa-fusion live/replay` would honour) must not pull them together.
 os.environ.pop("ROS_DOMAIN_ID", None)
 
+# Imported here, before any test: sets the timeout factor (SSA_TEST_TIMEOUT_FACTOR) of every
+# Graph the tests create, also those `ssa-fusion replay` creates inside a test.
+from ros_graph import RosGraph  # noqa: E402
+
 
 @pytest.fixture
 def ros_graph(tmp_path):
     """A RosGraph (see test/ros_graph.py) torn down after the test, whatever happens."""
-    from ros_graph import RosGraph
-
     graph = RosGraph(tmp_path)
     try:
         yield graph

@@ -6,6 +6,9 @@ process (no sensor_sim unless the case needs one) and asserts on /ssa/estimate,
 /ssa/forecast, /diagnostics (counts by cause) and the nodes' logs. The property-based test
 of the filter core (arbitrary Measurement fields never raise, never give NaN or a
 non-symmetric covariance) is in test/core/test_tracker.py.
+
+Every timeout below is nominal: `Graph` multiplies it by SSA_TEST_TIMEOUT_FACTOR (default 3,
+see test/ros_graph.py), and so does `g.scaled` in this file's own deadline loops.
 """
 
 from __future__ import annotations
@@ -273,7 +276,7 @@ def set_clock(g, pub, diag: Diag, t: float, nodes: tuple[str, ...]) -> None:
     def seen() -> bool:
         return all(abs(_node_stamp(diag, n) - t) < 1e-3 for n in nodes)
 
-    deadline = time.monotonic() + 15.0
+    deadline = time.monotonic() + g.scaled(15.0)
     while not seen():
         assert time.monotonic() < deadline, f"nodes did not take /clock {t}\n{g.report()}"
         pub.publish(clock_msg(t))
@@ -283,8 +286,8 @@ def set_clock(g, pub, diag: Diag, t: float, nodes: tuple[str, ...]) -> None:
 
 
 def publish_until(g, pub, msg, done, what: str, timeout: float = 10.0) -> None:
-    """Publish `msg` (best effort /clock) every 0.2 s until `done()`."""
-    deadline = time.monotonic() + timeout
+    """Publish `msg` (best effort /clock) every 0.2 s until `done()` (`timeout` scaled)."""
+    deadline = time.monotonic() + g.scaled(timeout)
     while not done():
         assert time.monotonic() < deadline, f"timed out waiting for {what}\n{g.report()}"
         pub.publish(msg)
