@@ -12,13 +12,19 @@ them). The design removes that difference: forecast *values* depend only on the
 measurements (see `core.surrogate`), the filter's rules are order-independent for real
 measurements, and the offline replay fuses forecasts at the positions the recorder saw them
 in the bag's log-time order. A bag without recorded forecasts gets them when the clock
-(the measurement stamps) passes each missed epoch by the live grace.
+(the measurement stamps) passes each missed epoch by the live grace, and those still owed
+when the measurement ending a gap arrives with it, as the surrogate node publishes them.
+
+A bag at another cadence than its estimator settings' is replayed at its own: the surrogate
+infers the cadence from the stamps (`settings`), as the node does with ``cadence`` 0.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
+import statistics
 import sys
 import time
 from dataclasses import dataclass, field
@@ -67,6 +73,10 @@ def run(args: argparse.Namespace) -> int:
     except (bagio.BagError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if s.cadence_s == 0:
+        print(f"replay: measurements every {bag_cadence(stream):g} s, not the "
+              f"{scenarios.settings_for(args.scenario, s.kind).cadence_s:g} s of the "
+              f"'{s.name}' settings: the surrogate infers the cadence from the stamps")
     stream, ahead = drop_ahead_of_clock(stream)
     if ahead:
         print(f"replay: {ahead} measurement(s) stamped more than {MAX_CLOCK_LEAD_S:g} s after "
@@ -116,9 +126,29 @@ def drop_ahead_of_clock(stream: list[bagio.BagMessage]) -> tuple[list[bagio.BagM
 
 
 def settings(stream: list[bagio.BagMessage], name: str = "") -> scenarios.Scenario:
-    """Estimator settings: `name`, else the default scenario of the measurement kind."""
+    """Estimator settings: `name`, else the default scenario of the measurement kind.
+
+    The bag's own cadence wins: if its measurements come at another interval than the
+    settings' cadence (beyond the surrogate's jitter tolerance), the cadence is set to 0 and
+    the surrogate infers it from the stamps, as the surrogate node does with `cadence` 0 (a
+    fixed 30 s cadence against 10 s data would find every interval off its grid and never
+    fit). Data at the settings' cadence keep it, so a replay reproduces the live run."""
     first = next(m for m in stream if m.topic == TOPIC_MEASUREMENT)
-    return scenarios.settings_for(name, first.msg.kind)
+    s = scenarios.settings_for(name, first.msg.kind)
+    dt = bag_cadence(stream)
+    if not math.isnan(dt) and abs(dt - s.cadence_s) > LIVE_SURROGATE.jitter * s.cadence_s:
+        s = s.with_(cadence_s=0.0)
+    return s
+
+
+def bag_cadence(stream: list[bagio.BagMessage]) -> float:
+    """Median interval (s) between successive stamps of the sensor measurements (NaN with
+    fewer than two): the cadence of the data, gaps and all."""
+    t = sorted({messages.stamp_to_seconds(m.msg.header.stamp) for m in stream
+                if m.topic == TOPIC_MEASUREMENT and m.msg.source == types.SENSOR})
+    if len(t) < 2:
+        return math.nan
+    return statistics.median(b - a for a, b in itertools.pairwise(t))
 
 
 @dataclass
@@ -170,8 +200,12 @@ def replay_offline(stream: list[bagio.BagMessage], s: scenarios.Scenario) -> Off
             if not recorded:  # no recorded forecast timing: release them by the clock
                 for f in surrogate.due(m.t):
                     forecast(f, msg.t_ns)
-            for f in surrogate.add(m):
-                pool[f.t] = f
+            owed = surrogate.add(m)  # forecasts of the epochs before m not yet released
+            for f in owed:
+                if recorded:
+                    pool[f.t] = f
+                else:  # released with m, as the node publishes them
+                    forecast(f, msg.t_ns)
             fuse(m, msg.t_ns)
         elif msg.topic == TOPIC_FORECAST:
             t = messages.stamp_to_seconds(msg.msg.header.stamp)

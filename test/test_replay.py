@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ssa_fusion import bagio, cli, evaluate, replay
+from ssa_fusion import bagio, cli, evaluate, messages, replay
 from ssa_fusion.core import types
 
 SAMPLE = Path(__file__).resolve().parents[1] / "bags" / "sample_iss_j2_rae"
@@ -111,6 +111,38 @@ def test_bare_mcap_like_ros2_bag_record(tmp_path):
     assert ev.coverage > 0.8
     assert cli.main(["report", str(out), "--out", str(tmp_path / "report")]) == 0
     assert (tmp_path / "report" / "arms.png").exists()
+
+
+def test_a_bag_at_another_cadence_is_replayed_at_its_own(tmp_path):
+    """10 s data under the default settings' 30 s cadence: the replay infers the cadence from
+    the stamps (as the surrogate node does with cadence 0), fits at the gap and forecasts
+    every missed epoch, the last ones released with the measurement that ends the gap."""
+    from ssa_fusion.core import scenarios, simulate
+
+    s = scenarios.DEFAULT_LIVE.with_(cadence_s=10.0, track_s=9000.0, gap_s=1200.0,
+                                     after_s=600.0)
+    sim = simulate.simulate(s, seed=4)
+    bag = tmp_path / "ten_s"
+    writer = bagio.BagWriter(bag)
+    writer.add_topic("/ssa/measurement", "ssa_fusion_msgs/msg/Measurement")
+    classes = bagio.rosbags_classes()
+    for i in np.flatnonzero(~sim.in_gap):
+        m = types.Measurement(t=float(sim.t[i]), z=sim.z[i], R=sim.R, kind=s.kind,
+                              object_id="iss", frame_id=s.station)
+        writer.write_msg("/ssa/measurement", round(float(sim.t[i]) * 1e9),
+                         messages.measurement_to_msg(m, classes))
+    writer.close()
+    stream = list(bagio.read_bag(bag))
+    settings = replay.settings(stream)
+    assert settings.cadence_s == 0.0 and replay.bag_cadence(stream) == 10.0
+    assert replay.settings(list(bagio.read_bag(SAMPLE))).cadence_s == 30.0  # its own kept
+    result = replay.replay_offline(stream, settings)
+    gap = sim.t[sim.in_gap]
+    np.testing.assert_allclose(sorted(f.t for _, f in result.forecasts), gap, rtol=0,
+                               atol=1e-6)
+    fused = {round(e.t, 3) for _, e in result.estimates
+             if e.update_source == types.UPDATE_FORECAST}
+    assert fused == {round(float(t), 3) for t in gap}
 
 
 def _as_dict(msg):
