@@ -3,7 +3,9 @@ and the sustained rate through surrogate + filter + recorder with zero loss.
 
 Starts surrogate, filter and recorder as processes (loopback, private domain); this process
 publishes range/az/el measurements of the ISS (and /clock) and receives the estimates.
-Prints parseable lines. Usage: .venv/bin/python bench/bench_graph.py [--quick]
+Prints parseable lines (losses are results, printed); asserts that every node exited 0 and
+that estimates arrived and were recorded at each rate. Usage: .venv/bin/python
+bench/bench_graph.py [--quick]
 """
 
 from __future__ import annotations
@@ -81,6 +83,10 @@ def run_stream(rate_hz: float, n: int, workdir: Path) -> dict:
     finally:
         g.close()
     counts = Counter(m.topic for m in bagio.read_bag(bag))
+    # what was measured is what is claimed: the nodes ran, fused and recorded this stream
+    assert codes == [0, 0, 0], f"node exit codes {codes}"
+    assert latency, f"no estimate of a published measurement arrived at {rate_hz} Hz"
+    assert counts["/ssa/measurement"] > 0 and counts["/ssa/estimate"] > 0, counts
     return {"latency_ms": np.array(latency) * 1e3, "estimates": len(latency), "sent": n,
             "recorded_measurements": counts["/ssa/measurement"],
             "recorded_estimates": counts["/ssa/estimate"], "codes": codes, "wall": wall}

@@ -13,7 +13,8 @@ Usage::
                                    [--seeds 6]
 
 Prints one ``delays: ...`` line per candidate; the mean is in the data's units (km for the
-ECI lift, noise sigmas for whitened channels).
+ECI lift, noise sigmas for whitened channels). Asserts that each holdout lies inside the
+training window and that every candidate's forecast of it is finite.
 """
 
 from __future__ import annotations
@@ -46,6 +47,8 @@ def holdout_rms(s: scenarios.Scenario, seed: int, delays: list[int]) -> list[flo
     elif np.all(sim.sigma > 0):
         z = z / sim.sigma
     h = min(round(s.gap_s / s.cadence_s), len(z) // 2)
+    # what is claimed: a holdout of at least one epoch, inside the training window only
+    assert h >= 1 and t[-1] < s.gap_start, (h, t[-1], s.gap_start)
     fit, held = z[:-h].T, z[-h:].T
     return [float(np.sqrt(np.mean(np.sum((HankelDMD(d).fit(fit).forecast(h) - held) ** 2,
                                          axis=0))))
@@ -60,6 +63,7 @@ def main() -> None:
     args = p.parse_args()
     s = scenarios.get(args.scenario)
     rms = np.array([holdout_rms(s, seed, args.delays) for seed in range(1, args.seeds + 1)])
+    assert np.isfinite(rms).all(), "a forecast of the holdout was not finite"
     print(f"scenario: {s.name}  training samples: {round(s.track_s / s.cadence_s)}  "
           f"held out: {min(round(s.gap_s / s.cadence_s), round(s.track_s / s.cadence_s) // 2)}  "
           f"configured delays: {s.delays}")
