@@ -63,7 +63,6 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import linear_sum_assignment
 
 __all__ = ["HankelDMD", "resolvable_rank", "svht_rank"]
 
@@ -386,6 +385,8 @@ class HankelDMD:
         """Exact DMD modes ``Y P_X^+ W`` (channels*delays, rank_), PyDMD layout."""
         self._check()
         if self._modes is None:
+            from scipy.optimize import linear_sum_assignment  # 0.2 s to import; modes only
+
             y = self._h[:, 1:]
             q, rr = np.linalg.qr(self._b[:, :-1].T)
             read_all = sla.solve_triangular(rr, (y @ q).T, check_finite=False).T
