@@ -25,7 +25,7 @@ setup(
     python_requires=">=3.10",
     entry_points={
         "console_scripts": [
-            "ssa-fusion = ssa_fusion.cli:main",
+            "ssa-fusion = ssa_fusion.apps.cli:main",
             "sensor_sim = ssa_fusion.nodes.sensor_sim:main",
             "surrogate = ssa_fusion.nodes.surrogate:main",
             "filter = ssa_fusion.nodes.filter:main",

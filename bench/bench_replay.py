@@ -29,9 +29,11 @@ from ssa_fusion import limit_blas_threads
 
 limit_blas_threads()
 
-from ssa_fusion import bagio, messages, replay  # noqa: E402
-from ssa_fusion.core import scenarios, simulate, types  # noqa: E402
-from ssa_fusion.qos import TOPIC_MEASUREMENT, TOPIC_TRUTH, TOPIC_WITHHELD  # noqa: E402
+from ssa_fusion.apps import replay  # noqa: E402
+from ssa_fusion.core import types  # noqa: E402
+from ssa_fusion.paper import scenarios, simulate  # noqa: E402
+from ssa_fusion.ros import bagio, messages  # noqa: E402
+from ssa_fusion.ros.topics import TOPIC_MEASUREMENT, TOPIC_TRUTH, TOPIC_WITHHELD  # noqa: E402
 
 
 def write_day_bag(path: Path, hours: float = 24.0, cadence: float = 10.0,
@@ -108,7 +110,7 @@ def main() -> None:
         played = Counter(m.topic for m in bagio.read_bag(short))
         rec = Path(tmp) / "rec"
         t0 = time.perf_counter()
-        code = subprocess.call([sys.executable, "-m", "ssa_fusion.cli", "replay", str(short),
+        code = subprocess.call([sys.executable, "-m", "ssa_fusion.apps.cli", "replay", str(short),
                                 "--rate", "100", "--record", str(rec)])
         wall = time.perf_counter() - t0
         got = Counter(m.topic for m in bagio.read_bag(rec))

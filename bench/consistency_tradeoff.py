@@ -35,15 +35,15 @@ limit_blas_threads()  # before numpy: the nodes' round-off
 
 import numpy as np  # noqa: E402
 
-from ssa_fusion.core import scenarios  # noqa: E402
-from ssa_fusion.core.experiments import (  # noqa: E402
+from ssa_fusion.core.metrics import chi2_bounds  # noqa: E402
+from ssa_fusion.paper import scenarios  # noqa: E402
+from ssa_fusion.paper.experiments import (  # noqa: E402
     forecast_fraction,
     run_dmd_ekf,
     run_hypothetical,
     score,
 )
-from ssa_fusion.core.metrics import chi2_bounds  # noqa: E402
-from ssa_fusion.core.simulate import simulate  # noqa: E402
+from ssa_fusion.paper.simulate import simulate  # noqa: E402
 
 
 def one_seed(job: tuple[str, float, float, int]

@@ -31,10 +31,10 @@ limit_blas_threads()  # before numpy: the nodes' round-off
 
 import numpy as np  # noqa: E402
 
-from ssa_fusion.core import scenarios  # noqa: E402
 from ssa_fusion.core.hankel_dmd import HankelDMD  # noqa: E402
-from ssa_fusion.core.simulate import simulate  # noqa: E402
 from ssa_fusion.core.surrogate import EciLift  # noqa: E402
+from ssa_fusion.paper import scenarios  # noqa: E402
+from ssa_fusion.paper.simulate import simulate  # noqa: E402
 
 
 def holdout_rms(s: scenarios.Scenario, seed: int, delays: list[int]) -> list[float]:

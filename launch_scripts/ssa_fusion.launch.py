@@ -10,7 +10,7 @@ from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from ssa_fusion.readiness import READERS
+from ssa_fusion.ros.readiness import READERS
 
 
 def generate_launch_description() -> LaunchDescription:

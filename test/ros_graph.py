@@ -1,4 +1,4 @@
-"""Graph tests use ssa_fusion.graph.Graph (real processes, private domain, loopback).
+"""Graph tests use ssa_fusion.ros.processes.Graph (real processes, private domain, loopback).
 
 Timeouts: one factor for every test that starts processes
 ---------------------------------------------------------
@@ -17,8 +17,8 @@ as soon as their condition holds, a larger factor never slows a passing test; ra
 import math
 import os
 
-from ssa_fusion.graph import Graph as RosGraph
-from ssa_fusion.graph import Proc as NodeProcess
+from ssa_fusion.ros.processes import Graph as RosGraph
+from ssa_fusion.ros.processes import Proc as NodeProcess
 
 
 def _timeout_factor() -> float:

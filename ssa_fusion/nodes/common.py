@@ -25,13 +25,13 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
-from ssa_fusion.core import scenarios
 from ssa_fusion.core.types import KIND_NAMES, RANGE_AZ_EL
 from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S
-from ssa_fusion.executors import make_executor
 from ssa_fusion.nodes import STOP
-from ssa_fusion.qos import TOPIC_DIAGNOSTICS
-from ssa_fusion.readiness import MATCHED_KEY
+from ssa_fusion.paper import scenarios
+from ssa_fusion.ros.executors import make_executor
+from ssa_fusion.ros.readiness import MATCHED_KEY
+from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
 
 
 class ParameterError(ValueError):

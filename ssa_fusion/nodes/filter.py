@@ -22,8 +22,7 @@ from rclpy.node import Node
 from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
 from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 
-from ssa_fusion import messages
-from ssa_fusion.core import kepler, scenarios
+from ssa_fusion.core import kepler
 from ssa_fusion.core.measurement import RANGE_AZ_EL, PositionModel, RazelModel
 from ssa_fusion.core.tracker import DEFAULT_GATE, Tracker, TrackerConfig
 from ssa_fusion.core.types import StateEstimate
@@ -38,7 +37,9 @@ from ssa_fusion.nodes.common import (
     run,
     wall_timer,
 )
-from ssa_fusion.qos import DATA_QOS, TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_MEASUREMENT
+from ssa_fusion.paper import scenarios
+from ssa_fusion.ros import messages
+from ssa_fusion.ros.topics import DATA_QOS, TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_MEASUREMENT
 
 SOURCE_NAMES = ("prediction", "sensor", "forecast")
 

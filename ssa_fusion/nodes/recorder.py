@@ -18,7 +18,6 @@ from pathlib import Path
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ssa_fusion.bagio import BagWriter, qos_from_rclpy
 from ssa_fusion.nodes.common import (
     Diagnostics,
     ParameterError,
@@ -27,7 +26,8 @@ from ssa_fusion.nodes.common import (
     run,
     wall_timer,
 )
-from ssa_fusion.qos import DATA_DEPTH, TOPIC_CLOCK
+from ssa_fusion.ros.bagio import BagWriter, qos_from_rclpy
+from ssa_fusion.ros.topics import DATA_DEPTH, TOPIC_CLOCK
 
 DEFAULT_TOPICS = [TOPIC_CLOCK]
 DEFAULT_PREFIX = "/ssa/"

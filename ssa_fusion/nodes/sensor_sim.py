@@ -24,9 +24,7 @@ from rosgraph_msgs.msg import Clock
 from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
 from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 
-from ssa_fusion import messages
-from ssa_fusion.core import scenarios, types
-from ssa_fusion.core.simulate import Simulation, simulate
+from ssa_fusion.core import types
 from ssa_fusion.nodes.common import (
     Diagnostics,
     ParameterError,
@@ -37,14 +35,17 @@ from ssa_fusion.nodes.common import (
     positive,
     run,
 )
-from ssa_fusion.qos import (
+from ssa_fusion.paper import scenarios
+from ssa_fusion.paper.simulate import Simulation, simulate
+from ssa_fusion.ros import messages
+from ssa_fusion.ros.readiness import ReadyNodes, check_needs
+from ssa_fusion.ros.topics import (
     DATA_QOS,
     TOPIC_CLOCK,
     TOPIC_MEASUREMENT,
     TOPIC_TRUTH,
     TOPIC_WITHHELD,
 )
-from ssa_fusion.readiness import ReadyNodes, check_needs
 
 ORBIT_SCENARIOS = [name for name, s in scenarios.SCENARIOS.items() if s.is_orbit]
 

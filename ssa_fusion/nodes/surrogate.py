@@ -23,8 +23,6 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
 
-from ssa_fusion import messages
-from ssa_fusion.core import scenarios
 from ssa_fusion.core.measurement import RazelModel
 from ssa_fusion.core.surrogate import LIVE_SURROGATE, EciLift, Surrogate, SurrogateConfig
 from ssa_fusion.core.types import RANGE_AZ_EL
@@ -41,7 +39,9 @@ from ssa_fusion.nodes.common import (
     run,
     wall_timer,
 )
-from ssa_fusion.qos import DATA_QOS, TOPIC_FORECAST, TOPIC_MEASUREMENT
+from ssa_fusion.paper import scenarios
+from ssa_fusion.ros import messages
+from ssa_fusion.ros.topics import DATA_QOS, TOPIC_FORECAST, TOPIC_MEASUREMENT
 
 
 def surrogate_config_from(node: Node) -> SurrogateConfig:

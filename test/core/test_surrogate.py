@@ -15,10 +15,10 @@ import math
 import numpy as np
 import pytest
 
-from ssa_fusion.core import scenarios as sc
-from ssa_fusion.core.simulate import Simulation, simulate
 from ssa_fusion.core.surrogate import EciLift, Surrogate, SurrogateConfig
 from ssa_fusion.core.types import FORECAST, POSITION, RANGE_AZ_EL, SENSOR, Measurement
+from ssa_fusion.paper import scenarios as sc
+from ssa_fusion.paper.simulate import Simulation, simulate
 
 DT = 30.0
 DELAYS = 60

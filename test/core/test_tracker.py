@@ -29,8 +29,6 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from ssa_fusion.core import iod
-from ssa_fusion.core import scenarios as sc
-from ssa_fusion.core.simulate import Simulation, simulate
 from ssa_fusion.core.tracker import HISTORY_REAL, Outcome, Tracker, TrackerConfig
 from ssa_fusion.core.types import (
     FORECAST,
@@ -40,6 +38,8 @@ from ssa_fusion.core.types import (
     UPDATE_SENSOR,
     Measurement,
 )
+from ssa_fusion.paper import scenarios as sc
+from ssa_fusion.paper.simulate import Simulation, simulate
 
 CADENCE = 30.0
 

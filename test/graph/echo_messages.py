@@ -7,7 +7,7 @@ import rclpy
 from msg_samples import N_SAMPLES, as_dict
 from ssa_fusion_msgs.msg import Measurement, StateEstimate
 
-from ssa_fusion.qos import DATA_QOS
+from ssa_fusion.ros.topics import DATA_QOS
 
 
 def main() -> None:

@@ -6,7 +6,7 @@ from msg_samples import N_SAMPLES, sample_estimate, sample_measurement
 from rclpy.executors import ExternalShutdownException
 from ssa_fusion_msgs.msg import Measurement, StateEstimate
 
-from ssa_fusion.qos import DATA_QOS
+from ssa_fusion.ros.topics import DATA_QOS
 
 
 def main() -> None:

@@ -30,14 +30,15 @@ from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from ssa_fusion_msgs.msg import Measurement, StateEstimate
 
-from ssa_fusion import bagio, messages
-from ssa_fusion.core import kepler, scenarios, types
+from ssa_fusion.apps.live import node_parameters
+from ssa_fusion.core import kepler, types
 from ssa_fusion.core.measurement import RazelModel
-from ssa_fusion.core.simulate import simulate
 from ssa_fusion.core.tracker import DEFAULT_GATE, Tracker, TrackerConfig
-from ssa_fusion.live import node_parameters
-from ssa_fusion.qos import DATA_QOS
-from ssa_fusion.readiness import ReadyNodes
+from ssa_fusion.paper import scenarios
+from ssa_fusion.paper.simulate import simulate
+from ssa_fusion.ros import bagio, messages
+from ssa_fusion.ros.readiness import ReadyNodes
+from ssa_fusion.ros.topics import DATA_QOS
 
 SHORT = scenarios.DEFAULT_LIVE.with_(track_s=1200.0, gap_s=0.0, after_s=0.0, delays=5)
 SIM = simulate(SHORT, seed=1)
@@ -207,7 +208,7 @@ def test_bad_input_is_never_fused_and_counted_by_cause(ros_graph):
 
 
 def test_nodes_report_when_their_subscriptions_have_matched(ros_graph):
-    """The readers' side of a DDS match, which senders wait for (`ssa_fusion.readiness`)."""
+    """The readers' side of a DDS match, which senders wait for (`ssa_fusion.ros.readiness`)."""
     g = ros_graph
     ready = ReadyNodes(g.probe)
     g.start_node("filter", params=filter_params())

@@ -8,9 +8,10 @@ import pytest
 from rosgraph_msgs.msg import Clock
 from ssa_fusion_msgs.msg import Measurement, StateEstimate
 
-from ssa_fusion import bagio, evaluate, messages
-from ssa_fusion.core import scenarios
-from ssa_fusion.live import node_parameters
+from ssa_fusion.apps import evaluate
+from ssa_fusion.apps.live import node_parameters
+from ssa_fusion.paper import scenarios
+from ssa_fusion.ros import bagio, messages
 
 TOPICS = {
     "/ssa/measurement": Measurement,
@@ -25,7 +26,7 @@ SHORT = scenarios.DEFAULT_LIVE.with_(track_s=3000.0, gap_s=900.0, after_s=600.0,
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     """Run the graph once; the tests below check what arrived and what was recorded."""
-    from ssa_fusion.graph import Graph
+    from ssa_fusion.ros.processes import Graph
 
     tmp = tmp_path_factory.mktemp("live")
     bag = tmp / "bag"

@@ -9,10 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ssa_fusion import bagio, cli, evaluate, messages, replay
+from ssa_fusion.apps import cli, evaluate, replay
 from ssa_fusion.core import types
+from ssa_fusion.ros import bagio, messages
 
-SAMPLE = Path(__file__).resolve().parents[1] / "bags" / "sample_iss_j2_rae"
+SAMPLE = Path(__file__).resolve().parents[2] / "bags" / "sample_iss_j2_rae"
 
 
 def fused(bag: Path) -> dict[float, types.StateEstimate]:
@@ -117,7 +118,7 @@ def test_a_bag_at_another_cadence_is_replayed_at_its_own(tmp_path):
     """10 s data under the default settings' 30 s cadence: the replay infers the cadence from
     the stamps (as the surrogate node does with cadence 0), fits at the gap and forecasts
     every missed epoch, the last ones released with the measurement that ends the gap."""
-    from ssa_fusion.core import scenarios, simulate
+    from ssa_fusion.paper import scenarios, simulate
 
     s = scenarios.DEFAULT_LIVE.with_(cadence_s=10.0, track_s=9000.0, gap_s=1200.0,
                                      after_s=600.0)

@@ -20,12 +20,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ssa_fusion import bagio
-from ssa_fusion.core import metrics, scenarios, types
-from ssa_fusion.core.montecarlo import placeholder_ensemble
-from ssa_fusion.core.pipeline import make_tracker
-from ssa_fusion.messages import estimate_from_msg, measurement_from_msg
-from ssa_fusion.qos import (
+from ssa_fusion.core import metrics, types
+from ssa_fusion.paper import scenarios
+from ssa_fusion.paper.montecarlo import placeholder_ensemble
+from ssa_fusion.paper.pipeline import make_tracker
+from ssa_fusion.ros import bagio
+from ssa_fusion.ros.messages import estimate_from_msg, measurement_from_msg
+from ssa_fusion.ros.topics import (
     TOPIC_ESTIMATE,
     TOPIC_FORECAST,
     TOPIC_MEASUREMENT,

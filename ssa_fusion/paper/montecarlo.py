@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import dynamics
+from ssa_fusion.core import dynamics
 
 N_PARTICLES = 200
 

@@ -3,9 +3,9 @@ defaults, the live evaluation, the offline replay and the experiments agree."""
 
 from __future__ import annotations
 
-from .scenarios import Scenario, measurement_model, placeholder
-from .surrogate import EciLift, Surrogate, SurrogateConfig
-from .tracker import Tracker, TrackerConfig
+from ssa_fusion.core.surrogate import EciLift, Surrogate, SurrogateConfig
+from ssa_fusion.core.tracker import Tracker, TrackerConfig
+from ssa_fusion.paper.scenarios import Scenario, measurement_model, placeholder
 
 
 def make_tracker(s: Scenario, object_id: str = "", **overrides) -> Tracker:

@@ -12,10 +12,10 @@ limit_blas_threads()
 
 # subcommand -> module providing add_arguments(parser) and run(args) -> int
 _COMMANDS = {
-    "live": ("ssa_fusion.live", "run the node graph on a scenario, record a bag, evaluate it"),
-    "reproduce": ("ssa_fusion.reproduce", "reproduce the paper's experiments (three arms)"),
-    "replay": ("ssa_fusion.replay", "replay a recorded bag through surrogate + filter"),
-    "report": ("ssa_fusion.report", "metrics table and plots from a recorded bag"),
+    "live": ("ssa_fusion.apps.live", "run the node graph on a scenario, record a bag, evaluate it"),
+    "reproduce": ("ssa_fusion.paper.reproduce", "reproduce the paper's experiments (three arms)"),
+    "replay": ("ssa_fusion.apps.replay", "replay a recorded bag through surrogate + filter"),
+    "report": ("ssa_fusion.apps.report", "metrics table and plots from a recorded bag"),
 }
 
 

@@ -14,8 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ssa_fusion import bagio, evaluate
+from ssa_fusion.apps import evaluate
 from ssa_fusion.core import types
+from ssa_fusion.ros import bagio
 
 ARMS = ("placeholder", "dmd_ekf", "hypothetical_ekf")
 STATE_LABELS = ("x [km]", "y [km]", "z [km]", "vx [km/s]", "vy [km/s]", "vz [km/s]")
@@ -65,13 +66,13 @@ def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
 
 def _plt():
     """pyplot with the Agg backend (imported on first use: `report` works without plots)."""
-    from ssa_fusion import plots
+    from ssa_fusion.paper import plots
 
     return plots.plt
 
 
 def save(fig, path: Path, dpi: int = 100) -> None:
-    from ssa_fusion import plots
+    from ssa_fusion.paper import plots
 
     plots.save(fig, path, dpi)
 

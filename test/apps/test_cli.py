@@ -6,9 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from ssa_fusion import cli, cliargs, live
+from ssa_fusion.apps import args as cliargs
+from ssa_fusion.apps import cli, live
 
-SAMPLE = str(Path(__file__).resolve().parents[1] / "bags" / "sample_iss_j2_rae")
+SAMPLE = str(Path(__file__).resolve().parents[2] / "bags" / "sample_iss_j2_rae")
 
 
 @pytest.mark.parametrize("argv", [
@@ -79,7 +80,7 @@ def test_outputs_under_a_file_are_refused(tmp_path, capsys):
 
 
 def test_reader_entries_name_a_node_and_a_topic():
-    from ssa_fusion.readiness import READERS, check_needs
+    from ssa_fusion.ros.readiness import READERS, check_needs
 
     assert check_needs(READERS) is None
     assert "no namespace" in check_needs(["/ns/filter:/ssa/measurement"])

@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
-from ssa_fusion import evaluate
-from ssa_fusion.core import kepler, metrics, scenarios, types
+from ssa_fusion.apps import evaluate
+from ssa_fusion.core import kepler, metrics, types
 from ssa_fusion.core.ekf import process_noise
+from ssa_fusion.paper import scenarios
 
 T0, CADENCE = 1000.0, 120.0
 TRACK, GAP, COVERED, AFTER = 40, 40, 10, 5  # epochs; estimates cover the gap's first 10

@@ -14,7 +14,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
-from ssa_fusion.qos import (
+from ssa_fusion.ros.topics import (
     TOPIC_CLOCK,
     TOPIC_DIAGNOSTICS,
     TOPIC_ESTIMATE,

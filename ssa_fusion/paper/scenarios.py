@@ -17,9 +17,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import dynamics, kepler
-from .frames import COLUMBUS, Station
-from .measurement import POSITION, RANGE_AZ_EL, PositionModel, RazelModel
+from ssa_fusion.core import dynamics, kepler
+from ssa_fusion.core.frames import COLUMBUS, Station
+from ssa_fusion.core.measurement import POSITION, RANGE_AZ_EL, PositionModel, RazelModel
 
 UNIX_EPOCH_JD = 2440587.5
 """Julian date of 1970-01-01T00:00:00 UTC; jd = UNIX_EPOCH_JD + t_unix / 86400."""

@@ -12,8 +12,8 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 
-from ssa_fusion import bagio, messages
-from ssa_fusion.qos import DATA_QOS, TOPIC_CLOCK
+from ssa_fusion.ros import bagio, messages
+from ssa_fusion.ros.topics import DATA_QOS, TOPIC_CLOCK
 
 
 class Player:

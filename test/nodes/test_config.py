@@ -6,10 +6,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-from ssa_fusion.core import scenarios
-from ssa_fusion.live import node_parameters
+from ssa_fusion.apps.live import node_parameters
+from ssa_fusion.paper import scenarios
 
-CONFIG = Path(__file__).resolve().parents[1] / "config" / "default.yaml"
+CONFIG = Path(__file__).resolve().parents[2] / "config" / "default.yaml"
 
 
 def test_default_yaml_matches_the_live_default_scenario():

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from ssa_fusion import cli
+from ssa_fusion.apps import cli
 
 ARMS = ("placeholder", "dmd_ekf", "hypothetical_ekf")
 SETTINGS = ("cadence_s", "training_window_s", "gap_s", "delays", "rank", "p0_sigma", "q",
@@ -74,9 +74,9 @@ def test_dmd_arm_predicts_where_no_forecast_arrives(monkeypatch):
     prediction, which is then the coasting EKF's state."""
     import numpy as np
 
-    from ssa_fusion.core import experiments, scenarios
-    from ssa_fusion.core.simulate import simulate
-    from ssa_fusion.reproduce import quick_variant
+    from ssa_fusion.paper import experiments, scenarios
+    from ssa_fusion.paper.reproduce import quick_variant
+    from ssa_fusion.paper.simulate import simulate
 
     s = quick_variant(scenarios.SCENARIOS["iss_j2_pos"])
     sim = simulate(s, seed=1)

@@ -7,8 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .measurement import RANGE_AZ_EL
-from .scenarios import Scenario, measurement_model, truth_states
+from ssa_fusion.core.measurement import RANGE_AZ_EL
+from ssa_fusion.paper.scenarios import Scenario, measurement_model, truth_states
 
 
 @dataclass

@@ -25,8 +25,8 @@ import rclpy
 from rclpy.context import Context
 from rclpy.node import Node
 
-from ssa_fusion.executors import make_executor
-from ssa_fusion.qos import DATA_QOS
+from ssa_fusion.ros.executors import make_executor
+from ssa_fusion.ros.topics import DATA_QOS
 
 NODE_BIN = Path(sys.prefix) / "lib" / "ssa_fusion"
 """Where the bootstrap places node executables (as `ros2 run ssa_fusion <node>` finds them)."""

@@ -86,7 +86,7 @@ def qos_from_rclpy(profile: Any) -> Qos:
 
 def rosbags_classes() -> Any:
     """`messages.MsgClasses` of the typestore, to build messages for bags without ROS."""
-    from ssa_fusion.messages import MsgClasses
+    from ssa_fusion.ros.messages import MsgClasses
 
     t = typestore().types
     return MsgClasses(t["builtin_interfaces/msg/Time"], t["std_msgs/msg/Header"],

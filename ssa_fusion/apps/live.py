@@ -15,12 +15,12 @@ import sys
 import time
 from pathlib import Path
 
-from ssa_fusion import evaluate, report
-from ssa_fusion.cliargs import add_domain_id, positive_float
-from ssa_fusion.core import scenarios
+from ssa_fusion.apps import evaluate, report
+from ssa_fusion.apps.args import add_domain_id, positive_float
 from ssa_fusion.core.types import KIND_NAMES
-from ssa_fusion.graph import Graph
-from ssa_fusion.readiness import READERS
+from ssa_fusion.paper import scenarios
+from ssa_fusion.ros.processes import Graph
+from ssa_fusion.ros.readiness import READERS
 
 LIVE_SCENARIOS = [n for n, s in scenarios.SCENARIOS.items() if s.is_orbit]
 LIVE_ROOT = Path("out/live")

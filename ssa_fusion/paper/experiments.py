@@ -25,16 +25,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import pipeline
-from .ekf import process_noise
-from .metrics import chi2_bounds, epsilon, nees
-from .montecarlo import N_PARTICLES as MC_PARTICLES
-from .montecarlo import placeholder_ensemble
-from .scenarios import Scenario, measurement_model, placeholder
-from .simulate import Simulation, simulate
-from .surrogate import Surrogate
-from .tracker import Tracker
-from .types import UPDATE_FORECAST, Measurement, StateEstimate
+from ssa_fusion.core.ekf import process_noise
+from ssa_fusion.core.metrics import chi2_bounds, epsilon, nees
+from ssa_fusion.core.surrogate import Surrogate
+from ssa_fusion.core.tracker import Tracker
+from ssa_fusion.core.types import UPDATE_FORECAST, Measurement, StateEstimate
+from ssa_fusion.paper import pipeline
+from ssa_fusion.paper.montecarlo import N_PARTICLES as MC_PARTICLES
+from ssa_fusion.paper.montecarlo import placeholder_ensemble
+from ssa_fusion.paper.scenarios import Scenario, measurement_model, placeholder
+from ssa_fusion.paper.simulate import Simulation, simulate
 
 N_PARTICLES = MC_PARTICLES
 

@@ -30,13 +30,14 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ssa_fusion import bagio, messages
-from ssa_fusion.cliargs import add_domain_id, positive_float
-from ssa_fusion.core import scenarios, types
-from ssa_fusion.core.pipeline import make_surrogate, make_tracker
+from ssa_fusion.apps.args import add_domain_id, positive_float
+from ssa_fusion.core import types
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
 from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S, ahead_of_clock
-from ssa_fusion.qos import (
+from ssa_fusion.paper import scenarios
+from ssa_fusion.paper.pipeline import make_surrogate, make_tracker
+from ssa_fusion.ros import bagio, messages
+from ssa_fusion.ros.topics import (
     TOPIC_CLOCK,
     TOPIC_ESTIMATE,
     TOPIC_FORECAST,
@@ -242,10 +243,10 @@ def write_offline(out: Path, stream: list[bagio.BagMessage], result: OfflineResu
 def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
                 s: scenarios.Scenario) -> int:
     """Play the bag into surrogate + filter processes and record the run."""
-    from ssa_fusion.graph import Graph
-    from ssa_fusion.live import node_parameters
-    from ssa_fusion.player import Player
-    from ssa_fusion.readiness import ReadyNodes, readers_of
+    from ssa_fusion.apps.live import node_parameters
+    from ssa_fusion.ros.player import Player
+    from ssa_fusion.ros.processes import Graph
+    from ssa_fusion.ros.readiness import ReadyNodes, readers_of
 
     record = args.record or _sibling(args.bag, "_replay")
     if record.exists():

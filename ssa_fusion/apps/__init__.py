@@ -1,0 +1,1 @@
+"""The ssa-fusion command: cli, args, live, replay, report, evaluate."""
