@@ -47,7 +47,9 @@ if ! is_fresh requirements "$REQ_FP"; then
   step "point the ROS wheels' CMake exports at this interpreter"
   PYINC=$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
   NPINC=$("$PY" -c 'import numpy; print(numpy.get_include())')
-  grep -rl --include='*__rosidl_generator_pyExport.cmake' '/opt/python/cp311-cp311' "$VENV/share" |
+  # grep exits 1 when there is nothing left to patch (a venv whose wheels were patched before).
+  { grep -rl --include='*__rosidl_generator_pyExport.cmake' '/opt/python/cp311-cp311' "$VENV/share" ||
+    [[ $? == 1 ]]; } |
     xargs -r sed -i \
       -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#$NPINC#g" \
       -e "s#/opt/python/cp311-cp311/include/python3.11#$PYINC#g"
