@@ -257,7 +257,8 @@ def jacobian(model: str, x: ArrayLike, **params: float) -> Array:
     h = 1e-6 * np.maximum(np.abs(xx), 1.0)
     cols = np.concatenate([xx[:, None] + np.diag(h), xx[:, None] - np.diag(h)], axis=1)
     f = fun(cols, **params)
-    return (f[:, :n] - f[:, n:]) / (2.0 * h)
+    jac: Array = (f[:, :n] - f[:, n:]) / (2.0 * h)
+    return jac
 
 
 def propagate_stm(
@@ -370,7 +371,7 @@ def state_to_elements(
 
 
 def _true_to_mean(nu: float, e: float) -> float:
-    """True anomaly -> mean anomaly (rad), elliptic orbits."""
+    """Convert true anomaly ``nu`` to mean anomaly (rad) on an elliptic orbit (e < 1)."""
     ea = 2.0 * math.atan2(
         math.sqrt(1.0 - e) * math.sin(nu / 2), math.sqrt(1.0 + e) * math.cos(nu / 2)
     )
@@ -420,7 +421,8 @@ def fit_sgp4_mean_elements(
         err, r, v = sat.sgp4_tsince(0.0)
         if err != 0:
             return np.full(6, 1e6)
-        return (np.concatenate([r, v]) - x0) * w
+        res: Array = (np.concatenate([r, v]) - x0) * w
+        return res
 
     sol = least_squares(resid, p0, x_scale=np.array([1e-3, 1e-3, 1e-3, 1e-2, 1e-2, 1e-2]),
                         xtol=1e-15, ftol=1e-15, gtol=1e-15, method="lm")
@@ -443,4 +445,5 @@ def sgp4_ephemeris(
     err, r, v = sat.sgp4_array(jd, fr)
     if np.any(err):
         raise RuntimeError(f"SGP4 error codes {set(err[err != 0].tolist())}")
-    return np.concatenate([r, v], axis=1)
+    state: Array = np.concatenate([r, v], axis=1)
+    return state

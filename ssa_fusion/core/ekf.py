@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -81,7 +81,7 @@ def _inv_sym(s: Array) -> Array:
             ))
     if not np.isfinite(s).all():
         return np.full((m, m), math.nan)
-    return np.linalg.inv(s)
+    return cast(Array, np.linalg.inv(s))
 
 
 class ExtendedKalmanFilter:
@@ -259,4 +259,4 @@ def process_noise(dt_s: float, q: float, dim: int = 3) -> Array:
     """
     dt = abs(float(dt_s))
     blk = q * np.array(((dt**3 / 3.0, dt**2 / 2.0), (dt**2 / 2.0, dt)))
-    return np.kron(blk, np.eye(dim))
+    return cast(Array, np.kron(blk, np.eye(dim)))

@@ -69,9 +69,14 @@ def _rot_z(theta: ArrayLike) -> NDArray[np.float64]:
 
 
 def _rotate(x: NDArray[np.float64], theta: ArrayLike, sign: float) -> NDArray[np.float64]:
+    """Rotate positions (..., 3) or states (..., 6) by R3(sign * theta), km, km/s.
+
+    ``sign = +1``: ECI -> ECEF (theta = ERA), with the ``omega x r`` term of the rotating
+    frame subtracted from the velocity; ``sign = -1``: ECEF -> ECI (it is added back).
+    """
     x = np.asarray(x, dtype=float)
     rot = _rot_z(sign * np.asarray(theta, dtype=float))
-    r = np.einsum("...ij,...j->...i", rot, x[..., :3])
+    r: NDArray[np.float64] = np.einsum("...ij,...j->...i", rot, x[..., :3])
     if x.shape[-1] == 3:
         return r
     if x.shape[-1] != 6:
@@ -121,7 +126,10 @@ def enu_matrix(lat_rad: float, lon_rad: float) -> NDArray[np.float64]:
     return np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
 
 
-def _enu_to_razel(enu: NDArray[np.float64]) -> tuple[NDArray, NDArray, NDArray]:
+def _enu_to_razel(
+    enu: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Range km, azimuth rad in [0, 2 pi) and elevation rad of ENU vectors (..., 3) km."""
     e, n, u = enu[..., 0], enu[..., 1], enu[..., 2]
     horiz = np.hypot(e, n)
     rng = np.hypot(horiz, u)
@@ -132,7 +140,7 @@ def _enu_to_razel(enu: NDArray[np.float64]) -> tuple[NDArray, NDArray, NDArray]:
 
 def razel(
     r_ecef_km: ArrayLike, lat_rad: float, lon_rad: float, alt_km: float
-) -> tuple[NDArray, NDArray, NDArray]:
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Range [km], azimuth [rad, from north clockwise, in [0, 2 pi)], elevation [rad].
 
     ``r_ecef_km``: target ECEF position(s), shape (..., 3). Returns three arrays of shape (...).

@@ -96,10 +96,21 @@ def svht_rank(sigma: ArrayLike, rows: int, cols: int) -> int:
 
 
 def psd_part(c: FloatArray) -> FloatArray:
-    """The positive semi-definite part of symmetric matrices c (k, n, n): their negative
-    eigenvalues set to zero."""
+    """Return the positive semi-definite part of symmetric matrices.
+
+    Parameters
+    ----------
+    c : ndarray, shape (k, n, n)
+        Symmetric matrices (any unit).
+
+    Returns
+    -------
+    ndarray, shape (k, n, n)
+        ``c`` with its negative eigenvalues set to zero (same unit).
+    """
     w, v = np.linalg.eigh(c)
-    return (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
+    out: FloatArray = (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
+    return out
 
 
 def _hankel(z: FloatArray, delays: int) -> FloatArray:
@@ -113,7 +124,7 @@ def _hankel(z: FloatArray, delays: int) -> FloatArray:
 
 
 def resolvable_rank(sigma: ArrayLike, rows: int, cols: int) -> int:
-    """Number of singular values an SVD of a ``rows`` x ``cols`` matrix resolves.
+    """Count the singular values an SVD of a ``rows`` x ``cols`` matrix resolves.
 
     A backward-stable SVD returns every singular value to an absolute accuracy of about
     ``eps * sigma_max``, so values at or below ``max(rows, cols) * eps * sigma_max`` are
@@ -319,7 +330,7 @@ class HankelDMD:
 
         h = _hankel(z, d)  # (m d, ncol)
         x = h[:, :-1]
-        rmax = min(x.shape)
+        rmax: int = min(x.shape)
 
         def choose_rank(sigma: FloatArray) -> int:
             if self.rank is None:
@@ -378,7 +389,8 @@ class HankelDMD:
     def operator(self) -> FloatArray:
         """Fitted reduced operator ``Atilde`` (rank_ x rank_) in the POD basis (unclipped)."""
         self._check()
-        return self._qs @ self._t_raw @ self._qs.T
+        op: FloatArray = self._qs @ self._t_raw @ self._qs.T
+        return op
 
     @property
     def modes(self) -> NDArray[np.complex128]:
@@ -418,7 +430,7 @@ class HankelDMD:
         if n_steps > k1:
             x_k = self._t @ seq[:, -1]
             seq = np.concatenate((seq, _orbit(self._t_stab, x_k, n_steps - k1)), axis=1)
-        out = self._c @ seq
+        out: FloatArray = self._c @ seq
         if self.angle_channels:
             idx = list(self.angle_channels)
             out[idx] = np.mod(out[idx], _TWO_PI)
@@ -435,7 +447,8 @@ class HankelDMD:
         k_max = max(1, min(k_need, ncol // 2))
         if residual is None and self._cov_cache is not None and (
                 self._cov_cache.shape[0] >= k_max):
-            return self._cov_cache[:k_max]
+            cached: FloatArray = self._cov_cache[:k_max]
+            return cached
         # Column stride bounds the work array to ~_COV_BUDGET error vectors.
         stride = max(1, -(-k_max * ncol // _COV_BUDGET))
         j = np.arange(0, ncol, stride)
@@ -454,7 +467,7 @@ class HankelDMD:
             err = np.asarray(residual(pred, tgt), dtype=np.float64)
         err *= valid[:, None, :]
         cnt = valid.sum(axis=1).astype(float)
-        cov = np.einsum("kaj,kbj->kab", err, err) / cnt[:, None, None]
+        cov: FloatArray = np.einsum("kaj,kbj->kab", err, err) / cnt[:, None, None]
         if residual is None:
             self._cov_cache = cov
         return cov
@@ -508,4 +521,5 @@ class HankelDMD:
         run = np.maximum.accumulate(tr)
         scale = np.where(tr > 0.0, run / np.where(tr > 0.0, tr, 1.0), 1.0)
         cov *= scale[:, None, None]
-        return 0.5 * (cov + cov.transpose(0, 2, 1))
+        out: FloatArray = 0.5 * (cov + cov.transpose(0, 2, 1))
+        return out

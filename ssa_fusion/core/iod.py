@@ -56,8 +56,11 @@ def herrick_gibbs(
 
 
 def lagrange_derivative_weights(t_s: ArrayLike) -> Array:
-    """Weights w (k,) with ``f'(t_s[-1]) ~= sum_j w_j f(t_s[j])`` (derivative of the Lagrange
-    interpolating polynomial through all k >= 2 samples, evaluated at the last node)."""
+    """Return weights w (k,) with ``f'(t_s[-1]) ~= sum_j w_j f(t_s[j])`` (1/s for t_s in s).
+
+    The derivative of the Lagrange interpolating polynomial through all k >= 2 samples,
+    evaluated at the last node.
+    """
     t = np.asarray(t_s, float)
     k = t.size
     if k < 2:

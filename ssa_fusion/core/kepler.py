@@ -1,25 +1,25 @@
-"""Analytic two-body (Keplerian) propagation with its state transition matrix.
+r"""Analytic two-body (Keplerian) propagation with its state transition matrix.
 
-The propagation uses the universal variable :math:`\\chi` and the Stumpff functions
-:math:`c_k(z)`, :math:`z = \\alpha\\chi^2`, with the universal functions
-:math:`U_k(\\chi, \\alpha) = \\chi^k c_k(z)` (Battin 1999, ch. 4).  With
-:math:`r_0 = |\\mathbf r_0|`, :math:`\\sigma_0 = \\mathbf r_0\\cdot\\mathbf v_0/\\sqrt\\mu` and
-:math:`\\alpha = 2/r_0 - v_0^2/\\mu` (inverse semi-major axis) Kepler's equation reads
+The propagation uses the universal variable :math:`\chi` and the Stumpff functions
+:math:`c_k(z)`, :math:`z = \alpha\chi^2`, with the universal functions
+:math:`U_k(\chi, \alpha) = \chi^k c_k(z)` (Battin 1999, ch. 4).  With
+:math:`r_0 = |\mathbf r_0|`, :math:`\sigma_0 = \mathbf r_0\cdot\mathbf v_0/\sqrt\mu` and
+:math:`\alpha = 2/r_0 - v_0^2/\mu` (inverse semi-major axis) Kepler's equation reads
 
-.. math:: \\sqrt\\mu\\,\\Delta t = r_0 U_1 + \\sigma_0 U_2 + U_3,
+.. math:: \sqrt\mu\,\Delta t = r_0 U_1 + \sigma_0 U_2 + U_3,
 
 and the state follows from the Lagrange coefficients
-:math:`F = 1 - U_2/r_0`, :math:`G = (r_0 U_1 + \\sigma_0 U_2)/\\sqrt\\mu`,
-:math:`\\dot F = -\\sqrt\\mu U_1/(r r_0)`, :math:`\\dot G = 1 - U_2/r`.
+:math:`F = 1 - U_2/r_0`, :math:`G = (r_0 U_1 + \sigma_0 U_2)/\sqrt\mu`,
+:math:`\dot F = -\sqrt\mu U_1/(r r_0)`, :math:`\dot G = 1 - U_2/r`.
 
 The 6x6 state transition matrix is analytic: ``F, G, Fdot, Gdot`` depend on the initial
 state only through the three scalars ``(r0, sigma0, alpha)``; their exact partials (using
-:math:`\\partial U_k/\\partial\\alpha = (k U_{k+2} - \\chi U_{k+1})/2` and the implicit
-derivative of :math:`\\chi` from Kepler's equation) give the Shepperd-type closed form
+:math:`\partial U_k/\partial\alpha = (k U_{k+2} - \chi U_{k+1})/2` and the implicit
+derivative of :math:`\chi` from Kepler's equation) give the Shepperd-type closed form
 
-.. math:: \\Phi = \\begin{bmatrix} F I & G I \\\\ \\dot F I & \\dot G I \\end{bmatrix}
-          + W M W^T,\\qquad W = \\begin{bmatrix} \\mathbf r_0 & \\mathbf v_0 & 0 & 0\\\\
-          0 & 0 & \\mathbf r_0 & \\mathbf v_0 \\end{bmatrix},
+.. math:: \Phi = \begin{bmatrix} F I & G I \\ \dot F I & \dot G I \end{bmatrix}
+          + W M W^T,\qquad W = \begin{bmatrix} \mathbf r_0 & \mathbf v_0 & 0 & 0\\
+          0 & 0 & \mathbf r_0 & \mathbf v_0 \end{bmatrix},
 
 with a 4x4 scalar matrix ``M``.  All scalar work is done with :mod:`math` (this sits in the
 EKF hot path); numpy is only used to assemble the 6x6 result.
@@ -44,7 +44,7 @@ _Z_SERIES = 0.5
 _MAX_ITER = 60
 
 # D = F*E_rr + G*E_rv + Fdot*E_vr + Gdot*E_vv as one (4,) @ (4, 36) product.
-_D_BASIS = np.zeros((4, 6, 6))
+_D_BASIS: NDArray[np.float64] = np.zeros((4, 6, 6))
 for _k, (_i0, _j0) in enumerate(((0, 0), (0, 3), (3, 0), (3, 3))):
     for _d in range(3):
         _D_BASIS[_k, _i0 + _d, _j0 + _d] = 1.0

@@ -57,7 +57,7 @@ class PositionModel:
         return x[self._idx]
 
     def H(self, x: NDArray[np.float64], t_s: float = 0.0) -> NDArray[np.float64]:
-        """Selection Jacobian (len(observed), len(x)) (read-only, cached per state size)."""
+        """Return the selection Jacobian (len(observed), len(x)) (read-only, cached per size)."""
         return self._H(len(x))
 
     def h_and_H(

@@ -33,12 +33,14 @@ def epsilon(x_hat: ArrayLike, x_true: ArrayLike) -> float:
 
 
 def _mahalanobis_sq(v: ArrayLike, C: ArrayLike) -> Array:
+    """``v^T C^-1 v`` per sample: v (k, n) or (n,), C (k, n, n) or (n, n) -> (k,)."""
     vv = np.asarray(v, float)
     cc = np.asarray(C, float)
     if vv.ndim == 1:
         vv, cc = vv[None], cc[None]
     sol = np.linalg.solve(cc, vv[..., None])[..., 0]
-    return np.einsum("ki,ki->k", vv, sol)
+    out: Array = np.einsum("ki,ki->k", vv, sol)
+    return out
 
 
 def nees(err: ArrayLike, P: ArrayLike) -> Array:

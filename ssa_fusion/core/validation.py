@@ -1,7 +1,9 @@
-"""Checks every consumer of measurements applies before using one (the filter's `Tracker`,
-the `Surrogate`, and through them the nodes and the offline replay), so that a bad message
-is refused the same way live and offline, with a cause (a `/diagnostics` counter name) and
-a reason a user can act on. Units: km, rad, s."""
+"""Checks every consumer of measurements applies before using one.
+
+The consumers are the filter's `Tracker`, the `Surrogate`, and through them the nodes and
+the offline replay, so that a bad message is refused the same way live and offline, with a
+cause (a `/diagnostics` counter name) and a reason a user can act on. Units: km, rad, s.
+"""
 
 from __future__ import annotations
 
@@ -25,9 +27,12 @@ far below a wall-time stamp in a sim-time graph (months)."""
 
 
 def measurement_problem(m: Measurement, kind: int | None, frame_id: str = "") -> Problem:
-    """What is wrong with `m` for a consumer of measurements of `kind` (None: any) from
-    `frame_id` ("": any): wrong kind or frame, NaN/inf anywhere, an impossible range/az/el,
-    or a covariance that is not symmetric positive semi-definite."""
+    """Return what is wrong with `m` for a consumer of `kind` from `frame_id`, or `OK`.
+
+    `kind` None and `frame_id` "" accept any. Problems: wrong kind or frame, NaN/inf
+    anywhere, an impossible range/az/el, or a covariance that is not symmetric positive
+    semi-definite.
+    """
     z = np.asarray(m.z, dtype=float)
     R = np.asarray(m.R, dtype=float)
     if kind is not None and m.kind != kind:
@@ -49,16 +54,23 @@ def measurement_problem(m: Measurement, kind: int | None, frame_id: str = "") ->
 
 
 def razel_possible(z: np.ndarray) -> np.ndarray:
-    """z (3, ...) = range km, azimuth, elevation rad: range >= 0 and |elevation| <= pi/2
-    (a forecast that is not is withheld, not clipped)."""
+    """Return whether z is a possible range/az/el: range >= 0 and |elevation| <= pi/2.
+
+    z (3, ...) = [range km, azimuth rad, elevation rad]; the result is a bool array (...).
+    A forecast that is not possible is withheld, not clipped.
+    """
     z = np.asarray(z, dtype=float)
-    return (z[0] >= 0.0) & (np.abs(z[2]) <= HALF_PI)
+    ok: np.ndarray = (z[0] >= 0.0) & (np.abs(z[2]) <= HALF_PI)
+    return ok
 
 
 def is_covariance(R: np.ndarray) -> bool:
-    """R is symmetric positive semi-definite up to round-off relative to its scale:
-    asymmetry <= 1e-9 max|R| and eigenvalues >= -1e-12 max|eig| (a singular covariance
-    assembled as Q D Q^T has eigenvalues of +-1e-17 |R| where D has a zero)."""
+    """Return whether R is symmetric positive semi-definite up to round-off.
+
+    Relative to its scale: asymmetry <= 1e-9 max|R| and eigenvalues >= -1e-12 max|eig| (a
+    singular covariance assembled as Q D Q^T has eigenvalues of +-1e-17 |R| where D has a
+    zero).
+    """
     scale = float(np.abs(R).max(initial=0.0))
     if float(np.abs(R - R.T).max(initial=0.0)) > 1e-9 * scale:
         return False
@@ -67,9 +79,12 @@ def is_covariance(R: np.ndarray) -> bool:
 
 
 def ahead_of_clock(t: float, now: float, max_lead_s: float) -> Problem:
-    """A stamp more than `max_lead_s` after the clock time `now` (s): typically a sensor
-    stamping wall time into a sim-time graph. Fused, it would move the filter and the
-    surrogate past every later real measurement. `now` <= 0 means no clock yet: no check."""
+    """Refuse a stamp `t` more than `max_lead_s` after the clock time `now` (all s).
+
+    Typically a sensor stamping wall time into a sim-time graph. Fused, it would move the
+    filter and the surrogate past every later real measurement. `now` <= 0 means no clock
+    yet: no check. Returns ("rejected_future", reason) or `OK`.
+    """
     if now > 0.0 and t > now + max_lead_s:
         return ("rejected_future",
                 f"t={t} is {t - now:.6g} s ahead of the clock ({now}); more than "
