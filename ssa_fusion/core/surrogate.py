@@ -1,5 +1,7 @@
-"""The measurement surrogate: a sliding buffer of real measurements, a Hankel-DMD model
-retrained on it, and forecasts for the epochs the sensor missed.
+"""The measurement surrogate: forecasts for the epochs the sensor missed.
+
+A sliding buffer of real measurements, a Hankel-DMD model retrained on it, and forecasts
+for the epochs the sensor missed.
 
 `Surrogate.add(m)` takes real measurements; `Surrogate.due(now)` returns the forecasts that
 have become due by sim time `now` (each missed epoch once). Which epochs get a forecast,
@@ -68,27 +70,46 @@ from .validation import OK, Problem, measurement_problem, razel_possible
 
 @dataclass
 class SurrogateConfig:
-    """buffer_s : length of the sliding training buffer, s;
-    retrain_period_s : refit at least this often (sim s) while measurements arrive (inf:
-    never); a gap always starts from a model fitted up to the last real measurement;
-    delays, rank : Hankel-DMD settings (rank None: automatic);
-    max_horizon_s : no forecast beyond this many s after the last real measurement;
-    cadence_s : expected measurement interval (0: inferred from the last `CADENCE_SAMPLES`
-    intervals in the buffer, see `Surrogate._infer_cadence`);
-    jitter : largest deviation of a sampling interval from the cadence, as a fraction of the
-    cadence, that still counts as the cadence (stamp jitter; such samples are fitted as if
-    on the grid); a larger one is a gap or irregular sampling, and a fit keeps what follows;
-    kind, frame_id : the only measurement kind and frame_id accepted (None / "": those of
-    the first measurement buffered);
-    grace : fraction of a cadence after an epoch before it counts as missed;
-    lift : optional observable map (e.g. `EciLift`) the DMD learns instead of z (None: z);
-    inflate_correlated : scale the model part D of the k-th forecast's covariance of a gap
-    by k (R + k D, see below);
-    correlation_power : the exponent p of that scaling (R + k^p D);
-    noise_share : the share a of the sensor noise R that a forecast's covariance keeps
-    (a R + k^p D); 1 is the paper's floor Var(e) >= R, lower values only for studies
-    (`bench/consistency_tradeoff.py`), in (0, 1];
-    whiten : learn noisy channels divided by their noise sigma (see below)."""
+    """Settings of a `Surrogate` (times in sim seconds).
+
+    Attributes
+    ----------
+    buffer_s : float
+        Length of the sliding training buffer, s.
+    retrain_period_s : float
+        Refit at least this often (sim s) while measurements arrive (inf: never); a gap
+        always starts from a model fitted up to the last real measurement.
+    delays, rank : int, int or None
+        Hankel-DMD settings (rank None: automatic).
+    max_horizon_s : float
+        No forecast beyond this many s after the last real measurement.
+    cadence_s : float
+        Expected measurement interval, s (0: inferred from the last `CADENCE_SAMPLES`
+        intervals in the buffer, see `Surrogate._infer_cadence`).
+    grace : float
+        Fraction of a cadence after an epoch before it counts as missed.
+    jitter : float
+        Largest deviation of a sampling interval from the cadence, as a fraction of the
+        cadence, that still counts as the cadence (stamp jitter; such samples are fitted as
+        if on the grid); a larger one is a gap or irregular sampling, and a fit keeps what
+        follows. In [0, 0.5).
+    kind, frame_id : int or None, str
+        The only measurement kind and frame_id accepted (None / "": those of the first
+        measurement buffered).
+    lift : EciLift or None
+        Optional observable map (e.g. `EciLift`) the DMD learns instead of z (None: z).
+    inflate_correlated : bool
+        Scale the model part D of the k-th forecast's covariance of a gap by k (R + k D,
+        see the module docstring).
+    correlation_power : float
+        The exponent p of that scaling (R + k^p D).
+    noise_share : float
+        The share a of the sensor noise R that a forecast's covariance keeps
+        (a R + k^p D); 1 is the paper's floor Var(e) >= R, lower values only for studies
+        (`bench/consistency_tradeoff.py`), in (0, 1].
+    whiten : bool
+        Learn noisy channels divided by their noise sigma (see the module docstring).
+    """
 
     buffer_s: float = 21600.0
     retrain_period_s: float = 600.0
@@ -107,6 +128,7 @@ class SurrogateConfig:
     whiten: bool = True
 
     def __post_init__(self) -> None:
+        """Reject a `noise_share` outside (0, 1] or a `jitter` outside [0, 0.5) (ValueError)."""
         if not 0.0 < self.noise_share <= 1.0:
             raise ValueError(f"noise_share must be in (0, 1], got {self.noise_share}")
         if not 0.0 <= self.jitter < 0.5:
@@ -117,12 +139,14 @@ class EciLift:
     """Range/az/el from a known station <-> the ECI position it implies (km).
 
     `model` is the tracker's `RazelModel` (station and reference epoch); times are on its
-    clock (s since `model.jd0_utc`)."""
+    clock (s since `model.jd0_utc`).
+    """
 
     def __init__(self, model: RazelModel) -> None:
         self.model = model
 
     def _jd(self, t: np.ndarray) -> np.ndarray:
+        """UTC Julian dates of epochs ``t`` (s since ``model.jd0_utc``)."""
         return self.model.jd0_utc + np.asarray(t, dtype=float) / 86400.0
 
     def forward(self, z: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -134,14 +158,29 @@ class EciLift:
         return razel_eci(r, self._jd(t), self.model.station)
 
     def residual(self, z: np.ndarray, t: np.ndarray) -> Callable[..., np.ndarray]:
-        """The error, in range/az/el, of lifted predictions of the samples z (N, 3) taken at
-        t (N,): for `HankelDMD.forecast_covariance` (pred (k, 3, J), target (k, J) ->
-        (k, 3, J)); the azimuth difference is wrapped to [-pi, pi)."""
+        """Return the error function, in range/az/el, of lifted predictions of samples ``z``.
+
+        Parameters
+        ----------
+        z : ndarray, shape (N, 3)
+            Measured range km, azimuth rad, elevation rad.
+        t : ndarray, shape (N,)
+            Their epochs, s on the model's clock.
+
+        Returns
+        -------
+        callable
+            ``err(pred, target)`` for `HankelDMD.forecast_covariance`: lifted predictions
+            ``pred`` (k, 3, J), ECI km, of the samples with indices ``target`` (k, J) ->
+            their error (k, 3, J) in range/az/el; the azimuth difference is wrapped to
+            [-pi, pi).
+        """
 
         def err(pred: np.ndarray, target: np.ndarray) -> np.ndarray:
             e = self.to_measurement(pred.transpose(0, 2, 1), t[target]) - z[target]
             e[..., 1] = (e[..., 1] + math.pi) % (2 * math.pi) - math.pi
-            return e.transpose(0, 2, 1)
+            out: np.ndarray = e.transpose(0, 2, 1)
+            return out
 
         return err
 
@@ -184,16 +223,21 @@ class Surrogate:
 
     @property
     def last(self) -> Measurement | None:
+        """The newest buffered measurement (always a real one), None if the buffer is empty."""
         return self._buf[-1] if self._buf else None
 
     def cadence(self) -> float:
-        """The measurement interval, s: configured, else inferred from the buffer."""
+        """Return the measurement interval, s: configured, else inferred (NaN: not yet)."""
         return self.config.cadence_s if self.config.cadence_s > 0 else self._dt
 
     def _infer_cadence(self) -> None:
-        """The slope of a least-squares line through the last stamps against their slot
+        """Infer the cadence, s, from the last `CADENCE_SAMPLES` intervals in the buffer.
+
+        The slope of a least-squares line through the last stamps against their slot
         numbers on the grid of the median interval: jitter averages out, a gap of whole
-        cadences does not count. Regular stamps give the median interval itself."""
+        cadences does not count. Regular stamps give the median interval itself. NaN when
+        a cadence is configured or fewer than two stamps are buffered.
+        """
         n = min(len(self._buf), CADENCE_SAMPLES + 1)
         if self.config.cadence_s > 0 or n < 2:
             self._dt = math.nan
@@ -208,10 +252,13 @@ class Surrogate:
         self._dt = float(np.polyfit(slot, t - t[0], 1)[0])
 
     def check(self, m: Measurement) -> Problem:
-        """Why `add` would refuse `m` (cause, reason), or ("", ""): a forecast; a wrong kind
-        or frame (against the configuration, else the buffer's); NaN/inf; an impossible
-        range/az/el or covariance; a stamp not after the last one buffered. Each would stop
-        every fit, or empty the buffer, while it stayed in it."""
+        """Return why `add` would refuse `m`: (cause, reason), or ("", "") if it would not.
+
+        Refused are: a forecast; a wrong kind or frame (against the configuration, else the
+        buffer's); NaN/inf; an impossible range/az/el or covariance; a stamp not after the
+        last one buffered. Each would stop every fit, or empty the buffer, while it stayed
+        in it.
+        """
         if m.source != SENSOR:
             return "ignored_forecast_input", f"source {m.source} at t={m.t}: not a sensor"
         last = self.last
@@ -269,16 +316,18 @@ class Surrogate:
             return []
         if not self._ensure_forecast(n_max):
             return []
+        forecast, cov = self._forecast, self._cov
+        assert forecast is not None and cov is not None  # both set by _ensure_forecast
         out = []
         for k in range(self._emitted + 1, n_due + 1):
-            z = self._forecast[:, k - 1]
+            z = forecast[:, k - 1]
             if last.kind == RANGE_AZ_EL and not razel_possible(z):
                 self.invalid += 1  # not a possible range/az/el: withheld, not clipped
                 self.status = f"forecast at t={last.t + k * dt} is not a valid range/az/el"
                 continue
-            R = self._cov[k - 1]
+            R = cov[k - 1]
             out.append(Measurement(
-                t=last.t + k * dt, z=self._forecast[:, k - 1].copy(), R=0.5 * (R + R.T),
+                t=last.t + k * dt, z=forecast[:, k - 1].copy(), R=0.5 * (R + R.T),
                 kind=last.kind, source=FORECAST, object_id=last.object_id,
                 frame_id=last.frame_id, horizon=k * dt,
             ))
@@ -286,11 +335,13 @@ class Surrogate:
         return out
 
     def _fill_gap(self, last: Measurement, m: Measurement) -> None:
-        """Fill the missed epochs between `last` and the real measurement `m` that ends a gap
-        with this gap's forecasts (source FORECAST), so that the buffer stays at a fixed
+        """Fill the missed epochs between `last` and `m`, the real measurement ending a gap.
+
+        They get this gap's forecasts (source FORECAST), so that the buffer stays at a fixed
         cadence and the next gap can still be fitted on the whole window. Nothing is filled
         if m is off the cadence grid, the gap outlasted the forecasts, or a forecast is not a
-        possible measurement; the fit then keeps the regular tail after the gap."""
+        possible measurement; the fit then keeps the regular tail after the gap.
+        """
         dt = self.cadence()
         steps = (m.t - last.t) / dt if math.isfinite(dt) and dt > 0 else math.nan
         n_miss = round(steps) - 1 if math.isfinite(steps) else 0
@@ -301,17 +352,26 @@ class Surrogate:
         z = self._forecast[:, :n_miss]
         if last.kind == RANGE_AZ_EL and not razel_possible(z).all():
             return
+        cov = self._cov
+        assert cov is not None  # set with self._forecast by _ensure_forecast
         for k in range(1, n_miss + 1):
             self._buf.append(Measurement(
-                t=last.t + k * dt, z=z[:, k - 1].copy(), R=self._cov[k - 1], kind=last.kind,
+                t=last.t + k * dt, z=z[:, k - 1].copy(), R=cov[k - 1], kind=last.kind,
                 source=FORECAST, object_id=last.object_id, frame_id=last.frame_id,
                 horizon=k * dt))
 
     # ----------------------------------------------------------------------------------
     def _ensure_forecast(self, n_steps: int) -> bool:
+        """Compute, unless done, the forecasts and covariances of the next `n_steps` epochs.
+
+        The epochs follow the last real measurement at the cadence; False when no model
+        could be fitted.
+        """
         if self._forecast is not None:
             return True
-        if self._model is None or self._model_t != self.last.t:
+        last = self.last
+        assert last is not None  # due() asks only with a measurement buffered
+        if self._model is None or self._model_t != last.t:
             self._fit()
         if self._model is None:
             return False
@@ -326,14 +386,14 @@ class Surrogate:
             # mapped back to range/az/el and compared with what the sensor measured.
             self._cov = self._model.forecast_covariance(
                 n_steps, lift.residual(self._fit_z, self._fit_t))
-            t = self.last.t + self.cadence() * np.arange(1, n_steps + 1)
+            t = last.t + self.cadence() * np.arange(1, n_steps + 1)
             self._forecast = lift.to_measurement(self._forecast.T, t).T
         if self._scale is not None:
             w = self._scale
             self._forecast = self._forecast * w[:, None]
             self._cov = self._cov * np.outer(w, w)[None]
         # Var(e) = R + D (paper section 4): R the sensor noise, D >= 0 (PSD) the model part
-        R = np.asarray(self.last.R, dtype=float)
+        R = np.asarray(last.R, dtype=float)
         D = psd_part(self._cov - R)
         if self.config.inflate_correlated:
             k = np.arange(1, n_steps + 1, dtype=float)
@@ -346,6 +406,7 @@ class Surrogate:
         cfg = self.config
         self._model = None
         last = self.last
+        assert last is not None  # fitted only with a measurement buffered
         self._model_t = last.t
         self._model_fit_at = last.t
         need = 2 * cfg.delays + 2

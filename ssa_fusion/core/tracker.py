@@ -1,5 +1,7 @@
-"""The estimator of one object: initial orbit determination, then an EKF over a stream of
-real and forecast measurements, with the input rules users rely on.
+"""The estimator of one object: initial orbit determination, then an EKF.
+
+The EKF runs over a stream of real and forecast measurements, with the input rules users
+rely on.
 
 `Tracker.process(m)` takes measurements in arrival order and returns what happened: an
 estimate (state + covariance at the measurement epoch) or the cause of a rejection. The
@@ -42,6 +44,7 @@ import bisect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import cast
 
 import numpy as np
 
@@ -60,7 +63,7 @@ def _base(f: Measurement) -> float:
 
 
 def _before(a: float, b: float) -> bool:
-    """a < b beyond the round-off of t - horizon (~1e-16 relative; 2 ms on Unix time)."""
+    """Return a < b beyond the round-off of t - horizon (~1e-16 relative; 2 ms on Unix time)."""
     return a < b - 1e-12 * max(1.0, abs(b))
 
 
@@ -72,13 +75,20 @@ DEFAULT_GATE = 1000.0
 class TrackerConfig:
     """Estimator settings.
 
-    p0_sigma : (n,) standard deviations added (in quadrature) to the IOD covariance;
-    q : white-noise acceleration spectral density of the process noise, (units/s^2)^2 s;
-    gate : NIS threshold beyond which an update is rejected (None: no gate; the default
-    only catches gross glitches, the estimate's consistency is not gated away);
-    iod_samples : real measurements used for the initial orbit determination (>= 2; 3 for
-    Herrick-Gibbs with range/az/el);
-    frame_id : frame (station id, or "eci") measurements must be expressed in; "" = any.
+    Attributes
+    ----------
+    p0_sigma : tuple of float, (n,)
+        Standard deviations added (in quadrature) to the IOD covariance, state units.
+    q : float
+        White-noise acceleration spectral density of the process noise, (units/s^2)^2 s.
+    gate : float or None
+        NIS threshold beyond which an update is rejected (None: no gate; the default
+        only catches gross glitches, the estimate's consistency is not gated away).
+    iod_samples : int
+        Real measurements used for the initial orbit determination (>= 2; 3 for
+        Herrick-Gibbs with range/az/el).
+    frame_id : str
+        Frame (station id, or "eci") measurements must be expressed in; "" = any.
     """
 
     p0_sigma: tuple[float, ...] = (1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3)
@@ -90,11 +100,21 @@ class TrackerConfig:
 
 @dataclass
 class Outcome:
-    """What `Tracker.process` did: `estimate` when fused, else `rejected` (a cause key) and
-    `detail` (a sentence for the log). `rolled_back` counts the fused forecasts undone to put
-    this measurement in front of them; `refused` lists the estimates of the measurements
-    (forecasts, and real ones after a late forecast) fused again after it, also when it was
-    itself rejected: they are new estimates all the same."""
+    """What `Tracker.process` did with one measurement.
+
+    Attributes
+    ----------
+    estimate : StateEstimate or None
+        The estimate at the measurement epoch when it was fused.
+    rejected, detail : str
+        Otherwise the cause (a key) and a sentence for the log.
+    rolled_back : int
+        Fused forecasts undone to put this measurement in front of them.
+    refused : list of StateEstimate
+        Estimates of the measurements (forecasts, and real ones after a late forecast)
+        fused again after it, also when it was itself rejected: they are new estimates all
+        the same.
+    """
 
     estimate: StateEstimate | None = None
     rejected: str = ""
@@ -151,9 +171,14 @@ class Tracker:
 
     @property
     def initialised(self) -> bool:
+        """True once the initial orbit determination has started the EKF."""
         return self.ekf is not None
 
     def estimate(self, source: int = 0, nis: float = 0.0) -> StateEstimate:
+        """Return the current estimate (copies of x, P at epoch `t`), tagged `source`, `nis`.
+
+        Only after initialisation (AssertionError before).
+        """
         assert self.ekf is not None
         return StateEstimate(self.t, self.ekf.x.copy(), self.ekf.P.copy(), self.object_id,
                              source, nis)
@@ -165,8 +190,10 @@ class Tracker:
         return self.predict_from(StateEstimate(self.t, self.ekf.x, self.ekf.P, self.object_id), t)
 
     def predict_from(self, e: StateEstimate, t: float) -> StateEstimate:
-        """The prediction of estimate `e` to epoch `t` with this tracker's placeholder model
-        and process noise (x by the model, P = F P F^T + Q); the tracker is not changed."""
+        """Predict estimate `e` to epoch `t` (s) with this tracker's model and process noise.
+
+        x by the placeholder model, P = F P F^T + Q; the tracker is not changed.
+        """
         x, F = self.f(e.x, t - e.t)
         P = F @ e.P @ F.T + self._Q(t - e.t)
         return StateEstimate(t, x, 0.5 * (P + P.T), e.object_id, 0, 0.0)
@@ -195,9 +222,13 @@ class Tracker:
         return process_noise(abs(dt), self.config.q, dim=self.n // 2)
 
     def _step(self, m: Measurement, source: int) -> Outcome:
-        """Predict to m.t and update with m (the EKF exists). Numerically hopeless input
-        (overflowing values) is rejected with the state left as it was."""
+        """Predict to m.t and update with m (the EKF exists).
+
+        Numerically hopeless input (overflowing values) is rejected with the state left as
+        it was.
+        """
         ekf = self.ekf
+        assert ekf is not None
         dt = m.t - self.t
         before = _Snapshot(self.t, ekf.x, ekf.P)
         model, t = self.model, m.t
@@ -207,7 +238,7 @@ class Tracker:
                     ekf.predict(lambda x: self.f(x, dt), self._Q(dt))
                 result = ekf.update(m.z, lambda x: model.h_and_H(x, t), m.R,
                                     model.angle_mask, self.config.gate)
-            ok = np.isfinite(ekf.x).all() and np.isfinite(ekf.P).all()
+            ok: bool | np.bool_ = np.isfinite(ekf.x).all() and np.isfinite(ekf.P).all()
         except (ValueError, OverflowError, FloatingPointError, np.linalg.LinAlgError) as exc:
             ok, result, reason = False, None, f"{type(exc).__name__}: {exc}"
         if not ok:
@@ -215,6 +246,7 @@ class Tracker:
             return Outcome(rejected="rejected_numeric",
                            detail=f"t={m.t}: update not computable "
                                   f"({reason if result is None else 'non-finite state'})")
+        assert result is not None  # ok: the update ran
         self.t = m.t
         if not result.accepted:
             return Outcome(rejected="rejected_gate",
@@ -256,12 +288,14 @@ class Tracker:
         return bisect.bisect_left([e.m.t for e in self._log], t)
 
     def _insert(self, k: int, m: Measurement, source: int) -> Outcome:
-        """Undo the fused steps from index k on (epochs at or after m.t), fuse m, then fuse
-        those steps again: every real measurement after m.t, and every forecast after m.t
+        """Undo the fused steps from index k on (epochs at or after m.t), fuse m, fuse again.
+
+        Fused again are every real measurement after m.t, and every forecast after m.t
         whose model knew what m says (a real m: trained on it; a forecast m: a model no
         older than m's). The dropped forecasts wait for the surrogate's newer ones. That
         holds even if m itself is rejected (the surrogate has buffered it all the same), so
-        the filter ends as in the offline order; `refused` then still lists the re-fused."""
+        the filter ends as in the offline order; `refused` then still lists the re-fused.
+        """
         tail = self._log[k:]
         if tail:
             self._rollback(k)
@@ -280,6 +314,7 @@ class Tracker:
 
     def _fuse_step(self, m: Measurement, source: int) -> Outcome:
         """`_step`, logged when fused; the state is left unchanged when it is not."""
+        assert self.ekf is not None
         before = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy())
         t_real = self.t_real
         out = self._step(m, source)
@@ -290,8 +325,10 @@ class Tracker:
         return out
 
     def _append(self, e: _Fused) -> None:
-        """Log a fused step; a real one also advances t_real and ends the history that lies
-        more than `HISTORY_REAL` real measurements back."""
+        """Log a fused step; a real one also advances t_real and trims the history.
+
+        The history kept starts `HISTORY_REAL` real measurements back.
+        """
         self._log.append(e)
         if e.m.source == FORECAST:
             return
@@ -308,6 +345,8 @@ class Tracker:
         del self._log[k:]
 
     def _restore(self, s: _Snapshot) -> None:
+        """Set the epoch and the EKF's x, P back to (copies of) a snapshot."""
+        assert self.ekf is not None
         self.t = s.t
         self.ekf.x, self.ekf.P = s.x.copy(), s.P.copy()
 
@@ -335,24 +374,27 @@ class Tracker:
         return Outcome(estimate=self.estimate(UPDATE_SENSOR))
 
     def _iod_solution(self, batch: list[Measurement]) -> tuple[float, np.ndarray, np.ndarray]:
-        """(epoch, state, covariance) from the IOD batch; covariance from the measurement
-        noise pushed through the IOD map (numerical Jacobian, 1 evaluation per input)."""
+        """Return (epoch, state, covariance) from the IOD batch.
+
+        The covariance is the measurement noise pushed through the IOD map (numerical
+        Jacobian, 1 evaluation per input).
+        """
         t = np.array([b.t for b in batch])
         Z = np.array([b.z for b in batch], dtype=float)
         if self.kind == RANGE_AZ_EL:
             mid = len(batch) // 2
             i3 = [0, mid, len(batch) - 1]
             t3 = t[i3]
+            razel = cast(RazelModel, self.model)  # the model of kind RANGE_AZ_EL
 
             def solve(zs: np.ndarray) -> np.ndarray:
-                r = iod.razel_to_eci(zs[i3], self.model.jd0_utc + t3 / 86400.0,
-                                     self.model.station)
+                r = iod.razel_to_eci(zs[i3], razel.jd0_utc + t3 / 86400.0, razel.station)
                 v2 = iod.herrick_gibbs(r[0], r[1], r[2], t3[0], t3[1], t3[2])
                 return np.concatenate([r[1], v2])
 
             t_init = float(t3[1])
         else:
-            observed = list(self.model.observed)
+            observed = list(cast(PositionModel, self.model).observed)
 
             def solve(zs: np.ndarray) -> np.ndarray:
                 x = np.zeros(self.n)
