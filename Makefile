@@ -12,5 +12,9 @@ bootstrap:
 demo: bootstrap
 	.venv/bin/ssa-fusion live
 
+# Gates first (issue 16): ruff on the whole tree (docstring and annotation rules on
+# ssa_fusion/core only, pyproject.toml) and mypy on ssa_fusion/core; any finding fails.
 test: bootstrap
+	.venv/bin/ruff check .
+	.venv/bin/mypy ssa_fusion/core
 	.venv/bin/python -m pytest
