@@ -9,7 +9,14 @@ import pytest
 from scipy.stats import chi2
 
 from ssa_fusion.core.dynamics import ISS_ELEMENTS, elements_to_state, propagate
-from ssa_fusion.core.hankel_dmd import HankelDMD, _leading_subspace, resolvable_rank, svht_rank
+from ssa_fusion.core.hankel_dmd import (
+    HankelDMD,
+    _gram_subspace,
+    _hankel,
+    _leading_subspace,
+    resolvable_rank,
+    svht_rank,
+)
 
 FREQS = (0.011, 0.037, 0.071)  # cycles per sample
 
@@ -65,6 +72,24 @@ def test_leading_subspace_matches_numpy_svd(shape: tuple[int, int]) -> None:
     np.testing.assert_allclose(sigma, s_ref, rtol=1e-9, atol=1e-12)
     assert u.shape == (n, r)
     np.testing.assert_allclose(np.abs(np.sum(u * u_ref[:, :r], axis=0)), 1.0, atol=1e-9)
+
+
+def test_gram_route_only_where_it_matches_the_svd(iss: np.ndarray) -> None:
+    """Noisy data: the Gram route is taken and keeps the SVD's rank and subspace (to 1e-9);
+    noise-free data (median singular value at round-off): it declines, the SVD decides."""
+    rng = np.random.default_rng(3)
+    z = iss[:, :720] + rng.normal(0.0, 1.0, (3, 720))  # 1 km noise
+    x = _hankel(z, 120)[:, :-1]
+    rule = lambda s: svht_rank(s, *x.shape)  # noqa: E731
+    fast = _gram_subspace(x, rule)
+    assert fast is not None
+    u_ref, s_ref, _ = np.linalg.svd(x, full_matrices=False)
+    r = fast[1].shape[1]
+    assert r == svht_rank(s_ref, *x.shape)
+    np.testing.assert_allclose(fast[0], s_ref, rtol=1e-6)
+    cosines = np.linalg.svd(fast[1].T @ u_ref[:, :r], compute_uv=False)  # principal angles
+    np.testing.assert_allclose(cosines, 1.0, atol=1e-9)
+    assert _gram_subspace(_hankel(iss[:, :720], 120)[:, :-1], rule) is None
 
 
 def test_svht_rank_matches_pydmd() -> None:
