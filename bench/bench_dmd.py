@@ -45,9 +45,13 @@ def timed(fn, *args) -> tuple[float, object]:
     return (time.perf_counter() - t0) * 1e3, out
 
 
-def bench(label: str) -> None:
+def bench(label: str, noise_km: float = 0.0) -> None:
+    """Time fit + forecast on ISS positions with ``noise_km`` Gaussian noise (0: noise-free,
+    where only the SVD resolves the kept directions; noisy data take the Gram route)."""
     pos = iss_positions(N_TRAIN + N_FC)
     z, truth = pos[:, :N_TRAIN], pos[:, N_TRAIN:]
+    if noise_km:
+        z = z + np.random.default_rng(0).normal(0.0, noise_km, z.shape)
     t_ours, t_py, t_cov = [], [], []
     for _ in range(3):  # warm-up
         ours(z)
@@ -75,7 +79,8 @@ def bench(label: str) -> None:
     print(f"cov_sqrt_trace_km h1: {sig[0]:.3e} h100: {sig[99]:.3e} h200: {sig[-1]:.3e}")
     # what was timed really forecast the orbit (a bound far above both libraries' errors)
     assert f_ours.shape == truth.shape and np.isfinite(f_ours).all()
-    assert err_ours < 0.1 and err_py < 0.1, (err_ours, err_py)  # km
+    bound = 0.1 if not noise_km else 10.0 * noise_km  # km
+    assert err_ours < bound and err_py < bound, (err_ours, err_py)
     assert cov.shape == (N_FC, 3, 3) and np.all(np.diff(sig) >= -1e-9 * sig[1:])
 
 
@@ -89,6 +94,7 @@ def main() -> None:
         return
     with threadpool_limits(1):
         bench("_1thread")
+        bench("_1thread_noisy_1km", noise_km=1.0)
 
 
 if __name__ == "__main__":
