@@ -18,16 +18,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ssa_fusion.core import dynamics, kepler
-from ssa_fusion.core.frames import COLUMBUS, Station
+from ssa_fusion.core.frames import Station
 from ssa_fusion.core.measurement import POSITION, RANGE_AZ_EL, PositionModel, RazelModel
-
-UNIX_EPOCH_JD = 2440587.5
-"""Julian date of 1970-01-01T00:00:00 UTC; jd = UNIX_EPOCH_JD + t_unix / 86400."""
+from ssa_fusion.core.stations import STATIONS, UNIX_EPOCH_JD
 
 ORBIT_EPOCH_UNIX = 1735689600.0
 """2025-01-01T00:00:00 UTC: epoch of the orbit scenarios' initial elements."""
-
-STATIONS = {"columbus": COLUMBUS}
 
 Placeholder = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
 
