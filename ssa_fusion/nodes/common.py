@@ -25,10 +25,9 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
+from ssa_fusion.core.stations import STATIONS
 from ssa_fusion.core.types import KIND_NAMES, RANGE_AZ_EL
-from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S
 from ssa_fusion.nodes import STOP
-from ssa_fusion.paper import scenarios
 from ssa_fusion.ros.executors import make_executor
 from ssa_fusion.ros.readiness import MATCHED_KEY
 from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
@@ -188,30 +187,31 @@ KINDS = {name: kind for kind, name in KIND_NAMES.items()}
 """The `kind` parameter's values: measurement kind by name."""
 
 
-def measurement_stream(node: Node) -> tuple[int, str]:
-    """Declare `kind` and `station` on `node`: the measurement kind it takes and the frame_id
-    those measurements come in (the station for range/az/el, "eci" for position)."""
+def measurement_stream(node: Node, defaults: Any) -> tuple[int, str]:
+    """Declare `kind` and `station` on `node` (defaults: `defaults.kind`, `defaults.station`):
+    the measurement kind it takes and the frame_id those measurements come in (the station
+    for range/az/el, "eci" for position)."""
     kind = declare(
-        node, "kind", "range_az_el", "measurement kind: position | range_az_el", one_of(*KINDS)
+        node, "kind", defaults.kind, "measurement kind: position | range_az_el", one_of(*KINDS)
     )
     station = declare(
         node,
         "station",
-        scenarios.DEFAULT_LIVE.station,
+        defaults.station,
         "station id of range/az/el measurements (their frame_id)",
-        one_of(*scenarios.STATIONS),
+        one_of(*STATIONS),
     )
     return KINDS[kind], station if KINDS[kind] == RANGE_AZ_EL else "eci"
 
 
-def clock_lead(node: Node) -> float:
+def clock_lead(node: Node, default: float) -> float:
     """Declare `max_clock_lead` (s) on `node`: a measurement stamped further ahead of the
     node's clock is refused as `rejected_future` (see `validation.ahead_of_clock`)."""
 
     def apply(value: Any) -> None:
         node.max_lead = float(value)
 
-    return float(declare(node, "max_clock_lead", MAX_CLOCK_LEAD_S,
+    return float(declare(node, "max_clock_lead", default,
                          "s a measurement's stamp may be ahead of this node's clock; further "
                          "is refused (a wall-time stamp in a sim-time graph)", positive,
                          apply=apply))

@@ -24,7 +24,8 @@ from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 
 from ssa_fusion.core import kepler
 from ssa_fusion.core.measurement import RANGE_AZ_EL, PositionModel, RazelModel
-from ssa_fusion.core.tracker import DEFAULT_GATE, Tracker, TrackerConfig
+from ssa_fusion.core.stations import STATIONS, UNIX_EPOCH_JD
+from ssa_fusion.core.tracker import Tracker, TrackerConfig
 from ssa_fusion.core.types import StateEstimate
 from ssa_fusion.core.validation import ahead_of_clock
 from ssa_fusion.nodes.common import (
@@ -37,7 +38,7 @@ from ssa_fusion.nodes.common import (
     run,
     wall_timer,
 )
-from ssa_fusion.paper import scenarios
+from ssa_fusion.nodes.defaults import FILTER
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.topics import DATA_QOS, TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_MEASUREMENT
 
@@ -51,10 +52,11 @@ def _p0_check(v: list) -> str | None:
 
 
 def tracker_from(node: Node) -> Tracker:
-    """Declare the filter's parameters on `node` and build its Tracker (shared with the
-    offline replay so both use the same defaults)."""
-    base = scenarios.DEFAULT_LIVE
-    kind, frame = measurement_stream(node)
+    """Declare the filter's parameters on `node` (defaults: `defaults.FILTER`) and build its
+    Tracker: the Keplerian placeholder, the measurement model of its `kind` (range/az/el
+    from `station`, on the Unix-time clock), and a `TrackerConfig` in core units."""
+    d = FILTER
+    kind, frame = measurement_stream(node, d)
     config = TrackerConfig()
 
     def setter(field: str, convert: Callable[[Any], Any]) -> Callable[[Any], None]:
@@ -69,7 +71,7 @@ def tracker_from(node: Node) -> Tracker:
     p0 = declare(
         node,
         "p0_sigma",
-        [v * 1000.0 for v in base.p0_sigma],
+        list(d.p0_sigma),
         "std floor added to the IOD covariance: 3 x m, 3 x m/s (applies at the next IOD)",
         _p0_check,
         apply=setter("p0_sigma", p0_km),
@@ -77,7 +79,7 @@ def tracker_from(node: Node) -> Tracker:
     q = declare(
         node,
         "q",
-        base.q * 1e6,
+        d.q,
         "process noise: white-noise acceleration spectral density, m^2/s^3",
         non_negative,
         apply=setter("q", lambda v: v * 1e-6),
@@ -85,21 +87,21 @@ def tracker_from(node: Node) -> Tracker:
     gate = declare(
         node,
         "gate",
-        DEFAULT_GATE,
+        d.gate,
         "NIS beyond which an update is rejected (0 = no gate)",
         non_negative,
         apply=setter("gate", lambda v: v or None),
     )
-    object_id = declare(node, "object_id", "", "only track this object ('' = any)")
+    object_id = declare(node, "object_id", d.object_id, "only track this object ('' = any)")
     iod_samples = declare(
         node,
         "iod_samples",
-        base.iod_samples,
+        d.iod_samples,
         "real measurements used by the initial orbit determination (>= 3)",
         lambda v: None if isinstance(v, int) and v >= 3 else "must be an integer >= 3",
         apply=setter("iod_samples", int),
     )
-    model = (RazelModel(scenarios.STATIONS[frame], scenarios.UNIX_EPOCH_JD)
+    model = (RazelModel(STATIONS[frame], UNIX_EPOCH_JD)
              if kind == RANGE_AZ_EL else PositionModel())
     config.p0_sigma, config.q, config.gate = p0_km(p0), q * 1e-6, gate or None
     config.frame_id, config.iod_samples = frame, iod_samples
@@ -113,12 +115,12 @@ class FilterNode(Node):
         self.predict_period = declare(
             self,
             "predict_period",
-            300.0,
+            FILTER.predict_period,
             "sim s without an update after which a prediction is published (0 = never)",
             non_negative,
             apply=lambda v: setattr(self, "predict_period", v),
         )
-        self.max_lead = clock_lead(self)
+        self.max_lead = clock_lead(self, FILTER.max_clock_lead)
         self.diag = Diagnostics(self)
         self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, DATA_QOS)
         for topic in (TOPIC_MEASUREMENT, TOPIC_FORECAST):

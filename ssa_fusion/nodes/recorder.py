@@ -26,11 +26,9 @@ from ssa_fusion.nodes.common import (
     run,
     wall_timer,
 )
+from ssa_fusion.nodes.defaults import BAG_PATTERN, RECORDER
 from ssa_fusion.ros.bagio import BagWriter, qos_from_rclpy
-from ssa_fusion.ros.topics import DATA_DEPTH, TOPIC_CLOCK
-
-DEFAULT_TOPICS = [TOPIC_CLOCK]
-DEFAULT_PREFIX = "/ssa/"
+from ssa_fusion.ros.topics import DATA_DEPTH
 
 
 def _import_type(type_name: str):
@@ -41,7 +39,7 @@ def _import_type(type_name: str):
 class Recorder(Node):
     def __init__(self) -> None:
         super().__init__("recorder")
-        default_bag = f"bags/ssa_{time.strftime('%Y%m%d_%H%M%S')}"
+        default_bag = RECORDER.bag or time.strftime(BAG_PATTERN)
         bag = declare(
             self,
             "bag",
@@ -51,17 +49,28 @@ class Recorder(Node):
         )
         self.topics = set(
             declare(
-                self, "topics", DEFAULT_TOPICS, "topics recorded besides every topic under prefix"
+                self,
+                "topics",
+                list(RECORDER.topics),
+                "topics recorded besides every topic under prefix",
             )
         )
         self.prefix = declare(
-            self, "prefix", DEFAULT_PREFIX, "record every topic whose name starts with this"
+            self, "prefix", RECORDER.prefix, "record every topic whose name starts with this"
         )
         flush = declare(
-            self, "flush_period", 1.0, "s of wall time between flushes of the bag to disk", positive
+            self,
+            "flush_period",
+            RECORDER.flush_period,
+            "s of wall time between flushes of the bag to disk",
+            positive,
         )
         discover = declare(
-            self, "discover_period", 0.1, "s between topic discovery scans", positive
+            self,
+            "discover_period",
+            RECORDER.discover_period,
+            "s between topic discovery scans",
+            positive,
         )
         if Path(bag).exists():
             raise ParameterError(f"parameter 'bag' = {bag!r}: exists already, not overwriting")

@@ -8,7 +8,8 @@ the scenario cadence:
 * ``/ssa/truth`` (ssa_fusion_msgs/StateEstimate, zero covariance): the true state;
 * ``/clock``: sim time, UTC (Unix seconds), advancing `time_scale` sim s per wall s.
 
-It exits 0 when the schedule is done.
+It exits 0 when the schedule is done. It is the one node that uses the paper's study
+(`ssa_fusion.paper`): its scenarios and their simulation are what it simulates.
 
     ros2 run ssa_fusion sensor_sim --ros-args -p scenario:=iss_j2_rae -p time_scale:=500.0
 """
@@ -16,6 +17,7 @@ It exits 0 when the schedule is done.
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import numpy as np
 from rclpy.duration import Duration
@@ -35,6 +37,7 @@ from ssa_fusion.nodes.common import (
     positive,
     run,
 )
+from ssa_fusion.nodes.defaults import SENSOR_SIM
 from ssa_fusion.paper import scenarios
 from ssa_fusion.paper.simulate import Simulation, simulate
 from ssa_fusion.ros import messages
@@ -48,6 +51,11 @@ from ssa_fusion.ros.topics import (
 )
 
 ORBIT_SCENARIOS = [name for name, s in scenarios.SCENARIOS.items() if s.is_orbit]
+
+
+def _or(default: Any, scenario_value: Any) -> Any:
+    """A default of `defaults.SENSOR_SIM`, or the scenario's value where it is None."""
+    return scenario_value if default is None else default
 
 
 def _scenario_check(value: str) -> str | None:
@@ -82,48 +90,51 @@ class SensorSim(Node):
         name = declare(
             self,
             "scenario",
-            scenarios.DEFAULT_LIVE.name,
+            SENSOR_SIM.scenario,
             "orbit scenario (truth model, orbit, measurement kind)",
             _scenario_check,
         )
         base = scenarios.get(name)
-        self.object_id = declare(self, "object_id", name, "object id put in every message")
-        cadence = declare(self, "cadence", base.cadence_s, "s between measurements", positive)
+        d = SENSOR_SIM
+        self.object_id = declare(self, "object_id", _or(d.object_id, name),
+                                 "object id put in every message")
+        cadence = declare(self, "cadence", _or(d.cadence, base.cadence_s),
+                          "s between measurements", positive)
         track = declare(
             self,
             "gap_start",
-            base.track_s,
+            _or(d.gap_start, base.track_s),
             "s of tracking before the gap (ignored when 'gaps' is set)",
             non_negative,
         )
-        gap = declare(self, "gap_length", base.gap_s, "s of the sensor outage", non_negative)
+        gap = declare(self, "gap_length", _or(d.gap_length, base.gap_s), "s of the sensor outage",
+                      non_negative)
         gaps = declare(
             self,
             "gaps",
-            [0.0],
+            list(d.gaps),
             "optional list [start_s, length_s, ...] of "
             "outages after the start; [0.0] = use gap_start/gap_length",
             lambda v: None if list(v) == [0.0] else _gaps_check(v),
         )
-        after = declare(
-            self, "after_gap", base.after_s, "s of tracking after the (last) gap", non_negative
-        )
+        after = declare(self, "after_gap", _or(d.after_gap, base.after_s),
+                        "s of tracking after the (last) gap", non_negative)
         noise = declare(
             self,
             "noise_sigma",
-            [-1.0],
+            list(d.noise_sigma),
             "measurement noise std per channel (m, or m, rad, rad for "
             "range/az/el); [-1.0] = the scenario's noise",
             _noise_check,
         )
         self.time_scale = declare(
-            self, "time_scale", 100.0, "sim seconds per wall second", positive
+            self, "time_scale", d.time_scale, "sim seconds per wall second", positive
         )
-        seed = declare(self, "seed", 0, "noise random seed")
+        seed = declare(self, "seed", d.seed, "noise random seed")
         self.wait_for = declare(
             self,
             "wait_for",
-            [""],
+            list(d.wait_for),
             "start only when each '/topic=count' has that many "
             "subscribers (e.g. /ssa/measurement=3)",
             lambda v: _wait_check([x for x in v if x]),
@@ -131,13 +142,13 @@ class SensorSim(Node):
         self.wait_for_readers = [x for x in declare(
             self,
             "wait_for_readers",
-            [""],
+            list(d.wait_for_readers),
             "start only when each 'node:/topic' reports a matched publisher on /diagnostics "
             "(e.g. filter:/ssa/measurement): the readers' side of the match exists too",
             lambda v: check_needs([x for x in v if x]),
         ) if x]
         self.readers = ReadyNodes(self)
-        tick = declare(self, "tick", 0.01, "wall s between publication ticks", positive)
+        tick = declare(self, "tick", d.tick, "wall s between publication ticks", positive)
 
         gap_list = list(gaps) if list(gaps) != [0.0] else [track, gap]
         windows = [(gap_list[i], gap_list[i] + gap_list[i + 1]) for i in range(0, len(gap_list), 2)]

@@ -24,7 +24,8 @@ from rclpy.node import Node
 from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
 
 from ssa_fusion.core.measurement import RazelModel
-from ssa_fusion.core.surrogate import LIVE_SURROGATE, EciLift, Surrogate, SurrogateConfig
+from ssa_fusion.core.stations import STATIONS, UNIX_EPOCH_JD
+from ssa_fusion.core.surrogate import EciLift, Surrogate, SurrogateConfig
 from ssa_fusion.core.types import RANGE_AZ_EL
 from ssa_fusion.core.validation import ahead_of_clock
 from ssa_fusion.nodes.common import (
@@ -39,16 +40,16 @@ from ssa_fusion.nodes.common import (
     run,
     wall_timer,
 )
-from ssa_fusion.paper import scenarios
+from ssa_fusion.nodes.defaults import SURROGATE
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.topics import DATA_QOS, TOPIC_FORECAST, TOPIC_MEASUREMENT
 
 
 def surrogate_config_from(node: Node) -> SurrogateConfig:
-    """Declare the surrogate's parameters on `node` and build its config (shared with the
-    offline replay so both use the same defaults). Model settings can be changed at run
-    time (`ros2 param set`); they take effect at the next fit."""
-    base = scenarios.DEFAULT_LIVE
+    """Declare the surrogate's parameters on `node` (defaults: `defaults.SURROGATE`) and build
+    its `SurrogateConfig` (core units). Model settings can be changed at run time
+    (`ros2 param set`); they take effect at the next fit."""
+    d = SURROGATE
     config = SurrogateConfig()
 
     def setting(
@@ -69,41 +70,46 @@ def surrogate_config_from(node: Node) -> SurrogateConfig:
     buffer_s = setting(
         "buffer_length",
         "buffer_s",
-        base.buffer_s or base.track_s,
+        d.buffer_length,
         "s of real measurements kept for training",
         positive,
     )
     setting(
         "retrain_period",
         "retrain_period_s",
-        0.0,
+        d.retrain_period,
         "sim s between refits while measurements arrive; 0 = none (every gap refits on the "
         "buffer up to the last real measurement anyway)",
         non_negative,
         lambda v: float(v) or math.inf,
     )
-    delays = setting("delays", "delays", base.delays, "Hankel-DMD time delays", positive, int)
+    delays = setting("delays", "delays", d.delays, "Hankel-DMD time delays", positive, int)
     setting(
-        "rank", "rank", 0, "Hankel-DMD rank (0 = automatic)", non_negative, lambda v: int(v) or None
+        "rank",
+        "rank",
+        d.rank,
+        "Hankel-DMD rank (0 = automatic)",
+        non_negative,
+        lambda v: int(v) or None,
     )
     setting(
         "max_horizon",
         "max_horizon_s",
-        7200.0,
+        d.max_horizon,
         "s after the last real measurement beyond which nothing is forecast",
         positive,
     )
     setting(
         "grace",
         "grace",
-        LIVE_SURROGATE.grace,
+        d.grace,
         "cadences after a missed epoch before it is forecast (absorbs message latency)",
         non_negative,
     )
     cadence = setting(
         "cadence",
         "cadence_s",
-        0.0,
+        d.cadence,
         "expected s between measurements (0 = infer from the buffer)",
         non_negative,
     )
@@ -112,11 +118,11 @@ def surrogate_config_from(node: Node) -> SurrogateConfig:
             f"parameter 'delays' = {delays}: needs a buffer of at least 2 x delays x cadence "
             f"= {2 * delays * cadence} s, but 'buffer_length' = {buffer_s} s"
         )
-    config.kind, config.frame_id = measurement_stream(node)
+    config.kind, config.frame_id = measurement_stream(node, d)
     lift = declare(
         node,
         "lift",
-        base.lift or "none",
+        d.lift,
         "observable the DMD learns: none (the measurement itself) or eci (range/az/el "
         "lifted to the ECI position it implies, forecasts mapped back)",
         one_of("none", "eci"),
@@ -124,8 +130,7 @@ def surrogate_config_from(node: Node) -> SurrogateConfig:
     if lift == "eci" and config.kind != RANGE_AZ_EL:
         raise ParameterError("parameter 'lift' = 'eci' needs 'kind' = 'range_az_el'")
     if lift == "eci":
-        station = scenarios.STATIONS[config.frame_id]
-        config.lift = EciLift(RazelModel(station, scenarios.UNIX_EPOCH_JD))
+        config.lift = EciLift(RazelModel(STATIONS[config.frame_id], UNIX_EPOCH_JD))
     return config
 
 
@@ -134,10 +139,12 @@ class SurrogateNode(Node):
         super().__init__("surrogate")
         self.core = Surrogate(surrogate_config_from(self))
         check = declare(
-            self, "check_period", 0.02, "wall s between checks for missed epochs", positive
+            self, "check_period", SURROGATE.check_period, "wall s between checks for missed epochs",
+            positive,
         )
-        self.object_id = declare(self, "object_id", "", "only learn this object ('' = any)")
-        self.max_lead = clock_lead(self)
+        self.object_id = declare(self, "object_id", SURROGATE.object_id,
+                                 "only learn this object ('' = any)")
+        self.max_lead = clock_lead(self, SURROGATE.max_clock_lead)
         self.diag = Diagnostics(self)
         self.pub = self.create_publisher(MeasurementMsg, TOPIC_FORECAST, DATA_QOS)
         self.diag.subscribe(

@@ -1,0 +1,109 @@
+"""Default parameter values of the four nodes, one dataclass per node, in the parameters'
+units (SI: m, m/s, rad, s; see docs/NODES.md for each parameter's meaning).
+
+Every field is named like the ROS parameter it is the default of, and the nodes declare
+their parameters with these values; ``config/default.yaml`` holds the same values (a few
+differ on purpose, for the default *run*: test/nodes/test_config.py lists them and keeps
+the rest equal). The estimator defaults are those of the default live scenario (the ISS,
+two-body + J2, range/az/el from Columbus every 30 s, ten orbits of tracking): the same
+numbers `ssa-fusion live` derives from that scenario (the same test checks it), written
+out here so that the nodes need nothing from the paper's study.
+
+A field whose default is ``None`` is computed when the node starts (said per field).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ssa_fusion.core.surrogate import LIVE_SURROGATE
+from ssa_fusion.core.tracker import DEFAULT_GATE
+from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S
+
+KIND = "range_az_el"
+"""Measurement kind filter and surrogate expect (``position`` | ``range_az_el``)."""
+STATION = "columbus"
+"""Station (a `core.stations.STATIONS` id) of their range/az/el measurements."""
+
+
+@dataclass(frozen=True)
+class SensorSimDefaults:
+    """sensor_sim. ``object_id``, ``cadence``, ``gap_start``, ``gap_length`` and
+    ``after_gap`` default to the chosen scenario's (its name; cadence_s, track_s, gap_s,
+    after_s), so they are None here."""
+
+    scenario: str = "iss_j2_rae"
+    object_id: str | None = None
+    cadence: float | None = None
+    gap_start: float | None = None
+    gap_length: float | None = None
+    gaps: tuple[float, ...] = (0.0,)
+    after_gap: float | None = None
+    noise_sigma: tuple[float, ...] = (-1.0,)
+    time_scale: float = 100.0
+    seed: int = 0
+    wait_for: tuple[str, ...] = ("",)
+    wait_for_readers: tuple[str, ...] = ("",)
+    tick: float = 0.01
+
+
+@dataclass(frozen=True)
+class SurrogateDefaults:
+    """surrogate: Hankel-DMD settings of the default scenario (buffer = its ten-orbit
+    tracking window, delays = two orbits of samples)."""
+
+    kind: str = KIND
+    station: str = STATION
+    buffer_length: float = 55770.0
+    retrain_period: float = 0.0
+    delays: int = 372
+    rank: int = 0
+    max_horizon: float = 7200.0
+    grace: float = LIVE_SURROGATE.grace
+    cadence: float = 0.0
+    lift: str = "eci"
+    check_period: float = 0.02
+    object_id: str = ""
+    max_clock_lead: float = MAX_CLOCK_LEAD_S
+
+
+@dataclass(frozen=True)
+class FilterDefaults:
+    """filter: EKF settings of the default scenario (P0 floor 1 km and 1 m/s per axis,
+    q = 1e-7 km^2/s^3 for the J2 the Keplerian model leaves out)."""
+
+    kind: str = KIND
+    station: str = STATION
+    p0_sigma: tuple[float, ...] = (1000.0, 1000.0, 1000.0, 1.0, 1.0, 1.0)
+    q: float = 0.1
+    gate: float = DEFAULT_GATE
+    object_id: str = ""
+    iod_samples: int = 3
+    predict_period: float = 300.0
+    max_clock_lead: float = MAX_CLOCK_LEAD_S
+
+
+BAG_PATTERN = "bags/ssa_%Y%m%d_%H%M%S"
+"""`time.strftime` pattern of the recorder's default bag directory (start time)."""
+
+
+@dataclass(frozen=True)
+class RecorderDefaults:
+    """recorder. ``bag`` defaults to `BAG_PATTERN` at the node's start time, so it is None
+    here."""
+
+    bag: str | None = None
+    topics: tuple[str, ...] = ("/clock",)
+    prefix: str = "/ssa/"
+    flush_period: float = 1.0
+    discover_period: float = 0.1
+
+
+SENSOR_SIM = SensorSimDefaults()
+SURROGATE = SurrogateDefaults()
+FILTER = FilterDefaults()
+RECORDER = RecorderDefaults()
+
+NODES = {"sensor_sim": SENSOR_SIM, "surrogate": SURROGATE, "filter": FILTER,
+         "recorder": RECORDER}
+"""Every node's defaults by node name (the names config/default.yaml uses)."""
