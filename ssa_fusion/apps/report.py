@@ -65,10 +65,11 @@ def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
 
 
 def _plt():
-    """pyplot with the Agg backend (imported on first use: `report` works without plots)."""
+    """The figure maker (`plots.subplots`; imported on first use: `report` works without
+    plots)."""
     from ssa_fusion.paper import plots
 
-    return plots.plt
+    return plots
 
 
 def save(fig, path: Path, dpi: int = 100) -> None:

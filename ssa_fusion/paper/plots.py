@@ -1,14 +1,17 @@
-"""Plots of the offline reproduction (matplotlib, Agg backend; never imported by the core)."""
+"""Plots of the offline reproduction (matplotlib; never imported by the core).
+
+Figures are made with `matplotlib.figure.Figure`, not pyplot: no backend is chosen, no
+global figure state kept (importing this module changes nothing in the process), and PNGs
+are written by the Agg renderer whatever the importer's backend is.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 
 ARM_STYLE = {
     "placeholder": dict(color="tab:red", label="placeholder alone (MC, 200)"),
@@ -19,11 +22,17 @@ ARM_STYLE = {
 STATE_NAMES = {6: ["x", "y", "z", "u", "v", "w"], 2: ["θ or x", "rate"]}
 
 
-def save(fig, path: Path, dpi: int = 110) -> None:
-    """Lay out, write as PNG and release a figure (every plot of the project ends here)."""
+def subplots(nrows: int = 1, ncols: int = 1, *, figsize: tuple[float, float] | None = None,
+             **kw: Any) -> tuple[Figure, Any]:
+    """A new figure and its axes, as `matplotlib.pyplot.subplots` (without pyplot)."""
+    fig = Figure(figsize=figsize)
+    return fig, fig.subplots(nrows, ncols, **kw)
+
+
+def save(fig: Figure, path: Path, dpi: int = 110) -> None:
+    """Lay out and write a figure as PNG (every plot of the project ends here)."""
     fig.tight_layout()
     fig.savefig(path, dpi=dpi)
-    plt.close(fig)
 
 
 def _pointwise_error(x_hat: np.ndarray, x_true: np.ndarray, pos_max: float,
@@ -42,7 +51,7 @@ def error_plot(name: str, sim, arms: dict, path: Path, time_unit: str) -> Path:
     pos_max = np.max(np.linalg.norm(sim.x[gap, :d], axis=1))
     vel_max = np.max(np.linalg.norm(sim.x[gap, d:], axis=1))
     scale, unit = (3600.0, "h") if time_unit == "h" else (1.0, time_unit)
-    fig, ax = plt.subplots(figsize=(8, 4.2))
+    fig, ax = subplots(figsize=(8, 4.2))
     for key, arm in arms.items():
         e = _pointwise_error(arm.x, sim.x[arm.idx], pos_max, vel_max)
         ax.semilogy((sim.t[arm.idx] - sim.t[0]) / scale, np.maximum(e, 1e-16),
@@ -72,7 +81,7 @@ def sigma_plot(name: str, sim, arm, path: Path, time_unit: str) -> Path:
     t = (sim.t[idx] - sim.t[0]) / scale
     names = STATE_NAMES.get(n, [f"x{i}" for i in range(n)])
     rows = (n + 1) // 2
-    fig, axes = plt.subplots(rows, 2, figsize=(9, 2.0 * rows + 0.8), sharex=True)
+    fig, axes = subplots(rows, 2, figsize=(9, 2.0 * rows + 0.8), sharex=True)
     for i, ax in enumerate(np.atleast_1d(axes).ravel()[:n]):
         ax.plot(t, err[:, i], color="tab:blue", lw=0.9, label="error")
         ax.plot(t, 3 * sig[:, i], color="tab:orange", lw=0.9, label="±3σ")
@@ -90,7 +99,7 @@ def sigma_plot(name: str, sim, arm, path: Path, time_unit: str) -> Path:
 
 
 def vdp_sweep_plot(sweep: dict, path: Path) -> Path:
-    fig, ax = plt.subplots(figsize=(6.5, 4))
+    fig, ax = subplots(figsize=(6.5, 4))
     for key in ("placeholder", "dmd_ekf", "hypothetical_ekf"):
         ax.semilogy(sweep["mu_p"], sweep[key], marker="o", ms=3, **ARM_STYLE[key])
     ax.axvline(2.0, color="k", lw=0.8, ls=":", label="true μ = 2")
@@ -106,7 +115,7 @@ def vdp_sweep_plot(sweep: dict, path: Path) -> Path:
 def consistency_plot(study: dict, path: Path) -> Path:
     """Forecast error variance (trace) against horizon: one-shot vs retrained, measured
     and as predicted by the surrogate."""
-    fig, ax = plt.subplots(figsize=(7, 4.2))
+    fig, ax = subplots(figsize=(7, 4.2))
     h = np.asarray(study["horizon_s"]) / study.get("time_scale", 1.0)
     for key, color in (("one_shot", "tab:red"), ("retrained", "tab:blue")):
         d = study[key]
