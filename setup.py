@@ -26,10 +26,12 @@ setup(
     entry_points={
         "console_scripts": [
             "ssa-fusion = ssa_fusion.apps.cli:main",
-            "sensor_sim = ssa_fusion.nodes.sensor_sim:main",
-            "surrogate = ssa_fusion.nodes.surrogate:main",
-            "filter = ssa_fusion.nodes.filter:main",
-            "recorder = ssa_fusion.nodes.recorder:main",
+            # nodes.entry prepares the process (signals, BLAS threads) before it imports the
+            # node module, then runs ssa_fusion.nodes.<node>:main
+            "sensor_sim = ssa_fusion.nodes.entry:sensor_sim",
+            "surrogate = ssa_fusion.nodes.entry:surrogate",
+            "filter = ssa_fusion.nodes.entry:filter_node",
+            "recorder = ssa_fusion.nodes.entry:recorder",
         ],
     },
 )

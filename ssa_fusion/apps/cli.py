@@ -8,8 +8,6 @@ import sys
 
 from ssa_fusion import limit_blas_threads
 
-limit_blas_threads()
-
 # subcommand -> module providing add_arguments(parser) and run(args) -> int
 _COMMANDS = {
     "live": ("ssa_fusion.apps.live", "run the node graph on a scenario, record a bag, evaluate it"),
@@ -41,6 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    limit_blas_threads()  # before build_parser imports the commands, and with them numpy
     args = build_parser().parse_args(argv)
     return int(args._run(args) or 0)
 

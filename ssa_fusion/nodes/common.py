@@ -232,7 +232,7 @@ def run(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
     ``close()`` runs, and the process exits 0. An invalid parameter at start-up exits 2 with
     a message naming the parameter. A callback may call `finish()` to end with exit 0.
     """
-    stop = STOP  # set by the handlers installed when ssa_fusion.nodes was imported
+    stop = STOP  # set by the handlers `start_process` installed (the node's main calls it)
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     code = 0

@@ -28,6 +28,7 @@ from ssa_fusion.core.stations import STATIONS, UNIX_EPOCH_JD
 from ssa_fusion.core.tracker import Tracker, TrackerConfig
 from ssa_fusion.core.types import StateEstimate
 from ssa_fusion.core.validation import ahead_of_clock
+from ssa_fusion.nodes import start_process
 from ssa_fusion.nodes.common import (
     Diagnostics,
     all_non_negative,
@@ -189,6 +190,7 @@ class FilterNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
+    start_process()
     return run(FilterNode, args)
 
 

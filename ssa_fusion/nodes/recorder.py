@@ -18,6 +18,7 @@ from pathlib import Path
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from ssa_fusion.nodes import start_process
 from ssa_fusion.nodes.common import (
     Diagnostics,
     ParameterError,
@@ -130,6 +131,7 @@ class Recorder(Node):
 
 
 def main(args: list[str] | None = None) -> int:
+    start_process()
     return run(Recorder, args)
 
 

@@ -27,6 +27,7 @@ from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
 from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 
 from ssa_fusion.core import types
+from ssa_fusion.nodes import start_process
 from ssa_fusion.nodes.common import (
     Diagnostics,
     ParameterError,
@@ -270,6 +271,7 @@ class SensorSim(Node):
 
 
 def main(args: list[str] | None = None) -> int:
+    start_process()
     return run(SensorSim, args)
 
 

@@ -28,6 +28,7 @@ from ssa_fusion.core.stations import STATIONS, UNIX_EPOCH_JD
 from ssa_fusion.core.surrogate import EciLift, Surrogate, SurrogateConfig
 from ssa_fusion.core.types import RANGE_AZ_EL
 from ssa_fusion.core.validation import ahead_of_clock
+from ssa_fusion.nodes import start_process
 from ssa_fusion.nodes.common import (
     Diagnostics,
     ParameterError,
@@ -200,6 +201,7 @@ class SurrogateNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
+    start_process()
     return run(SurrogateNode, args)
 
 

@@ -40,11 +40,12 @@ def fresh_domain_id() -> int:
 
 
 def node_command(executable: str) -> list[str]:
-    """Command running node `executable`: the installed file, else the module."""
+    """Command running node `executable`: the installed file, else the same entry point
+    through the module (`ssa_fusion.nodes.entry`)."""
     path = NODE_BIN / executable
     if path.exists():
         return [str(path)]
-    return [sys.executable, "-m", f"ssa_fusion.nodes.{executable}"]
+    return [sys.executable, "-m", "ssa_fusion.nodes.entry", executable]
 
 
 @dataclass

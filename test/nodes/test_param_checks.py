@@ -6,18 +6,12 @@ list check looks at every element (``min(v) >= 0`` lets a NaN through unless it 
 """
 
 import math
-import signal
 
 import pytest
 
-# Importing ssa_fusion.nodes installs the nodes' SIGINT/SIGTERM handlers; pytest keeps its own.
-_HANDLERS = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
-from ssa_fusion.nodes.common import non_negative, positive  # noqa: E402
-from ssa_fusion.nodes.filter import _p0_check  # noqa: E402
-from ssa_fusion.nodes.sensor_sim import _gaps_check, _noise_check  # noqa: E402
-
-for _sig, _handler in _HANDLERS.items():
-    signal.signal(_sig, _handler)
+from ssa_fusion.nodes.common import non_negative, positive
+from ssa_fusion.nodes.filter import _p0_check
+from ssa_fusion.nodes.sensor_sim import _gaps_check, _noise_check
 
 NON_FINITE = [math.inf, -math.inf, math.nan]
 
