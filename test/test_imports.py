@@ -1,7 +1,7 @@
 """Importing ssa_fusion does no work (issue 16): importing every module leaves the process
-environment, the SIGINT/SIGTERM handlers and matplotlib's backend as they were; the node executables set both
-up (`ssa_fusion.nodes.start_process`) before numpy is imported, so every BLAS library a node
-loads runs one thread."""
+environment, the SIGINT/SIGTERM handlers and matplotlib's backend as they were. The node
+executables set up the handlers and the BLAS thread limit (`ssa_fusion.nodes.start_process`)
+before numpy is imported, so every BLAS library a node loads runs one thread."""
 
 import json
 import os

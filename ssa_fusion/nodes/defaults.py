@@ -10,15 +10,14 @@ numbers `ssa-fusion live` derives from that scenario (the same test checks it), 
 out here so that the nodes need nothing from the paper's study.
 
 A field whose default is ``None`` is computed when the node starts (said per field).
+Plain values only, so that importing this module imports nothing else (the recorder needs no
+estimator); those that are core defaults (`surrogate.LIVE_SURROGATE.grace`,
+`tracker.DEFAULT_GATE`, `validation.MAX_CLOCK_LEAD_S`) are checked against them by the test.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-
-from ssa_fusion.core.surrogate import LIVE_SURROGATE
-from ssa_fusion.core.tracker import DEFAULT_GATE
-from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S
 
 KIND = "range_az_el"
 """Measurement kind filter and surrogate expect (``position`` | ``range_az_el``)."""
@@ -59,12 +58,12 @@ class SurrogateDefaults:
     delays: int = 372
     rank: int = 0
     max_horizon: float = 7200.0
-    grace: float = LIVE_SURROGATE.grace
+    grace: float = 2.0
     cadence: float = 0.0
     lift: str = "eci"
     check_period: float = 0.02
     object_id: str = ""
-    max_clock_lead: float = MAX_CLOCK_LEAD_S
+    max_clock_lead: float = 3600.0
 
 
 @dataclass(frozen=True)
@@ -76,11 +75,11 @@ class FilterDefaults:
     station: str = STATION
     p0_sigma: tuple[float, ...] = (1000.0, 1000.0, 1000.0, 1.0, 1.0, 1.0)
     q: float = 0.1
-    gate: float = DEFAULT_GATE
+    gate: float = 1000.0
     object_id: str = ""
     iod_samples: int = 3
     predict_period: float = 300.0
-    max_clock_lead: float = MAX_CLOCK_LEAD_S
+    max_clock_lead: float = 3600.0
 
 
 BAG_PATTERN = "bags/ssa_%Y%m%d_%H%M%S"

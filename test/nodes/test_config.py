@@ -18,6 +18,9 @@ import pytest
 import yaml
 
 from ssa_fusion.apps.live import node_parameters
+from ssa_fusion.core.surrogate import LIVE_SURROGATE
+from ssa_fusion.core.tracker import DEFAULT_GATE
+from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S
 from ssa_fusion.nodes import defaults
 from ssa_fusion.paper import scenarios
 from ssa_fusion.ros.processes import fresh_domain_id
@@ -69,6 +72,12 @@ def test_default_yaml_matches_the_live_default_scenario():
         for key, value in live[node].items():
             assert key in params, (node, key)
             assert params[key] == pytest.approx(value, rel=1e-12), (node, key)
+
+
+def test_defaults_that_are_core_defaults_equal_them():
+    assert defaults.SURROGATE.grace == LIVE_SURROGATE.grace
+    assert defaults.FILTER.gate == DEFAULT_GATE
+    assert defaults.SURROGATE.max_clock_lead == defaults.FILTER.max_clock_lead == MAX_CLOCK_LEAD_S
 
 
 def test_sensor_sim_defaults_are_the_default_scenario():
