@@ -20,8 +20,8 @@ All right-hand sides are vectorised: ``x0`` may be one state (n,) or a batch (p,
 Monte Carlo ensemble), integrated as one system.
 
 ``scipy.integrate`` and ``scipy.optimize`` are imported by the functions that use them, not
-here: the filter, surrogate and recorder nodes import this module (through `scenarios`) but
-never integrate, and ``scipy.integrate`` alone took ~0.6 s of every node's start-up.
+here: a process that only uses the Kepler or J2 models never pays for ``scipy.integrate``
+(~0.6 s to import).
 """
 
 from __future__ import annotations
