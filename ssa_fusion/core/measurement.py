@@ -13,11 +13,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .frames import ERA_RATE, TWO_PI, Station, earth_rotation_angle, enu_matrix, site_ecef
-
-POSITION = 0
-"""Measurement kind: direct observation of state channels (e.g. ECI position, km)."""
-RANGE_AZ_EL = 1
-"""Measurement kind: range [km], azimuth [rad, from north clockwise], elevation [rad]."""
+from .types import Kind
 
 
 class PositionModel:
@@ -30,7 +26,7 @@ class PositionModel:
         theta or a Van der Pol oscillator's x.
     """
 
-    kind = POSITION
+    kind = Kind.POSITION
 
     def __init__(self, observed: tuple[int, ...] = (0, 1, 2)) -> None:
         self.observed = tuple(int(i) for i in observed)
@@ -82,7 +78,7 @@ class RazelModel:
     :mod:`ssa_fusion.core.frames` (ECEF = ECI rotated by the Earth rotation angle).
     """
 
-    kind = RANGE_AZ_EL
+    kind = Kind.RANGE_AZ_EL
     angle_mask = (False, True, True)
 
     def __init__(self, station: Station, jd0_utc: float) -> None:

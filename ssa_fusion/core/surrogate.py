@@ -63,8 +63,8 @@ import numpy as np
 from .frames import razel_eci
 from .hankel_dmd import HankelDMD, psd_part
 from .iod import razel_to_eci
-from .measurement import RANGE_AZ_EL, RazelModel
-from .types import FORECAST, SENSOR, Measurement
+from .measurement import RazelModel
+from .types import Cause, Kind, Measurement, Source
 from .validation import OK, Problem, measurement_problem, razel_possible
 
 
@@ -259,8 +259,8 @@ class Surrogate:
         last one buffered. Each would stop every fit, or empty the buffer, while it stayed
         in it.
         """
-        if m.source != SENSOR:
-            return "ignored_forecast_input", f"source {m.source} at t={m.t}: not a sensor"
+        if m.source != Source.SENSOR:
+            return Cause.IGNORED_FORECAST_INPUT, f"source {m.source} at t={m.t}: not a sensor"
         last = self.last
         kind = self.config.kind if self.config.kind is not None else getattr(last, "kind", None)
         frame = self.config.frame_id or getattr(last, "frame_id", "")
@@ -268,7 +268,7 @@ class Surrogate:
         if problem != OK:
             return problem
         if last is not None and m.t <= last.t:
-            return "rejected_stale", f"t={m.t} not after the last buffered t={last.t}"
+            return Cause.REJECTED_STALE, f"t={m.t} not after the last buffered t={last.t}"
         return OK
 
     # ----------------------------------------------------------------------------------
@@ -321,14 +321,14 @@ class Surrogate:
         out = []
         for k in range(self._emitted + 1, n_due + 1):
             z = forecast[:, k - 1]
-            if last.kind == RANGE_AZ_EL and not razel_possible(z):
+            if last.kind == Kind.RANGE_AZ_EL and not razel_possible(z):
                 self.invalid += 1  # not a possible range/az/el: withheld, not clipped
                 self.status = f"forecast at t={last.t + k * dt} is not a valid range/az/el"
                 continue
             R = cov[k - 1]
             out.append(Measurement(
                 t=last.t + k * dt, z=forecast[:, k - 1].copy(), R=0.5 * (R + R.T),
-                kind=last.kind, source=FORECAST, object_id=last.object_id,
+                kind=last.kind, source=Source.FORECAST, object_id=last.object_id,
                 frame_id=last.frame_id, horizon=k * dt,
             ))
         self._emitted = n_due
@@ -350,14 +350,14 @@ class Surrogate:
         if n_miss > self._forecast.shape[1]:
             return
         z = self._forecast[:, :n_miss]
-        if last.kind == RANGE_AZ_EL and not razel_possible(z).all():
+        if last.kind == Kind.RANGE_AZ_EL and not razel_possible(z).all():
             return
         cov = self._cov
         assert cov is not None  # set with self._forecast by _ensure_forecast
         for k in range(1, n_miss + 1):
             self._buf.append(Measurement(
                 t=last.t + k * dt, z=z[:, k - 1].copy(), R=cov[k - 1], kind=last.kind,
-                source=FORECAST, object_id=last.object_id, frame_id=last.frame_id,
+                source=Source.FORECAST, object_id=last.object_id, frame_id=last.frame_id,
                 horizon=k * dt))
 
     # ----------------------------------------------------------------------------------
@@ -431,7 +431,7 @@ class Surrogate:
         if not np.isfinite(Z).all() or np.ptp(Z, axis=1).max() == 0.0:
             self.status = "cannot fit: constant or non-finite data"
             return
-        angles = (1,) if last.kind == RANGE_AZ_EL else ()
+        angles = (1,) if last.kind == Kind.RANGE_AZ_EL else ()
         if cfg.lift is not None:
             self._fit_t = t[-Z.shape[1]:]
             self._fit_z = Z.T
@@ -452,7 +452,7 @@ class Surrogate:
             self._model = None
             return
         self.fits += 1
-        filled = sum(b.source == FORECAST for b in list(self._buf)[-Z.shape[1]:])
+        filled = sum(b.source == Source.FORECAST for b in list(self._buf)[-Z.shape[1]:])
         self.status = (f"fitted on {Z.shape[1]} samples"
                        + (f" ({filled} of them forecasts filling a gap)" if filled else "")
                        + f", rank {self._model.rank_}" + tail)

@@ -50,8 +50,8 @@ import numpy as np
 
 from . import iod
 from .ekf import ExtendedKalmanFilter, process_noise
-from .measurement import RANGE_AZ_EL, PositionModel, RazelModel
-from .types import FORECAST, SENSOR, UPDATE_FORECAST, UPDATE_SENSOR, Measurement, StateEstimate
+from .measurement import PositionModel, RazelModel
+from .types import Cause, Kind, Measurement, Source, StateEstimate, UpdateSource
 from .validation import OK, measurement_problem
 
 Placeholder = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
@@ -206,16 +206,16 @@ class Tracker:
             return Outcome(rejected=cause, detail=detail)
         if self.ekf is None:
             return self._initialise(m)
-        if m.source == FORECAST:
+        if m.source == Source.FORECAST:
             return self._fuse_forecast(m)
         return self._fuse_real(m)
 
     def _validate(self, m: Measurement) -> tuple[str, str]:
-        if m.source not in (SENSOR, FORECAST):
-            return "rejected_source", f"unknown source {m.source}"
+        if m.source not in (Source.SENSOR, Source.FORECAST):
+            return Cause.REJECTED_SOURCE, f"unknown source {m.source}"
         problem = measurement_problem(m, self.kind, self.config.frame_id)
         if problem == OK and m.horizon < 0.0:
-            return "rejected_horizon", f"forecast horizon {m.horizon} s < 0 at t={m.t}"
+            return Cause.REJECTED_HORIZON, f"forecast horizon {m.horizon} s < 0 at t={m.t}"
         return problem
 
     def _Q(self, dt: float) -> np.ndarray:
@@ -243,13 +243,13 @@ class Tracker:
             ok, result, reason = False, None, f"{type(exc).__name__}: {exc}"
         if not ok:
             self.t, ekf.x, ekf.P = before.t, before.x, before.P
-            return Outcome(rejected="rejected_numeric",
+            return Outcome(rejected=Cause.REJECTED_NUMERIC,
                            detail=f"t={m.t}: update not computable "
                                   f"({reason if result is None else 'non-finite state'})")
         assert result is not None  # ok: the update ran
         self.t = m.t
         if not result.accepted:
-            return Outcome(rejected="rejected_gate",
+            return Outcome(rejected=Cause.REJECTED_GATE,
                            detail=f"NIS {result.nis:.1f} > gate {self.config.gate}")
         return Outcome(estimate=self.estimate(source, result.nis))
 
@@ -257,31 +257,32 @@ class Tracker:
         base = _base(m)
         k = self._position(m.t)
         at = self._log[k] if k < len(self._log) else None  # None: after every fused step
-        if at is not None and at.m.t == m.t and at.m.source != FORECAST:
-            return Outcome(rejected="forecast_superseded",
+        if at is not None and at.m.t == m.t and at.m.source != Source.FORECAST:
+            return Outcome(rejected=Cause.FORECAST_SUPERSEDED,
                            detail=f"forecast for t={m.t}, which has a real measurement")
         if m.t <= self.t and (at is None or not at.before.t < m.t):
-            return Outcome(rejected="forecast_superseded",
+            return Outcome(rejected=Cause.FORECAST_SUPERSEDED,
                            detail=f"forecast for t={m.t} is older than the filter's history "
                                   f"(back to t={self._log[0].m.t if self._log else self.t})")
         t_prev = self.t_real if at is None else at.t_real  # the last real before m.t
         if _before(base, t_prev):
-            return Outcome(rejected="forecast_superseded",
+            return Outcome(rejected=Cause.FORECAST_SUPERSEDED,
                            detail=f"forecast for t={m.t} from a model that ended at t={base}, "
                                   f"before the real measurement at t={t_prev}")
         if at is not None and at.m.t == m.t and not _before(_base(at.m), base):
-            return Outcome(rejected="rejected_stale",
+            return Outcome(rejected=Cause.REJECTED_STALE,
                            detail=f"forecast t={m.t}: a forecast of the same or a newer model "
                                   f"was fused for it")
-        return self._insert(k, m, UPDATE_FORECAST)
+        return self._insert(k, m, UpdateSource.FORECAST)
 
     def _fuse_real(self, m: Measurement) -> Outcome:
         if m.t < self.t_real:
-            return Outcome(rejected="rejected_stale",
+            return Outcome(rejected=Cause.REJECTED_STALE,
                            detail=f"t={m.t} older than the last real measurement t={self.t_real}")
         if m.t == self.t_real:
-            return Outcome(rejected="rejected_duplicate", detail=f"second measurement at t={m.t}")
-        return self._insert(self._position(m.t), m, UPDATE_SENSOR)
+            return Outcome(rejected=Cause.REJECTED_DUPLICATE,
+                           detail=f"second measurement at t={m.t}")
+        return self._insert(self._position(m.t), m, UpdateSource.SENSOR)
 
     def _position(self, t: float) -> int:
         """Index of the first fused step at or after epoch t (len(log) if none)."""
@@ -300,14 +301,14 @@ class Tracker:
         if tail:
             self._rollback(k)
         out = self._fuse_step(m, source)
-        base = m.t if source == UPDATE_SENSOR else _base(m)
-        out.rolled_back = sum(e.m.source == FORECAST for e in tail)
+        base = m.t if source == UpdateSource.SENSOR else _base(m)
+        out.rolled_back = sum(e.m.source == Source.FORECAST for e in tail)
         for e in tail:
-            if e.m.t <= m.t or (e.m.source == FORECAST and _before(_base(e.m), base)):
+            if e.m.t <= m.t or (e.m.source == Source.FORECAST and _before(_base(e.m), base)):
                 continue
             # it was valid before; only the gate can refuse it now
-            again = self._fuse_step(e.m, UPDATE_FORECAST if e.m.source == FORECAST
-                                    else UPDATE_SENSOR)
+            again = self._fuse_step(e.m, UpdateSource.FORECAST if e.m.source == Source.FORECAST
+                                    else UpdateSource.SENSOR)
             if again.estimate is not None:
                 out.refused.append(again.estimate)
         return out
@@ -330,10 +331,10 @@ class Tracker:
         The history kept starts `HISTORY_REAL` real measurements back.
         """
         self._log.append(e)
-        if e.m.source == FORECAST:
+        if e.m.source == Source.FORECAST:
             return
         self.t_real = e.m.t
-        reals = [i for i, f in enumerate(self._log) if f.m.source != FORECAST]
+        reals = [i for i, f in enumerate(self._log) if f.m.source != Source.FORECAST]
         if len(reals) > HISTORY_REAL:
             del self._log[:reals[-HISTORY_REAL]]
 
@@ -352,18 +353,18 @@ class Tracker:
 
     # ----------------------------------------------------------------------------------
     def _initialise(self, m: Measurement) -> Outcome:
-        if m.source == FORECAST:
-            return Outcome(rejected="ignored_before_iod", detail="forecast before IOD")
+        if m.source == Source.FORECAST:
+            return Outcome(rejected=Cause.IGNORED_BEFORE_IOD, detail="forecast before IOD")
         if self._iod and m.t <= self._iod[-1].t:
-            return Outcome(rejected="rejected_stale" if m.t < self._iod[-1].t
-                           else "rejected_duplicate", detail=f"t={m.t} during IOD")
+            return Outcome(rejected=Cause.REJECTED_STALE if m.t < self._iod[-1].t
+                           else Cause.REJECTED_DUPLICATE, detail=f"t={m.t} during IOD")
         self._iod.append(m)
         if len(self._iod) < max(2, self.config.iod_samples):
-            return Outcome(rejected="iod_pending", detail="collecting IOD measurements")
+            return Outcome(rejected=Cause.IOD_PENDING, detail="collecting IOD measurements")
         batch, self._iod = self._iod, []
         t_init, x0, P_iod = self._iod_solution(batch)
         if not np.isfinite(x0).all():
-            return Outcome(rejected="iod_failed", detail="initial orbit determination failed")
+            return Outcome(rejected=Cause.IOD_FAILED, detail="initial orbit determination failed")
         t_last = batch[-1].t
         P0 = P_iod + np.diag(np.asarray(self.config.p0_sigma, dtype=float) ** 2)
         if t_last != t_init:  # Herrick-Gibbs solves at the middle epoch: move to the last
@@ -371,7 +372,7 @@ class Tracker:
             P0 = F @ P0 @ F.T
         self.ekf = ExtendedKalmanFilter(x0, 0.5 * (P0 + P0.T))
         self.t = self.t_real = t_last
-        return Outcome(estimate=self.estimate(UPDATE_SENSOR))
+        return Outcome(estimate=self.estimate(UpdateSource.SENSOR))
 
     def _iod_solution(self, batch: list[Measurement]) -> tuple[float, np.ndarray, np.ndarray]:
         """Return (epoch, state, covariance) from the IOD batch.
@@ -381,7 +382,7 @@ class Tracker:
         """
         t = np.array([b.t for b in batch])
         Z = np.array([b.z for b in batch], dtype=float)
-        if self.kind == RANGE_AZ_EL:
+        if self.kind == Kind.RANGE_AZ_EL:
             mid = len(batch) // 2
             i3 = [0, mid, len(batch) - 1]
             t3 = t[i3]

@@ -6,25 +6,83 @@ simulation clock (the ROS time of the message stamps).
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass, field
 
 import numpy as np
 
-POSITION = 0
-"""Measurement kind: ECI position [x, y, z], km."""
-RANGE_AZ_EL = 1
-"""Measurement kind: [range km, azimuth rad (north, clockwise, [0, 2pi)), elevation rad]."""
 
-SENSOR = 0
-"""Measurement source: a real sensor."""
-FORECAST = 1
-"""Measurement source: a surrogate forecast."""
+class Kind(enum.IntEnum):
+    """Measurement kind; the values are the constants of ``Measurement.msg``."""
 
-UPDATE_NONE = 0
-UPDATE_SENSOR = 1
-UPDATE_FORECAST = 2
+    POSITION = 0
+    """ECI position [x, y, z], km (or observed state channels, see ``PositionModel``)."""
+    RANGE_AZ_EL = 1
+    """[range km, azimuth rad (north, clockwise, [0, 2pi)), elevation rad]."""
 
-KIND_NAMES = {POSITION: "position", RANGE_AZ_EL: "range_az_el"}
+
+class Source(enum.IntEnum):
+    """Measurement source; the values are the constants of ``Measurement.msg``."""
+
+    SENSOR = 0
+    """A real sensor."""
+    FORECAST = 1
+    """A surrogate forecast."""
+
+
+class UpdateSource(enum.IntEnum):
+    """What last updated a state estimate; the values are those of ``StateEstimate.msg``."""
+
+    NONE = 0
+    """No update (prediction only, or truth)."""
+    SENSOR = 1
+    """A real measurement."""
+    FORECAST = 2
+    """A surrogate forecast."""
+
+
+class Cause(enum.StrEnum):
+    """Why a measurement was not used, or another counted event.
+
+    The values are the ``/diagnostics`` counter keys; they must not change.
+    """
+
+    REJECTED_KIND = "rejected_kind"
+    REJECTED_FRAME = "rejected_frame"
+    REJECTED_NONFINITE = "rejected_nonfinite"
+    REJECTED_NEGATIVE_RANGE = "rejected_negative_range"
+    REJECTED_ELEVATION = "rejected_elevation"
+    REJECTED_COVARIANCE = "rejected_covariance"
+    REJECTED_FUTURE = "rejected_future"
+    REJECTED_SOURCE = "rejected_source"
+    REJECTED_HORIZON = "rejected_horizon"
+    REJECTED_NUMERIC = "rejected_numeric"
+    REJECTED_GATE = "rejected_gate"
+    REJECTED_STALE = "rejected_stale"
+    REJECTED_DUPLICATE = "rejected_duplicate"
+    FORECAST_SUPERSEDED = "forecast_superseded"
+    IGNORED_BEFORE_IOD = "ignored_before_iod"
+    IGNORED_FORECAST_INPUT = "ignored_forecast_input"
+    IGNORED_OTHER_OBJECT = "ignored_other_object"
+    IOD_PENDING = "iod_pending"
+    IOD_FAILED = "iod_failed"
+    RESET_CLOCK_JUMP = "reset_clock_jump"
+    FORECASTS_ROLLED_BACK = "forecasts_rolled_back"
+    FORECAST_INVALID = "forecast_invalid"
+    INTERNAL_ERROR = "internal_error"
+    UNRECORDABLE_TOPIC = "unrecordable_topic"
+
+
+# Aliases of the enum members under their former module-level names.
+POSITION = Kind.POSITION
+RANGE_AZ_EL = Kind.RANGE_AZ_EL
+SENSOR = Source.SENSOR
+FORECAST = Source.FORECAST
+UPDATE_NONE = UpdateSource.NONE
+UPDATE_SENSOR = UpdateSource.SENSOR
+UPDATE_FORECAST = UpdateSource.FORECAST
+
+KIND_NAMES = {Kind.POSITION: "position", Kind.RANGE_AZ_EL: "range_az_el"}
 
 
 @dataclass
@@ -40,7 +98,7 @@ class Measurement:
     R : ndarray (3, 3)
         Noise covariance of z in the units of z squared.
     kind, source : int
-        See the module constants.
+        A `Kind` and a `Source` (plain ints compare equal).
     frame_id : str
         "eci" for POSITION, the station id for RANGE_AZ_EL.
     horizon : float
@@ -50,8 +108,8 @@ class Measurement:
     t: float
     z: np.ndarray
     R: np.ndarray
-    kind: int = POSITION
-    source: int = SENSOR
+    kind: int = Kind.POSITION
+    source: int = Source.SENSOR
     object_id: str = ""
     frame_id: str = "eci"
     horizon: float = 0.0
@@ -65,5 +123,5 @@ class StateEstimate:
     x: np.ndarray
     P: np.ndarray = field(default_factory=lambda: np.zeros((6, 6)))
     object_id: str = ""
-    update_source: int = UPDATE_NONE
+    update_source: int = UpdateSource.NONE
     nis: float = 0.0

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from .types import RANGE_AZ_EL, Measurement
+from .types import Cause, Kind, Measurement
 
 HALF_PI = 0.5 * math.pi
 
@@ -36,20 +36,20 @@ def measurement_problem(m: Measurement, kind: int | None, frame_id: str = "") ->
     z = np.asarray(m.z, dtype=float)
     R = np.asarray(m.R, dtype=float)
     if kind is not None and m.kind != kind:
-        return "rejected_kind", f"kind {m.kind}, expected {kind}"
+        return Cause.REJECTED_KIND, f"kind {m.kind}, expected {kind}"
     if frame_id and m.frame_id != frame_id:
-        return "rejected_frame", f"frame_id {m.frame_id!r}, expected {frame_id!r}"
+        return Cause.REJECTED_FRAME, f"frame_id {m.frame_id!r}, expected {frame_id!r}"
     if not (math.isfinite(m.t) and np.isfinite(z).all() and np.isfinite(R).all()
             and math.isfinite(m.horizon)):
-        return "rejected_nonfinite", f"NaN or inf in stamp, z, covariance or horizon at t={m.t}"
-    if m.kind == RANGE_AZ_EL:
+        return Cause.REJECTED_NONFINITE, f"NaN or inf in stamp, z, covariance or horizon at t={m.t}"
+    if m.kind == Kind.RANGE_AZ_EL:
         if z[0] < 0.0:
-            return "rejected_negative_range", f"range {z[0]} km < 0 at t={m.t}"
+            return Cause.REJECTED_NEGATIVE_RANGE, f"range {z[0]} km < 0 at t={m.t}"
         if not -HALF_PI <= z[2] <= HALF_PI:
-            return ("rejected_elevation",
+            return (Cause.REJECTED_ELEVATION,
                     f"elevation {z[2]} rad outside [-pi/2, pi/2] at t={m.t}")
     if not is_covariance(R):
-        return "rejected_covariance", "covariance is not symmetric positive semi-definite"
+        return Cause.REJECTED_COVARIANCE, "covariance is not symmetric positive semi-definite"
     return OK
 
 
@@ -83,10 +83,10 @@ def ahead_of_clock(t: float, now: float, max_lead_s: float) -> Problem:
 
     Typically a sensor stamping wall time into a sim-time graph. Fused, it would move the
     filter and the surrogate past every later real measurement. `now` <= 0 means no clock
-    yet: no check. Returns ("rejected_future", reason) or `OK`.
+    yet: no check. Returns (Cause.REJECTED_FUTURE, reason) or `OK`.
     """
     if now > 0.0 and t > now + max_lead_s:
-        return ("rejected_future",
+        return (Cause.REJECTED_FUTURE,
                 f"t={t} is {t - now:.6g} s ahead of the clock ({now}); more than "
                 f"{max_lead_s:g} s ahead is refused (a sensor stamping wall time into a "
                 f"sim-time graph?)")

@@ -26,7 +26,7 @@ from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
 from ssa_fusion.core.stations import STATIONS
-from ssa_fusion.core.types import KIND_NAMES, RANGE_AZ_EL
+from ssa_fusion.core.types import KIND_NAMES, Cause, Kind
 from ssa_fusion.nodes import STOP
 from ssa_fusion.ros.executors import make_executor
 from ssa_fusion.ros.readiness import MATCHED_KEY
@@ -84,7 +84,7 @@ class Diagnostics:
                 callback(*args[:n_args])
             except Exception as exc:
                 self.count(
-                    "internal_error", f"{type(exc).__name__}: {exc}\n" + traceback.format_exc()
+                    Cause.INTERNAL_ERROR, f"{type(exc).__name__}: {exc}\n" + traceback.format_exc()
                 )
 
         return guarded
@@ -201,7 +201,7 @@ def measurement_stream(node: Node, defaults: Any) -> tuple[int, str]:
         "station id of range/az/el measurements (their frame_id)",
         one_of(*STATIONS),
     )
-    return KINDS[kind], station if KINDS[kind] == RANGE_AZ_EL else "eci"
+    return KINDS[kind], station if KINDS[kind] == Kind.RANGE_AZ_EL else "eci"
 
 
 def clock_lead(node: Node, default: float) -> float:

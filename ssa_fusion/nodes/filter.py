@@ -23,10 +23,10 @@ from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
 from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 
 from ssa_fusion.core import kepler
-from ssa_fusion.core.measurement import RANGE_AZ_EL, PositionModel, RazelModel
+from ssa_fusion.core.measurement import PositionModel, RazelModel
 from ssa_fusion.core.stations import STATIONS, UNIX_EPOCH_JD
 from ssa_fusion.core.tracker import Tracker, TrackerConfig
-from ssa_fusion.core.types import StateEstimate
+from ssa_fusion.core.types import Cause, Kind, StateEstimate
 from ssa_fusion.core.validation import ahead_of_clock
 from ssa_fusion.nodes import start_process
 from ssa_fusion.nodes.common import (
@@ -103,7 +103,7 @@ def tracker_from(node: Node) -> Tracker:
         apply=setter("iod_samples", int),
     )
     model = (RazelModel(STATIONS[frame], UNIX_EPOCH_JD)
-             if kind == RANGE_AZ_EL else PositionModel())
+             if kind == Kind.RANGE_AZ_EL else PositionModel())
     config.p0_sigma, config.q, config.gate = p0_km(p0), q * 1e-6, gate or None
     config.frame_id, config.iod_samples = frame, iod_samples
     return Tracker(kepler.propagate, model, config, n=6, object_id=object_id)
@@ -141,18 +141,20 @@ class FilterNode(Node):
     def on_jump(self, jump) -> None:
         self.tracker.reset()
         self._predicted_at = -math.inf
-        self.diag.count("reset_clock_jump", "sim time jumped backwards: filter reset", warn=False)
+        self.diag.count(
+            Cause.RESET_CLOCK_JUMP, "sim time jumped backwards: filter reset", warn=False
+        )
 
     def on_measurement(self, msg: MeasurementMsg) -> None:
         self.activity += 1
         wanted = self.tracker.object_id
         if wanted and msg.object_id != wanted:
-            self.diag.count("ignored_other_object", f"object_id {msg.object_id!r}", warn=False)
+            self.diag.count(Cause.IGNORED_OTHER_OBJECT, f"object_id {msg.object_id!r}", warn=False)
             return
         try:
             m = messages.measurement_from_msg(msg)
         except ValueError as exc:
-            self.diag.count("rejected_kind", str(exc))
+            self.diag.count(Cause.REJECTED_KIND, str(exc))
             return
         now = self.get_clock().now().nanoseconds * 1e-9
         cause, reason = ahead_of_clock(m.t, now, self.max_lead)
@@ -160,14 +162,14 @@ class FilterNode(Node):
             self.diag.count(cause, reason)
             return
         out = self.tracker.process(m)
-        if out.rejected == "iod_pending":
-            self.diag.counts["iod_pending"] += 1
+        if out.rejected == Cause.IOD_PENDING:
+            self.diag.counts[Cause.IOD_PENDING] += 1
         elif out.rejected:
             self.diag.count(out.rejected, out.detail, warn=out.rejected.startswith("rej"))
         else:
             self.last_object = msg.object_id
         if out.rolled_back:
-            self.diag.counts["forecasts_rolled_back"] += out.rolled_back
+            self.diag.counts[Cause.FORECASTS_ROLLED_BACK] += out.rolled_back
         for e in (out.estimate, *out.refused):  # re-fused forecasts even if m was rejected
             if e is not None:
                 self.publish(e)

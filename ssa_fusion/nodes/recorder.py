@@ -18,6 +18,7 @@ from pathlib import Path
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from ssa_fusion.core.types import Cause
 from ssa_fusion.nodes import start_process
 from ssa_fusion.nodes.common import (
     Diagnostics,
@@ -102,7 +103,7 @@ class Recorder(Node):
                     topic, type_name, [qos_from_rclpy(p.qos_profile) for p in pubs]
                 )
             except Exception as exc:  # an unknown type must not stop the others
-                self.diag.count("unrecordable_topic", f"{topic} ({type_name}): {exc}")
+                self.diag.count(Cause.UNRECORDABLE_TOPIC, f"{topic} ({type_name}): {exc}")
                 self._subs[topic] = None
                 continue
             reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in pubs)

@@ -26,7 +26,7 @@ from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
 from ssa_fusion.core.measurement import RazelModel
 from ssa_fusion.core.stations import STATIONS, UNIX_EPOCH_JD
 from ssa_fusion.core.surrogate import EciLift, Surrogate, SurrogateConfig
-from ssa_fusion.core.types import RANGE_AZ_EL
+from ssa_fusion.core.types import Cause, Kind
 from ssa_fusion.core.validation import ahead_of_clock
 from ssa_fusion.nodes import start_process
 from ssa_fusion.nodes.common import (
@@ -128,7 +128,7 @@ def surrogate_config_from(node: Node) -> SurrogateConfig:
         "lifted to the ECI position it implies, forecasts mapped back)",
         one_of("none", "eci"),
     )
-    if lift == "eci" and config.kind != RANGE_AZ_EL:
+    if lift == "eci" and config.kind != Kind.RANGE_AZ_EL:
         raise ParameterError("parameter 'lift' = 'eci' needs 'kind' = 'range_az_el'")
     if lift == "eci":
         config.lift = EciLift(RazelModel(STATIONS[config.frame_id], UNIX_EPOCH_JD))
@@ -162,17 +162,19 @@ class SurrogateNode(Node):
 
     def on_jump(self, jump) -> None:
         self.core.reset()
-        self.diag.count("reset_clock_jump", "sim time jumped backwards: buffer emptied", warn=False)
+        self.diag.count(
+            Cause.RESET_CLOCK_JUMP, "sim time jumped backwards: buffer emptied", warn=False
+        )
 
     def on_measurement(self, msg: MeasurementMsg) -> None:
         self.activity += 1
         if self.object_id and msg.object_id != self.object_id:
-            self.diag.count("ignored_other_object", f"object_id {msg.object_id!r}", warn=False)
+            self.diag.count(Cause.IGNORED_OTHER_OBJECT, f"object_id {msg.object_id!r}", warn=False)
             return
         try:
             m = messages.measurement_from_msg(msg)
         except ValueError as exc:
-            self.diag.count("rejected_kind", str(exc))
+            self.diag.count(Cause.REJECTED_KIND, str(exc))
             return
         now = self.get_clock().now().nanoseconds * 1e-9
         cause, reason = ahead_of_clock(m.t, now, self.max_lead)
@@ -189,9 +191,9 @@ class SurrogateNode(Node):
     def check(self) -> None:
         now = self.get_clock().now().nanoseconds * 1e-9
         self.publish(self.core.due(now))
-        if self.core.invalid > self.diag.counts["forecast_invalid"]:
-            self.diag.count("forecast_invalid", self.core.status)
-            self.diag.counts["forecast_invalid"] = self.core.invalid
+        if self.core.invalid > self.diag.counts[Cause.FORECAST_INVALID]:
+            self.diag.count(Cause.FORECAST_INVALID, self.core.status)
+            self.diag.counts[Cause.FORECAST_INVALID] = self.core.invalid
         self.diag.status["model"] = self.core.status
 
     def publish(self, forecasts: list) -> None:

@@ -19,8 +19,9 @@ import numpy as np
 
 from ssa_fusion.core import dynamics, kepler
 from ssa_fusion.core.frames import Station
-from ssa_fusion.core.measurement import POSITION, RANGE_AZ_EL, PositionModel, RazelModel
+from ssa_fusion.core.measurement import PositionModel, RazelModel
 from ssa_fusion.core.stations import STATIONS, UNIX_EPOCH_JD
+from ssa_fusion.core.types import Kind
 
 ORBIT_EPOCH_UNIX = 1735689600.0
 """2025-01-01T00:00:00 UTC: epoch of the orbit scenarios' initial elements."""
@@ -41,7 +42,7 @@ class Scenario:
     placeholder : str
         The EKF's model: "kepler" (analytic two-body) or a `dynamics` model name.
     kind, observed, station
-        Measurement: POSITION of state channels `observed`, or RANGE_AZ_EL from `station`.
+        Measurement: Kind.POSITION of state channels `observed`, or Kind.RANGE_AZ_EL from `station`.
     noise_sigma : tuple
         Measurement noise standard deviation per channel (km or rad); all zero = noise-free.
     noise_rel : float
@@ -74,7 +75,7 @@ class Scenario:
     truth: str
     x0: tuple[float, ...]
     placeholder: str
-    kind: int = POSITION
+    kind: int = Kind.POSITION
     observed: tuple[int, ...] = (0, 1, 2)
     station: str = ""
     noise_sigma: tuple[float, ...] = (0.0, 0.0, 0.0)
@@ -167,7 +168,7 @@ SCENARIOS: dict[str, Scenario] = {
         Scenario(name="iss_j2_pos_noisy", truth="j2", noise_rel=0.05,
                  **{**_ISS, "p0_sigma": (10.0, 10.0, 10.0, 1e-2, 1e-2, 1e-2)},
                  finding="close to hypothetical, within 3σ"),
-        Scenario(name="iss_j2_rae", truth="j2", kind=RANGE_AZ_EL, station="columbus",
+        Scenario(name="iss_j2_rae", truth="j2", kind=Kind.RANGE_AZ_EL, station="columbus",
                  noise_sigma=(1.0, 0.01, 0.01), lift="eci",
                  **{**_ISS, "p0_sigma": (1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3)},
                  finding="≈ hypothetical"),
@@ -211,17 +212,17 @@ def get(name: str) -> Scenario:
         ) from None
 
 
-def settings_for(name: str = "", kind: int = RANGE_AZ_EL) -> Scenario:
+def settings_for(name: str = "", kind: int = Kind.RANGE_AZ_EL) -> Scenario:
     """Estimator settings for recorded data: scenario `name`, else the default orbit scenario
     of the measurement `kind` (range/az/el: iss_j2_rae, position: iss_j2_pos)."""
     if name:
         return get(name)
-    return get("iss_j2_rae" if kind == RANGE_AZ_EL else "iss_j2_pos")
+    return get("iss_j2_rae" if kind == Kind.RANGE_AZ_EL else "iss_j2_pos")
 
 
 def measurement_model(s: Scenario) -> PositionModel | RazelModel:
     """h(x, t) of the scenario; t on the scenario's clock (Unix s for orbits)."""
-    if s.kind == RANGE_AZ_EL:
+    if s.kind == Kind.RANGE_AZ_EL:
         return RazelModel(STATIONS[s.station], s.jd0)
     return PositionModel(s.observed)
 

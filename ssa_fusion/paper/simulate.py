@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ssa_fusion.core.measurement import RANGE_AZ_EL
+from ssa_fusion.core.types import Kind
 from ssa_fusion.paper.scenarios import Scenario, measurement_model, truth_states
 
 
@@ -62,7 +62,7 @@ def simulate(s: Scenario, seed: int = 0, with_after: bool = True) -> Simulation:
     sigma = resolve_noise(s, z_true, t)
     rng = np.random.default_rng(seed)
     z = z_true + rng.standard_normal(z_true.shape) * sigma
-    if s.kind == RANGE_AZ_EL:  # azimuth stays in [0, 2pi)
+    if s.kind == Kind.RANGE_AZ_EL:  # azimuth stays in [0, 2pi)
         z[:, 1] %= 2 * np.pi
     in_gap = (t >= s.gap_start) & (t < s.gap_end)
     return Simulation(s, t, x, z_true, z, sigma, in_gap)

@@ -86,8 +86,8 @@ def measurement_to_msg(m: types.Measurement, classes: MsgClasses | None = None) 
     return c.measurement(
         header=c.header(stamp=seconds_to_stamp(m.t, c), frame_id=m.frame_id),
         object_id=m.object_id,
-        kind=m.kind,
-        source=m.source,
+        kind=int(m.kind),
+        source=int(m.source),
         z=np.asarray(m.z, dtype=float) * s,
         covariance=(np.asarray(m.R, dtype=float) * np.outer(s, s)).ravel(),
         horizon=float(m.horizon),
@@ -117,7 +117,7 @@ def estimate_to_msg(e: types.StateEstimate, classes: MsgClasses | None = None) -
         object_id=e.object_id,
         state=np.asarray(e.x, dtype=float) * _X_SCALE,
         covariance=(np.asarray(e.P, dtype=float) * KM * KM).ravel(),
-        update_source=e.update_source,
+        update_source=int(e.update_source),
         nis=float(e.nis),
     )
 

@@ -4,12 +4,13 @@ import numpy as np
 import pytest
 
 from ssa_fusion.core.frames import COLUMBUS, razel_eci, wrap_angle
-from ssa_fusion.core.measurement import POSITION, RANGE_AZ_EL, PositionModel, RazelModel
+from ssa_fusion.core.measurement import PositionModel, RazelModel
+from ssa_fusion.core.types import Kind
 
 
 def test_position_model_orbit_and_pendulum():
     m = PositionModel()
-    assert m.kind == POSITION == 0 and m.angle_mask == (False, False, False)
+    assert m.kind == Kind.POSITION == 0 and m.angle_mask == (False, False, False)
     x = np.arange(6.0) + 1
     z, H = m.h_and_H(x, 0.0)
     np.testing.assert_array_equal(z, x[:3])
@@ -34,7 +35,7 @@ def test_position_model_orbit_and_pendulum():
 def test_razel_model_matches_frames_and_finite_differences():
     jd0 = 2460310.5
     m = RazelModel(COLUMBUS, jd0)
-    assert m.kind == RANGE_AZ_EL == 1 and m.angle_mask == (False, True, True)
+    assert m.kind == Kind.RANGE_AZ_EL == 1 and m.angle_mask == (False, True, True)
     x = np.array([1200.0, -5200.0, 4300.0, 5.1, 1.2, -4.4])
     t = 3725.0
     z, H = m.h_and_H(x, t)
