@@ -31,8 +31,8 @@ from filterpy.kalman import ExtendedKalmanFilter as FilterpyEKF
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a source checkout
 
 from ssa_fusion.core.dynamics import ISS_ELEMENTS, elements_to_state
-from ssa_fusion.core.ekf import ExtendedKalmanFilter, process_noise, wrap_residual
-from ssa_fusion.core.frames import COLUMBUS
+from ssa_fusion.core.ekf import ExtendedKalmanFilter, process_noise
+from ssa_fusion.core.frames import COLUMBUS, wrap_angle
 from ssa_fusion.core.kepler import propagate
 from ssa_fusion.core.measurement import RazelModel
 
@@ -85,8 +85,8 @@ def run_filterpy(
 
     def residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         y = a - b
-        y[1] = wrap_residual(y[1])
-        y[2] = wrap_residual(y[2])
+        y[1] = wrap_angle(y[1])
+        y[2] = wrap_angle(y[2])
         return y
 
     kf = KeplerEKF(dim_x=6, dim_z=3)

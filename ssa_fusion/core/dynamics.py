@@ -34,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 from sgp4.api import WGS72, Satrec
 
 from .constants import G0, J2, MU_EARTH, MU_EARTH_MOON, OMEGA_EARTH, R_EARTH
+from .frames import wrap_2pi
 
 Array = NDArray[np.float64]
 
@@ -390,8 +391,8 @@ def _satrec(params: Array, epoch_days: float, bstar: float, gravity: int) -> Sat
     e = math.hypot(ex, ey)
     argp = math.atan2(ey, ex)
     sat = Satrec()
-    sat.sgp4init(gravity, "i", 1, epoch_days, bstar, 0.0, 0.0, e, argp % (2 * math.pi), inc,
-                 (lam - argp) % (2 * math.pi), n_radmin, raan % (2 * math.pi))
+    sat.sgp4init(gravity, "i", 1, epoch_days, bstar, 0.0, 0.0, e, wrap_2pi(argp), inc,
+                 wrap_2pi(lam - argp), n_radmin, wrap_2pi(raan))
     return sat
 
 

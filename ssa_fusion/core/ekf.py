@@ -21,9 +21,10 @@ from typing import NamedTuple, cast
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["ExtendedKalmanFilter", "UpdateResult", "process_noise", "wrap_residual"]
+from .frames import wrap_angle
 
-_TWO_PI = 2.0 * math.pi
+__all__ = ["ExtendedKalmanFilter", "UpdateResult", "process_noise"]
+
 
 Array = NDArray[np.float64]
 PredictFn = Callable[[Array], tuple[Array, Array]]
@@ -46,11 +47,6 @@ class UpdateResult(NamedTuple):
     accepted: bool
     nis: float
     y: Array
-
-
-def wrap_residual(a: float) -> float:
-    """Wrap an angle difference (rad) to (-pi, pi]."""
-    return math.pi - (math.pi - a) % _TWO_PI
 
 
 def _inv_sym(s: Array) -> Array:
@@ -199,7 +195,7 @@ class ExtendedKalmanFilter:
         if angle_mask is not None:
             for i, is_angle in enumerate(angle_mask):
                 if is_angle:
-                    y[i] = wrap_residual(float(y[i]))
+                    y[i] = wrap_angle(float(y[i]))
         PHt = P.dot(H.T)
         S = H.dot(PHt) + R
         Si = _inv_sym(S)

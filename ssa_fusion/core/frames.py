@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -54,8 +55,7 @@ def earth_rotation_angle(jd_utc: ArrayLike) -> NDArray[np.float64] | float:
     du = jd - J2000_JD
     frac = np.mod(jd, 1.0)
     era = TWO_PI * np.mod(frac + 0.7790572732640 + 0.00273781191135448 * du, 1.0)
-    era = np.mod(era, TWO_PI)
-    return float(era) if era.ndim == 0 else era
+    return wrap_2pi(era)
 
 
 def _rot_z(theta: ArrayLike) -> NDArray[np.float64]:
@@ -133,7 +133,7 @@ def _enu_to_razel(
     e, n, u = enu[..., 0], enu[..., 1], enu[..., 2]
     horiz = np.hypot(e, n)
     rng = np.hypot(horiz, u)
-    az = np.mod(np.arctan2(e, n), TWO_PI)
+    az = cast(NDArray[np.float64], wrap_2pi(np.arctan2(e, n)))  # np.float64 for one vector
     el = np.arctan2(u, horiz)
     return rng, az, el
 
@@ -191,7 +191,58 @@ def razel_jacobian_eci(x_eci6: ArrayLike, jd_utc: float, station: Station) -> ND
     return jac
 
 
-def wrap_angle(a: ArrayLike) -> NDArray[np.float64] | float:
-    """Wrap angle(s) [rad] into (-pi, pi] (for residuals)."""
+def wrap_angle(a: float | ArrayLike) -> NDArray[np.float64] | float:
+    """Wrap angle(s) into (-pi, pi] (residuals: the EKF innovation).
+
+    Parameters
+    ----------
+    a : float or array_like
+        Angle(s), rad.
+
+    Returns
+    -------
+    float or ndarray
+        ``pi - (pi - a) mod 2 pi``; a float for a Python float or 0-d input.
+    """
+    if isinstance(a, float):  # the EKF's per-channel hot path
+        return math.pi - (math.pi - a) % TWO_PI
     w = math.pi - np.mod(math.pi - np.asarray(a, dtype=float), TWO_PI)
+    return float(w) if np.ndim(w) == 0 else w
+
+
+def wrap_2pi(a: float | ArrayLike) -> NDArray[np.float64] | float:
+    """Wrap angle(s) into [0, 2 pi) (azimuths, orbital angles).
+
+    Parameters
+    ----------
+    a : float or array_like
+        Angle(s), rad.
+
+    Returns
+    -------
+    float or ndarray
+        ``a mod 2 pi`` (floor convention); a float for a Python float or 0-d input.
+    """
+    if isinstance(a, float):
+        return a % TWO_PI
+    w = np.mod(np.asarray(a, dtype=float), TWO_PI)
+    return float(w) if np.ndim(w) == 0 else w
+
+
+def wrap_pi(a: float | ArrayLike) -> NDArray[np.float64] | float:
+    """Wrap angle(s) into [-pi, pi) (errors of forecasts against truth).
+
+    Parameters
+    ----------
+    a : float or array_like
+        Angle(s), rad.
+
+    Returns
+    -------
+    float or ndarray
+        ``(a + pi) mod 2 pi - pi``; a float for a Python float or 0-d input.
+    """
+    if isinstance(a, float):
+        return (a + math.pi) % TWO_PI - math.pi
+    w = np.mod(np.asarray(a, dtype=float) + math.pi, TWO_PI) - math.pi
     return float(w) if np.ndim(w) == 0 else w

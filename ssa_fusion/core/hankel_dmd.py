@@ -64,9 +64,10 @@ import scipy.linalg as sla
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 
+from .frames import wrap_2pi
+
 __all__ = ["HankelDMD", "resolvable_rank", "svht_rank"]
 
-_TWO_PI = 2.0 * np.pi
 _COV_BUDGET = 400_000  # max (horizon, column) pairs in the covariance estimator
 FloatArray = NDArray[np.float64]
 GRAM_FLOOR = 1e-5  # of sigma_max: the smallest singular value `_gram_subspace` relies on
@@ -488,7 +489,7 @@ class HankelDMD:
         out: FloatArray = self._c @ seq
         if self.angle_channels:
             idx = list(self.angle_channels)
-            out[idx] = np.mod(out[idx], _TWO_PI)
+            out[idx] = wrap_2pi(out[idx])
         return out
 
     def _empirical_cov(self, k_need: int, residual: Residual | None = None) -> FloatArray:

@@ -12,7 +12,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from .frames import ERA_RATE, TWO_PI, Station, earth_rotation_angle, enu_matrix, site_ecef
+from .frames import ERA_RATE, Station, earth_rotation_angle, enu_matrix, site_ecef, wrap_2pi
 from .types import Kind
 
 
@@ -109,9 +109,7 @@ class RazelModel:
         h2 = e * e + n * n
         h = math.sqrt(h2)
         r2 = h2 + u * u
-        az = math.atan2(e, n)
-        if az < 0.0:
-            az += TWO_PI
+        az = float(wrap_2pi(math.atan2(e, n)))
         return math.sqrt(r2), az, math.atan2(u, h), h2, r2
 
     def h(self, x: NDArray[np.float64], t_s: float) -> NDArray[np.float64]:

@@ -60,7 +60,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .frames import razel_eci
+from .frames import razel_eci, wrap_pi
 from .hankel_dmd import HankelDMD, psd_part
 from .iod import razel_to_eci
 from .measurement import RazelModel
@@ -178,7 +178,7 @@ class EciLift:
 
         def err(pred: np.ndarray, target: np.ndarray) -> np.ndarray:
             e = self.to_measurement(pred.transpose(0, 2, 1), t[target]) - z[target]
-            e[..., 1] = (e[..., 1] + math.pi) % (2 * math.pi) - math.pi
+            e[..., 1] = wrap_pi(e[..., 1])
             out: np.ndarray = e.transpose(0, 2, 1)
             return out
 

@@ -20,12 +20,12 @@ Nothing here reads the true trajectory except to score the arms.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ssa_fusion.core.ekf import process_noise
+from ssa_fusion.core.frames import wrap_pi
 from ssa_fusion.core.metrics import chi2_bounds, epsilon, nees
 from ssa_fusion.core.surrogate import Surrogate
 from ssa_fusion.core.tracker import Tracker
@@ -221,7 +221,7 @@ def forecast_errors(s: Scenario, sim: Simulation, forecasts: list[Measurement]) 
         e = np.asarray(f.z, float) - zt
         for c, is_angle in enumerate(model.angle_mask):
             if is_angle:
-                e[c] = (e[c] + math.pi) % (2 * math.pi) - math.pi
+                e[c] = wrap_pi(e[c])
         h.append(f.horizon)
         err.append(e)
         C.append(np.asarray(f.R, float))

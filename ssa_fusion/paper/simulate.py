@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ssa_fusion.core.frames import wrap_2pi
 from ssa_fusion.core.types import Kind
 from ssa_fusion.paper.scenarios import Scenario, measurement_model, truth_states
 
@@ -63,7 +64,7 @@ def simulate(s: Scenario, seed: int = 0, with_after: bool = True) -> Simulation:
     rng = np.random.default_rng(seed)
     z = z_true + rng.standard_normal(z_true.shape) * sigma
     if s.kind == Kind.RANGE_AZ_EL:  # azimuth stays in [0, 2pi)
-        z[:, 1] %= 2 * np.pi
+        z[:, 1] = wrap_2pi(z[:, 1])
     in_gap = (t >= s.gap_start) & (t < s.gap_end)
     return Simulation(s, t, x, z_true, z, sigma, in_gap)
 

@@ -16,7 +16,8 @@ from filterpy.kalman import ExtendedKalmanFilter as FpEKF
 from filterpy.kalman import KalmanFilter
 from scipy.stats import chi2
 
-from ssa_fusion.core.ekf import ExtendedKalmanFilter, UpdateResult, process_noise, wrap_residual
+from ssa_fusion.core.ekf import ExtendedKalmanFilter, UpdateResult, process_noise
+from ssa_fusion.core.frames import wrap_angle
 from ssa_fusion.core.kepler import propagate
 
 DT = 0.5
@@ -94,7 +95,7 @@ def test_matches_filterpy_ekf_on_orbit_with_angles() -> None:
 
     def residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         y = a - b
-        y[1:] = wrap_residual(y[1]), wrap_residual(y[2])
+        y[1:] = wrap_angle(y[1]), wrap_angle(y[2])
         return y
 
     ref = KeplerEKF(dim_x=6, dim_z=3)
@@ -134,14 +135,14 @@ def test_angle_residual_wraps_near_two_pi() -> None:
     assert res2.y[0] == pytest.approx(2 * math.pi - 0.02)
 
 
-def test_wrap_residual_interval() -> None:
-    assert wrap_residual(math.pi) == pytest.approx(math.pi)
-    assert wrap_residual(-math.pi) == pytest.approx(math.pi)
-    assert wrap_residual(3 * math.pi) == pytest.approx(math.pi)
-    assert wrap_residual(2 * math.pi - 0.1) == pytest.approx(-0.1)
-    assert wrap_residual(-2 * math.pi + 0.1) == pytest.approx(0.1)
+def test_wrap_angle_interval() -> None:
+    assert wrap_angle(math.pi) == pytest.approx(math.pi)
+    assert wrap_angle(-math.pi) == pytest.approx(math.pi)
+    assert wrap_angle(3 * math.pi) == pytest.approx(math.pi)
+    assert wrap_angle(2 * math.pi - 0.1) == pytest.approx(-0.1)
+    assert wrap_angle(-2 * math.pi + 0.1) == pytest.approx(0.1)
     a = np.linspace(-20, 20, 1001)
-    w = np.array([wrap_residual(v) for v in a])
+    w = np.array([wrap_angle(v) for v in a])
     assert np.all(w > -math.pi) and np.all(w <= math.pi)
     np.testing.assert_allclose(np.cos(w), np.cos(a), atol=1e-12)
     np.testing.assert_allclose(np.sin(w), np.sin(a), atol=1e-12)

@@ -17,7 +17,9 @@ from ssa_fusion.core.frames import (
     razel_eci,
     razel_jacobian_eci,
     site_ecef,
+    wrap_2pi,
     wrap_angle,
+    wrap_pi,
 )
 
 # Made-up but realistic ISS TLEs (valid checksums). The first has its epoch at 2000-01-01 12:00
@@ -156,3 +158,27 @@ def test_wrap_angle_range():
     np.testing.assert_allclose(np.cos(w), np.cos(a), atol=1e-12)
     np.testing.assert_allclose(np.sin(w), np.sin(a), atol=1e-12)
     assert w[0] == pytest.approx(math.pi) and w[1] == pytest.approx(math.pi)
+
+
+def test_wrap_helpers_equal_the_formulas_they_replace():
+    """wrap_2pi / wrap_pi / wrap_angle give bit-identical results to the expressions the
+    code used before (Python float % and np.mod share the floor convention)."""
+    rng = np.random.default_rng(16)
+    a = np.concatenate((rng.uniform(-50.0, 50.0, 2000), rng.normal(0.0, 1e-9, 200),
+                        [0.0, -0.0, math.pi, -math.pi, 2 * math.pi, -2 * math.pi, 1e-300]))
+    two_pi = 2 * math.pi
+    np.testing.assert_array_equal(wrap_2pi(a), np.mod(a, two_pi))
+    np.testing.assert_array_equal(wrap_pi(a), (a + math.pi) % two_pi - math.pi)
+    np.testing.assert_array_equal(wrap_angle(a), math.pi - np.mod(math.pi - a, two_pi))
+    for v in a:
+        f = float(v)
+        assert wrap_2pi(f) == f % two_pi
+        assert wrap_pi(f) == (f + math.pi) % two_pi - math.pi
+        assert wrap_angle(f) == math.pi - (math.pi - f) % two_pi
+        assert wrap_2pi(f) == float(wrap_2pi(np.array(f)))  # scalar and array paths agree
+        assert wrap_pi(f) == float(wrap_pi(np.array(f)))
+        assert wrap_angle(f) == float(wrap_angle(np.array(f)))
+    w = np.asarray(wrap_2pi(a))
+    assert np.all((w >= 0.0) & (w <= two_pi))  # == 2 pi only by rounding of tiny negatives
+    w = np.asarray(wrap_pi(a))
+    assert np.all((w >= -math.pi) & (w <= math.pi))
