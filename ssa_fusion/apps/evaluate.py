@@ -77,7 +77,7 @@ def run_tracker(s: scenarios.Scenario, stream: list[types.Measurement]) -> dict:
     out: dict[float, types.StateEstimate] = {}
     for m in sorted(stream, key=lambda m: (m.t, m.source)):
         o = tracker.process(m)
-        for e in [o.estimate, *o.refused]:
+        for e in [o.estimate, *o.fused_again]:
             if e is not None:
                 out[e.t] = e
     return out

@@ -177,7 +177,7 @@ def replay_offline(stream: list[bagio.BagMessage], s: scenarios.Scenario) -> Off
         out = tracker.process(m)
         if out.rejected:
             result.rejected[out.rejected] = result.rejected.get(out.rejected, 0) + 1
-        for e in (out.estimate, *out.refused):
+        for e in (out.estimate, *out.fused_again):
             if e is not None:
                 e.object_id = e.object_id or m.object_id
                 result.estimates.append((t_ns, e))

@@ -110,7 +110,7 @@ class Outcome:
         Otherwise the cause (a key) and a sentence for the log.
     rolled_back : int
         Fused forecasts undone to put this measurement in front of them.
-    refused : list of StateEstimate
+    fused_again : list of StateEstimate
         Estimates of the measurements (forecasts, and real ones after a late forecast)
         fused again after it, also when it was itself rejected: they are new estimates all
         the same.
@@ -120,7 +120,7 @@ class Outcome:
     rejected: str = ""
     detail: str = ""
     rolled_back: int = 0
-    refused: list[StateEstimate] = field(default_factory=list)
+    fused_again: list[StateEstimate] = field(default_factory=list)
 
 
 @dataclass
@@ -295,7 +295,7 @@ class Tracker:
         whose model knew what m says (a real m: trained on it; a forecast m: a model no
         older than m's). The dropped forecasts wait for the surrogate's newer ones. That
         holds even if m itself is rejected (the surrogate has buffered it all the same), so
-        the filter ends as in the offline order; `refused` then still lists the re-fused.
+        the filter ends as in the offline order; `fused_again` then still lists them.
         """
         tail = self._log[k:]
         if tail:
@@ -310,7 +310,7 @@ class Tracker:
             again = self._fuse_step(e.m, UpdateSource.FORECAST if e.m.source == Source.FORECAST
                                     else UpdateSource.SENSOR)
             if again.estimate is not None:
-                out.refused.append(again.estimate)
+                out.fused_again.append(again.estimate)
         return out
 
     def _fuse_step(self, m: Measurement, source: int) -> Outcome:

@@ -170,7 +170,7 @@ class FilterNode(Node):
             self.last_object = msg.object_id
         if out.rolled_back:
             self.diag.counts[Cause.FORECASTS_ROLLED_BACK] += out.rolled_back
-        for e in (out.estimate, *out.refused):  # re-fused forecasts even if m was rejected
+        for e in (out.estimate, *out.fused_again):  # fused again even if m was rejected
             if e is not None:
                 self.publish(e)
 

@@ -113,7 +113,7 @@ def run_dmd_ekf(s: Scenario, sim: Simulation, **surrogate_overrides
         out = tr.process(m)
         if out.estimate is not None:
             est[_index(s, m.t)] = out.estimate
-        for e in out.refused:
+        for e in out.fused_again:
             est[_index(s, e.t)] = e
 
     for i in range(len(sim.t)):

@@ -399,8 +399,8 @@ def test_real_measurement_rolls_back_later_forecasts(name):
     assert out.estimate is not None and out.estimate.update_source == UPDATE_SENSOR
     assert out.estimate.t == sim.t[t2]
     assert out.rolled_back == 2
-    assert [e.t for e in out.refused] == [sim.t[t3]]
-    assert out.refused[0].update_source == UPDATE_FORECAST
+    assert [e.t for e in out.fused_again] == [sim.t[t3]]
+    assert out.fused_again[0].update_source == UPDATE_FORECAST
 
     fresh = _tracker(sim)
     _feed(fresh, history)
@@ -409,8 +409,8 @@ def test_real_measurement_rolls_back_later_forecasts(name):
     at_t3 = fresh.process(fc(t3)).estimate
     np.testing.assert_allclose(out.estimate.x, at_t2.x, rtol=1e-12)
     np.testing.assert_allclose(out.estimate.P, at_t2.P, rtol=1e-12, atol=1e-12 * abs(at_t2.P).max())
-    np.testing.assert_allclose(out.refused[0].x, at_t3.x, rtol=1e-12)
-    np.testing.assert_allclose(out.refused[0].P, at_t3.P, rtol=1e-12,
+    np.testing.assert_allclose(out.fused_again[0].x, at_t3.x, rtol=1e-12)
+    np.testing.assert_allclose(out.fused_again[0].P, at_t3.P, rtol=1e-12,
                                atol=1e-12 * abs(at_t3.P).max())
     assert tr.t == fresh.t == sim.t[t3] and tr.t_real == fresh.t_real == sim.t[t2]
     # and the two stay identical afterwards
@@ -431,7 +431,7 @@ def test_real_measurement_between_forecast_epochs_keeps_earlier_forecasts():
     m.t = float(sim.t[11]) - 5.0  # off the cadence grid, between forecasts 10 and 11
     out = tr.process(m)
     assert out.estimate is not None and out.rolled_back == 2
-    assert [e.t for e in out.refused] == [sim.t[11], sim.t[12]]
+    assert [e.t for e in out.fused_again] == [sim.t[11], sim.t[12]]
     assert tr.t == sim.t[12]
 
 
@@ -450,7 +450,7 @@ def test_gated_real_measurement_drops_only_the_forecast_at_its_epoch():
         assert tr.process(fc(i)).estimate is not None
     out = tr.process(_meas(sim, 11, bias=1000.0))
     assert out.rejected == "rejected_gate" and out.rolled_back == 2
-    assert [e.t for e in out.refused] == [sim.t[12]]
+    assert [e.t for e in out.fused_again] == [sim.t[12]]
     ref = _tracker(sim, gate=float(chi2.ppf(0.9999, 3)))
     _feed(ref, [*history, fc(10), fc(12)])
     _assert_same_filter(tr, ref)
@@ -501,10 +501,10 @@ def test_forecasts_issued_while_a_real_measurement_was_late_are_replaced():
     for i in (10, 11, 12, 13):  # stale, and biased so that keeping any of them shows
         assert live.process(_model_forecast(sim, i, base=9, bias=20.0)).estimate is not None
     out = live.process(_model_forecast(sim, 11, base=10))  # newer model: replaces 11-13
-    assert out.estimate is not None and out.rolled_back == 3 and out.refused == []
+    assert out.estimate is not None and out.rolled_back == 3 and out.fused_again == []
     out = live.process(_meas(sim, 10))  # real 10: replaces stale 10, keeps the fresh 11
     assert out.estimate.update_source == UPDATE_SENSOR and out.rolled_back == 2
-    assert [e.t for e in out.refused] == [sim.t[11]]
+    assert [e.t for e in out.fused_again] == [sim.t[11]]
     for i in (12, 13):
         assert live.process(_model_forecast(sim, i, base=10)).estimate is not None
     _assert_same_filter(live, offline)
@@ -543,7 +543,7 @@ def test_a_gaps_last_forecasts_count_whichever_order_they_arrive_in(order):
     for k in order:
         out = live.process(msgs[k])
         assert out.estimate is not None, (k, out.rejected)
-        for e in (out.estimate, *out.refused):
+        for e in (out.estimate, *out.fused_again):
             got[e.t] = e
     _assert_same_filter(live, offline)
     assert sorted(got) == sorted(want)
