@@ -98,12 +98,13 @@ def main() -> None:
         f_t = {round(f.t, 3) for _, f in result.forecasts}
         covered = sum(1 for t in gap_t if round(t, 3) in f_t)
         print(f"offline_estimates: {len(result.estimates)}  (fused real: "
-              f"{fused[types.UPDATE_SENSOR]}, fused forecast: {fused[types.UPDATE_FORECAST]})"
+              f"{fused[types.UpdateSource.SENSOR]}, "
+              f"fused forecast: {fused[types.UpdateSource.FORECAST]})"
               f"  forecasts: {len(result.forecasts)}  gap_epochs_forecast: {covered}/{n_gap}")
         assert len(result.forecasts) > 0, "the surrogate forecast nothing: the bench timed no fit"
         assert covered == n_gap, f"forecasts cover {covered} of {n_gap} gap epochs"
-        assert fused[types.UPDATE_FORECAST] >= n_gap, "the filter did not fuse the forecasts"
-        assert fused[types.UPDATE_SENSOR] >= n - 3, "the filter did not fuse the measurements"
+        assert fused[types.UpdateSource.FORECAST] >= n_gap, "the filter did not fuse the forecasts"
+        assert fused[types.UpdateSource.SENSOR] >= n - 3, "the filter did not fuse the measurements"
 
         short = Path(tmp) / "short"
         write_day_bag(short, hours=args.ros_hours, cadence=10.0)

@@ -67,7 +67,7 @@ def load(path: Path | str) -> BagData:
 
 def scenario_for(data: BagData, name: str = "") -> scenarios.Scenario:
     """The scenario whose estimator settings evaluate this bag (by name, else by kind)."""
-    kind = data.measurements[0].kind if data.measurements else types.POSITION
+    kind = data.measurements[0].kind if data.measurements else types.Kind.POSITION
     return scenarios.settings_for(name, kind)
 
 
@@ -126,7 +126,7 @@ def evaluate(data: BagData, scenario: str = "", seed: int = 0) -> Evaluation:
 
     live = {}
     for e in data.estimates:
-        if e.update_source != types.UPDATE_NONE:
+        if e.update_source != types.UpdateSource.NONE:
             live[e.t] = e
     before = [e for t, e in live.items() if t < t_gap[0] and e.update_source == 1]
     if not before:

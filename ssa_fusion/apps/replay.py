@@ -146,7 +146,7 @@ def bag_cadence(stream: list[bagio.BagMessage]) -> float:
     """Median interval (s) between successive stamps of the sensor measurements (NaN with
     fewer than two): the cadence of the data, gaps and all."""
     t = sorted({messages.stamp_to_seconds(m.msg.header.stamp) for m in stream
-                if m.topic == TOPIC_MEASUREMENT and m.msg.source == types.SENSOR})
+                if m.topic == TOPIC_MEASUREMENT and m.msg.source == types.Source.SENSOR})
     if len(t) < 2:
         return math.nan
     return statistics.median(b - a for a, b in itertools.pairwise(t))
@@ -196,7 +196,7 @@ def replay_offline(stream: list[bagio.BagMessage], s: scenarios.Scenario) -> Off
             last_clock = now
         elif msg.topic == TOPIC_MEASUREMENT:
             m = messages.measurement_from_msg(msg.msg)
-            if m.source != types.SENSOR:
+            if m.source != types.Source.SENSOR:
                 continue
             if not recorded:  # no recorded forecast timing: release them by the clock
                 for f in surrogate.due(m.t):

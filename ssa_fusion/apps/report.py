@@ -95,7 +95,7 @@ def plot_arms(ev: evaluate.Evaluation, path: Path) -> None:
 def plot_sigma(data: evaluate.BagData, path: Path) -> None:
     plt = _plt()
     truth = {e.t: e.x for e in data.truth}
-    est = [e for e in data.estimates if e.t in truth and e.update_source != types.UPDATE_NONE]
+    est = [e for e in data.estimates if e.t in truth and e.update_source != types.UpdateSource.NONE]
     if not est:
         return
     t = np.array([e.t for e in est])
@@ -137,7 +137,7 @@ def plot_forecasts(data: evaluate.BagData, path: Path) -> None:
 
 
 def plot_nis(data: evaluate.BagData, path: Path) -> None:
-    est = [e for e in data.estimates if e.update_source != types.UPDATE_NONE]
+    est = [e for e in data.estimates if e.update_source != types.UpdateSource.NONE]
     if not est:
         return
     plt = _plt()
@@ -145,7 +145,8 @@ def plot_nis(data: evaluate.BagData, path: Path) -> None:
     nis = np.array([e.nis for e in est])
     src = np.array([e.update_source for e in est])
     fig, ax = plt.subplots(figsize=(8, 3.5))
-    for s, label in ((types.UPDATE_SENSOR, "sensor"), (types.UPDATE_FORECAST, "forecast")):
+    for s, label in ((types.UpdateSource.SENSOR, "sensor"),
+                     (types.UpdateSource.FORECAST, "forecast")):
         k = src == s
         ax.semilogy((t[k] - t[0]) / 3600.0, np.maximum(nis[k], 1e-6), ".", ms=2, label=label)
     ax.set_xlabel("hours")

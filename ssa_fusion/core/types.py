@@ -73,15 +73,6 @@ class Cause(enum.StrEnum):
     UNRECORDABLE_TOPIC = "unrecordable_topic"
 
 
-# Aliases of the enum members under their former module-level names.
-POSITION = Kind.POSITION
-RANGE_AZ_EL = Kind.RANGE_AZ_EL
-SENSOR = Source.SENSOR
-FORECAST = Source.FORECAST
-UPDATE_NONE = UpdateSource.NONE
-UPDATE_SENSOR = UpdateSource.SENSOR
-UPDATE_FORECAST = UpdateSource.FORECAST
-
 KIND_NAMES = {Kind.POSITION: "position", Kind.RANGE_AZ_EL: "range_az_el"}
 
 

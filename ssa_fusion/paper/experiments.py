@@ -29,7 +29,7 @@ from ssa_fusion.core.frames import wrap_pi
 from ssa_fusion.core.metrics import chi2_bounds, epsilon, nees
 from ssa_fusion.core.surrogate import Surrogate
 from ssa_fusion.core.tracker import Tracker
-from ssa_fusion.core.types import UPDATE_FORECAST, Measurement, StateEstimate
+from ssa_fusion.core.types import Measurement, StateEstimate, UpdateSource
 from ssa_fusion.paper import pipeline
 from ssa_fusion.paper.montecarlo import N_PARTICLES as MC_PARTICLES
 from ssa_fusion.paper.montecarlo import placeholder_ensemble
@@ -193,7 +193,7 @@ def forecast_fraction(arm: Arm, sim: Simulation) -> float:
     """Fraction of the gap epochs at which `arm` fused a forecast."""
     gap = set(int(i) for i in sim.gap_index)
     fused = sum(1 for i, src in zip(arm.idx, arm.source, strict=True)
-                if int(i) in gap and src == UPDATE_FORECAST)
+                if int(i) in gap and src == UpdateSource.FORECAST)
     return fused / max(1, len(gap))
 
 

@@ -21,8 +21,8 @@ KM = 1000.0
 
 # Per-component scale from core units to SI for each measurement kind.
 _Z_SCALE = {
-    types.POSITION: np.array([KM, KM, KM]),
-    types.RANGE_AZ_EL: np.array([KM, 1.0, 1.0]),
+    types.Kind.POSITION: np.array([KM, KM, KM]),
+    types.Kind.RANGE_AZ_EL: np.array([KM, 1.0, 1.0]),
 }
 _X_SCALE = np.full(6, KM)
 
@@ -74,8 +74,8 @@ def z_scale(kind: int) -> np.ndarray:
         return _Z_SCALE[kind]
     except KeyError:
         raise ValueError(
-            f"unknown measurement kind {kind} (expected {types.POSITION}=POSITION "
-            f"or {types.RANGE_AZ_EL}=RANGE_AZ_EL)"
+            f"unknown measurement kind {kind} (expected {types.Kind.POSITION}=POSITION "
+            f"or {types.Kind.RANGE_AZ_EL}=RANGE_AZ_EL)"
         ) from None
 
 

@@ -25,7 +25,7 @@ def synthetic() -> evaluate.BagData:
         in_gap = TRACK <= i < TRACK + GAP
         (data.withheld if in_gap else data.measurements).append(m)
         if i < TRACK + COVERED:
-            source = types.UPDATE_FORECAST if in_gap else types.UPDATE_SENSOR
+            source = types.UpdateSource.FORECAST if in_gap else types.UpdateSource.SENSOR
             data.estimates.append(types.StateEstimate(ti, xi + OFFSET, 1e-2 * np.eye(6),
                                                       update_source=source))
     return data

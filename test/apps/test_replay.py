@@ -142,7 +142,7 @@ def test_a_bag_at_another_cadence_is_replayed_at_its_own(tmp_path):
     np.testing.assert_allclose(sorted(f.t for _, f in result.forecasts), gap, rtol=0,
                                atol=1e-6)
     fused = {round(e.t, 3) for _, e in result.estimates
-             if e.update_source == types.UPDATE_FORECAST}
+             if e.update_source == types.UpdateSource.FORECAST}
     assert fused == {round(float(t), 3) for t in gap}
 
 

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from ssa_fusion.core.surrogate import EciLift, Surrogate, SurrogateConfig
-from ssa_fusion.core.types import FORECAST, POSITION, RANGE_AZ_EL, SENSOR, Measurement
+from ssa_fusion.core.types import Kind, Measurement, Source
 from ssa_fusion.paper import scenarios as sc
 from ssa_fusion.paper.simulate import Simulation, simulate
 
@@ -44,8 +44,8 @@ def _config(**changes) -> SurrogateConfig:
 def _meas(sim: Simulation, i: int, R: np.ndarray | None = None) -> Measurement:
     kind = sim.scenario.kind
     return Measurement(float(sim.t[i]), sim.z[i].copy(),
-                       (sim.R if R is None else R).copy(), kind=kind, source=SENSOR,
-                       object_id="iss", frame_id="columbus" if kind == RANGE_AZ_EL else "eci")
+                       (sim.R if R is None else R).copy(), kind=kind, source=Source.SENSOR,
+                       object_id="iss", frame_id="columbus" if kind == Kind.RANGE_AZ_EL else "eci")
 
 
 def _track(sur: Surrogate, sim: Simulation, n: int = TRACK_N, R=None) -> list[Measurement]:
@@ -98,7 +98,7 @@ def test_gap_forecasts_each_missed_epoch_once_on_the_cadence_grid():
     assert [m.t for m in got] == [t_last + k * DT for k in range(1, k_max + 1)]
     for k, m in enumerate(got, start=1):
         assert m.horizon == k * DT
-        assert m.source == FORECAST and m.kind == POSITION
+        assert m.source == Source.FORECAST and m.kind == Kind.POSITION
         assert m.frame_id == "eci" and m.object_id == "iss"
         assert np.isfinite(m.z).all() and m.z.shape == (3,) and m.R.shape == (3, 3)
     # the measurement that ends the gap releases the epochs still owed before it
@@ -215,7 +215,7 @@ def test_range_az_el_forecasts_keep_azimuth_wrapped():
     got = sur.due(float(sim.t[TRACK_N - 1]) + (GAP_N + 0.6) * DT)
     az = np.array([m.z[1] for m in got])
     assert ((az >= 0.0) & (az < 2 * np.pi)).all()
-    assert all(m.kind == RANGE_AZ_EL and m.frame_id == "columbus" for m in got)
+    assert all(m.kind == Kind.RANGE_AZ_EL and m.frame_id == "columbus" for m in got)
 
 
 # ------------------------------------------------------------------------------ cannot fit
@@ -296,7 +296,7 @@ def test_a_stray_kind_or_frame_is_refused_and_changes_nothing():
     _track(clean, sim, R=R_FREE)
     _track(sur, sim, TRACK_N - 1, R=R_FREE)
     stray = _meas(sim, TRACK_N - 1, R_FREE)
-    stray.kind, stray.frame_id = RANGE_AZ_EL, "columbus"
+    stray.kind, stray.frame_id = Kind.RANGE_AZ_EL, "columbus"
     assert sur.check(stray)[0] == "rejected_kind"
     other = _replace(_meas(sim, TRACK_N - 1, R_FREE), frame_id="teme")
     assert sur.check(other)[0] == "rejected_frame"
@@ -310,10 +310,10 @@ def test_a_stray_kind_or_frame_is_refused_and_changes_nothing():
 def test_a_configured_kind_and_frame_are_not_taken_from_a_stray_first_message():
     """Without a configured kind the first message would decide it for the whole run."""
     sim = _sim()
-    clean = Surrogate(_config(kind=POSITION, frame_id="eci"))
-    sur = Surrogate(_config(kind=POSITION, frame_id="eci"))
+    clean = Surrogate(_config(kind=Kind.POSITION, frame_id="eci"))
+    sur = Surrogate(_config(kind=Kind.POSITION, frame_id="eci"))
     stray = _meas(sim, 0, R_FREE)
-    stray.kind, stray.frame_id, stray.t = RANGE_AZ_EL, "columbus", stray.t - DT
+    stray.kind, stray.frame_id, stray.t = Kind.RANGE_AZ_EL, "columbus", stray.t - DT
     assert sur.add(stray) == [] and sur.last is None
     _track(clean, sim, R=R_FREE)
     _track(sur, sim, R=R_FREE)
@@ -474,7 +474,7 @@ def test_a_gap_longer_than_the_forecasts_is_not_filled():
     _track(sur, sim, R=R_FREE)
     for i in range(TRACK_N + 20, TRACK_N + 30):  # 20 missed epochs, only 10 forecast
         sur.add(_meas(sim, i, R_FREE))
-    assert not any(m.source == FORECAST for m in sur._buf)
+    assert not any(m.source == Source.FORECAST for m in sur._buf)
     assert sur.due(float(sim.t[TRACK_N + 29]) + 3 * DT) == []
     assert "fixed cadence" in sur.status
 

@@ -30,14 +30,7 @@ from scipy.stats import chi2
 
 from ssa_fusion.core import iod
 from ssa_fusion.core.tracker import HISTORY_REAL, Outcome, Tracker, TrackerConfig
-from ssa_fusion.core.types import (
-    FORECAST,
-    RANGE_AZ_EL,
-    SENSOR,
-    UPDATE_FORECAST,
-    UPDATE_SENSOR,
-    Measurement,
-)
+from ssa_fusion.core.types import Kind, Measurement, Source, UpdateSource
 from ssa_fusion.paper import scenarios as sc
 from ssa_fusion.paper.simulate import Simulation, simulate
 
@@ -59,11 +52,11 @@ def _tracker(sim: Simulation, **config) -> Tracker:
 
 
 def _frame(sim: Simulation) -> str:
-    return sim.scenario.station if sim.scenario.kind == RANGE_AZ_EL else "eci"
+    return sim.scenario.station if sim.scenario.kind == Kind.RANGE_AZ_EL else "eci"
 
 
 def _meas(sim: Simulation, i: int, *, noisy: bool = True, R: np.ndarray | None = None,
-          source: int = SENSOR, bias: float = 0.0) -> Measurement:
+          source: int = Source.SENSOR, bias: float = 0.0) -> Measurement:
     z = (sim.z[i] if noisy else sim.z_true[i]).copy()
     z[0] += bias
     return Measurement(float(sim.t[i]), z, (sim.R if R is None else R).copy(),
@@ -111,7 +104,7 @@ def test_iod_position_finite_differences_noise_free(samples, vel_tol):
         assert out.rejected == "iod_pending" and not tr.initialised
     out = tr.process(_meas(sim, samples - 1, R=np.zeros((3, 3))))
     est = out.estimate
-    assert est is not None and est.update_source == UPDATE_SENSOR
+    assert est is not None and est.update_source == UpdateSource.SENSOR
     assert est.t == sim.t[samples - 1]  # finite differences give the state at the last sample
     err = est.x - sim.x[samples - 1]
     assert np.linalg.norm(err[:3]) < 1e-9  # position is the measurement itself
@@ -306,7 +299,7 @@ def test_rejection_leaves_state_untouched_and_later_data_fused(name, cause):
     # later good measurements are fused exactly as if the bad one had never come
     for i in range(n0, n0 + 5):
         a, b = tr.process(_meas(sim, i)), ref.process(_meas(sim, i))
-        assert a.estimate is not None and a.estimate.update_source == UPDATE_SENSOR
+        assert a.estimate is not None and a.estimate.update_source == UpdateSource.SENSOR
         np.testing.assert_array_equal(a.estimate.x, b.estimate.x)
         np.testing.assert_array_equal(a.estimate.P, b.estimate.P)
 
@@ -316,7 +309,7 @@ def test_gate_rejects_forecast_outlier_and_keeps_state():
     tr = _tracker(sim, gate=float(chi2.ppf(0.9999, 3)))
     _feed(tr, [_meas(sim, i) for i in range(10)])
     before = _state(tr)
-    out = tr.process(_meas(sim, 10, source=FORECAST, bias=1000.0))
+    out = tr.process(_meas(sim, 10, source=Source.FORECAST, bias=1000.0))
     assert out.rejected == "rejected_gate"
     _assert_same_state(_state(tr), before)
     assert tr.process(_meas(sim, 10)).estimate is not None
@@ -325,7 +318,7 @@ def test_gate_rejects_forecast_outlier_and_keeps_state():
 def test_rejections_before_iod():
     sim = _sim("iss_j2_rae")
     tr = _tracker(sim)
-    assert tr.process(_meas(sim, 0, source=FORECAST)).rejected == "ignored_before_iod"
+    assert tr.process(_meas(sim, 0, source=Source.FORECAST)).rejected == "ignored_before_iod"
     assert tr.process(_meas(sim, 1)).rejected == "iod_pending"
     assert tr.process(_meas(sim, 1)).rejected == "rejected_duplicate"
     assert tr.process(_meas(sim, 0)).rejected == "rejected_stale"
@@ -374,11 +367,11 @@ def test_forecast_for_epoch_with_real_measurement_is_superseded():
     _feed(tr, [_meas(sim, i) for i in range(10)])
     before = _state(tr)
     for i in (9, 8):  # the epoch of the last real one, and an earlier one
-        out = tr.process(_meas(sim, i, source=FORECAST, bias=5.0))
+        out = tr.process(_meas(sim, i, source=Source.FORECAST, bias=5.0))
         assert out.rejected == "forecast_superseded" and out.estimate is None
         _assert_same_state(_state(tr), before)
-    est = tr.process(_meas(sim, 10, source=FORECAST, R=sim.R * 4)).estimate
-    assert est is not None and est.update_source == UPDATE_FORECAST
+    est = tr.process(_meas(sim, 10, source=Source.FORECAST, R=sim.R * 4)).estimate
+    assert est is not None and est.update_source == UpdateSource.FORECAST
 
 
 @pytest.mark.parametrize("name", ["iss_j2_rae", "iss_j2_pos"])
@@ -388,19 +381,19 @@ def test_real_measurement_rolls_back_later_forecasts(name):
     history = [_meas(sim, i) for i in range(n0)]
 
     def fc(i):  # a forecast: biased, with a larger covariance
-        return _meas(sim, i, source=FORECAST, bias=3.0, R=sim.R * 9)
+        return _meas(sim, i, source=Source.FORECAST, bias=3.0, R=sim.R * 9)
 
     t1, t2, t3 = n0, n0 + 1, n0 + 2
     tr = _tracker(sim)
     _feed(tr, history)
     for i in (t1, t2, t3):
-        assert tr.process(fc(i)).estimate.update_source == UPDATE_FORECAST
+        assert tr.process(fc(i)).estimate.update_source == UpdateSource.FORECAST
     out = tr.process(_meas(sim, t2))
-    assert out.estimate is not None and out.estimate.update_source == UPDATE_SENSOR
+    assert out.estimate is not None and out.estimate.update_source == UpdateSource.SENSOR
     assert out.estimate.t == sim.t[t2]
     assert out.rolled_back == 2
     assert [e.t for e in out.fused_again] == [sim.t[t3]]
-    assert out.fused_again[0].update_source == UPDATE_FORECAST
+    assert out.fused_again[0].update_source == UpdateSource.FORECAST
 
     fresh = _tracker(sim)
     _feed(fresh, history)
@@ -426,7 +419,7 @@ def test_real_measurement_between_forecast_epochs_keeps_earlier_forecasts():
     tr = _tracker(sim)
     _feed(tr, [_meas(sim, i) for i in range(10)])
     for i in (10, 11, 12):
-        tr.process(_meas(sim, i, source=FORECAST, R=sim.R * 9))
+        tr.process(_meas(sim, i, source=Source.FORECAST, R=sim.R * 9))
     m = _meas(sim, 11)
     m.t = float(sim.t[11]) - 5.0  # off the cadence grid, between forecasts 10 and 11
     out = tr.process(m)
@@ -442,7 +435,7 @@ def test_gated_real_measurement_drops_only_the_forecast_at_its_epoch():
     history = [_meas(sim, i) for i in range(10)]
 
     def fc(i):
-        return _meas(sim, i, source=FORECAST, R=sim.R * 9)
+        return _meas(sim, i, source=Source.FORECAST, R=sim.R * 9)
 
     tr = _tracker(sim, gate=float(chi2.ppf(0.9999, 3)))
     _feed(tr, history)
@@ -462,7 +455,7 @@ def test_gated_real_measurement_drops_only_the_forecast_at_its_epoch():
 def _model_forecast(sim: Simulation, i: int, base: int, bias: float = 0.0) -> Measurement:
     """A forecast for epoch i from a model trained up to the real measurement at epoch base
     (horizon = t_i - t_base), like the surrogate's."""
-    m = _meas(sim, i, source=FORECAST, R=sim.R * 9, bias=bias)
+    m = _meas(sim, i, source=Source.FORECAST, R=sim.R * 9, bias=bias)
     m.horizon = float(sim.t[i] - sim.t[base])
     return m
 
@@ -503,7 +496,7 @@ def test_forecasts_issued_while_a_real_measurement_was_late_are_replaced():
     out = live.process(_model_forecast(sim, 11, base=10))  # newer model: replaces 11-13
     assert out.estimate is not None and out.rolled_back == 3 and out.fused_again == []
     out = live.process(_meas(sim, 10))  # real 10: replaces stale 10, keeps the fresh 11
-    assert out.estimate.update_source == UPDATE_SENSOR and out.rolled_back == 2
+    assert out.estimate.update_source == UpdateSource.SENSOR and out.rolled_back == 2
     assert [e.t for e in out.fused_again] == [sim.t[11]]
     for i in (12, 13):
         assert live.process(_model_forecast(sim, i, base=10)).estimate is not None
@@ -621,7 +614,7 @@ def test_reset_clears_pending_forecasts_and_iod_buffer():
     sim = _sim("iss_j2_rae")
     tr = _tracker(sim)
     _feed(tr, [_meas(sim, i) for i in range(10)])
-    tr.process(_meas(sim, 10, source=FORECAST, R=sim.R * 9))
+    tr.process(_meas(sim, 10, source=Source.FORECAST, R=sim.R * 9))
     tr.reset()
     tr.process(_meas(sim, 50))
     tr.reset()  # a reset during IOD forgets the IOD buffer too
@@ -688,7 +681,7 @@ def _measurement(data, tr: Tracker, sim: Simulation, limit: float, dt_limit: flo
     return Measurement(
         t=t, z=z, R=R,
         kind=data.draw(st.one_of(st.just(tr.kind), st.integers(0, 255))),
-        source=data.draw(st.one_of(st.sampled_from([SENSOR, FORECAST]), st.integers(0, 255))),
+        source=data.draw(st.one_of(st.sampled_from(list(Source)), st.integers(0, 255))),
         frame_id=data.draw(st.one_of(st.just(tr.config.frame_id), st.text(max_size=6))),
         horizon=data.draw(_floats(limit)),
     )
@@ -770,7 +763,7 @@ def test_herrick_gibbs_first_estimate_is_consistent():
         for i in range(3):
             z = sim.z_true[i] + sigma * rng.standard_normal(3)
             z[1] %= 2 * np.pi
-            out = tr.process(Measurement(float(sim.t[i]), z, R, kind=RANGE_AZ_EL,
+            out = tr.process(Measurement(float(sim.t[i]), z, R, kind=Kind.RANGE_AZ_EL,
                                          frame_id="columbus"))
         err = out.estimate.x - sim.x[2]
         nees.append(err @ np.linalg.solve(out.estimate.P, err))

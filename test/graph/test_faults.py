@@ -48,13 +48,13 @@ KM = 1000.0
 
 
 # helpers ---------------------------------------------------------------------------------
-def meas(i: int, dt: float = 0.0, z: np.ndarray | None = None, source: int = types.SENSOR,
+def meas(i: int, dt: float = 0.0, z: np.ndarray | None = None, source: int = types.Source.SENSOR,
          R: np.ndarray | None = None) -> Measurement:
     """The simulated measurement of epoch i (optionally moved by dt s or with other z)."""
     m = types.Measurement(t=float(T[i]) + dt, z=SIM.z[i] if z is None else z,
-                          R=SIM.R if R is None else R, kind=types.RANGE_AZ_EL, source=source,
+                          R=SIM.R if R is None else R, kind=types.Kind.RANGE_AZ_EL, source=source,
                           object_id="iss", frame_id="columbus",
-                          horizon=30.0 if source == types.FORECAST else 0.0)
+                          horizon=30.0 if source == types.Source.FORECAST else 0.0)
     return messages.measurement_to_msg(m)
 
 
@@ -183,7 +183,7 @@ def test_bad_input_is_never_fused_and_counted_by_cause(ros_graph):
     # estimates continue: exactly one per good epoch after IOD, none at a bad stamp
     est = estimates(got)
     assert [e.t for e in est] == [float(T[i]) for i in range(2, 10)]
-    assert all(e.update_source == types.UPDATE_SENSOR for e in est)
+    assert all(e.update_source == types.UpdateSource.SENSOR for e in est)
     assert_sane(est)
     # and they are what the core gives for the good measurements alone
     tracker = offline_tracker()
@@ -229,7 +229,7 @@ def test_a_real_measurement_beats_a_forecast_for_the_same_epoch(ros_graph):
     fcst = publisher(g, Measurement, "/ssa/forecast", ("filter",))
 
     def forecast(i: int) -> Measurement:  # a plausible forecast: 2 km off, honest R
-        return meas(i, z=SIM.z[i] + np.array([2.0, 0.0, 0.0]), source=types.FORECAST,
+        return meas(i, z=SIM.z[i] + np.array([2.0, 0.0, 0.0]), source=types.Source.FORECAST,
                     R=4.0 * SIM.R)
 
     def wait_estimates(n: int) -> None:
@@ -250,9 +250,9 @@ def test_a_real_measurement_beats_a_forecast_for_the_same_epoch(ros_graph):
 
     est = estimates(got)
     assert [(e.t, e.update_source) for e in est[2:]] == [
-        (T[4], types.UPDATE_FORECAST), (T[5], types.UPDATE_FORECAST),
-        (T[4], types.UPDATE_SENSOR), (T[5], types.UPDATE_FORECAST),
-        (T[5], types.UPDATE_SENSOR)]
+        (T[4], types.UpdateSource.FORECAST), (T[5], types.UpdateSource.FORECAST),
+        (T[4], types.UpdateSource.SENSOR), (T[5], types.UpdateSource.FORECAST),
+        (T[5], types.UpdateSource.SENSOR)]
     assert_sane(est)
     # the final estimates are exactly those of the real measurements without any forecast
     tracker = offline_tracker()
@@ -397,7 +397,7 @@ def test_surrogate_that_cannot_fit_forecasts_nothing_and_filter_keeps_predicting
         return "" if st is None else {kv.key: kv.value for kv in st.values}.get("model", "")
 
     def predictions() -> list[types.StateEstimate]:
-        return [e for e in estimates(got) if e.update_source == types.UPDATE_NONE]
+        return [e for e in estimates(got) if e.update_source == types.UpdateSource.NONE]
 
     # 1. too few samples (4; the fit needs 2 x delays + 2 = 12)
     set_clock(g, clock, diag, float(T[0]), NODES)
