@@ -45,10 +45,8 @@ filter's covariance grows through the gap as far as the model error says, while 
 whose model error is small against R still counts as much as the measurement it replaces.
 Scaling all of Var(e(k)) by k instead would discount R too: iss_j2_rae forecasts, 2-7x
 better than the sensor in angle, would be fused as if 14-20x worse at the end of the gap.
-p = 2 was not better in the experiments (see docs/RESULTS.md), and modelling the common
-error as a random-walk bias state in the EKF was tried and rejected (the DMD error
-oscillates with the orbit, a random walk does not, and the filter became grossly
-overconfident).
+The alternatives measured (p = 2, a random-walk bias state in the EKF) are in
+docs/HISTORY.md.
 """
 
 from __future__ import annotations
