@@ -126,10 +126,14 @@ def plot_forecasts(data: evaluate.BagData, path: Path) -> None:
     t = np.array([m.t for m in f])
     zf = np.array([m.z for m in f])
     zw = np.array([withheld[m.t] for m in f])
+    kind = f[0].kind
+    labels = (("range [km]", "azimuth [rad]", "elevation [rad]")
+              if kind == types.Kind.RANGE_AZ_EL else ("x ECI [km]", "y ECI [km]", "z ECI [km]"))
     fig, axes = plt.subplots(zf.shape[1], 1, figsize=(8, 6), sharex=True)
     for i, ax in enumerate(np.atleast_1d(axes)):
         ax.plot((t - t[0]) / 3600.0, zw[:, i], ".", ms=2, label="withheld (sensor)")
         ax.plot((t - t[0]) / 3600.0, zf[:, i], "-", lw=0.8, label="forecast")
+        ax.set_ylabel(labels[i] if i < len(labels) else f"z[{i}]")
         ax.grid(alpha=0.3)
     np.atleast_1d(axes)[0].legend()
     np.atleast_1d(axes)[-1].set_xlabel("hours into the gap")
