@@ -204,7 +204,7 @@ class Surrogate:
         self.status = "waiting for measurements"
         self.fits = 0
         self.invalid = 0  # forecasts withheld because they are not valid measurements
-        self.refused: Problem = OK  # why `add` refused its last measurement, if it did
+        self.rejected: Problem = OK  # why `add` rejected its last measurement, if it did
         self.reset()
 
     def reset(self) -> None:
@@ -273,10 +273,10 @@ class Surrogate:
     def add(self, m: Measurement) -> list[Measurement]:
         """Buffer a real measurement; returns forecasts still owed for epochs before it.
 
-        A measurement `check` finds fault with is ignored; `refused` holds the (cause,
+        A measurement `check` finds fault with is ignored; `rejected` holds the (cause,
         reason), `status` says why. A real backwards clock jump goes through `reset()`.
         """
-        self.refused = cause, reason = self.check(m)
+        self.rejected = cause, reason = self.check(m)
         if cause:
             self.status = f"ignored: {reason}"
             return []

@@ -182,8 +182,8 @@ class SurrogateNode(Node):
             self.diag.count(cause, reason)
             return
         forecasts = self.core.add(m)
-        if self.core.refused[0]:  # never trained on: it would stop every fit or empty the buffer
-            self.diag.count(*self.core.refused)
+        if self.core.rejected[0]:  # never trained on: it would stop every fit or empty the buffer
+            self.diag.count(*self.core.rejected)
             return
         self.publish(forecasts)
         self.diag.counts["buffered"] += 1
