@@ -86,13 +86,15 @@ def main() -> None:
         for _ in range(args.repeats):
             t0 = time.perf_counter()
             stream = list(bagio.read_bag(bag))
-            s = replay.settings(stream)
+            chosen = replay.settings(stream)
+            s = chosen.estimator
             result = replay.replay_offline(stream, s)
             times.append(time.perf_counter() - t0)
         print(f"offline_replay_24h_s_median: {statistics.median(times):.2f}  "
               f"min: {min(times):.2f}  (read + estimate; target <= 10)")
         fused = Counter(e.update_source for _, e in result.estimates)
-        print(f"offline_settings: {s.name}  cadence_s: {s.cadence_s:g} (0: inferred from the "
+        print(f"offline_settings: {chosen.origin}  cadence_s: {s.surrogate.cadence_s:g} "
+              f"(0: inferred from the "
               f"stamps, bag cadence {replay.bag_cadence(stream):g} s)")
         # forecasts and estimates fused from them, at the gap's epochs
         f_t = {round(f.t, 3) for _, f in result.forecasts}

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from ssa_fusion.apps import evaluate, report
 from ssa_fusion.apps.args import add_domain_id, positive_float
-from ssa_fusion.core.types import KIND_NAMES
+from ssa_fusion.nodes import settings
 from ssa_fusion.paper import scenarios
 from ssa_fusion.ros.processes import Graph
 from ssa_fusion.ros.readiness import READERS
@@ -65,20 +65,15 @@ def link_latest(out: Path, root: Path = LIVE_ROOT) -> None:
 def node_parameters(s: scenarios.Scenario, time_scale: float, seed: int,
                     bag: Path) -> dict[str, dict]:
     """Per-node parameters (SI units) that run scenario `s` live."""
-    km = 1000.0
     sensor = {"scenario": s.name, "object_id": s.name, "time_scale": time_scale,
               "seed": seed, "cadence": s.cadence_s, "gap_start": s.track_s,
               "gap_length": s.gap_s, "after_gap": s.after_s,
               "wait_for": ["/ssa/measurement=3", "/ssa/forecast=2", "/ssa/estimate=1",
                            "/ssa/truth=1", "/ssa/withheld=1", "/clock=3"],
               "wait_for_readers": READERS}
-    stream = {"kind": KIND_NAMES[s.kind], "station": s.station or "columbus"}
-    surrogate = {"use_sim_time": True, "buffer_length": s.buffer_s or s.track_s,
-                 "delays": s.delays, "rank": s.rank or 0, "cadence": s.cadence_s,
-                 "max_horizon": s.gap_s + s.cadence_s, "lift": s.lift or "none", **stream}
-    filt = {"use_sim_time": True, **stream,
-            "p0_sigma": [v * km for v in s.p0_sigma], "q": s.q * km * km,
-            "iod_samples": s.iod_samples}
+    estimator = s.estimator()
+    surrogate = {"use_sim_time": True, **settings.surrogate_params(estimator)}
+    filt = {"use_sim_time": True, **settings.filter_params(estimator)}
     recorder = {"use_sim_time": True, "bag": str(bag)}
     return {"sensor_sim": sensor, "surrogate": surrogate, "filter": filt, "recorder": recorder}
 
@@ -123,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
         return 1
     wall = time.monotonic() - t_start
     data = evaluate.load(bag)
-    ev = evaluate.evaluate(data, s.name, seed=args.seed)
+    ev = evaluate.evaluate(data, seed=args.seed)  # with the settings recorded in the bag
     report.write(data, ev, out)
     summary = {"scenario": s.name, "time_scale": args.time_scale, "wall_s": wall,
                "bag": str(bag), **report.summary(data, ev)}

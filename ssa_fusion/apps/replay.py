@@ -15,8 +15,10 @@ in the bag's log-time order. A bag without recorded forecasts gets them when the
 (the measurement stamps) passes each missed epoch by the live grace, and those still owed
 when the measurement ending a gap arrives with it, as the surrogate node publishes them.
 
-A bag at another cadence than its estimator settings' is replayed at its own: the surrogate
-infers the cadence from the stamps (`settings`), as the node does with ``cadence`` 0.
+The estimator settings are those recorded with the bag (``/ssa/config``) unless
+``--params-file`` or ``--scenario`` says otherwise (`settings`). A bag at another cadence
+than its settings' is replayed at its own: the surrogate infers the cadence from the stamps,
+as the node does with ``cadence`` 0.
 """
 
 from __future__ import annotations
@@ -27,18 +29,19 @@ import math
 import statistics
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+from ssa_fusion.apps import evaluate
 from ssa_fusion.apps.args import add_domain_id, positive_float
 from ssa_fusion.core import types
-from ssa_fusion.core.surrogate import LIVE_SURROGATE
+from ssa_fusion.core.config import EstimatorConfig, make_surrogate, make_tracker
 from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S, ahead_of_clock
-from ssa_fusion.paper import scenarios
-from ssa_fusion.paper.pipeline import make_surrogate, make_tracker
+from ssa_fusion.nodes import settings as node_settings
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import (
     TOPIC_CLOCK,
+    TOPIC_CONFIG,
     TOPIC_ESTIMATE,
     TOPIC_FORECAST,
     TOPIC_MEASUREMENT,
@@ -48,8 +51,8 @@ from ssa_fusion.ros.topics import (
 
 PLAYED = (TOPIC_MEASUREMENT, TOPIC_TRUTH, TOPIC_WITHHELD)
 """Topics a replay plays back (estimates and forecasts are what it recomputes)."""
-KNOWN = (*PLAYED, TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_CLOCK, "/diagnostics", "/rosout",
-         "/parameter_events")
+KNOWN = (*PLAYED, TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_CLOCK, TOPIC_CONFIG, "/diagnostics",
+         "/rosout", "/parameter_events")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -62,7 +65,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=None,
                    help="with --offline: output bag (default: BAG_offline)")
     p.add_argument("--scenario", default="",
-                   help="estimator settings (default: chosen by the measurement kind)")
+                   help="replay with this paper scenario's estimator settings (default: "
+                        "those recorded with the bag, else the measurement kind's default)")
+    p.add_argument("--params-file", type=Path, default=None,
+                   help="replay with the filter/surrogate settings of this ROS params YAML")
     add_domain_id(p)
 
 
@@ -70,14 +76,15 @@ def run(args: argparse.Namespace) -> int:
     try:
         stream = list(bagio.read_bag(args.bag))
         check_topics(args.bag, stream)
-        s = settings(stream, args.scenario)
+        chosen = settings(stream, args.scenario, args.params_file)
     except (bagio.BagError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    if s.cadence_s == 0:
-        print(f"replay: measurements every {bag_cadence(stream):g} s, not the "
-              f"{scenarios.settings_for(args.scenario, s.kind).cadence_s:g} s of the "
-              f"'{s.name}' settings: the surrogate infers the cadence from the stamps")
+    s = chosen.estimator
+    print(f"replay: estimator settings: {chosen.origin}")
+    if s.surrogate.cadence_s == 0:
+        print(f"replay: measurements every {bag_cadence(stream):g} s, not the settings' "
+              f"cadence: the surrogate infers the cadence from the stamps")
     stream, ahead = drop_ahead_of_clock(stream)
     if ahead:
         print(f"replay: {ahead} measurement(s) stamped more than {MAX_CLOCK_LEAD_S:g} s after "
@@ -126,8 +133,10 @@ def drop_ahead_of_clock(stream: list[bagio.BagMessage]) -> tuple[list[bagio.BagM
     return kept, len(stream) - len(kept)
 
 
-def settings(stream: list[bagio.BagMessage], name: str = "") -> scenarios.Scenario:
-    """Estimator settings: `name`, else the default scenario of the measurement kind.
+def settings(stream: list[bagio.BagMessage], scenario: str = "",
+             params_file: Path | None = None) -> evaluate.Settings:
+    """Estimator settings (`evaluate.estimator_for`: params file, scenario, those recorded
+    with the bag, else the measurement kind's default).
 
     The bag's own cadence wins: if its measurements come at another interval than the
     settings' cadence (beyond the surrogate's jitter tolerance), the cadence is set to 0 and
@@ -135,11 +144,13 @@ def settings(stream: list[bagio.BagMessage], name: str = "") -> scenarios.Scenar
     fixed 30 s cadence against 10 s data would find every interval off its grid and never
     fit). Data at the settings' cadence keep it, so a replay reproduces the live run."""
     first = next(m for m in stream if m.topic == TOPIC_MEASUREMENT)
-    s = scenarios.settings_for(name, first.msg.kind)
-    dt = bag_cadence(stream)
-    if not math.isnan(dt) and abs(dt - s.cadence_s) > LIVE_SURROGATE.jitter * s.cadence_s:
-        s = s.with_(cadence_s=0.0)
-    return s
+    recorded = [m.msg.data for m in stream if m.topic == TOPIC_CONFIG]
+    chosen = evaluate.estimator_for(recorded, first.msg.kind, scenario, params_file)
+    c = chosen.estimator
+    dt, cadence = bag_cadence(stream), c.surrogate.cadence_s
+    if not math.isnan(dt) and cadence > 0 and abs(dt - cadence) > c.surrogate.jitter * cadence:
+        chosen.estimator = c.with_(surrogate=replace(c.surrogate, cadence_s=0.0))
+    return chosen
 
 
 def bag_cadence(stream: list[bagio.BagMessage]) -> float:
@@ -161,12 +172,13 @@ class OfflineResult:
     rejected: dict[str, int] = field(default_factory=dict)
 
 
-def replay_offline(stream: list[bagio.BagMessage], s: scenarios.Scenario) -> OfflineResult:
-    """Surrogate + filter through the core over the bag's messages in log-time order."""
-    tracker = make_tracker(s)
+def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig) -> OfflineResult:
+    """Surrogate + filter of estimator `c` through the core over the bag's messages in
+    log-time order."""
+    tracker = make_tracker(c)
     # Forecasts always come from a fit on the buffer up to the last real measurement, so the
     # live node's optional periodic refits (retrain_period) would change nothing here.
-    surrogate = make_surrogate(s, retrain_period_s=math.inf, grace=LIVE_SURROGATE.grace)
+    surrogate = make_surrogate(c.with_(surrogate=replace(c.surrogate, retrain_period_s=math.inf)))
     result = OfflineResult()
     recorded = {messages.stamp_to_seconds(m.msg.header.stamp)
                 for m in stream if m.topic == TOPIC_FORECAST}
@@ -241,9 +253,8 @@ def write_offline(out: Path, stream: list[bagio.BagMessage], result: OfflineResu
 
 
 def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
-                s: scenarios.Scenario) -> int:
-    """Play the bag into surrogate + filter processes and record the run."""
-    from ssa_fusion.apps.live import node_parameters
+                c: EstimatorConfig) -> int:
+    """Play the bag into surrogate + filter processes (estimator `c`) and record the run."""
     from ssa_fusion.ros.player import Player
     from ssa_fusion.ros.processes import Graph
     from ssa_fusion.ros.readiness import ReadyNodes, readers_of
@@ -252,7 +263,9 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
     if record.exists():
         print(f"error: {record} exists already; choose another --record", file=sys.stderr)
         return 2
-    params = node_parameters(s, 1.0, 0, record)
+    params = {"recorder": {"use_sim_time": True, "bag": str(record)},
+              "surrogate": {"use_sim_time": True, **node_settings.surrogate_params(c)},
+              "filter": {"use_sim_time": True, **node_settings.filter_params(c)}}
     logs = record.with_name(record.name + "_logs")
     try:
         graph = Graph(logs, args.domain_id)

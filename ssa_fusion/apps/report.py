@@ -15,24 +15,27 @@ from pathlib import Path
 import numpy as np
 
 from ssa_fusion.apps import evaluate
-from ssa_fusion.core import types
+from ssa_fusion.core import config, types
 from ssa_fusion.ros import bagio
 
-ARMS = ("placeholder", "dmd_ekf", "hypothetical_ekf")
 STATE_LABELS = ("x [km]", "y [km]", "z [km]", "vx [km/s]", "vy [km/s]", "vz [km/s]")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("bag", type=Path, help="rosbag2 directory (or .mcap file) to report on")
     p.add_argument("--out", type=Path, default=None, help="output directory (default: BAG_report)")
-    p.add_argument("--scenario", default="", help="estimator settings to evaluate with")
+    p.add_argument("--scenario", default="",
+                   help="evaluate with this paper scenario's estimator settings (default: "
+                        "those recorded with the bag)")
+    p.add_argument("--params-file", type=Path, default=None,
+                   help="evaluate with the filter/surrogate settings of this ROS params YAML")
 
 
 def run(args: argparse.Namespace) -> int:
     out = args.out or args.bag.with_name(args.bag.name + "_report")
     try:
         data = evaluate.load(args.bag)
-        ev = evaluate.evaluate(data, args.scenario)
+        ev = evaluate.evaluate(data, args.scenario, params_file=args.params_file)
         write(data, ev, out)
     except (bagio.BagError, ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -44,12 +47,17 @@ def run(args: argparse.Namespace) -> int:
 
 def summary(data: evaluate.BagData, ev: evaluate.Evaluation) -> dict:
     """What report.json (and live.json) hold of an evaluation."""
+    g = ev.gap
     return {
-        "epsilon": ev.epsilon,
-        "nees_mean": ev.nees_mean,
-        "gap_epochs": len(ev.t),
-        "dmd_ekf_coverage": ev.coverage,
-        "dmd_ekf_propagated_epochs": ev.propagated,
+        "arms": {str(name): {"epsilon": sc.epsilon, "pos_err_mean_km": sc.pos_err_mean_km,
+                             "pos_err_final_km": sc.pos_err_final_km,
+                             "nees_mean": sc.nees_mean}
+                 for name, sc in g.scores.items()},
+        "gap_epochs": len(g.t),
+        "dmd_ekf_coverage": g.coverage,
+        "dmd_ekf_propagated_epochs": g.predicted,
+        "settings": ev.settings.origin,
+        "estimator": config.to_dict(ev.settings.estimator),
         "message_counts": data.counts,
     }
 
@@ -81,10 +89,11 @@ def save(fig, path: Path, dpi: int = 100) -> None:
 def plot_arms(ev: evaluate.Evaluation, path: Path) -> None:
     plt = _plt()
     fig, ax = plt.subplots(figsize=(8, 4))
-    hours = (ev.t - ev.t[0]) / 3600.0
-    for arm in ARMS:
-        err = np.linalg.norm(ev.arms[arm][:, :3] - ev.truth[:, :3], axis=1)
-        ax.semilogy(hours, err, label=f"{arm} (ε={ev.epsilon[arm]:.2e})")
+    g = ev.gap
+    hours = (g.t - g.t[0]) / 3600.0
+    for arm, traj in g.arms.items():
+        err = np.linalg.norm(traj.x[:, :3] - g.truth[:, :3], axis=1)
+        ax.semilogy(hours, err, label=f"{arm} (ε={g.scores[arm].epsilon:.2e})")
     ax.set_xlabel("hours into the gap")
     ax.set_ylabel("position error [km]")
     ax.legend()

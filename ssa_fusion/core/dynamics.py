@@ -248,17 +248,18 @@ _JACOBIANS: dict[str, Callable[..., Array]] = {
 def jacobian(model: str, x: ArrayLike, **params: float) -> Array:
     """State Jacobian A = d(dx/dt)/dx (n, n) at one state ``x`` (n,).
 
-    Analytic for "two_body", "cr3bp", "pendulum", "vdp"; central differences of the vectorised
-    right-hand side (one call) for "j2" and "drag".
+    Analytic for "two_body", "cr3bp", "pendulum", "vdp"; for "j2" and "drag" by the complex
+    step (one vectorised call of the right-hand side on x + i h e_j, A[:, j] = Im f / h), which
+    is exact to round-off: a finite-difference Jacobian's truncation noise makes an adaptive
+    integrator of the variational equations take ~40 steps where 3 do.
     """
     xx = np.asarray(x, float)
     if model in _JACOBIANS:
         return _JACOBIANS[model](xx, **params)
     fun, n = _MODELS[model]
-    h = 1e-6 * np.maximum(np.abs(xx), 1.0)
-    cols = np.concatenate([xx[:, None] + np.diag(h), xx[:, None] - np.diag(h)], axis=1)
-    f = fun(cols, **params)
-    jac: Array = (f[:, :n] - f[:, n:]) / (2.0 * h)
+    h = 1e-30
+    cols = xx[:, None] + 1j * h * np.eye(n)
+    jac: Array = fun(cols, **params).imag / h
     return jac
 
 

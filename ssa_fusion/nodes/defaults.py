@@ -73,6 +73,7 @@ class FilterDefaults:
 
     kind: str = KIND
     station: str = STATION
+    motion_model: str = "kepler"
     p0_sigma: tuple[float, ...] = (1000.0, 1000.0, 1000.0, 1.0, 1.0, 1.0)
     q: float = 0.1
     gate: float = 1000.0

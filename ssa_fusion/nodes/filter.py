@@ -1,11 +1,13 @@
-"""filter: EKF of one satellite with the Keplerian two-body placeholder model.
+"""filter: EKF of one satellite with a Keplerian (default) or two-body + J2 motion model.
 
 Initialises from its first real measurements (Herrick–Gibbs for range/az/el, finite
 differences for position), then fuses real measurements from ``/ssa/measurement`` and,
 for epochs without one, forecasts from ``/ssa/forecast``. Publishes ``/ssa/estimate``
 (state + full 6x6 covariance, stamped with the measurement epoch) for every fused epoch;
 when nothing is fused for `predict_period` sim s it publishes a prediction (update_source
-NONE) whose covariance grows. Rejected input is counted by cause on ``/diagnostics``.
+NONE) whose covariance grows. Rejected input is counted by cause on ``/diagnostics``. The
+estimator settings in effect are published (latched) on ``/ssa/config``, so every bag
+records them.
 
     ros2 run ssa_fusion filter --ros-args -p use_sim_time:=true -p kind:=range_az_el
 """
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 from rclpy.clock import JumpThreshold
@@ -21,27 +24,34 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
 from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
+from std_msgs.msg import String
 
-from ssa_fusion.core import kepler
-from ssa_fusion.core.measurement import PositionModel, RazelModel
-from ssa_fusion.core.stations import STATIONS, UNIX_EPOCH_JD
-from ssa_fusion.core.tracker import Tracker, TrackerConfig
-from ssa_fusion.core.types import Cause, Kind, StateEstimate
+from ssa_fusion.core.config import EstimatorConfig, make_tracker
+from ssa_fusion.core.types import Cause, StateEstimate
 from ssa_fusion.core.validation import ahead_of_clock
-from ssa_fusion.nodes import start_process
+from ssa_fusion.nodes import settings, start_process
 from ssa_fusion.nodes.common import (
     Diagnostics,
+    ParameterError,
     all_non_negative,
     clock_lead,
     declare,
     measurement_stream,
     non_negative,
+    one_of,
     run,
     wall_timer,
 )
 from ssa_fusion.nodes.defaults import FILTER
 from ssa_fusion.ros import messages
-from ssa_fusion.ros.topics import DATA_QOS, TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_MEASUREMENT
+from ssa_fusion.ros.topics import (
+    CONFIG_QOS,
+    DATA_QOS,
+    TOPIC_CONFIG,
+    TOPIC_ESTIMATE,
+    TOPIC_FORECAST,
+    TOPIC_MEASUREMENT,
+)
 
 SOURCE_NAMES = ("prediction", "sensor", "forecast")
 
@@ -52,67 +62,61 @@ def _p0_check(v: list) -> str | None:
     return "needs 6 standard deviations, each a finite number >= 0"
 
 
-def tracker_from(node: Node) -> Tracker:
-    """Declare the filter's parameters on `node` (defaults: `defaults.FILTER`) and build its
-    Tracker: the Keplerian placeholder, the measurement model of its `kind` (range/az/el
-    from `station`, on the Unix-time clock), and a `TrackerConfig` in core units."""
+def estimator_from(node: Node) -> EstimatorConfig:
+    """Declare the filter's estimator parameters on `node` (defaults: `defaults.FILTER`) and
+    return its `EstimatorConfig` (core units, via `settings.estimator_from`). The tuning
+    parameters can be set at run time: the new value goes through the same translation into
+    ``node.tracker.config`` (and is published on /ssa/config)."""
     d = FILTER
-    kind, frame = measurement_stream(node, d)
-    config = TrackerConfig()
+    values: dict[str, Any] = {}
 
-    def setter(field: str, convert: Callable[[Any], Any]) -> Callable[[Any], None]:
+    def runtime(name: str) -> Callable[[Any], None]:
         def apply(value: Any) -> None:
-            setattr(config, field, convert(value))
+            values[name] = value
+            node.estimator = settings.estimator_from(values, {})
+            node.tracker.config = replace(node.estimator.tracker,
+                                          frame_id=node.tracker.config.frame_id)
+            node.publish_config()
 
         return apply
 
-    def p0_km(v: Any) -> tuple[float, ...]:
-        return tuple(x / 1000.0 for x in v)
-
-    p0 = declare(
-        node,
-        "p0_sigma",
-        list(d.p0_sigma),
+    measurement_stream(node, d)
+    values["kind"] = node.get_parameter("kind").value
+    values["station"] = node.get_parameter("station").value
+    values["motion_model"] = declare(
+        node, "motion_model", d.motion_model,
+        "the EKF's motion model: kepler (analytic two-body) | j2 (two-body + J2, integrated)",
+        one_of(*map(str, settings.NODE_MOTION_MODELS)))
+    values["p0_sigma"] = declare(
+        node, "p0_sigma", list(d.p0_sigma),
         "std floor added to the IOD covariance: 3 x m, 3 x m/s (applies at the next IOD)",
-        _p0_check,
-        apply=setter("p0_sigma", p0_km),
-    )
-    q = declare(
-        node,
-        "q",
-        d.q,
-        "process noise: white-noise acceleration spectral density, m^2/s^3",
-        non_negative,
-        apply=setter("q", lambda v: v * 1e-6),
-    )
-    gate = declare(
-        node,
-        "gate",
-        d.gate,
-        "NIS beyond which an update is rejected (0 = no gate)",
-        non_negative,
-        apply=setter("gate", lambda v: v or None),
-    )
-    object_id = declare(node, "object_id", d.object_id, "only track this object ('' = any)")
-    iod_samples = declare(
-        node,
-        "iod_samples",
-        d.iod_samples,
+        _p0_check, apply=runtime("p0_sigma"))
+    values["q"] = declare(
+        node, "q", d.q, "process noise: white-noise acceleration spectral density, m^2/s^3",
+        non_negative, apply=runtime("q"))
+    values["gate"] = declare(
+        node, "gate", d.gate, "NIS beyond which an update is rejected (0 = no gate)",
+        non_negative, apply=runtime("gate"))
+    values["iod_samples"] = declare(
+        node, "iod_samples", d.iod_samples,
         "real measurements used by the initial orbit determination (>= 3)",
         lambda v: None if isinstance(v, int) and v >= 3 else "must be an integer >= 3",
-        apply=setter("iod_samples", int),
-    )
-    model = (RazelModel(STATIONS[frame], UNIX_EPOCH_JD)
-             if kind == Kind.RANGE_AZ_EL else PositionModel())
-    config.p0_sigma, config.q, config.gate = p0_km(p0), q * 1e-6, gate or None
-    config.frame_id, config.iod_samples = frame, iod_samples
-    return Tracker(kepler.propagate, model, config, n=6, object_id=object_id)
+        apply=runtime("iod_samples"))
+    try:
+        return settings.estimator_from(values, {})
+    except ValueError as exc:
+        raise ParameterError(str(exc)) from exc
 
 
 class FilterNode(Node):
     def __init__(self) -> None:
         super().__init__("filter")
-        self.tracker = tracker_from(self)
+        self.config_pub = self.create_publisher(String, TOPIC_CONFIG, CONFIG_QOS)
+        self.estimator = estimator_from(self)
+        object_id = declare(self, "object_id", FILTER.object_id,
+                            "only track this object ('' = any)")
+        self.tracker = make_tracker(self.estimator, object_id)
+        self.publish_config()
         self.predict_period = declare(
             self,
             "predict_period",
@@ -137,6 +141,12 @@ class FilterNode(Node):
         self.activity = 0
         self.last_object = ""
         self._predicted_at = -math.inf  # sim time of the last prediction published
+
+    def publish_config(self) -> None:
+        """Publish the estimator settings in effect on /ssa/config (latched)."""
+        if hasattr(self, "tracker"):
+            self.config_pub.publish(String(data=settings.config_message(
+                "filter", self.estimator.with_(tracker=self.tracker.config))))
 
     def on_jump(self, jump) -> None:
         self.tracker.reset()

@@ -106,14 +106,20 @@ class Recorder(Node):
                 self.diag.count(Cause.UNRECORDABLE_TOPIC, f"{topic} ({type_name}): {exc}")
                 self._subs[topic] = None
                 continue
+            # as rosbag2 adapts: reliable / transient local only if every publisher offers it
+            # (a latched topic, /ssa/config, is then received although published before)
             reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in pubs)
+            latched = all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                          for p in pubs)
             qos = QoSProfile(
                 history=HistoryPolicy.KEEP_LAST,
                 depth=DATA_DEPTH,
                 reliability=ReliabilityPolicy.RELIABLE
                 if reliable
                 else ReliabilityPolicy.BEST_EFFORT,
-                durability=DurabilityPolicy.VOLATILE,
+                durability=DurabilityPolicy.TRANSIENT_LOCAL
+                if latched
+                else DurabilityPolicy.VOLATILE,
             )
             self._subs[topic] = self.diag.subscribe(
                 msg_class, topic, lambda data, t=topic: self.on_message(t, data), qos, raw=True

@@ -14,21 +14,19 @@ never trained on.
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 from rclpy.clock import JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
 from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
+from std_msgs.msg import String
 
-from ssa_fusion.core.measurement import RazelModel
-from ssa_fusion.core.stations import STATIONS, UNIX_EPOCH_JD
-from ssa_fusion.core.surrogate import EciLift, Surrogate, SurrogateConfig
-from ssa_fusion.core.types import Cause, Kind
+from ssa_fusion.core.config import EstimatorConfig, Lift, make_surrogate
+from ssa_fusion.core.types import Cause
 from ssa_fusion.core.validation import ahead_of_clock
-from ssa_fusion.nodes import start_process
+from ssa_fusion.nodes import settings, start_process
 from ssa_fusion.nodes.common import (
     Diagnostics,
     ParameterError,
@@ -43,102 +41,77 @@ from ssa_fusion.nodes.common import (
 )
 from ssa_fusion.nodes.defaults import SURROGATE
 from ssa_fusion.ros import messages
-from ssa_fusion.ros.topics import DATA_QOS, TOPIC_FORECAST, TOPIC_MEASUREMENT
+from ssa_fusion.ros.topics import (
+    CONFIG_QOS,
+    DATA_QOS,
+    TOPIC_CONFIG,
+    TOPIC_FORECAST,
+    TOPIC_MEASUREMENT,
+)
 
 
-def surrogate_config_from(node: Node) -> SurrogateConfig:
-    """Declare the surrogate's parameters on `node` (defaults: `defaults.SURROGATE`) and build
-    its `SurrogateConfig` (core units). Model settings can be changed at run time
-    (`ros2 param set`); they take effect at the next fit."""
+def estimator_from(node: Node) -> EstimatorConfig:
+    """Declare the surrogate's estimator parameters on `node` (defaults:
+    `defaults.SURROGATE`) and return its `EstimatorConfig` (core units, via
+    `settings.estimator_from`). Model settings can be changed at run time (`ros2 param
+    set`): the new value goes through the same translation into ``node.core.config``
+    (published on /ssa/config) and takes effect at the next fit."""
     d = SURROGATE
-    config = SurrogateConfig()
+    values: dict[str, Any] = {}
 
-    def setting(
-        name: str,
-        field: str,
-        default: Any,
-        description: str,
-        check: Any,
-        convert: Callable[[Any], Any] = float,
-    ) -> Any:
+    def setting(name: str, description: str, check: Any) -> Any:
         def apply(value: Any) -> None:
-            setattr(config, field, convert(value))
+            values[name] = value
+            node.estimator = settings.estimator_from({}, values)
+            current = node.core.config
+            node.core.config = replace(node.estimator.surrogate, kind=current.kind,
+                                       frame_id=current.frame_id, lift=current.lift)
+            node.publish_config()
 
-        value = declare(node, name, default, description, check, apply=apply)
-        apply(value)
-        return value
+        values[name] = declare(node, name, getattr(d, name), description, check, apply=apply)
+        return values[name]
 
-    buffer_s = setting(
-        "buffer_length",
-        "buffer_s",
-        d.buffer_length,
-        "s of real measurements kept for training",
-        positive,
-    )
-    setting(
-        "retrain_period",
-        "retrain_period_s",
-        d.retrain_period,
-        "sim s between refits while measurements arrive; 0 = none (every gap refits on the "
-        "buffer up to the last real measurement anyway)",
-        non_negative,
-        lambda v: float(v) or math.inf,
-    )
-    delays = setting("delays", "delays", d.delays, "Hankel-DMD time delays", positive, int)
-    setting(
-        "rank",
-        "rank",
-        d.rank,
-        "Hankel-DMD rank (0 = automatic)",
-        non_negative,
-        lambda v: int(v) or None,
-    )
-    setting(
-        "max_horizon",
-        "max_horizon_s",
-        d.max_horizon,
-        "s after the last real measurement beyond which nothing is forecast",
-        positive,
-    )
-    setting(
-        "grace",
-        "grace",
-        d.grace,
-        "cadences after a missed epoch before it is forecast (absorbs message latency)",
-        non_negative,
-    )
-    cadence = setting(
-        "cadence",
-        "cadence_s",
-        d.cadence,
-        "expected s between measurements (0 = infer from the buffer)",
-        non_negative,
-    )
+    buffer_s = setting("buffer_length", "s of real measurements kept for training", positive)
+    setting("retrain_period",
+            "sim s between refits while measurements arrive; 0 = none (every gap refits on "
+            "the buffer up to the last real measurement anyway)", non_negative)
+    delays = setting("delays", "Hankel-DMD time delays", positive)
+    setting("rank", "Hankel-DMD rank (0 = automatic)", non_negative)
+    setting("max_horizon", "s after the last real measurement beyond which nothing is "
+            "forecast", positive)
+    setting("grace", "cadences after a missed epoch before it is forecast (absorbs message "
+            "latency)", non_negative)
+    cadence = setting("cadence", "expected s between measurements (0 = infer from the buffer)",
+                      non_negative)
     if cadence > 0 and delays * cadence * 2 > buffer_s:
         raise ParameterError(
             f"parameter 'delays' = {delays}: needs a buffer of at least 2 x delays x cadence "
             f"= {2 * delays * cadence} s, but 'buffer_length' = {buffer_s} s"
         )
-    config.kind, config.frame_id = measurement_stream(node, d)
-    lift = declare(
+    measurement_stream(node, d)
+    values["kind"] = node.get_parameter("kind").value
+    values["station"] = node.get_parameter("station").value
+    values["lift"] = declare(
         node,
         "lift",
         d.lift,
         "observable the DMD learns: none (the measurement itself) or eci (range/az/el "
         "lifted to the ECI position it implies, forecasts mapped back)",
-        one_of("none", "eci"),
+        one_of(*map(str, Lift)),
     )
-    if lift == "eci" and config.kind != Kind.RANGE_AZ_EL:
-        raise ParameterError("parameter 'lift' = 'eci' needs 'kind' = 'range_az_el'")
-    if lift == "eci":
-        config.lift = EciLift(RazelModel(STATIONS[config.frame_id], UNIX_EPOCH_JD))
-    return config
+    try:
+        return settings.estimator_from({}, values)
+    except ValueError as exc:
+        raise ParameterError(str(exc)) from exc
 
 
 class SurrogateNode(Node):
     def __init__(self) -> None:
         super().__init__("surrogate")
-        self.core = Surrogate(surrogate_config_from(self))
+        self.config_pub = self.create_publisher(String, TOPIC_CONFIG, CONFIG_QOS)
+        self.estimator = estimator_from(self)
+        self.core = make_surrogate(self.estimator)
+        self.publish_config()
         check = declare(
             self, "check_period", SURROGATE.check_period, "wall s between checks for missed epochs",
             positive,
@@ -159,6 +132,13 @@ class SurrogateNode(Node):
             post_callback=self.on_jump,
         )
         self.activity = 0
+
+    def publish_config(self) -> None:
+        """Publish the estimator settings in effect on /ssa/config (latched)."""
+        if hasattr(self, "core"):
+            surrogate = replace(self.core.config, lift=None)
+            self.config_pub.publish(String(data=settings.config_message(
+                "surrogate", self.estimator.with_(surrogate=surrogate))))
 
     def on_jump(self, jump) -> None:
         self.core.reset()

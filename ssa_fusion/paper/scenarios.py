@@ -17,16 +17,22 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ssa_fusion.core import dynamics, kepler
+from ssa_fusion.core import config, dynamics
+from ssa_fusion.core.config import EstimatorConfig, Lift, MotionModel
 from ssa_fusion.core.frames import Station
 from ssa_fusion.core.measurement import PositionModel, RazelModel
 from ssa_fusion.core.stations import STATIONS, UNIX_EPOCH_JD
+from ssa_fusion.core.surrogate import LIVE_SURROGATE
+from ssa_fusion.core.tracker import TrackerConfig
 from ssa_fusion.core.types import Kind
 
 ORBIT_EPOCH_UNIX = 1735689600.0
 """2025-01-01T00:00:00 UTC: epoch of the orbit scenarios' initial elements."""
 
 Placeholder = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
+
+ORBIT_TRUTHS = ("j2", "drag", "two_body", "sgp4")
+"""True dynamics that are Earth orbits."""
 
 
 @dataclass(frozen=True)
@@ -90,7 +96,7 @@ class Scenario:
     q: float = 1e-12
     iod_samples: int = 3
     buffer_s: float = 0.0
-    retrain_period_s: float = 1e18
+    retrain_period_s: float = math.inf
     lift: str = ""
     t0: float = ORBIT_EPOCH_UNIX
     truth_params: dict = field(default_factory=dict)
@@ -103,7 +109,9 @@ class Scenario:
 
     @property
     def is_orbit(self) -> bool:
-        return self.placeholder == "kepler"
+        """An Earth orbit (ECI states, UTC clock): decided by the truth, never by the
+        filter's model (a J2 filter on the ISS is still an orbit)."""
+        return self.truth in ORBIT_TRUTHS
 
     @property
     def jd0(self) -> float:
@@ -120,6 +128,22 @@ class Scenario:
 
     def with_(self, **changes) -> Scenario:
         return replace(self, **changes)
+
+    def estimator(self) -> EstimatorConfig:
+        """The estimator this scenario runs (the live nodes' and the experiments'): motion
+        model, measurement stream, P0 floor, q, IOD samples and the Hankel-DMD settings
+        (buffer = the tracking window, forecasts up to one cadence past the gap)."""
+        return EstimatorConfig(
+            kind=Kind(self.kind), station=self.station or "columbus", observed=self.observed,
+            n=self.n, motion_model=MotionModel(self.placeholder),
+            motion_params=dict(self.placeholder_params), jd0=self.jd0,
+            lift=Lift(self.lift or "none"),
+            tracker=TrackerConfig(p0_sigma=self.p0_sigma, q=self.q,
+                                  iod_samples=self.iod_samples),
+            surrogate=replace(LIVE_SURROGATE, buffer_s=self.buffer_s or self.track_s,
+                              delays=self.delays, rank=self.rank, cadence_s=self.cadence_s,
+                              max_horizon_s=self.gap_s + self.cadence_s,
+                              retrain_period_s=self.retrain_period_s))
 
 
 def _iss_state() -> tuple[float, ...]:
@@ -222,9 +246,7 @@ def settings_for(name: str = "", kind: int = Kind.RANGE_AZ_EL) -> Scenario:
 
 def measurement_model(s: Scenario) -> PositionModel | RazelModel:
     """h(x, t) of the scenario; t on the scenario's clock (Unix s for orbits)."""
-    if s.kind == Kind.RANGE_AZ_EL:
-        return RazelModel(STATIONS[s.station], s.jd0)
-    return PositionModel(s.observed)
+    return config.measurement_model(s.estimator())
 
 
 def station(s: Scenario) -> Station | None:
@@ -233,14 +255,7 @@ def station(s: Scenario) -> Station | None:
 
 def placeholder(s: Scenario) -> Placeholder:
     """The EKF's model f(x, dt) -> (x1, F): analytic Kepler or a `dynamics` model + STM."""
-    if s.placeholder == "kepler":
-        return kepler.propagate
-    model, params = s.placeholder, dict(s.placeholder_params)
-
-    def f(x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        return dynamics.propagate_stm(model, x, dt, **params)
-
-    return f
+    return config.motion(s.estimator())
 
 
 def truth_states(s: Scenario, t: np.ndarray) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""QoS profiles of the ssa_fusion topics, chosen on purpose and shared by every node.
+"""Topic names and QoS profiles of the ssa_fusion topics, shared by every node.
 
 Measurements, forecasts, estimates and truth are *reliable* with a deep keep-last history so
 that a burst at a high simulation time scale is queued rather than dropped; they are
@@ -24,3 +24,14 @@ TOPIC_TRUTH = "/ssa/truth"
 TOPIC_WITHHELD = "/ssa/withheld"
 TOPIC_CLOCK = "/clock"
 TOPIC_DIAGNOSTICS = "/diagnostics"
+TOPIC_CONFIG = "/ssa/config"
+"""The estimator settings in effect (std_msgs/String, JSON of `nodes.settings.config_message`),
+one latched message per filter/surrogate node, re-sent when a parameter changes."""
+
+CONFIG_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+"""Latched: a reader that joins later (the recorder) still gets each node's last settings."""

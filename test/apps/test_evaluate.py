@@ -6,7 +6,10 @@ import pytest
 from ssa_fusion.apps import evaluate
 from ssa_fusion.core import kepler, metrics, types
 from ssa_fusion.core.ekf import process_noise
+from ssa_fusion.core.tracker import TrackerConfig
+from ssa_fusion.nodes import settings
 from ssa_fusion.paper import scenarios
+from ssa_fusion.paper.arms import ArmName
 
 T0, CADENCE = 1000.0, 120.0
 TRACK, GAP, COVERED, AFTER = 40, 40, 10, 5  # epochs; estimates cover the gap's first 10
@@ -33,7 +36,7 @@ def synthetic() -> evaluate.BagData:
 
 def test_dmd_ekf_is_scored_over_the_whole_gap_with_the_filters_prediction():
     data = synthetic()
-    ev = evaluate.evaluate(data)
+    ev = evaluate.evaluate(data).gap
     last = data.estimates[-1]  # the last estimate, at the gap's 10th epoch
     x_true = np.array([e.x for e in data.truth[TRACK:TRACK + GAP]])
     expected = np.array([e.x for e in data.estimates[TRACK:]] + [
@@ -41,11 +44,29 @@ def test_dmd_ekf_is_scored_over_the_whole_gap_with_the_filters_prediction():
     full = metrics.epsilon(expected, x_true)
     subset = metrics.epsilon(expected[:COVERED], x_true[:COVERED])
     assert full > 1.5 * subset  # the propagated half is the harder one
-    assert ev.epsilon["dmd_ekf"] == pytest.approx(full, rel=1e-9)
+    assert ev.scores[ArmName.DMD_EKF].epsilon == pytest.approx(full, rel=1e-9)
     # the covariance is the filter's prediction's too: F P F' + Q
     F = kepler.propagate(last.x, ev.t[-1] - last.t)[1]
     Q = process_noise(ev.t[-1] - last.t, scenarios.get("iss_j2_pos").q, dim=3)
-    np.testing.assert_allclose(ev.covs["dmd_ekf"][-1], F @ last.P @ F.T + Q, rtol=1e-9)
+    np.testing.assert_allclose(ev.arms[ArmName.DMD_EKF].P[-1], F @ last.P @ F.T + Q, rtol=1e-9)
     assert ev.coverage == COVERED / GAP
-    assert ev.propagated == GAP - COVERED
-    assert f"{GAP - COVERED} scored from" in evaluate.table(ev)
+    assert ev.predicted == GAP - COVERED
+    assert f"{GAP - COVERED} scored from" in evaluate.table(evaluate.evaluate(data))
+
+
+def test_settings_come_from_the_bag_else_the_kinds_default(tmp_path):
+    data = synthetic()
+    assert evaluate.evaluate(data).settings.origin.startswith("scenario iss_j2_pos")
+    recorded = settings.config_message("filter", scenarios.get("iss_j2_pos").estimator()
+                                       .with_(tracker=TrackerConfig(q=3e-9)))
+    data.config.append(recorded)
+    ev = evaluate.evaluate(data)
+    assert ev.settings.origin.startswith("recorded")
+    assert ev.settings.estimator.tracker.q == 3e-9
+    params = tmp_path / "p.yaml"
+    params.write_text("/**:\n  ros__parameters:\n    kind: position\n"
+                      "filter:\n  ros__parameters:\n    q: 0.002\n    gate: 0.0\n")
+    ev = evaluate.evaluate(data, params_file=params)
+    assert ev.settings.origin == f"params file {params}"
+    assert ev.settings.estimator.tracker.q == pytest.approx(2e-9)  # m^2/s^3 -> km^2/s^3
+    assert ev.settings.estimator.tracker.gate is None

@@ -50,7 +50,7 @@ def test_offline_replay_reproduces_the_live_estimates(tmp_path):
 
 def test_offline_replay_is_deterministic(tmp_path):
     stream = list(bagio.read_bag(SAMPLE))
-    s = replay.settings(stream)
+    s = replay.settings(stream).estimator
     a = replay.replay_offline(stream, s)
     b = replay.replay_offline(stream, s)
     assert [t for t, _ in a.estimates] == [t for t, _ in b.estimates]
@@ -75,7 +75,7 @@ def test_a_measurement_stamped_far_ahead_of_its_log_time_is_not_replayed():
     assert dropped == 1
     assert kept == [*stream[:k + 1], glitched[k + 2], *stream[k + 1:]]
     # fused, the year-ahead stamp would have cost every later real measurement
-    s = replay.settings(stream)
+    s = replay.settings(stream).estimator
     assert replay.replay_offline(glitched, s).rejected.get("rejected_stale", 0) > 100
 
 
@@ -109,7 +109,7 @@ def test_bare_mcap_like_ros2_bag_record(tmp_path):
     got = evaluate.load(out)
     assert got.counts["/ssa/forecast"] > 0.8 * got.counts["/ssa/withheld"]
     ev = evaluate.evaluate(got)
-    assert ev.coverage > 0.8
+    assert ev.gap.coverage > 0.8
     assert cli.main(["report", str(out), "--out", str(tmp_path / "report")]) == 0
     assert (tmp_path / "report" / "arms.png").exists()
 
@@ -134,9 +134,10 @@ def test_a_bag_at_another_cadence_is_replayed_at_its_own(tmp_path):
                          messages.measurement_to_msg(m, classes))
     writer.close()
     stream = list(bagio.read_bag(bag))
-    settings = replay.settings(stream)
-    assert settings.cadence_s == 0.0 and replay.bag_cadence(stream) == 10.0
-    assert replay.settings(list(bagio.read_bag(SAMPLE))).cadence_s == 30.0  # its own kept
+    settings = replay.settings(stream).estimator
+    assert settings.surrogate.cadence_s == 0.0 and replay.bag_cadence(stream) == 10.0
+    own = replay.settings(list(bagio.read_bag(SAMPLE))).estimator
+    assert own.surrogate.cadence_s == 30.0  # its own kept
     result = replay.replay_offline(stream, settings)
     gap = sim.t[sim.in_gap]
     np.testing.assert_allclose(sorted(f.t for _, f in result.forecasts), gap, rtol=0,
