@@ -1,6 +1,7 @@
 """Graph test of the product: sensor_sim, surrogate, filter and recorder as separate
 processes over DDS, on a shortened default scenario (range/az/el of the ISS)."""
 
+import json
 from collections import Counter
 
 import numpy as np
@@ -121,3 +122,21 @@ def test_bag_reads_with_rosbags_and_mcap(run):
             n += 1
         assert reader.get_header().profile == "ros2"
     assert n == data.counts["/ssa/estimate"]
+
+
+def test_the_bag_records_the_estimator_settings_in_effect(run):
+    """Both estimator nodes publish their settings (latched) on /ssa/config; the recorder,
+    started first, still gets them, and they read back as the estimator the run's
+    parameters define: what replay and report then use."""
+    from ssa_fusion.nodes import settings
+
+    data = evaluate.load(run["bag"])
+    assert data.counts["/ssa/config"] == 2
+    nodes = sorted(json.loads(t)["node"] for t in data.config)
+    assert nodes == ["filter", "surrogate"]
+    params = node_parameters(SHORT, time_scale=1500.0, seed=3, bag=run["bag"])
+    expected = settings.estimator_from(params["filter"], params["surrogate"])
+    assert settings.recorded_estimator(data.config) == expected
+    assert expected.surrogate.delays == 40 and expected.tracker.q == pytest.approx(SHORT.q)
+    ev = evaluate.evaluate(data)
+    assert ev.settings.origin.startswith("recorded")

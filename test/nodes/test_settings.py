@@ -1,0 +1,60 @@
+"""`nodes.settings`: the one translation between ROS parameters (SI) and EstimatorConfig."""
+
+import json
+from pathlib import Path
+
+import pytest
+
+from ssa_fusion.core import config
+from ssa_fusion.nodes import settings
+from ssa_fusion.paper import scenarios
+
+CONFIG = Path(__file__).resolve().parents[2] / "config" / "default.yaml"
+
+
+def same(a, b) -> bool:
+    """Equal settings up to the last bits of a unit conversion (12 significant digits)."""
+    def rounded(c):
+        return json.loads(json.dumps(config.to_dict(c)),
+                          parse_float=lambda v: float(f"{float(v):.12g}"))
+
+    return rounded(a) == rounded(b)
+
+
+def test_params_round_trip_in_si_units():
+    c = scenarios.DEFAULT_LIVE.estimator()
+    f, s = settings.filter_params(c), settings.surrogate_params(c)
+    assert f["p0_sigma"][0] == pytest.approx(1000.0) and f["q"] == pytest.approx(0.1)  # m, m^2/s^3
+    assert s["retrain_period"] == 0.0  # never = 0 as a parameter
+    assert same(settings.estimator_from(f, s), c)
+
+
+def test_default_yaml_is_the_default_live_scenario():
+    """config/default.yaml, read as a ROS params file, is the default scenario's estimator
+    (what `ssa-fusion live` runs)."""
+    assert same(settings.load_params_file(CONFIG), scenarios.DEFAULT_LIVE.estimator())
+
+
+def test_params_file_errors_name_the_file_and_value(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("filter:\n  ros__parameters:\n    motion_model: sgp4\n")
+    with pytest.raises(ValueError, match=r"bad\.yaml.*motion_model 'sgp4'"):
+        settings.load_params_file(bad)
+    mixed = tmp_path / "mixed.yaml"
+    mixed.write_text("filter:\n  ros__parameters:\n    kind: position\n"
+                     "surrogate:\n  ros__parameters:\n    kind: range_az_el\n")
+    with pytest.raises(ValueError, match="disagree on 'kind'"):
+        settings.load_params_file(mixed)
+    with pytest.raises(ValueError, match="cannot read params file"):
+        settings.load_params_file(tmp_path / "missing.yaml")
+
+
+def test_recorded_settings_merge_both_nodes_last_message():
+    c = scenarios.DEFAULT_LIVE.estimator()
+    changed = c.with_(tracker=c.tracker.__class__(q=7e-8))
+    msgs = [settings.config_message("filter", c), settings.config_message("surrogate", c),
+            settings.config_message("filter", changed)]  # a `ros2 param set` during the run
+    assert settings.recorded_estimator(msgs) == changed
+    assert settings.recorded_estimator([]) is None
+    with pytest.raises(ValueError, match="malformed /ssa/config"):
+        settings.recorded_estimator(["{not json"])
