@@ -13,8 +13,8 @@ the position error and the NEES.
 * ``coast`` -- the same EKF predicting through the gap from the same estimate, with its
   process noise (x <- f(x), P <- F P F' + Q): what the graph does without a surrogate;
 * ``j2_coast`` -- the physics-only filter an orbit-determination user would run: the same
-  EKF settings and real measurements with a two-body + J2 motion model, coasting through the
-  gap (Earth orbits only);
+  EKF settings and real measurements with a two-body + J2 motion model (and the process
+  noise of what J2 leaves out, `J2_COAST_Q`), coasting through the gap (Earth orbits only);
 * ``dmd_ekf`` -- the filter's estimates at the gap epochs, fusing the surrogate's forecasts;
   at an epoch without one (no forecast, or one refused) its prediction from the last estimate
   before it, as the live filter would publish;
@@ -29,7 +29,7 @@ from __future__ import annotations
 import bisect
 import enum
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -37,6 +37,12 @@ from ssa_fusion.core.config import ORBIT_MODELS, EstimatorConfig, MotionModel, m
 from ssa_fusion.core.metrics import epsilon, nees
 from ssa_fusion.core.types import Measurement, Source, StateEstimate, UpdateSource
 from ssa_fusion.paper.montecarlo import N_PARTICLES, placeholder_ensemble
+
+J2_COAST_Q = 1e-13
+"""Process noise of the J2 filter, (km/s^2)^2 s, by the scenarios' rule q ~ a^2 tau (never
+from the gap): a ~ 1e-8 km/s^2, what a J2 model leaves out in LEO (J3 and higher harmonics,
+drag at 400 km), tau a quarter ISS period (1.4e3 s). The Keplerian filters' q (1e-7) is
+sized for the J2 they leave out, ~1e3 times larger an acceleration."""
 
 
 class ArmName(enum.StrEnum):
@@ -144,11 +150,12 @@ def coast(c: EstimatorConfig, start: StateEstimate, t_gap: np.ndarray) -> ArmTra
 
 def j2_coast(c: EstimatorConfig, real: Iterable[Measurement],
              t_gap: np.ndarray) -> ArmTrajectory | None:
-    """The EKF of `c` with the two-body + J2 motion model over the real measurements before
-    the gap, coasting through it; None unless `c` tracks an Earth orbit."""
+    """The EKF of `c` with the two-body + J2 motion model and its process noise `J2_COAST_Q`
+    over the real measurements before the gap, coasting through it; None unless `c` tracks
+    an Earth orbit."""
     if c.motion_model not in ORBIT_MODELS:
         return None
-    j2 = c.with_(motion_model=MotionModel.J2)
+    j2 = c.with_(motion_model=MotionModel.J2, tracker=replace(c.tracker, q=J2_COAST_Q))
     before = [m for m in real if m.t < t_gap[0] and m.source == Source.SENSOR]
     return coast(j2, start_estimate(run_filter(j2, before), float(t_gap[0])), t_gap)
 

@@ -18,7 +18,7 @@ import numpy as np
 
 from ssa_fusion.core.hankel_dmd import HankelDMD
 from ssa_fusion.core.iod import razel_to_eci
-from ssa_fusion.paper import experiments, scenarios
+from ssa_fusion.paper import distributions, experiments, scenarios
 from ssa_fusion.paper.simulate import simulate
 
 ARMS = ("placeholder", "dmd_ekf", "hypothetical_ekf")
@@ -26,6 +26,7 @@ TARGET_CLOSE = ("iss_j2_pos", "iss_sgp4_pos", "iss_j2_pos_noisy", "iss_j2_rae",
                 "cr3bp_halo_noisy")
 NEES_RUNS = 10
 NEES_RUNS_QUICK = 3
+QUICK_SEEDS = 3
 VDP_MUS = np.round(np.arange(1.0, 3.0 + 1e-9, 0.1), 10)
 VDP_MUS_QUICK = np.array([1.0, 2.0, 3.0])
 CONSISTENCY_SCENARIO = "iss_j2_pos_noisy"
@@ -219,10 +220,39 @@ def table(results: dict) -> str:
     return "\n".join(rows)
 
 
+def _ratio(d: dict, key: str) -> str:
+    r = d["ratios"].get(key)
+    if r is None:
+        return "—"
+    return f"{_fmt(r['median'])} [{_fmt(r['q25'])}–{_fmt(r['q75'])}] {_fmt(r['worst'])}"
+
+
+def distribution_table(dist: dict) -> str:
+    """Markdown table of the distributions over the evaluation seeds (and start epochs)."""
+    rows = ["| scenario | runs | ε DMD-EKF (median) | ε(DMD-EKF)/ε(coast) | "
+            "ε(DMD-EKF)/ε(J2 coast) | ε(DMD-EKF)/ε(hypothetical) | DMD-EKF beats coasting |",
+            "|---|---|---|---|---|---|---|"]
+    for name, d in dist.items():
+        rows.append(f"| {name} | {d['runs']} | {_fmt(d['epsilon_median']['dmd_ekf'])} | "
+                    f"{_ratio(d, 'dmd_over_coast')} | {_ratio(d, 'dmd_over_j2_coast')} | "
+                    f"{_ratio(d, 'dmd_over_hypothetical')} | "
+                    f"{100 * d['dmd_beats_coast']:.0f} % |")
+    first = next(iter(dist.values()))
+    rows.append(f"\nratios: median [interquartile range] worst (largest) over seeds "
+                f"{first['seeds'][0]}-{first['seeds'][-1]} (never used for tuning); below 1 "
+                f"the DMD-EKF is better. Range/az/el scenarios from "
+                f"{len(max((d['start_offsets_h'] for d in dist.values()), key=len))} start "
+                f"epoch(s).")
+    return "\n".join(rows)
+
+
 def markdown(results: dict) -> str:
     lines = ["# Reproduction of the paper's experiments", "",
              f"seed {results['seed']}, quick={results['quick']}, "
              f"{results['seconds']:.0f} s", "", table(results), ""]
+    if results.get("distributions"):
+        lines += ["## Distributions over the evaluation seeds", "",
+                  distribution_table(results["distributions"]), ""]
     v = results.get("vdp_sweep")
     if v:
         lines += ["## Van der Pol: ε over the gap against the placeholder μ_p", "",
@@ -272,6 +302,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     parser.add_argument("--no-studies", action="store_true",
                         help="skip the Van der Pol sweep and the consistency study")
+    parser.add_argument("--seeds", type=int, default=None, metavar="N",
+                        help=f"evaluation seeds of the distributions (default "
+                             f"{len(distributions.EVALUATION_SEEDS)}, --quick "
+                             f"{QUICK_SEEDS}; 0 skips them)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="processes for the distributions (default: the CPU count)")
 
 
 def run(args) -> int:
@@ -318,11 +354,29 @@ def run(args) -> int:
             from ssa_fusion.paper import plots as pl
             pl.consistency_plot(results["consistency"], out / "consistency.png")
         bar.step("consistency study")
+    n_seeds = args.seeds if args.seeds is not None else (
+        QUICK_SEEDS if args.quick else len(distributions.EVALUATION_SEEDS))
+    if n_seeds > 0:
+        seeds = distributions.EVALUATION_SEEDS[:n_seeds] if n_seeds <= len(
+            distributions.EVALUATION_SEEDS) else tuple(range(101, 101 + n_seeds))
+        offsets = (0.0,) if args.quick else distributions.START_OFFSETS_H
+        runs = sum(len(distributions.cases(s, seeds, offsets)) for s in chosen)
+        dbar = Progress(runs)
+        print(f"distributions: {len(seeds)} evaluation seeds ({seeds[0]}-{seeds[-1]}; settings "
+              f"were chosen on seeds {distributions.TUNING_SEEDS[0]}-"
+              f"{distributions.TUNING_SEEDS[-1]}), range/az/el from "
+              f"{len(offsets)} start epoch(s): {runs} runs"
+              + (" (--quick: fewer seeds and one start epoch)" if args.quick else ""),
+              file=sys.stderr)
+        results["distributions"] = distributions.run_distributions(
+            chosen, seeds, offsets, args.workers, dbar.step)
     results["seconds"] = round(time.monotonic() - t0, 1)
     (out / "results.json").write_text(json.dumps(_jsonable(results), indent=1))
     md = markdown(results)
     (out / "results.md").write_text(md)
     print(table(results))
+    if results.get("distributions"):
+        print("\n" + distribution_table(results["distributions"]))
     print(f"\nwrote {out / 'results.json'}, {out / 'results.md'} and plots "
           f"in {results['seconds']:.0f} s")
     return 0

@@ -19,7 +19,7 @@ def quick(tmp_path_factory):
     out = tmp_path_factory.mktemp("reproduce")
     names = ["iss_j2_pos", "iss_j2_rae", "iss_j2_pos_noisy", "vdp"]
     assert cli.main(["reproduce", "--quick", "--seed", "3", "--out", str(out),
-                     "--scenario", *names]) == 0
+                     "--seeds", "2", "--scenario", *names]) == 0
     return out, json.loads((out / "results.json").read_text())
 
 
@@ -71,13 +71,37 @@ def test_quick_keeps_the_ordering(quick):
     assert eps["dmd_ekf"] / eps["hypothetical_ekf"] < 1.5
 
 
+def test_distributions_over_evaluation_seeds_never_used_for_tuning(quick):
+    from ssa_fusion.paper import distributions
+
+    assert not set(distributions.EVALUATION_SEEDS) & set(distributions.TUNING_SEEDS)
+    assert len(distributions.EVALUATION_SEEDS) >= 20 and len(distributions.START_OFFSETS_H) >= 3
+    dist = quick[1]["distributions"]
+    assert set(dist) == set(quick[1]["scenarios"])
+    for name, d in dist.items():
+        assert d["seeds"] == [101, 102] and d["runs"] == 2, name
+        assert len(d["epsilon"]["dmd_ekf"]) == 2
+        r = d["ratios"]["dmd_over_coast"]
+        assert r["q25"] <= r["median"] <= r["q75"] <= r["worst"]
+        eps = d["epsilon"]
+        wins = sum(a < b for a, b in zip(eps["dmd_ekf"], eps["coast"], strict=True)) / 2
+        assert d["dmd_beats_coast"] == wins
+    assert "dmd_over_j2_coast" in dist["iss_j2_rae"]["ratios"]
+    assert "dmd_over_j2_coast" not in dist["vdp"]["ratios"]
+    assert "## Distributions over the evaluation seeds" in (quick[0] / "results.md").read_text()
+
+
 def test_same_seed_same_numbers(quick, tmp_path):
     assert cli.main(["reproduce", "--quick", "--seed", "3", "--out", str(tmp_path),
-                     "--scenario", "iss_j2_pos", "--no-plots", "--no-studies"]) == 0
+                     "--scenario", "iss_j2_pos", "--no-plots", "--no-studies",
+                     "--seeds", "2", "--workers", "1"]) == 0
     again = json.loads((tmp_path / "results.json").read_text())["scenarios"]["iss_j2_pos"]
     first = quick[1]["scenarios"]["iss_j2_pos"]
     assert again["arms"] == first["arms"]
     assert again["settings"] == first["settings"]
+    # one worker or two: the same distribution
+    dist = json.loads((tmp_path / "results.json").read_text())["distributions"]["iss_j2_pos"]
+    assert dist == quick[1]["distributions"]["iss_j2_pos"]
 
 
 def test_unknown_scenario_is_an_error(tmp_path, capsys):
