@@ -70,3 +70,30 @@ def test_settings_come_from_the_bag_else_the_kinds_default(tmp_path):
     assert ev.settings.origin == f"params file {params}"
     assert ev.settings.estimator.tracker.q == pytest.approx(2e-9)  # m^2/s^3 -> km^2/s^3
     assert ev.settings.estimator.tracker.gate is None
+
+
+def test_sample_bag_coast_matches_an_independent_kepler_propagation():
+    """On the recorded default scenario: `coast` is the last pre-gap estimate propagated by
+    the Keplerian model (checked against scipy's integration of two-body motion, within
+    10 % of ε), and `placeholder` (Monte Carlo from the same estimate) is close to it."""
+    from pathlib import Path
+
+    from scipy.integrate import solve_ivp
+
+    sample = Path(__file__).resolve().parents[2] / "bags" / "sample_iss_j2_rae"
+    data = evaluate.load(sample)
+    ev = evaluate.evaluate(data).gap
+    live = {e.t: e for e in data.estimates if e.update_source == types.UpdateSource.SENSOR}
+    start = live[max(t for t in live if t < ev.t[0])]
+    mu = 398600.4418
+
+    def f(_t, y):
+        return np.concatenate([y[3:], -mu * y[:3] / np.linalg.norm(y[:3]) ** 3])
+
+    sol = solve_ivp(f, (start.t, ev.t[-1]), start.x, t_eval=ev.t, rtol=1e-12, atol=1e-12,
+                    method="DOP853")
+    independent = metrics.epsilon(sol.y.T, ev.truth)
+    coast = ev.scores[ArmName.COAST].epsilon
+    assert coast == pytest.approx(independent, rel=0.1)
+    assert ev.scores[ArmName.PLACEHOLDER].epsilon == pytest.approx(coast, rel=0.5)
+    assert set(ev.scores) == set(ArmName)  # all five arms, j2_coast included
