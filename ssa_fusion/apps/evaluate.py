@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ssa_fusion.core import types
+from ssa_fusion.core import metrics, types
 from ssa_fusion.core.config import EstimatorConfig
 from ssa_fusion.nodes import settings
 from ssa_fusion.paper import scenarios
@@ -142,5 +142,9 @@ def table(ev: Evaluation) -> str:
                 f"{100 * g.coverage:.0f} % of them"
                 + (f"; dmd_ekf at the other {g.predicted} scored from the last estimate "
                    "before, propagated by the filter's model" if g.predicted else ""))
+    lo, hi = metrics.chi2_bounds(g.truth.shape[1])
+    rows.append(f"NEES: mean over the gap's epochs; a consistent filter's per-epoch NEES lies "
+                f"in [{lo:.2f}, {hi:.2f}] 95 % of the time (χ², {g.truth.shape[1]} dof), "
+                "its mean near the dof")
     rows.append(f"settings: {ev.settings.origin}")
     return "\n".join(rows)
