@@ -223,6 +223,34 @@ class ExtendedKalmanFilter:
         self.P_post = P.copy()
         return UpdateResult(True, nis, y)
 
+    def snapshot(self) -> tuple[Array, Array]:
+        """Return copies of the current estimate, for :meth:`restore`.
+
+        Returns
+        -------
+        x : ndarray, shape (n,)
+            Copy of ``x``.
+        P : ndarray, shape (n, n)
+            Copy of ``P``.
+        """
+        return self.x.copy(), self.P.copy()
+
+    def restore(self, x: ArrayLike, P: ArrayLike) -> None:
+        """Set the current estimate back to (copies of) a :meth:`snapshot`.
+
+        Only ``x`` and ``P`` are set; the diagnostics of the last step (``x_prior``,
+        ``x_post``, ``y``, ``S``, ``K``, ``nis``, ...) are left as they are.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,)
+            Estimate to restore.
+        P : array_like, shape (n, n)
+            Its covariance.
+        """
+        self.x = np.array(x, dtype=float)
+        self.P = np.array(P, dtype=float)
+
 
 def _raise_non_finite(z: Array, R: Array, zp: Array, S: Array) -> None:
     """Raise a ValueError naming the first non-finite input of an update."""

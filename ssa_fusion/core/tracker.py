@@ -5,7 +5,11 @@ rely on.
 
 `Tracker.process(m)` takes measurements in arrival order and returns what happened: an
 estimate (state + covariance at the measurement epoch) or the cause of a rejection. The
-rules (DESIGN.md "Behaviour users rely on"):
+tracker is the facade over two parts: until its EKF exists, the measurements it admits go to
+`initiation.OrbitInitiator` (the initial orbit determination, with its own rules during IOD);
+after that, every fused step is logged in `history.FusedHistory`, which rolls the filter back
+when a measurement goes in front of fused ones. The admission and arbitration rules are here
+(DESIGN.md "Behaviour users rely on"):
 
 * bad input is never fused (`validation.measurement_problem`, shared with the surrogate):
   non-finite values, negative range, elevation outside [-pi/2, pi/2], a kind or frame the
@@ -23,9 +27,9 @@ rules (DESIGN.md "Behaviour users rely on"):
   re-forecasts every missed epoch after each real measurement, so a forecast issued while a
   real measurement was still on its way (a surrogate stalled by a fit at a high time scale)
   is replaced, and the result equals the offline replay's;
-* late forecasts still count: the filter keeps what it fused since `HISTORY_REAL` real
-  measurements back, and a valid forecast for an epoch inside that history with nothing
-  fused at it yet (typically a gap's last forecasts, which the surrogate releases when the
+* late forecasts still count: a valid forecast for an epoch inside the filter's history (the
+  steps fused since `HISTORY_REAL` real measurements back, `history`) with nothing fused at
+  it yet (typically a gap's last forecasts, which the surrogate releases when the
   measurement ending the gap reaches it, on another topic) is fused at its epoch, with
   everything fused after it fused again. So the final state, and the last estimate published
   per epoch, do not depend on the order in which forecasts and the real measurements after
@@ -40,21 +44,17 @@ same estimates for the same input sequence.
 
 from __future__ import annotations
 
-import bisect
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import cast
 
 import numpy as np
 
-from . import iod
 from .ekf import ExtendedKalmanFilter, process_noise
+from .history import HISTORY_REAL, FusedHistory, FusedStep, Snapshot
+from .initiation import OrbitInitiator, Placeholder
 from .measurement import PositionModel, RazelModel
-from .types import Cause, Kind, Measurement, Source, StateEstimate, UpdateSource
+from .types import Cause, Measurement, Source, StateEstimate, UpdateSource
 from .validation import OK, measurement_problem
-
-Placeholder = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
 
 
 def _base(f: Measurement) -> float:
@@ -123,31 +123,12 @@ class Outcome:
     fused_again: list[StateEstimate] = field(default_factory=list)
 
 
-@dataclass
-class _Snapshot:
-    t: float
-    x: np.ndarray
-    P: np.ndarray
-
-
-@dataclass
-class _Fused:
-    """A measurement the filter fused, the state before it and the last real epoch then."""
-
-    m: Measurement
-    before: _Snapshot
-    t_real: float
-
-
-HISTORY_REAL = 8
-"""Real measurements back to which the filter keeps its fused steps, so that a forecast that
-arrives after the real measurements that followed its epoch (a gap's last forecasts, which the
-surrogate releases when the measurement ending the gap reaches it) can still go in front of
-them; 8 cadences are 0.24 s of wall time at 1000x real time."""
-
-
 class Tracker:
-    """IOD + EKF for one object (see the module docstring for the rules)."""
+    """IOD + EKF for one object (see the module docstring for the rules).
+
+    ``config`` may be changed (or replaced) at run time; ``f``, ``model`` and ``n`` are
+    handed to the `initiation.OrbitInitiator` at construction and at each `reset`.
+    """
 
     def __init__(self, placeholder: Placeholder, model: PositionModel | RazelModel,
                  config: TrackerConfig, n: int = 6, object_id: str = "") -> None:
@@ -161,13 +142,13 @@ class Tracker:
 
     # ----------------------------------------------------------------------------------
     def reset(self) -> None:
-        """Forget the state and every buffered measurement."""
+        """Forget the state and every buffered measurement (a new IOD batch starts)."""
         self.ekf: ExtendedKalmanFilter | None = None
         self.t = -math.inf
         self.t_real = -math.inf
-        self._iod: list[Measurement] = []
+        self._initiator = OrbitInitiator(self.f, self.model, self.n)
         # the steps fused since `HISTORY_REAL` real measurements back, oldest first
-        self._log: list[_Fused] = []
+        self._history = FusedHistory(HISTORY_REAL)
 
     @property
     def initialised(self) -> bool:
@@ -230,7 +211,7 @@ class Tracker:
         ekf = self.ekf
         assert ekf is not None
         dt = m.t - self.t
-        before = _Snapshot(self.t, ekf.x, ekf.P)
+        before = Snapshot(self.t, ekf.x, ekf.P)
         model, t = self.model, m.t
         try:
             with np.errstate(over="raise", invalid="raise"):
@@ -242,7 +223,8 @@ class Tracker:
         except (ValueError, OverflowError, FloatingPointError, np.linalg.LinAlgError) as exc:
             ok, result, reason = False, None, f"{type(exc).__name__}: {exc}"
         if not ok:
-            self.t, ekf.x, ekf.P = before.t, before.x, before.P
+            self.t = before.t
+            ekf.restore(before.x, before.P)
             return Outcome(rejected=Cause.REJECTED_NUMERIC,
                            detail=f"t={m.t}: update not computable "
                                   f"({reason if result is None else 'non-finite state'})")
@@ -255,15 +237,16 @@ class Tracker:
 
     def _fuse_forecast(self, m: Measurement) -> Outcome:
         base = _base(m)
-        k = self._position(m.t)
-        at = self._log[k] if k < len(self._log) else None  # None: after every fused step
+        k = self._history.position(m.t)
+        at = self._history.at(k)  # None: after every fused step
         if at is not None and at.m.t == m.t and at.m.source != Source.FORECAST:
             return Outcome(rejected=Cause.FORECAST_SUPERSEDED,
                            detail=f"forecast for t={m.t}, which has a real measurement")
         if m.t <= self.t and (at is None or not at.before.t < m.t):
+            first = self._history.at(0)
             return Outcome(rejected=Cause.FORECAST_SUPERSEDED,
                            detail=f"forecast for t={m.t} is older than the filter's history "
-                                  f"(back to t={self._log[0].m.t if self._log else self.t})")
+                                  f"(back to t={first.m.t if first else self.t})")
         t_prev = self.t_real if at is None else at.t_real  # the last real before m.t
         if _before(base, t_prev):
             return Outcome(rejected=Cause.FORECAST_SUPERSEDED,
@@ -282,11 +265,7 @@ class Tracker:
         if m.t == self.t_real:
             return Outcome(rejected=Cause.REJECTED_DUPLICATE,
                            detail=f"second measurement at t={m.t}")
-        return self._insert(self._position(m.t), m, UpdateSource.SENSOR)
-
-    def _position(self, t: float) -> int:
-        """Index of the first fused step at or after epoch t (len(log) if none)."""
-        return bisect.bisect_left([e.m.t for e in self._log], t)
+        return self._insert(self._history.position(m.t), m, UpdateSource.SENSOR)
 
     def _insert(self, k: int, m: Measurement, source: int) -> Outcome:
         """Undo the fused steps from index k on (epochs at or after m.t), fuse m, fuse again.
@@ -297,9 +276,7 @@ class Tracker:
         holds even if m itself is rejected (the surrogate has buffered it all the same), so
         the filter ends as in the offline order; `fused_again` then still lists them.
         """
-        tail = self._log[k:]
-        if tail:
-            self._rollback(k)
+        tail = self._rollback(k) if k < len(self._history) else []
         out = self._fuse_step(m, source)
         base = m.t if source == UpdateSource.SENSOR else _base(m)
         out.rolled_back = sum(e.m.source == Source.FORECAST for e in tail)
@@ -316,109 +293,41 @@ class Tracker:
     def _fuse_step(self, m: Measurement, source: int) -> Outcome:
         """`_step`, logged when fused; the state is left unchanged when it is not."""
         assert self.ekf is not None
-        before = _Snapshot(self.t, self.ekf.x.copy(), self.ekf.P.copy())
+        before = Snapshot(self.t, *self.ekf.snapshot())
         t_real = self.t_real
         out = self._step(m, source)
         if out.estimate is None:
             self._restore(before)
         else:
-            self._append(_Fused(m, before, t_real))
+            self._append(FusedStep(m, before, t_real))
         return out
 
-    def _append(self, e: _Fused) -> None:
-        """Log a fused step; a real one also advances t_real and trims the history.
+    def _append(self, e: FusedStep) -> None:
+        """Log a fused step; a real one also advances t_real (and trims the history)."""
+        self._history.record(e)
+        if e.m.source != Source.FORECAST:
+            self.t_real = e.m.t
 
-        The history kept starts `HISTORY_REAL` real measurements back.
-        """
-        self._log.append(e)
-        if e.m.source == Source.FORECAST:
-            return
-        self.t_real = e.m.t
-        reals = [i for i, f in enumerate(self._log) if f.m.source != Source.FORECAST]
-        if len(reals) > HISTORY_REAL:
-            del self._log[:reals[-HISTORY_REAL]]
+    def _rollback(self, k: int) -> list[FusedStep]:
+        """Back to the state before the k-th fused step; return the steps from k on, forgotten."""
+        assert self.ekf is not None
+        tail = self._history.rollback(k, self.ekf)
+        self.t, self.t_real = tail[0].before.t, tail[0].t_real
+        return tail
 
-    def _rollback(self, k: int) -> None:
-        """Back to the state before the k-th fused step; the steps from k on are forgotten."""
-        e = self._log[k]
-        self._restore(e.before)
-        self.t_real = e.t_real
-        del self._log[k:]
-
-    def _restore(self, s: _Snapshot) -> None:
+    def _restore(self, s: Snapshot) -> None:
         """Set the epoch and the EKF's x, P back to (copies of) a snapshot."""
         assert self.ekf is not None
         self.t = s.t
-        self.ekf.x, self.ekf.P = s.x.copy(), s.P.copy()
+        self.ekf.restore(s.x, s.P)
 
     # ----------------------------------------------------------------------------------
     def _initialise(self, m: Measurement) -> Outcome:
-        if m.source == Source.FORECAST:
-            return Outcome(rejected=Cause.IGNORED_BEFORE_IOD, detail="forecast before IOD")
-        if self._iod and m.t <= self._iod[-1].t:
-            return Outcome(rejected=Cause.REJECTED_STALE if m.t < self._iod[-1].t
-                           else Cause.REJECTED_DUPLICATE, detail=f"t={m.t} during IOD")
-        self._iod.append(m)
-        if len(self._iod) < max(2, self.config.iod_samples):
-            return Outcome(rejected=Cause.IOD_PENDING, detail="collecting IOD measurements")
-        batch, self._iod = self._iod, []
-        t_init, x0, P_iod = self._iod_solution(batch)
-        if not np.isfinite(x0).all():
-            return Outcome(rejected=Cause.IOD_FAILED, detail="initial orbit determination failed")
-        t_last = batch[-1].t
-        P0 = P_iod + np.diag(np.asarray(self.config.p0_sigma, dtype=float) ** 2)
-        if t_last != t_init:  # Herrick-Gibbs solves at the middle epoch: move to the last
-            x0, F = self.f(x0, t_last - t_init)
-            P0 = F @ P0 @ F.T
-        self.ekf = ExtendedKalmanFilter(x0, 0.5 * (P0 + P0.T))
-        self.t = self.t_real = t_last
+        """Hand `m` to the IOD batch; start the EKF when the batch is solved."""
+        got = self._initiator.add(m, self.config.iod_samples, self.config.p0_sigma)
+        if isinstance(got, tuple):
+            cause, detail = got
+            return Outcome(rejected=cause, detail=detail)
+        self.ekf = ExtendedKalmanFilter(got.x, got.P)
+        self.t = self.t_real = got.t
         return Outcome(estimate=self.estimate(UpdateSource.SENSOR))
-
-    def _iod_solution(self, batch: list[Measurement]) -> tuple[float, np.ndarray, np.ndarray]:
-        """Return (epoch, state, covariance) from the IOD batch.
-
-        The covariance is the measurement noise pushed through the IOD map (numerical
-        Jacobian, 1 evaluation per input).
-        """
-        t = np.array([b.t for b in batch])
-        Z = np.array([b.z for b in batch], dtype=float)
-        if self.kind == Kind.RANGE_AZ_EL:
-            mid = len(batch) // 2
-            i3 = [0, mid, len(batch) - 1]
-            t3 = t[i3]
-            razel = cast(RazelModel, self.model)  # the model of kind RANGE_AZ_EL
-
-            def solve(zs: np.ndarray) -> np.ndarray:
-                r = iod.razel_to_eci(zs[i3], razel.jd0_utc + t3 / 86400.0, razel.station)
-                v2 = iod.herrick_gibbs(r[0], r[1], r[2], t3[0], t3[1], t3[2])
-                return np.concatenate([r[1], v2])
-
-            t_init = float(t3[1])
-        else:
-            observed = list(cast(PositionModel, self.model).observed)
-
-            def solve(zs: np.ndarray) -> np.ndarray:
-                x = np.zeros(self.n)
-                fd = iod.finite_difference_state(t, zs)
-                k = len(observed)
-                x[observed] = fd[:k]
-                x[[i + self.n // 2 for i in observed]] = fd[k:]
-                return x
-
-            t_init = float(t[-1])
-        x0 = solve(Z)
-        R = [np.asarray(b.R, dtype=float) for b in batch]
-        P = np.zeros((self.n, self.n))
-        for j, Rj in enumerate(R):
-            sig = np.sqrt(np.clip(np.diag(Rj), 0.0, None))
-            if not sig.any():
-                continue
-            J = np.zeros((self.n, Z.shape[1]))
-            for c in range(Z.shape[1]):
-                if sig[c] == 0.0:
-                    continue
-                dz = Z.copy()
-                dz[j, c] += sig[c]
-                J[:, c] = (solve(dz) - x0) / sig[c]
-            P += J @ Rj @ J.T
-        return t_init, x0, P

@@ -1,0 +1,179 @@
+"""Initial orbit determination of one object: the batch of real measurements that starts its EKF.
+
+`OrbitInitiator.add(m, samples, p0_sigma)` takes the measurements a `tracker.Tracker` admitted
+before its filter exists, in arrival order, and returns either why it did not start the filter
+or the initial state. The two settings come with each call (the tracker's current
+``config.iod_samples`` and ``config.p0_sigma``, which may change at run time: a change applies
+to the batch being collected). The rules during IOD:
+
+* a forecast is ignored (`Cause.IGNORED_BEFORE_IOD`): IOD uses real measurements only;
+* a real measurement older than the last one collected is stale, one at its epoch a
+  duplicate (`Cause.REJECTED_STALE`, `Cause.REJECTED_DUPLICATE`);
+* until ``max(2, samples)`` are collected the answer is `Cause.IOD_PENDING`; then the batch is
+  solved (`OrbitInitiator.solve`) and emptied: range/az/el by Herrick-Gibbs at the middle of
+  the first, middle and last sample, positions by finite differences at the last epoch
+  (`iod`), the covariance being the measurement noise pushed through that map (numerical
+  Jacobian). A non-finite solution is `Cause.IOD_FAILED`;
+* the filter starts at the batch's last epoch, with the covariance floor ``p0_sigma`` added
+  (in quadrature) and, for Herrick-Gibbs, the state and covariance predicted there by the
+  placeholder dynamics.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import cast
+
+import numpy as np
+
+from . import iod
+from .measurement import PositionModel, RazelModel
+from .types import Cause, Kind, Measurement, Source
+
+Placeholder = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
+"""Placeholder dynamics ``f(x, dt) -> (x_new, F)``: the state ``dt`` s later and its Jacobian."""
+
+
+@dataclass
+class InitialState:
+    """The state an IOD batch starts the filter with.
+
+    Attributes
+    ----------
+    t : float
+        Epoch, s: the batch's last measurement.
+    x : ndarray, shape (n,)
+        State at `t`.
+    P : ndarray, shape (n, n)
+        Its covariance (symmetric): the IOD covariance plus the floor, predicted to `t`.
+    """
+
+    t: float
+    x: np.ndarray
+    P: np.ndarray
+
+
+class OrbitInitiator:
+    """Collects real measurements until an IOD batch is complete and solves it.
+
+    Parameters
+    ----------
+    f : Placeholder
+        Placeholder dynamics, used to move a Herrick-Gibbs state to the batch's last epoch.
+    model : PositionModel or RazelModel
+        Measurement model of the batch (its ``kind`` chooses the IOD method).
+    n : int
+        State size (``[position, velocity]``, n/2 each).
+
+    Attributes
+    ----------
+    batch : list of Measurement
+        The real measurements collected so far, in increasing epoch order.
+    """
+
+    def __init__(self, f: Placeholder, model: PositionModel | RazelModel, n: int) -> None:
+        self.f = f
+        self.model = model
+        self.n = n
+        self.kind = model.kind
+        self.batch: list[Measurement] = []
+
+    def add(self, m: Measurement, samples: int,
+            p0_sigma: tuple[float, ...]) -> InitialState | tuple[str, str]:
+        """Collect `m` (an admitted measurement); solve the batch once it is complete.
+
+        Parameters
+        ----------
+        m : Measurement
+            The next measurement, already validated.
+        samples : int
+            Real measurements per batch (at least 2 are used).
+        p0_sigma : tuple of float, (n,)
+            Standard deviations added in quadrature to the IOD covariance, state units.
+
+        Returns
+        -------
+        InitialState or tuple of str
+            The initial state when `m` completed the batch and it was solved; otherwise
+            ``(cause, detail)``: a `Cause` key and a sentence for the log.
+        """
+        if m.source == Source.FORECAST:
+            return Cause.IGNORED_BEFORE_IOD, "forecast before IOD"
+        if self.batch and m.t <= self.batch[-1].t:
+            return (Cause.REJECTED_STALE if m.t < self.batch[-1].t
+                    else Cause.REJECTED_DUPLICATE), f"t={m.t} during IOD"
+        self.batch.append(m)
+        if len(self.batch) < max(2, samples):
+            return Cause.IOD_PENDING, "collecting IOD measurements"
+        batch, self.batch = self.batch, []
+        t_init, x0, P_iod = self.solve(batch)
+        if not np.isfinite(x0).all():
+            return Cause.IOD_FAILED, "initial orbit determination failed"
+        t_last = batch[-1].t
+        P0 = P_iod + np.diag(np.asarray(p0_sigma, dtype=float) ** 2)
+        if t_last != t_init:  # Herrick-Gibbs solves at the middle epoch: move to the last
+            x0, F = self.f(x0, t_last - t_init)
+            P0 = F @ P0 @ F.T
+        return InitialState(t_last, x0, 0.5 * (P0 + P0.T))
+
+    def solve(self, batch: list[Measurement]) -> tuple[float, np.ndarray, np.ndarray]:
+        """Return (epoch, state, covariance) from an IOD batch.
+
+        Parameters
+        ----------
+        batch : list of Measurement
+            Real measurements in increasing epoch order (at least 2; 3 for range/az/el).
+
+        Returns
+        -------
+        t : float
+            Epoch of the solution: the middle sample (range/az/el) or the last (positions).
+        x : ndarray, shape (n,)
+            State at `t` (non-finite when the batch cannot be solved).
+        P : ndarray, shape (n, n)
+            The measurement noise pushed through the IOD map (numerical Jacobian, one
+            evaluation per input channel with non-zero variance).
+        """
+        t = np.array([b.t for b in batch])
+        Z = np.array([b.z for b in batch], dtype=float)
+        if self.kind == Kind.RANGE_AZ_EL:
+            mid = len(batch) // 2
+            i3 = [0, mid, len(batch) - 1]
+            t3 = t[i3]
+            razel = cast(RazelModel, self.model)  # the model of kind RANGE_AZ_EL
+
+            def solve(zs: np.ndarray) -> np.ndarray:
+                r = iod.razel_to_eci(zs[i3], razel.jd0_utc + t3 / 86400.0, razel.station)
+                v2 = iod.herrick_gibbs(r[0], r[1], r[2], t3[0], t3[1], t3[2])
+                return np.concatenate([r[1], v2])
+
+            t_init = float(t3[1])
+        else:
+            observed = list(cast(PositionModel, self.model).observed)
+
+            def solve(zs: np.ndarray) -> np.ndarray:
+                x = np.zeros(self.n)
+                fd = iod.finite_difference_state(t, zs)
+                k = len(observed)
+                x[observed] = fd[:k]
+                x[[i + self.n // 2 for i in observed]] = fd[k:]
+                return x
+
+            t_init = float(t[-1])
+        x0 = solve(Z)
+        R = [np.asarray(b.R, dtype=float) for b in batch]
+        P = np.zeros((self.n, self.n))
+        for j, Rj in enumerate(R):
+            sig = np.sqrt(np.clip(np.diag(Rj), 0.0, None))
+            if not sig.any():
+                continue
+            J = np.zeros((self.n, Z.shape[1]))
+            for c in range(Z.shape[1]):
+                if sig[c] == 0.0:
+                    continue
+                dz = Z.copy()
+                dz[j, c] += sig[c]
+                J[:, c] = (solve(dz) - x0) / sig[c]
+            P += J @ Rj @ J.T
+        return t_init, x0, P
