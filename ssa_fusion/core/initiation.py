@@ -107,14 +107,20 @@ class OrbitInitiator:
         if len(self.batch) < max(2, samples):
             return Cause.IOD_PENDING, "collecting IOD measurements"
         batch, self.batch = self.batch, []
-        t_init, x0, P_iod = self.solve(batch)
-        if not np.isfinite(x0).all():
-            return Cause.IOD_FAILED, "initial orbit determination failed"
         t_last = batch[-1].t
-        P0 = P_iod + np.diag(np.asarray(p0_sigma, dtype=float) ** 2)
-        if t_last != t_init:  # Herrick-Gibbs solves at the middle epoch: move to the last
-            x0, F = self.f(x0, t_last - t_init)
-            P0 = F @ P0 @ F.T
+        try:
+            with np.errstate(over="raise", invalid="raise", divide="raise"):
+                t_init, x0, P_iod = self.solve(batch)
+                P0 = P_iod + np.diag(np.asarray(p0_sigma, dtype=float) ** 2)
+                if t_last != t_init:  # Herrick-Gibbs solves at the middle epoch: move on
+                    x0, F = self.f(x0, t_last - t_init)
+                    P0 = F @ P0 @ F.T
+        except (ValueError, OverflowError, FloatingPointError, ZeroDivisionError,
+                np.linalg.LinAlgError) as exc:  # geometry no orbit fits (never raised on)
+            return (Cause.IOD_FAILED,
+                    f"initial orbit determination failed ({type(exc).__name__}: {exc})")
+        if not (np.isfinite(x0).all() and np.isfinite(P0).all()):
+            return Cause.IOD_FAILED, "initial orbit determination failed (non-finite state)"
         return InitialState(t_last, x0, 0.5 * (P0 + P0.T))
 
     def solve(self, batch: list[Measurement]) -> tuple[float, np.ndarray, np.ndarray]:

@@ -60,6 +60,8 @@ class Cause(enum.StrEnum):
     REJECTED_GATE = "rejected_gate"
     REJECTED_STALE = "rejected_stale"
     REJECTED_DUPLICATE = "rejected_duplicate"
+    REJECTED_IMPLAUSIBLE = "rejected_implausible"
+    REJECTED_CLOCK = "rejected_clock"
     FORECAST_SUPERSEDED = "forecast_superseded"
     IGNORED_BEFORE_IOD = "ignored_before_iod"
     IGNORED_FORECAST_INPUT = "ignored_forecast_input"

@@ -26,12 +26,25 @@ beyond the lag of a clock message behind a measurement at 10000x (a few hundred 
 far below a wall-time stamp in a sim-time graph (months)."""
 
 
+MAX_RANGE_KM = 1e7
+"""Largest plausible range (km): 26 times the Moon's distance; no sensor tracking an Earth
+orbiter measures beyond it, and larger values overflow the IOD's arithmetic."""
+MAX_ABS_VALUE = 1e7
+"""Largest plausible magnitude of any measured value (km for positions, rad for angles)."""
+MAX_VARIANCE = 1e12
+"""Largest plausible covariance entry (km^2 or rad^2): a standard deviation of 1e6 km or
+rad carries no information, and such a measurement fused in the initial orbit determination
+would poison the filter."""
+TWO_PI = 2.0 * math.pi
+
+
 def measurement_problem(m: Measurement, kind: int | None, frame_id: str = "") -> Problem:
     """Return what is wrong with `m` for a consumer of `kind` from `frame_id`, or `OK`.
 
     `kind` None and `frame_id` "" accept any. Problems: wrong kind or frame, NaN/inf
-    anywhere, an impossible range/az/el, or a covariance that is not symmetric positive
-    semi-definite.
+    anywhere, an impossible range/az/el, an implausible value (range beyond `MAX_RANGE_KM`,
+    azimuth outside [-2pi, 2pi], any value beyond `MAX_ABS_VALUE`, a covariance entry beyond
+    `MAX_VARIANCE`), or a covariance that is not symmetric positive semi-definite.
     """
     z = np.asarray(m.z, dtype=float)
     R = np.asarray(m.R, dtype=float)
@@ -48,6 +61,20 @@ def measurement_problem(m: Measurement, kind: int | None, frame_id: str = "") ->
         if not -HALF_PI <= z[2] <= HALF_PI:
             return (Cause.REJECTED_ELEVATION,
                     f"elevation {z[2]} rad outside [-pi/2, pi/2] at t={m.t}")
+        if z[0] > MAX_RANGE_KM:
+            return (Cause.REJECTED_IMPLAUSIBLE,
+                    f"range {z[0]:.6g} km beyond {MAX_RANGE_KM:g} km at t={m.t}")
+        if abs(z[1]) > TWO_PI:
+            return (Cause.REJECTED_IMPLAUSIBLE,
+                    f"azimuth {z[1]:.6g} rad outside [-2pi, 2pi] at t={m.t}")
+    if float(np.abs(z).max(initial=0.0)) > MAX_ABS_VALUE:
+        return (Cause.REJECTED_IMPLAUSIBLE,
+                f"a measured value of {float(np.abs(z).max()):.6g} beyond {MAX_ABS_VALUE:g} "
+                f"at t={m.t}")
+    if float(np.abs(R).max(initial=0.0)) > MAX_VARIANCE:
+        return (Cause.REJECTED_IMPLAUSIBLE,
+                f"covariance entry {float(np.abs(R).max()):.6g} beyond {MAX_VARIANCE:g} "
+                f"(units^2) at t={m.t}")
     if not is_covariance(R):
         return Cause.REJECTED_COVARIANCE, "covariance is not symmetric positive semi-definite"
     return OK
@@ -72,9 +99,14 @@ def is_covariance(R: np.ndarray) -> bool:
     zero).
     """
     scale = float(np.abs(R).max(initial=0.0))
-    if float(np.abs(R - R.T).max(initial=0.0)) > 1e-9 * scale:
+    if not math.isfinite(scale):
         return False
-    eig = np.linalg.eigvalsh(0.5 * (R + R.T))
+    if scale == 0.0:
+        return True
+    Rn = R / scale  # entries in [-1, 1]: no overflow in the checks whatever R's magnitude
+    if float(np.abs(Rn - Rn.T).max(initial=0.0)) > 1e-9:
+        return False
+    eig = np.linalg.eigvalsh(0.5 * (Rn + Rn.T))
     return bool(eig[0] >= -1e-12 * np.abs(eig).max())
 
 
