@@ -243,7 +243,10 @@ def run(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
         node = make_node()
         executor.add_node(node)
         while not stop.is_set():
-            executor.spin_once(timeout_sec=0.1)
+            try:
+                executor.spin_once(timeout_sec=0.1)
+            except Exception as exc:  # raised outside the node's guarded callbacks
+                escaped(node, exc)
         _drain(executor, node)
     except ParameterError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -263,6 +266,24 @@ def run(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
     return code
 
 
+def escaped(node: Node, exc: Exception) -> None:
+    """Count an exception that escaped the node's own (guarded) callbacks instead of dying
+    of it: rclpy's handling of a /clock message it cannot take (a negative time) raises in
+    the executor. Counted as `rejected_clock` when it came from rclpy's time source, else
+    `internal_error`, on the node's /diagnostics (logged once)."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    from_clock = any(f.filename.endswith(("time_source.py", "clock.py", "time.py"))
+                     for f in frames)
+    cause = Cause.REJECTED_CLOCK if from_clock else Cause.INTERNAL_ERROR
+    detail = (f"a /clock message rclpy cannot take ({type(exc).__name__}: {exc}); ignored"
+              if from_clock else f"{type(exc).__name__}: {exc}\n" + traceback.format_exc())
+    diag = getattr(node, "diag", None)
+    if diag is not None:
+        diag.count(cause, detail)
+    else:
+        node.get_logger().error(f"{cause}: {detail}")
+
+
 def _drain(
     executor: SingleThreadedExecutor, node: Node, quiet_s: float = 0.2, limit_s: float = 3.0
 ) -> None:
@@ -272,7 +293,10 @@ def _drain(
     deadline = time.monotonic() + limit_s
     last, last_change = node.activity, time.monotonic()
     while time.monotonic() < deadline and time.monotonic() - last_change < quiet_s:
-        executor.spin_once(timeout_sec=0.02)
+        try:
+            executor.spin_once(timeout_sec=0.02)
+        except Exception as exc:
+            escaped(node, exc)
         if node.activity != last:
             last, last_change = node.activity, time.monotonic()
 

@@ -27,7 +27,7 @@ from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 from std_msgs.msg import String
 
 from ssa_fusion.core.config import EstimatorConfig, make_tracker
-from ssa_fusion.core.types import Cause, StateEstimate
+from ssa_fusion.core.types import Cause, Source, StateEstimate
 from ssa_fusion.core.validation import ahead_of_clock
 from ssa_fusion.nodes import settings, start_process
 from ssa_fusion.nodes.common import (
@@ -128,9 +128,12 @@ class FilterNode(Node):
         self.max_lead = clock_lead(self, FILTER.max_clock_lead)
         self.diag = Diagnostics(self)
         self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, DATA_QOS)
-        for topic in (TOPIC_MEASUREMENT, TOPIC_FORECAST):
-            self.diag.subscribe(MeasurementMsg, topic, self.diag.guard(self.on_measurement),
-                                DATA_QOS)
+        for topic, source in ((TOPIC_MEASUREMENT, Source.SENSOR),
+                              (TOPIC_FORECAST, Source.FORECAST)):
+            self.diag.subscribe(
+                MeasurementMsg, topic,
+                self.diag.guard(lambda msg, t=topic, s=source: self.on_measurement(msg, t, s)),
+                DATA_QOS)
         wall_timer(self, 0.1, self.diag.guard(self.predict))
         self._jump = self.get_clock().create_jump_callback(
             JumpThreshold(
@@ -155,8 +158,16 @@ class FilterNode(Node):
             Cause.RESET_CLOCK_JUMP, "sim time jumped backwards: filter reset", warn=False
         )
 
-    def on_measurement(self, msg: MeasurementMsg) -> None:
+    def on_measurement(self, msg: MeasurementMsg, topic: str = TOPIC_MEASUREMENT,
+                       source: int = Source.SENSOR) -> None:
+        """Fuse one message of `topic`, which carries only `source` (sensor data on
+        /ssa/measurement, forecasts on /ssa/forecast; anything else is rejected_source)."""
         self.activity += 1
+        if msg.source != source:
+            self.diag.count(Cause.REJECTED_SOURCE,
+                            f"source {msg.source} on {topic}, which carries only source "
+                            f"{int(source)} ({Source(source).name})")
+            return
         wanted = self.tracker.object_id
         if wanted and msg.object_id != wanted:
             self.diag.count(Cause.IGNORED_OTHER_OBJECT, f"object_id {msg.object_id!r}", warn=False)

@@ -669,3 +669,49 @@ def test_sensor_sim_interrupted_twice_during_shutdown_exits_0(ros_graph, sig):
     time.sleep(0.05)  # a second interrupt while it is already shutting down
     sensor.popen.send_signal(sig)
     assert g.wait_exit(sensor, timeout=15.0) == 0, sensor.describe()
+
+
+def test_a_negative_clock_is_counted_and_no_node_dies(ros_graph, tmp_path):
+    """Issue 22 finding 1: one /clock with negative seconds killed filter, surrogate and
+    recorder (rclpy raises in its clock handling, outside the nodes' callbacks). Now each
+    counts it as rejected_clock and carries on."""
+    from builtin_interfaces.msg import Time
+
+    g = ros_graph
+    got, diag, clock, pub = filter_and_surrogate(g)
+    rec = g.start_node("recorder", params={"use_sim_time": True, "bag": str(tmp_path / "bag")})
+    nodes = (*NODES, "recorder")
+    g.wait_for(lambda: diag.status("recorder") is not None, 20.0, "the recorder's diagnostics")
+    set_clock(g, clock, diag, float(T[6]), NODES)
+    publish_until(g, clock, Clock(clock=Time(sec=-5, nanosec=0)),
+                  lambda: all(diag.counts(n).get("rejected_clock") for n in nodes),
+                  "rejected_clock on every node")
+    set_clock(g, clock, diag, float(T[7]), NODES)
+    for i in range(6):
+        pub.publish(meas(i))
+    g.wait_for(lambda: len(got) >= 4, 15.0, "4 estimates after the bad clock")
+    assert all(p.returncode is None for p in g.procs), g.report()
+    assert rec.returncode is None
+    for n in nodes:
+        assert "internal_error" not in diag.counts(n), n
+
+
+def test_the_forecast_topic_takes_only_forecasts_and_the_measurement_topic_only_sensors(
+        ros_graph):
+    """Issue 22 finding 6: a source=SENSOR message on /ssa/forecast was fused as a real
+    measurement (and a forecast on /ssa/measurement as a forecast)."""
+    g = ros_graph
+    got = g.collect(StateEstimate, "/ssa/estimate")
+    diag = Diag(g)
+    g.start_node("filter", params=filter_params())
+    forecasts = publisher(g, Measurement, "/ssa/forecast", ("filter",))
+    sensor = publisher(g, Measurement, "/ssa/measurement", ("filter",))
+    for i in range(3):
+        forecasts.publish(meas(i))  # sensor data on the forecast topic
+    sensor.publish(meas(3, source=types.Source.FORECAST))
+    diag.wait(g, "filter", {"rejected_source": 4})
+    for i in range(4, 8):
+        sensor.publish(meas(i))
+    c = diag.wait(g, "filter", {"rejected_source": 4, "published_sensor": 2})
+    assert "internal_error" not in c
+    assert [e.t for e in estimates(got)] == [float(T[6]), float(T[7])]
