@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
 
 from ssa_fusion import limit_blas_threads
@@ -38,10 +39,40 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Interrupted(BaseException):
+    """SIGTERM or SIGHUP, raised in the main thread like KeyboardInterrupt for SIGINT, so a
+    command's cleanup (`finally`: stop every node it started, close the bag) runs."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def _interrupt(signum: int, _frame: object) -> None:
+    for sig in _STOP_SIGNALS:  # a second signal must not cut the cleanup short
+        signal.signal(sig, signal.SIG_IGN)
+    raise Interrupted(signum)
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one subcommand. SIGINT, SIGTERM and SIGHUP stop it cleanly: the command's cleanup
+    runs (a live run stops every node it started and closes the bag), a line says so, and
+    the exit code is 128 + the signal's number (130, 143, 129), as a shell reports it."""
     limit_blas_threads()  # before build_parser imports the commands, and with them numpy
     args = build_parser().parse_args(argv)
-    return int(args._run(args) or 0)
+    previous = {sig: signal.signal(sig, _interrupt) for sig in _STOP_SIGNALS}
+    try:
+        return int(args._run(args) or 0)
+    except Interrupted as exc:
+        print(f"ssa-fusion {args.command}: stopped by {exc}; every process it started was "
+              f"stopped", file=sys.stderr)
+        return 128 + exc.signum
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 if __name__ == "__main__":
