@@ -69,6 +69,8 @@ class Cause(enum.StrEnum):
     IOD_PENDING = "iod_pending"
     IOD_FAILED = "iod_failed"
     RESET_CLOCK_JUMP = "reset_clock_jump"
+    HELD_UNTIL_CLOCK = "held_until_clock"
+    DROPPED_BEFORE_CLOCK = "dropped_before_clock"
     FORECASTS_ROLLED_BACK = "forecasts_rolled_back"
     FORECAST_INVALID = "forecast_invalid"
     INTERNAL_ERROR = "internal_error"

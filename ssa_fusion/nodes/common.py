@@ -9,7 +9,7 @@ import signal
 import sys
 import time
 import traceback
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
 from typing import Any
 
@@ -30,7 +30,7 @@ from ssa_fusion.core.types import KIND_NAMES, Cause, Kind
 from ssa_fusion.nodes import STOP
 from ssa_fusion.ros.executors import make_executor
 from ssa_fusion.ros.readiness import MATCHED_KEY
-from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
+from ssa_fusion.ros.topics import DATA_DEPTH, TOPIC_DIAGNOSTICS
 
 
 class ParameterError(ValueError):
@@ -104,6 +104,63 @@ class Diagnostics:
                                value=str(sub.get_publisher_count())) for sub in self._watched]
         msg.status = [st]
         self._pub.publish(msg)
+
+
+class ClockHold:
+    """Messages that arrive before the node's clock has started wait here until it has.
+
+    Under sim time the clock reads 0 until the first /clock: a stamp cannot be judged
+    against it (`validation.ahead_of_clock`), and one stamped a year ahead would go in first
+    and make every later measurement stale. So they are kept, in arrival order (counted as
+    `held_until_clock`), and handed back by `release` once the clock runs. A graph with no
+    /clock at all (sim time never starts) is not stalled: after `wait_s` wall s without one,
+    the held messages are released and later ones pass unheld, unjudged as before. Beyond
+    `limit` the oldest is dropped (`dropped_before_clock`). With wall time the clock always
+    runs.
+    """
+
+    def __init__(self, node: Node, limit: int = DATA_DEPTH, wait_s: float = 5.0) -> None:
+        self.node = node
+        self.limit = limit
+        self.wait_s = wait_s
+        self.held: deque[tuple[Any, ...]] = deque()
+        self.since = math.inf  # monotonic time the first message was held
+        self.clockless = False  # gave up waiting: this graph has no /clock
+
+    def _running(self) -> bool:
+        return bool(self.node.get_clock().now().nanoseconds > 0)
+
+    def hold(self, *item: Any) -> bool:
+        """Keep `item` and return True if the clock has not started, or if messages held
+        before it started have not been released yet (they go first); else return False."""
+        if not self.held and (self.clockless or self._running()):
+            return False
+        diag = self.node.diag
+        if len(self.held) >= self.limit:
+            self.held.popleft()
+            diag.count(Cause.DROPPED_BEFORE_CLOCK,
+                       f"more than {self.limit} messages before the first /clock")
+        if not self.held:
+            self.since = time.monotonic()
+        self.held.append(item)
+        diag.count(Cause.HELD_UNTIL_CLOCK, "measurements arrive before the first /clock: "
+                   "held until sim time starts", warn=False)
+        return True
+
+    def release(self) -> list[tuple[Any, ...]]:
+        """The held items, oldest first, once the clock runs or `wait_s` passed without it
+        (and forget them)."""
+        if not self.held:
+            return []
+        if not self._running():
+            if time.monotonic() - self.since < self.wait_s:
+                return []
+            self.clockless = True
+            self.node.get_logger().info(f"no /clock after {self.wait_s:g} s: measurements "
+                                        "are taken without a clock to judge their stamps")
+        items = list(self.held)
+        self.held.clear()
+        return items
 
 
 def wall_timer(node: Node, period_s: float, callback: Callable[[], None]) -> Any:

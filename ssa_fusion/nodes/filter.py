@@ -31,6 +31,7 @@ from ssa_fusion.core.types import Cause, Source, StateEstimate
 from ssa_fusion.core.validation import ahead_of_clock
 from ssa_fusion.nodes import settings, start_process
 from ssa_fusion.nodes.common import (
+    ClockHold,
     Diagnostics,
     ParameterError,
     all_non_negative,
@@ -127,6 +128,7 @@ class FilterNode(Node):
         )
         self.max_lead = clock_lead(self, FILTER.max_clock_lead)
         self.diag = Diagnostics(self)
+        self.clock_hold = ClockHold(self)
         self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, DATA_QOS)
         for topic, source in ((TOPIC_MEASUREMENT, Source.SENSOR),
                               (TOPIC_FORECAST, Source.FORECAST)):
@@ -168,6 +170,8 @@ class FilterNode(Node):
                             f"source {msg.source} on {topic}, which carries only source "
                             f"{int(source)} ({Source(source).name})")
             return
+        if self.clock_hold.hold(msg, topic, source):
+            return
         wanted = self.tracker.object_id
         if wanted and msg.object_id != wanted:
             self.diag.count(Cause.IGNORED_OTHER_OBJECT, f"object_id {msg.object_id!r}", warn=False)
@@ -201,6 +205,8 @@ class FilterNode(Node):
         self.diag.counts[f"published_{SOURCE_NAMES[e.update_source]}"] += 1
 
     def predict(self) -> None:
+        for held in self.clock_hold.release():
+            self.on_measurement(*held)
         if self.predict_period <= 0:
             return
         now = self.get_clock().now().nanoseconds * 1e-9

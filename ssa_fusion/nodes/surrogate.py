@@ -28,6 +28,7 @@ from ssa_fusion.core.types import Cause
 from ssa_fusion.core.validation import ahead_of_clock
 from ssa_fusion.nodes import settings, start_process
 from ssa_fusion.nodes.common import (
+    ClockHold,
     Diagnostics,
     ParameterError,
     clock_lead,
@@ -120,6 +121,7 @@ class SurrogateNode(Node):
                                  "only learn this object ('' = any)")
         self.max_lead = clock_lead(self, SURROGATE.max_clock_lead)
         self.diag = Diagnostics(self)
+        self.clock_hold = ClockHold(self)
         self.pub = self.create_publisher(MeasurementMsg, TOPIC_FORECAST, DATA_QOS)
         self.diag.subscribe(
             MeasurementMsg, TOPIC_MEASUREMENT, self.diag.guard(self.on_measurement), DATA_QOS
@@ -148,6 +150,8 @@ class SurrogateNode(Node):
 
     def on_measurement(self, msg: MeasurementMsg) -> None:
         self.activity += 1
+        if self.clock_hold.hold(msg):
+            return
         if self.object_id and msg.object_id != self.object_id:
             self.diag.count(Cause.IGNORED_OTHER_OBJECT, f"object_id {msg.object_id!r}", warn=False)
             return
@@ -169,6 +173,8 @@ class SurrogateNode(Node):
         self.diag.counts["buffered"] += 1
 
     def check(self) -> None:
+        for held in self.clock_hold.release():
+            self.on_measurement(*held)
         now = self.get_clock().now().nanoseconds * 1e-9
         self.publish(self.core.due(now))
         if self.core.invalid > self.diag.counts[Cause.FORECAST_INVALID]:

@@ -715,3 +715,23 @@ def test_the_forecast_topic_takes_only_forecasts_and_the_measurement_topic_only_
     c = diag.wait(g, "filter", {"rejected_source": 4, "published_sensor": 2})
     assert "internal_error" not in c
     assert [e.t for e in estimates(got)] == [float(T[6]), float(T[7])]
+
+
+def test_a_future_stamp_before_the_first_clock_does_not_poison_later_ones(ros_graph):
+    """Issue 22 finding 3: before the first /clock nothing could judge a stamp, so one
+    stamped a year ahead went in and made every later measurement stale. Now measurements
+    wait for the clock (held_until_clock), then the year-ahead one is refused."""
+    g = ros_graph
+    got, diag, clock, pub = filter_and_surrogate(g)
+    year = 365.25 * 86400.0
+    for m in [meas(0, year)] + [meas(i) for i in range(6)]:
+        pub.publish(m)
+    # at once (the nodes hold messages for 5 s without a clock, then take them unjudged)
+    set_clock(g, clock, diag, float(T[7]), NODES)
+    for node in NODES:
+        diag.wait(g, node, {"held_until_clock": 7})
+    c = diag.wait(g, "filter", {"rejected_future": 1, "published_sensor": 4})
+    assert "rejected_stale" not in c and "internal_error" not in c
+    c = diag.wait(g, "surrogate", {"rejected_future": 1, "buffered": 6})
+    assert "rejected_stale" not in c
+    assert [e.t for e in estimates(got)] == [float(T[i]) for i in range(2, 6)]
