@@ -219,3 +219,21 @@ def test_replay_over_ros2_of_a_measurement_only_bag(tmp_path):
     counts = Counter(m.topic for m in bagio.read_bag(record))
     assert counts["/ssa/measurement"] == len(played)
     assert counts["/ssa/estimate"] >= len(played) - 2  # every epoch after IOD
+
+
+def test_a_huge_range_in_the_iod_batch_neither_crashes_replay_nor_report(tmp_path, capsys):
+    """Issue 22 finding 4: one range >= 1e6 km among the first three measurements raised
+    from the IOD, and `replay --offline` and `report` of such a bag ended in a traceback.
+    Now the measurement is refused (rejected_implausible) and both finish."""
+    stream = list(bagio.read_bag(SAMPLE))
+    first = [i for i, m in enumerate(stream) if m.topic == "/ssa/measurement"][:2]
+    for i, r in zip(first, (1e300, 1e9), strict=True):
+        stream[i] = copy.deepcopy(stream[i])
+        stream[i].msg.z[0] = r * 1000.0  # m
+    result = replay.replay_offline(stream, replay.settings(stream).estimator)
+    assert result.rejected.get("rejected_implausible") == 2
+    assert len(result.estimates) > 1000
+    bag = tmp_path / "huge"
+    replay.write_offline(bag, stream, result)
+    assert cli.main(["report", str(bag), "--out", str(tmp_path / "rep")]) == 0
+    assert "dmd_ekf" in capsys.readouterr().out
