@@ -298,6 +298,7 @@ def run(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
         if stop.is_set():  # interrupted while starting: nothing to do
             return code
         node = make_node()
+        reject_unknown_parameters(node)
         executor.add_node(node)
         while not stop.is_set():
             try:
@@ -321,6 +322,19 @@ def run(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
     return code
+
+
+def reject_unknown_parameters(node: Node) -> None:
+    """Raise ParameterError naming every parameter given to `node` (``-p``, a params file)
+    that it does not declare, with the list of those it does: a misspelt name would
+    otherwise be ignored silently (rclpy's default)."""
+    declared = set(node._parameters)  # rclpy keeps no public list of either
+    given = set(getattr(node, "_parameter_overrides", {}))
+    unknown = sorted(p for p in given - declared if not p.startswith("qos_overrides."))
+    if unknown:
+        names = ", ".join(f"parameter '{p}'" for p in unknown)
+        raise ParameterError(f"unknown {names}; {node.get_name()} takes: "
+                             f"{', '.join(sorted(declared))}")
 
 
 def escaped(node: Node, exc: Exception) -> None:

@@ -451,6 +451,8 @@ def test_invalid_parameters_refuse_to_start(ros_graph, tmp_path):
         "p0_sigma": ("filter", {"p0_sigma": [1.0, 2.0]}),
         "kind": ("filter", {"kind": "sonar"}),
         "bag": ("recorder", {"bag": str(existing)}),
+        "qq": ("filter", {"qq": 0.1}),  # a misspelt name (issue 22 finding 7)
+        "dealys": ("surrogate", {"dealys": 300}),
     }
     procs = {name: g.start_node(node, params=p, name=f"{node}_{name}", expect_returncode=2)
              for name, (node, p) in cases.items()}
