@@ -13,6 +13,8 @@ ROS) the paper scenario of the measurement kind, said in the output.
 
 from __future__ import annotations
 
+import sys
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -58,13 +60,18 @@ def load(path: Path | str) -> BagData:
         TOPIC_WITHHELD: (data.withheld, measurement_from_msg),
         TOPIC_FORECAST: (data.forecasts, measurement_from_msg),
     }
-    for m in bagio.read_bag(path):
+    undecodable: Counter[str] = Counter()
+    for m in bagio.read_bag(path, undecodable=undecodable):
         data.counts[m.topic] = data.counts.get(m.topic, 0) + 1
         if m.topic in lists:
             target, convert = lists[m.topic]
             target.append(convert(m.msg))
         elif m.topic == TOPIC_CONFIG:
             data.config.append(m.msg.data)
+    for topic, n in undecodable.items():
+        data.counts[f"undecodable {topic}"] = n
+        print(f"warning: {path}: {n} message(s) on {topic} do not decode as their type; "
+              "skipped", file=sys.stderr)
     return data
 
 

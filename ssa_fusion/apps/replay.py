@@ -29,6 +29,7 @@ import math
 import statistics
 import sys
 import time
+from collections import Counter
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -74,7 +75,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        stream = list(bagio.read_bag(args.bag))
+        undecodable: Counter[str] = Counter()
+        stream = list(bagio.read_bag(args.bag, undecodable=undecodable))
+        for topic, n in undecodable.items():
+            print(f"replay: {n} message(s) on {topic} do not decode as their type; skipped")
         check_topics(args.bag, stream)
         chosen = settings(stream, args.scenario, args.params_file)
     except (bagio.BagError, ValueError) as exc:

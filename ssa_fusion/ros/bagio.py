@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import sys
+from collections import Counter
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -160,13 +161,16 @@ class BagMessage:
     msg: Any
 
 
-def read_bag(path: Path | str, topics: Iterable[str] | None = None) -> Iterator[BagMessage]:
+def read_bag(path: Path | str, topics: Iterable[str] | None = None,
+             undecodable: Counter[str] | None = None) -> Iterator[BagMessage]:
     """Messages of a bag in log-time order, deserialized with the Kilted + ssa_fusion_msgs
     typestore.
 
     `path` is a rosbag2 directory (metadata.yaml + storage files, as this project or
     `ros2 bag record` writes them) or a bare ``.mcap`` file. Unknown message types raise
-    BagError naming topic and type.
+    BagError naming topic and type. A message whose bytes do not decode as its type (a
+    malformed payload the recorder stored as it arrived) is skipped and counted by topic
+    in `undecodable` (when given): one bad message does not make the bag unreadable.
     """
     path = Path(path)
     if not path.exists():
@@ -174,9 +178,9 @@ def read_bag(path: Path | str, topics: Iterable[str] | None = None) -> Iterator[
     wanted = set(topics) if topics is not None else None
     if path.is_file() and path.suffix == ".mcap":
         if _mcap_finished(path):
-            yield from _read_mcap_file(path, wanted)
+            yield from _read_mcap_file(path, wanted, undecodable)
         else:
-            yield from _recover_mcap_file(path, wanted)
+            yield from _recover_mcap_file(path, wanted, undecodable)
         return
     if not (path / "metadata.yaml").exists():
         # metadata.yaml and the MCAP summary are written at close: a recorder killed
@@ -186,7 +190,7 @@ def read_bag(path: Path | str, topics: Iterable[str] | None = None) -> Iterator[
             raise BagError(
                 f"{path}: not a rosbag2 directory (no metadata.yaml) nor an .mcap file"
             )
-        recovered = [m for f in files for m in _recover_mcap_file(f, wanted)]
+        recovered = [m for f in files for m in _recover_mcap_file(f, wanted, undecodable)]
         yield from sorted(recovered, key=lambda m: m.t_ns)
         return
     from rosbags.highlevel import AnyReader
@@ -196,8 +200,9 @@ def read_bag(path: Path | str, topics: Iterable[str] | None = None) -> Iterator[
             conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
             _check_types(path, [(c.topic, c.msgtype) for c in conns])
             for conn, t_ns, raw in reader.messages(connections=conns):
-                yield BagMessage(conn.topic, conn.msgtype, t_ns,
-                                 reader.deserialize(raw, conn.msgtype))
+                msg = _decode(reader.deserialize, raw, conn.msgtype, conn.topic, undecodable)
+                if msg is not None:
+                    yield BagMessage(conn.topic, conn.msgtype, t_ns, msg)
     except BagError:
         raise
     except Exception as exc:  # rosbags raises several unrelated types; name the file
@@ -211,7 +216,20 @@ def _check_types(path: Path, topic_types: list[tuple[str, str]]) -> None:
             raise BagError(f"{path}: topic {topic} has unknown message type {msgtype}")
 
 
-def _read_mcap_file(path: Path, wanted: set[str] | None) -> Iterator[BagMessage]:
+def _decode(deserialize: Any, data: Any, msgtype: str, topic: str,
+            undecodable: Counter[str] | None) -> Any:
+    """deserialize(data, msgtype), or None (counted under `topic`) if the bytes are not a
+    valid message of that type."""
+    try:
+        return deserialize(data, msgtype)
+    except Exception:  # rosbags/CDR raise several unrelated types on malformed bytes
+        if undecodable is not None:
+            undecodable[topic] += 1
+        return None
+
+
+def _read_mcap_file(path: Path, wanted: set[str] | None,
+                    undecodable: Counter[str] | None = None) -> Iterator[BagMessage]:
     """A bare MCAP file (ROS 2 profile, CDR): log-time order via its index when it has
     one, else in file order."""
     from mcap.exceptions import McapError
@@ -228,8 +246,10 @@ def _read_mcap_file(path: Path, wanted: set[str] | None) -> Iterator[BagMessage]
                 if schema is None or schema.name not in store.fielddefs:
                     name = schema.name if schema else "(no schema)"
                     raise BagError(f"{path}: topic {channel.topic} has unknown type {name}")
-                yield BagMessage(channel.topic, schema.name, message.log_time,
-                                 store.deserialize_cdr(message.data, schema.name))
+                msg = _decode(store.deserialize_cdr, message.data, schema.name, channel.topic,
+                              undecodable)
+                if msg is not None:
+                    yield BagMessage(channel.topic, schema.name, message.log_time, msg)
     except BagError:
         raise
     except (McapError, OSError, ValueError, EOFError) as exc:
@@ -249,7 +269,8 @@ def _mcap_finished(path: Path) -> bool:
         return f.read() == MCAP_MAGIC
 
 
-def _recover_mcap_file(path: Path, wanted: set[str] | None) -> Iterator[BagMessage]:
+def _recover_mcap_file(path: Path, wanted: set[str] | None,
+                       undecodable: Counter[str] | None = None) -> Iterator[BagMessage]:
     """Messages of an MCAP file its writer never closed (no summary, no footer; maybe a
     torn last record): read record by record up to the last complete one, in log-time
     order. Everything the recorder flushed (a whole chunk per `flush_period`) is there."""
@@ -278,8 +299,10 @@ def _recover_mcap_file(path: Path, wanted: set[str] | None) -> Iterator[BagMessa
                     if schema is None or schema.name not in store.fielddefs:
                         name = schema.name if schema else "(no schema)"
                         raise BagError(f"{path}: topic {channel.topic} has unknown type {name}")
-                    out.append(BagMessage(channel.topic, schema.name, record.log_time,
-                                          store.deserialize_cdr(record.data, schema.name)))
+                    msg = _decode(store.deserialize_cdr, record.data, schema.name,
+                                  channel.topic, undecodable)
+                    if msg is not None:
+                        out.append(BagMessage(channel.topic, schema.name, record.log_time, msg))
         except (McapError, EOFError, ValueError, struct.error):
             pass  # the torn end of an unfinished file: keep what came before
     out.sort(key=lambda m: m.t_ns)

@@ -237,3 +237,25 @@ def test_a_huge_range_in_the_iod_batch_neither_crashes_replay_nor_report(tmp_pat
     replay.write_offline(bag, stream, result)
     assert cli.main(["report", str(bag), "--out", str(tmp_path / "rep")]) == 0
     assert "dmd_ekf" in capsys.readouterr().out
+
+
+def test_a_malformed_payload_in_the_bag_is_skipped_and_counted(tmp_path, capsys):
+    """Issue 22 finding 6: the recorder stores what arrives, and one undecodable payload
+    made `report` and `replay` reject the whole bag. Now it is skipped and counted."""
+    stream = list(bagio.read_bag(SAMPLE))
+    bag = tmp_path / "junk"
+    writer = bagio.BagWriter(bag)
+    topics = {m.topic: m.msgtype for m in stream}
+    for topic, msgtype in topics.items():
+        writer.add_topic(topic, msgtype)
+    k = next(i for i, m in enumerate(stream) if m.topic == "/ssa/measurement" and i > 100)
+    for i, m in enumerate(stream):
+        writer.write_msg(m.topic, m.t_ns, m.msg)
+        if i == k:
+            writer.write(m.topic, m.t_ns + 1, b"\x00\x01\x00\x00junk")
+    writer.close()
+    data = evaluate.load(bag)
+    assert data.counts["undecodable /ssa/measurement"] == 1
+    assert data.counts["/ssa/measurement"] == evaluate.load(SAMPLE).counts["/ssa/measurement"]
+    assert cli.main(["report", str(bag), "--out", str(tmp_path / "rep")]) == 0
+    assert "1 message(s) on /ssa/measurement do not decode" in capsys.readouterr().err
