@@ -119,7 +119,7 @@ class ClockHold:
     runs.
     """
 
-    def __init__(self, node: Node, limit: int = DATA_DEPTH, wait_s: float = 5.0) -> None:
+    def __init__(self, node: Node, limit: int = DATA_DEPTH, wait_s: float = 3.0) -> None:
         self.node = node
         self.limit = limit
         self.wait_s = wait_s

@@ -728,7 +728,7 @@ def test_a_future_stamp_before_the_first_clock_does_not_poison_later_ones(ros_gr
     year = 365.25 * 86400.0
     for m in [meas(0, year)] + [meas(i) for i in range(6)]:
         pub.publish(m)
-    # at once (the nodes hold messages for 5 s without a clock, then take them unjudged)
+    # at once (the nodes hold messages for 3 s without a clock, then take them unjudged)
     set_clock(g, clock, diag, float(T[7]), NODES)
     for node in NODES:
         diag.wait(g, node, {"held_until_clock": 7})
