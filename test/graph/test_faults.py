@@ -508,6 +508,26 @@ def test_bad_param_set_at_run_time_is_refused_and_old_value_kept(ros_graph):
     assert filt.returncode is None
 
 
+def test_a_run_time_set_gets_the_same_cross_check_as_start_up(ros_graph):
+    """Issue 21: `ros2 param set /surrogate delays 100000` was accepted at run time although
+    the same value is refused at start (the buffer cannot hold 2 x delays x cadence)."""
+    g = ros_graph
+    surr = g.start_node("surrogate", params=surrogate_params())
+    client = g.probe.create_client(SetParameters, "/surrogate/set_parameters")
+    get_client = g.probe.create_client(GetParameters, "/surrogate/get_parameters")
+    integer = ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=100000)
+    req = SetParameters.Request(parameters=[ParameterMsg(name="delays", value=integer)])
+    result = _call(g, client, req, "/surrogate/set_parameters").results[0]
+    assert not result.successful and "2 x delays x cadence" in result.reason
+    got = _call(g, get_client, GetParameters.Request(names=["delays"]),
+                "/surrogate/get_parameters").values[0]
+    assert got.integer_value == PARAMS["surrogate"]["delays"]
+    small = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=60.0)
+    req = SetParameters.Request(parameters=[ParameterMsg(name="buffer_length", value=small)])
+    assert not _call(g, client, req, "/surrogate/set_parameters").results[0].successful
+    assert surr.returncode is None
+
+
 
 def test_valid_param_set_at_run_time_takes_effect_and_read_only_ones_are_refused(ros_graph):
     g = ros_graph
