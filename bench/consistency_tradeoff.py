@@ -37,12 +37,8 @@ import numpy as np  # noqa: E402
 
 from ssa_fusion.core.metrics import chi2_bounds  # noqa: E402
 from ssa_fusion.paper import scenarios  # noqa: E402
-from ssa_fusion.paper.experiments import (  # noqa: E402
-    forecast_fraction,
-    run_dmd_ekf,
-    run_hypothetical,
-    score,
-)
+from ssa_fusion.paper.arms import ArmName  # noqa: E402
+from ssa_fusion.paper.experiments import evaluate_sim  # noqa: E402
 from ssa_fusion.paper.simulate import simulate  # noqa: E402
 
 
@@ -53,10 +49,10 @@ def one_seed(job: tuple[str, float, float, int]
     name, q, share, seed = job
     s = scenarios.get(name).with_(q=q)
     sim = simulate(s, seed)
-    hyp = score(run_hypothetical(s, sim), sim)
-    arm = run_dmd_ekf(s, sim, noise_share=share)[0]
-    dmd = score(arm, sim)
-    return dmd["epsilon"] / hyp["epsilon"], dmd["nees"], hyp["nees"], forecast_fraction(arm, sim)
+    ev, _ = evaluate_sim(s, sim, seed, only=(ArmName.DMD_EKF, ArmName.HYPOTHETICAL_EKF),
+                         noise_share=share)
+    dmd, hyp = ev.scores[ArmName.DMD_EKF], ev.scores[ArmName.HYPOTHETICAL_EKF]
+    return dmd.epsilon / hyp.epsilon, dmd.nees, hyp.nees, ev.coverage
 
 
 def main() -> None:
