@@ -20,3 +20,6 @@ MU_EARTH_MOON = 0.012150585609624
 
 G0 = 9.80665
 """Standard gravity, m/s^2 (used by the pendulum)."""
+
+C_KM_S = 299792.458
+"""Speed of light in vacuum, km/s (exact, SI)."""
