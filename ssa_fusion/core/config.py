@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from . import dynamics, kepler
-from .measurement import PositionModel, RazelModel
-from .stations import STATIONS, UNIX_EPOCH_JD
+from .measurement import MeasurementModel, PositionModel, RadecModel, RazelModel, StationModels
+from .stations import NETWORKS, STATIONS, UNIX_EPOCH_JD, network_stations
 from .surrogate import EciLift, Surrogate, SurrogateConfig
 from .tracker import Tracker, TrackerConfig
 from .types import KIND_NAMES, Kind
@@ -75,7 +75,9 @@ class EstimatorConfig:
     kind : Kind
         Measurement kind the filter and the surrogate take.
     station : str
-        Station id (`stations.STATIONS`) of range/az/el measurements; unused for positions.
+        Station id (`stations.STATIONS`) of range/az/el or ra/dec measurements, or a station
+        network (a `stations.NETWORKS` id, or station ids separated by commas: the filter
+        then fuses every station of the network, radar and optical); unused for positions.
     observed : tuple of int
         State channels a position measurement observes (`measurement.PositionModel`).
     n : int
@@ -89,6 +91,8 @@ class EstimatorConfig:
         `stations.UNIX_EPOCH_JD`; 0 for the non-orbit problems, whose clock has no epoch).
     lift : Lift
         What the surrogate learns.
+    light_time : bool
+        Light-time correction in the station measurement models (`measurement`).
     tracker : TrackerConfig
         EKF settings (its `frame_id` is set from `kind`/`station` by `make_tracker`).
     surrogate : SurrogateConfig
@@ -103,6 +107,7 @@ class EstimatorConfig:
     motion_params: dict[str, float] = field(default_factory=dict)
     jd0: float = UNIX_EPOCH_JD
     lift: Lift = Lift.NONE
+    light_time: bool = False
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
     surrogate: SurrogateConfig = field(default_factory=SurrogateConfig)
 
@@ -112,28 +117,46 @@ class EstimatorConfig:
         self.motion_model = MotionModel(self.motion_model)
         self.lift = Lift(self.lift)
         self.observed = tuple(int(i) for i in self.observed)
-        if self.kind == Kind.RANGE_AZ_EL and self.station not in STATIONS:
-            raise ValueError(f"station {self.station!r} unknown; known: {', '.join(STATIONS)}")
+        if self.kind in (Kind.RANGE_AZ_EL, Kind.RA_DEC):
+            network_stations(self.station)  # ValueError naming the known ids
         if self.lift == Lift.ECI and self.kind != Kind.RANGE_AZ_EL:
             raise ValueError("lift 'eci' needs kind range_az_el")
         if self.motion_model in ORBIT_MODELS and self.n != 6:
             raise ValueError(f"motion model {self.motion_model} needs n = 6, got {self.n}")
 
     @property
+    def is_network(self) -> bool:
+        """True when `station` names a network (several stations, any sensor type)."""
+        return self.station in NETWORKS or "," in self.station
+
+    @property
     def frame_id(self) -> str:
-        """The frame_id the measurements carry: the station id, or "eci" for positions."""
-        return self.station if self.kind == Kind.RANGE_AZ_EL else "eci"
+        """The frame_id the measurements carry.
+
+        The station id, "" for a network (any of its stations), or "eci" for positions.
+        """
+        if self.kind == Kind.POSITION:
+            return "eci"
+        return "" if self.is_network else self.station
 
     def with_(self, **changes: Any) -> EstimatorConfig:  # noqa: ANN401
         """Return a copy with `changes` (`dataclasses.replace`)."""
         return replace(self, **changes)
 
 
-def measurement_model(c: EstimatorConfig) -> PositionModel | RazelModel:
-    """h(x, t) of the configured measurement kind; t on the clock whose t = 0 is `c.jd0`."""
-    if c.kind == Kind.RANGE_AZ_EL:
-        return RazelModel(STATIONS[c.station], c.jd0)
-    return PositionModel(c.observed)
+def measurement_model(c: EstimatorConfig) -> MeasurementModel:
+    """Return h(x, t) of the configured measurement kind, or a network's models.
+
+    t is on the clock whose t = 0 is `c.jd0`.
+    """
+    if c.kind == Kind.POSITION:
+        return PositionModel(c.observed)
+    if c.is_network:
+        return StationModels(network_stations(c.station), c.jd0, c.light_time)
+    station = STATIONS[c.station]
+    if c.kind == Kind.RA_DEC:
+        return RadecModel(station, c.jd0, c.light_time)
+    return RazelModel(station, c.jd0, c.light_time)
 
 
 def motion(c: EstimatorConfig) -> MotionFunction:
@@ -177,7 +200,7 @@ def make_surrogate(c: EstimatorConfig) -> Surrogate:
 
 
 _STREAM_KEYS = ("kind", "station", "observed", "n", "motion_model", "motion_params", "jd0",
-                "lift")
+                "lift", "light_time")
 _NOT_SERIALISED = {"tracker": ("frame_id",), "surrogate": ("kind", "frame_id", "lift")}
 """Component fields set from the stream by the builders, so not part of the JSON."""
 

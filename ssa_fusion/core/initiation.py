@@ -9,9 +9,13 @@ to the batch being collected). The rules during IOD:
 * a forecast is ignored (`Cause.IGNORED_BEFORE_IOD`): IOD uses real measurements only;
 * a real measurement older than the last one collected is stale, one at its epoch a
   duplicate (`Cause.REJECTED_STALE`, `Cause.REJECTED_DUPLICATE`);
+* a batch comes from one station, of one kind, within ``max_span_s`` of its first
+  measurement (one pass): a measurement from another station, of another kind, or later
+  than that starts a new batch;
 * until ``max(2, samples)`` are collected the answer is `Cause.IOD_PENDING`; then the batch is
   solved (`OrbitInitiator.solve`) and emptied: range/az/el by Herrick-Gibbs at the middle of
-  the first, middle and last sample, positions by finite differences at the last epoch
+  the first, middle and last sample, ra/dec by Gauss's angles-only method (with iterative
+  improvement) at the same three, positions by finite differences at the last epoch
   (`iod`), the covariance being the measurement noise pushed through that map (numerical
   Jacobian). A non-finite solution is `Cause.IOD_FAILED`;
 * the filter starts at the batch's last epoch, with the covariance floor ``p0_sigma`` added
@@ -21,6 +25,7 @@ to the batch being collected). The rules during IOD:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import cast
@@ -28,8 +33,8 @@ from typing import cast
 import numpy as np
 
 from . import iod
-from .measurement import PositionModel, RazelModel
-from .types import Cause, Kind, Measurement, Source
+from .measurement import MeasurementModel, PositionModel, RadecModel, RazelModel, StationModels
+from .types import Cause, Measurement, Source
 
 Placeholder = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
 """Placeholder dynamics ``f(x, dt) -> (x_new, F)``: the state ``dt`` s later and its Jacobian."""
@@ -61,8 +66,9 @@ class OrbitInitiator:
     ----------
     f : Placeholder
         Placeholder dynamics, used to move a Herrick-Gibbs state to the batch's last epoch.
-    model : PositionModel or RazelModel
-        Measurement model of the batch (its ``kind`` chooses the IOD method).
+    model : MeasurementModel
+        Measurement model of the batch (the measurements' kind chooses the IOD method); for
+        a station network, the batch's station's model.
     n : int
         State size (``[position, velocity]``, n/2 each).
 
@@ -72,15 +78,14 @@ class OrbitInitiator:
         The real measurements collected so far, in increasing epoch order.
     """
 
-    def __init__(self, f: Placeholder, model: PositionModel | RazelModel, n: int) -> None:
+    def __init__(self, f: Placeholder, model: MeasurementModel, n: int) -> None:
         self.f = f
         self.model = model
         self.n = n
-        self.kind = model.kind
         self.batch: list[Measurement] = []
 
-    def add(self, m: Measurement, samples: int,
-            p0_sigma: tuple[float, ...]) -> InitialState | tuple[str, str]:
+    def add(self, m: Measurement, samples: int, p0_sigma: tuple[float, ...],
+            max_span_s: float = math.inf) -> InitialState | tuple[str, str]:
         """Collect `m` (an admitted measurement); solve the batch once it is complete.
 
         Parameters
@@ -91,6 +96,8 @@ class OrbitInitiator:
             Real measurements per batch (at least 2 are used).
         p0_sigma : tuple of float, (n,)
             Standard deviations added in quadrature to the IOD covariance, state units.
+        max_span_s : float
+            Longest span of one batch, s (see the module docstring).
 
         Returns
         -------
@@ -103,6 +110,9 @@ class OrbitInitiator:
         if self.batch and m.t <= self.batch[-1].t:
             return (Cause.REJECTED_STALE if m.t < self.batch[-1].t
                     else Cause.REJECTED_DUPLICATE), f"t={m.t} during IOD"
+        if self.batch and (m.frame_id != self.batch[0].frame_id or m.kind != self.batch[0].kind
+                           or m.t - self.batch[0].t > max_span_s):
+            self.batch = []  # a new pass, station or kind: start again from m
         self.batch.append(m)
         if len(self.batch) < max(2, samples):
             return Cause.IOD_PENDING, "collecting IOD measurements"
@@ -143,20 +153,30 @@ class OrbitInitiator:
         """
         t = np.array([b.t for b in batch])
         Z = np.array([b.z for b in batch], dtype=float)
-        if self.kind == Kind.RANGE_AZ_EL:
+        model = (self.model.get(batch[0].kind, batch[0].frame_id)
+                 if isinstance(self.model, StationModels) else self.model)
+        if isinstance(model, RazelModel | RadecModel):
             mid = len(batch) // 2
             i3 = [0, mid, len(batch) - 1]
             t3 = t[i3]
-            razel = cast(RazelModel, self.model)  # the model of kind RANGE_AZ_EL
+            station = model
 
-            def solve(zs: np.ndarray) -> np.ndarray:
-                r = iod.razel_to_eci(zs[i3], razel.jd0_utc + t3 / 86400.0, razel.station)
-                v2 = iod.herrick_gibbs(r[0], r[1], r[2], t3[0], t3[1], t3[2])
-                return np.concatenate([r[1], v2])
+            if isinstance(model, RazelModel):
+                def solve(zs: np.ndarray) -> np.ndarray:
+                    r = iod.razel_to_eci(zs[i3], station.jd0_utc + t3 / 86400.0,
+                                         station.station)
+                    v2 = iod.herrick_gibbs(r[0], r[1], r[2], t3[0], t3[1], t3[2])
+                    return np.concatenate([r[1], v2])
+            else:
+                sites = np.array([station.site_eci(ti) for ti in t3])
+
+                def solve(zs: np.ndarray) -> np.ndarray:
+                    r2, v2 = iod.gauss_angles_only(t3, zs[i3, 0], zs[i3, 1], sites)
+                    return np.concatenate([r2, v2])
 
             t_init = float(t3[1])
         else:
-            observed = list(cast(PositionModel, self.model).observed)
+            observed = list(cast(PositionModel, model).observed)
 
             def solve(zs: np.ndarray) -> np.ndarray:
                 x = np.zeros(self.n)

@@ -1,18 +1,185 @@
-"""Ground stations by id, and the clock their measurements are stamped on.
+"""Ground stations and their sensors by id, station networks, and the clock of measurements.
 
-A range/azimuth/elevation measurement names its station in ``frame_id``; `STATIONS` maps
-those ids to `frames.Station` (the nodes' ``station`` parameter takes its keys). Live and
-recorded measurements are stamped in Unix seconds (UTC; ROS time under sim time too), so a
-station's `measurement.RazelModel` has its reference epoch at `UNIX_EPOCH_JD`.
+A station's measurement names it in ``frame_id``: range/azimuth/elevation from a radar,
+topocentric right ascension/declination from an optical telescope. `STATIONS` maps station
+ids to their sites (`frames.Station`; the nodes' ``station`` parameter takes these keys, or a
+`NETWORKS` key); `SENSORS` maps sensor presets to what the sensor there measures, how well,
+above which elevation and how often during a pass. Live and recorded measurements are stamped
+in Unix seconds (UTC; ROS time under sim time too), so a station's measurement model has its
+reference epoch at `UNIX_EPOCH_JD`.
+
+Sites of the network are real, publicly documented tracking sites; coordinates are rounded
+to about 0.01 deg (~1 km) from the public descriptions cited with each, which is more than
+enough for simulation (no claim is made that they are survey-grade). Noise levels are the
+issue's reference values, not the sites' specifications: a tracking radar 20 m in range and
+0.02 deg in angle (the values of Orekit's orbit-determination tutorial), an optical
+telescope 1.5 arcsec.
 """
 
 from __future__ import annotations
 
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
 from .frames import COLUMBUS, Station
+from .types import Kind
 
 UNIX_EPOCH_JD = 2440587.5
 """Julian date of 1970-01-01T00:00:00 UTC; jd = UNIX_EPOCH_JD + t_unix / 86400."""
 
-STATIONS: dict[str, Station] = {"columbus": COLUMBUS}
+ARCSEC = math.pi / (180.0 * 3600.0)
+"""One arc second, rad."""
+
+
+class SensorType(enum.StrEnum):
+    """What a station's sensor measures."""
+
+    RADAR = "radar"
+    """Range, azimuth, elevation (`Kind.RANGE_AZ_EL`), day and night."""
+    OPTICAL = "optical"
+    """Topocentric right ascension and declination (`Kind.RA_DEC`), only while the station is
+    dark (sun below -12 deg) and the object sunlit."""
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """A sensor at a ground station.
+
+    Attributes
+    ----------
+    station : Station
+        The site; its ``name`` is the ``frame_id`` of the measurements.
+    type : SensorType
+        Radar or optical.
+    sigma : tuple of float
+        Noise standard deviation per channel: (km, rad, rad) for a radar, (rad, rad) for an
+        optical sensor.
+    min_elevation_deg : float
+        Elevation mask, deg: the sensor measures only above it.
+    mask_by_azimuth_deg : tuple of (float, float)
+        Optional mask by azimuth: (azimuth deg, minimum elevation deg) points, interpolated
+        linearly and periodically in azimuth; where given, the larger of it and
+        `min_elevation_deg` applies.
+    cadence_s : float
+        Seconds between measurements during a pass.
+    bias : tuple of float
+        Constant bias added to every measurement, same units as `sigma` (empty: none).
+    source : str
+        Where the site's coordinates come from.
+    """
+
+    station: Station
+    type: SensorType
+    sigma: tuple[float, ...]
+    min_elevation_deg: float = 10.0
+    mask_by_azimuth_deg: tuple[tuple[float, float], ...] = ()
+    cadence_s: float = 10.0
+    bias: tuple[float, ...] = ()
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        """Check the channel count of `sigma` and `bias` against the type (ValueError)."""
+        m = len(self.sigma)
+        if m != (3 if self.type == SensorType.RADAR else 2):
+            raise ValueError(f"{self.type} sensor needs {3 if m == 2 else 2} sigmas, got {m}")
+        if self.bias and len(self.bias) != m:
+            raise ValueError(f"bias needs {m} values, got {len(self.bias)}")
+
+    @property
+    def kind(self) -> Kind:
+        """The measurement kind: RANGE_AZ_EL (radar) or RA_DEC (optical)."""
+        return Kind.RANGE_AZ_EL if self.type == SensorType.RADAR else Kind.RA_DEC
+
+    @property
+    def R(self) -> NDArray[np.float64]:
+        """Noise covariance (m, m) in the units of the measurement squared."""
+        return np.diag(np.asarray(self.sigma, dtype=float) ** 2)
+
+    def min_elevation(self, az_rad: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Return the elevation mask (rad) at azimuths `az_rad` (rad, any shape)."""
+        floor = np.full(np.shape(az_rad), math.radians(self.min_elevation_deg))
+        if not self.mask_by_azimuth_deg:
+            return floor
+        table = np.radians(np.array(sorted(self.mask_by_azimuth_deg), dtype=float))
+        by_az = np.interp(np.mod(az_rad, 2 * math.pi), table[:, 0], table[:, 1],
+                          period=2 * math.pi)
+        out: NDArray[np.float64] = np.maximum(floor, by_az)
+        return out
+
+
+def _site(name: str, lat_deg: float, lon_deg: float, alt_km: float) -> Station:
+    return Station(name, math.radians(lat_deg), math.radians(lon_deg), alt_km)
+
+
+RADAR_SIGMA = (0.020, math.radians(0.02), math.radians(0.02))
+"""Tracking-radar noise: 20 m range, 0.02 deg azimuth and elevation."""
+OPTICAL_SIGMA = (1.5 * ARCSEC, 1.5 * ARCSEC)
+"""Optical noise: 1.5 arcsec in right ascension and declination."""
+PAPER_SIGMA = (1.0, 0.01, 0.01)
+"""The paper's idealised sensor: 1 km range, 0.01 rad (0.57 deg) angles."""
+
+SENSORS: dict[str, Sensor] = {
+    "columbus": Sensor(COLUMBUS, SensorType.RADAR, RADAR_SIGMA, 10.0, cadence_s=10.0,
+                       source="the paper's observer, Columbus, Ohio"),
+    "columbus_paper": Sensor(COLUMBUS, SensorType.RADAR, PAPER_SIGMA, -90.0, cadence_s=30.0,
+                             source="the paper's idealised sensor: sees through the Earth"),
+    "millstone": Sensor(
+        _site("millstone", 42.62, -71.49, 0.13), SensorType.RADAR, RADAR_SIGMA, 5.0,
+        source="Millstone Hill Radar, MIT Haystack Observatory, Westford MA "
+               "(haystack.mit.edu; en.wikipedia.org/wiki/Millstone_Hill)"),
+    "altair": Sensor(
+        _site("altair", 9.40, 167.48, 0.01), SensorType.RADAR, RADAR_SIGMA, 5.0,
+        source="ALTAIR, Reagan Test Site, Roi-Namur, Kwajalein Atoll "
+               "(en.wikipedia.org/wiki/ALTAIR)"),
+    "tira": Sensor(
+        _site("tira", 50.62, 7.13, 0.30), SensorType.RADAR, RADAR_SIGMA, 10.0,
+        source="TIRA, Fraunhofer FHR, Wachtberg, Germany "
+               "(fhr.fraunhofer.de; en.wikipedia.org/wiki/TIRA_(radar))"),
+    "socorro": Sensor(
+        _site("socorro", 33.82, -106.66, 1.51), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
+        cadence_s=10.0,
+        source="GEODSS Socorro, White Sands Missile Range, New Mexico "
+               "(en.wikipedia.org/wiki/GEODSS)"),
+    "maui": Sensor(
+        _site("maui", 20.71, -156.26, 3.06), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
+        cadence_s=10.0,
+        source="GEODSS Maui, Haleakala, Hawaii (en.wikipedia.org/wiki/GEODSS)"),
+    "diego_garcia": Sensor(
+        _site("diego_garcia", -7.41, 72.45, 0.01), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
+        cadence_s=10.0,
+        source="GEODSS Diego Garcia, British Indian Ocean Territory "
+               "(en.wikipedia.org/wiki/GEODSS)"),
+}
+"""Sensor presets by id. ``columbus`` and ``columbus_paper`` are two sensors at one site
+(frame_id "columbus"): a real radar with a 10 deg mask, and the paper's idealised one."""
+
+NETWORKS: dict[str, tuple[str, ...]] = {
+    "network": ("millstone", "tira", "altair", "socorro", "maui", "diego_garcia"),
+    "radar_network": ("millstone", "tira", "altair"),
+    "optical_network": ("socorro", "maui", "diego_garcia"),
+}
+"""Station networks by id: sensor preset ids, spread in longitude (radar and optical mixed,
+radar only, optical only)."""
+
+STATIONS: dict[str, Station] = {s.station.name: s.station for s in SENSORS.values()}
 """Known stations by id (the ``frame_id`` of their measurements)."""
 
+
+def network_stations(name: str) -> dict[str, Station]:
+    """Return the stations (id -> Station) of a network id, a station id, or "a,b,c" ids.
+
+    ValueError naming the known ids for an unknown one.
+    """
+    ids = NETWORKS.get(name) or tuple(x.strip() for x in name.split(",") if x.strip())
+    out = {}
+    for i in ids:
+        station = STATIONS.get(i) or (SENSORS[i].station if i in SENSORS else None)
+        if station is None:
+            raise ValueError(f"station {i!r} unknown; known stations: {', '.join(STATIONS)}; "
+                             f"networks: {', '.join(NETWORKS)}")
+        out[station.name] = station
+    return out

@@ -52,7 +52,7 @@ import numpy as np
 from .ekf import ExtendedKalmanFilter, process_noise
 from .history import HISTORY_REAL, FusedHistory, FusedStep, Snapshot
 from .initiation import OrbitInitiator, Placeholder
-from .measurement import PositionModel, RazelModel
+from .measurement import MeasurementModel, StationModels
 from .types import Cause, Measurement, Source, StateEstimate, UpdateSource
 from .validation import OK, measurement_problem
 
@@ -88,7 +88,13 @@ class TrackerConfig:
         Real measurements used for the initial orbit determination (>= 2; 3 for
         Herrick-Gibbs with range/az/el).
     frame_id : str
-        Frame (station id, or "eci") measurements must be expressed in; "" = any.
+        Frame (station id, or "eci") measurements must be expressed in; "" = any (with a
+        station network: any of its stations).
+    iod_max_span_s : float
+        Longest time (s) one IOD batch may span; a measurement further from the batch's
+        first one (or from another station or of another kind) starts a new batch, so the
+        initial orbit comes from one pass of one station (Herrick-Gibbs and Gauss need
+        closely spaced samples).
     """
 
     p0_sigma: tuple[float, ...] = (1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3)
@@ -96,6 +102,7 @@ class TrackerConfig:
     gate: float | None = DEFAULT_GATE
     iod_samples: int = 3
     frame_id: str = ""
+    iod_max_span_s: float = math.inf
 
 
 @dataclass
@@ -130,7 +137,7 @@ class Tracker:
     handed to the `initiation.OrbitInitiator` at construction and at each `reset`.
     """
 
-    def __init__(self, placeholder: Placeholder, model: PositionModel | RazelModel,
+    def __init__(self, placeholder: Placeholder, model: MeasurementModel,
                  config: TrackerConfig, n: int = 6, object_id: str = "") -> None:
         self.f = placeholder
         self.model = model
@@ -197,7 +204,19 @@ class Tracker:
         problem = measurement_problem(m, self.kind, self.config.frame_id)
         if problem == OK and m.horizon < 0.0:
             return Cause.REJECTED_HORIZON, f"forecast horizon {m.horizon} s < 0 at t={m.t}"
+        if (problem == OK and isinstance(self.model, StationModels)
+                and self.model.get(m.kind, m.frame_id) is None):
+            return (Cause.REJECTED_FRAME, f"station {m.frame_id!r} is not in the network "
+                                          f"({', '.join(self.model.stations)})")
         return problem
+
+    def _model_for(self, m: Measurement) -> MeasurementModel:
+        """Return the model that predicts `m` (its station's, for a network)."""
+        if isinstance(self.model, StationModels):
+            model = self.model.get(m.kind, m.frame_id)
+            assert model is not None  # validated
+            return model
+        return self.model
 
     def _Q(self, dt: float) -> np.ndarray:
         return process_noise(abs(dt), self.config.q, dim=self.n // 2)
@@ -212,7 +231,8 @@ class Tracker:
         assert ekf is not None
         dt = m.t - self.t
         before = Snapshot(self.t, ekf.x, ekf.P)
-        model, t = self.model, m.t
+        model, t = self._model_for(m), m.t
+        assert not isinstance(model, StationModels)
         try:
             with np.errstate(over="raise", invalid="raise"):
                 if dt != 0.0:
@@ -324,7 +344,8 @@ class Tracker:
     # ----------------------------------------------------------------------------------
     def _initialise(self, m: Measurement) -> Outcome:
         """Hand `m` to the IOD batch; start the EKF when the batch is solved."""
-        got = self._initiator.add(m, self.config.iod_samples, self.config.p0_sigma)
+        got = self._initiator.add(m, self.config.iod_samples, self.config.p0_sigma,
+                                  self.config.iod_max_span_s)
         if isinstance(got, tuple):
             cause, detail = got
             return Outcome(rejected=cause, detail=detail)

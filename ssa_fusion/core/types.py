@@ -19,6 +19,9 @@ class Kind(enum.IntEnum):
     """ECI position [x, y, z], km (or observed state channels, see ``PositionModel``)."""
     RANGE_AZ_EL = 1
     """[range km, azimuth rad (north, clockwise, [0, 2pi)), elevation rad]."""
+    RA_DEC = 2
+    """[right ascension rad in [0, 2pi), declination rad in [-pi/2, pi/2]]: topocentric, in
+    the ECI frame (an optical sensor; two channels, the message's third is 0)."""
 
 
 class Source(enum.IntEnum):
@@ -77,7 +80,7 @@ class Cause(enum.StrEnum):
     UNRECORDABLE_TOPIC = "unrecordable_topic"
 
 
-KIND_NAMES = {Kind.POSITION: "position", Kind.RANGE_AZ_EL: "range_az_el"}
+KIND_NAMES = {Kind.POSITION: "position", Kind.RANGE_AZ_EL: "range_az_el", Kind.RA_DEC: "ra_dec"}
 
 
 @dataclass
@@ -88,14 +91,15 @@ class Measurement:
     ----------
     t : float
         Epoch, s (simulation clock).
-    z : ndarray (3,)
-        Position in km (POSITION, ECI) or [range km, az rad, el rad] (RANGE_AZ_EL).
-    R : ndarray (3, 3)
+    z : ndarray (3,) or (2,)
+        Position in km (POSITION, ECI), [range km, az rad, el rad] (RANGE_AZ_EL), or
+        [ra rad, dec rad] (RA_DEC, topocentric).
+    R : ndarray (3, 3) or (2, 2)
         Noise covariance of z in the units of z squared.
     kind, source : int
         A `Kind` and a `Source` (plain ints compare equal).
     frame_id : str
-        "eci" for POSITION, the station id for RANGE_AZ_EL.
+        "eci" for POSITION, the station id for RANGE_AZ_EL and RA_DEC.
     horizon : float
         s since the last real measurement the forecast came from (0 for SENSOR).
     """

@@ -38,17 +38,19 @@ would poison the filter."""
 TWO_PI = 2.0 * math.pi
 
 
-def measurement_problem(m: Measurement, kind: int | None, frame_id: str = "") -> Problem:
+def measurement_problem(m: Measurement, kind: int | tuple[int, ...] | None,
+                        frame_id: str = "") -> Problem:
     """Return what is wrong with `m` for a consumer of `kind` from `frame_id`, or `OK`.
 
-    `kind` None and `frame_id` "" accept any. Problems: wrong kind or frame, NaN/inf
-    anywhere, an impossible range/az/el, an implausible value (range beyond `MAX_RANGE_KM`,
-    azimuth outside [-2pi, 2pi], any value beyond `MAX_ABS_VALUE`, a covariance entry beyond
+    `kind` (one kind or a tuple of them) None and `frame_id` "" accept any. Problems: wrong
+    kind or frame, NaN/inf anywhere, an impossible range/az/el or ra/dec (declination beyond
+    +-pi/2), an implausible value (range beyond `MAX_RANGE_KM`, azimuth or right ascension
+    outside [-2pi, 2pi], any value beyond `MAX_ABS_VALUE`, a covariance entry beyond
     `MAX_VARIANCE`), or a covariance that is not symmetric positive semi-definite.
     """
     z = np.asarray(m.z, dtype=float)
     R = np.asarray(m.R, dtype=float)
-    if kind is not None and m.kind != kind:
+    if kind is not None and m.kind not in (kind if isinstance(kind, tuple) else (kind,)):
         return Cause.REJECTED_KIND, f"kind {m.kind}, expected {kind}"
     if frame_id and m.frame_id != frame_id:
         return Cause.REJECTED_FRAME, f"frame_id {m.frame_id!r}, expected {frame_id!r}"
@@ -67,6 +69,16 @@ def measurement_problem(m: Measurement, kind: int | None, frame_id: str = "") ->
         if abs(z[1]) > TWO_PI:
             return (Cause.REJECTED_IMPLAUSIBLE,
                     f"azimuth {z[1]:.6g} rad outside [-2pi, 2pi] at t={m.t}")
+    if m.kind == Kind.RA_DEC:
+        if z.shape != (2,) or R.shape != (2, 2):
+            return (Cause.REJECTED_IMPLAUSIBLE,
+                    f"ra/dec needs z (2,) and R (2, 2), got {z.shape} and {R.shape} at t={m.t}")
+        if not -HALF_PI <= z[1] <= HALF_PI:
+            return (Cause.REJECTED_ELEVATION,
+                    f"declination {z[1]} rad outside [-pi/2, pi/2] at t={m.t}")
+        if abs(z[0]) > TWO_PI:
+            return (Cause.REJECTED_IMPLAUSIBLE,
+                    f"right ascension {z[0]:.6g} rad outside [-2pi, 2pi] at t={m.t}")
     if float(np.abs(z).max(initial=0.0)) > MAX_ABS_VALUE:
         return (Cause.REJECTED_IMPLAUSIBLE,
                 f"a measured value of {float(np.abs(z).max()):.6g} beyond {MAX_ABS_VALUE:g} "

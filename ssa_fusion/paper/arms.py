@@ -191,17 +191,21 @@ class _Epochs:
 
 def at_epochs(c: EstimatorConfig, estimates: Mapping[float, StateEstimate],
               t_gap: np.ndarray) -> ArmTrajectory:
-    """A filter's estimate at each gap epoch, else its prediction there from the last
-    estimate before it (`Tracker.predict_from`, with the EKF of `c`)."""
+    """A filter's estimate at each gap epoch, else its prediction there (`Tracker.predict_from`,
+    with the EKF of `c`): from the previous epoch's output when no estimate came between
+    (chained, as a filter publishing at a cadence through a gap does), else from the last
+    estimate before it."""
     tracker = make_tracker(c)
     lookup = _Epochs(estimates)
-    out = []
+    out: list[StateEstimate] = []
     for t in t_gap:
         e = lookup.at(float(t))
         if e is None:
             prev = lookup.before(float(t))
             if prev is None:
                 raise ValueError(f"no estimate before gap epoch t={t}")
+            if out and out[-1].t >= prev.t:
+                prev = out[-1]  # nothing new since the last output: go on from it
             e = tracker.predict_from(prev, float(t))
         out.append(e)
     return _trajectory(out)

@@ -23,6 +23,7 @@ KM = 1000.0
 _Z_SCALE = {
     types.Kind.POSITION: np.array([KM, KM, KM]),
     types.Kind.RANGE_AZ_EL: np.array([KM, 1.0, 1.0]),
+    types.Kind.RA_DEC: np.array([1.0, 1.0]),
 }
 _X_SCALE = np.full(6, KM)
 
@@ -74,33 +75,45 @@ def z_scale(kind: int) -> np.ndarray:
         return _Z_SCALE[kind]
     except KeyError:
         raise ValueError(
-            f"unknown measurement kind {kind} (expected {types.Kind.POSITION}=POSITION "
-            f"or {types.Kind.RANGE_AZ_EL}=RANGE_AZ_EL)"
+            f"unknown measurement kind {kind} (expected "
+            + ", ".join(f"{k.value}={k.name}" for k in types.Kind) + ")"
         ) from None
 
 
 def measurement_to_msg(m: types.Measurement, classes: MsgClasses | None = None) -> Any:
-    """Core Measurement (km) -> ssa_fusion_msgs/Measurement (m)."""
+    """Core Measurement (km) -> ssa_fusion_msgs/Measurement (m).
+
+    A two-channel kind (RA_DEC) fills z[:2] and the covariance's upper-left 2x2; the rest is 0.
+    """
     c = _default(classes)
     s = z_scale(m.kind)
+    k = len(s)
+    z = np.zeros(3)
+    z[:k] = np.asarray(m.z, dtype=float) * s
+    cov = np.zeros((3, 3))
+    cov[:k, :k] = np.asarray(m.R, dtype=float) * np.outer(s, s)
     return c.measurement(
         header=c.header(stamp=seconds_to_stamp(m.t, c), frame_id=m.frame_id),
         object_id=m.object_id,
         kind=int(m.kind),
         source=int(m.source),
-        z=np.asarray(m.z, dtype=float) * s,
-        covariance=(np.asarray(m.R, dtype=float) * np.outer(s, s)).ravel(),
+        z=z,
+        covariance=cov.ravel(),
         horizon=float(m.horizon),
     )
 
 
 def measurement_from_msg(msg: Any) -> types.Measurement:
-    """Measurement message (m) -> core Measurement (km); ValueError for an unknown kind."""
+    """Measurement message (m) -> core Measurement (km); ValueError for an unknown kind.
+
+    A two-channel kind (RA_DEC) takes z[:2] and the covariance's upper-left 2x2.
+    """
     s = z_scale(msg.kind)
+    k = len(s)
     return types.Measurement(
         t=stamp_to_seconds(msg.header.stamp),
-        z=np.asarray(msg.z, dtype=float) / s,
-        R=np.asarray(msg.covariance, dtype=float).reshape(3, 3) / np.outer(s, s),
+        z=np.asarray(msg.z, dtype=float)[:k] / s,
+        R=np.asarray(msg.covariance, dtype=float).reshape(3, 3)[:k, :k] / np.outer(s, s),
         kind=int(msg.kind),
         source=int(msg.source),
         object_id=msg.object_id,
