@@ -25,7 +25,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from rclpy.signals import SignalHandlerOptions
 
-from ssa_fusion.core.stations import STATIONS
+from ssa_fusion.core.stations import network_stations
 from ssa_fusion.core.types import KIND_NAMES, Cause, Kind
 from ssa_fusion.nodes import STOP
 from ssa_fusion.ros.executors import make_executor
@@ -247,18 +247,28 @@ KINDS = {name: kind for kind, name in KIND_NAMES.items()}
 def measurement_stream(node: Node, defaults: Any) -> tuple[int, str]:
     """Declare `kind` and `station` on `node` (defaults: `defaults.kind`, `defaults.station`):
     the measurement kind it takes and the frame_id those measurements come in (the station
-    for range/az/el, "eci" for position)."""
+    for range/az/el and ra/dec, "eci" for position)."""
     kind = declare(
-        node, "kind", defaults.kind, "measurement kind: position | range_az_el", one_of(*KINDS)
+        node, "kind", defaults.kind, "measurement kind: position | range_az_el | ra_dec",
+        one_of(*KINDS)
     )
     station = declare(
         node,
         "station",
         defaults.station,
-        "station id of range/az/el measurements (their frame_id)",
-        one_of(*STATIONS),
+        "station id of range/az/el or ra/dec measurements (their frame_id), or a station "
+        "network (a network id, or station ids separated by commas: the filter fuses them all)",
+        _station_check,
     )
-    return KINDS[kind], station if KINDS[kind] == Kind.RANGE_AZ_EL else "eci"
+    return KINDS[kind], station if KINDS[kind] != Kind.POSITION else "eci"
+
+
+def _station_check(value: str) -> str | None:
+    try:
+        network_stations(value)
+    except ValueError as exc:
+        return str(exc)
+    return None
 
 
 def clock_lead(node: Node, default: float) -> float:

@@ -20,9 +20,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 KIND = "range_az_el"
-"""Measurement kind filter and surrogate expect (``position`` | ``range_az_el``)."""
+"""Measurement kind filter and surrogate expect (``position`` | ``range_az_el`` | ``ra_dec``)."""
 STATION = "columbus"
-"""Station (a `core.stations.STATIONS` id) of their range/az/el measurements."""
+"""Station (a `core.stations.STATIONS` id) of their range/az/el measurements, or a network."""
 
 
 @dataclass(frozen=True)
@@ -79,6 +79,8 @@ class FilterDefaults:
     gate: float = 1000.0
     object_id: str = ""
     iod_samples: int = 3
+    iod_max_span: float = 0.0
+    light_time: bool = False
     predict_period: float = 300.0
     max_clock_lead: float = 3600.0
 

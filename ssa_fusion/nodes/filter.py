@@ -5,7 +5,9 @@ differences for position), then fuses real measurements from ``/ssa/measurement`
 for epochs without one, forecasts from ``/ssa/forecast``. Publishes ``/ssa/estimate``
 (state + full 6x6 covariance, stamped with the measurement epoch) for every fused epoch;
 when nothing is fused for `predict_period` sim s it publishes a prediction (update_source
-NONE) whose covariance grows. Rejected input is counted by cause on ``/diagnostics``. The
+NONE) whose covariance grows, every `predict_period` through a gap (each one predicted on
+from the previous, so a gap of hours costs one short propagation per prediction). Rejected
+input is counted by cause on ``/diagnostics``. The
 estimator settings in effect are published (latched) on ``/ssa/config``, so every bag
 records them.
 
@@ -103,6 +105,14 @@ def estimator_from(node: Node) -> EstimatorConfig:
         "real measurements used by the initial orbit determination (>= 3)",
         lambda v: None if isinstance(v, int) and v >= 3 else "must be an integer >= 3",
         apply=runtime("iod_samples"))
+    values["iod_max_span"] = declare(
+        node, "iod_max_span", d.iod_max_span,
+        "s one IOD batch may span (one pass of one station); later, another station's or "
+        "another kind's measurement starts a new batch (0 = no limit)",
+        non_negative, apply=runtime("iod_max_span"))
+    values["light_time"] = declare(
+        node, "light_time", d.light_time,
+        "correct the station measurement models for light time (range / c)")
     try:
         return settings.estimator_from(values, {})
     except ValueError as exc:
@@ -146,6 +156,7 @@ class FilterNode(Node):
         self.activity = 0
         self.last_object = ""
         self._predicted_at = -math.inf  # sim time of the last prediction published
+        self._prediction: StateEstimate | None = None  # and that prediction
 
     def publish_config(self) -> None:
         """Publish the estimator settings in effect on /ssa/config (latched)."""
@@ -156,6 +167,7 @@ class FilterNode(Node):
     def on_jump(self, jump) -> None:
         self.tracker.reset()
         self._predicted_at = -math.inf
+        self._prediction = None
         self.diag.count(
             Cause.RESET_CLOCK_JUMP, "sim time jumped backwards: filter reset", warn=False
         )
@@ -212,10 +224,15 @@ class FilterNode(Node):
         now = self.get_clock().now().nanoseconds * 1e-9
         if self.tracker.t >= now - self.predict_period or now <= self._predicted_at:
             return  # recently updated, or sim time has not moved since the last prediction
-        e = self.tracker.predicted(now)
+        last = self._prediction
+        if last is not None and self.tracker.initialised and last.t >= self.tracker.t:
+            e: StateEstimate | None = self.tracker.predict_from(last, now)  # chained
+        else:
+            e = self.tracker.predicted(now)
         if e is not None:
             self.publish(e)
             self._predicted_at = now
+            self._prediction = e
 
 
 def main(args: list[str] | None = None) -> int:

@@ -27,7 +27,8 @@ from ssa_fusion.nodes.defaults import FILTER, SURROGATE
 
 KM = 1000.0
 """m per km."""
-FILTER_KEYS = ("kind", "station", "motion_model", "p0_sigma", "q", "gate", "iod_samples")
+FILTER_KEYS = ("kind", "station", "motion_model", "p0_sigma", "q", "gate", "iod_samples",
+               "iod_max_span", "light_time")
 """The filter's parameters that are estimator settings."""
 SURROGATE_KEYS = ("kind", "station", "buffer_length", "retrain_period", "delays", "rank",
                   "max_horizon", "grace", "cadence", "lift")
@@ -41,7 +42,9 @@ def filter_params(c: EstimatorConfig) -> dict[str, Any]:
     t = c.tracker
     return {"kind": KIND_NAMES[c.kind], "station": c.station, "motion_model": str(c.motion_model),
             "p0_sigma": [v * KM for v in t.p0_sigma], "q": t.q * KM * KM,
-            "gate": t.gate or 0.0, "iod_samples": t.iod_samples}
+            "gate": t.gate or 0.0, "iod_samples": t.iod_samples,
+            "iod_max_span": 0.0 if math.isinf(t.iod_max_span_s) else t.iod_max_span_s,
+            "light_time": c.light_time}
 
 
 def surrogate_params(c: EstimatorConfig) -> dict[str, Any]:
@@ -76,7 +79,8 @@ def estimator_from(filt: Mapping[str, Any], surr: Mapping[str, Any]) -> Estimato
                          f"{', '.join(map(str, NODE_MOTION_MODELS))}")
     tracker = TrackerConfig(p0_sigma=tuple(float(v) / KM for v in f["p0_sigma"]),
                             q=float(f["q"]) / (KM * KM), gate=float(f["gate"]) or None,
-                            iod_samples=int(f["iod_samples"]))
+                            iod_samples=int(f["iod_samples"]),
+                            iod_max_span_s=float(f["iod_max_span"]) or math.inf)
     surrogate = dataclasses.replace(
         LIVE_SURROGATE, buffer_s=float(s["buffer_length"]),
         retrain_period_s=float(s["retrain_period"]) or math.inf, delays=int(s["delays"]),
@@ -85,6 +89,7 @@ def estimator_from(filt: Mapping[str, Any], surr: Mapping[str, Any]) -> Estimato
     return EstimatorConfig(kind=kinds[kind_name],
                            station=_stream(filt, surr, "station", FILTER.station),
                            motion_model=MotionModel(motion), jd0=UNIX_EPOCH_JD,
+                           light_time=bool(f["light_time"]),
                            lift=Lift(str(s["lift"]) if "lift" in surr or kind_name != "position"
                                      else Lift.NONE),
                            tracker=tracker, surrogate=surrogate)
