@@ -8,9 +8,9 @@ measurement's reception epoch at the station).
 Light time: with ``light_time=True`` the station models see the object where it was when the
 light left it, ``tau = range / c`` earlier, to first order ``r(t - tau) ~= r(t) - tau v(t)``
 (the ISS moves 11-39 m in the 1.4-5 ms it takes, more than a good radar's range noise; the
-second-order term ``tau^2 |a| / 2`` is below a micrometre). The Jacobian's velocity columns
-are then ``-tau`` times its position columns (tau's own dependence on the state, of relative
-size ``v / c``, is left out).
+second-order term ``tau^2 |a| / 2`` is below a micrometre). The Jacobian is that of this
+first-order model: position columns ``H_r (I - v los^T / c)``, velocity columns
+``-tau H_r``.
 """
 
 from __future__ import annotations
@@ -97,6 +97,25 @@ class _StationModel:
             return x0, x1, x2, 0.0
         tau = rho / C_KM_S
         return x0 - tau * float(x[3]), x1 - tau * float(x[4]), x2 - tau * float(x[5]), tau
+
+    @staticmethod
+    def _jacobian(rows: tuple[tuple[float, float, float], ...], los: tuple[float, ...],
+                  x: NDArray[np.float64], tau: float) -> NDArray[np.float64]:
+        """Return the (m, 6) Jacobian from d z / d r at the retarded position (`rows`).
+
+        With light time (tau > 0) the retarded position is ``r - tau v`` with
+        ``tau = |rho| / c``: d/dr = I - v los^T / c (`los`: ECI unit line of sight),
+        d/dv = -tau I.
+        """
+        if tau == 0.0:
+            return np.array([[*row, 0.0, 0.0, 0.0] for row in rows])
+        v0, v1, v2 = float(x[3]), float(x[4]), float(x[5])
+        l0, l1, l2 = (float(v) / C_KM_S for v in los)
+        out = []
+        for a, b, c in rows:
+            hv = a * v0 + b * v1 + c * v2
+            out.append([a - hv * l0, b - hv * l1, c - hv * l2, -tau * a, -tau * b, -tau * c])
+        return np.array(out)
 
     def site_eci(self, t_s: float) -> NDArray[np.float64]:
         """Return the station's ECI position (3,) km at ``t_s``."""
@@ -185,8 +204,7 @@ class RazelModel(_StationModel):
             (c0 * t00 + c1 * t10 + c2 * t20, c0 * t01 + c1 * t11 + c2 * t21,
              c0 * t02 + c1 * t12 + c2 * t22),
         )
-        jac = np.array([[*row, -tau * row[0], -tau * row[1], -tau * row[2]] for row in rows])
-        return np.array([r, az, el]), jac
+        return np.array([r, az, el]), self._jacobian(rows, rows[0], x, tau)
 
 
 class RadecModel(_StationModel):
@@ -217,8 +235,8 @@ class RadecModel(_StationModel):
         ra = float(wrap_2pi(math.atan2(dy, dx)))
         dec = math.atan2(dz, h)
         rows = ((-dy / h2, dx / h2, 0.0), (-dz * dx / (h * r2), -dz * dy / (h * r2), h / r2))
-        jac = np.array([[*row, -tau * row[0], -tau * row[1], -tau * row[2]] for row in rows])
-        return np.array([ra, dec]), jac
+        r = math.sqrt(r2)
+        return np.array([ra, dec]), self._jacobian(rows, (dx / r, dy / r, dz / r), x, tau)
 
 
 StationModel = RazelModel | RadecModel
