@@ -12,6 +12,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .constants import MU_EARTH
 from .frames import Station, ecef_to_eci, enu_matrix, site_ecef
+from .kepler import propagate
 
 Array = NDArray[np.float64]
 
@@ -103,3 +104,105 @@ def razel_to_eci(z: ArrayLike, jd_utc: ArrayLike, station: Station) -> Array:
     m = enu_matrix(station.lat_rad, station.lon_rad)
     r_ecef = enu @ m + site_ecef(station.lat_rad, station.lon_rad, station.alt_km)
     return ecef_to_eci(r_ecef, jd_utc)
+
+
+def radec_los(ra_rad: ArrayLike, dec_rad: ArrayLike) -> Array:
+    """Line-of-sight unit vectors (..., 3) of topocentric right ascension/declination (rad)."""
+    ra, dec = np.asarray(ra_rad, float), np.asarray(dec_rad, float)
+    out: Array = np.stack([np.cos(dec) * np.cos(ra), np.cos(dec) * np.sin(ra), np.sin(dec)], -1)
+    return out
+
+
+def _gauss_initial(t: Array, los: Array, site: Array, mu: float) -> tuple[Array, Array]:
+    """Return (r2, v2) at the middle epoch by Gauss's method without improvement.
+
+    Curtis, "Orbital Mechanics for Engineering Students", 3rd ed., Algorithm 5.5.
+    """
+    tau1, tau3 = t[0] - t[1], t[2] - t[1]
+    tau = tau3 - tau1
+    p = [np.cross(los[1], los[2]), np.cross(los[0], los[2]), np.cross(los[0], los[1])]
+    d0 = float(los[0] @ p[0])
+    if abs(d0) < 1e-14:
+        raise ValueError("angles-only IOD: the three lines of sight are coplanar")
+    d = np.array([[float(site[i] @ p[j]) for j in range(3)] for i in range(3)])
+    a = (-d[0, 1] * tau3 / tau + d[1, 1] + d[2, 1] * tau1 / tau) / d0
+    b = (d[0, 1] * (tau3**2 - tau**2) * tau3 / tau
+         + d[2, 1] * (tau**2 - tau1**2) * tau1 / tau) / (6.0 * d0)
+    e = float(site[1] @ los[1])
+    r2_site = float(site[1] @ site[1])
+    coeffs = [1.0, 0.0, -(a * a + 2 * a * e + r2_site), 0.0, 0.0, -2 * mu * b * (a + e), 0.0,
+              0.0, -(mu * b) ** 2]
+    roots = np.roots(coeffs)
+    real = roots[(np.abs(roots.imag) < 1e-9 * np.abs(roots)) & (roots.real > 0.0)].real
+    real = real[real > float(np.linalg.norm(site[1]))]  # above the observer's radius
+    if not len(real):
+        raise ValueError("angles-only IOD: no positive real root of Gauss's polynomial")
+    r2 = float(real.min())  # the lowest orbit consistent with the angles (Vallado's rule)
+    r3 = r2**3
+    rho2 = a + mu * b / r3
+    rho1 = ((6 * (d[2, 0] * tau1 / tau3 + d[1, 0] * tau / tau3) * r3
+             + mu * d[2, 0] * (tau**2 - tau1**2) * tau1 / tau3)
+            / (6 * r3 + mu * (tau**2 - tau3**2)) - d[0, 0]) / d0
+    rho3 = ((6 * (d[0, 2] * tau3 / tau1 - d[1, 2] * tau / tau1) * r3
+             + mu * d[0, 2] * (tau**2 - tau3**2) * tau3 / tau1)
+            / (6 * r3 + mu * (tau**2 - tau1**2)) - d[2, 2]) / d0
+    r = site + np.array([rho1, rho2, rho3])[:, None] * los
+    f1, f3 = 1 - mu * tau1**2 / (2 * r3), 1 - mu * tau3**2 / (2 * r3)
+    g1, g3 = tau1 - mu * tau1**3 / (6 * r3), tau3 - mu * tau3**3 / (6 * r3)
+    v2 = (-f3 * r[0] + f1 * r[2]) / (f1 * g3 - f3 * g1)
+    return r[1], v2
+
+
+def gauss_angles_only(t_s: ArrayLike, ra_rad: ArrayLike, dec_rad: ArrayLike,
+                      site_eci_km: ArrayLike, mu: float = MU_EARTH,
+                      iterations: int = 8) -> tuple[Array, Array]:
+    """Angles-only initial orbit determination from three topocentric ra/dec observations.
+
+    Gauss's method (Curtis Algorithm 5.5) followed by differential correction of the
+    two-body state at the middle epoch until it reproduces the three lines of sight (the
+    role of Curtis's Algorithm 5.6 iterative improvement, with exact two-body propagation,
+    `kepler.propagate`, and its state transition matrix).
+
+    Parameters
+    ----------
+    t_s : (3,) epochs, s (increasing).
+    ra_rad, dec_rad : (3,) topocentric right ascension and declination in the ECI frame, rad.
+    site_eci_km : (3, 3) the observer's ECI position at each epoch, km.
+    mu : gravitational parameter, km^3/s^2.
+    iterations : differential-correction steps at most (0: Gauss's first estimate).
+
+    Returns
+    -------
+    r2, v2 : (3,), (3,) ECI position (km) and velocity (km/s) at the middle epoch.
+
+    Raises ValueError when the geometry has no solution (coplanar lines of sight, no
+    positive root, a correction that does not converge).
+    """
+    t = np.asarray(t_s, float)
+    los = radec_los(ra_rad, dec_rad)
+    site = np.asarray(site_eci_km, float)
+    r2, v2 = _gauss_initial(t, los, site, mu)
+    x = np.concatenate([r2, v2])
+    # residual: the component of each observed line of sight off the predicted one
+    for _ in range(iterations):
+        res, jac = [], []
+        for k in (0, 2):
+            xk, phi = propagate(x, float(t[k] - t[1]), mu)
+            rho = xk[:3] - site[k]
+            n = float(np.linalg.norm(rho))
+            u = rho / n
+            dudr = (np.eye(3) - np.outer(u, u)) / n
+            res.append(u - los[k])
+            jac.append(dudr @ phi[:3, :])
+        rho2 = x[:3] - site[1]
+        n2 = float(np.linalg.norm(rho2))
+        u2 = rho2 / n2
+        res.append(u2 - los[1])
+        jac.append(np.hstack([(np.eye(3) - np.outer(u2, u2)) / n2, np.zeros((3, 3))]))
+        dx = np.linalg.lstsq(np.vstack(jac), -np.concatenate(res), rcond=None)[0]
+        x = x + dx
+        if float(np.linalg.norm(dx[:3])) < 1e-9 * float(np.linalg.norm(x[:3])):
+            break
+    if not np.isfinite(x).all():
+        raise ValueError("angles-only IOD: the correction diverged")
+    return x[:3], x[3:]
