@@ -23,7 +23,7 @@ import numpy as np
 from ssa_fusion.core import metrics, types
 from ssa_fusion.core.config import EstimatorConfig
 from ssa_fusion.nodes import settings
-from ssa_fusion.paper import scenarios
+from ssa_fusion.paper import scenarios, sky
 from ssa_fusion.paper.arms import ArmName, GapEvaluation, evaluate_gap
 from ssa_fusion.ros import bagio
 from ssa_fusion.ros.messages import estimate_from_msg, measurement_from_msg
@@ -93,6 +93,8 @@ def estimator_for(recorded: list[str], kind: int, scenario: str = "",
     """
     if params_file is not None:
         return Settings(settings.load_params_file(params_file), f"params file {params_file}")
+    if scenario in sky.SKY_SCENARIOS:
+        return Settings(sky.SKY_SCENARIOS[scenario].estimator(), f"scenario {scenario}")
     if scenario:
         return Settings(scenarios.get(scenario).estimator(), f"scenario {scenario}")
     estimator = settings.recorded_estimator(recorded)
@@ -105,10 +107,12 @@ def estimator_for(recorded: list[str], kind: int, scenario: str = "",
 
 @dataclass
 class Evaluation:
-    """A bag's gap evaluation and the settings it ran with."""
+    """A bag's gap evaluation and the settings it ran with; for a station network (the real
+    sky), also how the filter did after each pass and through the gaps."""
 
     gap: GapEvaluation
     settings: Settings
+    passes: sky.PassReport | None = None
 
 
 def evaluate(data: BagData, scenario: str = "", seed: int = 0,
@@ -120,16 +124,26 @@ def evaluate(data: BagData, scenario: str = "", seed: int = 0,
         raise ValueError("the bag has no /ssa/truth messages: nothing to compare against")
     kind = data.measurements[0].kind if data.measurements else types.Kind.POSITION
     chosen = estimator_for(data.config, kind, scenario, params_file)
-    t_gap = np.array(sorted({m.t for m in data.withheld}))
     truth = {e.t: e.x for e in data.truth}
+    t_gap = np.array(sorted({m.t for m in data.withheld}))
+    network = chosen.estimator.is_network
+    if network:  # stations measure off the truth's cadence: the truth epochs of the outage
+        t_all = np.array(sorted(truth))
+        t_gap = t_all[(t_all >= t_gap[0]) & (t_all <= t_gap[-1])]
     missing = [t for t in t_gap if t not in truth]
-    if missing:
-        raise ValueError(f"/ssa/truth lacks {len(missing)} gap epochs (first t={missing[0]})")
+    if missing or not len(t_gap):
+        raise ValueError(f"/ssa/truth lacks {len(missing)} gap epochs (first t="
+                         f"{missing[0] if missing else 'none in the gap'})")
     x_true = np.array([truth[t] for t in t_gap])
     live = {e.t: e for e in data.estimates if e.update_source != types.UpdateSource.NONE}
     real = [m for m in data.measurements if m.source == types.Source.SENSOR]
     gap = evaluate_gap(chosen.estimator, live, real, data.withheld, t_gap, x_true, seed)
-    return Evaluation(gap, chosen)
+    passes = None
+    if network:
+        t_all = np.array(sorted(truth))
+        passes = sky.pass_report(chosen.estimator, live, real, t_all,
+                                 np.array([truth[t] for t in t_all]))
+    return Evaluation(gap, chosen, passes)
 
 
 def table(ev: Evaluation) -> str:
@@ -154,4 +168,6 @@ def table(ev: Evaluation) -> str:
                 f"in [{lo:.2f}, {hi:.2f}] 95 % of the time (χ², {g.truth.shape[1]} dof), "
                 "its mean near the dof")
     rows.append(f"settings: {ev.settings.origin}")
+    if ev.passes is not None:
+        rows.append("\n" + ev.passes.table())
     return "\n".join(rows)

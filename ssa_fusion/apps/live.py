@@ -18,11 +18,12 @@ from pathlib import Path
 from ssa_fusion.apps import evaluate, report
 from ssa_fusion.apps.args import add_domain_id, positive_float
 from ssa_fusion.nodes import settings
-from ssa_fusion.paper import scenarios
+from ssa_fusion.paper import scenarios, sky
 from ssa_fusion.ros.processes import Graph
 from ssa_fusion.ros.readiness import READERS
 
-LIVE_SCENARIOS = [n for n, s in scenarios.SCENARIOS.items() if s.is_orbit]
+LIVE_SCENARIOS = [*(n for n, s in scenarios.SCENARIOS.items() if s.is_orbit), *sky.SKY_SCENARIOS]
+"""The paper's orbit scenarios and the real-sky ones (`paper.sky`)."""
 LIVE_ROOT = Path("out/live")
 """Where runs go by default, one directory each."""
 
@@ -62,24 +63,39 @@ def link_latest(out: Path, root: Path = LIVE_ROOT) -> None:
     os.replace(tmp, latest)
 
 
-def node_parameters(s: scenarios.Scenario, time_scale: float, seed: int,
+WAIT_FOR = ["/ssa/measurement=3", "/ssa/forecast=2", "/ssa/estimate=1", "/ssa/truth=1",
+            "/ssa/withheld=1", "/clock=3"]
+"""What sensor_sim waits for before it starts: every node's subscriptions."""
+
+
+def sim_seconds(s: scenarios.Scenario | sky.SkyScenario) -> float:
+    """Sim time the scenario runs, s."""
+    if isinstance(s, sky.SkyScenario):
+        return s.duration_s
+    return s.track_s + s.gap_s + s.after_s
+
+
+def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, seed: int,
                     bag: Path) -> dict[str, dict]:
     """Per-node parameters (SI units) that run scenario `s` live."""
-    sensor = {"scenario": s.name, "object_id": s.name, "time_scale": time_scale,
-              "seed": seed, "cadence": s.cadence_s, "gap_start": s.track_s,
-              "gap_length": s.gap_s, "after_gap": s.after_s,
-              "wait_for": ["/ssa/measurement=3", "/ssa/forecast=2", "/ssa/estimate=1",
-                           "/ssa/truth=1", "/ssa/withheld=1", "/clock=3"],
-              "wait_for_readers": READERS}
+    sensor: dict = {"scenario": s.name, "object_id": s.name, "time_scale": time_scale,
+                    "seed": seed, "wait_for": WAIT_FOR, "wait_for_readers": READERS}
+    if isinstance(s, sky.SkyScenario):  # the truth's cadence; the filter publishes at it
+        sensor["cadence"] = s.truth_cadence_s
+        extra = {"predict_period": s.truth_cadence_s}
+    else:
+        sensor.update({"cadence": s.cadence_s, "gap_start": s.track_s, "gap_length": s.gap_s,
+                       "after_gap": s.after_s})
+        extra = {}
     estimator = s.estimator()
     surrogate = {"use_sim_time": True, **settings.surrogate_params(estimator)}
-    filt = {"use_sim_time": True, **settings.filter_params(estimator)}
+    filt = {"use_sim_time": True, **settings.filter_params(estimator), **extra}
     recorder = {"use_sim_time": True, "bag": str(bag)}
     return {"sensor_sim": sensor, "surrogate": surrogate, "filter": filt, "recorder": recorder}
 
 
 def run(args: argparse.Namespace) -> int:
-    s = scenarios.get(args.scenario)
+    s = sky.SKY_SCENARIOS.get(args.scenario) or scenarios.get(args.scenario)
     out: Path = args.out or default_out(s.name)
     bag = args.bag or out / "bag"
     if bag.exists():
@@ -94,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: cannot use {out}: {exc}", file=sys.stderr)
         return 2
     params = node_parameters(s, args.time_scale, args.seed, bag)
-    sim_s = s.track_s + s.gap_s + s.after_s
+    sim_s = sim_seconds(s)
     graph = Graph(out / "logs", args.domain_id)
     print(f"live: {s.name}, {sim_s / 3600:.1f} h of sim time at {args.time_scale:g}x "
           f"(~{sim_s / args.time_scale:.0f} s of simulation after start-up); ROS domain "

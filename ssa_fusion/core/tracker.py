@@ -36,6 +36,10 @@ when a measurement goes in front of fused ones. The admission and arbitration ru
   them arrive (real measurements themselves must arrive in order); the exception is a real
   measurement that passes the gate on one state and not on the other (its earlier estimate
   then stays published);
+* a filter that has lost its object re-initialises: after ``reinit_after`` real
+  measurements in a row refused by the gate (a whole pass that disagrees with the
+  prediction, typically after a gap longer than the process noise allows for), it forgets its
+  state and starts a new IOD batch with the last of them (`Cause.REINITIALISED`);
 * `reset()` forgets everything (a backwards clock jump).
 
 It is the same code live (filter node) and offline (reproduce, replay), so both give the
@@ -90,6 +94,9 @@ class TrackerConfig:
     frame_id : str
         Frame (station id, or "eci") measurements must be expressed in; "" = any (with a
         station network: any of its stations).
+    reinit_after : int
+        Real measurements in a row refused by the gate after which the filter forgets its
+        state and initialises again (0: never).
     iod_max_span_s : float
         Longest time (s) one IOD batch may span; a measurement further from the batch's
         first one (or from another station or of another kind) starts a new batch, so the
@@ -103,6 +110,7 @@ class TrackerConfig:
     iod_samples: int = 3
     frame_id: str = ""
     iod_max_span_s: float = math.inf
+    reinit_after: int = 0
 
 
 @dataclass
@@ -154,6 +162,7 @@ class Tracker:
         self.t = -math.inf
         self.t_real = -math.inf
         self._initiator = OrbitInitiator(self.f, self.model, self.n)
+        self._gate_misses = 0  # real measurements refused by the gate in a row
         # the steps fused since `HISTORY_REAL` real measurements back, oldest first
         self._history = FusedHistory(HISTORY_REAL)
 
@@ -196,7 +205,20 @@ class Tracker:
             return self._initialise(m)
         if m.source == Source.FORECAST:
             return self._fuse_forecast(m)
-        return self._fuse_real(m)
+        out = self._fuse_real(m)
+        if out.rejected != Cause.REJECTED_GATE:
+            self._gate_misses = 0 if out.estimate is not None else self._gate_misses
+            return out
+        self._gate_misses += 1
+        limit = self.config.reinit_after
+        if not limit or self._gate_misses < limit:
+            return out
+        self.reset()
+        self._initialise(m)
+        return Outcome(rejected=Cause.REINITIALISED,
+                       detail=f"{limit} real measurements in a row beyond the gate "
+                              f"(last: {out.detail}): the filter lost its object; initial "
+                              f"orbit determination starts again at t={m.t}")
 
     def _validate(self, m: Measurement) -> tuple[str, str]:
         if m.source not in (Source.SENSOR, Source.FORECAST):

@@ -71,6 +71,7 @@ class Cause(enum.StrEnum):
     IGNORED_OTHER_OBJECT = "ignored_other_object"
     IOD_PENDING = "iod_pending"
     IOD_FAILED = "iod_failed"
+    REINITIALISED = "reinitialised"
     RESET_CLOCK_JUMP = "reset_clock_jump"
     HELD_UNTIL_CLOCK = "held_until_clock"
     DROPPED_BEFORE_CLOCK = "dropped_before_clock"

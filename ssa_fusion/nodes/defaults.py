@@ -38,6 +38,7 @@ class SensorSimDefaults:
     gap_length: float | None = None
     gaps: tuple[float, ...] = (0.0,)
     after_gap: float | None = None
+    duration: float = 0.0
     noise_sigma: tuple[float, ...] = (-1.0,)
     time_scale: float = 100.0
     seed: int = 0
@@ -80,6 +81,7 @@ class FilterDefaults:
     object_id: str = ""
     iod_samples: int = 3
     iod_max_span: float = 0.0
+    reinit_after: int = 0
     light_time: bool = False
     predict_period: float = 300.0
     max_clock_lead: float = 3600.0

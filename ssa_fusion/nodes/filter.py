@@ -110,6 +110,12 @@ def estimator_from(node: Node) -> EstimatorConfig:
         "s one IOD batch may span (one pass of one station); later, another station's or "
         "another kind's measurement starts a new batch (0 = no limit)",
         non_negative, apply=runtime("iod_max_span"))
+    values["reinit_after"] = declare(
+        node, "reinit_after", d.reinit_after,
+        "real measurements in a row beyond the gate after which the filter forgets its state "
+        "and initialises again (0 = never)",
+        lambda v: None if isinstance(v, int) and v >= 0 else "must be an integer >= 0",
+        apply=runtime("reinit_after"))
     values["light_time"] = declare(
         node, "light_time", d.light_time,
         "correct the station measurement models for light time (range / c)")

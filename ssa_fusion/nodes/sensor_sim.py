@@ -1,21 +1,26 @@
-"""sensor_sim: simulate a tracked satellite and its sensor, and drive sim time.
+"""sensor_sim: simulate a tracked satellite and its sensors, and drive sim time.
 
-Propagates the scenario's true orbit (two-body + J2, drag, or SGP4/SDP4), and publishes at
-the scenario cadence:
+Propagates the scenario's true orbit (two-body + J2, drag, or SGP4/SDP4), and publishes:
 
-* ``/ssa/measurement`` (ssa_fusion_msgs/Measurement): what the sensor measured;
-* ``/ssa/withheld``: what it would have measured during a gap (evaluation only);
+* ``/ssa/measurement`` (ssa_fusion_msgs/Measurement): what the sensors measured;
+* ``/ssa/withheld``: what they would have measured during a scheduled outage (evaluation
+  only);
 * ``/ssa/truth`` (ssa_fusion_msgs/StateEstimate, zero covariance): the true state;
 * ``/clock``: sim time, UTC (Unix seconds), advancing `time_scale` sim s per wall s.
 
-It exits 0 when the schedule is done. It is the one node that uses the paper's study
-(`ssa_fusion.paper`): its scenarios and their simulation are what it simulates.
+A paper scenario (`paper.scenarios`) has one idealised sensor measuring at every epoch of
+its cadence; a real-sky scenario (`paper.sky`) has stations that measure only above their
+masks (optical ones only at night, of a sunlit object), at their own cadence during a pass,
+and its truth keeps `cadence` through every gap. It exits 0 when the schedule is done. It is
+the one node that uses the paper's study (`ssa_fusion.paper`): its scenarios and their
+simulation are what it simulates.
 
     ros2 run ssa_fusion sensor_sim --ros-args -p scenario:=iss_j2_rae -p time_scale:=500.0
 """
 
 from __future__ import annotations
 
+import enum
 import time
 from typing import Any
 
@@ -39,8 +44,8 @@ from ssa_fusion.nodes.common import (
     run,
 )
 from ssa_fusion.nodes.defaults import SENSOR_SIM
-from ssa_fusion.paper import scenarios
-from ssa_fusion.paper.simulate import Simulation, simulate
+from ssa_fusion.paper import scenarios, sky
+from ssa_fusion.paper.simulate import simulate
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.readiness import ReadyNodes, check_needs
 from ssa_fusion.ros.topics import (
@@ -52,6 +57,43 @@ from ssa_fusion.ros.topics import (
 )
 
 ORBIT_SCENARIOS = [name for name, s in scenarios.SCENARIOS.items() if s.is_orbit]
+SCENARIO_NAMES = [*ORBIT_SCENARIOS, *sky.SKY_SCENARIOS]
+"""What the `scenario` parameter takes: the paper's orbit scenarios and the real-sky ones."""
+
+
+class Event(enum.IntEnum):
+    """What a scheduled publication is."""
+
+    TRUTH = 0
+    MEASUREMENT = 1
+    WITHHELD = 2
+
+
+Schedule = list[tuple[float, Event, types.Measurement | types.StateEstimate]]
+"""Publications in epoch order: (epoch s, what, the message's content)."""
+
+
+def paper_schedule(sim: Any, in_gap: np.ndarray, object_id: str) -> Schedule:
+    """One measurement (or withheld one) and the truth at every epoch of a paper scenario."""
+    s = sim.scenario
+    out: Schedule = []
+    for i, t in enumerate(sim.t.tolist()):
+        m = types.Measurement(t=t, z=sim.z[i], R=sim.R, kind=s.kind, object_id=object_id,
+                              frame_id=s.station or "eci")
+        out.append((t, Event.WITHHELD if in_gap[i] else Event.MEASUREMENT, m))
+        out.append((t, Event.TRUTH, types.StateEstimate(t=t, x=sim.x[i], object_id=object_id)))
+    return out
+
+
+def sky_schedule(sim: sky.SkySimulation, object_id: str) -> Schedule:
+    """The truth on its cadence and the stations' measurements, merged in epoch order."""
+    out: Schedule = [(t, Event.TRUTH, types.StateEstimate(t=t, x=x, object_id=object_id))
+                     for t, x in zip(sim.t.tolist(), sim.x, strict=True)]
+    for m, w in zip(sim.measurements, sim.withheld, strict=True):
+        m.object_id = object_id
+        out.append((m.t, Event.WITHHELD if w else Event.MEASUREMENT, m))
+    out.sort(key=lambda e: (e[0], -e[1]))  # at one epoch: measurements before the truth
+    return out
 
 
 def _or(default: Any, scenario_value: Any) -> Any:
@@ -60,7 +102,7 @@ def _or(default: Any, scenario_value: Any) -> Any:
 
 
 def _scenario_check(value: str) -> str | None:
-    return None if value in ORBIT_SCENARIOS else f"unknown scenario; known: {ORBIT_SCENARIOS}"
+    return None if value in SCENARIO_NAMES else f"unknown scenario; known: {SCENARIO_NAMES}"
 
 
 def _gaps_check(value: list) -> str | None:
@@ -95,12 +137,16 @@ class SensorSim(Node):
             "orbit scenario (truth model, orbit, measurement kind)",
             _scenario_check,
         )
-        base = scenarios.get(name)
+        real_sky = sky.SKY_SCENARIOS.get(name)
+        base = scenarios.get(name) if real_sky is None else scenarios.DEFAULT_LIVE
         d = SENSOR_SIM
         self.object_id = declare(self, "object_id", _or(d.object_id, name),
                                  "object id put in every message")
-        cadence = declare(self, "cadence", _or(d.cadence, base.cadence_s),
-                          "s between measurements", positive)
+        cadence = declare(self, "cadence", _or(d.cadence, base.cadence_s if real_sky is None
+                                               else real_sky.truth_cadence_s),
+                          "s between measurements (real sky: between truth samples)", positive)
+        duration = declare(self, "duration", d.duration,
+                           "real-sky scenarios: s of sim time (0 = the scenario's)", non_negative)
         track = declare(
             self,
             "gap_start",
@@ -151,6 +197,28 @@ class SensorSim(Node):
         self.readers = ReadyNodes(self)
         tick = declare(self, "tick", d.tick, "wall s between publication ticks", positive)
 
+        if real_sky is None:
+            self.schedule, summary = self._paper(base, cadence, track, gap, gaps, after, noise,
+                                                 seed)
+        else:
+            self.schedule, summary = self._sky(real_sky, cadence, duration, gaps, seed)
+        self.times = np.array([e[0] for e in self.schedule])
+
+        self.pub_clock = self.create_publisher(Clock, TOPIC_CLOCK, DATA_QOS)
+        self.pub_meas = self.create_publisher(MeasurementMsg, TOPIC_MEASUREMENT, DATA_QOS)
+        self.pub_withheld = self.create_publisher(MeasurementMsg, TOPIC_WITHHELD, DATA_QOS)
+        self.pub_truth = self.create_publisher(StateEstimateMsg, TOPIC_TRUTH, DATA_QOS)
+        self.diag = Diagnostics(self)
+        self.next = 0
+        self.finished = False
+        self._next_wait_log = time.monotonic() + 5.0  # quiet while discovery runs
+        self.wall0: float | None = None
+        self.create_timer(tick, self.step)
+        self.get_logger().info(f"{name}: {summary}, time scale {self.time_scale}x")
+
+    def _paper(self, base: scenarios.Scenario, cadence: float, track: float, gap: float,
+               gaps: list, after: float, noise: list, seed: int) -> tuple[Schedule, str]:
+        """The schedule of a paper scenario with the node's overrides, and a log line."""
         gap_list = list(gaps) if list(gaps) != [0.0] else [track, gap]
         windows = [(gap_list[i], gap_list[i] + gap_list[i + 1]) for i in range(0, len(gap_list), 2)]
         last_end = max(end for _, end in windows)
@@ -168,29 +236,28 @@ class SensorSim(Node):
                 noise_rel=0.0,
             )
         try:
-            self.sim: Simulation = simulate(scenario, seed=seed)
+            sim = simulate(scenario, seed=seed)
         except ValueError as exc:
-            raise ParameterError(f"cannot simulate scenario {name!r}: {exc}") from exc
-        rel = self.sim.t - scenario.t0
-        self.in_gap = np.zeros(len(rel), dtype=bool)
+            raise ParameterError(f"cannot simulate scenario {base.name!r}: {exc}") from exc
+        rel = sim.t - scenario.t0
+        in_gap = np.zeros(len(rel), dtype=bool)
         for start, end in windows:
-            self.in_gap |= (rel >= start) & (rel < end)
-        self.scenario = scenario
+            in_gap |= (rel >= start) & (rel < end)
+        return (paper_schedule(sim, in_gap, self.object_id),
+                f"{len(sim.t)} epochs every {cadence} s, gaps {windows} s")
 
-        self.pub_clock = self.create_publisher(Clock, TOPIC_CLOCK, DATA_QOS)
-        self.pub_meas = self.create_publisher(MeasurementMsg, TOPIC_MEASUREMENT, DATA_QOS)
-        self.pub_withheld = self.create_publisher(MeasurementMsg, TOPIC_WITHHELD, DATA_QOS)
-        self.pub_truth = self.create_publisher(StateEstimateMsg, TOPIC_TRUTH, DATA_QOS)
-        self.diag = Diagnostics(self)
-        self.next = 0
-        self.finished = False
-        self._next_wait_log = time.monotonic() + 5.0  # quiet while discovery runs
-        self.wall0: float | None = None
-        self.create_timer(tick, self.step)
-        self.get_logger().info(
-            f"{name}: {len(self.sim.t)} epochs every {cadence} s, gaps {windows} s, "
-            f"time scale {self.time_scale}x"
-        )
+    def _sky(self, s: sky.SkyScenario, cadence: float, duration: float, gaps: list,
+             seed: int) -> tuple[Schedule, str]:
+        """The schedule of a real-sky scenario (`gaps`, if set: whole-network outages)."""
+        s = s.with_(truth_cadence_s=cadence, duration_s=duration or s.duration_s)
+        if list(gaps) != [0.0]:
+            s = s.with_(outages=tuple((sky.ALL_STATIONS, gaps[i], gaps[i + 1])
+                                      for i in range(0, len(gaps), 2)))
+        sim = sky.simulate_sky(s, seed=seed, object_id=self.object_id)
+        return (sky_schedule(sim, self.object_id),
+                f"{len(sim.measurements)} measurements ({int(sim.withheld.sum())} withheld) "
+                f"from {', '.join(s.sensors)} over {s.duration_s / 3600:g} h, truth every "
+                f"{cadence} s, outages {list(s.outages)}")
 
     def waiting_for(self) -> list[str]:
         """What start-up still waits for: '/topic=count' entries whose subscriber count is
@@ -226,14 +293,14 @@ class SensorSim(Node):
             waited = any(self.wait_for) or bool(self.wait_for_readers)
             self.get_logger().info("subscribers matched; starting" if waited
                                    else "starting (no subscribers awaited: wait_for is empty)")
-        sim = self.sim
-        now = sim.t[0] + (time.monotonic() - self.wall0) * self.time_scale
-        stop = int(np.searchsorted(sim.t, now, side="right"))
+        times = self.times
+        now = times[0] + (time.monotonic() - self.wall0) * self.time_scale
+        stop = int(np.searchsorted(times, now, side="right"))
         for i in range(self.next, stop):
-            self.publish_epoch(i)
+            self.publish_event(i)
         self.next = max(self.next, stop)
-        self.publish_clock(min(now, sim.t[-1]))
-        if self.next >= len(sim.t):
+        self.publish_clock(min(now, times[-1]))
+        if self.next >= len(times):
             self.done()
 
     def publish_clock(self, t: float) -> None:
@@ -241,22 +308,20 @@ class SensorSim(Node):
         msg.clock = messages.seconds_to_stamp(t)
         self.pub_clock.publish(msg)
 
-    def publish_epoch(self, i: int) -> None:
-        sim, s = self.sim, self.scenario
-        t = float(sim.t[i])
+    def publish_event(self, i: int) -> None:
+        t, what, content = self.schedule[i]
         self.publish_clock(t)
-        frame = s.station or "eci"
-        m = types.Measurement(
-            t=t, z=sim.z[i], R=sim.R, kind=s.kind, object_id=self.object_id, frame_id=frame
-        )
-        if self.in_gap[i]:
-            self.pub_withheld.publish(messages.measurement_to_msg(m))
+        if what == Event.TRUTH:
+            assert isinstance(content, types.StateEstimate)
+            self.pub_truth.publish(messages.estimate_to_msg(content))
+            return
+        assert isinstance(content, types.Measurement)
+        if what == Event.WITHHELD:
+            self.pub_withheld.publish(messages.measurement_to_msg(content))
             self.diag.counts["withheld"] += 1
         else:
-            self.pub_meas.publish(messages.measurement_to_msg(m))
+            self.pub_meas.publish(messages.measurement_to_msg(content))
             self.diag.counts["published"] += 1
-        truth = types.StateEstimate(t=t, x=sim.x[i], object_id=self.object_id)
-        self.pub_truth.publish(messages.estimate_to_msg(truth))
 
     def done(self) -> None:
         self.finished = True
