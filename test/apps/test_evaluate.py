@@ -45,10 +45,19 @@ def test_dmd_ekf_is_scored_over_the_whole_gap_with_the_filters_prediction():
     subset = metrics.epsilon(expected[:COVERED], x_true[:COVERED])
     assert full > 1.5 * subset  # the propagated half is the harder one
     assert ev.scores[ArmName.DMD_EKF].epsilon == pytest.approx(full, rel=1e-9)
-    # the covariance is the filter's prediction's too: F P F' + Q
+    # the covariance is the filter's prediction's too, chained epoch by epoch through the
+    # gap as the filter node publishes it: P <- F P F' + Q(dt) at every cadence step
+    q = scenarios.get("iss_j2_pos").q
+    x, P, t_prev = last.x, last.P, last.t
+    for t in ev.t[COVERED:]:
+        x, F = kepler.propagate(x, t - t_prev)
+        P = F @ P @ F.T + process_noise(t - t_prev, q, dim=3)
+        t_prev = t
+    np.testing.assert_allclose(ev.arms[ArmName.DMD_EKF].P[-1], P, rtol=1e-9)
+    # chaining differs from one jump over the whole gap: the test tells them apart
     F = kepler.propagate(last.x, ev.t[-1] - last.t)[1]
-    Q = process_noise(ev.t[-1] - last.t, scenarios.get("iss_j2_pos").q, dim=3)
-    np.testing.assert_allclose(ev.arms[ArmName.DMD_EKF].P[-1], F @ last.P @ F.T + Q, rtol=1e-9)
+    one_jump = F @ last.P @ F.T + process_noise(ev.t[-1] - last.t, q, dim=3)
+    assert not np.allclose(P, one_jump, rtol=1e-3)
     assert ev.coverage == COVERED / GAP
     assert ev.predicted == GAP - COVERED
     assert f"{GAP - COVERED} scored from" in evaluate.table(evaluate.evaluate(data))
