@@ -1,0 +1,101 @@
+"""Real-sky scenarios (`paper.sky`): sensors measure only above their masks (optical: dark
+site, sunlit object), in passes separated by hours; the scheduled outage withholds exactly
+its station's measurements; a J2 filter fusing one radar's passes is within 1 km after each.
+
+The geometry under these rules (Sun, shadow, rise and set times) is checked against astropy
+and skyfield in `test/core/test_sky_geometry.py`; here the simulation must obey it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from ssa_fusion.core import frames, sun
+from ssa_fusion.core.stations import SENSORS, UNIX_EPOCH_JD
+from ssa_fusion.core.types import Kind
+from ssa_fusion.paper import sky
+
+DAY = 86400.0
+
+
+@pytest.fixture(scope="module")
+def radar_day() -> sky.SkySimulation:
+    s = sky.SKY_SCENARIOS["iss_radar_columbus"].with_(
+        duration_s=DAY, outages=(("columbus", 0.55 * DAY, 0.15 * DAY),))
+    return sky.simulate_sky(s, seed=3)
+
+
+def _true_razel(sim: sky.SkySimulation, name: str) -> tuple[np.ndarray, np.ndarray]:
+    """Measurements of station `name` and the true (geometric) range/az/el at their epochs."""
+    ms = [m for m in sim.measurements if m.frame_id == name]
+    t = np.array([m.t for m in ms])
+    rae = frames.razel_eci(sky.truth(sim.scenario, t), UNIX_EPOCH_JD + t / DAY,
+                           SENSORS[name].station)
+    return np.array([m.z for m in ms]), rae
+
+
+def test_radar_measures_only_above_its_mask_in_passes(radar_day):
+    z, rae = _true_razel(radar_day, "columbus")
+    mask = math.radians(SENSORS["columbus"].min_elevation_deg)
+    assert len(z) > 50
+    assert rae[:, 2].min() >= mask  # the true elevation of every measurement
+    sigma = SENSORS["columbus"].sigma
+    # measured = true + noise of the stated size (light time moves the ISS by < 40 m)
+    assert np.std(z[:, 0] - rae[:, 0]) == pytest.approx(sigma[0], rel=0.3)
+    assert np.abs(z[:, 2] - rae[:, 2]).max() < 6 * sigma[2]
+    passes = sky.passes(radar_day.measurements)
+    assert 4 <= len(passes) <= 8  # a LEO object over one site: ~5 passes a day
+    t = np.array([m.t for m in radar_day.measurements])
+    for first, last in passes:
+        assert 60.0 <= t[last] - t[first] <= 12 * 60.0  # minutes long
+    gaps = np.array([t[b[0]] - t[a[1]] for a, b in zip(passes, passes[1:], strict=False)])
+    assert gaps.min() > 1.4 * 3600  # hours apart (at least one orbit)
+
+
+def test_outage_withholds_exactly_its_stations_measurements(radar_day):
+    s = radar_day.scenario
+    _, start, length = s.outages[0]
+    t = np.array([m.t for m in radar_day.measurements])
+    inside = (t >= s.t0 + start) & (t < s.t0 + start + length)
+    assert inside.any()
+    assert np.array_equal(radar_day.withheld, inside)
+    assert len(radar_day.real) + len(radar_day.withheld_measurements) == len(t)
+    # the truth keeps its cadence through every gap
+    assert np.allclose(np.diff(radar_day.t), s.truth_cadence_s)
+
+
+def test_optical_sites_see_only_at_night_a_sunlit_object():
+    s = sky.SKY_SCENARIOS["leo_optical"].with_(duration_s=DAY)
+    sim = sky.simulate_sky(s, seed=1)
+    assert len(sim.measurements) > 10
+    for name in {m.frame_id for m in sim.measurements}:
+        ms = [m for m in sim.measurements if m.frame_id == name]
+        assert all(m.kind == Kind.RA_DEC for m in ms)
+        t = np.array([m.t for m in ms])
+        jd = UNIX_EPOCH_JD + t / DAY
+        station = SENSORS[name].station
+        assert sun.sun_elevation(jd, station).max() < math.radians(-12.0)
+        assert sun.sunlit(sky.truth(s, t)[:, :3], jd).all()
+    # the mask alone would let the site see the object more often (by day, in shadow)
+    grid = s.t0 + np.arange(0.0, DAY, SENSORS["socorro"].cadence_s)
+    rae = frames.razel_eci(sky.truth(s, grid), UNIX_EPOCH_JD + grid / DAY,
+                           SENSORS["socorro"].station)
+    above = int(np.sum(rae[:, 2] >= math.radians(SENSORS["socorro"].min_elevation_deg)))
+    seen = sum(m.frame_id == "socorro" for m in sim.measurements)
+    assert seen > 0 and above > 1.5 * seen  # here: 116 epochs above the mask, 59 seen
+
+
+def test_filter_is_within_a_kilometre_after_each_radar_pass(radar_day):
+    """Radar noise (20 m, 0.02 deg): the J2 filter's position error after each pass is below
+    1 km, and its sigma covers it to 3 sigma."""
+    report = sky.evaluate_sky(radar_day, seed=3, only=()).passes
+    assert len(report.passes) >= 4
+    err = np.array([p[3] for p in report.passes])
+    sig = np.array([p[4] for p in report.passes])
+    assert err.max() < 1.0, err
+    assert np.all(err < 3 * sig + 0.05), (err, sig)
+    # through the gaps the filter publishes its prediction: errors grow to km, not more
+    assert 1.0 < report.pos_err_km.max() < 20.0
+    assert np.isfinite(report.nees).all()
