@@ -7,6 +7,7 @@ and skyfield in `test/core/test_sky_geometry.py`; here the simulation must obey 
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -50,7 +51,7 @@ def test_radar_measures_only_above_its_mask_in_passes(radar_day):
     t = np.array([m.t for m in radar_day.measurements])
     for first, last in passes:
         assert 60.0 <= t[last] - t[first] <= 12 * 60.0  # minutes long
-    gaps = np.array([t[b[0]] - t[a[1]] for a, b in zip(passes, passes[1:], strict=False)])
+    gaps = np.array([t[b[0]] - t[a[1]] for a, b in itertools.pairwise(passes)])
     assert gaps.min() > 1.4 * 3600  # hours apart (at least one orbit)
 
 
