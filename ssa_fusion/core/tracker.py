@@ -71,6 +71,26 @@ def _before(a: float, b: float) -> bool:
     return a < b - 1e-12 * max(1.0, abs(b))
 
 
+def prediction_epochs(after: float, now: float, period: float,
+                      limit: int) -> tuple[list[float], int]:
+    """Return the epochs (s) where a filter publishing every `period` s of sim time predicts.
+
+    They are the multiples of `period` in (`after`, `now`], at most `limit` of them, the
+    earliest first (a caller catches up over later calls); returns (epochs, skipped), where
+    `skipped` counts the earliest ones left out when more than `limit` * 10 are due (a clock
+    that jumped far ahead: publishing them all would stall the caller).
+
+    >>> prediction_epochs(100.0, 250.0, 60.0, 10)
+    ([120.0, 180.0, 240.0], 0)
+    """
+    if not (period > 0.0 and math.isfinite(after) and math.isfinite(now)) or now <= after:
+        return [], 0
+    k0, k1 = math.floor(after / period) + 1, math.floor(now / period)
+    skipped = max(0, (k1 - k0 + 1) - 10 * limit)
+    k0 += skipped
+    return [k * period for k in range(k0, min(k1, k0 + limit - 1) + 1)], skipped
+
+
 DEFAULT_GATE = 1000.0
 """Default NIS gate: rejects gross glitches only (a 3-channel innovation ~30 sigma away)."""
 

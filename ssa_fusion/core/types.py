@@ -77,6 +77,7 @@ class Cause(enum.StrEnum):
     DROPPED_BEFORE_CLOCK = "dropped_before_clock"
     FORECASTS_ROLLED_BACK = "forecasts_rolled_back"
     FORECAST_INVALID = "forecast_invalid"
+    PREDICTIONS_SKIPPED = "predictions_skipped"
     INTERNAL_ERROR = "internal_error"
     UNRECORDABLE_TOPIC = "unrecordable_topic"
 

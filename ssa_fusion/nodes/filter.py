@@ -4,9 +4,10 @@ Initialises from its first real measurements (Herrick–Gibbs for range/az/el, f
 differences for position), then fuses real measurements from ``/ssa/measurement`` and,
 for epochs without one, forecasts from ``/ssa/forecast``. Publishes ``/ssa/estimate``
 (state + full 6x6 covariance, stamped with the measurement epoch) for every fused epoch;
-when nothing is fused for `predict_period` sim s it publishes a prediction (update_source
-NONE) whose covariance grows, every `predict_period` through a gap (each one predicted on
-from the previous, so a gap of hours costs one short propagation per prediction). Rejected
+when nothing is fused for `predict_period` sim s it publishes predictions (update_source
+NONE) whose covariance grows, at every multiple of `predict_period` of sim time through the
+gap (so on the truth's grid when the two cadences agree; each predicted on from the
+previous, so a gap of hours costs one short propagation per prediction). Rejected
 input is counted by cause on ``/diagnostics``. The
 estimator settings in effect are published (latched) on ``/ssa/config``, so every bag
 records them.
@@ -29,6 +30,7 @@ from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 from std_msgs.msg import String
 
 from ssa_fusion.core.config import EstimatorConfig, make_tracker
+from ssa_fusion.core.tracker import prediction_epochs
 from ssa_fusion.core.types import Cause, Source, StateEstimate
 from ssa_fusion.core.validation import ahead_of_clock
 from ssa_fusion.nodes import settings, start_process
@@ -57,6 +59,8 @@ from ssa_fusion.ros.topics import (
 )
 
 SOURCE_NAMES = ("prediction", "sensor", "forecast")
+PREDICTIONS_PER_TICK = 100
+"""Most predictions published per 0.1 s wall tick (a backlog is worked off over ticks)."""
 
 
 def _p0_check(v: list) -> str | None:
@@ -138,7 +142,8 @@ class FilterNode(Node):
             self,
             "predict_period",
             FILTER.predict_period,
-            "sim s without an update after which a prediction is published (0 = never)",
+            "sim s: without an update for this long, predictions are published at every "
+            "multiple of it (0 = never)",
             non_negative,
             apply=lambda v: setattr(self, "predict_period", v),
         )
@@ -204,6 +209,8 @@ class FilterNode(Node):
         if cause:
             self.diag.count(cause, reason)
             return
+        if m.source == Source.SENSOR:  # the gap's predictions before the measurement ending it
+            self.predict_until(math.nextafter(m.t, -math.inf), 10 * PREDICTIONS_PER_TICK)
         out = self.tracker.process(m)
         if out.rejected == Cause.IOD_PENDING:
             self.diag.counts[Cause.IOD_PENDING] += 1
@@ -225,19 +232,35 @@ class FilterNode(Node):
     def predict(self) -> None:
         for held in self.clock_hold.release():
             self.on_measurement(*held)
+        self.predict_until(self.get_clock().now().nanoseconds * 1e-9)
+
+    def predict_until(self, now: float, limit: int = PREDICTIONS_PER_TICK) -> None:
+        """Publish the predictions due on the `predict_period` grid up to sim time `now` (s).
+
+        Called by the timer with the clock's time (at most `limit` predictions), and before a
+        real measurement is fused with the epoch just before it (all that are due), so the
+        grid through a gap is complete however fast sim time runs."""
         if self.predict_period <= 0:
             return
-        now = self.get_clock().now().nanoseconds * 1e-9
-        if self.tracker.t >= now - self.predict_period or now <= self._predicted_at:
-            return  # recently updated, or sim time has not moved since the last prediction
-        last = self._prediction
-        if last is not None and self.tracker.initialised and last.t >= self.tracker.t:
-            e: StateEstimate | None = self.tracker.predict_from(last, now)  # chained
-        else:
-            e = self.tracker.predicted(now)
-        if e is not None:
+        if not self.tracker.initialised or self.tracker.t >= now - self.predict_period:
+            return  # nothing to predict from, or recently updated
+        epochs, skipped = prediction_epochs(max(self.tracker.t, self._predicted_at), now,
+                                            self.predict_period, limit)
+        if skipped:
+            self.diag.count(Cause.PREDICTIONS_SKIPPED,
+                            f"{skipped} prediction epochs skipped: sim time ran "
+                            f"{now - self._predicted_at:.0f} s ahead", warn=False)
+            self.diag.counts[Cause.PREDICTIONS_SKIPPED] += skipped - 1
+        for t in epochs:  # on the grid of multiples of predict_period, chained
+            last = self._prediction
+            if last is not None and last.t >= self.tracker.t:
+                e: StateEstimate | None = self.tracker.predict_from(last, t)
+            else:
+                e = self.tracker.predicted(t)
+            if e is None:
+                return
             self.publish(e)
-            self._predicted_at = now
+            self._predicted_at = t
             self._prediction = e
 
 

@@ -769,3 +769,19 @@ def test_herrick_gibbs_first_estimate_is_consistent():
         nees.append(err @ np.linalg.solve(out.estimate.P, err))
     lo, hi = chi2.ppf([0.0005, 0.9995], 6 * runs) / runs
     assert lo < np.mean(nees) < hi, (np.mean(nees), lo, hi)
+
+
+def test_prediction_epochs_are_the_multiples_of_the_period_after_the_last_update():
+    from ssa_fusion.core.tracker import prediction_epochs
+
+    assert prediction_epochs(100.0, 250.0, 60.0, 10) == ([120.0, 180.0, 240.0], 0)
+    assert prediction_epochs(120.0, 179.9, 60.0, 10) == ([], 0)  # 120 itself was updated
+    # a backlog is worked off `limit` at a time, the earliest first
+    t0 = 1735689600.0  # 2025-01-01, a multiple of 60 s: the truth's grid
+    first, skipped = prediction_epochs(t0 + 5.0, t0 + 3600.0, 60.0, 10)
+    assert first == [t0 + 60.0 * k for k in range(1, 11)] and skipped == 0
+    # far ahead (a forward clock jump): only the last 10 * limit are kept
+    got, skipped = prediction_epochs(0.0, 1e6, 1.0, 10)
+    assert skipped == 1e6 - 100 and got[0] == 1e6 - 99 and len(got) == 10
+    for bad in [(float("-inf"), 5.0, 1.0), (0.0, float("nan"), 1.0), (0.0, 5.0, 0.0)]:
+        assert prediction_epochs(*bad, 10) == ([], 0)
