@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -18,7 +19,7 @@ import numpy as np
 
 from ssa_fusion.core.hankel_dmd import HankelDMD
 from ssa_fusion.core.iod import razel_to_eci
-from ssa_fusion.paper import distributions, experiments, scenarios
+from ssa_fusion.paper import distributions, experiments, scenarios, sky, sky_study
 from ssa_fusion.paper.simulate import simulate
 
 ARMS = ("placeholder", "dmd_ekf", "hypothetical_ekf")
@@ -262,6 +263,8 @@ def markdown(results: dict) -> str:
         for i, mu in enumerate(v["mu_p"]):
             lines.append(f"| {mu:.1f} | " + " | ".join(_fmt(v[a][i]) for a in ARMS) + " |")
         lines.append("")
+    if results.get("sky_markdown"):
+        lines += ["## The real sky (evaluation seeds)", "", results["sky_markdown"], ""]
     c = results.get("consistency")
     if c:
         lines += [f"## Surrogate consistency ({c['scenario']}, {c['seeds']} seeds)", "",
@@ -307,7 +310,10 @@ def _jsonable(o):
 # ----------------------------------------------------------------------------------------
 def add_arguments(parser) -> None:
     parser.add_argument("--scenario", nargs="+", metavar="NAME", default=None,
-                        help=f"scenarios to run (default: all: {', '.join(scenarios.SCENARIOS)})")
+                        help=f"scenarios to run (default: the paper's: "
+                             f"{', '.join(scenarios.SCENARIOS)}; also the real-sky ones: "
+                             f"{', '.join(sky.SKY_SCENARIOS)}, whose study is distributions "
+                             f"over the evaluation seeds)")
     parser.add_argument("--out", default="out/reproduce",
                         help="output directory (default out/reproduce)")
     parser.add_argument("--seed", type=int, default=1, help="noise and Monte Carlo seed")
@@ -331,6 +337,8 @@ def add_arguments(parser) -> None:
 
 def run(args) -> int:
     names = args.scenario or list(scenarios.SCENARIOS)
+    sky_names = [n for n in names if n in sky.SKY_SCENARIOS]
+    names = [n for n in names if n not in sky.SKY_SCENARIOS]
     try:
         chosen = [scenarios.get(n) for n in names]
     except ValueError as exc:
@@ -389,6 +397,14 @@ def run(args) -> int:
               file=sys.stderr)
         results["distributions"] = distributions.run_distributions(
             chosen, seeds, offsets, args.workers, dbar.step)
+    if sky_names:
+        sky_seeds = distributions.EVALUATION_SEEDS[:QUICK_SEEDS if args.quick else None]
+        sky_offsets = (0.0,) if args.quick else distributions.START_OFFSETS_H
+        sbar = Progress(len(sky_names) * len(sky_seeds) * len(sky_offsets))
+        print(f"real sky: {', '.join(sky_names)} over {len(sky_seeds)} evaluation seeds from "
+              f"{len(sky_offsets)} start epoch(s)", file=sys.stderr)
+        results["sky_markdown"], results["sky"] = sky_study.run_sky_study(
+            sky_names, sky_seeds, sky_offsets, args.workers or os.cpu_count() or 1, sbar.step)
     results["seconds"] = round(time.monotonic() - t0, 1)
     (out / "results.json").write_text(json.dumps(_jsonable(results), indent=1))
     md = markdown(results)
@@ -403,6 +419,8 @@ def run(args) -> int:
     print(table(results))
     if results.get("distributions"):
         print("\n" + distribution_table(results["distributions"]))
+    if results.get("sky_markdown"):
+        print("\n" + results["sky_markdown"])
     print(f"\nwrote {out / 'results.json'}, {out / 'results.md'} and plots "
           f"in {results['seconds']:.0f} s")
     return 0

@@ -100,3 +100,26 @@ def test_filter_is_within_a_kilometre_after_each_radar_pass(radar_day):
     # through the gaps the filter publishes its prediction: errors grow to km, not more
     assert 1.0 < report.pos_err_km.max() < 20.0
     assert np.isfinite(report.nees).all()
+
+
+def test_reproduce_runs_the_real_sky_study_over_evaluation_seeds(tmp_path, monkeypatch):
+    """`ssa-fusion reproduce --scenario iss_radar_columbus --quick`: every arm over the outage
+    and the passes of 3 evaluation seeds (here on one day of the scenario, to stay fast)."""
+    import json
+
+    from ssa_fusion.apps.cli import build_parser
+    from ssa_fusion.paper.distributions import EVALUATION_SEEDS
+
+    short = sky.SKY_SCENARIOS["iss_radar_columbus"].with_(
+        duration_s=DAY, outages=(("columbus", 0.55 * DAY, 0.15 * DAY),))
+    monkeypatch.setitem(sky.SKY_SCENARIOS, "iss_radar_columbus", short)  # forked workers see it
+    args = build_parser().parse_args(["reproduce", "--scenario", "iss_radar_columbus", "--quick",
+                                      "--no-plots", "--workers", "2", "--out", str(tmp_path)])
+    assert args._run(args) == 0
+    got = json.loads((tmp_path / "results.json").read_text())["sky"]["iss_radar_columbus"]
+    assert got["runs"] == 3 and EVALUATION_SEEDS[0] == 101
+    assert got["after_pass_km_max"] < 1.0
+    arms_km = got["outage_mean_km_median"]
+    assert set(arms_km) == {"placeholder", "coast", "j2_coast", "dmd_ekf", "hypothetical_ekf"}
+    assert all(0.0 < v < 5.0 for v in arms_km.values()), arms_km  # km over a 3.6 h outage
+    assert "## The real sky" in (tmp_path / "results.md").read_text()
