@@ -128,8 +128,7 @@ def evaluate(data: BagData, scenario: str = "", seed: int = 0,
     t_gap = np.array(sorted({m.t for m in data.withheld}))
     network = chosen.estimator.is_network
     if network:  # stations measure off the truth's cadence: the truth epochs of the outage
-        t_all = np.array(sorted(truth))
-        t_gap = t_all[(t_all >= t_gap[0]) & (t_all <= t_gap[-1])]
+        t_gap = sky.outage_epochs(np.array(sorted(truth)), data.withheld)
     missing = [t for t in t_gap if t not in truth]
     if missing or not len(t_gap):
         raise ValueError(f"/ssa/truth lacks {len(missing)} gap epochs (first t="
@@ -144,6 +143,53 @@ def evaluate(data: BagData, scenario: str = "", seed: int = 0,
         passes = sky.pass_report(chosen.estimator, live, real, t_all,
                                  np.array([truth[t] for t in t_all]))
     return Evaluation(gap, chosen, passes)
+
+
+@dataclass
+class LateForecasts:
+    """Forecasts the surrogate published for the gap that the filter never fused.
+
+    An epoch counts when the bag holds a forecast for it (on /ssa/forecast, epoch within the
+    gap's span) but no estimate of the filter that fused anything at it (update_source
+    SENSOR or FORECAST): it was scored from the filter's prediction although a forecast
+    existed. The forecast reached the filter too late (after the history it can roll back)
+    or was dropped (superseded by a newer model, gated out, invalid). A real measurement
+    at the same epoch (an estimate from SENSOR) supersedes a forecast by design: not counted.
+    """
+
+    epochs: int
+    """Gap epochs with a forecast that the filter never fused."""
+    forecast_epochs: int
+    """Gap epochs with at least one forecast in the bag."""
+    first_t: float | None = None
+    """The earliest such epoch, s (sim time), or None."""
+
+
+def _same_epoch(a: float, b: float) -> bool:
+    """a == b up to the round-off of epochs computed as t0 + k * cadence (1 µs, or 1e-12
+    relative on Unix times): the rule of `paper.arms` for matching gap epochs."""
+    return abs(a - b) <= max(1e-6, 1e-12 * abs(b))
+
+
+def unfused_forecasts(data: BagData, t_gap: np.ndarray) -> LateForecasts:
+    """Count the gap's forecasts the filter never fused (`LateForecasts`); `t_gap`: the gap
+    epochs, s (as `evaluate` scores them; their first and last bound the span)."""
+    if not len(t_gap) or not data.forecasts:
+        return LateForecasts(0, 0)
+    lo, hi = float(np.min(t_gap)), float(np.max(t_gap))
+    wanted = sorted({f.t for f in data.forecasts
+                     if lo <= f.t <= hi or _same_epoch(f.t, lo) or _same_epoch(f.t, hi)})
+    fused = sorted({e.t for e in data.estimates
+                    if e.update_source != types.UpdateSource.NONE})
+    late = []
+    for t in wanted:
+        k = int(np.searchsorted(fused, t))
+        if not any(0 <= j < len(fused) and _same_epoch(fused[j], t) for j in (k - 1, k)):
+            late.append(t)
+    # epochs that differ by round-off only are one epoch
+    distinct = [t for i, t in enumerate(wanted) if i == 0 or not _same_epoch(wanted[i - 1], t)]
+    late = [t for i, t in enumerate(late) if i == 0 or not _same_epoch(late[i - 1], t)]
+    return LateForecasts(len(late), len(distinct), late[0] if late else None)
 
 
 def table(ev: Evaluation) -> str:

@@ -332,10 +332,12 @@ def estimates_at(c: EstimatorConfig, estimates: dict[float, StateEstimate],
     return arms.at_epochs(c, estimates, t[t > first])
 
 
-def outage_epochs(s: SkyScenario, t: np.ndarray) -> np.ndarray:
-    """The truth epochs inside the scenario's first scheduled outage."""
-    _, start, length = s.outages[0]
-    return t[(t >= s.t0 + start) & (t < s.t0 + start + length)]
+def outage_epochs(t: np.ndarray, withheld: list[Measurement]) -> np.ndarray:
+    """The truth epochs `t` the scheduled outage is scored over: from its first withheld
+    measurement to its last (the same rule for a bag, `apps.evaluate`, which knows only what
+    was withheld, not the schedule)."""
+    w = [m.t for m in withheld]
+    return t[(t >= min(w)) & (t <= max(w))] if w else t[:0]
 
 
 @dataclass
@@ -387,8 +389,8 @@ class SkyEvaluation:
 def evaluate_sky(sim: SkySimulation, seed: int = 0,
                  only: tuple[arms.ArmName, ...] = tuple(arms.ArmName)) -> SkyEvaluation:
     """Run the scenario's graph (filter and surrogate) over the delivered measurements and
-    score it: after each pass, at every truth epoch, and every arm over the first scheduled
-    outage."""
+    score it: after each pass, at every truth epoch, and every arm over the scheduled
+    outage (`outage_epochs`)."""
     s = sim.scenario
     c = s.estimator()
     real, withheld = sim.real, sim.withheld_measurements
@@ -396,7 +398,7 @@ def evaluate_sky(sim: SkySimulation, seed: int = 0,
     report = pass_report(c, run.estimates, real, sim.t, sim.x)
     outage = None
     if s.outages and withheld:
-        t_gap = outage_epochs(s, sim.t)
+        t_gap = outage_epochs(sim.t, withheld)
         outage = arms.evaluate_gap(c, run.estimates, real, withheld, t_gap,
                                    sim.x[np.isin(sim.t, t_gap)], seed, only=only)
     return SkyEvaluation(report, outage, len(run.forecasts))

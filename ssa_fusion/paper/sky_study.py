@@ -61,7 +61,8 @@ def summarise(name: str, runs: list[dict]) -> tuple[str, dict]:
     gaps = np.concatenate([r["gaps_h"] for r in runs]) if runs else np.zeros(0)
     lo, hi = runs[0]["nees_band"]
     lines = [f"### {name} ({len(runs)} runs: medians [quartiles] over runs)", "",
-             "| arm over the scheduled outage | mean position error [km] | mean NEES |",
+             "| arm over the outage (first to last withheld measurement) | mean position error "
+             "[km] | mean NEES |",
              "|---|---|---|"]
     arm_med = {}
     for a in ARMS:
