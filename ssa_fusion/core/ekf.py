@@ -284,3 +284,40 @@ def process_noise(dt_s: float, q: float, dim: int = 3) -> Array:
     dt = abs(float(dt_s))
     blk = q * np.array(((dt**3 / 3.0, dt**2 / 2.0), (dt**2 / 2.0, dt)))
     return cast(Array, np.kron(blk, np.eye(dim)))
+
+
+def bound_covariance(x: ArrayLike, P: ArrayLike, factor: float) -> Array:
+    """Limit the standard deviations of a ``[pos, vel]`` state's covariance.
+
+    Each position standard deviation is limited to ``factor * |pos|`` and each velocity one
+    to ``factor * |vel|`` (for an orbit, ``factor`` 2: the orbit's diameter and twice its
+    speed, beyond which the object could be anywhere on its orbit and a linear covariance
+    means nothing). Rows and columns over the limit are scaled, ``P <- D P D``, so the
+    correlations are kept and P stays positive semi-definite.
+
+    Parameters
+    ----------
+    x : array_like, shape (2*dim,)
+        State ``[p_1..p_dim, v_1..v_dim]`` (any units; the limit is relative).
+    P : array_like, shape (2*dim, 2*dim)
+        Its covariance.
+    factor : float
+        The limit relative to the norms; 0 or inf: no limit (P is returned unchanged).
+
+    Returns
+    -------
+    ndarray, shape (2*dim, 2*dim)
+    """
+    P = np.asarray(P, dtype=float)
+    if not factor or not math.isfinite(factor):
+        return P
+    x = np.asarray(x, dtype=float)
+    h = len(x) // 2
+    cap = np.repeat([factor * np.linalg.norm(x[:h]), factor * np.linalg.norm(x[h:])],
+                    [h, len(x) - h])
+    sig = np.sqrt(np.clip(np.diag(P), 0.0, None))
+    over = (sig > cap) & (cap > 0.0)
+    if not over.any():
+        return P
+    s = np.where(over, cap / np.where(over, sig, 1.0), 1.0)
+    return cast(Array, P * s[:, None] * s[None, :])

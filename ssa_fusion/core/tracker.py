@@ -53,7 +53,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .ekf import ExtendedKalmanFilter, process_noise
+from .ekf import ExtendedKalmanFilter, bound_covariance, process_noise
 from .history import HISTORY_REAL, FusedHistory, FusedStep, Snapshot
 from .initiation import OrbitInitiator, Placeholder
 from .measurement import MeasurementModel, StationModels
@@ -122,6 +122,12 @@ class TrackerConfig:
         first one (or from another station or of another kind) starts a new batch, so the
         initial orbit comes from one pass of one station (Herrick-Gibbs and Gauss need
         closely spaced samples).
+    sigma_bound : float
+        After every prediction, position standard deviations are limited to `sigma_bound`
+        times the position's norm and velocity ones to `sigma_bound` times the velocity's
+        (`ekf.bound_covariance`; 2 for an orbit: its diameter and twice its speed), so a gap
+        of days cannot blow the covariance up beyond what is physically possible; 0 = no
+        limit.
     """
 
     p0_sigma: tuple[float, ...] = (1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3)
@@ -131,6 +137,7 @@ class TrackerConfig:
     frame_id: str = ""
     iod_max_span_s: float = math.inf
     reinit_after: int = 0
+    sigma_bound: float = 0.0
 
 
 @dataclass
@@ -213,7 +220,8 @@ class Tracker:
         """
         x, F = self.f(e.x, t - e.t)
         P = F @ e.P @ F.T + self._Q(t - e.t)
-        return StateEstimate(t, x, 0.5 * (P + P.T), e.object_id, 0, 0.0)
+        P = bound_covariance(x, 0.5 * (P + P.T), self.config.sigma_bound)
+        return StateEstimate(t, x, P, e.object_id, 0, 0.0)
 
     # ----------------------------------------------------------------------------------
     def process(self, m: Measurement) -> Outcome:
@@ -279,6 +287,9 @@ class Tracker:
             with np.errstate(over="raise", invalid="raise"):
                 if dt != 0.0:
                     ekf.predict(lambda x: self.f(x, dt), self._Q(dt))
+                    if self.config.sigma_bound:
+                        ekf.P = bound_covariance(ekf.x, ekf.P, self.config.sigma_bound)
+                        ekf.P_prior = ekf.P.copy()
                 result = ekf.update(m.z, lambda x: model.h_and_H(x, t), m.R,
                                     model.angle_mask, self.config.gate)
             ok: bool | np.bool_ = np.isfinite(ekf.x).all() and np.isfinite(ekf.P).all()

@@ -82,6 +82,7 @@ class FilterDefaults:
     iod_samples: int = 3
     iod_max_span: float = 0.0
     reinit_after: int = 0
+    sigma_bound: float = 0.0
     light_time: bool = False
     predict_period: float = 300.0
     max_clock_lead: float = 3600.0

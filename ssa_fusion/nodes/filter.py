@@ -120,6 +120,11 @@ def estimator_from(node: Node) -> EstimatorConfig:
         "and initialises again (0 = never)",
         lambda v: None if isinstance(v, int) and v >= 0 else "must be an integer >= 0",
         apply=runtime("reinit_after"))
+    values["sigma_bound"] = declare(
+        node, "sigma_bound", d.sigma_bound,
+        "after each prediction, position sigmas are limited to sigma_bound x |position| and "
+        "velocity sigmas to sigma_bound x |velocity| (2: the orbit's diameter; 0 = no limit)",
+        non_negative, apply=runtime("sigma_bound"))
     values["light_time"] = declare(
         node, "light_time", d.light_time,
         "correct the station measurement models for light time (range / c)")

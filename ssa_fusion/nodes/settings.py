@@ -28,7 +28,7 @@ from ssa_fusion.nodes.defaults import FILTER, SURROGATE
 KM = 1000.0
 """m per km."""
 FILTER_KEYS = ("kind", "station", "motion_model", "p0_sigma", "q", "gate", "iod_samples",
-               "iod_max_span", "reinit_after", "light_time")
+               "iod_max_span", "reinit_after", "sigma_bound", "light_time")
 """The filter's parameters that are estimator settings."""
 SURROGATE_KEYS = ("kind", "station", "buffer_length", "retrain_period", "delays", "rank",
                   "max_horizon", "grace", "cadence", "lift")
@@ -44,7 +44,7 @@ def filter_params(c: EstimatorConfig) -> dict[str, Any]:
             "p0_sigma": [v * KM for v in t.p0_sigma], "q": t.q * KM * KM,
             "gate": t.gate or 0.0, "iod_samples": t.iod_samples,
             "iod_max_span": 0.0 if math.isinf(t.iod_max_span_s) else t.iod_max_span_s,
-            "reinit_after": t.reinit_after,
+            "reinit_after": t.reinit_after, "sigma_bound": t.sigma_bound,
             "light_time": c.light_time}
 
 
@@ -82,7 +82,8 @@ def estimator_from(filt: Mapping[str, Any], surr: Mapping[str, Any]) -> Estimato
                             q=float(f["q"]) / (KM * KM), gate=float(f["gate"]) or None,
                             iod_samples=int(f["iod_samples"]),
                             iod_max_span_s=float(f["iod_max_span"]) or math.inf,
-                            reinit_after=int(f["reinit_after"]))
+                            reinit_after=int(f["reinit_after"]),
+                            sigma_bound=float(f["sigma_bound"]))
     surrogate = dataclasses.replace(
         LIVE_SURROGATE, buffer_s=float(s["buffer_length"]),
         retrain_period_s=float(s["retrain_period"]) or math.inf, delays=int(s["delays"]),

@@ -75,10 +75,12 @@ class SkyScenario:
         estimates (s).
     outages : tuple of (str, float, float)
         Scheduled outages: (sensor id, or `ALL_STATIONS`; start s after t0; length s).
-    motion_model, q, p0_sigma, iod_samples, iod_max_span_s, reinit_after, light_time
+    motion_model, q, p0_sigma, iod_samples, iod_max_span_s, reinit_after, sigma_bound,
+    light_time
         The filter: motion model, process noise spectral density (km/s^2)^2 s, IOD
         covariance floor, IOD batch size and span (one pass), real measurements beyond the
-        gate in a row after which it initialises again, light-time correction.
+        gate in a row after which it initialises again, the bound on its standard
+        deviations relative to |r| and |v| (`ekf.bound_covariance`), light-time correction.
     finding : str
         What the scenario shows.
     """
@@ -97,6 +99,7 @@ class SkyScenario:
     iod_samples: int = 7
     iod_max_span_s: float = 300.0
     reinit_after: int = 10
+    sigma_bound: float = 2.0
     light_time: bool = True
     finding: str = ""
 
@@ -114,7 +117,8 @@ class SkyScenario:
             tracker=TrackerConfig(p0_sigma=self.p0_sigma, q=self.q,
                                   iod_samples=self.iod_samples,
                                   iod_max_span_s=self.iod_max_span_s,
-                                  reinit_after=self.reinit_after),
+                                  reinit_after=self.reinit_after,
+                                  sigma_bound=self.sigma_bound),
             surrogate=LIVE_SURROGATE)
 
     def with_(self, **changes: object) -> SkyScenario:

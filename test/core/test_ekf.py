@@ -257,3 +257,22 @@ def test_constructor_validates() -> None:
     kf = ExtendedKalmanFilter([1.0, 2.0], [[1.0, 0.0], [0.0, 1.0]])
     assert math.isnan(kf.nis)
     assert kf.x.dtype == np.float64
+
+
+def test_bound_covariance_limits_sigmas_and_keeps_correlations():
+    from ssa_fusion.core.ekf import bound_covariance
+
+    x = np.array([7000.0, 0.0, 0.0, 0.0, 7.5, 0.0])  # km, km/s
+    A = np.random.default_rng(1).standard_normal((6, 6))
+    d = np.repeat([3e4, 1.0], 3)
+    P = A @ A.T * np.outer(d, d)  # position sigma ~3e4 km: beyond 2|r|
+    B = bound_covariance(x, P, 2.0)
+    sig, sig_b = np.sqrt(np.diag(P)), np.sqrt(np.diag(B))
+    cap = np.repeat([14000.0, 15.0], 3)
+    np.testing.assert_allclose(sig_b, np.minimum(sig, cap), rtol=1e-12)
+    corr = P / np.outer(sig, sig)
+    np.testing.assert_allclose(B / np.outer(sig_b, sig_b), corr, atol=1e-12)
+    assert np.linalg.eigvalsh(B).min() > -1e-9 * np.abs(B).max()
+    assert np.array_equal(bound_covariance(x, P, 0.0), P)
+    small = np.diag([1.0, 1.0, 1.0, 1e-6, 1e-6, 1e-6])
+    assert np.array_equal(bound_covariance(x, small, 2.0), small)  # within the bound: unchanged

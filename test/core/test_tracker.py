@@ -785,3 +785,21 @@ def test_prediction_epochs_are_the_multiples_of_the_period_after_the_last_update
     assert skipped == 1e6 - 100 and got[0] == 1e6 - 99 and len(got) == 10
     for bad in [(float("-inf"), 5.0, 1.0), (0.0, float("nan"), 1.0), (0.0, 5.0, 0.0)]:
         assert prediction_epochs(*bad, 10) == ([], 0)
+
+
+def test_covariance_through_a_long_gap_is_bounded_by_the_orbit():
+    """sigma_bound 2: a month without measurements leaves every position sigma at most the
+    orbit's diameter and every velocity sigma at most twice the speed; unbounded, the
+    Keplerian along-track spread grows far beyond the orbit."""
+    sim = _sim("iss_j2_rae")
+    ms = [_meas(sim, i) for i in range(20)]
+    free, bounded = _tracker(sim), _tracker(sim, sigma_bound=2.0)
+    _feed(free, ms)
+    _feed(bounded, ms)
+    t = ms[-1].t + 30 * 86400.0
+    e_free, e = free.predicted(t), bounded.predicted(t)
+    sig = np.sqrt(np.diag(e.P))
+    assert np.all(sig[:3] <= 2.0 * np.linalg.norm(e.x[:3]) * (1 + 1e-12))
+    assert np.all(sig[3:] <= 2.0 * np.linalg.norm(e.x[3:]) * (1 + 1e-12))
+    assert np.sqrt(np.diag(e_free.P))[:3].max() > 10 * 2.0 * np.linalg.norm(e.x[:3])
+    np.testing.assert_allclose(e.x, e_free.x)  # the state is not touched
