@@ -15,6 +15,8 @@ _COMMANDS = {
     "reproduce": ("ssa_fusion.paper.reproduce", "reproduce the paper's experiments (three arms)"),
     "replay": ("ssa_fusion.apps.replay", "replay a recorded bag through surrogate + filter"),
     "report": ("ssa_fusion.apps.report", "metrics table and plots from a recorded bag"),
+    "bag": ("ssa_fusion.apps.bag", "bag tools: `bag repair` makes a killed recorder's bag "
+                                   "readable by any reader"),
 }
 
 

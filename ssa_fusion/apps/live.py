@@ -4,6 +4,11 @@ Starts the four executables as separate processes (the same files `ros2 run` sta
 private ROS domain on loopback, waits until the recorder listens to every topic, lets the
 simulation run at `--time-scale`, stops everything cleanly, then prints the table of the
 paper's three arms for the gap and writes plots.
+
+The summary warns when the machine did not keep up: when the simulation and the estimation
+behind it took more than `SLOW_FACTOR` times the wall time `--time-scale` asks for, and when
+the surrogate's forecasts for gap epochs never went into the filter (late or dropped; those
+epochs are scored from the filter's prediction). With `--strict` the latter fails the run.
 """
 
 from __future__ import annotations
@@ -11,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -21,11 +27,19 @@ from ssa_fusion.nodes import settings
 from ssa_fusion.paper import scenarios, sky
 from ssa_fusion.ros.processes import Graph
 from ssa_fusion.ros.readiness import READERS
+from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
 
 LIVE_SCENARIOS = [*(n for n, s in scenarios.SCENARIOS.items() if s.is_orbit), *sky.SKY_SCENARIOS]
 """The paper's orbit scenarios and the real-sky ones (`paper.sky`)."""
 LIVE_ROOT = Path("out/live")
 """Where runs go by default, one directory each."""
+SLOW_FACTOR = 1.2
+"""Warn when the run took more than this times the wall time the time scale asks for."""
+SLOW_SLACK_S = 0.5
+"""... and more than this many wall seconds over it (start-up and teardown jitter), s."""
+FILTER_COUNTERS = ("forecast_superseded", "forecasts_rolled_back", "rejected_gate",
+                   "rejected_stale")
+"""The filter's /diagnostics counters the late-forecast warning quotes (when received)."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -38,6 +52,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"output directory (default: {LIVE_ROOT}/<scenario>_<date-time>, "
                         f"also linked as {LIVE_ROOT}/latest)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--strict", action="store_true",
+                   help="exit 1 when forecasts for gap epochs never went into the filter "
+                        "(they arrived late or were dropped, e.g. at too high a time scale)")
     add_domain_id(p)
 
 
@@ -94,6 +111,66 @@ def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, 
     return {"sensor_sim": sensor, "surrogate": surrogate, "filter": filt, "recorder": recorder}
 
 
+_LOG_STAMP = re.compile(r"\[(\d+(?:\.\d+)?)\]")
+
+
+def sensor_wall_times(log: Path) -> tuple[float, float] | None:
+    """(start, end) of the simulation in wall time (Unix s) from sensor_sim's log (its stderr,
+    rcutils' default format): the lines "starting" and "schedule done"; None when either
+    is missing or unreadable."""
+    try:
+        lines = log.read_text(errors="replace").splitlines()
+    except OSError:
+        return None
+    start = end = None
+    for line in lines:
+        stamp = _LOG_STAMP.search(line)
+        if stamp is None:
+            continue
+        if start is None and ("]: subscribers matched; starting" in line
+                              or "]: starting (" in line):
+            start = float(stamp.group(1))
+        elif "]: schedule done" in line:
+            end = float(stamp.group(1))
+    return (start, end) if start is not None and end is not None and end >= start else None
+
+
+def slow_warning(ran_s: float, sim_s: float, time_scale: float) -> str | None:
+    """One warning line when `ran_s` wall seconds exceed `SLOW_FACTOR` times (and
+    `SLOW_SLACK_S` over) the `sim_s / time_scale` asked for; else None."""
+    asked = sim_s / time_scale
+    if ran_s <= SLOW_FACTOR * asked or ran_s - asked <= SLOW_SLACK_S:
+        return None
+    return (f"warning: --time-scale {time_scale:g} is more than this machine sustains: "
+            f"{sim_s:.0f} sim s took {ran_s:.1f} s of wall time, not {asked:.1f} s "
+            f"({sim_s / ran_s:.0f}x, {100 * (ran_s / asked - 1):.0f} % slower); "
+            "a lower --time-scale gives the nodes time to keep up")
+
+
+def filter_counters(diagnostics: list) -> dict[str, int]:
+    """`FILTER_COUNTERS` of the filter's last /diagnostics message in `diagnostics`
+    (DiagnosticArray messages); empty when none came from the filter."""
+    for msg in reversed(diagnostics):
+        for status in msg.status:
+            if status.name == "filter":
+                values = {kv.key: kv.value for kv in status.values}
+                return {k: int(values[k]) for k in FILTER_COUNTERS
+                        if values.get(k, "").isdigit()}
+    return {}
+
+
+def late_warning(late: evaluate.LateForecasts, counters: dict[str, int]) -> str | None:
+    """One warning line when forecasts for gap epochs never went into the filter; else None."""
+    if not late.epochs:
+        return None
+    seen = ", ".join(f"{k}={v}" for k, v in counters.items() if v)
+    return (f"warning: forecasts for {late.epochs} of {late.forecast_epochs} gap epochs never "
+            f"went into the filter (arrived late or were dropped; first t={late.first_t:.3f} s"
+            + (f"; filter /diagnostics: {seen}" if seen else "")
+            + "): those epochs are scored from its prediction; a lower --time-scale gives "
+            "the surrogate time")
+
+
 def run(args: argparse.Namespace) -> int:
     s = sky.SKY_SCENARIOS.get(args.scenario) or scenarios.get(args.scenario)
     out: Path = args.out or default_out(s.name)
@@ -116,7 +193,11 @@ def run(args: argparse.Namespace) -> int:
           f"(~{sim_s / args.time_scale:.0f} s of simulation after start-up); ROS domain "
           f"{graph.domain_id}; logs in {out}/logs", flush=True)
     t_start = time.monotonic()
+    last_output = 0.0  # wall time (Unix s) the probe last saw an estimate or forecast arrive
     try:
+        from diagnostic_msgs.msg import DiagnosticArray
+
+        diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
         for name in ("recorder", "surrogate", "filter"):
             graph.start_node(name, params=params[name])
         sensor = graph.start_node("sensor_sim", params=params["sensor_sim"])
@@ -126,7 +207,16 @@ def run(args: argparse.Namespace) -> int:
 
         seen = [graph.collect(StateEstimate, "/ssa/estimate"),
                 graph.collect(Measurement, "/ssa/forecast")]
-        graph.wait_quiet(lambda: tuple(len(x) for x in seen), quiet_s=1.0, limit_s=30.0)
+        before: tuple[int, ...] = (0, 0)
+
+        def counts() -> tuple[int, ...]:
+            nonlocal before, last_output
+            now = tuple(len(x) for x in seen)
+            if now != before:
+                before, last_output = now, time.time()
+            return now
+
+        graph.wait_quiet(counts, quiet_s=1.0, limit_s=30.0)
     finally:
         problems = graph.close()
     if problems:
@@ -136,10 +226,27 @@ def run(args: argparse.Namespace) -> int:
     data = evaluate.load(bag)
     ev = evaluate.evaluate(data, seed=args.seed)  # with the settings recorded in the bag
     report.write(data, ev, out)
+    late = evaluate.unfused_forecasts(data, ev.gap.t)
+    counters = filter_counters(diagnostics)
+    sim_wall = sensor_wall_times(out / "logs" / "sensor_sim.err")
+    # the simulation, and the estimation behind it until its last output reached the probe
+    ran = None if sim_wall is None else max(sim_wall[1], last_output) - sim_wall[0]
     summary = {"scenario": s.name, "time_scale": args.time_scale, "wall_s": wall,
-               "bag": str(bag), **report.summary(data, ev)}
+               "sim_wall_s": ran, "bag": str(bag), **report.summary(data, ev),
+               "late_forecast_epochs": late.epochs, "forecast_epochs": late.forecast_epochs,
+               "filter_counters": counters}
     (out / "live.json").write_text(json.dumps(summary, indent=2))
+    slow = None if ran is None else slow_warning(ran, sim_s, args.time_scale)
+    if slow:
+        print(slow, file=sys.stderr)
     print(f"\nrecorded {sum(data.counts.values())} messages to {bag} in {wall:.1f} s")
     print(evaluate.table(ev))
     print(f"\nplots and report.json in {out}/")
+    warning = late_warning(late, counters)
+    if warning:
+        print(warning, file=sys.stderr)
+    if warning and args.strict:
+        print(f"error: --strict: forecasts for {late.epochs} gap epochs never went into the "
+              "filter", file=sys.stderr)
+        return 1
     return 0

@@ -148,9 +148,15 @@ class BagWriter:
         if self._writer.storage is None:
             return
         self._writer.close()
-        meta = self.path / "metadata.yaml"
-        text = meta.read_text().replace("ros_distro: rosbags", f"ros_distro: {ROS_DISTRO}")
-        meta.write_text(text)
+        set_ros_distro(self.path)
+
+
+def set_ros_distro(path: Path, distro: str = ROS_DISTRO) -> None:
+    """Name `distro` as ros_distro in the metadata.yaml `rosbags.rosbag2.Writer` wrote into
+    bag directory `path` (it writes ``rosbags`` there)."""
+    meta = Path(path) / "metadata.yaml"
+    text = meta.read_text().replace("ros_distro: rosbags", f"ros_distro: {distro}")
+    meta.write_text(text)
 
 
 @dataclass
