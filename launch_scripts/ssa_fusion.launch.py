@@ -1,40 +1,118 @@
-"""Launch the ssa_fusion graph (sensor_sim, surrogate, filter, recorder) on the default
-scenario with sim time:  ros2 launch ssa_fusion ssa_fusion.launch.py [params:=FILE] [bag:=DIR]
+"""Launch the ssa_fusion graph (sensor_sim, surrogate, filter, recorder) with sim time.
+
+    ros2 launch ssa_fusion ssa_fusion.launch.py [scenario:=NAME] [time_scale:=X]
+                                                [bag:=DIR] [params_file:=FILE]
+
+Arguments (``ros2 launch ssa_fusion ssa_fusion.launch.py --show-args``):
+
+* ``params_file``: ROS params YAML every node reads first (default: the installed
+  ``config/default.yaml``, the default scenario);
+* ``scenario``: a scenario name (as ``ssa-fusion live --scenario``); every node then gets
+  that scenario's settings, over the params file's ('' = the params file's scenario);
+* ``time_scale``: sim seconds per wall second, over both ('' = theirs: 1000 in default.yaml);
+* ``bag``: the recorder's output directory, which must not exist (default, like ``ros2 bag
+  record``'s: ``bags/ssa_<date>_<time>`` at launch, `nodes.defaults.BAG_PATTERN`).
+
+The graph shuts itself down: when sensor_sim exits (its schedule is done), after
+`DRAIN_S` s in which filter, surrogate and recorder take what is still in flight; and at once
+when the recorder exits (it died, or refused its parameters: a bag that exists already), as
+nothing would be recorded and sensor_sim would wait for it forever.
 """
 
+from __future__ import annotations
+
 import os
+import time
+from pathlib import Path
+from typing import Any
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
-from launch.substitutions import LaunchConfiguration
+from launch.actions import (
+    DeclareLaunchArgument,
+    LogInfo,
+    OpaqueFunction,
+    RegisterEventHandler,
+    Shutdown,
+    TimerAction,
+)
+from launch.event_handlers import OnProcessExit
 from launch_ros.actions import Node
 
+from ssa_fusion.apps.live import LIVE_SCENARIOS, WAIT_FOR, node_parameters
+from ssa_fusion.nodes.defaults import BAG_PATTERN
+from ssa_fusion.paper import scenarios, sky
 from ssa_fusion.ros.readiness import READERS
+
+NODES = ("recorder", "surrogate", "filter", "sensor_sim")
+"""Started in this order; sensor_sim waits until the others have matched its topics."""
+DRAIN_S = 2.0
+"""Wall s between sensor_sim's exit and the shutdown of the rest. sensor_sim exits once every
+reader acknowledged its last message; the filter and the surrogate then publish their last
+estimates and forecasts, and the recorder writes them."""
+ARGUMENTS = {
+    "params_file": "ROS params YAML every node reads (default: the installed default.yaml)",
+    "scenario": "scenario name (as `ssa-fusion live --scenario`): every node gets its "
+                "settings, over the params file ('' = the params file's)",
+    "time_scale": "sim seconds per wall second, over params file and scenario ('' = theirs)",
+    "bag": "recorder output directory, must not exist (default: bags/ssa_<date>_<time>)",
+}
+"""The launch arguments and their descriptions."""
+
+
+def scenario_parameters(name: str, bag: str) -> dict[str, dict[str, Any]]:
+    """Per-node parameters that run scenario `name`, as `ssa-fusion live --scenario` sets
+    them (its time scale and seed left to the params file)."""
+    if name not in LIVE_SCENARIOS:
+        raise ValueError(f"scenario:={name!r} unknown; known: {', '.join(LIVE_SCENARIOS)}")
+    s = sky.SKY_SCENARIOS.get(name) or scenarios.get(name)
+    params = node_parameters(s, time_scale=1.0, seed=0, bag=Path(bag))
+    for key in ("time_scale", "seed"):
+        params["sensor_sim"].pop(key)
+    return params
+
+
+def graph(context: Any) -> list[Any]:
+    """The four nodes and the two shutdown handlers, for the arguments given."""
+    args = context.launch_configurations
+    bag = args["bag"]
+    extra: dict[str, dict[str, Any]] = {name: {} for name in NODES}
+    if args["scenario"]:
+        extra = scenario_parameters(args["scenario"], bag)
+    extra["recorder"].update(bag=bag)
+    for name in ("recorder", "surrogate", "filter"):
+        extra[name].update(use_sim_time=True)
+    # start once every node has matched its inputs (both sides of each DDS match)
+    extra["sensor_sim"].update(wait_for=WAIT_FOR, wait_for_readers=READERS)
+    if args["time_scale"]:
+        try:
+            extra["sensor_sim"].update(time_scale=float(args["time_scale"]))
+        except ValueError:
+            raise ValueError(f"time_scale:={args['time_scale']!r} is not a number") from None
+    nodes = {name: Node(package="ssa_fusion", executable=name, name=name, output="screen",
+                        parameters=[args["params_file"], extra[name]])
+             for name in NODES}
+    done = OnProcessExit(target_action=nodes["sensor_sim"], on_exit=[
+        LogInfo(msg=f"sensor_sim exited: the rest of the graph stops in {DRAIN_S:g} s"),
+        TimerAction(period=DRAIN_S, actions=[Shutdown(reason="sensor_sim finished")]),
+    ])
+    recorder_gone = OnProcessExit(target_action=nodes["recorder"], on_exit=[
+        Shutdown(reason="the recorder exited: nothing would be recorded"),
+    ])
+    return [*nodes.values(), RegisterEventHandler(done), RegisterEventHandler(recorder_gone)]
 
 
 def generate_launch_description() -> LaunchDescription:
-    default_params = os.path.join(
-        get_package_share_directory("ssa_fusion"), "config", "default.yaml"
-    )
-    params = LaunchConfiguration("params")
-    bag = LaunchConfiguration("bag")
-    nodes = [
-        Node(package="ssa_fusion", executable=name, name=name, output="screen",
-             parameters=[params, *extra])
-        for name, extra in [
-            ("recorder", [{"bag": bag, "use_sim_time": True}]),
-            ("surrogate", [{"use_sim_time": True}]),
-            ("filter", [{"use_sim_time": True}]),
-            # start once every node has matched its inputs (both sides of each DDS match)
-            ("sensor_sim", [{"wait_for": ["/ssa/measurement=3", "/ssa/estimate=1"],
-                             "wait_for_readers": READERS}]),
-        ]
-    ]
+    """The launch arguments, then the graph built from their values (`graph`)."""
+    defaults = {
+        "params_file": os.path.join(get_package_share_directory("ssa_fusion"), "config",
+                                    "default.yaml"),
+        "scenario": "",
+        "time_scale": "",
+        "bag": time.strftime(BAG_PATTERN),
+    }
     return LaunchDescription([
-        DeclareLaunchArgument("params", default_value=default_params,
-                              description="parameter YAML"),
-        DeclareLaunchArgument("bag", default_value="ssa_fusion_bag",
-                              description="output bag directory"),
-        *nodes,
+        *(DeclareLaunchArgument(name, default_value=defaults[name], description=text)
+          for name, text in ARGUMENTS.items()),
+        OpaqueFunction(function=graph),
     ])

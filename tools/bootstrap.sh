@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Create or refresh .venv/: ROS 2 Kilted wheels, Python dependencies, the ssa_fusion_msgs
-# interface package (built with CMake into the venv prefix) and ssa_fusion itself (editable).
+# interface package (built with CMake into the venv prefix) and ssa_fusion itself (editable,
+# with its node executables in lib/ssa_fusion/ and its data_files in share/, as colcon would).
 #
 # Idempotent: every step records a fingerprint of its inputs in .venv/.bootstrap/ and is
 # skipped when nothing changed. Fails loudly naming the step that failed.
@@ -97,5 +98,32 @@ for ep in entry_points(group="console_scripts"):
         dst.symlink_to(src)
 PYEOF
   mark package "$PKG_FP"
+fi
+
+# 5. setup.py's data_files into the venv prefix, as `colcon build` installs them ----------
+# (`pip install -e .` installs none): the ament index marker and share/ssa_fusion/
+# {package.xml,launch/,config/}, so that `ros2 run`/`ros2 launch` find the package with the
+# venv on AMENT_PREFIX_PATH. The file list is setup.py's own (read with setup() stubbed).
+SHARE_FILES=$(cd "$ROOT" && "$PY" - <<'PYEOF'
+import runpy
+from unittest import mock
+
+with mock.patch("setuptools.setup") as setup:
+    runpy.run_path("setup.py")
+for dest, files in setup.call_args.kwargs["data_files"]:
+    for f in files:
+        print(f"{dest}\t{f}")
+PYEOF
+)
+SHARE_FP=$( { echo "$SHARE_FILES"; cd "$ROOT" && cut -f2 <<<"$SHARE_FILES" | xargs -r cat; } |
+  sha256sum | cut -c1-16)
+if ! is_fresh share "$SHARE_FP" || [[ ! -f "$VENV/share/ssa_fusion/package.xml" ]]; then
+  step "install setup.py's data_files (ament index marker, share/ssa_fusion) into .venv"
+  rm -rf "$VENV/share/ssa_fusion"  # ours alone: no stale launch or config file stays
+  while IFS=$'\t' read -r dest file; do
+    mkdir -p "$VENV/$dest"
+    cp "$ROOT/$file" "$VENV/$dest/"
+  done <<<"$SHARE_FILES"
+  mark share "$SHARE_FP"
 fi
 echo "bootstrap: .venv ready" >&2

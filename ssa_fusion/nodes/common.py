@@ -14,6 +14,7 @@ from collections.abc import Callable
 from typing import Any
 
 import rclpy
+from builtin_interfaces.msg import Time as TimeMsg
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.clock import Clock, ClockType
@@ -38,10 +39,18 @@ class ParameterError(ValueError):
 
 
 class Diagnostics:
-    """Counts events by cause, logs each cause once, publishes them on /diagnostics."""
+    """Counts events by cause, logs each cause once, publishes them on /diagnostics.
 
-    def __init__(self, node: Node, period_s: float = 1.0) -> None:
+    Each report is published every `period_s` wall seconds (sim time may stand still) and
+    stamped in the graph's time base: `stamp()` when given, else the node's clock (sim time
+    under use_sim_time, 0 before the first /clock). The node that drives sim time
+    (sensor_sim) gives the sim time it last published.
+    """
+
+    def __init__(self, node: Node, period_s: float = 1.0,
+                 stamp: Callable[[], TimeMsg] | None = None) -> None:
         self.node = node
+        self._stamp = stamp or (lambda: node.get_clock().now().to_msg())
         self.counts: Counter[str] = Counter()
         self.status: dict[str, str] = {}
         self._logged: set[str] = set()
@@ -90,8 +99,9 @@ class Diagnostics:
         return guarded
 
     def publish(self) -> None:
+        """Publish the counts, status and matched-publisher counts now."""
         msg = DiagnosticArray()
-        msg.header.stamp = self.node.get_clock().now().to_msg()
+        msg.header.stamp = self._stamp()
         st = DiagnosticStatus()
         st.name = f"{self.node.get_name()}"
         st.hardware_id = "ssa_fusion"
@@ -203,6 +213,24 @@ def declare(
     return value
 
 
+def cross_check(node: Node, names: tuple[str, ...],
+                rule: Callable[[dict[str, Any]], str | None]) -> None:
+    """Enforce a rule over several parameters of `node` (declared with `declare`) at start
+    and on every later set.
+
+    `rule(values)` gets the value of each of `names` and returns None when they go together,
+    else the reason. It is checked now (an invalid start-up combination raises ParameterError
+    naming ``names[0]``) and then on every run-time set of any of `names`, with the values
+    the set would leave: its own over the current ones, so an atomic set of several is judged
+    as a whole. A set that breaks the rule is refused with the reason (old values kept).
+    """
+    values = {name: node.get_parameter(name).value for name in names}
+    reason = rule(values)
+    if reason:
+        raise ParameterError(f"parameter '{names[0]}' = {values[names[0]]!r}: {reason}")
+    node.__dict__.setdefault("_ssa_cross_checks", []).append((names, rule))
+
+
 def _validate(node: Node, params: list[Parameter]) -> SetParametersResult:
     hooks = node.__dict__.get("_ssa_param_hooks", {})
     for p in params:
@@ -211,6 +239,18 @@ def _validate(node: Node, params: list[Parameter]) -> SetParametersResult:
         if reason:
             node.get_logger().warning(f"refused parameter '{p.name}' = {p.value!r}: {reason}")
             return SetParametersResult(successful=False, reason=f"{p.name}: {reason}")
+    new = {p.name: p.value for p in params}
+    for names, rule in node.__dict__.get("_ssa_cross_checks", []):
+        changed = [name for name in names if name in new]
+        if not changed:
+            continue
+        reason = rule({name: new[name] if name in new else node.get_parameter(name).value
+                       for name in names})
+        if reason:
+            text = ", ".join(f"'{name}' = {new[name]!r}" for name in changed)
+            node.get_logger().warning(f"refused parameter {text}: {reason}")
+            return SetParametersResult(successful=False,
+                                       reason=f"{', '.join(changed)}: {reason}")
     return SetParametersResult(successful=True)
 
 

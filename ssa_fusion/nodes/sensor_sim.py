@@ -25,6 +25,7 @@ import time
 from typing import Any
 
 import numpy as np
+from builtin_interfaces.msg import Time as TimeMsg
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
@@ -208,7 +209,8 @@ class SensorSim(Node):
         self.pub_meas = self.create_publisher(MeasurementMsg, TOPIC_MEASUREMENT, DATA_QOS)
         self.pub_withheld = self.create_publisher(MeasurementMsg, TOPIC_WITHHELD, DATA_QOS)
         self.pub_truth = self.create_publisher(StateEstimateMsg, TOPIC_TRUTH, DATA_QOS)
-        self.diag = Diagnostics(self)
+        self.sim_stamp = TimeMsg()  # the sim time last published on /clock (0: none yet)
+        self.diag = Diagnostics(self, stamp=lambda: self.sim_stamp)  # sim time, like the rest
         self.next = 0
         self.finished = False
         self._next_wait_log = time.monotonic() + 5.0  # quiet while discovery runs
@@ -307,6 +309,7 @@ class SensorSim(Node):
         msg = Clock()
         msg.clock = messages.seconds_to_stamp(t)
         self.pub_clock.publish(msg)
+        self.sim_stamp = msg.clock
 
     def publish_event(self, i: int) -> None:
         t, what, content = self.schedule[i]

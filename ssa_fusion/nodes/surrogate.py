@@ -32,6 +32,7 @@ from ssa_fusion.nodes.common import (
     Diagnostics,
     ParameterError,
     clock_lead,
+    cross_check,
     declare,
     measurement_stream,
     non_negative,
@@ -60,19 +61,13 @@ def estimator_from(node: Node) -> EstimatorConfig:
     d = SURROGATE
     values: dict[str, Any] = {}
 
-    def fits(name: str, value: Any) -> str | None:
-        """The buffer must hold 2 x delays x cadence: on every set as at start."""
-        if not hasattr(node, "core"):
-            return None  # at start: checked below, once all three are declared
-        v = {**values, name: value}
+    def fits(v: dict[str, Any]) -> str | None:
+        """The buffer must hold 2 x delays x cadence (checked at start and on every set)."""
         if v["cadence"] > 0 and v["delays"] * v["cadence"] * 2 > v["buffer_length"]:
             return (f"needs a buffer of at least 2 x delays x cadence = "
                     f"{2 * v['delays'] * v['cadence']} s, but 'buffer_length' = "
                     f"{v['buffer_length']} s")
         return None
-
-    def both(name: str, check: Any) -> Any:
-        return lambda value: check(value) or fits(name, value)
 
     def setting(name: str, description: str, check: Any) -> Any:
         def apply(value: Any) -> None:
@@ -86,24 +81,19 @@ def estimator_from(node: Node) -> EstimatorConfig:
         values[name] = declare(node, name, getattr(d, name), description, check, apply=apply)
         return values[name]
 
-    buffer_s = setting("buffer_length", "s of real measurements kept for training",
-                       both("buffer_length", positive))
+    setting("buffer_length", "s of real measurements kept for training", positive)
     setting("retrain_period",
             "sim s between refits while measurements arrive; 0 = none (every gap refits on "
             "the buffer up to the last real measurement anyway)", non_negative)
-    delays = setting("delays", "Hankel-DMD time delays", both("delays", positive))
+    setting("delays", "Hankel-DMD time delays", positive)
     setting("rank", "Hankel-DMD rank (0 = automatic)", non_negative)
     setting("max_horizon", "s after the last real measurement beyond which nothing is "
             "forecast", positive)
     setting("grace", "cadences after a missed epoch before it is forecast (absorbs message "
             "latency)", non_negative)
-    cadence = setting("cadence", "expected s between measurements (0 = infer from the buffer)",
-                      both("cadence", non_negative))
-    if cadence > 0 and delays * cadence * 2 > buffer_s:
-        raise ParameterError(
-            f"parameter 'delays' = {delays}: needs a buffer of at least 2 x delays x cadence "
-            f"= {2 * delays * cadence} s, but 'buffer_length' = {buffer_s} s"
-        )
+    setting("cadence", "expected s between measurements (0 = infer from the buffer)",
+            non_negative)
+    cross_check(node, ("delays", "cadence", "buffer_length"), fits)
     measurement_stream(node, d)
     values["kind"] = node.get_parameter("kind").value
     values["station"] = node.get_parameter("station").value

@@ -26,7 +26,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
-from rcl_interfaces.srv import GetParameters, SetParameters
+from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from ssa_fusion_msgs.msg import Measurement, StateEstimate
@@ -532,6 +532,25 @@ def test_a_run_time_set_gets_the_same_cross_check_as_start_up(ros_graph):
     small = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=60.0)
     req = SetParameters.Request(parameters=[ParameterMsg(name="buffer_length", value=small)])
     assert not _call(g, client, req, "/surrogate/set_parameters").results[0].successful
+    # an atomic set is judged as a whole (buffer 1200 s, cadence 30 s, delays 5): each value
+    # fits with the other's old one, but not together -> refused; the reverse -> accepted
+    atomic = g.probe.create_client(SetParametersAtomically,
+                                   "/surrogate/set_parameters_atomically")
+
+    def set_both(delays: int, buffer_s: float):
+        req = SetParametersAtomically.Request(parameters=[
+            ParameterMsg(name="delays", value=ParameterValue(
+                type=ParameterType.PARAMETER_INTEGER, integer_value=delays)),
+            ParameterMsg(name="buffer_length", value=ParameterValue(
+                type=ParameterType.PARAMETER_DOUBLE, double_value=buffer_s))])
+        return _call(g, atomic, req, "/surrogate/set_parameters_atomically").result
+
+    result = set_both(15, 800.0)  # 2 x 15 x 30 = 900 s > 800 s
+    assert not result.successful and "2 x delays x cadence" in result.reason
+    assert set_both(30, 2000.0).successful  # 1800 s <= 2000 s, though 30 alone is refused
+    got = _call(g, get_client, GetParameters.Request(names=["delays", "buffer_length"]),
+                "/surrogate/get_parameters").values
+    assert (got[0].integer_value, got[1].double_value) == (30, 2000.0)
     assert surr.returncode is None
 
 

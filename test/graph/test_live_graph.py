@@ -6,6 +6,8 @@ from collections import Counter
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from ssa_fusion_msgs.msg import Measurement, StateEstimate
 
@@ -40,6 +42,7 @@ def run(tmp_path_factory):
     try:
         got = {topic: g.collect(t, topic) for topic, t in TOPICS.items()}
         clock = g.collect(Clock, "/clock")
+        diagnostics = g.collect(DiagnosticArray, "/diagnostics", QoSProfile(depth=100))
         nodes = {n: g.start_node(n, params=params[n]) for n in ("recorder", "surrogate", "filter")}
         g.wait_for_subscriber("/ssa/forecast", 3)  # filter, recorder, probe
         sensor = g.start_node("sensor_sim", params=params["sensor_sim"])
@@ -49,7 +52,8 @@ def run(tmp_path_factory):
         report = g.report()
     finally:
         problems = g.close()
-    yield {"got": got, "clock": clock, "bag": bag, "sensor_code": sensor_code,
+    yield {"got": got, "clock": clock, "diagnostics": diagnostics, "bag": bag,
+           "sensor_code": sensor_code,
            "codes": codes, "report": report, "problems": problems}
 
 
@@ -57,6 +61,24 @@ def test_all_nodes_exit_0(run):
     assert run["sensor_code"] == 0, run["report"]
     assert run["codes"] == {"recorder": 0, "surrogate": 0, "filter": 0}, run["report"]
     assert not run["problems"]
+
+
+def test_diagnostics_are_stamped_in_sim_time(run):
+    """Issue 21: /diagnostics carried wall time while every other topic carries sim time.
+    Every node's reports are stamped within the run's sim time (0 before its first /clock),
+    sensor_sim's (it drives sim time) with a time it published on /clock."""
+    t0 = SHORT.t0
+    t_end = SHORT.t0 + SHORT.track_s + SHORT.gap_s + SHORT.after_s
+    stamps: dict[str, list[float]] = {}
+    for arr in run["diagnostics"]:
+        for st in arr.status:
+            stamps.setdefault(st.name, []).append(messages.stamp_to_seconds(arr.header.stamp))
+    assert set(stamps) == {"sensor_sim", "surrogate", "filter", "recorder"}, run["report"]
+    for node, ts in stamps.items():
+        assert all(t == 0.0 or t0 <= t <= t_end for t in ts), (node, ts)
+        assert any(t0 <= t for t in ts), (node, ts)  # some after sim time started
+    clock = {messages.stamp_to_seconds(m.clock) for m in run["clock"]}
+    assert set(stamps["sensor_sim"]) <= clock | {0.0}
 
 
 def test_estimates_arrive_and_forecasts_only_in_the_gap(run):
