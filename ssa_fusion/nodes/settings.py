@@ -22,7 +22,7 @@ from ssa_fusion.core.config import EstimatorConfig, Lift, MotionModel
 from ssa_fusion.core.stations import UNIX_EPOCH_JD
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
 from ssa_fusion.core.tracker import TrackerConfig
-from ssa_fusion.core.types import KIND_NAMES
+from ssa_fusion.core.types import KIND_NAMES, Kind
 from ssa_fusion.nodes.defaults import FILTER, SURROGATE
 
 KM = 1000.0
@@ -66,8 +66,9 @@ def _stream(filt: Mapping[str, Any], surr: Mapping[str, Any], key: str, default:
 
 def estimator_from(filt: Mapping[str, Any], surr: Mapping[str, Any]) -> EstimatorConfig:
     """The `EstimatorConfig` of the filter's and the surrogate's parameters (SI); a missing
-    parameter takes the node's default (`defaults`), except that `lift` defaults to none
-    for positions. ValueError names a bad value."""
+    parameter takes the node's default (`defaults`), except that `lift` defaults to eci
+    only for range/az/el (none for positions and right ascension/declination). ValueError
+    names a bad value."""
     f = {**dataclasses.asdict(FILTER), **filt}
     s = {**dataclasses.asdict(SURROGATE), **surr}
     kinds = {name: kind for kind, name in KIND_NAMES.items()}
@@ -93,8 +94,8 @@ def estimator_from(filt: Mapping[str, Any], surr: Mapping[str, Any]) -> Estimato
                            station=_stream(filt, surr, "station", FILTER.station),
                            motion_model=MotionModel(motion), jd0=UNIX_EPOCH_JD,
                            light_time=bool(f["light_time"]),
-                           lift=Lift(str(s["lift"]) if "lift" in surr or kind_name != "position"
-                                     else Lift.NONE),
+                           lift=Lift(str(s["lift"]) if "lift" in surr
+                                     or kind_name == KIND_NAMES[Kind.RANGE_AZ_EL] else Lift.NONE),
                            tracker=tracker, surrogate=surrogate)
 
 

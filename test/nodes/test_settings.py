@@ -58,3 +58,14 @@ def test_recorded_settings_merge_both_nodes_last_message():
     assert settings.recorded_estimator([]) is None
     with pytest.raises(ValueError, match="malformed /ssa/config"):
         settings.recorded_estimator(["{not json"])
+
+
+def test_a_filter_of_ra_dec_alone_gets_no_eci_lift():
+    """`ros2 run ssa_fusion filter -p kind:=ra_dec` (no surrogate parameters): the surrogate's
+    default lift (eci, for range/az/el) must not apply to angles-only measurements."""
+    from ssa_fusion.core.config import Lift
+    from ssa_fusion.core.types import Kind
+
+    c = settings.estimator_from({"kind": "ra_dec", "station": "socorro"}, {})
+    assert c.kind == Kind.RA_DEC and c.lift == Lift.NONE
+    assert settings.estimator_from({"kind": "range_az_el"}, {}).lift == Lift.ECI
