@@ -37,9 +37,9 @@ from ssa_fusion.nodes import settings, start_process
 from ssa_fusion.nodes.common import (
     ClockHold,
     Diagnostics,
-    ParameterError,
     all_non_negative,
     clock_lead,
+    cross_check,
     declare,
     measurement_stream,
     non_negative,
@@ -128,10 +128,16 @@ def estimator_from(node: Node) -> EstimatorConfig:
     values["light_time"] = declare(
         node, "light_time", d.light_time,
         "correct the station measurement models for light time (range / c)")
-    try:
-        return settings.estimator_from(values, {})
-    except ValueError as exc:
-        raise ParameterError(str(exc)) from exc
+    def consistent(v: dict[str, Any]) -> str | None:
+        try:
+            settings.estimator_from(v, {})
+        except ValueError as exc:
+            return str(exc)
+        return None
+
+    # every cross-parameter rule of the estimator, at start and on every run-time set
+    cross_check(node, tuple(values), lambda v: consistent({**values, **v}))
+    return settings.estimator_from(values, {})
 
 
 class FilterNode(Node):
