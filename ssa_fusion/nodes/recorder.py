@@ -2,9 +2,12 @@
 
 Raw subscriptions hand over the CDR bytes as they arrived; they are written unchanged with
 `rosbags`, stamped with the node's ROS time at reception (sim time under use_sim_time), as
-`ros2 bag record` does. Topics are discovered as publishers appear. The pending MCAP chunk
-is flushed to disk every `flush_period` s, which bounds what a SIGKILL can lose; SIGINT or
-SIGTERM close the bag with everything received.
+`ros2 bag record` does. Under sim time, what arrives before the first /clock (typically the
+latched /ssa/config) is held and stamped with the clock's first time, so the bag does not
+start at time 0, 55 years before its data (which `ros2 bag play` would wait through).
+Topics are discovered as publishers appear. The pending MCAP chunk is flushed to disk every
+`flush_period` s, which bounds what a SIGKILL can lose; SIGINT or SIGTERM close the bag with
+everything received.
 
     ros2 run ssa_fusion recorder --ros-args -p bag:=bags/run1
 """
@@ -31,6 +34,9 @@ from ssa_fusion.nodes.common import (
 from ssa_fusion.nodes.defaults import BAG_PATTERN, RECORDER
 from ssa_fusion.ros.bagio import BagWriter, qos_from_rclpy
 from ssa_fusion.ros.topics import DATA_DEPTH
+
+HOLD_LIMIT = 10_000
+"""Most messages held until sim time starts (beyond, they are written stamped 0)."""
 
 
 def _import_type(type_name: str):
@@ -81,7 +87,8 @@ class Recorder(Node):
         self._subs = {}
         self.activity = 0
         wall_timer(self, discover, self.diag.guard(self.discover))
-        wall_timer(self, flush, self.writer.flush)
+        self._held: list[tuple[str, bytes]] = []  # received before sim time started
+        wall_timer(self, flush, self.flush)
         self.get_logger().info(f"recording to {bag}")
         self.discover()
 
@@ -127,11 +134,29 @@ class Recorder(Node):
             self.get_logger().info(f"recording {topic} [{type_name}]")
 
     def on_message(self, topic: str, data: bytes) -> None:
-        self.writer.write(topic, self.get_clock().now().nanoseconds, data)
+        now = self.get_clock().now().nanoseconds
         self.activity += 1
         self.diag.counts[f"recorded {topic}"] += 1
+        if now == 0 and len(self._held) < HOLD_LIMIT:  # sim time has not started yet
+            self._held.append((topic, data))
+            return
+        self._release(now)
+        self.writer.write(topic, now, data)
+
+    def _release(self, now: int) -> None:
+        """Write what was held until sim time started, stamped `now` (ns)."""
+        for topic, data in self._held:
+            self.writer.write(topic, now, data)
+        self._held.clear()
+
+    def flush(self) -> None:
+        now = self.get_clock().now().nanoseconds
+        if now and self._held:
+            self._release(now)
+        self.writer.flush()
 
     def close(self) -> None:
+        self._release(self.get_clock().now().nanoseconds)  # a graph whose clock never ran: 0
         self.writer.close()
         total = sum(self.writer.counts.values())
         self.get_logger().info(f"bag closed: {self.writer.path} ({total} messages)")

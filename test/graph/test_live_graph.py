@@ -123,6 +123,20 @@ def test_every_published_message_is_in_the_bag(run):
     assert counts["/clock"] == len(run["clock"])
 
 
+def test_bag_starts_at_sim_time_not_at_zero(run):
+    """The latched /ssa/config arrives before the first /clock: it is stamped with the
+    clock's first time, so `ros2 bag play` does not wait 55 years before the data."""
+    import yaml
+
+    msgs = list(bagio.read_bag(run["bag"]))
+    first_clock = min(m.t_ns for m in msgs if m.topic == "/clock")
+    assert any(m.topic == "/ssa/config" for m in msgs)
+    assert min(m.t_ns for m in msgs) >= first_clock - 1e9
+    info = yaml.safe_load((run["bag"] / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    sim_s = SHORT.track_s + SHORT.gap_s + SHORT.after_s
+    assert info["duration"]["nanoseconds"] <= (sim_s + 600.0) * 1e9
+
+
 def test_bag_reads_with_rosbags_and_mcap(run):
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
