@@ -32,6 +32,7 @@ setup(
             "surrogate = ssa_fusion.nodes.entry:surrogate",
             "filter = ssa_fusion.nodes.entry:filter_node",
             "recorder = ssa_fusion.nodes.entry:recorder",
+            "foxglove_bridge = ssa_fusion.nodes.entry:foxglove_bridge",
         ],
     },
 )

@@ -16,7 +16,7 @@ import sys
 
 from ssa_fusion.nodes import start_process
 
-NODES = ("sensor_sim", "surrogate", "filter", "recorder")
+NODES = ("sensor_sim", "surrogate", "filter", "recorder", "foxglove_bridge")
 
 
 def run_node(name: str, args: list[str] | None = None) -> int:
@@ -41,6 +41,10 @@ def filter_node() -> int:
 
 def recorder() -> int:
     return run_node("recorder")
+
+
+def foxglove_bridge() -> int:
+    return run_node("foxglove_bridge")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,232 @@
+"""foxglove_bridge: serve the graph live to Foxglove over its WebSocket protocol (foxglove-sdk).
+
+Subscribes to ``/ssa/truth``, ``/ssa/estimate``, ``/ssa/measurement`` and ``/ssa/forecast``
+and serves, on a WebSocket server bound to `host`:`port` (loopback by default):
+
+* ``/ssa/foxglove/scene`` (`foxglove.SceneUpdate`, every `scene_period` wall s): the Earth,
+  true and estimated positions with their recent trails, the 3σ ellipsoid of the estimate's
+  position covariance, the stations of `station`, the points forecasts and range/az/el (or
+  position) measurements imply; frame ``eci``, one scene unit = 1 km
+  (`ssa_fusion.ros.foxglove_scene`);
+* ``/ssa/foxglove/ground_track`` and ``/ssa/foxglove/ground_track_truth``
+  (`foxglove.LocationFix`, per estimate / truth): geodetic latitude/longitude (deg);
+* ``/ssa/foxglove/metrics`` (JSON, per estimate): position error against the truth of the
+  same epoch (km), σ (km), largest 3σ semi-axis (km), NIS, update source.
+
+Message log times are the messages' sim-time stamps. ``config/foxglove_layout.json`` is a
+Foxglove layout of these topics (3D, Map, Plot).
+
+    ros2 run ssa_fusion foxglove_bridge --ros-args -p use_sim_time:=true -p port:=8765
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from typing import Any
+
+import numpy as np
+from rclpy.node import Node
+from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
+from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
+
+from ssa_fusion.core.types import Source
+from ssa_fusion.nodes import start_process
+from ssa_fusion.nodes.common import (
+    Diagnostics,
+    ParameterError,
+    declare,
+    positive,
+    run,
+    wall_timer,
+)
+from ssa_fusion.nodes.defaults import STATION
+from ssa_fusion.ros import foxglove_scene as scene
+from ssa_fusion.ros import messages
+from ssa_fusion.ros.topics import (
+    DATA_QOS,
+    TOPIC_ESTIMATE,
+    TOPIC_FORECAST,
+    TOPIC_MEASUREMENT,
+    TOPIC_TRUTH,
+)
+
+DEFAULT_HOST = "127.0.0.1"
+"""Loopback: nothing is served beyond this machine unless `host` says so."""
+DEFAULT_PORT = 8765
+"""Foxglove's usual WebSocket port."""
+TRUTH_KEEP = 5000
+"""Truth states kept by epoch, to score estimates that arrive after their truth."""
+
+
+def _port(value: Any) -> str | None:
+    ok = isinstance(value, int) and 0 <= value <= 65535
+    return None if ok else "must be an integer in 0..65535 (0 = any free port)"
+
+
+def _host(value: Any) -> str | None:
+    return None if isinstance(value, str) and value.strip() else "must be a host name or address"
+
+
+def _count(value: Any) -> str | None:
+    return None if isinstance(value, int) and value >= 1 else "must be an integer >= 1"
+
+
+def _station(value: Any) -> str | None:
+    if value == "":
+        return None
+    from ssa_fusion.core.stations import network_stations
+
+    try:
+        network_stations(value)
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
+class FoxgloveBridgeNode(Node):
+    def __init__(self) -> None:
+        super().__init__("foxglove_bridge")
+        from ssa_fusion.core.stations import network_stations
+
+        host = declare(self, "host", DEFAULT_HOST,
+                       "address the Foxglove WebSocket server binds to (loopback by default)",
+                       _host)
+        port = declare(self, "port", DEFAULT_PORT,
+                       "TCP port of the Foxglove WebSocket server (0 = any free port)", _port)
+        station = declare(self, "station", STATION,
+                          "stations drawn in the scene: a station id, a network id, or ids "
+                          "separated by commas ('' = none); range/az/el from them are drawn "
+                          "as points", _station)
+        period = declare(self, "scene_period", 0.2,
+                         "wall s between scene updates", positive)
+        trail = declare(self, "trail_length", 600,
+                        "positions kept in the truth and estimate trails", _count)
+        points = declare(self, "points", 300,
+                         "forecast and measurement points kept in the scene", _count)
+        self.marker_km = float(declare(self, "marker_size", 150.0,
+                                       "diameter of the position markers in the scene, km",
+                                       positive))
+        self.object_id = declare(self, "object_id", "", "only show this object ('' = any)")
+        self.stations = network_stations(station) if station else {}
+        self.state = scene.SceneState(trail=int(trail), points=int(points))
+        self.truth: OrderedDict[float, np.ndarray] = OrderedDict()
+        self.diag = Diagnostics(self)
+        self.activity = 0
+        self._dirty = False
+
+        import foxglove
+        from foxglove.channels import LocationFixChannel, SceneUpdateChannel
+
+        try:
+            self.server = foxglove.start_server(name="ssa_fusion", host=host, port=int(port))
+        except Exception as exc:  # address in use, unknown host, ...
+            raise ParameterError(f"parameter 'port' = {port!r} (host {host!r}): cannot serve "
+                                 f"there: {exc}") from exc
+        self.scene_ch = SceneUpdateChannel(scene.SCENE_TOPIC)
+        self.track_ch = LocationFixChannel(scene.TRACK_TOPIC)
+        self.truth_track_ch = LocationFixChannel(scene.TRUTH_TRACK_TOPIC)
+        self.metrics_ch = foxglove.Channel(scene.METRICS_TOPIC, schema=scene.METRICS_SCHEMA)
+        self.port = int(self.server.port)
+        self.diag.status["url"] = f"ws://{host}:{self.port}"
+        self.get_logger().info(f"Foxglove WebSocket server on ws://{host}:{self.port}")
+
+        subs = ((StateEstimateMsg, TOPIC_TRUTH, self.on_truth),
+                (StateEstimateMsg, TOPIC_ESTIMATE, self.on_estimate),
+                (MeasurementMsg, TOPIC_MEASUREMENT, self.on_measurement),
+                (MeasurementMsg, TOPIC_FORECAST, self.on_measurement))
+        for msg_type, topic, callback in subs:
+            self.diag.subscribe(msg_type, topic, self.diag.guard(callback), DATA_QOS)
+        wall_timer(self, float(period), self.diag.guard(self.publish_scene))
+
+    def _ours(self, object_id: str) -> bool:
+        if self.object_id and object_id != self.object_id:
+            self.diag.count("ignored_other_object", f"object_id {object_id!r}", warn=False)
+            return False
+        return True
+
+    def on_truth(self, msg: StateEstimateMsg) -> None:
+        self.activity += 1
+        if not self._ours(msg.object_id):
+            return
+        e = messages.estimate_from_msg(msg)
+        if not np.all(np.isfinite(e.x)):
+            self.diag.count("rejected_nonfinite", "a truth state with NaN/inf")
+            return
+        self.state.add_truth(e.t, e.x)
+        self.truth[e.t] = e.x
+        while len(self.truth) > TRUTH_KEEP:
+            self.truth.popitem(last=False)
+        self.truth_track_ch.log(scene.location_fix(e.t, e.x, "truth"), log_time=_ns(e.t))
+        self.diag.counts["truth"] += 1
+        self._dirty = True
+
+    def on_estimate(self, msg: StateEstimateMsg) -> None:
+        self.activity += 1
+        if not self._ours(msg.object_id):
+            return
+        e = messages.estimate_from_msg(msg)
+        if not (np.all(np.isfinite(e.x)) and np.all(np.isfinite(e.P))):
+            self.diag.count("rejected_nonfinite", "an estimate with NaN/inf")
+            return
+        self.state.add_estimate(e.t, e.x, e.P)
+        self.track_ch.log(scene.location_fix(e.t, e.x, "estimate"), log_time=_ns(e.t))
+        self.metrics_ch.log(scene.metrics(e.t, e.x, e.P, self.truth.get(e.t),
+                                          e.update_source, e.nis), log_time=_ns(e.t))
+        self.diag.counts["estimates"] += 1
+        self._dirty = True
+
+    def on_measurement(self, msg: MeasurementMsg) -> None:
+        self.activity += 1
+        if not self._ours(msg.object_id):
+            return
+        try:
+            m = messages.measurement_from_msg(msg)
+        except ValueError as exc:
+            self.diag.count("rejected_kind", str(exc))
+            return
+        if not np.all(np.isfinite(m.z)):
+            self.diag.count("rejected_nonfinite", "a measurement with NaN/inf")
+            return
+        point = scene.measurement_point(m.kind, m.z, m.frame_id, m.t, self.stations)
+        if point is None:
+            self.diag.count("not_drawn", f"kind {m.kind} from {m.frame_id!r}: no point to "
+                            "draw (ra/dec, or a station not in 'station')", warn=False)
+            return
+        if m.source == Source.FORECAST:
+            self.state.add_forecast(point)
+            self.diag.counts["forecasts"] += 1
+        else:
+            self.state.add_measurement(point)
+            self.diag.counts["measurements"] += 1
+        self._dirty = True
+
+    def publish_scene(self) -> None:
+        """Log the scene (when something changed since the last one), stamped with the
+        newest epoch heard."""
+        if not self._dirty:
+            return
+        self._dirty = False
+        t = self.state.t or 0.0
+        self.scene_ch.log(scene.scene_update(self.state, self.stations, self.marker_km),
+                          log_time=_ns(t))
+        self.diag.counts["scene_updates"] += 1
+
+    def close(self) -> None:
+        server = getattr(self, "server", None)
+        if server is not None:
+            server.stop()
+
+
+def _ns(t_unix: float) -> int:
+    """Unix s -> int ns (>= 0), the foxglove log time."""
+    return max(round(t_unix * 1e9), 0) if math.isfinite(t_unix) else 0
+
+
+def main(args: list[str] | None = None) -> int:
+    start_process()
+    return run(FoxgloveBridgeNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,409 @@
+"""What the foxglove_bridge node shows, as pure functions: ECI -> geodetic latitude/longitude,
+covariance -> 3σ ellipsoid, range/az/el -> ECI point, and the 3D scene's entities.
+
+No rclpy here (testable with numpy alone); `foxglove` (foxglove-sdk) is imported only by the
+functions that build its messages. Units and frames: positions in km in the project's ECI
+frame (`core.frames`: ECEF rotated by the Earth rotation angle only); the 3D scene is drawn in
+frame ``eci`` with one scene unit = 1 km; times are Unix seconds (UTC, sim time); angles rad,
+except the ground track's latitude/longitude, which `foxglove.LocationFix` takes in degrees.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ssa_fusion.core.constants import R_EARTH, WGS84_F
+from ssa_fusion.core.frames import Station, ecef_to_eci, eci_to_ecef, enu_matrix, site_ecef
+from ssa_fusion.core.stations import UNIX_EPOCH_JD
+from ssa_fusion.core.types import Kind
+
+SCENE_FRAME = "eci"
+"""frame_id of every scene entity (the project's ECI frame, km)."""
+SCENE_TOPIC = "/ssa/foxglove/scene"
+"""foxglove.SceneUpdate: Earth, truth, estimate, trails, 3σ ellipsoid, stations, forecasts."""
+TRACK_TOPIC = "/ssa/foxglove/ground_track"
+"""foxglove.LocationFix: the estimate's geodetic latitude/longitude (deg), height (m)."""
+TRUTH_TRACK_TOPIC = "/ssa/foxglove/ground_track_truth"
+"""foxglove.LocationFix: the truth's geodetic latitude/longitude (deg), height (m)."""
+METRICS_TOPIC = "/ssa/foxglove/metrics"
+"""JSON: per estimate, its position error against the truth (km) and its σ (km)."""
+TOPICS = (SCENE_TOPIC, TRACK_TOPIC, TRUTH_TRACK_TOPIC, METRICS_TOPIC)
+
+_E2 = WGS84_F * (2.0 - WGS84_F)
+
+Rgba = tuple[float, float, float, float]
+EARTH_RGBA: Rgba = (0.15, 0.35, 0.8, 0.55)
+TRUTH_RGBA: Rgba = (0.1, 0.85, 0.2, 1.0)
+ESTIMATE_RGBA: Rgba = (0.95, 0.2, 0.15, 1.0)
+ELLIPSOID_RGBA: Rgba = (1.0, 0.6, 0.1, 0.45)
+STATION_RGBA: Rgba = (1.0, 1.0, 0.2, 1.0)
+FORECAST_RGBA: Rgba = (0.85, 0.2, 0.9, 0.9)
+MEASUREMENT_RGBA: Rgba = (0.75, 0.75, 0.75, 0.8)
+
+
+def jd_of(t_unix: float) -> float:
+    """UTC Julian date of Unix time `t_unix` (s)."""
+    return UNIX_EPOCH_JD + t_unix / 86400.0
+
+
+def ecef_to_geodetic(r_ecef_km: ArrayLike) -> tuple[float, float, float]:
+    """ECEF position (3,) km -> WGS-84 geodetic (latitude rad, longitude rad in (-π, π],
+    ellipsoidal height km); the inverse of `core.frames.site_ecef` (fixed-point iteration on
+    the latitude, converged to ~1e-12 rad)."""
+    x, y, z = (float(v) for v in np.asarray(r_ecef_km, dtype=float)[:3])
+    lon = math.atan2(y, x)
+    p = math.hypot(x, y)
+    if p < 1e-9:  # on the polar axis
+        lat = math.copysign(math.pi / 2, z)
+        return lat, lon, abs(z) - R_EARTH * math.sqrt(1.0 - _E2)
+    lat = math.atan2(z, p * (1.0 - _E2))
+    for _ in range(20):
+        n = R_EARTH / math.sqrt(1.0 - _E2 * math.sin(lat) ** 2)
+        new = math.atan2(z + _E2 * n * math.sin(lat), p)
+        done = abs(new - lat) < 1e-14
+        lat = new
+        if done:
+            break
+    n = R_EARTH / math.sqrt(1.0 - _E2 * math.sin(lat) ** 2)
+    if abs(lat) < math.radians(80.0):
+        alt = p / math.cos(lat) - n
+    else:
+        alt = z / math.sin(lat) - n * (1.0 - _E2)
+    return lat, lon, alt
+
+
+def eci_to_geodetic(r_eci_km: ArrayLike, t_unix: float) -> tuple[float, float, float]:
+    """ECI position (3,) km at Unix time `t_unix` (s) -> geodetic (latitude rad, longitude
+    rad, height km) of the point below it (its sub-satellite point), via `core.frames`."""
+    r = np.asarray(r_eci_km, dtype=float)[:3]
+    return ecef_to_geodetic(eci_to_ecef(r, jd_of(t_unix)))
+
+
+@dataclass(frozen=True)
+class Ellipsoid:
+    """An n-σ ellipsoid of a 3x3 position covariance (km²).
+
+    ``axes`` (3, 3): its principal directions, one unit vector per column (a proper
+    rotation, det +1), in the covariance's frame; ``semi_axes`` (3,) km: n σ along each;
+    ``quaternion`` (x, y, z, w): the same rotation, as `foxglove.Pose` takes it; ``size`` (3,)
+    km: the diameters (2 × semi-axes), as `foxglove.SpherePrimitive` takes them.
+    """
+
+    axes: NDArray[np.float64]
+    semi_axes: NDArray[np.float64]
+    quaternion: tuple[float, float, float, float]
+
+    @property
+    def size(self) -> NDArray[np.float64]:
+        return 2.0 * self.semi_axes
+
+
+def rotation_to_quaternion(rot: ArrayLike) -> tuple[float, float, float, float]:
+    """Proper rotation matrix (3, 3) -> unit quaternion (x, y, z, w) with w >= 0
+    (Shepperd's method: the largest of the four components is taken from the diagonal)."""
+    m = np.asarray(rot, dtype=float)
+    tr = float(np.trace(m))
+    cands = [tr, m[0, 0], m[1, 1], m[2, 2]]
+    k = int(np.argmax(cands))
+    if k == 0:
+        w = 0.5 * math.sqrt(1.0 + tr)
+        x, y, z = ((m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w),
+                   (m[1, 0] - m[0, 1]) / (4 * w))
+    elif k == 1:
+        x = 0.5 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        w, y, z = ((m[2, 1] - m[1, 2]) / (4 * x), (m[0, 1] + m[1, 0]) / (4 * x),
+                   (m[0, 2] + m[2, 0]) / (4 * x))
+    elif k == 2:
+        y = 0.5 * math.sqrt(1.0 - m[0, 0] + m[1, 1] - m[2, 2])
+        w, x, z = ((m[0, 2] - m[2, 0]) / (4 * y), (m[0, 1] + m[1, 0]) / (4 * y),
+                   (m[1, 2] + m[2, 1]) / (4 * y))
+    else:
+        z = 0.5 * math.sqrt(1.0 - m[0, 0] - m[1, 1] + m[2, 2])
+        w, x, y = ((m[1, 0] - m[0, 1]) / (4 * z), (m[0, 2] + m[2, 0]) / (4 * z),
+                   (m[1, 2] + m[2, 1]) / (4 * z))
+    q = np.array([x, y, z, w], dtype=float)
+    q /= np.linalg.norm(q)
+    if q[3] < 0:
+        q = -q
+    return (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+
+
+def quaternion_to_rotation(q: ArrayLike) -> NDArray[np.float64]:
+    """Unit quaternion (x, y, z, w) -> rotation matrix (3, 3)."""
+    x, y, z, w = (float(v) for v in np.asarray(q, dtype=float))
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def covariance_ellipsoid(p_pos_km2: ArrayLike, n_sigma: float = 3.0) -> Ellipsoid:
+    """The `n_sigma` ellipsoid of position covariance `p_pos_km2` (3, 3), km²: eigenvectors
+    as axes, n σ = n √λ (km) along each (negative eigenvalues of a numerically indefinite
+    matrix count as 0). Its quadric is ``(x)ᵀ (n² P)⁻¹ x = 1``."""
+    p = np.asarray(p_pos_km2, dtype=float)[:3, :3]
+    p = 0.5 * (p + p.T)
+    lam, vec = np.linalg.eigh(p)
+    if np.linalg.det(vec) < 0:
+        vec[:, 2] = -vec[:, 2]
+    semi = n_sigma * np.sqrt(np.clip(lam, 0.0, None))
+    return Ellipsoid(axes=vec, semi_axes=semi, quaternion=rotation_to_quaternion(vec))
+
+
+def razel_to_eci(z: ArrayLike, station: Station, t_unix: float) -> NDArray[np.float64]:
+    """Range/azimuth/elevation (km, rad, rad; azimuth from north towards east) measured from
+    `station` at Unix time `t_unix` (s) -> the ECI position (3,) km it implies."""
+    rng, az, el = (float(v) for v in np.asarray(z, dtype=float)[:3])
+    enu = rng * np.array([math.cos(el) * math.sin(az), math.cos(el) * math.cos(az),
+                          math.sin(el)])
+    ecef = site_ecef(station.lat_rad, station.lon_rad, station.alt_km)
+    ecef = ecef + enu_matrix(station.lat_rad, station.lon_rad).T @ enu
+    return np.asarray(ecef_to_eci(ecef, jd_of(t_unix)), dtype=float)
+
+
+def measurement_point(kind: int, z: ArrayLike, frame_id: str, t_unix: float,
+                      stations: dict[str, Station]) -> NDArray[np.float64] | None:
+    """ECI point (3,) km a measurement (core units: km, rad) implies: a position measurement
+    itself, range/az/el from its station (`frame_id` among `stations`); None for one without
+    range (ra/dec) or from an unknown station."""
+    if kind == Kind.POSITION:
+        return np.asarray(z, dtype=float)[:3].copy()
+    if kind == Kind.RANGE_AZ_EL and frame_id in stations:
+        return razel_to_eci(z, stations[frame_id], t_unix)
+    return None
+
+
+def station_eci(station: Station, t_unix: float) -> NDArray[np.float64]:
+    """ECI position (3,) km of `station` at Unix time `t_unix` (s)."""
+    ecef = site_ecef(station.lat_rad, station.lon_rad, station.alt_km)
+    return np.asarray(ecef_to_eci(ecef, jd_of(t_unix)), dtype=float)
+
+
+def meridian_eci(t_unix: float, n: int = 37, lon_rad: float = 0.0) -> NDArray[np.float64]:
+    """Points (n, 3) km of the meridian at longitude `lon_rad` on the Earth's surface
+    (spherical, radius `R_EARTH` + 1 km), pole to pole, in ECI at Unix time `t_unix` (s):
+    shows the Earth's rotation in the inertial scene."""
+    lat = np.linspace(-math.pi / 2, math.pi / 2, n)
+    r = R_EARTH + 1.0
+    ecef = np.stack([r * np.cos(lat) * math.cos(lon_rad), r * np.cos(lat) * math.sin(lon_rad),
+                     r * np.sin(lat)], -1)
+    return np.asarray(ecef_to_eci(ecef, jd_of(t_unix)), dtype=float)
+
+
+@dataclass
+class SceneState:
+    """What the scene shows, as the bridge last heard it (km, ECI, Unix s).
+
+    ``truth``/``estimate``: (t, state (6,) km km/s) of the newest; ``covariance`` (6, 6) km²
+    of the newest estimate; trails and point lists keep the newest `trail` / `points` items.
+    """
+
+    trail: int = 600
+    points: int = 300
+    truth: tuple[float, NDArray[np.float64]] | None = None
+    estimate: tuple[float, NDArray[np.float64]] | None = None
+    covariance: NDArray[np.float64] | None = None
+    truth_trail: deque[NDArray[np.float64]] = field(default_factory=deque)
+    estimate_trail: deque[NDArray[np.float64]] = field(default_factory=deque)
+    forecasts: deque[NDArray[np.float64]] = field(default_factory=deque)
+    measurements: deque[NDArray[np.float64]] = field(default_factory=deque)
+
+    def add_truth(self, t: float, x: ArrayLike) -> None:
+        self.truth = (t, np.asarray(x, dtype=float))
+        _push(self.truth_trail, self.truth[1][:3], self.trail)
+
+    def add_estimate(self, t: float, x: ArrayLike, p: ArrayLike) -> None:
+        self.estimate = (t, np.asarray(x, dtype=float))
+        self.covariance = np.asarray(p, dtype=float).reshape(6, 6)
+        _push(self.estimate_trail, self.estimate[1][:3], self.trail)
+
+    def add_forecast(self, r_eci_km: ArrayLike) -> None:
+        _push(self.forecasts, np.asarray(r_eci_km, dtype=float), self.points)
+
+    def add_measurement(self, r_eci_km: ArrayLike) -> None:
+        _push(self.measurements, np.asarray(r_eci_km, dtype=float), self.points)
+
+    @property
+    def t(self) -> float | None:
+        """Newest epoch heard (Unix s), None before any."""
+        ts = [s[0] for s in (self.truth, self.estimate) if s is not None]
+        return max(ts) if ts else None
+
+
+def _push(buf: deque[NDArray[np.float64]], item: NDArray[np.float64], limit: int) -> None:
+    buf.append(item)
+    while len(buf) > limit:
+        buf.popleft()
+
+
+def position_error_km(estimate: ArrayLike, truth: ArrayLike) -> float:
+    """‖r̂ − r‖ (km) of two states (km)."""
+    return float(np.linalg.norm(np.asarray(estimate, float)[:3] - np.asarray(truth, float)[:3]))
+
+
+def metrics(t: float, x: ArrayLike, p: ArrayLike, truth: ArrayLike | None,
+            update_source: int, nis: float) -> dict[str, Any]:
+    """The JSON message of `METRICS_TOPIC` for an estimate at `t` (Unix s): state `x` km,
+    covariance `p` (6, 6) km²; `truth` the true state at the same epoch, or None.
+
+    Keys: ``t`` (s), ``position_error_km`` (None without truth), ``sigma_km``
+    (√trace of the position block, km), ``three_sigma_max_km`` (the largest semi-axis of the
+    3σ ellipsoid, km), ``velocity_sigma_km_s``, ``nis``, ``update_source`` (0 none, 1 sensor,
+    2 forecast).
+    """
+    pm = np.asarray(p, dtype=float).reshape(6, 6)
+    ell = covariance_ellipsoid(pm[:3, :3])
+    return {
+        "t": float(t),
+        "position_error_km": None if truth is None else position_error_km(x, truth),
+        "sigma_km": float(math.sqrt(max(np.trace(pm[:3, :3]), 0.0))),
+        "three_sigma_max_km": float(ell.semi_axes.max()),
+        "velocity_sigma_km_s": float(math.sqrt(max(np.trace(pm[3:, 3:]), 0.0))),
+        "nis": float(nis),
+        "update_source": int(update_source),
+    }
+
+
+METRICS_SCHEMA: dict[str, Any] = {
+    "type": "object",
+    "properties": {
+        "t": {"type": "number", "description": "epoch, Unix s (sim time)"},
+        "position_error_km": {"type": ["number", "null"],
+                              "description": "|estimate - truth| position, km"},
+        "sigma_km": {"type": "number", "description": "sqrt(trace P_pos), km"},
+        "three_sigma_max_km": {"type": "number",
+                               "description": "largest semi-axis of the 3-sigma ellipsoid, km"},
+        "velocity_sigma_km_s": {"type": "number", "description": "sqrt(trace P_vel), km/s"},
+        "nis": {"type": "number"},
+        "update_source": {"type": "integer", "description": "0 none, 1 sensor, 2 forecast"},
+    },
+}
+"""JSON schema of `METRICS_TOPIC`'s messages."""
+
+
+# foxglove messages ------------------------------------------------------------------------
+
+def _stamp(t_unix: float) -> Any:
+    from foxglove.messages import Timestamp
+
+    ns = max(round(t_unix * 1e9), 0)
+    return Timestamp(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
+
+
+def _color(rgba: Rgba) -> Any:
+    from foxglove.messages import Color
+
+    return Color(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
+
+
+def _pose(position: ArrayLike, quaternion: tuple[float, float, float, float] = (0, 0, 0, 1)
+          ) -> Any:
+    from foxglove.messages import Pose, Quaternion, Vector3
+
+    x, y, z = (float(v) for v in np.asarray(position, dtype=float)[:3])
+    qx, qy, qz, qw = quaternion
+    return Pose(position=Vector3(x=x, y=y, z=z),
+                orientation=Quaternion(x=qx, y=qy, z=qz, w=qw))
+
+
+def _sphere(position: ArrayLike, size: ArrayLike, rgba: Rgba,
+            quaternion: tuple[float, float, float, float] = (0, 0, 0, 1)) -> Any:
+    from foxglove.messages import SpherePrimitive, Vector3
+
+    sx, sy, sz = (float(v) for v in np.broadcast_to(np.asarray(size, dtype=float), (3,)))
+    return SpherePrimitive(pose=_pose(position, quaternion), size=Vector3(x=sx, y=sy, z=sz),
+                           color=_color(rgba))
+
+
+def _line(points: Any, rgba: Rgba, thickness: float = 2.0) -> Any:
+    from foxglove.messages import LinePrimitive, LinePrimitiveLineType, Point3
+
+    pts = [Point3(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in points]
+    return LinePrimitive(type=LinePrimitiveLineType.LineStrip, pose=_pose((0, 0, 0)),
+                         thickness=thickness, scale_invariant=True, points=pts,
+                         color=_color(rgba))
+
+
+def _text(position: ArrayLike, text: str, rgba: Rgba) -> Any:
+    from foxglove.messages import TextPrimitive
+
+    return TextPrimitive(pose=_pose(position), billboard=True, font_size=14.0,
+                         scale_invariant=True, color=_color(rgba), text=text)
+
+
+def scene_entities(state: SceneState, stations: dict[str, Station],
+                   marker_km: float = 150.0) -> list[Any]:
+    """The scene's `foxglove.SceneEntity` list for `state` (frame ``eci``, km), stamped with
+    its newest epoch: ``earth`` (WGS-84-sized sphere, its prime meridian), ``truth`` and
+    ``estimate`` (a `marker_km`-wide sphere and the recent trail each), ``covariance`` (the
+    3σ ellipsoid of the estimate's position block, true size), ``stations`` (one marker and
+    label per station of `stations`), ``forecasts`` and ``measurements`` (the recent points
+    they imply). Entities without data are left out."""
+    from foxglove.messages import SceneEntity
+
+    t = state.t if state.t is not None else 0.0
+    stamp = _stamp(t)
+
+    def entity(eid: str, **prims: Any) -> Any:
+        return SceneEntity(timestamp=stamp, frame_id=SCENE_FRAME, id=eid, **prims)
+
+    earth_d = 2.0 * R_EARTH
+    out = [entity("earth",
+                  spheres=[_sphere((0, 0, 0), (earth_d, earth_d, earth_d * (1 - WGS84_F)),
+                                   EARTH_RGBA)],
+                  lines=[_line(meridian_eci(t), (1.0, 1.0, 1.0, 0.8), 1.5)])]
+    if state.truth is not None:
+        out.append(entity("truth", spheres=[_sphere(state.truth[1], marker_km, TRUTH_RGBA)],
+                          lines=[_line(state.truth_trail, TRUTH_RGBA)]))
+    if state.estimate is not None:
+        out.append(entity("estimate",
+                          spheres=[_sphere(state.estimate[1], marker_km, ESTIMATE_RGBA)],
+                          lines=[_line(state.estimate_trail, ESTIMATE_RGBA)]))
+        if state.covariance is not None:
+            ell = covariance_ellipsoid(state.covariance[:3, :3])
+            out.append(entity("covariance",
+                              spheres=[_sphere(state.estimate[1], ell.size, ELLIPSOID_RGBA,
+                                               ell.quaternion)],
+                              texts=[_text(state.estimate[1],
+                                           f"3σ {ell.semi_axes.max():.3g} km",
+                                           (*ELLIPSOID_RGBA[:3], 1.0))]))
+    if stations:
+        pos = {name: station_eci(s, t) for name, s in stations.items()}
+        out.append(entity("stations",
+                          spheres=[_sphere(p, marker_km * 0.6, STATION_RGBA)
+                                   for p in pos.values()],
+                          texts=[_text(p, name, STATION_RGBA) for name, p in pos.items()]))
+    if state.forecasts:
+        out.append(entity("forecasts", spheres=[_sphere(p, marker_km * 0.4, FORECAST_RGBA)
+                                                for p in state.forecasts]))
+    if state.measurements:
+        out.append(entity("measurements",
+                          spheres=[_sphere(p, marker_km * 0.3, MEASUREMENT_RGBA)
+                                   for p in state.measurements]))
+    return out
+
+
+def scene_update(state: SceneState, stations: dict[str, Station],
+                 marker_km: float = 150.0) -> Any:
+    """`foxglove.SceneUpdate` of `scene_entities` (each replaces its entity of the same id)."""
+    from foxglove.messages import SceneUpdate
+
+    return SceneUpdate(entities=scene_entities(state, stations, marker_km))
+
+
+def location_fix(t_unix: float, r_eci_km: ArrayLike, frame_id: str = "estimate") -> Any:
+    """`foxglove.LocationFix` of the point below ECI position `r_eci_km` (km) at `t_unix`
+    (Unix s): latitude and longitude in degrees (WGS-84), altitude in m."""
+    from foxglove.messages import LocationFix
+
+    lat, lon, alt = eci_to_geodetic(r_eci_km, t_unix)
+    return LocationFix(timestamp=_stamp(t_unix), frame_id=frame_id,
+                       latitude=math.degrees(lat), longitude=math.degrees(lon),
+                       altitude=alt * 1000.0)

@@ -1,0 +1,186 @@
+"""ssa_fusion.ros.foxglove_scene against analytic results and core.frames: covariance
+ellipsoids (diagonal, rotated, degenerate), quaternions, ECI -> geodetic, range/az/el -> ECI,
+and the foxglove messages it builds."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+from ssa_fusion.core.constants import R_EARTH, WGS84_F
+from ssa_fusion.core.frames import (
+    COLUMBUS,
+    earth_rotation_angle,
+    ecef_to_eci,
+    razel_eci,
+    site_ecef,
+    wrap_pi,
+)
+from ssa_fusion.core.stations import UNIX_EPOCH_JD, network_stations
+from ssa_fusion.core.types import Kind
+from ssa_fusion.ros import foxglove_scene as fs
+
+T = 1_718_000_000.0  # 2024-06-10, Unix s
+
+
+def _rot_z(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _rot_x(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def test_ellipsoid_of_a_diagonal_covariance():
+    ell = fs.covariance_ellipsoid(np.diag([4.0, 9.0, 16.0]))  # σ = 2, 3, 4 km
+    assert ell.semi_axes == pytest.approx([6.0, 9.0, 12.0])
+    assert ell.size == pytest.approx([12.0, 18.0, 24.0])
+    # each axis is a coordinate axis (up to sign), a proper rotation
+    assert np.abs(ell.axes) == pytest.approx(np.eye(3))
+    assert np.linalg.det(ell.axes) == pytest.approx(1.0)
+
+
+def test_ellipsoid_of_a_rotated_covariance():
+    rot = _rot_z(math.radians(30.0)) @ _rot_x(math.radians(50.0))
+    p = rot @ np.diag([1.0, 25.0, 100.0]) @ rot.T  # km²
+    ell = fs.covariance_ellipsoid(p)
+    assert ell.semi_axes == pytest.approx([3.0, 15.0, 30.0])
+    for i in range(3):  # principal directions are the rotated axes (up to sign)
+        assert abs(ell.axes[:, i] @ rot[:, i]) == pytest.approx(1.0)
+    # the pose foxglove gets (quaternion, diameters) rebuilds 9 P
+    r = fs.quaternion_to_rotation(ell.quaternion)
+    assert r @ np.diag((ell.size / 2) ** 2) @ r.T == pytest.approx(9.0 * p)
+    assert np.linalg.norm(ell.quaternion) == pytest.approx(1.0)
+
+
+def test_ellipsoid_of_a_singular_covariance_is_flat_not_nan():
+    p = np.diag([0.0, 1.0, 4.0])
+    p[0, 0] = -1e-18  # round-off makes it indefinite
+    ell = fs.covariance_ellipsoid(p, n_sigma=1.0)
+    assert ell.semi_axes == pytest.approx([0.0, 1.0, 2.0])
+    assert np.all(np.isfinite(ell.quaternion))
+
+
+@pytest.mark.parametrize("angle", [0.0, 0.3, 2.0, math.pi - 1e-3, math.pi])
+@pytest.mark.parametrize("axis", [(1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 2, -3)])
+def test_quaternion_round_trip(angle, axis):
+    u = np.asarray(axis, float) / np.linalg.norm(axis)
+    k = np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])
+    rot = np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k  # Rodrigues
+    q = fs.rotation_to_quaternion(rot)
+    assert fs.quaternion_to_rotation(q) == pytest.approx(rot, abs=1e-12)
+    assert q[3] == pytest.approx(math.cos(angle / 2), abs=1e-12)
+
+
+def test_geodetic_of_an_equatorial_eci_point_is_minus_the_earth_rotation_angle():
+    """A point on ECI +x lies on the equator at longitude -ERA(t) (ECEF is ECI rotated by
+    ERA about z), at height |r| - a."""
+    lat, lon, alt = fs.eci_to_geodetic([7000.0, 0.0, 0.0], T)
+    era = float(earth_rotation_angle(UNIX_EPOCH_JD + T / 86400.0))
+    assert lat == pytest.approx(0.0, abs=1e-12)
+    assert lon == pytest.approx(float(wrap_pi(-era)), abs=1e-12)
+    assert alt == pytest.approx(7000.0 - R_EARTH, abs=1e-9)
+
+
+def test_geodetic_of_the_pole():
+    b = R_EARTH * (1 - WGS84_F)
+    lat, _lon, alt = fs.eci_to_geodetic([0.0, 0.0, b + 500.0], T)
+    assert lat == pytest.approx(math.pi / 2)
+    assert alt == pytest.approx(500.0, abs=1e-9)
+
+
+@pytest.mark.parametrize(("lat_deg", "lon_deg", "alt_km"),
+                         [(39.9612, -82.9988, 0.275), (-33.9, 151.2, 420.0), (0.0, 180.0, 0.0),
+                          (85.0, 10.0, 35786.0), (-89.9, -45.0, 1.0), (51.6, 0.0, 400.0)])
+def test_geodetic_inverts_core_frames(lat_deg, lon_deg, alt_km):
+    """core.frames builds the ECI point of a geodetic site (site_ecef, ecef_to_eci);
+    eci_to_geodetic gets the site back at the same epoch."""
+    lat, lon = math.radians(lat_deg), math.radians(lon_deg)
+    r_eci = ecef_to_eci(site_ecef(lat, lon, alt_km), UNIX_EPOCH_JD + T / 86400.0)
+    got = fs.eci_to_geodetic(r_eci, T)
+    assert got[0] == pytest.approx(lat, abs=1e-11)
+    assert float(wrap_pi(got[1] - lon)) == pytest.approx(0.0, abs=1e-11)
+    assert got[2] == pytest.approx(alt_km, abs=1e-7)
+
+
+def test_razel_to_eci_inverts_core_razel():
+    r_eci = np.array([4000.0, -3000.0, 4500.0])
+    jd = UNIX_EPOCH_JD + T / 86400.0
+    z = razel_eci(r_eci, jd, COLUMBUS)
+    assert fs.razel_to_eci(z, COLUMBUS, T) == pytest.approx(r_eci, abs=1e-8)
+    stations = {"columbus": COLUMBUS}
+    assert fs.measurement_point(Kind.RANGE_AZ_EL, z, "columbus", T, stations) == \
+        pytest.approx(r_eci, abs=1e-8)
+    assert fs.measurement_point(Kind.POSITION, r_eci, "eci", T, {}) == pytest.approx(r_eci)
+    assert fs.measurement_point(Kind.RA_DEC, z[1:], "columbus", T, stations) is None
+    assert fs.measurement_point(Kind.RANGE_AZ_EL, z, "elsewhere", T, stations) is None
+
+
+def test_meridian_and_station_turn_with_the_earth():
+    m0, m1 = fs.meridian_eci(T), fs.meridian_eci(T + 6 * 3600.0)
+    assert np.linalg.norm(m0, axis=1) == pytest.approx(R_EARTH + 1.0)
+    mid0, mid1 = m0[len(m0) // 2], m1[len(m1) // 2]  # on the equator
+    turned = math.acos(mid0 @ mid1 / (np.linalg.norm(mid0) * np.linalg.norm(mid1)))
+    assert turned == pytest.approx(6 * 3600.0 * 7.292115146706979e-5, rel=1e-6)
+    s = fs.station_eci(COLUMBUS, T)
+    assert np.linalg.norm(s) == pytest.approx(np.linalg.norm(site_ecef(
+        COLUMBUS.lat_rad, COLUMBUS.lon_rad, COLUMBUS.alt_km)))
+
+
+def test_metrics():
+    x = np.array([7001.0, 2.0, 2.0, 0.0, 7.5, 0.0])
+    truth = np.array([7000.0, 0.0, 0.0, 0.0, 7.5, 0.0])
+    p = np.diag([1.0, 4.0, 9.0, 1e-6, 4e-6, 4e-6])
+    m = fs.metrics(T, x, p, truth, update_source=2, nis=1.5)
+    assert m["position_error_km"] == pytest.approx(3.0)
+    assert m["sigma_km"] == pytest.approx(math.sqrt(14.0))
+    assert m["three_sigma_max_km"] == pytest.approx(9.0)
+    assert m["velocity_sigma_km_s"] == pytest.approx(3e-3)
+    assert (m["t"], m["nis"], m["update_source"]) == (T, 1.5, 2)
+    assert fs.metrics(T, x, p, None, 1, 0.0)["position_error_km"] is None
+
+
+def test_scene_state_keeps_the_newest():
+    s = fs.SceneState(trail=3, points=2)
+    assert s.t is None
+    for k in range(5):
+        s.add_truth(T + k, [7000.0 + k, 0, 0, 0, 7.5, 0])
+        s.add_forecast([k, 0, 0])
+    s.add_estimate(T + 2, np.zeros(6), np.eye(6))
+    assert [p[0] for p in s.truth_trail] == [7002.0, 7003.0, 7004.0]
+    assert [p[0] for p in s.forecasts] == [3.0, 4.0]
+    assert s.t == T + 4
+
+
+def test_scene_messages_encode():
+    """The foxglove messages build and encode (protobuf); entities without data are left
+    out."""
+    from foxglove.messages import SceneUpdate
+
+    def ids(entities: list) -> list[str]:  # the messages have no getters; their repr says
+        return [re.search(r'\bid="([^"]*)"', repr(e)).group(1) for e in entities]
+
+    s = fs.SceneState()
+    assert ids(fs.scene_entities(s, {})) == ["earth"]
+    s.add_truth(T, [7000.0, 0, 0, 0, 7.5, 0])
+    s.add_estimate(T, [7001.0, 0, 0, 0, 7.5, 0], np.diag([1.0, 4, 9, 1e-6, 1e-6, 1e-6]))
+    s.add_forecast([7000.0, 10.0, 0.0])
+    s.add_measurement([7000.0, 20.0, 0.0])
+    stations = network_stations("network")
+    got = ids(fs.scene_entities(s, stations))
+    assert got == ["earth", "truth", "estimate", "covariance", "stations", "forecasts",
+                   "measurements"]
+    update = fs.scene_update(s, stations)
+    assert isinstance(update, SceneUpdate)
+    assert len(update.encode()) > 500
+    fix = repr(fs.location_fix(T, [7000.0, 0.0, 0.0]))
+    lat, lon, alt = fs.eci_to_geodetic([7000.0, 0.0, 0.0], T)
+    values = {k: float(v) for k, v in re.findall(r"\b(latitude|longitude|altitude)=([-\d.e]+)",
+                                                 fix)}
+    assert values == pytest.approx({"latitude": math.degrees(lat),
+                                    "longitude": math.degrees(lon), "altitude": alt * 1000.0})
