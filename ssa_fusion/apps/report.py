@@ -2,7 +2,8 @@
 
 Plots (PNG, in --out): the three arms' position error over the gap; the live estimate's
 error with its ±3σ bounds per state; forecasts against the withheld measurements; NIS of
-the filter over time.
+the filter over time. Also `report.html`: the same and more in one self-contained interactive
+page (`report_html`).
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(evaluate.table(ev))
-    print(f"\nwrote {out}/report.json and plots")
+    print(f"\nwrote {out}/report.json, {out}/report.html and plots")
     return 0
 
 
@@ -63,13 +64,16 @@ def summary(data: evaluate.BagData, ev: evaluate.Evaluation) -> dict:
 
 
 def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
-    """results JSON + PNG plots into `out`."""
+    """results JSON, PNG plots and report.html into `out`."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "report.json").write_text(json.dumps(summary(data, ev), indent=2))
     plot_arms(ev, out / "arms.png")
     plot_sigma(data, out / "estimate_3sigma.png")
     plot_forecasts(data, out / "forecast_vs_withheld.png")
     plot_nis(data, out / "nis.png")
+    from ssa_fusion.apps import report_html  # plotly: imported on first use, like the plots
+
+    report_html.write(data, ev, out / "report.html", title=f"ssa_fusion report: {out.name}")
 
 
 def _plt():

@@ -1,0 +1,321 @@
+"""`report.html` of a bag: one self-contained, interactive page (Plotly, its JavaScript
+inlined, so it opens offline and can be mailed as one file).
+
+Figures: the orbit in 3D (truth and the filter's estimates, ECI km, the gap highlighted);
+each arm's position error over the gap with its ±3σ; the surrogate's forecasts against the
+withheld measurements, with their ±3σ; each arm's NEES over the gap against the χ² band; the
+filter's NIS over the run against its χ² band. Tables: the arms, and for a station network
+(the real sky) the filter after each pass. Units: the core's (km, km/s, rad, s); times are
+hours.
+"""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+
+import numpy as np
+import plotly.graph_objects as go
+from plotly.subplots import make_subplots
+
+from ssa_fusion.apps import evaluate
+from ssa_fusion.core import metrics, types
+from ssa_fusion.core.constants import R_EARTH
+from ssa_fusion.paper import sky
+from ssa_fusion.paper.arms import ArmName
+
+COLORS = {ArmName.PLACEHOLDER: "#7f7f7f", ArmName.COAST: "#1f77b4",
+          ArmName.J2_COAST: "#2ca02c", ArmName.DMD_EKF: "#d62728",
+          ArmName.HYPOTHETICAL_EKF: "#9467bd"}
+"""One colour per arm, the same in every figure."""
+AXIS_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c")
+"""Colours of the x, y, z components."""
+MEASUREMENT_LABELS = {
+    types.Kind.POSITION: ("x ECI [km]", "y ECI [km]", "z ECI [km]"),
+    types.Kind.RANGE_AZ_EL: ("range [km]", "azimuth [rad]", "elevation [rad]"),
+    types.Kind.RA_DEC: ("right ascension [rad]", "declination [rad]"),
+}
+"""Axis titles of a measurement's components, by kind."""
+MAX_POINTS = 4000
+"""Longest line drawn (points); longer series are thinned evenly (the page stays small)."""
+CONFIG = {"displaylogo": False, "responsive": True}
+
+# A script error (a plot that failed to draw) shows on the page, not only in the console.
+ERROR_HOOK = """<script>
+window.addEventListener("error", function (e) {
+  var d = document.createElement("div"); d.className = "render-error";
+  d.textContent = "Error while drawing this report: " + e.message;
+  document.body.insertBefore(d, document.body.firstChild);
+});
+</script>"""
+
+STYLE = """<style>
+body { font-family: sans-serif; margin: 1.5em; color: #222; }
+table { border-collapse: collapse; margin: 0.5em 0 1em; }
+th, td { border: 1px solid #bbb; padding: 0.25em 0.6em; text-align: right; }
+th { background: #eee; } td:first-child { text-align: left; }
+.note { color: #555; max-width: 70em; }
+.render-error { background: #fdd; color: #900; padding: 0.5em; font-weight: bold; }
+</style>"""
+
+
+def _thin(n: int) -> np.ndarray:
+    """Indices of at most `MAX_POINTS` of `n` samples, evenly spread, first and last kept."""
+    if n <= MAX_POINTS:
+        return np.arange(n)
+    return np.unique(np.linspace(0, n - 1, MAX_POINTS).round().astype(int))
+
+
+def _hours(t: np.ndarray, t0: float) -> np.ndarray:
+    """Epochs `t` (s) as hours after `t0` (s)."""
+    return (np.asarray(t, float) - t0) / 3600.0
+
+
+def orbit_3d(data: evaluate.BagData, ev: evaluate.Evaluation) -> go.Figure:
+    """The true orbit and the filter's fused estimates in ECI (km) around the Earth, the
+    truth over the gap drawn thick, and the DMD-EKF arm over the gap."""
+    fig = go.Figure()
+    u, v = np.mgrid[0:2 * np.pi:37j, 0:np.pi:19j]
+    fig.add_trace(go.Surface(
+        x=R_EARTH * np.cos(u) * np.sin(v), y=R_EARTH * np.sin(u) * np.sin(v),
+        z=R_EARTH * np.cos(v), showscale=False, opacity=0.25, hoverinfo="skip",
+        colorscale=[[0, "#6baed6"], [1, "#6baed6"]], name="Earth"))
+    truth = np.array([e.x[:3] for e in data.truth])
+    k = _thin(len(truth))
+    fig.add_trace(go.Scatter3d(x=truth[k, 0], y=truth[k, 1], z=truth[k, 2], mode="lines",
+                               line={"color": "#444", "width": 2}, name="truth"))
+    est = np.array([e.x[:3] for e in data.estimates
+                    if e.update_source != types.UpdateSource.NONE])
+    if len(est):
+        k = _thin(len(est))
+        fig.add_trace(go.Scatter3d(x=est[k, 0], y=est[k, 1], z=est[k, 2], mode="markers",
+                                   marker={"size": 1.5, "color": "#1f77b4"},
+                                   name="estimate (fused epochs)"))
+    g = ev.gap
+    fig.add_trace(go.Scatter3d(x=g.truth[:, 0], y=g.truth[:, 1], z=g.truth[:, 2],
+                               mode="lines", line={"color": "#ff7f0e", "width": 8},
+                               name=f"truth over the gap ({len(g.t)} epochs)"))
+    dmd = g.arms.get(ArmName.DMD_EKF)
+    if dmd is not None:
+        fig.add_trace(go.Scatter3d(x=dmd.x[:, 0], y=dmd.x[:, 1], z=dmd.x[:, 2],
+                                   mode="lines", line={"color": COLORS[ArmName.DMD_EKF],
+                                                       "width": 4, "dash": "dash"},
+                                   name="dmd_ekf over the gap"))
+    h = np.cross(data.truth[0].x[:3], data.truth[0].x[3:6])  # look down on the orbit plane
+    eye = 1.6 * h / np.linalg.norm(h) + np.array([0.3, 0.3, 0.0])
+    fig.update_layout(
+        title="Orbit in ECI (truth, estimates; the gap highlighted)", height=650,
+        scene={"xaxis_title": "x ECI [km]", "yaxis_title": "y ECI [km]",
+               "zaxis_title": "z ECI [km]", "aspectmode": "data",
+               "camera": {"eye": dict(zip("xyz", eye.tolist(), strict=True))}},
+        legend={"x": 0, "y": 1}, margin={"l": 0, "r": 0, "t": 40, "b": 0})
+    return fig
+
+
+def arm_errors(ev: evaluate.Evaluation) -> go.Figure:
+    """Per arm, its position error along x, y, z ECI (km) over the gap with ±3σ of its
+    covariance (dashed), against hours into the gap."""
+    g = ev.gap
+    names = [a for a in ArmName if a in g.arms]
+    fig = make_subplots(rows=len(names), cols=1, shared_xaxes=True, vertical_spacing=0.04,
+                        subplot_titles=[f"{a}: ε = {g.scores[a].epsilon:.2e}, mean |Δr| = "
+                                        f"{g.scores[a].pos_err_mean_km:.3g} km"
+                                        for a in names])
+    hours = _hours(g.t, float(g.t[0]))
+    for row, name in enumerate(names, start=1):
+        arm = g.arms[name]
+        err = arm.x[:, :3] - g.truth[:, :3]
+        sig = np.sqrt(np.abs(np.diagonal(arm.P, axis1=1, axis2=2)[:, :3]))
+        for i, axis in enumerate("xyz"):
+            c = AXIS_COLORS[i]
+            first = row == 1
+            fig.add_trace(go.Scatter(x=hours, y=err[:, i], mode="lines", name=f"Δ{axis}",
+                                     line={"color": c, "width": 1.5}, legendgroup=axis,
+                                     showlegend=first), row=row, col=1)
+            for sign in (1, -1):
+                fig.add_trace(go.Scatter(x=hours, y=sign * 3 * sig[:, i], mode="lines",
+                                         name=f"±3σ {axis}", legendgroup=axis,
+                                         line={"color": c, "width": 1, "dash": "dash"},
+                                         showlegend=first and sign == 1), row=row, col=1)
+        fig.update_yaxes(title_text="error [km]", row=row, col=1)
+    fig.update_xaxes(title_text="hours into the gap [h]", row=len(names), col=1)
+    fig.update_layout(title="Position error of each arm over the gap, with ±3σ",
+                      height=230 * len(names) + 80)
+    return fig
+
+
+def forecasts(data: evaluate.BagData) -> go.Figure | None:
+    """The surrogate's forecasts (with ±3σ of their covariance) against the withheld
+    measurements of the same epochs, per component, in the measurement's units; None
+    without both."""
+    withheld = {m.t: m for m in data.withheld}
+    f = sorted((m for m in data.forecasts if m.t in withheld), key=lambda m: m.t)
+    if not f:
+        return None
+    t0 = min(withheld)
+    t = _hours(np.array([m.t for m in f]), t0)
+    zf = np.array([m.z for m in f])
+    sf = np.sqrt(np.abs(np.array([np.diag(m.R) for m in f])))
+    tw = sorted(withheld)
+    zw = np.array([withheld[s].z for s in tw])
+    kind = types.Kind(f[0].kind)
+    labels = MEASUREMENT_LABELS.get(kind, ())
+    n = zf.shape[1]
+    wrapped = {types.Kind.RANGE_AZ_EL: 1, types.Kind.RA_DEC: 0}.get(kind)
+    if wrapped is not None:  # azimuth / right ascension wrap at 2π: no line across a wrap
+        jump = np.flatnonzero(np.abs(np.diff(zf[:, wrapped])) > np.pi) + 1
+        t, sf = np.insert(t, jump, np.nan), np.insert(sf, jump, np.nan, axis=0)
+        zf = np.insert(zf, jump, np.nan, axis=0)
+    fig = make_subplots(rows=n, cols=1, shared_xaxes=True, vertical_spacing=0.05)
+    for i in range(n):
+        first = i == 0
+        fig.add_trace(go.Scatter(x=_hours(np.array(tw), t0), y=zw[:, i], mode="markers",
+                                 marker={"size": 4, "color": "#222"}, legendgroup="w",
+                                 name="withheld (sensor)", showlegend=first), row=i + 1, col=1)
+        fig.add_trace(go.Scatter(x=t, y=zf[:, i], mode="lines", legendgroup="f",
+                                 line={"color": COLORS[ArmName.DMD_EKF]}, name="forecast",
+                                 showlegend=first), row=i + 1, col=1)
+        for sign in (1, -1):
+            fig.add_trace(go.Scatter(x=t, y=zf[:, i] + sign * 3 * sf[:, i], mode="lines",
+                                     line={"color": COLORS[ArmName.DMD_EKF], "width": 1,
+                                           "dash": "dot"}, legendgroup="s",
+                                     name="forecast ±3σ", showlegend=first and sign == 1),
+                          row=i + 1, col=1)
+        fig.update_yaxes(title_text=labels[i] if i < len(labels) else f"z[{i}]",
+                         row=i + 1, col=1)
+    fig.update_xaxes(title_text="hours into the gap [h]", row=n, col=1)
+    fig.update_layout(title="Forecasts against the withheld measurements", height=220 * n + 80)
+    return fig
+
+
+def _band(fig: go.Figure, x0: float, x1: float, lo: float, hi: float) -> None:
+    """The 95 % χ² band [lo, hi] from x0 to x1 (h), shaded, as one legend entry (traces,
+    not shapes: their data coordinates hold on log axes)."""
+    style = {"color": "#2ca02c", "dash": "dash", "width": 1}
+    fig.add_trace(go.Scatter(x=[x0, x1], y=[lo, lo], mode="lines", line=style,
+                             legendgroup="band", showlegend=False, hoverinfo="skip"))
+    fig.add_trace(go.Scatter(x=[x0, x1], y=[hi, hi], mode="lines", line=style, fill="tonexty",
+                             fillcolor="rgba(44, 160, 44, 0.15)", legendgroup="band",
+                             name=f"95 % χ² band [{lo:.2f}, {hi:.2f}]"))
+
+
+def nees(ev: evaluate.Evaluation) -> go.Figure:
+    """Each arm's NEES (dimensionless, log scale) over the gap against the 95 % χ² band of
+    one epoch's NEES (dof: the state dimension)."""
+    g = ev.gap
+    dof = g.truth.shape[1]
+    lo, hi = metrics.chi2_bounds(dof)
+    hours = _hours(g.t, float(g.t[0]))
+    fig = go.Figure()
+    _band(fig, float(hours[0]), float(hours[-1]), lo, hi)
+    for name in ArmName:
+        sc = g.scores.get(name)
+        if sc is None or sc.nees is None:
+            continue
+        fig.add_trace(go.Scatter(x=hours, y=np.maximum(sc.nees, 1e-6), mode="lines",
+                                 line={"color": COLORS[name]}, name=str(name)))
+    fig.update_yaxes(type="log", title_text="NEES [-]", exponentformat="power")
+    fig.update_xaxes(title_text="hours into the gap [h]")
+    fig.update_layout(title=f"NEES over the gap against the 95 % χ² band ({dof} dof)",
+                      height=450)
+    return fig
+
+
+def nis(data: evaluate.BagData) -> go.Figure | None:
+    """The filter's NIS (dimensionless, log scale) at each fused epoch over the run,
+    sensor and forecast updates apart, against the 95 % χ² band of one update's NIS (dof:
+    the measurement dimension); None without fused epochs. Epochs with NIS 0 (the initial
+    orbit determination: no innovation) are left out."""
+    est = [e for e in data.estimates
+           if e.update_source != types.UpdateSource.NONE and e.nis > 0]
+    if not est:
+        return None
+    dof = len(data.measurements[0].z) if data.measurements else 3
+    lo, hi = metrics.chi2_bounds(dof)
+    t0 = min(e.t for e in est)
+    fig = go.Figure()
+    _band(fig, 0.0, float(_hours(np.array([est[-1].t]), t0)[0]), lo, hi)
+    for source, label, color in ((types.UpdateSource.SENSOR, "sensor update", "#1f77b4"),
+                                 (types.UpdateSource.FORECAST, "forecast update",
+                                  COLORS[ArmName.DMD_EKF])):
+        sel = [e for e in est if e.update_source == source]
+        if sel:
+            fig.add_trace(go.Scatter(x=_hours(np.array([e.t for e in sel]), t0),
+                                     y=[e.nis for e in sel], mode="markers",
+                                     marker={"size": 3, "color": color}, name=label))
+    fig.update_yaxes(type="log", title_text="NIS [-]", exponentformat="power")
+    fig.update_xaxes(title_text="hours since the first estimate [h]")
+    fig.update_layout(title=f"NIS of the filter against the 95 % χ² band ({dof} dof; "
+                            f"[{lo:.2f}, {hi:.2f}])", height=400)
+    return fig
+
+
+def _table(header: list[str], rows: list[list[str]]) -> str:
+    """An HTML table (cells escaped)."""
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>"
+                   for r in rows)
+    return f'<table class="arms"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>'
+
+
+def arms_table(ev: evaluate.Evaluation) -> str:
+    """The arms table of `evaluate.table` in HTML, with its notes."""
+    g = ev.gap
+    rows = []
+    for name in ArmName:
+        sc = g.scores.get(name)
+        if sc is None:
+            continue
+        v = sc.nees_mean
+        nees_text = "n/a" if v is None else (f"{v:.2f}" if abs(v) < 1e4 else f"{v:.2e}")
+        rows.append([str(name), f"{sc.epsilon:.3e}", f"{sc.pos_err_mean_km:.3g}",
+                     f"{sc.pos_err_final_km:.3g}", nees_text])
+    lo, hi = metrics.chi2_bounds(g.truth.shape[1])
+    notes = (f"gap: {len(g.t)} epochs; live DMD-EKF estimates at {100 * g.coverage:.0f} % of "
+             f"them" + (f"; dmd_ekf at the other {g.predicted} scored from the filter's "
+                        "prediction" if g.predicted else "")
+             + f". A consistent filter's per-epoch NEES lies in [{lo:.2f}, {hi:.2f}] 95 % of "
+               f"the time. Settings: {ev.settings.origin}.")
+    return (_table(["arm", "ε over the gap", "mean position error [km]",
+                    "final position error [km]", "mean NEES"], rows)
+            + f'<p class="note">{html.escape(notes)}</p>')
+
+
+def passes_table(passes: sky.PassReport) -> str:
+    """The per-pass table of a station network's run (`sky.PassReport`) in HTML."""
+    rows = [[f"{(t_end - passes.t_start) / 3600:.2f}", who, str(n), f"{err:.3f}",
+             f"{sig:.3f}"] for t_end, who, n, err, sig in passes.passes]
+    lo, hi = passes.nees_band
+    notes = (f"through the run ({len(passes.nees)} truth epochs): position error mean "
+             f"{np.mean(passes.pos_err_km):.3f} km, max {np.max(passes.pos_err_km):.3f} km; "
+             f"the per-epoch 95 % NEES band [{lo:.2f}, {hi:.2f}] holds "
+             f"{100 * passes.nees_in_band:.0f} % of epochs.")
+    return (_table(["pass end [h after start]", "stations", "measurements",
+                    "position error after the pass [km]", "its σ [km]"], rows)
+            + f'<p class="note">{html.escape(notes)}</p>')
+
+
+def figures(data: evaluate.BagData, ev: evaluate.Evaluation) -> list[go.Figure]:
+    """The report's figures, in page order (those without data left out)."""
+    figs = [orbit_3d(data, ev), arm_errors(ev), forecasts(data), nees(ev), nis(data)]
+    return [f for f in figs if f is not None]
+
+
+def build(data: evaluate.BagData, ev: evaluate.Evaluation,
+          title: str = "ssa_fusion report") -> str:
+    """The page: figures (plotly.js inlined once, with the first) and tables."""
+    parts = [f"<h1>{html.escape(title)}</h1>", "<h2>Arms over the gap</h2>", arms_table(ev)]
+    if ev.passes is not None:
+        parts += ["<h2>After each pass</h2>", passes_table(ev.passes)]
+    for i, fig in enumerate(figures(data, ev)):
+        fig.update_layout(template="plotly_white")
+        parts.append(fig.to_html(full_html=False, include_plotlyjs=i == 0, config=CONFIG))
+    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<title>{html.escape(title)}</title>{STYLE}</head>\n<body>{ERROR_HOOK}\n"
+            + "\n".join(parts) + "\n</body></html>\n")
+
+
+def write(data: evaluate.BagData, ev: evaluate.Evaluation, path: Path,
+          title: str = "ssa_fusion report") -> None:
+    """Write the page (`build`) to `path` (UTF-8)."""
+    path.write_text(build(data, ev, title), encoding="utf-8")
