@@ -14,7 +14,8 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/launch", glob("launch_scripts/*.launch.py")),
-        ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/config",
+         glob("config/*.yaml") + glob("config/*.json")),  # params; the Foxglove layout
     ],
     install_requires=["setuptools"],
     zip_safe=True,

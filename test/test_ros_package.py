@@ -90,6 +90,7 @@ IMPORT_KEYS = {
     "mcap": "mcap-ros2-support",  # the pip key of mcap-ros2-support, which installs mcap
     "sgp4": "python3-sgp4-pip",
     "plotly": "python3-plotly-pip",  # report.html (apps/report_html.py)
+    "foxglove": "python3-foxglove-sdk-pip",  # foxglove-sdk: the foxglove_bridge node
     "threadpoolctl": None,  # optional: used when installed (ssa_fusion.limit_blas_threads)
 }
 """Third-party modules the code imports -> their rosdep key (None: optional, undeclared)."""

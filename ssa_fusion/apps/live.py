@@ -9,6 +9,11 @@ The summary warns when the machine did not keep up: when the simulation and the 
 behind it took more than `SLOW_FACTOR` times the wall time `--time-scale` asks for, and when
 the surrogate's forecasts for gap epochs never went into the filter (late or dropped; those
 epochs are scored from the filter's prediction). With `--strict` the latter fails the run.
+
+With `--foxglove` it also starts `foxglove_bridge`, which serves the graph to Foxglove over
+WebSocket on loopback (``ws://127.0.0.1:PORT``, printed once it listens; the layout
+``config/foxglove_layout.json`` shows its topics), and the simulation waits until the bridge
+has matched the sensor's topics.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ import os
 import re
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from ssa_fusion.apps import evaluate, report
@@ -55,7 +61,60 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--strict", action="store_true",
                    help="exit 1 when forecasts for gap epochs never went into the filter "
                         "(they arrived late or were dropped, e.g. at too high a time scale)")
+    p.add_argument("--foxglove", action="store_true",
+                   help="also serve the graph live to Foxglove (foxglove_bridge node, "
+                        "WebSocket on 127.0.0.1; layout: config/foxglove_layout.json)")
+    p.add_argument("--foxglove-port", type=_port, default=FOXGLOVE_PORT,
+                   help=f"port of that WebSocket server (default {FOXGLOVE_PORT}; 0 = any free)")
     add_domain_id(p)
+
+
+FOXGLOVE_PORT = 8765
+"""Default port of `--foxglove`'s WebSocket server (Foxglove's usual one)."""
+FOXGLOVE_READERS = [f"foxglove_bridge:{t}" for t in ("/ssa/measurement", "/ssa/truth")]
+"""What the bridge must have matched before measurements flow (with `--foxglove`)."""
+_FOXGLOVE_URL = re.compile(r"Foxglove WebSocket server on (ws://\S+)")
+
+
+def _port(text: str) -> int:
+    """argparse type: a TCP port 0..65535."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"must be in 0..65535, got {value}")
+    return value
+
+
+def foxglove_parameters(params: dict[str, dict], port: int) -> dict:
+    """Parameters of the foxglove_bridge node beside the graph `params` (`node_parameters`):
+    sim time, `port` on loopback, and the filter's stations (drawn in the scene)."""
+    out: dict = {"use_sim_time": True, "host": "127.0.0.1", "port": port}
+    station = params.get("filter", {}).get("station")
+    if station:
+        out["station"] = station
+    return out
+
+
+def start_foxglove(graph: Graph, params: dict[str, dict], port: int,
+                   say: Callable[[str], None] = print) -> str:
+    """Start foxglove_bridge in `graph`, wait until its server listens, say its address
+    (``ws://127.0.0.1:PORT``) and return it."""
+    proc = graph.start_node("foxglove_bridge", params=foxglove_parameters(params, port))
+
+    def url() -> str | None:
+        found = _FOXGLOVE_URL.search(proc.stderr())
+        return found.group(1) if found else None
+
+    graph.wait_for(lambda: url() is not None or proc.returncode is not None, 20.0,
+                   "foxglove_bridge to listen")
+    address = url()
+    if address is None:
+        raise RuntimeError("foxglove_bridge did not start:\n" + proc.describe())
+    say(f"foxglove: open {address} in Foxglove (Open connection -> Foxglove WebSocket); "
+        "layout: config/foxglove_layout.json")
+    return address
 
 
 def default_out(scenario: str, root: Path = LIVE_ROOT) -> Path:
@@ -198,6 +257,10 @@ def run(args: argparse.Namespace) -> int:
         from diagnostic_msgs.msg import DiagnosticArray
 
         diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
+        if getattr(args, "foxglove", False):
+            start_foxglove(graph, params, args.foxglove_port, lambda text: print(text, flush=True))
+            params["sensor_sim"]["wait_for_readers"] = [
+                *params["sensor_sim"]["wait_for_readers"], *FOXGLOVE_READERS]
         for name in ("recorder", "surrogate", "filter"):
             graph.start_node(name, params=params[name])
         sensor = graph.start_node("sensor_sim", params=params["sensor_sim"])

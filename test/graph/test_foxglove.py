@@ -176,3 +176,20 @@ def test_bridge_serves_scene_track_and_metrics(ros_graph):
         if client is not None:
             client.close()
     assert time.monotonic() - t_start < 20 * g.timeout_factor
+
+
+def test_live_foxglove_starts_the_bridge_and_says_where(ros_graph):
+    """`ssa-fusion live --foxglove` starts the bridge (sim time, loopback, the filter's
+    stations) before the graph and prints its ws:// address once it listens."""
+    from ssa_fusion.apps import live
+
+    said: list[str] = []
+    params = {"filter": {"station": "radar_network"}}
+    assert live.foxglove_parameters(params, 8765) == {
+        "use_sim_time": True, "host": "127.0.0.1", "port": 8765, "station": "radar_network"}
+    address = live.start_foxglove(ros_graph, params, 0, said.append)
+    assert re.fullmatch(r"ws://127\.0\.0\.1:\d+", address), address
+    assert address in said[0] and "config/foxglove_layout.json" in said[0]
+    port = int(address.rsplit(":", 1)[1])
+    client = WsClient("127.0.0.1", port, timeout=ros_graph.scaled(10))
+    client.close()

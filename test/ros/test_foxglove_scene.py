@@ -4,8 +4,10 @@ and the foxglove messages it builds."""
 
 from __future__ import annotations
 
+import json
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -184,3 +186,30 @@ def test_scene_messages_encode():
                                                  fix)}
     assert values == pytest.approx({"latitude": math.degrees(lat),
                                     "longitude": math.degrees(lon), "altitude": alt * 1000.0})
+
+
+LAYOUT = Path(__file__).resolve().parents[2] / "config" / "foxglove_layout.json"
+
+
+def _panels(tree: object) -> list[str]:
+    if isinstance(tree, str):
+        return [tree]
+    assert isinstance(tree, dict)
+    return _panels(tree["first"]) + _panels(tree["second"])
+
+
+def test_the_layout_shows_the_bridge_topics():
+    """config/foxglove_layout.json (Foxglove's layout JSON: configById + layout tree): a 3D
+    panel on the scene in frame eci, a Map panel on the ground tracks, a Plot of the metrics'
+    fields; every panel of the tree is configured."""
+    layout = json.loads(LAYOUT.read_text())
+    panels = _panels(layout["layout"])
+    assert sorted(panels) == sorted(layout["configById"])
+    kinds = {p.split("!")[0]: layout["configById"][p] for p in panels}
+    assert set(kinds) == {"3D", "map", "Plot"}
+    assert kinds["3D"]["followTf"] == fs.SCENE_FRAME
+    assert set(kinds["3D"]["topics"]) == {fs.SCENE_TOPIC}
+    assert set(kinds["map"]["topicColors"]) == {fs.TRACK_TOPIC, fs.TRUTH_TRACK_TOPIC}
+    fields = [p["value"].split(".", 1) for p in kinds["Plot"]["paths"]]
+    assert {topic for topic, _ in fields} == {fs.METRICS_TOPIC}
+    assert {f for _, f in fields} <= set(fs.METRICS_SCHEMA["properties"])
