@@ -102,7 +102,7 @@ def orbit_3d(data: evaluate.BagData, ev: evaluate.Evaluation) -> go.Figure:
                                                        "width": 4, "dash": "dash"},
                                    name="dmd_ekf over the gap"))
     h = np.cross(data.truth[0].x[:3], data.truth[0].x[3:6])  # look down on the orbit plane
-    eye = 1.6 * h / np.linalg.norm(h) + np.array([0.3, 0.3, 0.0])
+    eye = 1.8 * h / np.linalg.norm(h) + np.array([0.3, 0.3, 0.0])
     fig.update_layout(
         title="Orbit in ECI (truth, estimates; the gap highlighted)", height=650,
         scene={"xaxis_title": "x ECI [km]", "yaxis_title": "y ECI [km]",
@@ -158,7 +158,7 @@ def forecasts(data: evaluate.BagData) -> go.Figure | None:
     sf = np.sqrt(np.abs(np.array([np.diag(m.R) for m in f])))
     tw = sorted(withheld)
     zw = np.array([withheld[s].z for s in tw])
-    kind = types.Kind(f[0].kind)
+    kind = int(f[0].kind)  # an unknown kind gets z[i] axis titles, not an error
     labels = MEASUREMENT_LABELS.get(kind, ())
     n = zf.shape[1]
     wrapped = {types.Kind.RANGE_AZ_EL: 1, types.Kind.RA_DEC: 0}.get(kind)
