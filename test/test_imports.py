@@ -90,7 +90,8 @@ def test_node_executables_prepare_the_process_before_numpy_is_imported():
     assert scripts == {"sensor_sim": "ssa_fusion.nodes.entry:sensor_sim",
                        "surrogate": "ssa_fusion.nodes.entry:surrogate",
                        "filter": "ssa_fusion.nodes.entry:filter_node",
-                       "recorder": "ssa_fusion.nodes.entry:recorder"}
+                       "recorder": "ssa_fusion.nodes.entry:recorder",
+                       "foxglove_bridge": "ssa_fusion.nodes.entry:foxglove_bridge"}
     result = _run(textwrap.dedent("""
         import json, signal, sys
         import ssa_fusion.nodes.entry as entry

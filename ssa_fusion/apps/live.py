@@ -304,7 +304,7 @@ def run(args: argparse.Namespace) -> int:
         print(slow, file=sys.stderr)
     print(f"\nrecorded {sum(data.counts.values())} messages to {bag} in {wall:.1f} s")
     print(evaluate.table(ev))
-    print(f"\nplots and report.json in {out}/")
+    print(f"\nplots and report.json in {out}/; open {out / 'report.html'} in a browser")
     warning = late_warning(late, counters)
     if warning:
         print(warning, file=sys.stderr)
