@@ -192,19 +192,30 @@ def unfused_forecasts(data: BagData, t_gap: np.ndarray) -> LateForecasts:
     return LateForecasts(len(late), len(distinct), late[0] if late else None)
 
 
-def table(ev: Evaluation) -> str:
-    """Markdown table of the arms."""
-    g = ev.gap
-    rows = ["| arm | ε over the gap | mean position error [km] | final position error [km] "
-            "| mean NEES |", "|---|---|---|---|---|"]
+ARM_COLUMNS = ("arm", "ε over the gap", "mean position error [km]",
+               "final position error [km]", "mean NEES")
+"""The columns of the arms table (`arm_rows`)."""
+
+
+def arm_rows(g: GapEvaluation) -> list[list[str]]:
+    """The arms table's cells (`ARM_COLUMNS`), one row per scored arm, formatted."""
+    rows = []
     for arm in ArmName:
         sc = g.scores.get(arm)
         if sc is None:
             continue
         v = sc.nees_mean
         nees = "n/a" if v is None else (f"{v:.2f}" if abs(v) < 1e4 else f"{v:.2e}")
-        rows.append(f"| {arm} | {sc.epsilon:.3e} | {sc.pos_err_mean_km:.3g} | "
-                    f"{sc.pos_err_final_km:.3g} | {nees} |")
+        rows.append([str(arm), f"{sc.epsilon:.3e}", f"{sc.pos_err_mean_km:.3g}",
+                     f"{sc.pos_err_final_km:.3g}", nees])
+    return rows
+
+
+def table(ev: Evaluation) -> str:
+    """Markdown table of the arms."""
+    g = ev.gap
+    rows = ["| " + " | ".join(ARM_COLUMNS) + " |", "|---|---|---|---|---|"]
+    rows += ["| " + " | ".join(cells) + " |" for cells in arm_rows(g)]
     rows.append(f"\ngap: {len(g.t)} epochs; live DMD-EKF estimates at "
                 f"{100 * g.coverage:.0f} % of them"
                 + (f"; dmd_ekf at the other {g.predicted} scored from the last estimate "

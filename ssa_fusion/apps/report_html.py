@@ -261,23 +261,14 @@ def _table(header: list[str], rows: list[list[str]]) -> str:
 def arms_table(ev: evaluate.Evaluation) -> str:
     """The arms table of `evaluate.table` in HTML, with its notes."""
     g = ev.gap
-    rows = []
-    for name in ArmName:
-        sc = g.scores.get(name)
-        if sc is None:
-            continue
-        v = sc.nees_mean
-        nees_text = "n/a" if v is None else (f"{v:.2f}" if abs(v) < 1e4 else f"{v:.2e}")
-        rows.append([str(name), f"{sc.epsilon:.3e}", f"{sc.pos_err_mean_km:.3g}",
-                     f"{sc.pos_err_final_km:.3g}", nees_text])
+    rows = evaluate.arm_rows(g)
     lo, hi = metrics.chi2_bounds(g.truth.shape[1])
     notes = (f"gap: {len(g.t)} epochs; live DMD-EKF estimates at {100 * g.coverage:.0f} % of "
              f"them" + (f"; dmd_ekf at the other {g.predicted} scored from the filter's "
                         "prediction" if g.predicted else "")
              + f". A consistent filter's per-epoch NEES lies in [{lo:.2f}, {hi:.2f}] 95 % of "
                f"the time. Settings: {ev.settings.origin}.")
-    return (_table(["arm", "ε over the gap", "mean position error [km]",
-                    "final position error [km]", "mean NEES"], rows)
+    return (_table(list(evaluate.ARM_COLUMNS), rows)
             + f'<p class="note">{html.escape(notes)}</p>')
 
 
