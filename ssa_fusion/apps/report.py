@@ -3,7 +3,8 @@
 Plots (PNG, in --out): the three arms' position error over the gap; the live estimate's
 error with its ±3σ bounds per state; forecasts against the withheld measurements; NIS of
 the filter over time. Also `report.html`: the same and more in one self-contained interactive
-page (`report_html`).
+page (`report_html`); and `visual.mcap`: the Foxglove visual topics of the bag (`visual_mcap`),
+to open in Foxglove with ``config/foxglove_layout.json``.
 """
 
 from __future__ import annotations
@@ -42,7 +43,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(evaluate.table(ev))
-    print(f"\nwrote {out}/report.json, {out}/report.html and plots")
+    print(f"\nwrote {out}/report.json, {out}/report.html, {out}/visual.mcap (open it in "
+          "Foxglove with config/foxglove_layout.json) and plots")
     return 0
 
 
@@ -64,7 +66,7 @@ def summary(data: evaluate.BagData, ev: evaluate.Evaluation) -> dict:
 
 
 def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
-    """results JSON, PNG plots and report.html into `out`."""
+    """results JSON, PNG plots, report.html and visual.mcap (Foxglove) into `out`."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "report.json").write_text(json.dumps(summary(data, ev), indent=2))
     plot_arms(ev, out / "arms.png")
@@ -74,6 +76,10 @@ def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
     from ssa_fusion.apps import report_html  # plotly: imported on first use, like the plots
 
     report_html.write(data, ev, out / "report.html", title=f"ssa_fusion report: {out.name}")
+    from ssa_fusion.apps import visual_mcap  # foxglove-sdk, likewise
+
+    stations = {s.name: s for s, _ in report_html.run_stations(ev.settings.estimator)}
+    visual_mcap.write(data, out / "visual.mcap", stations)
 
 
 def _plt():

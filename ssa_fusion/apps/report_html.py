@@ -2,11 +2,13 @@
 inlined, so it opens offline and can be mailed as one file).
 
 Figures: the orbit in 3D (truth and the filter's estimates, ECI km, the gap highlighted);
+the ground tracks of truth and estimate with the run's stations and the visibility circle of
+each station's elevation mask (longitude/latitude, deg);
 each arm's position error over the gap with its ±3σ; the surrogate's forecasts against the
 withheld measurements, with their ±3σ; each arm's NEES over the gap against the χ² band; the
 filter's NIS over the run against its χ² band. Tables: the arms, and for a station network
 (the real sky) the filter after each pass. Units: the core's (km, km/s, rad, s); times are
-hours.
+hours; the ground track's longitude and latitude are deg.
 """
 
 from __future__ import annotations
@@ -20,9 +22,13 @@ from plotly.subplots import make_subplots
 
 from ssa_fusion.apps import evaluate
 from ssa_fusion.core import metrics, types
+from ssa_fusion.core.config import EstimatorConfig
 from ssa_fusion.core.constants import R_EARTH
+from ssa_fusion.core.frames import Station
+from ssa_fusion.core.stations import NETWORKS, SENSORS, STATIONS
 from ssa_fusion.paper import sky
 from ssa_fusion.paper.arms import ArmName
+from ssa_fusion.ros import foxglove_scene
 
 COLORS = {ArmName.PLACEHOLDER: "#7f7f7f", ArmName.COAST: "#1f77b4",
           ArmName.J2_COAST: "#2ca02c", ArmName.DMD_EKF: "#d62728",
@@ -109,6 +115,109 @@ def orbit_3d(data: evaluate.BagData, ev: evaluate.Evaluation) -> go.Figure:
                "zaxis_title": "z ECI [km]", "aspectmode": "data",
                "camera": {"eye": dict(zip("xyz", eye.tolist(), strict=True))}},
         legend={"x": 0, "y": 1}, margin={"l": 0, "r": 0, "t": 40, "b": 0})
+    return fig
+
+
+NO_MASK_DEG = -90.0
+"""Elevation mask (deg) of a station without one: the paper's idealised sensor, which
+measures through the Earth (`stations.SENSORS["columbus_paper"]`)."""
+
+
+def run_stations(c: EstimatorConfig) -> list[tuple[Station, float]]:
+    """The stations of a run and each one's elevation mask (deg), from its estimator settings
+    (the bag's ``/ssa/config``): for a network (the real sky) each sensor's
+    ``min_elevation_deg`` (`stations.SENSORS`, by sensor or station id); for one station (a
+    paper scenario, whose simulated sensor has no horizon) `NO_MASK_DEG`; none for positions."""
+    if c.kind == types.Kind.POSITION:
+        return []
+    if not c.is_network:
+        return [(STATIONS[c.station], NO_MASK_DEG)] if c.station in STATIONS else []
+    ids = NETWORKS.get(c.station) or tuple(x.strip() for x in c.station.split(",") if x.strip())
+    out: dict[str, tuple[Station, float]] = {}
+    for i in ids:
+        sensor = SENSORS.get(i)
+        if sensor is not None:
+            out[sensor.station.name] = (sensor.station, sensor.min_elevation_deg)
+        elif i in STATIONS:
+            out[i] = (STATIONS[i], NO_MASK_DEG)
+    return list(out.values())
+
+
+def visibility_central_angle(h_km: float, el_rad: float, r_km: float = R_EARTH) -> float:
+    """Earth-central angle (rad) between a station and the sub-satellite point of an object
+    at altitude `h_km` (km) seen at elevation `el_rad` (rad) from it, on a spherical Earth of
+    radius `r_km`: λ = arccos(R cos(el) / (R + h)) − el. Below λ the object is above that
+    elevation; π for el = −90° (visible from everywhere)."""
+    return float(np.arccos(r_km * np.cos(el_rad) / (r_km + h_km)) - el_rad)
+
+
+def small_circle(lat_rad: float, lon_rad: float, radius_rad: float,
+                 n: int = 361) -> tuple[np.ndarray, np.ndarray]:
+    """`n` points (latitude, longitude in (−π, π], rad) of the circle at central angle
+    `radius_rad` around (`lat_rad`, `lon_rad`) on a sphere, bearing 0 to 2π from north."""
+    b = np.linspace(0.0, 2.0 * np.pi, n)
+    sl, cl, sr, cr = np.sin(lat_rad), np.cos(lat_rad), np.sin(radius_rad), np.cos(radius_rad)
+    lat = np.arcsin(np.clip(sl * cr + cl * sr * np.cos(b), -1.0, 1.0))
+    lon = lon_rad + np.arctan2(np.sin(b) * sr * cl, cr - sl * np.sin(lat))
+    return lat, np.angle(np.exp(1j * lon))
+
+
+def _unwrapped(lat_deg: np.ndarray, lon_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A lat/lon (deg) line with NaN inserted where it crosses the ±180° meridian, so no
+    segment is drawn across the map."""
+    jump = np.flatnonzero(np.abs(np.diff(lon_deg)) > 180.0) + 1
+    return np.insert(lat_deg, jump, np.nan), np.insert(lon_deg, jump, np.nan)
+
+
+def _track(states: list[types.StateEstimate]) -> tuple[np.ndarray, np.ndarray]:
+    """Geodetic latitude and longitude (deg) of the sub-satellite points of `states` (ECI
+    km at their Unix epochs), at most `MAX_POINTS`, broken at the ±180° meridian."""
+    k = _thin(len(states))
+    ll = np.array([foxglove_scene.eci_to_geodetic(states[i].x[:3], states[i].t)[:2]
+                   for i in k]).reshape(-1, 2)
+    return _unwrapped(np.degrees(ll[:, 0]), np.degrees(ll[:, 1]))
+
+
+def ground_track(data: evaluate.BagData, stations: list[tuple[Station, float]]) -> go.Figure:
+    """Ground tracks (geodetic longitude and latitude, deg) of the truth and of the filter's
+    fused estimates, the run's stations, and each station's visibility circle: the
+    sub-satellite points from which the object, at its mean altitude over the run
+    (‖r‖ − R_EARTH of the truth, spherical Earth), is above the station's elevation mask
+    (`visibility_central_angle`). A station without a mask gets its geometric horizon
+    (0°) dotted instead: its sensor sees the object from anywhere."""
+    fig = go.Figure()
+    lat, lon = _track(data.truth)
+    fig.add_trace(go.Scatter(x=lon, y=lat, mode="lines", line={"color": "#444", "width": 1},
+                             name="truth"))
+    est = [e for e in data.estimates if e.update_source != types.UpdateSource.NONE]
+    if est:
+        lat, lon = _track(est)
+        fig.add_trace(go.Scatter(x=lon, y=lat, mode="markers", name="estimate (fused epochs)",
+                                 marker={"size": 2, "color": "#1f77b4"}))
+    h = float(np.mean([np.linalg.norm(e.x[:3]) for e in data.truth])) - R_EARTH
+    for station, mask_deg in stations:
+        masked = mask_deg > NO_MASK_DEG
+        el = np.radians(mask_deg if masked else 0.0)
+        lam = visibility_central_angle(h, float(el))
+        clat, clon = small_circle(station.lat_rad, station.lon_rad, lam)
+        clat, clon = _unwrapped(np.degrees(clat), np.degrees(clon))
+        label = (f"{station.name}: above its {mask_deg:g}° mask" if masked else
+                 f"{station.name}: horizon (no mask: its sensor sees through the Earth)")
+        fig.add_trace(go.Scatter(x=clon, y=clat, mode="lines", name=f"{label}, λ = "
+                                 f"{np.degrees(lam):.1f}° at h = {h:.0f} km",
+                                 line={"color": "#d62728", "width": 1.5,
+                                       "dash": "solid" if masked else "dot"}))
+        fig.add_trace(go.Scatter(x=[np.degrees(station.lon_rad)],
+                                 y=[np.degrees(station.lat_rad)], mode="markers+text",
+                                 text=[station.name], textposition="top center",
+                                 marker={"size": 9, "color": "#d62728", "symbol": "triangle-up"},
+                                 name=station.name, showlegend=False))
+    fig.update_xaxes(title_text="longitude [deg]", range=[-180, 180], dtick=30,
+                     constrain="domain")
+    fig.update_yaxes(title_text="latitude [deg]", range=[-90, 90], dtick=30,
+                     scaleanchor="x", scaleratio=1)
+    fig.update_layout(title="Ground track (WGS-84 geodetic) with the stations' visibility "
+                            "circles", height=560, legend={"orientation": "h", "y": -0.15})
     return fig
 
 
@@ -288,7 +397,8 @@ def passes_table(passes: sky.PassReport) -> str:
 
 def figures(data: evaluate.BagData, ev: evaluate.Evaluation) -> list[go.Figure]:
     """The report's figures, in page order (those without data left out)."""
-    figs = [orbit_3d(data, ev), arm_errors(ev), forecasts(data), nees(ev), nis(data)]
+    figs = [orbit_3d(data, ev), ground_track(data, run_stations(ev.settings.estimator)),
+            arm_errors(ev), forecasts(data), nees(ev), nis(data)]
     return [f for f in figs if f is not None]
 
 

@@ -13,6 +13,9 @@ and serves, on a WebSocket server bound to `host`:`port` (loopback by default):
 * ``/ssa/foxglove/metrics`` (JSON, per estimate): position error against the truth of the
   same epoch (km), σ (km), largest 3σ semi-axis (km), NIS, update source.
 
+The messages come from `foxglove_scene.VisualTopics`, which `ssa-fusion report` also uses to
+write the same topics of a bag to ``visual.mcap`` (`ssa_fusion.apps.visual_mcap`).
+
 Message log times are the messages' sim-time stamps. ``config/foxglove_layout.json`` is a
 Foxglove layout of these topics (3D, Map, Plot).
 
@@ -21,11 +24,8 @@ Foxglove layout of these topics (3D, Map, Plot).
 
 from __future__ import annotations
 
-import math
-from collections import OrderedDict
 from typing import Any
 
-import numpy as np
 from rclpy.node import Node
 from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
 from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
@@ -55,8 +55,6 @@ DEFAULT_HOST = "127.0.0.1"
 """Loopback: nothing is served beyond this machine unless `host` says so."""
 DEFAULT_PORT = 8765
 """Foxglove's usual WebSocket port."""
-TRUTH_KEEP = 5000
-"""Truth states kept by epoch, to score estimates that arrive after their truth."""
 
 
 def _port(value: Any) -> str | None:
@@ -104,16 +102,15 @@ class FoxgloveBridgeNode(Node):
                         "positions kept in the truth and estimate trails", _count)
         points = declare(self, "points", 300,
                          "forecast and measurement points kept in the scene", _count)
-        self.marker_km = float(declare(self, "marker_size", 150.0,
-                                       "diameter of the position markers in the scene, km",
-                                       positive))
+        marker_km = float(declare(self, "marker_size", 150.0,
+                                  "diameter of the position markers in the scene, km",
+                                  positive))
         self.object_id = declare(self, "object_id", "", "only show this object ('' = any)")
-        self.stations = network_stations(station) if station else {}
-        self.state = scene.SceneState(trail=int(trail), points=int(points))
-        self.truth: OrderedDict[float, np.ndarray] = OrderedDict()
+        self.visual = scene.VisualTopics(network_stations(station) if station else {},
+                                         trail=int(trail), points=int(points),
+                                         marker_km=marker_km)
         self.diag = Diagnostics(self)
         self.activity = 0
-        self._dirty = False
 
         import foxglove
         from foxglove.channels import LocationFixChannel, SceneUpdateChannel
@@ -123,10 +120,13 @@ class FoxgloveBridgeNode(Node):
         except Exception as exc:  # address in use, unknown host, ...
             raise ParameterError(f"parameter 'port' = {port!r} (host {host!r}): cannot serve "
                                  f"there: {exc}") from exc
-        self.scene_ch = SceneUpdateChannel(scene.SCENE_TOPIC)
-        self.track_ch = LocationFixChannel(scene.TRACK_TOPIC)
-        self.truth_track_ch = LocationFixChannel(scene.TRUTH_TRACK_TOPIC)
-        self.metrics_ch = foxglove.Channel(scene.METRICS_TOPIC, schema=scene.METRICS_SCHEMA)
+        self.channels: dict[str, Any] = {
+            scene.SCENE_TOPIC: SceneUpdateChannel(scene.SCENE_TOPIC),
+            scene.TRACK_TOPIC: LocationFixChannel(scene.TRACK_TOPIC),
+            scene.TRUTH_TRACK_TOPIC: LocationFixChannel(scene.TRUTH_TRACK_TOPIC),
+            scene.METRICS_TOPIC: foxglove.Channel(scene.METRICS_TOPIC,
+                                                  schema=scene.METRICS_SCHEMA),
+        }
         self.port = int(self.server.port)
         self.diag.status["url"] = f"ws://{host}:{self.port}"
         self.get_logger().info(f"Foxglove WebSocket server on ws://{host}:{self.port}")
@@ -145,36 +145,33 @@ class FoxgloveBridgeNode(Node):
             return False
         return True
 
+    def _log(self, logged: list[scene.Logged]) -> None:
+        for item in logged:
+            self.channels[item.topic].log(item.message, log_time=item.log_time)
+
     def on_truth(self, msg: StateEstimateMsg) -> None:
         self.activity += 1
         if not self._ours(msg.object_id):
             return
         e = messages.estimate_from_msg(msg)
-        if not np.all(np.isfinite(e.x)):
-            self.diag.count("rejected_nonfinite", "a truth state with NaN/inf")
+        try:
+            self._log(self.visual.truth(e.t, e.x))
+        except scene.NotShownError as exc:
+            self.diag.count(exc.key, exc.detail, warn=exc.warn)
             return
-        self.state.add_truth(e.t, e.x)
-        self.truth[e.t] = e.x
-        while len(self.truth) > TRUTH_KEEP:
-            self.truth.popitem(last=False)
-        self.truth_track_ch.log(scene.location_fix(e.t, e.x, "truth"), log_time=_ns(e.t))
         self.diag.counts["truth"] += 1
-        self._dirty = True
 
     def on_estimate(self, msg: StateEstimateMsg) -> None:
         self.activity += 1
         if not self._ours(msg.object_id):
             return
         e = messages.estimate_from_msg(msg)
-        if not (np.all(np.isfinite(e.x)) and np.all(np.isfinite(e.P))):
-            self.diag.count("rejected_nonfinite", "an estimate with NaN/inf")
+        try:
+            self._log(self.visual.estimate(e.t, e.x, e.P, e.update_source, e.nis))
+        except scene.NotShownError as exc:
+            self.diag.count(exc.key, exc.detail, warn=exc.warn)
             return
-        self.state.add_estimate(e.t, e.x, e.P)
-        self.track_ch.log(scene.location_fix(e.t, e.x, "estimate"), log_time=_ns(e.t))
-        self.metrics_ch.log(scene.metrics(e.t, e.x, e.P, self.truth.get(e.t),
-                                          e.update_source, e.nis), log_time=_ns(e.t))
         self.diag.counts["estimates"] += 1
-        self._dirty = True
 
     def on_measurement(self, msg: MeasurementMsg) -> None:
         self.activity += 1
@@ -185,42 +182,26 @@ class FoxgloveBridgeNode(Node):
         except ValueError as exc:
             self.diag.count("rejected_kind", str(exc))
             return
-        if not np.all(np.isfinite(m.z)):
-            self.diag.count("rejected_nonfinite", "a measurement with NaN/inf")
+        forecast = m.source == Source.FORECAST
+        try:
+            self.visual.measurement(m.kind, m.z, m.frame_id, m.t, forecast)
+        except scene.NotShownError as exc:
+            self.diag.count(exc.key, exc.detail, warn=exc.warn)
             return
-        point = scene.measurement_point(m.kind, m.z, m.frame_id, m.t, self.stations)
-        if point is None:
-            self.diag.count("not_drawn", f"kind {m.kind} from {m.frame_id!r}: no point to "
-                            "draw (ra/dec, or a station not in 'station')", warn=False)
-            return
-        if m.source == Source.FORECAST:
-            self.state.add_forecast(point)
-            self.diag.counts["forecasts"] += 1
-        else:
-            self.state.add_measurement(point)
-            self.diag.counts["measurements"] += 1
-        self._dirty = True
+        self.diag.counts["forecasts" if forecast else "measurements"] += 1
 
     def publish_scene(self) -> None:
-        """Log the scene (when something changed since the last one), stamped with the
-        newest epoch heard."""
-        if not self._dirty:
+        """Log the scene (when something changed since the last one and a truth or estimate
+        was heard), stamped with the newest epoch heard."""
+        if not self.visual.scene_due:
             return
-        self._dirty = False
-        t = self.state.t or 0.0
-        self.scene_ch.log(scene.scene_update(self.state, self.stations, self.marker_km),
-                          log_time=_ns(t))
+        self._log([self.visual.scene()])
         self.diag.counts["scene_updates"] += 1
 
     def close(self) -> None:
         server = getattr(self, "server", None)
         if server is not None:
             server.stop()
-
-
-def _ns(t_unix: float) -> int:
-    """Unix s -> int ns (>= 0), the foxglove log time."""
-    return max(round(t_unix * 1e9), 0) if math.isfinite(t_unix) else 0
 
 
 def main(args: list[str] | None = None) -> int:

@@ -407,3 +407,114 @@ def location_fix(t_unix: float, r_eci_km: ArrayLike, frame_id: str = "estimate")
     return LocationFix(timestamp=_stamp(t_unix), frame_id=frame_id,
                        latitude=math.degrees(lat), longitude=math.degrees(lon),
                        altitude=alt * 1000.0)
+
+
+# what one truth / estimate / measurement adds to the visual topics ------------------------
+
+TRUTH_KEEP = 5000
+"""Truth states kept by epoch, to score estimates that arrive after their truth."""
+
+
+def log_time_ns(t_unix: float) -> int:
+    """Unix s (sim time) -> int ns (>= 0), the foxglove log time of a message stamped `t_unix`."""
+    return max(round(t_unix * 1e9), 0) if math.isfinite(t_unix) else 0
+
+
+@dataclass(frozen=True)
+class Logged:
+    """One message for a visual topic: ``topic`` (one of `TOPICS`), ``message`` (a foxglove
+    message, or the JSON dict of `METRICS_TOPIC`), ``log_time`` (int ns, the sim-time stamp)."""
+
+    topic: str
+    message: Any
+    log_time: int
+
+
+class NotShownError(Exception):
+    """A message the visual topics leave out: ``key`` is the diagnostics counter
+    (``rejected_nonfinite``, ``rejected_kind``, ``not_drawn``), ``warn`` whether it is worth
+    a warning."""
+
+    def __init__(self, key: str, detail: str, warn: bool = True) -> None:
+        super().__init__(detail)
+        self.key = key
+        self.detail = detail
+        self.warn = warn
+
+
+class VisualTopics:
+    """The visual topics of a stream of truth states, estimates and measurements, in the order
+    they arrive: one object shared by the live `foxglove_bridge` and the `visual.mcap` writer
+    of `ssa-fusion report`, so both serve the same messages.
+
+    Inputs are in core units (km, km/s, rad; ECI; Unix s, sim time). `truth` and `estimate`
+    return the `Logged` messages they produce at once (ground tracks, metrics, log time = their
+    stamp); `measurement` only updates the scene; `scene` is the current `foxglove.SceneUpdate`
+    (the caller decides how often). Each raises `NotShownError` for what it leaves out.
+    """
+
+    def __init__(self, stations: dict[str, Station], trail: int = 600, points: int = 300,
+                 marker_km: float = 150.0) -> None:
+        self.stations = stations
+        self.marker_km = float(marker_km)
+        self.state = SceneState(trail=int(trail), points=int(points))
+        self.truths: dict[float, NDArray[np.float64]] = {}
+        self.dirty = False
+        """True when something changed since the last `scene`."""
+
+    def truth(self, t: float, x: ArrayLike) -> list[Logged]:
+        """A true state `x` (6,) km, km/s at `t` (Unix s) -> its `TRUTH_TRACK_TOPIC` fix."""
+        xs = np.asarray(x, dtype=float)
+        if not np.all(np.isfinite(xs)):
+            raise NotShownError("rejected_nonfinite", "a truth state with NaN/inf")
+        self.state.add_truth(t, xs)
+        self.truths[t] = xs
+        while len(self.truths) > TRUTH_KEEP:
+            del self.truths[next(iter(self.truths))]
+        self.dirty = True
+        return [Logged(TRUTH_TRACK_TOPIC, location_fix(t, xs, "truth"), log_time_ns(t))]
+
+    def estimate(self, t: float, x: ArrayLike, p: ArrayLike, update_source: int,
+                 nis: float) -> list[Logged]:
+        """An estimate (state `x` km, km/s, covariance `p` (6, 6) km² at `t` Unix s) -> its
+        `TRACK_TOPIC` fix and `METRICS_TOPIC` JSON (scored against the truth of the same
+        epoch, when it came first)."""
+        xs, ps = np.asarray(x, dtype=float), np.asarray(p, dtype=float)
+        if not (np.all(np.isfinite(xs)) and np.all(np.isfinite(ps))):
+            raise NotShownError("rejected_nonfinite", "an estimate with NaN/inf")
+        self.state.add_estimate(t, xs, ps)
+        self.dirty = True
+        ns = log_time_ns(t)
+        return [Logged(TRACK_TOPIC, location_fix(t, xs, "estimate"), ns),
+                Logged(METRICS_TOPIC, metrics(t, xs, ps, self.truths.get(t), update_source,
+                                              nis), ns)]
+
+    def measurement(self, kind: int, z: ArrayLike, frame_id: str, t: float,
+                    forecast: bool) -> None:
+        """A measurement or (`forecast`) a surrogate forecast (core units) -> the point it
+        implies in the scene."""
+        zs = np.asarray(z, dtype=float)
+        if not np.all(np.isfinite(zs)):
+            raise NotShownError("rejected_nonfinite", "a measurement with NaN/inf")
+        point = measurement_point(kind, zs, frame_id, t, self.stations)
+        if point is None:
+            raise NotShownError("not_drawn", f"kind {kind} from {frame_id!r}: no point to draw "
+                           "(ra/dec, or a station not in 'station')", warn=False)
+        if forecast:
+            self.state.add_forecast(point)
+        else:
+            self.state.add_measurement(point)
+        self.dirty = True
+
+    @property
+    def scene_due(self) -> bool:
+        """True when the scene changed since the last `scene` and has an epoch to be stamped
+        with (a truth or an estimate was heard)."""
+        return self.dirty and self.state.t is not None
+
+    def scene(self) -> Logged:
+        """The `SCENE_TOPIC` update of the current state, logged at its newest epoch."""
+        self.dirty = False
+        t = self.state.t or 0.0
+        return Logged(SCENE_TOPIC, scene_update(self.state, self.stations, self.marker_km),
+                      log_time_ns(t))

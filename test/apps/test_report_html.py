@@ -23,8 +23,9 @@ from ssa_fusion.paper.arms import ArmName
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE_BAG = ROOT / "bags" / "sample_iss_j2_rae"
-SAMPLE_FIGURES = 5
-"""orbit 3D, per-arm error ±3σ, forecasts vs withheld, NEES, NIS."""
+SAMPLE_FIGURES = 6
+"""orbit 3D, ground track with station masks, per-arm error ±3σ, forecasts vs withheld,
+NEES, NIS."""
 CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
                   "--no-first-run", "--disable-background-networking",
                   "--disable-component-update", "--disable-sync", "--disable-extensions",
@@ -129,8 +130,9 @@ def test_chromium_draws_every_plot_and_the_table_without_errors(rendered, sample
     assert "WebGL is not supported" not in text
     assert not any("render-error" in c for c in page.div_classes)
     # axes labelled with units (SVG text of the 2D figures)
-    for label in ("hours into the gap [h]", "error [km]", "range [km]", "azimuth [rad]",
-                  "elevation [rad]", "NEES [-]", "NIS [-]", "95 % χ² band"):
+    for label in ("longitude [deg]", "latitude [deg]", "hours into the gap [h]", "error [km]",
+                  "range [km]", "azimuth [rad]", "elevation [rad]", "NEES [-]", "NIS [-]",
+                  "95 % χ² band"):
         assert label in text, label
     for arm in ArmName:
         assert str(arm) in text
@@ -171,6 +173,51 @@ def test_a_real_sky_evaluation_gets_the_per_pass_table(sample):
 def test_a_position_bag_without_forecasts_gets_the_other_figures():
     data = synthetic()
     html = report_html.build(data, evaluate.evaluate(data))
-    # orbit, errors, NEES: no forecasts, and its estimates carry no NIS (all 0)
-    assert html.count("Plotly.newPlot") == 3
+    # orbit, ground track, errors, NEES: no forecasts, and its estimates carry no NIS (all 0)
+    assert html.count("Plotly.newPlot") == 4
     assert "x ECI [km]" in html and "NEES [-]" in html
+
+
+def test_the_visibility_circle_is_at_the_masks_central_angle_from_the_station():
+    from ssa_fusion.core.constants import R_EARTH
+    from ssa_fusion.core.frames import COLUMBUS
+
+    h, el = 420.0, np.radians(10.0)
+    lam = report_html.visibility_central_angle(h, el)
+    # analytic: the triangle Earth centre - station - object, with the angle 90° + el at the
+    # station, R opposite the object's angle and R + h opposite it (law of sines)
+    nadir = np.arcsin(R_EARTH * np.cos(el) / (R_EARTH + h))
+    assert lam == pytest.approx(np.pi / 2 - el - nadir, abs=1e-12)
+    assert np.degrees(lam) == pytest.approx(12.5, abs=0.1)  # the ISS above 10°: ~1390 km
+    lat, lon = report_html.small_circle(COLUMBUS.lat_rad, COLUMBUS.lon_rad, lam)
+    # every point of the circle is at central angle λ from the station (haversine)
+    lat0, lon0 = COLUMBUS.lat_rad, COLUMBUS.lon_rad
+    d = 2 * np.arcsin(np.sqrt(np.sin((lat - lat0) / 2) ** 2
+                              + np.cos(lat) * np.cos(lat0) * np.sin((lon - lon0) / 2) ** 2))
+    assert np.allclose(d, lam, atol=1e-12)
+    # and from its northernmost point the object at h is seen exactly at the mask elevation
+    r_sat = (R_EARTH + h) * np.array([np.cos(lat[0]) * np.cos(lon[0]),
+                                      np.cos(lat[0]) * np.sin(lon[0]), np.sin(lat[0])])
+    r_st = R_EARTH * np.array([np.cos(COLUMBUS.lat_rad) * np.cos(COLUMBUS.lon_rad),
+                               np.cos(COLUMBUS.lat_rad) * np.sin(COLUMBUS.lon_rad),
+                               np.sin(COLUMBUS.lat_rad)])
+    los = r_sat - r_st
+    assert np.arcsin(los @ r_st / (np.linalg.norm(los) * R_EARTH)) == pytest.approx(el, abs=1e-9)
+    assert lat[0] == pytest.approx(COLUMBUS.lat_rad + lam, abs=1e-12)  # bearing 0: north
+
+
+def test_the_ground_track_draws_each_network_station_with_its_mask():
+    from ssa_fusion.paper.sky import SKY_SCENARIOS
+
+    net = report_html.run_stations(SKY_SCENARIOS["iss_network"].estimator())
+    masks = {s.name: m for s, m in net}
+    assert masks == {"millstone": 5.0, "tira": 10.0, "altair": 5.0, "socorro": 20.0,
+                     "maui": 20.0, "diego_garcia": 20.0}
+    assert [m for _, m in report_html.run_stations(
+        SKY_SCENARIOS["iss_radar_columbus"].estimator())] == [10.0]
+    data = evaluate.load(SAMPLE_BAG)
+    fig = report_html.ground_track(data, net)
+    names = " ".join(str(t.name) for t in fig.data)
+    assert "tira: above its 10° mask" in names and "socorro: above its 20° mask" in names
+    assert fig.layout.xaxis.title.text == "longitude [deg]"
+    assert fig.layout.yaxis.title.text == "latitude [deg]"
