@@ -17,10 +17,27 @@ def positive_float(text: str) -> float:
     return value
 
 
+MAX_DOMAIN_ID = 232
+"""The largest ROS domain id (DDS ports: 7400 + 250 x id must stay below 65536)."""
+
+
+def domain_id(text: str) -> int:
+    """argparse type of `--domain-id`: an integer in 0..`MAX_DOMAIN_ID`."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if not 0 <= value <= MAX_DOMAIN_ID:
+        raise argparse.ArgumentTypeError(
+            f"{value} is outside 0..{MAX_DOMAIN_ID} (ROS domain ids; 0..101 avoid the "
+            "ephemeral ports on Linux)")
+    return value
+
+
 def add_domain_id(p: argparse.ArgumentParser) -> None:
     """`--domain-id`, defaulting to $ROS_DOMAIN_ID when that is set (so that ROS tools in
     the same shell see the run), else to a free-looking id chosen by `graph.Graph`."""
     env = os.environ.get("ROS_DOMAIN_ID", "").strip()
-    p.add_argument("--domain-id", type=int, default=int(env) if env.isdigit() else None,
+    p.add_argument("--domain-id", type=domain_id, default=int(env) if env.isdigit() else None,
                    help="ROS domain id (default: $ROS_DOMAIN_ID if set, else a free-looking "
                         "one in 1..100)")

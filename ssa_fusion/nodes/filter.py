@@ -59,6 +59,8 @@ from ssa_fusion.ros.topics import (
 )
 
 SOURCE_NAMES = ("prediction", "sensor", "forecast")
+MAX_IOD_SAMPLES = 1000
+"""Most measurements one IOD batch may take (a pass of 10 s samples has at most ~100)."""
 PREDICTIONS_PER_TICK = 100
 """Most predictions published per 0.1 s wall tick (a backlog is worked off over ticks)."""
 
@@ -106,8 +108,9 @@ def estimator_from(node: Node) -> EstimatorConfig:
         non_negative, apply=runtime("gate"))
     values["iod_samples"] = declare(
         node, "iod_samples", d.iod_samples,
-        "real measurements used by the initial orbit determination (>= 3)",
-        lambda v: None if isinstance(v, int) and v >= 3 else "must be an integer >= 3",
+        f"real measurements used by the initial orbit determination (3..{MAX_IOD_SAMPLES})",
+        lambda v: None if isinstance(v, int) and 3 <= v <= MAX_IOD_SAMPLES
+        else f"must be an integer in 3..{MAX_IOD_SAMPLES}",
         apply=runtime("iod_samples"))
     values["iod_max_span"] = declare(
         node, "iod_max_span", d.iod_max_span,

@@ -82,7 +82,11 @@ class Recorder(Node):
         )
         if Path(bag).exists():
             raise ParameterError(f"parameter 'bag' = {bag!r}: exists already, not overwriting")
-        self.writer = BagWriter(bag)
+        try:
+            self.writer = BagWriter(bag)
+        except Exception as exc:  # rosbags raises several types for a path it cannot use
+            raise ParameterError(f"parameter 'bag' = {bag!r}: cannot create the bag there: "
+                                 f"{exc}") from exc
         self.diag = Diagnostics(self)
         self._subs = {}
         self.activity = 0

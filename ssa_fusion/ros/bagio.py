@@ -182,6 +182,9 @@ def read_bag(path: Path | str, topics: Iterable[str] | None = None,
     if not path.exists():
         raise BagError(f"{path}: no such bag")
     wanted = set(topics) if topics is not None else None
+    mcaps = [path] if path.is_file() else sorted(path.glob("*.mcap")) if path.is_dir() else []
+    for f in mcaps:
+        _check_mcap_magic(f)
     if path.is_file() and path.suffix == ".mcap":
         if _mcap_finished(path):
             yield from _read_mcap_file(path, wanted, undecodable)
@@ -263,6 +266,18 @@ def _read_mcap_file(path: Path, wanted: set[str] | None,
 
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def _check_mcap_magic(path: Path) -> None:
+    """BagError unless `path` starts like an MCAP file (its magic bytes)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(MCAP_MAGIC))
+    except OSError as exc:
+        raise BagError(f"{path}: cannot read: {exc}") from exc
+    if head != MCAP_MAGIC:
+        raise BagError(f"{path}: not an MCAP file (it does not start with the MCAP magic "
+                       "bytes)")
 
 
 def _mcap_finished(path: Path) -> bool:

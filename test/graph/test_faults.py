@@ -460,10 +460,14 @@ def test_invalid_parameters_refuse_to_start(ros_graph, tmp_path):
         "bag": ("recorder", {"bag": str(existing)}),
         "qq": ("filter", {"qq": 0.1}),  # a misspelt name (issue 22 finding 7)
         "dealys": ("surrogate", {"dealys": 300}),
+        "iod_samples": ("filter", {"iod_samples": 1000000}),  # issue 22 finding 7
+        "bag/unwritable": ("recorder", {"bag": "/proc/nope/bag"}),  # cannot be created
     }
-    procs = {name: g.start_node(node, params=p, name=f"{node}_{name}", expect_returncode=2)
-             for name, (node, p) in cases.items()}
-    for name, proc in procs.items():
+    procs = {label: g.start_node(node, params=p, name=f"{node}_{label.replace('/', '_')}",
+                                 expect_returncode=2)
+             for label, (node, p) in cases.items()}
+    for label, proc in procs.items():
+        name = label.split("/")[0]  # the parameter the error must name
         assert g.wait_exit(proc, timeout=30.0) == 2, proc.describe()
         assert f"parameter '{name}'" in proc.stderr(), proc.describe()
         assert "Traceback" not in proc.stderr(), proc.describe()

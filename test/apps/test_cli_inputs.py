@@ -1,0 +1,45 @@
+"""CLI input errors are one clear line and exit 2 (issue 22 finding 7): a ROS domain id out
+of range, and a file named .mcap that is not an MCAP file."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from ssa_fusion.apps.args import domain_id
+from ssa_fusion.ros import bagio
+
+
+def _cli(*args: str, cwd=None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "ssa_fusion.apps.cli", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_domain_id_out_of_range_is_refused_before_anything_starts(tmp_path):
+    import argparse
+
+    assert domain_id("0") == 0 and domain_id("232") == 232
+    for bad in ("233", "999", "-1", "x"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            domain_id(bad)
+    out = tmp_path / "run"
+    r = _cli("live", "--domain-id", "999", "--out", str(out))
+    assert r.returncode == 2, r
+    assert "--domain-id: 999 is outside 0..232" in r.stderr
+    assert "Traceback" not in r.stderr and not out.exists()  # no empty run directory
+
+
+@pytest.mark.parametrize("layout", ["bare", "in_dir"])
+def test_a_text_file_named_mcap_is_not_an_mcap(tmp_path, layout):
+    f = (tmp_path / "x.mcap") if layout == "bare" else (tmp_path / "bag" / "bag.mcap")
+    f.parent.mkdir(exist_ok=True)
+    f.write_text("hello, not a bag\n")
+    target = f if layout == "bare" else f.parent
+    with pytest.raises(bagio.BagError, match="not an MCAP file"):
+        list(bagio.read_bag(target))
+    r = _cli("report", str(target), "--out", str(tmp_path / "rep"))
+    assert r.returncode == 2, r
+    assert "not an MCAP file" in r.stderr and "withheld" not in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
