@@ -65,6 +65,7 @@ class Cause(enum.StrEnum):
     REJECTED_DUPLICATE = "rejected_duplicate"
     REJECTED_IMPLAUSIBLE = "rejected_implausible"
     REJECTED_CLOCK = "rejected_clock"
+    REJECTED_MALFORMED = "rejected_malformed"
     FORECAST_SUPERSEDED = "forecast_superseded"
     IGNORED_BEFORE_IOD = "ignored_before_iod"
     IGNORED_FORECAST_INPUT = "ignored_forecast_input"

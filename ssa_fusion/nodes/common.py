@@ -24,6 +24,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 
 from ssa_fusion.core.stations import network_stations
@@ -75,12 +76,31 @@ class Diagnostics:
         (key `MATCHED_KEY + topic`), at once when it changes. A sender can then wait until this
         reader has matched it, not only until its writer has matched the reader: DDS drops
         what a writer sends before the reader's side of the match exists."""
+        if not raw:  # take the bytes and decode them here: a payload that does not decode
+            callback = self._decoding(msg_type, topic, callback)  # is counted, not lost
         sub = self.node.create_subscription(
-            msg_type, topic, callback, qos, raw=raw,
+            msg_type, topic, callback, qos, raw=True,
             event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.publish()),
         )
         self._watched.append(sub)
         return sub
+
+    def _decoding(self, msg_type: Any, topic: str,
+                  callback: Callable[[Any], None]) -> Callable[[bytes], None]:
+        """Wrap `callback` to take serialized bytes: decoded as `msg_type`, or counted as
+        `rejected_malformed` (logged once) when they do not decode."""
+        name = f"{msg_type.__module__.split('.')[0]}/{msg_type.__name__}"
+
+        def decode(data: bytes) -> None:
+            try:
+                msg = deserialize_message(data, msg_type)
+            except Exception as exc:  # rclpy raises several types for bad CDR
+                self.count(Cause.REJECTED_MALFORMED,
+                           f"{len(data)} bytes on {topic} do not decode as {name}: {exc}")
+                return
+            callback(msg)
+
+        return decode
 
     def guard(self, callback: Callable[..., None]) -> Callable[..., None]:
         """Wrap a subscription/timer callback: an unexpected exception is counted as

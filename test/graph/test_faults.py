@@ -769,6 +769,28 @@ def test_the_forecast_topic_takes_only_forecasts_and_the_measurement_topic_only_
     assert [e.t for e in estimates(got)] == [float(T[6]), float(T[7])]
 
 
+def test_a_payload_that_does_not_decode_is_counted_and_the_stream_goes_on(ros_graph):
+    """Issue 22 finding 6: malformed bytes were dropped inside rclpy with no log and no
+    count. Filter and surrogate take the bytes and decode them themselves: junk is counted
+    as rejected_malformed, and the sender's next messages are fused. (An *empty* payload is
+    different: the publishing side never delivers it, and a reliable reader then waits for
+    it forever -- DDS's in-order delivery, outside the nodes; see docs/NODES.md.)"""
+    g = ros_graph
+    got = g.collect(StateEstimate, "/ssa/estimate")
+    diag = Diag(g)
+    g.start_node("filter", params=filter_params())
+    g.start_node("surrogate", params=surrogate_params())
+    pub = publisher(g, Measurement, "/ssa/measurement", ("filter", "surrogate"))
+    pub.publish(b"\x00\x01\x00\x00junkjunkjunk")
+    diag.wait(g, "filter", {"rejected_malformed": 1})
+    diag.wait(g, "surrogate", {"rejected_malformed": 1})
+    for i in range(6):
+        pub.publish(meas(i))
+    c = diag.wait(g, "filter", {"rejected_malformed": 1, "published_sensor": 4})
+    assert "internal_error" not in c
+    assert len(estimates(got)) == 4
+
+
 def test_a_future_stamp_before_the_first_clock_does_not_poison_later_ones(ros_graph):
     """Issue 22 finding 3: before the first /clock nothing could judge a stamp, so one
     stamped a year ahead went in and made every later measurement stale. Now measurements
