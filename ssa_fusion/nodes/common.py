@@ -17,6 +17,7 @@ import rclpy
 from builtin_interfaces.msg import Time as TimeMsg
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterException
@@ -360,7 +361,13 @@ def run(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
     a message naming the parameter. A callback may call `finish()` to end with exit 0.
     """
     stop = STOP  # set by the handlers `start_process` installed (the node's main calls it)
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except RCLError as exc:  # rcl could not parse the arguments: a -p rule, a params file
+        print(f"error: cannot start: {_first_line(str(exc))} (check the --ros-args: "
+              "-p name:=value rules need a value, lists one type; params files valid YAML)",
+              file=sys.stderr)
+        return 2
     node = None
     code = 0
     executor = make_executor()
@@ -392,6 +399,11 @@ def run(make_node: Callable[[], Node], args: list[str] | None = None) -> int:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
     return code
+
+
+def _first_line(text: str) -> str:
+    """The message of an rcl error without its source locations (", at file.c:N")."""
+    return text.strip().splitlines()[0].split(", at /")[0] if text.strip() else "unknown error"
 
 
 def reject_unknown_parameters(node: Node) -> None:
