@@ -51,6 +51,9 @@ from ssa_fusion.ros.topics import (
     TOPIC_MEASUREMENT,
 )
 
+MAX_DELAYS = 10_000
+"""Most Hankel-DMD delays (a Hankel matrix of 10^4 x channels rows; with `cadence` 0 the
+buffer's sample count is not known at start, so this bounds the fit's size)."""
 
 def estimator_from(node: Node) -> EstimatorConfig:
     """Declare the surrogate's estimator parameters on `node` (defaults:
@@ -85,7 +88,9 @@ def estimator_from(node: Node) -> EstimatorConfig:
     setting("retrain_period",
             "sim s between refits while measurements arrive; 0 = none (every gap refits on "
             "the buffer up to the last real measurement anyway)", non_negative)
-    setting("delays", "Hankel-DMD time delays", positive)
+    setting("delays", f"Hankel-DMD time delays (1..{MAX_DELAYS})",
+            lambda v: None if isinstance(v, int) and 1 <= v <= MAX_DELAYS
+            else f"must be an integer in 1..{MAX_DELAYS}")
     setting("rank", "Hankel-DMD rank (0 = automatic)", non_negative)
     setting("max_horizon", "s after the last real measurement beyond which nothing is "
             "forecast", positive)

@@ -462,6 +462,7 @@ def test_invalid_parameters_refuse_to_start(ros_graph, tmp_path):
         "dealys": ("surrogate", {"dealys": 300}),
         "iod_samples": ("filter", {"iod_samples": 1000000}),  # issue 22 finding 7
         "bag/unwritable": ("recorder", {"bag": "/proc/nope/bag"}),  # cannot be created
+        "delays/huge": ("surrogate", {"delays": 1000000000000}),  # cadence 0: inferred
     }
     procs = {label: g.start_node(node, params=p, name=f"{node}_{label.replace('/', '_')}",
                                  expect_returncode=2)
