@@ -527,7 +527,7 @@ def test_a_run_time_set_gets_the_same_cross_check_as_start_up(ros_graph):
     surr = g.start_node("surrogate", params=surrogate_params())
     client = g.probe.create_client(SetParameters, "/surrogate/set_parameters")
     get_client = g.probe.create_client(GetParameters, "/surrogate/get_parameters")
-    integer = ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=100000)
+    integer = ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=5000)
     req = SetParameters.Request(parameters=[ParameterMsg(name="delays", value=integer)])
     result = _call(g, client, req, "/surrogate/set_parameters").results[0]
     assert not result.successful and "2 x delays x cadence" in result.reason
