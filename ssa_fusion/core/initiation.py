@@ -33,11 +33,27 @@ from typing import cast
 import numpy as np
 
 from . import iod
+from .constants import MU_EARTH, R_EARTH
 from .measurement import MeasurementModel, PositionModel, RadecModel, RazelModel, StationModels
 from .types import Cause, Measurement, Source
 
 Placeholder = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
 """Placeholder dynamics ``f(x, dt) -> (x_new, F)``: the state ``dt`` s later and its Jacobian."""
+
+
+def earth_orbit_problem(x: np.ndarray) -> str:
+    """Why ECI state `x` (km, km/s) is no Earth orbit a ground station tracks, or "".
+
+    It must lie above the Earth's surface and be bound (specific energy v^2/2 - mu/r < 0):
+    a batch with an outlier (a range of 1e6 km among ranges of 1e3) gives neither.
+    """
+    r = float(np.linalg.norm(x[:3]))
+    energy = 0.5 * float(np.dot(x[3:6], x[3:6])) - MU_EARTH / r if r > 0 else math.inf
+    if r < R_EARTH:
+        return f"|r| = {r:.1f} km is inside the Earth"
+    if energy >= 0.0:
+        return f"not a bound orbit: |r| = {r:.4g} km, energy {energy:.4g} km^2/s^2 >= 0"
+    return ""
 
 
 @dataclass
@@ -131,6 +147,10 @@ class OrbitInitiator:
                     f"initial orbit determination failed ({type(exc).__name__}: {exc})")
         if not (np.isfinite(x0).all() and np.isfinite(P0).all()):
             return Cause.IOD_FAILED, "initial orbit determination failed (non-finite state)"
+        if isinstance(self.model, StationModels | RazelModel | RadecModel):
+            problem = earth_orbit_problem(x0)
+            if problem:  # an outlier in the batch (say a range of 1e6 km): start again
+                return Cause.IOD_FAILED, f"initial orbit determination failed ({problem})"
         return InitialState(t_last, x0, 0.5 * (P0 + P0.T))
 
     def solve(self, batch: list[Measurement]) -> tuple[float, np.ndarray, np.ndarray]:
