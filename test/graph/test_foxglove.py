@@ -161,7 +161,10 @@ def test_bridge_serves_scene_track_and_metrics(ros_graph):
                     sid, _log_time = struct.unpack("<IQ", data[1:13])
                     received[subs[sid]].append(data[13:])
             client.binaries.clear()
-            return all(received.values())
+            # truth and estimate travel on two topics: an estimate can arrive before the
+            # truth of its epoch (its error is then unknown, None); wait for one that did not
+            errors = [json.loads(m)["position_error_km"] for m in received[scene.METRICS_TOPIC]]
+            return all(received.values()) and any(e is not None for e in errors)
 
         g.wait_for(got_all, 15, "messages on the scene, ground-track and metrics channels")
         metric = json.loads(received[scene.METRICS_TOPIC][-1])
