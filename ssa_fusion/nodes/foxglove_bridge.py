@@ -24,6 +24,7 @@ Foxglove layout of these topics (3D, Map, Plot).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from rclpy.node import Node
@@ -149,29 +150,31 @@ class FoxgloveBridgeNode(Node):
         for item in logged:
             self.channels[item.topic].log(item.message, log_time=item.log_time)
 
+    def _show(self, make: Callable[[], object], counter: str) -> None:
+        """Run `make` (a `VisualTopics` call); count `counter`, or why it was not shown."""
+        try:
+            made = make()
+        except scene.NotShownError as exc:
+            self.diag.count(exc.key, exc.detail, warn=exc.warn)
+            return
+        if isinstance(made, list):
+            self._log(made)
+        self.diag.counts[counter] += 1
+
     def on_truth(self, msg: StateEstimateMsg) -> None:
         self.activity += 1
         if not self._ours(msg.object_id):
             return
         e = messages.estimate_from_msg(msg)
-        try:
-            self._log(self.visual.truth(e.t, e.x))
-        except scene.NotShownError as exc:
-            self.diag.count(exc.key, exc.detail, warn=exc.warn)
-            return
-        self.diag.counts["truth"] += 1
+        self._show(lambda: self.visual.truth(e.t, e.x), "truth")
 
     def on_estimate(self, msg: StateEstimateMsg) -> None:
         self.activity += 1
         if not self._ours(msg.object_id):
             return
         e = messages.estimate_from_msg(msg)
-        try:
-            self._log(self.visual.estimate(e.t, e.x, e.P, e.update_source, e.nis))
-        except scene.NotShownError as exc:
-            self.diag.count(exc.key, exc.detail, warn=exc.warn)
-            return
-        self.diag.counts["estimates"] += 1
+        self._show(lambda: self.visual.estimate(e.t, e.x, e.P, e.update_source, e.nis),
+                   "estimates")
 
     def on_measurement(self, msg: MeasurementMsg) -> None:
         self.activity += 1
@@ -183,12 +186,8 @@ class FoxgloveBridgeNode(Node):
             self.diag.count("rejected_kind", str(exc))
             return
         forecast = m.source == Source.FORECAST
-        try:
-            self.visual.measurement(m.kind, m.z, m.frame_id, m.t, forecast)
-        except scene.NotShownError as exc:
-            self.diag.count(exc.key, exc.detail, warn=exc.warn)
-            return
-        self.diag.counts["forecasts" if forecast else "measurements"] += 1
+        self._show(lambda: self.visual.measurement(m.kind, m.z, m.frame_id, m.t, forecast),
+                   "forecasts" if forecast else "measurements")
 
     def publish_scene(self) -> None:
         """Log the scene (when something changed since the last one and a truth or estimate
