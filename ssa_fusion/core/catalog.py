@@ -1,0 +1,337 @@
+"""Catalogs of element sets: TLE/3LE and CCSDS OMM files, and their SGP4/SDP4 truth.
+
+A catalog is a list of `CatalogEntry` (object id, name, `sgp4.api.Satrec`), read by
+:func:`read_catalog` from
+
+* **TLE** (two lines per object) or **3LE** (a name line, then the two lines; a Space-Track
+  ``0 NAME`` name line works too). Lines starting with ``#`` and blank lines are skipped.
+  Every line is checked column by column against the TLE layout (`sgp4.io.LINE1`/`LINE2`)
+  and by its checksum (column 69, when present), because ``Satrec.twoline2rv`` accepts
+  malformed lines silently (zeros for what it cannot read).
+* **CCSDS OMM** in XML (NDM/XML, as CelesTrak and Space-Track serve it) or CSV (one row per
+  object, CelesTrak's columns), read by `sgp4.omm`. OMM in KVN is not supported (`sgp4`
+  does not read it): the error says so.
+
+The format is told from the content, not the file name. Malformed input raises ValueError
+naming the file and the line (the XML segment for OMM/XML), never an error from deep
+inside `sgp4`. The object id is the NORAD catalogue number as a decimal string (``"5"``
+for ``00005``; Alpha-5 numbers as their integer, ``A0001`` -> ``"100001"``), the same for a
+TLE and the OMM of the same object; an id twice in one file is an error.
+
+:func:`catalog_states` propagates every object to many epochs at once with
+`sgp4.api.SatrecArray` (SGP4 near Earth, SDP4 for periods >= 225 min, WGS-72 as the element
+sets assume). Its output is TEME, which this project uses as its ECI frame directly (see
+`frames` and `dynamics.sgp4_ephemeris`, which does the same for one object): km, km/s.
+Epochs are Unix seconds (UTC), as the measurement stamps (`stations.UNIX_EPOCH_JD`).
+
+The sample catalog ``config/catalogs/sample.tle`` holds real element sets of six objects of
+different regimes (LEO, high-drag LEO, MEO/GPS, GEO, HEO/Molniya) from the SGP4 verification
+file ``SGP4-VER.TLE`` shipped with `sgp4`: D. A. Vallado, P. Crawford, R. Hujsak and
+T. S. Kelso, "Revisiting Spacetrack Report #3", AIAA 2006-6753 (2006).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import xml.etree.ElementTree as ET
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from sgp4 import omm
+from sgp4.api import SGP4_ERRORS, Satrec, SatrecArray
+from sgp4.io import LINE1, LINE2, compute_checksum
+
+from .stations import UNIX_EPOCH_JD
+
+DAY_S = 86400.0
+"""Seconds per day."""
+
+_OMM_FIELDS = (
+    "OBJECT_ID", "EPOCH", "MEAN_MOTION", "ECCENTRICITY", "INCLINATION", "RA_OF_ASC_NODE",
+    "ARG_OF_PERICENTER", "MEAN_ANOMALY", "EPHEMERIS_TYPE", "CLASSIFICATION_TYPE",
+    "NORAD_CAT_ID", "ELEMENT_SET_NO", "REV_AT_EPOCH", "BSTAR", "MEAN_MOTION_DOT",
+    "MEAN_MOTION_DDOT",
+)
+"""OMM fields `sgp4.omm.initialize` needs."""
+_OMM_EXPECTED = {"REF_FRAME": "TEME", "TIME_SYSTEM": "UTC", "CENTER_NAME": "EARTH"}
+"""OMM metadata an SGP4 element set must have, when the file gives it."""
+
+
+@dataclass(frozen=True)
+class CatalogEntry:
+    """One object of a catalog: its id, name and SGP4 element set.
+
+    Attributes
+    ----------
+    object_id : str
+        NORAD catalogue number as a decimal string (the ``object_id`` of its measurements
+        and estimates).
+    name : str
+        Object name (3LE name line, OMM ``OBJECT_NAME``); empty for a bare TLE.
+    satrec : sgp4.api.Satrec
+        The initialised element set (WGS-72).
+    source : str
+        Where it was read: ``file:line`` (TLE line 1, OMM/CSV row) or ``file:segment N``.
+    """
+
+    object_id: str
+    name: str
+    satrec: Satrec
+    source: str = ""
+
+    @property
+    def epoch_unix(self) -> float:
+        """Epoch of the element set, Unix seconds (UTC)."""
+        sat = self.satrec
+        return float((sat.jdsatepoch - UNIX_EPOCH_JD) * DAY_S + sat.jdsatepochF * DAY_S)
+
+
+@dataclass(frozen=True)
+class CatalogStates:
+    """SGP4/SDP4 states of a catalog at common epochs.
+
+    Attributes
+    ----------
+    object_ids : tuple of str
+        The objects, in catalog order (axis 0).
+    t : ndarray (T,)
+        Epochs, Unix seconds (UTC) (axis 1).
+    x : ndarray (N, T, 6)
+        ECI (= TEME) position and velocity, km and km/s; NaN where SGP4 failed.
+    error : ndarray (N, T) of int
+        SGP4 error code (0: fine; see `sgp4.api.SGP4_ERRORS`, e.g. 6: decayed).
+    """
+
+    object_ids: tuple[str, ...]
+    t: NDArray[np.float64]
+    x: NDArray[np.float64]
+    error: NDArray[np.int_]
+
+
+def read_catalog(path: Path | str) -> list[CatalogEntry]:
+    """Element sets of a TLE, 3LE, OMM/XML or OMM/CSV file (told from its content).
+
+    ValueError, naming the file and line: unreadable file, unknown or unsupported format
+    (OMM/KVN), malformed line or field, an element set SGP4 refuses, an object id twice,
+    no element set at all.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: cannot read catalog: {exc}") from None
+    head = next((s.strip() for s in text.splitlines()
+                 if s.strip() and not s.startswith("#")), "")
+    if head.startswith("<"):
+        entries = parse_omm_xml(text, str(path))
+    elif head.startswith("CCSDS_OMM_VERS"):
+        raise ValueError(f"{path}: OMM in KVN is not supported (sgp4 reads OMM as XML or "
+                         f"CSV); convert it to one of those")
+    elif "NORAD_CAT_ID" in head.split(","):
+        entries = parse_omm_csv(text, str(path))
+    else:
+        entries = parse_tle(text, str(path))
+    if not entries:
+        raise ValueError(f"{path}: no element sets in the file")
+    return entries
+
+
+def parse_tle(text: str, source: str = "<string>") -> list[CatalogEntry]:
+    """Entries of TLE/3LE `text` (see the module docstring); `source` names it in errors."""
+    out: list[CatalogEntry] = []
+    seen: dict[str, str] = {}
+    name, name_no = "", 0
+    lines = _numbered(text.splitlines())
+    for no, line in lines:
+        if line.startswith("1 "):
+            nxt = next(lines, None)
+            if nxt is None or not nxt[1].startswith("2 "):
+                raise ValueError(f"{source}:{no}: TLE line 1 is not followed by its line 2")
+            entry = _tle_entry(line, nxt[1], name, f"{source}:{no}", f"{source}:{nxt[0]}")
+            _check_new(entry, seen)
+            out.append(entry)
+            name, name_no = "", 0
+        elif line.startswith("2 "):
+            raise ValueError(f"{source}:{no}: TLE line 2 without a line 1 before it")
+        elif name:
+            raise ValueError(f"{source}:{name_no}: name line {name!r} is not followed by "
+                             f"TLE lines (line {no} is neither)")
+        else:
+            name, name_no = (line[2:] if line.startswith("0 ") else line).strip(), no
+    if name:
+        raise ValueError(f"{source}:{name_no}: name line {name!r} at the end of the file "
+                         f"without TLE lines")
+    return out
+
+
+def _numbered(lines: Iterable[str]) -> Iterator[tuple[int, str]]:
+    """(1-based line number, line without trailing blanks), comments and blanks left out."""
+    for no, raw in enumerate(lines, 1):
+        line = raw.rstrip()
+        if line and not line.startswith("#"):
+            yield no, line
+
+
+def _check_new(entry: CatalogEntry, seen: dict[str, str]) -> None:
+    if entry.object_id in seen:
+        raise ValueError(f"{entry.source}: object {entry.object_id} is already in the "
+                         f"catalog ({seen[entry.object_id]}); one element set per object")
+    seen[entry.object_id] = entry.source
+
+
+def _check_columns(line: str, template: str, which: int, where: str) -> None:
+    """ValueError unless `line` fits the TLE layout `template` (sgp4.io.LINE1/LINE2)."""
+    if not line.isascii():
+        raise ValueError(f"{where}: TLE line {which} has non-ASCII characters")
+    if len(line) not in (68, 69):  # 68: without the checksum column
+        raise ValueError(f"{where}: TLE line {which} has {len(line)} columns, not 69")
+    for col, (c, want) in enumerate(zip(line, template, strict=False), 1):
+        if 3 <= col <= 7:  # catalogue number: digits, or Alpha-5 (a letter first)
+            ok = c.isalnum()
+        elif want == "N":
+            ok = c.isdigit() or c == " "
+        elif want in "+-":
+            ok = c in " +-" or (want == "-" and c.isdigit())
+        elif want in " .12":
+            ok = c == want
+        else:  # classification, international designator: free text
+            ok = True
+        if not ok:
+            raise ValueError(f"{where}: TLE line {which}, column {col}: {c!r} does not fit "
+                             f"the TLE layout ({template[col - 1]!r} there)")
+    if len(line) == 69 and int(line[68]) != compute_checksum(line):
+        raise ValueError(f"{where}: TLE line {which} fails its checksum (column 69 is "
+                         f"{line[-1]!r}, the line sums to {compute_checksum(line)})")
+
+
+def _tle_entry(line1: str, line2: str, name: str, where: str, where2: str) -> CatalogEntry:
+    """Entry of TLE lines `line1` (at `where`, ``file:line``) and `line2` (at `where2`)."""
+    _check_columns(line1, LINE1, 1, where)
+    _check_columns(line2, LINE2, 2, where2)
+    if line1[2:7] != line2[2:7]:
+        raise ValueError(f"{where}: catalogue numbers of lines 1 and 2 differ "
+                         f"({line1[2:7]!r} and {line2[2:7]!r})")
+    sat = Satrec.twoline2rv(line1, line2)
+    _check_satrec(sat, where)
+    return CatalogEntry(str(sat.satnum), name, sat, where)
+
+
+def _check_satrec(sat: Satrec, where: str) -> None:
+    """ValueError if SGP4 refused the element set at initialisation."""
+    if sat.error:
+        raise ValueError(f"{where}: SGP4 refuses the element set: "
+                         f"{SGP4_ERRORS.get(sat.error, f'error {sat.error}')}")
+    if not (sat.no_kozai > 0.0 and 0.0 <= sat.ecco < 1.0 and math.isfinite(sat.bstar)):
+        raise ValueError(f"{where}: not a bound orbit (mean motion {sat.no_kozai:g} rad/min, "
+                         f"eccentricity {sat.ecco:g})")
+
+
+def parse_omm_xml(text: str, source: str = "<string>") -> list[CatalogEntry]:
+    """Entries of CCSDS OMM XML `text` (one per ``segment``; `sgp4.omm.parse_xml`)."""
+    import io
+
+    try:
+        segments = list(omm.parse_xml(io.StringIO(text)))
+    except ET.ParseError as exc:
+        line, col = exc.position
+        raise ValueError(f"{source}:{line}: not well-formed XML (column {col + 1})") from None
+    except AttributeError:  # a segment without metadata, data or one of their blocks
+        raise ValueError(f"{source}: an OMM segment lacks its metadata, data, meanElements or "
+                         f"tleParameters block") from None
+    seen: dict[str, str] = {}
+    out = []
+    for k, fields in enumerate(segments, 1):
+        entry = _omm_entry(fields, f"{source}:segment {k}")
+        _check_new(entry, seen)
+        out.append(entry)
+    return out
+
+
+def parse_omm_csv(text: str, source: str = "<string>") -> list[CatalogEntry]:
+    """Entries of CCSDS OMM CSV `text`.
+
+    A header row of OMM keywords, then one row per object; lines starting with ``#`` are
+    comments.
+    """
+    numbered = list(_numbered(text.splitlines()))
+    rows = csv.DictReader(line for _, line in numbered)
+    seen: dict[str, str] = {}
+    out = []
+    for k, fields in enumerate(rows, 1):
+        where = f"{source}:{numbered[k][0]}"
+        if None in fields:
+            raise ValueError(f"{where}: more values than the header has columns")
+        entry = _omm_entry(dict(fields), where)
+        _check_new(entry, seen)
+        out.append(entry)
+    return out
+
+
+def _omm_entry(fields: dict[str, Any], where: str) -> CatalogEntry:
+    """Entry of one OMM (a dict of keyword -> text), or ValueError naming `where`."""
+    missing = [k for k in _OMM_FIELDS if not (fields.get(k) or "").strip()]
+    if missing:
+        raise ValueError(f"{where}: OMM lacks {', '.join(missing)}")
+    for key, want in _OMM_EXPECTED.items():
+        got = (fields.get(key) or want).strip().upper()
+        if got != want:
+            raise ValueError(f"{where}: OMM {key} is {got}; SGP4 element sets need {want}")
+    theory = (fields.get("MEAN_ELEMENT_THEORY") or "SGP4").strip().upper()
+    if theory not in ("SGP4", "SGP/SGP4"):
+        raise ValueError(f"{where}: OMM MEAN_ELEMENT_THEORY is {theory}; only SGP4 element "
+                         f"sets are supported")
+    clean = {k: v.strip() for k, v in fields.items() if isinstance(v, str)}
+    if "." not in clean["EPOCH"]:  # whole seconds: sgp4.omm wants a fraction
+        clean["EPOCH"] += ".0"
+    sat = Satrec()
+    try:
+        omm.initialize(sat, clean)
+    except ValueError as exc:
+        raise ValueError(f"{where}: malformed OMM field: {exc}") from None
+    _check_satrec(sat, where)
+    name = (fields.get("OBJECT_NAME") or "").strip()
+    return CatalogEntry(str(sat.satnum), name, sat, where)
+
+
+def unix_to_jd(t_unix: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Unix seconds (UTC) -> Julian date as (whole part, fraction of a day), both (T,).
+
+    The whole part is ``UNIX_EPOCH_JD`` + whole days (exact), the fraction the rest (< 1),
+    so no precision is lost to the ~2.4e6 of the Julian date (what `sgp4` asks for).
+    """
+    t = np.atleast_1d(np.asarray(t_unix, dtype=float))
+    days = np.floor(t / DAY_S)
+    return UNIX_EPOCH_JD + days, (t - days * DAY_S) / DAY_S
+
+
+def catalog_states(entries: Sequence[CatalogEntry], t_unix: ArrayLike) -> CatalogStates:
+    """SGP4/SDP4 states of every object of `entries` at every epoch of `t_unix`, vectorised.
+
+    Parameters
+    ----------
+    entries : sequence of CatalogEntry
+        The objects (axis 0 of the result).
+    t_unix : array_like (T,)
+        Epochs, Unix seconds (UTC).
+
+    Returns
+    -------
+    CatalogStates
+        ``x`` (N, T, 6): position km and velocity km/s in ECI (TEME, as the project uses
+        SGP4 output everywhere), NaN where SGP4 reports an error (``error`` != 0, e.g. an
+        object decayed before that epoch).
+    """
+    jd, fr = unix_to_jd(t_unix)
+    if not entries:
+        return CatalogStates((), jd * 0.0, np.zeros((0, jd.size, 6)),
+                             np.zeros((0, jd.size), dtype=int))
+    err, r, v = SatrecArray([e.satrec for e in entries]).sgp4(jd, fr)
+    x = np.concatenate([r, v], axis=-1)
+    x[err != 0] = np.nan
+    t = np.atleast_1d(np.asarray(t_unix, dtype=float))
+    return CatalogStates(tuple(e.object_id for e in entries), t, x, err.astype(int))
