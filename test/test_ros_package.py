@@ -101,7 +101,7 @@ ROSDISTRO_KEYS = {"python3-numpy", "python3-scipy", "python3-matplotlib", "pytho
 hand against rosdistro of 2026-08-22); the others must be in tools/rosdep.yaml."""
 ROS_PACKAGES = {"rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "rosgraph_msgs",
                 "diagnostic_msgs", "ament_index_python", "launch", "launch_ros",
-                "ssa_fusion_msgs"}
+                "ssa_fusion_msgs", "geometry_msgs", "sensor_msgs", "visualization_msgs"}
 """ROS packages the code imports; their rosdep key is the package name."""
 
 

@@ -31,6 +31,7 @@ from ssa_fusion.apps import evaluate, report
 from ssa_fusion.apps.args import add_domain_id, positive_float
 from ssa_fusion.nodes import settings
 from ssa_fusion.paper import scenarios, sky
+from ssa_fusion.ros import visual_msgs
 from ssa_fusion.ros.processes import Graph
 from ssa_fusion.ros.readiness import READERS
 from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
@@ -71,8 +72,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 FOXGLOVE_PORT = 8765
 """Default port of `--foxglove`'s WebSocket server (Foxglove's usual one)."""
-FOXGLOVE_READERS = [f"foxglove_bridge:{t}" for t in ("/ssa/measurement", "/ssa/truth")]
-"""What the bridge must have matched before measurements flow (with `--foxglove`)."""
+FOXGLOVE_READERS = [*(f"foxglove_bridge:{t}" for t in ("/ssa/measurement", "/ssa/truth")),
+                    *(f"recorder:{t}" for t in visual_msgs.TOPICS)]
+"""What the bridge must have matched before measurements flow (with `--foxglove`), and the
+recorder of the bridge's ROS visual topics (so the bag holds the picture from the start)."""
 _FOXGLOVE_URL = re.compile(r"Foxglove WebSocket server on (ws://\S+)")
 
 

@@ -29,6 +29,9 @@ far below a wall-time stamp in a sim-time graph (months)."""
 MAX_RANGE_KM = 1e7
 """Largest plausible range (km): 26 times the Moon's distance; no sensor tracking an Earth
 orbiter measures beyond it, and larger values overflow the IOD's arithmetic."""
+MIN_RANGE_KM = 1.0
+"""Smallest plausible range (km): nothing a sensor tracks in orbit is within 1 km of its
+antenna, and the line-of-sight Jacobian grows as 1/range (a range of 0 has no direction)."""
 MAX_ABS_VALUE = 1e7
 """Largest plausible magnitude of any measured value (km for positions, rad for angles)."""
 MAX_VARIANCE = 1e12
@@ -44,9 +47,10 @@ def measurement_problem(m: Measurement, kind: int | tuple[int, ...] | None,
 
     `kind` (one kind or a tuple of them) None and `frame_id` "" accept any. Problems: wrong
     kind or frame, NaN/inf anywhere, an impossible range/az/el or ra/dec (declination beyond
-    +-pi/2), an implausible value (range beyond `MAX_RANGE_KM`, azimuth or right ascension
-    outside [-2pi, 2pi], any value beyond `MAX_ABS_VALUE`, a covariance entry beyond
-    `MAX_VARIANCE`), or a covariance that is not symmetric positive semi-definite.
+    +-pi/2), an implausible value (range below `MIN_RANGE_KM` or beyond `MAX_RANGE_KM`,
+    azimuth or right ascension outside [-2pi, 2pi], any value beyond `MAX_ABS_VALUE`, a
+    covariance entry beyond `MAX_VARIANCE`), or a covariance that is not symmetric positive
+    semi-definite.
     """
     z = np.asarray(m.z, dtype=float)
     R = np.asarray(m.R, dtype=float)
@@ -63,6 +67,9 @@ def measurement_problem(m: Measurement, kind: int | tuple[int, ...] | None,
         if not -HALF_PI <= z[2] <= HALF_PI:
             return (Cause.REJECTED_ELEVATION,
                     f"elevation {z[2]} rad outside [-pi/2, pi/2] at t={m.t}")
+        if z[0] < MIN_RANGE_KM:
+            return (Cause.REJECTED_IMPLAUSIBLE,
+                    f"range {z[0]:.6g} km below {MIN_RANGE_KM:g} km at t={m.t}")
         if z[0] > MAX_RANGE_KM:
             return (Cause.REJECTED_IMPLAUSIBLE,
                     f"range {z[0]:.6g} km beyond {MAX_RANGE_KM:g} km at t={m.t}")

@@ -16,6 +16,11 @@ and serves, on a WebSocket server bound to `host`:`port` (loopback by default):
 The messages come from `foxglove_scene.VisualTopics`, which `ssa-fusion report` also uses to
 write the same topics of a bag to ``visual.mcap`` (`ssa_fusion.apps.visual_mcap`).
 
+With ``ros_topics`` (default true) it also publishes the scene and the ground tracks as ROS
+messages that the recorder puts in the bag (`ssa_fusion.ros.visual_msgs`):
+``/ssa/visual/markers`` (`visualization_msgs/MarkerArray`), ``/ssa/visual/ground_track`` and
+``/ssa/visual/ground_track_truth`` (`sensor_msgs/NavSatFix`).
+
 Message log times are the messages' sim-time stamps. ``config/foxglove_layout.json`` is a
 Foxglove layout of these topics (3D, Map, Plot).
 
@@ -24,6 +29,7 @@ Foxglove layout of these topics (3D, Map, Plot).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -43,7 +49,7 @@ from ssa_fusion.nodes.common import (
 )
 from ssa_fusion.nodes.defaults import STATION
 from ssa_fusion.ros import foxglove_scene as scene
-from ssa_fusion.ros import messages
+from ssa_fusion.ros import messages, visual_msgs
 from ssa_fusion.ros.topics import (
     DATA_QOS,
     TOPIC_ESTIMATE,
@@ -107,6 +113,10 @@ class FoxgloveBridgeNode(Node):
                                   "diameter of the position markers in the scene, km",
                                   positive))
         self.object_id = declare(self, "object_id", "", "only show this object ('' = any)")
+        ros_topics = declare(self, "ros_topics", True,
+                             "also publish the scene and ground tracks as ROS messages "
+                             "(/ssa/visual/*: MarkerArray, NavSatFix), so the recorder puts "
+                             "them in the bag")
         self.visual = scene.VisualTopics(network_stations(station) if station else {},
                                          trail=int(trail), points=int(points),
                                          marker_km=marker_km)
@@ -131,6 +141,18 @@ class FoxgloveBridgeNode(Node):
         self.port = int(self.server.port)
         self.diag.status["url"] = f"ws://{host}:{self.port}"
         self.get_logger().info(f"Foxglove WebSocket server on ws://{host}:{self.port}")
+
+        self.ros_pubs: dict[str, Any] = {}
+        if ros_topics:
+            from sensor_msgs.msg import NavSatFix
+            from visualization_msgs.msg import MarkerArray
+
+            self.ros_pubs = {
+                visual_msgs.MARKERS_TOPIC: self.create_publisher(
+                    MarkerArray, visual_msgs.MARKERS_TOPIC, DATA_QOS),
+                **{topic: self.create_publisher(NavSatFix, topic, DATA_QOS)
+                   for topic in (visual_msgs.TRACK_TOPIC, visual_msgs.TRUTH_TRACK_TOPIC)},
+            }
 
         subs = ((StateEstimateMsg, TOPIC_TRUTH, self.on_truth),
                 (StateEstimateMsg, TOPIC_ESTIMATE, self.on_estimate),
@@ -167,6 +189,7 @@ class FoxgloveBridgeNode(Node):
             return
         e = messages.estimate_from_msg(msg)
         self._show(lambda: self.visual.truth(e.t, e.x), "truth")
+        self._publish_fix(visual_msgs.TRUTH_TRACK_TOPIC, e.t, e.x, "truth")
 
     def on_estimate(self, msg: StateEstimateMsg) -> None:
         self.activity += 1
@@ -175,6 +198,13 @@ class FoxgloveBridgeNode(Node):
         e = messages.estimate_from_msg(msg)
         self._show(lambda: self.visual.estimate(e.t, e.x, e.P, e.update_source, e.nis),
                    "estimates")
+        self._publish_fix(visual_msgs.TRACK_TOPIC, e.t, e.x, "estimate")
+
+    def _publish_fix(self, topic: str, t: float, x: Any, frame_id: str) -> None:
+        """Publish the ground-track NavSatFix of a state that was shown (finite)."""
+        pub = self.ros_pubs.get(topic)
+        if pub is not None and all(math.isfinite(float(v)) for v in (t, *x[:3])):
+            pub.publish(visual_msgs.nav_sat_fix(t, x, frame_id))
 
     def on_measurement(self, msg: MeasurementMsg) -> None:
         self.activity += 1
@@ -194,7 +224,11 @@ class FoxgloveBridgeNode(Node):
         was heard), stamped with the newest epoch heard."""
         if not self.visual.scene_due:
             return
-        self._log([self.visual.scene()])
+        logged = self.visual.scene()
+        self._log([logged])
+        pub = self.ros_pubs.get(visual_msgs.MARKERS_TOPIC)
+        if pub is not None:
+            pub.publish(visual_msgs.marker_array(self.visual.shapes, self.visual.state.t or 0.0))
         self.diag.counts["scene_updates"] += 1
 
     def close(self) -> None:

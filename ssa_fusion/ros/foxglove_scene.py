@@ -338,56 +338,119 @@ def _text(position: ArrayLike, text: str, rgba: Rgba) -> Any:
                          scale_invariant=True, color=_color(rgba), text=text)
 
 
-def scene_entities(state: SceneState, stations: dict[str, Station],
-                   marker_km: float = 150.0) -> list[Any]:
-    """The scene's `foxglove.SceneEntity` list for `state` (frame ``eci``, km), stamped with
-    its newest epoch: ``earth`` (WGS-84-sized sphere, its prime meridian), ``truth`` and
-    ``estimate`` (a `marker_km`-wide sphere and the recent trail each), ``covariance`` (the
-    3σ ellipsoid of the estimate's position block, true size), ``stations`` (one marker and
-    label per station of `stations`), ``forecasts`` and ``measurements`` (the recent points
-    they imply). Entities without data are left out."""
-    from foxglove.messages import SceneEntity
+@dataclass(frozen=True)
+class Sphere:
+    """A sphere (ellipsoid) of the scene: centre ``position`` (3,) km ECI, diameters ``size``
+    (3,) km along its axes, rotated by ``quaternion`` (x, y, z, w)."""
 
+    position: NDArray[np.float64]
+    size: NDArray[np.float64]
+    rgba: Rgba
+    quaternion: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Line:
+    """A polyline through ``points`` (n, 3) km ECI, ``thickness`` in screen pixels."""
+
+    points: NDArray[np.float64]
+    rgba: Rgba
+    thickness: float = 2.0
+
+
+@dataclass(frozen=True)
+class Label:
+    """A text label at ``position`` (3,) km ECI, facing the viewer."""
+
+    position: NDArray[np.float64]
+    text: str
+    rgba: Rgba
+
+
+@dataclass(frozen=True)
+class Shape:
+    """One entity of the scene (``id``: earth, truth, estimate, covariance, stations,
+    forecasts, measurements) as plain geometry, drawn by `scene_entities` in Foxglove's
+    schema and by `ssa_fusion.ros.visual_msgs` as ROS markers."""
+
+    id: str
+    spheres: tuple[Sphere, ...] = ()
+    lines: tuple[Line, ...] = ()
+    labels: tuple[Label, ...] = ()
+
+
+def _ball(position: ArrayLike, size: ArrayLike, rgba: Rgba,
+          quaternion: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)) -> Sphere:
+    return Sphere(np.asarray(position, dtype=float)[:3].copy(),
+                  np.broadcast_to(np.asarray(size, dtype=float), (3,)).copy(), rgba, quaternion)
+
+
+def _polyline(points: Any, rgba: Rgba, thickness: float = 2.0) -> Line:
+    pts = np.asarray([np.asarray(p, dtype=float)[:3] for p in points], dtype=float)
+    return Line(pts.reshape(-1, 3), rgba, thickness)
+
+
+def scene_shapes(state: SceneState, stations: dict[str, Station],
+                 marker_km: float = 150.0) -> list[Shape]:
+    """The scene of `state` as `Shape` s (ECI, km): ``earth`` (WGS-84-sized sphere, its prime
+    meridian), ``truth`` and ``estimate`` (a `marker_km`-wide sphere and the recent trail
+    each), ``covariance`` (the 3σ ellipsoid of the estimate's position block, true size),
+    ``stations`` (one marker and label per station of `stations`), ``forecasts`` and
+    ``measurements`` (the recent points they imply). Entities without data are left out."""
     t = state.t if state.t is not None else 0.0
-    stamp = _stamp(t)
-
-    def entity(eid: str, **prims: Any) -> Any:
-        return SceneEntity(timestamp=stamp, frame_id=SCENE_FRAME, id=eid, **prims)
-
     earth_d = 2.0 * R_EARTH
-    out = [entity("earth",
-                  spheres=[_sphere((0, 0, 0), (earth_d, earth_d, earth_d * (1 - WGS84_F)),
-                                   EARTH_RGBA)],
-                  lines=[_line(meridian_eci(t), (1.0, 1.0, 1.0, 0.8), 1.5)])]
+    out = [Shape("earth",
+                 spheres=(_ball((0, 0, 0), (earth_d, earth_d, earth_d * (1 - WGS84_F)),
+                                EARTH_RGBA),),
+                 lines=(_polyline(meridian_eci(t), (1.0, 1.0, 1.0, 0.8), 1.5),))]
     if state.truth is not None:
-        out.append(entity("truth", spheres=[_sphere(state.truth[1], marker_km, TRUTH_RGBA)],
-                          lines=[_line(state.truth_trail, TRUTH_RGBA)]))
+        out.append(Shape("truth", spheres=(_ball(state.truth[1], marker_km, TRUTH_RGBA),),
+                         lines=(_polyline(state.truth_trail, TRUTH_RGBA),)))
     if state.estimate is not None:
-        out.append(entity("estimate",
-                          spheres=[_sphere(state.estimate[1], marker_km, ESTIMATE_RGBA)],
-                          lines=[_line(state.estimate_trail, ESTIMATE_RGBA)]))
+        out.append(Shape("estimate",
+                         spheres=(_ball(state.estimate[1], marker_km, ESTIMATE_RGBA),),
+                         lines=(_polyline(state.estimate_trail, ESTIMATE_RGBA),)))
         if state.covariance is not None:
             ell = covariance_ellipsoid(state.covariance[:3, :3])
-            out.append(entity("covariance",
-                              spheres=[_sphere(state.estimate[1], ell.size, ELLIPSOID_RGBA,
-                                               ell.quaternion)],
-                              texts=[_text(state.estimate[1],
+            out.append(Shape("covariance",
+                             spheres=(_ball(state.estimate[1], ell.size, ELLIPSOID_RGBA,
+                                            ell.quaternion),),
+                             labels=(Label(np.asarray(state.estimate[1][:3], dtype=float),
                                            f"3σ {ell.semi_axes.max():.3g} km",
-                                           (*ELLIPSOID_RGBA[:3], 1.0))]))
+                                           (*ELLIPSOID_RGBA[:3], 1.0)),)))
     if stations:
         pos = {name: station_eci(s, t) for name, s in stations.items()}
-        out.append(entity("stations",
-                          spheres=[_sphere(p, marker_km * 0.6, STATION_RGBA)
-                                   for p in pos.values()],
-                          texts=[_text(p, name, STATION_RGBA) for name, p in pos.items()]))
+        out.append(Shape("stations",
+                         spheres=tuple(_ball(p, marker_km * 0.6, STATION_RGBA)
+                                       for p in pos.values()),
+                         labels=tuple(Label(p, name, STATION_RGBA) for name, p in pos.items())))
     if state.forecasts:
-        out.append(entity("forecasts", spheres=[_sphere(p, marker_km * 0.4, FORECAST_RGBA)
-                                                for p in state.forecasts]))
+        out.append(Shape("forecasts", spheres=tuple(_ball(p, marker_km * 0.4, FORECAST_RGBA)
+                                                    for p in state.forecasts)))
     if state.measurements:
-        out.append(entity("measurements",
-                          spheres=[_sphere(p, marker_km * 0.3, MEASUREMENT_RGBA)
-                                   for p in state.measurements]))
+        out.append(Shape("measurements",
+                         spheres=tuple(_ball(p, marker_km * 0.3, MEASUREMENT_RGBA)
+                                       for p in state.measurements)))
     return out
+
+
+def scene_entities(state: SceneState, stations: dict[str, Station],
+                   marker_km: float = 150.0) -> list[Any]:
+    """`scene_shapes` as `foxglove.SceneEntity` s (frame ``eci``, km), stamped with the
+    state's newest epoch."""
+    return _entities(scene_shapes(state, stations, marker_km), state.t or 0.0)
+
+
+def _entities(shapes: list[Shape], t: float) -> list[Any]:
+    from foxglove.messages import SceneEntity
+
+    stamp = _stamp(t)
+    return [SceneEntity(timestamp=stamp, frame_id=SCENE_FRAME, id=sh.id,
+                        spheres=[_sphere(b.position, b.size, b.rgba, b.quaternion)
+                                 for b in sh.spheres],
+                        lines=[_line(ln.points, ln.rgba, ln.thickness) for ln in sh.lines],
+                        texts=[_text(lb.position, lb.text, lb.rgba) for lb in sh.labels])
+            for sh in shapes]
 
 
 def scene_update(state: SceneState, stations: dict[str, Station],
@@ -461,6 +524,8 @@ class VisualTopics:
         self.truths: dict[float, NDArray[np.float64]] = {}
         self.dirty = False
         """True when something changed since the last `scene`."""
+        self.shapes: list[Shape] = []
+        """The geometry of the last `scene` (ECI, km)."""
 
     def truth(self, t: float, x: ArrayLike) -> list[Logged]:
         """A true state `x` (6,) km, km/s at `t` (Unix s) -> its `TRUTH_TRACK_TOPIC` fix."""
@@ -514,7 +579,10 @@ class VisualTopics:
 
     def scene(self) -> Logged:
         """The `SCENE_TOPIC` update of the current state, logged at its newest epoch."""
+        from foxglove.messages import SceneUpdate
+
         self.dirty = False
         t = self.state.t or 0.0
-        return Logged(SCENE_TOPIC, scene_update(self.state, self.stations, self.marker_km),
+        self.shapes = scene_shapes(self.state, self.stations, self.marker_km)
+        return Logged(SCENE_TOPIC, SceneUpdate(entities=_entities(self.shapes, t)),
                       log_time_ns(t))

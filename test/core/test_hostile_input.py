@@ -22,6 +22,8 @@ def razel(t: float, z, cov=R) -> Measurement:
 
 @pytest.mark.parametrize(("z", "cov", "what"), [
     ([2e7, 1.0, 0.5], R, "range"),
+    ([0.0, 1.0, 0.5], R, "range"),  # finding 6: a range of 0 has no direction
+    ([0.5, 1.0, 0.5], R, "range"),
     ([7000.0, 1e6, 0.5], R, "azimuth"),
     ([7000.0, 1.0, 0.5], 1e200 * np.eye(3), "covariance"),
     ([7000.0, 1.0, 0.5], 1e308 * np.eye(3), "covariance"),

@@ -23,6 +23,7 @@ def add(z, cov=R) -> Surrogate:
 
 @pytest.mark.parametrize(("z", "cov", "cause"), [
     ([1e305, 1.0, 0.5], R, Cause.REJECTED_IMPLAUSIBLE),  # 1e308 m
+    ([0.0, 1.0, 0.5], R, Cause.REJECTED_IMPLAUSIBLE),  # range 0 m
     ([7000.0, 1e6, 0.5], R, Cause.REJECTED_IMPLAUSIBLE),
     ([7000.0, 1.0, float(np.nextafter(math.pi / 2, 4.0))], R, Cause.REJECTED_ELEVATION),
     ([7000.0, 1.0, 0.5], 1e308 * np.eye(3), Cause.REJECTED_IMPLAUSIBLE),

@@ -724,10 +724,12 @@ def test_sensor_sim_interrupted_twice_during_shutdown_exits_0(ros_graph, sig):
     assert g.wait_exit(sensor, timeout=15.0) == 0, sensor.describe()
 
 
-def test_a_negative_clock_is_counted_and_no_node_dies(ros_graph, tmp_path):
+def test_a_negative_or_huge_clock_is_survived_and_no_node_dies(ros_graph, tmp_path):
     """Issue 22 finding 1: one /clock with negative seconds killed filter, surrogate and
     recorder (rclpy raises in its clock handling, outside the nodes' callbacks). Now each
-    counts it as rejected_clock and carries on."""
+    counts it as rejected_clock and carries on. A clock at the end of time (int32 seconds,
+    2038) is taken as a jump ahead; the return to the real clock is a jump back that resets
+    filter and surrogate, and the next measurements are fused."""
     from builtin_interfaces.msg import Time
 
     g = ros_graph
@@ -739,7 +741,11 @@ def test_a_negative_clock_is_counted_and_no_node_dies(ros_graph, tmp_path):
     publish_until(g, clock, Clock(clock=Time(sec=-5, nanosec=0)),
                   lambda: all(diag.counts(n).get("rejected_clock") for n in nodes),
                   "rejected_clock on every node")
+    huge = float(2**31 - 1)
+    set_clock(g, clock, diag, huge, NODES)
     set_clock(g, clock, diag, float(T[7]), NODES)
+    for n in NODES:
+        diag.wait(g, n, {"reset_clock_jump": 1})
     for i in range(6):
         pub.publish(meas(i))
     g.wait_for(lambda: len(got) >= 4, 15.0, "4 estimates after the bad clock")

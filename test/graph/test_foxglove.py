@@ -13,13 +13,16 @@ import select
 import socket
 import struct
 import time
+from collections import Counter
 
 import numpy as np
+from sensor_msgs.msg import NavSatFix
 from ssa_fusion_msgs.msg import StateEstimate
+from visualization_msgs.msg import Marker, MarkerArray
 
 from ssa_fusion.core import types
+from ssa_fusion.ros import bagio, messages, visual_msgs
 from ssa_fusion.ros import foxglove_scene as scene
-from ssa_fusion.ros import messages
 from ssa_fusion.ros.topics import DATA_QOS
 
 SUBPROTOCOLS = ("foxglove.sdk.v1", "foxglove.websocket.v1")
@@ -108,15 +111,28 @@ def _estimate(k: int, truth: bool = False) -> StateEstimate:
         t=T0 + 30.0 * k, x=x, P=p, object_id="iss", update_source=0 if truth else 1))
 
 
-def test_bridge_serves_scene_track_and_metrics(ros_graph):
-    """The fixture tears the process down (SIGTERM, SIGKILL after a timeout) whatever
-    happens, and fails the test if it did not exit 0."""
+def test_bridge_serves_scene_track_and_metrics_and_records_them_in_the_bag(ros_graph,
+                                                                           tmp_path):
+    """Over the WebSocket: the scene, the ground track and the metrics; over DDS, recorded by
+    the recorder into the bag: the same scene as a MarkerArray and the ground tracks as
+    NavSatFix. The fixture tears the processes down (SIGTERM, SIGKILL after a timeout)
+    whatever happens, and fails the test if one did not exit 0."""
     g = ros_graph
     t_start = time.monotonic()
     client = None
+    bag = tmp_path / "bag"
+    markers: list[MarkerArray] = []
+    fixes: list[NavSatFix] = []
+    g.probe.create_subscription(MarkerArray, visual_msgs.MARKERS_TOPIC, markers.append,
+                                DATA_QOS)
+    g.probe.create_subscription(NavSatFix, visual_msgs.TRACK_TOPIC, fixes.append, DATA_QOS)
     try:
+        rec = g.start_node("recorder", params={"bag": str(bag), "discover_period": 0.2})
         proc = g.start_node("foxglove_bridge", params={"port": 0, "station": "network",
                                                        "scene_period": 0.05})
+        g.wait_for_subscriber(visual_msgs.MARKERS_TOPIC, 2)  # the probe and the recorder
+        g.wait_for_subscriber(visual_msgs.TRACK_TOPIC, 2)
+        g.wait_for_subscriber(visual_msgs.TRUTH_TRACK_TOPIC, 1)  # the recorder
         url = re.compile(r"ws://127\.0\.0\.1:(\d+)")
         g.wait_for(lambda: url.search(proc.stderr()) is not None or proc.returncode is not None,
                    20, "the bridge to report its WebSocket address")
@@ -166,7 +182,9 @@ def test_bridge_serves_scene_track_and_metrics(ros_graph):
             errors = [json.loads(m)["position_error_km"] for m in received[scene.METRICS_TOPIC]]
             return all(received.values()) and any(e is not None for e in errors)
 
-        g.wait_for(got_all, 15, "messages on the scene, ground-track and metrics channels")
+        g.wait_for(lambda: got_all() and bool(markers) and bool(fixes), 15,
+                   "messages on the scene, ground-track and metrics channels and their ROS "
+                   "topics")
         metric = json.loads(received[scene.METRICS_TOPIC][-1])
         assert metric["sigma_km"] == np.sqrt(14.0)
         assert metric["three_sigma_max_km"] == 9.0
@@ -175,10 +193,29 @@ def test_bridge_serves_scene_track_and_metrics(ros_graph):
                    for e in errors), errors
         assert len(received[scene.SCENE_TOPIC][0]) > 100  # a protobuf SceneUpdate
         assert g.stop(proc) == 0, g.report()
+        assert g.stop(rec) == 0, g.report()
+
+        # the ROS topics: the estimate's marker where the estimate is, its sub-satellite point
+        est = [m for m in markers[-1].markers if m.ns == "estimate" and m.type == Marker.SPHERE]
+        p = est[0].pose.position
+        assert (p.x, p.y, p.z) == (6779.0, 1.0, 0.5)
+        assert markers[-1].markers[0].action == Marker.DELETEALL
+        assert {m.ns for m in markers[-1].markers} >= {"earth", "truth", "estimate",
+                                                       "covariance", "stations"}
+        fix = fixes[-1]
+        lat, lon, _ = scene.eci_to_geodetic([6779.0, 1.0, 0.5],
+                                            fix.header.stamp.sec + fix.header.stamp.nanosec * 1e-9)
+        assert abs(fix.latitude - np.degrees(lat)) < 1e-9
+        assert abs(fix.longitude - np.degrees(lon)) < 1e-9
+        # ... and the recorder put them in the bag, readable with their ROS types
+        in_bag = Counter((m.topic, m.msgtype) for m in bagio.read_bag(bag))
+        assert in_bag[(visual_msgs.MARKERS_TOPIC, "visualization_msgs/msg/MarkerArray")] > 0
+        assert in_bag[(visual_msgs.TRACK_TOPIC, "sensor_msgs/msg/NavSatFix")] > 0
+        assert in_bag[(visual_msgs.TRUTH_TRACK_TOPIC, "sensor_msgs/msg/NavSatFix")] > 0
     finally:
         if client is not None:
             client.close()
-    assert time.monotonic() - t_start < 20 * g.timeout_factor
+    assert time.monotonic() - t_start < 25 * g.timeout_factor
 
 
 def test_live_foxglove_starts_the_bridge_and_says_where(ros_graph):

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
+from visualization_msgs.msg import Marker
 
 from ssa_fusion.core.constants import R_EARTH, WGS84_F
 from ssa_fusion.core.frames import (
@@ -24,6 +26,7 @@ from ssa_fusion.core.frames import (
 from ssa_fusion.core.stations import UNIX_EPOCH_JD, network_stations
 from ssa_fusion.core.types import Kind
 from ssa_fusion.ros import foxglove_scene as fs
+from ssa_fusion.ros import visual_msgs as vm
 
 T = 1_718_000_000.0  # 2024-06-10, Unix s
 
@@ -208,8 +211,53 @@ def test_the_layout_shows_the_bridge_topics():
     kinds = {p.split("!")[0]: layout["configById"][p] for p in panels}
     assert set(kinds) == {"3D", "map", "Plot"}
     assert kinds["3D"]["followTf"] == fs.SCENE_FRAME
-    assert set(kinds["3D"]["topics"]) == {fs.SCENE_TOPIC}
-    assert set(kinds["map"]["topicColors"]) == {fs.TRACK_TOPIC, fs.TRUTH_TRACK_TOPIC}
+    # the same picture live (foxglove schemas) and from a recorded bag (ROS messages)
+    assert set(kinds["3D"]["topics"]) == {fs.SCENE_TOPIC, vm.MARKERS_TOPIC}
+    assert set(kinds["map"]["topicColors"]) == {fs.TRACK_TOPIC, fs.TRUTH_TRACK_TOPIC,
+                                                vm.TRACK_TOPIC, vm.TRUTH_TRACK_TOPIC}
     fields = [p["value"].split(".", 1) for p in kinds["Plot"]["paths"]]
-    assert {topic for topic, _ in fields} == {fs.METRICS_TOPIC}
-    assert {f for _, f in fields} <= set(fs.METRICS_SCHEMA["properties"])
+    metric_fields = {f for topic, f in fields if topic == fs.METRICS_TOPIC}
+    assert metric_fields and metric_fields <= set(fs.METRICS_SCHEMA["properties"])
+    estimate_fields = {f for topic, f in fields if topic == "/ssa/estimate"}
+    assert estimate_fields == {"nis"}
+    assert "nis" in StateEstimateMsg.get_fields_and_field_types()
+
+
+def test_ros_markers_draw_the_same_shapes_as_the_foxglove_scene():
+    """The bag's MarkerArray: a DELETEALL first, then per entity its spheres (one SPHERE with
+    the 3σ ellipsoid's size and rotation; a SPHERE_LIST for a cloud of points), trails and
+    labels, in frame eci, stamped with the scene's epoch."""
+    v = fs.VisualTopics(network_stations("network"))
+    p = np.diag([1.0, 4.0, 9.0, 1e-6, 1e-6, 1e-6])
+    v.truth(T, [7000.0, 0.0, 0.0, 0.0, 7.5, 0.0])
+    v.truth(T + 60.0, [6990.0, 450.0, 0.0, -0.5, 7.5, 0.0])
+    v.estimate(T + 60.0, [6991.0, 451.0, 1.0, -0.5, 7.5, 0.0], p, 1, 2.0)
+    for k in range(3):
+        v.measurement(Kind.POSITION, [7000.0, 10.0 * k, 0.0], "x", T + 60.0, forecast=True)
+    v.scene()
+    ma = vm.marker_array(v.shapes, T + 60.0)
+    assert ma.markers[0].action == Marker.DELETEALL
+    by = {(m.ns, m.type): m for m in ma.markers[1:]}
+    assert all(m.header.frame_id == fs.SCENE_FRAME and m.header.stamp.sec == int(T + 60.0)
+               for m in ma.markers)
+    cov = by[("covariance", Marker.SPHERE)]
+    ell = fs.covariance_ellipsoid(p[:3, :3])
+    assert [cov.scale.x, cov.scale.y, cov.scale.z] == pytest.approx(list(ell.size))
+    o = cov.pose.orientation
+    assert (o.x, o.y, o.z, o.w) == pytest.approx(ell.quaternion)
+    cloud = by[("forecasts", Marker.SPHERE_LIST)]
+    assert [(q.x, q.y, q.z) for q in cloud.points] == [(7000.0, 10.0 * k, 0.0) for k in range(3)]
+    trail = by[("truth", Marker.LINE_STRIP)]
+    assert len(trail.points) == 2 and trail.points[1].y == 450.0
+    assert by[("stations", Marker.SPHERE_LIST)].points
+    ids = [(m.ns, m.id) for m in ma.markers[1:]]
+    assert len(ids) == len(set(ids))  # each marker its own (namespace, id)
+
+
+def test_nav_sat_fix_is_the_sub_satellite_point():
+    r = [4000.0, 3000.0, 4500.0]
+    fix = vm.nav_sat_fix(T, r, "estimate")
+    lat, lon, alt = fs.eci_to_geodetic(r, T)
+    assert (fix.latitude, fix.longitude, fix.altitude) == (math.degrees(lat),
+                                                           math.degrees(lon), alt * 1000.0)
+    assert fix.header.frame_id == "estimate" and fix.header.stamp.sec == int(T)
