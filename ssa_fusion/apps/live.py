@@ -290,7 +290,12 @@ def run(args: argparse.Namespace) -> int:
         return 1
     wall = time.monotonic() - t_start
     data = evaluate.load(bag)
-    ev = evaluate.evaluate(data, seed=args.seed)  # with the settings recorded in the bag
+    try:
+        ev = evaluate.evaluate(data, seed=args.seed)  # with the settings recorded in the bag
+    except ValueError as exc:  # e.g. a real-sky seed whose outage fell where no pass was
+        print(f"recorded {sum(data.counts.values())} messages to {bag} in {wall:.1f} s\n"
+              f"error: the run cannot be evaluated: {exc}", file=sys.stderr)
+        return 1
     report.write(data, ev, out)
     late = evaluate.unfused_forecasts(data, ev.gap.t)
     counters = filter_counters(diagnostics)

@@ -85,3 +85,40 @@ def test_reader_entries_name_a_node_and_a_topic():
     assert check_needs(READERS) is None
     assert "no namespace" in check_needs(["/ns/filter:/ssa/measurement"])
     assert "is not 'node:/topic'" in check_needs(["filter"])
+
+
+class _FakeGraph:
+    """Stands in for `ros.processes.Graph`: nodes 'run' and exit 0 at once."""
+
+    def __init__(self, *_args) -> None:
+        self.domain_id = 0
+
+    def collect(self, *_args) -> list:
+        return []
+
+    def start_node(self, *_args, **_kwargs) -> object:
+        return object()
+
+    def wait_exit(self, *_args, **_kwargs) -> int:
+        return 0
+
+    def wait_quiet(self, *_args, **_kwargs) -> None:
+        return None
+
+    def close(self) -> list[str]:
+        return []
+
+
+def test_live_run_that_cannot_be_evaluated_says_why_without_a_traceback(tmp_path, monkeypatch,
+                                                                         capsys):
+    """A run whose bag has no outage (a real-sky seed where no pass was withheld) raised
+    ValueError out of `live` with a traceback; now it is one line, exit 1, the bag kept."""
+    from ssa_fusion.apps import evaluate
+
+    monkeypatch.setattr(live, "Graph", _FakeGraph)
+    monkeypatch.setattr(evaluate, "load", lambda _bag: evaluate.BagData(counts={"/clock": 3}))
+    args = cli.build_parser().parse_args(["live", "--out", str(tmp_path / "run")])
+    assert live.run(args) == 1
+    err = capsys.readouterr().err
+    assert "error: the run cannot be evaluated: the bag has no /ssa/withheld messages" in err
+    assert "recorded 3 messages" in err
