@@ -1,0 +1,224 @@
+"""The batched EKF (`core.batch_ekf`) equals the per-object filter object by object.
+
+Twenty objects on different orbits (LEO at several inclinations, high-drag-altitude LEO, MEO,
+GEO, Molniya), each with its own time step (1 s to 50 min) and station, go through one cycle
+(predict + range/az/el update) of the batched filter and, one by one, of the project's
+per-object `Tracker` (and FilterPy's `ExtendedKalmanFilter`); they must agree to 1e-9
+relative (max |difference| / max |reference| per object, for x and for P).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from ssa_fusion.core import dynamics, kepler
+from ssa_fusion.core.batch_ekf import (
+    REASONS,
+    BatchEKF,
+    BatchEKFConfig,
+    Code,
+    integrate_stm,
+    kepler_stm,
+)
+from ssa_fusion.core.config import EstimatorConfig, make_tracker
+from ssa_fusion.core.dynamics import elements_to_state
+from ssa_fusion.core.ekf import ExtendedKalmanFilter, bound_covariance, process_noise
+from ssa_fusion.core.frames import razel_eci, wrap_angle
+from ssa_fusion.core.measurement import RazelModel
+from ssa_fusion.core.stations import RADAR_SIGMA, STATIONS, UNIX_EPOCH_JD
+from ssa_fusion.core.types import Cause, Kind, Measurement
+
+NAMES = ("millstone", "tira", "altair", "columbus")
+STATION_LIST = [STATIONS[s] for s in NAMES]
+T0 = 1.7e9  # s, Unix time
+R = np.diag(np.square(RADAR_SIGMA)) * 25.0  # a coarser radar: 100 m, 0.1 deg
+P0 = np.diag([1.0, 1.0, 1.0, 1e-6, 1e-6, 1e-6])
+TOL = 1e-9
+
+
+def _rel(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.abs(a - b).max() / np.abs(b).max())
+
+
+def _objects(n: int = 20, seed: int = 3) -> dict[str, np.ndarray]:
+    """Estimates, steps, stations and measurements of `n` objects (truth = estimate + error)."""
+    rng = np.random.default_rng(seed)
+    regimes = [  # (a km, e)
+        (6778.0, 0.001), (6878.0, 0.0005), (7178.0, 0.01), (6578.0, 0.002),  # LEO, low
+        (26560.0, 0.01), (42164.0, 0.0002), (26555.9, 0.7294), (8000.0, 0.15),
+    ]
+    x, dt, st = [], [], []
+    for i in range(n):
+        a, e = regimes[i % len(regimes)]
+        angles = rng.uniform(0.0, 2.0 * math.pi, 3)
+        x.append(elements_to_state(a, e, rng.uniform(0.0, math.pi), *angles))
+        dt.append((1.0, 10.0, 30.0, 60.0, 300.0, 1200.0, 3000.0)[i % 7])
+        st.append(i % len(NAMES))
+    X = np.array(x)
+    DT = np.array(dt)
+    err = rng.normal(0.0, 1.0, (n, 6)) * np.array([0.3, 0.3, 0.3, 3e-4, 3e-4, 3e-4])
+    truth, _, ok = kepler_stm(X + err, DT)
+    assert ok.all()
+    T = T0 + DT
+    Z = np.array([razel_eci(truth[i], UNIX_EPOCH_JD + T[i] / 86400.0, STATION_LIST[st[i]])
+                  for i in range(n)])
+    Z += rng.normal(0.0, 1.0, Z.shape) * np.sqrt(np.diag(R))
+    Z[:, 1] %= 2.0 * math.pi
+    return {"x": X, "P": np.tile(P0, (n, 1, 1)), "dt": DT, "t": T, "station": np.array(st),
+            "z": Z}
+
+
+def _tracker_cycle(model: str, x0: np.ndarray, t: float, z: np.ndarray,
+                   station: int) -> tuple[np.ndarray, np.ndarray]:
+    """One cycle of the project's per-object filter (a `Tracker` past its IOD)."""
+    tracker = make_tracker(EstimatorConfig(station=",".join(NAMES), motion_model=model))
+    tracker.ekf = ExtendedKalmanFilter(x0, P0)
+    tracker.t = tracker.t_real = T0
+    out = tracker.process(Measurement(t, z, R, Kind.RANGE_AZ_EL, frame_id=NAMES[station]))
+    assert out.estimate is not None, out.detail
+    return out.estimate.x, out.estimate.P
+
+
+@pytest.mark.parametrize("model", ["kepler", "j2"])
+def test_equals_per_object_tracker(model: str) -> None:
+    o = _objects()
+    bank = BatchEKF(BatchEKFConfig(motion_model=model), STATION_LIST)
+    out = bank.step(o["x"], o["P"], o["dt"], o["z"], R, o["t"], o["station"])
+    assert (out.code == Code.FUSED).all(), [out.reason(i) for i in range(len(out.code))]
+    worst = 0.0
+    for i in range(len(o["x"])):
+        x, P = _tracker_cycle(model, o["x"][i], float(o["t"][i]), o["z"][i], int(o["station"][i]))
+        worst = max(worst, _rel(out.x[i], x), _rel(out.P[i], P))
+    # j2: fixed-step DOP853 (60 s) against the tracker's adaptive DOP853 (rtol 1e-10)
+    assert worst < TOL, worst
+
+
+def test_equals_filterpy() -> None:
+    filterpy = pytest.importorskip("filterpy.kalman")
+    o = _objects(seed=5)
+    bank = BatchEKF(BatchEKFConfig(), STATION_LIST)
+    out = bank.step(o["x"], o["P"], o["dt"], o["z"], R, o["t"], o["station"])
+
+    def residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        y = a - b
+        y[1:] = wrap_angle(y[1:])
+        return y
+
+    for i in range(len(o["x"])):
+        dt, t = float(o["dt"][i]), float(o["t"][i])
+        model = RazelModel(STATION_LIST[int(o["station"][i])], UNIX_EPOCH_JD)
+        kf = filterpy.ExtendedKalmanFilter(dim_x=6, dim_z=3)
+        kf.x, kf.P = o["x"][i].copy(), P0.copy()
+        kf.x, kf.F = kepler.propagate(kf.x, dt)
+        kf.P = kf.F @ kf.P @ kf.F.T + process_noise(dt, 1e-10)
+        kf.update(o["z"][i], model.H, model.h, R=R, args=(t,), hx_args=(t,), residual=residual)
+        assert _rel(out.x[i], kf.x) < TOL
+        assert _rel(out.P[i], kf.P) < TOL
+
+
+def test_motion_models_match_per_object() -> None:
+    o = _objects()
+    x1, phi, ok = kepler_stm(o["x"], o["dt"])
+    assert ok.all()
+    for i in range(len(x1)):
+        xr, pr = kepler.propagate(o["x"][i], float(o["dt"][i]))
+        assert _rel(x1[i], xr) < 1e-12 and _rel(phi[i], pr) < 1e-12
+    # J2: the batched fixed-step integrator equals a per-object integration with the same
+    # fixed-step DOP853 scheme (dynamics' own right-hand side and Jacobian) to round-off
+    from scipy.integrate._ivp import dop853_coefficients as dop
+
+    sel = np.arange(0, len(x1), 3)
+    x1, phi, ok = integrate_stm("j2", o["x"][sel], o["dt"][sel], max_step_s=60.0)
+    assert ok.all()
+    for k, i in enumerate(sel):
+        y = np.concatenate([o["x"][i], np.eye(6).ravel()])
+        steps = math.ceil(o["dt"][i] / 60.0)
+        h = o["dt"][i] / steps
+
+        def f(y: np.ndarray) -> np.ndarray:
+            phi0 = y[6:].reshape(6, 6)
+            return np.concatenate([dynamics.rhs("j2", y[:6]),
+                                   (dynamics.jacobian("j2", y[:6]) @ phi0).ravel()])
+
+        for _ in range(steps):
+            K = np.zeros((dop.N_STAGES, 42))
+            for s in range(dop.N_STAGES):
+                K[s] = f(y + h * (dop.A[s, :s] @ K[:s]))
+            y = y + h * (dop.B @ K)
+        assert _rel(x1[k], y[:6]) < 1e-12 and _rel(phi[k], y[6:].reshape(6, 6)) < 1e-12
+
+
+def test_mask_and_update_only() -> None:
+    o = _objects()
+    bank = BatchEKF(BatchEKFConfig(), STATION_LIST)
+    full = bank.step(o["x"], o["P"], o["dt"], o["z"], R, o["t"], o["station"])
+    mask = np.arange(len(o["x"])) % 3 == 0
+    part = bank.step(o["x"], o["P"], o["dt"], o["z"], R, o["t"], o["station"], mask=mask)
+    assert (part.code[~mask] == Code.NOT_MEASURED).all() and (part.code[mask] == 0).all()
+    assert np.array_equal(part.x[~mask], o["x"][~mask])
+    assert np.array_equal(part.P[~mask], o["P"][~mask])
+    np.testing.assert_allclose(part.x[mask], full.x[mask], rtol=1e-14, atol=0)
+    np.testing.assert_allclose(part.P[mask], full.P[mask], rtol=1e-12, atol=1e-18)
+    assert np.isnan(part.nis[~mask]).all() and np.isfinite(part.nis[mask]).all()
+    # dt == 0: an update without prediction, as ExtendedKalmanFilter.update
+    up = bank.update(o["x"], o["P"], o["z"], R, T0, o["station"])
+    for i in range(len(o["x"])):
+        model = RazelModel(STATION_LIST[int(o["station"][i])], UNIX_EPOCH_JD)
+        kf = ExtendedKalmanFilter(o["x"][i], P0)
+        res = kf.update(o["z"][i], lambda x, m=model: m.h_and_H(x, T0), R, model.angle_mask,
+                        1000.0)
+        assert res.accepted == (up.code[i] == Code.FUSED)
+        if res.accepted:
+            assert _rel(up.x[i], kf.x) < TOL and _rel(up.P[i], kf.P) < TOL
+            assert abs(up.nis[i] - res.nis) <= 1e-9 * res.nis
+
+
+def test_bad_input_rejected_per_object() -> None:
+    o = _objects()
+    bank = BatchEKF(BatchEKFConfig(), STATION_LIST)
+    clean = bank.step(o["x"], o["P"], o["dt"], o["z"], R, o["t"], o["station"])
+    z, x = o["z"].copy(), o["x"].copy()
+    Rs = np.tile(R, (len(x), 1, 1))
+    z[1, 0] = math.nan
+    x[2, 4] = math.inf
+    Rs[3, 1, 1] = math.nan
+    z[4, 0] = -1.0
+    z[5, 2] = 2.0
+    z[6, 0] += 1e4  # 10,000 km off: beyond the gate
+    x[7, :3] = 0.0  # r0 = 0: no Kepler solution
+    before_x, before_P = x.copy(), o["P"].copy()
+    out = bank.step(x, o["P"], o["dt"], z, Rs, o["t"], o["station"])
+    expected = {1: Cause.REJECTED_NONFINITE, 2: Cause.REJECTED_NONFINITE,
+                3: Cause.REJECTED_NONFINITE, 4: Cause.REJECTED_NEGATIVE_RANGE,
+                5: Cause.REJECTED_ELEVATION, 6: Cause.REJECTED_GATE,
+                7: Cause.REJECTED_NUMERIC}
+    for i in range(len(x)):
+        if i in expected:
+            assert out.reason(i) == expected[i]
+            # a rejected object keeps its state (its prediction is dropped too)
+            assert np.array_equal(out.x[i], before_x[i], equal_nan=True)
+            assert np.array_equal(out.P[i], before_P[i])
+        else:
+            assert out.reason(i) == REASONS[Code.FUSED] == ""
+            np.testing.assert_allclose(out.x[i], clean.x[i], rtol=1e-15, atol=0)
+            np.testing.assert_allclose(out.P[i], clean.P[i], rtol=1e-13, atol=1e-20)
+    assert out.nis[6] > 1000.0 and np.isnan(out.nis[1])
+
+
+def test_sigma_bound_and_inplace() -> None:
+    o = _objects()
+    cfg = BatchEKFConfig(sigma_bound=1e-4, q=1e-6)  # a bound that bites after a long gap
+    bank = BatchEKF(cfg, STATION_LIST)
+    pred = bank.predict(o["x"], o["P"], o["dt"] * 50.0)
+    assert pred.ok.all()
+    for i in range(len(o["x"])):
+        xr, F = kepler.propagate(o["x"][i], float(o["dt"][i]) * 50.0)
+        Pr = F @ P0 @ F.T + process_noise(float(o["dt"][i]) * 50.0, 1e-6)
+        Pr = bound_covariance(xr, 0.5 * (Pr + Pr.T), 1e-4)
+        assert _rel(pred.P[i], Pr) < TOL
+    x, P = o["x"].copy(), o["P"].copy()
+    out = bank.step(x, P, o["dt"], o["z"], R, o["t"], o["station"], inplace=True)
+    assert out.x is x and out.P is P and not np.array_equal(x, o["x"])
