@@ -91,6 +91,7 @@ IMPORT_KEYS = {
     "sgp4": "python3-sgp4-pip",
     "plotly": "python3-plotly-pip",  # report.html (apps/report_html.py)
     "foxglove": "python3-foxglove-sdk-pip",  # foxglove-sdk: the foxglove_bridge node
+    "ccsds_ndm": "python3-ccsds-ndm-pip",  # CCSDS OEM/TDM (apps/ccsds.py)
     "threadpoolctl": None,  # optional: used when installed (ssa_fusion.limit_blas_threads)
 }
 """Third-party modules the code imports -> their rosdep key (None: optional, undeclared)."""

@@ -17,6 +17,10 @@ _COMMANDS = {
     "report": ("ssa_fusion.apps.report", "metrics table and plots from a recorded bag"),
     "bag": ("ssa_fusion.apps.bag", "bag tools: `bag repair` makes a killed recorder's bag "
                                    "readable by any reader"),
+    "export": ("ssa_fusion.apps.ccsds", "CCSDS out of a bag: `export oem` (estimates with "
+                                        "covariance), `export tdm` (range/az/el)"),
+    "import": ("ssa_fusion.apps.ccsds", "CCSDS into a bag: `import tdm FILE --bag OUT` "
+                                        "(range/az/el that `replay` runs)"),
 }
 
 
