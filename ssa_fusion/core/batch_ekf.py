@@ -62,6 +62,7 @@ __all__ = [
     "Code",
     "Predicted",
     "integrate_stm",
+    "kepler_state",
     "kepler_stm",
 ]
 
@@ -372,6 +373,29 @@ def kepler_stm(x: ArrayLike, dt: ArrayLike,
         x1 = np.concatenate([fg[:, :1] * r + fg[:, 1:2] * v, fg[:, 2:3] * r + fg[:, 3:] * v], 1)
         ok &= np.isfinite(x1).all(axis=1) & np.isfinite(phi).all(axis=(1, 2))
     return x1, phi, ok
+
+
+def kepler_state(x: ArrayLike, dt: ArrayLike, mu: float = MU_EARTH) -> tuple[Array, BoolArray]:
+    """Propagate N two-body states by their own ``dt`` (s), without the STM.
+
+    As `kepler_stm` (same solution, about a third of its cost): returns (x1 (N, 6), ok (N,)).
+    """
+    X = np.atleast_2d(np.asarray(x, dtype=float))
+    dts = np.broadcast_to(np.asarray(dt, dtype=float), (X.shape[0],))
+    smu = math.sqrt(mu)
+    with np.errstate(all="ignore"):
+        r, v = X[:, :3], X[:, 3:]
+        r0 = np.sqrt(np.einsum("ij,ij->i", r, r))
+        sig0 = np.einsum("ij,ij->i", r, v) / smu
+        alpha = 2.0 / r0 - np.einsum("ij,ij->i", v, v) / mu
+        chi, ok = _solve_chi(r0, sig0, alpha, smu * dts)
+        u1, u2, _, rr = _kepler_terms(r0, sig0, alpha, chi)
+        f, g = 1.0 - u2 / r0, (r0 * u1 + sig0 * u2) / smu
+        fd, gd = -smu * u1 / (rr * r0), 1.0 - u2 / rr
+        x1 = np.concatenate([f[:, None] * r + g[:, None] * v, fd[:, None] * r + gd[:, None] * v],
+                            axis=1)
+        ok &= (r0 > 0.0) & np.isfinite(x1).all(axis=1)
+    return x1, ok
 
 
 def _variational(fun: Callable[..., Array], params: dict[str, float]) -> Callable[[Array], Array]:
