@@ -1,0 +1,307 @@
+"""The gap study (issue 19): forecasting through the gaps between passes of the real sky.
+
+Per run (a `sky` scenario from a start offset, with a seed) and per placeholder motion model
+(``kepler``: the filter with a two-body model and the Keplerian filters' process noise
+`KEPLER_Q`; ``j2``: the scenario's own two-body + J2 filter, q = `sky.SKY_Q`), the filter
+runs over the delivered measurements with the live Hankel-DMD surrogate as the graph drives
+it (`sky.run_dmd_ekf`). Every inter-pass gap is then scored at the truth epochs inside it
+(on a `GRID_S` grid), for the arms:
+
+* ``coast_<placeholder>`` -- the filter predicting from its estimate at the end of the pass
+  (``coast_kepler`` is the issue's `coast`, ``coast_j2`` its `j2_coast`);
+* ``dmd_ekf_<placeholder>`` -- the filter fusing the Hankel-DMD surrogate's forecasts (its
+  prediction where none came: then equal to the coast);
+* ``residual_<placeholder>`` -- variant (b), `core.residual.ResidualSurrogate`: the
+  placeholder from the pass-end estimate plus the learned residual, with the held-out
+  calibrated covariance (the filter's motion model corrected; coasting where it did not
+  forecast);
+* ``bopdmd_<placeholder>`` -- variant (a), `core.residual.bopdmd_residual_forecast`: BOP-DMD
+  on the same irregular residual series, with its bagging variance.
+
+Per gap: the mean position error over its epochs (km), the mean NEES (6 dof) of each arm,
+its length (h), whether it lies after the surrogate's training span (its first anchor at
+least `ResidualConfig.min_span_s` before the gap) and whether each surrogate forecast.
+Summaries per run are means over the gaps after the training span (all, and those of
+1.5-16 h, the issue's range), then medians [quartiles] over runs.
+
+Settings are chosen on the tuning seeds 1-3 only (`tune`); `distributions.EVALUATION_SEEDS`
+x `START_OFFSETS_H` are reported. Units: km, h.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ssa_fusion.core import residual
+from ssa_fusion.core.metrics import chi2_bounds
+from ssa_fusion.core.types import UpdateSource
+from ssa_fusion.paper import arms, sky
+
+KEPLER_Q = 1e-7
+"""Process noise of the two-body placeholder filter, (km/s^2)^2 s: the Keplerian filters' q
+(`arms.J2_COAST_Q`'s note), sized by q ~ a^2 tau for the J2 acceleration a two-body model
+leaves out in LEO (~1e-5 km/s^2, tau a quarter period); fixed before any gap was scored."""
+
+PLACEHOLDERS = {"kepler": ("kepler", KEPLER_Q, "two_body"), "j2": ("j2", sky.SKY_Q, "j2")}
+"""placeholder -> (filter motion model, q, `dynamics` model of its trajectory)."""
+
+GRID_S = 300.0
+"""The truth epochs a gap is scored at are those on this grid (s after the run's start)."""
+
+GAP_RANGE_H = (1.5, 16.0)
+"""The issue's gap lengths for the j2 target, h."""
+
+TUNING_SEEDS = (1, 2, 3)
+"""The seeds `tune` chooses the residual surrogate's settings on (start offset 0 h)."""
+
+
+def tuning_candidates() -> dict[str, residual.ResidualConfig]:
+    """The residual settings `tune` compares (name -> config): the Hill model with empirical
+    accelerations (constants, + once-, + twice-per-revolution terms), one with a 1-day
+    window, and the free basis."""
+    hill = residual.ResidualConfig(model="hill")
+    return {
+        "hill_h0": replace(hill, harmonics=0),
+        "hill_h1": replace(hill, harmonics=1),
+        "hill_h2": replace(hill, harmonics=2),
+        "hill_h1_w1d": replace(hill, harmonics=1, window_s=86400.0, min_span_s=43200.0),
+        "basis_h2": residual.ResidualConfig(model="basis"),
+    }
+
+
+CHOSEN = "w2d_h2_sec"
+"""The residual setting chosen by `tune` on the tuning seeds (see docs/HISTORY.md)."""
+
+
+@dataclass(frozen=True)
+class Case:
+    """One run: scenario name, start offset (h), seed, residual variants (name -> config),
+    and whether the BOP-DMD variant runs too."""
+
+    name: str
+    offset_h: float
+    seed: int
+    variants: tuple[tuple[str, residual.ResidualConfig], ...]
+    bopdmd: bool = True
+
+
+def _anchors(estimates: dict[float, object], real: list) -> list[tuple[float, float]]:
+    """(end epoch of each pass's last real measurement the filter fused, start epoch of the
+    next pass) for the passes of `real` the filter fused."""
+    fused = [m for m in real if m.t in estimates
+             and getattr(estimates[m.t], "update_source", None) == UpdateSource.SENSOR]
+    ps = sky.passes(fused)
+    out = []
+    for (_, last), (nxt, _) in itertools.pairwise(ps):
+        out.append((fused[last].t, fused[nxt].t))
+    if ps:
+        out.append((fused[ps[-1][1]].t, np.inf))
+    return out
+
+
+def _score(arm: arms.ArmTrajectory, x_true: np.ndarray) -> tuple[float, float]:
+    sc = arms.score(arm, x_true)
+    return sc.pos_err_mean_km, (np.nan if sc.nees_mean is None else sc.nees_mean)
+
+
+def _traj(t: np.ndarray, x: np.ndarray, P: np.ndarray) -> arms.ArmTrajectory:
+    return arms.ArmTrajectory(t, x, P, np.full(len(t), UpdateSource.FORECAST))
+
+
+def run_placeholder(sim: sky.SkySimulation, placeholder: str, case: Case) -> list[dict]:
+    """Every inter-pass gap of one run with one placeholder, scored (one dict per gap)."""
+    model, q, dyn = PLACEHOLDERS[placeholder]
+    s = sim.scenario.with_(motion_model=model, q=q)
+    c = s.estimator()
+    run = sky.run_dmd_ekf(replace(sim, scenario=s))
+    est = run.estimates if not run.forecasts else arms.run_filter(c, sim.real)
+    prop = residual.orbit_propagator(dyn)
+    surrogates = {n: residual.ResidualSurrogate(cfg, prop) for n, cfg in case.variants}
+    grid = sim.t[np.isclose(np.mod(sim.t - sim.t[0], GRID_S), 0.0)]
+    x_grid = sim.x[np.isin(sim.t, grid)]
+    gaps: list[dict] = []
+    t_first = None
+    for t_end, t_next in _anchors(est, sim.real):
+        e = est[t_end]
+        t_first = t_end if t_first is None else t_first
+        for sur in surrogates.values():
+            sur.add_anchor(t_end, e.x, e.P)
+        inside = (grid > t_end) & (grid < t_next)
+        if not np.isfinite(t_next) or not inside.any():
+            continue
+        t_gap, x_true = grid[inside], x_grid[inside]
+        row: dict = {"placeholder": placeholder, "gap_h": (t_next - t_end) / 3600.0,
+                     "since_first_h": (t_end - t_first) / 3600.0, "err": {}, "nees": {},
+                     "forecast": {}}
+        coast = arms.coast(c, e, t_gap)
+        row["err"]["coast"], row["nees"]["coast"] = _score(coast, x_true)
+        dmd = arms.at_epochs(c, run.estimates, t_gap) if run.forecasts else coast
+        row["err"]["dmd_ekf"], row["nees"]["dmd_ekf"] = _score(dmd, x_true)
+        row["dmd_forecasts"] = sum(t_end < f.t < t_next for f in run.forecasts)
+        row["forecast"]["dmd_ekf"] = row["dmd_forecasts"] > 0
+        for name, sur in surrogates.items():
+            fit = sur.fit()
+            ok = fit is not None and t_gap[-1] - t_end <= sur.cfg.max_horizon_s
+            if ok:
+                assert fit is not None
+                xf, Pf = fit.predict(t_gap)
+                ok = bool(np.all(np.isfinite(xf)) and np.all(np.isfinite(Pf)))
+            arm = _traj(t_gap, xf, Pf) if ok else coast
+            row["err"][name], row["nees"][name] = _score(arm, x_true)
+            row["forecast"][name] = ok
+        if case.bopdmd:
+            sur = next(iter(surrogates.values()))
+            out = residual.bopdmd_residual_forecast(
+                sur.cfg, residual.BopConfig(seed=case.seed), prop, np.array(sur.t),
+                np.array(sur.x), np.array(sur.P), t_gap)
+            arm = _traj(t_gap, *out) if out is not None else coast
+            row["err"]["bopdmd"], row["nees"]["bopdmd"] = _score(arm, x_true)
+            row["forecast"]["bopdmd"] = out is not None
+        gaps.append(row)
+    return gaps
+
+
+def run_case(case: Case) -> dict:
+    """One run: both placeholders, every gap scored, and the count of Hankel-DMD forecasts."""
+    base = sky.SKY_SCENARIOS[case.name]
+    s = base.with_(t0=base.t0 + 3600.0 * case.offset_h)
+    sim = sky.simulate_sky(s, seed=case.seed)
+    gaps = [g for p in PLACEHOLDERS for g in run_placeholder(sim, p, case)]
+    return {"name": case.name, "offset_h": case.offset_h, "seed": case.seed, "gaps": gaps}
+
+
+# --------------------------------------------------------------------------------------------
+# Summaries
+# --------------------------------------------------------------------------------------------
+def _q(v: list[float] | np.ndarray) -> str:
+    v = np.asarray(v, float)
+    v = v[np.isfinite(v)]
+    if not len(v):
+        return "-"
+    q25, med, q75 = np.percentile(v, [25, 50, 75])
+    return f"{med:.3g} [{q25:.3g}, {q75:.3g}]"
+
+
+def _scored(run: dict, placeholder: str, min_span_h: float,
+            gap_range: tuple[float, float] | None = None) -> list[dict]:
+    out = [g for g in run["gaps"] if g["placeholder"] == placeholder
+           and g["since_first_h"] >= min_span_h]
+    if gap_range is not None:
+        out = [g for g in out if gap_range[0] <= g["gap_h"] <= gap_range[1]]
+    return out
+
+
+def run_summary(run: dict, min_span_h: float,
+                gap_range: tuple[float, float] | None = None) -> dict:
+    """Per placeholder and arm: mean over the run's scored gaps of the gap-mean position
+    error (km) and NEES, and the fraction of gaps each surrogate forecast."""
+    out: dict = {}
+    for p in PLACEHOLDERS:
+        gs = _scored(run, p, min_span_h, gap_range)
+        if not gs:
+            continue
+        names = list(gs[0]["err"])
+        out[p] = {"gaps": len(gs),
+                  "err": {a: float(np.mean([g["err"][a] for g in gs])) for a in names},
+                  "nees": {a: float(np.nanmean([g["nees"][a] for g in gs])) for a in names},
+                  "forecast": {a: float(np.mean([g["forecast"][a] for g in gs]))
+                               for a in gs[0]["forecast"]}}
+    return out
+
+
+def summarise(name: str, runs: list[dict], min_span_h: float, variants: list[str]
+              ) -> tuple[str, dict]:
+    """Markdown for one scenario, and its JSON summary (medians over runs)."""
+    lo, hi = chi2_bounds(6)
+    arms_list = ["coast", "dmd_ekf", *variants]
+    if any("bopdmd" in g["err"] for r in runs for g in r["gaps"]):
+        arms_list.append("bopdmd")
+    lines = [f"### {name} ({len(runs)} runs: medians [quartiles] over runs of the run's mean "
+             f"over its gaps after the training span)", ""]
+    summary: dict = {"runs": len(runs)}
+    for label, rng in (("all gaps", None), (f"gaps of {GAP_RANGE_H[0]}-{GAP_RANGE_H[1]} h",
+                                             GAP_RANGE_H)):
+        per = [run_summary(r, min_span_h, rng) for r in runs]
+        lines += [f"{label}:", "",
+                  "| placeholder | arm | mean position error [km] | mean NEES (95 % band "
+                  f"[{lo:.2f}, {hi:.2f}]) | gaps forecast [%] | coast / arm |",
+                  "|---|---|---|---|---|---|"]
+        key = "all" if rng is None else "range"
+        summary[key] = {}
+        for p in PLACEHOLDERS:
+            rs = [s[p] for s in per if p in s]
+            if not rs:
+                continue
+            n_gaps = sum(s["gaps"] for s in rs)
+            summary[key][p] = {"runs": len(rs), "gaps": n_gaps}
+            for a in arms_list:
+                err = [s["err"][a] for s in rs]
+                nees = [s["nees"][a] for s in rs]
+                fc = [100 * s["forecast"][a] for s in rs] if a != "coast" else []
+                ratio = [s["err"]["coast"] / s["err"][a] for s in rs]
+                lines.append(f"| {p} | {a} | {_q(err)} | {_q(nees)} | "
+                             f"{_q(fc) if fc else '-'} | {_q(ratio)} |")
+                summary[key][p][a] = {
+                    "err_median": float(np.median(err)),
+                    "nees_median": float(np.nanmedian(nees)),
+                    "forecast_median": float(np.median(fc)) if fc else None,
+                    "forecast_mean": float(np.mean(fc)) if fc else None,
+                    "coast_over_arm_median": float(np.median(ratio)),
+                    "nees_in_band": float(np.mean((np.asarray(nees) >= lo)
+                                                  & (np.asarray(nees) <= hi)))}
+            lines.append(f"| {p} | ({n_gaps} gaps over {len(rs)} runs) | | | | |")
+        lines.append("")
+    # the issue's kepler target compares with the kepler filter's coast, the j2 one with j2
+    per = [run_summary(r, min_span_h, GAP_RANGE_H) for r in runs]
+    both = [s for s in per if "kepler" in s and "j2" in s]
+    for a in [*variants, *(["bopdmd"] if "bopdmd" in arms_list else [])]:
+        k = [s["kepler"]["err"]["coast"] / s["kepler"]["err"][a] for s in both]
+        j = [s["j2"]["err"]["coast"] / s["j2"]["err"][a] for s in both]
+        kj = [s["j2"]["err"]["coast"] / s["kepler"]["err"][a] for s in both]
+        lines.append(f"- {a}: coast(kepler) / {a}(kepler) {_q(k)}; j2_coast / {a}(j2) "
+                     f"{_q(j)}; j2_coast / {a}(kepler) {_q(kj)} (gaps "
+                     f"{GAP_RANGE_H[0]}-{GAP_RANGE_H[1]} h)")
+        summary.setdefault("ratios", {})[a] = {
+            "coast_kepler_over_kepler": float(np.median(k)) if k else None,
+            "j2_coast_over_j2": float(np.median(j)) if j else None,
+            "j2_coast_over_kepler": float(np.median(kj)) if kj else None}
+    dmd = sum(g.get("dmd_forecasts", 0) for r in runs for g in r["gaps"])
+    lines.append(f"- Hankel-DMD forecasts issued inside the gaps: {dmd} in all runs")
+    summary["hankel_forecasts"] = dmd
+    return "\n".join(lines), summary
+
+
+def run_gap_study(names: list[str], seeds: tuple[int, ...], offsets_h: tuple[float, ...],
+                  variants: dict[str, residual.ResidualConfig], bopdmd: bool = True,
+                  workers: int = 2, progress: Callable[[str], None] | None = None
+                  ) -> tuple[str, dict, list[dict]]:
+    """Every run of the scenarios over seeds x offsets in `workers` processes: (markdown,
+    summary by scenario, the raw runs). The result does not depend on `workers`."""
+    vs = tuple(variants.items())
+    todo = [Case(n, o, s, vs, bopdmd) for n in names for o in offsets_h for s in seeds]
+    runs: list[dict] = []
+    with ProcessPoolExecutor(max(1, workers)) as pool:
+        for r in pool.map(run_case, todo):
+            runs.append(r)
+            if progress:
+                progress(r["name"])
+    min_span_h = max(cfg.min_span_s for cfg in variants.values()) / 3600.0
+    texts, result = [], {}
+    for n in names:
+        text, result[n] = summarise(n, [r for r in runs if r["name"] == n], min_span_h,
+                                    list(variants))
+        texts.append(text)
+    return "\n\n".join(texts), result, runs
+
+
+def tune(names: list[str], workers: int = 2) -> tuple[str, dict]:
+    """Compare `tuning_candidates` on `TUNING_SEEDS` (offset 0 h): markdown and summary."""
+    cands = tuning_candidates()
+    text, result, _ = run_gap_study(names, TUNING_SEEDS, (0.0,), cands, bopdmd=True,
+                                    workers=workers)
+    return text, result
