@@ -133,22 +133,31 @@ _H_S = 1.0
 """Time step (s) of the central differences that give the residual's rate."""
 
 
-def state_residual(x_ref: ArrayLike, x: ArrayLike) -> Array:
-    """Return the curvilinear residual of states and its rate.
+def _with_rate(fn: Callable[[Array, Array], Array], x_ref: ArrayLike, y: ArrayLike) -> Array:
+    """Return (fn(x_ref, y position), its rate) over +-`_H_S` of straight-line motion.
 
-    Residual (k, 6) of states x against reference states x_ref (both ECI (k, 6)): the
-    `curvilinear` position residual (km) and its rate (km/s), by central differences over
-    +-1 s of straight-line motion of both (the gravity both feel cancels to O(1e-9) km).
+    x_ref (k, 6) reference states and y (k, 6) [position, rate] move in straight lines for
+    +-h; the rate is the central difference of fn (the gravity both feel cancels to
+    O(1e-9) km over 1 s).
     """
     x_ref = np.atleast_2d(np.asarray(x_ref, float))
-    x = np.atleast_2d(np.asarray(x, float))
+    y = np.atleast_2d(np.asarray(y, float))
     h = _H_S
 
     def at(dt: float) -> Array:
         ref = np.concatenate([x_ref[:, :3] + dt * x_ref[:, 3:], x_ref[:, 3:]], axis=1)
-        return curvilinear(ref, x[:, :3] + dt * x[:, 3:])
+        return fn(ref, y[:, :3] + dt * y[:, 3:])
 
-    return np.concatenate([curvilinear(x_ref, x[:, :3]), (at(h) - at(-h)) / (2 * h)], axis=1)
+    return np.concatenate([fn(x_ref, y[:, :3]), (at(h) - at(-h)) / (2 * h)], axis=1)
+
+
+def state_residual(x_ref: ArrayLike, x: ArrayLike) -> Array:
+    """Return the curvilinear residual of states and its rate.
+
+    Residual (k, 6) of ECI states x against reference states x_ref (both (k, 6)): the
+    `curvilinear` position residual (km) and its rate (km/s).
+    """
+    return _with_rate(curvilinear, x_ref, x)
 
 
 def apply_residual(x_ref: ArrayLike, res: ArrayLike) -> Array:
@@ -156,16 +165,7 @@ def apply_residual(x_ref: ArrayLike, res: ArrayLike) -> Array:
 
     The ECI states (k, 6) whose `state_residual` against x_ref (k, 6) is res (k, 6).
     """
-    x_ref = np.atleast_2d(np.asarray(x_ref, float))
-    res = np.atleast_2d(np.asarray(res, float))
-    h = _H_S
-
-    def at(dt: float) -> Array:
-        ref = np.concatenate([x_ref[:, :3] + dt * x_ref[:, 3:], x_ref[:, 3:]], axis=1)
-        return from_curvilinear(ref, res[:, :3] + dt * res[:, 3:])
-
-    return np.concatenate([from_curvilinear(x_ref, res[:, :3]), (at(h) - at(-h)) / (2 * h)],
-                          axis=1)
+    return _with_rate(from_curvilinear, x_ref, res)
 
 
 def argument_of_latitude(x: ArrayLike) -> tuple[Array, Array]:
