@@ -245,7 +245,8 @@ def write_offline(out: Path, stream: list[bagio.BagMessage], result: OfflineResu
                                (TOPIC_WITHHELD, "Measurement"), (TOPIC_FORECAST, "Measurement"),
                                (TOPIC_ESTIMATE, "StateEstimate")):
             writer.add_topic(topic, f"{bagio.MSG_PACKAGE}/msg/{msgtype}")
-        rows = [(m.t_ns, 0, m.topic, m.msg) for m in stream if m.topic in PLAYED]
+        rows = [(m.t_ns, 0, m.topic, messages.recode(m.msg, m.msgtype, classes))
+                for m in stream if m.topic in PLAYED]
         rows += [(t, 1, TOPIC_FORECAST, messages.measurement_to_msg(f, classes))
                  for t, f in result.forecasts]
         rows += [(t, 2, TOPIC_ESTIMATE, messages.estimate_to_msg(e, classes))

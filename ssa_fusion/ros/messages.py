@@ -9,6 +9,7 @@ e.g. `bagio.ROSBAGS_CLASSES` for writing bags without ROS).
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass
 from typing import Any
 
@@ -100,7 +101,25 @@ def measurement_to_msg(m: types.Measurement, classes: MsgClasses | None = None) 
         z=z,
         covariance=cov.ravel(),
         horizon=float(m.horizon),
+        shard_key=shard_key(m.object_id),
     )
+
+
+def recode(msg: Any, msgtype: str, classes: MsgClasses | None = None) -> Any:
+    """A Measurement or StateEstimate message read from a bag (of any version of the types)
+    -> the current type, through the core types: fields newer than the bag (e.g.
+    ``shard_key``) are filled in. Messages of other types are returned as they are."""
+    if not msgtype.startswith("ssa_fusion_msgs/"):
+        return msg
+    if msgtype.endswith("Measurement"):
+        return measurement_to_msg(measurement_from_msg(msg), classes)
+    return estimate_to_msg(estimate_from_msg(msg), classes)
+
+
+def shard_key(object_id: str) -> int:
+    """The Measurement message's ``shard_key`` of `object_id`: CRC-32 of its UTF-8 bytes
+    (0 .. 2**32 - 1), the same on every machine and in every process (unlike `hash`)."""
+    return zlib.crc32(object_id.encode("utf-8"))
 
 
 def measurement_from_msg(msg: Any) -> types.Measurement:

@@ -69,10 +69,7 @@ class Player:
         self.clock_pub.publish(ClockMsg(clock=messages.seconds_to_stamp(t, self.classes)))
 
     def _convert(self, m: bagio.BagMessage):
-        if m.msgtype.endswith("Measurement"):
-            return messages.measurement_to_msg(messages.measurement_from_msg(m.msg),
-                                               self.classes)
-        return messages.estimate_to_msg(messages.estimate_from_msg(m.msg), self.classes)
+        return messages.recode(m.msg, m.msgtype, self.classes)
 
     def done(self) -> bool:
         return self.next >= len(self.items)

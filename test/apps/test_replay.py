@@ -14,6 +14,8 @@ from ssa_fusion.core import types
 from ssa_fusion.ros import bagio, messages
 
 SAMPLE = Path(__file__).resolve().parents[2] / "bags" / "sample_iss_j2_rae"
+"""Recorded before Measurement had `shard_key`: read with its own stored definitions."""
+CLASSES = bagio.rosbags_classes()
 
 
 def fused(bag: Path) -> dict[float, types.StateEstimate]:
@@ -163,7 +165,7 @@ def test_unknown_topic_is_named(tmp_path, capsys):
     writer.add_topic("/radar/raw", "std_msgs/msg/String")
     store = bagio.typestore()
     for m in bagio.read_bag(SAMPLE, topics=["/ssa/measurement"]):
-        writer.write_msg("/ssa/measurement", m.t_ns, m.msg)
+        writer.write_msg("/ssa/measurement", m.t_ns, messages.recode(m.msg, m.msgtype, CLASSES))
         break
     writer.write_msg("/radar/raw", 1, store.types["std_msgs/msg/String"](data="x"))
     writer.close()
@@ -212,7 +214,7 @@ def test_replay_over_ros2_of_a_measurement_only_bag(tmp_path):
     writer.add_topic("/ssa/measurement", "ssa_fusion_msgs/msg/Measurement")
     played = list(bagio.read_bag(SAMPLE, topics=["/ssa/measurement"]))[:40]
     for m in played:
-        writer.write_msg("/ssa/measurement", m.t_ns, m.msg)
+        writer.write_msg("/ssa/measurement", m.t_ns, messages.recode(m.msg, m.msgtype, CLASSES))
     writer.close()
     record = tmp_path / "replayed"
     assert cli.main(["replay", str(bag), "--rate", "3000", "--record", str(record)]) == 0
@@ -250,7 +252,7 @@ def test_a_malformed_payload_in_the_bag_is_skipped_and_counted(tmp_path, capsys)
         writer.add_topic(topic, msgtype)
     k = next(i for i, m in enumerate(stream) if m.topic == "/ssa/measurement" and i > 100)
     for i, m in enumerate(stream):
-        writer.write_msg(m.topic, m.t_ns, m.msg)
+        writer.write_msg(m.topic, m.t_ns, messages.recode(m.msg, m.msgtype, CLASSES))
         if i == k:
             writer.write(m.topic, m.t_ns + 1, b"\x00\x01\x00\x00junk")
     writer.close()
