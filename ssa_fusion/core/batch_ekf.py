@@ -310,6 +310,46 @@ def _lagrange_basis() -> Array:
 _LAGRANGE_BASIS = _lagrange_basis()
 
 
+class _Orbit(NamedTuple):
+    """N initial states split for the universal-variable solution, with chi solved."""
+
+    r: Array  # (N, 3) km
+    v: Array  # (N, 3) km/s
+    r0: Array  # |r| km
+    sig0: Array  # r.v / sqrt(mu)
+    alpha: Array  # 1 / a, 1/km
+    tau: Array  # sqrt(mu) dt
+    chi: Array  # universal anomaly at t0 + dt
+    ok: BoolArray
+
+
+def _kepler_solve(x: ArrayLike, dt: ArrayLike, mu: float) -> _Orbit:
+    """Split N states (N, 6) and solve Kepler's equation for their own dt (s)."""
+    X = np.atleast_2d(np.asarray(x, dtype=float))
+    dts = np.broadcast_to(np.asarray(dt, dtype=float), (X.shape[0],))
+    smu = math.sqrt(mu)
+    r, v = X[:, :3], X[:, 3:]
+    r0 = np.sqrt(np.einsum("ij,ij->i", r, r))
+    sig0 = np.einsum("ij,ij->i", r, v) / smu
+    alpha = 2.0 / r0 - np.einsum("ij,ij->i", v, v) / mu
+    chi, ok = _solve_chi(r0, sig0, alpha, smu * dts)
+    return _Orbit(r, v, r0, sig0, alpha, smu * dts, chi, ok & (r0 > 0.0))
+
+
+def _lagrange(r0: AnyArray, sig0: AnyArray, alpha: AnyArray, chi: AnyArray,
+              smu: float) -> AnyArray:
+    """Lagrange coefficients (..., 4) [F, G, Fdot, Gdot] at chi."""
+    u1, u2, _, rr = _kepler_terms(r0, sig0, alpha, chi)
+    out: AnyArray = np.stack([1.0 - u2 / r0, (r0 * u1 + sig0 * u2) / smu,
+                              -smu * u1 / (rr * r0), 1.0 - u2 / rr], -1)
+    return out
+
+
+def _apply(fg: Array, r: Array, v: Array) -> Array:
+    """States [F r + G v, Fdot r + Gdot v] (N, 6) from the coefficients fg (N, 4)."""
+    return np.concatenate([fg[:, :1] * r + fg[:, 1:2] * v, fg[:, 2:3] * r + fg[:, 3:] * v], 1)
+
+
 def kepler_stm(x: ArrayLike, dt: ArrayLike,
                mu: float = MU_EARTH) -> tuple[Array, Array, BoolArray]:
     """Propagate N two-body states by their own ``dt`` with their state transition matrices.
@@ -339,26 +379,17 @@ def kepler_stm(x: ArrayLike, dt: ArrayLike,
     ok : ndarray (N,) of bool
         False where the input is not finite, r0 = 0, or Kepler's equation did not converge.
     """
-    X = np.atleast_2d(np.asarray(x, dtype=float))
-    n = X.shape[0]
-    dts = np.broadcast_to(np.asarray(dt, dtype=float), (n,))
     smu = math.sqrt(mu)
     with np.errstate(all="ignore"):
-        r, v = X[:, :3], X[:, 3:]
-        r0 = np.sqrt(np.einsum("ij,ij->i", r, r))
-        sig0 = np.einsum("ij,ij->i", r, v) / smu
-        alpha = 2.0 / r0 - np.einsum("ij,ij->i", v, v) / mu
-        chi, ok = _solve_chi(r0, sig0, alpha, smu * dts)
-        ok &= r0 > 0.0
+        o = _kepler_solve(x, dt, mu)
+        r, v, r0, n = o.r, o.v, o.r0, o.r.shape[0]
         # copy k of each object: parameter k of p = (r0, sigma0, alpha) perturbed by i h
-        pc = np.stack([r0, sig0, alpha], -1)[:, None, :] + 1j * _COMPLEX_STEP * np.eye(3)
+        pc = np.stack([r0, o.sig0, o.alpha], -1)[:, None, :] + 1j * _COMPLEX_STEP * np.eye(3)
         r0c, sig0c, alphac = pc[..., 0], pc[..., 1], pc[..., 2]  # (N, 3)
-        chi0 = np.repeat(chi[:, None], 3, axis=1).astype(complex)
+        chi0 = np.repeat(o.chi[:, None], 3, axis=1).astype(complex)
         u1, u2, u3, rr = _kepler_terms(r0c, sig0c, alphac, chi0)
-        chic = chi0 - (r0c * u1 + sig0c * u2 + u3 - smu * dts[:, None]) / rr
-        u1, u2, u3, rr = _kepler_terms(r0c, sig0c, alphac, chic)
-        coef = np.stack([1.0 - u2 / r0c, (r0c * u1 + sig0c * u2) / smu,
-                         -smu * u1 / (rr * r0c), 1.0 - u2 / rr], -1)  # (N, 3, 4)
+        chic = chi0 - (r0c * u1 + sig0c * u2 + u3 - o.tau[:, None]) / rr
+        coef = _lagrange(r0c, sig0c, alphac, chic, smu)  # (N, 3, 4)
         fg = coef[:, 0, :].real  # F, G, Fdot, Gdot (N, 4)
         dfg_dp = coef.imag / _COMPLEX_STEP  # (N, 3 params, 4)
         zero = np.zeros_like(r)
@@ -370,8 +401,8 @@ def kepler_stm(x: ArrayLike, dt: ArrayLike,
         phi = (fg @ _LAGRANGE_BASIS).reshape(n, 6, 6)
         phi[:, :3] += r[:, :, None] * dfg_dx[:, None, 0] + v[:, :, None] * dfg_dx[:, None, 1]
         phi[:, 3:] += r[:, :, None] * dfg_dx[:, None, 2] + v[:, :, None] * dfg_dx[:, None, 3]
-        x1 = np.concatenate([fg[:, :1] * r + fg[:, 1:2] * v, fg[:, 2:3] * r + fg[:, 3:] * v], 1)
-        ok &= np.isfinite(x1).all(axis=1) & np.isfinite(phi).all(axis=(1, 2))
+        x1 = _apply(fg, r, v)
+        ok = o.ok & np.isfinite(x1).all(axis=1) & np.isfinite(phi).all(axis=(1, 2))
     return x1, phi, ok
 
 
@@ -380,21 +411,10 @@ def kepler_state(x: ArrayLike, dt: ArrayLike, mu: float = MU_EARTH) -> tuple[Arr
 
     As `kepler_stm` (same solution, about a third of its cost): returns (x1 (N, 6), ok (N,)).
     """
-    X = np.atleast_2d(np.asarray(x, dtype=float))
-    dts = np.broadcast_to(np.asarray(dt, dtype=float), (X.shape[0],))
-    smu = math.sqrt(mu)
     with np.errstate(all="ignore"):
-        r, v = X[:, :3], X[:, 3:]
-        r0 = np.sqrt(np.einsum("ij,ij->i", r, r))
-        sig0 = np.einsum("ij,ij->i", r, v) / smu
-        alpha = 2.0 / r0 - np.einsum("ij,ij->i", v, v) / mu
-        chi, ok = _solve_chi(r0, sig0, alpha, smu * dts)
-        u1, u2, _, rr = _kepler_terms(r0, sig0, alpha, chi)
-        f, g = 1.0 - u2 / r0, (r0 * u1 + sig0 * u2) / smu
-        fd, gd = -smu * u1 / (rr * r0), 1.0 - u2 / rr
-        x1 = np.concatenate([f[:, None] * r + g[:, None] * v, fd[:, None] * r + gd[:, None] * v],
-                            axis=1)
-        ok &= (r0 > 0.0) & np.isfinite(x1).all(axis=1)
+        o = _kepler_solve(x, dt, mu)
+        x1 = _apply(_lagrange(o.r0, o.sig0, o.alpha, o.chi, math.sqrt(mu)), o.r, o.v)
+        ok = o.ok & np.isfinite(x1).all(axis=1)
     return x1, ok
 
 

@@ -21,6 +21,7 @@ from ssa_fusion.core.batch_ekf import (
     BatchEKFConfig,
     Code,
     integrate_stm,
+    kepler_state,
     kepler_stm,
 )
 from ssa_fusion.core.config import EstimatorConfig, make_tracker
@@ -122,10 +123,11 @@ def test_equals_filterpy() -> None:
 def test_motion_models_match_per_object() -> None:
     o = _objects()
     x1, phi, ok = kepler_stm(o["x"], o["dt"])
-    assert ok.all()
+    xs, ok_s = kepler_state(o["x"], o["dt"])
+    assert ok.all() and ok_s.all()
     for i in range(len(x1)):
         xr, pr = kepler.propagate(o["x"][i], float(o["dt"][i]))
-        assert _rel(x1[i], xr) < 1e-12 and _rel(phi[i], pr) < 1e-12
+        assert _rel(x1[i], xr) < 1e-12 and _rel(phi[i], pr) < 1e-12 and _rel(xs[i], xr) < 1e-12
     # J2: the batched fixed-step integrator equals a per-object integration with the same
     # fixed-step DOP853 scheme (dynamics' own right-hand side and Jacobian) to round-off
     from scipy.integrate._ivp import dop853_coefficients as dop
