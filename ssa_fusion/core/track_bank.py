@@ -1,0 +1,240 @@
+"""Initial orbit determination and EKF for a catalog of objects, batched: `TrackBank`.
+
+A `TrackBank` keeps one track per ``object_id`` in arrays (state (N, 6) km, km/s ECI,
+covariance (N, 6, 6), epoch (N,) Unix s). `TrackBank.process` takes a batch of range/
+azimuth/elevation measurements of any objects, in epoch order, and applies the per-object
+`tracker.Tracker` rules to each object, vectorised over objects:
+
+* an object without a track collects its first measurements in its own
+  `initiation.OrbitInitiator` (Herrick-Gibbs over one pass of one station, ``iod_samples``
+  measurements within ``iod_max_span_s``) until the batch is solved and its track starts;
+* an object with a track predicts to each measurement and fuses it (`batch_ekf.BatchEKF`:
+  one call per *round*, a round holding at most one measurement per object: the k-th
+  measurement of every object in the batch goes in round k);
+* a measurement older than the object's last fused one is stale, one at the same epoch a
+  duplicate (the per-object tracker's rules: a second station measuring at the same epoch
+  is refused too); a rejected update leaves the track as it was.
+
+Plausibility (`validation.measurement_problem`) is the caller's: the node checks each
+message as it arrives. Not done here (the per-object tracker's): forecasts and their
+rollback, light time, re-initialisation after ``reinit_after`` gate misses, kinds other
+than range/az/el.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .batch_ekf import REASONS, BatchEKF, BatchEKFConfig, Code
+from .frames import Station
+from .initiation import InitialState, OrbitInitiator
+from .measurement import StationModels
+from .types import Cause, Kind, Measurement
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class TrackBankConfig:
+    """Settings of a `TrackBank`.
+
+    Attributes
+    ----------
+    ekf : BatchEKFConfig
+        Motion model, process noise, gate, covariance bound of every track.
+    iod_samples : int
+        Measurements per initial orbit determination (>= 3: Herrick-Gibbs).
+    iod_max_span_s : float
+        Longest span of one IOD batch, s (one pass).
+    p0_sigma : tuple of float, (6,)
+        Standard deviations added in quadrature to the IOD covariance, km and km/s.
+    """
+
+    ekf: BatchEKFConfig = field(default_factory=BatchEKFConfig)
+    iod_samples: int = 3
+    iod_max_span_s: float = 600.0
+    p0_sigma: tuple[float, ...] = (1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3)
+
+    def __post_init__(self) -> None:
+        """Check the IOD settings (ValueError naming the field)."""
+        if self.iod_samples < 3:
+            raise ValueError(f"iod_samples must be >= 3 (Herrick-Gibbs), got {self.iod_samples}")
+        if len(self.p0_sigma) != 6:
+            raise ValueError(f"p0_sigma needs 6 values, got {len(self.p0_sigma)}")
+
+
+@dataclass(frozen=True)
+class BankResult:
+    """What `TrackBank.process` did with a batch of M measurements (input order).
+
+    Attributes
+    ----------
+    cause : list of str
+        Per measurement: "" when fused (or when it started a track), else a `types.Cause`
+        key (``iod_pending`` while an IOD batch is collected).
+    fused : ndarray (K,) of int
+        Indices of the measurements that produced an estimate (fused, or ended an IOD
+        batch), in processing order.
+    x, P : ndarray (K, 6), (K, 6, 6)
+        The estimate each of them produced, at its epoch (km, km/s ECI; km^2 ...).
+    nis : ndarray (K,)
+        Its normalized innovation squared (0 for a track started by IOD).
+    """
+
+    cause: list[str]
+    fused: NDArray[np.int64]
+    x: Array
+    P: Array
+    nis: Array
+
+
+class TrackBank:
+    """Tracks of many objects (module docstring).
+
+    Parameters
+    ----------
+    config : TrackBankConfig
+    stations : dict of str to frames.Station
+        The network: the ``frame_id`` of a measurement names its station.
+    capacity : int
+        Initial number of rows (grows by doubling as objects arrive).
+    """
+
+    def __init__(self, config: TrackBankConfig, stations: dict[str, Station],
+                 capacity: int = 64) -> None:
+        self.config = config
+        self.ekf = BatchEKF(config.ekf, list(stations.values()))
+        self.models = StationModels(stations, config.ekf.jd0)
+        self.rows: dict[str, int] = {}
+        self.object_ids: list[str] = []
+        cap = max(1, int(capacity))
+        self.x = np.zeros((cap, 6))
+        self.P = np.zeros((cap, 6, 6))
+        self.t = np.full(cap, -math.inf)
+        """Epoch of each track's state (Unix s), -inf before its IOD."""
+        self.tracking = np.zeros(cap, dtype=bool)
+        self._initiators: dict[int, OrbitInitiator] = {}
+
+    def __len__(self) -> int:
+        """Return the number of objects heard of."""
+        return len(self.object_ids)
+
+    def _placeholder(self, x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Propagate one state by the motion model: (x, F) `dt` s later (for the IOD)."""
+        x1, F, _ = self.ekf.propagate(np.asarray(x, dtype=float)[None], np.array([dt]))
+        return x1[0], F[0]
+
+    def row(self, object_id: str) -> int:
+        """Return the row of `object_id`, added (without a track) when new."""
+        r = self.rows.get(object_id)
+        if r is None:
+            r = self.rows[object_id] = len(self.object_ids)
+            self.object_ids.append(object_id)
+            if r >= self.t.size:
+                grow = self.t.size
+                self.x = np.concatenate([self.x, np.zeros((grow, 6))])
+                self.P = np.concatenate([self.P, np.zeros((grow, 6, 6))])
+                self.t = np.concatenate([self.t, np.full(grow, -math.inf)])
+                self.tracking = np.concatenate([self.tracking, np.zeros(grow, dtype=bool)])
+        return r
+
+    def process(self, t: ArrayLike, object_ids: Sequence[str], frame_ids: Sequence[str],
+                z: ArrayLike, R: ArrayLike) -> BankResult:
+        """Fuse a batch of M range/az/el measurements (module docstring).
+
+        Parameters
+        ----------
+        t : array_like (M,)
+            Epochs, Unix s, non-decreasing.
+        object_ids, frame_ids : sequence of str (M,)
+            The object measured and the station measuring it (an id of the network).
+        z : array_like (M, 3)
+            Range km, azimuth rad, elevation rad.
+        R : array_like (M, 3, 3)
+            Noise covariances, km^2, rad^2.
+        """
+        tt = np.asarray(t, dtype=float)
+        zz = np.asarray(z, dtype=float).reshape(-1, 3)
+        RR = np.asarray(R, dtype=float).reshape(-1, 3, 3)
+        m = tt.size
+        rows = np.array([self.row(o) for o in object_ids], dtype=np.int64)
+        station = np.array([self.ekf.index.get(f, -1) for f in frame_ids], dtype=np.int64)
+        cause = [""] * m
+        out_i: list[NDArray[np.int64]] = []
+        out_x: list[Array] = []
+        out_P: list[Array] = []
+        out_nis: list[Array] = []
+        for i in np.flatnonzero(station < 0).tolist():
+            cause[i] = Cause.REJECTED_FRAME
+        # rank of each measurement among its object's in this batch: its round
+        order = np.lexsort((np.arange(m), rows))
+        first = np.r_[True, rows[order][1:] != rows[order][:-1]]
+        start = np.maximum.accumulate(np.where(first, np.arange(m), 0))
+        rank = np.empty(m, dtype=np.int64)
+        rank[order] = np.arange(m) - start
+        for k in range(int(rank.max(initial=-1)) + 1):
+            idx = np.flatnonzero((rank == k) & (station >= 0))
+            if not idx.size:
+                continue
+            tracked = self.tracking[rows[idx]]
+            for i in idx[~tracked].tolist():  # initial orbit determination, per object
+                started = self._initiate(int(rows[i]), Measurement(
+                    float(tt[i]), zz[i], RR[i], kind=Kind.RANGE_AZ_EL,
+                    object_id=object_ids[i], frame_id=frame_ids[i]))
+                if isinstance(started, str):
+                    cause[i] = started
+                else:
+                    out_i.append(np.array([i]))
+                    out_x.append(started.x[None])
+                    out_P.append(started.P[None])
+                    out_nis.append(np.zeros(1))
+            idx = idx[tracked]
+            if not idx.size:
+                continue
+            r = rows[idx]
+            dt = tt[idx] - self.t[r]
+            for i in idx[dt < 0].tolist():
+                cause[i] = Cause.REJECTED_STALE
+            for i in idx[dt == 0].tolist():
+                cause[i] = Cause.REJECTED_DUPLICATE
+            go = dt > 0
+            idx, r, dt = idx[go], r[go], dt[go]
+            if not idx.size:
+                continue
+            res = self.ekf.step(self.x[r], self.P[r], dt, zz[idx], RR[idx], tt[idx],
+                                station[idx])
+            ok = res.code == Code.FUSED
+            for i, c in zip(idx[~ok].tolist(), res.code[~ok].tolist(), strict=True):
+                cause[i] = REASONS[c]
+            r_ok = r[ok]
+            self.x[r_ok] = res.x[ok]
+            self.P[r_ok] = res.P[ok]
+            self.t[r_ok] = tt[idx[ok]]
+            out_i.append(idx[ok])
+            out_x.append(res.x[ok])
+            out_P.append(res.P[ok])
+            out_nis.append(res.nis[ok])
+        if out_i:
+            return BankResult(cause, np.concatenate(out_i), np.concatenate(out_x),
+                              np.concatenate(out_P), np.concatenate(out_nis))
+        return BankResult(cause, np.zeros(0, np.int64), np.zeros((0, 6)), np.zeros((0, 6, 6)),
+                          np.zeros(0))
+
+    def _initiate(self, row: int, m: Measurement) -> InitialState | str:
+        """Feed `m` to the row's initiator: the initial state once solved, else the cause."""
+        init = self._initiators.get(row)
+        if init is None:
+            init = self._initiators[row] = OrbitInitiator(self._placeholder, self.models, 6)
+        out = init.add(m, self.config.iod_samples, self.config.p0_sigma,
+                       self.config.iod_max_span_s)
+        if isinstance(out, tuple):
+            return out[0]
+        del self._initiators[row]
+        self.x[row], self.P[row], self.t[row] = out.x, out.P, out.t
+        self.tracking[row] = True
+        return out
