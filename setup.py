@@ -34,6 +34,7 @@ setup(
             "filter = ssa_fusion.nodes.entry:filter_node",
             "recorder = ssa_fusion.nodes.entry:recorder",
             "foxglove_bridge = ssa_fusion.nodes.entry:foxglove_bridge",
+            "catalog_filter = ssa_fusion.nodes.entry:catalog_filter",
         ],
     },
 )

@@ -68,6 +68,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--foxglove-port", type=_port, default=FOXGLOVE_PORT,
                    help=f"port of that WebSocket server (default {FOXGLOVE_PORT}; 0 = any free)")
     add_domain_id(p)
+    from ssa_fusion.apps import live_catalog
+
+    live_catalog.add_arguments(p)
 
 
 FOXGLOVE_PORT = 8765
@@ -234,6 +237,10 @@ def late_warning(late: evaluate.LateForecasts, counters: dict[str, int]) -> str 
 
 
 def run(args: argparse.Namespace) -> int:
+    if getattr(args, "catalog", None) is not None:
+        from ssa_fusion.apps import live_catalog
+
+        return live_catalog.run(args)
     s = sky.SKY_SCENARIOS.get(args.scenario) or scenarios.get(args.scenario)
     out: Path = args.out or default_out(s.name)
     bag = args.bag or out / "bag"

@@ -13,12 +13,13 @@ azimuth/elevation measurements of any objects, in epoch order, and applies the p
   measurement of every object in the batch goes in round k);
 * a measurement older than the object's last fused one is stale, one at the same epoch a
   duplicate (the per-object tracker's rules: a second station measuring at the same epoch
-  is refused too); a rejected update leaves the track as it was.
+  is refused too); a rejected update leaves the track as it was;
+* after ``reinit_after`` measurements in a row beyond the gate the track is dropped and
+  its IOD starts again from the last of them (`Cause.REINITIALISED`).
 
 Plausibility (`validation.measurement_problem`) is the caller's: the node checks each
 message as it arrives. Not done here (the per-object tracker's): forecasts and their
-rollback, light time, re-initialisation after ``reinit_after`` gate misses, kinds other
-than range/az/el.
+rollback, light time, kinds other than range/az/el.
 """
 
 from __future__ import annotations
@@ -53,12 +54,16 @@ class TrackBankConfig:
         Longest span of one IOD batch, s (one pass).
     p0_sigma : tuple of float, (6,)
         Standard deviations added in quadrature to the IOD covariance, km and km/s.
+    reinit_after : int
+        Measurements of an object in a row refused by the gate after which its track is
+        dropped and its IOD starts again from the last of them (0: never).
     """
 
     ekf: BatchEKFConfig = field(default_factory=BatchEKFConfig)
     iod_samples: int = 3
     iod_max_span_s: float = 600.0
     p0_sigma: tuple[float, ...] = (1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3)
+    reinit_after: int = 0
 
     def __post_init__(self) -> None:
         """Check the IOD settings (ValueError naming the field)."""
@@ -118,6 +123,8 @@ class TrackBank:
         self.t = np.full(cap, -math.inf)
         """Epoch of each track's state (Unix s), -inf before its IOD."""
         self.tracking = np.zeros(cap, dtype=bool)
+        self.gate_misses = np.zeros(cap, dtype=np.int64)
+        """Measurements refused by the gate in a row, per object."""
         self._initiators: dict[int, OrbitInitiator] = {}
 
     def __len__(self) -> int:
@@ -141,6 +148,8 @@ class TrackBank:
                 self.P = np.concatenate([self.P, np.zeros((grow, 6, 6))])
                 self.t = np.concatenate([self.t, np.full(grow, -math.inf)])
                 self.tracking = np.concatenate([self.tracking, np.zeros(grow, dtype=bool)])
+                self.gate_misses = np.concatenate([self.gate_misses,
+                                                   np.zeros(grow, dtype=np.int64)])
         return r
 
     def process(self, t: ArrayLike, object_ids: Sequence[str], frame_ids: Sequence[str],
@@ -211,6 +220,15 @@ class TrackBank:
             ok = res.code == Code.FUSED
             for i, c in zip(idx[~ok].tolist(), res.code[~ok].tolist(), strict=True):
                 cause[i] = REASONS[c]
+            gate = res.code == Code.GATE
+            self.gate_misses[r[ok]] = 0
+            self.gate_misses[r[gate]] += 1
+            limit = self.config.reinit_after
+            if limit:
+                for i in idx[gate & (self.gate_misses[r] >= limit)].tolist():
+                    cause[i] = self._reinitialise(int(rows[i]), Measurement(
+                        float(tt[i]), zz[i], RR[i], kind=Kind.RANGE_AZ_EL,
+                        object_id=object_ids[i], frame_id=frame_ids[i]))
             r_ok = r[ok]
             self.x[r_ok] = res.x[ok]
             self.P[r_ok] = res.P[ok]
@@ -224,6 +242,15 @@ class TrackBank:
                               np.concatenate(out_P), np.concatenate(out_nis))
         return BankResult(cause, np.zeros(0, np.int64), np.zeros((0, 6)), np.zeros((0, 6, 6)),
                           np.zeros(0))
+
+    def _reinitialise(self, row: int, m: Measurement) -> str:
+        """Drop the row's track (it lost its object) and start its IOD again from `m`."""
+        self.tracking[row] = False
+        self.t[row] = -math.inf
+        self.gate_misses[row] = 0
+        self._initiators.pop(row, None)
+        self._initiate(row, m)
+        return Cause.REINITIALISED
 
     def _initiate(self, row: int, m: Measurement) -> InitialState | str:
         """Feed `m` to the row's initiator: the initial state once solved, else the cause."""

@@ -72,16 +72,18 @@ class Diagnostics:
                 self.node.get_logger().info(text)
 
     def subscribe(self, msg_type: Any, topic: str, callback: Callable[[Any], None],
-                  qos: QoSProfile, raw: bool = False) -> Any:
+                  qos: QoSProfile, raw: bool = False, content_filter: Any = None) -> Any:
         """`create_subscription` whose matched-publisher count is reported on /diagnostics
         (key `MATCHED_KEY + topic`), at once when it changes. A sender can then wait until this
         reader has matched it, not only until its writer has matched the reader: DDS drops
-        what a writer sends before the reader's side of the match exists."""
+        what a writer sends before the reader's side of the match exists. `content_filter`
+        (rclpy `ContentFilterOptions`): DDS delivers only the samples it accepts."""
         if not raw:  # take the bytes and decode them here: a payload that does not decode
             callback = self._decoding(msg_type, topic, callback)  # is counted, not lost
         sub = self.node.create_subscription(
             msg_type, topic, callback, qos, raw=True,
             event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.publish()),
+            content_filter_options=content_filter,
         )
         self._watched.append(sub)
         return sub

@@ -45,6 +45,9 @@ class SensorSimDefaults:
     wait_for: tuple[str, ...] = ("",)
     wait_for_readers: tuple[str, ...] = ("",)
     tick: float = 0.01
+    catalog: str = ""
+    objects: int = 0
+    synthetic: int = 0
 
 
 @dataclass(frozen=True)
@@ -88,6 +91,28 @@ class FilterDefaults:
     max_clock_lead: float = 3600.0
 
 
+@dataclass(frozen=True)
+class CatalogFilterDefaults:
+    """catalog_filter: the real-sky scenarios' filter (`paper.sky.SkyScenario`: two-body +
+    J2, P0 floor 1 km / 1 m/s, q = 1e-7 m^2/s^3 = 1e-13 km^2/s^3, IOD from 7 measurements
+    within 300 s, initialised again after 10 gate misses, covariance bounded by the orbit;
+    no light time)."""
+
+    station: str = "radar_network"
+    motion_model: str = "j2"
+    q: float = 1e-7
+    gate: float = 1000.0
+    p0_sigma: tuple[float, ...] = (1000.0, 1000.0, 1000.0, 1.0, 1.0, 1.0)
+    iod_samples: int = 7
+    iod_max_span: float = 300.0
+    reinit_after: int = 10
+    sigma_bound: float = 2.0
+    shards: int = 1
+    shard: int = 0
+    batch_period: float = 0.05
+    max_clock_lead: float = 3600.0
+
+
 BAG_PATTERN = "bags/ssa_%Y%m%d_%H%M%S"
 """`time.strftime` pattern of the recorder's default bag directory (start time)."""
 
@@ -108,6 +133,7 @@ SENSOR_SIM = SensorSimDefaults()
 SURROGATE = SurrogateDefaults()
 FILTER = FilterDefaults()
 RECORDER = RecorderDefaults()
+CATALOG_FILTER = CatalogFilterDefaults()
 
 NODES = {"sensor_sim": SENSOR_SIM, "surrogate": SURROGATE, "filter": FILTER,
          "recorder": RECORDER}

@@ -16,7 +16,7 @@ import sys
 
 from ssa_fusion.nodes import start_process
 
-NODES = ("sensor_sim", "surrogate", "filter", "recorder", "foxglove_bridge")
+NODES = ("sensor_sim", "surrogate", "filter", "recorder", "foxglove_bridge", "catalog_filter")
 
 
 def run_node(name: str, args: list[str] | None = None) -> int:
@@ -45,6 +45,10 @@ def recorder() -> int:
 
 def foxglove_bridge() -> int:
     return run_node("foxglove_bridge")
+
+
+def catalog_filter() -> int:
+    return run_node("catalog_filter")
 
 
 if __name__ == "__main__":

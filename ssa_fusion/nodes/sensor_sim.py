@@ -21,6 +21,7 @@ simulation are what it simulates.
 from __future__ import annotations
 
 import enum
+import math
 import time
 from typing import Any
 
@@ -32,7 +33,9 @@ from rosgraph_msgs.msg import Clock
 from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
 from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 
-from ssa_fusion.core import types
+from ssa_fusion.core import catalog as catalog_io
+from ssa_fusion.core import survey, types
+from ssa_fusion.core.stations import SENSORS, SensorType
 from ssa_fusion.nodes import start_process
 from ssa_fusion.nodes.common import (
     Diagnostics,
@@ -120,6 +123,10 @@ def _noise_check(value: list) -> str | None:
     return "needs 3 values, each a finite number >= 0 (or [-1.0])"
 
 
+def _count_check(value: Any) -> str | None:
+    return None if isinstance(value, int) and value >= 0 else "must be an integer >= 0"
+
+
 def _wait_check(value: list) -> str | None:
     for item in value:
         topic, _, count = item.partition("=")
@@ -197,13 +204,35 @@ class SensorSim(Node):
         ) if x]
         self.readers = ReadyNodes(self)
         tick = declare(self, "tick", d.tick, "wall s between publication ticks", positive)
+        catalog = declare(self, "catalog", d.catalog,
+                          "element sets (TLE, 3LE, OMM XML/CSV) of the objects to simulate; "
+                          "'' = the scenario's one object")
+        objects = declare(self, "objects", d.objects,
+                          "catalog: simulate the first N objects (0 = all)", _count_check)
+        synthetic = declare(self, "synthetic", d.synthetic,
+                            "catalog: spread its first element set into N objects on orbits "
+                            "of the same regime (0 = the catalog's own objects)", _count_check)
 
-        if real_sky is None:
+        self.catalog: survey.Observations | None = None
+        if catalog:
+            if real_sky is None:
+                raise ParameterError(f"parameter 'catalog' = {catalog!r}: needs a real-sky "
+                                     f"scenario (its radars observe the catalog); known: "
+                                     f"{list(sky.SKY_SCENARIOS)}")
+            self.catalog, summary = self._catalog(real_sky, catalog, objects, synthetic,
+                                                  duration, seed)
+            self.schedule = []
+            self.times = self.catalog.t
+        elif real_sky is None:
             self.schedule, summary = self._paper(base, cadence, track, gap, gaps, after, noise,
                                                  seed)
         else:
             self.schedule, summary = self._sky(real_sky, cadence, duration, gaps, seed)
-        self.times = np.array([e[0] for e in self.schedule])
+        if self.catalog is None:
+            self.times = np.array([e[0] for e in self.schedule])
+        if not self.times.size:
+            raise ParameterError(f"scenario {name!r}: nothing to publish (no measurement and "
+                                 "no truth epoch)")
 
         self.pub_clock = self.create_publisher(Clock, TOPIC_CLOCK, DATA_QOS)
         self.pub_meas = self.create_publisher(MeasurementMsg, TOPIC_MEASUREMENT, DATA_QOS)
@@ -261,6 +290,30 @@ class SensorSim(Node):
                 f"from {', '.join(s.sensors)} over {s.duration_s / 3600:g} h, truth every "
                 f"{cadence} s, outages {list(s.outages)}")
 
+    def _catalog(self, s: sky.SkyScenario, path: str, objects: int, synthetic: int,
+                 duration: float, seed: int) -> tuple[survey.Observations, str]:
+        """The measurements of a catalog by the scenario's radars (no truth topic: the truth
+        is SGP4 of the catalog, recomputed by whoever scores the run)."""
+        try:
+            entries = catalog_io.read_catalog(path)
+        except ValueError as exc:
+            raise ParameterError(f"parameter 'catalog' = {path!r}: {exc}") from exc
+        if synthetic:
+            entries = survey.synthetic_catalog(entries[0], synthetic, seed=seed)
+        if objects:
+            entries = entries[:objects]
+        radars = [SENSORS[n] for n in s.sensors if SENSORS[n].type == SensorType.RADAR]
+        if not radars:
+            raise ParameterError(f"scenario {s.name!r} has no radar to observe a catalog")
+        t0 = 60.0 * math.ceil(max(e.epoch_unix for e in entries) / 60.0)
+        span = duration or s.duration_s
+        obs = survey.observe_catalog(entries, radars, t0, span, seed=seed)
+        self.catalog_ids = list(obs.object_ids)
+        self.catalog_R = [r.R for r in radars]
+        return obs, (f"catalog {path}: {len(entries)} objects, {len(obs)} measurements from "
+                     f"{', '.join(r.station.name for r in radars)} over {span / 3600:g} h "
+                     f"from t0={t0:.0f}")
+
     def waiting_for(self) -> list[str]:
         """What start-up still waits for: '/topic=count' entries whose subscriber count is
         short (matched by this node's own publishers where it publishes the topic), then
@@ -298,8 +351,12 @@ class SensorSim(Node):
         times = self.times
         now = times[0] + (time.monotonic() - self.wall0) * self.time_scale
         stop = int(np.searchsorted(times, now, side="right"))
+        publish = self.publish_event
+        if self.catalog is not None:  # one clock per tick, ahead of the tick's measurements
+            self.publish_clock(min(now, times[-1]))
+            publish = self.publish_catalog
         for i in range(self.next, stop):
-            self.publish_event(i)
+            publish(i)
         self.next = max(self.next, stop)
         self.publish_clock(min(now, times[-1]))
         if self.next >= len(times):
@@ -325,6 +382,18 @@ class SensorSim(Node):
         else:
             self.pub_meas.publish(messages.measurement_to_msg(content))
             self.diag.counts["published"] += 1
+
+    def publish_catalog(self, i: int) -> None:
+        """Publish catalog measurement `i` (its epoch is at or before the clock published)."""
+        obs = self.catalog
+        assert obs is not None
+        k = int(obs.sensor[i])
+        m = types.Measurement(float(obs.t[i]), obs.z[i], self.catalog_R[k],
+                              kind=types.Kind.RANGE_AZ_EL,
+                              object_id=self.catalog_ids[int(obs.obj[i])],
+                              frame_id=obs.sensors[k].station.name)
+        self.pub_meas.publish(messages.measurement_to_msg(m))
+        self.diag.counts["published"] += 1
 
     def done(self) -> None:
         self.finished = True

@@ -1,0 +1,264 @@
+"""`ssa-fusion live --catalog FILE`: a catalog of objects through the live graph.
+
+sensor_sim simulates the radars of the scenario (`--scenario` when it is a real-sky one,
+else ``iss_network``'s radars) measuring every object of the catalog (SGP4/SDP4 truth,
+`core.survey`); `--shards` K ``catalog_filter`` processes each track the objects of their
+shard (DDS content filter on ``Measurement.shard_key``); the recorder records everything.
+No surrogate runs in a catalog graph (per-object surrogates are not scheduled yet).
+
+At the end it prints what happened to every measurement (published by the simulator,
+recorded, received by the shards, fused, pending in an IOD batch, rejected by cause: none
+may be missing), the real-time factor the run achieved, each shard's objects and memory, and
+the estimates' position error against the SGP4 truth of the catalog. ``catalog.json`` in
+the run directory holds the same numbers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections import Counter, defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ssa_fusion.apps import live
+from ssa_fusion.core import catalog as catalog_io
+from ssa_fusion.core import survey
+from ssa_fusion.paper import sky
+from ssa_fusion.ros import bagio, messages
+from ssa_fusion.ros.processes import Graph
+from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS, TOPIC_ESTIMATE, TOPIC_MEASUREMENT
+
+DEFAULT_SCENARIO = "iss_network"
+"""Whose radars observe a catalog when `--scenario` is not a real-sky scenario."""
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The catalog options of `ssa-fusion live`."""
+    p.add_argument("--catalog", type=Path, default=None,
+                   help="run a catalog instead of the scenario's one object: element sets "
+                        "(TLE, 3LE, OMM XML/CSV), e.g. config/catalogs/sample.tle")
+    p.add_argument("--objects", type=int, default=0,
+                   help="catalog: only its first N objects (default all)")
+    p.add_argument("--synthetic", type=int, default=0,
+                   help="catalog: spread its first element set into N objects of the same "
+                        "orbital regime (core.survey.synthetic_catalog)")
+    p.add_argument("--duration", type=float, default=0.0,
+                   help="catalog: hours of sim time (default: the scenario's)")
+    p.add_argument("--shards", type=int, default=1,
+                   help="catalog: filter processes, each owning the objects of its shard "
+                        "(default 1)")
+
+
+def check(args: argparse.Namespace) -> str | None:
+    """Why the catalog options cannot run, or None."""
+    if args.objects < 0 or args.synthetic < 0 or args.duration < 0:
+        return "--objects, --synthetic and --duration must be >= 0"
+    if not 1 <= args.shards <= 64:
+        return "--shards must be in 1..64"
+    try:
+        catalog_io.read_catalog(args.catalog)
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
+def entries_of(args: argparse.Namespace) -> list[catalog_io.CatalogEntry]:
+    """The objects the run simulates (as sensor_sim builds them from the same options)."""
+    entries = catalog_io.read_catalog(args.catalog)
+    if args.synthetic:
+        entries = survey.synthetic_catalog(entries[0], args.synthetic, seed=args.seed)
+    return entries[: args.objects] if args.objects else entries
+
+
+def node_names(shards: int) -> list[str]:
+    return [f"catalog_filter_{k}" for k in range(shards)]
+
+
+def _statuses(diagnostics: list) -> dict[str, dict[str, str]]:
+    """The last /diagnostics key/values of each node (by node name)."""
+    out: dict[str, dict[str, str]] = {}
+    for msg in diagnostics:
+        for status in msg.status:
+            out[status.name] = {kv.key: kv.value for kv in status.values}
+    return out
+
+
+def _rss_kib(pid: int) -> int:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1])
+    except OSError:
+        pass
+    return 0
+
+
+def position_errors(entries: list[catalog_io.CatalogEntry],
+                    estimates: dict[str, list[tuple[float, np.ndarray]]]) -> np.ndarray:
+    """|r_estimate - r_SGP4| (km) of every estimate (object id -> (t, x) list)."""
+    by_id = {e.object_id: e for e in entries}
+    errs = []
+    for oid, rows in estimates.items():
+        entry = by_id.get(oid)
+        if entry is None or not rows:
+            continue
+        t = np.array([r[0] for r in rows])
+        x = catalog_io.catalog_states([entry], t).x[0]
+        r = np.array([r[1][:3] for r in rows])
+        errs.append(np.linalg.norm(r - x[:, :3], axis=1))
+    return np.concatenate(errs) if errs else np.zeros(0)
+
+
+def run(args: argparse.Namespace) -> int:
+    problem = check(args)
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
+        return 2
+    s = sky.SKY_SCENARIOS.get(args.scenario) or sky.SKY_SCENARIOS[DEFAULT_SCENARIO]
+    out: Path = args.out or live.default_out(f"catalog_{s.name}")
+    bag = args.bag or out / "bag"
+    if bag.exists():
+        print(f"error: bag {bag} exists already; choose another --bag or --out", file=sys.stderr)
+        return 2
+    out.mkdir(parents=True, exist_ok=True)
+    entries = entries_of(args)
+    sim_s = args.duration * 3600.0 or s.duration_s
+    names = node_names(args.shards)
+    readers = ["recorder:" + TOPIC_MEASUREMENT, "recorder:" + TOPIC_ESTIMATE,
+               *(f"{n}:{TOPIC_MEASUREMENT}" for n in names)]
+    sensor = {"scenario": s.name, "catalog": str(Path(args.catalog).resolve()),
+              "objects": args.objects, "synthetic": args.synthetic, "duration": sim_s,
+              "time_scale": args.time_scale, "seed": args.seed,
+              "wait_for": [f"{TOPIC_MEASUREMENT}={args.shards + 1}"],
+              "wait_for_readers": readers}
+    graph = Graph(out / "logs", args.domain_id)
+    print(f"live: catalog {args.catalog} ({len(entries)} objects), radars of {s.name}, "
+          f"{sim_s / 3600:g} h of sim time at {args.time_scale:g}x, {args.shards} filter "
+          f"shard(s); ROS domain {graph.domain_id}; logs in {out}/logs", flush=True)
+    t_start = time.monotonic()
+    rss: dict[str, int] = {}
+    try:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from ssa_fusion_msgs.msg import StateEstimate
+
+        diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
+        graph.start_node("recorder", params={"use_sim_time": True, "bag": str(bag)})
+        shards = [graph.start_node("catalog_filter", "-r", f"__node:={n}", name=n, params={
+            "use_sim_time": True, "shards": args.shards, "shard": k,
+            "station": ",".join(st.station.name for st in _radars(s))})
+            for k, n in enumerate(names)]
+        sim = graph.start_node("sensor_sim", params=sensor)
+        graph.wait_exit(sim, timeout=300.0 + 3.0 * sim_s / args.time_scale)
+        seen = graph.collect(StateEstimate, TOPIC_ESTIMATE)
+        graph.wait_quiet(lambda: len(seen), quiet_s=2.0, limit_s=60.0)
+        graph.wait_quiet(lambda: len(diagnostics), quiet_s=1.5, limit_s=5.0)
+        rss = {n: _rss_kib(p.popen.pid) for n, p in zip(names, shards, strict=True)}
+    finally:
+        problems = graph.close()
+    if problems:
+        print("error: node process(es) ended badly:\n" + "\n\n".join(problems), file=sys.stderr)
+        return 1
+    wall = time.monotonic() - t_start
+    summary = summarise(bag, entries, _statuses(diagnostics), names, rss,
+                        live.sensor_wall_times(out / "logs" / "sensor_sim.err"), sim_s)
+    summary.update({"catalog": str(args.catalog), "objects": len(entries), "scenario": s.name,
+                    "time_scale": args.time_scale, "shards": args.shards, "wall_s": wall})
+    (out / "catalog.json").write_text(json.dumps(summary, indent=2))
+    print(table(summary))
+    return 0 if summary["lost_measurements"] == 0 else 1
+
+
+def _radars(s: sky.SkyScenario) -> list[Any]:
+    from ssa_fusion.core.stations import SENSORS, SensorType
+
+    return [SENSORS[n] for n in s.sensors if SENSORS[n].type == SensorType.RADAR]
+
+
+def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
+              status: dict[str, dict[str, str]], names: list[str], rss: dict[str, int],
+              sim_wall: tuple[float, float] | None, sim_s: float) -> dict[str, Any]:
+    """The run's accounting (every measurement), speed, memory and accuracy."""
+    recorded: Counter[str] = Counter()
+    estimates: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
+    last_estimate_ns = 0
+    for m in bagio.read_bag(bag, topics=[TOPIC_MEASUREMENT, TOPIC_ESTIMATE]):
+        recorded[m.topic] += 1
+        if m.topic == TOPIC_ESTIMATE:
+            e = messages.estimate_from_msg(m.msg)
+            estimates[e.object_id].append((e.t, e.x))
+            last_estimate_ns = max(last_estimate_ns, m.t_ns)
+
+    def num(node: str, key: str) -> int:
+        v = status.get(node, {}).get(key, "0")
+        return int(v) if v.isdigit() else 0
+
+    published = num("sensor_sim", "published")
+    per_shard = {}
+    causes: Counter[str] = Counter()
+    for n in names:
+        st = status.get(n, {})
+        counts = {k: int(v) for k, v in st.items() if v.isdigit()}
+        per_shard[n] = {"received": counts.get("received", 0),
+                        "ignored_other_shard": counts.get("ignored_other_shard", 0),
+                        "consumed": counts.get("consumed", 0),
+                        "estimates": counts.get("published_sensor", 0),
+                        "objects": int(st.get("objects", "0") or 0),
+                        "rss_mib": rss.get(n, 0) / 1024.0,
+                        "bank_bytes_per_object": st.get("bank_bytes_per_object", "")}
+        for k, v in counts.items():
+            if k.startswith(("rejected_", "iod_")):
+                causes[k] += v
+    received = sum(p["received"] - p["ignored_other_shard"] for p in per_shard.values())
+    door = sum(v for k, v in causes.items() if k.startswith("rejected_"))  # incl. bank's
+    consumed = sum(p["consumed"] for p in per_shard.values())
+    fused = sum(p["estimates"] for p in per_shard.values())
+    err = position_errors(entries, estimates)
+    ran = None if sim_wall is None else sim_wall[1] - sim_wall[0]
+    n = max(len(entries), 1)
+    return {
+        "published": published, "recorded_measurements": recorded[TOPIC_MEASUREMENT],
+        "received_by_shards": received, "consumed_by_banks": consumed,
+        "estimates_published": fused, "estimates_recorded": recorded[TOPIC_ESTIMATE],
+        "rejected_and_pending": dict(causes), "rejected_total": door,
+        "lost_measurements": max(published - recorded[TOPIC_MEASUREMENT], 0)
+        + max(published - received, 0),
+        "lost_estimates": max(fused - recorded[TOPIC_ESTIMATE], 0),
+        "objects_with_estimates": len(estimates),
+        "sim_s": sim_s, "sim_wall_s": ran,
+        "live_real_time_factor": None if not ran else sim_s / ran,
+        "per_shard": per_shard,
+        "rss_mib_per_object": sum(p["rss_mib"] for p in per_shard.values()) / n,
+        "position_error_km": {"median": float(np.median(err)) if err.size else None,
+                              "p95": float(np.percentile(err, 95)) if err.size else None,
+                              "estimates": int(err.size)},
+    }
+
+
+def table(s: dict[str, Any]) -> str:
+    """The summary as lines of text."""
+    rows = [
+        f"\nmeasurements: published {s['published']}, recorded {s['recorded_measurements']}, "
+        f"received by the shards {s['received_by_shards']}, taken by the banks "
+        f"{s['consumed_by_banks']}; lost: {s['lost_measurements']}",
+        f"estimates: published {s['estimates_published']}, recorded "
+        f"{s['estimates_recorded']}, for {s['objects_with_estimates']} objects",
+        "rejected / pending by cause: " + (", ".join(
+            f"{k} {v}" for k, v in sorted(s["rejected_and_pending"].items())) or "none"),
+    ]
+    if s["live_real_time_factor"]:
+        rows.append(f"speed: {s['sim_s'] / 3600:g} h of sim time in {s['sim_wall_s']:.1f} s "
+                    f"of wall time = {s['live_real_time_factor']:.0f}x real time")
+    for n, p in s["per_shard"].items():
+        rows.append(f"{n}: {p['objects']} objects, {p['received']} received, "
+                    f"{p['estimates']} estimates, RSS {p['rss_mib']:.0f} MiB, bank "
+                    f"{p['bank_bytes_per_object']} B/object")
+    pe = s["position_error_km"]
+    if pe["median"] is not None:
+        rows.append(f"position error against the SGP4 truth: median {pe['median']:.3f} km, "
+                    f"95 % {pe['p95']:.3f} km over {pe['estimates']} estimates")
+    return "\n".join(rows)
