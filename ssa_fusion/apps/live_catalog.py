@@ -147,6 +147,7 @@ def run(args: argparse.Namespace) -> int:
         from ssa_fusion_msgs.msg import StateEstimate
 
         diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
+        seen = graph.collect(StateEstimate, TOPIC_ESTIMATE)
         graph.start_node("recorder", params={"use_sim_time": True, "bag": str(bag)})
         shards = [graph.start_node("catalog_filter", "-r", f"__node:={n}", name=n, params={
             "use_sim_time": True, "shards": args.shards, "shard": k,
@@ -154,9 +155,12 @@ def run(args: argparse.Namespace) -> int:
             for k, n in enumerate(names)]
         sim = graph.start_node("sensor_sim", params=sensor)
         graph.wait_exit(sim, timeout=300.0 + 3.0 * sim_s / args.time_scale)
-        seen = graph.collect(StateEstimate, TOPIC_ESTIMATE)
-        graph.wait_quiet(lambda: len(seen), quiet_s=2.0, limit_s=60.0)
-        graph.wait_quiet(lambda: len(diagnostics), quiet_s=1.5, limit_s=5.0)
+        graph.wait_quiet(lambda: len(seen), quiet_s=1.0, limit_s=60.0)
+        # then one more report of every shard, counting all it did
+        since = len(diagnostics)
+        graph.wait_for(lambda: set(names) <= {st.name for d in diagnostics[since:]
+                                              for st in d.status}, 10.0,
+                       "a last /diagnostics report of every shard")
         rss = {n: _rss_kib(p.popen.pid) for n, p in zip(names, shards, strict=True)}
     finally:
         problems = graph.close()
@@ -209,7 +213,8 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
                         "estimates": counts.get("published_sensor", 0),
                         "objects": int(st.get("objects", "0") or 0),
                         "rss_mib": rss.get(n, 0) / 1024.0,
-                        "bank_bytes_per_object": st.get("bank_bytes_per_object", "")}
+                        "bank_bytes_per_object": st.get("bank_bytes_per_object", ""),
+                        "object_ids": [x for x in st.get("object_ids", "").split(",") if x]}
         for k, v in counts.items():
             if k.startswith(("rejected_", "iod_")):
                 causes[k] += v

@@ -52,6 +52,8 @@ from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.topics import DATA_QOS, TOPIC_ESTIMATE, TOPIC_MEASUREMENT
 
+LIST_OBJECTS = 200
+"""Up to this many objects, /diagnostics lists their ids (``object_ids``)."""
 KEY_SPACE = 2**32
 """Values of `Measurement.shard_key` (uint32)."""
 
@@ -211,6 +213,8 @@ class CatalogFilterNode(Node):
             self.pub.publish(messages.estimate_to_msg(e))
         self.diag.counts["published_sensor"] += int(res.fused.size)
         self.diag.status["objects"] = str(len(self.bank))
+        if len(self.bank) <= LIST_OBJECTS:
+            self.diag.status["object_ids"] = ",".join(self.bank.object_ids)
         self.diag.status["tracks"] = str(int(self.bank.tracking.sum()))
         n = max(len(self.bank), 1)
         arrays = (self.bank.x.nbytes + self.bank.P.nbytes + self.bank.t.nbytes
