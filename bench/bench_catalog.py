@@ -23,7 +23,10 @@ Usage::
 
 Prints ``key: value`` lines and tables; the last line is one JSON object. Times are the best
 of ``--repeats`` runs, on one thread (OPENBLAS_NUM_THREADS=1 unless set). ``--quick``: N up
-to 1,000 (looped filters time 300 objects) and 300 objects for the day (< 60 s).
+to 1,000 (looped filters time 300 objects), 300 objects for the day, and live runs of 100
+objects (a few minutes). The live part runs `ssa-fusion live --catalog` three times (a day
+of 1,000 objects at 100x with one shard; one hour at 1000x with one and with two shards).
+``--no-live`` skips it.
 """
 
 from __future__ import annotations
@@ -277,6 +280,83 @@ def offline_day(n: int, hours: float, sample: int, rng: np.random.Generator) -> 
     }
 
 
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "config" / "catalogs" / "sample.tle"
+
+
+def live_catalog(out: Path, objects: int, hours: float, time_scale: float,
+                 shards: int) -> dict:
+    """`ssa-fusion live --catalog` of `objects` LEO objects (CBERS 2 spread around the Earth,
+    the radar network) as separate node processes; its catalog.json."""
+    import os
+    import subprocess
+
+    cmd = [str(Path(sys.executable).parent / "ssa-fusion"), "live", "--catalog", str(SAMPLE),
+           "--synthetic", str(objects), "--duration", str(hours), "--shards", str(shards),
+           "--time-scale", str(time_scale), "--out", str(out)]
+    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, check=False)
+    print("  $ " + " ".join(cmd[1:]))
+    print("\n".join("  " + line for line in done.stdout.strip().splitlines()[-8:]))
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads((out / "catalog.json").read_text())
+
+
+def same_estimates(a: Path, b: Path) -> tuple[int, int, float]:
+    """(estimates in both bags, bit-identical ones, largest relative difference of x or P)."""
+    from ssa_fusion.ros import bagio, messages
+
+    def load(bag: Path) -> dict:
+        out = {}
+        for m in bagio.read_bag(bag, topics=["/ssa/estimate"]):
+            e = messages.estimate_from_msg(m.msg)
+            out[(e.object_id, e.t)] = (e.x, e.P)
+        return out
+
+    ea, eb = load(a), load(b)
+    assert set(ea) == set(eb), "the two runs estimated different (object, epoch) pairs"
+    same = worst = 0.0
+    for k, (x, P) in ea.items():
+        y, Q = eb[k]
+        same += bool(np.array_equal(x, y) and np.array_equal(P, Q))
+        worst = max(worst, float(np.abs(x - y).max() / np.abs(y).max()),
+                    float(np.abs(P - Q).max() / np.abs(Q).max()))
+    return len(ea), int(same), worst
+
+
+def live_part(quick: bool, tmp: Path) -> dict:
+    """The live targets: real time on a day of a catalog, nothing lost, and 2 shards vs 1."""
+    n = 100 if quick else 1000
+    hours = 2.0 if quick else 24.0
+    print(f"live: {n} LEO objects, radar network, {hours:g} h at 100x, 1 shard")
+    day = live_catalog(tmp / "day", n, hours, 100.0, 1)
+    assert day["published"] > 0 and day["estimates_published"] > 0, "nothing measured/fused"
+    print(f"live: {n} LEO objects, 1 h at 1000x (more than the graph sustains): 1 vs 2 shards")
+    one = live_catalog(tmp / "k1", n, 1.0, 1000.0, 1)
+    two = live_catalog(tmp / "k2", n, 1.0, 1000.0, 2)
+    both, identical, worst = same_estimates(tmp / "k1" / "bag", tmp / "k2" / "bag")
+    ratio = two["throughput_per_s"] / one["throughput_per_s"]
+    lost = day["lost_measurements"] + one["lost_measurements"] + two["lost_measurements"]
+    print(f"live_real_time_factor: {day['live_real_time_factor']:.1f} (target >= 100; "
+          f"{day['sim_s'] / 3600:g} h of sim time, first measurement to last estimate)")
+    print(f"lost_measurements: {lost} over the three runs (published vs recorded vs "
+          "received by the shards)")
+    print(f"memory: {day['rss_mib_per_object'] * 1024:.0f} KiB RSS per object "
+          f"(process total / objects), bank arrays "
+          f"{next(iter(day['per_shard'].values()))['bank_bytes_per_object']} B per object")
+    print(f"shard2_vs_shard1: {ratio:.2f} (target >= 1.6; {one['throughput_per_s']:.0f} vs "
+          f"{two['throughput_per_s']:.0f} measurements/s)")
+    print(f"shard estimates: {identical} of {both} bit-identical, largest relative "
+          f"difference {worst:.1e}")
+    return {"live_real_time_factor": round(day["live_real_time_factor"], 1),
+            "lost_measurements": lost, "shard2_vs_shard1": round(ratio, 2),
+            "live_objects": n, "live_hours": hours,
+            "live_rss_kib_per_object": round(day["rss_mib_per_object"] * 1024, 1),
+            "live_position_error_median_km": day["position_error_km"]["median"],
+            "shard_estimates_identical": identical, "shard_estimates": both,
+            "shard_estimates_max_rel_diff": worst}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smaller N and a shorter run (< 60 s)")
@@ -286,6 +366,8 @@ def main() -> None:
     ap.add_argument("--day-objects", type=int, default=None)
     ap.add_argument("--hours", type=float, default=None)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--no-live", action="store_true",
+                    help="skip the live graph runs (node processes over DDS)")
     args = ap.parse_args()
     ns = [1, 10, 100, 1000] if args.quick else [1, 10, 100, 1000, 10000]
     day_n = args.day_objects or (300 if args.quick else 10000)
@@ -342,9 +424,18 @@ def main() -> None:
         "offline_objects": day_n, "offline_hours": hours,
         "offline_filter_wall_s": round(day["filter_wall_s"], 2),
         "offline_measurements_fused": day["fused"],
-        "live_real_time_factor": None, "shard2_vs_shard1": None, "lost_measurements": None,
-        "not_measured": ["live_real_time_factor", "shard2_vs_shard1", "lost_measurements"],
     }
+    if args.no_live:
+        result.update({"live_real_time_factor": None, "shard2_vs_shard1": None,
+                       "lost_measurements": None,
+                       "not_measured": ["live_real_time_factor", "shard2_vs_shard1",
+                                        "lost_measurements"]})
+    else:
+        import tempfile
+
+        print()
+        with tempfile.TemporaryDirectory(prefix="bench_catalog_") as tmp:
+            result.update(live_part(args.quick, Path(tmp)))
     print(json.dumps(result))
 
 

@@ -50,7 +50,7 @@ from ssa_fusion.nodes.common import (
 )
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.ros import messages
-from ssa_fusion.ros.topics import DATA_QOS, TOPIC_ESTIMATE, TOPIC_MEASUREMENT
+from ssa_fusion.ros.topics import CATALOG_QOS, TOPIC_ESTIMATE, TOPIC_MEASUREMENT
 
 LIST_OBJECTS = 200
 """Up to this many objects, /diagnostics lists their ids (``object_ids``)."""
@@ -133,13 +133,13 @@ class CatalogFilterNode(Node):
         self.lo, self.hi = shard_range(self.shard, self.shards)
         self.diag = Diagnostics(self)
         self.diag.status["shard"] = f"{self.shard}/{self.shards} keys [{self.lo}, {self.hi}]"
-        self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, DATA_QOS)
+        self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, CATALOG_QOS)
         cft = None
         if self.shards > 1:
             cft = ContentFilterOptions("shard_key BETWEEN %0 AND %1",
                                        [str(self.lo), str(self.hi)])
         self.sub = self.diag.subscribe(MeasurementMsg, TOPIC_MEASUREMENT,
-                                       self.diag.guard(self.on_measurement), DATA_QOS,
+                                       self.diag.guard(self.on_measurement), CATALOG_QOS,
                                        content_filter=cft)
         if cft is not None and not self.sub.is_cft_enabled:
             self.diag.count("content_filter_unavailable",

@@ -53,6 +53,7 @@ from ssa_fusion.paper.simulate import simulate
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.readiness import ReadyNodes, check_needs
 from ssa_fusion.ros.topics import (
+    CATALOG_QOS,
     DATA_QOS,
     TOPIC_CLOCK,
     TOPIC_MEASUREMENT,
@@ -235,7 +236,8 @@ class SensorSim(Node):
                                  "no truth epoch)")
 
         self.pub_clock = self.create_publisher(Clock, TOPIC_CLOCK, DATA_QOS)
-        self.pub_meas = self.create_publisher(MeasurementMsg, TOPIC_MEASUREMENT, DATA_QOS)
+        self.pub_meas = self.create_publisher(
+            MeasurementMsg, TOPIC_MEASUREMENT, DATA_QOS if self.catalog is None else CATALOG_QOS)
         self.pub_withheld = self.create_publisher(MeasurementMsg, TOPIC_WITHHELD, DATA_QOS)
         self.pub_truth = self.create_publisher(StateEstimateMsg, TOPIC_TRUTH, DATA_QOS)
         self.sim_stamp = TimeMsg()  # the sim time last published on /clock (0: none yet)

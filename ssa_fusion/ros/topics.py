@@ -17,6 +17,18 @@ DATA_QOS = QoSProfile(
     durability=DurabilityPolicy.VOLATILE,
 )
 
+CATALOG_DEPTH = 1_000_000
+"""Keep-last depth of a catalog's measurement and estimate streams: a shard or the recorder
+that falls minutes behind a catalog's thousands of measurements per second queues them (the
+history grows only as far as the backlog) rather than losing the oldest."""
+
+CATALOG_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=CATALOG_DEPTH,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+
 TOPIC_MEASUREMENT = "/ssa/measurement"
 TOPIC_FORECAST = "/ssa/forecast"
 TOPIC_ESTIMATE = "/ssa/estimate"
