@@ -25,7 +25,8 @@ Prints ``key: value`` lines and tables; the last line is one JSON object. Times 
 of ``--repeats`` runs, on one thread (OPENBLAS_NUM_THREADS=1 unless set). ``--quick``: N up
 to 1,000 (looped filters time 300 objects), 300 objects for the day, and live runs of 100
 objects (a few minutes). The live part runs `ssa-fusion live --catalog` three times (a day
-of 1,000 objects at 100x with one shard; one hour at 1000x with one and with two shards).
+of 1,000 objects at 150x with one shard; one hour as fast as the simulator publishes, with
+one and with two shards).
 ``--no-live`` skips it.
 """
 
@@ -324,16 +325,25 @@ def same_estimates(a: Path, b: Path) -> tuple[int, int, float]:
     return len(ea), int(same), worst
 
 
+DAY_SCALE = 150.0
+"""Time scale of the day-long run: above the 100x target, so the factor measured says
+whether the graph keeps up (it cannot exceed the scale asked for)."""
+FLOOD_SCALE = 100000.0
+"""Time scale of the shard comparison: the simulator publishes an hour in well under a
+second, so the throughput measured is the estimation's (queued, nothing lost)."""
+
+
 def live_part(quick: bool, tmp: Path) -> dict:
     """The live targets: real time on a day of a catalog, nothing lost, and 2 shards vs 1."""
     n = 100 if quick else 1000
     hours = 2.0 if quick else 24.0
-    print(f"live: {n} LEO objects, radar network, {hours:g} h at 100x, 1 shard")
-    day = live_catalog(tmp / "day", n, hours, 100.0, 1)
+    print(f"live: {n} LEO objects, radar network, {hours:g} h at {DAY_SCALE:g}x, 1 shard")
+    day = live_catalog(tmp / "day", n, hours, DAY_SCALE, 1)
     assert day["published"] > 0 and day["estimates_published"] > 0, "nothing measured/fused"
-    print(f"live: {n} LEO objects, 1 h at 1000x (more than the graph sustains): 1 vs 2 shards")
-    one = live_catalog(tmp / "k1", n, 1.0, 1000.0, 1)
-    two = live_catalog(tmp / "k2", n, 1.0, 1000.0, 2)
+    print(f"live: {n} LEO objects, 1 h at {FLOOD_SCALE:g}x (as fast as the simulator "
+          "publishes; the filters catch up): 1 vs 2 shards")
+    one = live_catalog(tmp / "k1", n, 1.0, FLOOD_SCALE, 1)
+    two = live_catalog(tmp / "k2", n, 1.0, FLOOD_SCALE, 2)
     both, identical, worst = same_estimates(tmp / "k1" / "bag", tmp / "k2" / "bag")
     ratio = two["throughput_per_s"] / one["throughput_per_s"]
     lost = day["lost_measurements"] + one["lost_measurements"] + two["lost_measurements"]
