@@ -463,6 +463,10 @@ def test_invalid_parameters_refuse_to_start(ros_graph, tmp_path):
         "iod_samples": ("filter", {"iod_samples": 1000000}),  # issue 22 finding 7
         "bag/unwritable": ("recorder", {"bag": "/proc/nope/bag"}),  # cannot be created
         "delays/huge": ("surrogate", {"delays": 1000000000000}),  # cadence 0: inferred
+        "catalog": ("sensor_sim", {"scenario": "iss_network", "catalog": "/nope/cat.tle"}),
+        "catalog/paper": ("sensor_sim", {"catalog": "config/catalogs/sample.tle"}),
+        "shard": ("catalog_filter", {"shards": 2, "shard": 2}),
+        "station": ("catalog_filter", {"station": "atlantis"}),
     }
     procs = {label: g.start_node(node, params=p, name=f"{node}_{label.replace('/', '_')}",
                                  expect_returncode=2)
