@@ -93,6 +93,7 @@ IMPORT_KEYS = {
     "foxglove": "python3-foxglove-sdk-pip",  # foxglove-sdk: the foxglove_bridge node
     "ccsds_ndm": "python3-ccsds-ndm-pip",  # CCSDS OEM/TDM (apps/ccsds.py)
     "threadpoolctl": None,  # optional: used when installed (ssa_fusion.limit_blas_threads)
+    "pydmd": None,  # optional: the BOP-DMD variant of core.residual (issue 19's study)
 }
 """Third-party modules the code imports -> their rosdep key (None: optional, undeclared)."""
 ROSDISTRO_KEYS = {"python3-numpy", "python3-scipy", "python3-matplotlib", "python3-yaml",
