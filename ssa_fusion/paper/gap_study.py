@@ -7,16 +7,16 @@ runs over the delivered measurements with the live Hankel-DMD surrogate as the g
 it (`sky.run_dmd_ekf`). Every inter-pass gap is then scored at the truth epochs inside it
 (on a `GRID_S` grid), for the arms:
 
-* ``coast_<placeholder>`` -- the filter predicting from its estimate at the end of the pass
-  (``coast_kepler`` is the issue's `coast`, ``coast_j2`` its `j2_coast`);
-* ``dmd_ekf_<placeholder>`` -- the filter fusing the Hankel-DMD surrogate's forecasts (its
-  prediction where none came: then equal to the coast);
-* ``residual_<placeholder>`` -- variant (b), `core.residual.ResidualSurrogate`: the
-  placeholder from the pass-end estimate plus the learned residual, with the held-out
-  calibrated covariance (the filter's motion model corrected; coasting where it did not
-  forecast);
-* ``bopdmd_<placeholder>`` -- variant (a), `core.residual.bopdmd_residual_forecast`: BOP-DMD
-  on the same irregular residual series, with its bagging variance.
+* ``coast`` -- the filter predicting from its estimate at the end of the pass (with the
+  ``kepler`` placeholder it is the issue's `coast`, with ``j2`` its `j2_coast`);
+* ``dmd_ekf`` -- the filter fusing the Hankel-DMD surrogate's forecasts (its prediction
+  where none came: then equal to the coast);
+* one arm per residual setting (e.g. ``hill_h1``) -- variant (b),
+  `core.residual.ResidualSurrogate`: the placeholder from the pass-end estimate plus the
+  learned residual, with the held-out calibrated covariance (the filter's motion model
+  corrected; coasting where it did not forecast);
+* ``bopdmd`` -- variant (a), `core.residual.bopdmd_residual_forecast`: BOP-DMD on the same
+  irregular residual series, with its bagging variance (coasting where it did not forecast).
 
 Per gap: the mean position error over its epochs (km), the mean NEES (6 dof) of each arm,
 its length (h), whether it lies after the surrogate's training span (its first anchor at
@@ -63,13 +63,15 @@ TUNING_SEEDS = (1, 2, 3)
 def tuning_candidates() -> dict[str, residual.ResidualConfig]:
     """The residual settings `tune` compares (name -> config): the Hill model with empirical
     accelerations (constants, + once-, + twice-per-revolution terms), one with a 1-day
-    window, and the free basis."""
+    window, one whose held-out covariance scale grows with the horizon, and the free
+    basis."""
     hill = residual.ResidualConfig(model="hill")
     return {
         "hill_h0": replace(hill, harmonics=0),
         "hill_h1": replace(hill, harmonics=1),
         "hill_h2": replace(hill, harmonics=2),
         "hill_h1_w1d": replace(hill, harmonics=1, window_s=86400.0, min_span_s=43200.0),
+        "hill_h1_hs": replace(hill, harmonics=1, horizon_scale=True),
         "basis_h2": residual.ResidualConfig(model="basis"),
     }
 
