@@ -624,6 +624,91 @@ class ResidualSurrogate:
         return f
 
 
+LIVE_RESIDUAL = ResidualConfig(model="hill", harmonics=1)
+"""The residual setting a live filter uses: ``hill_h1`` (empirical accelerations, constant
++ once per revolution, 2-day window), chosen on the tuning seeds 1-3 by
+`paper.gap_study.tune` (docs/HISTORY.md, session 10)."""
+
+PLACEHOLDER_TRAJECTORY = {"kepler": "two_body", "j2": "j2"}
+"""The `dynamics` model of each filter motion model's trajectory (for `orbit_propagator`)."""
+
+
+@dataclass
+class GapForecaster:
+    """The residual surrogate on a filter's live stream: what to publish in a gap.
+
+    `on_estimate` takes every estimate that fused a real measurement (epoch order). Once a
+    prediction epoch lies `pass_break_s` or more after the newest of them, that estimate is
+    a pass end: it becomes an anchor (`ResidualSurrogate.add_anchor`), the surrogate fits at
+    it, and the fit's forecast is computed once on the grid of multiples of `period_s` up to
+    ``max_horizon_s`` after it (one integration). `forecast(t)` returns that forecast at a
+    grid epoch t of the gap (state km, km/s ECI; covariance), or None: no fit (too few
+    anchors, refused), t before `pass_break_s` after the pass or beyond the horizon. A real
+    measurement always wins: the filter's own state is not touched.
+    """
+
+    surrogate: ResidualSurrogate
+    period_s: float
+    pass_break_s: float = 600.0
+    last: tuple[float, Array, Array] | None = None
+    anchored_t: float = -math.inf
+    fitted_t: float = -math.inf
+    table: dict[float, tuple[Array, Array]] = field(default_factory=dict)
+
+    @classmethod
+    def for_model(cls, motion_model: str, period_s: float,
+                  cfg: ResidualConfig = LIVE_RESIDUAL) -> GapForecaster:
+        """Build the forecaster of a filter with `motion_model` ("kepler" or "j2")."""
+        prop = orbit_propagator(PLACEHOLDER_TRAJECTORY[motion_model])
+        return cls(ResidualSurrogate(cfg, prop), float(period_s))
+
+    def on_estimate(self, t: float, x: ArrayLike, P: ArrayLike) -> None:
+        """Take the filter's estimate (epoch t s) after it fused a real measurement.
+
+        The previous one is a pass end (an anchor) when t is `pass_break_s` or more after it.
+        """
+        if self.last is not None and t <= self.last[0]:
+            return
+        if self.last is not None and t - self.last[0] >= self.pass_break_s:
+            self._anchor()
+        self.last = (float(t), np.asarray(x, float).copy(), np.asarray(P, float).copy())
+
+    def _anchor(self) -> bool:
+        """Make the newest estimate an anchor, once; True when it became one now."""
+        if self.last is None or self.last[0] <= self.anchored_t:
+            return False
+        t_end, x, P = self.last
+        self.anchored_t = t_end
+        try:
+            self.surrogate.add_anchor(t_end, x, P)
+        except ValueError:
+            return False
+        return True
+
+    def forecast(self, t: float) -> tuple[Array, Array] | None:
+        """Return the surrogate's state and covariance at gap epoch t (s), or None."""
+        if self.last is None or t - self.last[0] < self.pass_break_s:
+            return None
+        t_end = self.last[0]
+        self._anchor()
+        if self.fitted_t != t_end:  # a pass ended: fit once, tabulate the forecast
+            self.fitted_t = t_end
+            self.table = {}
+            try:
+                fit = self.surrogate.fit()
+            except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+                fit = None
+            if fit is not None:
+                k0 = math.floor(t_end / self.period_s) + 1
+                k1 = math.floor((t_end + self.surrogate.cfg.max_horizon_s) / self.period_s)
+                grid = self.period_s * np.arange(k0, k1 + 1, dtype=float)
+                if grid.size:
+                    xs, Ps = fit.predict(grid)
+                    self.table = {float(g): (xs[i], Ps[i]) for i, g in enumerate(grid)
+                                  if np.isfinite(xs[i]).all() and np.isfinite(Ps[i]).all()}
+        return self.table.get(float(t))
+
+
 # --------------------------------------------------------------------------------------------
 # Variant (a): optimized DMD with bagging on the irregular residual series
 # --------------------------------------------------------------------------------------------
