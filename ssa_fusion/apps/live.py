@@ -164,7 +164,7 @@ def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, 
                     "seed": seed, "wait_for": WAIT_FOR, "wait_for_readers": READERS}
     if isinstance(s, sky.SkyScenario):  # the truth's cadence; the filter publishes at it
         sensor["cadence"] = s.truth_cadence_s
-        extra = {"predict_period": s.truth_cadence_s}
+        extra = {"predict_period": s.truth_cadence_s, "gap_forecast": "residual"}
     else:
         sensor.update({"cadence": s.cadence_s, "gap_start": s.track_s, "gap_length": s.gap_s,
                        "after_gap": s.after_s})

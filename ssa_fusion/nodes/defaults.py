@@ -89,6 +89,7 @@ class FilterDefaults:
     light_time: bool = False
     predict_period: float = 300.0
     max_clock_lead: float = 3600.0
+    gap_forecast: str = "none"
 
 
 @dataclass(frozen=True)

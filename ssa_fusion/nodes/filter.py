@@ -30,8 +30,9 @@ from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 from std_msgs.msg import String
 
 from ssa_fusion.core.config import EstimatorConfig, make_tracker
+from ssa_fusion.core.residual import GapForecaster
 from ssa_fusion.core.tracker import prediction_epochs
-from ssa_fusion.core.types import Cause, Source, StateEstimate
+from ssa_fusion.core.types import Cause, Source, StateEstimate, UpdateSource
 from ssa_fusion.core.validation import ahead_of_clock
 from ssa_fusion.nodes import settings, start_process
 from ssa_fusion.nodes.common import (
@@ -159,8 +160,15 @@ class FilterNode(Node):
             "sim s: without an update for this long, predictions are published at every "
             "multiple of it (0 = never)",
             non_negative,
-            apply=lambda v: setattr(self, "predict_period", v),
+            apply=self._set_predict_period,
         )
+        self.gap_forecast = declare(
+            self, "gap_forecast", FILTER.gap_forecast,
+            "what the predictions in a gap between passes are: none (the EKF coasting) | "
+            "residual (the motion model plus its residual learned from past pass ends, "
+            "core.residual; tagged update_source FORECAST; the EKF itself coasts on)",
+            one_of("none", "residual"))
+        self.gaps = self._gap_forecaster()
         self.max_lead = clock_lead(self, FILTER.max_clock_lead)
         self.diag = Diagnostics(self)
         self.clock_hold = ClockHold(self)
@@ -183,6 +191,15 @@ class FilterNode(Node):
         self._predicted_at = -math.inf  # sim time of the last prediction published
         self._prediction: StateEstimate | None = None  # and that prediction
 
+    def _gap_forecaster(self) -> GapForecaster | None:
+        if self.gap_forecast != "residual" or self.predict_period <= 0:
+            return None
+        return GapForecaster.for_model(str(self.estimator.motion_model), self.predict_period)
+
+    def _set_predict_period(self, value: float) -> None:
+        self.predict_period = value
+        self.gaps = self._gap_forecaster()
+
     def publish_config(self) -> None:
         """Publish the estimator settings in effect on /ssa/config (latched)."""
         if hasattr(self, "tracker"):
@@ -191,6 +208,7 @@ class FilterNode(Node):
 
     def on_jump(self, jump) -> None:
         self.tracker.reset()
+        self.gaps = self._gap_forecaster()
         self._predicted_at = -math.inf
         self._prediction = None
         self.diag.count(
@@ -240,6 +258,8 @@ class FilterNode(Node):
 
     def publish(self, e: StateEstimate) -> None:
         e.object_id = e.object_id or self.last_object
+        if self.gaps is not None and e.update_source == UpdateSource.SENSOR:
+            self.gaps.on_estimate(e.t, e.x, e.P)
         self.pub.publish(messages.estimate_to_msg(e))
         self.diag.counts[f"published_{SOURCE_NAMES[e.update_source]}"] += 1
 
@@ -273,9 +293,12 @@ class FilterNode(Node):
                 e = self.tracker.predicted(t)
             if e is None:
                 return
-            self.publish(e)
+            f = self.gaps.forecast(t) if self.gaps is not None else None
+            self.publish(e if f is None else StateEstimate(
+                t=t, x=f[0], P=f[1], object_id=e.object_id,
+                update_source=UpdateSource.FORECAST))
             self._predicted_at = t
-            self._prediction = e
+            self._prediction = e  # the EKF's own prediction chain goes on
 
 
 def main(args: list[str] | None = None) -> int:
