@@ -220,6 +220,12 @@ def table(ev: Evaluation) -> str:
                 f"{100 * g.coverage:.0f} % of them"
                 + (f"; dmd_ekf at the other {g.predicted} scored from the last estimate "
                    "before, propagated by the filter's model" if g.predicted else ""))
+    surrogate, coast = g.scores.get(ArmName.DMD_EKF), g.scores.get(ArmName.COAST)
+    if surrogate is not None and coast is not None and g.coverage > 0:
+        rows.append(f"surrogate (the live graph's estimates in the gap, `dmd_ekf`) against the "
+                    f"EKF coasting: mean position error {surrogate.pos_err_mean_km:.3g} km vs "
+                    f"{coast.pos_err_mean_km:.3g} km "
+                    f"({coast.pos_err_mean_km / surrogate.pos_err_mean_km:.2f}x smaller)")
     lo, hi = metrics.chi2_bounds(g.truth.shape[1])
     rows.append(f"NEES: mean over the gap's epochs; a consistent filter's per-epoch NEES lies "
                 f"in [{lo:.2f}, {hi:.2f}] 95 % of the time (χ², {g.truth.shape[1]} dof), "
