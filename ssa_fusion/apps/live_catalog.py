@@ -220,7 +220,7 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
                         "bank_bytes_per_object": st.get("bank_bytes_per_object", ""),
                         "object_ids": [x for x in st.get("object_ids", "").split(",") if x]}
         for k, v in counts.items():
-            if k.startswith(("rejected_", "iod_")):
+            if k.startswith(("rejected_", "iod_", "reinitialised")):
                 causes[k] += v
     received = sum(p["received"] - p["ignored_other_shard"] for p in per_shard.values())
     door = sum(v for k, v in causes.items() if k.startswith("rejected_"))  # incl. bank's
