@@ -17,10 +17,8 @@ Motion models (`BatchEKFConfig.motion_model`):
 
 ``"kepler"``
     Analytic two-body, as `kepler.propagate` (universal variable, Newton on Kepler's
-    equation). The state transition matrix is the complex-step derivative of the same
-    closed form: one complex Newton step from the converged real root per perturbed copy,
-    which is exact to round-off (the imaginary part of a Newton step from the root is the
-    implicit derivative), so it equals `kepler.propagate`'s analytic STM to ~1e-14.
+    equation), with the same analytic state transition matrix (exact partials of the
+    Lagrange coefficients, `kepler_stm`), evaluated elementwise over the object axis.
 ``"two_body"``, ``"j2"``, ``"drag"``
     The `dynamics` right-hand sides with their variational equations dPhi/dt = A(x) Phi
     (A by the complex step, as `dynamics.jacobian`), integrated for all objects at once
@@ -68,7 +66,7 @@ __all__ = [
 
 Array = NDArray[np.float64]
 AnyArray = NDArray[Any]
-"""A float64 or complex128 array (the Kepler terms serve the real solve and the complex step)."""
+"""An array of any dtype (per-object inputs as given)."""
 BoolArray = NDArray[np.bool_]
 
 _COMPLEX_STEP = 1e-30
@@ -212,46 +210,43 @@ class BatchUpdate(NamedTuple):
 # --------------------------------------------------------------------------------------------
 # Motion models
 # --------------------------------------------------------------------------------------------
-def _stumpff23(z: AnyArray) -> tuple[AnyArray, AnyArray]:
-    """Stumpff c2(z), c3(z) elementwise (branch by the real part; complex-step safe)."""
-    c2 = np.empty_like(z)
-    c3 = np.empty_like(z)
-    zr = z.real
-    pos = zr > _Z_SERIES
-    neg = zr < -_Z_SERIES
-    mid = ~(pos | neg)
-    if pos.any():
-        zp = z[pos]
-        s = np.sqrt(zp)
-        h = np.sin(0.5 * s)
-        c2[pos] = 2.0 * h * h / zp
-        c3[pos] = (s - np.sin(s)) / (zp * s)
-    if neg.any():
-        zn = -z[neg]
-        s = np.sqrt(zn)
-        c2[neg] = (np.cosh(s) - 1.0) / zn
-        c3[neg] = (np.sinh(s) - s) / (zn * s)
-    if mid.any():
-        zm = z[mid]
-        # c_k = sum_j (-z)^j / (k + 2j)!, as many terms as the largest |z| needs for a
-        # truncation below 1e-18 (at most 9: 0.5^9 / 20! ~ 1e-21)
-        zmax = float(np.abs(zm).max())
-        terms = next((j for j in range(1, 9) if zmax**j / math.factorial(2 * j + 2) < 1e-18), 9)
-        a2 = np.ones_like(zm)
-        a3 = np.ones_like(zm)
-        for k in range(terms - 1, 0, -1):
-            a2 = 1.0 - zm / ((2 * k + 1) * (2 * k + 2)) * a2
-            a3 = 1.0 - zm / ((2 * k + 2) * (2 * k + 3)) * a3
-        c2[mid] = 0.5 * a2
-        c3[mid] = a3 / 6.0
-    return c2, c3
+def _stumpff(z: Array, full: bool = False) -> tuple[Array, ...]:
+    """Stumpff c2(z), c3(z) (and c4, c5 when ``full``) elementwise, as `kepler.stumpff`.
+
+    Closed forms (trigonometric for z > 0.5, hyperbolic for z < -0.5), power series near 0
+    (``c_k = sum_j (-z)^j / (k + 2j)!``, 8 terms: truncation < 0.5^8 / 20! ~ 2e-21).
+    """
+    big = np.abs(z) > _Z_SERIES
+    anybig = bool(big.any())
+    zm = np.where(big, 0.0, z) if anybig else z
+    c4 = (1.0 / 24.0) * (1.0 - zm / 30.0 * (1.0 - zm / 56.0 * (1.0 - zm / 90.0 * (
+        1.0 - zm / 132.0 * (1.0 - zm / 182.0 * (1.0 - zm / 240.0 * (1.0 - zm / 306.0)))))))
+    c5 = (1.0 / 120.0) * (1.0 - zm / 42.0 * (1.0 - zm / 72.0 * (1.0 - zm / 110.0 * (
+        1.0 - zm / 156.0 * (1.0 - zm / 210.0 * (1.0 - zm / 272.0 * (1.0 - zm / 342.0)))))))
+    c2 = 0.5 - zm * c4
+    c3 = 1.0 / 6.0 - zm * c5
+    if anybig:
+        for sel in (z > _Z_SERIES, z < -_Z_SERIES):
+            if not sel.any():
+                continue
+            zs = z[sel]
+            s = np.sqrt(np.abs(zs))
+            if zs[0] > 0.0:
+                h = np.sin(0.5 * s)
+                a2, a3 = 2.0 * h * h / zs, (s - np.sin(s)) / (zs * s)
+            else:
+                a2, a3 = (np.cosh(s) - 1.0) / (-zs), (np.sinh(s) - s) / (-zs * s)
+            c2[sel], c3[sel] = a2, a3
+            if full:
+                c4[sel], c5[sel] = (0.5 - a2) / zs, (1.0 / 6.0 - a3) / zs
+    return (c2, c3, c4, c5) if full else (c2, c3)
 
 
-def _kepler_terms(r0: AnyArray, sig0: AnyArray, alpha: AnyArray,
-                  chi: AnyArray) -> tuple[AnyArray, AnyArray, AnyArray, AnyArray]:
+def _kepler_terms(r0: Array, sig0: Array, alpha: Array,
+                  chi: Array) -> tuple[Array, Array, Array, Array]:
     """Universal functions U1, U2, U3 at chi and the radius r (same shape as the inputs)."""
     chi2 = chi * chi
-    c2, c3 = _stumpff23(alpha * chi2)
+    c2, c3 = _stumpff(alpha * chi2)
     u2 = chi2 * c2
     u3 = chi2 * chi * c3
     u1 = chi - alpha * u3
@@ -299,17 +294,6 @@ def _solve_chi(r0: Array, sig0: Array, alpha: Array, tau: Array) -> tuple[Array,
     return chi, done & np.isfinite(chi)
 
 
-def _lagrange_basis() -> Array:
-    """(4, 36): ``[F, G, Fdot, Gdot] @ basis`` is ``[[F I, G I], [Fdot I, Gdot I]]`` flattened."""
-    out = np.zeros((4, 6, 6))
-    for k, (i0, j0) in enumerate(((0, 0), (0, 3), (3, 0), (3, 3))):
-        out[k, i0:i0 + 3, j0:j0 + 3] = np.eye(3)
-    return out.reshape(4, 36)
-
-
-_LAGRANGE_BASIS = _lagrange_basis()
-
-
 class _Orbit(NamedTuple):
     """N initial states split for the universal-variable solution, with chi solved."""
 
@@ -336,11 +320,10 @@ def _kepler_solve(x: ArrayLike, dt: ArrayLike, mu: float) -> _Orbit:
     return _Orbit(r, v, r0, sig0, alpha, smu * dts, chi, ok & (r0 > 0.0))
 
 
-def _lagrange(r0: AnyArray, sig0: AnyArray, alpha: AnyArray, chi: AnyArray,
-              smu: float) -> AnyArray:
+def _lagrange(r0: Array, sig0: Array, alpha: Array, chi: Array, smu: float) -> Array:
     """Lagrange coefficients (..., 4) [F, G, Fdot, Gdot] at chi."""
     u1, u2, _, rr = _kepler_terms(r0, sig0, alpha, chi)
-    out: AnyArray = np.stack([1.0 - u2 / r0, (r0 * u1 + sig0 * u2) / smu,
+    out: Array = np.stack([1.0 - u2 / r0, (r0 * u1 + sig0 * u2) / smu,
                               -smu * u1 / (rr * r0), 1.0 - u2 / rr], -1)
     return out
 
@@ -354,12 +337,13 @@ def kepler_stm(x: ArrayLike, dt: ArrayLike,
                mu: float = MU_EARTH) -> tuple[Array, Array, BoolArray]:
     """Propagate N two-body states by their own ``dt`` with their state transition matrices.
 
-    The vectorised counterpart of `kepler.propagate` (same universal-variable solution,
-    ``x1 = [F r0 + G v0, Fdot r0 + Gdot v0]``). The Lagrange coefficients depend on the
-    initial state only through p = (r0, sigma0, alpha); their partials d(F, G, Fdot, Gdot)/dp
-    are complex-step derivatives (three perturbed copies per object, chi moved by one complex
-    Newton step from its converged root: exact to round-off), and the chain rule through
-    dp/dx0 gives ``Phi = [[F I, G I], [Fdot I, Gdot I]] + [r0; v0] (d[F, G]/dx0 ...)``.
+    The vectorised counterpart of `kepler.propagate`, with the same analytic STM: the
+    Lagrange coefficients ``F, G, Fdot, Gdot`` (``x1 = [F r0 + G v0, Fdot r0 + Gdot v0]``)
+    depend on the initial state only through p = (r0 km, sigma0 km^0.5, alpha 1/km); their
+    exact partials (``dU_k/dalpha = (k U_{k+2} - chi U_{k+1}) / 2`` at fixed chi, and the
+    implicit derivative of chi from Kepler's equation) give
+    ``Phi = [[F I, G I], [Fdot I, Gdot I]] + W M W^T``, ``W = [[r0, v0, 0, 0], [0, 0, r0, v0]]``
+    with a 4x4 matrix ``M`` per object. Every step is elementwise over the object axis.
 
     Parameters
     ----------
@@ -382,27 +366,72 @@ def kepler_stm(x: ArrayLike, dt: ArrayLike,
     smu = math.sqrt(mu)
     with np.errstate(all="ignore"):
         o = _kepler_solve(x, dt, mu)
-        r, v, r0, n = o.r, o.v, o.r0, o.r.shape[0]
-        # copy k of each object: parameter k of p = (r0, sigma0, alpha) perturbed by i h
-        pc = np.stack([r0, o.sig0, o.alpha], -1)[:, None, :] + 1j * _COMPLEX_STEP * np.eye(3)
-        r0c, sig0c, alphac = pc[..., 0], pc[..., 1], pc[..., 2]  # (N, 3)
-        chi0 = np.repeat(o.chi[:, None], 3, axis=1).astype(complex)
-        u1, u2, u3, rr = _kepler_terms(r0c, sig0c, alphac, chi0)
-        chic = chi0 - (r0c * u1 + sig0c * u2 + u3 - o.tau[:, None]) / rr
-        coef = _lagrange(r0c, sig0c, alphac, chic, smu)  # (N, 3, 4)
-        fg = coef[:, 0, :].real  # F, G, Fdot, Gdot (N, 4)
-        dfg_dp = coef.imag / _COMPLEX_STEP  # (N, 3 params, 4)
-        zero = np.zeros_like(r)
-        dp_dx = np.stack([np.concatenate([r / r0[:, None], zero], 1),
-                          np.concatenate([v, r], 1) / smu,
-                          np.concatenate([-2.0 * r / r0[:, None] ** 3, -2.0 * v / mu], 1)],
-                         1)  # (N, 3 params, 6)
-        dfg_dx = np.matmul(np.swapaxes(dfg_dp, 1, 2), dp_dx)  # (N, 4, 6)
-        phi = (fg @ _LAGRANGE_BASIS).reshape(n, 6, 6)
-        phi[:, :3] += r[:, :, None] * dfg_dx[:, None, 0] + v[:, :, None] * dfg_dx[:, None, 1]
-        phi[:, 3:] += r[:, :, None] * dfg_dx[:, None, 2] + v[:, :, None] * dfg_dx[:, None, 3]
-        x1 = _apply(fg, r, v)
-        ok = o.ok & np.isfinite(x1).all(axis=1) & np.isfinite(phi).all(axis=(1, 2))
+        r, v, r0, sig0, alpha, chi = o.r, o.v, o.r0, o.sig0, o.alpha, o.chi
+        n = r.shape[0]
+        chi2 = chi * chi
+        c2, c3, c4, c5 = _stumpff(alpha * chi2, full=True)
+        u2 = chi2 * c2
+        u3 = chi2 * chi * c3
+        u4 = chi2 * chi2 * c4
+        u5 = chi2 * chi2 * chi * c5
+        u1 = chi - alpha * u3
+        u0 = 1.0 - alpha * u2
+        rr = r0 * u0 + sig0 * u1 + u2
+        ir0 = 1.0 / r0
+        ir = 1.0 / rr
+        f = 1.0 - u2 * ir0
+        g = (r0 * u1 + sig0 * u2) / smu
+        fd = -smu * u1 * ir * ir0
+        gd = 1.0 - u2 * ir
+        # partials w.r.t. p = (r0, sigma0, alpha); dU_k/dalpha at fixed chi
+        u0a = -0.5 * chi * u1
+        u1a = 0.5 * (u3 - chi * u2)
+        u2a = 0.5 * (2.0 * u4 - chi * u3)
+        u3a = 0.5 * (3.0 * u5 - chi * u4)
+        # dchi/dp = -dK/dp / r from Kepler's equation K(chi, p) = tau
+        xa_r, xa_s, xa_a = -u1 * ir, -u2 * ir, -(r0 * u1a + sig0 * u2a + u3a) * ir
+        au1 = -alpha * u1
+        d0r, d0s, d0a = au1 * xa_r, au1 * xa_s, au1 * xa_a + u0a
+        d1r, d1s, d1a = u0 * xa_r, u0 * xa_s, u0 * xa_a + u1a
+        d2r, d2s, d2a = u1 * xa_r, u1 * xa_s, u1 * xa_a + u2a
+        r_r = u0 + r0 * d0r + sig0 * d1r + d2r
+        r_s = u1 + r0 * d0s + sig0 * d1s + d2s
+        r_a = r0 * d0a + sig0 * d1a + d2a
+        f_r, f_s, f_a = -d2r * ir0 + u2 * ir0 * ir0, -d2s * ir0, -d2a * ir0
+        g_r = (u1 + r0 * d1r + sig0 * d2r) / smu
+        g_s = (u2 + r0 * d1s + sig0 * d2s) / smu
+        g_a = (r0 * d1a + sig0 * d2a) / smu
+        k = -smu * ir * ir0
+        fd_r = k * d1r - fd * (r_r * ir + ir0)
+        fd_s = k * d1s - fd * r_s * ir
+        fd_a = k * d1a - fd * r_a * ir
+        q = u2 * ir * ir
+        gd_r, gd_s, gd_a = -d2r * ir + q * r_r, -d2s * ir + q * r_s, -d2a * ir + q * r_a
+        # M[i] = (a_i, b_i, b_i, d_i): d(coef i)/dx = [a_i r0 + b_i v0, b_i r0 + d_i v0]
+        ir03 = 2.0 * ir0 * ir0 * ir0
+        ism = 1.0 / smu
+        imu = 2.0 / mu
+        fs = np.stack([f, g, fd, gd])
+        a = np.stack([f_r, g_r, fd_r, gd_r]) * ir0 - np.stack([f_a, g_a, fd_a, gd_a]) * ir03
+        b = np.stack([f_s, g_s, fd_s, gd_s]) * ism
+        dd = np.stack([f_a, g_a, fd_a, gd_a]) * -imu
+        # structure of arrays (object axis last): long contiguous loops, no small inner axes
+        rT, vT = np.ascontiguousarray(r.T), np.ascontiguousarray(v.T)  # (3, N)
+        grad = np.empty((4, 6, n))  # rows d(coef i)/dx0
+        grad[:, :3] = a[:, None, :] * rT + b[:, None, :] * vT
+        grad[:, 3:] = b[:, None, :] * rT + dd[:, None, :] * vT
+        phi = np.empty((6, 6, n))
+        phi[:3] = rT[:, None, :] * grad[0] + vT[:, None, :] * grad[1]
+        phi[3:] = rT[:, None, :] * grad[2] + vT[:, None, :] * grad[3]
+        for i, (i0, j0) in enumerate(((0, 0), (0, 3), (3, 0), (3, 3))):
+            for d in range(3):
+                phi[i0 + d, j0 + d] += fs[i]
+        ok = o.ok & np.isfinite(phi).all(axis=(0, 1))
+        phi = np.ascontiguousarray(phi.transpose(2, 0, 1))
+        x1 = np.empty((n, 6))
+        x1[:, :3] = f[:, None] * r + g[:, None] * v
+        x1[:, 3:] = fd[:, None] * r + gd[:, None] * v
+        ok &= np.isfinite(x1).all(axis=1)
     return x1, phi, ok
 
 
