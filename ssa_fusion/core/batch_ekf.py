@@ -539,22 +539,24 @@ def _process_noise_basis() -> Array:
     return out
 
 
-def _inv3_sym(S: Array) -> tuple[Array, BoolArray]:
-    """Inverses of symmetric 3x3 matrices (m, 3, 3) by cofactors; ok False if det <= 0."""
-    a, b, c = S[:, 0, 0], S[:, 0, 1], S[:, 0, 2]
-    d, e, f = S[:, 1, 1], S[:, 1, 2], S[:, 2, 2]
+def _inv3_sym_soa(S: Array) -> tuple[Array, BoolArray]:
+    """Inverses of symmetric 3x3 matrices stored object axis last (3, 3, m), by cofactors.
+
+    Returns (inverses (3, 3, m), ok (m,)); ok is False where det <= 0 or not finite.
+    """
+    a, b, c = S[0, 0], S[0, 1], S[0, 2]
+    d, e, f = S[1, 1], S[1, 2], S[2, 2]
     c11 = d * f - e * e
     c12 = c * e - b * f
     c13 = b * e - c * d
     det = a * c11 + b * c12 + c * c13
     ok = np.isfinite(det) & (det > 0.0)
     i = 1.0 / np.where(ok, det, 1.0)
-    c23 = (b * c - a * e) * i
-    inv = np.stack([
-        np.stack([c11 * i, c12 * i, c13 * i], -1),
-        np.stack([c12 * i, (a * f - c * c) * i, c23], -1),
-        np.stack([c13 * i, c23, (a * d - b * b) * i], -1),
-    ], -2)
+    inv = np.empty_like(S)
+    inv[0, 0], inv[1, 1], inv[2, 2] = c11 * i, (a * f - c * c) * i, (a * d - b * b) * i
+    inv[0, 1] = inv[1, 0] = c12 * i
+    inv[0, 2] = inv[2, 0] = c13 * i
+    inv[1, 2] = inv[2, 1] = (b * c - a * e) * i
     return inv, ok
 
 
@@ -587,6 +589,8 @@ class BatchEKF:
         self._enu = np.array([enu_matrix(s.lat_rad, s.lon_rad) for s in self.stations])
         self._site = np.array([m @ site_ecef(s.lat_rad, s.lon_rad, s.alt_km)
                                for m, s in zip(self._enu, self.stations, strict=True)])
+        self._enu_soa = np.ascontiguousarray(self._enu.transpose(1, 2, 0))  # (3, 3, stations)
+        self._site_soa = np.ascontiguousarray(self._site.T)  # (3, stations) km
         self._qbasis = config.q * _process_noise_basis().reshape(3, 36)
         self._params = config.params
 
@@ -669,21 +673,54 @@ class BatchEKF:
 
     def _update(self, x: Array, P: Array, z: Array, R: Array, t: Array,
                 station: NDArray[np.intp]) -> tuple[Array, Array, Array, Array, BoolArray]:
-        """Joseph-form update of m objects: (x, P, nis, y, computable)."""
-        zp, H = self.measure(x, t, station)
-        y = z - zp
-        y[:, 1:] = wrap_angle(y[:, 1:])
-        Ht = np.swapaxes(H, 1, 2)
-        PHt = np.matmul(P, Ht)
-        Si, ok = _inv3_sym(np.matmul(H, PHt) + R)
-        nis = np.einsum("mi,mij,mj->m", y, Si, y)
-        K = np.matmul(PHt, Si)
-        x1 = x + np.einsum("mij,mj->mi", K, y)
-        A = np.eye(6) - np.matmul(K, H)
-        P1 = _sym(np.matmul(np.matmul(A, P), np.swapaxes(A, 1, 2))
-                  + np.matmul(np.matmul(K, R), np.swapaxes(K, 1, 2)))
-        ok &= np.isfinite(nis) & np.isfinite(x1).all(axis=1) & np.isfinite(P1).all(axis=(1, 2))
-        return x1, P1, nis, y, ok
+        """Joseph-form update of m objects: (x, P, nis, y, computable).
+
+        Elementwise over the object axis in a structure-of-arrays layout (object axis last),
+        using the zero velocity columns of H. The Joseph form ``A P A^T + K R K^T``
+        (``A = I - K H``) is evaluated expanded, ``P + (K S - 2 P H^T) K^T`` symmetrised
+        (S = H P H^T + R): algebraically the same, and like it insensitive to first order
+        to an error in the gain K (the first-order term is antisymmetric).
+        """
+        m = x.shape[0]
+        th = self._era0 + ERA_RATE * t
+        c, s = np.cos(th), np.sin(th)
+        M = self._enu_soa[:, :, station]  # (3, 3, m)
+        T = np.empty_like(M)  # ECI -> ENU: M R3(th)
+        T[:, 0] = M[:, 0] * c - M[:, 1] * s
+        T[:, 1] = M[:, 0] * s + M[:, 1] * c
+        T[:, 2] = M[:, 2]
+        xt = x.T
+        enu = T[:, 0] * xt[0] + T[:, 1] * xt[1] + T[:, 2] * xt[2] - self._site_soa[:, station]
+        e, n, u = enu
+        h2 = e * e + n * n
+        h = np.sqrt(h2)
+        r2 = h2 + u * u
+        rg = np.sqrt(r2)
+        y = np.empty((3, m))
+        y[0] = z[:, 0] - rg
+        y[1] = wrap_angle(z[:, 1] - np.mod(np.arctan2(e, n), 2.0 * math.pi))
+        y[2] = wrap_angle(z[:, 2] - np.arctan2(u, h))
+        k = -u / (h * r2)
+        D = np.empty((3, 3, m))  # d(range, az, el)/d(e, n, u)
+        D[0, 0], D[0, 1], D[0, 2] = e / rg, n / rg, u / rg
+        D[1, 0], D[1, 1], D[1, 2] = n / h2, -e / h2, 0.0
+        D[2, 0], D[2, 1], D[2, 2] = k * e, k * n, h / r2
+        Hr = D[:, 0, None] * T[0] + D[:, 1, None] * T[1] + D[:, 2, None] * T[2]  # (3, 3, m)
+        Pt = np.ascontiguousarray(P.transpose(1, 2, 0))  # (6, 6, m)
+        PHt = Pt[:, 0, None] * Hr[:, 0] + Pt[:, 1, None] * Hr[:, 1] + Pt[:, 2, None] * Hr[:, 2]
+        S = (Hr[:, 0, None] * PHt[0] + Hr[:, 1, None] * PHt[1] + Hr[:, 2, None] * PHt[2]
+             + R.transpose(1, 2, 0))
+        Si, ok = _inv3_sym_soa(S)
+        Siy = Si[:, 0] * y[0] + Si[:, 1] * y[1] + Si[:, 2] * y[2]
+        nis = y[0] * Siy[0] + y[1] * Siy[1] + y[2] * Siy[2]
+        K = PHt[:, 0, None] * Si[0] + PHt[:, 1, None] * Si[1] + PHt[:, 2, None] * Si[2]
+        x1 = x + (K[:, 0] * y[0] + K[:, 1] * y[1] + K[:, 2] * y[2]).T
+        E = K[:, 0, None] * S[0] + K[:, 1, None] * S[1] + K[:, 2, None] * S[2] - 2.0 * PHt
+        P1 = Pt + E[:, 0, None] * K[:, 0] + E[:, 1, None] * K[:, 1] + E[:, 2, None] * K[:, 2]
+        P1 += P1.transpose(1, 0, 2)
+        P1 *= 0.5
+        ok &= np.isfinite(nis) & np.isfinite(x1).all(axis=1) & np.isfinite(P1).all(axis=(0, 1))
+        return x1, np.ascontiguousarray(P1.transpose(2, 0, 1)), nis, y.T, ok
 
     def update(self, x: ArrayLike, P: ArrayLike, z: ArrayLike, R: ArrayLike, t: ArrayLike,
                station: ArrayLike, mask: ArrayLike | None = None,
