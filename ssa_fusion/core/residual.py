@@ -624,10 +624,10 @@ class ResidualSurrogate:
         return f
 
 
-LIVE_RESIDUAL = ResidualConfig(model="hill", harmonics=1)
-"""The residual setting a live filter uses: ``hill_h1`` (empirical accelerations, constant
-+ once per revolution, 2-day window), chosen on the tuning seeds 1-3 by
-`paper.gap_study.tune` (docs/HISTORY.md, session 10)."""
+LIVE_RESIDUAL = ResidualConfig(model="hill", harmonics=1, model_error=0.2)
+"""The residual setting a live filter uses: ``hill_h1_me20`` (empirical accelerations,
+constant + once per revolution, 2-day window, relative model error 0.2), chosen on the
+tuning seeds 1-3 by `paper.gap_study.tune` (docs/HISTORY.md, session 10)."""
 
 PLACEHOLDER_TRAJECTORY = {"kepler": "two_body", "j2": "j2"}
 """The `dynamics` model of each filter motion model's trajectory (for `orbit_propagator`)."""

@@ -72,16 +72,23 @@ def tuning_candidates() -> dict[str, residual.ResidualConfig]:
         "hill_h2": replace(hill, harmonics=2),
         "hill_h1_w1d": replace(hill, harmonics=1, window_s=86400.0, min_span_s=43200.0),
         "hill_h1_hs": replace(hill, harmonics=1, horizon_scale=True),
+        # session 10, live: the chosen setting's NEES over the gaps is 16-64 (overconfident);
+        # the relative model error (covariance only: no mean error changes) on these seeds
+        "hill_h1_me5": replace(hill, harmonics=1, model_error=0.05),
+        "hill_h1_me10": replace(hill, harmonics=1, model_error=0.1),
+        "hill_h1_me20": replace(hill, harmonics=1, model_error=0.2),
         "basis_h2": residual.ResidualConfig(model="basis"),
     }
 
 
-CHOSEN = "hill_h1"
+CHOSEN = "hill_h1_me20"
 """The residual setting chosen by `tune` on the tuning seeds 1-3 (offset 0 h, all three
-scenarios): the best median j2_coast / residual over gaps of 1.5-16 h on both ISS scenarios
-(2.81 and 5.97; hill_h2 1.46 and 4.61, the free basis 0.56 and 3.91, BOP-DMD 0.007), and one
-of the two best with the two-body placeholder (0.74 and 3.27; the 1-day window 1.01 and 5.58
-but forecasting in 29 % of iss_radar_columbus's gaps)."""
+scenarios): the model hill_h1, the best median j2_coast / residual over gaps of 1.5-16 h on
+both ISS scenarios (2.81 and 5.97; hill_h2 1.46 and 4.61, the free basis 0.56 and 3.91,
+BOP-DMD 0.007), and one of the two best with the two-body placeholder (0.74 and 3.27; the
+1-day window 1.01 and 5.58 but forecasting in 29 % of iss_radar_columbus's gaps); then its
+relative model error (covariance only) 0.2, whose j2 NEES over those gaps is nearest the
+band on both ISS scenarios (13.4 and 23.1; 0.01: 21.8 and 38.2; 0.1: 13.0 and 27.8)."""
 
 
 @dataclass(frozen=True)
