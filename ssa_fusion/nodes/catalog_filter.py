@@ -64,6 +64,26 @@ def shard_range(shard: int, shards: int) -> tuple[int, int]:
     return lo, (shard + 1) * KEY_SPACE // shards - 1
 
 
+def shard_problem(key: int, object_id: str, shard: int, shards: int) -> tuple[str, str] | None:
+    """Why shard `shard` of `shards` does not take a measurement of `object_id` carrying
+    `key`, as (counter, reason), or None. One shard takes everything (a publisher that does
+    not set ``shard_key`` included); with several, a key that is not the CRC-32 of the id is
+    ``rejected_shard_key`` (its publisher did not set it: every shard would refuse it), and
+    one of another shard's range ``ignored_other_shard`` (a DDS without content filters)."""
+    if shards <= 1:
+        return None
+    want = messages.shard_key(object_id)
+    if key != want:
+        return ("rejected_shard_key", f"object {object_id!r}: shard_key {key} is not the "
+                f"CRC-32 of its id ({want}); the publisher must set it (ros.messages."
+                "shard_key) for a sharded graph")
+    lo, hi = shard_range(shard, shards)
+    if not lo <= key <= hi:
+        return ("ignored_other_shard", f"object {object_id!r}, shard_key {key}: not in "
+                f"[{lo}, {hi}]")
+    return None
+
+
 def _network(value: Any) -> str | None:
     try:
         network_stations(value)
@@ -167,11 +187,9 @@ class CatalogFilterNode(Node):
             self.diag.count(Cause.REJECTED_SOURCE, f"source {msg.source} on "
                             f"{TOPIC_MEASUREMENT}, which carries only sensor data")
             return
-        if not self.lo <= msg.shard_key <= self.hi or \
-                msg.shard_key != messages.shard_key(msg.object_id):
-            self.diag.count("ignored_other_shard", f"object {msg.object_id!r}, shard_key "
-                            f"{msg.shard_key}: not in [{self.lo}, {self.hi}] or not its "
-                            "CRC-32", warn=False)
+        why = shard_problem(msg.shard_key, msg.object_id, self.shard, self.shards)
+        if why:
+            self.diag.count(why[0], why[1], warn=why[0] != "ignored_other_shard")
             return
         try:
             m = messages.measurement_from_msg(msg)
