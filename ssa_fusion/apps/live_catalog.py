@@ -213,6 +213,8 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
         counts = {k: int(v) for k, v in st.items() if v.isdigit()}
         per_shard[n] = {"received": counts.get("received", 0),
                         "ignored_other_shard": counts.get("ignored_other_shard", 0),
+                        "refused": counts.get("refused", 0),
+                        "dropped": counts.get("dropped", 0),
                         "consumed": counts.get("consumed", 0),
                         "estimates": counts.get("published_sensor", 0),
                         "objects": int(st.get("objects", "0") or 0),
@@ -220,11 +222,13 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
                         "bank_bytes_per_object": st.get("bank_bytes_per_object", ""),
                         "object_ids": [x for x in st.get("object_ids", "").split(",") if x]}
         for k, v in counts.items():
-            if k.startswith(("rejected_", "iod_", "reinitialised")):
+            if k.startswith(("rejected_", "iod_", "reinitialised", "internal_error")):
                 causes[k] += v
-    received = sum(p["received"] - p["ignored_other_shard"] for p in per_shard.values())
-    door = sum(v for k, v in causes.items() if k.startswith("rejected_"))  # incl. bank's
+    received = sum(p["received"] for p in per_shard.values())
+    door = sum(p["refused"] for p in per_shard.values())
     consumed = sum(p["consumed"] for p in per_shard.values())
+    # every received measurement ends refused at the door, consumed by the bank, or dropped
+    unaccounted = sum(p["received"] - p["refused"] - p["consumed"] for p in per_shard.values())
     fused = sum(p["estimates"] for p in per_shard.values())
     err = position_errors(entries, estimates)
     ran = None if sim_wall is None else sim_wall[1] - sim_wall[0]
@@ -233,9 +237,11 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
         "published": published, "recorded_measurements": recorded[TOPIC_MEASUREMENT],
         "received_by_shards": received, "consumed_by_banks": consumed,
         "estimates_published": fused, "estimates_recorded": recorded[TOPIC_ESTIMATE],
-        "rejected_and_pending": dict(causes), "rejected_total": door,
-        "lost_measurements": max(published - recorded[TOPIC_MEASUREMENT], 0)
-        + max(published - received, 0),
+        "rejected_and_pending": dict(causes), "refused_at_door": door,
+        "dropped": sum(p["dropped"] for p in per_shard.values()),
+        "unaccounted": unaccounted,
+        "lost_measurements": abs(published - recorded[TOPIC_MEASUREMENT])
+        + abs(published - received) + abs(unaccounted),
         "lost_estimates": max(fused - recorded[TOPIC_ESTIMATE], 0),
         "objects_with_estimates": len(estimates),
         "sim_s": sim_s, "sim_wall_s": ran,
@@ -253,8 +259,9 @@ def table(s: dict[str, Any]) -> str:
     """The summary as lines of text."""
     rows = [
         f"\nmeasurements: published {s['published']}, recorded {s['recorded_measurements']}, "
-        f"received by the shards {s['received_by_shards']}, taken by the banks "
-        f"{s['consumed_by_banks']}; lost: {s['lost_measurements']}",
+        f"received by the shards {s['received_by_shards']} (refused at the door "
+        f"{s['refused_at_door']}, taken by the banks {s['consumed_by_banks']}, dropped "
+        f"{s['dropped']}); lost: {s['lost_measurements']}",
         f"estimates: published {s['estimates_published']}, recorded "
         f"{s['estimates_recorded']}, for {s['objects_with_estimates']} objects",
         "rejected / pending by cause: " + (", ".join(

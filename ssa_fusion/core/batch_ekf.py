@@ -766,6 +766,11 @@ class BatchEKF:
         X = x if inplace and isinstance(x, np.ndarray) else np.asarray(x, dtype=float)
         PP = P if inplace and isinstance(P, np.ndarray) else np.asarray(P, dtype=float)
         n = X.shape[0]
+        if mask is not None:
+            mk = np.asarray(mask)
+            if mk.dtype != np.bool_ or mk.shape != (n,):
+                raise ValueError(f"mask must be a boolean array of shape ({n},), got "
+                                 f"{mk.dtype} {mk.shape}")
         idx = np.arange(n) if mask is None else np.flatnonzero(np.asarray(mask, dtype=bool))
         code = np.full(n, Code.NOT_MEASURED, dtype=np.int8)
         nis = np.full(n, np.nan)

@@ -694,18 +694,17 @@ class GapForecaster:
         if self.fitted_t != t_end:  # a pass ended: fit once, tabulate the forecast
             self.fitted_t = t_end
             self.table = {}
-            try:
+            k0 = math.floor(t_end / self.period_s) + 1
+            k1 = math.floor((t_end + self.surrogate.cfg.max_horizon_s) / self.period_s)
+            grid = self.period_s * np.arange(k0, k1 + 1, dtype=float)
+            try:  # a fit or propagation that fails leaves the gap to the EKF's coasting
                 fit = self.surrogate.fit()
-            except (ValueError, np.linalg.LinAlgError, FloatingPointError):
-                fit = None
-            if fit is not None:
-                k0 = math.floor(t_end / self.period_s) + 1
-                k1 = math.floor((t_end + self.surrogate.cfg.max_horizon_s) / self.period_s)
-                grid = self.period_s * np.arange(k0, k1 + 1, dtype=float)
-                if grid.size:
+                if fit is not None and grid.size:
                     xs, Ps = fit.predict(grid)
                     self.table = {float(g): (xs[i], Ps[i]) for i, g in enumerate(grid)
                                   if np.isfinite(xs[i]).all() and np.isfinite(Ps[i]).all()}
+            except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError):
+                self.table = {}
         return self.table.get(float(t))
 
 

@@ -167,9 +167,9 @@ class TrackBank:
         R : array_like (M, 3, 3)
             Noise covariances, km^2, rad^2.
         """
-        tt = np.asarray(t, dtype=float)
-        zz = np.asarray(z, dtype=float).reshape(-1, 3)
-        RR = np.asarray(R, dtype=float).reshape(-1, 3, 3)
+        tt = np.array(t, dtype=float)  # copies: IOD batches keep measurements for later
+        zz = np.array(z, dtype=float).reshape(-1, 3)
+        RR = np.array(R, dtype=float).reshape(-1, 3, 3)
         m = tt.size
         rows = np.array([self.row(o) for o in object_ids], dtype=np.int64)
         station = np.array([self.ekf.index.get(f, -1) for f in frame_ids], dtype=np.int64)
@@ -180,6 +180,9 @@ class TrackBank:
         out_nis: list[Array] = []
         for i in np.flatnonzero(station < 0).tolist():
             cause[i] = Cause.REJECTED_FRAME
+        for i in np.flatnonzero(~np.isfinite(tt)).tolist():
+            cause[i] = Cause.REJECTED_NONFINITE
+            station[i] = -1  # out of every round
         # rank of each measurement among its object's in this batch: its round
         order = np.lexsort((np.arange(m), rows))
         first = np.r_[True, rows[order][1:] != rows[order][:-1]]

@@ -175,27 +175,40 @@ class CatalogFilterNode(Node):
 
     def on_jump(self, _jump: Any) -> None:
         self.bank = TrackBank(self.bank_config, self.stations)
+        self.diag.counts["dropped"] += len(self._pending)
         self._pending.clear()
         self.diag.count(Cause.RESET_CLOCK_JUMP, "sim time jumped backwards: every track "
                         "forgotten", warn=False)
 
     def on_measurement(self, msg: MeasurementMsg) -> None:
-        """Check one message and keep it for the next batch."""
+        """Check one message and keep it for the next batch. Every received message ends
+        counted once: ``ignored_other_shard``, ``refused`` (with its cause), ``consumed`` by
+        the bank, or ``dropped`` (by a clock jump or a failed batch)."""
         self.activity += 1
         self.diag.counts["received"] += 1
+        if not self._admit(msg):
+            self.diag.counts["refused"] += 1
+
+    def _admit(self, msg: MeasurementMsg) -> bool:
+        """Keep `msg` for the next batch and return True, or count why not and return False
+        (refused); a measurement of another shard is counted as ``ignored_other_shard``
+        only, not as received (True)."""
         if msg.source != Source.SENSOR:
             self.diag.count(Cause.REJECTED_SOURCE, f"source {msg.source} on "
                             f"{TOPIC_MEASUREMENT}, which carries only sensor data")
-            return
+            return False
         why = shard_problem(msg.shard_key, msg.object_id, self.shard, self.shards)
         if why:
-            self.diag.count(why[0], why[1], warn=why[0] != "ignored_other_shard")
-            return
+            other = why[0] == "ignored_other_shard"
+            self.diag.count(why[0], why[1], warn=not other)
+            if other:
+                self.diag.counts["received"] -= 1  # never this shard's: not received here
+            return other
         try:
             m = messages.measurement_from_msg(msg)
         except ValueError as exc:
             self.diag.count(Cause.REJECTED_KIND, str(exc))
-            return
+            return False
         cause, reason = measurement_problem(m, Kind.RANGE_AZ_EL)
         if not cause:
             if m.frame_id not in self.stations:
@@ -206,8 +219,9 @@ class CatalogFilterNode(Node):
                                                self.max_lead)
         if cause:
             self.diag.count(cause, reason)
-            return
+            return False
         self._pending.append((m.t, m.object_id, m.frame_id, m.z, m.R))
+        return True
 
     def fuse(self) -> None:
         """Fuse what arrived since the last batch (in epoch order) and publish the estimates."""
@@ -216,8 +230,13 @@ class CatalogFilterNode(Node):
         batch = sorted(self._pending, key=lambda p: p[0])  # stable: arrival order at a tie
         self._pending = []
         t = np.array([p[0] for p in batch])
-        res = self.bank.process(t, [p[1] for p in batch], [p[2] for p in batch],
-                                np.array([p[3] for p in batch]), np.array([p[4] for p in batch]))
+        try:
+            res = self.bank.process(t, [p[1] for p in batch], [p[2] for p in batch],
+                                    np.array([p[3] for p in batch]),
+                                    np.array([p[4] for p in batch]))
+        except Exception:  # counted, then the guard logs the traceback as internal_error
+            self.diag.counts["dropped"] += len(batch)
+            raise
         self.diag.counts["consumed"] += len(batch)
         for i, cause in enumerate(res.cause):
             if cause == Cause.IOD_PENDING:

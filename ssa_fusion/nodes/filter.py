@@ -198,7 +198,11 @@ class FilterNode(Node):
 
     def _set_predict_period(self, value: float) -> None:
         self.predict_period = value
-        self.gaps = self._gap_forecaster()
+        if self.gaps is not None and value > 0:  # keep the anchors; tabulate anew
+            self.gaps.period_s = float(value)
+            self.gaps.fitted_t = -math.inf
+        else:
+            self.gaps = self._gap_forecaster()
 
     def publish_config(self) -> None:
         """Publish the estimator settings in effect on /ssa/config (latched)."""

@@ -29,7 +29,6 @@ Foxglove layout of these topics (3D, Map, Plot).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from typing import Any
 
@@ -172,38 +171,39 @@ class FoxgloveBridgeNode(Node):
         for item in logged:
             self.channels[item.topic].log(item.message, log_time=item.log_time)
 
-    def _show(self, make: Callable[[], object], counter: str) -> None:
+    def _show(self, make: Callable[[], object], counter: str) -> bool:
         """Run `make` (a `VisualTopics` call); count `counter`, or why it was not shown."""
         try:
             made = make()
         except scene.NotShownError as exc:
             self.diag.count(exc.key, exc.detail, warn=exc.warn)
-            return
+            return False
         if isinstance(made, list):
             self._log(made)
         self.diag.counts[counter] += 1
+        return True
 
     def on_truth(self, msg: StateEstimateMsg) -> None:
         self.activity += 1
         if not self._ours(msg.object_id):
             return
         e = messages.estimate_from_msg(msg)
-        self._show(lambda: self.visual.truth(e.t, e.x), "truth")
-        self._publish_fix(visual_msgs.TRUTH_TRACK_TOPIC, e.t, e.x, "truth")
+        if self._show(lambda: self.visual.truth(e.t, e.x), "truth"):
+            self._publish_fix(visual_msgs.TRUTH_TRACK_TOPIC, e.t, e.x, "truth")
 
     def on_estimate(self, msg: StateEstimateMsg) -> None:
         self.activity += 1
         if not self._ours(msg.object_id):
             return
         e = messages.estimate_from_msg(msg)
-        self._show(lambda: self.visual.estimate(e.t, e.x, e.P, e.update_source, e.nis),
-                   "estimates")
-        self._publish_fix(visual_msgs.TRACK_TOPIC, e.t, e.x, "estimate")
+        if self._show(lambda: self.visual.estimate(e.t, e.x, e.P, e.update_source, e.nis),
+                      "estimates"):  # the ground track only of what the scene shows
+            self._publish_fix(visual_msgs.TRACK_TOPIC, e.t, e.x, "estimate")
 
     def _publish_fix(self, topic: str, t: float, x: Any, frame_id: str) -> None:
-        """Publish the ground-track NavSatFix of a state that was shown (finite)."""
+        """Publish the ground-track NavSatFix of a state the scene showed."""
         pub = self.ros_pubs.get(topic)
-        if pub is not None and all(math.isfinite(float(v)) for v in (t, *x[:3])):
+        if pub is not None:
             pub.publish(visual_msgs.nav_sat_fix(t, x, frame_id))
 
     def on_measurement(self, msg: MeasurementMsg) -> None:

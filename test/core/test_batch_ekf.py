@@ -165,6 +165,10 @@ def test_mask_and_update_only() -> None:
     np.testing.assert_allclose(part.x[mask], full.x[mask], rtol=1e-14, atol=0)
     np.testing.assert_allclose(part.P[mask], full.P[mask], rtol=1e-12, atol=1e-18)
     assert np.isnan(part.nis[~mask]).all() and np.isfinite(part.nis[mask]).all()
+    # a mask is one bool per object: an index list or a wrong length is an error
+    for bad in ([0, 2], mask[:-1], np.r_[mask, True]):
+        with pytest.raises(ValueError, match="mask must be a boolean array"):
+            bank.step(o["x"], o["P"], o["dt"], o["z"], R, o["t"], o["station"], mask=bad)
     # dt == 0: an update without prediction, as ExtendedKalmanFilter.update
     up = bank.update(o["x"], o["P"], o["z"], R, T0, o["station"])
     for i in range(len(o["x"])):

@@ -109,3 +109,21 @@ def test_stale_duplicate_and_unknown_station_are_refused_per_measurement():
     assert res.cause == [Cause.REJECTED_STALE, Cause.REJECTED_DUPLICATE]
     assert res.fused.size == 0 and bank.t[bank.rows["b"]] == 100.0
     assert math.isfinite(bank.x[bank.rows["b"]].sum())
+
+
+def test_the_bank_keeps_copies_and_refuses_a_non_finite_epoch():
+    """Measurements waiting in an IOD batch do not change when the caller reuses its
+    arrays; a NaN epoch is refused with a cause, not reported as fused."""
+    bank = _bank()
+    R = np.diag([1e-4, 1e-8, 1e-8])
+    z = np.array([[1500.0, 1.0, 0.5]])
+    res = bank.process([10.0], ["a"], ["millstone"], z, [R])
+    assert res.cause == [Cause.IOD_PENDING]
+    z[0, 0] = -1.0
+    assert bank._initiators[bank.rows["a"]].batch[0].z[0] == 1500.0
+    bank.tracking[bank.rows["a"]] = True
+    bank.x[bank.rows["a"]] = [7000.0, 0.0, 0.0, 0.0, 7.5, 0.0]
+    bank.P[bank.rows["a"]] = np.eye(6)
+    bank.t[bank.rows["a"]] = 10.0
+    res = bank.process([float("nan")], ["a"], ["millstone"], [[1500.0, 1.0, 0.5]], [R])
+    assert res.cause == [Cause.REJECTED_NONFINITE] and res.fused.size == 0
