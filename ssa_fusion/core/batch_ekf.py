@@ -48,6 +48,7 @@ from numpy.typing import ArrayLike, NDArray
 from . import dynamics
 from .constants import MU_EARTH
 from .frames import ERA_RATE, Station, earth_rotation_angle, enu_matrix, site_ecef, wrap_angle
+from .kepler import lagrange_partials
 from .stations import UNIX_EPOCH_JD
 from .tracker import DEFAULT_GATE
 from .types import Cause
@@ -368,53 +369,10 @@ def kepler_stm(x: ArrayLike, dt: ArrayLike,
         o = _kepler_solve(x, dt, mu)
         r, v, r0, sig0, alpha, chi = o.r, o.v, o.r0, o.sig0, o.alpha, o.chi
         n = r.shape[0]
-        chi2 = chi * chi
-        c2, c3, c4, c5 = _stumpff(alpha * chi2, full=True)
-        u2 = chi2 * c2
-        u3 = chi2 * chi * c3
-        u4 = chi2 * chi2 * c4
-        u5 = chi2 * chi2 * chi * c5
-        u1 = chi - alpha * u3
-        u0 = 1.0 - alpha * u2
-        rr = r0 * u0 + sig0 * u1 + u2
-        ir0 = 1.0 / r0
-        ir = 1.0 / rr
-        f = 1.0 - u2 * ir0
-        g = (r0 * u1 + sig0 * u2) / smu
-        fd = -smu * u1 * ir * ir0
-        gd = 1.0 - u2 * ir
-        # partials w.r.t. p = (r0, sigma0, alpha); dU_k/dalpha at fixed chi
-        u0a = -0.5 * chi * u1
-        u1a = 0.5 * (u3 - chi * u2)
-        u2a = 0.5 * (2.0 * u4 - chi * u3)
-        u3a = 0.5 * (3.0 * u5 - chi * u4)
-        # dchi/dp = -dK/dp / r from Kepler's equation K(chi, p) = tau
-        xa_r, xa_s, xa_a = -u1 * ir, -u2 * ir, -(r0 * u1a + sig0 * u2a + u3a) * ir
-        au1 = -alpha * u1
-        d0r, d0s, d0a = au1 * xa_r, au1 * xa_s, au1 * xa_a + u0a
-        d1r, d1s, d1a = u0 * xa_r, u0 * xa_s, u0 * xa_a + u1a
-        d2r, d2s, d2a = u1 * xa_r, u1 * xa_s, u1 * xa_a + u2a
-        r_r = u0 + r0 * d0r + sig0 * d1r + d2r
-        r_s = u1 + r0 * d0s + sig0 * d1s + d2s
-        r_a = r0 * d0a + sig0 * d1a + d2a
-        f_r, f_s, f_a = -d2r * ir0 + u2 * ir0 * ir0, -d2s * ir0, -d2a * ir0
-        g_r = (u1 + r0 * d1r + sig0 * d2r) / smu
-        g_s = (u2 + r0 * d1s + sig0 * d2s) / smu
-        g_a = (r0 * d1a + sig0 * d2a) / smu
-        k = -smu * ir * ir0
-        fd_r = k * d1r - fd * (r_r * ir + ir0)
-        fd_s = k * d1s - fd * r_s * ir
-        fd_a = k * d1a - fd * r_a * ir
-        q = u2 * ir * ir
-        gd_r, gd_s, gd_a = -d2r * ir + q * r_r, -d2s * ir + q * r_s, -d2a * ir + q * r_a
-        # M[i] = (a_i, b_i, b_i, d_i): d(coef i)/dx = [a_i r0 + b_i v0, b_i r0 + d_i v0]
-        ir03 = 2.0 * ir0 * ir0 * ir0
-        ism = 1.0 / smu
-        imu = 2.0 / mu
-        fs = np.stack([f, g, fd, gd])
-        a = np.stack([f_r, g_r, fd_r, gd_r]) * ir0 - np.stack([f_a, g_a, fd_a, gd_a]) * ir03
-        b = np.stack([f_s, g_s, fd_s, gd_s]) * ism
-        dd = np.stack([f_a, g_a, fd_a, gd_a]) * -imu
+        c2, c3, c4, c5 = _stumpff(alpha * chi * chi, full=True)
+        (f, g, fd, gd), ca, cb, cd = lagrange_partials(r0, sig0, alpha, chi,
+                                                       (c2, c3, c4, c5), smu, mu)
+        fs, a, b, dd = np.stack([f, g, fd, gd]), np.stack(ca), np.stack(cb), np.stack(cd)
         # structure of arrays (object axis last): long contiguous loops, no small inner axes
         rT, vT = np.ascontiguousarray(r.T), np.ascontiguousarray(v.T)  # (3, N)
         grad = np.empty((4, 6, n))  # rows d(coef i)/dx0

@@ -30,6 +30,7 @@ Units: km, km/s, s; the frame is any inertial frame (ECI).
 from __future__ import annotations
 
 import math
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -148,6 +149,77 @@ def _solve_chi(r0: float, sig0: float, alpha: float, tau: float) -> float:
     return chi
 
 
+Num = TypeVar("Num", float, NDArray[np.float64])
+
+
+def lagrange_partials(r0: Num, sig0: Num, alpha: Num, chi: Num,
+                      c: tuple[Num, Num, Num, Num], smu: float, mu: float
+                      ) -> tuple[tuple[Num, Num, Num, Num], tuple[Num, Num, Num, Num],
+                                 tuple[Num, Num, Num, Num], tuple[Num, Num, Num, Num]]:
+    """Return the Lagrange coefficients of a two-body arc and their exact gradients.
+
+    For the arc from |r0| = `r0` km, sigma0 = r0.v0 / sqrt(mu), alpha = 2/r0 - v0^2/mu
+    (1/km), with universal anomaly `chi` (sqrt(km)) and Stumpff values `c` = (c2, c3, c4,
+    c5) at alpha chi^2: returns (f, g, fdot, gdot) and, per coefficient i, the factors
+    (a_i, b_i, d_i) of its gradient with respect to the initial state,
+    ``d coef_i / d x0 = [a_i r0_vec + b_i v0_vec, b_i r0_vec + d_i v0_vec]`` (the partials
+    through r0, sigma0 and alpha, chi following Kepler's equation). Elementwise: Python
+    floats (`propagate`) or arrays of objects (`batch_ekf.kepler_stm`).
+    """
+    c2, c3, c4, c5 = c
+    chi2 = chi * chi
+    u2 = chi2 * c2
+    u3 = chi2 * chi * c3
+    u4 = chi2 * chi2 * c4
+    u5 = chi2 * chi2 * chi * c5
+    u1 = chi - alpha * u3
+    u0 = 1.0 - alpha * u2
+    r = r0 * u0 + sig0 * u1 + u2
+    ir0 = 1.0 / r0
+    ir = 1.0 / r
+    f = 1.0 - u2 * ir0
+    g = (r0 * u1 + sig0 * u2) / smu
+    fd = -smu * u1 * ir * ir0
+    gd = 1.0 - u2 * ir
+    # --- partials w.r.t. p = (r0, sigma0, alpha) --------------------------------
+    # dU_k/dalpha at fixed chi = (k U_{k+2} - chi U_{k+1}) / 2
+    u0a = -0.5 * chi * u1
+    u1a = 0.5 * (u3 - chi * u2)
+    u2a = 0.5 * (2.0 * u4 - chi * u3)
+    u3a = 0.5 * (3.0 * u5 - chi * u4)
+    # chi from Kepler's equation K(chi, p) = tau:  dchi/dp = -dK/dp / r
+    xa_r, xa_s, xa_a = -u1 * ir, -u2 * ir, -(r0 * u1a + sig0 * u2a + u3a) * ir
+    # total derivatives of U0, U1, U2 (dU_k/dchi = U_{k-1}, dU0/dchi = -alpha U1)
+    au1 = -alpha * u1
+    d0r, d0s, d0a = au1 * xa_r, au1 * xa_s, au1 * xa_a + u0a
+    d1r, d1s, d1a = u0 * xa_r, u0 * xa_s, u0 * xa_a + u1a
+    d2r, d2s, d2a = u1 * xa_r, u1 * xa_s, u1 * xa_a + u2a
+    # r = r0 U0 + sig0 U1 + U2
+    rr = u0 + r0 * d0r + sig0 * d1r + d2r
+    rs = u1 + r0 * d0s + sig0 * d1s + d2s
+    ra = r0 * d0a + sig0 * d1a + d2a
+    f_r, f_s, f_a = -d2r * ir0 + u2 * ir0 * ir0, -d2s * ir0, -d2a * ir0
+    g_r = (u1 + r0 * d1r + sig0 * d2r) / smu
+    g_s = (u2 + r0 * d1s + sig0 * d2s) / smu
+    g_a = (r0 * d1a + sig0 * d2a) / smu
+    k = -smu * ir * ir0
+    fd_r = k * d1r - fd * (rr * ir + ir0)
+    fd_s = k * d1s - fd * rs * ir
+    fd_a = k * d1a - fd * ra * ir
+    q = u2 * ir * ir
+    gd_r, gd_s, gd_a = -d2r * ir + q * rr, -d2s * ir + q * rs, -d2a * ir + q * ra
+    # grad r0 = [r0_vec/r0, 0], grad sigma0 = [v0_vec, r0_vec]/sqrt(mu),
+    # grad alpha = [-2 r0_vec/r0^3, -2 v0_vec/mu]
+    ir03 = 2.0 * ir0 * ir0 * ir0
+    ism = 1.0 / smu
+    imu = 2.0 / mu
+    return ((f, g, fd, gd),
+            (f_r * ir0 - f_a * ir03, g_r * ir0 - g_a * ir03, fd_r * ir0 - fd_a * ir03,
+             gd_r * ir0 - gd_a * ir03),
+            (f_s * ism, g_s * ism, fd_s * ism, gd_s * ism),
+            (-f_a * imu, -g_a * imu, -fd_a * imu, -gd_a * imu))
+
+
 def propagate(
     x0_km: ArrayLike, dt_s: float, mu: float = MU_EARTH
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -196,63 +268,9 @@ def propagate(
     alpha = 2.0 / r0 - (vx * vx + vy * vy + vz * vz) / mu
 
     chi = _solve_chi(r0, sig0, alpha, smu * dt)
-    chi2 = chi * chi
-    c2, c3, c4, c5 = stumpff(alpha * chi2)
-    u2 = chi2 * c2
-    u3 = chi2 * chi * c3
-    u4 = chi2 * chi2 * c4
-    u5 = chi2 * chi2 * chi * c5
-    u1 = chi - alpha * u3
-    u0 = 1.0 - alpha * u2
-    r = r0 * u0 + sig0 * u1 + u2
-
-    f = 1.0 - u2 / r0
-    g = (r0 * u1 + sig0 * u2) / smu
-    fd = -smu * u1 / (r * r0)
-    gd = 1.0 - u2 / r
-
-    # --- partials w.r.t. p = (r0, sigma0, alpha) --------------------------------
-    # dU_k/dalpha at fixed chi = (k U_{k+2} - chi U_{k+1}) / 2
-    u0a = -0.5 * chi * u1
-    u1a = 0.5 * (u3 - chi * u2)
-    u2a = 0.5 * (2.0 * u4 - chi * u3)
-    u3a = 0.5 * (3.0 * u5 - chi * u4)
-    # chi from Kepler's equation K(chi, p) = tau:  dchi/dp = -dK/dp / r
-    xa_r, xa_s, xa_a = -u1 / r, -u2 / r, -(r0 * u1a + sig0 * u2a + u3a) / r
-    # total derivatives of U0, U1, U2 (dU_k/dchi = U_{k-1}, dU0/dchi = -alpha U1)
-    au1 = -alpha * u1
-    d0r, d0s, d0a = au1 * xa_r, au1 * xa_s, au1 * xa_a + u0a
-    d1r, d1s, d1a = u0 * xa_r, u0 * xa_s, u0 * xa_a + u1a
-    d2r, d2s, d2a = u1 * xa_r, u1 * xa_s, u1 * xa_a + u2a
-    # r = r0 U0 + sig0 U1 + U2
-    rr = u0 + r0 * d0r + sig0 * d1r + d2r
-    rs = u1 + r0 * d0s + sig0 * d1s + d2s
-    ra = r0 * d0a + sig0 * d1a + d2a
-    # Lagrange coefficients
-    ir0 = 1.0 / r0
-    ir = 1.0 / r
-    f_r, f_s, f_a = -d2r * ir0 + u2 * ir0 * ir0, -d2s * ir0, -d2a * ir0
-    g_r = (u1 + r0 * d1r + sig0 * d2r) / smu
-    g_s = (u2 + r0 * d1s + sig0 * d2s) / smu
-    g_a = (r0 * d1a + sig0 * d2a) / smu
-    k = -smu * ir * ir0
-    fd_r = k * d1r - fd * (rr * ir + ir0)
-    fd_s = k * d1s - fd * rs * ir
-    fd_a = k * d1a - fd * ra * ir
-    q = u2 * ir * ir
-    gd_r, gd_s, gd_a = -d2r * ir + q * rr, -d2s * ir + q * rs, -d2a * ir + q * ra
-
-    # grad r0 = W [1/r0, 0, 0, 0], grad sigma0 = W [0, 1, 1, 0]/sqrt(mu),
-    # grad alpha = W [-2/r0^3, 0, 0, -2/mu]  (W = [[r0, v0, 0, 0], [0, 0, r0, v0]])
-    ir03 = 2.0 * ir0 * ir0 * ir0
-    ism = 1.0 / smu
-    imu = 2.0 / mu
-    m = np.array((
-        (f_r * ir0 - f_a * ir03, f_s * ism, f_s * ism, -f_a * imu),
-        (g_r * ir0 - g_a * ir03, g_s * ism, g_s * ism, -g_a * imu),
-        (fd_r * ir0 - fd_a * ir03, fd_s * ism, fd_s * ism, -fd_a * imu),
-        (gd_r * ir0 - gd_a * ir03, gd_s * ism, gd_s * ism, -gd_a * imu),
-    ))
+    (f, g, fd, gd), a, b, d = lagrange_partials(r0, sig0, alpha, chi,
+                                                stumpff(alpha * chi * chi), smu, mu)
+    m = np.array([(a[i], b[i], b[i], d[i]) for i in range(4)])
     w = np.array((
         (x, vx, 0.0, 0.0), (y, vy, 0.0, 0.0), (z, vz, 0.0, 0.0),
         (0.0, 0.0, x, vx), (0.0, 0.0, y, vy), (0.0, 0.0, z, vz),
