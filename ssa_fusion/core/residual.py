@@ -42,6 +42,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -510,6 +511,37 @@ def period_of(x: ArrayLike) -> float:
     return 2.0 * math.pi * math.sqrt(a ** 3 / MU_EARTH)
 
 
+class _Window(NamedTuple):
+    t: Array
+    x: Array
+    P: Array
+    t0: float
+    period: float
+    x_ref: Array
+    res: Array
+
+
+def _window(cfg: ResidualConfig, propagate: Propagator, t: ArrayLike, x: ArrayLike,
+            P: ArrayLike) -> _Window | None:
+    """Return the training window of the anchors that end at the gap start t0.
+
+    Its anchors, the placeholder from the last one (x_ref) and their residual against it;
+    None when the window holds fewer than `min_anchors` or spans less than `min_span_s`,
+    or the orbit is unbound.
+    """
+    ta, xa, Pa = np.asarray(t, float), np.asarray(x, float), np.asarray(P, float)
+    t0 = float(ta[-1])
+    keep = ta >= t0 - cfg.window_s
+    ta, xa, Pa = ta[keep], xa[keep], Pa[keep]
+    if len(ta) < cfg.min_anchors or t0 - ta[0] < cfg.min_span_s:
+        return None
+    period = period_of(xa[-1])
+    if not math.isfinite(period):
+        return None
+    x_ref = propagate(xa[-1], t0, ta)
+    return _Window(ta, xa, Pa, t0, period, x_ref, state_residual(x_ref, xa))
+
+
 def fit_residual(cfg: ResidualConfig, propagate: Propagator, t: ArrayLike, x: ArrayLike,
                  P: ArrayLike) -> ResidualFit | None:
     """Fit the residual model to the anchors of its window.
@@ -519,19 +551,10 @@ def fit_residual(cfg: ResidualConfig, propagate: Propagator, t: ArrayLike, x: Ar
     (fewer than `min_anchors` anchors or a span below `min_span_s`) or the fit is refused
     (a residual beyond `max_residual_km`, an unbound orbit).
     """
-    t = np.asarray(t, float)
-    x = np.asarray(x, float)
-    P = np.asarray(P, float)
-    t0 = float(t[-1])
-    keep = t >= t0 - cfg.window_s
-    t, x, P = t[keep], x[keep], P[keep]
-    if len(t) < cfg.min_anchors or t0 - t[0] < cfg.min_span_s:
+    w = _window(cfg, propagate, t, x, P)
+    if w is None:
         return None
-    period = period_of(x[-1])
-    if not math.isfinite(period):
-        return None
-    x_ref = propagate(x[-1], t0, t)
-    res = state_residual(x_ref, x)
+    t, x, P, t0, period, x_ref, res = w
     if not np.all(np.isfinite(res)) or np.abs(res[:, :3]).max() > cfg.max_residual_km:
         return None
     sig = residual_sigmas(x_ref, P, cfg.sigma_floor)
@@ -790,18 +813,10 @@ def bopdmd_residual_forecast(cfg: ResidualConfig, bop: BopConfig, propagate: Pro
     covariances (j, 6, 6) (bagging variance, diagonal in the residual frame, plus the gap
     start's own covariance). None when the window holds too little or the fit fails.
     """
-    t = np.asarray(t, float)
-    x = np.asarray(x, float)
-    t0 = float(t[-1])
-    keep = t >= t0 - cfg.window_s
-    t, x = t[keep], x[keep]
-    if len(t) < cfg.min_anchors or t0 - t[0] < cfg.min_span_s:
+    w = _window(cfg, propagate, t, x, P)
+    if w is None:
         return None
-    period = period_of(x[-1])
-    if not math.isfinite(period):
-        return None
-    x_ref = propagate(x[-1], t0, t)
-    res = state_residual(x_ref, x)
+    t, x, P, t0, period, _, res = w
     n = 2 * math.pi / period
     alpha = np.array([1j * n, -1j * n, 2j * n, -2j * n, 1e-3 * n + 0j, -1e-3 * n + 0j])
     try:
