@@ -236,25 +236,36 @@ def late_warning(late: evaluate.LateForecasts, counters: dict[str, int]) -> str 
             "the surrogate time")
 
 
-def run(args: argparse.Namespace) -> int:
-    if getattr(args, "catalog", None) is not None:
-        from ssa_fusion.apps import live_catalog
-
-        return live_catalog.run(args)
-    s = sky.SKY_SCENARIOS.get(args.scenario) or scenarios.get(args.scenario)
-    out: Path = args.out or default_out(s.name)
-    bag = args.bag or out / "bag"
+def run_dirs(args: argparse.Namespace, name: str) -> tuple[Path, Path] | None:
+    """The run directory (`--out`, else a new one named after `name`, linked as latest)
+    and the bag in it (`--bag`, else OUT/bag), created; None after a one-line error when
+    the bag exists or the directory cannot be made."""
+    out: Path = args.out or default_out(name)
+    bag: Path = args.bag or out / "bag"
     if bag.exists():
         print(f"error: bag {bag} exists already; choose another --bag or --out",
               file=sys.stderr)
-        return 2
+        return None
     try:
         out.mkdir(parents=True, exist_ok=True)
         if args.out is None:
             link_latest(out)
     except OSError as exc:
         print(f"error: cannot use {out}: {exc}", file=sys.stderr)
+        return None
+    return out, bag
+
+
+def run(args: argparse.Namespace) -> int:
+    if getattr(args, "catalog", None) is not None:
+        from ssa_fusion.apps import live_catalog
+
+        return live_catalog.run(args)
+    s = sky.SKY_SCENARIOS.get(args.scenario) or scenarios.get(args.scenario)
+    dirs = run_dirs(args, s.name)
+    if dirs is None:
         return 2
+    out, bag = dirs
     params = node_parameters(s, args.time_scale, args.seed, bag)
     sim_s = sim_seconds(s)
     graph = Graph(out / "logs", args.domain_id)

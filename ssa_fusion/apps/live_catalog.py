@@ -120,12 +120,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {problem}", file=sys.stderr)
         return 2
     s = sky.SKY_SCENARIOS.get(args.scenario) or sky.SKY_SCENARIOS[DEFAULT_SCENARIO]
-    out: Path = args.out or live.default_out(f"catalog_{s.name}")
-    bag = args.bag or out / "bag"
-    if bag.exists():
-        print(f"error: bag {bag} exists already; choose another --bag or --out", file=sys.stderr)
+    dirs = live.run_dirs(args, f"catalog_{s.name}")
+    if dirs is None:
         return 2
-    out.mkdir(parents=True, exist_ok=True)
+    out, bag = dirs
     entries = entries_of(args)
     sim_s = args.duration * 3600.0 or s.duration_s
     names = node_names(args.shards)
