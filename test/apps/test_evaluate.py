@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from gap_bags import around_a_gap
 
 from ssa_fusion.apps import evaluate
 from ssa_fusion.core import kepler, metrics, types
@@ -11,22 +12,14 @@ from ssa_fusion.nodes import settings
 from ssa_fusion.paper import scenarios
 from ssa_fusion.paper.arms import ArmName
 
-T0, CADENCE = 1000.0, 120.0
 TRACK, GAP, COVERED, AFTER = 40, 40, 10, 5  # epochs; estimates cover the gap's first 10
 OFFSET = np.array([1.0, -0.5, 0.2, 1e-3, -2e-3, 5e-4])  # the estimates' error, km, km/s
 
 
 def synthetic() -> evaluate.BagData:
     """Two-body truth, noise-free positions, estimates that stop a quarter into the gap."""
-    t = T0 + CADENCE * np.arange(TRACK + GAP + AFTER)
-    x0 = np.array(scenarios.get("iss_j2_pos").x0)
-    x = np.array([kepler.propagate(x0, ti - T0)[0] for ti in t])
-    data = evaluate.BagData()
-    for i, (ti, xi) in enumerate(zip(t, x, strict=True)):
-        data.truth.append(types.StateEstimate(ti, xi))
-        m = types.Measurement(ti, xi[:3], 1e-6 * np.eye(3))
-        in_gap = TRACK <= i < TRACK + GAP
-        (data.withheld if in_gap else data.measurements).append(m)
+    data, epochs = around_a_gap(TRACK, GAP, AFTER)
+    for i, ti, xi, in_gap in epochs:
         if i < TRACK + COVERED:
             source = types.UpdateSource.FORECAST if in_gap else types.UpdateSource.SENSOR
             data.estimates.append(types.StateEstimate(ti, xi + OFFSET, 1e-2 * np.eye(6),

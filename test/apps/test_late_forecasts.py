@@ -9,12 +9,11 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from gap_bags import CADENCE, T0, around_a_gap
 
 from ssa_fusion.apps import cli, evaluate, live
-from ssa_fusion.core import kepler, types
-from ssa_fusion.paper import scenarios
+from ssa_fusion.core import types
 
-T0, CADENCE = 1000.0, 120.0
 TRACK, GAP, AFTER = 30, 20, 5  # epochs
 FUSED = 12  # the filter fused the forecasts of the gap's first 12 epochs, predicted the rest
 
@@ -23,15 +22,8 @@ def synthetic(fused: int = FUSED, forecasts: bool = True) -> evaluate.BagData:
     """Two-body truth; real measurements and SENSOR estimates around a gap; a forecast for
     every gap epoch; FORECAST estimates for the first `fused` gap epochs and predictions
     (update_source NONE, what the filter publishes once `predict_period` passes) after."""
-    t = T0 + CADENCE * np.arange(TRACK + GAP + AFTER)
-    x0 = np.array(scenarios.get("iss_j2_pos").x0)
-    x = np.array([kepler.propagate(x0, ti - T0)[0] for ti in t])
-    data = evaluate.BagData()
-    for i, (ti, xi) in enumerate(zip(t, x, strict=True)):
-        data.truth.append(types.StateEstimate(ti, xi))
-        m = types.Measurement(ti, xi[:3], 1e-6 * np.eye(3))
-        in_gap = TRACK <= i < TRACK + GAP
-        (data.withheld if in_gap else data.measurements).append(m)
+    data, epochs = around_a_gap(TRACK, GAP, AFTER)
+    for i, ti, xi, in_gap in epochs:
         if in_gap and forecasts:
             data.forecasts.append(types.Measurement(ti, xi[:3], 1e-4 * np.eye(3),
                                                     source=types.Source.FORECAST))
