@@ -150,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
         graph.start_node("recorder", params={"use_sim_time": True, "bag": str(bag)})
         shards = [graph.start_node("catalog_filter", "-r", f"__node:={n}", name=n, params={
             "use_sim_time": True, "shards": args.shards, "shard": k,
-            "station": ",".join(st.station.name for st in _radars(s))})
+            "station": ",".join(st.station.name for st in s.radars)})
             for k, n in enumerate(names)]
         sim = graph.start_node("sensor_sim", params=sensor)
         graph.wait_exit(sim, timeout=300.0 + 3.0 * sim_s / args.time_scale)
@@ -176,12 +176,6 @@ def run(args: argparse.Namespace) -> int:
     (out / "catalog.json").write_text(json.dumps(summary, indent=2))
     print(table(summary))
     return 0 if summary["lost_measurements"] == 0 else 1
-
-
-def _radars(s: sky.SkyScenario) -> list[Any]:
-    from ssa_fusion.core.stations import SENSORS, SensorType
-
-    return [SENSORS[n] for n in s.sensors if SENSORS[n].type == SensorType.RADAR]
 
 
 def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],

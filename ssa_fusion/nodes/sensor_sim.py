@@ -35,7 +35,6 @@ from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 
 from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core import survey, types
-from ssa_fusion.core.stations import SENSORS, SensorType
 from ssa_fusion.nodes import start_process
 from ssa_fusion.nodes.common import (
     Diagnostics,
@@ -304,7 +303,7 @@ class SensorSim(Node):
             entries = survey.synthetic_catalog(entries[0], synthetic, seed=seed)
         if objects:
             entries = entries[:objects]
-        radars = [SENSORS[n] for n in s.sensors if SENSORS[n].type == SensorType.RADAR]
+        radars = s.radars
         if not radars:
             raise ParameterError(f"scenario {s.name!r} has no radar to observe a catalog")
         t0 = 60.0 * math.ceil(max(e.epoch_unix for e in entries) / 60.0)

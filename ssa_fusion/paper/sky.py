@@ -104,6 +104,11 @@ class SkyScenario:
     finding: str = ""
 
     @property
+    def radars(self) -> list[Sensor]:
+        """The scenario's radar sensors (those a catalog run simulates)."""
+        return [SENSORS[n] for n in self.sensors if SENSORS[n].type == SensorType.RADAR]
+
+    @property
     def network(self) -> str:
         """The filter's ``station`` setting: the sensors' station ids, comma-separated."""
         return ",".join(dict.fromkeys(SENSORS[s].station.name for s in self.sensors)) + ","
