@@ -35,6 +35,7 @@ setup(
             "recorder = ssa_fusion.nodes.entry:recorder",
             "foxglove_bridge = ssa_fusion.nodes.entry:foxglove_bridge",
             "catalog_filter = ssa_fusion.nodes.entry:catalog_filter",
+            "catalog_surrogate = ssa_fusion.nodes.entry:catalog_surrogate",
         ],
     },
 )

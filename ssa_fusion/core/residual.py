@@ -226,6 +226,10 @@ class ResidualConfig:
     max_residual_km : float
         A fit whose position residual exceeds this anywhere in its window or forecast is
         refused (km).
+    heldout_fits : int
+        At each new anchor only the newest this many fits are scored (0: every fit within
+        `max_horizon_s`). Each score propagates the placeholder from the fit's anchor, so a
+        catalog bounds the cost with 1: the fit is scored where its gap ended.
     calibration_samples : int
         Held-out NEES values (the newest) the covariance scale averages.
     min_calibration : int
@@ -256,6 +260,7 @@ class ResidualConfig:
     ridge: float = 1e-6
     max_horizon_s: float = 86400.0
     max_residual_km: float = 2000.0
+    heldout_fits: int = 0
     calibration_samples: int = 30
     min_calibration: int = 3
     prior_scale: float = 10.0
@@ -598,7 +603,8 @@ class ResidualSurrogate:
         if self.t and t <= self.t[-1]:
             raise ValueError(f"anchor at t={t} not after the last one (t={self.t[-1]})")
         xa, Pa = np.asarray(x, float), np.asarray(P, float)
-        for f in self.fits:
+        k = self.cfg.heldout_fits
+        for f in self.fits[-k:] if k else self.fits:
             if 0.0 < t - f.t0 <= self.cfg.max_horizon_s:
                 x_ref, res, cov = f.residual(np.array([t]))
                 e = xa - apply_residual(x_ref, res)[0]
@@ -609,6 +615,8 @@ class ResidualSurrogate:
                 except np.linalg.LinAlgError:
                     continue
         self.fits = [f for f in self.fits if t - f.t0 <= self.cfg.max_horizon_s]
+        if k:
+            self.fits = self.fits[-k:]  # the others are never scored again
         self.t.append(float(t))
         self.x.append(xa.copy())
         self.P.append(Pa.copy())

@@ -26,7 +26,6 @@ import numpy as np
 from rclpy.clock import JumpThreshold
 from rclpy.duration import Duration
 from rclpy.node import Node
-from rclpy.subscription_content_filter_options import ContentFilterOptions
 from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
 from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 
@@ -39,8 +38,8 @@ from ssa_fusion.nodes import start_process
 from ssa_fusion.nodes.common import (
     Diagnostics,
     all_non_negative,
+    at_least,
     clock_lead,
-    cross_check,
     declare,
     non_negative,
     one_of,
@@ -49,39 +48,17 @@ from ssa_fusion.nodes.common import (
     wall_timer,
 )
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
+from ssa_fusion.nodes.shards import (
+    content_filter,
+    declare_shard,
+    shard_problem,
+    shard_range,
+)
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.topics import CATALOG_QOS, TOPIC_ESTIMATE, TOPIC_MEASUREMENT
 
 LIST_OBJECTS = 200
 """Up to this many objects, /diagnostics lists their ids (``object_ids``)."""
-KEY_SPACE = 2**32
-"""Values of `Measurement.shard_key` (uint32)."""
-
-
-def shard_range(shard: int, shards: int) -> tuple[int, int]:
-    """The closed range [lo, hi] of shard keys shard `shard` of `shards` owns."""
-    lo = shard * KEY_SPACE // shards
-    return lo, (shard + 1) * KEY_SPACE // shards - 1
-
-
-def shard_problem(key: int, object_id: str, shard: int, shards: int) -> tuple[str, str] | None:
-    """Why shard `shard` of `shards` does not take a measurement of `object_id` carrying
-    `key`, as (counter, reason), or None. One shard takes everything (a publisher that does
-    not set ``shard_key`` included); with several, a key that is not the CRC-32 of the id is
-    ``rejected_shard_key`` (its publisher did not set it: every shard would refuse it), and
-    one of another shard's range ``ignored_other_shard`` (a DDS without content filters)."""
-    if shards <= 1:
-        return None
-    want = messages.shard_key(object_id)
-    if key != want:
-        return ("rejected_shard_key", f"object {object_id!r}: shard_key {key} is not the "
-                f"CRC-32 of its id ({want}); the publisher must set it (ros.messages."
-                "shard_key) for a sharded graph")
-    lo, hi = shard_range(shard, shards)
-    if not lo <= key <= hi:
-        return ("ignored_other_shard", f"object {object_id!r}, shard_key {key}: not in "
-                f"[{lo}, {hi}]")
-    return None
 
 
 def _network(value: Any) -> str | None:
@@ -96,12 +73,6 @@ def _p0_check(v: list) -> str | None:
     if len(v) == 6 and all_non_negative(v):
         return None
     return "needs 6 standard deviations, each a finite number >= 0"
-
-
-def _count(low: int) -> Any:
-    def check(v: Any) -> str | None:
-        return None if isinstance(v, int) and v >= low else f"must be an integer >= {low}"
-    return check
 
 
 class CatalogFilterNode(Node):
@@ -127,20 +98,14 @@ class CatalogFilterNode(Node):
                        "s one IOD batch may span (one pass of one station)", positive)
         reinit = declare(self, "reinit_after", d.reinit_after,
                          "measurements of an object in a row beyond the gate after which its "
-                         "track is dropped and its IOD starts again (0 = never)", _count(0))
+                         "track is dropped and its IOD starts again (0 = never)", at_least(0))
         bound = declare(self, "sigma_bound", d.sigma_bound,
                         "position/velocity sigmas limited to sigma_bound x |r| / |v| after "
                         "each prediction (0 = no limit)", non_negative)
-        self.shards = declare(self, "shards", d.shards, "number of filter shards (>= 1)",
-                              _count(1))
-        self.shard = declare(self, "shard", d.shard, "this node's shard, 0..shards-1",
-                             _count(0))
+        self.shard, self.shards = declare_shard(self, d.shards, d.shard)
         period = declare(self, "batch_period", d.batch_period,
                          "wall s between batches: what arrived meanwhile is fused at once",
                          positive)
-        cross_check(self, ("shard", "shards"),
-                    lambda v: None if v["shard"] < v["shards"] else
-                    f"must be < shards ({v['shards']})")
         self.max_lead = clock_lead(self, d.max_clock_lead)
         ekf = BatchEKFConfig(motion_model=model, q=q * 1e-6, gate=gate or None,
                              sigma_bound=bound)
@@ -154,10 +119,7 @@ class CatalogFilterNode(Node):
         self.diag = Diagnostics(self)
         self.diag.status["shard"] = f"{self.shard}/{self.shards} keys [{self.lo}, {self.hi}]"
         self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, CATALOG_QOS)
-        cft = None
-        if self.shards > 1:
-            cft = ContentFilterOptions("shard_key BETWEEN %0 AND %1",
-                                       [str(self.lo), str(self.hi)])
+        cft = content_filter(self.shard, self.shards)
         self.sub = self.diag.subscribe(MeasurementMsg, TOPIC_MEASUREMENT,
                                        self.diag.guard(self.on_measurement), CATALOG_QOS,
                                        content_filter=cft)

@@ -298,6 +298,13 @@ def non_negative(value: Any) -> str | None:
     return None if _finite(value) and value >= 0 else "must be a finite number >= 0"
 
 
+def at_least(low: int) -> Callable[[Any], str | None]:
+    """A parameter check: an integer >= `low`."""
+    def check(v: Any) -> str | None:
+        return None if isinstance(v, int) and v >= low else f"must be an integer >= {low}"
+    return check
+
+
 def all_non_negative(values: Any) -> bool:
     """Every element is a finite number >= 0 (``min(values) >= 0`` lets NaN through)."""
     return all(non_negative(v) is None for v in values)

@@ -114,6 +114,24 @@ class CatalogFilterDefaults:
     max_clock_lead: float = 3600.0
 
 
+@dataclass(frozen=True)
+class CatalogSurrogateDefaults:
+    """catalog_surrogate: residual gap forecasts of a catalog (`core.gap_bank`), for the
+    catalog_filter's two-body + J2 tracks; the residual model is the live filter's
+    (`core.residual.LIVE_RESIDUAL`: 5 pass ends over a day at least, in a 2-day window)."""
+
+    motion_model: str = "j2"
+    predict_period: float = 600.0
+    pass_break: float = 600.0
+    hold: float = 120.0
+    fit_budget: float = 0.5
+    min_anchors: int = 5
+    min_span: float = 86400.0
+    shards: int = 1
+    shard: int = 0
+    max_clock_lead: float = 3600.0
+
+
 BAG_PATTERN = "bags/ssa_%Y%m%d_%H%M%S"
 """`time.strftime` pattern of the recorder's default bag directory (start time)."""
 
@@ -135,6 +153,7 @@ SURROGATE = SurrogateDefaults()
 FILTER = FilterDefaults()
 RECORDER = RecorderDefaults()
 CATALOG_FILTER = CatalogFilterDefaults()
+CATALOG_SURROGATE = CatalogSurrogateDefaults()
 
 NODES = {"sensor_sim": SENSOR_SIM, "surrogate": SURROGATE, "filter": FILTER,
          "recorder": RECORDER}

@@ -16,7 +16,8 @@ import sys
 
 from ssa_fusion.nodes import start_process
 
-NODES = ("sensor_sim", "surrogate", "filter", "recorder", "foxglove_bridge", "catalog_filter")
+NODES = ("sensor_sim", "surrogate", "filter", "recorder", "foxglove_bridge", "catalog_filter",
+         "catalog_surrogate")
 
 
 def run_node(name: str, args: list[str] | None = None) -> int:
@@ -49,6 +50,10 @@ def foxglove_bridge() -> int:
 
 def catalog_filter() -> int:
     return run_node("catalog_filter")
+
+
+def catalog_surrogate() -> int:
+    return run_node("catalog_surrogate")
 
 
 if __name__ == "__main__":

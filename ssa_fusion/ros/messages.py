@@ -117,8 +117,9 @@ def recode(msg: Any, msgtype: str, classes: MsgClasses | None = None) -> Any:
 
 
 def shard_key(object_id: str) -> int:
-    """The Measurement message's ``shard_key`` of `object_id`: CRC-32 of its UTF-8 bytes
-    (0 .. 2**32 - 1), the same on every machine and in every process (unlike `hash`)."""
+    """The ``shard_key`` of `object_id` (Measurement and StateEstimate messages): CRC-32 of
+    its UTF-8 bytes (0 .. 2**32 - 1), the same on every machine and in every process (unlike
+    `hash`)."""
     return zlib.crc32(object_id.encode("utf-8"))
 
 
@@ -151,6 +152,7 @@ def estimate_to_msg(e: types.StateEstimate, classes: MsgClasses | None = None) -
         covariance=(np.asarray(e.P, dtype=float) * KM * KM).ravel(),
         update_source=int(e.update_source),
         nis=float(e.nis),
+        shard_key=shard_key(e.object_id),
     )
 
 

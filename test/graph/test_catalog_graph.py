@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from ssa_fusion.apps import live_catalog
-from ssa_fusion.nodes.catalog_filter import shard_range
+from ssa_fusion.nodes.shards import shard_range
 from ssa_fusion.ros import bagio, messages
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"

@@ -2,7 +2,7 @@
 
 import itertools
 
-from ssa_fusion.nodes.catalog_filter import KEY_SPACE, shard_problem, shard_range
+from ssa_fusion.nodes.shards import KEY_SPACE, shard_problem, shard_range
 from ssa_fusion.ros.messages import shard_key
 
 
