@@ -3,14 +3,19 @@
 sensor_sim simulates the radars of the scenario (`--scenario` when it is a real-sky one,
 else ``iss_network``'s radars) measuring every object of the catalog (SGP4/SDP4 truth,
 `core.survey`); `--shards` K ``catalog_filter`` processes each track the objects of their
-shard (DDS content filter on ``Measurement.shard_key``); the recorder records everything.
-No surrogate runs in a catalog graph (per-object surrogates are not scheduled yet).
+shard (DDS content filter on ``Measurement.shard_key``), and as many ``catalog_surrogate``
+processes forecast through the gaps between passes of the same shards' objects
+(`core.gap_bank`, residual fits under a wall-time budget; ``--no-surrogate`` leaves them
+out); the recorder records everything.
 
 At the end it prints what happened to every measurement (published by the simulator,
 recorded, received by the shards, fused, pending in an IOD batch, rejected by cause: none
 may be missing), the real-time factor the run achieved, each shard's objects and memory, and
-the estimates' position error against the SGP4 truth of the catalog. ``catalog.json`` in
-the run directory holds the same numbers.
+the estimates' position error against the SGP4 truth of the catalog; with the surrogates,
+their fits (made, refused, skipped for want of time) and the forecasts' error against that
+truth beside the filter's own coasting (its two-body + J2 model from the same pass end, the
+physics-only baseline) at the same epochs. ``catalog.json`` in the run directory holds the
+same numbers.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ import json
 import sys
 import time
 from collections import Counter, defaultdict
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -27,11 +33,18 @@ import numpy as np
 
 from ssa_fusion.apps import live
 from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core import survey
+from ssa_fusion.core import residual, survey
+from ssa_fusion.core.types import UpdateSource
+from ssa_fusion.nodes.defaults import CATALOG_FILTER, CATALOG_SURROGATE
 from ssa_fusion.paper import sky
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.processes import Graph
-from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS, TOPIC_ESTIMATE, TOPIC_MEASUREMENT
+from ssa_fusion.ros.topics import (
+    CATALOG_QOS,
+    TOPIC_DIAGNOSTICS,
+    TOPIC_ESTIMATE,
+    TOPIC_MEASUREMENT,
+)
 
 DEFAULT_SCENARIO = "iss_network"
 """Whose radars observe a catalog when `--scenario` is not a real-sky scenario."""
@@ -50,8 +63,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=float, default=0.0,
                    help="catalog: hours of sim time (default: the scenario's)")
     p.add_argument("--shards", type=int, default=1,
-                   help="catalog: filter processes, each owning the objects of its shard "
-                        "(default 1)")
+                   help="catalog: filter (and surrogate) processes, each owning the objects "
+                        "of its shard (default 1)")
+    p.add_argument("--no-surrogate", dest="surrogate", action="store_false",
+                   help="catalog: no catalog_surrogate (gap forecasts)")
+    p.add_argument("--surrogate-param", action="append", default=[], metavar="NAME=VALUE",
+                   help="catalog: a catalog_surrogate parameter (e.g. min_span=21600), "
+                        "repeatable")
 
 
 def check(args: argparse.Namespace) -> str | None:
@@ -60,6 +78,10 @@ def check(args: argparse.Namespace) -> str | None:
         return "--objects, --synthetic and --duration must be >= 0"
     if not 1 <= args.shards <= 64:
         return "--shards must be in 1..64"
+    try:
+        surrogate_params(args)
+    except ValueError as exc:
+        return str(exc)
     try:
         catalog_io.read_catalog(args.catalog)
     except ValueError as exc:
@@ -75,8 +97,30 @@ def entries_of(args: argparse.Namespace) -> list[catalog_io.CatalogEntry]:
     return entries[: args.objects] if args.objects else entries
 
 
-def node_names(shards: int) -> list[str]:
-    return [f"catalog_filter_{k}" for k in range(shards)]
+def node_names(shards: int, node: str = "catalog_filter") -> list[str]:
+    return [f"{node}_{k}" for k in range(shards)]
+
+
+def surrogate_params(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``--surrogate-param NAME=VALUE`` options as parameters (YAML values: numbers,
+    booleans, strings); ValueError naming the one that is not NAME=VALUE."""
+    import yaml
+
+    known = {f.name: getattr(CATALOG_SURROGATE, f.name) for f in fields(CATALOG_SURROGATE)}
+    out: dict[str, Any] = {}
+    for item in getattr(args, "surrogate_param", []):
+        name, eq, text = (x.strip() for x in item.partition("="))
+        if not eq or not name:
+            raise ValueError(f"--surrogate-param {item!r}: expected NAME=VALUE")
+        if name not in known or name in ("shards", "shard"):
+            raise ValueError(f"--surrogate-param {item!r}: catalog_surrogate has no parameter "
+                             f"{name!r} to set (it has {', '.join(sorted(known))}; shards "
+                             "come from --shards)")
+        value = yaml.safe_load(text)
+        if isinstance(known[name], float) and type(value) is int:
+            value = float(value)  # 10800 for a parameter of seconds: a float parameter
+        out[name] = value
+    return out
 
 
 def _statuses(diagnostics: list) -> dict[str, dict[str, str]]:
@@ -127,17 +171,20 @@ def run(args: argparse.Namespace) -> int:
     entries = entries_of(args)
     sim_s = args.duration * 3600.0 or s.duration_s
     names = node_names(args.shards)
+    gaps = node_names(args.shards, "catalog_surrogate") if args.surrogate else []
     readers = ["recorder:" + TOPIC_MEASUREMENT, "recorder:" + TOPIC_ESTIMATE,
                *(f"{n}:{TOPIC_MEASUREMENT}" for n in names)]
     sensor = {"scenario": s.name, "catalog": str(Path(args.catalog).resolve()),
               "objects": args.objects, "synthetic": args.synthetic, "duration": sim_s,
               "time_scale": args.time_scale, "seed": args.seed,
-              "wait_for": [f"{TOPIC_MEASUREMENT}={args.shards + 1}"],
+              "wait_for": [f"{TOPIC_MEASUREMENT}={args.shards + 1}",
+                           f"{TOPIC_ESTIMATE}={len(gaps) + 1}"],
               "wait_for_readers": readers}
     graph = Graph(out / "logs", args.domain_id)
     print(f"live: catalog {args.catalog} ({len(entries)} objects), radars of {s.name}, "
           f"{sim_s / 3600:g} h of sim time at {args.time_scale:g}x, {args.shards} filter "
-          f"shard(s); ROS domain {graph.domain_id}; logs in {out}/logs", flush=True)
+          f"shard(s){' with a surrogate each' if gaps else ''}; ROS domain {graph.domain_id}; "
+          f"logs in {out}/logs", flush=True)
     t_start = time.monotonic()
     rss: dict[str, int] = {}
     last_output = time.time()
@@ -146,22 +193,31 @@ def run(args: argparse.Namespace) -> int:
         from ssa_fusion_msgs.msg import StateEstimate
 
         diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
-        seen = graph.collect(StateEstimate, TOPIC_ESTIMATE)
+        seen: Counter[int] = Counter()  # estimates heard, by update source
+        graph.probe.create_subscription(StateEstimate, TOPIC_ESTIMATE,
+                                        lambda m: seen.update((m.update_source,)), CATALOG_QOS)
         graph.start_node("recorder", params={"use_sim_time": True, "bag": str(bag)})
         shards = [graph.start_node("catalog_filter", "-r", f"__node:={n}", name=n, params={
             "use_sim_time": True, "shards": args.shards, "shard": k,
             "station": ",".join(st.station.name for st in s.radars)})
             for k, n in enumerate(names)]
+        procs = shards + [
+            graph.start_node("catalog_surrogate", "-r", f"__node:={n}", name=n, params={
+                **surrogate_params(args), "use_sim_time": True, "shards": args.shards,
+                "shard": k}) for k, n in enumerate(gaps)]
         sim = graph.start_node("sensor_sim", params=sensor)
-        graph.wait_exit(sim, timeout=300.0 + 3.0 * sim_s / args.time_scale)
-        graph.wait_quiet(lambda: len(seen), quiet_s=1.0, limit_s=600.0)
-        last_output = time.time() - 1.0  # wall time (Unix s) the last estimate arrived
-        # then one more report of every shard, counting all it did
-        since = len(diagnostics)
-        graph.wait_for(lambda: set(names) <= {st.name for d in diagnostics[since:]
-                                              for st in d.status}, 10.0,
-                       "a last /diagnostics report of every shard")
-        rss = {n: _rss_kib(p.popen.pid) for n, p in zip(names, shards, strict=True)}
+        graph.wait_for(lambda: any(p.popen.poll() is not None for p in (sim, *procs)),
+                       300.0 + 3.0 * sim_s / args.time_scale, "sensor_sim to exit")
+        if sim.popen.poll() is not None:  # else a node ended early: graph.close says which
+            # the filters are done when their estimates stop (surrogates may still be fitting)
+            graph.wait_quiet(lambda: seen[UpdateSource.SENSOR], quiet_s=1.0, limit_s=600.0)
+            last_output = time.time() - 1.0  # wall time (Unix s) the last estimate arrived
+            # then one more report of every shard, counting all it did
+            since = len(diagnostics)
+            graph.wait_for(lambda: set(names + gaps) <= {st.name for d in diagnostics[since:]
+                                                         for st in d.status}, 10.0,
+                           "a last /diagnostics report of every shard")
+            rss = {n: _rss_kib(p.popen.pid) for n, p in zip(names + gaps, procs, strict=True)}
     finally:
         problems = graph.close()
     if problems:
@@ -170,7 +226,7 @@ def run(args: argparse.Namespace) -> int:
     wall = time.monotonic() - t_start
     sim_wall = live.sensor_wall_times(out / "logs" / "sensor_sim.err")
     ran = None if sim_wall is None else (sim_wall[0], max(sim_wall[1], last_output))
-    summary = summarise(bag, entries, _statuses(diagnostics), names, rss, ran, sim_s)
+    summary = summarise(bag, entries, _statuses(diagnostics), names, rss, ran, sim_s, gaps)
     summary.update({"catalog": str(args.catalog), "objects": len(entries), "scenario": s.name,
                     "time_scale": args.time_scale, "shards": args.shards, "wall_s": wall})
     (out / "catalog.json").write_text(json.dumps(summary, indent=2))
@@ -178,20 +234,74 @@ def run(args: argparse.Namespace) -> int:
     return 0 if summary["lost_measurements"] == 0 else 1
 
 
+GAPS_SCORED = 200
+"""Most gaps whose forecasts are scored against the coasting filter (evenly chosen)."""
+
+
+def gap_errors(entries: list[catalog_io.CatalogEntry],
+               estimates: dict[str, list[tuple[float, np.ndarray]]],
+               forecasts: dict[str, list[tuple[float, np.ndarray]]],
+               motion_model: str = CATALOG_FILTER.motion_model,
+               max_gaps: int = GAPS_SCORED) -> dict[str, Any]:
+    """Position errors (km) against the SGP4 truth of the surrogates' forecasts and of the
+    filter coasting on its motion model from the same pass end (its newest estimate before
+    them), at the same epochs, over up to `max_gaps` gaps evenly chosen."""
+    gaps = []  # (object, pass end t, x, forecast epochs, forecast positions)
+    for oid, fc in sorted(forecasts.items()):
+        est = sorted(estimates.get(oid, []), key=lambda r: r[0])
+        if not est:
+            continue
+        te = np.array([r[0] for r in est])
+        tf = np.array([r[0] for r in fc])
+        rf = np.array([r[1][:3] for r in fc])
+        end = np.searchsorted(te, tf) - 1  # the estimate each forecast follows
+        for j in np.unique(end[end >= 0]):
+            at = end == j
+            gaps.append((oid, te[j], est[j][1], tf[at], rf[at]))
+    if not gaps:
+        return {"gaps": 0, "forecasts": 0}
+    pick = np.unique(np.linspace(0, len(gaps) - 1, min(max_gaps, len(gaps))).astype(int))
+    by_id = {e.object_id: e for e in entries}
+    coast = residual.orbit_propagator(residual.PLACEHOLDER_TRAJECTORY[motion_model])
+    e_fc, e_coast, better = [], [], 0
+    for i in pick.tolist():
+        oid, t0, x0, tf, rf = gaps[i]
+        truth = catalog_io.catalog_states([by_id[oid]], tf).x[0][:, :3]
+        a = np.linalg.norm(rf - truth, axis=1)
+        b = np.linalg.norm(coast(x0, float(t0), tf)[:, :3] - truth, axis=1)
+        e_fc.append(a)
+        e_coast.append(b)
+        better += int(np.median(a) < np.median(b))
+    fc_all, coast_all = np.concatenate(e_fc), np.concatenate(e_coast)
+    med_fc, med_coast = float(np.median(fc_all)), float(np.median(coast_all))
+    return {"gaps": len(gaps), "gaps_scored": int(pick.size),
+            "forecasts": int(sum(len(g[3]) for g in gaps)),
+            "forecasts_scored": int(fc_all.size),
+            "forecast_error_km": {"median": med_fc, "p95": float(np.percentile(fc_all, 95))},
+            "coast_error_km": {"median": med_coast,
+                               "p95": float(np.percentile(coast_all, 95))},
+            "coast_over_forecast": med_coast / med_fc if med_fc > 0 else None,
+            "gaps_forecast_better": better / pick.size}
+
+
 def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
               status: dict[str, dict[str, str]], names: list[str], rss: dict[str, int],
-              sim_wall: tuple[float, float] | None, sim_s: float) -> dict[str, Any]:
+              sim_wall: tuple[float, float] | None, sim_s: float,
+              gap_nodes: list[str] | None = None) -> dict[str, Any]:
     """The run's accounting (every measurement), speed, memory and accuracy. `sim_wall`:
-    wall times (Unix s) of the first measurement published and of the last estimate heard."""
+    wall times (Unix s) of the first measurement published and of the last estimate heard;
+    `gap_nodes`: the catalog_surrogate processes."""
     recorded: Counter[str] = Counter()
     estimates: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
-    last_estimate_ns = 0
+    forecasts: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
     for m in bagio.read_bag(bag, topics=[TOPIC_MEASUREMENT, TOPIC_ESTIMATE]):
         recorded[m.topic] += 1
         if m.topic == TOPIC_ESTIMATE:
             e = messages.estimate_from_msg(m.msg)
-            estimates[e.object_id].append((e.t, e.x))
-            last_estimate_ns = max(last_estimate_ns, m.t_ns)
+            if e.update_source == UpdateSource.FORECAST:
+                forecasts[e.object_id].append((e.t, e.x))
+            else:
+                estimates[e.object_id].append((e.t, e.x))
 
     def num(node: str, key: str) -> int:
         v = status.get(node, {}).get(key, "0")
@@ -225,10 +335,23 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
     err = position_errors(entries, estimates)
     ran = None if sim_wall is None else sim_wall[1] - sim_wall[0]
     n = max(len(entries), 1)
+    surrogates = {}
+    for g in gap_nodes or []:
+        st = status.get(g, {})
+        surrogates[g] = {k: num(g, k) for k in (
+            "received", "fits_made", "fits_refused", "fits_skipped", "published_forecast",
+            "forecasts_overtaken", "waiting_for_fit", "objects")}
+        surrogates[g]["fit_seconds"] = float(st.get("fit_seconds", "0") or 0)
+        surrogates[g]["object_ids"] = [x for x in st.get("object_ids", "").split(",") if x]
+        surrogates[g]["rss_mib"] = rss.get(g, 0) / 1024.0
+    n_forecasts = sum(len(v) for v in forecasts.values())
     return {
         "published": published, "recorded_measurements": recorded[TOPIC_MEASUREMENT],
         "received_by_shards": received, "consumed_by_banks": consumed,
-        "estimates_published": fused, "estimates_recorded": recorded[TOPIC_ESTIMATE],
+        "estimates_published": fused,
+        "estimates_recorded": recorded[TOPIC_ESTIMATE] - n_forecasts,
+        "surrogates": surrogates, "forecasts_recorded": n_forecasts,
+        "gap_errors": gap_errors(entries, estimates, forecasts) if surrogates else None,
         "rejected_and_pending": dict(causes), "refused_at_door": door,
         "dropped": sum(p["dropped"] for p in per_shard.values()),
         "unaccounted": unaccounted,
@@ -272,4 +395,25 @@ def table(s: dict[str, Any]) -> str:
     if pe["median"] is not None:
         rows.append(f"position error against the SGP4 truth: median {pe['median']:.3f} km, "
                     f"95 % {pe['p95']:.3f} km over {pe['estimates']} estimates")
+    for n, g in s.get("surrogates", {}).items():
+        rows.append(f"{n}: {g['objects']} objects; fits made {g['fits_made']}, refused "
+                    f"{g['fits_refused']}, skipped (gap over before its turn) "
+                    f"{g['fits_skipped']}, waiting {g['waiting_for_fit']}; "
+                    f"{g['fit_seconds']:.0f} s of fitting; {g['published_forecast']} "
+                    f"forecasts ({g['forecasts_overtaken']} overtaken by a measurement); "
+                    f"RSS {g['rss_mib']:.0f} MiB")
+    ge = s.get("gap_errors")
+    if ge and ge.get("gaps_scored"):
+        rows.append(
+            f"gaps: {ge['forecasts']} forecasts recorded in {ge['gaps']} gaps; scored "
+            f"{ge['forecasts_scored']} in {ge['gaps_scored']} gaps against the SGP4 truth: "
+            f"surrogate median {ge['forecast_error_km']['median']:.3f} km (95 % "
+            f"{ge['forecast_error_km']['p95']:.3f}), the filter coasting on its model "
+            f"median {ge['coast_error_km']['median']:.3f} km (95 % "
+            f"{ge['coast_error_km']['p95']:.3f}): coast / surrogate "
+            f"{ge['coast_over_forecast']:.2f}; surrogate better in "
+            f"{100 * ge['gaps_forecast_better']:.0f} % of the gaps")
+    elif ge is not None:
+        rows.append("gaps: no forecasts recorded (fits need pass ends over "
+                    "min_span; see the surrogates' counts)")
     return "\n".join(rows)

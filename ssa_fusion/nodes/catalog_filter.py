@@ -49,6 +49,7 @@ from ssa_fusion.nodes.common import (
 )
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.nodes.shards import (
+    LIST_OBJECTS,
     content_filter,
     declare_shard,
     shard_problem,
@@ -56,9 +57,6 @@ from ssa_fusion.nodes.shards import (
 )
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.topics import CATALOG_QOS, TOPIC_ESTIMATE, TOPIC_MEASUREMENT
-
-LIST_OBJECTS = 200
-"""Up to this many objects, /diagnostics lists their ids (``object_ids``)."""
 
 
 def _network(value: Any) -> str | None:

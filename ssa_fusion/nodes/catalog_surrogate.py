@@ -44,7 +44,7 @@ from ssa_fusion.nodes.common import (
     wall_timer,
 )
 from ssa_fusion.nodes.defaults import CATALOG_SURROGATE
-from ssa_fusion.nodes.shards import content_filter, declare_shard, shard_problem
+from ssa_fusion.nodes.shards import LIST_OBJECTS, content_filter, declare_shard, shard_problem
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.topics import CATALOG_QOS, TOPIC_ESTIMATE
 
@@ -146,6 +146,8 @@ class CatalogSurrogateNode(Node):
         for key, name in COUNTERS.items():
             self.diag.counts[name] = b.counts[key]
         self.diag.status["objects"] = str(len(b))
+        if len(b) <= LIST_OBJECTS:
+            self.diag.status["object_ids"] = ",".join(b.object_ids)
         self.diag.status["waiting_for_fit"] = str(b.waiting)
         self.diag.status["fit_seconds"] = f"{b.fit_seconds:.1f}"
 

@@ -17,6 +17,8 @@ from ssa_fusion.ros import messages
 
 KEY_SPACE = 2**32
 """Values of ``shard_key`` (uint32)."""
+LIST_OBJECTS = 200
+"""Up to this many objects, a shard lists their ids on /diagnostics (``object_ids``)."""
 
 
 def shard_range(shard: int, shards: int) -> tuple[int, int]:
