@@ -1,8 +1,9 @@
 """Graph test of a sharded catalog run (issue 20): `ssa-fusion live --catalog` starts
-sensor_sim (catalog mode), the recorder and two catalog_filter shards as separate processes
-over DDS (private domain, loopback). Every object's estimates come from exactly one shard,
-the one its shard key belongs to; no measurement is lost between simulator, bag and shards;
-the estimates follow the SGP4 truth."""
+sensor_sim (catalog mode), the recorder, two catalog_filter shards and two catalog_surrogate
+shards as separate processes over DDS (private domain, loopback). Every object's estimates
+come from exactly one shard, the one its shard key belongs to, and its gap forecasts from
+that shard's surrogate; no measurement is lost between simulator, bag and shards; the
+estimates follow the SGP4 truth, and the forecasts lie in the gaps between passes."""
 
 import argparse
 import json
@@ -23,8 +24,9 @@ OBJECTS = 12
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("catalog")
     args = argparse.Namespace(
-        catalog=SAMPLE, objects=0, synthetic=OBJECTS, duration=3.0, shards=2,
-        scenario="iss_network", time_scale=2000.0, seed=4, out=out, bag=None, domain_id=None)
+        catalog=SAMPLE, objects=0, synthetic=OBJECTS, duration=6.0, shards=2,
+        scenario="iss_network", time_scale=2000.0, seed=4, out=out, bag=None, domain_id=None,
+        surrogate=True, surrogate_param=["min_span=7200", "min_anchors=3"])
     rc = live_catalog.run(args)
     return rc, out, json.loads((out / "catalog.json").read_text())
 
@@ -52,7 +54,8 @@ def test_every_object_is_tracked_by_exactly_the_shard_of_its_key(run):
         assert p["received"] > 0
     # and the recorded estimates are those objects' (counted per shard as they published)
     est = Counter(m.msg.object_id for m in bagio.read_bag(out / "bag",
-                                                          topics=["/ssa/estimate"]))
+                                                          topics=["/ssa/estimate"])
+                  if m.msg.update_source == 1)  # the filters' (not the surrogates' forecasts)
     for p, mine in zip(shards.values(), ids, strict=True):
         assert sum(est[o] for o in mine) == p["estimates"]
 
@@ -61,3 +64,32 @@ def test_estimates_follow_the_sgp4_truth(run):
     _, _, s = run
     assert s["objects_with_estimates"] == OBJECTS
     assert s["position_error_km"]["median"] < 0.5
+
+
+def test_each_shards_surrogate_forecasts_its_objects_gaps_only(run):
+    _, out, s = run
+    filters, gaps = list(s["per_shard"].values()), list(s["surrogates"].values())
+    assert len(gaps) == 2
+    for f, g in zip(filters, gaps, strict=True):
+        assert set(g["object_ids"]) == set(f["object_ids"])  # the shard's objects, all
+        assert g["received"] == f["estimates"]  # every estimate of its shard, nothing else
+    made = sum(g["fits_made"] for g in gaps)
+    published = sum(g["published_forecast"] for g in gaps)
+    assert made >= 4 and published > 20
+    assert s["forecasts_recorded"] == published
+    sensor, forecast = {}, {}
+    for m in bagio.read_bag(out / "bag", topics=["/ssa/estimate"]):
+        e = messages.estimate_from_msg(m.msg)
+        (forecast if e.update_source == 2 else sensor).setdefault(e.object_id, []).append(e.t)
+    mine = {o: k for k, g in enumerate(gaps) for o in g["object_ids"]}
+    for oid, ts in forecast.items():
+        assert oid in mine
+        est = sorted(sensor[oid])
+        for t in ts:  # at least pass_break (600 s) after the object's last estimate
+            before = [x for x in est if x < t]
+            assert before and t - before[-1] >= 600.0
+            assert t % 600.0 == 0.0  # on the predict_period grid
+    # scored against the SGP4 truth beside the filter coasting on its J2 model
+    ge = s["gap_errors"]
+    assert ge["forecasts"] == published and ge["gaps_scored"] >= 4
+    assert ge["forecast_error_km"]["median"] < 5.0
