@@ -33,10 +33,11 @@ import numpy as np
 
 from ssa_fusion.apps import live
 from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core import residual, survey
+from ssa_fusion.core import survey
 from ssa_fusion.core.types import UpdateSource
 from ssa_fusion.nodes.defaults import CATALOG_FILTER, CATALOG_SURROGATE
 from ssa_fusion.paper import sky
+from ssa_fusion.paper.catalog_gaps import gap_errors
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.processes import Graph
 from ssa_fusion.ros.topics import (
@@ -234,56 +235,6 @@ def run(args: argparse.Namespace) -> int:
     return 0 if summary["lost_measurements"] == 0 else 1
 
 
-GAPS_SCORED = 200
-"""Most gaps whose forecasts are scored against the coasting filter (evenly chosen)."""
-
-
-def gap_errors(entries: list[catalog_io.CatalogEntry],
-               estimates: dict[str, list[tuple[float, np.ndarray]]],
-               forecasts: dict[str, list[tuple[float, np.ndarray]]],
-               motion_model: str = CATALOG_FILTER.motion_model,
-               max_gaps: int = GAPS_SCORED) -> dict[str, Any]:
-    """Position errors (km) against the SGP4 truth of the surrogates' forecasts and of the
-    filter coasting on its motion model from the same pass end (its newest estimate before
-    them), at the same epochs, over up to `max_gaps` gaps evenly chosen."""
-    gaps = []  # (object, pass end t, x, forecast epochs, forecast positions)
-    for oid, fc in sorted(forecasts.items()):
-        est = sorted(estimates.get(oid, []), key=lambda r: r[0])
-        if not est:
-            continue
-        te = np.array([r[0] for r in est])
-        tf = np.array([r[0] for r in fc])
-        rf = np.array([r[1][:3] for r in fc])
-        end = np.searchsorted(te, tf) - 1  # the estimate each forecast follows
-        for j in np.unique(end[end >= 0]):
-            at = end == j
-            gaps.append((oid, te[j], est[j][1], tf[at], rf[at]))
-    if not gaps:
-        return {"gaps": 0, "forecasts": 0}
-    pick = np.unique(np.linspace(0, len(gaps) - 1, min(max_gaps, len(gaps))).astype(int))
-    by_id = {e.object_id: e for e in entries}
-    coast = residual.orbit_propagator(residual.PLACEHOLDER_TRAJECTORY[motion_model])
-    e_fc, e_coast, better = [], [], 0
-    for i in pick.tolist():
-        oid, t0, x0, tf, rf = gaps[i]
-        truth = catalog_io.catalog_states([by_id[oid]], tf).x[0][:, :3]
-        a = np.linalg.norm(rf - truth, axis=1)
-        b = np.linalg.norm(coast(x0, float(t0), tf)[:, :3] - truth, axis=1)
-        e_fc.append(a)
-        e_coast.append(b)
-        better += int(np.median(a) < np.median(b))
-    fc_all, coast_all = np.concatenate(e_fc), np.concatenate(e_coast)
-    med_fc, med_coast = float(np.median(fc_all)), float(np.median(coast_all))
-    return {"gaps": len(gaps), "gaps_scored": int(pick.size),
-            "forecasts": int(sum(len(g[3]) for g in gaps)),
-            "forecasts_scored": int(fc_all.size),
-            "forecast_error_km": {"median": med_fc, "p95": float(np.percentile(fc_all, 95))},
-            "coast_error_km": {"median": med_coast,
-                               "p95": float(np.percentile(coast_all, 95))},
-            "coast_over_forecast": med_coast / med_fc if med_fc > 0 else None,
-            "gaps_forecast_better": better / pick.size}
-
-
 def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
               status: dict[str, dict[str, str]], names: list[str], rss: dict[str, int],
               sim_wall: tuple[float, float] | None, sim_s: float,
@@ -351,7 +302,8 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
         "estimates_published": fused,
         "estimates_recorded": recorded[TOPIC_ESTIMATE] - n_forecasts,
         "surrogates": surrogates, "forecasts_recorded": n_forecasts,
-        "gap_errors": gap_errors(entries, estimates, forecasts) if surrogates else None,
+        "gap_errors": gap_errors(entries, estimates, forecasts, CATALOG_FILTER.motion_model)
+        if surrogates else None,
         "rejected_and_pending": dict(causes), "refused_at_door": door,
         "dropped": sum(p["dropped"] for p in per_shard.values()),
         "unaccounted": unaccounted,

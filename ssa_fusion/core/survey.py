@@ -62,6 +62,15 @@ class Observations:
         return np.bincount(self.obj, minlength=len(self.object_ids)).astype(np.int64)
 
 
+def catalog_start(entries: Sequence[CatalogEntry]) -> float:
+    """Return where a simulation of the catalog starts (Unix s).
+
+    The first whole minute at or after the newest element set's epoch: no object is
+    propagated backwards.
+    """
+    return 60.0 * math.ceil(max(e.epoch_unix for e in entries) / 60.0)
+
+
 def observe_catalog(entries: Sequence[CatalogEntry], sensors: Sequence[Sensor], t0: float,
                     duration_s: float, seed: int = 0,
                     chunk_states: int = 2_000_000) -> Observations:

@@ -21,7 +21,6 @@ simulation are what it simulates.
 from __future__ import annotations
 
 import enum
-import math
 import time
 from typing import Any
 
@@ -306,7 +305,7 @@ class SensorSim(Node):
         radars = s.radars
         if not radars:
             raise ParameterError(f"scenario {s.name!r} has no radar to observe a catalog")
-        t0 = 60.0 * math.ceil(max(e.epoch_unix for e in entries) / 60.0)
+        t0 = survey.catalog_start(entries)
         span = duration or s.duration_s
         obs = survey.observe_catalog(entries, radars, t0, span, seed=seed)
         self.catalog_ids = list(obs.object_ids)

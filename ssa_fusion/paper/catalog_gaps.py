@@ -1,0 +1,163 @@
+"""Gap forecasts over a catalog: the residual surrogate against the filter coasting.
+
+`gap_errors` scores the forecasts a catalog run made (`core.gap_bank`, the
+``catalog_surrogate`` node) against the SGP4 truth of its catalog, beside the filter coasting
+on its own motion model (two-body + J2: the physics-only filter) from the same pass end, at
+the same epochs. `offline_run` runs the same pipeline without ROS: a synthetic LEO catalog
+measured by a scenario's radars (`core.survey`), fused by the batched filter
+(`core.track_bank`) and forecast by a `GapBank` that fits every gap (no wall-time budget), so
+the accuracy of the method is measured apart from the time the live node has for it.
+
+The residual setting is the live filter's (`core.residual.LIVE_RESIDUAL`, chosen on the
+ISS gap study's tuning seeds 1-3): nothing here is tuned, and the catalog seeds
+(`EVALUATION_SEEDS`) are used for nothing else.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import defaultdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ssa_fusion.core import catalog as catalog_io
+from ssa_fusion.core import residual, survey
+from ssa_fusion.core.batch_ekf import BatchEKFConfig
+from ssa_fusion.core.gap_bank import GapBank, GapBankConfig
+from ssa_fusion.core.track_bank import TrackBank, TrackBankConfig
+from ssa_fusion.paper.sky import SKY_SCENARIOS, SkyScenario
+
+SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"
+"""The sample catalog; its first element set (CBERS 2, LEO) is spread into synthetic ones."""
+EVALUATION_SEEDS = tuple(range(101, 106))
+"""Seeds of the synthetic catalogs and their measurement noise; never used for tuning."""
+GAPS_SCORED = 200
+"""Most gaps whose forecasts are scored against the coasting filter (evenly chosen)."""
+
+Rows = dict[str, list[tuple[float, np.ndarray]]]
+"""Per object id, (epoch s, state (6,) km, km/s ECI) in epoch order."""
+
+
+def bank_config(s: SkyScenario) -> TrackBankConfig:
+    """The batched filter of scenario `s` (its motion model, process noise, IOD, bounds;
+    no light time: the batched filter has none)."""
+    return TrackBankConfig(
+        ekf=BatchEKFConfig(motion_model=s.motion_model, q=s.q, sigma_bound=s.sigma_bound),
+        iod_samples=s.iod_samples, iod_max_span_s=s.iod_max_span_s, p0_sigma=s.p0_sigma,
+        reinit_after=s.reinit_after)
+
+
+def gap_errors(entries: list[catalog_io.CatalogEntry], estimates: Rows, forecasts: Rows,
+               motion_model: str = "j2", max_gaps: int = GAPS_SCORED) -> dict[str, Any]:
+    """Score forecasts against the SGP4 truth of `entries`, beside coasting.
+
+    Position errors (km) of the `forecasts` and of the filter coasting on `motion_model`
+    from the same pass end (the object's newest estimate before them), at the same epochs,
+    over up to `max_gaps` gaps evenly chosen (a gap: the forecasts after one estimate).
+    """
+    gaps = []  # (object, pass end t, x, forecast epochs, forecast positions)
+    for oid, fc in sorted(forecasts.items()):
+        est = estimates.get(oid, [])
+        if not est:
+            continue
+        te = np.array([r[0] for r in est])
+        tf = np.array([r[0] for r in fc])
+        rf = np.array([r[1][:3] for r in fc])
+        end = np.searchsorted(te, tf) - 1  # the estimate each forecast follows
+        for j in np.unique(end[end >= 0]):
+            at = end == j
+            gaps.append((oid, te[j], est[j][1], tf[at], rf[at]))
+    if not gaps:
+        return {"gaps": 0, "forecasts": 0}
+    pick = np.unique(np.linspace(0, len(gaps) - 1, min(max_gaps, len(gaps))).astype(int))
+    by_id = {e.object_id: e for e in entries}
+    coast = residual.orbit_propagator(residual.PLACEHOLDER_TRAJECTORY[motion_model])
+    e_fc, e_coast, better = [], [], 0
+    for i in pick.tolist():
+        oid, t0, x0, tf, rf = gaps[i]
+        truth = catalog_io.catalog_states([by_id[oid]], tf).x[0][:, :3]
+        a = np.linalg.norm(rf - truth, axis=1)
+        b = np.linalg.norm(coast(x0, float(t0), tf)[:, :3] - truth, axis=1)
+        e_fc.append(a)
+        e_coast.append(b)
+        better += int(np.median(a) < np.median(b))
+    fc_all, coast_all = np.concatenate(e_fc), np.concatenate(e_coast)
+    med_fc, med_coast = float(np.median(fc_all)), float(np.median(coast_all))
+    return {"gaps": len(gaps), "gaps_scored": int(pick.size),
+            "forecasts": int(sum(len(g[3]) for g in gaps)),
+            "forecasts_scored": int(fc_all.size),
+            "forecast_error_km": {"median": med_fc, "p95": float(np.percentile(fc_all, 95))},
+            "coast_error_km": {"median": med_coast,
+                               "p95": float(np.percentile(coast_all, 95))},
+            "coast_over_forecast": med_coast / med_fc if med_fc > 0 else None,
+            "gaps_forecast_better": better / pick.size}
+
+
+class _FrozenWall:
+    """A wall clock that moves only between rounds: every fit costs nothing of the budget."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_network",
+                batch_s: float = 60.0, gap_config: GapBankConfig | None = None,
+                max_gaps: int = GAPS_SCORED) -> dict[str, Any]:
+    """One synthetic catalog through survey, batched filter and gap forecasts, scored.
+
+    `objects` LEO objects (the sample catalog's first element set spread by `seed`),
+    measured for `hours` by the radars of `scenario`, fused every `batch_s` sim s; every gap
+    is fitted (no budget). Returns the scores (`gap_errors`) with the fits' counts and
+    their mean wall time.
+    """
+    s = SKY_SCENARIOS[scenario]
+    entries = survey.synthetic_catalog(catalog_io.read_catalog(SAMPLE)[0], objects, seed=seed)
+    radars = s.radars
+    t0 = survey.catalog_start(entries)
+    obs = survey.observe_catalog(entries, radars, t0, hours * 3600.0, seed=seed)
+    names = [r.station.name for r in radars]
+    bank = TrackBank(bank_config(s), {r.station.name: r.station for r in radars})
+    wall = _FrozenWall()
+    gaps = GapBank(gap_config or GapBankConfig(motion_model=s.motion_model), wall=wall)
+    estimates: Rows = defaultdict(list)
+    forecasts: Rows = defaultdict(list)
+    R = np.array([r.R for r in radars])
+    c_fit = 0.0
+    edges = np.searchsorted(obs.t, t0 + batch_s * np.arange(
+        1, math.ceil(hours * 3600.0 / batch_s) + 2))
+    first = 0
+    for k, last in enumerate(edges):
+        if last > first:
+            sl = slice(first, int(last))
+            ids = [obs.object_ids[i] for i in obs.obj[sl]]
+            res = bank.process(obs.t[sl], ids, [names[i] for i in obs.sensor[sl]],
+                               obs.z[sl], R[obs.sensor[sl]])
+            c = time.perf_counter()
+            for j, i in enumerate(res.fused.tolist()):
+                oid, t = ids[i], float(obs.t[sl][i])
+                estimates[oid].append((t, res.x[j]))
+                for f in gaps.on_estimate(oid, t, res.x[j], res.P[j]):
+                    forecasts[f.object_id].append((f.t, f.x))
+            c_fit += time.perf_counter() - c
+            first = int(last)
+        wall.now += 1.0
+        c = time.perf_counter()
+        for f in gaps.step(t0 + batch_s * (k + 1)):
+            forecasts[f.object_id].append((f.t, f.x))
+        c_fit += time.perf_counter() - c
+    for rows in forecasts.values():
+        rows.sort(key=lambda r: r[0])
+    made = gaps.counts["fitted"]
+    out = gap_errors(entries, estimates, forecasts, s.motion_model, max_gaps)
+    out.update({"seed": seed, "objects": objects, "hours": hours, "measurements": len(obs),
+                "estimates": sum(len(v) for v in estimates.values()),
+                "fits_made": made, "fits_refused": gaps.counts["refused"],
+                "surrogate_wall_s": c_fit,
+                "wall_s_per_fit": c_fit / made if made else None})
+    return out
