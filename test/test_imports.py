@@ -92,7 +92,8 @@ def test_node_executables_prepare_the_process_before_numpy_is_imported():
                        "filter": "ssa_fusion.nodes.entry:filter_node",
                        "recorder": "ssa_fusion.nodes.entry:recorder",
                        "foxglove_bridge": "ssa_fusion.nodes.entry:foxglove_bridge",
-                       "catalog_filter": "ssa_fusion.nodes.entry:catalog_filter"}
+                       "catalog_filter": "ssa_fusion.nodes.entry:catalog_filter",
+                       "catalog_surrogate": "ssa_fusion.nodes.entry:catalog_surrogate"}
     result = _run(textwrap.dedent("""
         import json, signal, sys
         import ssa_fusion.nodes.entry as entry
