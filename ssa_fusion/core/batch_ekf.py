@@ -1,11 +1,21 @@
-"""A bank of EKFs over N objects, vectorised over the object axis: `BatchEKF`.
+"""A bank of EKFs over N objects, one compiled loop over the objects: `BatchEKF`.
 
 One cycle of the per-object filter (`tracker.Tracker._step`: predict by the motion model,
 ``P = F P F^T + Q`` symmetrised, optional `ekf.bound_covariance`, then one range/azimuth/
 elevation update from a ground station, Joseph form, azimuth and elevation residuals wrapped,
-NIS gate) is done here for N objects at once with numpy, with no Python loop per object.
+NIS gate) is done here for N objects in one call, with no Python loop per object.
 Every object has its own time step, station, measurement and noise; objects whose mask is
 False in a batch are left exactly as they were.
+
+Compiled with numba: the admission checks, the Kepler propagation with its STM, the
+covariance prediction and the update are loops over the objects compiled by `numba.njit`
+(no fastmath: IEEE arithmetic in the order written; the results equal the former numpy
+formulation to ~1e-15 relative, ~2e-12 over multi-day arcs where Kepler's equation is that
+ill-conditioned, and the per-object filter to 1e-9). The numba kernels are
+compiled at their first call in a process (4 to 6 s here) unless numba's on-disk cache holds
+them (``__pycache__`` next to this file, else ``NUMBA_CACHE_DIR`` or ``~/.cache/numba``;
+about 0.2 s to load), see `_jit`. The integrated motion models' propagation
+(`integrate_stm`) stays numpy, vectorised over the objects.
 
 State and frames: ``x`` (N, 6) ECI [r km, v km/s] (the project's ECI, `frames`), ``P``
 (N, 6, 6) in km^2, km^2/s, km^2/s^2; measurements ``z`` (N, 3) [range km, azimuth rad in
@@ -18,7 +28,7 @@ Motion models (`BatchEKFConfig.motion_model`):
 ``"kepler"``
     Analytic two-body, as `kepler.propagate` (universal variable, Newton on Kepler's
     equation), with the same analytic state transition matrix (exact partials of the
-    Lagrange coefficients, `kepler_stm`), evaluated elementwise over the object axis.
+    Lagrange coefficients, `kepler_stm`; `kepler.lagrange_partials` itself, compiled).
 ``"two_body"``, ``"j2"``, ``"drag"``
     The `dynamics` right-hand sides with their variational equations dPhi/dt = A(x) Phi
     (A by the complex step, as `dynamics.jacobian`), integrated for all objects at once
@@ -37,18 +47,20 @@ batches messages applies them to each message anyway).
 
 from __future__ import annotations
 
+import hashlib
+import inspect
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, TypeVar, cast
 
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import dynamics
+from . import dynamics, kepler
 from .constants import MU_EARTH
-from .frames import ERA_RATE, Station, earth_rotation_angle, enu_matrix, site_ecef, wrap_angle
-from .kepler import lagrange_partials
+from .frames import ERA_RATE, Station, earth_rotation_angle, enu_matrix, site_ecef
 from .stations import UNIX_EPOCH_JD
 from .tracker import DEFAULT_GATE
 from .types import Cause
@@ -77,6 +89,7 @@ _Z_SERIES = 0.5
 """|z| below which the Stumpff functions c2, c3 are evaluated by their power series."""
 
 _MAX_NEWTON = 60
+_TWO_PI = 2.0 * math.pi
 
 INTEGRATED_MODELS = ("two_body", "j2", "drag")
 """`dynamics` models integrated with their variational equations."""
@@ -95,6 +108,9 @@ class Code:
     NUMERIC = 5
     GATE = 6
 
+
+_FUSED, _NONFINITE, _NEGATIVE_RANGE, _ELEVATION = (Code.FUSED, Code.NONFINITE,
+                                                  Code.NEGATIVE_RANGE, Code.ELEVATION)
 
 REASONS: tuple[str, ...] = (
     "",
@@ -209,142 +225,449 @@ class BatchUpdate(NamedTuple):
 
 
 # --------------------------------------------------------------------------------------------
-# Motion models
+# Compiled kernels (numba)
 # --------------------------------------------------------------------------------------------
-def _stumpff(z: Array, full: bool = False) -> tuple[Array, ...]:
-    """Stumpff c2(z), c3(z) (and c4, c5 when ``full``) elementwise, as `kepler.stumpff`.
+_Fn = TypeVar("_Fn", bound=Callable[..., Any])
+
+
+_KEPLER_PARTIALS_SHA256 = "1f232bc5f2f87ac7"
+"""First 16 hex digits of the SHA-256 of the source of `kepler.lagrange_partials` that the
+cached kernels were written against (see `_cacheable`; test_batch_ekf checks it)."""
+
+
+def _lagrange_partials_digest() -> str:
+    """First 16 hex digits of the SHA-256 of the source of `kepler.lagrange_partials`."""
+    src = inspect.getsource(kepler.lagrange_partials)
+    return hashlib.sha256(src.encode()).hexdigest()[:16]
+
+
+def _cacheable() -> bool:
+    """Whether the compiled kernels may be cached on disk.
+
+    numba checks a cached kernel against its own source file only (this one), not against
+    the functions it calls from other files: `kepler.lagrange_partials` is compiled into
+    `_kepler_kernel`, and a cached kernel would keep an older version of it. So the cache is
+    used only while that function's source is the one `_KEPLER_PARTIALS_SHA256` names; after
+    an edit of it the kernels are compiled in every process (correct, a few seconds slower)
+    until the digest here is updated, which, by changing this file, invalidates every
+    cached kernel.
+    """
+    try:
+        return _lagrange_partials_digest() == _KEPLER_PARTIALS_SHA256
+    except (OSError, TypeError):  # no source (a frozen install): compile every time
+        return False
+
+
+_CACHE = _cacheable()
+
+
+def _jit(fn: _Fn) -> _Fn:
+    """Compile ``fn`` with ``numba.njit``: no fastmath, numpy's error model.
+
+    No fastmath: IEEE arithmetic, nothing reassociated or contracted; numpy's error model:
+    x / 0 is inf or nan as in numpy, not an exception. The machine code is cached on disk
+    (``cache=True``, see `_cacheable`) in the ``__pycache__`` directory next to this file,
+    or where numba falls back to when that is not writable (``NUMBA_CACHE_DIR``, else the
+    user's cache directory, ``~/.cache/numba``); without a writable place, or without the
+    cache, the kernels are compiled in each process at their first call (a few seconds).
+    """
+    return _compile(fn, _CACHE)
+
+
+def _compile(fn: _Fn, cache: bool) -> _Fn:
+    """`_jit` with or without the cache."""
+    if cache:
+        try:
+            return cast(_Fn, numba.njit(cache=True, error_model="numpy")(fn))
+        except RuntimeError:  # numba: "cannot cache function ...: no locator available"
+            pass
+    return cast(_Fn, numba.njit(error_model="numpy")(fn))
+
+
+# kepler.propagate's Lagrange coefficients and partials, the same code compiled into the
+# kernels that call it (not cached itself: numba's cache key ignores the compile options)
+_lagrange_partials = _compile(kepler.lagrange_partials, False)
+
+
+@_jit
+def _stumpff(z: float, full: bool) -> tuple[float, float, float, float]:
+    """Stumpff (c2, c3, c4, c5) at z (c4, c5 only when ``full``, else 0), as `kepler.stumpff`.
 
     Closed forms (trigonometric for z > 0.5, hyperbolic for z < -0.5), power series near 0
-    (``c_k = sum_j (-z)^j / (k + 2j)!``, 8 terms: truncation < 0.5^8 / 20! ~ 2e-21).
+    (``c_k = sum_j (-z)^j / (k + 2j)!``, 8 terms: truncation < 0.5^8 / 20! ~ 2e-21), nested,
+    with ``z / m`` as ``z * (1 / m)`` (a multiplication is several times shorter than a
+    division; the two differ by an ulp).
     """
-    big = np.abs(z) > _Z_SERIES
-    anybig = bool(big.any())
-    zm = np.where(big, 0.0, z) if anybig else z
-    c4 = (1.0 / 24.0) * (1.0 - zm / 30.0 * (1.0 - zm / 56.0 * (1.0 - zm / 90.0 * (
-        1.0 - zm / 132.0 * (1.0 - zm / 182.0 * (1.0 - zm / 240.0 * (1.0 - zm / 306.0)))))))
-    c5 = (1.0 / 120.0) * (1.0 - zm / 42.0 * (1.0 - zm / 72.0 * (1.0 - zm / 110.0 * (
-        1.0 - zm / 156.0 * (1.0 - zm / 210.0 * (1.0 - zm / 272.0 * (1.0 - zm / 342.0)))))))
-    c2 = 0.5 - zm * c4
-    c3 = 1.0 / 6.0 - zm * c5
-    if anybig:
-        for sel in (z > _Z_SERIES, z < -_Z_SERIES):
-            if not sel.any():
-                continue
-            zs = z[sel]
-            s = np.sqrt(np.abs(zs))
-            if zs[0] > 0.0:
-                h = np.sin(0.5 * s)
-                a2, a3 = 2.0 * h * h / zs, (s - np.sin(s)) / (zs * s)
-            else:
-                a2, a3 = (np.cosh(s) - 1.0) / (-zs), (np.sinh(s) - s) / (-zs * s)
-            c2[sel], c3[sel] = a2, a3
-            if full:
-                c4[sel], c5[sel] = (0.5 - a2) / zs, (1.0 / 6.0 - a3) / zs
-    return (c2, c3, c4, c5) if full else (c2, c3)
+    if -_Z_SERIES <= z <= _Z_SERIES:
+        c4 = (1.0 / 24.0) * (1.0 - z * (1.0 / 30.0) * (1.0 - z * (1.0 / 56.0) * (
+            1.0 - z * (1.0 / 90.0) * (1.0 - z * (1.0 / 132.0) * (1.0 - z * (1.0 / 182.0) * (
+                1.0 - z * (1.0 / 240.0) * (1.0 - z * (1.0 / 306.0))))))))
+        c5 = (1.0 / 120.0) * (1.0 - z * (1.0 / 42.0) * (1.0 - z * (1.0 / 72.0) * (
+            1.0 - z * (1.0 / 110.0) * (1.0 - z * (1.0 / 156.0) * (1.0 - z * (1.0 / 210.0) * (
+                1.0 - z * (1.0 / 272.0) * (1.0 - z * (1.0 / 342.0))))))))
+        return 0.5 - z * c4, 1.0 / 6.0 - z * c5, c4, c5
+    if z > 0.0:
+        s = math.sqrt(z)
+        h = math.sin(0.5 * s)
+        c2, c3 = 2.0 * h * h / z, (s - math.sin(s)) / (z * s)
+    else:
+        s = math.sqrt(-z)
+        c2, c3 = (math.cosh(s) - 1.0) / (-z), (math.sinh(s) - s) / (-z * s)
+    if not full:
+        return c2, c3, 0.0, 0.0
+    return c2, c3, (0.5 - c2) / z, (1.0 / 6.0 - c3) / z
 
 
-def _kepler_terms(r0: Array, sig0: Array, alpha: Array,
-                  chi: Array) -> tuple[Array, Array, Array, Array]:
-    """Universal functions U1, U2, U3 at chi and the radius r (same shape as the inputs)."""
-    chi2 = chi * chi
-    c2, c3 = _stumpff(alpha * chi2)
-    u2 = chi2 * c2
-    u3 = chi2 * chi * c3
-    u1 = chi - alpha * u3
-    r = r0 * (1.0 - alpha * u2) + sig0 * u1 + u2
-    return u1, u2, u3, r
-
-
-def _solve_chi(r0: Array, sig0: Array, alpha: Array, tau: Array) -> tuple[Array, BoolArray]:
-    """Solve ``r0 U1 + sig0 U2 + U3 = tau`` for chi, vectorised; return (chi, converged).
+@_jit
+def _solve_chi(r0: float, sig0: float, alpha: float, tau: float) -> tuple[float, bool]:
+    """Solve ``r0 U1 + sig0 U2 + U3 = tau`` for chi; return (chi, converged).
 
     Newton's method from a Taylor series (short steps) or the mean-anomaly guess (ellipses),
     safeguarded for ellipses by the bracket that follows from |dE - dM| <= 2 e.
     """
+    if tau == 0.0:
+        return 0.0, True
+    lo, hi = -math.inf, math.inf
     bound = alpha > 1e-12 / r0
-    sa = np.sqrt(np.where(bound, alpha, 1.0))
-    ecc = np.hypot(1.0 - r0 * alpha, sig0 * sa)
-    dm = tau * alpha * sa
-    lo = np.where(bound, (dm - 2.0 * ecc - 1e-9) / sa, -np.inf)
-    hi = np.where(bound, (dm + 2.0 * ecc + 1e-9) / sa, np.inf)
+    if bound:
+        sa = math.sqrt(alpha)
+        ecc = math.hypot(1.0 - r0 * alpha, sig0 * sa)
+        dm = tau * alpha * sa
+        lo = (dm - 2.0 * ecc - 1e-9) / sa
+        hi = (dm + 2.0 * ecc + 1e-9) / sa
     ir0 = 1.0 / r0
     t = tau * ir0
-    taylor = t * (1.0 - t * ir0 * (0.5 * sig0 - t * (0.5 * sig0 * sig0 * ir0
+    if abs(tau) < 0.2 * r0 * math.sqrt(r0):
+        chi = t * (1.0 - t * ir0 * (0.5 * sig0 - t * (0.5 * sig0 * sig0 * ir0
                                                       - (1.0 - alpha * r0) / 6.0)))
-    short = np.abs(tau) < 0.2 * r0 * np.sqrt(r0)
-    chi = np.where(short, taylor, np.where(bound, tau * alpha, t))
-    done = (tau == 0.0) | ~np.isfinite(chi)
-    chi[tau == 0.0] = 0.0
+    else:
+        chi = tau * alpha if bound else t
+    if not math.isfinite(chi):
+        return chi, False
     for _ in range(_MAX_NEWTON):
-        u1, u2, u3, r = _kepler_terms(r0, sig0, alpha, chi)
+        chi2 = chi * chi
+        c2, c3, _c4, _c5 = _stumpff(alpha * chi2, False)
+        u2 = chi2 * c2
+        u3 = chi2 * chi * c3
+        u1 = chi - alpha * u3
+        r = r0 * (1.0 - alpha * u2) + sig0 * u1 + u2
         err = r0 * u1 + sig0 * u2 + u3 - tau
         step = err / r
         # Newton's error after this step is ~ step^2 sigma / (2 r), sigma = dr/dchi
         sig = sig0 * (1.0 - alpha * u2) + (1.0 - alpha * r0) * u1
-        conv = (step * step * np.abs(sig) <= 2e-16 * r * np.abs(chi)) | (err == 0.0)
-        hi = np.where(err > 0.0, np.minimum(hi, chi), hi)
-        lo = np.where(err < 0.0, np.maximum(lo, chi), lo)
+        conv = step * step * abs(sig) <= 2e-16 * r * abs(chi) or err == 0.0
+        if err > 0.0:
+            hi = min(hi, chi)
+        elif err < 0.0:
+            lo = max(lo, chi)
         new = chi - step
-        outside = ~((lo < new) & (new < hi))
-        mid = 0.5 * (lo + hi)
-        new = np.where(outside & np.isfinite(mid), mid, new)
-        chi = np.where(done, chi, new)
-        done = done | conv | ~np.isfinite(chi)
-        if done.all():
-            break
-    return chi, done & np.isfinite(chi)
+        if not (lo < new < hi):
+            mid = 0.5 * (lo + hi)
+            if math.isfinite(mid):
+                new = mid
+        chi = new
+        if conv or not math.isfinite(chi):
+            return chi, math.isfinite(chi)
+    return chi, False
 
 
-class _Orbit(NamedTuple):
-    """N initial states split for the universal-variable solution, with chi solved."""
-
-    r: Array  # (N, 3) km
-    v: Array  # (N, 3) km/s
-    r0: Array  # |r| km
-    sig0: Array  # r.v / sqrt(mu)
-    alpha: Array  # 1 / a, 1/km
-    tau: Array  # sqrt(mu) dt
-    chi: Array  # universal anomaly at t0 + dt
-    ok: BoolArray
-
-
-def _kepler_solve(x: ArrayLike, dt: ArrayLike, mu: float) -> _Orbit:
-    """Split N states (N, 6) and solve Kepler's equation for their own dt (s)."""
-    X = np.atleast_2d(np.asarray(x, dtype=float))
-    dts = np.broadcast_to(np.asarray(dt, dtype=float), (X.shape[0],))
+@_jit
+def _kepler_kernel(x: Array, dt: Array, mu: float, x1: Array, phi: Array, ok: BoolArray,
+                   stm: bool) -> None:
+    """Kepler propagation of x (n, 6) by dt (n,) into x1, phi (n, 6, 6) (if ``stm``), ok."""
     smu = math.sqrt(mu)
-    r, v = X[:, :3], X[:, 3:]
-    r0 = np.sqrt(np.einsum("ij,ij->i", r, r))
-    sig0 = np.einsum("ij,ij->i", r, v) / smu
-    alpha = 2.0 / r0 - np.einsum("ij,ij->i", v, v) / mu
-    chi, ok = _solve_chi(r0, sig0, alpha, smu * dts)
-    return _Orbit(r, v, r0, sig0, alpha, smu * dts, chi, ok & (r0 > 0.0))
+    grad = np.empty((4, 6))
+    for i in range(x.shape[0]):
+        rx, ry, rz, vx, vy, vz = x[i, 0], x[i, 1], x[i, 2], x[i, 3], x[i, 4], x[i, 5]
+        r0 = math.sqrt(rx * rx + ry * ry + rz * rz)
+        sig0 = (rx * vx + ry * vy + rz * vz) / smu
+        alpha = 2.0 / r0 - (vx * vx + vy * vy + vz * vz) / mu
+        chi, good = _solve_chi(r0, sig0, alpha, smu * dt[i])
+        good = good and r0 > 0.0
+        c = _stumpff(alpha * chi * chi, stm)
+        (f, g, fd, gd), a, b, d = _lagrange_partials(r0, sig0, alpha, chi, c, smu, mu)
+        nf = 0.0  # stays 0.0 unless an element is inf or nan
+        for k in range(3):
+            w, wd = f * x[i, k] + g * x[i, k + 3], fd * x[i, k] + gd * x[i, k + 3]
+            x1[i, k], x1[i, k + 3] = w, wd
+            nf += (w - w) + (wd - wd)
+        if stm:
+            # Phi = [[F I, G I], [Fdot I, Gdot I]] + W M W^T (see kepler_stm)
+            for m in range(4):
+                for k in range(3):
+                    grad[m, k] = a[m] * x[i, k] + b[m] * x[i, k + 3]
+                    grad[m, k + 3] = b[m] * x[i, k] + d[m] * x[i, k + 3]
+            for k in range(3):
+                for j in range(6):
+                    phi[i, k, j] = x[i, k] * grad[0, j] + x[i, k + 3] * grad[1, j]
+                    phi[i, k + 3, j] = x[i, k] * grad[2, j] + x[i, k + 3] * grad[3, j]
+                phi[i, k, k] += f
+                phi[i, k, k + 3] += g
+                phi[i, k + 3, k] += fd
+                phi[i, k + 3, k + 3] += gd
+            for k in range(6):
+                for j in range(6):
+                    nf += phi[i, k, j] - phi[i, k, j]
+        ok[i] = good and nf == 0.0
 
 
-def _lagrange(r0: Array, sig0: Array, alpha: Array, chi: Array, smu: float) -> Array:
-    """Lagrange coefficients (..., 4) [F, G, Fdot, Gdot] at chi."""
-    u1, u2, _, rr = _kepler_terms(r0, sig0, alpha, chi)
-    out: Array = np.stack([1.0 - u2 / r0, (r0 * u1 + sig0 * u2) / smu,
-                              -smu * u1 / (rr * r0), 1.0 - u2 / rr], -1)
+@_jit
+def _predict_kernel(x: Array, P: Array, dt: Array, x1: Array, F: Array, ok: BoolArray,
+                    q: float, sigma_bound: float, P1: Array) -> None:
+    """``P1 = F sym(P) F^T + Q`` (symmetric), bounded; dt == 0: x1, P1 = x, P (ok).
+
+    ``Q = q [[dt^3/3 I, dt^2/2 I], [dt^2/2 I, dt I]]`` (`ekf.process_noise`); only the
+    upper triangle of the product is computed, then mirrored. ``ok`` is and-ed with the
+    finiteness of P1.
+    """
+    Ps = np.empty((6, 6))
+    FP = np.empty((6, 6))
+    s = np.empty(6)
+    for i in range(x.shape[0]):
+        if dt[i] == 0.0:  # no prediction (as the per-object filter)
+            x1[i] = x[i]
+            P1[i] = P[i]
+            ok[i] = True
+            continue
+        for k in range(6):
+            for j in range(k, 6):
+                Ps[k, j] = Ps[j, k] = 0.5 * (P[i, k, j] + P[i, j, k])
+        for k in range(6):  # FP = F Ps, row by row (the inner loop over j vectorises)
+            for j in range(6):
+                FP[k, j] = F[i, k, 0] * Ps[0, j]
+            for m in range(1, 6):
+                f = F[i, k, m]
+                for j in range(6):
+                    FP[k, j] += f * Ps[m, j]
+        for k in range(6):
+            for j in range(k, 6):
+                acc = FP[k, 0] * F[i, j, 0]
+                for m in range(1, 6):
+                    acc += FP[k, m] * F[i, j, m]
+                P1[i, k, j] = acc
+        adt = abs(dt[i])
+        q3, q2, q1 = adt * adt * adt * (q / 3.0), adt * adt * (q / 2.0), adt * q
+        for k in range(3):
+            P1[i, k, k] += q3
+            P1[i, k, k + 3] += q2
+            P1[i, k + 3, k + 3] += q1
+        if sigma_bound > 0.0:  # ekf.bound_covariance
+            cp = sigma_bound * math.sqrt(x1[i, 0] ** 2 + x1[i, 1] ** 2 + x1[i, 2] ** 2)
+            cv = sigma_bound * math.sqrt(x1[i, 3] ** 2 + x1[i, 4] ** 2 + x1[i, 5] ** 2)
+            for k in range(6):
+                cap = cp if k < 3 else cv
+                sig = math.sqrt(max(P1[i, k, k], 0.0))
+                s[k] = cap / sig if (sig > cap and cap > 0.0) else 1.0
+            for k in range(6):
+                for j in range(k, 6):
+                    P1[i, k, j] = P1[i, k, j] * s[k] * s[j]
+        nf = 0.0  # stays 0.0 unless an element is inf or nan
+        for k in range(6):
+            for j in range(k, 6):
+                w = P1[i, k, j]
+                P1[i, j, k] = w
+                nf += w - w
+        ok[i] = ok[i] and nf == 0.0
+
+
+@_jit
+def _wrap(a: float) -> float:
+    """`frames.wrap_angle` of a float: ``pi - (pi - a) mod 2 pi``, in (-pi, pi]."""
+    b = math.pi - a
+    if 0.0 < b < _TWO_PI:  # b mod 2 pi = b: skip the (slow) floating-point modulo
+        return math.pi - b
+    return math.pi - b % _TWO_PI
+
+
+@_jit
+def _admit_kernel(x: Array, P: Array, dt: Array, z: Array, R: Array, t: Array,
+                  st: NDArray[np.intp], stations: int, code: NDArray[np.int8]) -> None:
+    """Set the admission `Code` of m measurements.
+
+    NONFINITE (an input not finite, or no such station), ELEVATION (outside
+    [-pi/2, pi/2]), NEGATIVE_RANGE, else FUSED.
+    """
+    for i in range(x.shape[0]):
+        nf = (dt[i] - dt[i]) + (t[i] - t[i])  # stays 0.0 unless an input is inf or nan
+        for k in range(3):
+            nf += z[i, k] - z[i, k]
+            for j in range(3):
+                nf += R[i, k, j] - R[i, k, j]
+        for k in range(6):
+            nf += x[i, k] - x[i, k]
+            for j in range(6):
+                nf += P[i, k, j] - P[i, k, j]
+        if not (nf == 0.0 and 0 <= st[i] < stations):
+            code[i] = _NONFINITE
+        elif not abs(z[i, 2]) <= 0.5 * math.pi:
+            code[i] = _ELEVATION
+        elif z[i, 0] < 0.0:
+            code[i] = _NEGATIVE_RANGE
+        else:
+            code[i] = _FUSED
+
+
+@_jit
+def _update_kernel(x: Array, P: Array, z: Array, R: Array, t: Array, st: NDArray[np.intp],
+                   enu: Array, site: Array, era0: float, era_rate: float, x1: Array, P1: Array,
+                   nis: Array, y: Array, ok: BoolArray) -> None:
+    """Joseph-form range/az/el update of m objects (see `BatchEKF._update`).
+
+    ``enu`` (stations, 3, 3) and ``site`` (stations, 3): the stations' ECEF -> ENU rotations
+    and ENU positions of the ECEF origin; Earth rotation angle ``era0 + era_rate t``.
+    """
+    T = np.empty((3, 3))
+    Hr = np.empty((3, 3))
+    D = np.empty((3, 3))
+    PHt = np.empty((6, 3))
+    S = np.empty((3, 3))
+    Si = np.empty((3, 3))
+    K = np.empty((6, 3))
+    E = np.empty((6, 3))
+    W = np.empty((6, 6))
+    t_prev, c, s = math.nan, 1.0, 0.0
+    for i in range(x.shape[0]):
+        if t[i] != t_prev:  # a batch's measurements often share their epoch
+            th = era0 + era_rate * t[i]
+            c, s, t_prev = math.cos(th), math.sin(th), t[i]
+        j = st[i]
+        for k in range(3):  # ECI -> ENU: M R3(th)
+            T[k, 0] = enu[j, k, 0] * c - enu[j, k, 1] * s
+            T[k, 1] = enu[j, k, 0] * s + enu[j, k, 1] * c
+            T[k, 2] = enu[j, k, 2]
+        e = T[0, 0] * x[i, 0] + T[0, 1] * x[i, 1] + T[0, 2] * x[i, 2] - site[j, 0]
+        n = T[1, 0] * x[i, 0] + T[1, 1] * x[i, 1] + T[1, 2] * x[i, 2] - site[j, 1]
+        u = T[2, 0] * x[i, 0] + T[2, 1] * x[i, 1] + T[2, 2] * x[i, 2] - site[j, 2]
+        h2 = e * e + n * n
+        h = math.sqrt(h2)
+        r2 = h2 + u * u
+        rg = math.sqrt(r2)
+        y0 = z[i, 0] - rg
+        az = math.atan2(e, n)
+        y1 = _wrap(z[i, 1] - (az + _TWO_PI if az < 0.0 else az))  # az mod 2 pi
+        y2 = _wrap(z[i, 2] - math.atan2(u, h))
+        y[i, 0], y[i, 1], y[i, 2] = y0, y1, y2
+        kk = -u / (h * r2)
+        D[0, 0], D[0, 1], D[0, 2] = e / rg, n / rg, u / rg  # d(range, az, el)/d(e, n, u)
+        D[1, 0], D[1, 1], D[1, 2] = n / h2, -e / h2, 0.0
+        D[2, 0], D[2, 1], D[2, 2] = kk * e, kk * n, h / r2
+        for a in range(3):  # H = [Hr, 0]: no velocity columns
+            for j in range(3):
+                Hr[a, j] = D[a, 0] * T[0, j] + D[a, 1] * T[1, j] + D[a, 2] * T[2, j]
+        for p in range(6):
+            for a in range(3):
+                PHt[p, a] = P[i, p, 0] * Hr[a, 0] + P[i, p, 1] * Hr[a, 1] + P[i, p, 2] * Hr[a, 2]
+        for a in range(3):
+            for b in range(3):
+                S[a, b] = (Hr[a, 0] * PHt[0, b] + Hr[a, 1] * PHt[1, b] + Hr[a, 2] * PHt[2, b]
+                           + R[i, a, b])
+        sa, sb, sc, sd, se, sf = S[0, 0], S[0, 1], S[0, 2], S[1, 1], S[1, 2], S[2, 2]
+        c11 = sd * sf - se * se
+        c12 = sc * se - sb * sf
+        c13 = sb * se - sc * sd
+        det = sa * c11 + sb * c12 + sc * c13
+        good = math.isfinite(det) and det > 0.0
+        idet = 1.0 / det if good else 1.0
+        Si[0, 0], Si[1, 1], Si[2, 2] = c11 * idet, (sa * sf - sc * sc) * idet, (
+            sa * sd - sb * sb) * idet
+        Si[0, 1] = Si[1, 0] = c12 * idet
+        Si[0, 2] = Si[2, 0] = c13 * idet
+        Si[1, 2] = Si[2, 1] = (sb * sc - sa * se) * idet
+        v = (y0 * (Si[0, 0] * y0 + Si[0, 1] * y1 + Si[0, 2] * y2)
+             + y1 * (Si[1, 0] * y0 + Si[1, 1] * y1 + Si[1, 2] * y2)
+             + y2 * (Si[2, 0] * y0 + Si[2, 1] * y1 + Si[2, 2] * y2))
+        nis[i] = v
+        nf = v - v  # 0.0, or nan once anything checked is inf or nan
+        for p in range(6):
+            for a in range(3):
+                K[p, a] = PHt[p, 0] * Si[0, a] + PHt[p, 1] * Si[1, a] + PHt[p, 2] * Si[2, a]
+            w = x[i, p] + (K[p, 0] * y0 + K[p, 1] * y1 + K[p, 2] * y2)
+            x1[i, p] = w
+            nf += w - w
+            for a in range(3):
+                E[p, a] = (K[p, 0] * S[0, a] + K[p, 1] * S[1, a] + K[p, 2] * S[2, a]
+                           - 2.0 * PHt[p, a])
+        for p in range(6):
+            for q in range(6):
+                W[p, q] = P[i, p, q] + E[p, 0] * K[q, 0] + E[p, 1] * K[q, 1] + E[p, 2] * K[q, 2]
+        for p in range(6):
+            for q in range(p, 6):
+                w = (W[p, q] + W[q, p]) * 0.5
+                P1[i, p, q] = P1[i, q, p] = w
+                nf += w - w
+        ok[i] = good and nf == 0.0
+
+
+_CHUNK = 128
+"""Objects per pass of `_kepler_step_kernel` (its predicted states, STMs and covariances,
+128 x 78 doubles = 80 KB, stay in the CPU cache from one kernel to the next)."""
+
+
+@_jit
+def _kepler_step_kernel(x: Array, P: Array, dt: Array, z: Array, R: Array, t: Array,
+                        st: NDArray[np.intp], enu: Array, site: Array, era0: float,
+                        era_rate: float, mu: float, q: float, sigma_bound: float, x1: Array,
+                        P1: Array, nis: Array, y: Array, ok: BoolArray) -> None:
+    """Kepler prediction then update of m objects, `_CHUNK` objects at a time.
+
+    `_kepler_kernel`, `_predict_kernel` and `_update_kernel` on each chunk: the same numbers
+    as three passes over all objects, with the intermediate arrays in cache (at N = 10,000
+    a third less time than the three passes).
+    """
+    c = min(_CHUNK, x.shape[0])
+    xp, F, Pp = np.empty((c, 6)), np.empty((c, 6, 6)), np.empty((c, 6, 6))
+    okp, oku = np.empty(c, dtype=np.bool_), np.empty(c, dtype=np.bool_)
+    for a in range(0, x.shape[0], _CHUNK):
+        b = min(a + _CHUNK, x.shape[0])
+        m = b - a
+        _kepler_kernel(x[a:b], dt[a:b], mu, xp[:m], F[:m], okp[:m], True)
+        _predict_kernel(x[a:b], P[a:b], dt[a:b], xp[:m], F[:m], okp[:m], q, sigma_bound,
+                        Pp[:m])
+        _update_kernel(xp[:m], Pp[:m], z[a:b], R[a:b], t[a:b], st[a:b], enu, site, era0,
+                       era_rate, x1[a:b], P1[a:b], nis[a:b], y[a:b], oku[:m])
+        for i in range(m):
+            ok[a + i] = okp[i] and oku[i]
+
+
+def _f64(a: AnyArray) -> Array:
+    """Return ``a`` as a C-contiguous writable float64 array (the kernels' argument type).
+
+    ``a`` itself when it is one (the usual case, checked faster than ``np.require``), else a
+    copy: one array type per argument, so each kernel is compiled once.
+    """
+    if a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable:
+        return a
+    out: Array = np.array(a, dtype=np.float64, order="C")
     return out
 
 
-def _apply(fg: Array, r: Array, v: Array) -> Array:
-    """States [F r + G v, Fdot r + Gdot v] (N, 6) from the coefficients fg (N, 4)."""
-    return np.concatenate([fg[:, :1] * r + fg[:, 1:2] * v, fg[:, 2:3] * r + fg[:, 3:] * v], 1)
+# --------------------------------------------------------------------------------------------
+# Motion models
+# --------------------------------------------------------------------------------------------
+def _kepler(x: ArrayLike, dt: ArrayLike, mu: float,
+            stm: bool) -> tuple[Array, Array, BoolArray]:
+    X = _f64(np.atleast_2d(np.asarray(x, dtype=float)))
+    n = X.shape[0]
+    dts = _f64(np.broadcast_to(np.asarray(dt, dtype=float), (n,)))
+    x1 = np.empty((n, 6))
+    phi = np.empty((n, 6, 6) if stm else (0, 6, 6))
+    ok = np.empty(n, dtype=np.bool_)
+    _kepler_kernel(X, dts, float(mu), x1, phi, ok, stm)
+    return x1, phi, ok
 
 
 def kepler_stm(x: ArrayLike, dt: ArrayLike,
                mu: float = MU_EARTH) -> tuple[Array, Array, BoolArray]:
     """Propagate N two-body states by their own ``dt`` with their state transition matrices.
 
-    The vectorised counterpart of `kepler.propagate`, with the same analytic STM: the
+    The batched counterpart of `kepler.propagate`, with the same analytic STM: the
     Lagrange coefficients ``F, G, Fdot, Gdot`` (``x1 = [F r0 + G v0, Fdot r0 + Gdot v0]``)
     depend on the initial state only through p = (r0 km, sigma0 km^0.5, alpha 1/km); their
     exact partials (``dU_k/dalpha = (k U_{k+2} - chi U_{k+1}) / 2`` at fixed chi, and the
-    implicit derivative of chi from Kepler's equation) give
+    implicit derivative of chi from Kepler's equation; `kepler.lagrange_partials`, the same
+    code compiled) give
     ``Phi = [[F I, G I], [Fdot I, Gdot I]] + W M W^T``, ``W = [[r0, v0, 0, 0], [0, 0, r0, v0]]``
-    with a 4x4 matrix ``M`` per object. Every step is elementwise over the object axis.
+    with a 4x4 matrix ``M`` per object. A compiled loop over the objects (numba).
 
     Parameters
     ----------
@@ -364,44 +687,15 @@ def kepler_stm(x: ArrayLike, dt: ArrayLike,
     ok : ndarray (N,) of bool
         False where the input is not finite, r0 = 0, or Kepler's equation did not converge.
     """
-    smu = math.sqrt(mu)
-    with np.errstate(all="ignore"):
-        o = _kepler_solve(x, dt, mu)
-        r, v, r0, sig0, alpha, chi = o.r, o.v, o.r0, o.sig0, o.alpha, o.chi
-        n = r.shape[0]
-        c2, c3, c4, c5 = _stumpff(alpha * chi * chi, full=True)
-        (f, g, fd, gd), ca, cb, cd = lagrange_partials(r0, sig0, alpha, chi,
-                                                       (c2, c3, c4, c5), smu, mu)
-        fs, a, b, dd = np.stack([f, g, fd, gd]), np.stack(ca), np.stack(cb), np.stack(cd)
-        # structure of arrays (object axis last): long contiguous loops, no small inner axes
-        rT, vT = np.ascontiguousarray(r.T), np.ascontiguousarray(v.T)  # (3, N)
-        grad = np.empty((4, 6, n))  # rows d(coef i)/dx0
-        grad[:, :3] = a[:, None, :] * rT + b[:, None, :] * vT
-        grad[:, 3:] = b[:, None, :] * rT + dd[:, None, :] * vT
-        phi = np.empty((6, 6, n))
-        phi[:3] = rT[:, None, :] * grad[0] + vT[:, None, :] * grad[1]
-        phi[3:] = rT[:, None, :] * grad[2] + vT[:, None, :] * grad[3]
-        for i, (i0, j0) in enumerate(((0, 0), (0, 3), (3, 0), (3, 3))):
-            for d in range(3):
-                phi[i0 + d, j0 + d] += fs[i]
-        ok = o.ok & np.isfinite(phi).all(axis=(0, 1))
-        phi = np.ascontiguousarray(phi.transpose(2, 0, 1))
-        x1 = np.empty((n, 6))
-        x1[:, :3] = f[:, None] * r + g[:, None] * v
-        x1[:, 3:] = fd[:, None] * r + gd[:, None] * v
-        ok &= np.isfinite(x1).all(axis=1)
-    return x1, phi, ok
+    return _kepler(x, dt, mu, True)
 
 
 def kepler_state(x: ArrayLike, dt: ArrayLike, mu: float = MU_EARTH) -> tuple[Array, BoolArray]:
     """Propagate N two-body states by their own ``dt`` (s), without the STM.
 
-    As `kepler_stm` (same solution, about a third of its cost): returns (x1 (N, 6), ok (N,)).
+    As `kepler_stm` (same solution, a fraction of its cost): returns (x1 (N, 6), ok (N,)).
     """
-    with np.errstate(all="ignore"):
-        o = _kepler_solve(x, dt, mu)
-        x1 = _apply(_lagrange(o.r0, o.sig0, o.alpha, o.chi, math.sqrt(mu)), o.r, o.v)
-        ok = o.ok & np.isfinite(x1).all(axis=1)
+    x1, _, ok = _kepler(x, dt, mu, False)
     return x1, ok
 
 
@@ -487,42 +781,6 @@ def integrate_stm(model: str, x: ArrayLike, dt: ArrayLike, max_step_s: float = 6
 # --------------------------------------------------------------------------------------------
 # The filter bank
 # --------------------------------------------------------------------------------------------
-def _process_noise_basis() -> Array:
-    """(3, 6, 6) matrices B_k with ``process_noise(dt, q) = q sum_k dt^(3-k) B_k``."""
-    out = np.zeros((3, 6, 6))
-    i3 = np.eye(3)
-    out[0, :3, :3] = i3 / 3.0
-    out[1, :3, 3:] = out[1, 3:, :3] = i3 / 2.0
-    out[2, 3:, 3:] = i3
-    return out
-
-
-def _inv3_sym_soa(S: Array) -> tuple[Array, BoolArray]:
-    """Inverses of symmetric 3x3 matrices stored object axis last (3, 3, m), by cofactors.
-
-    Returns (inverses (3, 3, m), ok (m,)); ok is False where det <= 0 or not finite.
-    """
-    a, b, c = S[0, 0], S[0, 1], S[0, 2]
-    d, e, f = S[1, 1], S[1, 2], S[2, 2]
-    c11 = d * f - e * e
-    c12 = c * e - b * f
-    c13 = b * e - c * d
-    det = a * c11 + b * c12 + c * c13
-    ok = np.isfinite(det) & (det > 0.0)
-    i = 1.0 / np.where(ok, det, 1.0)
-    inv = np.empty_like(S)
-    inv[0, 0], inv[1, 1], inv[2, 2] = c11 * i, (a * f - c * c) * i, (a * d - b * b) * i
-    inv[0, 1] = inv[1, 0] = c12 * i
-    inv[0, 2] = inv[2, 0] = c13 * i
-    inv[1, 2] = inv[2, 1] = (b * c - a * e) * i
-    return inv, ok
-
-
-def _sym(P: Array) -> Array:
-    out: Array = 0.5 * (P + np.swapaxes(P, -1, -2))
-    return out
-
-
 class BatchEKF:
     """EKFs of N objects, one cycle for all at once (see the module docstring).
 
@@ -547,9 +805,6 @@ class BatchEKF:
         self._enu = np.array([enu_matrix(s.lat_rad, s.lon_rad) for s in self.stations])
         self._site = np.array([m @ site_ecef(s.lat_rad, s.lon_rad, s.alt_km)
                                for m, s in zip(self._enu, self.stations, strict=True)])
-        self._enu_soa = np.ascontiguousarray(self._enu.transpose(1, 2, 0))  # (3, 3, stations)
-        self._site_soa = np.ascontiguousarray(self._site.T)  # (3, stations) km
-        self._qbasis = config.q * _process_noise_basis().reshape(3, 36)
         self._params = config.params
 
     # ----------------------------------------------------------------------------------
@@ -562,30 +817,11 @@ class BatchEKF:
 
     def _predict(self, x: Array, P: Array, dt: Array) -> tuple[Array, Array, BoolArray]:
         """x, P predicted by dt (dt == 0: unchanged, as the per-object filter skips it)."""
-        move = dt != 0.0
         x1, F, ok = self.propagate(x, dt)
-        adt = np.abs(dt)
-        Q = (np.stack([adt**3, adt**2, adt], -1) @ self._qbasis).reshape(-1, 6, 6)
-        P1 = _sym(np.matmul(np.matmul(F, P), np.swapaxes(F, 1, 2)) + Q)
-        if self.config.sigma_bound:
-            P1 = self._bound(x1, P1)
-        ok &= np.isfinite(P1).all(axis=(1, 2))
-        if not move.all():
-            x1[~move] = x[~move]
-            P1[~move] = P[~move]
-            ok |= ~move
+        P1 = np.empty((x.shape[0], 6, 6))
+        _predict_kernel(x, P, dt, x1, _f64(F), ok, float(self.config.q),
+                        float(self.config.sigma_bound), P1)
         return x1, P1, ok
-
-    def _bound(self, x: Array, P: Array) -> Array:
-        """`ekf.bound_covariance` for N objects."""
-        factor = self.config.sigma_bound
-        cap = np.repeat(factor * np.stack([np.linalg.norm(x[:, :3], axis=1),
-                                           np.linalg.norm(x[:, 3:], axis=1)], -1), 3, axis=1)
-        sig = np.sqrt(np.clip(np.diagonal(P, axis1=1, axis2=2), 0.0, None))
-        over = (sig > cap) & (cap > 0.0)
-        s = np.where(over, cap / np.where(over, sig, 1.0), 1.0)
-        out: Array = P * s[:, :, None] * s[:, None, :]
-        return out
 
     def predict(self, x: ArrayLike, P: ArrayLike, dt: ArrayLike) -> Predicted:
         """Predict N objects by their own ``dt`` (s): ``x <- f(x)``, ``P <- F P F^T + Q``.
@@ -593,9 +829,9 @@ class BatchEKF:
         Then ``P`` is symmetrised and bounded (``sigma_bound``); ``dt == 0`` leaves an object
         unchanged. Objects whose prediction is not computable keep their input (``ok``).
         """
-        X = np.asarray(x, dtype=float)
-        PP = np.asarray(P, dtype=float)
-        dts = np.broadcast_to(np.asarray(dt, dtype=float), (X.shape[0],))
+        X = _f64(np.asarray(x, dtype=float))
+        PP = _f64(np.asarray(P, dtype=float))
+        dts = _f64(np.broadcast_to(np.asarray(dt, dtype=float), (X.shape[0],)))
         with np.errstate(all="ignore"):
             x1, P1, ok = self._predict(X, PP, dts)
         return Predicted(np.where(ok[:, None], x1, X), np.where(ok[:, None, None], P1, PP), ok)
@@ -633,52 +869,31 @@ class BatchEKF:
                 station: NDArray[np.intp]) -> tuple[Array, Array, Array, Array, BoolArray]:
         """Joseph-form update of m objects: (x, P, nis, y, computable).
 
-        Elementwise over the object axis in a structure-of-arrays layout (object axis last),
-        using the zero velocity columns of H. The Joseph form ``A P A^T + K R K^T``
-        (``A = I - K H``) is evaluated expanded, ``P + (K S - 2 P H^T) K^T`` symmetrised
-        (S = H P H^T + R): algebraically the same, and like it insensitive to first order
-        to an error in the gain K (the first-order term is antisymmetric).
+        A compiled loop over the objects (`_update_kernel`) using the zero velocity columns
+        of H. The Joseph form ``A P A^T + K R K^T`` (``A = I - K H``) is evaluated expanded,
+        ``P + (K S - 2 P H^T) K^T`` symmetrised (S = H P H^T + R): algebraically the same,
+        and like it insensitive to first order to an error in the gain K (the first-order
+        term is antisymmetric).
         """
         m = x.shape[0]
-        th = self._era0 + ERA_RATE * t
-        c, s = np.cos(th), np.sin(th)
-        M = self._enu_soa[:, :, station]  # (3, 3, m)
-        T = np.empty_like(M)  # ECI -> ENU: M R3(th)
-        T[:, 0] = M[:, 0] * c - M[:, 1] * s
-        T[:, 1] = M[:, 0] * s + M[:, 1] * c
-        T[:, 2] = M[:, 2]
-        xt = x.T
-        enu = T[:, 0] * xt[0] + T[:, 1] * xt[1] + T[:, 2] * xt[2] - self._site_soa[:, station]
-        e, n, u = enu
-        h2 = e * e + n * n
-        h = np.sqrt(h2)
-        r2 = h2 + u * u
-        rg = np.sqrt(r2)
-        y = np.empty((3, m))
-        y[0] = z[:, 0] - rg
-        y[1] = wrap_angle(z[:, 1] - np.mod(np.arctan2(e, n), 2.0 * math.pi))
-        y[2] = wrap_angle(z[:, 2] - np.arctan2(u, h))
-        k = -u / (h * r2)
-        D = np.empty((3, 3, m))  # d(range, az, el)/d(e, n, u)
-        D[0, 0], D[0, 1], D[0, 2] = e / rg, n / rg, u / rg
-        D[1, 0], D[1, 1], D[1, 2] = n / h2, -e / h2, 0.0
-        D[2, 0], D[2, 1], D[2, 2] = k * e, k * n, h / r2
-        Hr = D[:, 0, None] * T[0] + D[:, 1, None] * T[1] + D[:, 2, None] * T[2]  # (3, 3, m)
-        Pt = np.ascontiguousarray(P.transpose(1, 2, 0))  # (6, 6, m)
-        PHt = Pt[:, 0, None] * Hr[:, 0] + Pt[:, 1, None] * Hr[:, 1] + Pt[:, 2, None] * Hr[:, 2]
-        S = (Hr[:, 0, None] * PHt[0] + Hr[:, 1, None] * PHt[1] + Hr[:, 2, None] * PHt[2]
-             + R.transpose(1, 2, 0))
-        Si, ok = _inv3_sym_soa(S)
-        Siy = Si[:, 0] * y[0] + Si[:, 1] * y[1] + Si[:, 2] * y[2]
-        nis = y[0] * Siy[0] + y[1] * Siy[1] + y[2] * Siy[2]
-        K = PHt[:, 0, None] * Si[0] + PHt[:, 1, None] * Si[1] + PHt[:, 2, None] * Si[2]
-        x1 = x + (K[:, 0] * y[0] + K[:, 1] * y[1] + K[:, 2] * y[2]).T
-        E = K[:, 0, None] * S[0] + K[:, 1, None] * S[1] + K[:, 2, None] * S[2] - 2.0 * PHt
-        P1 = Pt + E[:, 0, None] * K[:, 0] + E[:, 1, None] * K[:, 1] + E[:, 2, None] * K[:, 2]
-        P1 += P1.transpose(1, 0, 2)
-        P1 *= 0.5
-        ok &= np.isfinite(nis) & np.isfinite(x1).all(axis=1) & np.isfinite(P1).all(axis=(0, 1))
-        return x1, np.ascontiguousarray(P1.transpose(2, 0, 1)), nis, y.T, ok
+        x1, P1 = np.empty((m, 6)), np.empty((m, 6, 6))
+        nis, y, ok = np.empty(m), np.empty((m, 3)), np.empty(m, dtype=np.bool_)
+        _update_kernel(x, P, z, R, t, station, self._enu, self._site, self._era0, ERA_RATE,
+                       x1, P1, nis, y, ok)
+        return x1, P1, nis, y, ok
+
+    def _kepler_step(self, x: Array, P: Array, dt: Array, z: Array, R: Array, t: Array,
+                     station: NDArray[np.intp]
+                     ) -> tuple[Array, Array, Array, Array, BoolArray]:
+        """`_predict` then `_update` with the Kepler model (`_kepler_step_kernel`)."""
+        m = x.shape[0]
+        x1, P1 = np.empty((m, 6)), np.empty((m, 6, 6))
+        nis, y, ok = np.empty(m), np.empty((m, 3)), np.empty(m, dtype=np.bool_)
+        _kepler_step_kernel(x, P, dt, z, R, t, station, self._enu, self._site, self._era0,
+                            ERA_RATE, float(self._params.get("mu", MU_EARTH)),
+                            float(self.config.q), float(self.config.sigma_bound), x1, P1, nis,
+                            y, ok)
+        return x1, P1, nis, y, ok
 
     def update(self, x: ArrayLike, P: ArrayLike, z: ArrayLike, R: ArrayLike, t: ArrayLike,
                station: ArrayLike, mask: ArrayLike | None = None,
@@ -750,13 +965,12 @@ class BatchEKF:
         dts = pick(np.asarray(dt, dtype=float), 0)
         st = pick(np.asarray(station, dtype=np.intp), 0)
         xs, Ps = pick(X, 1), pick(PP, 2)
+        zz, RR, tt, dts, xs, Ps = (_f64(a) for a in (zz, RR, tt, dts, xs, Ps))
+        if not (st.dtype == np.intp and st.flags.c_contiguous and st.flags.writeable):
+            st = np.array(st, dtype=np.intp)
+        c = np.empty(idx.size, dtype=np.int8)
+        _admit_kernel(xs, Ps, dts, zz, RR, tt, st, len(self.stations), c)
         with np.errstate(all="ignore"):
-            finite = (np.isfinite(zz).all(axis=1) & np.isfinite(RR).all(axis=(1, 2))
-                      & np.isfinite(tt) & np.isfinite(dts) & np.isfinite(xs).all(axis=1)
-                      & np.isfinite(Ps).all(axis=(1, 2)) & (st >= 0) & (st < len(self.stations)))
-            c = np.where(finite, Code.FUSED, Code.NONFINITE).astype(np.int8)
-            c[finite & (zz[:, 0] < 0.0)] = Code.NEGATIVE_RANGE
-            c[finite & ~(np.abs(zz[:, 2]) <= 0.5 * math.pi)] = Code.ELEVATION
             valid = c == Code.FUSED
             allv = bool(valid.all())
             go = np.flatnonzero(valid)
@@ -764,23 +978,33 @@ class BatchEKF:
             def sub(a: AnyArray) -> AnyArray:
                 return a if allv else a[go]
 
-            xp, Pp, ok = self._predict(sub(xs), sub(Ps), sub(dts))
-            x1, P1, g_nis, g_y, ok2 = self._update(xp, Pp, sub(zz), sub(RR), sub(tt), sub(st))
-            ok &= ok2
+            if self.config.motion_model == "kepler":  # predict and update by chunks
+                x1, P1, g_nis, g_y, ok = self._kepler_step(sub(xs), sub(Ps), sub(dts), sub(zz),
+                                                           sub(RR), sub(tt), sub(st))
+            else:
+                xp, Pp, ok = self._predict(sub(xs), sub(Ps), sub(dts))
+                x1, P1, g_nis, g_y, ok2 = self._update(xp, Pp, sub(zz), sub(RR), sub(tt),
+                                                       sub(st))
+                ok &= ok2
             cg = np.where(ok, Code.FUSED, Code.NUMERIC).astype(np.int8)
             if self.config.gate is not None:
                 cg[ok & (g_nis > self.config.gate)] = Code.GATE
-            c[go] = cg
-            where = idx[go]
-            nis[where] = np.where(ok, g_nis, np.nan)
-            yy[where] = g_y
-        code[idx] = c
+            g_nis[~ok] = np.nan
         take = cg == Code.FUSED
+        if every and allv:  # the usual batch: every object measured and admitted
+            code, nis, yy, rows = cg, g_nis, g_y, take
+        else:
+            c[go] = cg
+            code[idx] = c
+            where = idx[go]
+            nis[where] = g_nis
+            yy[where] = g_y
+            rows = where[take]
         if every and allv and bool(take.all()) and not inplace:
             X, PP = x1, P1
         else:
             if not inplace:
                 X, PP = X.copy(), PP.copy()
-            X[where[take]] = x1[take]
-            PP[where[take]] = P1[take]
+            X[rows] = x1[take]
+            PP[rows] = P1[take]
         return BatchUpdate(X, PP, code, nis, yy)

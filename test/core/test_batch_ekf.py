@@ -228,3 +228,31 @@ def test_sigma_bound_and_inplace() -> None:
     x, P = o["x"].copy(), o["P"].copy()
     out = bank.step(x, P, o["dt"], o["z"], R, o["t"], o["station"], inplace=True)
     assert out.x is x and out.P is P and not np.array_equal(x, o["x"])
+
+
+def test_input_layouts() -> None:
+    """Broadcast, scalar, list, strided, Fortran-ordered and read-only inputs: the same cycle."""
+    o = _objects()
+    bank = BatchEKF(BatchEKFConfig(), STATION_LIST)
+    n = len(o["x"])
+    ref = bank.step(o["x"], o["P"], 30.0, o["z"], np.tile(R, (n, 1, 1)), np.full(n, T0 + 30.0),
+                    np.full(n, 2))
+    P_ro = np.asfortranarray(o["P"])
+    P_ro.flags.writeable = False
+    wide = np.zeros((n, 12))
+    wide[:, ::2] = o["x"]
+    out = bank.step(wide[:, ::2], P_ro, 30.0, o["z"].tolist(), R, T0 + 30.0, 2)
+    assert np.array_equal(out.code, ref.code)
+    assert np.array_equal(out.x, ref.x) and np.array_equal(out.P, ref.P)
+    x1, phi, ok = kepler_stm(o["x"][0].tolist(), 30.0)
+    assert x1.shape == (1, 6) and phi.shape == (1, 6, 6) and ok.all()
+    assert np.array_equal(x1[0], kepler_stm(o["x"], 30.0)[0][0])
+
+
+def test_compiled_kernels_cache_key() -> None:
+    """The cached compiled kernels contain `kepler.lagrange_partials`: its digest is noted."""
+    from ssa_fusion.core import batch_ekf
+
+    assert batch_ekf._lagrange_partials_digest() == batch_ekf._KEPLER_PARTIALS_SHA256, (
+        "kepler.lagrange_partials changed: set batch_ekf._KEPLER_PARTIALS_SHA256 to "
+        f"{batch_ekf._lagrange_partials_digest()!r} (the kernels are not cached until then)")
