@@ -516,28 +516,22 @@ def _update_kernel(x: Array, P: Array, z: Array, R: Array, t: Array, st: NDArray
     ``enu`` (stations, 3, 3) and ``site`` (stations, 3): the stations' ECEF -> ENU rotations
     and ENU positions of the ECEF origin; Earth rotation angle ``era0 + era_rate t``.
     """
-    T = np.empty((3, 3))
-    Hr = np.empty((3, 3))
-    D = np.empty((3, 3))
-    PHt = np.empty((6, 3))
-    S = np.empty((3, 3))
-    Si = np.empty((3, 3))
-    K = np.empty((6, 3))
-    E = np.empty((6, 3))
-    W = np.empty((6, 6))
+    # the fixed 3x3 blocks as scalars (in registers); rows of P H^T, K, E in small arrays
+    PHt, K, E = np.empty((6, 3)), np.empty((6, 3)), np.empty((6, 3))
     t_prev, c, s = math.nan, 1.0, 0.0
     for i in range(x.shape[0]):
         if t[i] != t_prev:  # a batch's measurements often share their epoch
             th = era0 + era_rate * t[i]
             c, s, t_prev = math.cos(th), math.sin(th), t[i]
         j = st[i]
-        for k in range(3):  # ECI -> ENU: M R3(th)
-            T[k, 0] = enu[j, k, 0] * c - enu[j, k, 1] * s
-            T[k, 1] = enu[j, k, 0] * s + enu[j, k, 1] * c
-            T[k, 2] = enu[j, k, 2]
-        e = T[0, 0] * x[i, 0] + T[0, 1] * x[i, 1] + T[0, 2] * x[i, 2] - site[j, 0]
-        n = T[1, 0] * x[i, 0] + T[1, 1] * x[i, 1] + T[1, 2] * x[i, 2] - site[j, 1]
-        u = T[2, 0] * x[i, 0] + T[2, 1] * x[i, 1] + T[2, 2] * x[i, 2] - site[j, 2]
+        # ECI -> ENU: T = M R3(th)
+        t00, t01 = enu[j, 0, 0] * c - enu[j, 0, 1] * s, enu[j, 0, 0] * s + enu[j, 0, 1] * c
+        t10, t11 = enu[j, 1, 0] * c - enu[j, 1, 1] * s, enu[j, 1, 0] * s + enu[j, 1, 1] * c
+        t20, t21 = enu[j, 2, 0] * c - enu[j, 2, 1] * s, enu[j, 2, 0] * s + enu[j, 2, 1] * c
+        t02, t12, t22 = enu[j, 0, 2], enu[j, 1, 2], enu[j, 2, 2]
+        e = t00 * x[i, 0] + t01 * x[i, 1] + t02 * x[i, 2] - site[j, 0]
+        n = t10 * x[i, 0] + t11 * x[i, 1] + t12 * x[i, 2] - site[j, 1]
+        u = t20 * x[i, 0] + t21 * x[i, 1] + t22 * x[i, 2] - site[j, 2]
         h2 = e * e + n * n
         h = math.sqrt(h2)
         r2 = h2 + u * u
@@ -548,51 +542,64 @@ def _update_kernel(x: Array, P: Array, z: Array, R: Array, t: Array, st: NDArray
         y2 = _wrap(z[i, 2] - math.atan2(u, h))
         y[i, 0], y[i, 1], y[i, 2] = y0, y1, y2
         kk = -u / (h * r2)
-        D[0, 0], D[0, 1], D[0, 2] = e / rg, n / rg, u / rg  # d(range, az, el)/d(e, n, u)
-        D[1, 0], D[1, 1], D[1, 2] = n / h2, -e / h2, 0.0
-        D[2, 0], D[2, 1], D[2, 2] = kk * e, kk * n, h / r2
-        for a in range(3):  # H = [Hr, 0]: no velocity columns
-            for j in range(3):
-                Hr[a, j] = D[a, 0] * T[0, j] + D[a, 1] * T[1, j] + D[a, 2] * T[2, j]
+        d00, d01, d02 = e / rg, n / rg, u / rg  # D = d(range, az, el)/d(e, n, u)
+        d10, d11, d12 = n / h2, -e / h2, 0.0
+        d20, d21, d22 = kk * e, kk * n, h / r2
+        # H = [Hr, 0] (no velocity columns), Hr = D T
+        h00 = d00 * t00 + d01 * t10 + d02 * t20
+        h01 = d00 * t01 + d01 * t11 + d02 * t21
+        h02 = d00 * t02 + d01 * t12 + d02 * t22
+        h10 = d10 * t00 + d11 * t10 + d12 * t20
+        h11 = d10 * t01 + d11 * t11 + d12 * t21
+        h12 = d10 * t02 + d11 * t12 + d12 * t22
+        h20 = d20 * t00 + d21 * t10 + d22 * t20
+        h21 = d20 * t01 + d21 * t11 + d22 * t21
+        h22 = d20 * t02 + d21 * t12 + d22 * t22
         for p in range(6):
-            for a in range(3):
-                PHt[p, a] = P[i, p, 0] * Hr[a, 0] + P[i, p, 1] * Hr[a, 1] + P[i, p, 2] * Hr[a, 2]
-        for a in range(3):
-            for b in range(3):
-                S[a, b] = (Hr[a, 0] * PHt[0, b] + Hr[a, 1] * PHt[1, b] + Hr[a, 2] * PHt[2, b]
-                           + R[i, a, b])
-        sa, sb, sc, sd, se, sf = S[0, 0], S[0, 1], S[0, 2], S[1, 1], S[1, 2], S[2, 2]
-        c11 = sd * sf - se * se
-        c12 = sc * se - sb * sf
-        c13 = sb * se - sc * sd
-        det = sa * c11 + sb * c12 + sc * c13
+            PHt[p, 0] = P[i, p, 0] * h00 + P[i, p, 1] * h01 + P[i, p, 2] * h02
+            PHt[p, 1] = P[i, p, 0] * h10 + P[i, p, 1] * h11 + P[i, p, 2] * h12
+            PHt[p, 2] = P[i, p, 0] * h20 + P[i, p, 1] * h21 + P[i, p, 2] * h22
+        # S = H P H^T + R
+        s00 = h00 * PHt[0, 0] + h01 * PHt[1, 0] + h02 * PHt[2, 0] + R[i, 0, 0]
+        s01 = h00 * PHt[0, 1] + h01 * PHt[1, 1] + h02 * PHt[2, 1] + R[i, 0, 1]
+        s02 = h00 * PHt[0, 2] + h01 * PHt[1, 2] + h02 * PHt[2, 2] + R[i, 0, 2]
+        s10 = h10 * PHt[0, 0] + h11 * PHt[1, 0] + h12 * PHt[2, 0] + R[i, 1, 0]
+        s11 = h10 * PHt[0, 1] + h11 * PHt[1, 1] + h12 * PHt[2, 1] + R[i, 1, 1]
+        s12 = h10 * PHt[0, 2] + h11 * PHt[1, 2] + h12 * PHt[2, 2] + R[i, 1, 2]
+        s20 = h20 * PHt[0, 0] + h21 * PHt[1, 0] + h22 * PHt[2, 0] + R[i, 2, 0]
+        s21 = h20 * PHt[0, 1] + h21 * PHt[1, 1] + h22 * PHt[2, 1] + R[i, 2, 1]
+        s22 = h20 * PHt[0, 2] + h21 * PHt[1, 2] + h22 * PHt[2, 2] + R[i, 2, 2]
+        c11 = s11 * s22 - s12 * s12  # S^-1 by cofactors, from its upper triangle
+        c12 = s02 * s12 - s01 * s22
+        c13 = s01 * s12 - s02 * s11
+        det = s00 * c11 + s01 * c12 + s02 * c13
         good = math.isfinite(det) and det > 0.0
         idet = 1.0 / det if good else 1.0
-        Si[0, 0], Si[1, 1], Si[2, 2] = c11 * idet, (sa * sf - sc * sc) * idet, (
-            sa * sd - sb * sb) * idet
-        Si[0, 1] = Si[1, 0] = c12 * idet
-        Si[0, 2] = Si[2, 0] = c13 * idet
-        Si[1, 2] = Si[2, 1] = (sb * sc - sa * se) * idet
-        v = (y0 * (Si[0, 0] * y0 + Si[0, 1] * y1 + Si[0, 2] * y2)
-             + y1 * (Si[1, 0] * y0 + Si[1, 1] * y1 + Si[1, 2] * y2)
-             + y2 * (Si[2, 0] * y0 + Si[2, 1] * y1 + Si[2, 2] * y2))
+        i00, i01, i02 = c11 * idet, c12 * idet, c13 * idet
+        i11, i12 = (s00 * s22 - s02 * s02) * idet, (s01 * s02 - s00 * s12) * idet
+        i22 = (s00 * s11 - s01 * s01) * idet
+        v = (y0 * (i00 * y0 + i01 * y1 + i02 * y2)
+             + y1 * (i01 * y0 + i11 * y1 + i12 * y2)
+             + y2 * (i02 * y0 + i12 * y1 + i22 * y2))
         nis[i] = v
         nf = v - v  # 0.0, or nan once anything checked is inf or nan
-        for p in range(6):
-            for a in range(3):
-                K[p, a] = PHt[p, 0] * Si[0, a] + PHt[p, 1] * Si[1, a] + PHt[p, 2] * Si[2, a]
-            w = x[i, p] + (K[p, 0] * y0 + K[p, 1] * y1 + K[p, 2] * y2)
+        for p in range(6):  # K = P H^T S^-1, x1 = x + K y, E = K S - 2 P H^T
+            g0, g1, g2 = PHt[p, 0], PHt[p, 1], PHt[p, 2]
+            k0 = g0 * i00 + g1 * i01 + g2 * i02
+            k1 = g0 * i01 + g1 * i11 + g2 * i12
+            k2 = g0 * i02 + g1 * i12 + g2 * i22
+            K[p, 0], K[p, 1], K[p, 2] = k0, k1, k2
+            w = x[i, p] + (k0 * y0 + k1 * y1 + k2 * y2)
             x1[i, p] = w
             nf += w - w
-            for a in range(3):
-                E[p, a] = (K[p, 0] * S[0, a] + K[p, 1] * S[1, a] + K[p, 2] * S[2, a]
-                           - 2.0 * PHt[p, a])
-        for p in range(6):
-            for q in range(6):
-                W[p, q] = P[i, p, q] + E[p, 0] * K[q, 0] + E[p, 1] * K[q, 1] + E[p, 2] * K[q, 2]
-        for p in range(6):
+            E[p, 0] = k0 * s00 + k1 * s10 + k2 * s20 - 2.0 * g0
+            E[p, 1] = k0 * s01 + k1 * s11 + k2 * s21 - 2.0 * g1
+            E[p, 2] = k0 * s02 + k1 * s12 + k2 * s22 - 2.0 * g2
+        for p in range(6):  # Joseph, expanded: P + E K^T, symmetrised
             for q in range(p, 6):
-                w = (W[p, q] + W[q, p]) * 0.5
+                wpq = P[i, p, q] + E[p, 0] * K[q, 0] + E[p, 1] * K[q, 1] + E[p, 2] * K[q, 2]
+                wqp = P[i, q, p] + E[q, 0] * K[p, 0] + E[q, 1] * K[p, 1] + E[q, 2] * K[p, 2]
+                w = (wpq + wqp) * 0.5
                 P1[i, p, q] = P1[i, q, p] = w
                 nf += w - w
         ok[i] = good and nf == 0.0
