@@ -439,12 +439,11 @@ def _predict_kernel(x: Array, P: Array, dt: Array, x1: Array, F: Array, ok: Bool
                 f = F[i, k, m]
                 for j in range(6):
                     FP[k, j] += f * Ps[m, j]
-        for k in range(6):
+        for k in range(6):  # upper triangle of FP F^T (row k of FP held in registers)
+            f0, f1, f2, f3, f4, f5 = FP[k, 0], FP[k, 1], FP[k, 2], FP[k, 3], FP[k, 4], FP[k, 5]
             for j in range(k, 6):
-                acc = FP[k, 0] * F[i, j, 0]
-                for m in range(1, 6):
-                    acc += FP[k, m] * F[i, j, m]
-                P1[i, k, j] = acc
+                P1[i, k, j] = (f0 * F[i, j, 0] + f1 * F[i, j, 1] + f2 * F[i, j, 2]
+                               + f3 * F[i, j, 3] + f4 * F[i, j, 4] + f5 * F[i, j, 5])
         adt = abs(dt[i])
         q3, q2, q1 = adt * adt * adt * (q / 3.0), adt * adt * (q / 2.0), adt * q
         for k in range(3):
