@@ -1,0 +1,109 @@
+"""Graph test of the catalog_surrogate node alone: the test process drives sim time on
+/clock and publishes the filter's estimates of two objects, plus bad ones. Every bad
+estimate is refused by cause on /diagnostics (or never delivered: the content filter), the
+node lives on, and the forecast it publishes through the gap that follows equals the
+in-process `core.residual.GapForecaster` fed the same estimates (through the same messages).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from rosgraph_msgs.msg import Clock
+from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
+from test_faults import Diag, publisher
+
+from ssa_fusion.core import dynamics, types
+from ssa_fusion.core.gap_bank import CATALOG_RESIDUAL
+from ssa_fusion.core.residual import GapForecaster
+from ssa_fusion.nodes.shards import shard_range
+from ssa_fusion.ros import messages
+from ssa_fusion.ros.topics import CATALOG_QOS
+
+T0 = 1.7e9  # Unix s
+PERIOD = 300.0
+P = np.diag([1e-4] * 3 + [1e-10] * 3)
+
+
+def _object_of_shard(shard: int, shards: int, other: bool = False) -> str:
+    """An object id of shard `shard` of `shards` (`other`: of another shard) whose key is
+    not the last of the range."""
+    lo, hi = shard_range(shard, shards)
+    return next(o for o in (f"7{k:04d}" for k in range(1000))
+                if (lo <= messages.shard_key(o) < hi) != other)
+
+
+def _estimates(oid: str) -> list[types.StateEstimate]:
+    """Pass ends' worth of a J2 orbit: 4 passes of 5 min every 97 min, 60 s apart, as the
+    filter's SENSOR estimates (through the message, m <-> km, as the node gets them)."""
+    x0 = np.array(dynamics.elements_to_state(**dynamics.ISS_ELEMENTS))
+    t = np.concatenate([s + np.arange(0.0, 300.0, 60.0) for s in 5820.0 * np.arange(4)])
+    x = dynamics.propagate("j2", x0, np.r_[-60.0, t])[1:]
+    return [messages.estimate_from_msg(messages.estimate_to_msg(types.StateEstimate(
+        t=T0 + ti, x=xi, P=P, object_id=oid, update_source=types.UpdateSource.SENSOR)))
+        for ti, xi in zip(t, x, strict=True)]
+
+
+def test_bad_estimates_are_refused_and_the_gap_forecast_equals_the_core(ros_graph):
+    g = ros_graph
+    span = 3 * 5820.0  # first to last pass end: only the last one may fit
+    params = {"use_sim_time": True, "shards": 2, "shard": 0, "hold": 0.0,
+              "predict_period": PERIOD, "min_anchors": 3, "min_span": span - 1.0,
+              "fit_budget": 1.0}
+    node = g.start_node("catalog_surrogate", params=params)
+    diag = Diag(g)
+    forecasts: list = []
+    g.probe.create_subscription(StateEstimateMsg, "/ssa/estimate",
+                                lambda m: forecasts.append(m) if m.update_source == 2 else None,
+                                CATALOG_QOS)
+    clock = publisher(g, Clock, "/clock", ("catalog_surrogate",))
+    est = publisher(g, StateEstimateMsg, "/ssa/estimate", ("catalog_surrogate",))
+
+    def tick(t: float) -> None:
+        clock.publish(Clock(clock=messages.seconds_to_stamp(t)))
+
+    mine, theirs = _object_of_shard(0, 2), _object_of_shard(0, 2, other=True)
+    good = _estimates(mine)
+    tick(T0)
+    # bad input first: each refused by cause (or kept away by the content filter)
+    nan = messages.estimate_to_msg(good[0])
+    nan.state[2] = float("nan")
+    no_id = messages.estimate_to_msg(replace(good[0], object_id=""))
+    wrong_key = messages.estimate_to_msg(good[0])
+    wrong_key.shard_key = messages.shard_key(mine) + 1  # in range, not the id's CRC-32
+    future = messages.estimate_to_msg(replace(good[0], t=T0 + 1e5))
+    forecast = messages.estimate_to_msg(replace(good[0], update_source=2))
+    other = messages.estimate_to_msg(replace(good[0], object_id=theirs))
+    for m in (nan, no_id, wrong_key, future, forecast, other):
+        est.publish(m)
+    diag.wait(g, "catalog_surrogate", {"rejected_nonfinite": 1, "rejected_object_id": 1,
+                                       "rejected_shard_key": 1, "rejected_future": 1})
+    # then the object's passes, sim time running every minute, and on into the gap after
+    # the last (a clock and an estimate arrive on separate topics, so in either order)
+    end = good[-1].t
+    k = 0
+    for t in T0 + 60.0 * np.arange(int((end - T0) / 60.0) + 61):
+        tick(float(t))
+        while k < len(good) and good[k].t <= t:
+            est.publish(messages.estimate_to_msg(good[k]))
+            k += 1
+    c = diag.wait(g, "catalog_surrogate", {"received": len(good), "fits_made": 1}, 30.0)
+    g.wait_for(lambda: len(forecasts) >= 9, 20.0, "the gap's forecasts")
+    assert c.get("ignored_not_sensor", "0") == c.get("ignored_other_shard", "0") == "0"
+    # (an earlier pass end the node saw in time was refused: its pass ends span too little)
+    ref = GapForecaster.for_model("j2", PERIOD, replace(CATALOG_RESIDUAL, min_anchors=3,
+                                                        min_span_s=span - 1.0))
+    for e in good:
+        ref.on_estimate(e.t, e.x, e.P)
+    got = [e for e in map(messages.estimate_from_msg, forecasts) if e.t > T0]  # not ours
+    t = np.array([f.t for f in got])
+    assert t[0] - PERIOD < end + 600.0 <= t[0]  # the grid's first epoch past pass_break
+    assert np.all(np.diff(t) == PERIOD)
+    for f in got:
+        assert f.object_id == mine and f.t - end >= 600.0
+        want = messages.estimate_from_msg(messages.estimate_to_msg(types.StateEstimate(
+            t=f.t, x=ref.forecast(f.t)[0], P=ref.forecast(f.t)[1], object_id=mine)))
+        np.testing.assert_allclose(f.x, want.x, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(f.P, want.P, rtol=1e-9, atol=1e-15)
+    assert node.popen.poll() is None
