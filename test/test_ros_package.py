@@ -92,6 +92,7 @@ IMPORT_KEYS = {
     "plotly": "python3-plotly-pip",  # report.html (apps/report_html.py)
     "foxglove": "python3-foxglove-sdk-pip",  # foxglove-sdk: the foxglove_bridge node
     "ccsds_ndm": "python3-ccsds-ndm-pip",  # CCSDS OEM/TDM (apps/ccsds.py)
+    "numba": "python3-numba-pip",  # the batched EKF's compiled kernels (core/batch_ekf.py)
     "threadpoolctl": None,  # optional: used when installed (ssa_fusion.limit_blas_threads)
     "pydmd": None,  # optional: the BOP-DMD variant of core.residual (issue 19's study)
 }
