@@ -201,6 +201,8 @@ def test_bad_input_is_never_fused_and_counted_by_cause(ros_graph):
 
     # still up, and each cause was logged once although counted more often
     assert filt.returncode is None and surr.returncode is None
+    for proc in (filt, surr):  # no /clock here: taken unjudged once the nodes stop waiting
+        assert "no /clock after" in proc.stderr(), proc.describe()
     for proc, causes in ((filt, want), (surr, want_s)):
         log = proc.stderr()
         for cause in causes:
@@ -228,6 +230,7 @@ def test_a_real_measurement_beats_a_forecast_for_the_same_epoch(ros_graph):
     g.start_node("filter", params=filter_params())
     real = publisher(g, Measurement, "/ssa/measurement", ("filter",))
     fcst = publisher(g, Measurement, "/ssa/forecast", ("filter",))
+    run_clock_at(g, diag, float(T[5]), ("filter",))
 
     def forecast(i: int) -> Measurement:  # a plausible forecast: 2 km off, honest R
         return meas(i, z=SIM.z[i] + np.array([2.0, 0.0, 0.0]), source=types.Source.FORECAST,
@@ -305,6 +308,14 @@ def _node_stamp(diag: Diag, node: str) -> float:
     return -1.0
 
 
+def run_clock_at(g, diag: Diag, t: float, nodes: tuple[str, ...]) -> None:
+    """Start the nodes' sim time at `t` (at or after every stamp the test sends, so nothing
+    is refused as ahead of the clock and the filter has nothing to predict): measurements
+    are then judged on arrival instead of held until the nodes give up waiting for a
+    /clock (3 s of wall time; that path is taken by the tests that publish no /clock)."""
+    set_clock(g, publisher(g, Clock, "/clock", nodes), diag, t, nodes)
+
+
 NODES = ("filter", "surrogate")
 
 
@@ -375,6 +386,7 @@ def test_surrogate_learns_only_its_configured_object_and_kind(ros_graph):
     diag = Diag(g)
     g.start_node("surrogate", params=surrogate_params(object_id="iss"))
     pub = publisher(g, Measurement, "/ssa/measurement", ("surrogate",))
+    run_clock_at(g, diag, float(T[5]), ("surrogate",))
     other = meas(0, -30.0)
     other.object_id = "debris"
     position = meas(0, -20.0)
@@ -570,6 +582,7 @@ def test_valid_param_set_at_run_time_takes_effect_and_read_only_ones_are_refused
     g.start_node("filter", params=filter_params(predict_period=0.0))
     got = g.collect(StateEstimate, "/ssa/estimate")
     pub = publisher(g, Measurement, "/ssa/measurement", ("filter",))
+    run_clock_at(g, diag, float(T[8]), ("filter",))
     set_client = g.probe.create_client(SetParameters, "/filter/set_parameters")
 
     def set_param(name: str, value: ParameterValue):
@@ -618,6 +631,15 @@ def start_graph(g, bag: Path, time_scale: float, wait_for: list[str], stamped=Fa
     return nodes, received
 
 
+def stop_together(g, procs: list) -> None:
+    """SIGTERM every process in `procs` at once, then assert that each exits 0 (as
+    `g.stop` one by one would, without adding their shutdown times up)."""
+    for p in procs:
+        p.popen.send_signal(signal.SIGTERM)
+    for p in procs:
+        assert g.wait_exit(p, timeout=10.0) == 0, p.describe()
+
+
 ALL_SUBSCRIBED = ["/ssa/measurement=4", "/ssa/forecast=3", "/ssa/estimate=2",
                   "/ssa/truth=2", "/ssa/withheld=2", "/clock=4"]
 
@@ -663,8 +685,7 @@ def test_recorder_stopped_during_a_burst_keeps_every_message_it_received(ros_gra
     logged = int(rec.stderr().split("bag closed:")[1].split("(")[1].split()[0])
     total = sum(1 for _ in bagio.read_bag(bag))
     assert total == logged > 0
-    for name in ("sensor_sim", "surrogate", "filter"):
-        assert g.stop(nodes[name], signal.SIGTERM) == 0, nodes[name].describe()
+    stop_together(g, [nodes[name] for name in ("sensor_sim", "surrogate", "filter")])
 
 
 def test_sigterm_right_after_start_exits_0(ros_graph, tmp_path):
@@ -700,8 +721,7 @@ def test_sigkill_of_the_recorder_leaves_a_bag_readable_up_to_its_last_flush(ros_
         before = sum(1 for t in stamps if t < lost_bound)
         assert before <= got[topic] <= len(stamps), (topic, before, got[topic], len(stamps))
     assert got["/clock"] > 0 and got["/ssa/measurement"] > 0
-    for name in ("sensor_sim", "surrogate", "filter"):
-        assert g.stop(nodes[name], signal.SIGTERM) == 0, nodes[name].describe()
+    stop_together(g, [nodes[name] for name in ("sensor_sim", "surrogate", "filter")])
 
 
 def test_sensor_sim_says_what_it_waits_for(ros_graph):
@@ -769,6 +789,7 @@ def test_the_forecast_topic_takes_only_forecasts_and_the_measurement_topic_only_
     g.start_node("filter", params=filter_params())
     forecasts = publisher(g, Measurement, "/ssa/forecast", ("filter",))
     sensor = publisher(g, Measurement, "/ssa/measurement", ("filter",))
+    run_clock_at(g, diag, float(T[7]), ("filter",))
     for i in range(3):
         forecasts.publish(meas(i))  # sensor data on the forecast topic
     sensor.publish(meas(3, source=types.Source.FORECAST))

@@ -114,7 +114,7 @@ def test_reproduce_runs_the_real_sky_study_over_evaluation_seeds(tmp_path, monke
         duration_s=DAY, outages=(("columbus", 0.55 * DAY, 0.15 * DAY),))
     monkeypatch.setitem(sky.SKY_SCENARIOS, "iss_radar_columbus", short)  # forked workers see it
     args = build_parser().parse_args(["reproduce", "--scenario", "iss_radar_columbus", "--quick",
-                                      "--no-plots", "--workers", "2", "--out", str(tmp_path)])
+                                      "--no-plots", "--workers", "3", "--out", str(tmp_path)])
     assert args._run(args) == 0
     got = json.loads((tmp_path / "results.json").read_text())["sky"]["iss_radar_columbus"]
     assert got["runs"] == 3 and EVALUATION_SEEDS[0] == 101
