@@ -813,6 +813,7 @@ def test_a_payload_that_does_not_decode_is_counted_and_the_stream_goes_on(ros_gr
     g.start_node("filter", params=filter_params())
     g.start_node("surrogate", params=surrogate_params())
     pub = publisher(g, Measurement, "/ssa/measurement", ("filter", "surrogate"))
+    run_clock_at(g, diag, float(T[5]), NODES)
     pub.publish(b"\x00\x01\x00\x00junkjunkjunk")
     diag.wait(g, "filter", {"rejected_malformed": 1})
     diag.wait(g, "surrogate", {"rejected_malformed": 1})

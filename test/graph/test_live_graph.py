@@ -2,6 +2,7 @@
 processes over DDS, on a shortened default scenario (range/az/el of the ISS)."""
 
 import json
+import signal
 from collections import Counter
 
 import numpy as np
@@ -48,7 +49,9 @@ def run(tmp_path_factory):
         sensor = g.start_node("sensor_sim", params=params["sensor_sim"])
         sensor_code = g.wait_exit(sensor, timeout=90)
         g.wait_quiet(lambda: tuple(len(v) for v in got.values()), quiet_s=1.0, limit_s=20)
-        codes = {n: g.stop(p) for n, p in nodes.items()}
+        for p in nodes.values():  # SIGTERM all at once: their shutdowns overlap
+            p.popen.send_signal(signal.SIGTERM)
+        codes = {n: g.wait_exit(p, timeout=10.0) for n, p in nodes.items()}
         report = g.report()
     finally:
         problems = g.close()

@@ -6,6 +6,7 @@ initialise from a pass, publish at the truth's cadence through the gaps, and be 
 after each pass."""
 
 import math
+import signal
 
 import numpy as np
 import pytest
@@ -39,7 +40,9 @@ def run(tmp_path_factory):
         sensor = g.start_node("sensor_sim", params=params["sensor_sim"])
         sensor_code = g.wait_exit(sensor, timeout=120)
         g.wait_quiet(lambda: len(estimates), quiet_s=1.0, limit_s=20)
-        codes = {n: g.stop(p) for n, p in nodes.items()}
+        for p in nodes.values():  # SIGTERM all at once: their shutdowns overlap
+            p.popen.send_signal(signal.SIGTERM)
+        codes = {n: g.wait_exit(p, timeout=10.0) for n, p in nodes.items()}
         report = g.report()
     finally:
         problems = g.close()
