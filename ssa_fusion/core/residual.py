@@ -620,6 +620,10 @@ class ResidualSurrogate:
         self.t.append(float(t))
         self.x.append(xa.copy())
         self.P.append(Pa.copy())
+        # what no later fit or scale can use: bounded memory on a stream of any length
+        old = sum(1 for ta in self.t if ta < t - self.cfg.window_s)
+        del self.t[:old], self.x[:old], self.P[:old]
+        del self.heldout[:-self.cfg.calibration_samples]
 
     @property
     def scale(self) -> tuple[float, float]:

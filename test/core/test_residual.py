@@ -181,3 +181,16 @@ def test_gap_forecaster_on_a_filter_stream_forecasts_the_gap_and_never_a_pass():
     from ssa_fusion.paper import gap_study
 
     assert gap_study.tuning_candidates()[gap_study.CHOSEN] == residual.LIVE_RESIDUAL
+
+
+def test_the_surrogate_keeps_only_what_later_fits_can_use():
+    """On a stream of any length, the anchors older than the window before the newest and
+    the held-out scores beyond the newest `calibration_samples` are let go."""
+    cfg = residual.ResidualConfig(window_s=86400.0, calibration_samples=4)
+    sur = residual.ResidualSurrogate(cfg, residual.orbit_propagator("two_body"))
+    P = np.eye(6)
+    for k in range(200):
+        sur.heldout.append((1.0, 0.1))  # as add_anchor would score earlier fits
+        sur.add_anchor(k * 21600.0, X0, P)
+    assert sur.t == [k * 21600.0 for k in range(195, 200)]  # within a day of the newest
+    assert len(sur.x) == len(sur.P) == 5 and len(sur.heldout) == 4
