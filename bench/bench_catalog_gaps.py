@@ -111,12 +111,16 @@ def main() -> None:
                     help="one seed, fewer objects, shorter spans (a few minutes)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--no-live", action="store_true")
+    ap.add_argument("--no-offline", action="store_true")
     args = ap.parse_args()
+    result: dict = {}
     if args.quick:
-        result = offline_part(EVALUATION_SEEDS[:1], 6, 30.0, 1)
+        if not args.no_offline:
+            result = offline_part(EVALUATION_SEEDS[:1], 6, 30.0, 1)
         live = (20, 14.0, 2000.0, ["--surrogate-param", "min_span=21600"])
     else:
-        result = offline_part(EVALUATION_SEEDS, 20, 48.0, args.workers)
+        if not args.no_offline:
+            result = offline_part(EVALUATION_SEEDS, 20, 48.0, args.workers)
         live = (200, 48.0, 600.0, [])
     if not args.no_live:
         result.update(live_part(*live))

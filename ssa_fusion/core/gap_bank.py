@@ -199,10 +199,9 @@ class GapBank:
         while self._allowance > 0.0 and self._queued[:n].any():
             r = int(np.flatnonzero(self._queued[:n])[np.argmax(last[self._queued[:n]])])
             self._queued[r] = False
-            spent = self._fit(r)
+            spent = self._fit(r)  # the fit's own wall time accrues at the next step
             self.fit_seconds += spent
             self._allowance -= spent
-            self._wall_last = self.wall()
         out: list[GapForecast] = []
         for r in sorted(self._active):
             out.extend(self._release(r, now - c.hold_s))
