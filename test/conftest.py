@@ -27,6 +27,6 @@ def ros_graph(tmp_path):
     try:
         yield graph
     finally:
-        problems = graph.close()
+        problems = graph.close(together=True)  # assertions are done: stop them at once
     if problems:
         pytest.fail("node process(es) ended badly:\n" + "\n\n".join(problems))

@@ -142,12 +142,16 @@ class Graph:
         code."""
         if proc.popen.poll() is None:
             proc.popen.send_signal(sig)
-            try:
-                proc.popen.wait(self.scaled(timeout))
-            except subprocess.TimeoutExpired:
-                proc.popen.kill()
-                proc.popen.wait(5)
+            self._await(proc, timeout)
         return proc.popen.returncode
+
+    def _await(self, proc: Proc, timeout: float) -> None:
+        """Wait for `proc` to exit; SIGKILL if still alive after `timeout` s (scaled)."""
+        try:
+            proc.popen.wait(self.scaled(timeout))
+        except subprocess.TimeoutExpired:
+            proc.popen.kill()
+            proc.popen.wait(5)
 
     # probe -------------------------------------------------------------------------------
     def spin_once(self, timeout: float = 0.05) -> None:
@@ -196,11 +200,25 @@ class Graph:
         return "\n".join(p.describe() for p in self.procs)
 
     # teardown ----------------------------------------------------------------------------
-    def close(self) -> list[str]:
-        """Stop every process still running (newest first); describe unexpected exits."""
+    def close(self, together: bool = False) -> list[str]:
+        """Stop every process still running (newest first); describe unexpected exits.
+
+        `together`: signal them all at once, then wait for each (a test's teardown, after
+        which nothing is asserted about what a recorder would still receive; ~0.5 s per
+        process less). Otherwise each is stopped before the next is signalled, so the first
+        started (a recorder) hears the others to the end.
+        """
         problems = []
+        running = [p for p in reversed(self.procs) if p.popen.poll() is None]
+        if together:
+            for p in running:
+                p.popen.send_signal(signal.SIGTERM)
         for p in reversed(self.procs):
-            self.stop(p)
+            if together:
+                if p in running:
+                    self._await(p, 10.0)
+            else:
+                self.stop(p)
             if p.expect_returncode is not None and p.returncode != p.expect_returncode:
                 problems.append(p.describe())
         self.executor.shutdown()

@@ -479,6 +479,8 @@ def test_invalid_parameters_refuse_to_start(ros_graph, tmp_path):
         "catalog/paper": ("sensor_sim", {"catalog": "config/catalogs/sample.tle"}),
         "shard": ("catalog_filter", {"shards": 2, "shard": 2}),
         "station": ("catalog_filter", {"station": "atlantis"}),
+        "fit_budget": ("catalog_surrogate", {"fit_budget": 2.0}),
+        "shards": ("catalog_surrogate", {"shards": 0}),
     }
     procs = {label: g.start_node(node, params=p, name=f"{node}_{label.replace('/', '_')}",
                                  expect_returncode=2)
