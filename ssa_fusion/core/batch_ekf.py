@@ -8,14 +8,15 @@ Every object has its own time step, station, measurement and noise; objects whos
 False in a batch are left exactly as they were.
 
 Compiled with numba: the admission checks, the Kepler propagation with its STM, the
-covariance prediction and the update are loops over the objects compiled by `numba.njit`
-(no fastmath: IEEE arithmetic in the order written; the results equal the former numpy
-formulation to ~1e-15 relative, ~2e-12 over multi-day arcs where Kepler's equation is that
-ill-conditioned, and the per-object filter to 1e-9). The numba kernels are
-compiled at their first call in a process (4 to 6 s here) unless numba's on-disk cache holds
+two-body and J2 integration with its STM, the covariance prediction and the update are
+loops over the objects compiled by `numba.njit` (no fastmath: IEEE arithmetic in the
+order written; the results equal the former numpy formulation to ~1e-15 relative, ~2e-12
+over multi-day arcs where Kepler's equation is that ill-conditioned, and the per-object
+filter to 1e-9). The numba kernels are compiled at their first call in a process (4 to
+6 s here; the two-body/J2 integration kernel ~1 s more) unless numba's on-disk cache holds
 them (``__pycache__`` next to this file, else ``NUMBA_CACHE_DIR`` or ``~/.cache/numba``;
-about 0.2 s to load), see `_jit`. The integrated motion models' propagation
-(`integrate_stm`) stays numpy, vectorised over the objects.
+about 0.2 s to load), see `_jit`. The "drag" model's integration stays numpy, vectorised
+over the objects.
 
 State and frames: ``x`` (N, 6) ECI [r km, v km/s] (the project's ECI, `frames`), ``P``
 (N, 6, 6) in km^2, km^2/s, km^2/s^2; measurements ``z`` (N, 3) [range km, azimuth rad in
@@ -30,10 +31,13 @@ Motion models (`BatchEKFConfig.motion_model`):
     equation), with the same analytic state transition matrix (exact partials of the
     Lagrange coefficients, `kepler_stm`; `kepler.lagrange_partials` itself, compiled).
 ``"two_body"``, ``"j2"``, ``"drag"``
-    The `dynamics` right-hand sides with their variational equations dPhi/dt = A(x) Phi
-    (A by the complex step, as `dynamics.jacobian`), integrated for all objects at once
-    with the 8th-order Dormand-Prince tableau (the one `dynamics.propagate_stm`'s DOP853
-    uses) at a fixed step: each object takes ``ceil(|dt| / max_step_s)`` equal steps.
+    The `dynamics` right-hand sides with their variational equations dPhi/dt = A(x) Phi,
+    integrated with the 8th-order Dormand-Prince tableau (the one `dynamics.propagate_stm`'s
+    DOP853 uses) at a fixed step: each object takes ``ceil(|dt| / max_step_s)`` equal steps.
+    "two_body" and "j2": a compiled loop over the objects with the analytic Jacobian
+    (`_gravity_stm_kernel`); "drag": numpy, all objects at once, A by the complex step (as
+    `dynamics.jacobian`; `_integrate_stm_numpy`). The two paths agree to ~1e-15 relative
+    per step (~1e-12 over a day of steps).
     The per-object filter integrates the same equations adaptively (DOP853, rtol 1e-10,
     atol 1e-9, `config.ORBIT_TOLERANCES`); with the default 60 s step the fixed-step
     result is the more accurate one and the two agree to ~5e-11 relative (LEO and Molniya,
@@ -47,6 +51,7 @@ batches messages applies them to each message anyway).
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import inspect
 import math
@@ -637,6 +642,120 @@ def _kepler_step_kernel(x: Array, P: Array, dt: Array, z: Array, R: Array, t: Ar
             ok[a + i] = okp[i] and oku[i]
 
 
+@_jit
+def _gravity_rhs(y: Array, mu: float, j2: float, re: float, out: Array, s: int) -> None:
+    """``out[s] = dy/dt`` of the state + STM ``y`` (42,) under two-body + J2 gravity.
+
+    The acceleration is `dynamics._rhs_j2`'s, term for term in the same order (so the same
+    floating-point result): with ``r2 = |r|^2``, ``k = -mu / r^3``, ``f = 1.5 J2 Re^2 / r2``,
+    ``w = 5 z^2 / r2``::
+
+        a_x = k x (1 + f (1 - w)),  a_y = k y (1 + f (1 - w)),  a_z = k z (1 + f (3 - w))
+
+    (J2 = 0: two-body). ``dPhi/dt = A Phi`` with ``A = [[0, I], [G, 0]]``: the velocity rows
+    of Phi become the position rows of dPhi/dt, and ``G = da/dr``, analytic (the numpy path
+    takes A by the complex step, exact to round-off as well). Writing ``a_i = k x_i g_i``,
+    ``g_i = 1 + f (c_i - w)`` (c = 1, 1, 3), with ``dk/dx_j = -3 k x_j / r2``,
+    ``df/dx_j = -2 f x_j / r2``, ``dw/dx_j = (10 z delta_jz - 2 w x_j) / r2``::
+
+        G_ij = k (delta_ij g_i + x_i x_j (4 f w - 3 g_i - 2 f c_i) / r2
+                  - 10 f z x_i delta_jz / r2)
+
+    (symmetric, as the Hessian of the potential is; two-body: ``k (I - 3 r r^T / r2)``).
+    """
+    x, yy, z = y[0], y[1], y[2]
+    r2 = x * x + yy * yy + z * z
+    r = math.sqrt(r2)
+    k = -mu / (r2 * r)
+    f = 1.5 * j2 * re * re / r2
+    w = 5.0 * z * z / r2
+    gxy = 1.0 + f * (1.0 - w)
+    gz = 1.0 + f * (3.0 - w)
+    out[s, 0], out[s, 1], out[s, 2] = y[3], y[4], y[5]
+    out[s, 3] = k * x * gxy
+    out[s, 4] = k * yy * gxy
+    out[s, 5] = k * z * gz
+    ir2 = 1.0 / r2
+    fw4 = 4.0 * f * w
+    exy = k * ir2 * (fw4 - 3.0 * gxy - 2.0 * f)
+    ez = k * ir2 * (fw4 - 3.0 * gz - 6.0 * f)
+    dz = 10.0 * f * k * z * ir2  # the delta_jz term: G_i2 -= dz x_i
+    kxy, kz = k * gxy, k * gz
+    g00, g01, g02 = kxy + x * x * exy, x * yy * exy, x * z * exy - dz * x
+    g10, g11, g12 = yy * x * exy, kxy + yy * yy * exy, yy * z * exy - dz * yy
+    g20, g21, g22 = z * x * ez, z * yy * ez, kz + z * z * ez - dz * z
+    for j in range(6):  # dPhi/dt: rows 0-2 = Phi rows 3-5, rows 3-5 = G Phi rows 0-2
+        p0, p1, p2 = y[6 + j], y[12 + j], y[18 + j]
+        out[s, 6 + j] = y[24 + j]
+        out[s, 12 + j] = y[30 + j]
+        out[s, 18 + j] = y[36 + j]
+        out[s, 24 + j] = g00 * p0 + g01 * p1 + g02 * p2
+        out[s, 30 + j] = g10 * p0 + g11 * p1 + g12 * p2
+        out[s, 36 + j] = g20 * p0 + g21 * p1 + g22 * p2
+
+
+@_jit
+def _gravity_stm_kernel(x: Array, dt: Array, max_step: float, mu: float, j2: float, re: float,
+                        A: Array, B: Array, x1: Array, phi: Array, ok: BoolArray) -> None:
+    """Fixed-step DOP853 of two-body + J2 with the STM for n objects (see `integrate_stm`).
+
+    Object i takes ``ceil(|dt_i| / max_step)`` steps of ``h = dt_i / steps`` with the
+    explicit Runge-Kutta tableau ``A`` (stages, stages), ``B`` (stages,) (scipy's DOP853) on
+    ``y = [x, Phi]`` (42,), ``Phi(0) = I``, right-hand side `_gravity_rhs`; as
+    `_integrate_stm_numpy` (the stage sums ``sum_j A[s, j] K[j]`` and ``sum_j B[j] K[j]``
+    taken in the order of j, as BLAS may not: ~1e-16 apart per step). A non-finite input
+    (state or dt) takes no step: x1 = x, Phi = I, ok False; ok is False where x1 or Phi is
+    not finite.
+    """
+    ns = B.shape[0]
+    y = np.empty(42)
+    ys = np.empty(42)
+    K = np.empty((ns, 42))
+    for i in range(x.shape[0]):
+        nf = dt[i] - dt[i]  # stays 0.0 unless an input is inf or nan
+        for c in range(6):
+            nf += x[i, c] - x[i, c]
+            y[c] = x[i, c]
+        for c in range(6, 42):
+            y[c] = 0.0
+        for c in range(6):
+            y[6 + 7 * c] = 1.0
+        steps = math.ceil(abs(dt[i]) / max_step) if nf == 0.0 else 0
+        h = dt[i] / max(steps, 1)
+        for _ in range(steps):
+            for s in range(ns):
+                if s == 0:
+                    _gravity_rhs(y, mu, j2, re, K, 0)
+                    continue
+                a0 = A[s, 0]
+                for c in range(42):
+                    ys[c] = a0 * K[0, c]
+                for j in range(1, s):
+                    a = A[s, j]
+                    for c in range(42):
+                        ys[c] += a * K[j, c]
+                for c in range(42):
+                    ys[c] = y[c] + h * ys[c]
+                _gravity_rhs(ys, mu, j2, re, K, s)
+            b0 = B[0]
+            for c in range(42):
+                ys[c] = b0 * K[0, c]
+            for j in range(1, ns):
+                b = B[j]
+                for c in range(42):
+                    ys[c] += b * K[j, c]
+            for c in range(42):
+                y[c] = y[c] + h * ys[c]
+        for c in range(6):
+            x1[i, c] = y[c]
+            nf += y[c] - y[c]
+        for c in range(36):
+            w = y[6 + c]
+            phi[i, c // 6, c % 6] = w
+            nf += w - w
+        ok[i] = nf == 0.0
+
+
 def _f64(a: AnyArray) -> Array:
     """Return ``a`` as a C-contiguous writable float64 array (the kernels' argument type).
 
@@ -724,11 +843,52 @@ def _variational(fun: Callable[..., Array], params: dict[str, float]) -> Callabl
     return f
 
 
+@functools.cache
 def _dop853() -> tuple[Array, Array, int]:
-    """Return the Dormand-Prince 8(5,3) tableau of scipy's DOP853: (A, B, stages)."""
+    """Return the Dormand-Prince 8(5,3) tableau of scipy's DOP853: (A, B, stages).
+
+    Read once (the arrays are shared: not to be written to).
+    """
     from scipy.integrate._ivp import dop853_coefficients as dop
 
     return np.asarray(dop.A, float), np.asarray(dop.B, float), int(dop.N_STAGES)
+
+
+@functools.cache
+def _tableau() -> tuple[Array, Array]:
+    """`_dop853`'s (A[:stages, :stages], B) as C-contiguous float64 (the kernel's)."""
+    A, B, stages = _dop853()
+    return np.ascontiguousarray(A[:stages, :stages]), np.ascontiguousarray(B)
+
+
+def _defaults(fun: Callable[..., Array]) -> dict[str, float]:
+    """Return the keyword parameters of a `dynamics` right-hand side with their defaults."""
+    return {k: float(p.default) for k, p in inspect.signature(fun).parameters.items()
+            if p.default is not inspect.Parameter.empty}
+
+
+_GRAVITY_DEFAULTS = {"two_body": _defaults(dynamics._MODELS["two_body"][0]),
+                     "j2": _defaults(dynamics._MODELS["j2"][0])}
+"""The models `_gravity_stm_kernel` integrates, with their parameters' defaults (`dynamics`'
+own: ``mu``; ``mu``, ``j2``, ``re``)."""
+
+
+def _gravity_params(model: str, params: dict[str, float]) -> tuple[float, float, float] | None:
+    """(mu, j2, re) of the compiled path for ``model`` and ``params``, or None (numpy path).
+
+    None for a model the kernel does not integrate ("drag"), or parameters the model does not
+    take or that are not real scalars (the numpy path then does what it always did with
+    them: a TypeError for an unknown name, numpy broadcasting for arrays).
+    """
+    defaults = _GRAVITY_DEFAULTS.get(model)
+    if defaults is None:
+        return None
+    p = dict(defaults)
+    for k, v in params.items():
+        if k not in defaults or not isinstance(v, (int, float, np.integer, np.floating)):
+            return None
+        p[k] = float(v)
+    return p["mu"], p.get("j2", 0.0), p.get("re", 1.0)
 
 
 def integrate_stm(model: str, x: ArrayLike, dt: ArrayLike, max_step_s: float = 60.0,
@@ -736,8 +896,9 @@ def integrate_stm(model: str, x: ArrayLike, dt: ArrayLike, max_step_s: float = 6
     """Integrate N states of a `dynamics` model with their STMs, fixed-step DOP853.
 
     Object i takes ``ceil(|dt_i| / max_step_s)`` equal steps of the 8th-order Dormand-Prince
-    method; all objects still stepping are advanced together (one right-hand-side call per
-    stage for all of them).
+    method. "two_body" and "j2": a compiled loop over the objects (`_gravity_stm_kernel`,
+    analytic Jacobian; equal to `_integrate_stm_numpy` to ~1e-15 relative per step, 1e-12
+    over days); "drag": `_integrate_stm_numpy`.
 
     Parameters
     ----------
@@ -755,6 +916,31 @@ def integrate_stm(model: str, x: ArrayLike, dt: ArrayLike, max_step_s: float = 6
     Returns
     -------
     (x1 (N, 6), Phi (N, 6, 6), ok (N,)): ``ok`` False where input or result is not finite.
+    """
+    if model not in INTEGRATED_MODELS:
+        raise ValueError(f"model {model!r} is not one of {', '.join(INTEGRATED_MODELS)}")
+    gp = _gravity_params(model, params)
+    X = np.atleast_2d(np.asarray(x, dtype=float))
+    if gp is None or X.ndim != 2 or X.shape[1] != 6 or not (
+            max_step_s > 0.0 and math.isfinite(max_step_s)):
+        return _integrate_stm_numpy(model, X, dt, max_step_s, **params)
+    X = _f64(X)
+    n = X.shape[0]
+    dts = _f64(np.broadcast_to(np.asarray(dt, dtype=float), (n,)))
+    A, B = _tableau()
+    x1, phi = np.empty((n, 6)), np.empty((n, 6, 6))
+    ok = np.empty(n, dtype=np.bool_)
+    _gravity_stm_kernel(X, dts, float(max_step_s), *gp, A, B, x1, phi, ok)
+    return x1, phi, ok
+
+
+def _integrate_stm_numpy(model: str, x: ArrayLike, dt: ArrayLike, max_step_s: float = 60.0,
+                         **params: float) -> tuple[Array, Array, BoolArray]:
+    """`integrate_stm` in numpy, vectorised over the objects (any `INTEGRATED_MODELS` model).
+
+    All objects still stepping are advanced together (one right-hand-side call per stage for
+    all of them; A by the complex step, `_variational`). `integrate_stm` uses it for "drag"
+    (and unusual arguments); the tests compare the compiled path with it.
     """
     if model not in INTEGRATED_MODELS:
         raise ValueError(f"model {model!r} is not one of {', '.join(INTEGRATED_MODELS)}")

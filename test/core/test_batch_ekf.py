@@ -256,3 +256,48 @@ def test_compiled_kernels_cache_key() -> None:
     assert batch_ekf._lagrange_partials_digest() == batch_ekf._KEPLER_PARTIALS_SHA256, (
         "kepler.lagrange_partials changed: set batch_ekf._KEPLER_PARTIALS_SHA256 to "
         f"{batch_ekf._lagrange_partials_digest()!r} (the kernels are not cached until then)")
+
+
+@pytest.mark.parametrize("model,params", [("j2", {}), ("two_body", {}),
+                                          ("j2", {"mu": 4.0e5, "j2": 2e-3, "re": 6400.0})])
+def test_compiled_integration_equals_numpy(model: str, params: dict[str, float]) -> None:
+    """The compiled two-body/J2 integration with its STM equals the numpy path to ~1e-12.
+
+    Every orbit regime, steps of both signs, dt = 0, a day-long step, two step lengths and
+    the model's parameters as given (not its defaults); a non-finite input gives what the
+    numpy path gives (no step: x1 = x, Phi = I, not ok).
+    """
+    from ssa_fusion.core.batch_ekf import _integrate_stm_numpy
+
+    o = _objects(n=24, seed=11)
+    x = o["x"].copy()
+    dt = o["dt"] * np.where(np.arange(24) % 2 == 0, 1.0, -1.0)  # both signs
+    dt[3], dt[4] = 0.0, 86400.0
+    x[5, 2] = math.nan
+    dt[6] = math.inf
+    for max_step in (60.0, 25.0):
+        x1, phi, ok = integrate_stm(model, x, dt, max_step, **params)
+        x2, phi2, ok2 = _integrate_stm_numpy(model, x, dt, max_step, **params)
+        assert np.array_equal(ok, ok2) and ok.sum() == 22 and not ok[5] and not ok[6]
+        assert np.array_equal(x1[~ok], x2[~ok], equal_nan=True)
+        assert np.array_equal(phi[~ok], phi2[~ok]) and (phi[~ok] == np.eye(6)).all()
+        assert np.array_equal(x1[3], x[3]) and np.array_equal(phi[3], np.eye(6))
+        for i in np.flatnonzero(ok):
+            assert _rel(x1[i], x2[i]) < 1e-12 and _rel(phi[i], phi2[i]) < 1e-12, i
+    # one state, a scalar step: shapes as the numpy path's
+    one = integrate_stm(model, x[0].tolist(), 30.0, **params)
+    assert one[0].shape == (1, 6) and one[1].shape == (1, 6, 6) and one[2].all()
+
+
+def test_numpy_integration_kept_where_not_compiled() -> None:
+    """"drag" (and a parameter the model does not take) go through the numpy path as before."""
+    from ssa_fusion.core.batch_ekf import _integrate_stm_numpy
+
+    o = _objects(n=6)
+    a = integrate_stm("drag", o["x"], o["dt"], bc=50.0)
+    b = _integrate_stm_numpy("drag", o["x"], o["dt"], bc=50.0)
+    assert all(np.array_equal(u, v) for u, v in zip(a, b, strict=True)) and a[2].all()
+    with pytest.raises(TypeError):
+        integrate_stm("j2", o["x"], o["dt"], bc=50.0)
+    with pytest.raises(ValueError, match="is not one of"):
+        integrate_stm("kepler", o["x"], o["dt"])
