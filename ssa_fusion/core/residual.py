@@ -61,22 +61,23 @@ def orbit_propagator(model: str) -> Propagator:
     """Return a placeholder trajectory as a `Propagator`.
 
     The placeholder trajectory of `dynamics` model ``"two_body"`` or ``"j2"`` (ECI, km,
-    km/s) as a `Propagator` (integrated backwards and forwards from x0 as needed).
+    km/s) as a `Propagator` (integrated backwards and forwards from x0 as needed; epochs in
+    any order, repeats included).
     """
 
     def propagate(x0: Array, t0: float, t: Array) -> Array:
-        t = np.asarray(t, float)
-        out = np.empty((len(t), 6))
-        for side in (t < t0, t >= t0):
+        t_all, back = np.unique(np.asarray(t, float), return_inverse=True)  # repeats too
+        out = np.empty((len(t_all), 6))
+        out[t_all == t0] = x0
+        for side in (t_all < t0, t_all > t0):
             if not side.any():
                 continue
-            idx = np.flatnonzero(side)
-            order = idx[np.argsort(t[idx])]
-            if t[order[0]] < t0:
+            order = np.flatnonzero(side)  # increasing epochs
+            if t_all[order[0]] < t0:
                 order = order[::-1]  # backwards: decreasing epochs
-            tt = np.concatenate([[t0], t[order]])
+            tt = np.concatenate([[t0], t_all[order]])
             out[order] = dynamics.propagate(model, x0, tt, **ORBIT_TOLERANCES)[1:]
-        return out
+        return out[back.reshape(-1)]
 
     return propagate
 

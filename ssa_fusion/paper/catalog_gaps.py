@@ -59,8 +59,9 @@ def gap_errors(entries: list[catalog_io.CatalogEntry], estimates: Rows, forecast
     over up to `max_gaps` gaps evenly chosen (a gap: the forecasts after one estimate).
     """
     gaps = []  # (object, pass end t, x, forecast epochs, forecast positions)
-    for oid, fc in sorted(forecasts.items()):
-        est = estimates.get(oid, [])
+    for oid, rows in sorted(forecasts.items()):
+        est = sorted(estimates.get(oid, []), key=lambda r: r[0])
+        fc = sorted(rows, key=lambda r: r[0])  # bag order: a forecast may be published twice
         if not est:
             continue
         te = np.array([r[0] for r in est])

@@ -194,3 +194,13 @@ def test_the_surrogate_keeps_only_what_later_fits_can_use():
         sur.add_anchor(k * 21600.0, X0, P)
     assert sur.t == [k * 21600.0 for k in range(195, 200)]  # within a day of the newest
     assert len(sur.x) == len(sur.P) == 5 and len(sur.heldout) == 4
+
+
+def test_the_placeholder_takes_epochs_in_any_order_repeats_included():
+    prop = residual.orbit_propagator("two_body")
+    t = np.array([600.0, -300.0, 600.0, 0.0, 1200.0, -300.0])
+    got = prop(X0, 0.0, t)
+    once = prop(X0, 0.0, np.array([-300.0, 0.0, 600.0, 1200.0]))
+    want = once[[2, 0, 2, 1, 3, 0]]
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_allclose(got[3], X0, rtol=0, atol=1e-9)
