@@ -204,3 +204,17 @@ def test_the_placeholder_takes_epochs_in_any_order_repeats_included():
     want = once[[2, 0, 2, 1, 3, 0]]
     np.testing.assert_array_equal(got, want)
     np.testing.assert_allclose(got[3], X0, rtol=0, atol=1e-9)
+
+
+def test_hill_design_on_a_uniform_grid_keeps_the_closed_form_for_a_day():
+    # a day of 60 s steps, taken as products of one step's exponential between fresh ones
+    n, f = 2 * math.pi / 5560.0, 1e-8
+    t = 60.0 * np.arange(1, 1441) + 17.3
+    D = residual.hill_design(t, n, 0.3, harmonics=0)
+    z = D[:, :, 7] * f  # constant along-track push
+    x = 2 * f / n * (t - np.sin(n * t) / n)
+    y = -1.5 * f * t ** 2 + 4 * f / n ** 2 * (1 - np.cos(n * t))
+    assert np.abs(z[:, 0] - x).max() < 1e-11 * np.abs(x).max()  # measured 5e-13
+    assert np.abs(z[:, 1] - y).max() < 1e-11 * np.abs(y).max()
+    free = 6 * (np.sin(n * t) - n * t)  # a radial offset drifts along track
+    assert np.abs(D[:, 1, 0] - free).max() < 1e-11 * np.abs(free).max()
