@@ -43,3 +43,24 @@ def test_a_text_file_named_mcap_is_not_an_mcap(tmp_path, layout):
     assert r.returncode == 2, r
     assert "not an MCAP file" in r.stderr and "withheld" not in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
+
+
+def test_surrogate_params_of_a_catalog_run_are_checked_before_anything_starts(tmp_path):
+    import argparse
+
+    from ssa_fusion.apps.live_catalog import surrogate_params
+
+    ok = argparse.Namespace(surrogate_param=["min_span=21600", "fit_budget=0.25",
+                                             "min_anchors=3"])
+    assert surrogate_params(ok) == {"min_span": 21600.0, "fit_budget": 0.25,
+                                    "min_anchors": 3}  # an integer for seconds: a double
+    assert type(surrogate_params(ok)["min_span"]) is float
+    out = tmp_path / "run"
+    for bad, says in (("min_spam=1", "catalog_surrogate has no parameter 'min_spam'"),
+                      ("shards=2", "shards come from --shards"),
+                      ("min_span", "expected NAME=VALUE")):
+        r = _cli("live", "--catalog", "config/catalogs/sample.tle", "--surrogate-param", bad,
+                 "--out", str(out))
+        assert r.returncode == 2, r
+        assert says in r.stderr and "Traceback" not in r.stderr
+        assert not out.exists()
