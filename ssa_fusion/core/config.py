@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from . import dynamics, kepler
+from .batch_ekf import integrate_stm
 from .measurement import MeasurementModel, PositionModel, RadecModel, RazelModel, StationModels
 from .stations import NETWORKS, STATIONS, UNIX_EPOCH_JD, network_stations
 from .surrogate import EciLift, Surrogate, SurrogateConfig
@@ -36,9 +37,10 @@ class MotionModel(enum.StrEnum):
     KEPLER = "kepler"
     """Analytic two-body (universal variables, `kepler.propagate`), ECI km, km/s."""
     J2 = "j2"
-    """Two-body + J2, integrated with its state transition matrix (`dynamics.propagate_stm`)."""
+    """Two-body + J2, integrated with its state transition matrix (`batch_ekf.integrate_stm`:
+    compiled fixed-step DOP853, steps of at most 60 s)."""
     TWO_BODY = "two_body"
-    """Two-body, integrated (the Keplerian model by numerical integration)."""
+    """Two-body, integrated (the Keplerian model by numerical integration, as J2)."""
     PENDULUM = "pendulum"
     """Damped pendulum [theta rad, theta_dot rad/s] (the paper's toy problem)."""
     VDP = "vdp"
@@ -167,6 +169,18 @@ def motion(c: EstimatorConfig) -> MotionFunction:
     if c.motion_model == MotionModel.KEPLER:
         return kepler.propagate
     name, params = str(c.motion_model), dict(c.motion_params)
+    if c.motion_model in (MotionModel.J2, MotionModel.TWO_BODY):
+        # compiled fixed-step DOP853 (steps <= 60 s): the catalog filter's, ~100x cheaper per
+        # prediction than scipy's adaptive DOP853 and within ~1e-10 relative of it
+        def compiled(x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+            x1, F, ok = integrate_stm(name, np.asarray(x, float)[None], np.array([dt]),
+                                      **params)
+            if not ok[0]:
+                raise RuntimeError(f"propagation failed: the {name} orbit is not finite "
+                                   f"{dt} s on")
+            return x1[0], F[0]
+
+        return compiled
     # orbits: 1e-9 km (1 µm) absolute, 1e-10 relative; 4x faster than the default 1e-12
     # for differences below 1e-11 km over a 30 s step
     tol = ORBIT_TOLERANCES if c.motion_model in ORBIT_MODELS else {}
