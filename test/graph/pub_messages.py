@@ -1,12 +1,14 @@
-"""Test process: publish N sample Measurement and StateEstimate messages once a subscriber
-matched on both topics, then stay up until terminated."""
+"""Test process: publish N sample Measurement and StateEstimate messages once the echo said
+on /test/ready that its subscriptions matched this publisher (both sides of the match), then
+stay up until terminated."""
 
 import rclpy
 from msg_samples import N_SAMPLES, sample_estimate, sample_measurement
 from rclpy.executors import ExternalShutdownException
 from ssa_fusion_msgs.msg import Measurement, StateEstimate
+from std_msgs.msg import Empty
 
-from ssa_fusion.ros.topics import DATA_QOS
+from ssa_fusion.ros.topics import CONFIG_QOS, DATA_QOS
 
 
 def main() -> None:
@@ -15,10 +17,12 @@ def main() -> None:
     pub_m = node.create_publisher(Measurement, "/test/measurement", DATA_QOS)
     pub_e = node.create_publisher(StateEstimate, "/test/estimate", DATA_QOS)
     sent = False
+    ready: list[Empty] = []
+    node.create_subscription(Empty, "/test/ready", ready.append, CONFIG_QOS)
 
     def tick() -> None:
         nonlocal sent
-        if sent or pub_m.get_subscription_count() == 0 or pub_e.get_subscription_count() == 0:
+        if sent or not ready:
             return
         for i in range(N_SAMPLES):
             pub_m.publish(sample_measurement(i))
