@@ -16,6 +16,7 @@ setup(
         ("share/" + package_name + "/launch", glob("launch_scripts/*.launch.py")),
         ("share/" + package_name + "/config",
          glob("config/*.yaml") + glob("config/*.json")),  # params; the Foxglove layout
+        ("share/" + package_name + "/config/catalogs", glob("config/catalogs/*")),
     ],
     install_requires=["setuptools"],
     zip_safe=True,

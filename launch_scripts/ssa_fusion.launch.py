@@ -28,20 +28,13 @@ from typing import Any
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import (
-    DeclareLaunchArgument,
-    LogInfo,
-    OpaqueFunction,
-    RegisterEventHandler,
-    Shutdown,
-    TimerAction,
-)
-from launch.event_handlers import OnProcessExit
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch_ros.actions import Node
 
 from ssa_fusion.apps.live import LIVE_SCENARIOS, WAIT_FOR, node_parameters
 from ssa_fusion.nodes.defaults import BAG_PATTERN
 from ssa_fusion.paper import scenarios, sky
+from ssa_fusion.ros.launch_events import shutdown_handlers
 from ssa_fusion.ros.readiness import READERS
 
 NODES = ("recorder", "surrogate", "filter", "sensor_sim")
@@ -92,14 +85,8 @@ def graph(context: Any) -> list[Any]:
     nodes = {name: Node(package="ssa_fusion", executable=name, name=name, output="screen",
                         parameters=[args["params_file"], extra[name]])
              for name in NODES}
-    done = OnProcessExit(target_action=nodes["sensor_sim"], on_exit=[
-        LogInfo(msg=f"sensor_sim exited: the rest of the graph stops in {DRAIN_S:g} s"),
-        TimerAction(period=DRAIN_S, actions=[Shutdown(reason="sensor_sim finished")]),
-    ])
-    recorder_gone = OnProcessExit(target_action=nodes["recorder"], on_exit=[
-        Shutdown(reason="the recorder exited: nothing would be recorded"),
-    ])
-    return [*nodes.values(), RegisterEventHandler(done), RegisterEventHandler(recorder_gone)]
+    return [*nodes.values(),
+            *shutdown_handlers(nodes["sensor_sim"], nodes["recorder"], DRAIN_S)]
 
 
 def generate_launch_description() -> LaunchDescription:

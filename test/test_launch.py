@@ -63,6 +63,11 @@ STAND_INS = {
 @pytest.fixture
 def launch(monkeypatch) -> types.ModuleType:
     """The launch file imported over the stand-ins (and AMENT_PREFIX_PATH = the venv)."""
+    return load_launch_file(monkeypatch, LAUNCH_FILE)
+
+
+def load_launch_file(monkeypatch, path: Path) -> types.ModuleType:
+    """Import the launch file `path` over the stand-ins (AMENT_PREFIX_PATH = the venv)."""
     modules = {}
     for name, classes in STAND_INS.items():
         module = types.ModuleType(name)
@@ -75,7 +80,7 @@ def launch(monkeypatch) -> types.ModuleType:
             parent, _, child = name.rpartition(".")
             setattr(modules[parent], child, module)
     monkeypatch.setenv("AMENT_PREFIX_PATH", sys.prefix)
-    spec = importlib.util.spec_from_file_location("ssa_fusion_launch", LAUNCH_FILE)
+    spec = importlib.util.spec_from_file_location(path.name.replace(".", "_"), path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

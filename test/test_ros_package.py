@@ -41,8 +41,10 @@ def test_setup_installs_the_index_marker_package_xml_launch_and_config():
     dests = {dest: files for dest, files in data_files()}
     assert dests["share/ament_index/resource_index/packages"] == ["resource/ssa_fusion"]
     assert dests["share/ssa_fusion"] == ["package.xml"]
-    assert dests["share/ssa_fusion/launch"] == ["launch_scripts/ssa_fusion.launch.py"]
+    assert sorted(dests["share/ssa_fusion/launch"]) == ["launch_scripts/catalog.launch.py",
+                                                       "launch_scripts/ssa_fusion.launch.py"]
     assert "config/default.yaml" in dests["share/ssa_fusion/config"]
+    assert "config/catalogs/sample.tle" in dests["share/ssa_fusion/config/catalogs"]
 
 
 @pytest.mark.parametrize(("dest", "file"), [(d, f) for d, fs in data_files() for f in fs])

@@ -27,7 +27,7 @@ import time
 from collections import Counter, defaultdict
 from dataclasses import fields
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -124,6 +124,47 @@ def surrogate_params(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
+class NodeSpec(NamedTuple):
+    """One process of a catalog graph: executable, node name, parameters."""
+
+    executable: str
+    name: str
+    params: dict[str, Any]
+
+
+def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthetic: int,
+                  sim_s: float, time_scale: float, seed: int, shards: int, surrogate: bool,
+                  surrogate_extra: dict[str, Any], bag: Path | None) -> list[NodeSpec]:
+    """The processes of a catalog run, in start order (sensor_sim last: it waits for the
+    others): the recorder (`bag`, None: its default), `shards` catalog_filter and, with
+    `surrogate`, as many catalog_surrogate (`surrogate_extra` over their defaults), and
+    sensor_sim simulating `scenario`'s radars measuring the catalog. The same for
+    `ssa-fusion live --catalog` and `ros2 launch ssa_fusion catalog.launch.py`."""
+    names = node_names(shards)
+    gaps = node_names(shards, "catalog_surrogate") if surrogate else []
+    readers = ["recorder:" + TOPIC_MEASUREMENT, "recorder:" + TOPIC_ESTIMATE,
+               *(f"{n}:{TOPIC_MEASUREMENT}" for n in names)]
+    recorder: dict[str, Any] = {"use_sim_time": True}
+    if bag is not None:
+        recorder["bag"] = str(bag)
+    station = ",".join(st.station.name for st in scenario.radars)
+    return [
+        NodeSpec("recorder", "recorder", recorder),
+        *(NodeSpec("catalog_filter", n, {"use_sim_time": True, "shards": shards, "shard": k,
+                                         "station": station}) for k, n in enumerate(names)),
+        *(NodeSpec("catalog_surrogate", n, {**surrogate_extra, "use_sim_time": True,
+                                            "shards": shards, "shard": k})
+          for k, n in enumerate(gaps)),
+        NodeSpec("sensor_sim", "sensor_sim", {
+            "scenario": scenario.name, "catalog": str(Path(catalog).resolve()),
+            "objects": objects, "synthetic": synthetic, "duration": float(sim_s),
+            "time_scale": float(time_scale), "seed": seed,
+            "wait_for": [f"{TOPIC_MEASUREMENT}={shards + 1}",
+                         f"{TOPIC_ESTIMATE}={len(gaps) + 1}"],
+            "wait_for_readers": readers}),
+    ]
+
+
 def _statuses(diagnostics: list) -> dict[str, dict[str, str]]:
     """The last /diagnostics key/values of each node (by node name)."""
     out: dict[str, dict[str, str]] = {}
@@ -173,14 +214,9 @@ def run(args: argparse.Namespace) -> int:
     sim_s = args.duration * 3600.0 or s.duration_s
     names = node_names(args.shards)
     gaps = node_names(args.shards, "catalog_surrogate") if args.surrogate else []
-    readers = ["recorder:" + TOPIC_MEASUREMENT, "recorder:" + TOPIC_ESTIMATE,
-               *(f"{n}:{TOPIC_MEASUREMENT}" for n in names)]
-    sensor = {"scenario": s.name, "catalog": str(Path(args.catalog).resolve()),
-              "objects": args.objects, "synthetic": args.synthetic, "duration": sim_s,
-              "time_scale": args.time_scale, "seed": args.seed,
-              "wait_for": [f"{TOPIC_MEASUREMENT}={args.shards + 1}",
-                           f"{TOPIC_ESTIMATE}={len(gaps) + 1}"],
-              "wait_for_readers": readers}
+    specs = catalog_graph(s, args.catalog, args.objects, args.synthetic, sim_s,
+                          args.time_scale, args.seed, args.shards, args.surrogate,
+                          surrogate_params(args), bag)
     graph = Graph(out / "logs", args.domain_id)
     print(f"live: catalog {args.catalog} ({len(entries)} objects), radars of {s.name}, "
           f"{sim_s / 3600:g} h of sim time at {args.time_scale:g}x, {args.shards} filter "
@@ -197,16 +233,10 @@ def run(args: argparse.Namespace) -> int:
         seen: Counter[int] = Counter()  # estimates heard, by update source
         graph.probe.create_subscription(StateEstimate, TOPIC_ESTIMATE,
                                         lambda m: seen.update((m.update_source,)), CATALOG_QOS)
-        graph.start_node("recorder", params={"use_sim_time": True, "bag": str(bag)})
-        shards = [graph.start_node("catalog_filter", "-r", f"__node:={n}", name=n, params={
-            "use_sim_time": True, "shards": args.shards, "shard": k,
-            "station": ",".join(st.station.name for st in s.radars)})
-            for k, n in enumerate(names)]
-        procs = shards + [
-            graph.start_node("catalog_surrogate", "-r", f"__node:={n}", name=n, params={
-                **surrogate_params(args), "use_sim_time": True, "shards": args.shards,
-                "shard": k}) for k, n in enumerate(gaps)]
-        sim = graph.start_node("sensor_sim", params=sensor)
+        started = {n.name: graph.start_node(n.executable, "-r", f"__node:={n.name}",
+                                            name=n.name, params=n.params) for n in specs}
+        sim = started["sensor_sim"]
+        procs = [started[n] for n in names + gaps]
         graph.wait_for(lambda: any(p.popen.poll() is not None for p in (sim, *procs)),
                        300.0 + 3.0 * sim_s / args.time_scale, "sensor_sim to exit")
         if sim.popen.poll() is not None:  # else a node ended early: graph.close says which

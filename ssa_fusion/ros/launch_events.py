@@ -1,0 +1,28 @@
+"""What the launch files (launch_scripts/*.launch.py) share: the graph shuts itself down.
+
+`launch` is imported when called, not with this module: it is there under ``ros2 launch``
+(and stood in for in tests), not in every environment that imports ssa_fusion.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def shutdown_handlers(sensor_sim: Any, recorder: Any, drain_s: float) -> list[Any]:
+    """Two event handlers for a launch description: when the `sensor_sim` action's process
+    exits (its schedule is done), shut the launch down after `drain_s` wall s, in which the
+    other nodes take what is still in flight; when the `recorder`'s exits (it died, or
+    refused its parameters: a bag that exists already), at once, as nothing would be
+    recorded and sensor_sim would wait for it forever."""
+    from launch.actions import LogInfo, RegisterEventHandler, Shutdown, TimerAction
+    from launch.event_handlers import OnProcessExit
+
+    done = OnProcessExit(target_action=sensor_sim, on_exit=[
+        LogInfo(msg=f"sensor_sim exited: the rest of the graph stops in {drain_s:g} s"),
+        TimerAction(period=drain_s, actions=[Shutdown(reason="sensor_sim finished")]),
+    ])
+    recorder_gone = OnProcessExit(target_action=recorder, on_exit=[
+        Shutdown(reason="the recorder exited: nothing would be recorded"),
+    ])
+    return [RegisterEventHandler(done), RegisterEventHandler(recorder_gone)]
