@@ -212,11 +212,11 @@ def run(args: argparse.Namespace) -> int:
     out, bag = dirs
     entries = entries_of(args)
     sim_s = args.duration * 3600.0 or s.duration_s
-    names = node_names(args.shards)
-    gaps = node_names(args.shards, "catalog_surrogate") if args.surrogate else []
     specs = catalog_graph(s, args.catalog, args.objects, args.synthetic, sim_s,
                           args.time_scale, args.seed, args.shards, args.surrogate,
                           surrogate_params(args), bag)
+    names = [n.name for n in specs if n.executable == "catalog_filter"]
+    gaps = [n.name for n in specs if n.executable == "catalog_surrogate"]
     graph = Graph(out / "logs", args.domain_id)
     print(f"live: catalog {args.catalog} ({len(entries)} objects), radars of {s.name}, "
           f"{sim_s / 3600:g} h of sim time at {args.time_scale:g}x, {args.shards} filter "
