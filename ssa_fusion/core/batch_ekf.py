@@ -18,11 +18,13 @@ them (``__pycache__`` next to this file, else ``NUMBA_CACHE_DIR`` or ``~/.cache/
 about 0.2 s to load), see `_jit`. The "drag" model's integration stays numpy, vectorised
 over the objects.
 
-State and frames: ``x`` (N, 6) ECI [r km, v km/s] (the project's ECI, `frames`), ``P``
-(N, 6, 6) in km^2, km^2/s, km^2/s^2; measurements ``z`` (N, 3) [range km, azimuth rad in
-[0, 2 pi), elevation rad] from the station ``stations[station[i]]`` at ``t`` s after the
-configuration's ``jd0`` (UTC Julian date of t = 0; Unix time by default), noise ``R``
-(N, 3, 3) or (3, 3) in km^2, rad^2.
+State and frames: ``x`` (N, 6) GCRF [r km, v km/s] (`frames`), ``P`` (N, 6, 6) in km^2,
+km^2/s, km^2/s^2; measurements ``z`` (N, 3) [range km, azimuth rad in [0, 2 pi), elevation
+rad] from the station ``stations[station[i]]`` (ITRF) at ``t`` s after the configuration's
+``jd0`` (UTC Julian date of t = 0; Unix time by default), noise ``R`` (N, 3, 3) or (3, 3)
+in km^2, rad^2. The GCRF -> ITRF rotation is computed once per distinct measurement epoch
+(`frames.gcrs_to_itrs_matrix`, vectorised) and handed to the compiled update; J2 acts about
+the Earth's pole at each object's start epoch (`frames.pole_frame`).
 
 Motion models (`BatchEKFConfig.motion_model`):
 
@@ -63,10 +65,10 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import dynamics, kepler
+from . import dynamics, frames, kepler
 from .constants import MU_EARTH
-from .frames import ERA_RATE, Station, earth_rotation_angle, enu_matrix, site_ecef
-from .stations import UNIX_EPOCH_JD
+from .frames import Station, enu_matrix
+from .timescales import DAY_S, UNIX_EPOCH_JD
 from .tracker import DEFAULT_GATE
 from .types import Cause
 
@@ -514,27 +516,29 @@ def _admit_kernel(x: Array, P: Array, dt: Array, z: Array, R: Array, t: Array,
 
 
 @_jit
-def _update_kernel(x: Array, P: Array, z: Array, R: Array, t: Array, st: NDArray[np.intp],
-                   enu: Array, site: Array, era0: float, era_rate: float, x1: Array, P1: Array,
+def _update_kernel(x: Array, P: Array, z: Array, R: Array, g: Array, gi: NDArray[np.intp],
+                   st: NDArray[np.intp], enu: Array, site: Array, x1: Array, P1: Array,
                    nis: Array, y: Array, ok: BoolArray) -> None:
     """Joseph-form range/az/el update of m objects (see `BatchEKF._update`).
 
-    ``enu`` (stations, 3, 3) and ``site`` (stations, 3): the stations' ECEF -> ENU rotations
-    and ENU positions of the ECEF origin; Earth rotation angle ``era0 + era_rate t``.
+    ``enu`` (stations, 3, 3) and ``site`` (stations, 3): the stations' ITRF -> ENU rotations
+    and ENU positions of the ITRF origin; ``g[gi[i]]`` (3, 3) the GCRF -> ITRF rotation at
+    measurement i's epoch.
     """
     # the fixed 3x3 blocks as scalars (in registers); rows of P H^T, K, E in small arrays
     PHt, K, E = np.empty((6, 3)), np.empty((6, 3)), np.empty((6, 3))
-    t_prev, c, s = math.nan, 1.0, 0.0
     for i in range(x.shape[0]):
-        if t[i] != t_prev:  # a batch's measurements often share their epoch
-            th = era0 + era_rate * t[i]
-            c, s, t_prev = math.cos(th), math.sin(th), t[i]
-        j = st[i]
-        # ECI -> ENU: T = M R3(th)
-        t00, t01 = enu[j, 0, 0] * c - enu[j, 0, 1] * s, enu[j, 0, 0] * s + enu[j, 0, 1] * c
-        t10, t11 = enu[j, 1, 0] * c - enu[j, 1, 1] * s, enu[j, 1, 0] * s + enu[j, 1, 1] * c
-        t20, t21 = enu[j, 2, 0] * c - enu[j, 2, 1] * s, enu[j, 2, 0] * s + enu[j, 2, 1] * c
-        t02, t12, t22 = enu[j, 0, 2], enu[j, 1, 2], enu[j, 2, 2]
+        j, k = st[i], gi[i]
+        # GCRF -> ENU: T = M G
+        t00 = enu[j, 0, 0] * g[k, 0, 0] + enu[j, 0, 1] * g[k, 1, 0] + enu[j, 0, 2] * g[k, 2, 0]
+        t01 = enu[j, 0, 0] * g[k, 0, 1] + enu[j, 0, 1] * g[k, 1, 1] + enu[j, 0, 2] * g[k, 2, 1]
+        t02 = enu[j, 0, 0] * g[k, 0, 2] + enu[j, 0, 1] * g[k, 1, 2] + enu[j, 0, 2] * g[k, 2, 2]
+        t10 = enu[j, 1, 0] * g[k, 0, 0] + enu[j, 1, 1] * g[k, 1, 0] + enu[j, 1, 2] * g[k, 2, 0]
+        t11 = enu[j, 1, 0] * g[k, 0, 1] + enu[j, 1, 1] * g[k, 1, 1] + enu[j, 1, 2] * g[k, 2, 1]
+        t12 = enu[j, 1, 0] * g[k, 0, 2] + enu[j, 1, 1] * g[k, 1, 2] + enu[j, 1, 2] * g[k, 2, 2]
+        t20 = enu[j, 2, 0] * g[k, 0, 0] + enu[j, 2, 1] * g[k, 1, 0] + enu[j, 2, 2] * g[k, 2, 0]
+        t21 = enu[j, 2, 0] * g[k, 0, 1] + enu[j, 2, 1] * g[k, 1, 1] + enu[j, 2, 2] * g[k, 2, 1]
+        t22 = enu[j, 2, 0] * g[k, 0, 2] + enu[j, 2, 1] * g[k, 1, 2] + enu[j, 2, 2] * g[k, 2, 2]
         e = t00 * x[i, 0] + t01 * x[i, 1] + t02 * x[i, 2] - site[j, 0]
         n = t10 * x[i, 0] + t11 * x[i, 1] + t12 * x[i, 2] - site[j, 1]
         u = t20 * x[i, 0] + t21 * x[i, 1] + t22 * x[i, 2] - site[j, 2]
@@ -617,9 +621,9 @@ _CHUNK = 128
 
 
 @_jit
-def _kepler_step_kernel(x: Array, P: Array, dt: Array, z: Array, R: Array, t: Array,
-                        st: NDArray[np.intp], enu: Array, site: Array, era0: float,
-                        era_rate: float, mu: float, q: float, sigma_bound: float, x1: Array,
+def _kepler_step_kernel(x: Array, P: Array, dt: Array, z: Array, R: Array, g: Array,
+                        gi: NDArray[np.intp], st: NDArray[np.intp], enu: Array, site: Array,
+                        mu: float, q: float, sigma_bound: float, x1: Array,
                         P1: Array, nis: Array, y: Array, ok: BoolArray) -> None:
     """Kepler prediction then update of m objects, `_CHUNK` objects at a time.
 
@@ -636,8 +640,8 @@ def _kepler_step_kernel(x: Array, P: Array, dt: Array, z: Array, R: Array, t: Ar
         _kepler_kernel(x[a:b], dt[a:b], mu, xp[:m], F[:m], okp[:m], True)
         _predict_kernel(x[a:b], P[a:b], dt[a:b], xp[:m], F[:m], okp[:m], q, sigma_bound,
                         Pp[:m])
-        _update_kernel(xp[:m], Pp[:m], z[a:b], R[a:b], t[a:b], st[a:b], enu, site, era0,
-                       era_rate, x1[a:b], P1[a:b], nis[a:b], y[a:b], oku[:m])
+        _update_kernel(xp[:m], Pp[:m], z[a:b], R[a:b], g, gi[a:b], st[a:b], enu, site,
+                       x1[a:b], P1[a:b], nis[a:b], y[a:b], oku[:m])
         for i in range(m):
             ok[a + i] = okp[i] and oku[i]
 
@@ -892,6 +896,7 @@ def _gravity_params(model: str, params: dict[str, float]) -> tuple[float, float,
 
 
 def integrate_stm(model: str, x: ArrayLike, dt: ArrayLike, max_step_s: float = 60.0,
+                  pole_frame: ArrayLike | None = None,
                   **params: float) -> tuple[Array, Array, BoolArray]:
     """Integrate N states of a `dynamics` model with their STMs, fixed-step DOP853.
 
@@ -910,6 +915,11 @@ def integrate_stm(model: str, x: ArrayLike, dt: ArrayLike, max_step_s: float = 6
         Time steps, s (any sign).
     max_step_s : float
         Longest step, s.
+    pole_frame : array_like (3, 3) or (N, 3, 3), optional
+        Rotation from the states' frame (GCRF) to axes whose z is the Earth's pole at the
+        start epoch (`frames.pole_frame`): the states are turned to it, integrated (J2 and
+        the atmosphere act about its z), and turned back, Phi with them. None: the states'
+        own z axis is the pole.
     **params : float
         Model parameters (`dynamics` module docstring).
 
@@ -919,6 +929,18 @@ def integrate_stm(model: str, x: ArrayLike, dt: ArrayLike, max_step_s: float = 6
     """
     if model not in INTEGRATED_MODELS:
         raise ValueError(f"model {model!r} is not one of {', '.join(INTEGRATED_MODELS)}")
+    if pole_frame is not None and model != "two_body":
+        r = np.asarray(pole_frame, dtype=float)
+        X = np.atleast_2d(np.asarray(x, dtype=float))
+        x1p, phip, okp = integrate_stm(model, dynamics.rotate_states(X, r), dt, max_step_s,
+                                       None, **params)
+        rt = np.swapaxes(r, -1, -2)
+        # Phi = B^T Phi' B with B = diag(R, R), block by block
+        phi = np.empty_like(phip)
+        for a in (0, 3):
+            for b in (0, 3):
+                phi[:, a:a + 3, b:b + 3] = np.matmul(rt, np.matmul(phip[:, a:a + 3, b:b + 3], r))
+        return _f64(dynamics.rotate_states(x1p, rt)), phi, okp
     gp = _gravity_params(model, params)
     X = np.atleast_2d(np.asarray(x, dtype=float))
     if gp is None or X.ndim != 2 or X.shape[1] != 6 or not (
@@ -995,54 +1017,71 @@ class BatchEKF:
         self.config = config
         self.stations = tuple(stations)
         self.index = {s.name: i for i, s in enumerate(self.stations)}
-        self._era0 = float(earth_rotation_angle(config.jd0))
-        self._enu = np.array([enu_matrix(s.lat_rad, s.lon_rad) for s in self.stations])
-        self._site = np.array([m @ site_ecef(s.lat_rad, s.lon_rad, s.alt_km)
-                               for m, s in zip(self._enu, self.stations, strict=True)])
+        self._unix0 = (config.jd0 - UNIX_EPOCH_JD) * DAY_S
+        self._enu = np.array([enu_matrix(s.lat_rad, s.lon_rad) for s in self.stations]
+                             ).reshape(-1, 3, 3)
+        self._site = np.array([m @ s.itrs for m, s in zip(self._enu, self.stations, strict=True)]
+                              ).reshape(-1, 3)
         self._params = config.params
 
     # ----------------------------------------------------------------------------------
-    def propagate(self, x: ArrayLike, dt: ArrayLike) -> tuple[Array, Array, BoolArray]:
-        """Motion model for N states: (x1 (N, 6), Phi (N, 6, 6), ok (N,)); dt in s."""
+    def _rotations(self, t: Array) -> tuple[Array, NDArray[np.intp]]:
+        """GCRF -> ITRF rotations at the distinct epochs of ``t`` (s after jd0) and the index
+        of each epoch's: ((k, 3, 3), (len(t),))."""
+        if t.size and bool(np.all(t == t[0])):  # a scan: one epoch
+            uniq, inv = t[:1], np.zeros(t.size, dtype=np.intp)
+        else:
+            uniq, inv = np.unique(t, return_inverse=True)
+        with np.errstate(all="ignore"):
+            g = frames.gcrs_to_itrs_matrix(np.nan_to_num(uniq) + self._unix0)
+        return _f64(g.reshape(-1, 3, 3)), np.ascontiguousarray(inv.reshape(-1), dtype=np.intp)
+
+    def propagate(self, x: ArrayLike, dt: ArrayLike,
+                  t0: ArrayLike) -> tuple[Array, Array, BoolArray]:
+        """Motion model for N states at epochs ``t0`` (s after jd0) by ``dt`` (s).
+
+        Returns (x1 (N, 6), Phi (N, 6, 6), ok (N,)); J2 about the Earth's pole at ``t0``.
+        """
         if self.config.motion_model == "kepler":
             return kepler_stm(x, dt, self._params.get("mu", MU_EARTH))
+        with np.errstate(all="ignore"):
+            pole = frames.pole_frame(np.nan_to_num(np.asarray(t0, dtype=float))
+                                     + self._unix0)
         return integrate_stm(self.config.motion_model, x, dt, self.config.max_step_s,
-                             **self._params)
+                             pole_frame=pole, **self._params)
 
-    def _predict(self, x: Array, P: Array, dt: Array) -> tuple[Array, Array, BoolArray]:
+    def _predict(self, x: Array, P: Array, dt: Array,
+                 t0: Array) -> tuple[Array, Array, BoolArray]:
         """x, P predicted by dt (dt == 0: unchanged, as the per-object filter skips it)."""
-        x1, F, ok = self.propagate(x, dt)
+        x1, F, ok = self.propagate(x, dt, t0)
         P1 = np.empty((x.shape[0], 6, 6))
         _predict_kernel(x, P, dt, x1, _f64(F), ok, float(self.config.q),
                         float(self.config.sigma_bound), P1)
         return x1, P1, ok
 
-    def predict(self, x: ArrayLike, P: ArrayLike, dt: ArrayLike) -> Predicted:
-        """Predict N objects by their own ``dt`` (s): ``x <- f(x)``, ``P <- F P F^T + Q``.
+    def predict(self, x: ArrayLike, P: ArrayLike, dt: ArrayLike, t0: ArrayLike) -> Predicted:
+        """Predict N objects at epochs ``t0`` (s after jd0) by their own ``dt`` (s).
 
-        Then ``P`` is symmetrised and bounded (``sigma_bound``); ``dt == 0`` leaves an object
-        unchanged. Objects whose prediction is not computable keep their input (``ok``).
+        ``x <- f(x)``, ``P <- F P F^T + Q``, then ``P`` is symmetrised and bounded
+        (``sigma_bound``); ``dt == 0`` leaves an object unchanged. Objects whose prediction
+        is not computable keep their input (``ok``).
         """
         X = _f64(np.asarray(x, dtype=float))
         PP = _f64(np.asarray(P, dtype=float))
         dts = _f64(np.broadcast_to(np.asarray(dt, dtype=float), (X.shape[0],)))
+        t0s = np.broadcast_to(np.asarray(t0, dtype=float), (X.shape[0],))
         with np.errstate(all="ignore"):
-            x1, P1, ok = self._predict(X, PP, dts)
+            x1, P1, ok = self._predict(X, PP, dts, t0s)
         return Predicted(np.where(ok[:, None], x1, X), np.where(ok[:, None, None], P1, PP), ok)
 
     def measure(self, x: Array, t: Array, station: NDArray[np.intp]) -> tuple[Array, Array]:
         """Predicted [range km, az rad in [0, 2 pi), el rad] (m, 3) and Jacobian (m, 3, 6).
 
-        ``x`` (m, 6) ECI states, ``t`` (m,) s after jd0, ``station`` (m,) station indices;
+        ``x`` (m, 6) GCRF states, ``t`` (m,) s after jd0, ``station`` (m,) station indices;
         the batched `measurement.RazelModel.h_and_H` (no light time).
         """
-        th = self._era0 + ERA_RATE * t
-        c, s = np.cos(th)[:, None], np.sin(th)[:, None]
-        M = self._enu[station]
-        T = np.empty_like(M)  # ECI -> ENU: M R3(th)
-        T[:, :, 0] = M[:, :, 0] * c - M[:, :, 1] * s
-        T[:, :, 1] = M[:, :, 0] * s + M[:, :, 1] * c
-        T[:, :, 2] = M[:, :, 2]
+        g, gi = self._rotations(np.asarray(t, dtype=float))
+        T = np.matmul(self._enu[station], g[gi])  # GCRF -> ENU
         enu = np.einsum("mij,mj->mi", T, x[:, :3]) - self._site[station]
         e, n, u = enu[:, 0], enu[:, 1], enu[:, 2]
         h2 = e * e + n * n
@@ -1072,8 +1111,8 @@ class BatchEKF:
         m = x.shape[0]
         x1, P1 = np.empty((m, 6)), np.empty((m, 6, 6))
         nis, y, ok = np.empty(m), np.empty((m, 3)), np.empty(m, dtype=np.bool_)
-        _update_kernel(x, P, z, R, t, station, self._enu, self._site, self._era0, ERA_RATE,
-                       x1, P1, nis, y, ok)
+        g, gi = self._rotations(t)
+        _update_kernel(x, P, z, R, g, gi, station, self._enu, self._site, x1, P1, nis, y, ok)
         return x1, P1, nis, y, ok
 
     def _kepler_step(self, x: Array, P: Array, dt: Array, z: Array, R: Array, t: Array,
@@ -1083,8 +1122,9 @@ class BatchEKF:
         m = x.shape[0]
         x1, P1 = np.empty((m, 6)), np.empty((m, 6, 6))
         nis, y, ok = np.empty(m), np.empty((m, 3)), np.empty(m, dtype=np.bool_)
-        _kepler_step_kernel(x, P, dt, z, R, t, station, self._enu, self._site, self._era0,
-                            ERA_RATE, float(self._params.get("mu", MU_EARTH)),
+        g, gi = self._rotations(t)
+        _kepler_step_kernel(x, P, dt, z, R, g, gi, station, self._enu, self._site,
+                            float(self._params.get("mu", MU_EARTH)),
                             float(self.config.q), float(self.config.sigma_bound), x1, P1, nis,
                             y, ok)
         return x1, P1, nis, y, ok
@@ -1103,7 +1143,7 @@ class BatchEKF:
         Parameters
         ----------
         x : array_like (N, 6)
-            States at the objects' epochs, ECI km, km/s.
+            States at the objects' epochs, GCRF km, km/s.
         P : array_like (N, 6, 6)
             Their covariances.
         dt : array_like (N,) or scalar
@@ -1176,7 +1216,7 @@ class BatchEKF:
                 x1, P1, g_nis, g_y, ok = self._kepler_step(sub(xs), sub(Ps), sub(dts), sub(zz),
                                                            sub(RR), sub(tt), sub(st))
             else:
-                xp, Pp, ok = self._predict(sub(xs), sub(Ps), sub(dts))
+                xp, Pp, ok = self._predict(sub(xs), sub(Ps), sub(dts), sub(tt) - sub(dts))
                 x1, P1, g_nis, g_y, ok2 = self._update(xp, Pp, sub(zz), sub(RR), sub(tt),
                                                        sub(st))
                 ok &= ok2

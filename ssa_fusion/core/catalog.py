@@ -20,9 +20,9 @@ TLE and the OMM of the same object; an id twice in one file is an error.
 
 :func:`catalog_states` propagates every object to many epochs at once with
 `sgp4.api.SatrecArray` (SGP4 near Earth, SDP4 for periods >= 225 min, WGS-72 as the element
-sets assume). Its output is TEME, which this project uses as its ECI frame directly (see
-`frames` and `dynamics.sgp4_ephemeris`, which does the same for one object): km, km/s.
-Epochs are Unix seconds (UTC), as the measurement stamps (`stations.UNIX_EPOCH_JD`).
+sets assume). SGP4 speaks TEME: its states are turned to the GCRF, the project's inertial
+frame, on the way out (`frames.teme_to_gcrs`; `dynamics.sgp4_ephemeris` does the same for
+one object): km, km/s. Epochs are Unix seconds (UTC), as the measurement stamps.
 
 The sample catalog ``config/catalogs/sample.tle`` holds real element sets of six objects of
 different regimes (LEO, high-drag LEO, MEO/GPS, GEO, HEO/Molniya) from the SGP4 verification
@@ -46,10 +46,9 @@ from sgp4 import omm
 from sgp4.api import SGP4_ERRORS, Satrec, SatrecArray
 from sgp4.io import LINE1, LINE2, compute_checksum
 
-from .stations import UNIX_EPOCH_JD
+from .frames import teme_to_gcrs_matrix
+from .timescales import DAY_S, UNIX_EPOCH_JD, jd_utc
 
-DAY_S = 86400.0
-"""Seconds per day."""
 
 _OMM_FIELDS = (
     "OBJECT_ID", "EPOCH", "MEAN_MOTION", "ECCENTRICITY", "INCLINATION", "RA_OF_ASC_NODE",
@@ -102,7 +101,7 @@ class CatalogStates:
     t : ndarray (T,)
         Epochs, Unix seconds (UTC) (axis 1).
     x : ndarray (N, T, 6)
-        ECI (= TEME) position and velocity, km and km/s; NaN where SGP4 failed.
+        GCRF position and velocity, km and km/s; NaN where SGP4 failed.
     error : ndarray (N, T) of int
         SGP4 error code (0: fine; see `sgp4.api.SGP4_ERRORS`, e.g. 6: decayed).
     """
@@ -298,17 +297,6 @@ def _omm_entry(fields: dict[str, Any], where: str) -> CatalogEntry:
     return CatalogEntry(str(sat.satnum), name, sat, where)
 
 
-def unix_to_jd(t_unix: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Unix seconds (UTC) -> Julian date as (whole part, fraction of a day), both (T,).
-
-    The whole part is ``UNIX_EPOCH_JD`` + whole days (exact), the fraction the rest (< 1),
-    so no precision is lost to the ~2.4e6 of the Julian date (what `sgp4` asks for).
-    """
-    t = np.atleast_1d(np.asarray(t_unix, dtype=float))
-    days = np.floor(t / DAY_S)
-    return UNIX_EPOCH_JD + days, (t - days * DAY_S) / DAY_S
-
-
 def catalog_states(entries: Sequence[CatalogEntry], t_unix: ArrayLike) -> CatalogStates:
     """SGP4/SDP4 states of every object of `entries` at every epoch of `t_unix`, vectorised.
 
@@ -322,16 +310,18 @@ def catalog_states(entries: Sequence[CatalogEntry], t_unix: ArrayLike) -> Catalo
     Returns
     -------
     CatalogStates
-        ``x`` (N, T, 6): position km and velocity km/s in ECI (TEME, as the project uses
-        SGP4 output everywhere), NaN where SGP4 reports an error (``error`` != 0, e.g. an
+        ``x`` (N, T, 6): position km and velocity km/s in the GCRF (SGP4's TEME turned by
+        `frames.teme_to_gcrs`), NaN where SGP4 reports an error (``error`` != 0, e.g. an
         object decayed before that epoch).
     """
-    jd, fr = unix_to_jd(t_unix)
+    jd, fr = jd_utc(np.atleast_1d(np.asarray(t_unix, dtype=float)))
     if not entries:
         return CatalogStates((), jd * 0.0, np.zeros((0, jd.size, 6)),
                              np.zeros((0, jd.size), dtype=int))
     err, r, v = SatrecArray([e.satrec for e in entries]).sgp4(jd, fr)
-    x = np.concatenate([r, v], axis=-1)
-    x[err != 0] = np.nan
     t = np.atleast_1d(np.asarray(t_unix, dtype=float))
+    m = teme_to_gcrs_matrix(t)  # (T, 3, 3)
+    x = np.concatenate([np.einsum("tij,ntj->nti", m, r), np.einsum("tij,ntj->nti", m, v)],
+                       axis=-1)
+    x[err != 0] = np.nan
     return CatalogStates(tuple(e.object_id for e in entries), t, x, err.astype(int))

@@ -19,16 +19,18 @@ from typing import Any
 
 import numpy as np
 
-from . import dynamics, kepler
+from . import dynamics, frames, kepler
 from .batch_ekf import integrate_stm
 from .measurement import MeasurementModel, PositionModel, RadecModel, RazelModel, StationModels
-from .stations import NETWORKS, STATIONS, UNIX_EPOCH_JD, network_stations
+from .stations import NETWORKS, STATIONS, network_stations
+from .timescales import DAY_S, UNIX_EPOCH_JD
 from .surrogate import EciLift, Surrogate, SurrogateConfig
 from .tracker import Tracker, TrackerConfig
 from .types import KIND_NAMES, Kind
 
-MotionFunction = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
-"""f(x, dt) -> (x1, F): a motion model and its state transition matrix."""
+MotionFunction = Callable[[np.ndarray, float, float], tuple[np.ndarray, np.ndarray]]
+"""f(x, dt, t0) -> (x1, F): a motion model and its state transition matrix, from the state
+``x`` at ``t0`` (s on the clock of `EstimatorConfig.jd0`) to ``t0 + dt``."""
 
 
 class MotionModel(enum.StrEnum):
@@ -162,19 +164,27 @@ def measurement_model(c: EstimatorConfig) -> MeasurementModel:
 
 
 def motion(c: EstimatorConfig) -> MotionFunction:
-    """Return the motion model f(x, dt) -> (x1, F) of `c`.
+    """Return the motion model f(x, dt, t0) -> (x1, F) of `c`.
 
-    Analytic Kepler, or a `dynamics` model integrated with its state transition matrix.
+    Analytic Kepler, or a `dynamics` model integrated with its state transition matrix. The
+    orbit models' states are GCRF; J2 acts about the Earth's pole at ``t0``
+    (`frames.pole_frame`, the clock being Unix time for orbits).
     """
     if c.motion_model == MotionModel.KEPLER:
-        return kepler.propagate
+        def kepler_motion(x: np.ndarray, dt: float,
+                          _t0: float) -> tuple[np.ndarray, np.ndarray]:
+            return kepler.propagate(x, dt)
+
+        return kepler_motion
     name, params = str(c.motion_model), dict(c.motion_params)
     if c.motion_model in (MotionModel.J2, MotionModel.TWO_BODY):
         # compiled fixed-step DOP853 (steps <= 60 s): the catalog filter's, ~100x cheaper per
         # prediction than scipy's adaptive DOP853 and within ~1e-10 relative of it
-        def compiled(x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        unix = (c.jd0 - UNIX_EPOCH_JD) * DAY_S
+
+        def compiled(x: np.ndarray, dt: float, t0: float) -> tuple[np.ndarray, np.ndarray]:
             x1, F, ok = integrate_stm(name, np.asarray(x, float)[None], np.array([dt]),
-                                      **params)
+                                      pole_frame=frames.pole_frame(t0 + unix), **params)
             if not ok[0]:
                 raise RuntimeError(f"propagation failed: the {name} orbit is not finite "
                                    f"{dt} s on")
@@ -185,7 +195,7 @@ def motion(c: EstimatorConfig) -> MotionFunction:
     # for differences below 1e-11 km over a 30 s step
     tol = ORBIT_TOLERANCES if c.motion_model in ORBIT_MODELS else {}
 
-    def f(x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    def f(x: np.ndarray, dt: float, _t0: float) -> tuple[np.ndarray, np.ndarray]:
         return dynamics.propagate_stm(name, x, dt, **tol, **params)
 
     return f

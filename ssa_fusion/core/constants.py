@@ -23,3 +23,6 @@ G0 = 9.80665
 
 C_KM_S = 299792.458
 """Speed of light in vacuum, km/s (exact, SI)."""
+
+ARCSEC = 3.141592653589793 / (180.0 * 3600.0)
+"""One arc second, rad."""

@@ -2,9 +2,14 @@
 
 Models for :func:`propagate` (state layout, units, parameters):
 
-``"two_body"``  ECI [r km, v km/s]; ``mu`` (km^3/s^2, default MU_EARTH).
-``"j2"``        two-body + J2 zonal; ``mu``, ``j2`` (default J2), ``re`` (km, default R_EARTH).
-``"drag"``      two-body + drag in an exponential atmosphere co-rotating with the Earth:
+``"two_body"``  inertial [r km, v km/s] (GCRF); ``mu`` (km^3/s^2, default MU_EARTH).
+``"j2"``        two-body + J2 zonal about the z axis of the frame the state is in; ``mu``,
+                ``j2`` (default J2), ``re`` (km, default R_EARTH). In the GCRF the Earth's
+                pole is not that axis (precession and nutation have moved it by ~0.14 deg
+                since J2000): give `propagate` the ``pole_frame`` of the start epoch
+                (`frames.pole_frame`), which turns the state to axes whose z is the pole.
+``"drag"``      two-body + drag in an exponential atmosphere co-rotating with the Earth (about
+                the z axis, as J2: the same ``pole_frame`` applies):
                 ``a = -0.5 rho |v_rel| v_rel / bc``; ``bc`` = ballistic coefficient m/(Cd A)
                 in kg/m^2 (default 100, ISS-like, giving ~0.1 km/day decay of a at 420 km);
                 ``rho0`` kg/m^3 at ``h0`` km with scale height ``scale_height`` km (defaults:
@@ -34,7 +39,9 @@ from numpy.typing import ArrayLike, NDArray
 from sgp4.api import WGS72, Satrec
 
 from .constants import G0, J2, MU_EARTH, MU_EARTH_MOON, OMEGA_EARTH, R_EARTH
+from . import frames
 from .frames import wrap_2pi
+from .timescales import UNIX_EPOCH_JD
 
 Array = NDArray[np.float64]
 
@@ -145,12 +152,26 @@ def rhs(model: str, x: ArrayLike, **params: float) -> Array:
     return _MODELS[model][0](np.asarray(x, float), **params)
 
 
+def rotate_states(x: Array, rotation: Array | None) -> Array:
+    """States (..., 6) (or positions (..., 3)) with every 3-vector turned by ``rotation``.
+
+    ``rotation`` (3, 3) or (..., 3, 3) broadcasting against the leading axes; None: ``x``.
+    """
+    if rotation is None:
+        return x
+    parts = [np.einsum("...ij,...j->...i", rotation, x[..., k:k + 3])
+             for k in range(0, x.shape[-1], 3)]
+    out: Array = np.concatenate(parts, -1)
+    return out
+
+
 def propagate(
     model: str,
     x0: ArrayLike,
     t_s: ArrayLike,
     rtol: float = 1e-12,
     atol: float = 1e-12,
+    pole_frame: Array | None = None,
     **params: float,
 ) -> Array:
     """Integrate ``model`` from ``x0`` (at ``t_s[0]``) and sample it at ``t_s``.
@@ -165,6 +186,10 @@ def propagate(
         Monotonic sample times (s; nondimensional time for "cr3bp"); ``t_s[0]`` is x0's epoch.
     rtol, atol
         DOP853 tolerances.
+    pole_frame
+        Rotation (3, 3) from the states' frame to axes whose z is the Earth's pole
+        (`frames.pole_frame` of the start epoch), for the orbit models; None: the frame's
+        own z axis is the pole.
     **params
         Model parameters (module docstring).
 
@@ -172,6 +197,11 @@ def propagate(
     -------
     ndarray (len(t_s), n) or (len(t_s), p, n) for a batch.
     """
+    if pole_frame is not None:
+        r = np.asarray(pole_frame, dtype=float)
+        x_pole = rotate_states(np.asarray(x0, dtype=float), r)
+        out_pole = propagate(model, x_pole, t_s, rtol, atol, None, **params)
+        return rotate_states(out_pole, r.T)
     from scipy.integrate import solve_ivp
 
     fun, n = _MODELS[model]
@@ -431,13 +461,13 @@ def fit_sgp4_mean_elements(
     return _satrec(sol.x, epoch_days, bstar, gravity)
 
 
-def sgp4_ephemeris(
+def sgp4_ephemeris_teme(
     x0_osc_km: ArrayLike, jd0_utc: float, t_s: ArrayLike, bstar: float = 0.0
 ) -> Array:
-    """SGP4/SDP4 ephemeris (len(t_s), 6) [km, km/s] in TEME (used as the project's ECI).
+    """SGP4/SDP4 ephemeris (len(t_s), 6) [km, km/s] in TEME, SGP4's own frame.
 
     Mean elements are fitted (:func:`fit_sgp4_mean_elements`, WGS-72 constants as in the
-    standard SGP4) so the state at ``jd0_utc`` equals ``x0_osc_km``; SDP4 is selected
+    standard SGP4) so the TEME state at ``jd0_utc`` equals ``x0_osc_km``; SDP4 is selected
     automatically for periods >= 225 min. ``t_s``: seconds since ``jd0_utc``.
     """
     sat = fit_sgp4_mean_elements(x0_osc_km, jd0_utc, bstar)
@@ -449,3 +479,18 @@ def sgp4_ephemeris(
         raise RuntimeError(f"SGP4 error codes {set(err[err != 0].tolist())}")
     state: Array = np.concatenate([r, v], axis=1)
     return state
+
+
+def sgp4_ephemeris(
+    x0_gcrs_km: ArrayLike, t0_unix: float, t_s: ArrayLike, bstar: float = 0.0
+) -> Array:
+    """SGP4/SDP4 ephemeris (len(t_s), 6) [km, km/s] in the GCRF, from a GCRF state.
+
+    ``x0_gcrs_km`` at Unix epoch ``t0_unix`` (UTC) is turned to TEME (`frames.gcrs_to_teme`),
+    mean elements are fitted to it (`sgp4_ephemeris_teme`), and SGP4's TEME states at
+    ``t0_unix + t_s`` are turned back to the GCRF (`frames.teme_to_gcrs`).
+    """
+    t = np.atleast_1d(np.asarray(t_s, float))
+    x0_teme = frames.gcrs_to_teme(np.asarray(x0_gcrs_km, float), t0_unix)
+    eph = sgp4_ephemeris_teme(x0_teme, UNIX_EPOCH_JD + t0_unix / 86400.0, t, bstar)
+    return frames.teme_to_gcrs(eph, t0_unix + t)

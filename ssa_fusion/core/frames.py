@@ -1,15 +1,44 @@
-"""Reference frames: ECI <-> ECEF by Earth rotation angle, WGS-84 sites, range/azimuth/elevation.
+"""Reference frames of the real Earth: GCRF, ITRF, TEME, topocentric; vectorised (pyerfa).
 
-Conventions
------------
-* Units: km, km/s, rad. Epochs are UTC Julian dates ``jd_utc`` (UT1 ~= UTC is assumed).
-* ECI is the project's inertial frame: ECEF rotated about +z by the IERS 2003 Earth rotation
-  angle (ERA) only -- no precession, nutation or polar motion. SGP4's TEME output is used as
-  this ECI directly (TEME is rotated to ECEF by GMST; GMST - ERA is ~0 at J2000 and grows by
-  ~0.0128 deg per year, i.e. ~0.3 deg in 2024; inside this project the frame is consistent).
-* Topocentric frame: East-North-Up (ENU) at the station's geodetic latitude/longitude.
-  Azimuth is measured from north, clockwise (towards east), in [0, 2 pi); elevation in
-  [-pi/2, pi/2] above the local (ellipsoid-normal) horizon.
+Frames
+------
+* **GCRF** (Geocentric Celestial Reference Frame; ERFA's GCRS axes) is the inertial frame of
+  everything ssa_fusion estimates and publishes: states, covariances, forecasts, the
+  optical sensors' right ascension and declination. It agrees with EME2000/J2000 to 23 mas
+  (the frame bias), so an OEM in GCRF is read correctly by software that takes EME2000.
+* **ITRF** (International Terrestrial Reference Frame, ERFA's ITRS) is the Earth-fixed frame of
+  the stations (WGS-84 geodetic coordinates -> ITRF; WGS-84 and ITRF agree to centimetres).
+* **TEME** (True Equator, Mean Equinox) is only where SGP4/SDP4 speak it: element sets and
+  their propagation are converted on the way in (`teme_to_gcrs`).
+
+Transformations (IERS Conventions 2010, CIO based, IAU 2006/2000A)::
+
+    r_ITRS = W(x_p, y_p, s') R3(ERA(UT1)) Q(TT) r_GCRS
+
+with ``Q`` the GCRS -> CIRS matrix of the CIP coordinates X, Y and the CIO locator s
+(`erfa.xys06a`, `erfa.c2ixys`), ``ERA`` the Earth rotation angle of UT1 (`erfa.era00`) and
+``W`` polar motion (`erfa.pom00`, s' from `erfa.sp00`). ``Q`` and ``W`` change slowly (the
+fastest nutation term has a period of 5.6 days), so they are computed on a grid of whole
+UTC hours and interpolated linearly, element by element: the error of that is below
+1e-5 arcsec. The Earth rotation angle is computed at every epoch. Velocities carry the
+``omega x r`` of the Earth's rotation (``omega`` = `ERA_RATE` about the CIP); the slow
+rotation of ``Q`` and ``W`` (< 1e-11 rad/s) is neglected in velocities (< 0.1 mm/s).
+
+TEME -> GCRS follows Vallado (2006) as astropy does: ``r_PEF = R3(GMST82(UT1)) r_TEME`` (PEF
+is the terrestrial intermediate frame, up to the TIO locator s' < 0.1 mas), then as above
+without polar motion, so ``r_GCRS = Q^T R3(GMST82 - ERA) r_TEME`` (the same for velocities).
+
+Time: stamps are Unix seconds, UTC (`timescales`); TT for ``Q`` and s', UT1 for ERA and
+GMST from the EOP (`eop`; the no-EOP mode and its size of error are described there).
+Every function takes ``eop`` (default `eop.default()`).
+
+Topocentric: East-North-Up (ENU) at the station's geodetic latitude/longitude. Azimuth from
+north, clockwise (towards east), in [0, 2 pi); elevation in [-pi/2, pi/2] above the local
+ellipsoid-normal horizon, geometric (no refraction; see `refraction`). Right ascension and
+declination are *astrometric*: the direction from the station to the object, in the GCRF,
+with no aberration applied (what a plate reduction against a star catalogue gives).
+
+Units: km, km/s, rad, s.
 """
 
 from __future__ import annotations
@@ -18,17 +47,36 @@ import math
 from dataclasses import dataclass
 from typing import cast
 
+import erfa
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from . import eop as eop_
 from .constants import R_EARTH, WGS84_F
+from .timescales import jd_tt, jd_ut1
+
+Array = NDArray[np.float64]
 
 TWO_PI = 2.0 * math.pi
 J2000_JD = 2451545.0
 ERA_RATE = TWO_PI * 1.00273781191135448 / 86400.0
-"""Rate of the Earth rotation angle, rad/s (IERS 2003; equals OMEGA_EARTH)."""
+"""Rate of the Earth rotation angle, rad/s of UT1 (IERS 2003; equals OMEGA_EARTH)."""
+
+NODE_S = 3600.0
+"""Spacing of the grid on which Q and W are computed and then interpolated, s."""
 
 _E2 = WGS84_F * (2.0 - WGS84_F)
+
+
+class Frame:
+    """Names of the frames as messages (``header.frame_id``) and CCSDS files write them."""
+
+    GCRF = "gcrf"
+    """The inertial frame of every state, covariance and RA/Dec (module docstring)."""
+    ITRF = "itrf"
+    """The Earth-fixed frame (stations; ground tracks)."""
+    TEME = "teme"
+    """SGP4's frame (element sets only)."""
 
 
 @dataclass(frozen=True)
@@ -40,74 +88,299 @@ class Station:
     lon_rad: float
     alt_km: float
 
+    @property
+    def itrs(self) -> Array:
+        """Position in the ITRF (3,), km."""
+        return site_itrs(self.lat_rad, self.lon_rad, self.alt_km)
+
 
 COLUMBUS = Station("columbus", math.radians(39.9612), math.radians(-82.9988), 0.275)
 """Columbus, Ohio (the paper's observer)."""
 
 
-def earth_rotation_angle(jd_utc: ArrayLike) -> NDArray[np.float64] | float:
-    """Earth rotation angle (IERS 2003), rad in [0, 2 pi).
-
-    ``ERA = 2 pi (0.7790572732640 + 1.00273781191135448 Du)``, ``Du = jd - 2451545.0``, evaluated
-    as ``frac(jd) + 0.779... + 0.00273781191135448 Du`` to keep precision. Vectorised.
-    """
-    jd = np.asarray(jd_utc, dtype=float)
-    du = jd - J2000_JD
-    frac = np.mod(jd, 1.0)
-    era = TWO_PI * np.mod(frac + 0.7790572732640 + 0.00273781191135448 * du, 1.0)
-    return wrap_2pi(era)
+# --------------------------------------------------------------------------------------------
+# Q (GCRS -> CIRS) and W (polar motion) on the hourly grid
+# --------------------------------------------------------------------------------------------
+_NODES: dict[tuple[int, int], tuple[Array, Array]] = {}
+_NODES_MAX = 200_000
+"""Entries of the node cache before it is emptied (a node is two 3x3 matrices: ~150 B)."""
 
 
-def _rot_z(theta: ArrayLike) -> NDArray[np.float64]:
-    """Frame rotations R3(theta), shape (..., 3, 3); ECI -> ECEF for theta = ERA."""
+def _compute_nodes(keys: NDArray[np.int64], eop: eop_.EarthOrientation) -> None:
+    """Compute and cache Q and W at the grid nodes ``keys`` (whole hours since 1970)."""
+    t = keys.astype(float) * NODE_S
+    tt1, tt2 = jd_tt(t)
+    x, y, s = erfa.xys06a(tt1, tt2)
+    q = erfa.c2ixys(x, y, s)
+    v = eop.at(t)
+    w = erfa.pom00(v.xp, v.yp, erfa.sp00(tt1, tt2))
+    if len(_NODES) + len(keys) > _NODES_MAX:
+        _NODES.clear()
+    for k, qi, wi in zip(keys.tolist(), q, w, strict=True):
+        _NODES[(eop._key, k)] = (qi, wi)
+
+
+def _nodes(keys: NDArray[np.int64], eop: eop_.EarthOrientation) -> tuple[Array, Array]:
+    """Q and W at the grid nodes ``keys`` (n,): two (n, 3, 3) arrays."""
+    uniq, inverse = np.unique(keys, return_inverse=True)
+    missing = np.array([k for k in uniq.tolist() if (eop._key, k) not in _NODES],
+                       dtype=np.int64)
+    if len(missing):
+        _compute_nodes(missing, eop)
+    got = [_NODES[(eop._key, k)] for k in uniq.tolist()]
+    q = np.array([g[0] for g in got]).reshape(-1, 3, 3)
+    w = np.array([g[1] for g in got]).reshape(-1, 3, 3)
+    return q[inverse], w[inverse]
+
+
+def _slow_matrices(t: Array, eop: eop_.EarthOrientation) -> tuple[Array, Array]:
+    """Q (GCRS -> CIRS) and W (TIRS -> ITRS) at epochs ``t`` (n,): (n, 3, 3) each."""
+    h = t / NODE_S
+    k0 = np.floor(h)
+    f = (h - k0)[:, None, None]
+    keys = k0.astype(np.int64)
+    q, w = _nodes(np.concatenate([keys, keys + 1]), eop)
+    n = len(t)
+    return q[:n] + f * (q[n:] - q[:n]), w[:n] + f * (w[n:] - w[:n])
+
+
+def _epochs(t_unix: ArrayLike) -> tuple[Array, tuple[int, ...]]:
+    t = np.asarray(t_unix, dtype=float)
+    return t.ravel(), t.shape
+
+
+def _eop(eop: eop_.EarthOrientation | None) -> eop_.EarthOrientation:
+    return eop_.default() if eop is None else eop
+
+
+def earth_rotation_angle(t_unix: ArrayLike,
+                         eop: eop_.EarthOrientation | None = None) -> Array:
+    """Earth rotation angle (IERS 2003, `erfa.era00`) of UT1 at Unix (UTC) stamps, rad."""
+    t, shape = _epochs(t_unix)
+    e = _eop(eop)
+    out: Array = erfa.era00(*jd_ut1(t, e.at(t).dut1)).reshape(shape)
+    return out
+
+
+def gmst82(t_unix: ArrayLike, eop: eop_.EarthOrientation | None = None) -> Array:
+    """Greenwich mean sidereal time, IAU 1982 (`erfa.gmst82`), of UT1 at Unix stamps, rad."""
+    t, shape = _epochs(t_unix)
+    e = _eop(eop)
+    out: Array = erfa.gmst82(*jd_ut1(t, e.at(t).dut1)).reshape(shape)
+    return out
+
+
+def rot_z(theta: ArrayLike) -> Array:
+    """Frame rotations R3(theta), shape (..., 3, 3) (a vector's coordinates in a frame turned
+    by +theta about z)."""
     th = np.asarray(theta, dtype=float)
     c, s = np.cos(th), np.sin(th)
     z, o = np.zeros_like(th), np.ones_like(th)
-    return np.stack(
-        [np.stack([c, s, z], -1), np.stack([-s, c, z], -1), np.stack([z, z, o], -1)], -2
-    )
+    out: Array = np.stack(
+        [np.stack([c, s, z], -1), np.stack([-s, c, z], -1), np.stack([z, z, o], -1)], -2)
+    return out
 
 
-def _rotate(x: NDArray[np.float64], theta: ArrayLike, sign: float) -> NDArray[np.float64]:
-    """Rotate positions (..., 3) or states (..., 6) by R3(sign * theta), km, km/s.
+def gcrs_to_cirs_matrix(t_unix: ArrayLike,
+                        eop: eop_.EarthOrientation | None = None) -> Array:
+    """Q(t): GCRS -> CIRS rotation (precession-nutation, frame bias), (..., 3, 3)."""
+    t, shape = _epochs(t_unix)
+    q, _ = _slow_matrices(t, _eop(eop))
+    return q.reshape(*shape, 3, 3)
 
-    ``sign = +1``: ECI -> ECEF (theta = ERA), with the ``omega x r`` term of the rotating
-    frame subtracted from the velocity; ``sign = -1``: ECEF -> ECI (it is added back).
+
+def cip_gcrs(t_unix: ArrayLike, eop: eop_.EarthOrientation | None = None) -> Array:
+    """Unit vector of the Celestial Intermediate Pole (the Earth's axis) in the GCRF, (..., 3).
+
+    The axis of the Earth's rotation and, to 0.5" (polar motion), of its figure: the axis
+    about which J2 acts.
     """
-    x = np.asarray(x, dtype=float)
-    rot = _rot_z(sign * np.asarray(theta, dtype=float))
-    r: NDArray[np.float64] = np.einsum("...ij,...j->...i", rot, x[..., :3])
-    if x.shape[-1] == 3:
-        return r
-    if x.shape[-1] != 6:
+    q = gcrs_to_cirs_matrix(t_unix, eop)
+    p = q[..., 2, :]
+    out: Array = p / np.linalg.norm(p, axis=-1, keepdims=True)
+    return out
+
+
+def pole_frame(t_unix: ArrayLike, eop: eop_.EarthOrientation | None = None) -> Array:
+    """Rotation (..., 3, 3) from the GCRF to axes whose z is the Earth's pole, near ``t_unix``.
+
+    The GCRS -> CIRS matrix Q at the whole UTC hour at or before each epoch (the pole moves
+    < 0.01" in an hour): the axes in which J2 and the co-rotating atmosphere of `dynamics`
+    act about z. Epochs in the same hour share one matrix (cheap for a batch).
+    """
+    t, shape = _epochs(t_unix)
+    q, _ = _nodes(np.floor(t / NODE_S).astype(np.int64), _eop(eop))
+    return q.reshape(*shape, 3, 3)
+
+
+def gcrs_to_itrs_matrix(t_unix: ArrayLike,
+                        eop: eop_.EarthOrientation | None = None) -> Array:
+    """GCRS -> ITRS rotation ``W R3(ERA) Q`` at Unix (UTC) stamps, (..., 3, 3)."""
+    t, shape = _epochs(t_unix)
+    e = _eop(eop)
+    q, w = _slow_matrices(t, e)
+    r = rot_z(erfa.era00(*jd_ut1(t, e.at(t).dut1)))
+    out: Array = np.matmul(w, np.matmul(r, q)).reshape(*shape, 3, 3)
+    return out
+
+
+@dataclass(frozen=True)
+class _Segment:
+    """One hour of the grid, for the scalar path: Q, W and UT1 - UTC linear in it."""
+
+    t0: float
+    q0: Array
+    dq: Array
+    w0: Array
+    dw: Array
+    dut1: float
+    dut1_rate: float
+
+
+_SEGMENTS: dict[tuple[int, int], _Segment] = {}
+
+
+def _segment(key: int, eop: eop_.EarthOrientation) -> _Segment:
+    seg = _SEGMENTS.get((eop._key, key))
+    if seg is None:
+        keys = np.array([key, key + 1], dtype=np.int64)
+        q, w = _nodes(keys, eop)
+        t = keys.astype(float) * NODE_S
+        d = eop.at(t).dut1
+        if abs(d[1] - d[0]) > 0.5:  # a leap second at the hour's end: UT1 itself is smooth
+            d[1] += math.copysign(1.0, d[0] - d[1])
+        if len(_SEGMENTS) > _NODES_MAX:
+            _SEGMENTS.clear()
+        seg = _SEGMENTS[(eop._key, key)] = _Segment(
+            float(t[0]), q[0], q[1] - q[0], w[0], w[1] - w[0], float(d[0]),
+            float(d[1] - d[0]) / NODE_S)
+    return seg
+
+
+def _era_scalar(t_ut1_unix: float) -> float:
+    """`erfa.era00` of UT1 given as Unix-like seconds (UTC stamp + UT1 - UTC), rad."""
+    days = math.floor(t_ut1_unix / 86400.0)
+    frac = (t_ut1_unix - days * 86400.0) / 86400.0
+    du = (2440587.5 - J2000_JD + days) + frac
+    return TWO_PI * ((frac + 0.5 + 0.7790572732640 + 0.00273781191135448 * du) % 1.0)
+
+
+def gcrs_to_itrs_matrix1(t_unix: float, eop: eop_.EarthOrientation | None = None
+                         ) -> Array:
+    """`gcrs_to_itrs_matrix` of one epoch, the fast path of the measurement models (3, 3)."""
+    e = _eop(eop)
+    key = math.floor(t_unix / NODE_S)
+    seg = _segment(key, e)
+    f = (t_unix - seg.t0) / NODE_S
+    q = seg.q0 + f * seg.dq
+    w = seg.w0 + f * seg.dw
+    th = _era_scalar(t_unix + seg.dut1 + seg.dut1_rate * (t_unix - seg.t0))
+    c, s = math.cos(th), math.sin(th)
+    rq = np.array([c * q[0] + s * q[1], c * q[1] - s * q[0], q[2]])
+    out: Array = w @ rq
+    return out
+
+
+def _apply(m: Array, v: Array) -> Array:
+    out: Array = np.einsum("...ij,...j->...i", m, v)
+    return out
+
+
+def _parts(x: ArrayLike, t_unix: ArrayLike) -> tuple[Array, Array, tuple[int, ...]]:
+    """``x`` (..., 3|6) broadcast against the epochs, and the epochs as given (as an array)."""
+    xa = np.asarray(x, dtype=float)
+    if xa.shape[-1] not in (3, 6):
         raise ValueError("last axis must be 3 (position) or 6 (position+velocity)")
-    v = np.einsum("...ij,...j->...i", rot, x[..., 3:6])
-    # v_ecef = R v_eci - w x r_ecef ;  v_eci = R^T (v_ecef + w x r_ecef)
-    if sign > 0:
-        wxr = ERA_RATE * np.stack([-r[..., 1], r[..., 0], np.zeros_like(r[..., 0])], -1)
-        v = v - wxr
-    else:
-        xe = x[..., :3]
-        wxr = ERA_RATE * np.stack([-xe[..., 1], xe[..., 0], np.zeros_like(xe[..., 0])], -1)
-        v = np.einsum("...ij,...j->...i", rot, x[..., 3:6] + wxr)
-    return np.concatenate([r, v], -1)
+    t = np.asarray(t_unix, dtype=float)
+    lead = np.broadcast_shapes(xa.shape[:-1], t.shape)
+    return np.broadcast_to(xa, (*lead, xa.shape[-1])), t, lead
 
 
-def eci_to_ecef(x_eci: ArrayLike, jd_utc: ArrayLike) -> NDArray[np.float64]:
-    """ECI -> ECEF. ``x_eci`` (..., 3) positions [km] or (..., 6) states [km, km/s].
+def _omega_cross(r: Array) -> Array:
+    """ERA_RATE z x r for positions (..., 3)."""
+    return ERA_RATE * np.stack([-r[..., 1], r[..., 0], np.zeros(r.shape[:-1])], -1)
 
-    ``jd_utc`` broadcasts against the leading axes (scalar or (...)).
+
+def _rq_w(t: Array, eop: eop_.EarthOrientation | None) -> tuple[Array, Array]:
+    """R3(ERA) Q and W at epochs ``t`` (any shape): two (*t.shape, 3, 3) arrays."""
+    e = _eop(eop)
+    flat = t.ravel()
+    q, w = _slow_matrices(flat, e)
+    rq = np.matmul(rot_z(erfa.era00(*jd_ut1(flat, e.at(flat).dut1))), q)
+    return rq.reshape(*t.shape, 3, 3), w.reshape(*t.shape, 3, 3)
+
+
+def gcrs_to_itrs(x: ArrayLike, t_unix: ArrayLike,
+                 eop: eop_.EarthOrientation | None = None) -> Array:
+    """GCRF -> ITRF of positions (..., 3) km or states (..., 6) km, km/s at Unix stamps.
+
+    ``t_unix`` broadcasts against the leading axes of ``x`` (the rotations are computed once
+    per epoch given). Velocities: ``v_ITRS = W (R Q v - omega x (R Q r))``.
     """
-    return _rotate(np.asarray(x_eci, float), earth_rotation_angle(jd_utc), 1.0)
+    xs, t, _ = _parts(x, t_unix)
+    rq, w = _rq_w(t, eop)
+    r_tirs = _apply(rq, xs[..., :3])
+    out = _apply(w, r_tirs)
+    if xs.shape[-1] == 6:
+        v_tirs = _apply(rq, xs[..., 3:]) - _omega_cross(r_tirs)
+        out = np.concatenate([out, _apply(w, v_tirs)], -1)
+    return out
 
 
-def ecef_to_eci(x_ecef: ArrayLike, jd_utc: ArrayLike) -> NDArray[np.float64]:
-    """ECEF -> ECI, inverse of :func:`eci_to_ecef` (positions (..., 3) or states (..., 6))."""
-    return _rotate(np.asarray(x_ecef, float), earth_rotation_angle(jd_utc), -1.0)
+def itrs_to_gcrs(x: ArrayLike, t_unix: ArrayLike,
+                 eop: eop_.EarthOrientation | None = None) -> Array:
+    """ITRF -> GCRF, the inverse of `gcrs_to_itrs` (positions (..., 3) or states (..., 6))."""
+    xs, t, _ = _parts(x, t_unix)
+    rq, w = _rq_w(t, eop)
+    wt, rq_t = np.swapaxes(w, -1, -2), np.swapaxes(rq, -1, -2)
+    r_tirs = _apply(wt, xs[..., :3])
+    out = _apply(rq_t, r_tirs)
+    if xs.shape[-1] == 6:
+        v_tirs = _apply(wt, xs[..., 3:]) + _omega_cross(r_tirs)
+        out = np.concatenate([out, _apply(rq_t, v_tirs)], -1)
+    return out
 
 
-def site_ecef(lat_rad: float, lon_rad: float, alt_km: float) -> NDArray[np.float64]:
-    """WGS-84 geodetic (lat, lon [rad], ellipsoidal height [km]) -> ECEF position (3,) km."""
+def teme_to_gcrs_matrix(t_unix: ArrayLike,
+                        eop: eop_.EarthOrientation | None = None) -> Array:
+    """TEME -> GCRS rotation ``Q^T R3(GMST82 - ERA)`` at Unix stamps, (..., 3, 3).
+
+    Positions and velocities alike (module docstring).
+    """
+    t, shape = _epochs(t_unix)
+    e = _eop(eop)
+    q, _ = _slow_matrices(t, e)
+    ut1 = jd_ut1(t, e.at(t).dut1)
+    r3 = rot_z(erfa.gmst82(*ut1) - erfa.era00(*ut1))
+    out: Array = np.matmul(np.swapaxes(q, -1, -2), r3).reshape(*shape, 3, 3)
+    return out
+
+
+def _rotate_parts(m: Array, xs: Array) -> Array:
+    out: Array = np.concatenate(
+        [_apply(m, xs[..., k:k + 3]) for k in range(0, xs.shape[-1], 3)], -1)
+    return out
+
+
+def teme_to_gcrs(x: ArrayLike, t_unix: ArrayLike,
+                 eop: eop_.EarthOrientation | None = None) -> Array:
+    """TEME (SGP4's output) -> GCRF, positions (..., 3) or states (..., 6), km, km/s."""
+    xs, t, _ = _parts(x, t_unix)
+    return _rotate_parts(teme_to_gcrs_matrix(t, eop), xs)
+
+
+def gcrs_to_teme(x: ArrayLike, t_unix: ArrayLike,
+                 eop: eop_.EarthOrientation | None = None) -> Array:
+    """GCRF -> TEME, the inverse of `teme_to_gcrs` (an OEM in TEME, an SGP4 fit)."""
+    xs, t, _ = _parts(x, t_unix)
+    return _rotate_parts(np.swapaxes(teme_to_gcrs_matrix(t, eop), -1, -2), xs)
+
+
+# --------------------------------------------------------------------------------------------
+# Stations and topocentric measurements
+# --------------------------------------------------------------------------------------------
+def site_itrs(lat_rad: float, lon_rad: float, alt_km: float) -> Array:
+    """WGS-84 geodetic (lat, lon [rad], ellipsoidal height [km]) -> ITRF position (3,) km."""
     sl, cl = math.sin(lat_rad), math.cos(lat_rad)
     n = R_EARTH / math.sqrt(1.0 - _E2 * sl * sl)
     return np.array(
@@ -119,48 +392,63 @@ def site_ecef(lat_rad: float, lon_rad: float, alt_km: float) -> NDArray[np.float
     )
 
 
-def enu_matrix(lat_rad: float, lon_rad: float) -> NDArray[np.float64]:
-    """Rotation ECEF -> local East-North-Up (3, 3); rows are the E, N, U unit vectors in ECEF."""
+def site_gcrs(station: Station, t_unix: ArrayLike,
+              eop: eop_.EarthOrientation | None = None) -> Array:
+    """The station's GCRF position (..., 3), km, at Unix stamps (shape of ``t_unix``)."""
+    t = np.asarray(t_unix, dtype=float)
+    return itrs_to_gcrs(np.broadcast_to(station.itrs, (*t.shape, 3)), t, eop)
+
+
+def enu_matrix(lat_rad: float, lon_rad: float) -> Array:
+    """Rotation ITRF -> local East-North-Up (3, 3); rows are the E, N, U unit vectors."""
     sl, cl = math.sin(lat_rad), math.cos(lat_rad)
     so, co = math.sin(lon_rad), math.cos(lon_rad)
     return np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
 
 
-def _enu_to_razel(
-    enu: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+def _enu_to_razel(enu: Array) -> tuple[Array, Array, Array]:
     """Range km, azimuth rad in [0, 2 pi) and elevation rad of ENU vectors (..., 3) km."""
     e, n, u = enu[..., 0], enu[..., 1], enu[..., 2]
     horiz = np.hypot(e, n)
     rng = np.hypot(horiz, u)
-    az = cast(NDArray[np.float64], wrap_2pi(np.arctan2(e, n)))  # np.float64 for one vector
+    az = cast(Array, wrap_2pi(np.arctan2(e, n)))
     el = np.arctan2(u, horiz)
     return rng, az, el
 
 
-def razel(
-    r_ecef_km: ArrayLike, lat_rad: float, lon_rad: float, alt_km: float
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """Range [km], azimuth [rad, from north clockwise, in [0, 2 pi)], elevation [rad].
+def razel_itrs(r_itrs_km: ArrayLike, station: Station) -> Array:
+    """[range km, azimuth rad in [0, 2 pi), elevation rad] (..., 3) of ITRF positions."""
+    rho = np.asarray(r_itrs_km, float)[..., :3] - station.itrs
+    enu = rho @ enu_matrix(station.lat_rad, station.lon_rad).T
+    return np.stack(_enu_to_razel(enu), -1)
 
-    ``r_ecef_km``: target ECEF position(s), shape (..., 3). Returns three arrays of shape (...).
+
+def razel_gcrs(x_gcrs: ArrayLike, t_unix: ArrayLike, station: Station,
+               eop: eop_.EarthOrientation | None = None) -> Array:
+    """[range km, az rad, el rad] (..., 3) of GCRF target(s) (..., 3 or 6) seen from `station`.
+
+    Geometric (the target where it is at ``t_unix``; see `lighttime` for where it was when
+    the light left it). ``t_unix`` is a scalar or broadcasts against the leading axes.
     """
-    rho = np.asarray(r_ecef_km, float)[..., :3] - site_ecef(lat_rad, lon_rad, alt_km)
-    enu = rho @ enu_matrix(lat_rad, lon_rad).T
-    return _enu_to_razel(enu)
+    r = gcrs_to_itrs(np.asarray(x_gcrs, float)[..., :3], t_unix, eop)
+    return razel_itrs(r, station)
 
 
-def razel_eci(x_eci: ArrayLike, jd_utc: ArrayLike, station: Station) -> NDArray[np.float64]:
-    """[range km, az rad, el rad] (..., 3) of ECI target(s) ``x_eci`` ((..., 3) or (..., 6)).
+def radec_gcrs(x_gcrs: ArrayLike, t_unix: ArrayLike, station: Station,
+               eop: eop_.EarthOrientation | None = None) -> Array:
+    """Astrometric [ra rad in [0, 2 pi), dec rad] (..., 2) of GCRF target(s) from `station`.
 
-    ``jd_utc`` (UTC Julian date) is a scalar or broadcasts against the leading axes of ``x_eci``.
+    The direction of ``r - r_site(t)`` in the GCRF, no aberration (module docstring).
     """
-    r_ecef = eci_to_ecef(np.asarray(x_eci, float)[..., :3], jd_utc)
-    rng, az, el = razel(r_ecef, station.lat_rad, station.lon_rad, station.alt_km)
-    return np.stack([rng, az, el], -1)
+    x = np.asarray(x_gcrs, float)[..., :3]
+    t = np.broadcast_to(np.asarray(t_unix, dtype=float), x.shape[:-1])
+    rho = x - site_gcrs(station, t, eop)
+    ra = cast(Array, wrap_2pi(np.arctan2(rho[..., 1], rho[..., 0])))
+    dec = np.arctan2(rho[..., 2], np.hypot(rho[..., 0], rho[..., 1]))
+    return np.stack([ra, dec], -1)
 
 
-def razel_partials_enu(enu: NDArray[np.float64]) -> NDArray[np.float64]:
+def razel_partials_enu(enu: Array) -> Array:
     """Analytic d[range, az, el]/d[e, n, u] (3, 3) at the topocentric ENU vector ``enu`` (3,)."""
     e, n, u = float(enu[0]), float(enu[1]), float(enu[2])
     h2 = e * e + n * n
@@ -176,21 +464,24 @@ def razel_partials_enu(enu: NDArray[np.float64]) -> NDArray[np.float64]:
     )
 
 
-def razel_jacobian_eci(x_eci6: ArrayLike, jd_utc: float, station: Station) -> NDArray[np.float64]:
-    """Analytic Jacobian d[range, az, el]/d[x_eci] (3, 6) (velocity columns are zero).
+def razel_jacobian_gcrs(x_gcrs6: ArrayLike, t_unix: float, station: Station,
+                        eop: eop_.EarthOrientation | None = None) -> Array:
+    """Analytic Jacobian d[range, az, el]/d[x_gcrs] (3, 6) (velocity columns are zero).
 
-    ``x_eci6``: ECI state (6,) [km, km/s] (or position (3,), still giving (3, 6)).
     Singular at the station's zenith (azimuth undefined), as for any RAE sensor.
     """
-    x = np.asarray(x_eci6, float)
+    x = np.asarray(x_gcrs6, float)
     m = enu_matrix(station.lat_rad, station.lon_rad)
-    t = m @ _rot_z(earth_rotation_angle(jd_utc))
-    enu = t @ x[:3] - m @ site_ecef(station.lat_rad, station.lon_rad, station.alt_km)
+    t = m @ gcrs_to_itrs_matrix(float(t_unix), eop)
+    enu = t @ x[:3] - m @ station.itrs
     jac = np.zeros((3, 6))
     jac[:, :3] = razel_partials_enu(enu) @ t
     return jac
 
 
+# --------------------------------------------------------------------------------------------
+# Angles
+# --------------------------------------------------------------------------------------------
 def wrap_angle(a: float | ArrayLike) -> NDArray[np.float64] | float:
     """Wrap angle(s) into (-pi, pi] (residuals: the EKF innovation).
 

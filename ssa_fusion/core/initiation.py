@@ -37,8 +37,9 @@ from .constants import MU_EARTH, R_EARTH
 from .measurement import MeasurementModel, PositionModel, RadecModel, RazelModel, StationModels
 from .types import Cause, Measurement, Source
 
-Placeholder = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
-"""Placeholder dynamics ``f(x, dt) -> (x_new, F)``: the state ``dt`` s later and its Jacobian."""
+Placeholder = Callable[[np.ndarray, float, float], tuple[np.ndarray, np.ndarray]]
+"""Placeholder dynamics ``f(x, dt, t0) -> (x_new, F)``: the state ``dt`` s after its epoch
+``t0`` (s on the measurements' clock, Unix s for orbits) and its Jacobian."""
 
 
 def earth_orbit_problem(x: np.ndarray) -> str:
@@ -139,7 +140,7 @@ class OrbitInitiator:
                 t_init, x0, P_iod = self.solve(batch)
                 P0 = P_iod + np.diag(np.asarray(p0_sigma, dtype=float) ** 2)
                 if t_last != t_init:  # Herrick-Gibbs solves at the middle epoch: move on
-                    x0, F = self.f(x0, t_last - t_init)
+                    x0, F = self.f(x0, t_last - t_init, t_init)
                     P0 = F @ P0 @ F.T
         except (ValueError, OverflowError, FloatingPointError, ZeroDivisionError,
                 np.linalg.LinAlgError) as exc:  # geometry no orbit fits (never raised on)
@@ -183,12 +184,11 @@ class OrbitInitiator:
 
             if isinstance(model, RazelModel):
                 def solve(zs: np.ndarray) -> np.ndarray:
-                    r = iod.razel_to_eci(zs[i3], station.jd0_utc + t3 / 86400.0,
-                                         station.station)
+                    r = iod.razel_to_gcrs(zs[i3], station.unix0 + t3, station.station)
                     v2 = iod.herrick_gibbs(r[0], r[1], r[2], t3[0], t3[1], t3[2])
                     return np.concatenate([r[1], v2])
             else:
-                sites = np.array([station.site_eci(ti) for ti in t3])
+                sites = np.array([station.site_gcrs(ti) for ti in t3])
 
                 def solve(zs: np.ndarray) -> np.ndarray:
                     r2, v2 = iod.gauss_angles_only(t3, zs[i3, 0], zs[i3, 1], sites)

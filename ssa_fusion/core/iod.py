@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .constants import MU_EARTH
-from .frames import Station, ecef_to_eci, enu_matrix, site_ecef
+from .frames import Station, enu_matrix, itrs_to_gcrs
 from .kepler import propagate
 
 Array = NDArray[np.float64]
@@ -92,18 +92,17 @@ def finite_difference_state(t_s: ArrayLike, r: ArrayLike) -> Array:
     return np.concatenate([rr[-1], w @ rr])
 
 
-def razel_to_eci(z: ArrayLike, jd_utc: ArrayLike, station: Station) -> Array:
-    """[range km, az rad, el rad] (..., 3) seen from ``station`` -> ECI position (..., 3) km.
+def razel_to_gcrs(z: ArrayLike, t_unix: ArrayLike, station: Station) -> Array:
+    """[range km, az rad, el rad] (..., 3) seen from ``station`` -> GCRF position (..., 3) km.
 
-    Inverse of :func:`ssa_fusion.core.frames.razel_eci` (same frame conventions).
+    At Unix (UTC) epochs ``t_unix``; the inverse of :func:`ssa_fusion.core.frames.razel_gcrs`.
     """
     zz = np.asarray(z, float)
     rng, az, el = zz[..., 0], zz[..., 1], zz[..., 2]
     ce = np.cos(el)
     enu = np.stack([rng * ce * np.sin(az), rng * ce * np.cos(az), rng * np.sin(el)], -1)
     m = enu_matrix(station.lat_rad, station.lon_rad)
-    r_ecef = enu @ m + site_ecef(station.lat_rad, station.lon_rad, station.alt_km)
-    return ecef_to_eci(r_ecef, jd_utc)
+    return itrs_to_gcrs(enu @ m + station.itrs, t_unix)
 
 
 def radec_los(ra_rad: ArrayLike, dec_rad: ArrayLike) -> Array:

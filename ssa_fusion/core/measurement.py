@@ -1,7 +1,7 @@
 """Measurement models h(x) and their Jacobians H for the EKF (hot path: keep them cheap).
 
 Every model exposes ``kind``, ``angle_mask``, ``h(x, t_s)``, ``H(x, t_s)`` and
-``h_and_H(x, t_s) -> (z, H)``. States are ECI [km, km/s] for orbits (or any state vector for
+``h_and_H(x, t_s) -> (z, H)``. States are GCRF [km, km/s] for orbits (or any state vector for
 :class:`PositionModel`); ``t_s`` is seconds since the model's reference epoch (the
 measurement's reception epoch at the station).
 
@@ -21,7 +21,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .constants import C_KM_S
-from .frames import ERA_RATE, Station, earth_rotation_angle, enu_matrix, site_ecef, wrap_2pi
+from .frames import Station, enu_matrix, gcrs_to_itrs_matrix1, wrap_2pi
+from .timescales import DAY_S, UNIX_EPOCH_JD
 from .types import Kind
 
 
@@ -73,63 +74,67 @@ class PositionModel:
 
 
 class _StationModel:
-    """What the two station models share: the station, the reference epoch, light time."""
+    """What the two station models share: the station, the reference epoch, light time.
+
+    The GCRF -> ITRF rotation at each epoch is `frames.gcrs_to_itrs_matrix1` (IERS 2010, the
+    default EOP); with ``T = M G`` (M: ITRF -> ENU of the station) the topocentric vector of
+    a GCRF position p is ``T p - M r_site``.
+    """
 
     def __init__(self, station: Station, jd0_utc: float, light_time: bool = False) -> None:
         self.station = station
         self.jd0_utc = float(jd0_utc)
         self.light_time = bool(light_time)
-        self._era0 = float(earth_rotation_angle(self.jd0_utc))
-        m = enu_matrix(station.lat_rad, station.lon_rad)
-        self._site_ecef = site_ecef(station.lat_rad, station.lon_rad, station.alt_km)
-        s = m @ self._site_ecef
-        self._m = [[float(v) for v in row] for row in m]
-        self._s = [float(v) for v in s]
+        self.unix0 = (self.jd0_utc - UNIX_EPOCH_JD) * DAY_S
+        """Unix time (s) of ``t_s = 0``."""
+        self._m = enu_matrix(station.lat_rad, station.lon_rad)
+        self._site_itrs = station.itrs
+        self._site_enu = self._m @ self._site_itrs
 
-    def _position(self, x: NDArray[np.float64], rho: float) -> tuple[float, float, float, float]:
-        """Return (x, y, z) of the object when the light left it (km), and tau (s).
+    def _position(self, x: NDArray[np.float64], rho: float) -> tuple[NDArray[np.float64], float]:
+        """Return the GCRF position (3,) of the object when the light left it (km), and tau (s).
 
         ``rho`` is the range (km) the delay is computed from; tau = 0 without light time or
         without a velocity in the state.
         """
-        x0, x1, x2 = float(x[0]), float(x[1]), float(x[2])
         if not self.light_time or len(x) < 6:
-            return x0, x1, x2, 0.0
+            return x[:3], 0.0
         tau = rho / C_KM_S
-        return x0 - tau * float(x[3]), x1 - tau * float(x[4]), x2 - tau * float(x[5]), tau
+        return x[:3] - tau * x[3:6], tau
 
     @staticmethod
-    def _jacobian(rows: tuple[tuple[float, float, float], ...], los: tuple[float, ...],
+    def _jacobian(rows: NDArray[np.float64], los: NDArray[np.float64],
                   x: NDArray[np.float64], tau: float) -> NDArray[np.float64]:
-        """Return the (m, 6) Jacobian from d z / d r at the retarded position (`rows`).
+        """Return the (m, 6) Jacobian from d z / d r at the retarded position (`rows` (m, 3)).
 
         With light time (tau > 0) the retarded position is ``r - tau v`` with
-        ``tau = |rho| / c``: d/dr = I - v los^T / c (`los`: ECI unit line of sight),
+        ``tau = |rho| / c``: d/dr = I - v los^T / c (`los`: GCRF unit line of sight),
         d/dv = -tau I.
         """
+        out = np.zeros((rows.shape[0], 6))
         if tau == 0.0:
-            return np.array([[*row, 0.0, 0.0, 0.0] for row in rows])
-        v0, v1, v2 = float(x[3]), float(x[4]), float(x[5])
-        l0, l1, l2 = (float(v) / C_KM_S for v in los)
-        out = []
-        for a, b, c in rows:
-            hv = a * v0 + b * v1 + c * v2
-            out.append([a - hv * l0, b - hv * l1, c - hv * l2, -tau * a, -tau * b, -tau * c])
-        return np.array(out)
+            out[:, :3] = rows
+            return out
+        hv = rows @ x[3:6]
+        out[:, :3] = rows - np.outer(hv, los / C_KM_S)
+        out[:, 3:] = -tau * rows
+        return out
 
-    def site_eci(self, t_s: float) -> NDArray[np.float64]:
-        """Return the station's ECI position (3,) km at ``t_s``."""
-        th = self._era0 + ERA_RATE * float(t_s)
-        c, s = math.cos(th), math.sin(th)
-        e = self._site_ecef
-        return np.array([c * e[0] - s * e[1], s * e[0] + c * e[1], e[2]])
+    def gcrs_to_itrs(self, t_s: float) -> NDArray[np.float64]:
+        """Return the GCRF -> ITRF rotation (3, 3) at ``t_s`` s after jd0."""
+        return gcrs_to_itrs_matrix1(self.unix0 + float(t_s))
+
+    def site_gcrs(self, t_s: float) -> NDArray[np.float64]:
+        """Return the station's GCRF position (3,) km at ``t_s`` s after jd0."""
+        out: NDArray[np.float64] = self._site_itrs @ self.gcrs_to_itrs(t_s)
+        return out
 
     def H(self, x: NDArray[np.float64], t_s: float) -> NDArray[np.float64]:
         """Analytic Jacobian d z / d x (m, 6)."""
         return self.h_and_H(x, t_s)[1]
 
     def h(self, x: NDArray[np.float64], t_s: float) -> NDArray[np.float64]:
-        """Predicted measurement of ECI state ``x`` at ``t_s`` s after jd0."""
+        """Predicted measurement of GCRF state ``x`` at ``t_s`` s after jd0."""
         return self.h_and_H(x, t_s)[0]
 
     def h_and_H(
@@ -139,81 +144,56 @@ class _StationModel:
 
 
 class RazelModel(_StationModel):
-    """Range/azimuth/elevation of an ECI state seen from a ground station.
+    """Range/azimuth/elevation of a GCRF state seen from a ground station.
 
     Parameters
     ----------
     station
-        Observer (WGS-84 geodetic).
+        Observer (WGS-84 geodetic, ITRF).
     jd0_utc
         Reference epoch (UTC Julian date); ``t_s`` arguments are seconds since it.
     light_time
         See the object where it was ``range / c`` earlier (module docstring).
 
-    ``h`` returns [range km, az rad in [0, 2 pi), el rad]; ``H`` is the analytic (3, 6)
-    Jacobian w.r.t. the ECI state (velocity columns zero without light time). Same frame
-    conventions as :mod:`ssa_fusion.core.frames` (ECEF = ECI rotated by the Earth rotation
-    angle).
+    ``h`` returns [range km, az rad in [0, 2 pi), el rad] (geometric elevation: no
+    refraction); ``H`` is the analytic (3, 6) Jacobian w.r.t. the GCRF state (velocity
+    columns zero without light time). Frames as :mod:`ssa_fusion.core.frames`.
     """
 
     kind = Kind.RANGE_AZ_EL
     angle_mask = (False, True, True)
 
-    def _enu(self, p: tuple[float, float, float], t_s: float) -> tuple[float, ...]:
-        th = self._era0 + ERA_RATE * float(t_s)
-        c, s = math.cos(th), math.sin(th)
-        x0, x1, x2 = p
-        (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = self._m
-        # T = M R3(th): ECI -> ENU rotation (m02 == 0 for ENU)
-        t00, t01 = m00 * c - m01 * s, m00 * s + m01 * c
-        t10, t11 = m10 * c - m11 * s, m10 * s + m11 * c
-        t20, t21 = m20 * c - m21 * s, m20 * s + m21 * c
-        e = t00 * x0 + t01 * x1 + m02 * x2 - self._s[0]
-        n = t10 * x0 + t11 * x1 + m12 * x2 - self._s[1]
-        u = t20 * x0 + t21 * x1 + m22 * x2 - self._s[2]
-        return e, n, u, t00, t01, m02, t10, t11, m12, t20, t21, m22
-
-    @staticmethod
-    def _z(e: float, n: float, u: float) -> tuple[float, float, float, float, float]:
-        h2 = e * e + n * n
-        h = math.sqrt(h2)
-        r2 = h2 + u * u
-        az = float(wrap_2pi(math.atan2(e, n)))
-        return math.sqrt(r2), az, math.atan2(u, h), h2, r2
-
     def h_and_H(
         self, x: NDArray[np.float64], t_s: float
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """``(h(x, t_s), H(x, t_s))`` in one call (EKF hot path)."""
-        p0, p1, p2, tau = self._position(x, 0.0)
+        x = np.asarray(x, dtype=float)
+        T = self._m @ self.gcrs_to_itrs(t_s)  # GCRF -> ENU
+        p, tau = self._position(x, 0.0)
+        enu = T @ p - self._site_enu
         if self.light_time:
-            e, n, u = self._enu((p0, p1, p2), t_s)[:3]
-            p0, p1, p2, tau = self._position(x, math.sqrt(e * e + n * n + u * u))
-        e, n, u, t00, t01, t02, t10, t11, t12, t20, t21, t22 = self._enu((p0, p1, p2), t_s)
-        r, az, el, h2, r2 = self._z(e, n, u)
+            p, tau = self._position(x, math.sqrt(float(enu @ enu)))
+            enu = T @ p - self._site_enu
+        e, n, u = float(enu[0]), float(enu[1]), float(enu[2])
+        h2 = e * e + n * n
         h = math.sqrt(h2)
-        # d[r, az, el]/d[e, n, u]
-        a0, a1, a2 = e / r, n / r, u / r
-        b0, b1 = n / h2, -e / h2
+        r2 = h2 + u * u
+        r = math.sqrt(r2)
         k = -u / (h * r2)
-        c0, c1, c2 = k * e, k * n, h / r2
-        rows = (
-            (a0 * t00 + a1 * t10 + a2 * t20, a0 * t01 + a1 * t11 + a2 * t21,
-             a0 * t02 + a1 * t12 + a2 * t22),
-            (b0 * t00 + b1 * t10, b0 * t01 + b1 * t11, b0 * t02 + b1 * t12),
-            (c0 * t00 + c1 * t10 + c2 * t20, c0 * t01 + c1 * t11 + c2 * t21,
-             c0 * t02 + c1 * t12 + c2 * t22),
-        )
-        return np.array([r, az, el]), self._jacobian(rows, rows[0], x, tau)
+        D = np.array([[e / r, n / r, u / r], [n / h2, -e / h2, 0.0], [k * e, k * n, h / r2]])
+        rows = D @ T
+        z = np.array([r, float(wrap_2pi(math.atan2(e, n))), math.atan2(u, h)])
+        return z, self._jacobian(rows, rows[0], x, tau)
 
 
 class RadecModel(_StationModel):
-    """Topocentric right ascension / declination of an ECI state seen from a ground station.
+    """Astrometric right ascension / declination of a GCRF state seen from a ground station.
 
-    The optical sensor's measurement: the direction of ``rho = r - r_site`` in the ECI frame,
-    ``ra = atan2(rho_y, rho_x)`` in [0, 2 pi), ``dec = atan2(rho_z, hypot(rho_x, rho_y))``.
-    Same parameters as `RazelModel`; ``H`` is the analytic (2, 6) Jacobian (velocity
-    columns zero without light time). Singular at the celestial poles (ra undefined).
+    The optical sensor's measurement: the direction of ``rho = r - r_site`` in the GCRF (no
+    aberration; `frames`), ``ra = atan2(rho_y, rho_x)`` in [0, 2 pi),
+    ``dec = atan2(rho_z, hypot(rho_x, rho_y))``. Same parameters as `RazelModel`; ``H`` is the
+    analytic (2, 6) Jacobian (velocity columns zero without light time). Singular at the
+    celestial poles (ra undefined).
     """
 
     kind = Kind.RA_DEC
@@ -223,20 +203,20 @@ class RadecModel(_StationModel):
         self, x: NDArray[np.float64], t_s: float
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """``(h(x, t_s), H(x, t_s))`` in one call (EKF hot path)."""
-        site = self.site_eci(t_s)
-        p0, p1, p2, tau = self._position(x, 0.0)
+        x = np.asarray(x, dtype=float)
+        site = self.site_gcrs(t_s)
+        p, tau = self._position(x, 0.0)
         if self.light_time:
-            rho = math.dist((p0, p1, p2), (float(site[0]), float(site[1]), float(site[2])))
-            p0, p1, p2, tau = self._position(x, rho)
-        dx, dy, dz = p0 - float(site[0]), p1 - float(site[1]), p2 - float(site[2])
+            p, tau = self._position(x, float(np.linalg.norm(p - site)))
+        dx, dy, dz = (float(v) for v in p - site)
         h2 = dx * dx + dy * dy
         h = math.sqrt(h2)
         r2 = h2 + dz * dz
-        ra = float(wrap_2pi(math.atan2(dy, dx)))
-        dec = math.atan2(dz, h)
-        rows = ((-dy / h2, dx / h2, 0.0), (-dz * dx / (h * r2), -dz * dy / (h * r2), h / r2))
         r = math.sqrt(r2)
-        return np.array([ra, dec]), self._jacobian(rows, (dx / r, dy / r, dz / r), x, tau)
+        rows = np.array([[-dy / h2, dx / h2, 0.0],
+                         [-dz * dx / (h * r2), -dz * dy / (h * r2), h / r2]])
+        z = np.array([float(wrap_2pi(math.atan2(dy, dx))), math.atan2(dz, h)])
+        return z, self._jacobian(rows, np.array([dx / r, dy / r, dz / r]), x, tau)
 
 
 StationModel = RazelModel | RadecModel

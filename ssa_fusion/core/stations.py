@@ -6,7 +6,7 @@ ids to their sites (`frames.Station`; the nodes' ``station`` parameter takes the
 `NETWORKS` key); `SENSORS` maps sensor presets to what the sensor there measures, how well,
 above which elevation and how often during a pass. Live and recorded measurements are stamped
 in Unix seconds (UTC; ROS time under sim time too), so a station's measurement model has its
-reference epoch at `UNIX_EPOCH_JD`.
+reference epoch at `timescales.UNIX_EPOCH_JD`.
 
 Sites of the network are real, publicly documented tracking sites; coordinates are rounded
 to about 0.01 deg (~1 km) from the public descriptions cited with each, which is more than
@@ -25,14 +25,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .constants import ARCSEC
 from .frames import COLUMBUS, Station
 from .types import Kind
-
-UNIX_EPOCH_JD = 2440587.5
-"""Julian date of 1970-01-01T00:00:00 UTC; jd = UNIX_EPOCH_JD + t_unix / 86400."""
-
-ARCSEC = math.pi / (180.0 * 3600.0)
-"""One arc second, rad."""
 
 
 class SensorType(enum.StrEnum):

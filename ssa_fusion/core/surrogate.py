@@ -58,9 +58,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .frames import razel_eci, wrap_pi
+from .frames import razel_gcrs, wrap_pi
 from .hankel_dmd import HankelDMD, psd_part
-from .iod import razel_to_eci
+from .iod import razel_to_gcrs
 from .measurement import RazelModel
 from .types import Cause, Kind, Measurement, Source
 from .validation import OK, Problem, measurement_problem, razel_possible
@@ -134,7 +134,7 @@ class SurrogateConfig:
 
 
 class EciLift:
-    """Range/az/el from a known station <-> the ECI position it implies (km).
+    """Range/az/el from a known station <-> the GCRF position it implies (km).
 
     `model` is the tracker's `RazelModel` (station and reference epoch); times are on its
     clock (s since `model.jd0_utc`).
@@ -143,17 +143,17 @@ class EciLift:
     def __init__(self, model: RazelModel) -> None:
         self.model = model
 
-    def _jd(self, t: np.ndarray) -> np.ndarray:
-        """UTC Julian dates of epochs ``t`` (s since ``model.jd0_utc``)."""
-        return self.model.jd0_utc + np.asarray(t, dtype=float) / 86400.0
+    def _unix(self, t: np.ndarray) -> np.ndarray:
+        """Unix (UTC) epochs of ``t`` (s since ``model.jd0_utc``)."""
+        return self.model.unix0 + np.asarray(t, dtype=float)
 
     def forward(self, z: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """(..., 3) range/az/el at epochs t (...) -> (..., 3) ECI positions, km."""
-        return razel_to_eci(z, self._jd(t), self.model.station)
+        """(..., 3) range/az/el at epochs t (...) -> (..., 3) GCRF positions, km."""
+        return razel_to_gcrs(z, self._unix(t), self.model.station)
 
     def to_measurement(self, r: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """(..., 3) ECI positions at epochs t (...) -> (..., 3) range/az/el (km, rad, rad)."""
-        return razel_eci(r, self._jd(t), self.model.station)
+        """(..., 3) GCRF positions at epochs t (...) -> (..., 3) range/az/el (km, rad, rad)."""
+        return razel_gcrs(r, self._unix(t), self.model.station)
 
     def residual(self, z: np.ndarray, t: np.ndarray) -> Callable[..., np.ndarray]:
         """Return the error function, in range/az/el, of lifted predictions of samples ``z``.

@@ -7,7 +7,7 @@ adds the radar's noise: one array of measurements for the whole catalog, in epoc
 size when no real one of that size is at hand).
 
 Units and frames as in the rest of the core: epochs Unix seconds (UTC), range km, azimuth
-(from north, clockwise, [0, 2π)) and elevation rad, states ECI (= SGP4's TEME) km, km/s.
+(from north, clockwise, [0, 2π)) and elevation rad, states GCRF km, km/s.
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ from numpy.typing import NDArray
 from sgp4.api import WGS72, Satrec
 
 from .catalog import CatalogEntry, catalog_states
-from .frames import razel_eci
-from .stations import UNIX_EPOCH_JD, Sensor, SensorType
+from .frames import razel_gcrs
+from .stations import Sensor, SensorType
 
 SGP4_EPOCH_JD = 2433281.5
 """Julian date of SGP4's epoch origin (1949 December 31 00:00 UTC), for `Satrec.sgp4init`."""
@@ -104,7 +104,7 @@ def observe_catalog(entries: Sequence[CatalogEntry], sensors: Sequence[Sensor], 
         for i in range(0, t_all.size, step):
             t = t_all[i:i + step]
             x = catalog_states(entries, t).x  # (N, T, 6)
-            rae = razel_eci(x, UNIX_EPOCH_JD + t / 86400.0, sensor.station)  # (N, T, 3)
+            rae = razel_gcrs(x, t, sensor.station)  # (N, T, 3)
             with np.errstate(invalid="ignore"):
                 up = (rae[..., 2] >= sensor.min_elevation(rae[..., 1])) \
                     & np.isfinite(rae).all(-1)

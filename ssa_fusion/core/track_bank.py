@@ -131,9 +131,11 @@ class TrackBank:
         """Return the number of objects heard of."""
         return len(self.object_ids)
 
-    def _placeholder(self, x: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """Propagate one state by the motion model: (x, F) `dt` s later (for the IOD)."""
-        x1, F, _ = self.ekf.propagate(np.asarray(x, dtype=float)[None], np.array([dt]))
+    def _placeholder(self, x: np.ndarray, dt: float,
+                     t0: float) -> tuple[np.ndarray, np.ndarray]:
+        """Propagate one state at `t0` by the motion model: (x, F) `dt` s later (for the IOD)."""
+        x1, F, _ = self.ekf.propagate(np.asarray(x, dtype=float)[None], np.array([dt]),
+                                      np.array([t0]))
         return x1[0], F[0]
 
     def row(self, object_id: str) -> int:

@@ -218,7 +218,7 @@ class Tracker:
 
         x by the placeholder model, P = F P F^T + Q; the tracker is not changed.
         """
-        x, F = self.f(e.x, t - e.t)
+        x, F = self.f(e.x, t - e.t, e.t)
         P = F @ e.P @ F.T + self._Q(t - e.t)
         P = bound_covariance(x, 0.5 * (P + P.T), self.config.sigma_bound)
         return StateEstimate(t, x, P, e.object_id, 0, 0.0)
@@ -286,7 +286,7 @@ class Tracker:
         try:
             with np.errstate(over="raise", invalid="raise"):
                 if dt != 0.0:
-                    ekf.predict(lambda x: self.f(x, dt), self._Q(dt))
+                    ekf.predict(lambda x: self.f(x, dt, before.t), self._Q(dt))
                     if self.config.sigma_bound:
                         ekf.P = bound_covariance(ekf.x, ekf.P, self.config.sigma_bound)
                         ekf.P_prior = ekf.P.copy()

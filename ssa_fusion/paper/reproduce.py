@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ssa_fusion.core.hankel_dmd import HankelDMD
-from ssa_fusion.core.iod import razel_to_eci
+from ssa_fusion.core.iod import razel_to_gcrs
 from ssa_fusion.paper import distributions, experiments, scenarios, sky, sky_study
 from ssa_fusion.paper.simulate import simulate
 
@@ -153,7 +153,7 @@ def consistency_study(s: scenarios.Scenario, seeds: int, retrain_steps: int) -> 
         sim = simulate(s, seed)
         Z = sim.z
         if s.lift == "eci":
-            Z = razel_to_eci(Z, s.jd0 + sim.t / 86400.0, scenarios.station(s))
+            Z = razel_to_gcrs(Z, s.unix0 + sim.t, scenarios.station(s))
         g0 = int(np.flatnonzero(sim.in_gap)[0])
         m = HankelDMD(s.delays, s.rank).fit(Z[g0 - n_train:g0].T)
         e_one.append(m.forecast(H).T - Z[g0:g0 + H])

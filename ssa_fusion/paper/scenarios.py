@@ -17,11 +17,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ssa_fusion.core import config, dynamics
+from ssa_fusion.core import config, dynamics, frames
 from ssa_fusion.core.config import EstimatorConfig, Lift, MotionModel
 from ssa_fusion.core.frames import Station
 from ssa_fusion.core.measurement import PositionModel, RazelModel
-from ssa_fusion.core.stations import STATIONS, UNIX_EPOCH_JD
+from ssa_fusion.core.stations import STATIONS
+from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
 from ssa_fusion.core.tracker import TrackerConfig
 from ssa_fusion.core.types import Kind
@@ -29,7 +30,7 @@ from ssa_fusion.core.types import Kind
 ORBIT_EPOCH_UNIX = 1735689600.0
 """2025-01-01T00:00:00 UTC: epoch of the orbit scenarios' initial elements."""
 
-Placeholder = Callable[[np.ndarray, float], tuple[np.ndarray, np.ndarray]]
+Placeholder = Callable[[np.ndarray, float, float], tuple[np.ndarray, np.ndarray]]
 
 ORBIT_TRUTHS = ("j2", "drag", "two_body", "sgp4")
 """True dynamics that are Earth orbits."""
@@ -117,6 +118,11 @@ class Scenario:
     def jd0(self) -> float:
         """UTC Julian date of t = 0 of the clock this scenario's times are on."""
         return UNIX_EPOCH_JD if self.is_orbit else 0.0
+
+    @property
+    def unix0(self) -> float:
+        """Unix time (s) of t = 0 of this scenario's clock (orbits: 0, the clock is Unix)."""
+        return (self.jd0 - UNIX_EPOCH_JD) * 86400.0
 
     @property
     def gap_start(self) -> float:
@@ -273,13 +279,15 @@ def station(s: Scenario) -> Station | None:
 
 
 def placeholder(s: Scenario) -> Placeholder:
-    """The EKF's model f(x, dt) -> (x1, F): analytic Kepler or a `dynamics` model + STM."""
+    """The EKF's model f(x, dt, t0) -> (x1, F): analytic Kepler or a `dynamics` model + STM."""
     return config.motion(s.estimator())
 
 
 def truth_states(s: Scenario, t: np.ndarray) -> np.ndarray:
     """True states (len(t), n) at times `t` on the scenario clock (t[0] == s.t0)."""
     if s.truth == "sgp4":
-        return dynamics.sgp4_ephemeris(np.array(s.x0), s.jd0 + s.t0 / 86400.0, t - s.t0,
+        return dynamics.sgp4_ephemeris(np.array(s.x0), s.unix0 + s.t0, t - s.t0,
                                        **s.truth_params)
-    return dynamics.propagate(s.truth, np.array(s.x0), t - s.t0, **s.truth_params)
+    pole = frames.pole_frame(s.unix0 + s.t0) if s.is_orbit else None
+    return dynamics.propagate(s.truth, np.array(s.x0), t - s.t0, pole_frame=pole,
+                              **s.truth_params)

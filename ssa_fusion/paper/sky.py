@@ -21,9 +21,9 @@ import numpy as np
 
 from ssa_fusion.core import dynamics, frames, lighttime, visibility
 from ssa_fusion.core.config import EstimatorConfig, MotionModel, make_surrogate, make_tracker
-from ssa_fusion.core.measurement import RadecModel
 from ssa_fusion.core.metrics import chi2_bounds, nees
-from ssa_fusion.core.stations import SENSORS, UNIX_EPOCH_JD, Sensor, SensorType
+from ssa_fusion.core.stations import SENSORS, Sensor, SensorType
+from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
 from ssa_fusion.core.tracker import TrackerConfig
 from ssa_fusion.core.types import Measurement, StateEstimate
@@ -67,7 +67,7 @@ class SkyScenario:
     sensors : tuple of str
         Sensor preset ids (`stations.SENSORS`); their stations form the filter's network.
     x0 : tuple of float
-        True ECI state at `t0`, km, km/s (osculating; SGP4 mean elements are fitted to it).
+        True GCRF state at `t0`, km, km/s (osculating; SGP4 mean elements are fitted to it in TEME).
     bstar : float
         SGP4 drag term of the truth, 1/earth radii.
     t0, duration_s, truth_cadence_s
@@ -156,7 +156,7 @@ SKY_SCENARIOS: dict[str, SkyScenario] = {
 class SkySimulation:
     """Truth on a regular grid and what the sensors measured (or would have, in an outage).
 
-    t, x : (N,), (N, 6) truth epochs (Unix s) and ECI states; measurements : every
+    t, x : (N,), (N, 6) truth epochs (Unix s) and GCRF states; measurements : every
     measurement in epoch order; withheld : (M,) True where a scheduled outage withheld it.
     """
 
@@ -178,19 +178,17 @@ class SkySimulation:
 
 
 def truth(s: SkyScenario, t: np.ndarray) -> np.ndarray:
-    """True ECI states (len(t), 6) at Unix epochs `t` (SGP4 with the scenario's bstar)."""
-    jd0 = UNIX_EPOCH_JD + s.t0 / 86400.0
-    return dynamics.sgp4_ephemeris(np.array(s.x0), jd0, np.asarray(t, float) - s.t0,
+    """True GCRF states (len(t), 6) at Unix epochs `t` (SGP4 with the scenario's bstar)."""
+    return dynamics.sgp4_ephemeris(np.array(s.x0), s.t0, np.asarray(t, float) - s.t0,
                                    bstar=s.bstar)
 
 
 def _visible(sensor: Sensor, t: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Where `sensor` measures the object at epochs `t` with states `x` (N, 6)."""
-    jd = UNIX_EPOCH_JD + t / 86400.0
-    rae = frames.razel_eci(x, jd, sensor.station)
+    rae = frames.razel_gcrs(x, t, sensor.station)
     up = rae[:, 2] >= sensor.min_elevation(rae[:, 1])
     if sensor.type == SensorType.OPTICAL:
-        up &= visibility.station_dark(jd, sensor.station) & visibility.sunlit(x[:, :3], jd)
+        up &= visibility.station_dark(t, sensor.station) & visibility.sunlit(x[:, :3], t)
     return np.asarray(up, dtype=bool)
 
 
@@ -206,12 +204,10 @@ def _observe(s: SkyScenario, sensor: Sensor, rng: np.random.Generator,
     station = sensor.station
     if s.light_time:
         x = lighttime.retarded_states(lambda tt: truth(s, tt), t, station)
-    jd = UNIX_EPOCH_JD + t / 86400.0
     if sensor.type == SensorType.RADAR:
-        z = frames.razel_eci(x, jd, station)
+        z = frames.razel_gcrs(x, t, station)
     else:
-        model = RadecModel(station, UNIX_EPOCH_JD)
-        z = np.array([model.h(xi, ti) for xi, ti in zip(x, t, strict=True)])
+        z = frames.radec_gcrs(x, t, station)
     sigma = np.asarray(sensor.sigma, dtype=float)
     z = z + rng.standard_normal(z.shape) * sigma + np.asarray(sensor.bias or 0.0)
     angle = [1] if sensor.type == SensorType.RADAR else [0]

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from sgp4.api import Satrec, SatrecArray, jday
 
-from ssa_fusion.core import catalog
+from ssa_fusion.core import catalog, timescales
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "config" / "catalogs" / "sample.tle"
@@ -70,7 +70,7 @@ def test_epoch_in_unix_seconds():
     # 2006 day 177.78615833 = 2006-06-26 18:52:04.08 UTC
     expected = dt.datetime(2006, 6, 26, tzinfo=dt.UTC).timestamp() + 0.78615833 * 86400
     assert entry.epoch_unix == pytest.approx(expected, abs=1e-4)
-    jd, fr = catalog.unix_to_jd([entry.epoch_unix])
+    jd, fr = timescales.jd_utc([entry.epoch_unix])
     assert jd[0] == entry.satrec.jdsatepoch
     assert fr[0] == pytest.approx(entry.satrec.jdsatepochF, abs=1e-11)
 
