@@ -147,7 +147,7 @@ def plot_forecasts(data: evaluate.BagData, path: Path) -> None:
     zw = np.array([withheld[m.t] for m in f])
     kind = f[0].kind
     labels = (("range [km]", "azimuth [rad]", "elevation [rad]")
-              if kind == types.Kind.RANGE_AZ_EL else ("x ECI [km]", "y ECI [km]", "z ECI [km]"))
+              if kind == types.Kind.RANGE_AZ_EL else ("x GCRF [km]", "y GCRF [km]", "z GCRF [km]"))
     fig, axes = plt.subplots(zf.shape[1], 1, figsize=(8, 6), sharex=True)
     for i, ax in enumerate(np.atleast_1d(axes)):
         ax.plot((t - t[0]) / 3600.0, zw[:, i], ".", ms=2, label="withheld (sensor)")

@@ -1,7 +1,7 @@
 """`report.html` of a bag: one self-contained, interactive page (Plotly, its JavaScript
 inlined, so it opens offline and can be mailed as one file).
 
-Figures: the orbit in 3D (truth and the filter's estimates, ECI km, the gap highlighted);
+Figures: the orbit in 3D (truth and the filter's estimates, GCRF km, the gap highlighted);
 the ground tracks of truth and estimate with the run's stations and the visibility circle of
 each station's elevation mask (longitude/latitude, deg);
 each arm's position error over the gap with its ±3σ; the surrogate's forecasts against the
@@ -37,7 +37,7 @@ COLORS = {ArmName.PLACEHOLDER: "#7f7f7f", ArmName.COAST: "#1f77b4",
 AXIS_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c")
 """Colours of the x, y, z components."""
 MEASUREMENT_LABELS = {
-    types.Kind.POSITION: ("x ECI [km]", "y ECI [km]", "z ECI [km]"),
+    types.Kind.POSITION: ("x GCRF [km]", "y GCRF [km]", "z GCRF [km]"),
     types.Kind.RANGE_AZ_EL: ("range [km]", "azimuth [rad]", "elevation [rad]"),
     types.Kind.RA_DEC: ("right ascension [rad]", "declination [rad]"),
 }
@@ -78,7 +78,7 @@ def _hours(t: np.ndarray, t0: float) -> np.ndarray:
 
 
 def orbit_3d(data: evaluate.BagData, ev: evaluate.Evaluation) -> go.Figure:
-    """The true orbit and the filter's fused estimates in ECI (km) around the Earth, the
+    """The true orbit and the filter's fused estimates in GCRF (km) around the Earth, the
     truth over the gap drawn thick, and the DMD-EKF arm over the gap."""
     fig = go.Figure()
     u, v = np.mgrid[0:2 * np.pi:37j, 0:np.pi:19j]
@@ -110,9 +110,9 @@ def orbit_3d(data: evaluate.BagData, ev: evaluate.Evaluation) -> go.Figure:
     h = np.cross(data.truth[0].x[:3], data.truth[0].x[3:6])  # look down on the orbit plane
     eye = 1.8 * h / np.linalg.norm(h) + np.array([0.3, 0.3, 0.0])
     fig.update_layout(
-        title="Orbit in ECI (truth, estimates; the gap highlighted)", height=650,
-        scene={"xaxis_title": "x ECI [km]", "yaxis_title": "y ECI [km]",
-               "zaxis_title": "z ECI [km]", "aspectmode": "data",
+        title="Orbit in GCRF (truth, estimates; the gap highlighted)", height=650,
+        scene={"xaxis_title": "x GCRF [km]", "yaxis_title": "y GCRF [km]",
+               "zaxis_title": "z GCRF [km]", "aspectmode": "data",
                "camera": {"eye": dict(zip("xyz", eye.tolist(), strict=True))}},
         legend={"x": 0, "y": 1}, margin={"l": 0, "r": 0, "t": 40, "b": 0})
     return fig
@@ -170,10 +170,10 @@ def _unwrapped(lat_deg: np.ndarray, lon_deg: np.ndarray) -> tuple[np.ndarray, np
 
 
 def _track(states: list[types.StateEstimate]) -> tuple[np.ndarray, np.ndarray]:
-    """Geodetic latitude and longitude (deg) of the sub-satellite points of `states` (ECI
+    """Geodetic latitude and longitude (deg) of the sub-satellite points of `states` (GCRF
     km at their Unix epochs), at most `MAX_POINTS`, broken at the ±180° meridian."""
     k = _thin(len(states))
-    ll = np.array([foxglove_scene.eci_to_geodetic(states[i].x[:3], states[i].t)[:2]
+    ll = np.array([foxglove_scene.gcrs_to_geodetic(states[i].x[:3], states[i].t)[:2]
                    for i in k]).reshape(-1, 2)
     return _unwrapped(np.degrees(ll[:, 0]), np.degrees(ll[:, 1]))
 
@@ -222,7 +222,7 @@ def ground_track(data: evaluate.BagData, stations: list[tuple[Station, float]]) 
 
 
 def arm_errors(ev: evaluate.Evaluation) -> go.Figure:
-    """Per arm, its position error along x, y, z ECI (km) over the gap with ±3σ of its
+    """Per arm, its position error along x, y, z GCRF (km) over the gap with ±3σ of its
     covariance (dashed), against hours into the gap."""
     g = ev.gap
     names = [a for a in ArmName if a in g.arms]

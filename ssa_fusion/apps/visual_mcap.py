@@ -7,7 +7,7 @@ as a scene; this file holds, in Foxglove's own schemas:
 
 * ``/ssa/foxglove/scene`` (`foxglove.SceneUpdate`): the Earth, true and estimated positions
   with their trails, the estimate's 3σ ellipsoid, the run's stations, forecast and
-  measurement points, ECI, one scene unit = 1 km; one update per `scene_period_s` of sim time
+  measurement points, GCRF, one scene unit = 1 km; one update per `scene_period_s` of sim time
   (the bridge sends one per wall-clock period instead);
 * ``/ssa/foxglove/ground_track`` / ``/ssa/foxglove/ground_track_truth``
   (`foxglove.LocationFix`): one per estimate / truth state, WGS-84 latitude and longitude in

@@ -910,7 +910,7 @@ def integrate_stm(model: str, x: ArrayLike, dt: ArrayLike, max_step_s: float = 6
     model : str
         A 6-state `dynamics` model ("two_body", "j2", "drag").
     x : array_like (N, 6)
-        Initial states, ECI km, km/s.
+        Initial states, GCRF km, km/s.
     dt : array_like (N,) or scalar
         Time steps, s (any sign).
     max_step_s : float
@@ -1026,8 +1026,10 @@ class BatchEKF:
 
     # ----------------------------------------------------------------------------------
     def _rotations(self, t: Array) -> tuple[Array, NDArray[np.intp]]:
-        """GCRF -> ITRF rotations at the distinct epochs of ``t`` (s after jd0) and the index
-        of each epoch's: ((k, 3, 3), (len(t),))."""
+        """Return GCRF -> ITRF rotations at the distinct epochs of ``t`` (s after jd0).
+
+        With the index of each epoch's: ((k, 3, 3), (len(t),)).
+        """
         if t.size and bool(np.all(t == t[0])):  # a scan: one epoch
             uniq, inv = t[:1], np.zeros(t.size, dtype=np.intp)
         else:

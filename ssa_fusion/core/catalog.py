@@ -49,7 +49,6 @@ from sgp4.io import LINE1, LINE2, compute_checksum
 from .frames import teme_to_gcrs_matrix
 from .timescales import DAY_S, UNIX_EPOCH_JD, jd_utc
 
-
 _OMM_FIELDS = (
     "OBJECT_ID", "EPOCH", "MEAN_MOTION", "ECCENTRICITY", "INCLINATION", "RA_OF_ASC_NODE",
     "ARG_OF_PERICENTER", "MEAN_ANOMALY", "EPHEMERIS_TYPE", "CLASSIFICATION_TYPE",

@@ -21,10 +21,11 @@ import numpy as np
 
 from . import dynamics, frames, kepler
 from .batch_ekf import integrate_stm
+from .frames import Frame
 from .measurement import MeasurementModel, PositionModel, RadecModel, RazelModel, StationModels
 from .stations import NETWORKS, STATIONS, network_stations
-from .timescales import DAY_S, UNIX_EPOCH_JD
 from .surrogate import EciLift, Surrogate, SurrogateConfig
+from .timescales import DAY_S, UNIX_EPOCH_JD
 from .tracker import Tracker, TrackerConfig
 from .types import KIND_NAMES, Kind
 
@@ -37,7 +38,7 @@ class MotionModel(enum.StrEnum):
     """The EKF's motion model (what the filter predicts with)."""
 
     KEPLER = "kepler"
-    """Analytic two-body (universal variables, `kepler.propagate`), ECI km, km/s."""
+    """Analytic two-body (universal variables, `kepler.propagate`), GCRF km, km/s."""
     J2 = "j2"
     """Two-body + J2, integrated with its state transition matrix (`batch_ekf.integrate_stm`:
     compiled fixed-step DOP853, steps of at most 60 s)."""
@@ -52,7 +53,7 @@ class MotionModel(enum.StrEnum):
 
 
 ORBIT_MODELS = (MotionModel.KEPLER, MotionModel.J2, MotionModel.TWO_BODY)
-"""Motion models of an Earth orbit (ECI states on a UTC clock)."""
+"""Motion models of an Earth orbit (GCRF states on a UTC clock)."""
 
 
 ORBIT_TOLERANCES = {"rtol": 1e-10, "atol": 1e-9}
@@ -65,7 +66,7 @@ class Lift(enum.StrEnum):
     NONE = "none"
     """The measurement itself."""
     ECI = "eci"
-    """Range/az/el lifted to the ECI position it implies (`surrogate.EciLift`)."""
+    """Range/az/el lifted to the inertial (GCRF) position it implies (`surrogate.EciLift`)."""
 
 
 @dataclass
@@ -137,10 +138,10 @@ class EstimatorConfig:
     def frame_id(self) -> str:
         """The frame_id the measurements carry.
 
-        The station id, "" for a network (any of its stations), or "eci" for positions.
+        The station id, "" for a network (any of its stations), or "gcrf" for positions.
         """
         if self.kind == Kind.POSITION:
-            return "eci"
+            return Frame.GCRF
         return "" if self.is_network else self.station
 
     def with_(self, **changes: Any) -> EstimatorConfig:  # noqa: ANN401

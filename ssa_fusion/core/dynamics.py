@@ -38,8 +38,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from sgp4.api import WGS72, Satrec
 
-from .constants import G0, J2, MU_EARTH, MU_EARTH_MOON, OMEGA_EARTH, R_EARTH
 from . import frames
+from .constants import G0, J2, MU_EARTH, MU_EARTH_MOON, OMEGA_EARTH, R_EARTH
 from .frames import wrap_2pi
 from .timescales import UNIX_EPOCH_JD
 
@@ -56,7 +56,7 @@ ISS_ELEMENTS: dict[str, float] = {
     "argp_rad": math.radians(51.197),
     "nu_rad": math.radians(358.89),
 }
-"""ISS osculating elements (paper Table 1); ``elements_to_state(**ISS_ELEMENTS)`` gives ECI km."""
+"""ISS osculating elements (paper Table 1); ``elements_to_state(**ISS_ELEMENTS)`` gives GCRF km."""
 
 MOLNIYA_ELEMENTS: dict[str, float] = {
     "a_km": 26555.94,
@@ -181,7 +181,7 @@ def propagate(
     model
         One of "two_body", "j2", "drag", "cr3bp", "pendulum", "vdp" (see module docstring).
     x0
-        Initial state (n,) or a batch (p, n), in the model's units (orbits: ECI km, km/s).
+        Initial state (n,) or a batch (p, n), in the model's units (orbits: GCRF km, km/s).
     t_s
         Monotonic sample times (s; nondimensional time for "cr3bp"); ``t_s[0]`` is x0's epoch.
     rtol, atol

@@ -104,7 +104,7 @@ class EarthOrientation:
         return float(self.t[0]), float(self.t[-1])
 
     def covers(self, t_unix: ArrayLike) -> NDArray[np.bool_]:
-        """True where the table covers the epochs (else the no-EOP values serve)."""
+        """Return True where the table covers the epochs (else the no-EOP values serve)."""
         t = np.asarray(t_unix, dtype=float)
         lo, hi = self.span
         out: NDArray[np.bool_] = (t >= lo) & (t <= hi)
@@ -176,7 +176,7 @@ def read_finals(path: Path | str) -> EarthOrientation:
 
 @functools.cache
 def bundled() -> EarthOrientation:
-    """The IERS finals2000A table shipped by astropy-iers-data (read once per process)."""
+    """Return the IERS finals2000A table of astropy-iers-data (read once per process)."""
     import astropy_iers_data
 
     return read_finals(astropy_iers_data.IERS_A_FILE)
@@ -190,6 +190,6 @@ def _from_env(value: str) -> EarthOrientation:
 
 
 def default() -> EarthOrientation:
-    """The EOP frames use by default: ``SSA_FUSION_EOP`` (none, a file) or the bundled table."""
+    """Return the default EOP: ``SSA_FUSION_EOP`` (none, a file) or the bundled table."""
     value = os.environ.get(EOP_ENV, "").strip()
     return _from_env(value) if value else bundled()

@@ -171,8 +171,10 @@ def gmst82(t_unix: ArrayLike, eop: eop_.EarthOrientation | None = None) -> Array
 
 
 def rot_z(theta: ArrayLike) -> Array:
-    """Frame rotations R3(theta), shape (..., 3, 3) (a vector's coordinates in a frame turned
-    by +theta about z)."""
+    """Return frame rotations R3(theta), shape (..., 3, 3).
+
+    A vector's coordinates in a frame turned by +theta about z.
+    """
     th = np.asarray(theta, dtype=float)
     c, s = np.cos(th), np.sin(th)
     z, o = np.zeros_like(th), np.ones_like(th)
@@ -190,7 +192,7 @@ def gcrs_to_cirs_matrix(t_unix: ArrayLike,
 
 
 def cip_gcrs(t_unix: ArrayLike, eop: eop_.EarthOrientation | None = None) -> Array:
-    """Unit vector of the Celestial Intermediate Pole (the Earth's axis) in the GCRF, (..., 3).
+    """Return the Celestial Intermediate Pole (the Earth's axis), GCRF unit vectors (..., 3).
 
     The axis of the Earth's rotation and, to 0.5" (polar motion), of its figure: the axis
     about which J2 acts.
@@ -257,10 +259,14 @@ def _segment(key: int, eop: eop_.EarthOrientation) -> _Segment:
     return seg
 
 
-def _era_scalar(t_ut1_unix: float) -> float:
-    """`erfa.era00` of UT1 given as Unix-like seconds (UTC stamp + UT1 - UTC), rad."""
-    days = math.floor(t_ut1_unix / 86400.0)
-    frac = (t_ut1_unix - days * 86400.0) / 86400.0
+def _era_scalar(t_unix: float, dut1: float) -> float:
+    """`erfa.era00` of UT1 = the UTC stamp `t_unix` (s) + `dut1` (s), rad.
+
+    The seconds of the day are taken before `dut1` is added: a Unix stamp resolves only
+    0.24 us, 1.7e-11 rad of Earth rotation.
+    """
+    days = math.floor(t_unix / 86400.0)
+    frac = ((t_unix - days * 86400.0) + dut1) / 86400.0
     du = (2440587.5 - J2000_JD + days) + frac
     return TWO_PI * ((frac + 0.5 + 0.7790572732640 + 0.00273781191135448 * du) % 1.0)
 
@@ -274,7 +280,7 @@ def gcrs_to_itrs_matrix1(t_unix: float, eop: eop_.EarthOrientation | None = None
     f = (t_unix - seg.t0) / NODE_S
     q = seg.q0 + f * seg.dq
     w = seg.w0 + f * seg.dw
-    th = _era_scalar(t_unix + seg.dut1 + seg.dut1_rate * (t_unix - seg.t0))
+    th = _era_scalar(t_unix, seg.dut1 + seg.dut1_rate * (t_unix - seg.t0))
     c, s = math.cos(th), math.sin(th)
     rq = np.array([c * q[0] + s * q[1], c * q[1] - s * q[0], q[2]])
     out: Array = w @ rq
@@ -394,7 +400,7 @@ def site_itrs(lat_rad: float, lon_rad: float, alt_km: float) -> Array:
 
 def site_gcrs(station: Station, t_unix: ArrayLike,
               eop: eop_.EarthOrientation | None = None) -> Array:
-    """The station's GCRF position (..., 3), km, at Unix stamps (shape of ``t_unix``)."""
+    """Return the station's GCRF position (..., 3), km, at Unix stamps (shape of ``t_unix``)."""
     t = np.asarray(t_unix, dtype=float)
     return itrs_to_gcrs(np.broadcast_to(station.itrs, (*t.shape, 3)), t, eop)
 

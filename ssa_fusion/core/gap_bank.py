@@ -17,7 +17,7 @@ the bank later than the clock; a forecast for an epoch a real measurement covers
 wrong), and `on_estimate` those due before the estimate that ends the gap. A forecast
 published at or after the epoch of that estimate is counted as ``overtaken``.
 
-Frames and units: ECI km, km/s; times s (sim time, e.g. Unix s); ``fit_budget`` a fraction
+Frames and units: GCRF km, km/s; times s (sim time, e.g. Unix s); ``fit_budget`` a fraction
 of wall time.
 """
 
@@ -86,7 +86,7 @@ class GapBankConfig:
 
 @dataclass(frozen=True)
 class GapForecast:
-    """One forecast of one object: epoch t (s), state x (6,) km, km/s ECI, covariance P (6, 6)."""
+    """One forecast of one object: epoch t (s), state x (6,) km, km/s GCRF, covariance P (6, 6)."""
 
     object_id: str
     t: float
@@ -158,7 +158,7 @@ class GapBank:
                     P: ArrayLike) -> list[GapForecast]:
         """Take an estimate of `object_id` that fused a real measurement.
 
-        Epoch t (s), state x (6,) km, km/s ECI, covariance P (6, 6). Return the forecasts
+        Epoch t (s), state x (6,) km, km/s GCRF, covariance P (6, 6). Return the forecasts
         of the gap it ends that were not yet released (their epochs before t).
         """
         r = self._row(object_id)

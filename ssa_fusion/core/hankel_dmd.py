@@ -1,7 +1,7 @@
 """Hankel dynamic mode decomposition (time-delay DMD) for forecasting measurements.
 
 The surrogate model of the paper (section 2.1): measurements ``z(k)`` (any channels,
-e.g. ECI position in km or range km / azimuth rad / elevation rad) sampled at a fixed
+e.g. GCRF position in km or range km / azimuth rad / elevation rad) sampled at a fixed
 cadence are stacked into a Hankel (time-delay) matrix and a best-fit linear operator
 ``A`` with ``H[:, 1:] ~= A H[:, :-1]`` is identified in a rank-``r`` subspace. Forecasts
 iterate that operator from the *last* Hankel column, so they continue right after the

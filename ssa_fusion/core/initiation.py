@@ -43,7 +43,7 @@ Placeholder = Callable[[np.ndarray, float, float], tuple[np.ndarray, np.ndarray]
 
 
 def earth_orbit_problem(x: np.ndarray) -> str:
-    """Why ECI state `x` (km, km/s) is no Earth orbit a ground station tracks, or "".
+    """Why GCRF state `x` (km, km/s) is no Earth orbit a ground station tracks, or "".
 
     It must lie above the Earth's surface and be bound (specific energy v^2/2 - mu/r < 0):
     a batch with an outlier (a range of 1e6 km among ranges of 1e3) gives neither.

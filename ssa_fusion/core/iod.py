@@ -1,6 +1,6 @@
-"""Initial orbit determination: Gibbs, Herrick-Gibbs, finite differences, RAE -> ECI.
+"""Initial orbit determination: Gibbs, Herrick-Gibbs, finite differences, RAE -> GCRF.
 
-Units km, km/s, s, rad; position vectors are inertial (ECI).
+Units km, km/s, s, rad; position vectors are inertial (GCRF).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ Array = NDArray[np.float64]
 
 
 def gibbs(r1: ArrayLike, r2: ArrayLike, r3: ArrayLike, mu: float = MU_EARTH) -> Array:
-    """Gibbs method: velocity (3,) km/s at ``r2`` from three coplanar ECI positions (km).
+    """Gibbs method: velocity (3,) km/s at ``r2`` from three coplanar GCRF positions (km).
 
     Best for widely separated vectors (angles > ~5 deg); see :func:`herrick_gibbs` otherwise.
     (Curtis, Orbital Mechanics for Engineering Students, Algorithm 5.1.)
@@ -42,7 +42,7 @@ def herrick_gibbs(
     t3: float,
     mu: float = MU_EARTH,
 ) -> Array:
-    """Herrick-Gibbs: velocity (3,) km/s at ``r2`` from three closely spaced ECI positions.
+    """Herrick-Gibbs: velocity (3,) km/s at ``r2`` from three closely spaced GCRF positions.
 
     Times in s. Taylor-series method for small separations (Vallado, Algorithm 55).
     """
@@ -83,7 +83,7 @@ def finite_difference_state(t_s: ArrayLike, r: ArrayLike) -> Array:
 
     Velocity is the derivative of the Lagrange polynomial through the k >= 2 samples at the last
     node (one-sided: k=2 is a backward difference, k=3 second order, ...). Works for any m, e.g.
-    m=3 (ECI position, km -> km/s) or m=1 (pendulum angle).
+    m=3 (GCRF position, km -> km/s) or m=1 (pendulum angle).
     """
     rr = np.asarray(r, float)
     if rr.ndim == 1:
@@ -165,14 +165,14 @@ def gauss_angles_only(t_s: ArrayLike, ra_rad: ArrayLike, dec_rad: ArrayLike,
     Parameters
     ----------
     t_s : (3,) epochs, s (increasing).
-    ra_rad, dec_rad : (3,) topocentric right ascension and declination in the ECI frame, rad.
-    site_eci_km : (3, 3) the observer's ECI position at each epoch, km.
+    ra_rad, dec_rad : (3,) topocentric right ascension and declination in the GCRF frame, rad.
+    site_eci_km : (3, 3) the observer's GCRF position at each epoch, km.
     mu : gravitational parameter, km^3/s^2.
     iterations : differential-correction steps at most (0: Gauss's first estimate).
 
     Returns
     -------
-    r2, v2 : (3,), (3,) ECI position (km) and velocity (km/s) at the middle epoch.
+    r2, v2 : (3,), (3,) GCRF position (km) and velocity (km/s) at the middle epoch.
 
     Raises ValueError when the geometry has no solution (coplanar lines of sight, no
     positive root, a correction that does not converge).

@@ -24,7 +24,7 @@ derivative of :math:`\chi` from Kepler's equation) give the Shepperd-type closed
 with a 4x4 scalar matrix ``M``.  All scalar work is done with :mod:`math` (this sits in the
 EKF hot path); numpy is only used to assemble the 6x6 result.
 
-Units: km, km/s, s; the frame is any inertial frame (ECI).
+Units: km, km/s, s; the frame is any inertial frame (GCRF).
 """
 
 from __future__ import annotations

@@ -32,7 +32,7 @@ class PositionModel:
     Parameters
     ----------
     observed
-        Observed state indices, default (0, 1, 2) (ECI position, km). Use (0,) for a pendulum's
+        Observed state indices, default (0, 1, 2) (GCRF position, km). Use (0,) for a pendulum's
         theta or a Van der Pol oscillator's x.
     """
 

@@ -33,7 +33,7 @@ errors (NEES / 6) scales every later forecast's covariance (never below 1).
 `bopdmd_forecast` is the other variant evaluated: optimized DMD with bagging (PyDMD's
 `BOPDMD`, which accepts any time vector) fitted on the same irregular residual series.
 
-Frames and units: ECI km, km/s; times s (any clock, e.g. Unix s); residual coordinates km and
+Frames and units: GCRF km, km/s; times s (any clock, e.g. Unix s); residual coordinates km and
 km/s in the placeholder trajectory's radial / along-track / cross-track (RTN) frame.
 """
 
@@ -59,7 +59,7 @@ sampled at t (before or after t0, any order)."""
 def orbit_propagator(model: str) -> Propagator:
     """Return a placeholder trajectory as a `Propagator`.
 
-    The placeholder trajectory of `dynamics` model ``"two_body"`` or ``"j2"`` (ECI, km,
+    The placeholder trajectory of `dynamics` model ``"two_body"`` or ``"j2"`` (GCRF, km,
     km/s) as a `Propagator`: integrated backwards and forwards from x0 as needed (epochs in
     any order, repeats included), epoch to epoch, by `batch_ekf.integrate_stm` (fixed-step
     DOP853, steps of at most 60 s, compiled; within ~5e-9 relative of scipy's adaptive
@@ -94,7 +94,7 @@ def orbit_propagator(model: str) -> Propagator:
 def rtn_axes(x_ref: ArrayLike) -> Array:
     """Return the residual frame's axes.
 
-    Unit radial, along-track and cross-track axes (k, 3, 3) of ECI states (k, 6): row 0
+    Unit radial, along-track and cross-track axes (k, 3, 3) of GCRF states (k, 6): row 0
     r/|r|, row 2 the orbit normal h/|h|, row 1 = row 2 x row 0.
     """
     x = np.atleast_2d(np.asarray(x_ref, float))
@@ -125,7 +125,7 @@ def curvilinear(x_ref: ArrayLike, r: ArrayLike) -> Array:
 def from_curvilinear(x_ref: ArrayLike, rho: ArrayLike) -> Array:
     """Return the positions whose curvilinear coordinates are given.
 
-    The ECI positions (k, 3) whose `curvilinear` coordinates about x_ref are rho (k, 3).
+    The GCRF positions (k, 3) whose `curvilinear` coordinates about x_ref are rho (k, 3).
     """
     x = np.atleast_2d(np.asarray(x_ref, float))
     rho = np.atleast_2d(np.asarray(rho, float))
@@ -162,7 +162,7 @@ def _with_rate(fn: Callable[[Array, Array], Array], x_ref: ArrayLike, y: ArrayLi
 def state_residual(x_ref: ArrayLike, x: ArrayLike) -> Array:
     """Return the curvilinear residual of states and its rate.
 
-    Residual (k, 6) of ECI states x against reference states x_ref (both (k, 6)): the
+    Residual (k, 6) of GCRF states x against reference states x_ref (both (k, 6)): the
     `curvilinear` position residual (km) and its rate (km/s).
     """
     return _with_rate(curvilinear, x_ref, x)
@@ -171,7 +171,7 @@ def state_residual(x_ref: ArrayLike, x: ArrayLike) -> Array:
 def apply_residual(x_ref: ArrayLike, res: ArrayLike) -> Array:
     """Return the states whose `state_residual` is given.
 
-    The ECI states (k, 6) whose `state_residual` against x_ref (k, 6) is res (k, 6).
+    The GCRF states (k, 6) whose `state_residual` against x_ref (k, 6) is res (k, 6).
     """
     return _with_rate(from_curvilinear, x_ref, res)
 
@@ -180,7 +180,7 @@ def argument_of_latitude(x: ArrayLike) -> tuple[Array, Array]:
     """Return the argument of latitude and its rate.
 
     Argument of latitude u (rad, from the ascending node) and its rate |h|/|r|^2 (rad/s)
-    of ECI states (k, 6).
+    of GCRF states (k, 6).
     """
     x = np.atleast_2d(np.asarray(x, float))
     r, v = x[:, :3], x[:, 3:]
@@ -454,7 +454,7 @@ class ResidualFit:
     def predict(self, t: ArrayLike) -> tuple[Array, Array]:
         """Forecast states and covariances.
 
-        Forecast states (k, 6) and covariances (k, 6, 6), ECI km, km/s, at epochs t (s):
+        Forecast states (k, 6) and covariances (k, 6, 6), GCRF km, km/s, at epochs t (s):
         the placeholder from the anchor plus the learned residual, covariance = scale x
         formal (`scale_at`; mapped from the residual frame by its axes).
         """
@@ -496,10 +496,10 @@ def design(cfg: ResidualConfig, tau: ArrayLike, x_ref: ArrayLike, period_s: floa
 
 
 def to_eci_covariance(x_ref: ArrayLike, cov: ArrayLike) -> Array:
-    """Map residual-frame covariances to ECI.
+    """Map residual-frame covariances to GCRF.
 
     Covariances (k, 6, 6) of residual-frame errors (position, rate) about x_ref (k, 6)
-    mapped to ECI position and velocity: dr = M rho, dv = M (rho_dot + w x rho), with M the
+    mapped to GCRF position and velocity: dr = M rho, dv = M (rho_dot + w x rho), with M the
     frame's axes and w = (0, 0, |h|/|r|^2) its rotation rate (rad/s) in the frame.
     """
     x_ref = np.atleast_2d(np.asarray(x_ref, float))
@@ -519,7 +519,7 @@ def to_eci_covariance(x_ref: ArrayLike, cov: ArrayLike) -> Array:
 def residual_sigmas(x_ref: ArrayLike, P: ArrayLike, floor: tuple[float, float]) -> Array:
     """Return an estimate's standard deviations along the residual frame.
 
-    Standard deviations (k, 6) of estimates with ECI covariances P (k, 6, 6) along the
+    Standard deviations (k, 6) of estimates with GCRF covariances P (k, 6, 6) along the
     residual frame's axes about x_ref (k, 6), floored at `floor` (km, km/s).
     """
     ax = rtn_axes(x_ref)
@@ -532,7 +532,7 @@ def residual_sigmas(x_ref: ArrayLike, P: ArrayLike, floor: tuple[float, float]) 
 
 
 def period_of(x: ArrayLike) -> float:
-    """Osculating orbital period (s) of an ECI state (6,) (two-body; inf if unbound)."""
+    """Osculating orbital period (s) of an GCRF state (6,) (two-body; inf if unbound)."""
     x = np.asarray(x, float)
     energy = 0.5 * float(x[3:] @ x[3:]) - MU_EARTH / float(np.linalg.norm(x[:3]))
     if energy >= 0.0:
@@ -576,7 +576,7 @@ def fit_residual(cfg: ResidualConfig, propagate: Propagator, t: ArrayLike, x: Ar
                  P: ArrayLike) -> ResidualFit | None:
     """Fit the residual model to the anchors of its window.
 
-    Fit the residual model to anchors (epochs t (k,) s, ECI states x (k, 6), covariances
+    Fit the residual model to anchors (epochs t (k,) s, GCRF states x (k, 6), covariances
     P (k, 6, 6)); the last anchor is the gap start. None when the window holds too little
     (fewer than `min_anchors` anchors or a span below `min_span_s`) or the fit is refused
     (a residual beyond `max_residual_km`, an unbound orbit).
@@ -624,7 +624,7 @@ class ResidualSurrogate:
     heldout: list[tuple[float, float]] = field(default_factory=list)
 
     def add_anchor(self, t: float, x: ArrayLike, P: ArrayLike) -> None:
-        """Add the estimate (ECI x (6,), P (6, 6)) at epoch t (s) at the end of a pass."""
+        """Add the estimate (GCRF x (6,), P (6, 6)) at epoch t (s) at the end of a pass."""
         if self.t and t <= self.t[-1]:
             raise ValueError(f"anchor at t={t} not after the last one (t={self.t[-1]})")
         xa, Pa = np.asarray(x, float), np.asarray(P, float)
@@ -702,7 +702,7 @@ class GapForecaster:
     a pass end: it becomes an anchor (`ResidualSurrogate.add_anchor`), the surrogate fits at
     it, and the fit's forecast is computed once on the grid of multiples of `period_s` up to
     ``max_horizon_s`` after it (one integration). `forecast(t)` returns that forecast at a
-    grid epoch t of the gap (state km, km/s ECI; covariance), or None: no fit (too few
+    grid epoch t of the gap (state km, km/s GCRF; covariance), or None: no fit (too few
     anchors, refused), t before `pass_break_s` after the pass or beyond the horizon. A real
     measurement always wins: the filter's own state is not touched.
     """

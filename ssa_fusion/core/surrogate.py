@@ -28,7 +28,7 @@ the threshold and the other channels are fitted into their noise.
 
 Optionally (`SurrogateConfig.lift`) the DMD learns a *lifted* observable instead of the raw
 measurement: for range/az/el from a known station, `EciLift` turns each measurement into the
-ECI position it implies (station position + line of sight, no dynamics), Hankel-DMD learns
+GCRF position it implies (station position + line of sight, no dynamics), Hankel-DMD learns
 and forecasts that (nearly linear, like the position scenarios), and each forecast is mapped
 back to range/az/el. Its covariance is measured in range/az/el too: the in-sample lifted
 predictions are mapped back at their own epochs and compared with what the sensor measured
@@ -169,7 +169,7 @@ class EciLift:
         -------
         callable
             ``err(pred, target)`` for `HankelDMD.forecast_covariance`: lifted predictions
-            ``pred`` (k, 3, J), ECI km, of the samples with indices ``target`` (k, J) ->
+            ``pred`` (k, 3, J), GCRF km, of the samples with indices ``target`` (k, J) ->
             their error (k, 3, J) in range/az/el; the azimuth difference is wrapped to
             [-pi, pi).
         """

@@ -1,6 +1,6 @@
 """Initial orbit determination and EKF for a catalog of objects, batched: `TrackBank`.
 
-A `TrackBank` keeps one track per ``object_id`` in arrays (state (N, 6) km, km/s ECI,
+A `TrackBank` keeps one track per ``object_id`` in arrays (state (N, 6) km, km/s GCRF,
 covariance (N, 6, 6), epoch (N,) Unix s). `TrackBank.process` takes a batch of range/
 azimuth/elevation measurements of any objects, in epoch order, and applies the per-object
 `tracker.Tracker` rules to each object, vectorised over objects:
@@ -86,7 +86,7 @@ class BankResult:
         Indices of the measurements that produced an estimate (fused, or ended an IOD
         batch), in processing order.
     x, P : ndarray (K, 6), (K, 6, 6)
-        The estimate each of them produced, at its epoch (km, km/s ECI; km^2 ...).
+        The estimate each of them produced, at its epoch (km, km/s GCRF; km^2 ...).
     nis : ndarray (K,)
         Its normalized innovation squared (0 for a track started by IOD).
     """

@@ -112,7 +112,7 @@ class TrackerConfig:
         Real measurements used for the initial orbit determination (>= 2; 3 for
         Herrick-Gibbs with range/az/el).
     frame_id : str
-        Frame (station id, or "eci") measurements must be expressed in; "" = any (with a
+        Frame (station id, or "gcrf") measurements must be expressed in; "" = any (with a
         station network: any of its stations).
     reinit_after : int
         Real measurements in a row refused by the gate after which the filter forgets its

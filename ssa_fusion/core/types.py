@@ -16,12 +16,12 @@ class Kind(enum.IntEnum):
     """Measurement kind; the values are the constants of ``Measurement.msg``."""
 
     POSITION = 0
-    """ECI position [x, y, z], km (or observed state channels, see ``PositionModel``)."""
+    """GCRF position [x, y, z], km (or observed state channels, see ``PositionModel``)."""
     RANGE_AZ_EL = 1
     """[range km, azimuth rad (north, clockwise, [0, 2pi)), elevation rad]."""
     RA_DEC = 2
     """[right ascension rad in [0, 2pi), declination rad in [-pi/2, pi/2]]: topocentric, in
-    the ECI frame (an optical sensor; two channels, the message's third is 0)."""
+    the GCRF frame (an optical sensor; two channels, the message's third is 0)."""
 
 
 class Source(enum.IntEnum):
@@ -95,14 +95,15 @@ class Measurement:
     t : float
         Epoch, s (simulation clock).
     z : ndarray (3,) or (2,)
-        Position in km (POSITION, ECI), [range km, az rad, el rad] (RANGE_AZ_EL), or
-        [ra rad, dec rad] (RA_DEC, topocentric).
+        Position in km (POSITION, GCRF), [range km, az rad, el rad] (RANGE_AZ_EL), or
+        [ra rad, dec rad] (RA_DEC, astrometric, GCRF).
     R : ndarray (3, 3) or (2, 2)
         Noise covariance of z in the units of z squared.
     kind, source : int
         A `Kind` and a `Source` (plain ints compare equal).
     frame_id : str
-        "eci" for POSITION, the station id for RANGE_AZ_EL and RA_DEC.
+        "gcrf" (`frames.Frame.GCRF`) for POSITION, the station id for RANGE_AZ_EL and
+        RA_DEC.
     horizon : float
         s since the last real measurement the forecast came from (0 for SENSOR).
     """
@@ -113,13 +114,13 @@ class Measurement:
     kind: int = Kind.POSITION
     source: int = Source.SENSOR
     object_id: str = ""
-    frame_id: str = "eci"
+    frame_id: str = "gcrf"
     horizon: float = 0.0
 
 
 @dataclass
 class StateEstimate:
-    """An ECI state estimate: x (6,) in km, km/s; P (6, 6) in km^2, km^2/s, km^2/s^2."""
+    """An GCRF state estimate: x (6,) in km, km/s; P (6, 6) in km^2, km^2/s, km^2/s^2."""
 
     t: float
     x: np.ndarray

@@ -28,6 +28,7 @@ from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 
+from ssa_fusion.core.frames import Frame
 from ssa_fusion.core.stations import network_stations
 from ssa_fusion.core.types import KIND_NAMES, Cause, Kind
 from ssa_fusion.nodes import STOP
@@ -317,7 +318,7 @@ KINDS = {name: kind for kind, name in KIND_NAMES.items()}
 def measurement_stream(node: Node, defaults: Any) -> tuple[int, str]:
     """Declare `kind` and `station` on `node` (defaults: `defaults.kind`, `defaults.station`):
     the measurement kind it takes and the frame_id those measurements come in (the station
-    for range/az/el and ra/dec, "eci" for position)."""
+    for range/az/el and ra/dec, "gcrf" for position)."""
     kind = declare(
         node, "kind", defaults.kind, "measurement kind: position | range_az_el | ra_dec",
         one_of(*KINDS)
@@ -330,7 +331,7 @@ def measurement_stream(node: Node, defaults: Any) -> tuple[int, str]:
         "network (a network id, or station ids separated by commas: the filter fuses them all)",
         _station_check,
     )
-    return KINDS[kind], station if KINDS[kind] != Kind.POSITION else "eci"
+    return KINDS[kind], station if KINDS[kind] != Kind.POSITION else Frame.GCRF
 
 
 def _station_check(value: str) -> str | None:

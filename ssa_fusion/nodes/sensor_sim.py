@@ -34,6 +34,7 @@ from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 
 from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core import survey, types
+from ssa_fusion.core.frames import Frame
 from ssa_fusion.nodes import start_process
 from ssa_fusion.nodes.common import (
     Diagnostics,
@@ -82,7 +83,7 @@ def paper_schedule(sim: Any, in_gap: np.ndarray, object_id: str) -> Schedule:
     out: Schedule = []
     for i, t in enumerate(sim.t.tolist()):
         m = types.Measurement(t=t, z=sim.z[i], R=sim.R, kind=s.kind, object_id=object_id,
-                              frame_id=s.station or "eci")
+                              frame_id=s.station or Frame.GCRF)
         out.append((t, Event.WITHHELD if in_gap[i] else Event.MEASUREMENT, m))
         out.append((t, Event.TRUTH, types.StateEstimate(t=t, x=sim.x[i], object_id=object_id)))
     return out

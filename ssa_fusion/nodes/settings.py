@@ -19,8 +19,8 @@ from typing import Any
 
 from ssa_fusion.core import config
 from ssa_fusion.core.config import EstimatorConfig, Lift, MotionModel
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
+from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.tracker import TrackerConfig
 from ssa_fusion.core.types import KIND_NAMES, Kind
 from ssa_fusion.nodes.defaults import FILTER, SURROGATE

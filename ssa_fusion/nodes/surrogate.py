@@ -107,7 +107,7 @@ def estimator_from(node: Node) -> EstimatorConfig:
         "lift",
         d.lift,
         "observable the DMD learns: none (the measurement itself) or eci (range/az/el "
-        "lifted to the ECI position it implies, forecasts mapped back)",
+        "lifted to the inertial (GCRF) position it implies, forecasts mapped back)",
         one_of(*map(str, Lift)),
     )
     try:

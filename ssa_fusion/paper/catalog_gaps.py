@@ -38,7 +38,7 @@ GAPS_SCORED = 200
 """Most gaps whose forecasts are scored against the coasting filter (evenly chosen)."""
 
 Rows = dict[str, list[tuple[float, np.ndarray]]]
-"""Per object id, (epoch s, state (6,) km, km/s ECI) in epoch order."""
+"""Per object id, (epoch s, state (6,) km, km/s GCRF) in epoch order."""
 
 
 def bank_config(s: SkyScenario) -> TrackBankConfig:

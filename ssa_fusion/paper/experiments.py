@@ -22,7 +22,7 @@ import numpy as np
 
 from ssa_fusion.core import config
 from ssa_fusion.core.config import EstimatorConfig
-from ssa_fusion.core.frames import wrap_pi
+from ssa_fusion.core.frames import Frame, wrap_pi
 from ssa_fusion.core.metrics import chi2_bounds, nees
 from ssa_fusion.core.surrogate import Surrogate
 from ssa_fusion.core.tracker import Tracker
@@ -58,7 +58,7 @@ def make_surrogate(s: Scenario, **overrides: Any) -> Surrogate:
 def measurements(s: Scenario, sim: Simulation) -> tuple[list[Measurement], list[Measurement]]:
     """The simulation's real measurements (outside the gap) and the gap's (withheld)."""
     ms = [Measurement(t=float(t), z=z.copy(), R=sim.R, kind=s.kind, object_id=s.name,
-                      frame_id=s.station or "eci") for t, z in zip(sim.t, sim.z, strict=True)]
+                      frame_id=s.station or Frame.GCRF) for t, z in zip(sim.t, sim.z, strict=True)]
     real = [m for m, g in zip(ms, sim.in_gap, strict=True) if not g]
     withheld = [m for m, g in zip(ms, sim.in_gap, strict=True) if g]
     return real, withheld

@@ -78,7 +78,7 @@ def settings_of(s: scenarios.Scenario, sim) -> dict:
         "gap_s": s.gap_s, "gap_epochs": int(sim.in_gap.sum()),
         "delays": s.delays,
         "rank": s.rank if s.rank is not None else f"auto (SVHT, <= {HankelDMD(1).max_rank})",
-        "surrogate_observable": "ECI position from range/az/el" if s.lift == "eci"
+        "surrogate_observable": "GCRF position from range/az/el" if s.lift == "eci"
         else "measurement",
         "forecast_covariance": (f"R + k^{sc.correlation_power:g} * D(k), Var(e(k)) = R + D(k), "
                                 "D >= 0 (k-th forecast of the gap)") if sc.inflate_correlated

@@ -22,8 +22,8 @@ from ssa_fusion.core.config import EstimatorConfig, Lift, MotionModel
 from ssa_fusion.core.frames import Station
 from ssa_fusion.core.measurement import PositionModel, RazelModel
 from ssa_fusion.core.stations import STATIONS
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
+from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.tracker import TrackerConfig
 from ssa_fusion.core.types import Kind
 
@@ -74,7 +74,7 @@ class Scenario:
         Surrogate training buffer (0: the tracking window) and refit period (a gap always
         starts from a fit up to the last real measurement).
     lift : str
-        "" (DMD learns the measurement) or "eci" (range/az/el lifted to the ECI position it
+        "" (DMD learns the measurement) or "eci" (range/az/el lifted to the inertial (GCRF) position it
         implies, see `surrogate.EciLift`).
     """
 
@@ -110,7 +110,7 @@ class Scenario:
 
     @property
     def is_orbit(self) -> bool:
-        """An Earth orbit (ECI states, UTC clock): decided by the truth, never by the
+        """An Earth orbit (GCRF states, UTC clock): decided by the truth, never by the
         filter's model (a J2 filter on the ISS is still an orbit)."""
         return self.truth in ORBIT_TRUTHS
 

@@ -23,8 +23,8 @@ from ssa_fusion.core import dynamics, frames, lighttime, visibility
 from ssa_fusion.core.config import EstimatorConfig, MotionModel, make_surrogate, make_tracker
 from ssa_fusion.core.metrics import chi2_bounds, nees
 from ssa_fusion.core.stations import SENSORS, Sensor, SensorType
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
+from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.tracker import TrackerConfig
 from ssa_fusion.core.types import Measurement, StateEstimate
 from ssa_fusion.paper import arms

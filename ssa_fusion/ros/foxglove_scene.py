@@ -1,11 +1,12 @@
-"""What the foxglove_bridge node shows, as pure functions: ECI -> geodetic latitude/longitude,
-covariance -> 3σ ellipsoid, range/az/el -> ECI point, and the 3D scene's entities.
+"""What the foxglove_bridge node shows, as pure functions: GCRF -> geodetic latitude/longitude,
+covariance -> 3σ ellipsoid, range/az/el -> GCRF point, and the 3D scene's entities.
 
 No rclpy here (testable with numpy alone); `foxglove` (foxglove-sdk) is imported only by the
-functions that build its messages. Units and frames: positions in km in the project's ECI
-frame (`core.frames`: ECEF rotated by the Earth rotation angle only); the 3D scene is drawn in
-frame ``eci`` with one scene unit = 1 km; times are Unix seconds (UTC, sim time); angles rad,
-except the ground track's latitude/longitude, which `foxglove.LocationFix` takes in degrees.
+functions that build its messages. Units and frames: positions in km in the GCRF
+(`core.frames`); the 3D scene is drawn in frame ``gcrf`` with one scene unit = 1 km; ground
+tracks are WGS-84 geodetic of the ITRF position; times are Unix seconds (UTC, sim time);
+angles rad, except the ground track's latitude/longitude, which `foxglove.LocationFix` takes
+in degrees.
 """
 
 from __future__ import annotations
@@ -19,12 +20,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ssa_fusion.core.constants import R_EARTH, WGS84_F
-from ssa_fusion.core.frames import Station, ecef_to_eci, eci_to_ecef, enu_matrix, site_ecef
-from ssa_fusion.core.stations import UNIX_EPOCH_JD
+from ssa_fusion.core.frames import Frame, Station, gcrs_to_itrs, itrs_to_gcrs, site_gcrs
+from ssa_fusion.core.iod import razel_to_gcrs
 from ssa_fusion.core.types import Kind
 
-SCENE_FRAME = "eci"
-"""frame_id of every scene entity (the project's ECI frame, km)."""
+SCENE_FRAME = Frame.GCRF
+"""frame_id of every scene entity (the GCRF, km)."""
 SCENE_TOPIC = "/ssa/foxglove/scene"
 """foxglove.SceneUpdate: Earth, truth, estimate, trails, 3σ ellipsoid, stations, forecasts."""
 TRACK_TOPIC = "/ssa/foxglove/ground_track"
@@ -47,16 +48,11 @@ FORECAST_RGBA: Rgba = (0.85, 0.2, 0.9, 0.9)
 MEASUREMENT_RGBA: Rgba = (0.75, 0.75, 0.75, 0.8)
 
 
-def jd_of(t_unix: float) -> float:
-    """UTC Julian date of Unix time `t_unix` (s)."""
-    return UNIX_EPOCH_JD + t_unix / 86400.0
-
-
-def ecef_to_geodetic(r_ecef_km: ArrayLike) -> tuple[float, float, float]:
-    """ECEF position (3,) km -> WGS-84 geodetic (latitude rad, longitude rad in (-π, π],
-    ellipsoidal height km); the inverse of `core.frames.site_ecef` (fixed-point iteration on
+def itrs_to_geodetic(r_itrs_km: ArrayLike) -> tuple[float, float, float]:
+    """ITRF position (3,) km -> WGS-84 geodetic (latitude rad, longitude rad in (-π, π],
+    ellipsoidal height km); the inverse of `core.frames.site_itrs` (fixed-point iteration on
     the latitude, converged to ~1e-12 rad)."""
-    x, y, z = (float(v) for v in np.asarray(r_ecef_km, dtype=float)[:3])
+    x, y, z = (float(v) for v in np.asarray(r_itrs_km, dtype=float)[:3])
     lon = math.atan2(y, x)
     p = math.hypot(x, y)
     if p < 1e-9:  # on the polar axis
@@ -78,11 +74,11 @@ def ecef_to_geodetic(r_ecef_km: ArrayLike) -> tuple[float, float, float]:
     return lat, lon, alt
 
 
-def eci_to_geodetic(r_eci_km: ArrayLike, t_unix: float) -> tuple[float, float, float]:
-    """ECI position (3,) km at Unix time `t_unix` (s) -> geodetic (latitude rad, longitude
+def gcrs_to_geodetic(r_gcrs_km: ArrayLike, t_unix: float) -> tuple[float, float, float]:
+    """GCRF position (3,) km at Unix time `t_unix` (s) -> geodetic (latitude rad, longitude
     rad, height km) of the point below it (its sub-satellite point), via `core.frames`."""
-    r = np.asarray(r_eci_km, dtype=float)[:3]
-    return ecef_to_geodetic(eci_to_ecef(r, jd_of(t_unix)))
+    r = np.asarray(r_gcrs_km, dtype=float)[:3]
+    return itrs_to_geodetic(gcrs_to_itrs(r, t_unix))
 
 
 @dataclass(frozen=True)
@@ -157,49 +153,32 @@ def covariance_ellipsoid(p_pos_km2: ArrayLike, n_sigma: float = 3.0) -> Ellipsoi
     return Ellipsoid(axes=vec, semi_axes=semi, quaternion=rotation_to_quaternion(vec))
 
 
-def razel_to_eci(z: ArrayLike, station: Station, t_unix: float) -> NDArray[np.float64]:
-    """Range/azimuth/elevation (km, rad, rad; azimuth from north towards east) measured from
-    `station` at Unix time `t_unix` (s) -> the ECI position (3,) km it implies."""
-    rng, az, el = (float(v) for v in np.asarray(z, dtype=float)[:3])
-    enu = rng * np.array([math.cos(el) * math.sin(az), math.cos(el) * math.cos(az),
-                          math.sin(el)])
-    ecef = site_ecef(station.lat_rad, station.lon_rad, station.alt_km)
-    ecef = ecef + enu_matrix(station.lat_rad, station.lon_rad).T @ enu
-    return np.asarray(ecef_to_eci(ecef, jd_of(t_unix)), dtype=float)
-
-
 def measurement_point(kind: int, z: ArrayLike, frame_id: str, t_unix: float,
                       stations: dict[str, Station]) -> NDArray[np.float64] | None:
-    """ECI point (3,) km a measurement (core units: km, rad) implies: a position measurement
+    """GCRF point (3,) km a measurement (core units: km, rad) implies: a position measurement
     itself, range/az/el from its station (`frame_id` among `stations`); None for one without
     range (ra/dec) or from an unknown station."""
     if kind == Kind.POSITION:
         return np.asarray(z, dtype=float)[:3].copy()
     if kind == Kind.RANGE_AZ_EL and frame_id in stations:
-        return razel_to_eci(z, stations[frame_id], t_unix)
+        return razel_to_gcrs(np.asarray(z, dtype=float)[:3], t_unix, stations[frame_id])
     return None
 
 
-def station_eci(station: Station, t_unix: float) -> NDArray[np.float64]:
-    """ECI position (3,) km of `station` at Unix time `t_unix` (s)."""
-    ecef = site_ecef(station.lat_rad, station.lon_rad, station.alt_km)
-    return np.asarray(ecef_to_eci(ecef, jd_of(t_unix)), dtype=float)
-
-
-def meridian_eci(t_unix: float, n: int = 37, lon_rad: float = 0.0) -> NDArray[np.float64]:
+def meridian_gcrs(t_unix: float, n: int = 37, lon_rad: float = 0.0) -> NDArray[np.float64]:
     """Points (n, 3) km of the meridian at longitude `lon_rad` on the Earth's surface
-    (spherical, radius `R_EARTH` + 1 km), pole to pole, in ECI at Unix time `t_unix` (s):
+    (spherical, radius `R_EARTH` + 1 km), pole to pole, in the GCRF at Unix time `t_unix` (s):
     shows the Earth's rotation in the inertial scene."""
     lat = np.linspace(-math.pi / 2, math.pi / 2, n)
     r = R_EARTH + 1.0
-    ecef = np.stack([r * np.cos(lat) * math.cos(lon_rad), r * np.cos(lat) * math.sin(lon_rad),
+    itrs = np.stack([r * np.cos(lat) * math.cos(lon_rad), r * np.cos(lat) * math.sin(lon_rad),
                      r * np.sin(lat)], -1)
-    return np.asarray(ecef_to_eci(ecef, jd_of(t_unix)), dtype=float)
+    return np.asarray(itrs_to_gcrs(itrs, t_unix), dtype=float)
 
 
 @dataclass
 class SceneState:
-    """What the scene shows, as the bridge last heard it (km, ECI, Unix s).
+    """What the scene shows, as the bridge last heard it (km, GCRF, Unix s).
 
     ``truth``/``estimate``: (t, state (6,) km km/s) of the newest; ``covariance`` (6, 6) km²
     of the newest estimate; trails and point lists keep the newest `trail` / `points` items.
@@ -224,11 +203,11 @@ class SceneState:
         self.covariance = np.asarray(p, dtype=float).reshape(6, 6)
         _push(self.estimate_trail, self.estimate[1][:3], self.trail)
 
-    def add_forecast(self, r_eci_km: ArrayLike) -> None:
-        _push(self.forecasts, np.asarray(r_eci_km, dtype=float), self.points)
+    def add_forecast(self, r_gcrs_km: ArrayLike) -> None:
+        _push(self.forecasts, np.asarray(r_gcrs_km, dtype=float), self.points)
 
-    def add_measurement(self, r_eci_km: ArrayLike) -> None:
-        _push(self.measurements, np.asarray(r_eci_km, dtype=float), self.points)
+    def add_measurement(self, r_gcrs_km: ArrayLike) -> None:
+        _push(self.measurements, np.asarray(r_gcrs_km, dtype=float), self.points)
 
     @property
     def t(self) -> float | None:
@@ -340,7 +319,7 @@ def _text(position: ArrayLike, text: str, rgba: Rgba) -> Any:
 
 @dataclass(frozen=True)
 class Sphere:
-    """A sphere (ellipsoid) of the scene: centre ``position`` (3,) km ECI, diameters ``size``
+    """A sphere (ellipsoid) of the scene: centre ``position`` (3,) km GCRF, diameters ``size``
     (3,) km along its axes, rotated by ``quaternion`` (x, y, z, w)."""
 
     position: NDArray[np.float64]
@@ -351,7 +330,7 @@ class Sphere:
 
 @dataclass(frozen=True)
 class Line:
-    """A polyline through ``points`` (n, 3) km ECI, ``thickness`` in screen pixels."""
+    """A polyline through ``points`` (n, 3) km GCRF, ``thickness`` in screen pixels."""
 
     points: NDArray[np.float64]
     rgba: Rgba
@@ -360,7 +339,7 @@ class Line:
 
 @dataclass(frozen=True)
 class Label:
-    """A text label at ``position`` (3,) km ECI, facing the viewer."""
+    """A text label at ``position`` (3,) km GCRF, facing the viewer."""
 
     position: NDArray[np.float64]
     text: str
@@ -392,7 +371,7 @@ def _polyline(points: Any, rgba: Rgba, thickness: float = 2.0) -> Line:
 
 def scene_shapes(state: SceneState, stations: dict[str, Station],
                  marker_km: float = 150.0) -> list[Shape]:
-    """The scene of `state` as `Shape` s (ECI, km): ``earth`` (WGS-84-sized sphere, its prime
+    """The scene of `state` as `Shape` s (GCRF, km): ``earth`` (WGS-84-sized sphere, its prime
     meridian), ``truth`` and ``estimate`` (a `marker_km`-wide sphere and the recent trail
     each), ``covariance`` (the 3σ ellipsoid of the estimate's position block, true size),
     ``stations`` (one marker and label per station of `stations`), ``forecasts`` and
@@ -402,7 +381,7 @@ def scene_shapes(state: SceneState, stations: dict[str, Station],
     out = [Shape("earth",
                  spheres=(_ball((0, 0, 0), (earth_d, earth_d, earth_d * (1 - WGS84_F)),
                                 EARTH_RGBA),),
-                 lines=(_polyline(meridian_eci(t), (1.0, 1.0, 1.0, 0.8), 1.5),))]
+                 lines=(_polyline(meridian_gcrs(t), (1.0, 1.0, 1.0, 0.8), 1.5),))]
     if state.truth is not None:
         out.append(Shape("truth", spheres=(_ball(state.truth[1], marker_km, TRUTH_RGBA),),
                          lines=(_polyline(state.truth_trail, TRUTH_RGBA),)))
@@ -419,7 +398,7 @@ def scene_shapes(state: SceneState, stations: dict[str, Station],
                                            f"3σ {ell.semi_axes.max():.3g} km",
                                            (*ELLIPSOID_RGBA[:3], 1.0)),)))
     if stations:
-        pos = {name: station_eci(s, t) for name, s in stations.items()}
+        pos = {name: site_gcrs(s, t) for name, s in stations.items()}
         out.append(Shape("stations",
                          spheres=tuple(_ball(p, marker_km * 0.6, STATION_RGBA)
                                        for p in pos.values()),
@@ -436,7 +415,7 @@ def scene_shapes(state: SceneState, stations: dict[str, Station],
 
 def scene_entities(state: SceneState, stations: dict[str, Station],
                    marker_km: float = 150.0) -> list[Any]:
-    """`scene_shapes` as `foxglove.SceneEntity` s (frame ``eci``, km), stamped with the
+    """`scene_shapes` as `foxglove.SceneEntity` s (frame ``gcrf``, km), stamped with the
     state's newest epoch."""
     return _entities(scene_shapes(state, stations, marker_km), state.t or 0.0)
 
@@ -461,12 +440,12 @@ def scene_update(state: SceneState, stations: dict[str, Station],
     return SceneUpdate(entities=scene_entities(state, stations, marker_km))
 
 
-def location_fix(t_unix: float, r_eci_km: ArrayLike, frame_id: str = "estimate") -> Any:
-    """`foxglove.LocationFix` of the point below ECI position `r_eci_km` (km) at `t_unix`
+def location_fix(t_unix: float, r_gcrs_km: ArrayLike, frame_id: str = "estimate") -> Any:
+    """`foxglove.LocationFix` of the point below GCRF position `r_gcrs_km` (km) at `t_unix`
     (Unix s): latitude and longitude in degrees (WGS-84), altitude in m."""
     from foxglove.messages import LocationFix
 
-    lat, lon, alt = eci_to_geodetic(r_eci_km, t_unix)
+    lat, lon, alt = gcrs_to_geodetic(r_gcrs_km, t_unix)
     return LocationFix(timestamp=_stamp(t_unix), frame_id=frame_id,
                        latitude=math.degrees(lat), longitude=math.degrees(lon),
                        altitude=alt * 1000.0)
@@ -510,7 +489,7 @@ class VisualTopics:
     they arrive: one object shared by the live `foxglove_bridge` and the `visual.mcap` writer
     of `ssa-fusion report`, so both serve the same messages.
 
-    Inputs are in core units (km, km/s, rad; ECI; Unix s, sim time). `truth` and `estimate`
+    Inputs are in core units (km, km/s, rad; GCRF; Unix s, sim time). `truth` and `estimate`
     return the `Logged` messages they produce at once (ground tracks, metrics, log time = their
     stamp); `measurement` only updates the scene; `scene` is the current `foxglove.SceneUpdate`
     (the caller decides how often). Each raises `NotShownError` for what it leaves out.
@@ -525,7 +504,7 @@ class VisualTopics:
         self.dirty = False
         """True when something changed since the last `scene`."""
         self.shapes: list[Shape] = []
-        """The geometry of the last `scene` (ECI, km)."""
+        """The geometry of the last `scene` (GCRF, km)."""
 
     def truth(self, t: float, x: ArrayLike) -> list[Logged]:
         """A true state `x` (6,) km, km/s at `t` (Unix s) -> its `TRUTH_TRACK_TOPIC` fix."""

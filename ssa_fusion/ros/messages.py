@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from ssa_fusion.core import types
+from ssa_fusion.core.frames import Frame
 
 KM = 1000.0
 """m per km."""
@@ -146,7 +147,7 @@ def estimate_to_msg(e: types.StateEstimate, classes: MsgClasses | None = None) -
     """Core StateEstimate (km, km/s) -> ssa_fusion_msgs/StateEstimate (m, m/s)."""
     c = _default(classes)
     return c.estimate(
-        header=c.header(stamp=seconds_to_stamp(e.t, c), frame_id="eci"),
+        header=c.header(stamp=seconds_to_stamp(e.t, c), frame_id=Frame.GCRF),
         object_id=e.object_id,
         state=np.asarray(e.x, dtype=float) * _X_SCALE,
         covariance=(np.asarray(e.P, dtype=float) * KM * KM).ravel(),

@@ -8,7 +8,7 @@ node also publishes, and the recorder records:
   `foxglove_scene.scene_shapes` — one DELETEALL marker, then per entity (namespace = entity
   id: earth, truth, estimate, covariance, stations, forecasts, measurements) a SPHERE per
   single sphere, a SPHERE_LIST for a cloud of equal points, a LINE_STRIP per trail and a
-  TEXT_VIEW_FACING per label; frame ``eci``, one unit = 1 km, stamped with the scene's sim
+  TEXT_VIEW_FACING per label; frame ``gcrf``, one unit = 1 km, stamped with the scene's sim
   time;
 * `TRACK_TOPIC` / `TRUTH_TRACK_TOPIC` (`sensor_msgs/NavSatFix`): the point below the estimate
   / the truth, WGS-84 latitude and longitude in deg, height in m, covariance unknown.
@@ -32,12 +32,12 @@ from ssa_fusion.ros.foxglove_scene import (
     SCENE_FRAME,
     Rgba,
     Shape,
-    eci_to_geodetic,
+    gcrs_to_geodetic,
     log_time_ns,
 )
 
 MARKERS_TOPIC = "/ssa/visual/markers"
-"""visualization_msgs/MarkerArray: the 3D scene (ECI, km)."""
+"""visualization_msgs/MarkerArray: the 3D scene (GCRF, km)."""
 TRACK_TOPIC = "/ssa/visual/ground_track"
 """sensor_msgs/NavSatFix: the estimate's sub-satellite point."""
 TRUTH_TRACK_TOPIC = "/ssa/visual/ground_track_truth"
@@ -73,7 +73,7 @@ def _marker(t: Time, ns: str, mid: int, kind: int, rgba: Rgba) -> Marker:
 
 
 def marker_array(shapes: list[Shape], t_unix: float) -> MarkerArray:
-    """`shapes` (ECI, km) stamped `t_unix` (Unix s) -> MarkerArray that replaces the scene
+    """`shapes` (GCRF, km) stamped `t_unix` (Unix s) -> MarkerArray that replaces the scene
     (its first marker deletes all earlier ones)."""
     t = stamp(t_unix)
     clear = Marker(action=Marker.DELETEALL)
@@ -115,11 +115,11 @@ def marker_array(shapes: list[Shape], t_unix: float) -> MarkerArray:
     return MarkerArray(markers=out)
 
 
-def nav_sat_fix(t_unix: float, r_eci_km: ArrayLike, frame_id: str) -> NavSatFix:
-    """The point below ECI position `r_eci_km` (km) at `t_unix` (Unix s, sim time) ->
+def nav_sat_fix(t_unix: float, r_gcrs_km: ArrayLike, frame_id: str) -> NavSatFix:
+    """The point below GCRF position `r_gcrs_km` (km) at `t_unix` (Unix s, sim time) ->
     NavSatFix: WGS-84 latitude and longitude (deg), height (m), status FIX, covariance
     unknown; the same values as the Foxglove ground track (`foxglove_scene.location_fix`)."""
-    lat, lon, alt = eci_to_geodetic(r_eci_km, t_unix)
+    lat, lon, alt = gcrs_to_geodetic(r_gcrs_km, t_unix)
     msg = NavSatFix(latitude=math.degrees(lat), longitude=math.degrees(lon),
                     altitude=alt * 1000.0,
                     position_covariance_type=NavSatFix.COVARIANCE_TYPE_UNKNOWN)

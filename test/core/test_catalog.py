@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from sgp4.api import Satrec, SatrecArray, jday
 
-from ssa_fusion.core import catalog, timescales
+from ssa_fusion.core import catalog, frames, timescales
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "config" / "catalogs" / "sample.tle"
@@ -55,14 +55,17 @@ def test_catalog_truth_equals_sgp4_vectorised_and_per_object():
     sats = [Satrec.twoline2rv(a, b) for _, a, b in sample_lines()]
     err, r, v = SatrecArray(sats).sgp4(jd, fr)
     assert not err.any()
-    np.testing.assert_allclose(states.x[..., :3], r, rtol=0, atol=1e-6)  # km: 1 mm
-    np.testing.assert_allclose(states.x[..., 3:], v, rtol=0, atol=1e-9)  # km/s
+    teme = frames.gcrs_to_teme(states.x, t)  # the catalog's states are GCRF: back to TEME
+    np.testing.assert_allclose(teme[..., :3], r, rtol=0, atol=1e-6)  # km: 1 mm
+    np.testing.assert_allclose(teme[..., 3:], v, rtol=0, atol=1e-9)  # km/s
     for i, sat in enumerate(sats):  # and object by object, epoch by epoch
         for k in range(0, t.size, 41):
             e1, r1, v1 = sat.sgp4(jd[k], fr[k])
             assert e1 == 0
-            np.testing.assert_allclose(states.x[i, k, :3], r1, rtol=0, atol=1e-6)
-            np.testing.assert_allclose(states.x[i, k, 3:], v1, rtol=0, atol=1e-9)
+            np.testing.assert_allclose(teme[i, k, :3], r1, rtol=0, atol=1e-6)
+            np.testing.assert_allclose(teme[i, k, 3:], v1, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(states.x[0, 0], frames.teme_to_gcrs([*r[0, 0], *v[0, 0]], t[0]),
+                               rtol=0, atol=1e-9)
 
 
 def test_epoch_in_unix_seconds():

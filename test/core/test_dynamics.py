@@ -18,6 +18,7 @@ from ssa_fusion.core.dynamics import (
     propagate,
     propagate_stm,
     sgp4_ephemeris,
+    sgp4_ephemeris_teme,
     state_to_elements,
 )
 
@@ -170,7 +171,7 @@ def _naive_sgp4_error_km(x0, jd0):
 @pytest.mark.parametrize("els", [ISS_ELEMENTS, MOLNIYA_ELEMENTS])
 def test_sgp4_mean_element_fit_reproduces_osculating_state(els):
     x0 = elements_to_state(**els)
-    eph = sgp4_ephemeris(x0, JD0, np.array([0.0, 600.0]))
+    eph = sgp4_ephemeris_teme(x0, JD0, np.array([0.0, 600.0]))
     assert np.linalg.norm(eph[0, :3] - x0[:3]) < 1e-3  # < 1 m
     assert np.linalg.norm(eph[0, 3:] - x0[3:]) < 1e-6  # < 1 mm/s
     if els is ISS_ELEMENTS:
@@ -199,8 +200,8 @@ def test_sgp4_ephemeris_against_vallado_verification_output(satnum):
     # Feed the verification TEME state at epoch; the fitted mean elements must reproduce the
     # published (tcppver.out, shipped with the sgp4 package) ephemeris over days.
     rec, ref = _vallado_verification(satnum)
-    eph = sgp4_ephemeris(ref[0, 1:], rec.jdsatepoch + rec.jdsatepochF, ref[:, 0] * 60.0,
-                         bstar=rec.bstar)
+    eph = sgp4_ephemeris_teme(ref[0, 1:], rec.jdsatepoch + rec.jdsatepochF, ref[:, 0] * 60.0,
+                              bstar=rec.bstar)
     assert np.abs(eph[:, :3] - ref[:, 1:4]).max() < 2e-3  # km
     assert np.abs(eph[:, 3:] - ref[:, 4:]).max() < 2e-6  # km/s
 
@@ -235,3 +236,19 @@ def test_propagate_stm_matches_finite_differences(model, x0, dt, params):
         xm = propagate(model, x0 - d, [0.0, dt], **params)[-1]
         num[:, k] = (xp - xm) / (2 * h)
     np.testing.assert_allclose(phi, num, rtol=1e-5, atol=1e-7 * np.abs(num).max())
+
+
+def test_sgp4_ephemeris_in_the_gcrf_is_sgp4s_teme_turned():
+    """`sgp4_ephemeris` takes and gives GCRF: its first state is the one given (the fit is
+    made in TEME, < 1 m), and later states are the TEME ephemeris turned by
+    `frames.teme_to_gcrs` (0.3-0.4 deg from TEME's axes in 2025: ~40 km at the ISS)."""
+    from ssa_fusion.core import frames
+
+    t0 = 1735689600.0
+    x0 = elements_to_state(**ISS_ELEMENTS)
+    t = np.array([0.0, 3600.0, 86400.0])
+    eph = sgp4_ephemeris(x0, t0, t)
+    assert np.linalg.norm(eph[0, :3] - x0[:3]) < 1e-3
+    teme = sgp4_ephemeris_teme(frames.gcrs_to_teme(x0, t0), 2440587.5 + t0 / 86400.0, t)
+    np.testing.assert_allclose(eph, frames.teme_to_gcrs(teme, t0 + t), rtol=0, atol=1e-6)
+    assert np.linalg.norm(teme[1, :3] - eph[1, :3]) > 20.0

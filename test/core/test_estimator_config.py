@@ -44,16 +44,17 @@ def test_builders_wire_the_stream_into_tracker_and_surrogate():
     assert surrogate.config.kind == Kind.RANGE_AZ_EL and surrogate.config.frame_id == "columbus"
     assert isinstance(surrogate.config.lift, EciLift)
     pos = config.make_tracker(EstimatorConfig(kind=Kind.POSITION))
-    assert pos.config.frame_id == "eci"
+    assert pos.config.frame_id == "gcrf"
 
 
 def test_kepler_motion_is_the_analytic_two_body_and_j2_differs_by_j2():
     f = config.motion(EstimatorConfig())
-    x1, _ = f(X0, 600.0)
+    t0 = 1.7e9
+    x1, _ = f(X0, 600.0, t0)
     x_ref, F_ref = kepler.propagate(X0, 600.0)
     np.testing.assert_array_equal(x1, x_ref)
-    two = config.motion(EstimatorConfig(motion_model=MotionModel.TWO_BODY))(X0, 600.0)
+    two = config.motion(EstimatorConfig(motion_model=MotionModel.TWO_BODY))(X0, 600.0, t0)
     np.testing.assert_allclose(two[0], x_ref, atol=1e-6)  # integrated (1e-9 km tolerance)
     np.testing.assert_allclose(two[1], F_ref, atol=1e-6)
-    j2 = config.motion(EstimatorConfig(motion_model=MotionModel.J2))(X0, 600.0)[0]
+    j2 = config.motion(EstimatorConfig(motion_model=MotionModel.J2))(X0, 600.0, t0)[0]
     assert 0.1 < np.linalg.norm(j2[:3] - x_ref[:3]) < 10.0  # J2 moves LEO km in 10 min

@@ -4,7 +4,7 @@ not use it.
 * Positions: finite differences are linear in the measurements, so the covariance the
   numerical Jacobian gives must equal the closed-form one of the difference weights
   (backward difference for 2 samples, the second-order one-sided stencil for 3).
-* Range/az/el: a two-body orbit seen from a station (measurements from `frames.razel_eci`,
+* Range/az/el: a two-body orbit seen from a station (measurements from `frames.razel_gcrs`,
   truth from `kepler.propagate`): noise free, Herrick-Gibbs reproduces the true state at the
   middle epoch; with noise, the mean NEES of the solution against the truth over Monte Carlo
   runs lies in the two-sided 99.9 % chi-square interval (6 * runs degrees of freedom), at the
@@ -25,16 +25,16 @@ from ssa_fusion.core.measurement import PositionModel, RazelModel
 from ssa_fusion.core.types import Cause, Kind, Measurement, Source
 
 JD0 = 2460000.5
+T0_UNIX = (JD0 - 2440587.5) * 86400.0
 STATION = frames.COLUMBUS
 CADENCE = 30.0
 
 
 def _truth() -> np.ndarray:
-    """A circular low orbit ~600 km above and 300 km north of the station at t = 0 (ECI)."""
+    """A circular low orbit ~600 km above and 300 km north of the station at t = 0 (GCRF)."""
     lat, lon = STATION.lat_rad, STATION.lon_rad
     up, north = frames.enu_matrix(lat, lon)[2], frames.enu_matrix(lat, lon)[1]
-    r_ecef = frames.site_ecef(lat, lon, STATION.alt_km) + 600.0 * up + 300.0 * north
-    r = frames.ecef_to_eci(r_ecef, JD0)
+    r = frames.itrs_to_gcrs(STATION.itrs + 600.0 * up + 300.0 * north, T0_UNIX)
     v_dir = np.cross([0.3, 0.2, 1.0], r)
     v = np.sqrt(MU_EARTH / np.linalg.norm(r)) * v_dir / np.linalg.norm(v_dir)
     return np.concatenate([r, v])
@@ -51,7 +51,7 @@ class _Initiator(OrbitInitiator):
     """An OrbitInitiator with its two settings fixed (the tracker passes them per call)."""
 
     def __init__(self, model, samples: int, p0_sigma: tuple[float, ...] = ZERO) -> None:
-        super().__init__(kepler.propagate, model, 6)
+        super().__init__(lambda x, dt, _t0: kepler.propagate(x, dt), model, 6)
         self.settings = (samples, p0_sigma)
 
     def add(self, m):
@@ -101,13 +101,13 @@ def test_at_least_two_samples():
 
 def test_settings_apply_to_the_batch_being_collected():
     """The settings come with each call, so a run-time change applies to the current batch."""
-    ini = OrbitInitiator(kepler.propagate, PositionModel(), 6)
+    ini = OrbitInitiator(lambda x, dt, _t0: kepler.propagate(x, dt), PositionModel(), 6)
     R = np.eye(3)
     assert ini.add(_pos(0.0, [7000, 0, 0], R), 4, ZERO)[0] == Cause.IOD_PENDING
     assert ini.add(_pos(30.0, [7000, 1, 0], R), 4, ZERO)[0] == Cause.IOD_PENDING
     got = ini.add(_pos(60.0, [7000, 2, 0], R), 3, (2.0,) * 6)
     assert isinstance(got, InitialState)
-    ref = OrbitInitiator(kepler.propagate, PositionModel(), 6)
+    ref = OrbitInitiator(lambda x, dt, _t0: kepler.propagate(x, dt), PositionModel(), 6)
     _, _, P_iod = ref.solve([_pos(30.0 * j, [7000, j, 0], R) for j in range(3)])
     np.testing.assert_allclose(got.P, P_iod + 4.0 * np.eye(6), atol=1e-12)
 
@@ -161,7 +161,7 @@ def test_position_floor_is_added_in_quadrature():
 def _rae_truth() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     t = CADENCE * np.arange(3)
     x = _states(_truth(), t)
-    z = frames.razel_eci(x, JD0 + t / 86400.0, STATION)
+    z = frames.razel_gcrs(x, T0_UNIX + t, STATION)
     return t, x, z
 
 

@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from ssa_fusion.core.frames import COLUMBUS, razel_eci, wrap_angle
-from ssa_fusion.core.measurement import PositionModel, RazelModel
+from ssa_fusion.core.frames import COLUMBUS, radec_gcrs, razel_gcrs, wrap_angle
+from ssa_fusion.core.measurement import PositionModel, RadecModel, RazelModel
+from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.types import Kind
 
 
@@ -39,7 +40,9 @@ def test_razel_model_matches_frames_and_finite_differences():
     x = np.array([1200.0, -5200.0, 4300.0, 5.1, 1.2, -4.4])
     t = 3725.0
     z, H = m.h_and_H(x, t)
-    np.testing.assert_allclose(z, razel_eci(x, jd0 + t / 86400.0, COLUMBUS), atol=1e-7)
+    t_unix = (jd0 - UNIX_EPOCH_JD) * 86400.0 + t
+    # the model's fast path (hourly Q, W interpolated) against the vectorised frames: 1e-10 rad
+    np.testing.assert_allclose(z, razel_gcrs(x, t_unix, COLUMBUS), atol=1e-9)
     np.testing.assert_array_equal(m.h(x, t), z)
     np.testing.assert_array_equal(m.H(x, t), H)
     assert 0.0 <= z[1] < 2 * np.pi
@@ -49,5 +52,22 @@ def test_razel_model_matches_frames_and_finite_differences():
         dx[k] = 1e-3
         d = m.h(x + dx, t) - m.h(x - dx, t)
         d[1:] = wrap_angle(d[1:])
+        num[:, k] = d / 2e-3
+    np.testing.assert_allclose(H, num, rtol=1e-6, atol=1e-12)
+
+
+def test_radec_model_matches_frames_and_finite_differences():
+    jd0 = 2460310.5
+    m = RadecModel(COLUMBUS, jd0)
+    x = np.array([1200.0, -5200.0, 4300.0, 5.1, 1.2, -4.4])
+    t = 3725.0
+    z, H = m.h_and_H(x, t)
+    t_unix = (jd0 - UNIX_EPOCH_JD) * 86400.0 + t
+    np.testing.assert_allclose(z, radec_gcrs(x, t_unix, COLUMBUS), atol=1e-9)
+    num = np.zeros((2, 6))
+    for k in range(6):
+        dx = np.zeros(6)
+        dx[k] = 1e-3
+        d = wrap_angle(m.h(x + dx, t) - m.h(x - dx, t))
         num[:, k] = d / 2e-3
     np.testing.assert_allclose(H, num, rtol=1e-6, atol=1e-12)

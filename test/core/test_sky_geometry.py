@@ -8,9 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from ssa_fusion.core import lighttime, sun, visibility
+from ssa_fusion.core import frames, lighttime, sun, visibility
 from ssa_fusion.core.constants import R_EARTH
-from ssa_fusion.core.stations import STATIONS, UNIX_EPOCH_JD
+from ssa_fusion.core.stations import STATIONS
+from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 
 # ISS (ZARYA), NORAD 25544, epoch 2019-12-31 19:42 UTC (the sgp4 package's test suite)
 ISS_TLE = ("1 25544U 98067A   19366.82137887  .00016717  00000-0  10270-3 0  9129",
@@ -18,8 +19,9 @@ ISS_TLE = ("1 25544U 98067A   19366.82137887  .00016717  00000-0  10270-3 0  912
 
 
 def test_sun_direction_matches_astropy():
-    """Within 0.01 deg of astropy's Sun in the true equator and equinox of date (TETE, the
-    frame closest to TEME), over dates 2000-2026 (astropy's bundled IERS data, offline)."""
+    """Within 25" of astropy's apparent Sun in the GCRS over dates 2000-2026 (astropy's
+    bundled IERS data, offline): ours is geometric, astropy's carries the annual aberration
+    (20.5") and 8 min of light time; the distance within 1e-4."""
     astropy_time = pytest.importorskip("astropy.time")
     coords = pytest.importorskip("astropy.coordinates")
     from astropy.utils import iers
@@ -28,11 +30,11 @@ def test_sun_direction_matches_astropy():
     iers.conf.auto_max_age = None
     jd = np.array([2451545.0, 2453371.75, 2455197.5, 2458849.5, 2460676.5, 2461192.25])
     t = astropy_time.Time(jd, format="jd", scale="utc")
-    ref = coords.get_sun(t).transform_to(coords.TETE(obstime=t)).cartesian.xyz.value.T
-    ours = sun.sun_position_eci(jd)
+    ref = coords.get_sun(t).cartesian.xyz.value.T
+    ours = sun.sun_position_gcrs((jd - UNIX_EPOCH_JD) * 86400.0)
     cos = np.sum(ours * ref, axis=1) / np.linalg.norm(ours, axis=1) / np.linalg.norm(ref, axis=1)
-    worst = np.degrees(np.arccos(np.clip(cos, -1, 1))).max()
-    assert worst < 0.01, worst
+    worst = np.degrees(np.arccos(np.clip(cos, -1, 1))).max() * 3600.0
+    assert 15.0 < worst < 25.0, worst
     dist = np.linalg.norm(ref, axis=1) * 149597870.7  # au -> km
     assert np.allclose(np.linalg.norm(ours, axis=1), dist, rtol=1e-4)
 
@@ -45,6 +47,7 @@ def test_earth_shadow():
 
 
 def _iss_states(t_unix: np.ndarray) -> np.ndarray:
+    """GCRF states of the ISS element set at Unix epochs (SGP4's TEME turned to the GCRF)."""
     from sgp4.api import Satrec
 
     sat = Satrec.twoline2rv(*ISS_TLE)
@@ -52,21 +55,20 @@ def _iss_states(t_unix: np.ndarray) -> np.ndarray:
     jd_int = np.floor(jd)
     err, r, v = sat.sgp4_array(jd_int, jd - jd_int)
     assert not err.any()
-    return np.concatenate([r, v], axis=1)
+    return frames.teme_to_gcrs(np.concatenate([r, v], axis=1), t_unix)
 
 
 def test_iss_spends_a_third_of_its_orbit_in_shadow():
     t = 1577836800.0 + np.arange(0.0, 86400.0, 10.0)  # 2020-01-01
     x = _iss_states(t)
-    frac = 1.0 - sun.sunlit(x[:, :3], UNIX_EPOCH_JD + t / 86400.0).mean()
+    frac = 1.0 - sun.sunlit(x[:, :3], t).mean()
     assert 0.30 < frac < 0.42, frac  # ~35 min of a 92 min orbit at low beta angle
 
 
 def test_rise_and_set_times_match_skyfield():
-    """Passes of the ISS over Columbus above 10 deg on 2020-01-01 from our frames (TEME
-    rotated by the Earth rotation angle) against skyfield's find_events: within 5 s (the
-    ~0.3 deg GMST-ERA difference of our frame moves the station ~1 s of ISS motion; the
-    rest is polar motion and sampling)."""
+    """Passes of the ISS over Columbus above 10 deg on 2020-01-01 from our frames against
+    skyfield's find_events: within 1.5 s (the grid is 1 s; skyfield's own UT1 and
+    its root finding)."""
     api = pytest.importorskip("skyfield.api")
     ts = api.load.timescale(builtin=True)
     sat = api.EarthSatellite(*ISS_TLE, "ISS", ts)
@@ -83,29 +85,28 @@ def test_rise_and_set_times_match_skyfield():
     assert len(rises) >= 3
     grid = 1577836800.0 + np.arange(0.0, 86400.0, 1.0)
     x = _iss_states(grid)
-    up = visibility.above_mask(x, UNIX_EPOCH_JD + grid / 86400.0, st, math.radians(10.0))
+    up = visibility.above_mask(x, grid, st, math.radians(10.0))
     edges = np.diff(up.astype(int))
     ours_rise = grid[1:][edges == 1]
     ours_set = grid[1:][edges == -1]
     assert len(ours_rise) == len(rises) and len(ours_set) == len(sets)
-    assert np.abs(ours_rise - rises).max() < 5.0, np.abs(ours_rise - rises)
-    assert np.abs(ours_set - sets).max() < 5.0, np.abs(ours_set - sets)
+    assert np.abs(ours_rise - rises).max() < 1.5, np.abs(ours_rise - rises)
+    assert np.abs(ours_set - sets).max() < 1.5, np.abs(ours_set - sets)
 
 
 def test_optical_rules():
     """An optical site sees only at night (sun below -12 deg) an object in sunlight."""
     st = STATIONS["socorro"]
     t = 1735689600.0 + np.arange(0.0, 86400.0, 600.0)
-    jd = UNIX_EPOCH_JD + t / 86400.0
-    dark = visibility.station_dark(jd, st)
-    el = sun.sun_elevation(jd, st)
+    dark = visibility.station_dark(t, st)
+    el = sun.sun_elevation(t, st)
     assert np.array_equal(dark, el < math.radians(-12.0))
     assert 0.3 < dark.mean() < 0.7  # January in New Mexico: long nights
     # a point straight above the site at 1000 km: visible iff dark and sunlit
-    site = lighttime.site_eci(st, t)
+    site = frames.site_gcrs(st, t)
     above = site * (1 + 1000.0 / np.linalg.norm(site, axis=1))[:, None]
-    seen = visibility.optical_visible(above, jd, st, math.radians(20.0))
-    assert np.array_equal(seen, dark & sun.sunlit(above, jd))
+    seen = visibility.optical_visible(above, t, st, math.radians(20.0))
+    assert np.array_equal(seen, dark & sun.sunlit(above, t))
     assert seen.any() and not seen.all()
 
 
@@ -115,7 +116,7 @@ def test_light_time_of_the_iss_in_view():
     t = 1577836800.0 + np.arange(0.0, 86400.0, 10.0)
     x = _iss_states(t)
     st = STATIONS["columbus"]
-    up = visibility.above_mask(x, UNIX_EPOCH_JD + t / 86400.0, st, math.radians(10.0))
+    up = visibility.above_mask(x, t, st, math.radians(10.0))
     tau = lighttime.light_time_delay(x[up, :3], st, t[up])
     assert tau.min() > 1.4e-3 and tau.max() < 5.0e-3
     ret = lighttime.retarded_states(_iss_states, t[up], st)

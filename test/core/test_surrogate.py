@@ -45,7 +45,7 @@ def _meas(sim: Simulation, i: int, R: np.ndarray | None = None) -> Measurement:
     kind = sim.scenario.kind
     return Measurement(float(sim.t[i]), sim.z[i].copy(),
                        (sim.R if R is None else R).copy(), kind=kind, source=Source.SENSOR,
-                       object_id="iss", frame_id="columbus" if kind == Kind.RANGE_AZ_EL else "eci")
+                       object_id="iss", frame_id="columbus" if kind == Kind.RANGE_AZ_EL else "gcrf")
 
 
 def _track(sur: Surrogate, sim: Simulation, n: int = TRACK_N, R=None) -> list[Measurement]:
@@ -99,7 +99,7 @@ def test_gap_forecasts_each_missed_epoch_once_on_the_cadence_grid():
     for k, m in enumerate(got, start=1):
         assert m.horizon == k * DT
         assert m.source == Source.FORECAST and m.kind == Kind.POSITION
-        assert m.frame_id == "eci" and m.object_id == "iss"
+        assert m.frame_id == "gcrf" and m.object_id == "iss"
         assert np.isfinite(m.z).all() and m.z.shape == (3,) and m.R.shape == (3, 3)
     # the measurement that ends the gap releases the epochs still owed before it
     end = TRACK_N + 50
@@ -310,8 +310,8 @@ def test_a_stray_kind_or_frame_is_refused_and_changes_nothing():
 def test_a_configured_kind_and_frame_are_not_taken_from_a_stray_first_message():
     """Without a configured kind the first message would decide it for the whole run."""
     sim = _sim()
-    clean = Surrogate(_config(kind=Kind.POSITION, frame_id="eci"))
-    sur = Surrogate(_config(kind=Kind.POSITION, frame_id="eci"))
+    clean = Surrogate(_config(kind=Kind.POSITION, frame_id="gcrf"))
+    sur = Surrogate(_config(kind=Kind.POSITION, frame_id="gcrf"))
     stray = _meas(sim, 0, R_FREE)
     stray.kind, stray.frame_id, stray.t = Kind.RANGE_AZ_EL, "columbus", stray.t - DT
     assert sur.add(stray) == [] and sur.last is None

@@ -11,8 +11,8 @@ from sgp4.api import jday
 from sgp4.exporter import export_tle
 
 from ssa_fusion.core import catalog, survey
-from ssa_fusion.core.frames import razel_eci
-from ssa_fusion.core.stations import NETWORKS, SENSORS, UNIX_EPOCH_JD
+from ssa_fusion.core.frames import razel_gcrs, teme_to_gcrs
+from ssa_fusion.core.stations import NETWORKS, SENSORS
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"
 BASE = catalog.read_catalog(SAMPLE)[0]  # CBERS 2, LEO
@@ -29,8 +29,8 @@ def cat():
 
 
 def test_noise_free_measurements_are_sgp4_seen_from_the_station(cat):
-    """Each measurement equals range/az/el of `sgp4`'s own per-object state at its epoch, and
-    it lies above the sensor's mask."""
+    """Each measurement equals range/az/el of `sgp4`'s own per-object state at its epoch
+    (TEME, turned to the GCRF), and it lies above the sensor's mask."""
     sensors = [_exact(s) for s in RADARS]
     t0 = BASE.epoch_unix
     obs = survey.observe_catalog(cat, sensors, t0, 6 * 3600.0, seed=0, chunk_states=5000)
@@ -42,7 +42,7 @@ def test_noise_free_measurements_are_sgp4_seen_from_the_station(cat):
         e, r, v = sat.sgp4(jd, fr + sec / 86400.0)
         assert e == 0
         s = sensors[obs.sensor[i]]
-        want = razel_eci(np.array([*r, *v]), UNIX_EPOCH_JD + sec / 86400.0, s.station)
+        want = razel_gcrs(teme_to_gcrs(np.array([*r, *v]), sec), sec, s.station)
         assert obs.z[i] == pytest.approx(want, rel=1e-9, abs=1e-9)
         assert obs.z[i, 2] >= s.min_elevation(np.array(obs.z[i, 1]))
 
@@ -58,7 +58,7 @@ def test_every_epoch_above_the_mask_is_measured(cat):
     up = []
     for tk in t:
         _, r, _ = cat[0].satrec.sgp4(jd, fr + tk / 86400.0)
-        az_el = razel_eci(np.array(r), UNIX_EPOCH_JD + tk / 86400.0, sensor.station)
+        az_el = razel_gcrs(teme_to_gcrs(np.array(r), tk), tk, sensor.station)
         up.append(az_el[2] >= math.radians(sensor.min_elevation_deg))
     assert np.array_equal(obs.t, t[np.array(up)])
     assert len(obs) > 0

@@ -52,7 +52,7 @@ def _tracker(sim: Simulation, **config) -> Tracker:
 
 
 def _frame(sim: Simulation) -> str:
-    return sim.scenario.station if sim.scenario.kind == Kind.RANGE_AZ_EL else "eci"
+    return sim.scenario.station if sim.scenario.kind == Kind.RANGE_AZ_EL else "gcrf"
 
 
 def _meas(sim: Simulation, i: int, *, noisy: bool = True, R: np.ndarray | None = None,
@@ -171,11 +171,11 @@ def test_tracking_noise_free_range_az_el_error_small():
 
 
 def test_tracking_noisy_range_az_el_beats_raw_measurements():
-    """Scenario noise (1 km, 10 mrad): a single measurement converted to ECI is ~110 km off
+    """Scenario noise (1 km, 10 mrad): a single measurement converted to GCRF is ~110 km off
     (RMS, the ISS is mostly far from Columbus); three hours of tracking must do much better."""
     sim = _sim("iss_j2_rae", track_s=3 * 3600.0)
     model = sc.measurement_model(sim.scenario)
-    raw = iod.razel_to_eci(sim.z, model.jd0_utc + sim.t / 86400.0, model.station)
+    raw = iod.razel_to_gcrs(sim.z, model.unix0 + sim.t, model.station)
     raw_rms = np.sqrt(np.mean(np.sum((raw - sim.x[:, :3]) ** 2, axis=1)[-120:]))
     tr = _tracker(sim, q=1e-8)
     first = _feed(tr, [_meas(sim, i) for i in range(3)]).estimate
@@ -249,7 +249,7 @@ def _bad(kind: str):
         "elevation_high": ({}, z(2, math.pi / 2 + 1e-9), "rejected_elevation"),
         "elevation_low": ({}, z(2, -math.pi / 2 - 1e-9), "rejected_elevation"),
         "wrong_kind": ({}, attr("kind", 7), "rejected_kind"),
-        "wrong_frame": ({"frame_id": "columbus"}, attr("frame_id", "eci"), "rejected_frame"),
+        "wrong_frame": ({"frame_id": "columbus"}, attr("frame_id", "gcrf"), "rejected_frame"),
         "unknown_source": ({}, attr("source", 9), "rejected_source"),
         "nonsymmetric_cov": ({}, R(lambda r: r + np.array([[0, 1e-3, 0], [0, 0, 0], [0, 0, 0]])),
                              "rejected_covariance"),
@@ -275,7 +275,7 @@ def test_rejection_leaves_state_untouched_and_later_data_fused(name, cause):
     changes, mutate, expected = _bad(cause)
     cfg = dict(changes)
     if cause == "wrong_frame" and name == "iss_j2_pos":
-        cfg["frame_id"] = "eci"
+        cfg["frame_id"] = "gcrf"
     tr = _tracker(sim, **cfg)
     ref = _tracker(sim, **cfg)
     n0 = 10

@@ -14,7 +14,7 @@ def sample_measurement(i: int) -> Measurement:
     m = Measurement()
     m.header.stamp.sec = 1_700_000_000 + i
     m.header.stamp.nanosec = 123_456_789 + i
-    m.header.frame_id = "columbus" if i % 2 else "eci"
+    m.header.frame_id = "columbus" if i % 2 else "gcrf"
     m.object_id = f"ISS (ZARYA) #{i}"
     m.kind = Measurement.RANGE_AZ_EL if i % 2 else Measurement.POSITION
     m.source = Measurement.FORECAST if i % 3 == 0 else Measurement.SENSOR
@@ -28,7 +28,7 @@ def sample_estimate(i: int) -> StateEstimate:
     e = StateEstimate()
     e.header.stamp.sec = 1_700_000_000 + i
     e.header.stamp.nanosec = 999_999_999 - i
-    e.header.frame_id = "eci"
+    e.header.frame_id = "gcrf"
     e.object_id = f"obj-{i}"
     e.state = [-6.7e6 + i, 1.0e-3, 3.3e6, 7.6e3, -0.5, float(i)]
     e.covariance = [(-1) ** k * 10.0 ** (k - 18) + i for k in range(36)]

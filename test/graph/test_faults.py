@@ -148,7 +148,7 @@ def bad_messages(i: int) -> list[tuple[str, Measurement]]:
     out.append(("rejected_kind", m))
     m = meas(i, 16.0)
     m.kind = Measurement.POSITION  # a kind this filter is not configured for
-    m.header.frame_id = "eci"
+    m.header.frame_id = "gcrf"
     out.append(("rejected_kind", m))
     m = meas(i, 17.0)
     m.header.frame_id = "goldstone"  # a station this filter is not configured for
@@ -390,7 +390,7 @@ def test_surrogate_learns_only_its_configured_object_and_kind(ros_graph):
     other = meas(0, -30.0)
     other.object_id = "debris"
     position = meas(0, -20.0)
-    position.kind, position.header.frame_id = Measurement.POSITION, "eci"
+    position.kind, position.header.frame_id = Measurement.POSITION, "gcrf"
     for m in [other, position] + [meas(i) for i in range(6)]:
         pub.publish(m)
     c = diag.wait(g, "surrogate", {"ignored_other_object": 1, "rejected_kind": 1,

@@ -52,7 +52,7 @@ def test_j2_coast_tracks_with_j2_then_follows_an_independent_j2_orbit():
     t = 60.0 * np.arange(200)
     truth = orbit(X0, t)
     real = [Measurement(float(ti), xi[:3], 1e-6 * np.eye(3), kind=Kind.POSITION,
-                        frame_id="eci") for ti, xi in zip(t[:150], truth[:150], strict=True)]
+                        frame_id="gcrf") for ti, xi in zip(t[:150], truth[:150], strict=True)]
     t_gap = t[150:]
     got = arms.j2_coast(CONFIG, real, t_gap)
     j2 = CONFIG.with_(motion_model=MotionModel.J2)
