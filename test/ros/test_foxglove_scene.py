@@ -1,6 +1,6 @@
 """ssa_fusion.ros.foxglove_scene against analytic results and core.frames: covariance
-ellipsoids (diagonal, rotated, degenerate), quaternions, ECI -> geodetic, range/az/el -> ECI,
-and the foxglove messages it builds."""
+ellipsoids (diagonal, rotated, degenerate), quaternions, GCRF -> geodetic (against astropy),
+range/az/el -> GCRF, and the foxglove messages it builds."""
 
 from __future__ import annotations
 
@@ -17,13 +17,16 @@ from visualization_msgs.msg import Marker
 from ssa_fusion.core.constants import R_EARTH, WGS84_F
 from ssa_fusion.core.frames import (
     COLUMBUS,
-    earth_rotation_angle,
-    ecef_to_eci,
-    razel_eci,
-    site_ecef,
+    ERA_RATE,
+    Frame,
+    gcrs_to_itrs,
+    itrs_to_gcrs,
+    razel_gcrs,
+    site_gcrs,
+    site_itrs,
     wrap_pi,
 )
-from ssa_fusion.core.stations import UNIX_EPOCH_JD, network_stations
+from ssa_fusion.core.stations import network_stations
 from ssa_fusion.core.types import Kind
 from ssa_fusion.ros import foxglove_scene as fs
 from ssa_fusion.ros import visual_msgs as vm
@@ -82,19 +85,32 @@ def test_quaternion_round_trip(angle, axis):
     assert q[3] == pytest.approx(math.cos(angle / 2), abs=1e-12)
 
 
-def test_geodetic_of_an_equatorial_eci_point_is_minus_the_earth_rotation_angle():
-    """A point on ECI +x lies on the equator at longitude -ERA(t) (ECEF is ECI rotated by
-    ERA about z), at height |r| - a."""
-    lat, lon, alt = fs.eci_to_geodetic([7000.0, 0.0, 0.0], T)
-    era = float(earth_rotation_angle(UNIX_EPOCH_JD + T / 86400.0))
-    assert lat == pytest.approx(0.0, abs=1e-12)
-    assert lon == pytest.approx(float(wrap_pi(-era)), abs=1e-12)
-    assert alt == pytest.approx(7000.0 - R_EARTH, abs=1e-9)
+def test_sub_satellite_point_matches_astropy():
+    """GCRF points -> geodetic latitude, longitude, height against astropy's GCRS -> ITRS ->
+    WGS-84 (same IERS table): 1e-9 rad, 1 mm."""
+    astropy_time = pytest.importorskip("astropy.time")
+    coords = pytest.importorskip("astropy.coordinates")
+    from astropy import units
+    from astropy.utils import iers
+
+    iers.conf.auto_download = False
+    iers.conf.auto_max_age = None
+    iers.earth_orientation_table.set(iers.IERS_A.open(iers.IERS_A_FILE))
+    r = np.array([[7000.0, 0.0, 0.0], [4000.0, -3000.0, 4500.0], [-100.0, 200.0, 6800.0]])
+    t = astropy_time.Time(T, format="unix", scale="utc")
+    gcrs = coords.GCRS(coords.CartesianRepresentation(r.T * units.km), obstime=t)
+    itrs = gcrs.transform_to(coords.ITRS(obstime=t))
+    ref = itrs.earth_location.to_geodetic("WGS84")
+    for i in range(len(r)):
+        lat, lon, alt = fs.gcrs_to_geodetic(r[i], T)
+        assert lat == pytest.approx(ref.lat.rad[i], abs=1e-9)
+        assert float(wrap_pi(lon - ref.lon.rad[i])) == pytest.approx(0.0, abs=1e-9)
+        assert alt == pytest.approx(ref.height.to_value(units.km)[i], abs=1e-6)
 
 
 def test_geodetic_of_the_pole():
     b = R_EARTH * (1 - WGS84_F)
-    lat, _lon, alt = fs.eci_to_geodetic([0.0, 0.0, b + 500.0], T)
+    lat, _lon, alt = fs.itrs_to_geodetic([0.0, 0.0, b + 500.0])
     assert lat == pytest.approx(math.pi / 2)
     assert alt == pytest.approx(500.0, abs=1e-9)
 
@@ -103,38 +119,37 @@ def test_geodetic_of_the_pole():
                          [(39.9612, -82.9988, 0.275), (-33.9, 151.2, 420.0), (0.0, 180.0, 0.0),
                           (85.0, 10.0, 35786.0), (-89.9, -45.0, 1.0), (51.6, 0.0, 400.0)])
 def test_geodetic_inverts_core_frames(lat_deg, lon_deg, alt_km):
-    """core.frames builds the ECI point of a geodetic site (site_ecef, ecef_to_eci);
-    eci_to_geodetic gets the site back at the same epoch."""
+    """core.frames builds the GCRF point of a geodetic site (site_itrs, itrs_to_gcrs);
+    gcrs_to_geodetic gets the site back at the same epoch."""
     lat, lon = math.radians(lat_deg), math.radians(lon_deg)
-    r_eci = ecef_to_eci(site_ecef(lat, lon, alt_km), UNIX_EPOCH_JD + T / 86400.0)
-    got = fs.eci_to_geodetic(r_eci, T)
+    r_gcrs = itrs_to_gcrs(site_itrs(lat, lon, alt_km), T)
+    got = fs.gcrs_to_geodetic(r_gcrs, T)
     assert got[0] == pytest.approx(lat, abs=1e-11)
     assert float(wrap_pi(got[1] - lon)) == pytest.approx(0.0, abs=1e-11)
     assert got[2] == pytest.approx(alt_km, abs=1e-7)
 
 
-def test_razel_to_eci_inverts_core_razel():
+def test_measurement_point_inverts_core_razel():
     r_eci = np.array([4000.0, -3000.0, 4500.0])
-    jd = UNIX_EPOCH_JD + T / 86400.0
-    z = razel_eci(r_eci, jd, COLUMBUS)
-    assert fs.razel_to_eci(z, COLUMBUS, T) == pytest.approx(r_eci, abs=1e-8)
+    z = razel_gcrs(r_eci, T, COLUMBUS)
     stations = {"columbus": COLUMBUS}
     assert fs.measurement_point(Kind.RANGE_AZ_EL, z, "columbus", T, stations) == \
         pytest.approx(r_eci, abs=1e-8)
-    assert fs.measurement_point(Kind.POSITION, r_eci, "eci", T, {}) == pytest.approx(r_eci)
+    assert fs.measurement_point(Kind.POSITION, r_eci, Frame.GCRF, T, {}) == \
+        pytest.approx(r_eci)
     assert fs.measurement_point(Kind.RA_DEC, z[1:], "columbus", T, stations) is None
     assert fs.measurement_point(Kind.RANGE_AZ_EL, z, "elsewhere", T, stations) is None
 
 
 def test_meridian_and_station_turn_with_the_earth():
-    m0, m1 = fs.meridian_eci(T), fs.meridian_eci(T + 6 * 3600.0)
+    m0, m1 = fs.meridian_gcrs(T), fs.meridian_gcrs(T + 6 * 3600.0)
     assert np.linalg.norm(m0, axis=1) == pytest.approx(R_EARTH + 1.0)
     mid0, mid1 = m0[len(m0) // 2], m1[len(m1) // 2]  # on the equator
     turned = math.acos(mid0 @ mid1 / (np.linalg.norm(mid0) * np.linalg.norm(mid1)))
-    assert turned == pytest.approx(6 * 3600.0 * 7.292115146706979e-5, rel=1e-6)
-    s = fs.station_eci(COLUMBUS, T)
-    assert np.linalg.norm(s) == pytest.approx(np.linalg.norm(site_ecef(
-        COLUMBUS.lat_rad, COLUMBUS.lon_rad, COLUMBUS.alt_km)))
+    assert turned == pytest.approx(6 * 3600.0 * ERA_RATE, rel=1e-4)  # + precession
+    assert gcrs_to_itrs(m1, T + 6 * 3600.0) == pytest.approx(gcrs_to_itrs(m0, T), abs=1e-9)
+    s = site_gcrs(COLUMBUS, T)
+    assert np.linalg.norm(s) == pytest.approx(np.linalg.norm(COLUMBUS.itrs))
 
 
 def test_metrics():
@@ -184,7 +199,7 @@ def test_scene_messages_encode():
     assert isinstance(update, SceneUpdate)
     assert len(update.encode()) > 500
     fix = repr(fs.location_fix(T, [7000.0, 0.0, 0.0]))
-    lat, lon, alt = fs.eci_to_geodetic([7000.0, 0.0, 0.0], T)
+    lat, lon, alt = fs.gcrs_to_geodetic([7000.0, 0.0, 0.0], T)
     values = {k: float(v) for k, v in re.findall(r"\b(latitude|longitude|altitude)=([-\d.e]+)",
                                                  fix)}
     assert values == pytest.approx({"latitude": math.degrees(lat),
@@ -203,7 +218,7 @@ def _panels(tree: object) -> list[str]:
 
 def test_the_layout_shows_the_bridge_topics():
     """config/foxglove_layout.json (Foxglove's layout JSON: configById + layout tree): a 3D
-    panel on the scene in frame eci, a Map panel on the ground tracks, a Plot of the metrics'
+    panel on the scene in frame gcrf, a Map panel on the ground tracks, a Plot of the metrics'
     fields; every panel of the tree is configured."""
     layout = json.loads(LAYOUT.read_text())
     panels = _panels(layout["layout"])
@@ -226,7 +241,7 @@ def test_the_layout_shows_the_bridge_topics():
 def test_ros_markers_draw_the_same_shapes_as_the_foxglove_scene():
     """The bag's MarkerArray: a DELETEALL first, then per entity its spheres (one SPHERE with
     the 3σ ellipsoid's size and rotation; a SPHERE_LIST for a cloud of points), trails and
-    labels, in frame eci, stamped with the scene's epoch."""
+    labels, in frame gcrf, stamped with the scene's epoch."""
     v = fs.VisualTopics(network_stations("network"))
     p = np.diag([1.0, 4.0, 9.0, 1e-6, 1e-6, 1e-6])
     v.truth(T, [7000.0, 0.0, 0.0, 0.0, 7.5, 0.0])
@@ -257,7 +272,7 @@ def test_ros_markers_draw_the_same_shapes_as_the_foxglove_scene():
 def test_nav_sat_fix_is_the_sub_satellite_point():
     r = [4000.0, 3000.0, 4500.0]
     fix = vm.nav_sat_fix(T, r, "estimate")
-    lat, lon, alt = fs.eci_to_geodetic(r, T)
+    lat, lon, alt = fs.gcrs_to_geodetic(r, T)
     assert (fix.latitude, fix.longitude, fix.altitude) == (math.degrees(lat),
                                                            math.degrees(lon), alt * 1000.0)
     assert fix.header.frame_id == "estimate" and fix.header.stamp.sec == int(T)
