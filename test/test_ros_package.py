@@ -95,6 +95,8 @@ IMPORT_KEYS = {
     "foxglove": "python3-foxglove-sdk-pip",  # foxglove-sdk: the foxglove_bridge node
     "ccsds_ndm": "python3-ccsds-ndm-pip",  # CCSDS OEM/TDM (apps/ccsds.py)
     "numba": "python3-numba-pip",  # the batched EKF's compiled kernels (core/batch_ekf.py)
+    "erfa": "python3-pyerfa-pip",  # frames and time scales (core/frames.py, timescales.py)
+    "astropy_iers_data": "python3-astropy-iers-data-pip",  # IERS EOP and leap seconds
     "threadpoolctl": None,  # optional: used when installed (ssa_fusion.limit_blas_threads)
     "pydmd": None,  # optional: the BOP-DMD variant of core.residual (issue 19's study)
 }

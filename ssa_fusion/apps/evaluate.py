@@ -22,6 +22,7 @@ import numpy as np
 
 from ssa_fusion.core import metrics, types
 from ssa_fusion.core.config import EstimatorConfig
+from ssa_fusion.core.frames import Frame
 from ssa_fusion.nodes import settings
 from ssa_fusion.paper import scenarios, sky
 from ssa_fusion.paper.arms import ArmName, GapEvaluation, evaluate_gap
@@ -48,6 +49,22 @@ class BagData:
     forecasts: list[types.Measurement] = field(default_factory=list)
     config: list[str] = field(default_factory=list)
     counts: dict[str, int] = field(default_factory=dict)
+    frames: set[str] = field(default_factory=set)
+    """The frame_id of the truth and estimate messages: {"gcrf"}, or {"eci"} for a bag
+    recorded before the GCRF (`frames.Frame.LEGACY_ECI`)."""
+
+    @property
+    def legacy_frame(self) -> bool:
+        """True when the bag's states are not in the GCRF (a recording of older versions)."""
+        return bool(self.frames - {Frame.GCRF})
+
+    def frame_note(self, path: Path | str) -> str:
+        """One line saying a legacy bag's frame, or "" for a GCRF bag."""
+        if not self.legacy_frame:
+            return ""
+        return (f"note: {path}: its states are in frame {', '.join(sorted(self.frames))!r}, "
+                f"recorded before ssa_fusion used the GCRF (Earth-consistent frames); errors "
+                f"against its own truth stand, its states are not GCRF")
 
 
 def load(path: Path | str) -> BagData:
@@ -66,6 +83,8 @@ def load(path: Path | str) -> BagData:
         if m.topic in lists:
             target, convert = lists[m.topic]
             target.append(convert(m.msg))
+            if m.topic in (TOPIC_TRUTH, TOPIC_ESTIMATE):
+                data.frames.add(m.msg.header.frame_id)
         elif m.topic == TOPIC_CONFIG:
             data.config.append(m.msg.data)
     for topic, n in undecodable.items():

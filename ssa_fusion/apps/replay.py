@@ -37,6 +37,7 @@ from ssa_fusion.apps import evaluate
 from ssa_fusion.apps.args import add_domain_id, positive_float
 from ssa_fusion.core import types
 from ssa_fusion.core.config import EstimatorConfig, make_surrogate, make_tracker
+from ssa_fusion.core.frames import Frame
 from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S, ahead_of_clock
 from ssa_fusion.nodes import settings as node_settings
 from ssa_fusion.ros import bagio, messages
@@ -125,6 +126,13 @@ def check_topics(path: Path, stream: list[bagio.BagMessage]) -> None:
                          f"{', '.join(PLAYED)}")
     if not any(m.topic == TOPIC_MEASUREMENT for m in stream):
         raise ValueError(f"{path}: no {TOPIC_MEASUREMENT} messages to replay")
+    legacy = sorted({m.msg.header.frame_id for m in stream
+                     if m.topic in (TOPIC_TRUTH, TOPIC_ESTIMATE)} - {Frame.GCRF})
+    if legacy:
+        raise ValueError(f"{path}: its states are in frame {', '.join(legacy)!r}, recorded "
+                         f"before ssa_fusion used the GCRF; a replay would put them beside "
+                         f"GCRF estimates. `ssa-fusion report` still reads it; re-record it "
+                         f"to replay it")
 
 
 def drop_ahead_of_clock(stream: list[bagio.BagMessage]) -> tuple[list[bagio.BagMessage], int]:

@@ -43,6 +43,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(evaluate.table(ev))
+    if data.legacy_frame:
+        print(data.frame_note(args.bag))
     print(f"\nwrote {out}/report.json, {out}/report.html, {out}/visual.mcap (open it in "
           "Foxglove with config/foxglove_layout.json) and plots")
     return 0

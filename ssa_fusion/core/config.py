@@ -98,6 +98,8 @@ class EstimatorConfig:
         What the surrogate learns.
     light_time : bool
         Light-time correction in the station measurement models (`measurement`).
+    refraction : bool
+        Refracted elevation in the radar measurement models (`refraction`).
     tracker : TrackerConfig
         EKF settings (its `frame_id` is set from `kind`/`station` by `make_tracker`).
     surrogate : SurrogateConfig
@@ -113,6 +115,7 @@ class EstimatorConfig:
     jd0: float = UNIX_EPOCH_JD
     lift: Lift = Lift.NONE
     light_time: bool = False
+    refraction: bool = False
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
     surrogate: SurrogateConfig = field(default_factory=SurrogateConfig)
 
@@ -157,11 +160,11 @@ def measurement_model(c: EstimatorConfig) -> MeasurementModel:
     if c.kind == Kind.POSITION:
         return PositionModel(c.observed)
     if c.is_network:
-        return StationModels(network_stations(c.station), c.jd0, c.light_time)
+        return StationModels(network_stations(c.station), c.jd0, c.light_time, c.refraction)
     station = STATIONS[c.station]
     if c.kind == Kind.RA_DEC:
         return RadecModel(station, c.jd0, c.light_time)
-    return RazelModel(station, c.jd0, c.light_time)
+    return RazelModel(station, c.jd0, c.light_time, c.refraction)
 
 
 def motion(c: EstimatorConfig) -> MotionFunction:
@@ -225,7 +228,7 @@ def make_surrogate(c: EstimatorConfig) -> Surrogate:
 
 
 _STREAM_KEYS = ("kind", "station", "observed", "n", "motion_model", "motion_params", "jd0",
-                "lift", "light_time")
+                "lift", "light_time", "refraction")
 _NOT_SERIALISED = {"tracker": ("frame_id",), "surrogate": ("kind", "frame_id", "lift")}
 """Component fields set from the stream by the builders, so not part of the JSON."""
 

@@ -77,6 +77,10 @@ class Frame:
     """The Earth-fixed frame (stations; ground tracks)."""
     TEME = "teme"
     """SGP4's frame (element sets only)."""
+    LEGACY_ECI = "eci"
+    """What states say in bags recorded before ssa_fusion used the GCRF: SGP4's TEME axes
+    turned to Earth-fixed by the Earth rotation angle alone, consistent with itself but not
+    with the Earth (0.3-0.4 deg off in the 2020s)."""
 
 
 @dataclass(frozen=True)

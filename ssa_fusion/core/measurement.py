@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from .constants import C_KM_S
 from .frames import Station, enu_matrix, gcrs_to_itrs_matrix1, wrap_2pi
+from .refraction import refraction, refraction_rate
 from .timescales import DAY_S, UNIX_EPOCH_JD
 from .types import Kind
 
@@ -81,10 +82,12 @@ class _StationModel:
     a GCRF position p is ``T p - M r_site``.
     """
 
-    def __init__(self, station: Station, jd0_utc: float, light_time: bool = False) -> None:
+    def __init__(self, station: Station, jd0_utc: float, light_time: bool = False,
+                 refraction: bool = False) -> None:
         self.station = station
         self.jd0_utc = float(jd0_utc)
         self.light_time = bool(light_time)
+        self.refraction = bool(refraction)
         self.unix0 = (self.jd0_utc - UNIX_EPOCH_JD) * DAY_S
         """Unix time (s) of ``t_s = 0``."""
         self._m = enu_matrix(station.lat_rad, station.lon_rad)
@@ -154,10 +157,13 @@ class RazelModel(_StationModel):
         Reference epoch (UTC Julian date); ``t_s`` arguments are seconds since it.
     light_time
         See the object where it was ``range / c`` earlier (module docstring).
+    refraction
+        Add the atmosphere's refraction to the elevation (`refraction.refraction`): the
+        elevation a sensor sees, not the geometric one (default).
 
-    ``h`` returns [range km, az rad in [0, 2 pi), el rad] (geometric elevation: no
-    refraction); ``H`` is the analytic (3, 6) Jacobian w.r.t. the GCRF state (velocity
-    columns zero without light time). Frames as :mod:`ssa_fusion.core.frames`.
+    ``h`` returns [range km, az rad in [0, 2 pi), el rad]; ``H`` is the analytic (3, 6)
+    Jacobian w.r.t. the GCRF state (velocity columns zero without light time). Frames as
+    :mod:`ssa_fusion.core.frames`.
     """
 
     kind = Kind.RANGE_AZ_EL
@@ -182,8 +188,12 @@ class RazelModel(_StationModel):
         k = -u / (h * r2)
         D = np.array([[e / r, n / r, u / r], [n / h2, -e / h2, 0.0], [k * e, k * n, h / r2]])
         rows = D @ T
-        z = np.array([r, float(wrap_2pi(math.atan2(e, n))), math.atan2(u, h)])
-        return z, self._jacobian(rows, rows[0], x, tau)
+        el = math.atan2(u, h)
+        if self.refraction:
+            rows[2] *= 1.0 + float(refraction_rate(el))
+            el += float(refraction(el))
+        z = np.array([r, float(wrap_2pi(math.atan2(e, n))), el])
+        return z, self._jacobian(rows, rows[0], x, tau)  # rows[0]: the line of sight
 
 
 class RadecModel(_StationModel):
@@ -241,15 +251,18 @@ class StationModels:
         Reference epoch of every model (UTC Julian date of t = 0).
     light_time
         Light-time correction in every model (module docstring).
+    refraction
+        Refracted elevations in the radar models (`RazelModel`).
     """
 
     kind = STATION_KINDS
 
     def __init__(self, stations: dict[str, Station], jd0_utc: float,
-                 light_time: bool = False) -> None:
+                 light_time: bool = False, refraction: bool = False) -> None:
         self.stations = dict(stations)
         self.jd0_utc = float(jd0_utc)
         self.light_time = bool(light_time)
+        self.refraction = bool(refraction)
         self._models: dict[tuple[int, str], StationModel] = {}
 
     def get(self, kind: int, frame_id: str) -> StationModel | None:
@@ -260,8 +273,11 @@ class StationModels:
             station = self.stations.get(frame_id)
             if station is None or kind not in STATION_KINDS:
                 return None
-            cls = RazelModel if kind == Kind.RANGE_AZ_EL else RadecModel
-            model = self._models[key] = cls(station, self.jd0_utc, self.light_time)
+            if kind == Kind.RANGE_AZ_EL:
+                model = RazelModel(station, self.jd0_utc, self.light_time, self.refraction)
+            else:
+                model = RadecModel(station, self.jd0_utc, self.light_time)
+            self._models[key] = model
         return model
 
 

@@ -87,6 +87,7 @@ class FilterDefaults:
     reinit_after: int = 0
     sigma_bound: float = 0.0
     light_time: bool = False
+    refraction: bool = False
     predict_period: float = 300.0
     max_clock_lead: float = 3600.0
     gap_forecast: str = "none"

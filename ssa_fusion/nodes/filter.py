@@ -132,6 +132,10 @@ def estimator_from(node: Node) -> EstimatorConfig:
     values["light_time"] = declare(
         node, "light_time", d.light_time,
         "correct the station measurement models for light time (range / c)")
+    values["refraction"] = declare(
+        node, "refraction", d.refraction,
+        "radar elevations as the atmosphere refracts them (Saemundsson's standard-atmosphere "
+        "formula, core.refraction); off: geometric elevations")
     def consistent(v: dict[str, Any]) -> str | None:
         try:
             settings.estimator_from(v, {})

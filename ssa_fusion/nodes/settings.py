@@ -28,7 +28,7 @@ from ssa_fusion.nodes.defaults import FILTER, SURROGATE
 KM = 1000.0
 """m per km."""
 FILTER_KEYS = ("kind", "station", "motion_model", "p0_sigma", "q", "gate", "iod_samples",
-               "iod_max_span", "reinit_after", "sigma_bound", "light_time")
+               "iod_max_span", "reinit_after", "sigma_bound", "light_time", "refraction")
 """The filter's parameters that are estimator settings."""
 SURROGATE_KEYS = ("kind", "station", "buffer_length", "retrain_period", "delays", "rank",
                   "max_horizon", "grace", "cadence", "lift")
@@ -45,7 +45,7 @@ def filter_params(c: EstimatorConfig) -> dict[str, Any]:
             "gate": t.gate or 0.0, "iod_samples": t.iod_samples,
             "iod_max_span": 0.0 if math.isinf(t.iod_max_span_s) else t.iod_max_span_s,
             "reinit_after": t.reinit_after, "sigma_bound": t.sigma_bound,
-            "light_time": c.light_time}
+            "light_time": c.light_time, "refraction": c.refraction}
 
 
 def surrogate_params(c: EstimatorConfig) -> dict[str, Any]:
@@ -94,6 +94,7 @@ def estimator_from(filt: Mapping[str, Any], surr: Mapping[str, Any]) -> Estimato
                            station=_stream(filt, surr, "station", FILTER.station),
                            motion_model=MotionModel(motion), jd0=UNIX_EPOCH_JD,
                            light_time=bool(f["light_time"]),
+                           refraction=bool(f["refraction"]),
                            lift=Lift(str(s["lift"]) if "lift" in surr
                                      or kind_name == KIND_NAMES[Kind.RANGE_AZ_EL] else Lift.NONE),
                            tracker=tracker, surrogate=surrogate)

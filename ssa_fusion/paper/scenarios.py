@@ -74,8 +74,8 @@ class Scenario:
         Surrogate training buffer (0: the tracking window) and refit period (a gap always
         starts from a fit up to the last real measurement).
     lift : str
-        "" (DMD learns the measurement) or "eci" (range/az/el lifted to the inertial (GCRF) position it
-        implies, see `surrogate.EciLift`).
+        "" (DMD learns the measurement) or "eci" (range/az/el lifted to the inertial (GCRF)
+        position it implies, see `surrogate.EciLift`).
     """
 
     name: str

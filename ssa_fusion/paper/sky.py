@@ -19,7 +19,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ssa_fusion.core import dynamics, frames, lighttime, visibility
+from ssa_fusion.core import dynamics, frames, lighttime, refraction, visibility
 from ssa_fusion.core.config import EstimatorConfig, MotionModel, make_surrogate, make_tracker
 from ssa_fusion.core.metrics import chi2_bounds, nees
 from ssa_fusion.core.stations import SENSORS, Sensor, SensorType
@@ -67,7 +67,8 @@ class SkyScenario:
     sensors : tuple of str
         Sensor preset ids (`stations.SENSORS`); their stations form the filter's network.
     x0 : tuple of float
-        True GCRF state at `t0`, km, km/s (osculating; SGP4 mean elements are fitted to it in TEME).
+        True GCRF state at `t0`, km, km/s (osculating; SGP4 mean elements are fitted to it,
+        in TEME).
     bstar : float
         SGP4 drag term of the truth, 1/earth radii.
     t0, duration_s, truth_cadence_s
@@ -80,7 +81,11 @@ class SkyScenario:
         The filter: motion model, process noise spectral density (km/s^2)^2 s, IOD
         covariance floor, IOD batch size and span (one pass), real measurements beyond the
         gate in a row after which it initialises again, the bound on its standard
-        deviations relative to |r| and |v| (`ekf.bound_covariance`), light-time correction.
+        deviations relative to |r| and |v| (`ekf.bound_covariance`), light-time correction
+        (in the simulated measurements too).
+    refraction
+        Radar elevations refracted by the standard atmosphere (`core.refraction`), in the
+        simulated measurements and in the filter's model alike.
     finding : str
         What the scenario shows.
     """
@@ -101,6 +106,7 @@ class SkyScenario:
     reinit_after: int = 10
     sigma_bound: float = 2.0
     light_time: bool = True
+    refraction: bool = False
     finding: str = ""
 
     @property
@@ -118,7 +124,7 @@ class SkyScenario:
         kind = SENSORS[self.sensors[0]].kind
         return EstimatorConfig(
             kind=kind, station=self.network, motion_model=MotionModel(self.motion_model),
-            jd0=UNIX_EPOCH_JD, light_time=self.light_time,
+            jd0=UNIX_EPOCH_JD, light_time=self.light_time, refraction=self.refraction,
             tracker=TrackerConfig(p0_sigma=self.p0_sigma, q=self.q,
                                   iod_samples=self.iod_samples,
                                   iod_max_span_s=self.iod_max_span_s,
@@ -206,6 +212,8 @@ def _observe(s: SkyScenario, sensor: Sensor, rng: np.random.Generator,
         x = lighttime.retarded_states(lambda tt: truth(s, tt), t, station)
     if sensor.type == SensorType.RADAR:
         z = frames.razel_gcrs(x, t, station)
+        if s.refraction:
+            z[:, 2] += refraction.refraction(z[:, 2])
     else:
         z = frames.radec_gcrs(x, t, station)
     sigma = np.asarray(sensor.sigma, dtype=float)

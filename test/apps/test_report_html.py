@@ -175,7 +175,7 @@ def test_a_position_bag_without_forecasts_gets_the_other_figures():
     html = report_html.build(data, evaluate.evaluate(data))
     # orbit, ground track, errors, NEES: no forecasts, and its estimates carry no NIS (all 0)
     assert html.count("Plotly.newPlot") == 4
-    assert "x ECI [km]" in html and "NEES [-]" in html
+    assert "x GCRF [km]" in html and "NEES [-]" in html
 
 
 def test_the_visibility_circle_is_at_the_masks_central_angle_from_the_station():

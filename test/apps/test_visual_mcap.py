@@ -14,7 +14,6 @@ from mcap.reader import make_reader
 
 from ssa_fusion.apps import evaluate, visual_mcap
 from ssa_fusion.core.frames import COLUMBUS
-from ssa_fusion.core.stations import UNIX_EPOCH_JD
 from ssa_fusion.ros import foxglove_scene as scene
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -94,12 +93,6 @@ def _field_numbers(path: Path, message: str) -> dict[str, int]:
     raise AssertionError(f"no {message} in its schema")
 
 
-def _gmst_rad(t_unix: float) -> float:
-    """Earth rotation angle (rad) at Unix time `t_unix` (s, UTC taken as UT1): IERS 2003."""
-    du = UNIX_EPOCH_JD + t_unix / 86400.0 - 2451545.0
-    return (2 * math.pi * (0.7790572732640 + 1.00273781191135448 * du)) % (2 * math.pi)
-
-
 def test_the_file_holds_the_four_visual_channels_with_their_schemas(written):
     data, path, counts = written
     msgs = _messages(path)
@@ -148,10 +141,17 @@ def test_a_location_fix_agrees_with_a_direct_computation(written):
     e = data.truth[i]
     assert bytes(raw[num["frame_id"]][0]).decode() == "truth"
     assert fixes[i][0] == round(e.t * 1e9)
-    # direct: rotate ECI by the Earth rotation angle, geocentric -> geodetic latitude
-    theta = _gmst_rad(e.t)
-    x, y, z = e.x[:3]
-    xe, ye = math.cos(theta) * x + math.sin(theta) * y, -math.sin(theta) * x + math.cos(theta) * y
+    # direct: GCRF -> ITRF by ERFA's full rotation (c2t06a: IAU 2006/2000A, the same IERS
+    # table's UT1 - UTC and polar motion), then the geodetic latitude by fixed point
+    import erfa
+
+    from ssa_fusion.core import eop, timescales
+
+    v = eop.default().at(np.array([e.t]))
+    jd1, jd2 = 2440587.5, e.t / 86400.0
+    tt = jd2 + float(timescales.tt_minus_utc(e.t)) / 86400.0
+    c2t = erfa.c2t06a(jd1, tt, jd1, jd2 + v.dut1[0] / 86400.0, v.xp[0], v.yp[0])
+    xe, ye, z = c2t @ e.x[:3]
     lon = math.degrees(math.atan2(ye, xe))
     f = 1 / 298.257223563
     e2 = f * (2 - f)

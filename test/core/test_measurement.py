@@ -71,3 +71,33 @@ def test_radec_model_matches_frames_and_finite_differences():
         d = wrap_angle(m.h(x + dx, t) - m.h(x - dx, t))
         num[:, k] = d / 2e-3
     np.testing.assert_allclose(H, num, rtol=1e-6, atol=1e-12)
+
+
+def test_refraction_inverts_bennetts_formula_and_its_jacobian_is_exact():
+    """Saemundsson's R(true elevation) against Bennett's independent R(apparent elevation)
+    (Meeus, Astronomical Algorithms, eq. 16.3): el + R(el) seen through Bennett gives R back
+    within 0.1' from the horizon to the zenith; the radar model adds it to the elevation with
+    the matching Jacobian."""
+    from ssa_fusion.core.refraction import refraction
+
+    el = np.radians(np.linspace(0.0, 90.0, 91))
+    r = refraction(el)
+    h0 = np.degrees(el + r)  # the apparent elevation, deg
+    bennett = np.radians(1.0 / np.tan(np.radians(h0 + 7.31 / (h0 + 4.4))) / 60.0)
+    assert np.abs(np.degrees(r - bennett) * 60.0).max() < 0.1
+    assert np.degrees(refraction(np.radians(10.0))) * 60.0 == pytest.approx(5.4, abs=0.05)
+    jd0 = 2460310.5
+    plain, bent = RazelModel(COLUMBUS, jd0), RazelModel(COLUMBUS, jd0, refraction=True)
+    x = np.array([1200.0, -5200.0, 4300.0, 5.1, 1.2, -4.4])
+    z0, z1 = plain.h(x, 0.0), bent.h(x, 0.0)
+    assert z1[2] - z0[2] == pytest.approx(float(refraction(z0[2])), abs=1e-15)
+    np.testing.assert_array_equal(z1[:2], z0[:2])
+    _, H = bent.h_and_H(x, 0.0)
+    num = np.zeros((3, 6))
+    for k in range(6):
+        dx = np.zeros(6)
+        dx[k] = 1e-3
+        d = bent.h(x + dx, 0.0) - bent.h(x - dx, 0.0)
+        d[1:] = wrap_angle(d[1:])
+        num[:, k] = d / 2e-3
+    np.testing.assert_allclose(H, num, rtol=1e-6, atol=1e-12)

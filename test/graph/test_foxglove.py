@@ -203,7 +203,7 @@ def test_bridge_serves_scene_track_and_metrics_and_records_them_in_the_bag(ros_g
         assert {m.ns for m in markers[-1].markers} >= {"earth", "truth", "estimate",
                                                        "covariance", "stations"}
         fix = fixes[-1]
-        lat, lon, _ = scene.eci_to_geodetic([6779.0, 1.0, 0.5],
+        lat, lon, _ = scene.gcrs_to_geodetic([6779.0, 1.0, 0.5],
                                             fix.header.stamp.sec + fix.header.stamp.nanosec * 1e-9)
         assert abs(fix.latitude - np.degrees(lat)) < 1e-9
         assert abs(fix.longitude - np.degrees(lon)) < 1e-9
