@@ -22,7 +22,8 @@ fastest nutation term has a period of 5.6 days), so they are computed on a grid 
 UTC hours and interpolated linearly, element by element: the error of that is below
 1e-5 arcsec. The Earth rotation angle is computed at every epoch. Velocities carry the
 ``omega x r`` of the Earth's rotation (``omega`` = `ERA_RATE` about the CIP); the slow
-rotation of ``Q`` and ``W`` (< 1e-11 rad/s) is neglected in velocities (< 0.1 mm/s).
+rotation of ``Q`` and ``W`` (~1.1e-11 rad/s) is neglected in velocities: < 0.5 mm/s below
+the geostationary orbit, 2 mm/s at 200,000 km.
 
 TEME -> GCRS follows Vallado (2006) as astropy does: ``r_PEF = R3(GMST82(UT1)) r_TEME`` (PEF
 is the terrestrial intermediate frame, up to the TIO locator s' < 0.1 mas), then as above

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -110,11 +111,19 @@ def jd_utc(t_unix: ArrayLike) -> tuple[Array, Array]:
 
 
 def tai_minus_utc(t_unix: ArrayLike) -> Array:
-    """TAI - UTC, s, at Unix stamps (the leap seconds; `erfa.utctai`)."""
+    """TAI - UTC, s, at Unix stamps (the leap seconds; `erfa.utctai`).
+
+    Taken at 0h UTC of each stamp's day: a Unix stamp counts 86400 s in every day, while
+    ERFA's UTC day fraction of a leap-second day is of 86401 s, and TAI - UTC changes only at
+    a day's end. Beyond the table's last leap second (+ 5 years ERFA calls the year
+    "dubious") no new leap second is known: TAI - UTC stays at its last value, silently.
+    """
     install_leap_seconds()
-    u1, u2 = jd_utc(t_unix)
-    a1, a2 = erfa.utctai(u1, u2)
-    out: Array = np.round(((a1 - u1) + (a2 - u2)) * DAY_S, 6)
+    u1, _ = jd_utc(t_unix)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", erfa.ErfaWarning)
+        a1, a2 = erfa.utctai(u1, np.zeros_like(u1))
+    out: Array = np.round(((a1 - u1) + a2) * DAY_S, 6)
     return out
 
 

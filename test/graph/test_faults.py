@@ -32,8 +32,11 @@ from rosgraph_msgs.msg import Clock
 from ssa_fusion_msgs.msg import Measurement, StateEstimate
 
 from ssa_fusion.apps.live import node_parameters
-from ssa_fusion.core import kepler, types
+from ssa_fusion.core import types
+from ssa_fusion.core.config import EstimatorConfig
+from ssa_fusion.core.config import motion as config_motion
 from ssa_fusion.core.measurement import RazelModel
+from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.tracker import DEFAULT_GATE, Tracker, TrackerConfig
 from ssa_fusion.paper import scenarios
 from ssa_fusion.paper.simulate import simulate
@@ -110,10 +113,10 @@ def assert_sane(est: list[types.StateEstimate]) -> None:
 
 def offline_tracker() -> Tracker:
     """The filter node's Tracker for SHORT, built from the core alone."""
-    model = RazelModel(scenarios.STATIONS["columbus"], scenarios.UNIX_EPOCH_JD)
+    model = RazelModel(scenarios.STATIONS["columbus"], UNIX_EPOCH_JD)
     config = TrackerConfig(p0_sigma=SHORT.p0_sigma, q=SHORT.q, gate=DEFAULT_GATE,
                            frame_id="columbus")
-    return Tracker(kepler.propagate, model, config, n=6)
+    return Tracker(config_motion(EstimatorConfig()), model, config, n=6)
 
 
 def filter_params(**extra) -> dict:
