@@ -89,11 +89,10 @@ TOPO_ANGLE_TOL = 1e-3 * ARCSEC
 skyfield (right ascension and declination: the hourly interpolation of Q)): 100 times
 tighter than the 1 m and 0.1" asked of the frames, 10-100 times looser than measured."""
 
-# astropy's own time conversions past the leap-second table warn (ours do not)
 DUBIOUS_YEAR = pytest.mark.filterwarnings("ignore:ERFA function.*dubious year:erfa.ErfaWarning")
 """ERFA calls a UTC year beyond its leap-second table's horizon "dubious" (2029 on, with the
-table of astropy-iers-data): the frames and astropy warn for every such epoch; these tests
-use them on purpose."""
+table of astropy-iers-data): astropy's own time conversions warn for every such epoch (ours
+do not); these tests use them on purpose."""
 
 SITES = {s.station.name: s.station for s in SENSORS.values()}
 """The project's real sensor sites (columbus, millstone, altair, tira, socorro, maui, ...)."""
