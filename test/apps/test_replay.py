@@ -14,7 +14,7 @@ from ssa_fusion.core import types
 from ssa_fusion.ros import bagio, messages
 
 SAMPLE = Path(__file__).resolve().parents[2] / "bags" / "sample_iss_j2_rae"
-"""Recorded before Measurement had `shard_key`: read with its own stored definitions."""
+"""A recording of `make demo` (frames of the real Earth: states in the GCRF)."""
 CLASSES = bagio.rosbags_classes()
 
 
