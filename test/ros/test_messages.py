@@ -24,7 +24,7 @@ def test_every_measurement_message_carries_its_shard_key():
 def _bag_without_shard_key(path: Path) -> Path:
     """A bag of Measurement as it was defined before `shard_key` (its own stored definition)."""
     from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import Stores, get_typestore, get_types_from_msg
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     name = "ssa_fusion_msgs/msg/Measurement"
     text = "\n".join(line for line in (bagio._msg_dir() / "Measurement.msg").read_text()
