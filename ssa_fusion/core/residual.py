@@ -47,6 +47,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from . import frames
 from .batch_ekf import integrate_stm
 from .constants import MU_EARTH
 
@@ -60,7 +61,8 @@ def orbit_propagator(model: str) -> Propagator:
     """Return a placeholder trajectory as a `Propagator`.
 
     The placeholder trajectory of `dynamics` model ``"two_body"`` or ``"j2"`` (GCRF, km,
-    km/s) as a `Propagator`: integrated backwards and forwards from x0 as needed (epochs in
+    km/s, epochs Unix s; J2 about the Earth's pole at the anchor, `frames.pole_frame`) as a
+    `Propagator`: integrated backwards and forwards from x0 as needed (epochs in
     any order, repeats included), epoch to epoch, by `batch_ekf.integrate_stm` (fixed-step
     DOP853, steps of at most 60 s, compiled; within ~5e-9 relative of scipy's adaptive
     DOP853 at rtol 1e-10 over three days of a LEO orbit, and ~40x faster). RuntimeError
@@ -68,6 +70,7 @@ def orbit_propagator(model: str) -> Propagator:
     """
 
     def propagate(x0: Array, t0: float, t: Array) -> Array:
+        pole = frames.pole_frame(t0)  # J2 about the Earth's pole (t0: Unix s)
         t_all, back = np.unique(np.asarray(t, float), return_inverse=True)  # repeats too
         out = np.empty((len(t_all), 6))
         out[t_all == t0] = x0
@@ -79,7 +82,8 @@ def orbit_propagator(model: str) -> Propagator:
                 order = order[::-1]  # backwards: decreasing epochs
             x, prev = np.asarray(x0, float)[None], float(t0)
             for i in order.tolist():
-                x, _, ok = integrate_stm(model, x, np.array([t_all[i] - prev]))
+                x, _, ok = integrate_stm(model, x, np.array([t_all[i] - prev]),
+                                         pole_frame=pole)
                 if not ok[0]:
                     raise RuntimeError(f"the {model} orbit cannot be propagated to t={t_all[i]}")
                 out[i], prev = x[0], float(t_all[i])

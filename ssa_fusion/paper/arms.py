@@ -33,8 +33,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ssa_fusion.core import frames
 from ssa_fusion.core.config import ORBIT_MODELS, EstimatorConfig, MotionModel, make_tracker
 from ssa_fusion.core.metrics import epsilon, nees
+from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
 from ssa_fusion.core.types import Measurement, Source, StateEstimate, UpdateSource
 from ssa_fusion.paper.montecarlo import N_PARTICLES, placeholder_ensemble
 
@@ -132,8 +134,10 @@ def placeholder(c: EstimatorConfig, start: StateEstimate, t_gap: np.ndarray, see
                 n_particles: int = N_PARTICLES) -> ArmTrajectory:
     """The motion model alone: Monte Carlo from `start` (see the module docstring)."""
     dt = np.concatenate([[0.0], t_gap - start.t])  # the ensemble starts at the estimate
+    pole = (frames.pole_frame(start.t + (c.jd0 - UNIX_EPOCH_JD) * DAY_S)
+            if c.motion_model in ORBIT_MODELS else None)
     mean, cov = placeholder_ensemble(str(c.motion_model), start.x, start.P, dt, seed,
-                                     n_particles, **c.motion_params)
+                                     n_particles, pole, **c.motion_params)
     return ArmTrajectory(np.asarray(t_gap, float), mean[1:], cov[1:],
                          np.full(len(t_gap), UpdateSource.NONE))
 
