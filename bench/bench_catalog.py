@@ -64,13 +64,15 @@ from ssa_fusion.core.config import EstimatorConfig, make_tracker
 from ssa_fusion.core.constants import R_EARTH
 from ssa_fusion.core.dynamics import elements_to_state
 from ssa_fusion.core.ekf import ExtendedKalmanFilter, process_noise
-from ssa_fusion.core.frames import razel_eci, wrap_angle
+from ssa_fusion.core.frames import razel_gcrs, wrap_angle
 from ssa_fusion.core.kepler import propagate
 from ssa_fusion.core.measurement import RazelModel
 from ssa_fusion.core.stations import NETWORKS, SENSORS
 from ssa_fusion.core.types import Kind, Measurement
 
 JD0 = 2460000.5
+UNIX0 = (JD0 - 2440587.5) * 86400.0
+"""Unix time of t = 0 of the bench's clock (s after JD0)."""
 """UTC Julian date of t = 0 (2023-02-24 00:00 UTC)."""
 NETWORK = "radar_network"
 P0 = np.diag([1.0, 1.0, 1.0, 1e-6, 1e-6, 1e-6])
@@ -104,7 +106,7 @@ def _cycle_inputs(n: int, rng: np.random.Generator, dt: float = 10.0) -> dict[st
     truth, _ = kepler_state(x + rng.normal(0, 1, (n, 6)) * np.sqrt(np.diag(P0)), dt)
     st = np.arange(n) % len(STATIONS)
     R = np.array([s.R for s in SENS])[st]
-    z = np.array([razel_eci(truth[i], JD0 + dt / 86400.0, STATIONS[st[i]]) for i in range(n)])
+    z = np.array([razel_gcrs(truth[i], UNIX0 + dt, STATIONS[st[i]]) for i in range(n)])
     z += rng.normal(0.0, 1.0, z.shape) * np.sqrt(np.diagonal(R, axis1=1, axis2=2))
     z[:, 1] %= 2.0 * math.pi
     return {"x": x, "P": np.tile(P0, (n, 1, 1)), "z": z, "R": R, "st": st,
@@ -238,7 +240,7 @@ def offline_day(n: int, hours: float, sample: int, rng: np.random.Generator) -> 
         assert ok.all()
         seen = np.zeros(n, dtype=bool)
         for j, sensor in enumerate(SENS):  # the first station (network order) that sees it
-            rae = razel_eci(truth, JD0 + t / 86400.0, sensor.station)
+            rae = razel_gcrs(truth, UNIX0 + t, sensor.station)
             vis = ~seen & (rae[:, 2] >= sensor.min_elevation(rae[:, 1]))
             z[vis] = rae[vis] + rng.normal(0.0, 1.0, (int(vis.sum()), 3)) * sd_st[j]
             st[vis] = j

@@ -18,9 +18,10 @@ _COMMANDS = {
     "bag": ("ssa_fusion.apps.bag", "bag tools: `bag repair` makes a killed recorder's bag "
                                    "readable by any reader"),
     "export": ("ssa_fusion.apps.ccsds", "CCSDS out of a bag: `export oem` (estimates with "
-                                        "covariance), `export tdm` (range/az/el)"),
+                                        "covariance, GCRF), `export tdm` (range/az/el, "
+                                        "ra/dec)"),
     "import": ("ssa_fusion.apps.ccsds", "CCSDS into a bag: `import tdm FILE --bag OUT` "
-                                        "(range/az/el that `replay` runs)"),
+                                        "(range/az/el and ra/dec that `replay` runs)"),
 }
 
 
