@@ -67,8 +67,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import dynamics, frames, kepler
 from .constants import MU_EARTH
+from .eop import default as eop_default
 from .frames import Station, enu_matrix
-from .timescales import DAY_S, UNIX_EPOCH_JD
+from .timescales import DAY_S, UNIX_EPOCH_JD, install_leap_seconds
 from .tracker import DEFAULT_GATE
 from .types import Cause
 
@@ -931,16 +932,14 @@ def integrate_stm(model: str, x: ArrayLike, dt: ArrayLike, max_step_s: float = 6
         raise ValueError(f"model {model!r} is not one of {', '.join(INTEGRATED_MODELS)}")
     if pole_frame is not None and model != "two_body":
         r = np.asarray(pole_frame, dtype=float)
+        B = np.zeros((*r.shape[:-2], 6, 6))  # diag(R, R): states into the pole's axes
+        B[..., :3, :3] = B[..., 3:, 3:] = r
+        Bt = np.swapaxes(B, -1, -2)
         X = np.atleast_2d(np.asarray(x, dtype=float))
-        x1p, phip, okp = integrate_stm(model, dynamics.rotate_states(X, r), dt, max_step_s,
-                                       None, **params)
-        rt = np.swapaxes(r, -1, -2)
-        # Phi = B^T Phi' B with B = diag(R, R), block by block
-        phi = np.empty_like(phip)
-        for a in (0, 3):
-            for b in (0, 3):
-                phi[:, a:a + 3, b:b + 3] = np.matmul(rt, np.matmul(phip[:, a:a + 3, b:b + 3], r))
-        return _f64(dynamics.rotate_states(x1p, rt)), phi, okp
+        x1p, phip, okp = integrate_stm(model, np.einsum("...ij,...j->...i", B, X), dt,
+                                       max_step_s, None, **params)
+        x1 = _f64(np.einsum("...ij,...j->...i", Bt, x1p))
+        return x1, np.matmul(np.matmul(Bt, phip), B), okp
     gp = _gravity_params(model, params)
     X = np.atleast_2d(np.asarray(x, dtype=float))
     if gp is None or X.ndim != 2 or X.shape[1] != 6 or not (
@@ -1018,6 +1017,8 @@ class BatchEKF:
         self.stations = tuple(stations)
         self.index = {s.name: i for i, s in enumerate(self.stations)}
         self._unix0 = (config.jd0 - UNIX_EPOCH_JD) * DAY_S
+        self._eop = eop_default()  # the tables read now (EOP, leap seconds), not later
+        install_leap_seconds()
         self._enu = np.array([enu_matrix(s.lat_rad, s.lon_rad) for s in self.stations]
                              ).reshape(-1, 3, 3)
         self._site = np.array([m @ s.itrs for m, s in zip(self._enu, self.stations, strict=True)]
@@ -1035,7 +1036,7 @@ class BatchEKF:
         else:
             uniq, inv = np.unique(t, return_inverse=True)
         with np.errstate(all="ignore"):
-            g = frames.gcrs_to_itrs_matrix(np.nan_to_num(uniq) + self._unix0)
+            g = frames.gcrs_to_itrs_matrix(np.nan_to_num(uniq) + self._unix0, self._eop)
         return _f64(g.reshape(-1, 3, 3)), np.ascontiguousarray(inv.reshape(-1), dtype=np.intp)
 
     def propagate(self, x: ArrayLike, dt: ArrayLike,
@@ -1048,7 +1049,7 @@ class BatchEKF:
             return kepler_stm(x, dt, self._params.get("mu", MU_EARTH))
         with np.errstate(all="ignore"):
             pole = frames.pole_frame(np.nan_to_num(np.asarray(t0, dtype=float))
-                                     + self._unix0)
+                                     + self._unix0, self._eop)
         return integrate_stm(self.config.motion_model, x, dt, self.config.max_step_s,
                              pole_frame=pole, **self._params)
 

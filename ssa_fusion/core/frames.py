@@ -215,8 +215,16 @@ def pole_frame(t_unix: ArrayLike, eop: eop_.EarthOrientation | None = None) -> A
     < 0.01" in an hour): the axes in which J2 and the co-rotating atmosphere of `dynamics`
     act about z. Epochs in the same hour share one matrix (cheap for a batch).
     """
+    e = _eop(eop)
+    if np.ndim(t_unix) == 0:  # one epoch (the per-object filter): the cached node itself
+        key = math.floor(float(np.asarray(t_unix)) / NODE_S)
+        node = _NODES.get((e._key, key))
+        if node is None:
+            _compute_nodes(np.array([key], dtype=np.int64), e)
+            node = _NODES[(e._key, key)]
+        return node[0]
     t, shape = _epochs(t_unix)
-    q, _ = _nodes(np.floor(t / NODE_S).astype(np.int64), _eop(eop))
+    q, _ = _nodes(np.floor(t / NODE_S).astype(np.int64), e)
     return q.reshape(*shape, 3, 3)
 
 

@@ -21,9 +21,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .constants import C_KM_S
+from .eop import EarthOrientation
+from .eop import default as eop_default
 from .frames import Station, enu_matrix, gcrs_to_itrs_matrix1, wrap_2pi
 from .refraction import refraction, refraction_rate
-from .timescales import DAY_S, UNIX_EPOCH_JD
+from .timescales import DAY_S, UNIX_EPOCH_JD, install_leap_seconds
 from .types import Kind
 
 
@@ -83,11 +85,14 @@ class _StationModel:
     """
 
     def __init__(self, station: Station, jd0_utc: float, light_time: bool = False,
-                 refraction: bool = False) -> None:
+                 refraction: bool = False, eop: EarthOrientation | None = None) -> None:
         self.station = station
         self.jd0_utc = float(jd0_utc)
         self.light_time = bool(light_time)
         self.refraction = bool(refraction)
+        # the tables read now (EOP, leap seconds), not at the first measurement
+        self.eop = eop_default() if eop is None else eop
+        install_leap_seconds()
         self.unix0 = (self.jd0_utc - UNIX_EPOCH_JD) * DAY_S
         """Unix time (s) of ``t_s = 0``."""
         self._m = enu_matrix(station.lat_rad, station.lon_rad)
@@ -125,7 +130,7 @@ class _StationModel:
 
     def gcrs_to_itrs(self, t_s: float) -> NDArray[np.float64]:
         """Return the GCRF -> ITRF rotation (3, 3) at ``t_s`` s after jd0."""
-        return gcrs_to_itrs_matrix1(self.unix0 + float(t_s))
+        return gcrs_to_itrs_matrix1(self.unix0 + float(t_s), self.eop)
 
     def site_gcrs(self, t_s: float) -> NDArray[np.float64]:
         """Return the station's GCRF position (3,) km at ``t_s`` s after jd0."""
