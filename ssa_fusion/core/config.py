@@ -234,8 +234,13 @@ _NOT_SERIALISED = {"tracker": ("frame_id",), "surrogate": ("kind", "frame_id", "
 
 
 def to_dict(c: EstimatorConfig) -> dict[str, Any]:
-    """JSON-ready dict of `c` (kind and enums by name; what `from_dict` reads back)."""
-    out: dict[str, Any] = {k: getattr(c, k) for k in _STREAM_KEYS}
+    """JSON-ready dict of `c` (kind and enums by name; what `from_dict` reads back).
+
+    ``frame`` names the inertial frame of the estimator's states ("gcrf"), so that settings
+    recorded with a bag say it.
+    """
+    out: dict[str, Any] = {"frame": Frame.GCRF}
+    out.update({k: getattr(c, k) for k in _STREAM_KEYS})
     out["kind"] = KIND_NAMES[c.kind]
     out["motion_model"] = str(c.motion_model)
     out["lift"] = str(c.lift)
@@ -255,9 +260,12 @@ def from_dict(d: dict[str, Any], base: EstimatorConfig | None = None) -> Estimat
     values raise ValueError naming them.
     """
     base = base or EstimatorConfig()
-    unknown = set(d) - {*_STREAM_KEYS, "tracker", "surrogate"}
+    unknown = set(d) - {*_STREAM_KEYS, "tracker", "surrogate", "frame"}
     if unknown:
         raise ValueError(f"unknown estimator setting(s): {', '.join(sorted(unknown))}")
+    if d.get("frame", Frame.GCRF) != Frame.GCRF:
+        raise ValueError(f"estimator settings of frame {d['frame']!r}: this version estimates "
+                         f"in the GCRF")
     stream: dict[str, Any] = {k: d[k] for k in _STREAM_KEYS if k in d}
     if "kind" in stream:
         names = {name: kind for kind, name in KIND_NAMES.items()}

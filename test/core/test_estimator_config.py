@@ -19,8 +19,12 @@ def test_to_dict_round_trips_through_json():
     c = EstimatorConfig(motion_model=MotionModel.J2, lift=Lift.ECI,
                         tracker=TrackerConfig(p0_sigma=(2.0,) * 6, q=3e-9, gate=None),
                         surrogate=SurrogateConfig(delays=77, rank=5, retrain_period_s=math.inf))
-    back = config.from_dict(json.loads(json.dumps(config.to_dict(c))))
+    d = json.loads(json.dumps(config.to_dict(c)))
+    assert d["frame"] == "gcrf"  # settings recorded with a bag name the states' frame
+    back = config.from_dict(d)
     assert back == c
+    with pytest.raises(ValueError, match="frame 'eci'"):
+        config.from_dict({**d, "frame": "eci"})
 
 
 def test_from_dict_keeps_the_base_for_missing_keys_and_names_unknown_ones():
