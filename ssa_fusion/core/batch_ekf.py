@@ -97,6 +97,8 @@ _Z_SERIES = 0.5
 """|z| below which the Stumpff functions c2, c3 are evaluated by their power series."""
 
 _MAX_NEWTON = 60
+_Z_AXIS = np.array([0.0, 0.0, 1.0])
+"""The pole of an integration without one (the states' own z axis)."""
 _TWO_PI = 2.0 * math.pi
 
 INTEGRATED_MODELS = ("two_body", "j2", "drag")
@@ -648,65 +650,70 @@ def _kepler_step_kernel(x: Array, P: Array, dt: Array, z: Array, R: Array, g: Ar
 
 
 @_jit
-def _gravity_rhs(y: Array, mu: float, j2: float, re: float, out: Array, s: int) -> None:
+def _gravity_rhs(y: Array, mu: float, j2: float, re: float, px: float, py: float, pz: float,
+                 out: Array, s: int) -> None:
     """``out[s] = dy/dt`` of the state + STM ``y`` (42,) under two-body + J2 gravity.
 
-    The acceleration is `dynamics._rhs_j2`'s, term for term in the same order (so the same
-    floating-point result): with ``r2 = |r|^2``, ``k = -mu / r^3``, ``f = 1.5 J2 Re^2 / r2``,
-    ``w = 5 z^2 / r2``::
+    J2 acts about the unit vector ``p = (px, py, pz)`` (the Earth's pole in the states'
+    frame; (0, 0, 1): the frame's z axis, `dynamics._rhs_j2`). With ``r2 = |r|^2``,
+    ``k = -mu / r^3``, ``f = 1.5 J2 Re^2 / r2``, ``z = p . r``, ``w = 5 z^2 / r2`` and
+    ``g = 1 + f (1 - w)``::
 
-        a_x = k x (1 + f (1 - w)),  a_y = k y (1 + f (1 - w)),  a_z = k z (1 + f (3 - w))
+        a = k (g r + 2 f z p)
 
     (J2 = 0: two-body). ``dPhi/dt = A Phi`` with ``A = [[0, I], [G, 0]]``: the velocity rows
     of Phi become the position rows of dPhi/dt, and ``G = da/dr``, analytic (the numpy path
-    takes A by the complex step, exact to round-off as well). Writing ``a_i = k x_i g_i``,
-    ``g_i = 1 + f (c_i - w)`` (c = 1, 1, 3), with ``dk/dx_j = -3 k x_j / r2``,
-    ``df/dx_j = -2 f x_j / r2``, ``dw/dx_j = (10 z delta_jz - 2 w x_j) / r2``::
+    takes A by the complex step, exact to round-off as well)::
 
-        G_ij = k (delta_ij g_i + x_i x_j (4 f w - 3 g_i - 2 f c_i) / r2
-                  - 10 f z x_i delta_jz / r2)
+        G = k (g I + (4 f w - 2 f - 3 g) r r^T / r2 - 10 f z (r p^T + p r^T) / r2
+               + 2 f p p^T)
 
     (symmetric, as the Hessian of the potential is; two-body: ``k (I - 3 r r^T / r2)``).
     """
-    x, yy, z = y[0], y[1], y[2]
-    r2 = x * x + yy * yy + z * z
+    x, yy, zz = y[0], y[1], y[2]
+    r2 = x * x + yy * yy + zz * zz
     r = math.sqrt(r2)
     k = -mu / (r2 * r)
     f = 1.5 * j2 * re * re / r2
+    z = px * x + py * yy + pz * zz
     w = 5.0 * z * z / r2
-    gxy = 1.0 + f * (1.0 - w)
-    gz = 1.0 + f * (3.0 - w)
+    g = 1.0 + f * (1.0 - w)
+    c = 2.0 * f * z
     out[s, 0], out[s, 1], out[s, 2] = y[3], y[4], y[5]
-    out[s, 3] = k * x * gxy
-    out[s, 4] = k * yy * gxy
-    out[s, 5] = k * z * gz
+    out[s, 3] = k * (g * x + c * px)
+    out[s, 4] = k * (g * yy + c * py)
+    out[s, 5] = k * (g * zz + c * pz)
     ir2 = 1.0 / r2
-    fw4 = 4.0 * f * w
-    exy = k * ir2 * (fw4 - 3.0 * gxy - 2.0 * f)
-    ez = k * ir2 * (fw4 - 3.0 * gz - 6.0 * f)
-    dz = 10.0 * f * k * z * ir2  # the delta_jz term: G_i2 -= dz x_i
-    kxy, kz = k * gxy, k * gz
-    g00, g01, g02 = kxy + x * x * exy, x * yy * exy, x * z * exy - dz * x
-    g10, g11, g12 = yy * x * exy, kxy + yy * yy * exy, yy * z * exy - dz * yy
-    g20, g21, g22 = z * x * ez, z * yy * ez, kz + z * z * ez - dz * z
+    e = k * ir2 * (4.0 * f * w - 2.0 * f - 3.0 * g)  # the r r^T term
+    d = -10.0 * k * f * z * ir2  # the (r p^T + p r^T) term
+    h = 2.0 * k * f  # the p p^T term
+    kg = k * g
+    g00 = kg + e * x * x + 2.0 * d * x * px + h * px * px
+    g11 = kg + e * yy * yy + 2.0 * d * yy * py + h * py * py
+    g22 = kg + e * zz * zz + 2.0 * d * zz * pz + h * pz * pz
+    g01 = e * x * yy + d * (x * py + px * yy) + h * px * py
+    g02 = e * x * zz + d * (x * pz + px * zz) + h * px * pz
+    g12 = e * yy * zz + d * (yy * pz + py * zz) + h * py * pz
     for j in range(6):  # dPhi/dt: rows 0-2 = Phi rows 3-5, rows 3-5 = G Phi rows 0-2
         p0, p1, p2 = y[6 + j], y[12 + j], y[18 + j]
         out[s, 6 + j] = y[24 + j]
         out[s, 12 + j] = y[30 + j]
         out[s, 18 + j] = y[36 + j]
         out[s, 24 + j] = g00 * p0 + g01 * p1 + g02 * p2
-        out[s, 30 + j] = g10 * p0 + g11 * p1 + g12 * p2
-        out[s, 36 + j] = g20 * p0 + g21 * p1 + g22 * p2
+        out[s, 30 + j] = g01 * p0 + g11 * p1 + g12 * p2
+        out[s, 36 + j] = g02 * p0 + g12 * p1 + g22 * p2
 
 
 @_jit
 def _gravity_stm_kernel(x: Array, dt: Array, max_step: float, mu: float, j2: float, re: float,
-                        A: Array, B: Array, x1: Array, phi: Array, ok: BoolArray) -> None:
+                        pole: Array, A: Array, B: Array, x1: Array, phi: Array,
+                        ok: BoolArray) -> None:
     """Fixed-step DOP853 of two-body + J2 with the STM for n objects (see `integrate_stm`).
 
     Object i takes ``ceil(|dt_i| / max_step)`` steps of ``h = dt_i / steps`` with the
     explicit Runge-Kutta tableau ``A`` (stages, stages), ``B`` (stages,) (scipy's DOP853) on
-    ``y = [x, Phi]`` (42,), ``Phi(0) = I``, right-hand side `_gravity_rhs`; as
+    ``y = [x, Phi]`` (42,), ``Phi(0) = I``, right-hand side `_gravity_rhs` with J2 about
+    ``pole[i]`` (unit vectors (n, 3)); as
     `_integrate_stm_numpy` (the stage sums ``sum_j A[s, j] K[j]`` and ``sum_j B[j] K[j]``
     taken in the order of j, as BLAS may not: ~1e-16 apart per step). A non-finite input
     (state or dt) takes no step: x1 = x, Phi = I, ok False; ok is False where x1 or Phi is
@@ -727,10 +734,11 @@ def _gravity_stm_kernel(x: Array, dt: Array, max_step: float, mu: float, j2: flo
             y[6 + 7 * c] = 1.0
         steps = math.ceil(abs(dt[i]) / max_step) if nf == 0.0 else 0
         h = dt[i] / max(steps, 1)
+        px, py, pz = pole[i, 0], pole[i, 1], pole[i, 2]
         for _ in range(steps):
             for s in range(ns):
                 if s == 0:
-                    _gravity_rhs(y, mu, j2, re, K, 0)
+                    _gravity_rhs(y, mu, j2, re, px, py, pz, K, 0)
                     continue
                 a0 = A[s, 0]
                 for c in range(42):
@@ -741,7 +749,7 @@ def _gravity_stm_kernel(x: Array, dt: Array, max_step: float, mu: float, j2: flo
                         ys[c] += a * K[j, c]
                 for c in range(42):
                     ys[c] = y[c] + h * ys[c]
-                _gravity_rhs(ys, mu, j2, re, K, s)
+                _gravity_rhs(ys, mu, j2, re, px, py, pz, K, s)
             b0 = B[0]
             for c in range(42):
                 ys[c] = b0 * K[0, c]
@@ -918,9 +926,10 @@ def integrate_stm(model: str, x: ArrayLike, dt: ArrayLike, max_step_s: float = 6
         Longest step, s.
     pole_frame : array_like (3, 3) or (N, 3, 3), optional
         Rotation from the states' frame (GCRF) to axes whose z is the Earth's pole at the
-        start epoch (`frames.pole_frame`): the states are turned to it, integrated (J2 and
-        the atmosphere act about its z), and turned back, Phi with them. None: the states'
-        own z axis is the pole.
+        start epoch (`frames.pole_frame`): J2 acts about its third row (the pole), in the
+        compiled loop; on the numpy path ("drag") the states are turned to it, integrated
+        (J2 and the atmosphere act about its z) and turned back, Phi with them. None: the
+        states' own z axis is the pole.
     **params : float
         Model parameters (`dynamics` module docstring).
 
@@ -930,7 +939,22 @@ def integrate_stm(model: str, x: ArrayLike, dt: ArrayLike, max_step_s: float = 6
     """
     if model not in INTEGRATED_MODELS:
         raise ValueError(f"model {model!r} is not one of {', '.join(INTEGRATED_MODELS)}")
-    if pole_frame is not None and model != "two_body":
+    gp = _gravity_params(model, params)
+    X = np.atleast_2d(np.asarray(x, dtype=float))
+    if gp is not None and X.ndim == 2 and X.shape[1] == 6 and (
+            max_step_s > 0.0 and math.isfinite(max_step_s)):
+        X = _f64(X)
+        n = X.shape[0]
+        dts = _f64(np.broadcast_to(np.asarray(dt, dtype=float), (n,)))
+        # J2 about the pole: the third row of the rotation to the pole's axes
+        pole = (np.broadcast_to(_Z_AXIS, (n, 3)) if pole_frame is None else
+                np.broadcast_to(np.asarray(pole_frame, dtype=float)[..., 2, :], (n, 3)))
+        A, B = _tableau()
+        x1, phi = np.empty((n, 6)), np.empty((n, 6, 6))
+        ok = np.empty(n, dtype=np.bool_)
+        _gravity_stm_kernel(X, dts, float(max_step_s), *gp, _f64(pole), A, B, x1, phi, ok)
+        return x1, phi, ok
+    if pole_frame is not None and model != "two_body":  # the numpy path: turn the states
         r = np.asarray(pole_frame, dtype=float)
         B = np.zeros((*r.shape[:-2], 6, 6))  # diag(R, R): states into the pole's axes
         B[..., :3, :3] = B[..., 3:, 3:] = r
@@ -940,19 +964,7 @@ def integrate_stm(model: str, x: ArrayLike, dt: ArrayLike, max_step_s: float = 6
                                        max_step_s, None, **params)
         x1 = _f64(np.einsum("...ij,...j->...i", Bt, x1p))
         return x1, np.matmul(np.matmul(Bt, phip), B), okp
-    gp = _gravity_params(model, params)
-    X = np.atleast_2d(np.asarray(x, dtype=float))
-    if gp is None or X.ndim != 2 or X.shape[1] != 6 or not (
-            max_step_s > 0.0 and math.isfinite(max_step_s)):
-        return _integrate_stm_numpy(model, X, dt, max_step_s, **params)
-    X = _f64(X)
-    n = X.shape[0]
-    dts = _f64(np.broadcast_to(np.asarray(dt, dtype=float), (n,)))
-    A, B = _tableau()
-    x1, phi = np.empty((n, 6)), np.empty((n, 6, 6))
-    ok = np.empty(n, dtype=np.bool_)
-    _gravity_stm_kernel(X, dts, float(max_step_s), *gp, A, B, x1, phi, ok)
-    return x1, phi, ok
+    return _integrate_stm_numpy(model, X, dt, max_step_s, **params)
 
 
 def _integrate_stm_numpy(model: str, x: ArrayLike, dt: ArrayLike, max_step_s: float = 60.0,

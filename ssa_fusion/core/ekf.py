@@ -282,8 +282,12 @@ def process_noise(dt_s: float, q: float, dim: int = 3) -> Array:
         ``[p_1..p_dim, v_1..v_dim]``.
     """
     dt = abs(float(dt_s))
-    blk = q * np.array(((dt**3 / 3.0, dt**2 / 2.0), (dt**2 / 2.0, dt)))
-    return cast(Array, np.kron(blk, np.eye(dim)))
+    Q = np.zeros((2 * dim, 2 * dim))  # the Kronecker product by hand (np.kron: ~50 us)
+    i = np.arange(dim)
+    Q[i, i] = q * dt**3 / 3.0
+    Q[i, i + dim] = Q[i + dim, i] = q * dt**2 / 2.0
+    Q[i + dim, i + dim] = q * dt
+    return Q
 
 
 def bound_covariance(x: ArrayLike, P: ArrayLike, factor: float) -> Array:

@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from .constants import C_KM_S
 from .eop import EarthOrientation
 from .eop import default as eop_default
-from .frames import Station, enu_matrix, gcrs_to_itrs_matrix1, wrap_2pi
+from .frames import Station, enu_matrix, gcrs_to_itrs_floats, wrap_2pi
 from .refraction import refraction, refraction_rate
 from .timescales import DAY_S, UNIX_EPOCH_JD, install_leap_seconds
 from .types import Kind
@@ -79,9 +79,11 @@ class PositionModel:
 class _StationModel:
     """What the two station models share: the station, the reference epoch, light time.
 
-    The GCRF -> ITRF rotation at each epoch is `frames.gcrs_to_itrs_matrix1` (IERS 2010, the
-    default EOP); with ``T = M G`` (M: ITRF -> ENU of the station) the topocentric vector of
-    a GCRF position p is ``T p - M r_site``.
+    The GCRF -> ITRF rotation G at each epoch is `frames.gcrs_to_itrs_floats` (IERS 2010,
+    the EOP read at construction); with ``T = M G`` (M: ITRF -> ENU of the station) the
+    topocentric vector of a GCRF position p is ``T p - M r_site``. The arithmetic is in
+    Python floats (the EKF's hot path: ~8 us a measurement; numpy's small-array overhead
+    would triple it).
     """
 
     def __init__(self, station: Station, jd0_utc: float, light_time: bool = False,
@@ -95,47 +97,62 @@ class _StationModel:
         install_leap_seconds()
         self.unix0 = (self.jd0_utc - UNIX_EPOCH_JD) * DAY_S
         """Unix time (s) of ``t_s = 0``."""
-        self._m = enu_matrix(station.lat_rad, station.lon_rad)
-        self._site_itrs = station.itrs
-        self._site_enu = self._m @ self._site_itrs
+        m = enu_matrix(station.lat_rad, station.lon_rad)
+        self._m = [[float(v) for v in row] for row in m]
+        self._site_itrs = [float(v) for v in station.itrs]
+        self._site_enu = [float(v) for v in m @ station.itrs]
 
-    def _position(self, x: NDArray[np.float64], rho: float) -> tuple[NDArray[np.float64], float]:
-        """Return the GCRF position (3,) of the object when the light left it (km), and tau (s).
+    def _enu_rows(self, t_s: float) -> list[list[float]]:
+        """Rows of ``T = M G`` (GCRF -> ENU) at ``t_s`` s after jd0."""
+        g = gcrs_to_itrs_floats(self.unix0 + float(t_s), self.eop)
+        return [[row[0] * g[j] + row[1] * g[3 + j] + row[2] * g[6 + j] for j in range(3)]
+                for row in self._m]
+
+    def gcrs_to_itrs(self, t_s: float) -> NDArray[np.float64]:
+        """Return the GCRF -> ITRF rotation (3, 3) at ``t_s`` s after jd0."""
+        return np.array(gcrs_to_itrs_floats(self.unix0 + float(t_s), self.eop)).reshape(3, 3)
+
+    def _site_gcrs(self, t_s: float) -> tuple[float, float, float]:
+        g = gcrs_to_itrs_floats(self.unix0 + float(t_s), self.eop)
+        a, b, c = self._site_itrs
+        return (g[0] * a + g[3] * b + g[6] * c, g[1] * a + g[4] * b + g[7] * c,
+                g[2] * a + g[5] * b + g[8] * c)
+
+    def site_gcrs(self, t_s: float) -> NDArray[np.float64]:
+        """Return the station's GCRF position (3,) km at ``t_s`` s after jd0."""
+        return np.array(self._site_gcrs(t_s))
+
+    def _retarded(self, x: NDArray[np.float64], rho: float
+                  ) -> tuple[float, float, float, float]:
+        """Return (x, y, z) of the object when the light left it (km, GCRF), and tau (s).
 
         ``rho`` is the range (km) the delay is computed from; tau = 0 without light time or
         without a velocity in the state.
         """
+        x0, x1, x2 = float(x[0]), float(x[1]), float(x[2])
         if not self.light_time or len(x) < 6:
-            return x[:3], 0.0
+            return x0, x1, x2, 0.0
         tau = rho / C_KM_S
-        return x[:3] - tau * x[3:6], tau
+        return x0 - tau * float(x[3]), x1 - tau * float(x[4]), x2 - tau * float(x[5]), tau
 
     @staticmethod
-    def _jacobian(rows: NDArray[np.float64], los: NDArray[np.float64],
+    def _jacobian(rows: list[list[float]], los: list[float] | tuple[float, ...],
                   x: NDArray[np.float64], tau: float) -> NDArray[np.float64]:
-        """Return the (m, 6) Jacobian from d z / d r at the retarded position (`rows` (m, 3)).
+        """Return the (m, 6) Jacobian from d z / d r at the retarded position (`rows`).
 
         With light time (tau > 0) the retarded position is ``r - tau v`` with
         ``tau = |rho| / c``: d/dr = I - v los^T / c (`los`: GCRF unit line of sight),
         d/dv = -tau I.
         """
-        out = np.zeros((rows.shape[0], 6))
         if tau == 0.0:
-            out[:, :3] = rows
-            return out
-        hv = rows @ x[3:6]
-        out[:, :3] = rows - np.outer(hv, los / C_KM_S)
-        out[:, 3:] = -tau * rows
-        return out
-
-    def gcrs_to_itrs(self, t_s: float) -> NDArray[np.float64]:
-        """Return the GCRF -> ITRF rotation (3, 3) at ``t_s`` s after jd0."""
-        return gcrs_to_itrs_matrix1(self.unix0 + float(t_s), self.eop)
-
-    def site_gcrs(self, t_s: float) -> NDArray[np.float64]:
-        """Return the station's GCRF position (3,) km at ``t_s`` s after jd0."""
-        out: NDArray[np.float64] = self._site_itrs @ self.gcrs_to_itrs(t_s)
-        return out
+            return np.array([[*row, 0.0, 0.0, 0.0] for row in rows])
+        v0, v1, v2 = float(x[3]), float(x[4]), float(x[5])
+        l0, l1, l2 = (float(v) / C_KM_S for v in los)
+        out = []
+        for a, b, c in rows:
+            hv = a * v0 + b * v1 + c * v2
+            out.append([a - hv * l0, b - hv * l1, c - hv * l2, -tau * a, -tau * b, -tau * c])
+        return np.array(out)
 
     def H(self, x: NDArray[np.float64], t_s: float) -> NDArray[np.float64]:
         """Analytic Jacobian d z / d x (m, 6)."""
@@ -165,6 +182,8 @@ class RazelModel(_StationModel):
     refraction
         Add the atmosphere's refraction to the elevation (`refraction.refraction`): the
         elevation a sensor sees, not the geometric one (default).
+    eop
+        Earth-orientation parameters (default `eop.default()`).
 
     ``h`` returns [range km, az rad in [0, 2 pi), el rad]; ``H`` is the analytic (3, 6)
     Jacobian w.r.t. the GCRF state (velocity columns zero without light time). Frames as
@@ -174,31 +193,39 @@ class RazelModel(_StationModel):
     kind = Kind.RANGE_AZ_EL
     angle_mask = (False, True, True)
 
+    def _enu(self, t: list[list[float]], p: tuple[float, float, float]
+             ) -> tuple[float, float, float]:
+        s = self._site_enu
+        return (t[0][0] * p[0] + t[0][1] * p[1] + t[0][2] * p[2] - s[0],
+                t[1][0] * p[0] + t[1][1] * p[1] + t[1][2] * p[2] - s[1],
+                t[2][0] * p[0] + t[2][1] * p[1] + t[2][2] * p[2] - s[2])
+
     def h_and_H(
         self, x: NDArray[np.float64], t_s: float
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """``(h(x, t_s), H(x, t_s))`` in one call (EKF hot path)."""
-        x = np.asarray(x, dtype=float)
-        T = self._m @ self.gcrs_to_itrs(t_s)  # GCRF -> ENU
-        p, tau = self._position(x, 0.0)
-        enu = T @ p - self._site_enu
+        T = self._enu_rows(t_s)  # GCRF -> ENU
+        p0, p1, p2, tau = self._retarded(x, 0.0)
+        e, n, u = self._enu(T, (p0, p1, p2))
         if self.light_time:
-            p, tau = self._position(x, math.sqrt(float(enu @ enu)))
-            enu = T @ p - self._site_enu
-        e, n, u = float(enu[0]), float(enu[1]), float(enu[2])
+            p0, p1, p2, tau = self._retarded(x, math.sqrt(e * e + n * n + u * u))
+            e, n, u = self._enu(T, (p0, p1, p2))
         h2 = e * e + n * n
         h = math.sqrt(h2)
         r2 = h2 + u * u
         r = math.sqrt(r2)
         k = -u / (h * r2)
-        D = np.array([[e / r, n / r, u / r], [n / h2, -e / h2, 0.0], [k * e, k * n, h / r2]])
-        rows = D @ T
+        D = ((e / r, n / r, u / r), (n / h2, -e / h2, 0.0), (k * e, k * n, h / r2))
+        rows = [[d[0] * T[0][j] + d[1] * T[1][j] + d[2] * T[2][j] for j in range(3)]
+                for d in D]
         el = math.atan2(u, h)
+        los = list(rows[0])  # the range row: the unit line of sight in the GCRF
         if self.refraction:
-            rows[2] *= 1.0 + float(refraction_rate(el))
+            scale = 1.0 + float(refraction_rate(el))
+            rows[2] = [v * scale for v in rows[2]]
             el += float(refraction(el))
         z = np.array([r, float(wrap_2pi(math.atan2(e, n))), el])
-        return z, self._jacobian(rows, rows[0], x, tau)  # rows[0]: the line of sight
+        return z, self._jacobian(rows, los, x, tau)
 
 
 class RadecModel(_StationModel):
@@ -206,9 +233,10 @@ class RadecModel(_StationModel):
 
     The optical sensor's measurement: the direction of ``rho = r - r_site`` in the GCRF (no
     aberration; `frames`), ``ra = atan2(rho_y, rho_x)`` in [0, 2 pi),
-    ``dec = atan2(rho_z, hypot(rho_x, rho_y))``. Same parameters as `RazelModel`; ``H`` is the
-    analytic (2, 6) Jacobian (velocity columns zero without light time). Singular at the
-    celestial poles (ra undefined).
+    ``dec = atan2(rho_z, hypot(rho_x, rho_y))``. Same parameters as `RazelModel` (no
+    refraction: a plate reduced against catalogue stars carries none); ``H`` is the analytic
+    (2, 6) Jacobian (velocity columns zero without light time). Singular at the celestial
+    poles (ra undefined).
     """
 
     kind = Kind.RA_DEC
@@ -218,20 +246,18 @@ class RadecModel(_StationModel):
         self, x: NDArray[np.float64], t_s: float
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """``(h(x, t_s), H(x, t_s))`` in one call (EKF hot path)."""
-        x = np.asarray(x, dtype=float)
-        site = self.site_gcrs(t_s)
-        p, tau = self._position(x, 0.0)
+        s0, s1, s2 = self._site_gcrs(t_s)
+        p0, p1, p2, tau = self._retarded(x, 0.0)
         if self.light_time:
-            p, tau = self._position(x, float(np.linalg.norm(p - site)))
-        dx, dy, dz = (float(v) for v in p - site)
+            p0, p1, p2, tau = self._retarded(x, math.dist((p0, p1, p2), (s0, s1, s2)))
+        dx, dy, dz = p0 - s0, p1 - s1, p2 - s2
         h2 = dx * dx + dy * dy
         h = math.sqrt(h2)
         r2 = h2 + dz * dz
         r = math.sqrt(r2)
-        rows = np.array([[-dy / h2, dx / h2, 0.0],
-                         [-dz * dx / (h * r2), -dz * dy / (h * r2), h / r2]])
+        rows = [[-dy / h2, dx / h2, 0.0], [-dz * dx / (h * r2), -dz * dy / (h * r2), h / r2]]
         z = np.array([float(wrap_2pi(math.atan2(dy, dx))), math.atan2(dz, h)])
-        return z, self._jacobian(rows, np.array([dx / r, dy / r, dz / r]), x, tau)
+        return z, self._jacobian(rows, (dx / r, dy / r, dz / r), x, tau)
 
 
 StationModel = RazelModel | RadecModel

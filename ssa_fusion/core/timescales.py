@@ -120,10 +120,11 @@ def tai_minus_utc(t_unix: ArrayLike) -> Array:
     """
     install_leap_seconds()
     u1, _ = jd_utc(t_unix)
+    days, inverse = np.unique(u1, return_inverse=True)  # one ERFA call per distinct day
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", erfa.ErfaWarning)
-        a1, a2 = erfa.utctai(u1, np.zeros_like(u1))
-    out: Array = np.round(((a1 - u1) + a2) * DAY_S, 6)
+        a1, a2 = erfa.utctai(days, np.zeros_like(days))
+    out: Array = np.round(((a1 - days) + a2) * DAY_S, 6)[inverse.reshape(u1.shape)]
     return out
 
 
