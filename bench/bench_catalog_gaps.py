@@ -36,7 +36,7 @@ limit_blas_threads()
 
 import numpy as np  # noqa: E402
 
-from ssa_fusion.paper.catalog_gaps import EVALUATION_SEEDS, SAMPLE, offline_run  # noqa: E402
+from ssa_fusion.studies.catalog_gaps import EVALUATION_SEEDS, SAMPLE, offline_run  # noqa: E402
 
 
 def _offline(job: tuple[int, int, float]) -> dict:

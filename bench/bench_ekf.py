@@ -30,11 +30,12 @@ from filterpy.kalman import ExtendedKalmanFilter as FilterpyEKF
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a source checkout
 
-from ssa_fusion.core.dynamics import ISS_ELEMENTS, elements_to_state
+from ssa_fusion.core.dynamics import elements_to_state
 from ssa_fusion.core.ekf import ExtendedKalmanFilter, process_noise
 from ssa_fusion.core.frames import COLUMBUS, wrap_angle
 from ssa_fusion.core.kepler import propagate
 from ssa_fusion.core.measurement import RazelModel
+from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
 JD0 = 2460000.5
 R_RAE = np.diag([1.0, 1e-4, 1e-4])  # 1 km, 0.01 rad (paper's RAE noise)

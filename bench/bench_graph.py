@@ -28,13 +28,13 @@ limit_blas_threads()
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from ssa_fusion_msgs.msg import Measurement, StateEstimate  # noqa: E402
 
-from ssa_fusion.apps.live import node_parameters  # noqa: E402
 from ssa_fusion.core import types  # noqa: E402
-from ssa_fusion.paper import scenarios, simulate  # noqa: E402
+from ssa_fusion.graphs import node_parameters  # noqa: E402
 from ssa_fusion.ros import bagio, messages  # noqa: E402
 from ssa_fusion.ros.processes import Graph  # noqa: E402
 from ssa_fusion.ros.readiness import ReadyNodes, readers_of  # noqa: E402
 from ssa_fusion.ros.topics import DATA_QOS  # noqa: E402
+from ssa_fusion.sim import scenarios, simulate  # noqa: E402
 
 
 def run_stream(rate_hz: float, n: int, workdir: Path) -> dict:

@@ -31,9 +31,9 @@ limit_blas_threads()
 
 from ssa_fusion.apps import replay  # noqa: E402
 from ssa_fusion.core import types  # noqa: E402
-from ssa_fusion.paper import scenarios, simulate  # noqa: E402
 from ssa_fusion.ros import bagio, messages  # noqa: E402
 from ssa_fusion.ros.topics import TOPIC_MEASUREMENT, TOPIC_TRUTH, TOPIC_WITHHELD  # noqa: E402
+from ssa_fusion.sim import scenarios, simulate  # noqa: E402
 
 
 def write_day_bag(path: Path, hours: float = 24.0, cadence: float = 10.0,

@@ -24,8 +24,9 @@ from ssa_fusion import limit_blas_threads
 
 limit_blas_threads()
 
-from ssa_fusion.paper import sky, sky_study  # noqa: E402
-from ssa_fusion.paper.distributions import EVALUATION_SEEDS, START_OFFSETS_H  # noqa: E402
+from ssa_fusion.sim import sky  # noqa: E402
+from ssa_fusion.studies import sky_study  # noqa: E402
+from ssa_fusion.studies.distributions import EVALUATION_SEEDS, START_OFFSETS_H  # noqa: E402
 
 
 def main() -> int:

@@ -36,10 +36,10 @@ limit_blas_threads()  # before numpy: the nodes' round-off
 import numpy as np  # noqa: E402
 
 from ssa_fusion.core.metrics import chi2_bounds  # noqa: E402
-from ssa_fusion.paper import scenarios  # noqa: E402
-from ssa_fusion.paper.arms import ArmName  # noqa: E402
-from ssa_fusion.paper.experiments import evaluate_sim  # noqa: E402
-from ssa_fusion.paper.simulate import simulate  # noqa: E402
+from ssa_fusion.evaluation.arms import ArmName  # noqa: E402
+from ssa_fusion.sim import scenarios  # noqa: E402
+from ssa_fusion.sim.simulate import simulate  # noqa: E402
+from ssa_fusion.studies.experiments import evaluate_sim  # noqa: E402
 
 
 def one_seed(job: tuple[str, float, float, int]

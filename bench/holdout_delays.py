@@ -33,8 +33,8 @@ import numpy as np  # noqa: E402
 
 from ssa_fusion.core.hankel_dmd import HankelDMD  # noqa: E402
 from ssa_fusion.core.surrogate import EciLift  # noqa: E402
-from ssa_fusion.paper import scenarios  # noqa: E402
-from ssa_fusion.paper.simulate import simulate  # noqa: E402
+from ssa_fusion.sim import scenarios  # noqa: E402
+from ssa_fusion.sim.simulate import simulate  # noqa: E402
 
 
 def holdout_rms(s: scenarios.Scenario, seed: int, delays: list[int]) -> list[float]:

@@ -17,7 +17,6 @@ rosbags) or /diagnostics.
 from __future__ import annotations
 
 import os
-import time
 from pathlib import Path
 from typing import Any
 
@@ -26,9 +25,7 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch_ros.actions import Node
 
-from ssa_fusion.apps.live_catalog import DEFAULT_SCENARIO, catalog_graph
-from ssa_fusion.nodes.defaults import BAG_PATTERN
-from ssa_fusion.paper import sky
+from ssa_fusion.graphs import DEFAULT_SCENARIO, catalog_graph, catalog_scenario, default_bag
 from ssa_fusion.ros.launch_events import shutdown_handlers
 
 DRAIN_S = 2.0
@@ -62,11 +59,7 @@ def _number(args: dict[str, str], name: str, kind: type, low: float) -> Any:
 def graph(context: Any) -> list[Any]:
     """The catalog graph's nodes and the two shutdown handlers, for the arguments given."""
     args = context.launch_configurations
-    scenario = sky.SKY_SCENARIOS.get(args["scenario"])
-    if scenario is None or not scenario.radars:
-        radar = [n for n, s in sky.SKY_SCENARIOS.items() if s.radars]
-        raise ValueError(f"scenario:={args['scenario']!r} is not a real-sky scenario with "
-                         f"radars; known: {', '.join(radar)}")
+    scenario = catalog_scenario(args["scenario"])
     if args["surrogate"] not in ("true", "false"):
         raise ValueError(f"surrogate:={args['surrogate']!r}: true or false")
     hours = _number(args, "duration", float, 0.0)
@@ -94,7 +87,7 @@ def generate_launch_description() -> LaunchDescription:
         "scenario": DEFAULT_SCENARIO,
         "time_scale": "100",
         "seed": "0",
-        "bag": time.strftime(BAG_PATTERN),
+        "bag": default_bag(),
     }
     return LaunchDescription([
         *(DeclareLaunchArgument(name, default_value=defaults[name], description=text)

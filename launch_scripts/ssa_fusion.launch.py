@@ -11,7 +11,7 @@ Arguments (``ros2 launch ssa_fusion ssa_fusion.launch.py --show-args``):
   that scenario's settings, over the params file's ('' = the params file's scenario);
 * ``time_scale``: sim seconds per wall second, over both ('' = theirs: 1000 in default.yaml);
 * ``bag``: the recorder's output directory, which must not exist (default, like ``ros2 bag
-  record``'s: ``bags/ssa_<date>_<time>`` at launch, `nodes.defaults.BAG_PATTERN`).
+  record``'s: ``bags/ssa_<date>_<time>`` at launch, `graphs.default_bag`).
 
 The graph shuts itself down: when sensor_sim exits (its schedule is done), after
 `DRAIN_S` s in which filter, surrogate and recorder take what is still in flight; and at once
@@ -22,7 +22,6 @@ nothing would be recorded and sensor_sim would wait for it forever.
 from __future__ import annotations
 
 import os
-import time
 from pathlib import Path
 from typing import Any
 
@@ -31,11 +30,8 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch_ros.actions import Node
 
-from ssa_fusion.apps.live import LIVE_SCENARIOS, WAIT_FOR, node_parameters
-from ssa_fusion.nodes.defaults import BAG_PATTERN
-from ssa_fusion.paper import scenarios, sky
+from ssa_fusion.graphs import READERS, WAIT_FOR, default_bag, live_scenario, node_parameters
 from ssa_fusion.ros.launch_events import shutdown_handlers
-from ssa_fusion.ros.readiness import READERS
 
 NODES = ("recorder", "surrogate", "filter", "sensor_sim")
 """Started in this order; sensor_sim waits until the others have matched its topics."""
@@ -56,9 +52,7 @@ ARGUMENTS = {
 def scenario_parameters(name: str, bag: str) -> dict[str, dict[str, Any]]:
     """Per-node parameters that run scenario `name`, as `ssa-fusion live --scenario` sets
     them (its time scale and seed left to the params file)."""
-    if name not in LIVE_SCENARIOS:
-        raise ValueError(f"scenario:={name!r} unknown; known: {', '.join(LIVE_SCENARIOS)}")
-    s = sky.SKY_SCENARIOS.get(name) or scenarios.get(name)
+    s = live_scenario(name)
     params = node_parameters(s, time_scale=1.0, seed=0, bag=Path(bag))
     for key in ("time_scale", "seed"):
         params["sensor_sim"].pop(key)
@@ -96,7 +90,7 @@ def generate_launch_description() -> LaunchDescription:
                                     "default.yaml"),
         "scenario": "",
         "time_scale": "",
-        "bag": time.strftime(BAG_PATTERN),
+        "bag": default_bag(),
     }
     return LaunchDescription([
         *(DeclareLaunchArgument(name, default_value=defaults[name], description=text)

@@ -27,10 +27,10 @@ from typing import Any
 
 import pytest
 
-from ssa_fusion.apps.live import WAIT_FOR, node_parameters
+from ssa_fusion.graphs import WAIT_FOR, node_parameters
 from ssa_fusion.nodes.defaults import BAG_PATTERN
-from ssa_fusion.paper import scenarios
 from ssa_fusion.ros.readiness import READERS
+from ssa_fusion.sim import scenarios
 
 ROOT = Path(__file__).resolve().parents[1]
 LAUNCH_FILE = ROOT / "launch_scripts" / "ssa_fusion.launch.py"
@@ -197,7 +197,7 @@ def test_without_scenario_or_time_scale_the_params_file_decides(launch):
 
 
 @pytest.mark.parametrize(("given", "message"), [
-    ({"scenario": "mars_base"}, "scenario:='mars_base' unknown; known: "),
+    ({"scenario": "mars_base"}, "scenario 'mars_base' unknown; known: "),
     ({"time_scale": "fast"}, "time_scale:='fast' is not a number"),
 ])
 def test_bad_arguments_are_named(launch, given, message):

@@ -1,6 +1,6 @@
 """The catalog launch file (launch_scripts/catalog.launch.py) over the stand-ins of
 test_launch.py: its arguments, and the nodes it starts are `ssa-fusion live --catalog`'s
-(`live_catalog.catalog_graph`), K filter and K surrogate shards, with the two shutdown
+(`graphs.catalog_graph`), K filter and K surrogate shards, with the two shutdown
 handlers."""
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ from pathlib import Path
 import pytest
 from test_launch import declared, kind, load_launch_file, run_graph, shutdowns
 
-from ssa_fusion.apps.live_catalog import catalog_graph
+from ssa_fusion.graphs import catalog_graph
 from ssa_fusion.nodes.shards import shard_range
-from ssa_fusion.paper import sky
+from ssa_fusion.sim import sky
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -73,7 +73,7 @@ def test_without_surrogates_only_the_filter_shards_run(launch):
 
 
 @pytest.mark.parametrize(("given", "message"), [
-    ({"scenario": "iss_j2_rae"}, "scenario:='iss_j2_rae' is not a real-sky scenario"),
+    ({"scenario": "iss_j2_rae"}, "scenario 'iss_j2_rae' is not a real-sky scenario"),
     ({"shards": "0"}, "shards:='0' must be >= 1"),
     ({"shards": "two"}, "shards:='two' is not an integer"),
     ({"duration": "-1"}, "duration:='-1' must be >= 0.0"),

@@ -1,12 +1,16 @@
-"""Imports point down the floors (issue 16; README "Layout"):
+"""Imports point down the floors (DESIGN.md and README "Layout"):
 
-    apps -> nodes -> ros -> core      paper -> core      (apps may use every floor)
+    apps -> graphs -> nodes -> ros -> core
+    studies -> sim, evaluation -> core       (launch files -> graphs, ros.launch_events)
 
-* core imports nothing from paper, ros, nodes, apps, and no ROS package;
-* paper imports nothing from ros, nodes, apps, and no ROS package;
-* ros imports nothing from nodes, apps, paper;
-* nodes import nothing from apps, and nothing from paper except nodes/sensor_sim.py (the
-  simulator runs the paper's scenarios);
+* core imports nothing of the package, and no ROS package;
+* sim and evaluation import only the core (and no ROS package);
+* studies import core, sim, evaluation (and ros, to read bags), never nodes, graphs or apps;
+* ros imports nothing from nodes, graphs, apps, sim, evaluation, studies;
+* nodes import ros and core, never apps, graphs, studies or evaluation; sim only in
+  nodes/sensor_sim.py (the simulator runs the simulated world);
+* graphs (what runs together) imports nodes, ros, sim and core, never apps or studies;
+* the launch files import graphs and ros.launch_events only of the package;
 * the top-level package imports no floor (every module imports it).
 
 Every module's source is parsed (no import is executed): `import` statements anywhere
@@ -28,19 +32,31 @@ ROS = ("rclpy", "rcl_interfaces", "rosidl_runtime_py", "builtin_interfaces", "st
        "launch", "launch_ros", "ament_index_python")
 """ROS packages (and ROS bag libraries): none in core or paper."""
 
-FLOORS = ("core", "paper", "ros", "nodes", "apps")
+FLOORS = ("core", "sim", "evaluation", "studies", "ros", "nodes", "graphs", "apps")
+
+
+def _floors(*names: str) -> tuple[str, ...]:
+    return tuple(f"ssa_fusion.{n}" for n in names)
+
 
 FORBIDDEN: dict[str, tuple[str, ...]] = {
-    "core": ("ssa_fusion.paper", "ssa_fusion.ros", "ssa_fusion.nodes", "ssa_fusion.apps", *ROS),
-    "paper": ("ssa_fusion.ros", "ssa_fusion.nodes", "ssa_fusion.apps", *ROS),
-    "ros": ("ssa_fusion.nodes", "ssa_fusion.apps", "ssa_fusion.paper"),
-    "nodes": ("ssa_fusion.apps", "ssa_fusion.paper"),
-    "": tuple(f"ssa_fusion.{floor}" for floor in FLOORS),
+    "core": (*_floors("sim", "evaluation", "studies", "ros", "nodes", "graphs", "apps"), *ROS),
+    "sim": (*_floors("evaluation", "studies", "ros", "nodes", "graphs", "apps"), *ROS),
+    "evaluation": (*_floors("sim", "studies", "ros", "nodes", "graphs", "apps"), *ROS),
+    "studies": _floors("nodes", "graphs", "apps"),
+    "ros": _floors("nodes", "graphs", "apps", "sim", "evaluation", "studies"),
+    "nodes": _floors("apps", "graphs", "studies", "evaluation", "sim"),
+    "graphs": _floors("apps", "studies", "evaluation"),
+    "": _floors(*FLOORS),
 }
 """Per floor ("" = the top-level package), the module prefixes its modules may not import."""
 
-ALLOWED: dict[str, tuple[str, ...]] = {"ssa_fusion.nodes.sensor_sim": ("ssa_fusion.paper",)}
+ALLOWED: dict[str, tuple[str, ...]] = {"ssa_fusion.nodes.sensor_sim": ("ssa_fusion.sim",)}
 """Exceptions by module: the prefixes it may import all the same."""
+
+LAUNCH = Path(__file__).resolve().parents[1] / "launch_scripts"
+LAUNCH_MAY_IMPORT = ("ssa_fusion.graphs", "ssa_fusion.ros.launch_events")
+"""What of the package a launch file may import."""
 
 
 def module_name(path: Path) -> str:
@@ -114,27 +130,43 @@ def test_imports_point_down():
     assert not found, "imports against the floors:\n" + "\n".join(found)
 
 
-def test_only_sensor_sim_among_the_nodes_uses_the_paper():
+def test_only_sensor_sim_among_the_nodes_uses_the_simulated_world():
     users = [m for m, (src, pkg) in all_modules().items()
              if floor_of(m) == "nodes"
-             and any(_under(n, "ssa_fusion.paper") for n in imports_of(src, m, pkg))]
+             and any(_under(n, "ssa_fusion.sim") for n in imports_of(src, m, pkg))]
     assert users == ["ssa_fusion.nodes.sensor_sim"]
+
+
+def test_launch_files_import_only_the_graphs():
+    for path in sorted(LAUNCH.glob("*.launch.py")):
+        ours = {n for n in imports_of(path.read_text(), "launch_file")
+                if _under(n, "ssa_fusion")}
+        bad = [n for n in ours if not any(_under(n, p) or _under(p, n)
+                                          for p in LAUNCH_MAY_IMPORT)]
+        assert not bad, f"{path.name} imports {bad}"
+        assert any(_under(n, "ssa_fusion.graphs") for n in ours), path.name
 
 
 # The checker itself: each of these imports must be found, and each must break the rules.
 BAD = [
-    ("ssa_fusion.core.x", "from ssa_fusion.paper import scenarios"),
-    ("ssa_fusion.core.x", "from ssa_fusion import paper"),
-    ("ssa_fusion.core.x", "from ..paper.scenarios import STATIONS"),
+    ("ssa_fusion.core.x", "from ssa_fusion.sim import scenarios"),
+    ("ssa_fusion.core.x", "from ssa_fusion import studies"),
+    ("ssa_fusion.core.x", "from ..sim.scenarios import STATIONS"),
     ("ssa_fusion.core.x", "def f():\n    import rclpy.node\n"),
     ("ssa_fusion.core.x", "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n"
                           "    from ssa_fusion.ros import messages\n"),
-    ("ssa_fusion.paper.x", "import ssa_fusion.nodes.common"),
-    ("ssa_fusion.paper.x", "from rclpy.node import Node"),
-    ("ssa_fusion.ros.x", "from ssa_fusion.paper import scenarios"),
+    ("ssa_fusion.sim.x", "import ssa_fusion.nodes.common"),
+    ("ssa_fusion.sim.x", "from rclpy.node import Node"),
+    ("ssa_fusion.sim.x", "from ssa_fusion.evaluation import arms"),
+    ("ssa_fusion.evaluation.x", "from ssa_fusion.sim import sky"),
+    ("ssa_fusion.studies.x", "from ssa_fusion.apps import live"),
+    ("ssa_fusion.studies.x", "from ssa_fusion import graphs"),
+    ("ssa_fusion.ros.x", "from ssa_fusion.sim import scenarios"),
     ("ssa_fusion.ros.x", "from ..apps import cli"),
-    ("ssa_fusion.nodes.filter", "from ssa_fusion.paper import scenarios"),
-    ("ssa_fusion.nodes.common", "import importlib\nimportlib.import_module('ssa_fusion.paper')"),
+    ("ssa_fusion.nodes.filter", "from ssa_fusion.sim import scenarios"),
+    ("ssa_fusion.nodes.filter", "from ssa_fusion.graphs import node_parameters"),
+    ("ssa_fusion.nodes.common", "import importlib\nimportlib.import_module('ssa_fusion.studies')"),
+    ("ssa_fusion.graphs", "from ssa_fusion.apps import live"),
     ("ssa_fusion.nodes.entry", "import importlib\n"
                                "importlib.import_module(f'ssa_fusion.apps.{name}')"),
     ("ssa_fusion.nodes.sensor_sim", "from ssa_fusion.apps import live"),
@@ -142,11 +174,14 @@ BAD = [
 ]
 GOOD = [
     ("ssa_fusion.core.x", "from .frames import COLUMBUS\nimport numpy"),
-    ("ssa_fusion.paper.x", "from ssa_fusion.core import dynamics"),
+    ("ssa_fusion.sim.x", "from ssa_fusion.core import dynamics"),
+    ("ssa_fusion.evaluation.x", "from ssa_fusion.core import metrics"),
+    ("ssa_fusion.studies.x", "from ssa_fusion.sim import sky\nfrom ssa_fusion.ros import bagio"),
     ("ssa_fusion.ros.x", "import rclpy\nfrom ssa_fusion.core import types"),
-    ("ssa_fusion.nodes.sensor_sim", "from ssa_fusion.paper import scenarios"),
+    ("ssa_fusion.nodes.sensor_sim", "from ssa_fusion.sim import scenarios"),
     ("ssa_fusion.nodes.filter", "from ssa_fusion.ros import messages\nimport rclpy"),
-    ("ssa_fusion.apps.x", "from ssa_fusion.paper import scenarios\nfrom ssa_fusion import nodes"),
+    ("ssa_fusion.graphs", "from ssa_fusion.sim import sky\nfrom ssa_fusion.nodes import settings"),
+    ("ssa_fusion.apps.x", "from ssa_fusion.studies import reproduce\nfrom ssa_fusion import nodes"),
 ]
 
 

@@ -12,7 +12,7 @@ from ssa_fusion import limit_blas_threads
 # subcommand -> module providing add_arguments(parser) and run(args) -> int
 _COMMANDS = {
     "live": ("ssa_fusion.apps.live", "run the node graph on a scenario, record a bag, evaluate it"),
-    "reproduce": ("ssa_fusion.paper.reproduce", "reproduce the paper's experiments (three arms)"),
+    "reproduce": ("ssa_fusion.studies.reproduce", "reproduce the paper's experiments (three arms)"),
     "replay": ("ssa_fusion.apps.replay", "replay a recorded bag through surrogate + filter"),
     "report": ("ssa_fusion.apps.report", "metrics table and plots from a recorded bag"),
     "bag": ("ssa_fusion.apps.bag", "bag tools: `bag repair` makes a killed recorder's bag "

@@ -1,4 +1,4 @@
-"""Evaluate a bag the graph recorded: every arm of `ssa_fusion.paper.arms` over the gap.
+"""Evaluate a bag the graph recorded: every arm of `ssa_fusion.evaluation.arms` over the gap.
 
 The arms (placeholder, coast, j2_coast, dmd_ekf, hypothetical_ekf) are defined and scored
 once, in `paper.arms`, for the offline study and for bags alike. Here the DMD-EKF arm is the
@@ -23,9 +23,9 @@ import numpy as np
 from ssa_fusion.core import metrics, types
 from ssa_fusion.core.config import EstimatorConfig
 from ssa_fusion.core.frames import Frame
+from ssa_fusion.evaluation import passes as passes_
+from ssa_fusion.evaluation.arms import ArmName, GapEvaluation, evaluate_gap
 from ssa_fusion.nodes import settings
-from ssa_fusion.paper import scenarios, sky
-from ssa_fusion.paper.arms import ArmName, GapEvaluation, evaluate_gap
 from ssa_fusion.ros import bagio
 from ssa_fusion.ros.messages import estimate_from_msg, measurement_from_msg
 from ssa_fusion.ros.topics import (
@@ -36,6 +36,7 @@ from ssa_fusion.ros.topics import (
     TOPIC_TRUTH,
     TOPIC_WITHHELD,
 )
+from ssa_fusion.sim import scenarios, sky
 
 
 @dataclass
@@ -131,7 +132,7 @@ class Evaluation:
 
     gap: GapEvaluation
     settings: Settings
-    passes: sky.PassReport | None = None
+    passes: passes_.PassReport | None = None
 
 
 def evaluate(data: BagData, scenario: str = "", seed: int = 0,
@@ -147,7 +148,7 @@ def evaluate(data: BagData, scenario: str = "", seed: int = 0,
     t_gap = np.array(sorted({m.t for m in data.withheld}))
     network = chosen.estimator.is_network
     if network:  # stations measure off the truth's cadence: the truth epochs of the outage
-        t_gap = sky.outage_epochs(np.array(sorted(truth)), data.withheld)
+        t_gap = passes_.outage_epochs(np.array(sorted(truth)), data.withheld)
     missing = [t for t in t_gap if t not in truth]
     if missing or not len(t_gap):
         raise ValueError(f"/ssa/truth lacks {len(missing)} gap epochs (first t="
@@ -159,7 +160,7 @@ def evaluate(data: BagData, scenario: str = "", seed: int = 0,
     passes = None
     if network:
         t_all = np.array(sorted(truth))
-        passes = sky.pass_report(chosen.estimator, live, real, t_all,
+        passes = passes_.pass_report(chosen.estimator, live, real, t_all,
                                  np.array([truth[t] for t in t_all]))
     return Evaluation(gap, chosen, passes)
 

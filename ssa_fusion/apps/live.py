@@ -20,24 +20,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
 import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-from ssa_fusion.apps import evaluate, report
+from ssa_fusion import graphs
+from ssa_fusion.apps import evaluate, report, runs
 from ssa_fusion.apps.args import add_domain_id, positive_float
-from ssa_fusion.nodes import settings
-from ssa_fusion.paper import scenarios, sky
 from ssa_fusion.ros import visual_msgs
 from ssa_fusion.ros.processes import Graph
-from ssa_fusion.ros.readiness import READERS
 from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
+from ssa_fusion.sim import scenarios, sky
 
-LIVE_SCENARIOS = [*(n for n, s in scenarios.SCENARIOS.items() if s.is_orbit), *sky.SKY_SCENARIOS]
-"""The paper's orbit scenarios and the real-sky ones (`paper.sky`)."""
 LIVE_ROOT = Path("out/live")
 """Where runs go by default, one directory each."""
 SLOW_FACTOR = 1.2
@@ -50,7 +46,7 @@ FILTER_COUNTERS = ("forecast_superseded", "forecasts_rolled_back", "rejected_gat
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--scenario", default=scenarios.DEFAULT_LIVE.name, choices=LIVE_SCENARIOS)
+    p.add_argument("--scenario", default=scenarios.DEFAULT_LIVE.name, choices=graphs.LIVE_SCENARIOS)
     p.add_argument("--time-scale", type=positive_float, default=1000.0,
                    help="sim seconds per wall second (default 1000)")
     p.add_argument("--bag", type=Path, default=None,
@@ -123,83 +119,6 @@ def start_foxglove(graph: Graph, params: dict[str, dict], port: int,
     return address
 
 
-def default_out(scenario: str, root: Path = LIVE_ROOT) -> Path:
-    """A new run directory named like rosbag2's default bag names, never an existing one."""
-    stamp = time.strftime("%Y_%m_%d-%H_%M_%S")
-    out = root / f"{scenario}_{stamp}"
-    n = 1
-    while out.exists():
-        n += 1
-        out = root / f"{scenario}_{stamp}_{n}"
-    return out
-
-
-def link_latest(out: Path, root: Path = LIVE_ROOT) -> None:
-    """Point root/latest at `out` (replacing an older link, never a real directory)."""
-    latest = root / "latest"
-    if latest.exists() and not latest.is_symlink():
-        return
-    tmp = root / f".latest_{os.getpid()}"
-    tmp.unlink(missing_ok=True)
-    tmp.symlink_to(os.path.relpath(out.resolve(), root.resolve()), target_is_directory=True)
-    os.replace(tmp, latest)
-
-
-WAIT_FOR = ["/ssa/measurement=3", "/ssa/forecast=2", "/ssa/estimate=1", "/ssa/truth=1",
-            "/ssa/withheld=1", "/clock=3"]
-"""What sensor_sim waits for before it starts: every node's subscriptions."""
-
-
-def sim_seconds(s: scenarios.Scenario | sky.SkyScenario) -> float:
-    """Sim time the scenario runs, s."""
-    if isinstance(s, sky.SkyScenario):
-        return s.duration_s
-    return s.track_s + s.gap_s + s.after_s
-
-
-def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, seed: int,
-                    bag: Path) -> dict[str, dict]:
-    """Per-node parameters (SI units) that run scenario `s` live."""
-    sensor: dict = {"scenario": s.name, "object_id": s.name, "time_scale": time_scale,
-                    "seed": seed, "wait_for": WAIT_FOR, "wait_for_readers": READERS}
-    if isinstance(s, sky.SkyScenario):  # the truth's cadence; the filter publishes at it
-        sensor["cadence"] = s.truth_cadence_s
-        extra = {"predict_period": s.truth_cadence_s, "gap_forecast": "residual"}
-    else:
-        sensor.update({"cadence": s.cadence_s, "gap_start": s.track_s, "gap_length": s.gap_s,
-                       "after_gap": s.after_s})
-        extra = {}
-    estimator = s.estimator()
-    surrogate = {"use_sim_time": True, **settings.surrogate_params(estimator)}
-    filt = {"use_sim_time": True, **settings.filter_params(estimator), **extra}
-    recorder = {"use_sim_time": True, "bag": str(bag)}
-    return {"sensor_sim": sensor, "surrogate": surrogate, "filter": filt, "recorder": recorder}
-
-
-_LOG_STAMP = re.compile(r"\[(\d+(?:\.\d+)?)\]")
-
-
-def sensor_wall_times(log: Path) -> tuple[float, float] | None:
-    """(start, end) of the simulation in wall time (Unix s) from sensor_sim's log (its stderr,
-    rcutils' default format): the lines "starting" and "schedule done"; None when either
-    is missing or unreadable."""
-    try:
-        lines = log.read_text(errors="replace").splitlines()
-    except OSError:
-        return None
-    start = end = None
-    for line in lines:
-        stamp = _LOG_STAMP.search(line)
-        if stamp is None:
-            continue
-        if start is None and ("]: subscribers matched; starting" in line
-                              or "]: starting (" in line):
-            start = float(stamp.group(1))
-        elif "]: schedule done" in line:
-            end = float(stamp.group(1))
-    return (start, end) if start is not None and end is not None and end >= start else None
-
-
 def slow_warning(ran_s: float, sim_s: float, time_scale: float) -> str | None:
     """One warning line when `ran_s` wall seconds exceed `SLOW_FACTOR` times (and
     `SLOW_SLACK_S` over) the `sim_s / time_scale` asked for; else None."""
@@ -236,38 +155,18 @@ def late_warning(late: evaluate.LateForecasts, counters: dict[str, int]) -> str 
             "the surrogate time")
 
 
-def run_dirs(args: argparse.Namespace, name: str) -> tuple[Path, Path] | None:
-    """The run directory (`--out`, else a new one named after `name`, linked as latest)
-    and the bag in it (`--bag`, else OUT/bag), created; None after a one-line error when
-    the bag exists or the directory cannot be made."""
-    out: Path = args.out or default_out(name)
-    bag: Path = args.bag or out / "bag"
-    if bag.exists():
-        print(f"error: bag {bag} exists already; choose another --bag or --out",
-              file=sys.stderr)
-        return None
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        if args.out is None:
-            link_latest(out)
-    except OSError as exc:
-        print(f"error: cannot use {out}: {exc}", file=sys.stderr)
-        return None
-    return out, bag
-
-
 def run(args: argparse.Namespace) -> int:
     if getattr(args, "catalog", None) is not None:
         from ssa_fusion.apps import live_catalog
 
         return live_catalog.run(args)
     s = sky.SKY_SCENARIOS.get(args.scenario) or scenarios.get(args.scenario)
-    dirs = run_dirs(args, s.name)
+    dirs = runs.run_dirs(args, s.name)
     if dirs is None:
         return 2
     out, bag = dirs
-    params = node_parameters(s, args.time_scale, args.seed, bag)
-    sim_s = sim_seconds(s)
+    params = graphs.node_parameters(s, args.time_scale, args.seed, bag)
+    sim_s = graphs.sim_seconds(s)
     graph = Graph(out / "logs", args.domain_id)
     print(f"live: {s.name}, {sim_s / 3600:.1f} h of sim time at {args.time_scale:g}x "
           f"(~{sim_s / args.time_scale:.0f} s of simulation after start-up); ROS domain "
@@ -317,7 +216,7 @@ def run(args: argparse.Namespace) -> int:
     report.write(data, ev, out)
     late = evaluate.unfused_forecasts(data, ev.gap.t)
     counters = filter_counters(diagnostics)
-    sim_wall = sensor_wall_times(out / "logs" / "sensor_sim.err")
+    sim_wall = runs.sensor_wall_times(out / "logs" / "sensor_sim.err")
     # the simulation, and the estimation behind it until its last output reached the probe
     ran = None if sim_wall is None else max(sim_wall[1], last_output) - sim_wall[0]
     summary = {"scenario": s.name, "time_scale": args.time_scale, "wall_s": wall,

@@ -27,17 +27,15 @@ import time
 from collections import Counter, defaultdict
 from dataclasses import fields
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
-from ssa_fusion.apps import live
+from ssa_fusion import graphs
+from ssa_fusion.apps import runs
 from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core import survey
 from ssa_fusion.core.types import UpdateSource
 from ssa_fusion.nodes.defaults import CATALOG_FILTER, CATALOG_SURROGATE
-from ssa_fusion.paper import sky
-from ssa_fusion.paper.catalog_gaps import gap_errors
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.processes import Graph
 from ssa_fusion.ros.topics import (
@@ -46,9 +44,8 @@ from ssa_fusion.ros.topics import (
     TOPIC_ESTIMATE,
     TOPIC_MEASUREMENT,
 )
-
-DEFAULT_SCENARIO = "iss_network"
-"""Whose radars observe a catalog when `--scenario` is not a real-sky scenario."""
+from ssa_fusion.sim import sky, survey
+from ssa_fusion.studies.catalog_gaps import gap_errors
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -98,10 +95,6 @@ def entries_of(args: argparse.Namespace) -> list[catalog_io.CatalogEntry]:
     return entries[: args.objects] if args.objects else entries
 
 
-def node_names(shards: int, node: str = "catalog_filter") -> list[str]:
-    return [f"{node}_{k}" for k in range(shards)]
-
-
 def surrogate_params(args: argparse.Namespace) -> dict[str, Any]:
     """The ``--surrogate-param NAME=VALUE`` options as parameters (YAML values: numbers,
     booleans, strings); ValueError naming the one that is not NAME=VALUE."""
@@ -122,47 +115,6 @@ def surrogate_params(args: argparse.Namespace) -> dict[str, Any]:
             value = float(value)  # 10800 for a parameter of seconds: a float parameter
         out[name] = value
     return out
-
-
-class NodeSpec(NamedTuple):
-    """One process of a catalog graph: executable, node name, parameters."""
-
-    executable: str
-    name: str
-    params: dict[str, Any]
-
-
-def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthetic: int,
-                  sim_s: float, time_scale: float, seed: int, shards: int, surrogate: bool,
-                  surrogate_extra: dict[str, Any], bag: Path | None) -> list[NodeSpec]:
-    """The processes of a catalog run, in start order (sensor_sim last: it waits for the
-    others): the recorder (`bag`, None: its default), `shards` catalog_filter and, with
-    `surrogate`, as many catalog_surrogate (`surrogate_extra` over their defaults), and
-    sensor_sim simulating `scenario`'s radars measuring the catalog. The same for
-    `ssa-fusion live --catalog` and `ros2 launch ssa_fusion catalog.launch.py`."""
-    names = node_names(shards)
-    gaps = node_names(shards, "catalog_surrogate") if surrogate else []
-    readers = ["recorder:" + TOPIC_MEASUREMENT, "recorder:" + TOPIC_ESTIMATE,
-               *(f"{n}:{TOPIC_MEASUREMENT}" for n in names)]
-    recorder: dict[str, Any] = {"use_sim_time": True}
-    if bag is not None:
-        recorder["bag"] = str(bag)
-    station = ",".join(st.station.name for st in scenario.radars)
-    return [
-        NodeSpec("recorder", "recorder", recorder),
-        *(NodeSpec("catalog_filter", n, {"use_sim_time": True, "shards": shards, "shard": k,
-                                         "station": station}) for k, n in enumerate(names)),
-        *(NodeSpec("catalog_surrogate", n, {**surrogate_extra, "use_sim_time": True,
-                                            "shards": shards, "shard": k})
-          for k, n in enumerate(gaps)),
-        NodeSpec("sensor_sim", "sensor_sim", {
-            "scenario": scenario.name, "catalog": str(Path(catalog).resolve()),
-            "objects": objects, "synthetic": synthetic, "duration": float(sim_s),
-            "time_scale": float(time_scale), "seed": seed,
-            "wait_for": [f"{TOPIC_MEASUREMENT}={shards + 1}",
-                         f"{TOPIC_ESTIMATE}={len(gaps) + 1}"],
-            "wait_for_readers": readers}),
-    ]
 
 
 def _statuses(diagnostics: list) -> dict[str, dict[str, str]]:
@@ -205,14 +157,14 @@ def run(args: argparse.Namespace) -> int:
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         return 2
-    s = sky.SKY_SCENARIOS.get(args.scenario) or sky.SKY_SCENARIOS[DEFAULT_SCENARIO]
-    dirs = live.run_dirs(args, f"catalog_{s.name}")
+    s = sky.SKY_SCENARIOS.get(args.scenario) or sky.SKY_SCENARIOS[graphs.DEFAULT_SCENARIO]
+    dirs = runs.run_dirs(args, f"catalog_{s.name}")
     if dirs is None:
         return 2
     out, bag = dirs
     entries = entries_of(args)
     sim_s = args.duration * 3600.0 or s.duration_s
-    specs = catalog_graph(s, args.catalog, args.objects, args.synthetic, sim_s,
+    specs = graphs.catalog_graph(s, args.catalog, args.objects, args.synthetic, sim_s,
                           args.time_scale, args.seed, args.shards, args.surrogate,
                           surrogate_params(args), bag)
     names = [n.name for n in specs if n.executable == "catalog_filter"]
@@ -255,7 +207,7 @@ def run(args: argparse.Namespace) -> int:
         print("error: node process(es) ended badly:\n" + "\n\n".join(problems), file=sys.stderr)
         return 1
     wall = time.monotonic() - t_start
-    sim_wall = live.sensor_wall_times(out / "logs" / "sensor_sim.err")
+    sim_wall = runs.sensor_wall_times(out / "logs" / "sensor_sim.err")
     ran = None if sim_wall is None else (sim_wall[0], max(sim_wall[1], last_output))
     summary = summarise(bag, entries, _statuses(diagnostics), names, rss, ran, sim_s, gaps)
     summary.update({"catalog": str(args.catalog), "objects": len(entries), "scenario": s.name,

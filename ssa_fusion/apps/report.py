@@ -87,13 +87,13 @@ def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
 def _plt():
     """The figure maker (`plots.subplots`; imported on first use: `report` works without
     plots)."""
-    from ssa_fusion.paper import plots
+    from ssa_fusion.studies import plots
 
     return plots
 
 
 def save(fig, path: Path, dpi: int = 100) -> None:
-    from ssa_fusion.paper import plots
+    from ssa_fusion.studies import plots
 
     plots.save(fig, path, dpi)
 

@@ -26,8 +26,8 @@ from ssa_fusion.core.config import EstimatorConfig
 from ssa_fusion.core.constants import R_EARTH
 from ssa_fusion.core.frames import Station
 from ssa_fusion.core.stations import NETWORKS, SENSORS, STATIONS
-from ssa_fusion.paper import sky
-from ssa_fusion.paper.arms import ArmName
+from ssa_fusion.evaluation.arms import ArmName
+from ssa_fusion.evaluation.passes import PassReport
 from ssa_fusion.ros import foxglove_scene
 
 COLORS = {ArmName.PLACEHOLDER: "#7f7f7f", ArmName.COAST: "#1f77b4",
@@ -381,8 +381,8 @@ def arms_table(ev: evaluate.Evaluation) -> str:
             + f'<p class="note">{html.escape(notes)}</p>')
 
 
-def passes_table(passes: sky.PassReport) -> str:
-    """The per-pass table of a station network's run (`sky.PassReport`) in HTML."""
+def passes_table(passes: PassReport) -> str:
+    """The per-pass table of a station network's run (`PassReport`) in HTML."""
     rows = [[f"{(t_end - passes.t_start) / 3600:.2f}", who, str(n), f"{err:.3f}",
              f"{sig:.3f}"] for t_end, who, n, err, sig in passes.passes]
     lo, hi = passes.nees_band

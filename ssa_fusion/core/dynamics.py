@@ -46,33 +46,6 @@ from .timescales import UNIX_EPOCH_JD
 Array = NDArray[np.float64]
 
 # --------------------------------------------------------------------------------------------
-# Scenario initial conditions (DESIGN.md / paper tables)
-# --------------------------------------------------------------------------------------------
-ISS_ELEMENTS: dict[str, float] = {
-    "a_km": 6796.9,
-    "e": 0.0007,
-    "i_rad": math.radians(51.639),
-    "raan_rad": math.radians(113.73),
-    "argp_rad": math.radians(51.197),
-    "nu_rad": math.radians(358.89),
-}
-"""ISS osculating elements (paper Table 1); ``elements_to_state(**ISS_ELEMENTS)`` gives GCRF km."""
-
-MOLNIYA_ELEMENTS: dict[str, float] = {
-    "a_km": 26555.94,
-    "e": 0.7294,
-    "i_rad": math.radians(63.324),
-    "raan_rad": math.radians(295.46),
-    "argp_rad": math.radians(282.69),
-    "nu_rad": math.radians(357.32),
-}
-"""Molniya-3-50 osculating elements (paper Table 2)."""
-
-HALO_L1_STATE: Array = np.array([0.87592, 0.0, 0.19175, 0.0, 0.23080, 0.0])
-"""Earth-Moon L1 halo initial state, CR3BP rotating frame, nondimensional (paper Table 3)."""
-
-
-# --------------------------------------------------------------------------------------------
 # Right-hand sides; y has shape (n, ...) (state along axis 0)
 # --------------------------------------------------------------------------------------------
 def _rhs_two_body(y: Array, mu: float = MU_EARTH) -> Array:

@@ -7,7 +7,7 @@ differ on purpose, for the default *run*: test/nodes/test_config.py lists them a
 the rest equal). The estimator defaults are those of the default live scenario (the ISS,
 two-body + J2, range/az/el from Columbus every 30 s, ten orbits of tracking): the same
 numbers `ssa-fusion live` derives from that scenario (the same test checks it), written
-out here so that the nodes need nothing from the paper's study.
+out here so that the nodes need nothing from the simulated world (`ssa_fusion.sim`).
 
 A field whose default is ``None`` is computed when the node starts (said per field).
 Plain values only, so that importing this module imports nothing else (the recorder needs no
@@ -95,7 +95,7 @@ class FilterDefaults:
 
 @dataclass(frozen=True)
 class CatalogFilterDefaults:
-    """catalog_filter: the real-sky scenarios' filter (`paper.sky.SkyScenario`: two-body +
+    """catalog_filter: the real-sky scenarios' filter (`sim.sky.SkyScenario`: two-body +
     J2, P0 floor 1 km / 1 m/s, q = 1e-7 m^2/s^3 = 1e-13 km^2/s^3, IOD from 7 measurements
     within 300 s, initialised again after 10 gate misses, covariance bounded by the orbit;
     no light time)."""

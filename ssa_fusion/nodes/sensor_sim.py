@@ -8,11 +8,11 @@ Propagates the scenario's true orbit (two-body + J2, drag, or SGP4/SDP4), and pu
 * ``/ssa/truth`` (ssa_fusion_msgs/StateEstimate, zero covariance): the true state;
 * ``/clock``: sim time, UTC (Unix seconds), advancing `time_scale` sim s per wall s.
 
-A paper scenario (`paper.scenarios`) has one idealised sensor measuring at every epoch of
-its cadence; a real-sky scenario (`paper.sky`) has stations that measure only above their
+A paper scenario (`sim.scenarios`) has one idealised sensor measuring at every epoch of
+its cadence; a real-sky scenario (`sim.sky`) has stations that measure only above their
 masks (optical ones only at night, of a sunlit object), at their own cadence during a pass,
 and its truth keeps `cadence` through every gap. It exits 0 when the schedule is done. It is
-the one node that uses the paper's study (`ssa_fusion.paper`): its scenarios and their
+the one node that uses the simulated world (`ssa_fusion.sim`): its scenarios and their
 simulation are what it simulates.
 
     ros2 run ssa_fusion sensor_sim --ros-args -p scenario:=iss_j2_rae -p time_scale:=500.0
@@ -33,7 +33,7 @@ from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
 from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 
 from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core import survey, types
+from ssa_fusion.core import types
 from ssa_fusion.core.frames import Frame
 from ssa_fusion.nodes import start_process
 from ssa_fusion.nodes.common import (
@@ -47,8 +47,6 @@ from ssa_fusion.nodes.common import (
     run,
 )
 from ssa_fusion.nodes.defaults import SENSOR_SIM
-from ssa_fusion.paper import scenarios, sky
-from ssa_fusion.paper.simulate import simulate
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.readiness import ReadyNodes, check_needs
 from ssa_fusion.ros.topics import (
@@ -59,6 +57,8 @@ from ssa_fusion.ros.topics import (
     TOPIC_TRUTH,
     TOPIC_WITHHELD,
 )
+from ssa_fusion.sim import scenarios, sky, survey
+from ssa_fusion.sim.simulate import simulate
 
 ORBIT_SCENARIOS = [name for name, s in scenarios.SCENARIOS.items() if s.is_orbit]
 SCENARIO_NAMES = [*ORBIT_SCENARIOS, *sky.SKY_SCENARIOS]

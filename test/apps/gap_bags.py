@@ -8,7 +8,7 @@ import numpy as np
 
 from ssa_fusion.apps import evaluate
 from ssa_fusion.core import kepler, types
-from ssa_fusion.paper import scenarios
+from ssa_fusion.sim import scenarios
 
 T0, CADENCE = 1000.0, 120.0
 

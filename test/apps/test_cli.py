@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from ssa_fusion.apps import args as cliargs
-from ssa_fusion.apps import cli, live
+from ssa_fusion.apps import cli, live, runs
 
 SAMPLE = str(Path(__file__).resolve().parents[2] / "bags" / "sample_iss_j2_rae")
 
@@ -48,13 +48,13 @@ def test_offline_replay_never_overwrites(tmp_path, capsys):
 
 
 def test_live_runs_get_new_directories_and_a_latest_link(tmp_path):
-    a = live.default_out("iss_j2_rae", tmp_path)
+    a = runs.default_out("iss_j2_rae", tmp_path)
     a.mkdir()
-    live.link_latest(a, tmp_path)
-    b = live.default_out("iss_j2_rae", tmp_path)  # same second: a suffix, never `a`
+    runs.link_latest(a, tmp_path)
+    b = runs.default_out("iss_j2_rae", tmp_path)  # same second: a suffix, never `a`
     assert b != a and b.name.startswith("iss_j2_rae_")
     b.mkdir()
-    live.link_latest(b, tmp_path)
+    runs.link_latest(b, tmp_path)
     assert (tmp_path / "latest").resolve() == b.resolve()
     assert a.is_dir()  # the earlier run is kept
 

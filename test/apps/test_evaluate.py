@@ -8,9 +8,9 @@ from ssa_fusion.apps import evaluate
 from ssa_fusion.core import kepler, metrics, types
 from ssa_fusion.core.ekf import process_noise
 from ssa_fusion.core.tracker import TrackerConfig
+from ssa_fusion.evaluation.arms import ArmName
 from ssa_fusion.nodes import settings
-from ssa_fusion.paper import scenarios
-from ssa_fusion.paper.arms import ArmName
+from ssa_fusion.sim import scenarios
 
 TRACK, GAP, COVERED, AFTER = 40, 40, 10, 5  # epochs; estimates cover the gap's first 10
 OFFSET = np.array([1.0, -0.5, 0.2, 1e-3, -2e-3, 5e-4])  # the estimates' error, km, km/s

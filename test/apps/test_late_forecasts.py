@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from gap_bags import CADENCE, T0, around_a_gap
 
-from ssa_fusion.apps import cli, evaluate, live
+from ssa_fusion.apps import cli, evaluate, live, runs
 from ssa_fusion.core import types
 
 TRACK, GAP, AFTER = 30, 20, 5  # epochs
@@ -128,13 +128,13 @@ SENSOR_LOG = """\
 def test_the_simulations_wall_time_comes_from_the_sensor_log(tmp_path):
     log = tmp_path / "sensor_sim.err"
     log.write_text(SENSOR_LOG)
-    assert live.sensor_wall_times(log) == pytest.approx((1795577900.0, 1795577960.5))
+    assert runs.sensor_wall_times(log) == pytest.approx((1795577900.0, 1795577960.5))
     log.write_text(SENSOR_LOG.replace("subscribers matched; starting",
                                       "starting (no subscribers awaited: wait_for is empty)"))
-    assert live.sensor_wall_times(log) == pytest.approx((1795577900.0, 1795577960.5))
+    assert runs.sensor_wall_times(log) == pytest.approx((1795577900.0, 1795577960.5))
     log.write_text(SENSOR_LOG.splitlines()[0])  # killed before it finished
-    assert live.sensor_wall_times(log) is None
-    assert live.sensor_wall_times(tmp_path / "missing.err") is None
+    assert runs.sensor_wall_times(log) is None
+    assert runs.sensor_wall_times(tmp_path / "missing.err") is None
 
 
 @pytest.mark.parametrize("ran, warned", [(60.0, False), (71.9, False), (72.1, True),

@@ -120,7 +120,7 @@ def test_a_bag_at_another_cadence_is_replayed_at_its_own(tmp_path):
     """10 s data under the default settings' 30 s cadence: the replay infers the cadence from
     the stamps (as the surrogate node does with cadence 0), fits at the gap and forecasts
     every missed epoch, the last ones released with the measurement that ends the gap."""
-    from ssa_fusion.paper import scenarios, simulate
+    from ssa_fusion.sim import scenarios, simulate
 
     s = scenarios.DEFAULT_LIVE.with_(cadence_s=10.0, track_s=9000.0, gap_s=1200.0,
                                      after_s=600.0)

@@ -18,8 +18,8 @@ import pytest
 from test_evaluate import synthetic  # the synthetic BagData helper (test/apps on sys.path)
 
 from ssa_fusion.apps import evaluate, report, report_html
-from ssa_fusion.paper import sky
-from ssa_fusion.paper.arms import ArmName
+from ssa_fusion.evaluation.arms import ArmName
+from ssa_fusion.evaluation.passes import PassReport
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE_BAG = ROOT / "bags" / "sample_iss_j2_rae"
@@ -156,7 +156,7 @@ def test_the_screenshot_shows_plots_not_a_blank_page(rendered):
 
 def test_a_real_sky_evaluation_gets_the_per_pass_table(sample):
     data, ev, _ = sample
-    passes = sky.PassReport(passes=[(3600.0, "radar_a", 12, 0.25, 0.4),
+    passes = PassReport(passes=[(3600.0, "radar_a", 12, 0.25, 0.4),
                                     (9000.0, "radar_a,optical_b", 30, 0.12, 0.2)],
                             t_start=0.0, t=np.array([0.0, 60.0]),
                             pos_err_km=np.array([0.3, 0.2]), nees=np.array([5.0, 7.0]),
@@ -207,7 +207,7 @@ def test_the_visibility_circle_is_at_the_masks_central_angle_from_the_station():
 
 
 def test_the_ground_track_draws_each_network_station_with_its_mask():
-    from ssa_fusion.paper.sky import SKY_SCENARIOS
+    from ssa_fusion.sim.sky import SKY_SCENARIOS
 
     net = report_html.run_stations(SKY_SCENARIOS["iss_network"].estimator())
     masks = {s.name: m for s, m in net}

@@ -30,7 +30,8 @@ def probe() -> None:
 
 def cases() -> dict[str, tuple[np.ndarray, int, int | None, int]]:
     """name -> (training data (channels, samples), delays, rank, forecast steps)."""
-    from ssa_fusion.core.dynamics import ISS_ELEMENTS, elements_to_state, propagate
+    from ssa_fusion.core.dynamics import elements_to_state, propagate
+    from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
     x0 = elements_to_state(**ISS_ELEMENTS)
     pos = np.asarray(propagate("j2", x0, np.arange(2100) * 30.0))[:, :3].T * 1e3  # m

@@ -10,9 +10,6 @@ from sgp4.api import WGS72, Satrec
 
 from ssa_fusion.core.constants import G0, J2, MU_EARTH, MU_EARTH_MOON, OMEGA_EARTH, R_EARTH
 from ssa_fusion.core.dynamics import (
-    HALO_L1_STATE,
-    ISS_ELEMENTS,
-    MOLNIYA_ELEMENTS,
     elements_to_state,
     fit_sgp4_mean_elements,
     propagate,
@@ -21,6 +18,7 @@ from ssa_fusion.core.dynamics import (
     sgp4_ephemeris_teme,
     state_to_elements,
 )
+from ssa_fusion.sim.scenarios import HALO_L1_STATE, ISS_ELEMENTS, MOLNIYA_ELEMENTS
 
 JD0 = 2460310.5  # 2024-01-01 00:00 UTC
 

@@ -10,8 +10,9 @@ import pytest
 from ssa_fusion.core import dynamics
 from ssa_fusion.core.gap_bank import GapBank, GapBankConfig
 from ssa_fusion.core.residual import LIVE_RESIDUAL, GapForecaster
+from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
-X0 = np.array(dynamics.elements_to_state(**dynamics.ISS_ELEMENTS))
+X0 = np.array(dynamics.elements_to_state(**ISS_ELEMENTS))
 P = np.diag([1e-6] * 3 + [1e-12] * 3)  # 1 m, 1 mm/s
 CFG = GapBankConfig(
     motion_model="kepler", period_s=60.0, pass_break_s=600.0, hold_s=0.0, fit_budget=1.0,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from ssa_fusion.core.dynamics import ISS_ELEMENTS, elements_to_state, propagate
+from ssa_fusion.core.dynamics import elements_to_state, propagate
 from ssa_fusion.core.hankel_dmd import (
     HankelDMD,
     _gram_subspace,
@@ -17,6 +17,7 @@ from ssa_fusion.core.hankel_dmd import (
     resolvable_rank,
     svht_rank,
 )
+from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
 FREQS = (0.011, 0.037, 0.071)  # cycles per sample
 

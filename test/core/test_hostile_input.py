@@ -59,8 +59,8 @@ def test_an_outlier_range_in_the_iod_batch_is_not_fused_into_the_initial_orbit()
     later good measurement at its gate. The IOD of that batch is no bound Earth orbit: it
     fails and the next batch, of good measurements, starts the filter."""
     from ssa_fusion.core.initiation import earth_orbit_problem
-    from ssa_fusion.paper import scenarios
-    from ssa_fusion.paper.simulate import simulate
+    from ssa_fusion.sim import scenarios
+    from ssa_fusion.sim.simulate import simulate
 
     s = scenarios.DEFAULT_LIVE.with_(track_s=1200.0, gap_s=0.0, after_s=0.0)
     sim = simulate(s, seed=1)

@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
-from ssa_fusion.core.dynamics import ISS_ELEMENTS, MOLNIYA_ELEMENTS, elements_to_state, propagate
+from ssa_fusion.core.dynamics import elements_to_state, propagate
 from ssa_fusion.core.frames import COLUMBUS, razel_gcrs
 from ssa_fusion.core.iod import finite_difference_state, gibbs, herrick_gibbs, razel_to_gcrs
+from ssa_fusion.sim.scenarios import ISS_ELEMENTS, MOLNIYA_ELEMENTS
 
 
 def test_gibbs_curtis_example_5_1():

@@ -44,7 +44,7 @@ from ssa_fusion.core.constants import ARCSEC, C_KM_S
 from ssa_fusion.core.frames import Station, wrap_pi
 from ssa_fusion.core.measurement import RadecModel, RazelModel
 from ssa_fusion.core.stations import OPTICAL_SIGMA, RADAR_SIGMA, SENSORS, SensorType
-from ssa_fusion.paper import sky
+from ssa_fusion.sim import sky
 
 Array = NDArray[np.float64]
 

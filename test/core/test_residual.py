@@ -9,8 +9,9 @@ from scipy.integrate import solve_ivp
 
 from ssa_fusion.core import dynamics, residual
 from ssa_fusion.core.constants import MU_EARTH
+from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
-X0 = np.array(dynamics.elements_to_state(**dynamics.ISS_ELEMENTS))
+X0 = np.array(dynamics.elements_to_state(**ISS_ELEMENTS))
 
 
 def _passes(rng: np.random.Generator, days: float, per_day: int = 5) -> np.ndarray:
@@ -77,25 +78,6 @@ def test_basis_fit_on_irregular_samples_recovers_an_analytic_signal():
     B_out, _ = residual.basis(t_out, 2 * math.pi * t_out / period + 0.4,
                               np.full(50, 2 * math.pi / period), 2, 2, True, period)
     np.testing.assert_allclose(B_out @ c, B_out @ coef, atol=1e-7)
-
-
-def test_bopdmd_on_irregular_samples_recovers_frequency_and_decay():
-    pytest.importorskip("pydmd")
-    rng = np.random.default_rng(2)
-    lam, om = 0.05, 2 * math.pi  # decay 1/time unit, one cycle per time unit
-    t = np.sort(np.concatenate([s + rng.uniform(0, 0.1, 6) for s in rng.uniform(0, 6, 12)]))
-
-    def signal(tt: np.ndarray) -> np.ndarray:
-        e = np.exp(-lam * tt)
-        return np.stack([e * np.cos(om * tt), e * np.sin(om * tt), 0.5 * e * np.cos(om * tt)],
-                        axis=1)
-
-    forecast = residual.bopdmd_fit(t, signal(t), residual.BopConfig(rank=2, trials=10),
-                                   init_alpha=[-0.1 + 6j, -0.1 - 6j])
-    t_out = np.linspace(6.0, 8.0, 30)
-    mean, var = forecast(t_out)
-    np.testing.assert_allclose(mean, signal(t_out), atol=2e-3)
-    assert np.all(var >= 0.0)
 
 
 @pytest.mark.parametrize("model", ["hill", "basis"])
@@ -178,7 +160,7 @@ def test_gap_forecaster_on_a_filter_stream_forecasts_the_gap_and_never_a_pass():
     assert err_coast > 10.0 and err < 0.05 * err_coast
     assert gf.forecast(t_end + 300.5) is None  # off the grid
     # the chosen live setting is the study's choice
-    from ssa_fusion.paper import gap_study
+    from ssa_fusion.studies import gap_study
 
     assert gap_study.tuning_candidates()[gap_study.CHOSEN] == residual.LIVE_RESIDUAL
 

@@ -17,9 +17,10 @@ from ssa_fusion.core.stations import SENSORS, STATIONS, network_stations
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.tracker import TrackerConfig
 from ssa_fusion.core.types import Cause, Kind, Measurement
+from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
 T0 = 1735689600.0  # 2025-01-01T00:00:00Z
-X0 = dynamics.elements_to_state(**dynamics.ISS_ELEMENTS)
+X0 = dynamics.elements_to_state(**ISS_ELEMENTS)
 
 
 def truth(t: np.ndarray) -> np.ndarray:

@@ -17,8 +17,8 @@ import pytest
 
 from ssa_fusion.core.surrogate import EciLift, Surrogate, SurrogateConfig
 from ssa_fusion.core.types import Kind, Measurement, Source
-from ssa_fusion.paper import scenarios as sc
-from ssa_fusion.paper.simulate import Simulation, simulate
+from ssa_fusion.sim import scenarios as sc
+from ssa_fusion.sim.simulate import Simulation, simulate
 
 DT = 30.0
 DELAYS = 60

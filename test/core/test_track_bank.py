@@ -9,13 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ssa_fusion.core import catalog, survey
+from ssa_fusion.core import catalog
 from ssa_fusion.core.batch_ekf import BatchEKFConfig
 from ssa_fusion.core.config import EstimatorConfig, MotionModel, make_tracker
 from ssa_fusion.core.stations import NETWORKS, SENSORS
 from ssa_fusion.core.track_bank import TrackBank, TrackBankConfig
 from ssa_fusion.core.tracker import TrackerConfig
 from ssa_fusion.core.types import Cause, Kind, Measurement
+from ssa_fusion.sim import survey
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"
 RADARS = [SENSORS[s] for s in NETWORKS["radar_network"]]

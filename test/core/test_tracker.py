@@ -31,8 +31,8 @@ from scipy.stats import chi2
 from ssa_fusion.core import iod
 from ssa_fusion.core.tracker import HISTORY_REAL, Outcome, Tracker, TrackerConfig
 from ssa_fusion.core.types import Kind, Measurement, Source, UpdateSource
-from ssa_fusion.paper import scenarios as sc
-from ssa_fusion.paper.simulate import Simulation, simulate
+from ssa_fusion.sim import scenarios as sc
+from ssa_fusion.sim.simulate import Simulation, simulate
 
 CADENCE = 30.0
 

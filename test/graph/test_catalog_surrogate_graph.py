@@ -20,6 +20,7 @@ from ssa_fusion.core.residual import GapForecaster
 from ssa_fusion.nodes.shards import shard_range
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.topics import CATALOG_QOS
+from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
 T0 = 1.7e9  # Unix s
 PERIOD = 300.0
@@ -37,7 +38,7 @@ def _object_of_shard(shard: int, shards: int, other: bool = False) -> str:
 def _estimates(oid: str) -> list[types.StateEstimate]:
     """Pass ends' worth of a J2 orbit: 4 passes of 5 min every 97 min, 60 s apart, as the
     filter's SENSOR estimates (through the message, m <-> km, as the node gets them)."""
-    x0 = np.array(dynamics.elements_to_state(**dynamics.ISS_ELEMENTS))
+    x0 = np.array(dynamics.elements_to_state(**ISS_ELEMENTS))
     t = np.concatenate([s + np.arange(0.0, 300.0, 60.0) for s in 5820.0 * np.arange(4)])
     x = dynamics.propagate("j2", x0, np.r_[-60.0, t])[1:]
     return [messages.estimate_from_msg(messages.estimate_to_msg(types.StateEstimate(

@@ -31,18 +31,18 @@ from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from ssa_fusion_msgs.msg import Measurement, StateEstimate
 
-from ssa_fusion.apps.live import node_parameters
 from ssa_fusion.core import types
 from ssa_fusion.core.config import EstimatorConfig
 from ssa_fusion.core.config import motion as config_motion
 from ssa_fusion.core.measurement import RazelModel
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.tracker import DEFAULT_GATE, Tracker, TrackerConfig
-from ssa_fusion.paper import scenarios
-from ssa_fusion.paper.simulate import simulate
+from ssa_fusion.graphs import node_parameters
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.readiness import ReadyNodes
 from ssa_fusion.ros.topics import DATA_QOS
+from ssa_fusion.sim import scenarios
+from ssa_fusion.sim.simulate import simulate
 
 SHORT = scenarios.DEFAULT_LIVE.with_(track_s=1200.0, gap_s=0.0, after_s=0.0, delays=5)
 SIM = simulate(SHORT, seed=1)

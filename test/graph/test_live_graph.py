@@ -13,9 +13,9 @@ from rosgraph_msgs.msg import Clock
 from ssa_fusion_msgs.msg import Measurement, StateEstimate
 
 from ssa_fusion.apps import evaluate
-from ssa_fusion.apps.live import node_parameters
-from ssa_fusion.paper import scenarios
+from ssa_fusion.graphs import node_parameters
 from ssa_fusion.ros import bagio, messages
+from ssa_fusion.sim import scenarios
 
 TOPICS = {
     "/ssa/measurement": Measurement,

@@ -13,12 +13,13 @@ import pytest
 from ssa_fusion_msgs.msg import StateEstimate
 
 from ssa_fusion.apps import evaluate
-from ssa_fusion.apps.live import node_parameters
 from ssa_fusion.core import frames
 from ssa_fusion.core.stations import SENSORS
 from ssa_fusion.core.types import Kind, UpdateSource
-from ssa_fusion.paper import sky
+from ssa_fusion.evaluation.passes import passes
+from ssa_fusion.graphs import node_parameters
 from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_MEASUREMENT, TOPIC_WITHHELD
+from ssa_fusion.sim import sky
 
 SCENARIO = sky.SKY_SCENARIOS["iss_radar_columbus"]
 HOURS = 13.0
@@ -66,7 +67,7 @@ def test_bag_holds_only_measurements_above_the_mask_in_passes(run):
     assert t.min() > SCENARIO.t0 + 7 * 3600.0  # nothing before the first pass
     true_el = frames.razel_gcrs(sky.truth(SCENARIO, t), t, SENSORS["columbus"].station)[:, 2]
     assert true_el.min() >= math.radians(SENSORS["columbus"].min_elevation_deg)
-    assert len(sky.passes(ms)) >= 3
+    assert len(passes(ms)) >= 3
     # the outage's pass went to /ssa/withheld, and only there
     w = np.array([m.t for m in data.withheld])
     assert len(w) > 5

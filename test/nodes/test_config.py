@@ -17,13 +17,13 @@ from pathlib import Path
 import pytest
 import yaml
 
-from ssa_fusion.apps.live import node_parameters
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
 from ssa_fusion.core.tracker import DEFAULT_GATE
 from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S
+from ssa_fusion.graphs import node_parameters
 from ssa_fusion.nodes import defaults
-from ssa_fusion.paper import scenarios
 from ssa_fusion.ros.processes import fresh_domain_id
+from ssa_fusion.sim import scenarios
 
 CONFIG = Path(__file__).resolve().parents[2] / "config" / "default.yaml"
 WORKER = Path(__file__).with_name("declared_parameters.py")

@@ -7,7 +7,7 @@ import pytest
 
 from ssa_fusion.core import config
 from ssa_fusion.nodes import settings
-from ssa_fusion.paper import scenarios
+from ssa_fusion.sim import scenarios
 
 CONFIG = Path(__file__).resolve().parents[2] / "config" / "default.yaml"
 

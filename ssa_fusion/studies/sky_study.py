@@ -19,7 +19,9 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from ssa_fusion.paper import arms, sky
+from ssa_fusion.evaluation import arms, passes
+from ssa_fusion.sim import sky
+from ssa_fusion.studies import sky_runs
 
 ARMS = [str(a) for a in arms.ArmName]
 
@@ -30,10 +32,10 @@ def run_case(case: tuple[str, float, int]) -> dict:
     base = sky.SKY_SCENARIOS[name]
     s = base.with_(t0=base.t0 + 3600.0 * offset_h)
     sim = sky.simulate_sky(s, seed=seed)
-    ev = sky.evaluate_sky(sim, seed=seed)
+    ev = sky_runs.evaluate_sky(sim, seed=seed)
     after = [p[3] for p in ev.passes.passes]
     c_off = s.with_(light_time=False).estimator()  # the same measurements (light time in)
-    off = sky.pass_report(c_off, arms.run_filter(c_off, sim.real), sim.real, sim.t, sim.x)
+    off = passes.pass_report(c_off, arms.run_filter(c_off, sim.real), sim.real, sim.t, sim.x)
     o = ev.outage  # None where the outage's station would have seen nothing
     if o is not None and set(o.scores) != set(arms.ArmName):
         raise RuntimeError(f"{case}: an arm is missing over the outage")

@@ -9,7 +9,7 @@ import numpy as np
 
 from ssa_fusion.core.frames import wrap_2pi
 from ssa_fusion.core.types import Kind
-from ssa_fusion.paper.scenarios import Scenario, measurement_model, truth_states
+from ssa_fusion.sim.scenarios import Scenario, measurement_model, truth_states
 
 
 @dataclass

@@ -6,7 +6,7 @@ import json
 import pytest
 
 from ssa_fusion.apps import cli
-from ssa_fusion.paper.arms import ArmName
+from ssa_fusion.evaluation.arms import ArmName
 
 ARMS = ("placeholder", "coast", "dmd_ekf", "hypothetical_ekf")
 SETTINGS = ("cadence_s", "training_window_s", "gap_s", "delays", "rank", "p0_sigma", "q",
@@ -72,7 +72,7 @@ def test_quick_keeps_the_ordering(quick):
 
 
 def test_distributions_over_evaluation_seeds_never_used_for_tuning(quick):
-    from ssa_fusion.paper import distributions
+    from ssa_fusion.studies import distributions
 
     assert not set(distributions.EVALUATION_SEEDS) & set(distributions.TUNING_SEEDS)
     assert len(distributions.EVALUATION_SEEDS) >= 20 and len(distributions.START_OFFSETS_H) >= 3
@@ -115,9 +115,10 @@ def test_dmd_arm_predicts_where_no_forecast_arrives(monkeypatch):
     prediction, which is then the coasting EKF's state."""
     import numpy as np
 
-    from ssa_fusion.paper import experiments, scenarios
-    from ssa_fusion.paper.reproduce import quick_variant
-    from ssa_fusion.paper.simulate import simulate
+    from ssa_fusion.sim import scenarios
+    from ssa_fusion.sim.simulate import simulate
+    from ssa_fusion.studies import experiments
+    from ssa_fusion.studies.reproduce import quick_variant
 
     s = quick_variant(scenarios.SCENARIOS["iss_j2_pos"])
     sim = simulate(s, seed=1)
@@ -144,7 +145,7 @@ def test_dmd_arm_predicts_where_no_forecast_arrives(monkeypatch):
 
 
 def test_update_doc_replaces_only_the_generated_block(tmp_path):
-    from ssa_fusion.paper import reproduce
+    from ssa_fusion.studies import reproduce
 
     doc = tmp_path / "R.md"
     doc.write_text(f"# Results\nintro\n{reproduce.GENERATED_BEGIN}\nold\n"

@@ -16,7 +16,9 @@ import pytest
 from ssa_fusion.core import frames, sun
 from ssa_fusion.core.stations import SENSORS
 from ssa_fusion.core.types import Kind
-from ssa_fusion.paper import sky
+from ssa_fusion.evaluation.passes import passes
+from ssa_fusion.sim import sky
+from ssa_fusion.studies.sky_runs import evaluate_sky
 
 DAY = 86400.0
 
@@ -45,12 +47,12 @@ def test_radar_measures_only_above_its_mask_in_passes(radar_day):
     # measured = true + noise of the stated size (light time moves the ISS by < 40 m)
     assert np.std(z[:, 0] - rae[:, 0]) == pytest.approx(sigma[0], rel=0.3)
     assert np.abs(z[:, 2] - rae[:, 2]).max() < 6 * sigma[2]
-    passes = sky.passes(radar_day.measurements)
-    assert 4 <= len(passes) <= 8  # a LEO object over one site: ~5 passes a day
+    runs = passes(radar_day.measurements)
+    assert 4 <= len(runs) <= 8  # a LEO object over one site: ~5 passes a day
     t = np.array([m.t for m in radar_day.measurements])
-    for first, last in passes:
+    for first, last in runs:
         assert 60.0 <= t[last] - t[first] <= 12 * 60.0  # minutes long
-    gaps = np.array([t[b[0]] - t[a[1]] for a, b in itertools.pairwise(passes)])
+    gaps = np.array([t[b[0]] - t[a[1]] for a, b in itertools.pairwise(runs)])
     assert gaps.min() > 1.4 * 3600  # hours apart (at least one orbit)
 
 
@@ -88,7 +90,7 @@ def test_optical_sites_see_only_at_night_a_sunlit_object():
 def test_filter_is_within_a_kilometre_after_each_radar_pass(radar_day):
     """Radar noise (20 m, 0.02 deg): the J2 filter's position error after each pass is below
     1 km, and its sigma covers it to 3 sigma."""
-    report = sky.evaluate_sky(radar_day, seed=3, only=()).passes
+    report = evaluate_sky(radar_day, seed=3, only=()).passes
     assert len(report.passes) >= 4
     err = np.array([p[3] for p in report.passes])
     sig = np.array([p[4] for p in report.passes])
@@ -105,7 +107,7 @@ def test_reproduce_runs_the_real_sky_study_over_evaluation_seeds(tmp_path, monke
     import json
 
     from ssa_fusion.apps.cli import build_parser
-    from ssa_fusion.paper.distributions import EVALUATION_SEEDS
+    from ssa_fusion.studies.distributions import EVALUATION_SEEDS
 
     short = sky.SKY_SCENARIOS["iss_radar_columbus"].with_(
         duration_s=DAY, outages=(("columbus", 0.55 * DAY, 0.15 * DAY),))

@@ -4,7 +4,7 @@ Per run (a `sky` scenario from a start offset, with a seed) and per placeholder 
 (``kepler``: the filter with a two-body model and the Keplerian filters' process noise
 `KEPLER_Q`; ``j2``: the scenario's own two-body + J2 filter, q = `sky.SKY_Q`), the filter
 runs over the delivered measurements with the live Hankel-DMD surrogate as the graph drives
-it (`sky.run_dmd_ekf`). Every inter-pass gap is then scored at the truth epochs inside it
+it (`sky_runs.run_dmd_ekf`). Every inter-pass gap is then scored at the truth epochs inside it
 (on a `GRID_S` grid), for the arms:
 
 * ``coast`` -- the filter predicting from its estimate at the end of the pass (with the
@@ -40,7 +40,9 @@ import numpy as np
 from ssa_fusion.core import residual
 from ssa_fusion.core.metrics import chi2_bounds
 from ssa_fusion.core.types import UpdateSource
-from ssa_fusion.paper import arms, sky
+from ssa_fusion.evaluation import arms, passes
+from ssa_fusion.sim import sky
+from ssa_fusion.studies import bopdmd, sky_runs
 
 KEPLER_Q = 1e-7
 """Process noise of the two-body placeholder filter, (km/s^2)^2 s: the Keplerian filters' q
@@ -108,7 +110,7 @@ def _anchors(estimates: dict[float, object], real: list) -> list[tuple[float, fl
     next pass) for the passes of `real` the filter fused."""
     fused = [m for m in real if m.t in estimates
              and getattr(estimates[m.t], "update_source", None) == UpdateSource.SENSOR]
-    ps = sky.passes(fused)
+    ps = passes.passes(fused)
     out = []
     for (_, last), (nxt, _) in itertools.pairwise(ps):
         out.append((fused[last].t, fused[nxt].t))
@@ -131,7 +133,7 @@ def run_placeholder(sim: sky.SkySimulation, placeholder: str, case: Case) -> lis
     model, q, dyn = PLACEHOLDERS[placeholder]
     s = sim.scenario.with_(motion_model=model, q=q)
     c = s.estimator()
-    run = sky.run_dmd_ekf(replace(sim, scenario=s))
+    run = sky_runs.run_dmd_ekf(replace(sim, scenario=s))
     est = run.estimates if not run.forecasts else arms.run_filter(c, sim.real)
     prop = residual.orbit_propagator(dyn)
     surrogates = {n: residual.ResidualSurrogate(cfg, prop) for n, cfg in case.variants}
@@ -169,8 +171,8 @@ def run_placeholder(sim: sky.SkySimulation, placeholder: str, case: Case) -> lis
             row["forecast"][name] = ok
         if case.bopdmd:
             sur = next(iter(surrogates.values()))
-            out = residual.bopdmd_residual_forecast(
-                sur.cfg, residual.BopConfig(seed=case.seed), prop, np.array(sur.t),
+            out = bopdmd.bopdmd_residual_forecast(
+                sur.cfg, bopdmd.BopConfig(seed=case.seed), prop, np.array(sur.t),
                 np.array(sur.x), np.array(sur.P), t_gap)
             arm = _traj(t_gap, *out) if out is not None else coast
             row["err"]["bopdmd"], row["nees"]["bopdmd"] = _score(arm, x_true)

@@ -38,7 +38,7 @@ from ssa_fusion.core.config import ORBIT_MODELS, EstimatorConfig, MotionModel, m
 from ssa_fusion.core.metrics import epsilon, nees
 from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
 from ssa_fusion.core.types import Measurement, Source, StateEstimate, UpdateSource
-from ssa_fusion.paper.montecarlo import N_PARTICLES, placeholder_ensemble
+from ssa_fusion.evaluation.montecarlo import N_PARTICLES, placeholder_ensemble
 
 J2_COAST_Q = 1e-13
 """Process noise of the J2 filter, (km/s^2)^2 s, by the scenarios' rule q ~ a^2 tau (never

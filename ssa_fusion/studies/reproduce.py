@@ -19,8 +19,9 @@ import numpy as np
 
 from ssa_fusion.core.hankel_dmd import HankelDMD
 from ssa_fusion.core.iod import razel_to_gcrs
-from ssa_fusion.paper import distributions, experiments, scenarios, sky, sky_study
-from ssa_fusion.paper.simulate import simulate
+from ssa_fusion.sim import scenarios, sky
+from ssa_fusion.sim.simulate import simulate
+from ssa_fusion.studies import distributions, experiments, sky_study
 
 ARMS = ("placeholder", "dmd_ekf", "hypothetical_ekf")
 TARGET_CLOSE = ("iss_j2_pos", "iss_sgp4_pos", "iss_j2_pos_noisy", "iss_j2_rae",
@@ -111,7 +112,7 @@ def run_one(s: scenarios.Scenario, seed: int, nees_runs: int, out: Path, plots: 
     r["paper_finding"] = s.finding
     r["targets"] = targets(s.name, r)
     if plots:
-        from ssa_fusion.paper import plots as pl
+        from ssa_fusion.studies import plots as pl
         # orbits in hours; the CR3BP runs on its nondimensional time unit (TU)
         unit = "h" if s.is_orbit else ("TU" if s.truth == "cr3bp" else "s")
         files = [pl.error_plot(s.name, sim, ev.arms, out / f"{s.name}_error.png", unit).name]
@@ -368,7 +369,7 @@ def run(args) -> int:
         mus = VDP_MUS_QUICK if args.quick else VDP_MUS
         results["vdp_sweep"] = experiments.vdp_sweep(sv, args.seed, mus)
         if plots:
-            from ssa_fusion.paper import plots as pl
+            from ssa_fusion.studies import plots as pl
             pl.vdp_sweep_plot(results["vdp_sweep"], out / "vdp_sweep.png")
         bar.step("vdp sweep")
     if do_cons:
@@ -378,7 +379,7 @@ def run(args) -> int:
         seeds = 3 if args.quick else CONSISTENCY_SEEDS
         results["consistency"] = consistency_study(sc, seeds, CONSISTENCY_RETRAIN_STEPS)
         if plots:
-            from ssa_fusion.paper import plots as pl
+            from ssa_fusion.studies import plots as pl
             pl.consistency_plot(results["consistency"], out / "consistency.png")
         bar.step("consistency study")
     n_seeds = args.seeds if args.seeds is not None else (

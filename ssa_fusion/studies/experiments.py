@@ -1,4 +1,4 @@
-"""The arms of `ssa_fusion.paper.arms` on a simulated scenario, plus the paper's two studies
+"""The arms of `ssa_fusion.evaluation.arms` on a simulated scenario, plus the paper's two studies
 (pure functions, no I/O).
 
 The DMD-EKF runs exactly as the live graph drives the two nodes: the real measurements go
@@ -27,10 +27,10 @@ from ssa_fusion.core.metrics import chi2_bounds, nees
 from ssa_fusion.core.surrogate import Surrogate
 from ssa_fusion.core.tracker import Tracker
 from ssa_fusion.core.types import Measurement, StateEstimate
-from ssa_fusion.paper.arms import ArmName, ArmTrajectory, GapEvaluation, evaluate_gap
-from ssa_fusion.paper.montecarlo import N_PARTICLES
-from ssa_fusion.paper.scenarios import Scenario, measurement_model
-from ssa_fusion.paper.simulate import Simulation, simulate
+from ssa_fusion.evaluation.arms import ArmName, ArmTrajectory, GapEvaluation, evaluate_gap
+from ssa_fusion.evaluation.montecarlo import N_PARTICLES
+from ssa_fusion.sim.scenarios import Scenario, measurement_model
+from ssa_fusion.sim.simulate import Simulation, simulate
 
 __all__ = ["N_PARTICLES", "DmdEkfRun", "estimator", "evaluate_sim", "make_surrogate",
            "make_tracker", "run_dmd_ekf", "run_scenario", "vdp_sweep"]

@@ -23,10 +23,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ssa_fusion.core.types import Kind
-from ssa_fusion.paper import experiments
-from ssa_fusion.paper.arms import ArmName
-from ssa_fusion.paper.scenarios import Scenario
-from ssa_fusion.paper.simulate import simulate
+from ssa_fusion.evaluation.arms import ArmName
+from ssa_fusion.sim.scenarios import Scenario
+from ssa_fusion.sim.simulate import simulate
+from ssa_fusion.studies import experiments
 
 TUNING_SEEDS = tuple(range(1, 11))
 """Seeds the scenario settings were chosen on (and the single-seed table's seed 1)."""

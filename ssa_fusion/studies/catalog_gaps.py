@@ -24,11 +24,12 @@ from typing import Any
 import numpy as np
 
 from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core import residual, survey
+from ssa_fusion.core import residual
 from ssa_fusion.core.batch_ekf import BatchEKFConfig
 from ssa_fusion.core.gap_bank import GapBank, GapBankConfig
 from ssa_fusion.core.track_bank import TrackBank, TrackBankConfig
-from ssa_fusion.paper.sky import SKY_SCENARIOS, SkyScenario
+from ssa_fusion.sim import survey
+from ssa_fusion.sim.sky import SKY_SCENARIOS, SkyScenario
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"
 """The sample catalog; its first element set (CBERS 2, LEO) is spread into synthetic ones."""

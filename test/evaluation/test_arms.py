@@ -11,7 +11,7 @@ from ssa_fusion.core import kepler
 from ssa_fusion.core.config import EstimatorConfig, MotionModel
 from ssa_fusion.core.tracker import TrackerConfig
 from ssa_fusion.core.types import Kind, Measurement, StateEstimate, UpdateSource
-from ssa_fusion.paper import arms
+from ssa_fusion.evaluation import arms
 
 MU, RE, J2 = 398600.4418, 6378.137, 1.08262668e-3
 X0 = np.array([6778.0, 0.0, 0.0, 0.0, 4.8, 5.9])

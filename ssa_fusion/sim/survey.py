@@ -20,9 +20,9 @@ import numpy as np
 from numpy.typing import NDArray
 from sgp4.api import WGS72, Satrec
 
-from .catalog import CatalogEntry, catalog_states
-from .frames import razel_gcrs
-from .stations import Sensor, SensorType
+from ssa_fusion.core.catalog import CatalogEntry, catalog_states
+from ssa_fusion.core.frames import razel_gcrs
+from ssa_fusion.core.stations import Sensor, SensorType
 
 SGP4_EPOCH_JD = 2433281.5
 """Julian date of SGP4's epoch origin (1949 December 31 00:00 UTC), for `Satrec.sgp4init`."""

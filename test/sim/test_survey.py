@@ -10,9 +10,10 @@ import pytest
 from sgp4.api import jday
 from sgp4.exporter import export_tle
 
-from ssa_fusion.core import catalog, survey
+from ssa_fusion.core import catalog
 from ssa_fusion.core.frames import razel_gcrs, teme_to_gcrs
 from ssa_fusion.core.stations import NETWORKS, SENSORS
+from ssa_fusion.sim import survey
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"
 BASE = catalog.read_catalog(SAMPLE)[0]  # CBERS 2, LEO

@@ -27,6 +27,30 @@ from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.tracker import TrackerConfig
 from ssa_fusion.core.types import Kind
 
+ISS_ELEMENTS: dict[str, float] = {
+    "a_km": 6796.9,
+    "e": 0.0007,
+    "i_rad": math.radians(51.639),
+    "raan_rad": math.radians(113.73),
+    "argp_rad": math.radians(51.197),
+    "nu_rad": math.radians(358.89),
+}
+"""ISS osculating elements (paper Table 1); ``elements_to_state(**ISS_ELEMENTS)`` gives GCRF km."""
+
+MOLNIYA_ELEMENTS: dict[str, float] = {
+    "a_km": 26555.94,
+    "e": 0.7294,
+    "i_rad": math.radians(63.324),
+    "raan_rad": math.radians(295.46),
+    "argp_rad": math.radians(282.69),
+    "nu_rad": math.radians(357.32),
+}
+"""Molniya-3-50 osculating elements (paper Table 2)."""
+
+HALO_L1_STATE = np.array([0.87592, 0.0, 0.19175, 0.0, 0.23080, 0.0])
+"""Earth-Moon L1 halo initial state, CR3BP rotating frame, nondimensional (paper Table 3)."""
+
+
 ORBIT_EPOCH_UNIX = 1735689600.0
 """2025-01-01T00:00:00 UTC: epoch of the orbit scenarios' initial elements."""
 
@@ -153,11 +177,11 @@ class Scenario:
 
 
 def _iss_state() -> tuple[float, ...]:
-    return tuple(dynamics.elements_to_state(**dynamics.ISS_ELEMENTS))
+    return tuple(dynamics.elements_to_state(**ISS_ELEMENTS))
 
 
 def _molniya_state() -> tuple[float, ...]:
-    return tuple(dynamics.elements_to_state(**dynamics.MOLNIYA_ELEMENTS))
+    return tuple(dynamics.elements_to_state(**MOLNIYA_ELEMENTS))
 
 
 ISS_BSTAR = 1.0270e-4
@@ -235,7 +259,7 @@ SCENARIOS: dict[str, Scenario] = {
             finding="both EKFs fail away from μ_p≈2",
         ),
         Scenario(
-            name="cr3bp_halo_noisy", truth="cr3bp", x0=tuple(dynamics.HALO_L1_STATE),
+            name="cr3bp_halo_noisy", truth="cr3bp", x0=tuple(HALO_L1_STATE),
             placeholder="cr3bp", noise_rel=0.01, cadence_s=HALO_PERIOD / 200,
             track_s=10 * HALO_PERIOD, gap_s=HALO_PERIOD, after_s=0.1, delays=200, t0=0.0,
             # q: the exact placeholder leaves out only the EKF's linearisation error,

@@ -1,0 +1,84 @@
+"""Run directories of `ssa-fusion live`: one per run, named like rosbag2's bags, and the logs.
+
+`default_out` names a new directory (`out/live/<scenario>_<date-time>`), `link_latest`
+points `out/live/latest` at it, `run_dirs` makes it and picks the bag inside, and
+`sensor_wall_times` reads from sensor_sim's log when the simulation started and ended.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import sys
+import time
+from pathlib import Path
+
+LIVE_ROOT = Path("out/live")
+"""Where runs go by default, one directory each."""
+
+
+def default_out(scenario: str, root: Path = LIVE_ROOT) -> Path:
+    """A new run directory named like rosbag2's default bag names, never an existing one."""
+    stamp = time.strftime("%Y_%m_%d-%H_%M_%S")
+    out = root / f"{scenario}_{stamp}"
+    n = 1
+    while out.exists():
+        n += 1
+        out = root / f"{scenario}_{stamp}_{n}"
+    return out
+
+
+def link_latest(out: Path, root: Path = LIVE_ROOT) -> None:
+    """Point root/latest at `out` (replacing an older link, never a real directory)."""
+    latest = root / "latest"
+    if latest.exists() and not latest.is_symlink():
+        return
+    tmp = root / f".latest_{os.getpid()}"
+    tmp.unlink(missing_ok=True)
+    tmp.symlink_to(os.path.relpath(out.resolve(), root.resolve()), target_is_directory=True)
+    os.replace(tmp, latest)
+
+
+_LOG_STAMP = re.compile(r"\[(\d+(?:\.\d+)?)\]")
+
+
+def sensor_wall_times(log: Path) -> tuple[float, float] | None:
+    """(start, end) of the simulation in wall time (Unix s) from sensor_sim's log (its stderr,
+    rcutils' default format): the lines "starting" and "schedule done"; None when either
+    is missing or unreadable."""
+    try:
+        lines = log.read_text(errors="replace").splitlines()
+    except OSError:
+        return None
+    start = end = None
+    for line in lines:
+        stamp = _LOG_STAMP.search(line)
+        if stamp is None:
+            continue
+        if start is None and ("]: subscribers matched; starting" in line
+                              or "]: starting (" in line):
+            start = float(stamp.group(1))
+        elif "]: schedule done" in line:
+            end = float(stamp.group(1))
+    return (start, end) if start is not None and end is not None and end >= start else None
+
+
+def run_dirs(args: argparse.Namespace, name: str) -> tuple[Path, Path] | None:
+    """The run directory (`--out`, else a new one named after `name`, linked as latest)
+    and the bag in it (`--bag`, else OUT/bag), created; None after a one-line error when
+    the bag exists or the directory cannot be made."""
+    out: Path = args.out or default_out(name)
+    bag: Path = args.bag or out / "bag"
+    if bag.exists():
+        print(f"error: bag {bag} exists already; choose another --bag or --out",
+              file=sys.stderr)
+        return None
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        if args.out is None:
+            link_latest(out)
+    except OSError as exc:
+        print(f"error: cannot use {out}: {exc}", file=sys.stderr)
+        return None
+    return out, bag

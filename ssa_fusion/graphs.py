@@ -1,0 +1,127 @@
+"""What runs together: the nodes of a graph, their names and their parameters.
+
+One place for the processes `ssa-fusion live` starts and the launch files start (`ros2
+launch ssa_fusion ssa_fusion.launch.py`, `catalog.launch.py`): the single-object graph of a
+scenario (`node_parameters`: sensor_sim, surrogate, filter, recorder) and a catalog's graph
+(`catalog_graph`: recorder, filter and surrogate shards, sensor_sim). Parameters are in SI
+units, as the nodes declare them (`nodes.settings` translates the estimator's settings).
+
+It knows the simulated world (`sim`) for the scenarios' settings and the nodes' settings;
+the apps and the launch files import it, nothing below them does.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, NamedTuple
+
+from ssa_fusion.nodes import settings
+from ssa_fusion.nodes.defaults import BAG_PATTERN
+from ssa_fusion.ros.readiness import READERS
+from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_MEASUREMENT
+from ssa_fusion.sim import scenarios, sky
+
+LIVE_SCENARIOS = [*(n for n, s in scenarios.SCENARIOS.items() if s.is_orbit), *sky.SKY_SCENARIOS]
+"""The paper's orbit scenarios and the real-sky ones (`sim.sky`)."""
+WAIT_FOR = ["/ssa/measurement=3", "/ssa/forecast=2", "/ssa/estimate=1", "/ssa/truth=1",
+            "/ssa/withheld=1", "/clock=3"]
+"""What sensor_sim waits for before it starts: every node's subscriptions."""
+
+
+def sim_seconds(s: scenarios.Scenario | sky.SkyScenario) -> float:
+    """Sim time the scenario runs, s."""
+    if isinstance(s, sky.SkyScenario):
+        return s.duration_s
+    return s.track_s + s.gap_s + s.after_s
+
+
+def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, seed: int,
+                    bag: Path) -> dict[str, dict]:
+    """Per-node parameters (SI units) that run scenario `s` live."""
+    sensor: dict = {"scenario": s.name, "object_id": s.name, "time_scale": time_scale,
+                    "seed": seed, "wait_for": WAIT_FOR, "wait_for_readers": READERS}
+    if isinstance(s, sky.SkyScenario):  # the truth's cadence; the filter publishes at it
+        sensor["cadence"] = s.truth_cadence_s
+        extra = {"predict_period": s.truth_cadence_s, "gap_forecast": "residual"}
+    else:
+        sensor.update({"cadence": s.cadence_s, "gap_start": s.track_s, "gap_length": s.gap_s,
+                       "after_gap": s.after_s})
+        extra = {}
+    estimator = s.estimator()
+    surrogate = {"use_sim_time": True, **settings.surrogate_params(estimator)}
+    filt = {"use_sim_time": True, **settings.filter_params(estimator), **extra}
+    recorder = {"use_sim_time": True, "bag": str(bag)}
+    return {"sensor_sim": sensor, "surrogate": surrogate, "filter": filt, "recorder": recorder}
+
+
+def default_bag() -> str:
+    """A recorder output directory named like ``ros2 bag record``'s (`BAG_PATTERN`, now)."""
+    return time.strftime(BAG_PATTERN)
+
+
+def catalog_scenario(name: str) -> sky.SkyScenario:
+    """The real-sky scenario `name` whose radars observe a catalog (ValueError naming them)."""
+    scenario = sky.SKY_SCENARIOS.get(name)
+    if scenario is None or not scenario.radars:
+        radar = [n for n, s in sky.SKY_SCENARIOS.items() if s.radars]
+        raise ValueError(f"scenario {name!r} is not a real-sky scenario with radars; known: "
+                         f"{', '.join(radar)}")
+    return scenario
+
+
+def live_scenario(name: str) -> scenarios.Scenario | sky.SkyScenario:
+    """The scenario `name` of `LIVE_SCENARIOS` (ValueError naming the known ones)."""
+    if name not in LIVE_SCENARIOS:
+        raise ValueError(f"scenario {name!r} unknown; known: {', '.join(LIVE_SCENARIOS)}")
+    return sky.SKY_SCENARIOS.get(name) or scenarios.get(name)
+
+
+DEFAULT_SCENARIO = "iss_network"
+"""Whose radars observe a catalog when `--scenario` is not a real-sky scenario."""
+
+
+def node_names(shards: int, node: str = "catalog_filter") -> list[str]:
+    """The node names of `shards` shards of `node`: node_0, node_1, ..."""
+    return [f"{node}_{k}" for k in range(shards)]
+
+
+class NodeSpec(NamedTuple):
+    """One process of a catalog graph: executable, node name, parameters."""
+
+    executable: str
+    name: str
+    params: dict[str, Any]
+
+
+def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthetic: int,
+                  sim_s: float, time_scale: float, seed: int, shards: int, surrogate: bool,
+                  surrogate_extra: dict[str, Any], bag: Path | None) -> list[NodeSpec]:
+    """The processes of a catalog run, in start order (sensor_sim last: it waits for the
+    others): the recorder (`bag`, None: its default), `shards` catalog_filter and, with
+    `surrogate`, as many catalog_surrogate (`surrogate_extra` over their defaults), and
+    sensor_sim simulating `scenario`'s radars measuring the catalog. The same for
+    `ssa-fusion live --catalog` and `ros2 launch ssa_fusion catalog.launch.py`."""
+    names = node_names(shards)
+    gaps = node_names(shards, "catalog_surrogate") if surrogate else []
+    readers = ["recorder:" + TOPIC_MEASUREMENT, "recorder:" + TOPIC_ESTIMATE,
+               *(f"{n}:{TOPIC_MEASUREMENT}" for n in names)]
+    recorder: dict[str, Any] = {"use_sim_time": True}
+    if bag is not None:
+        recorder["bag"] = str(bag)
+    station = ",".join(st.station.name for st in scenario.radars)
+    return [
+        NodeSpec("recorder", "recorder", recorder),
+        *(NodeSpec("catalog_filter", n, {"use_sim_time": True, "shards": shards, "shard": k,
+                                         "station": station}) for k, n in enumerate(names)),
+        *(NodeSpec("catalog_surrogate", n, {**surrogate_extra, "use_sim_time": True,
+                                            "shards": shards, "shard": k})
+          for k, n in enumerate(gaps)),
+        NodeSpec("sensor_sim", "sensor_sim", {
+            "scenario": scenario.name, "catalog": str(Path(catalog).resolve()),
+            "objects": objects, "synthetic": synthetic, "duration": float(sim_s),
+            "time_scale": float(time_scale), "seed": seed,
+            "wait_for": [f"{TOPIC_MEASUREMENT}={shards + 1}",
+                         f"{TOPIC_ESTIMATE}={len(gaps) + 1}"],
+            "wait_for_readers": readers}),
+    ]

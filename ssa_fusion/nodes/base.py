@@ -1,0 +1,159 @@
+"""`SsaNode`: the base class of every ssa_fusion node.
+
+It owns what every node does alike, so that a node only translates messages to and from
+core types, holds its parameters and timers, and calls the core:
+
+* its parameters, declared from the node's table (`PARAMETERS`, `nodes.parameters`),
+  checked at start-up and on every run-time set, their values in `params`;
+* its ``/diagnostics`` (`diag`: counts by cause, logged once, matched inputs);
+* input subscriptions whose callbacks cannot kill the node (`subscribe`), and wall timers
+  (`wall_timer`);
+* the clock hold: measurements that come before the first /clock wait for it
+  (`measurement_in`, `replay_held`), and a backwards jump of sim time resets what the node
+  learnt (`reset_on_backward_jump`);
+* its process: `main` runs it until SIGINT/SIGTERM or `finish`, exit 0, or 2 with a message
+  for an invalid parameter (`nodes.process`).
+
+As rclpy's demos, a node subclasses it and sets its publishers, subscriptions and timers up
+in ``__init__``::
+
+    class Echo(SsaNode):
+        PARAMETERS = ParameterTable("echo", (Param("period", 1.0, "wall s", "s", POSITIVE),))
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.wall_timer(self.params.number("period"), self.tick)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import ClassVar
+
+from rclpy.clock import JumpThreshold, TimeJump
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.subscription import Subscription
+from rclpy.subscription_content_filter_options import ContentFilterOptions
+from rclpy.timer import Timer
+
+from ssa_fusion.core.types import Cause, Measurement
+from ssa_fusion.core.validation import ahead_of_clock
+from ssa_fusion.nodes import start_process
+from ssa_fusion.nodes.clock_hold import ClockHold
+from ssa_fusion.nodes.diagnostics import Diagnostics, wall_timer
+from ssa_fusion.nodes.parameters import NodeParameters, ParameterTable, ParamValue
+from ssa_fusion.nodes.process import run
+from ssa_fusion.ros import messages
+from ssa_fusion.ros.interfaces import Message, Time
+
+
+class SsaNode(Node):
+    """An rclpy node with the parameters, diagnostics, clock hold and process of them all.
+
+    Attributes
+    ----------
+    PARAMETERS : ParameterTable
+        The node's name and parameters (class attribute, one per node class; ``-r
+        __node:=...`` renames a node, as any rclpy node).
+    params : NodeParameters
+        Their values in effect.
+    diag : Diagnostics
+        Its /diagnostics counters and status.
+    """
+
+    PARAMETERS: ClassVar[ParameterTable]
+
+    def __init__(self) -> None:
+        super().__init__(self.PARAMETERS.node)
+        self.params = NodeParameters(self, self.PARAMETERS, self.on_parameters_set)
+        self.params.reject_unknown()
+        self.diag = Diagnostics(self, stamp=self.diagnostics_stamp)
+        self.clock_hold = ClockHold(self, self.diag)
+        self._jump_handles: list[object] = []
+
+    # parameters ------------------------------------------------------------------------
+    def on_parameters_set(self, changed: dict[str, ParamValue]) -> None:
+        """Put run-time parameters that changed into effect (their values are in `params`).
+
+        Called once per accepted ``ros2 param set`` of parameters marked run time. A node
+        whose run-time parameters are read where they are used needs nothing here.
+        """
+
+    # time --------------------------------------------------------------------------------
+    def diagnostics_stamp(self) -> Time:
+        """Return the time of a /diagnostics report: the node's clock (sim time or 0)."""
+        return self.get_clock().now().to_msg()
+
+    def now_s(self) -> float:
+        """Return the node's clock in s (sim time under use_sim_time; 0 before /clock)."""
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def wall_timer(self, period_s: float, callback: Callable[[], None]) -> Timer:
+        """Create a guarded timer on the steady (wall) clock (sim time may stand still)."""
+        return wall_timer(self, period_s, self.diag.guard(callback))
+
+    def reset_on_backward_jump(self, reset: Callable[[], None], what: str) -> None:
+        """Call `reset` when sim time jumps backwards (a bag loops), and count it.
+
+        `what` says what was forgotten (``reset_clock_jump`` on /diagnostics).
+        """
+        def on_jump(_jump: TimeJump) -> None:
+            reset()
+            self.diag.count(Cause.RESET_CLOCK_JUMP, f"sim time jumped backwards: {what}")
+
+        self._jump_handles.append(self.get_clock().create_jump_callback(
+            JumpThreshold(min_forward=None, min_backward=Duration(nanoseconds=-1),
+                          on_clock_change=False),
+            post_callback=on_jump))
+
+    # input -------------------------------------------------------------------------------
+    def subscribe(self, msg_type: type[Message], topic: str,
+                  callback: Callable[[Message], None], qos: QoSProfile, raw: bool = False,
+                  content_filter: ContentFilterOptions | None = None) -> Subscription[Message]:
+        """Subscribe to an input: see `Diagnostics.subscribe`."""
+        return self.diag.subscribe(msg_type, topic, callback, qos, raw, content_filter)
+
+    def measurement_in(self, msg: Message, again: Callable[[], None],
+                       object_id: str) -> Measurement | None:
+        """Return the core measurement of Measurement message `msg`, or None.
+
+        None when it must wait for the first /clock (`again` handles it once the clock
+        runs: `replay_held`), or when it is refused (counted by cause): of another object
+        than `object_id` (unless ''), of no kind the core knows, or stamped more than
+        ``max_clock_lead`` ahead of the clock.
+        """
+        if self.clock_hold.hold(again):
+            return None
+        if object_id and msg.object_id != object_id:
+            self.diag.count(Cause.IGNORED_OTHER_OBJECT, f"object_id {msg.object_id!r}")
+            return None
+        try:
+            m = messages.measurement_from_msg(msg)
+        except ValueError as exc:
+            self.diag.count(Cause.REJECTED_KIND, str(exc))
+            return None
+        return None if self.ahead_of_clock(m.t) else m
+
+    def ahead_of_clock(self, t: float) -> bool:
+        """Return True, counted, when epoch `t` is beyond ``max_clock_lead`` of the clock."""
+        cause, reason = ahead_of_clock(t, self.now_s(), self.params.number("max_clock_lead"))
+        if cause:
+            self.diag.count(cause, reason)
+        return bool(cause)
+
+    def replay_held(self) -> None:
+        """Handle the messages held until the clock started, once it has (in order)."""
+        for again in self.clock_hold.release():
+            again()
+
+    # process -----------------------------------------------------------------------------
+    def close(self) -> None:
+        """Release what the node holds outside rclpy (a bag, a server) before it ends."""
+
+    @classmethod
+    def main(cls, args: list[str] | None = None) -> int:
+        """Run this node in this process until it is stopped; return the exit code."""
+        start_process()
+        return run(cls, args)

@@ -1,0 +1,125 @@
+"""A node's process: its rclpy main loop, clean shutdown and exit codes.
+
+SIGINT/SIGTERM (also twice, also during shutdown) end the loop and the process exits 0; an
+invalid parameter at start-up exits 2 with one line naming it (`ParameterError`).
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import time
+import traceback
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+import rclpy
+from rclpy.executors import Executor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.signals import SignalHandlerOptions
+
+from ssa_fusion.core.types import Cause
+from ssa_fusion.nodes import STOP
+from ssa_fusion.nodes.parameters import ParameterError
+from ssa_fusion.ros.executors import make_executor
+
+if TYPE_CHECKING:
+    from ssa_fusion.nodes.base import SsaNode
+
+EXIT_OK = 0
+"""The node ended: its job was done, or SIGINT/SIGTERM stopped it."""
+EXIT_BAD_PARAMETERS = 2
+"""The node could not start: a parameter or a ROS argument is invalid (stderr says which)."""
+
+
+def run(make_node: Callable[[], SsaNode], args: list[str] | None = None) -> int:
+    """Run one node in this process with the behaviour users rely on; return the exit code.
+
+    SIGINT/SIGTERM (also twice, also during shutdown) end the loop; pending callbacks are
+    drained for a moment (so a recorder writes what already reached it), the node's
+    ``close()`` runs, and the process exits 0. An invalid parameter at start-up exits 2 with
+    a message naming the parameter. A callback may call `finish()` to end with exit 0.
+    """
+    stop = STOP  # set by the handlers `start_process` installed (the node's main calls it)
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except _rclpy.RCLError as exc:  # rcl could not parse the arguments: a -p rule, a params file
+        print(f"error: cannot start: {_first_line(str(exc))} (check the --ros-args: "
+              "-p name:=value rules need a value, lists one type; params files valid YAML)",
+              file=sys.stderr)
+        return EXIT_BAD_PARAMETERS
+    node: SsaNode | None = None
+    code = EXIT_OK
+    executor = make_executor()
+    try:
+        if stop.is_set():  # interrupted while starting: nothing to do
+            return code
+        node = make_node()
+        executor.add_node(node)
+        while not stop.is_set():
+            try:
+                executor.spin_once(timeout_sec=0.1)
+            except Exception as exc:  # raised outside the node's guarded callbacks
+                escaped(node, exc)
+        _drain(executor, node)
+    except ParameterError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        code = EXIT_BAD_PARAMETERS
+    finally:
+        if node is not None:
+            node.close()
+            node.destroy_node()
+        executor.shutdown()
+        rclpy.try_shutdown()
+        # Python's finalization resets handlers it installed to SIG_DFL, so a late second
+        # interrupt would kill the exiting process (-15/-2); ignored signals stay ignored.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    return code
+
+
+def finish() -> None:
+    """End the node's loop from a callback: the node's job is done.
+
+    `run` leaves its loop after this callback returns, closes the node and exits 0. (Not an
+    exception: rclpy's executor logs an exception escaping a callback as FATAL with a
+    traceback.)
+    """
+    STOP.set()
+
+
+def _first_line(text: str) -> str:
+    """Return the message of an rcl error without its source locations (", at file.c:N")."""
+    return text.strip().splitlines()[0].split(", at /")[0] if text.strip() else "unknown error"
+
+
+def escaped(node: SsaNode, exc: Exception) -> None:
+    """Count an exception that escaped the node's own (guarded) callbacks instead of dying.
+
+    rclpy's handling of a /clock message it cannot take (a negative time) raises in the
+    executor. Counted as `rejected_clock` when it came from rclpy's time source, else
+    `internal_error`, on the node's /diagnostics (logged once).
+    """
+    frames = traceback.extract_tb(exc.__traceback__)
+    from_clock = any(f.filename.endswith(("time_source.py", "clock.py", "time.py"))
+                     for f in frames)
+    cause = Cause.REJECTED_CLOCK if from_clock else Cause.INTERNAL_ERROR
+    detail = (f"a /clock message rclpy cannot take ({type(exc).__name__}: {exc}); ignored"
+              if from_clock else f"{type(exc).__name__}: {exc}\n" + traceback.format_exc())
+    node.diag.count(cause, detail)
+
+
+def _drain(executor: Executor, node: SsaNode, quiet_s: float = 0.2,
+           limit_s: float = 3.0) -> None:
+    """Run the input callbacks already pending until no message came for `quiet_s`."""
+    if not node.diag.has_inputs:
+        return
+    deadline = time.monotonic() + limit_s
+    last, last_change = node.diag.activity, time.monotonic()
+    while time.monotonic() < deadline and time.monotonic() - last_change < quiet_s:
+        try:
+            executor.spin_once(timeout_sec=0.02)
+        except Exception as exc:
+            escaped(node, exc)
+        if node.diag.activity != last:
+            last, last_change = node.diag.activity, time.monotonic()
