@@ -13,10 +13,16 @@ A catalog is a list of `CatalogEntry` (object id, name, `sgp4.api.Satrec`), read
   does not read it): the error says so.
 
 The format is told from the content, not the file name. Malformed input raises ValueError
-naming the file and the line (the XML segment for OMM/XML), never an error from deep
-inside `sgp4`. The object id is the NORAD catalogue number as a decimal string (``"5"``
-for ``00005``; Alpha-5 numbers as their integer, ``A0001`` -> ``"100001"``), the same for a
-TLE and the OMM of the same object; an id twice in one file is an error.
+naming the file and the line (the XML segment for OMM/XML) in one bounded line (values are
+quoted to `MAX_QUOTE` characters), never an error from deep inside `sgp4` or `csv`. Every
+element set is checked against the domain of its fields before it is used: finite angles,
+an inclination in [0, 180] deg, an eccentricity in [0, 1), a mean motion of a bound orbit
+above the Earth's surface (0 < n <= `MAX_MEAN_MOTION_REV_DAY`), |B*| <= `MAX_BSTAR`, an
+epoch the frames support (`timescales.EPOCH_MIN` .. `EPOCH_MAX`), and for OMM a
+one-letter classification and integer counters in the TLE's ranges. The object id is the
+NORAD catalogue number as a decimal string (``"5"`` for ``00005``; Alpha-5 numbers as their
+integer, ``A0001`` -> ``"100001"``), the same for a TLE and the OMM of the same object; an id
+twice in one file is an error.
 
 :func:`catalog_states` propagates every object to many epochs at once with
 `sgp4.api.SatrecArray` (SGP4 near Earth, SDP4 for periods >= 225 min, WGS-72 as the element
@@ -47,7 +53,25 @@ from sgp4.api import SGP4_ERRORS, Satrec, SatrecArray
 from sgp4.io import LINE1, LINE2, compute_checksum
 
 from .frames import teme_to_gcrs_matrix
-from .timescales import DAY_S, UNIX_EPOCH_JD, jd_utc
+from .timescales import DAY_S, UNIX_EPOCH_JD, check_epochs, jd_utc
+
+MAX_QUOTE = 60
+"""Characters of a value quoted in an error message (the rest is cut: '...')."""
+MAX_MEAN_MOTION_REV_DAY = 18.0
+"""The largest mean motion taken, rev/day: 17 rev/day is an orbit at the Earth's surface."""
+MAX_BSTAR = 1.0
+"""The largest |B*| taken, 1/Earth radii (decaying debris reach ~0.1; 1 is implausible)."""
+OMM_INTEGER_RANGES = {"NORAD_CAT_ID": (0, 339999), "ELEMENT_SET_NO": (0, 9999),
+                      "REV_AT_EPOCH": (0, 99999), "EPHEMERIS_TYPE": (0, 9)}
+"""Integer OMM fields and the ranges a TLE can carry (NORAD numbers: Alpha-5)."""
+_ALPHA5 = "ABCDEFGHJKLMNPQRSTUVWXYZ"
+"""Alpha-5's first characters (I and O are not used)."""
+
+
+def _quote(value: object) -> str:
+    """``repr`` of `value`, cut to `MAX_QUOTE` characters."""
+    text = repr(value)
+    return text if len(text) <= MAX_QUOTE else text[:MAX_QUOTE] + "..."
 
 _OMM_FIELDS = (
     "OBJECT_ID", "EPOCH", "MEAN_MOTION", "ECCENTRICITY", "INCLINATION", "RA_OF_ASC_NODE",
@@ -188,9 +212,14 @@ def _check_columns(line: str, template: str, which: int, where: str) -> None:
         raise ValueError(f"{where}: TLE line {which} has non-ASCII characters")
     if len(line) not in (68, 69):  # 68: without the checksum column
         raise ValueError(f"{where}: TLE line {which} has {len(line)} columns, not 69")
+    number = line[2:7]
+    if not ((number.strip().isdigit() and number == number.strip().rjust(5))
+            or (number[0] in _ALPHA5 and number[1:].isdigit())):
+        raise ValueError(f"{where}: TLE line {which}, columns 3-7: catalogue number "
+                         f"{number!r} is neither digits nor Alpha-5 (a letter, 4 digits)")
     for col, (c, want) in enumerate(zip(line, template, strict=False), 1):
-        if 3 <= col <= 7:  # catalogue number: digits, or Alpha-5 (a letter first)
-            ok = c.isalnum()
+        if 3 <= col <= 7:  # the catalogue number, checked above
+            ok = True
         elif want == "N":
             ok = c.isdigit() or c == " "
         elif want in "+-":
@@ -220,13 +249,32 @@ def _tle_entry(line1: str, line2: str, name: str, where: str, where2: str) -> Ca
 
 
 def _check_satrec(sat: Satrec, where: str) -> None:
-    """ValueError if SGP4 refused the element set at initialisation."""
+    """ValueError if SGP4 refused the element set, or a field is outside its domain.
+
+    The domains are the module docstring's; the epoch must lie in the frames' range.
+    """
     if sat.error:
         raise ValueError(f"{where}: SGP4 refuses the element set: "
                          f"{SGP4_ERRORS.get(sat.error, f'error {sat.error}')}")
-    if not (sat.no_kozai > 0.0 and 0.0 <= sat.ecco < 1.0 and math.isfinite(sat.bstar)):
-        raise ValueError(f"{where}: not a bound orbit (mean motion {sat.no_kozai:g} rad/min, "
-                         f"eccentricity {sat.ecco:g})")
+    fields = {"inclination": sat.inclo, "right ascension of the node": sat.nodeo,
+              "argument of perigee": sat.argpo, "mean anomaly": sat.mo,
+              "eccentricity": sat.ecco, "mean motion": sat.no_kozai, "B*": sat.bstar,
+              "mean motion derivative": sat.ndot, "its second derivative": sat.nddot}
+    bad = [k for k, v in fields.items() if not math.isfinite(v)]
+    if bad:
+        raise ValueError(f"{where}: {', '.join(bad)} not finite")
+    rev_day = sat.no_kozai * 1440.0 / (2.0 * math.pi)
+    if not 0.0 <= sat.inclo <= math.pi:
+        raise ValueError(f"{where}: inclination {math.degrees(sat.inclo):g} deg outside "
+                         f"[0, 180]")
+    if not (0.0 < rev_day <= MAX_MEAN_MOTION_REV_DAY and 0.0 <= sat.ecco < 1.0):
+        raise ValueError(f"{where}: not a bound orbit above the Earth's surface (mean motion "
+                         f"{rev_day:g} rev/day, eccentricity {sat.ecco:g})")
+    if abs(sat.bstar) > MAX_BSTAR:
+        raise ValueError(f"{where}: B* {sat.bstar:g} per Earth radius beyond "
+                         f"{MAX_BSTAR:g} (not a physical drag term)")
+    epoch = float((sat.jdsatepoch - UNIX_EPOCH_JD) * DAY_S + sat.jdsatepochF * DAY_S)
+    check_epochs(epoch, f"{where}: epoch")
 
 
 def parse_omm_xml(text: str, source: str = "<string>") -> list[CatalogEntry]:
@@ -238,9 +286,9 @@ def parse_omm_xml(text: str, source: str = "<string>") -> list[CatalogEntry]:
     except ET.ParseError as exc:
         line, col = exc.position
         raise ValueError(f"{source}:{line}: not well-formed XML (column {col + 1})") from None
-    except AttributeError:  # a segment without metadata, data or one of their blocks
-        raise ValueError(f"{source}: an OMM segment lacks its metadata, data, meanElements or "
-                         f"tleParameters block") from None
+    except (AttributeError, TypeError, KeyError):  # a segment without a block, or empty
+        raise ValueError(f"{source}: an OMM segment lacks (or has empty) metadata, data, "
+                         f"meanElements or tleParameters") from None
     seen: dict[str, str] = {}
     out = []
     for k, fields in enumerate(segments, 1):
@@ -260,13 +308,18 @@ def parse_omm_csv(text: str, source: str = "<string>") -> list[CatalogEntry]:
     rows = csv.DictReader(line for _, line in numbered)
     seen: dict[str, str] = {}
     out = []
-    for k, fields in enumerate(rows, 1):
-        where = f"{source}:{numbered[k][0]}"
-        if None in fields:
-            raise ValueError(f"{where}: more values than the header has columns")
-        entry = _omm_entry(dict(fields), where)
-        _check_new(entry, seen)
-        out.append(entry)
+    k = 0
+    try:
+        for k, fields in enumerate(rows, 1):
+            where = f"{source}:{numbered[k][0]}"
+            if None in fields:
+                raise ValueError(f"{where}: more values than the header has columns")
+            entry = _omm_entry(dict(fields), where)
+            _check_new(entry, seen)
+            out.append(entry)
+    except csv.Error as exc:  # e.g. a field beyond csv's size limit (131,072 characters)
+        line = numbered[min(k + 1, len(numbered) - 1)][0] if numbered else 0
+        raise ValueError(f"{source}:{line}: unreadable CSV row: {exc}") from None
     return out
 
 
@@ -284,13 +337,21 @@ def _omm_entry(fields: dict[str, Any], where: str) -> CatalogEntry:
         raise ValueError(f"{where}: OMM MEAN_ELEMENT_THEORY is {theory}; only SGP4 element "
                          f"sets are supported")
     clean = {k: v.strip() for k, v in fields.items() if isinstance(v, str)}
+    if len(clean["CLASSIFICATION_TYPE"]) != 1:
+        raise ValueError(f"{where}: OMM CLASSIFICATION_TYPE "
+                         f"{_quote(clean['CLASSIFICATION_TYPE'])} is not one letter (U, C, S)")
+    for key, (lo, hi) in OMM_INTEGER_RANGES.items():
+        text = clean.get(key, "0") or "0"
+        if not (text.isdigit() and lo <= int(text) <= hi):
+            raise ValueError(f"{where}: OMM {key} {_quote(text)} is not an integer in "
+                             f"{lo}..{hi}")
     if "." not in clean["EPOCH"]:  # whole seconds: sgp4.omm wants a fraction
         clean["EPOCH"] += ".0"
     sat = Satrec()
     try:
         omm.initialize(sat, clean)
-    except ValueError as exc:
-        raise ValueError(f"{where}: malformed OMM field: {exc}") from None
+    except (ValueError, TypeError, OverflowError) as exc:
+        raise ValueError(f"{where}: malformed OMM field: {_quote(str(exc))}") from None
     _check_satrec(sat, where)
     name = (fields.get("OBJECT_NAME") or "").strip()
     return CatalogEntry(str(sat.satnum), name, sat, where)
