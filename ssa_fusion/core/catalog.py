@@ -18,7 +18,7 @@ quoted to `MAX_QUOTE` characters), never an error from deep inside `sgp4` or `cs
 element set is checked against the domain of its fields before it is used: finite angles,
 an inclination in [0, 180] deg, an eccentricity in [0, 1), a mean motion of a bound orbit
 above the Earth's surface (0 < n <= `MAX_MEAN_MOTION_REV_DAY`), |B*| <= `MAX_BSTAR`, an
-epoch the frames support (`timescales.EPOCH_MIN` .. `EPOCH_MAX`), and for OMM a
+epoch ssa_fusion represents (`timescales.EPOCH_MIN` .. `EPOCH_MAX`), and for OMM a
 one-letter classification and integer counters in the TLE's ranges. The object id is the
 NORAD catalogue number as a decimal string (``"5"`` for ``00005``; Alpha-5 numbers as their
 integer, ``A0001`` -> ``"100001"``), the same for a TLE and the OMM of the same object; an id

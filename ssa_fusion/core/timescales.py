@@ -18,9 +18,11 @@ Julian dates are returned as two parts ``(jd1, jd2)`` with ``jd1`` the whole day
 (``xxxx.5``) and ``jd2`` the fraction, as ERFA wants them: one float64 Julian date resolves
 only ~40 us, which is 20 m of Earth rotation at a satellite's distance.
 
-The range a stamp may take is `EPOCH_MIN` .. `EPOCH_MAX` (UTC, 1972 to 2100): the era of
-leap seconds, where TAI - UTC is a whole number of seconds and IERS tables exist; `check_epochs`
-refuses a stamp outside it with one line naming it.
+The range a stamp may take is `EPOCH_MIN` .. `EPOCH_MAX` (UTC, 1972-01-01 to
+2038-01-19T03:14:07): from the start of the leap seconds (TAI - UTC a whole number of seconds,
+IERS tables) to the last second a ROS 2 time stamp can carry (``builtin_interfaces/Time``
+has int32 seconds: a later stamp would wrap to 1901). `check_epochs` refuses a stamp outside
+it with one line naming it, at every entrance (element sets, TDM files, messages).
 """
 
 from __future__ import annotations
@@ -50,8 +52,8 @@ EPOCH_MIN = 63072000.0
 """Earliest stamp the frames take: 1972-01-01T00:00:00 UTC (Unix s), the start of leap
 seconds (before it TAI - UTC drifted continuously)."""
 
-EPOCH_MAX = 4102444800.0
-"""Latest stamp the frames take: 2100-01-01T00:00:00 UTC (Unix s)."""
+EPOCH_MAX = 2147483647.0
+"""Latest stamp: 2038-01-19T03:14:07 UTC (Unix s), the largest int32 second of a ROS 2 stamp."""
 
 
 def iso(t_unix: float) -> str:
@@ -68,8 +70,9 @@ def check_epochs(t_unix: ArrayLike, what: str = "epoch") -> None:
     bad = ~np.isfinite(t) | (t < EPOCH_MIN) | (t > EPOCH_MAX)
     if np.any(bad):
         first = float(t.ravel()[np.flatnonzero(bad.ravel())[0]])
-        raise ValueError(f"{what} {iso(first)} is outside the range the frames support "
-                         f"({iso(EPOCH_MIN)} .. {iso(EPOCH_MAX)})")
+        raise ValueError(f"{what} {iso(first)} is outside the range ssa_fusion represents "
+                         f"({iso(EPOCH_MIN)} .. {iso(EPOCH_MAX)}: leap seconds to the last "
+                         f"second of a ROS 2 stamp)")
 
 
 @functools.cache

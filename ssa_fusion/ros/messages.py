@@ -17,6 +17,7 @@ import numpy as np
 
 from ssa_fusion.core import types
 from ssa_fusion.core.frames import Frame
+from ssa_fusion.core.timescales import EPOCH_MAX, iso
 
 KM = 1000.0
 """m per km."""
@@ -66,7 +67,13 @@ def stamp_to_seconds(stamp: Any) -> float:
 
 
 def seconds_to_stamp(t: float, classes: MsgClasses | None = None) -> Any:
-    """float seconds (>= 0) -> builtin_interfaces/Time, rounded to the nanosecond."""
+    """float seconds (>= 0) -> builtin_interfaces/Time, rounded to the nanosecond.
+
+    ValueError for a stamp a ROS 2 Time cannot carry (negative, not finite, or beyond its
+    int32 seconds, 2038-01-19): never a wrapped stamp.
+    """
+    if not 0.0 <= t <= EPOCH_MAX:
+        raise ValueError(f"stamp {iso(t)} cannot be a ROS 2 time (0 .. {iso(EPOCH_MAX)})")
     ns = round(float(t) * 1e9)
     return _default(classes).time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 

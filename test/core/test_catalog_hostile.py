@@ -4,7 +4,7 @@ line naming file and line, and no input ends in anything but entries or that Val
 The named cases are those of a hostile-input probe of the catalog readers (NaN and infinite
 angles, an infinite mean motion, B* = 1e9, an inclination of 999 deg, a misread Alpha-5
 number, a two-letter classification, a huge ELEMENT_SET_NO, a CSV field over csv's limit,
-an OMM with empty blocks, an epoch after 2100); the property tests throw mutated and random
+an OMM with empty blocks, an epoch in 2100); the property tests throw mutated and random
 text at each reader (hypothesis).
 """
 
@@ -69,7 +69,7 @@ def refused(tmp_path: Path, name: str, text: str) -> str:
      "ELEMENT_SET_NO '99999999999999999999' is not an integer in 0..9999"),
     ("norad.csv", csv_of(ROW.replace(",25544,", ",-5,")), "NORAD_CAT_ID"),
     ("epoch.csv", csv_of(ROW.replace("2019-12-31", "2100-06-01")),
-     "epoch 2100-06-01T19:42:47.134Z is outside the range the frames support"),
+     "epoch 2100-06-01T19:42:47.134Z is outside the range ssa_fusion represents"),
     ("big.csv", csv_of(ROW.replace("ISS", "X" * 200_000)), "unreadable CSV row"),
     ("empty.xml", '<?xml version="1.0"?><ndm><omm><body><segment><metadata></metadata>'
                   "<data></data></segment></body></omm></ndm>", "lacks (or has empty)"),
