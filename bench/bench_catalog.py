@@ -1,4 +1,4 @@
-"""Benchmark: the batched EKF over a catalog of N objects (issue 20; not a test).
+"""Benchmark: the batched EKF over a catalog of N objects (not a test).
 
 One EKF cycle per object = Keplerian predict with the state transition matrix + one
 range/azimuth/elevation update from a radar station (Joseph form, angle residuals wrapped,
@@ -53,19 +53,14 @@ from filterpy.kalman import ExtendedKalmanFilter as FilterpyEKF
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a source checkout
 
-from ssa_fusion.core.batch_ekf import (
-    REASONS,
-    BatchEKF,
-    BatchEKFConfig,
-    Code,
-    kepler_state,
-)
+from ssa_fusion.core.batch_ekf import REASONS, BatchEKF, Code
 from ssa_fusion.core.config import EstimatorConfig, make_tracker
 from ssa_fusion.core.constants import R_EARTH
 from ssa_fusion.core.dynamics import elements_to_state
 from ssa_fusion.core.ekf import ExtendedKalmanFilter, process_noise
+from ssa_fusion.core.filter_options import FilterOptions
 from ssa_fusion.core.frames import razel_gcrs, wrap_angle
-from ssa_fusion.core.kepler import propagate
+from ssa_fusion.core.kepler import kepler_state, propagate
 from ssa_fusion.core.measurement import RazelModel
 from ssa_fusion.core.stations import NETWORKS, SENSORS
 from ssa_fusion.core.types import Kind, Measurement
@@ -171,7 +166,7 @@ def _best(fn: Callable[..., object], args: tuple[object, ...], calls: int) -> fl
 def cost_growth(ns: list[int], repeats: int, loop_max: int,
                 rng: np.random.Generator) -> list[dict[str, float]]:
     """Time one cycle per object for the three filters at each N; check they agree."""
-    bank = BatchEKF(BatchEKFConfig(q=Q_PSD, gate=GATE, jd0=JD0), STATIONS)
+    bank = BatchEKF(FilterOptions().with_(q=Q_PSD, gate=GATE), STATIONS, JD0)
     models = [RazelModel(s, JD0) for s in STATIONS]
     rows = []
     for n in ns:
@@ -225,7 +220,7 @@ def offline_day(n: int, hours: float, sample: int, rng: np.random.Generator) -> 
     x0, sample_idx = x.copy(), rng.choice(n, size=min(sample, n), replace=False)
     sample_pos = {int(i): k for k, i in enumerate(sample_idx)}
     sample_ms: list[list[Measurement]] = [[] for _ in sample_idx]
-    bank = BatchEKF(BatchEKFConfig(q=Q_PSD, gate=GATE, jd0=JD0), STATIONS)
+    bank = BatchEKF(FilterOptions().with_(q=Q_PSD, gate=GATE), STATIONS, JD0)
     R_st = np.array([s.R for s in SENS])
     sd_st = np.sqrt(np.diagonal(R_st, axis1=1, axis2=2))
     codes: Counter[int] = Counter()
@@ -263,8 +258,8 @@ def offline_day(n: int, hours: float, sample: int, rng: np.random.Generator) -> 
     fused_n = codes[Code.FUSED]
     # the same measurements of a sample through the per-object Tracker (the live filter)
     worst = 0.0
-    config = EstimatorConfig(station=NETWORK, jd0=JD0)
-    config.tracker.q, config.tracker.gate = Q_PSD, GATE
+    config = EstimatorConfig(station=NETWORK, jd0=JD0,
+                             filter=FilterOptions().with_(q=Q_PSD, gate=GATE))
     for k, o in enumerate(sample_idx):
         tracker = make_tracker(config)
         tracker.ekf = ExtendedKalmanFilter(x0[o], P0)

@@ -1,4 +1,5 @@
 """Pure numerical core of ssa_fusion.
 
-Imports numpy, scipy and sgp4 only (never rclpy). Units throughout: km, km/s, rad, s.
+Imports numpy, scipy, sgp4, numba, pyerfa and astropy-iers-data only (never rclpy, no other
+floor of the package). Units throughout: km, km/s, rad, s.
 """

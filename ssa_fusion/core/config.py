@@ -5,7 +5,9 @@ study from a scenario (`ssa_fusion.sim.scenarios.Scenario.estimator`), and ``rep
 ``report`` from a ROS params file or from the settings the nodes recorded with the bag
 (``/ssa/config``, the JSON of `to_dict`). Everything then goes through the same builders
 (`make_tracker`, `make_surrogate`), so the filter node, the surrogate node, the offline
-replay and the experiments run the same estimator for the same settings.
+replay and the experiments run the same estimator for the same settings. It composes the
+measurement stream with the filter's options (`filter_options.FilterOptions`, the catalog
+filter's too) and the surrogate's (`surrogate.SurrogateConfig`).
 
 Units are the core's: km, km/s, rad, s.
 """
@@ -20,44 +22,24 @@ from typing import Any
 import numpy as np
 
 from . import dynamics, frames, kepler
-from .batch_ekf import integrate_stm
+from .constants import MU_EARTH
+from .filter_options import FilterOptions
 from .frames import Frame
 from .measurement import MeasurementModel, PositionModel, RadecModel, RazelModel, StationModels
+from .propagation import INTEGRATED_MODELS, integrate_stm
 from .stations import NETWORKS, STATIONS, network_stations
 from .surrogate import EciLift, Surrogate, SurrogateConfig
 from .timescales import DAY_S, UNIX_EPOCH_JD
-from .tracker import Tracker, TrackerConfig
-from .types import KIND_NAMES, Kind
+from .tracker import Tracker
+from .types import KIND_NAMES, Kind, MotionModel
 
 MotionFunction = Callable[[np.ndarray, float, float], tuple[np.ndarray, np.ndarray]]
 """f(x, dt, t0) -> (x1, F): a motion model and its state transition matrix, from the state
 ``x`` at ``t0`` (s on the clock of `EstimatorConfig.jd0`) to ``t0 + dt``."""
 
 
-class MotionModel(enum.StrEnum):
-    """The EKF's motion model (what the filter predicts with)."""
-
-    KEPLER = "kepler"
-    """Analytic two-body (universal variables, `kepler.propagate`), GCRF km, km/s."""
-    J2 = "j2"
-    """Two-body + J2, integrated with its state transition matrix (`batch_ekf.integrate_stm`:
-    compiled fixed-step DOP853, steps of at most 60 s)."""
-    TWO_BODY = "two_body"
-    """Two-body, integrated (the Keplerian model by numerical integration, as J2)."""
-    PENDULUM = "pendulum"
-    """Damped pendulum [theta rad, theta_dot rad/s] (the paper's toy problem)."""
-    VDP = "vdp"
-    """Van der Pol oscillator (nondimensional)."""
-    CR3BP = "cr3bp"
-    """Circular restricted three-body problem, Earth-Moon, rotating frame, nondimensional."""
-
-
-ORBIT_MODELS = (MotionModel.KEPLER, MotionModel.J2, MotionModel.TWO_BODY)
+ORBIT_MODELS = (MotionModel.KEPLER, *INTEGRATED_MODELS)
 """Motion models of an Earth orbit (GCRF states on a UTC clock)."""
-
-
-ORBIT_TOLERANCES = {"rtol": 1e-10, "atol": 1e-9}
-"""DOP853 tolerances of an integrated orbit motion model (km, km/s and the STM's entries)."""
 
 
 class Lift(enum.StrEnum):
@@ -73,7 +55,7 @@ class Lift(enum.StrEnum):
 class EstimatorConfig:
     """Everything one object's estimator needs.
 
-    The measurement stream, the motion model, the tracker's and the surrogate's settings.
+    The measurement stream, the filter's options and the surrogate's settings.
 
     Attributes
     ----------
@@ -87,10 +69,6 @@ class EstimatorConfig:
         State channels a position measurement observes (`measurement.PositionModel`).
     n : int
         State dimension.
-    motion_model : MotionModel
-        The EKF's motion model ("placeholder" in the paper).
-    motion_params : dict of str to float
-        Parameters of a `dynamics` motion model (e.g. the pendulum's m, c, L).
     jd0 : float
         UTC Julian date of t = 0 of the clock the measurements are stamped on (Unix time:
         `stations.UNIX_EPOCH_JD`; 0 for the non-orbit problems, whose clock has no epoch).
@@ -100,8 +78,9 @@ class EstimatorConfig:
         Light-time correction in the station measurement models (`measurement`).
     refraction : bool
         Refracted elevation in the radar measurement models (`refraction`).
-    tracker : TrackerConfig
-        EKF settings (its `frame_id` is set from `kind`/`station` by `make_tracker`).
+    filter : FilterOptions
+        The EKF's options: noise, IOD, and its motion model ("placeholder" in the paper;
+        ``filter.motion``).
     surrogate : SurrogateConfig
         Surrogate settings (`kind`, `frame_id` and `lift` are set by `make_surrogate`).
     """
@@ -110,27 +89,25 @@ class EstimatorConfig:
     station: str = "columbus"
     observed: tuple[int, ...] = (0, 1, 2)
     n: int = 6
-    motion_model: MotionModel = MotionModel.KEPLER
-    motion_params: dict[str, float] = field(default_factory=dict)
     jd0: float = UNIX_EPOCH_JD
     lift: Lift = Lift.NONE
     light_time: bool = False
     refraction: bool = False
-    tracker: TrackerConfig = field(default_factory=TrackerConfig)
+    filter: FilterOptions = field(default_factory=FilterOptions)
     surrogate: SurrogateConfig = field(default_factory=SurrogateConfig)
 
     def __post_init__(self) -> None:
         """Coerce the enums and check the combination (ValueError naming the field)."""
         self.kind = Kind(self.kind)
-        self.motion_model = MotionModel(self.motion_model)
         self.lift = Lift(self.lift)
         self.observed = tuple(int(i) for i in self.observed)
         if self.kind in (Kind.RANGE_AZ_EL, Kind.RA_DEC):
             network_stations(self.station)  # ValueError naming the known ids
         if self.lift == Lift.ECI and self.kind != Kind.RANGE_AZ_EL:
             raise ValueError("lift 'eci' needs kind range_az_el")
-        if self.motion_model in ORBIT_MODELS and self.n != 6:
-            raise ValueError(f"motion model {self.motion_model} needs n = 6, got {self.n}")
+        model = self.filter.motion.motion_model
+        if model in ORBIT_MODELS and self.n != 6:
+            raise ValueError(f"motion model {model} needs n = 6, got {self.n}")
 
     @property
     def is_network(self) -> bool:
@@ -168,51 +145,53 @@ def measurement_model(c: EstimatorConfig) -> MeasurementModel:
 
 
 def motion(c: EstimatorConfig) -> MotionFunction:
-    """Return the motion model f(x, dt, t0) -> (x1, F) of `c`.
+    """Return the motion model f(x, dt, t0) -> (x1, F) of `c` (``c.filter.motion``).
 
-    Analytic Kepler, or a `dynamics` model integrated with its state transition matrix. The
-    orbit models' states are GCRF; J2 acts about the Earth's pole at ``t0``
-    (`frames.pole_frame`, the clock being Unix time for orbits).
+    Analytic Kepler, or a `dynamics` model integrated with its state transition matrix:
+    the orbit models ("two_body", "j2", "drag") with the catalog filter's fixed-step DOP853
+    (`propagation.integrate_stm`, steps of at most ``max_step_s``; ~100x cheaper per
+    prediction than scipy's adaptive DOP853 and within ~1e-10 relative of it), the others
+    (pendulum, Van der Pol, CR3BP) with scipy's (`dynamics.propagate_stm`). The orbit
+    models' states are GCRF; J2 acts about the Earth's pole at ``t0`` (`frames.pole_frame`,
+    the clock being Unix time for orbits).
     """
-    if c.motion_model == MotionModel.KEPLER:
+    m = c.filter.motion
+    model, params = m.motion_model, dict(m.motion_params)
+    if model == MotionModel.KEPLER:
+        mu = float(params.get("mu", MU_EARTH))
+
         def kepler_motion(x: np.ndarray, dt: float,
                           _t0: float) -> tuple[np.ndarray, np.ndarray]:
-            return kepler.propagate(x, dt)
+            return kepler.propagate(x, dt, mu)
 
         return kepler_motion
-    name, params = str(c.motion_model), dict(c.motion_params)
-    if c.motion_model in (MotionModel.J2, MotionModel.TWO_BODY):
-        # compiled fixed-step DOP853 (steps <= 60 s): the catalog filter's, ~100x cheaper per
-        # prediction than scipy's adaptive DOP853 and within ~1e-10 relative of it
-        unix = (c.jd0 - UNIX_EPOCH_JD) * DAY_S
+    if model in INTEGRATED_MODELS:
+        unix, step = (c.jd0 - UNIX_EPOCH_JD) * DAY_S, m.max_step_s
 
         def compiled(x: np.ndarray, dt: float, t0: float) -> tuple[np.ndarray, np.ndarray]:
-            x1, F, ok = integrate_stm(name, np.asarray(x, float)[None], np.array([dt]),
+            x1, F, ok = integrate_stm(model, np.asarray(x, float)[None], np.array([dt]), step,
                                       pole_frame=frames.pole_frame(t0 + unix), **params)
             if not ok[0]:
-                raise RuntimeError(f"propagation failed: the {name} orbit is not finite "
+                raise RuntimeError(f"propagation failed: the {model} orbit is not finite "
                                    f"{dt} s on")
             return x1[0], F[0]
 
         return compiled
-    # orbits: 1e-9 km (1 µm) absolute, 1e-10 relative; 4x faster than the default 1e-12
-    # for differences below 1e-11 km over a 30 s step
-    tol = ORBIT_TOLERANCES if c.motion_model in ORBIT_MODELS else {}
 
     def f(x: np.ndarray, dt: float, _t0: float) -> tuple[np.ndarray, np.ndarray]:
-        return dynamics.propagate_stm(name, x, dt, **tol, **params)
+        return dynamics.propagate_stm(model, x, dt, **params)
 
     return f
 
 
 def make_tracker(c: EstimatorConfig, object_id: str = "") -> Tracker:
-    """Build the EKF of `c`.
+    """Build the EKF of `c` (its frame_id set from the stream).
 
-    It holds its own copy of `c.tracker` (frame_id set from the stream): change settings at
-    run time through `Tracker.config`.
+    Its options are `c.filter` (frozen): change settings at run time by replacing
+    `Tracker.config`.
     """
-    tc = replace(c.tracker, frame_id=c.frame_id)
-    return Tracker(motion(c), measurement_model(c), tc, n=c.n, object_id=object_id)
+    return Tracker(motion(c), measurement_model(c), c.filter, n=c.n, object_id=object_id,
+                   frame_id=c.frame_id)
 
 
 def make_surrogate(c: EstimatorConfig) -> Surrogate:
@@ -227,10 +206,22 @@ def make_surrogate(c: EstimatorConfig) -> Surrogate:
     return Surrogate(sc)
 
 
-_STREAM_KEYS = ("kind", "station", "observed", "n", "motion_model", "motion_params", "jd0",
-                "lift", "light_time", "refraction")
-_NOT_SERIALISED = {"tracker": ("frame_id",), "surrogate": ("kind", "frame_id", "lift")}
-"""Component fields set from the stream by the builders, so not part of the JSON."""
+_STREAM_KEYS = ("kind", "station", "observed", "n", "jd0", "lift", "light_time", "refraction")
+_MOTION_KEYS = ("motion_model", "motion_params")
+"""Filter options at the top level of the JSON; the others are under ``tracker`` (the
+layout of the settings recorded with earlier bags, which read back)."""
+_NOT_SERIALISED = ("kind", "frame_id", "lift")
+"""Surrogate fields set from the stream by `make_surrogate`, so not part of the JSON."""
+
+
+def _plain(d: dict[str, Any]) -> dict[str, Any]:
+    """Return ``d`` with its tuples as lists (for JSON)."""
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+
+
+def _tuples(d: dict[str, Any]) -> dict[str, Any]:
+    """Return ``d`` with its lists as tuples (from JSON)."""
+    return {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
 
 
 def to_dict(c: EstimatorConfig) -> dict[str, Any]:
@@ -242,14 +233,14 @@ def to_dict(c: EstimatorConfig) -> dict[str, Any]:
     out: dict[str, Any] = {"frame": Frame.GCRF}
     out.update({k: getattr(c, k) for k in _STREAM_KEYS})
     out["kind"] = KIND_NAMES[c.kind]
-    out["motion_model"] = str(c.motion_model)
     out["lift"] = str(c.lift)
     out["observed"] = list(c.observed)
-    for part in ("tracker", "surrogate"):
-        d = {f.name: getattr(getattr(c, part), f.name) for f in fields(getattr(c, part))}
-        for k in _NOT_SERIALISED[part]:
-            d.pop(k)
-        out[part] = {k: list(v) if isinstance(v, tuple) else v for k, v in d.items()}
+    options = c.filter.flat()
+    out["motion_model"] = str(options.pop("motion_model"))
+    out["motion_params"] = dict(options.pop("motion_params"))
+    out["tracker"] = _plain(options)
+    out["surrogate"] = _plain({f.name: getattr(c.surrogate, f.name) for f in fields(c.surrogate)
+                               if f.name not in _NOT_SERIALISED})
     return out
 
 
@@ -260,7 +251,7 @@ def from_dict(d: dict[str, Any], base: EstimatorConfig | None = None) -> Estimat
     values raise ValueError naming them.
     """
     base = base or EstimatorConfig()
-    unknown = set(d) - {*_STREAM_KEYS, "tracker", "surrogate", "frame"}
+    unknown = set(d) - {*_STREAM_KEYS, *_MOTION_KEYS, "tracker", "surrogate", "frame"}
     if unknown:
         raise ValueError(f"unknown estimator setting(s): {', '.join(sorted(unknown))}")
     if d.get("frame", Frame.GCRF) != Frame.GCRF:
@@ -272,13 +263,14 @@ def from_dict(d: dict[str, Any], base: EstimatorConfig | None = None) -> Estimat
         if stream["kind"] not in names:
             raise ValueError(f"kind {stream['kind']!r} unknown; known: {', '.join(names)}")
         stream["kind"] = names[stream["kind"]]
-    parts: dict[str, Any] = {}
-    for part, cls in (("tracker", TrackerConfig), ("surrogate", SurrogateConfig)):
-        given = dict(d.get(part, {}))
-        names_ok = {f.name for f in fields(cls)} - set(_NOT_SERIALISED[part])
+    options, surrogate = dict(d.get("tracker", {})), dict(d.get("surrogate", {}))
+    for part, given, names_ok in (
+            ("tracker", options, set(base.filter.flat()) - set(_MOTION_KEYS)),
+            ("surrogate", surrogate, {f.name for f in fields(SurrogateConfig)}
+             - set(_NOT_SERIALISED))):
         bad = set(given) - names_ok
         if bad:
             raise ValueError(f"unknown {part} setting(s): {', '.join(sorted(bad))}")
-        given = {k: tuple(v) if isinstance(v, list) else v for k, v in given.items()}
-        parts[part] = replace(getattr(base, part), **given)
-    return replace(base, **stream, **parts)
+    options.update({k: d[k] for k in _MOTION_KEYS if k in d})
+    return replace(base, **stream, filter=base.filter.with_(**_tuples(options)),
+                   surrogate=replace(base.surrogate, **_tuples(surrogate)))

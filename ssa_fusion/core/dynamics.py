@@ -1,6 +1,7 @@
 """Truth dynamics: numerically integrated models, Keplerian elements, and an SGP4/SDP4 ephemeris.
 
-Models for :func:`propagate` (state layout, units, parameters):
+Models for :func:`propagate` (state layout, units, parameters), by their `types.MotionModel`
+name:
 
 ``"two_body"``  inertial [r km, v km/s] (GCRF); ``mu`` (km^3/s^2, default MU_EARTH).
 ``"j2"``        two-body + J2 zonal about the z axis of the frame the state is in; ``mu``,
@@ -42,6 +43,7 @@ from . import frames
 from .constants import G0, J2, MU_EARTH, MU_EARTH_MOON, OMEGA_EARTH, R_EARTH
 from .frames import wrap_2pi
 from .timescales import UNIX_EPOCH_JD
+from .types import MotionModel
 
 Array = NDArray[np.float64]
 
@@ -111,13 +113,15 @@ def _rhs_vdp(y: Array, mu: float = 2.0) -> Array:
 
 
 _MODELS: dict[str, tuple[Callable[..., Array], int]] = {
-    "two_body": (_rhs_two_body, 6),
-    "j2": (_rhs_j2, 6),
-    "drag": (_rhs_drag, 6),
-    "cr3bp": (_rhs_cr3bp, 6),
-    "pendulum": (_rhs_pendulum, 2),
-    "vdp": (_rhs_vdp, 2),
+    MotionModel.TWO_BODY: (_rhs_two_body, 6),
+    MotionModel.J2: (_rhs_j2, 6),
+    MotionModel.DRAG: (_rhs_drag, 6),
+    MotionModel.CR3BP: (_rhs_cr3bp, 6),
+    MotionModel.PENDULUM: (_rhs_pendulum, 2),
+    MotionModel.VDP: (_rhs_vdp, 2),
 }
+"""Right-hand side and state size of each integrated `types.MotionModel` (looked up by the
+model or its name)."""
 
 
 def rhs(model: str, x: ArrayLike, **params: float) -> Array:
@@ -241,10 +245,10 @@ def _jac_vdp(x: Array, mu: float = 2.0) -> Array:
 
 
 _JACOBIANS: dict[str, Callable[..., Array]] = {
-    "two_body": _jac_two_body,
-    "cr3bp": _jac_cr3bp,
-    "pendulum": _jac_pendulum,
-    "vdp": _jac_vdp,
+    MotionModel.TWO_BODY: _jac_two_body,
+    MotionModel.CR3BP: _jac_cr3bp,
+    MotionModel.PENDULUM: _jac_pendulum,
+    MotionModel.VDP: _jac_vdp,
 }
 
 

@@ -1,6 +1,6 @@
 """Residual gap forecasts for a whole catalog, under a wall-time budget: `GapBank`.
 
-One `residual.GapForecaster` per object takes that object's estimates (those that fused a
+One `gap_forecaster.GapForecaster` per object takes that object's estimates (those that fused a
 real measurement). When an object has had no estimate for ``pass_break_s`` of sim time, its
 newest estimate is a pass end: the object waits for a residual fit (`residual.
 ResidualSurrogate`, about 0.3-0.6 s of one core each with a J2 placeholder). Fits run in
@@ -32,7 +32,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .residual import LIVE_RESIDUAL, GapForecaster, ResidualConfig
+from .gap_forecaster import PLACEHOLDER_TRAJECTORY, GapForecaster
+from .residual import LIVE_RESIDUAL, ResidualConfig
+from .types import MotionModel
 
 Array = NDArray[np.float64]
 
@@ -47,9 +49,9 @@ class GapBankConfig:
 
     Attributes
     ----------
-    motion_model : str
-        The filter's motion model ("kepler" or "j2"): the placeholder the residual is
-        learned against.
+    motion_model : MotionModel
+        The filter's motion model ("kepler" or "j2", `gap_forecaster.PLACEHOLDER_TRAJECTORY`):
+        the placeholder the residual is learned against.
     period_s : float
         Forecast grid, sim s: forecasts at the multiples of it in a gap.
     pass_break_s : float
@@ -63,7 +65,7 @@ class GapBankConfig:
         held-out only where its gap ends (``heldout_fits`` 1: one propagation per fit).
     """
 
-    motion_model: str = "j2"
+    motion_model: MotionModel = MotionModel.J2
     period_s: float = 600.0
     pass_break_s: float = 600.0
     hold_s: float = 120.0
@@ -72,8 +74,10 @@ class GapBankConfig:
 
     def __post_init__(self) -> None:
         """Check the settings (ValueError naming the field)."""
-        if self.motion_model not in ("kepler", "j2"):
-            raise ValueError(f"motion_model must be kepler or j2, got {self.motion_model!r}")
+        if self.motion_model not in PLACEHOLDER_TRAJECTORY:
+            raise ValueError(f"motion_model must be {' or '.join(PLACEHOLDER_TRAJECTORY)}, "
+                             f"got {self.motion_model!r}")
+        object.__setattr__(self, "motion_model", MotionModel(self.motion_model))
         for name in ("period_s", "pass_break_s"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):

@@ -3,9 +3,9 @@
 Every compiled function of the core is decorated with `jit`: ``numba.njit`` without fastmath
 (IEEE arithmetic in the order written, nothing reassociated or contracted) and with numpy's
 error model (x / 0 is inf or nan as in numpy, not an exception). A function is compiled at
-its first call in a process (the kernels of `propagation` and `batch_ekf` take 4 to 7 s in
-all; one array type per argument, so once each) unless numba's on-disk cache holds it
-(about 0.2 s to load).
+its first call in a process (the kernels of `kepler`, `propagation` and `batch_ekf` take 4
+to 7 s in all; its callers hand it C-contiguous float64 arrays, `f64`, so once each) unless
+numba's on-disk cache holds it (about 0.2 s to load).
 
 Where the cache is
     ``$XDG_CACHE_HOME/ssa_fusion/numba/<digest>`` (``~/.cache/ssa_fusion/numba/<digest>``
@@ -31,7 +31,7 @@ What names it
     read again: deleting ``~/.cache/ssa_fusion/numba`` is always safe.
 
 A compiled function calls the compiled functions of another module by the names it imports
-(``from .propagation import _kepler_kernel``), or through a module whose globals hold them;
+(``from .kepler import _kepler_kernel``), or through a module whose globals hold them;
 both are followed.
 """
 
@@ -41,20 +41,24 @@ import hashlib
 import os
 import stat
 import sys
-import types
 from collections.abc import Callable, Mapping
 from pathlib import Path
+from types import ModuleType
 from typing import Any, TypeVar, cast
 
 import numba
 import numpy as np
 from numba.core.dispatcher import Dispatcher
+from numpy.typing import NDArray
 
-__all__ = ["cache_directory", "cache_root", "jit", "source_digest"]
+__all__ = ["cache_directory", "cache_root", "f64", "jit", "source_digest"]
 
 _Fn = TypeVar("_Fn", bound=Callable[..., Any])
 
 _SCALARS = (bool, int, float, complex, str, bytes, type(None))
+
+_NUMBA_CONFIG: Any = numba.config
+"""numba's settings (``CACHE_DIR`` is set there from the environment, untyped)."""
 
 _digests: dict[str, str | None] = {}
 """Digest per module name (`source_digest`), computed once per process."""
@@ -109,7 +113,7 @@ def _gather(namespace: Mapping[str, Any], files: dict[str, bytes], constants: di
             continue
         if isinstance(value, Dispatcher):
             _gather(value.py_func.__globals__, files, constants, seen)
-        elif isinstance(value, types.ModuleType):
+        elif isinstance(value, ModuleType):
             if _holds_compiled(vars(value)):
                 _gather(vars(value), files, constants, seen)
         else:
@@ -176,15 +180,28 @@ def jit(fn: _Fn) -> _Fn:
     """Compile ``fn`` with numba (no fastmath, numpy's error model), cached (module docstring)."""
     directory = cache_directory(fn)
     if directory is not None:
-        saved = numba.config.CACHE_DIR
-        numba.config.CACHE_DIR = str(directory)  # read by numba's locator when decorating
+        saved = _NUMBA_CONFIG.CACHE_DIR
+        _NUMBA_CONFIG.CACHE_DIR = str(directory)  # read by numba's locator when decorating
         try:
             compiled = numba.njit(cache=True, error_model="numpy")(fn)
         except RuntimeError:  # numba: "cannot cache function ...: no locator available"
             compiled = None
         finally:
-            numba.config.CACHE_DIR = saved
+            _NUMBA_CONFIG.CACHE_DIR = saved
         path = getattr(getattr(compiled, "_cache", None), "cache_path", None)
         if isinstance(path, str) and Path(path).parent == directory:
             return cast(_Fn, compiled)
     return cast(_Fn, numba.njit(error_model="numpy")(fn))
+
+
+def f64(a: NDArray[Any]) -> NDArray[np.float64]:
+    """Return ``a`` as a C-contiguous writable float64 array (the kernels' argument type).
+
+    ``a`` itself when it is one (the usual case, checked faster than ``np.require``), else a
+    copy: one array type per argument, so each kernel is compiled once.
+    """
+    if a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable:
+        return a
+    out: NDArray[np.float64] = np.array(a, dtype=np.float64, order="C")
+    return out
+

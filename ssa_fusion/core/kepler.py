@@ -1,5 +1,9 @@
 r"""Analytic two-body (Keplerian) propagation with its state transition matrix.
 
+The one Kepler solver of the package, compiled with numba (`jit.jit`): `kepler_stm` and
+`kepler_state` propagate N states at once (the catalog filter's motion model), `propagate`
+one state (the per-object filter's, the IOD's), with the same code.
+
 The propagation uses the universal variable :math:`\chi` and the Stumpff functions
 :math:`c_k(z)`, :math:`z = \alpha\chi^2`, with the universal functions
 :math:`U_k(\chi, \alpha) = \chi^k c_k(z)` (Battin 1999, ch. 4).  With
@@ -8,21 +12,22 @@ The propagation uses the universal variable :math:`\chi` and the Stumpff functio
 
 .. math:: \sqrt\mu\,\Delta t = r_0 U_1 + \sigma_0 U_2 + U_3,
 
-and the state follows from the Lagrange coefficients
-:math:`F = 1 - U_2/r_0`, :math:`G = (r_0 U_1 + \sigma_0 U_2)/\sqrt\mu`,
+solved by Newton's method, safeguarded for ellipses by the bracket that follows from
+:math:`|\Delta E - \Delta M| \le 2e` (`_solve_chi`), and the state follows from the Lagrange
+coefficients :math:`F = 1 - U_2/r_0`, :math:`G = (r_0 U_1 + \sigma_0 U_2)/\sqrt\mu`,
 :math:`\dot F = -\sqrt\mu U_1/(r r_0)`, :math:`\dot G = 1 - U_2/r`.
 
 The 6x6 state transition matrix is analytic: ``F, G, Fdot, Gdot`` depend on the initial
 state only through the three scalars ``(r0, sigma0, alpha)``; their exact partials (using
 :math:`\partial U_k/\partial\alpha = (k U_{k+2} - \chi U_{k+1})/2` and the implicit
-derivative of :math:`\chi` from Kepler's equation) give the Shepperd-type closed form
+derivative of :math:`\chi` from Kepler's equation, `lagrange_partials`) give the
+Shepperd-type closed form
 
 .. math:: \Phi = \begin{bmatrix} F I & G I \\ \dot F I & \dot G I \end{bmatrix}
           + W M W^T,\qquad W = \begin{bmatrix} \mathbf r_0 & \mathbf v_0 & 0 & 0\\
           0 & 0 & \mathbf r_0 & \mathbf v_0 \end{bmatrix},
 
-with a 4x4 scalar matrix ``M``.  All scalar work is done with :mod:`math` (this sits in the
-EKF hot path); numpy is only used to assemble the 6x6 result.
+with a 4x4 scalar matrix ``M`` per object.
 
 Units: km, km/s, s; the frame is any inertial frame (GCRF).
 """
@@ -30,132 +35,123 @@ Units: km, km/s, s; the frame is any inertial frame (GCRF).
 from __future__ import annotations
 
 import math
-from typing import TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ssa_fusion.core.constants import MU_EARTH
+from .constants import MU_EARTH
+from .jit import f64, jit
 
-__all__ = ["propagate", "stumpff"]
+__all__ = ["kepler_state", "kepler_stm", "lagrange_partials", "propagate", "stumpff"]
+
+Array = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+Quad = tuple[float, float, float, float]
 
 _Z_SERIES = 0.5
-"""|z| below which the Stumpff functions c4, c5 are evaluated by their power series."""
+"""|z| below which the Stumpff functions are evaluated by their power series."""
 
-_MAX_ITER = 60
-
-# D = F*E_rr + G*E_rv + Fdot*E_vr + Gdot*E_vv as one (4,) @ (4, 36) product.
-_D_BASIS: NDArray[np.float64] = np.zeros((4, 6, 6))
-for _k, (_i0, _j0) in enumerate(((0, 0), (0, 3), (3, 0), (3, 3))):
-    for _d in range(3):
-        _D_BASIS[_k, _i0 + _d, _j0 + _d] = 1.0
-_D_BASIS = _D_BASIS.reshape(4, 36)
-del _k, _i0, _j0, _d
+_MAX_NEWTON = 60
 
 
-def _c45_series(z: float) -> tuple[float, float]:
-    """Stumpff c4(z), c5(z) by their power series (accurate for |z| <= 0.5)."""
-    # c_k(z) = sum_j (-z)^j / (k + 2j)!, 8 terms: truncation < 0.5^8 / 20! ~ 2e-21.
-    c4 = (1.0 / 24.0) * (1.0 - z / 30.0 * (1.0 - z / 56.0 * (1.0 - z / 90.0 * (
-        1.0 - z / 132.0 * (1.0 - z / 182.0 * (1.0 - z / 240.0 * (1.0 - z / 306.0)))))))
-    c5 = (1.0 / 120.0) * (1.0 - z / 42.0 * (1.0 - z / 72.0 * (1.0 - z / 110.0 * (
-        1.0 - z / 156.0 * (1.0 - z / 210.0 * (1.0 - z / 272.0 * (1.0 - z / 342.0)))))))
-    return c4, c5
+@jit
+def _stumpff(z: float, full: bool) -> Quad:
+    """Stumpff functions (c2, c3, c4, c5) at z; c4, c5 only when ``full`` (else 0).
 
-
-def _c23(z: float) -> tuple[float, float]:
-    """Stumpff c2(z) = (1 - cos sqrt z)/z and c3(z) = (sqrt z - sin sqrt z)/z^1.5."""
-    if z > _Z_SERIES:
-        s = math.sqrt(z)
-        h = math.sin(0.5 * s)
-        return 2.0 * h * h / z, (s - math.sin(s)) / (z * s)
-    if z < -_Z_SERIES:
-        s = math.sqrt(-z)
-        return (math.cosh(s) - 1.0) / (-z), (math.sinh(s) - s) / (-z * s)
-    c4, c5 = _c45_series(z)
-    return 0.5 - z * c4, 1.0 / 6.0 - z * c5
-
-
-def stumpff(z: float) -> tuple[float, float, float, float]:
-    """Stumpff functions ``(c2, c3, c4, c5)`` at ``z`` (dimensionless).
-
-    ``c_k(z) = sum_j (-z)^j / (k + 2j)!``; closed forms (trigonometric for z > 0,
-    hyperbolic for z < 0) away from zero, power series near zero.
+    Closed forms (trigonometric for z > 0.5, hyperbolic for z < -0.5), power series near 0
+    (``c_k = sum_j (-z)^j / (k + 2j)!``, 8 terms: truncation < 0.5^8 / 20! ~ 2e-21), nested,
+    with ``z / m`` as ``z * (1 / m)`` (a multiplication is several times shorter than a
+    division; the two differ by an ulp).
     """
     if -_Z_SERIES <= z <= _Z_SERIES:
-        c4, c5 = _c45_series(z)
+        c4 = (1.0 / 24.0) * (1.0 - z * (1.0 / 30.0) * (1.0 - z * (1.0 / 56.0) * (
+            1.0 - z * (1.0 / 90.0) * (1.0 - z * (1.0 / 132.0) * (1.0 - z * (1.0 / 182.0) * (
+                1.0 - z * (1.0 / 240.0) * (1.0 - z * (1.0 / 306.0))))))))
+        c5 = (1.0 / 120.0) * (1.0 - z * (1.0 / 42.0) * (1.0 - z * (1.0 / 72.0) * (
+            1.0 - z * (1.0 / 110.0) * (1.0 - z * (1.0 / 156.0) * (1.0 - z * (1.0 / 210.0) * (
+                1.0 - z * (1.0 / 272.0) * (1.0 - z * (1.0 / 342.0))))))))
         return 0.5 - z * c4, 1.0 / 6.0 - z * c5, c4, c5
-    c2, c3 = _c23(z)
+    if z > 0.0:
+        s = math.sqrt(z)
+        h = math.sin(0.5 * s)
+        c2, c3 = 2.0 * h * h / z, (s - math.sin(s)) / (z * s)
+    else:
+        s = math.sqrt(-z)
+        c2, c3 = (math.cosh(s) - 1.0) / (-z), (math.sinh(s) - s) / (-z * s)
+    if not full:
+        return c2, c3, 0.0, 0.0
     return c2, c3, (0.5 - c2) / z, (1.0 / 6.0 - c3) / z
 
 
-def _solve_chi(r0: float, sig0: float, alpha: float, tau: float) -> float:
-    """Solve Kepler's equation ``r0 U1 + sig0 U2 + U3 = tau`` (tau = sqrt(mu) dt) for chi.
+@jit
+def _solve_chi(r0: float, sig0: float, alpha: float, tau: float) -> tuple[float, bool]:
+    """Solve ``r0 U1 + sig0 U2 + U3 = tau`` for chi; return (chi, converged).
 
-    Newton's method; for bound orbits it is safeguarded by the bracket that follows from
-    ``|dE - dM| <= 2 e`` (chi = dE / sqrt(alpha)), so it cannot diverge.
+    ``tau = sqrt(mu) dt``. Newton's method from a third-order Taylor series of chi(tau)
+    (short steps), the mean-anomaly guess (ellipses), Vallado's starter (hyperbolas, 2013,
+    algorithm 8) or tau / r0 (near-parabolic), safeguarded for ellipses by the bracket that
+    follows from |dE - dM| <= 2 e (chi = dE / sqrt(alpha)): it cannot diverge there.
     """
     if tau == 0.0:
-        return 0.0
-    lo = -math.inf
-    hi = math.inf
+        return 0.0, True
+    lo, hi = -math.inf, math.inf
     bound = alpha > 1e-12 / r0
-    if bound:  # ellipse: chi = delta eccentric anomaly * sqrt(a), |dE - dM| <= 2 e
+    if bound:
         sa = math.sqrt(alpha)
-        e = math.hypot(1.0 - r0 * alpha, sig0 * sa)
-        dm = tau * alpha * sa  # mean motion * dt
-        lo = (dm - 2.0 * e - 1e-9) / sa
-        hi = (dm + 2.0 * e + 1e-9) / sa
+        ecc = math.hypot(1.0 - r0 * alpha, sig0 * sa)
+        dm = tau * alpha * sa
+        lo = (dm - 2.0 * ecc - 1e-9) / sa
+        hi = (dm + 2.0 * ecc + 1e-9) / sa
+    ir0 = 1.0 / r0
+    t = tau * ir0
     if abs(tau) < 0.2 * r0 * math.sqrt(r0):
-        # short step: third-order Taylor series of chi(tau) (dchi/dtau = 1/r,
-        # d2chi/dtau2 = -sigma/r^3, d3chi/dtau3 = 3 sigma^2/r^5 - (1 - alpha r)/r^4)
-        ir0 = 1.0 / r0
-        t = tau * ir0
-        chi = t * (1.0 - t * ir0 * (0.5 * sig0 - t * (
-            0.5 * sig0 * sig0 * ir0 - (1.0 - alpha * r0) / 6.0)))
+        chi = t * (1.0 - t * ir0 * (0.5 * sig0 - t * (0.5 * sig0 * sig0 * ir0
+                                                      - (1.0 - alpha * r0) / 6.0)))
     elif bound:
         chi = tau * alpha
-    elif alpha < 0.0:  # hyperbola (Vallado 2013, algorithm 8 starter)
+    elif alpha < 0.0:  # hyperbola
         sgn = 1.0 if tau > 0.0 else -1.0
         sa = math.sqrt(-1.0 / alpha)
         arg = (-2.0 * tau * alpha) / (sig0 + sgn * sa * (1.0 - r0 * alpha))
-        chi = sgn * sa * math.log(arg) if arg > 0.0 else tau / r0
+        chi = sgn * sa * math.log(arg) if arg > 0.0 else t
     else:  # near-parabolic
-        chi = tau / r0
-    for _ in range(_MAX_ITER):
-        z = alpha * chi * chi
-        c2, c3 = _c23(z)
+        chi = t
+    if not math.isfinite(chi):
+        return chi, False
+    for _ in range(_MAX_NEWTON):
         chi2 = chi * chi
+        c2, c3, _c4, _c5 = _stumpff(alpha * chi2, False)
         u2 = chi2 * c2
-        u1 = chi * (1.0 - z * c3)
-        u0 = 1.0 - z * c2
-        err = r0 * u1 + sig0 * u2 + chi2 * chi * c3 - tau
-        r = r0 * u0 + sig0 * u1 + u2
+        u3 = chi2 * chi * c3
+        u1 = chi - alpha * u3
+        r = r0 * (1.0 - alpha * u2) + sig0 * u1 + u2
+        err = r0 * u1 + sig0 * u2 + u3 - tau
         step = err / r
-        # Newton's error after this step is ~ step^2 * sigma / (2 r), sigma = dr/dchi
-        sig = sig0 * u0 + (1.0 - alpha * r0) * u1
+        # Newton's error after this step is ~ step^2 sigma / (2 r), sigma = dr/dchi; the last
+        # step is taken as it is (below an ulp of chi it may not move chi off the bracket's
+        # end, which is no reason to bisect)
+        sig = sig0 * (1.0 - alpha * u2) + (1.0 - alpha * r0) * u1
         if step * step * abs(sig) <= 2e-16 * r * abs(chi) or err == 0.0:
-            return chi - step
+            chi -= step
+            return chi, math.isfinite(chi)
         if err > 0.0:
             hi = min(hi, chi)
         else:
             lo = max(lo, chi)
         new = chi - step
-        if not lo < new < hi:  # Newton left the bracket: bisect instead
-            new = 0.5 * (lo + hi)
-            if not math.isfinite(new):
-                new = chi - step
+        if not (lo < new < hi):  # Newton left the bracket: bisect instead
+            mid = 0.5 * (lo + hi)
+            if math.isfinite(mid):
+                new = mid
         chi = new
-    return chi
+        if not math.isfinite(chi):
+            return chi, False
+    return chi, False
 
 
-Num = TypeVar("Num", float, NDArray[np.float64])
-
-
-def lagrange_partials(r0: Num, sig0: Num, alpha: Num, chi: Num,
-                      c: tuple[Num, Num, Num, Num], smu: float, mu: float
-                      ) -> tuple[tuple[Num, Num, Num, Num], tuple[Num, Num, Num, Num],
-                                 tuple[Num, Num, Num, Num], tuple[Num, Num, Num, Num]]:
+@jit
+def lagrange_partials(r0: float, sig0: float, alpha: float, chi: float, c: Quad, smu: float,
+                      mu: float) -> tuple[Quad, Quad, Quad, Quad]:
     """Return the Lagrange coefficients of a two-body arc and their exact gradients.
 
     For the arc from |r0| = `r0` km, sigma0 = r0.v0 / sqrt(mu), alpha = 2/r0 - v0^2/mu
@@ -163,8 +159,7 @@ def lagrange_partials(r0: Num, sig0: Num, alpha: Num, chi: Num,
     c5) at alpha chi^2: returns (f, g, fdot, gdot) and, per coefficient i, the factors
     (a_i, b_i, d_i) of its gradient with respect to the initial state,
     ``d coef_i / d x0 = [a_i r0_vec + b_i v0_vec, b_i r0_vec + d_i v0_vec]`` (the partials
-    through r0, sigma0 and alpha, chi following Kepler's equation). Elementwise: Python
-    floats (`propagate`) or arrays of objects (`batch_ekf.kepler_stm`).
+    through r0, sigma0 and alpha, chi following Kepler's equation).
     """
     c2, c3, c4, c5 = c
     chi2 = chi * chi
@@ -220,10 +215,114 @@ def lagrange_partials(r0: Num, sig0: Num, alpha: Num, chi: Num,
             (-f_a * imu, -g_a * imu, -fd_a * imu, -gd_a * imu))
 
 
+@jit
+def _kepler_kernel(x: Array, dt: Array, mu: float, x1: Array, phi: Array, ok: BoolArray,
+                   stm: bool) -> None:
+    """Kepler propagation of x (n, 6) by dt (n,) into x1, phi (n, 6, 6) (if ``stm``), ok."""
+    smu = math.sqrt(mu)
+    grad = np.empty((4, 6))
+    for i in range(x.shape[0]):
+        rx, ry, rz, vx, vy, vz = x[i, 0], x[i, 1], x[i, 2], x[i, 3], x[i, 4], x[i, 5]
+        r0 = math.sqrt(rx * rx + ry * ry + rz * rz)
+        sig0 = (rx * vx + ry * vy + rz * vz) / smu
+        alpha = 2.0 / r0 - (vx * vx + vy * vy + vz * vz) / mu
+        chi, good = _solve_chi(r0, sig0, alpha, smu * dt[i])
+        good = good and r0 > 0.0
+        c = _stumpff(alpha * chi * chi, stm)
+        (f, g, fd, gd), a, b, d = lagrange_partials(r0, sig0, alpha, chi, c, smu, mu)
+        nf = 0.0  # stays 0.0 unless an element is inf or nan
+        for k in range(3):
+            w, wd = f * x[i, k] + g * x[i, k + 3], fd * x[i, k] + gd * x[i, k + 3]
+            x1[i, k], x1[i, k + 3] = w, wd
+            nf += (w - w) + (wd - wd)
+        if stm:
+            # Phi = [[F I, G I], [Fdot I, Gdot I]] + W M W^T (see kepler_stm)
+            for m in range(4):
+                for k in range(3):
+                    grad[m, k] = a[m] * x[i, k] + b[m] * x[i, k + 3]
+                    grad[m, k + 3] = b[m] * x[i, k] + d[m] * x[i, k + 3]
+            for k in range(3):
+                for j in range(6):
+                    phi[i, k, j] = x[i, k] * grad[0, j] + x[i, k + 3] * grad[1, j]
+                    phi[i, k + 3, j] = x[i, k] * grad[2, j] + x[i, k + 3] * grad[3, j]
+                phi[i, k, k] += f
+                phi[i, k, k + 3] += g
+                phi[i, k + 3, k] += fd
+                phi[i, k + 3, k + 3] += gd
+            for k in range(6):
+                for j in range(6):
+                    nf += phi[i, k, j] - phi[i, k, j]
+        ok[i] = good and nf == 0.0
+
+
+def _kepler(x: ArrayLike, dt: ArrayLike, mu: float,
+            stm: bool) -> tuple[Array, Array, BoolArray]:
+    X = f64(np.atleast_2d(np.asarray(x, dtype=float)))
+    n = X.shape[0]
+    dts = f64(np.broadcast_to(np.asarray(dt, dtype=float), (n,)))
+    x1 = np.empty((n, 6))
+    phi = np.empty((n, 6, 6) if stm else (0, 6, 6))
+    ok = np.empty(n, dtype=np.bool_)
+    _kepler_kernel(X, dts, float(mu), x1, phi, ok, stm)
+    return x1, phi, ok
+
+
+def kepler_stm(x: ArrayLike, dt: ArrayLike,
+               mu: float = MU_EARTH) -> tuple[Array, Array, BoolArray]:
+    """Propagate N two-body states by their own ``dt`` with their state transition matrices.
+
+    The analytic solution and STM of the module docstring (`propagate` is this for one
+    object): the Lagrange coefficients ``F, G, Fdot, Gdot`` (``x1 = [F r0 + G v0,
+    Fdot r0 + Gdot v0]``) and their exact partials (``dU_k/dalpha = (k U_{k+2} - chi
+    U_{k+1}) / 2`` at fixed chi, and the implicit derivative of chi from Kepler's equation;
+    `lagrange_partials`) give ``Phi = [[F I, G I], [Fdot I, Gdot I]] + W M W^T``. A compiled
+    loop over the objects.
+
+    Parameters
+    ----------
+    x : array_like (N, 6)
+        Inertial states [km, km/s].
+    dt : array_like (N,) or scalar
+        Time steps, s (any sign).
+    mu : float
+        Gravitational parameter, km^3/s^2.
+
+    Returns
+    -------
+    x1 : ndarray (N, 6)
+        States at t0 + dt.
+    Phi : ndarray (N, 6, 6)
+        State transition matrices d x1 / d x0.
+    ok : ndarray (N,) of bool
+        False where the input is not finite, r0 = 0, or Kepler's equation did not converge.
+    """
+    return _kepler(x, dt, mu, True)
+
+
+def kepler_state(x: ArrayLike, dt: ArrayLike, mu: float = MU_EARTH) -> tuple[Array, BoolArray]:
+    """Propagate N two-body states by their own ``dt`` (s), without the STM.
+
+    As `kepler_stm` (same solution, a fraction of its cost): returns (x1 (N, 6), ok (N,)).
+    """
+    x1, _, ok = _kepler(x, dt, mu, False)
+    return x1, ok
+
+
+def stumpff(z: float) -> Quad:
+    """Stumpff functions ``(c2, c3, c4, c5)`` at ``z`` (dimensionless).
+
+    ``c_k(z) = sum_j (-z)^j / (k + 2j)!``; closed forms (trigonometric for z > 0.5,
+    hyperbolic for z < -0.5), power series near zero (the solver's, compiled).
+    """
+    return _stumpff(float(z), True)
+
+
 def propagate(
     x0_km: ArrayLike, dt_s: float, mu: float = MU_EARTH
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Propagate an inertial two-body state by ``dt_s`` seconds, with its STM.
+
+    `kepler_stm` for one object (the same compiled solver), with the input checked first.
 
     Parameters
     ----------
@@ -256,29 +355,12 @@ def propagate(
     else:
         x, y, z, vx, vy, vz = np.asarray(x0_km, dtype=float).tolist()
     dt = float(dt_s)
-    smu = math.sqrt(mu)
     r0 = math.sqrt(x * x + y * y + z * z)
     rv = x * vx + y * vy + z * vz
-    sig0 = rv / smu
     if not (r0 > 0.0 and math.isfinite(r0 + rv + dt + mu)) or not (
         math.isfinite(vx * vx + vy * vy + vz * vz)
     ):
         raise ValueError(f"kepler.propagate: need a finite state with r0 > 0 and finite dt, "
                          f"got x0={[x, y, z, vx, vy, vz]}, dt={dt}")
-    alpha = 2.0 / r0 - (vx * vx + vy * vy + vz * vz) / mu
-
-    chi = _solve_chi(r0, sig0, alpha, smu * dt)
-    (f, g, fd, gd), a, b, d = lagrange_partials(r0, sig0, alpha, chi,
-                                                stumpff(alpha * chi * chi), smu, mu)
-    m = np.array([(a[i], b[i], b[i], d[i]) for i in range(4)])
-    w = np.array((
-        (x, vx, 0.0, 0.0), (y, vy, 0.0, 0.0), (z, vz, 0.0, 0.0),
-        (0.0, 0.0, x, vx), (0.0, 0.0, y, vy), (0.0, 0.0, z, vz),
-    ))
-    stm = w.dot(m).dot(w.T)
-    stm += np.array((f, g, fd, gd)).dot(_D_BASIS).reshape(6, 6)
-    x1 = np.array((
-        f * x + g * vx, f * y + g * vy, f * z + g * vz,
-        fd * x + gd * vx, fd * y + gd * vy, fd * z + gd * vz,
-    ))
-    return x1, stm
+    x1, stm, _ = kepler_stm(np.array([[x, y, z, vx, vy, vz]]), dt, mu)
+    return x1[0], stm[0]

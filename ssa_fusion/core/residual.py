@@ -30,11 +30,15 @@ The forecast covariance is the fit's formal covariance, scaled by what held-out 
 (out of sample: they were not in its training window), and the mean of those normalised
 errors (NEES / 6) scales every later forecast's covariance (never below 1).
 
-The other variant evaluated, optimized DMD with bagging on the same irregular residual
-series, is `studies.bopdmd` (a study, not part of the core).
+When a live filter fits and what it publishes in a gap is `gap_forecaster`'s policy. The
+other variant evaluated, optimized DMD with bagging on the same irregular residual series,
+is `studies.bopdmd` (a study, not part of the core).
 
 Frames and units: GCRF km, km/s; times s (any clock, e.g. Unix s); residual coordinates km and
 km/s in the placeholder trajectory's radial / along-track / cross-track (RTN) frame.
+
+One job, the residual model, in ~700 lines: its frame, basis, fit and held-out calibration
+are used only by one another.
 """
 
 from __future__ import annotations
@@ -48,8 +52,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import frames
-from .batch_ekf import integrate_stm
 from .constants import MU_EARTH
+from .propagation import integrate_stm
+from .types import MotionModel
 
 Array = NDArray[np.float64]
 
@@ -57,13 +62,14 @@ Propagator = Callable[[Array, float, Array], Array]
 """propagate(x0 (6,), t0 s, t (k,) s) -> (k, 6): the placeholder's trajectory from x0 at t0,
 sampled at t (before or after t0, any order)."""
 
-def orbit_propagator(model: str) -> Propagator:
+
+def orbit_propagator(model: MotionModel | str) -> Propagator:
     """Return a placeholder trajectory as a `Propagator`.
 
     The placeholder trajectory of `dynamics` model ``"two_body"`` or ``"j2"`` (GCRF, km,
     km/s, epochs Unix s; J2 about the Earth's pole at the anchor, `frames.pole_frame`) as a
     `Propagator`: integrated backwards and forwards from x0 as needed (epochs in
-    any order, repeats included), epoch to epoch, by `batch_ekf.integrate_stm` (fixed-step
+    any order, repeats included), epoch to epoch, by `propagation.integrate_stm` (fixed-step
     DOP853, steps of at most 60 s, compiled; within ~5e-9 relative of scipy's adaptive
     DOP853 at rtol 1e-10 over three days of a LEO orbit, and ~40x faster). RuntimeError
     when the orbit cannot be propagated (a non-finite result).
@@ -691,82 +697,5 @@ class ResidualSurrogate:
 LIVE_RESIDUAL = ResidualConfig(model="hill", harmonics=1, model_error=0.2)
 """The residual setting a live filter uses: ``hill_h1_me20`` (empirical accelerations,
 constant + once per revolution, 2-day window, relative model error 0.2), chosen on the
-tuning seeds 1-3 by `studies.gap_study.tune` (docs/HISTORY.md, 2026-11-23)."""
-
-PLACEHOLDER_TRAJECTORY = {"kepler": "two_body", "j2": "j2"}
-"""The `dynamics` model of each filter motion model's trajectory (for `orbit_propagator`)."""
-
-
-@dataclass
-class GapForecaster:
-    """The residual surrogate on a filter's live stream: what to publish in a gap.
-
-    `on_estimate` takes every estimate that fused a real measurement (epoch order). Once a
-    prediction epoch lies `pass_break_s` or more after the newest of them, that estimate is
-    a pass end: it becomes an anchor (`ResidualSurrogate.add_anchor`), the surrogate fits at
-    it, and the fit's forecast is computed once on the grid of multiples of `period_s` up to
-    ``max_horizon_s`` after it (one integration). `forecast(t)` returns that forecast at a
-    grid epoch t of the gap (state km, km/s GCRF; covariance), or None: no fit (too few
-    anchors, refused), t before `pass_break_s` after the pass or beyond the horizon. A real
-    measurement always wins: the filter's own state is not touched.
-    """
-
-    surrogate: ResidualSurrogate
-    period_s: float
-    pass_break_s: float = 600.0
-    last: tuple[float, Array, Array] | None = None
-    anchored_t: float = -math.inf
-    fitted_t: float = -math.inf
-    table: dict[float, tuple[Array, Array]] = field(default_factory=dict)
-
-    @classmethod
-    def for_model(cls, motion_model: str, period_s: float,
-                  cfg: ResidualConfig = LIVE_RESIDUAL) -> GapForecaster:
-        """Build the forecaster of a filter with `motion_model` ("kepler" or "j2")."""
-        prop = orbit_propagator(PLACEHOLDER_TRAJECTORY[motion_model])
-        return cls(ResidualSurrogate(cfg, prop), float(period_s))
-
-    def on_estimate(self, t: float, x: ArrayLike, P: ArrayLike) -> None:
-        """Take the filter's estimate (epoch t s) after it fused a real measurement.
-
-        The previous one is a pass end (an anchor) when t is `pass_break_s` or more after it.
-        """
-        if self.last is not None and t <= self.last[0]:
-            return
-        if self.last is not None and t - self.last[0] >= self.pass_break_s:
-            self._anchor()
-        self.last = (float(t), np.asarray(x, float).copy(), np.asarray(P, float).copy())
-
-    def _anchor(self) -> bool:
-        """Make the newest estimate an anchor, once; True when it became one now."""
-        if self.last is None or self.last[0] <= self.anchored_t:
-            return False
-        t_end, x, P = self.last
-        self.anchored_t = t_end
-        try:
-            self.surrogate.add_anchor(t_end, x, P)
-        except ValueError:
-            return False
-        return True
-
-    def forecast(self, t: float) -> tuple[Array, Array] | None:
-        """Return the surrogate's state and covariance at gap epoch t (s), or None."""
-        if self.last is None or t - self.last[0] < self.pass_break_s:
-            return None
-        t_end = self.last[0]
-        self._anchor()
-        if self.fitted_t != t_end:  # a pass ended: fit once, tabulate the forecast
-            self.fitted_t = t_end
-            self.table = {}
-            k0 = math.floor(t_end / self.period_s) + 1
-            k1 = math.floor((t_end + self.surrogate.cfg.max_horizon_s) / self.period_s)
-            grid = self.period_s * np.arange(k0, k1 + 1, dtype=float)
-            try:  # a fit or propagation that fails leaves the gap to the EKF's coasting
-                fit = self.surrogate.fit()
-                if fit is not None and grid.size:
-                    xs, Ps = fit.predict(grid)
-                    self.table = {float(g): (xs[i], Ps[i]) for i, g in enumerate(grid)
-                                  if np.isfinite(xs[i]).all() and np.isfinite(Ps[i]).all()}
-            except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError):
-                self.table = {}
-        return self.table.get(float(t))
+tuning seeds 1-3 by `studies.gap_study.tune` (docs/HISTORY.md, 2026-11-25: a surrogate
+through the gaps between passes)."""

@@ -10,8 +10,8 @@ reference epoch at `timescales.UNIX_EPOCH_JD`.
 
 Sites of the network are real, publicly documented tracking sites; coordinates are rounded
 to about 0.01 deg (~1 km) from the public descriptions cited with each, which is more than
-enough for simulation (no claim is made that they are survey-grade). Noise levels are the
-issue's reference values, not the sites' specifications: a tracking radar 20 m in range and
+enough for simulation (no claim is made that they are survey-grade). Noise levels are
+reference values, not the sites' specifications: a tracking radar 20 m in range and
 0.02 deg in angle (the values of Orekit's orbit-determination tutorial), an optical
 telescope 1.5 arcsec.
 """

@@ -3,7 +3,8 @@
 A `TrackBank` keeps one track per ``object_id`` in arrays (state (N, 6) km, km/s GCRF,
 covariance (N, 6, 6), epoch (N,) Unix s). `TrackBank.process` takes a batch of range/
 azimuth/elevation measurements of any objects, in epoch order, and applies the per-object
-`tracker.Tracker` rules to each object, vectorised over objects:
+`tracker.Tracker` rules to each object, vectorised over objects, with the per-object
+tracker's options (`filter_options.FilterOptions`):
 
 * an object without a track collects its first measurements in its own
   `initiation.OrbitInitiator` (Herrick-Gibbs over one pass of one station, ``iod_samples``
@@ -26,51 +27,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .batch_ekf import REASONS, BatchEKF, BatchEKFConfig, Code
+from .batch_ekf import REASONS, BatchEKF, Code
+from .filter_options import FilterOptions
 from .frames import Station
 from .initiation import InitialState, OrbitInitiator
 from .measurement import StationModels
+from .timescales import UNIX_EPOCH_JD
 from .types import Cause, Kind, Measurement
 
 Array = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class TrackBankConfig:
-    """Settings of a `TrackBank`.
-
-    Attributes
-    ----------
-    ekf : BatchEKFConfig
-        Motion model, process noise, gate, covariance bound of every track.
-    iod_samples : int
-        Measurements per initial orbit determination (>= 3: Herrick-Gibbs).
-    iod_max_span_s : float
-        Longest span of one IOD batch, s (one pass).
-    p0_sigma : tuple of float, (6,)
-        Standard deviations added in quadrature to the IOD covariance, km and km/s.
-    reinit_after : int
-        Measurements of an object in a row refused by the gate after which its track is
-        dropped and its IOD starts again from the last of them (0: never).
-    """
-
-    ekf: BatchEKFConfig = field(default_factory=BatchEKFConfig)
-    iod_samples: int = 3
-    iod_max_span_s: float = 600.0
-    p0_sigma: tuple[float, ...] = (1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3)
-    reinit_after: int = 0
-
-    def __post_init__(self) -> None:
-        """Check the IOD settings (ValueError naming the field)."""
-        if self.iod_samples < 3:
-            raise ValueError(f"iod_samples must be >= 3 (Herrick-Gibbs), got {self.iod_samples}")
-        if len(self.p0_sigma) != 6:
-            raise ValueError(f"p0_sigma needs 6 values, got {len(self.p0_sigma)}")
 
 
 @dataclass(frozen=True)
@@ -103,18 +73,27 @@ class TrackBank:
 
     Parameters
     ----------
-    config : TrackBankConfig
+    config : FilterOptions
+        Of every track: IOD (``iod``: 3 samples or more, Herrick-Gibbs; a P0 floor of 6
+        values; ValueError otherwise), noise and motion model (`batch_ekf.BatchEKF`).
     stations : dict of str to frames.Station
         The network: the ``frame_id`` of a measurement names its station.
     capacity : int
         Initial number of rows (grows by doubling as objects arrive).
+    jd0 : float
+        UTC Julian date of t = 0 of the measurement clock (Unix time by default).
     """
 
-    def __init__(self, config: TrackBankConfig, stations: dict[str, Station],
-                 capacity: int = 64) -> None:
+    def __init__(self, config: FilterOptions, stations: dict[str, Station],
+                 capacity: int = 64, jd0: float = UNIX_EPOCH_JD) -> None:
+        iod = config.iod
+        if iod.iod_samples < 3:
+            raise ValueError(f"iod_samples must be >= 3 (Herrick-Gibbs), got {iod.iod_samples}")
+        if len(iod.p0_sigma) != 6:
+            raise ValueError(f"p0_sigma needs 6 values, got {len(iod.p0_sigma)}")
         self.config = config
-        self.ekf = BatchEKF(config.ekf, list(stations.values()))
-        self.models = StationModels(stations, config.ekf.jd0)
+        self.ekf = BatchEKF(config, list(stations.values()), jd0)
+        self.models = StationModels(stations, jd0)
         self.rows: dict[str, int] = {}
         self.object_ids: list[str] = []
         cap = max(1, int(capacity))
@@ -228,7 +207,7 @@ class TrackBank:
             gate = res.code == Code.GATE
             self.gate_misses[r[ok]] = 0
             self.gate_misses[r[gate]] += 1
-            limit = self.config.reinit_after
+            limit = self.config.iod.reinit_after
             if limit:
                 for i in idx[gate & (self.gate_misses[r] >= limit)].tolist():
                     cause[i] = self._reinitialise(int(rows[i]), Measurement(
@@ -262,8 +241,8 @@ class TrackBank:
         init = self._initiators.get(row)
         if init is None:
             init = self._initiators[row] = OrbitInitiator(self._placeholder, self.models, 6)
-        out = init.add(m, self.config.iod_samples, self.config.p0_sigma,
-                       self.config.iod_max_span_s)
+        iod = self.config.iod
+        out = init.add(m, iod.iod_samples, iod.p0_sigma, iod.iod_max_span_s)
         if isinstance(out, tuple):
             return out[0]
         del self._initiators[row]

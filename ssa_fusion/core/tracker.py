@@ -54,10 +54,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .ekf import ExtendedKalmanFilter, bound_covariance, process_noise
+from .filter_options import FilterOptions
 from .history import HISTORY_REAL, FusedHistory, FusedStep, Snapshot
 from .initiation import OrbitInitiator, Placeholder
 from .measurement import MeasurementModel, StationModels
-from .types import Cause, Measurement, Source, StateEstimate, UpdateSource
+from .types import Cause, Measurement, Source, StateEstimate, UpdateSource, same_epoch
 from .validation import OK, measurement_problem
 
 
@@ -67,8 +68,8 @@ def _base(f: Measurement) -> float:
 
 
 def _before(a: float, b: float) -> bool:
-    """Return a < b beyond the round-off of t - horizon (~1e-16 relative; 2 ms on Unix time)."""
-    return a < b - 1e-12 * max(1.0, abs(b))
+    """Return a < b beyond the round-off of t - horizon (`types.same_epoch`)."""
+    return a < b and not same_epoch(a, b)
 
 
 def prediction_epochs(after: float, now: float, period: float,
@@ -89,55 +90,6 @@ def prediction_epochs(after: float, now: float, period: float,
     skipped = max(0, (k1 - k0 + 1) - 10 * limit)
     k0 += skipped
     return [k * period for k in range(k0, min(k1, k0 + limit - 1) + 1)], skipped
-
-
-DEFAULT_GATE = 1000.0
-"""Default NIS gate: rejects gross glitches only (a 3-channel innovation ~30 sigma away)."""
-
-
-@dataclass
-class TrackerConfig:
-    """Estimator settings.
-
-    Attributes
-    ----------
-    p0_sigma : tuple of float, (n,)
-        Standard deviations added (in quadrature) to the IOD covariance, state units.
-    q : float
-        White-noise acceleration spectral density of the process noise, (units/s^2)^2 s.
-    gate : float or None
-        NIS threshold beyond which an update is rejected (None: no gate; the default
-        only catches gross glitches, the estimate's consistency is not gated away).
-    iod_samples : int
-        Real measurements used for the initial orbit determination (>= 2; 3 for
-        Herrick-Gibbs with range/az/el).
-    frame_id : str
-        Frame (station id, or "gcrf") measurements must be expressed in; "" = any (with a
-        station network: any of its stations).
-    reinit_after : int
-        Real measurements in a row refused by the gate after which the filter forgets its
-        state and initialises again (0: never).
-    iod_max_span_s : float
-        Longest time (s) one IOD batch may span; a measurement further from the batch's
-        first one (or from another station or of another kind) starts a new batch, so the
-        initial orbit comes from one pass of one station (Herrick-Gibbs and Gauss need
-        closely spaced samples).
-    sigma_bound : float
-        After every prediction, position standard deviations are limited to `sigma_bound`
-        times the position's norm and velocity ones to `sigma_bound` times the velocity's
-        (`ekf.bound_covariance`; 2 for an orbit: its diameter and twice its speed), so a gap
-        of days cannot blow the covariance up beyond what is physically possible; 0 = no
-        limit.
-    """
-
-    p0_sigma: tuple[float, ...] = (1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3)
-    q: float = 1e-10
-    gate: float | None = DEFAULT_GATE
-    iod_samples: int = 3
-    frame_id: str = ""
-    iod_max_span_s: float = math.inf
-    reinit_after: int = 0
-    sigma_bound: float = 0.0
 
 
 @dataclass
@@ -168,17 +120,22 @@ class Outcome:
 class Tracker:
     """IOD + EKF for one object (see the module docstring for the rules).
 
-    ``config`` may be changed (or replaced) at run time; ``f``, ``model`` and ``n`` are
-    handed to the `initiation.OrbitInitiator` at construction and at each `reset`.
+    ``config`` (`filter_options.FilterOptions`: its noise and IOD parts; the motion model
+    is ``placeholder``) may be replaced at run time; ``f``, ``model`` and ``n`` are handed
+    to the `initiation.OrbitInitiator` at construction and at each `reset`. ``frame_id``
+    is the frame (station id, or "gcrf") measurements must be expressed in; "" = any (with
+    a station network: any of its stations).
     """
 
     def __init__(self, placeholder: Placeholder, model: MeasurementModel,
-                 config: TrackerConfig, n: int = 6, object_id: str = "") -> None:
+                 config: FilterOptions, n: int = 6, object_id: str = "",
+                 frame_id: str = "") -> None:
         self.f = placeholder
         self.model = model
         self.config = config
         self.n = n
         self.object_id = object_id
+        self.frame_id = frame_id
         self.kind = model.kind
         self.reset()
 
@@ -220,7 +177,7 @@ class Tracker:
         """
         x, F = self.f(e.x, t - e.t, e.t)
         P = F @ e.P @ F.T + self._Q(t - e.t)
-        P = bound_covariance(x, 0.5 * (P + P.T), self.config.sigma_bound)
+        P = bound_covariance(x, 0.5 * (P + P.T), self.config.noise.sigma_bound)
         return StateEstimate(t, x, P, e.object_id, 0, 0.0)
 
     # ----------------------------------------------------------------------------------
@@ -238,7 +195,7 @@ class Tracker:
             self._gate_misses = 0 if out.estimate is not None else self._gate_misses
             return out
         self._gate_misses += 1
-        limit = self.config.reinit_after
+        limit = self.config.iod.reinit_after
         if not limit or self._gate_misses < limit:
             return out
         self.reset()
@@ -251,7 +208,7 @@ class Tracker:
     def _validate(self, m: Measurement) -> tuple[str, str]:
         if m.source not in (Source.SENSOR, Source.FORECAST):
             return Cause.REJECTED_SOURCE, f"unknown source {m.source}"
-        problem = measurement_problem(m, self.kind, self.config.frame_id)
+        problem = measurement_problem(m, self.kind, self.frame_id)
         if problem == OK and m.horizon < 0.0:
             return Cause.REJECTED_HORIZON, f"forecast horizon {m.horizon} s < 0 at t={m.t}"
         if (problem == OK and isinstance(self.model, StationModels)
@@ -269,7 +226,7 @@ class Tracker:
         return self.model
 
     def _Q(self, dt: float) -> np.ndarray:
-        return process_noise(abs(dt), self.config.q, dim=self.n // 2)
+        return process_noise(abs(dt), self.config.noise.q, dim=self.n // 2)
 
     def _step(self, m: Measurement, source: int) -> Outcome:
         """Predict to m.t and update with m (the EKF exists).
@@ -283,15 +240,16 @@ class Tracker:
         before = Snapshot(self.t, ekf.x, ekf.P)
         model, t = self._model_for(m), m.t
         assert not isinstance(model, StationModels)
+        noise = self.config.noise
         try:
             with np.errstate(over="raise", invalid="raise"):
                 if dt != 0.0:
                     ekf.predict(lambda x: self.f(x, dt, before.t), self._Q(dt))
-                    if self.config.sigma_bound:
-                        ekf.P = bound_covariance(ekf.x, ekf.P, self.config.sigma_bound)
+                    if noise.sigma_bound:
+                        ekf.P = bound_covariance(ekf.x, ekf.P, noise.sigma_bound)
                         ekf.P_prior = ekf.P.copy()
                 result = ekf.update(m.z, lambda x: model.h_and_H(x, t), m.R,
-                                    model.angle_mask, self.config.gate)
+                                    model.angle_mask, noise.gate)
             ok: bool | np.bool_ = np.isfinite(ekf.x).all() and np.isfinite(ekf.P).all()
         except (ValueError, OverflowError, FloatingPointError, np.linalg.LinAlgError) as exc:
             ok, result, reason = False, None, f"{type(exc).__name__}: {exc}"
@@ -305,7 +263,7 @@ class Tracker:
         self.t = m.t
         if not result.accepted:
             return Outcome(rejected=Cause.REJECTED_GATE,
-                           detail=f"NIS {result.nis:.1f} > gate {self.config.gate}")
+                           detail=f"NIS {result.nis:.1f} > gate {noise.gate}")
         return Outcome(estimate=self.estimate(source, result.nis))
 
     def _fuse_forecast(self, m: Measurement) -> Outcome:
@@ -397,8 +355,8 @@ class Tracker:
     # ----------------------------------------------------------------------------------
     def _initialise(self, m: Measurement) -> Outcome:
         """Hand `m` to the IOD batch; start the EKF when the batch is solved."""
-        got = self._initiator.add(m, self.config.iod_samples, self.config.p0_sigma,
-                                  self.config.iod_max_span_s)
+        iod = self.config.iod
+        got = self._initiator.add(m, iod.iod_samples, iod.p0_sigma, iod.iod_max_span_s)
         if isinstance(got, tuple):
             cause, detail = got
             return Outcome(rejected=cause, detail=detail)

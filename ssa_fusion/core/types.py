@@ -1,7 +1,8 @@
 """Plain data types shared by the core, the nodes and the offline tools.
 
 Everything here is in the core's units: km, km/s, rad, s. Times are seconds on the
-simulation clock (the ROS time of the message stamps).
+simulation clock (the ROS time of the message stamps); `same_epoch` says when two of them
+name the same epoch.
 """
 
 from __future__ import annotations
@@ -84,6 +85,44 @@ class Cause(enum.StrEnum):
 
 
 KIND_NAMES = {Kind.POSITION: "position", Kind.RANGE_AZ_EL: "range_az_el", Kind.RA_DEC: "ra_dec"}
+
+
+class MotionModel(enum.StrEnum):
+    """A motion model: what a filter predicts with, or what a simulated truth follows.
+
+    The values are the names in settings, JSON and ROS parameters; `dynamics` holds the
+    right-hand sides of the integrated ones.
+    """
+
+    KEPLER = "kepler"
+    """Analytic two-body (universal variables, `kepler.propagate`), GCRF km, km/s."""
+    TWO_BODY = "two_body"
+    """Two-body, integrated with its state transition matrix (`propagation.integrate_stm`)."""
+    J2 = "j2"
+    """Two-body + J2 about the Earth's pole, integrated with its state transition matrix
+    (`propagation.integrate_stm`: compiled fixed-step DOP853, steps of at most 60 s)."""
+    DRAG = "drag"
+    """Two-body + drag in an exponential atmosphere co-rotating with the Earth, integrated
+    with its state transition matrix (`propagation.integrate_stm`, numpy path)."""
+    PENDULUM = "pendulum"
+    """Damped pendulum [theta rad, theta_dot rad/s] (the paper's toy problem)."""
+    VDP = "vdp"
+    """Van der Pol oscillator (nondimensional)."""
+    CR3BP = "cr3bp"
+    """Circular restricted three-body problem, Earth-Moon, rotating frame, nondimensional."""
+
+
+EPOCH_TOLERANCE_S = 1e-6
+"""Absolute tolerance of `same_epoch`, s (the relative one is 1e-12)."""
+
+
+def same_epoch(a: float, b: float) -> bool:
+    """Return whether epochs ``a`` and ``b`` (s) are the same up to round-off.
+
+    Round-off of epochs computed as ``t0 + k * cadence`` or ``t - horizon``: 1 µs
+    (`EPOCH_TOLERANCE_S`), or 1e-12 relative (~2 ms on Unix times).
+    """
+    return abs(a - b) <= max(EPOCH_TOLERANCE_S, 1e-12 * abs(b))
 
 
 @dataclass

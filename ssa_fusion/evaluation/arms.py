@@ -29,15 +29,22 @@ from __future__ import annotations
 import bisect
 import enum
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from ssa_fusion.core import frames
-from ssa_fusion.core.config import ORBIT_MODELS, EstimatorConfig, MotionModel, make_tracker
+from ssa_fusion.core.config import ORBIT_MODELS, EstimatorConfig, make_tracker
 from ssa_fusion.core.metrics import epsilon, nees
 from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
-from ssa_fusion.core.types import Measurement, Source, StateEstimate, UpdateSource
+from ssa_fusion.core.types import (
+    Measurement,
+    MotionModel,
+    Source,
+    StateEstimate,
+    UpdateSource,
+    same_epoch,
+)
 from ssa_fusion.evaluation.montecarlo import N_PARTICLES, placeholder_ensemble
 
 J2_COAST_Q = 1e-13
@@ -62,7 +69,8 @@ class ArmTrajectory:
     """One arm's estimates at the gap epochs.
 
     t : (k,) epochs, s; x : (k, n) states; P : (k, n, n) covariances; source : (k,)
-    `UpdateSource` of each estimate (NONE: a prediction)."""
+    `UpdateSource` of each estimate (NONE: a prediction).
+    """
 
     t: np.ndarray
     x: np.ndarray
@@ -76,7 +84,8 @@ class ArmScore:
 
     epsilon : the paper's normalised error (`metrics.epsilon`); pos_err_mean_km,
     pos_err_final_km : position error norm, mean over the gap and at its last epoch, km;
-    nees : (k,) NEES per epoch (None if a covariance is not invertible); nees_mean its mean."""
+    nees : (k,) NEES per epoch (None if a covariance is not invertible); nees_mean its mean.
+    """
 
     epsilon: float
     pos_err_mean_km: float
@@ -92,8 +101,10 @@ def _trajectory(estimates: list[StateEstimate]) -> ArmTrajectory:
 
 
 def score(arm: ArmTrajectory, x_true: np.ndarray) -> ArmScore:
-    """Score `arm` against the true states (k, n) at its epochs (the first three state
-    components are the position, km, for the position errors)."""
+    """Score `arm` against the true states (k, n) at its epochs.
+
+    The first three state components are the position, km, for the position errors.
+    """
     err = np.linalg.norm(arm.x[:, :3] - x_true[:, :3], axis=1)
     e: np.ndarray | None = None
     if np.all(np.isfinite(arm.P)):
@@ -107,8 +118,10 @@ def score(arm: ArmTrajectory, x_true: np.ndarray) -> ArmScore:
 
 def run_filter(c: EstimatorConfig, stream: Iterable[Measurement],
                object_id: str = "") -> dict[float, StateEstimate]:
-    """Run the EKF of `c` over `stream` in epoch order (a real measurement before a forecast
-    of the same epoch); the last estimate published per epoch."""
+    """Run the EKF of `c` over `stream` in epoch order; return the last estimate per epoch.
+
+    A real measurement goes before a forecast of the same epoch.
+    """
     tracker = make_tracker(c, object_id)
     out: dict[float, StateEstimate] = {}
     for m in sorted(stream, key=lambda m: (m.t, m.source)):
@@ -120,8 +133,11 @@ def run_filter(c: EstimatorConfig, stream: Iterable[Measurement],
 
 
 def start_estimate(estimates: Mapping[float, StateEstimate], t_gap0: float) -> StateEstimate:
-    """The filter's estimate at its last real measurement before the gap starts at `t_gap0`
-    (ValueError if the filter never updated on a real measurement before it)."""
+    """Return the filter's estimate at its last real measurement before the gap.
+
+    The gap starts at `t_gap0`; ValueError if the filter never updated on a real
+    measurement before it.
+    """
     before = [e for t, e in estimates.items()
               if t < t_gap0 and e.update_source == UpdateSource.SENSOR]
     if not before:
@@ -132,18 +148,19 @@ def start_estimate(estimates: Mapping[float, StateEstimate], t_gap0: float) -> S
 
 def placeholder(c: EstimatorConfig, start: StateEstimate, t_gap: np.ndarray, seed: int,
                 n_particles: int = N_PARTICLES) -> ArmTrajectory:
-    """The motion model alone: Monte Carlo from `start` (see the module docstring)."""
+    """Return the motion model alone: Monte Carlo from `start` (see the module docstring)."""
     dt = np.concatenate([[0.0], t_gap - start.t])  # the ensemble starts at the estimate
+    motion = c.filter.motion
     pole = (frames.pole_frame(start.t + (c.jd0 - UNIX_EPOCH_JD) * DAY_S)
-            if c.motion_model in ORBIT_MODELS else None)
-    mean, cov = placeholder_ensemble(str(c.motion_model), start.x, start.P, dt, seed,
-                                     n_particles, pole, **c.motion_params)
+            if motion.motion_model in ORBIT_MODELS else None)
+    mean, cov = placeholder_ensemble(str(motion.motion_model), start.x, start.P, dt, seed,
+                                     n_particles, pole, **motion.motion_params)
     return ArmTrajectory(np.asarray(t_gap, float), mean[1:], cov[1:],
                          np.full(len(t_gap), UpdateSource.NONE))
 
 
 def coast(c: EstimatorConfig, start: StateEstimate, t_gap: np.ndarray) -> ArmTrajectory:
-    """The EKF of `c` predicting from `start` epoch by epoch through the gap, no update."""
+    """Return the EKF of `c` predicting from `start` epoch by epoch through the gap, no update."""
     tracker = make_tracker(c)
     e, out = start, []
     for t in t_gap:
@@ -154,51 +171,49 @@ def coast(c: EstimatorConfig, start: StateEstimate, t_gap: np.ndarray) -> ArmTra
 
 def j2_coast(c: EstimatorConfig, real: Iterable[Measurement],
              t_gap: np.ndarray) -> ArmTrajectory | None:
-    """The EKF of `c` with the two-body + J2 motion model and its process noise `J2_COAST_Q`
-    over the real measurements before the gap, coasting through it; None unless `c` tracks
-    an Earth orbit."""
-    if c.motion_model not in ORBIT_MODELS:
+    """Return the EKF of `c` with a two-body + J2 motion model, coasting through the gap.
+
+    The filter runs with its process noise `J2_COAST_Q` over the real measurements before
+    the gap; None unless `c` tracks an Earth orbit.
+    """
+    if c.filter.motion.motion_model not in ORBIT_MODELS:
         return None
-    j2 = c.with_(motion_model=MotionModel.J2, tracker=replace(c.tracker, q=J2_COAST_Q))
+    j2 = c.with_(filter=c.filter.with_(motion_model=MotionModel.J2, q=J2_COAST_Q))
     before = [m for m in real if m.t < t_gap[0] and m.source == Source.SENSOR]
     return coast(j2, start_estimate(run_filter(j2, before), float(t_gap[0])), t_gap)
 
 
-def _same_epoch(a: float, b: float) -> bool:
-    """Return a == b up to the round-off of epochs computed as t0 + k * cadence (1 µs, or
-    1e-12 relative on Unix times)."""
-    return abs(a - b) <= max(1e-6, 1e-12 * abs(b))
-
-
 class _Epochs:
-    """A filter's estimates by epoch, looked up up to round-off (`_same_epoch`)."""
+    """A filter's estimates by epoch, looked up up to round-off (`types.same_epoch`)."""
 
     def __init__(self, estimates: Mapping[float, StateEstimate]) -> None:
         self.times = sorted(estimates)
         self.estimates = estimates
 
     def at(self, t: float) -> StateEstimate | None:
-        """The estimate at epoch t, or None."""
+        """Return the estimate at epoch t, or None."""
         k = bisect.bisect_left(self.times, t)
         for j in (k - 1, k):
-            if 0 <= j < len(self.times) and _same_epoch(self.times[j], t):
+            if 0 <= j < len(self.times) and same_epoch(self.times[j], t):
                 return self.estimates[self.times[j]]
         return None
 
     def before(self, t: float) -> StateEstimate | None:
-        """The last estimate before epoch t (not at it), or None."""
+        """Return the last estimate before epoch t (not at it), or None."""
         k = bisect.bisect_left(self.times, t)
-        while k > 0 and _same_epoch(self.times[k - 1], t):
+        while k > 0 and same_epoch(self.times[k - 1], t):
             k -= 1
         return self.estimates[self.times[k - 1]] if k > 0 else None
 
 
 def at_epochs(c: EstimatorConfig, estimates: Mapping[float, StateEstimate],
               t_gap: np.ndarray) -> ArmTrajectory:
-    """A filter's estimate at each gap epoch, else its prediction there (`Tracker.predict_from`,
-    with the EKF of `c`): from the previous epoch's output when no estimate came between
-    (chained, as a filter publishing at a cadence through a gap does), else from the last
-    estimate before it."""
+    """Return a filter's estimate at each gap epoch, else its prediction there.
+
+    The prediction (`Tracker.predict_from`, with the EKF of `c`) goes from the previous
+    epoch's output when no estimate came between (chained, as a filter publishing at a
+    cadence through a gap does), else from the last estimate before it.
+    """
     tracker = make_tracker(c)
     lookup = _Epochs(estimates)
     out: list[StateEstimate] = []
@@ -217,14 +232,16 @@ def at_epochs(c: EstimatorConfig, estimates: Mapping[float, StateEstimate],
 
 def dmd_ekf(c: EstimatorConfig, estimates: Mapping[float, StateEstimate],
             t_gap: np.ndarray) -> ArmTrajectory:
-    """The filter's estimates fusing the surrogate's forecasts (`at_epochs`)."""
+    """Return the filter's estimates fusing the surrogate's forecasts (`at_epochs`)."""
     return at_epochs(c, estimates, t_gap)
 
 
 def hypothetical(c: EstimatorConfig, real_and_withheld: Iterable[Measurement],
                  t_gap: np.ndarray) -> ArmTrajectory:
-    """The EKF of `c` over the real measurements and the gap's withheld ones (`at_epochs`:
-    an epoch whose measurement the filter rejected carries its prediction)."""
+    """Return the EKF of `c` over the real measurements and the gap's withheld ones.
+
+    `at_epochs`: an epoch whose measurement the filter rejected carries its prediction.
+    """
     return at_epochs(c, run_filter(c, real_and_withheld), t_gap)
 
 
@@ -234,7 +251,8 @@ class GapEvaluation:
 
     t : (k,) gap epochs; truth : (k, n); arms / scores by `ArmName` (j2_coast absent where it
     does not apply); coverage : fraction of gap epochs with a filter estimate that fused a
-    forecast; predicted : gap epochs where dmd_ekf is the filter's prediction."""
+    forecast; predicted : gap epochs where dmd_ekf is the filter's prediction.
+    """
 
     t: np.ndarray
     truth: np.ndarray
@@ -248,7 +266,7 @@ def evaluate_gap(c: EstimatorConfig, estimates: Mapping[float, StateEstimate],
                  real: list[Measurement], withheld: list[Measurement], t_gap: np.ndarray,
                  x_true: np.ndarray, seed: int,
                  only: Iterable[ArmName] = tuple(ArmName)) -> GapEvaluation:
-    """The arms over the gap `t_gap` with true states `x_true` (all, or those in `only`).
+    """Score the arms over the gap `t_gap` with true states `x_true` (all, or those in `only`).
 
     `estimates`: the filter's estimates fusing the surrogate's forecasts (live from a bag, or
     offline), last per epoch; `real`: the real measurements (not the gap's); `withheld`: the

@@ -1,5 +1,8 @@
-"""The paper's "placeholder model alone" arm: Monte Carlo of the placeholder dynamics over
-an ensemble drawn from an estimate and its covariance (paper section 3, 200 particles)."""
+"""The paper's "placeholder model alone" arm: Monte Carlo of the placeholder dynamics.
+
+Over an ensemble drawn from an estimate and its covariance (paper section 3, 200
+particles).
+"""
 
 from __future__ import annotations
 
@@ -14,10 +17,12 @@ def placeholder_ensemble(model: str, x0: np.ndarray, P0: np.ndarray, dt: np.ndar
                          seed: int = 0, n_particles: int = N_PARTICLES,
                          pole_frame: np.ndarray | None = None,
                          **params: float) -> tuple[np.ndarray, np.ndarray]:
-    """Mean (k, n) and covariance (k, n, n) of `n_particles` draws from N(x0, P0)
-    propagated by the placeholder `model` ("kepler" = two-body) to offsets `dt` (k,) s from
-    the epoch of x0 (dt[0] may be 0); an orbit's J2 about the pole of `pole_frame`
-    (`dynamics.propagate`). Deterministic for a given `seed`."""
+    """Return the mean (k, n) and covariance (k, n, n) of a propagated ensemble.
+
+    `n_particles` draws from N(x0, P0) propagated by the placeholder `model` ("kepler" =
+    two-body) to offsets `dt` (k,) s from the epoch of x0 (dt[0] may be 0); an orbit's J2
+    about the pole of `pole_frame` (`dynamics.propagate`). Deterministic for a given `seed`.
+    """
     n = len(x0)
     rng = np.random.default_rng([seed, 7])
     L = np.linalg.cholesky(0.5 * (P0 + P0.T) + 1e-30 * np.eye(n))

@@ -26,8 +26,10 @@ PASS_BREAK_S = 600.0
 
 def passes(measurements: list[Measurement], gap_s: float = PASS_BREAK_S
            ) -> list[tuple[int, int]]:
-    """Index ranges [first, last] of the passes in `measurements` (epoch order): runs with
-    no two consecutive measurements more than `gap_s` apart."""
+    """Return the index ranges [first, last] of the passes in `measurements` (epoch order).
+
+    A pass is a run with no two consecutive measurements more than `gap_s` apart.
+    """
     if not measurements:
         return []
     t = np.array([m.t for m in measurements])
@@ -88,9 +90,12 @@ class PassReport:
 def pass_report(c: EstimatorConfig, estimates: dict[float, StateEstimate],
                 real: list[Measurement], t_truth: np.ndarray,
                 x_truth: np.ndarray) -> PassReport:
-    """Score a filter's estimates (by epoch, those that fused a measurement) against the truth
-    (`t_truth`, `x_truth` on a regular cadence): after each pass of `real`, and at every truth
-    epoch (the estimate there, or the prediction from the last one)."""
+    """Score a filter's estimates against the truth after each pass and at every truth epoch.
+
+    `estimates`: by epoch, those that fused a measurement; the truth (`t_truth`, `x_truth`)
+    is on a regular cadence. Scored after each pass of `real`, and at every truth epoch (the
+    estimate there, or the prediction from the last one).
+    """
     if not estimates:
         raise ValueError("the filter never published an estimate")
     traj = estimates_at(c, estimates, t_truth)
@@ -115,15 +120,20 @@ def pass_report(c: EstimatorConfig, estimates: dict[float, StateEstimate],
 
 def estimates_at(c: EstimatorConfig, estimates: dict[float, StateEstimate],
                  t: np.ndarray) -> arms.ArmTrajectory:
-    """The filter's estimate, or its prediction from the last one, at every epoch of `t`
-    after its first estimate (what the live filter publishes through the gaps)."""
+    """Return the filter's estimate, or its prediction from the last one, at epochs `t`.
+
+    At every epoch of `t` after its first estimate (what the live filter publishes through
+    the gaps).
+    """
     first = min(estimates)
     return arms.at_epochs(c, estimates, t[t > first])
 
 
 def outage_epochs(t: np.ndarray, withheld: list[Measurement]) -> np.ndarray:
-    """The truth epochs `t` the scheduled outage is scored over: from its first withheld
-    measurement to its last (the same rule for a bag, `apps.evaluate`, which knows only what
-    was withheld, not the schedule)."""
+    """Return the truth epochs of `t` the scheduled outage is scored over.
+
+    From its first withheld measurement to its last (the same rule for a bag,
+    `apps.evaluate`, which knows only what was withheld, not the schedule).
+    """
     w = [m.t for m in withheld]
     return t[(t >= min(w)) & (t <= max(w))] if w else t[:0]

@@ -14,17 +14,18 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
 from ssa_fusion.core import config, dynamics, frames
-from ssa_fusion.core.config import EstimatorConfig, Lift, MotionModel
+from ssa_fusion.core.config import EstimatorConfig, Lift
+from ssa_fusion.core.filter_options import FilterOptions
 from ssa_fusion.core.frames import Station
-from ssa_fusion.core.measurement import PositionModel, RazelModel
+from ssa_fusion.core.measurement import PositionModel, RadecModel, RazelModel, StationModels
 from ssa_fusion.core.stations import STATIONS
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.tracker import TrackerConfig
 from ssa_fusion.core.types import Kind
 
 ISS_ELEMENTS: dict[str, float] = {
@@ -124,18 +125,22 @@ class Scenario:
     retrain_period_s: float = math.inf
     lift: str = ""
     t0: float = ORBIT_EPOCH_UNIX
-    truth_params: dict = field(default_factory=dict)
-    placeholder_params: dict = field(default_factory=dict)
+    truth_params: dict[str, float] = field(default_factory=dict)
+    placeholder_params: dict[str, float] = field(default_factory=dict)
     finding: str = ""
 
     @property
     def n(self) -> int:
+        """The state dimension."""
         return len(self.x0)
 
     @property
     def is_orbit(self) -> bool:
-        """An Earth orbit (GCRF states, UTC clock): decided by the truth, never by the
-        filter's model (a J2 filter on the ISS is still an orbit)."""
+        """Whether this is an Earth orbit (GCRF states, UTC clock).
+
+        Decided by the truth, never by the filter's model (a J2 filter on the ISS is still
+        an orbit).
+        """
         return self.truth in ORBIT_TRUTHS
 
     @property
@@ -150,26 +155,33 @@ class Scenario:
 
     @property
     def gap_start(self) -> float:
+        """The gap's first instant, s on the scenario's clock."""
         return self.t0 + self.track_s
 
     @property
     def gap_end(self) -> float:
+        """The end of the gap (the first instant after it), s on the scenario's clock."""
         return self.gap_start + self.gap_s
 
-    def with_(self, **changes) -> Scenario:
-        return replace(self, **changes)
+    def with_(self, **changes: object) -> Scenario:
+        """Return a copy with `changes` (`dataclasses.replace`)."""
+        # arg-type: `changes` are fields of different types by name, which mypy cannot match
+        # to `object`; replace itself rejects a name that is no field
+        return replace(self, **changes)  # type: ignore[arg-type]
 
     def estimator(self) -> EstimatorConfig:
-        """The estimator this scenario runs (the live nodes' and the experiments'): motion
-        model, measurement stream, P0 floor, q, IOD samples and the Hankel-DMD settings
-        (buffer = the tracking window, forecasts up to one cadence past the gap)."""
+        """Return the estimator this scenario runs (the live nodes' and the experiments').
+
+        Motion model, measurement stream, P0 floor, q, IOD samples and the Hankel-DMD
+        settings (buffer = the tracking window, forecasts up to one cadence past the gap).
+        """
         return EstimatorConfig(
             kind=Kind(self.kind), station=self.station or "columbus", observed=self.observed,
-            n=self.n, motion_model=MotionModel(self.placeholder),
-            motion_params=dict(self.placeholder_params), jd0=self.jd0,
-            lift=Lift(self.lift or "none"),
-            tracker=TrackerConfig(p0_sigma=self.p0_sigma, q=self.q,
-                                  iod_samples=self.iod_samples),
+            n=self.n, jd0=self.jd0, lift=Lift(self.lift or "none"),
+            filter=FilterOptions().with_(motion_model=self.placeholder,
+                                         motion_params=self.placeholder_params,
+                                         p0_sigma=self.p0_sigma, q=self.q,
+                                         iod_samples=self.iod_samples),
             surrogate=replace(LIVE_SURROGATE, buffer_s=self.buffer_s or self.track_s,
                               delays=self.delays, rank=self.rank, cadence_s=self.cadence_s,
                               max_horizon_s=self.gap_s + self.cadence_s,
@@ -177,10 +189,12 @@ class Scenario:
 
 
 def _iss_state() -> tuple[float, ...]:
+    """Return the ISS's initial GCRF state (`ISS_ELEMENTS`), km, km/s."""
     return tuple(dynamics.elements_to_state(**ISS_ELEMENTS))
 
 
 def _molniya_state() -> tuple[float, ...]:
+    """Return the Molniya's initial GCRF state (`MOLNIYA_ELEMENTS`), km, km/s."""
     return tuple(dynamics.elements_to_state(**MOLNIYA_ELEMENTS))
 
 
@@ -203,8 +217,9 @@ HALO_PERIOD = 2.17831
 # length of the window, forecast that stretch, error against its measurements): two
 # periods for the ISS (372) and Molniya (144), one period for the halo orbit (200); the
 # pendulum's 60 is its holdout minimum; Van der Pol keeps 100 (100-200 all forecast to
-# ~1e-6, far below what its placeholder error lets show). Never on the gap.
-_ISS = dict(
+# ~1e-6, far below what its placeholder error lets show). Never on the gap. `_ISS` and
+# `_PENDULUM` are keyword arguments of `Scenario`, of the types of its fields.
+_ISS: dict[str, Any] = dict(
     x0=_iss_state(), placeholder="kepler", cadence_s=30.0,
     track_s=30.0 * round(10 * ISS_PERIOD_S / 30.0), gap_s=186 * 30.0,
     delays=round(2 * ISS_PERIOD_S / 30.0),
@@ -212,7 +227,7 @@ _ISS = dict(
 )
 
 # The damped pendulum of the paper; only the initial angle differs between its two rows.
-_PENDULUM = dict(
+_PENDULUM: dict[str, Any] = dict(
     truth="pendulum", placeholder="pendulum", observed=(0,), noise_sigma=(0.0,),
     cadence_s=0.1, track_s=100.0, gap_s=400.0, after_s=20.0, delays=60, t0=0.0,
     p0_sigma=(1e-3, 1e-2), q=1e-5, truth_params={"m": 0.5, "c": 2e-3, "L": 1.0},
@@ -276,7 +291,7 @@ after ten orbits (15.5 h) of tracking."""
 
 
 def get(name: str) -> Scenario:
-    """The scenario `name`; ValueError listing the known names otherwise."""
+    """Return the scenario `name`; ValueError listing the known names otherwise."""
     try:
         return SCENARIOS[name]
     except KeyError:
@@ -286,29 +301,40 @@ def get(name: str) -> Scenario:
 
 
 def settings_for(name: str = "", kind: int = Kind.RANGE_AZ_EL) -> Scenario:
-    """Estimator settings for recorded data: scenario `name`, else the default orbit scenario
-    of the measurement `kind` (range/az/el: iss_j2_rae, position: iss_j2_pos)."""
+    """Return the scenario whose estimator settings fit recorded data.
+
+    Scenario `name`, else the default orbit scenario of the measurement `kind` (range/az/el:
+    iss_j2_rae, position: iss_j2_pos).
+    """
     if name:
         return get(name)
     return get("iss_j2_rae" if kind == Kind.RANGE_AZ_EL else "iss_j2_pos")
 
 
-def measurement_model(s: Scenario) -> PositionModel | RazelModel:
-    """h(x, t) of the scenario; t on the scenario's clock (Unix s for orbits)."""
-    return config.measurement_model(s.estimator())
+def measurement_model(s: Scenario) -> PositionModel | RazelModel | RadecModel:
+    """Return h(x, t) of the scenario; t on the scenario's clock (Unix s for orbits).
+
+    ValueError when its station names a network: a scenario is measured from one station.
+    """
+    model = config.measurement_model(s.estimator())
+    if isinstance(model, StationModels):
+        raise ValueError(f"scenario {s.name!r}: station {s.station!r} is a network; a "
+                         "scenario is measured from one station")
+    return model
 
 
 def station(s: Scenario) -> Station | None:
+    """Return the scenario's station (`STATIONS`), None when it has none (positions)."""
     return STATIONS.get(s.station)
 
 
 def placeholder(s: Scenario) -> Placeholder:
-    """The EKF's model f(x, dt, t0) -> (x1, F): analytic Kepler or a `dynamics` model + STM."""
+    """Return the EKF's model f(x, dt, t0) -> (x1, F): analytic Kepler or `dynamics` + STM."""
     return config.motion(s.estimator())
 
 
 def truth_states(s: Scenario, t: np.ndarray) -> np.ndarray:
-    """True states (len(t), n) at times `t` on the scenario clock (t[0] == s.t0)."""
+    """Return the true states (len(t), n) at times `t` on the scenario clock (t[0] == s.t0)."""
     if s.truth == "sgp4":
         return dynamics.sgp4_ephemeris(np.array(s.x0), s.unix0 + s.t0, t - s.t0,
                                        **s.truth_params)

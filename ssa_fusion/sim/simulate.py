@@ -1,5 +1,7 @@
-"""Simulated truth and measurements of a scenario: what sensor_sim publishes and what the
-offline experiments consume."""
+"""Simulated truth and measurements of a scenario.
+
+What sensor_sim publishes and what the offline experiments consume.
+"""
 
 from __future__ import annotations
 
@@ -31,10 +33,12 @@ class Simulation:
 
     @property
     def R(self) -> np.ndarray:
+        """The measurement noise covariance (m, m): diag(sigma^2)."""
         return np.diag(self.sigma**2)
 
     @property
     def gap_index(self) -> np.ndarray:
+        """The indices of the epochs in the gap."""
         return np.flatnonzero(self.in_gap)
 
 
@@ -46,11 +50,15 @@ def epochs(s: Scenario, with_after: bool = True) -> np.ndarray:
 
 
 def resolve_noise(s: Scenario, z_true: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Noise sigma per channel: `noise_sigma`, or `noise_rel` x RMS of the channel over the
-    tracking window (only data before the gap is used)."""
+    """Return the noise sigma per channel.
+
+    `noise_sigma`, or `noise_rel` x RMS of the channel over the tracking window (only data
+    before the gap is used).
+    """
     if s.noise_rel > 0.0:
         track = z_true[t < s.gap_start]
-        return s.noise_rel * np.sqrt(np.mean(track**2, axis=0))
+        rms: np.ndarray = np.sqrt(np.mean(track**2, axis=0))
+        return s.noise_rel * rms
     return np.asarray(s.noise_sigma, dtype=float)
 
 

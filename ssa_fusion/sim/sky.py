@@ -20,11 +20,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ssa_fusion.core import dynamics, frames, lighttime, refraction, visibility
-from ssa_fusion.core.config import EstimatorConfig, MotionModel
+from ssa_fusion.core.config import EstimatorConfig
+from ssa_fusion.core.filter_options import FilterOptions
 from ssa_fusion.core.stations import SENSORS, Sensor, SensorType
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.tracker import TrackerConfig
 from ssa_fusion.core.types import Measurement
 from ssa_fusion.sim.scenarios import ISS_BSTAR, ISS_ELEMENTS, ORBIT_EPOCH_UNIX
 
@@ -33,7 +33,7 @@ SKY_Q = 1e-13
 3e-14} whose mean NEES over every truth epoch (gaps included) is nearest its 6 degrees of
 freedom on the tuning seeds 1-3 of iss_radar_columbus (5.9-6.5, 92-95 % of epochs in the
 per-epoch 95 % band; 1e-12, the rule-of-thumb q ~ a^2 tau with a ~ 3e-8 km/s^2, gave 1.3-1.6:
-too cautious). The evaluation seeds never saw it (docs/HISTORY.md, 2026-11-21)."""
+too cautious). The evaluation seeds never saw it (docs/HISTORY.md, 2026-11-24: the real sky)."""
 
 ALL_STATIONS = "*"
 """The station id of an outage of the whole network."""
@@ -115,19 +115,25 @@ class SkyScenario:
         return ",".join(dict.fromkeys(SENSORS[s].station.name for s in self.sensors)) + ","
 
     def estimator(self) -> EstimatorConfig:
-        """The filter of this scenario (the surrogate settings are the live defaults)."""
+        """Return the filter of this scenario (the surrogate settings are the live defaults)."""
         kind = SENSORS[self.sensors[0]].kind
         return EstimatorConfig(
-            kind=kind, station=self.network, motion_model=MotionModel(self.motion_model),
+            kind=kind, station=self.network,
             jd0=UNIX_EPOCH_JD, light_time=self.light_time, refraction=self.refraction,
-            tracker=TrackerConfig(p0_sigma=self.p0_sigma, q=self.q,
-                                  iod_samples=self.iod_samples,
-                                  iod_max_span_s=self.iod_max_span_s,
-                                  reinit_after=self.reinit_after,
-                                  sigma_bound=self.sigma_bound),
+            filter=self.filter_options(),
             surrogate=LIVE_SURROGATE)
 
+    def filter_options(self) -> FilterOptions:
+        """Return the options of this scenario's filter (the per-object and the batched one)."""
+        return FilterOptions().with_(
+            motion_model=self.motion_model, q=self.q, p0_sigma=self.p0_sigma,
+            iod_samples=self.iod_samples, iod_max_span_s=self.iod_max_span_s,
+            reinit_after=self.reinit_after, sigma_bound=self.sigma_bound)
+
     def with_(self, **changes: object) -> SkyScenario:
+        """Return a copy with `changes` (`dataclasses.replace`)."""
+        # arg-type: `changes` are fields of different types by name, which mypy cannot match
+        # to `object`; replace itself rejects a name that is no field
         return replace(self, **changes)  # type: ignore[arg-type]
 
 
@@ -179,7 +185,7 @@ class SkySimulation:
 
 
 def truth(s: SkyScenario, t: np.ndarray) -> np.ndarray:
-    """True GCRF states (len(t), 6) at Unix epochs `t` (SGP4 with the scenario's bstar)."""
+    """Return the true GCRF states (len(t), 6) at Unix epochs `t` (SGP4, the scenario's bstar)."""
     return dynamics.sgp4_ephemeris(np.array(s.x0), s.t0, np.asarray(t, float) - s.t0,
                                    bstar=s.bstar)
 
@@ -195,7 +201,7 @@ def _visible(sensor: Sensor, t: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 def _observe(s: SkyScenario, sensor: Sensor, rng: np.random.Generator,
              object_id: str) -> list[Measurement]:
-    """The noisy measurements of `sensor` over the scenario (light time in the truth)."""
+    """Return the noisy measurements of `sensor` over the scenario (light time in the truth)."""
     t = s.t0 + sensor.cadence_s * np.arange(int(s.duration_s // sensor.cadence_s) + 1)
     x = truth(s, t)
     up = _visible(sensor, t, x)

@@ -4,7 +4,7 @@
 ``catalog_surrogate`` node) against the SGP4 truth of its catalog, beside the filter coasting
 on its own motion model (two-body + J2: the physics-only filter) from the same pass end, at
 the same epochs. `offline_run` runs the same pipeline without ROS: a synthetic LEO catalog
-measured by a scenario's radars (`core.survey`), fused by the batched filter
+measured by a scenario's radars (`sim.survey`), fused by the batched filter
 (`core.track_bank`) and forecast by a `GapBank` that fits every gap (no wall-time budget), so
 the accuracy of the method is measured apart from the time the live node has for it.
 
@@ -25,9 +25,11 @@ import numpy as np
 
 from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core import residual
-from ssa_fusion.core.batch_ekf import BatchEKFConfig
+from ssa_fusion.core.filter_options import FilterOptions
 from ssa_fusion.core.gap_bank import GapBank, GapBankConfig
-from ssa_fusion.core.track_bank import TrackBank, TrackBankConfig
+from ssa_fusion.core.gap_forecaster import PLACEHOLDER_TRAJECTORY
+from ssa_fusion.core.track_bank import TrackBank
+from ssa_fusion.core.types import MotionModel
 from ssa_fusion.sim import survey
 from ssa_fusion.sim.sky import SKY_SCENARIOS, SkyScenario
 
@@ -42,13 +44,13 @@ Rows = dict[str, list[tuple[float, np.ndarray]]]
 """Per object id, (epoch s, state (6,) km, km/s GCRF) in epoch order."""
 
 
-def bank_config(s: SkyScenario) -> TrackBankConfig:
-    """The batched filter of scenario `s` (its motion model, process noise, IOD, bounds;
-    no light time: the batched filter has none)."""
-    return TrackBankConfig(
-        ekf=BatchEKFConfig(motion_model=s.motion_model, q=s.q, sigma_bound=s.sigma_bound),
-        iod_samples=s.iod_samples, iod_max_span_s=s.iod_max_span_s, p0_sigma=s.p0_sigma,
-        reinit_after=s.reinit_after)
+def bank_config(s: SkyScenario) -> FilterOptions:
+    """Return the batched filter's settings of scenario `s`.
+
+    Its motion model, process noise, IOD, bounds; no light time: the batched filter has
+    none.
+    """
+    return s.filter_options()
 
 
 def gap_errors(entries: list[catalog_io.CatalogEntry], estimates: Rows, forecasts: Rows,
@@ -76,7 +78,7 @@ def gap_errors(entries: list[catalog_io.CatalogEntry], estimates: Rows, forecast
         return {"gaps": 0, "forecasts": 0}
     pick = np.unique(np.linspace(0, len(gaps) - 1, min(max_gaps, len(gaps))).astype(int))
     by_id = {e.object_id: e for e in entries}
-    coast = residual.orbit_propagator(residual.PLACEHOLDER_TRAJECTORY[motion_model])
+    coast = residual.orbit_propagator(PLACEHOLDER_TRAJECTORY[MotionModel(motion_model)])
     e_fc, e_coast, better = [], [], 0
     for i in pick.tolist():
         oid, t0, x0, tf, rf = gaps[i]

@@ -17,8 +17,10 @@ the result does not depend on how many.
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -49,30 +51,34 @@ class Case:
 
 
 def cases(s: Scenario, seeds: tuple[int, ...], offsets_h: tuple[float, ...]) -> list[Case]:
-    """The runs of scenario `s`: every seed, from every start offset if range/az/el."""
+    """Return the runs of scenario `s`: every seed, from every start offset if range/az/el."""
     offs = offsets_h if s.kind == Kind.RANGE_AZ_EL else (0.0,)
     return [Case(s, o, seed) for o in offs for seed in seeds]
 
 
 def run_case(case: Case) -> dict[str, float]:
-    """ε of every arm of one run (arm name -> ε). (Worker processes inherit the CLI's
-    one-BLAS-thread setting, `ssa_fusion.limit_blas_threads`.)"""
+    """Run one case; return ε of every arm (arm name -> ε).
+
+    Worker processes inherit the CLI's one-BLAS-thread setting
+    (`ssa_fusion.limit_blas_threads`).
+    """
     s = case.scenario.with_(t0=case.scenario.t0 + 3600.0 * case.offset_h)
     ev, _ = experiments.evaluate_sim(s, simulate(s, case.seed), case.seed)
     return {str(k): sc.epsilon for k, sc in ev.scores.items()}
 
 
 def _stats(v: np.ndarray) -> dict[str, float]:
+    """Return the median, quartiles and worst (largest) value of `v`."""
     q25, med, q75 = np.percentile(v, [25, 50, 75])
     return {"median": float(med), "q25": float(q25), "q75": float(q75), "worst": float(v.max())}
 
 
-def summarise(runs: list[dict[str, float]]) -> dict:
-    """ε per arm per run, the ratio statistics and the DMD-EKF's win rate over coasting."""
+def summarise(runs: list[dict[str, float]]) -> dict[str, Any]:
+    """Return ε per arm per run, the ratio statistics and the DMD-EKF's win rate over coasting."""
     arms = [str(a) for a in ArmName if all(str(a) in r for r in runs)]
     eps = {a: [r[a] for r in runs] for a in arms}
     dmd = np.array(eps[ArmName.DMD_EKF])
-    out: dict = {"runs": len(runs), "epsilon": eps, "epsilon_median":
+    out: dict[str, Any] = {"runs": len(runs), "epsilon": eps, "epsilon_median":
                  {a: float(np.median(v)) for a, v in eps.items()}, "ratios": {}}
     for key, arm in RATIOS.items():
         if str(arm) in eps:
@@ -83,10 +89,12 @@ def summarise(runs: list[dict[str, float]]) -> dict:
 
 def run_distributions(chosen: list[Scenario], seeds: tuple[int, ...] = EVALUATION_SEEDS,
                       offsets_h: tuple[float, ...] = START_OFFSETS_H,
-                      workers: int | None = None, progress=None) -> dict:
-    """Every scenario's distribution (`summarise`) over `seeds` (and `offsets_h`), by name.
+                      workers: int | None = None,
+                      progress: Callable[[str], None] | None = None) -> dict[str, dict[str, Any]]:
+    """Return each scenario's distribution (`summarise`) by name, over `seeds` (and `offsets_h`).
 
-    `workers`: processes (default: the CPU count); `progress(label)` is called per run."""
+    `workers`: processes (default: the CPU count); `progress(label)` is called per run.
+    """
     todo = [(s.name, c) for s in chosen for c in cases(s, seeds, offsets_h)]
     workers = workers or os.cpu_count() or 1
     results: dict[str, list[dict[str, float]]] = {s.name: [] for s in chosen}

@@ -1,5 +1,6 @@
-"""The arms of `ssa_fusion.evaluation.arms` on a simulated scenario, plus the paper's two studies
-(pure functions, no I/O).
+"""The arms of `ssa_fusion.evaluation.arms` on a simulated scenario, plus the paper's two studies.
+
+Pure functions, no I/O.
 
 The DMD-EKF runs exactly as the live graph drives the two nodes: the real measurements go
 to a `Surrogate` (Hankel-DMD) and to a `Tracker` (IOD + EKF); during the gap the
@@ -27,7 +28,13 @@ from ssa_fusion.core.metrics import chi2_bounds, nees
 from ssa_fusion.core.surrogate import Surrogate
 from ssa_fusion.core.tracker import Tracker
 from ssa_fusion.core.types import Measurement, StateEstimate
-from ssa_fusion.evaluation.arms import ArmName, ArmTrajectory, GapEvaluation, evaluate_gap
+from ssa_fusion.evaluation.arms import (
+    ArmName,
+    ArmScore,
+    ArmTrajectory,
+    GapEvaluation,
+    evaluate_gap,
+)
 from ssa_fusion.evaluation.montecarlo import N_PARTICLES
 from ssa_fusion.sim.scenarios import Scenario, measurement_model
 from ssa_fusion.sim.simulate import Simulation, simulate
@@ -37,26 +44,31 @@ __all__ = ["N_PARTICLES", "DmdEkfRun", "estimator", "evaluate_sim", "make_surrog
 
 
 def estimator(s: Scenario) -> EstimatorConfig:
-    """The scenario's estimator without the innovation gate (see the module docstring)."""
+    """Return the scenario's estimator without the innovation gate (see the module docstring)."""
     c = s.estimator()
-    return c.with_(tracker=replace(c.tracker, gate=None))
+    return c.with_(filter=c.filter.with_(gate=None))
 
 
 def make_tracker(s: Scenario) -> Tracker:
-    """The scenario's EKF, built as the live filter node builds it (`estimator`)."""
+    """Return the scenario's EKF, built as the live filter node builds it (`estimator`)."""
     return config.make_tracker(estimator(s), object_id=s.name)
 
 
-def make_surrogate(s: Scenario, **overrides: Any) -> Surrogate:
-    """The scenario's surrogate, built as the live surrogate node builds it: trained on the
-    tracking window, one fit at the start of the gap, forecasts for every missed epoch.
-    `overrides`: `SurrogateConfig` fields for studies."""
+def make_surrogate(s: Scenario, **overrides: object) -> Surrogate:
+    """Return the scenario's surrogate, built as the live surrogate node builds it.
+
+    Trained on the tracking window, one fit at the start of the gap, forecasts for every
+    missed epoch. `overrides`: `SurrogateConfig` fields for studies.
+    """
     c = estimator(s)
-    return config.make_surrogate(c.with_(surrogate=replace(c.surrogate, **overrides)))
+    # arg-type: `overrides` are fields of different types by name, which mypy cannot match
+    # to `object`; replace itself rejects a name that is no field
+    surrogate = replace(c.surrogate, **overrides)  # type: ignore[arg-type]
+    return config.make_surrogate(c.with_(surrogate=surrogate))
 
 
 def measurements(s: Scenario, sim: Simulation) -> tuple[list[Measurement], list[Measurement]]:
-    """The simulation's real measurements (outside the gap) and the gap's (withheld)."""
+    """Return the simulation's real measurements (outside the gap) and the gap's (withheld)."""
     ms = [Measurement(t=float(t), z=z.copy(), R=sim.R, kind=s.kind, object_id=s.name,
                       frame_id=s.station or Frame.GCRF) for t, z in zip(sim.t, sim.z, strict=True)]
     real = [m for m, g in zip(ms, sim.in_gap, strict=True) if not g]
@@ -66,16 +78,20 @@ def measurements(s: Scenario, sim: Simulation) -> tuple[list[Measurement], list[
 
 @dataclass
 class DmdEkfRun:
-    """The filter's estimates of a DMD-EKF run (last per epoch, keyed by epoch, s) and the
-    forecasts the surrogate issued."""
+    """The filter's estimates of a DMD-EKF run and the forecasts the surrogate issued.
+
+    The estimates are the last per epoch, keyed by epoch, s.
+    """
 
     estimates: dict[float, StateEstimate]
     forecasts: list[Measurement]
 
 
-def run_dmd_ekf(s: Scenario, sim: Simulation, **surrogate_overrides: Any) -> DmdEkfRun:
-    """Surrogate + filter over the simulation, driven as the live graph drives the nodes.
-    `surrogate_overrides`: `SurrogateConfig` fields for studies (none in the reproduction)."""
+def run_dmd_ekf(s: Scenario, sim: Simulation, **surrogate_overrides: object) -> DmdEkfRun:
+    """Run surrogate + filter over the simulation, driven as the live graph drives the nodes.
+
+    `surrogate_overrides`: `SurrogateConfig` fields for studies (none in the reproduction).
+    """
     tr = make_tracker(s)
     su = make_surrogate(s, **surrogate_overrides)
     run = DmdEkfRun({}, [])
@@ -104,9 +120,11 @@ def run_dmd_ekf(s: Scenario, sim: Simulation, **surrogate_overrides: Any) -> Dmd
 
 def evaluate_sim(s: Scenario, sim: Simulation, seed: int,
                  only: tuple[ArmName, ...] = tuple(ArmName),
-                 **surrogate_overrides: Any) -> tuple[GapEvaluation, DmdEkfRun]:
-    """The arms (all, or `only` those) over the simulation's gap (`arms.evaluate_gap`), and
-    the DMD-EKF run."""
+                 **surrogate_overrides: object) -> tuple[GapEvaluation, DmdEkfRun]:
+    """Score the arms (all, or `only` those) over the simulation's gap; return them and the run.
+
+    The arms are `arms.evaluate_gap`'s; the run is the DMD-EKF's (`run_dmd_ekf`).
+    """
     real, withheld = measurements(s, sim)
     run = run_dmd_ekf(s, sim, **surrogate_overrides)
     gap = sim.gap_index
@@ -116,16 +134,20 @@ def evaluate_sim(s: Scenario, sim: Simulation, seed: int,
 
 
 def trajectory(estimates: dict[float, StateEstimate]) -> ArmTrajectory:
-    """All of a run's estimates as one trajectory, in epoch order (for plots)."""
+    """Return all of a run's estimates as one trajectory, in epoch order (for plots)."""
     es = [estimates[t] for t in sorted(estimates)]
     return ArmTrajectory(np.array([e.t for e in es]), np.array([e.x for e in es]),
                          np.array([e.P for e in es]),
                          np.array([e.update_source for e in es], dtype=int))
 
 
-def forecast_errors(s: Scenario, sim: Simulation, forecasts: list[Measurement]) -> dict:
-    """Forecast minus true (noise-free) measurement, and the forecast's covariance, per
-    horizon, for the forecasts issued during the gap."""
+def forecast_errors(s: Scenario, sim: Simulation,
+                    forecasts: list[Measurement]) -> dict[str, np.ndarray]:
+    """Return the forecasts' errors against the true measurements, and their covariances.
+
+    Forecast minus true (noise-free) measurement ("err"), and the forecast's covariance
+    ("cov"), by horizon ("horizon"), for the forecasts issued during the gap.
+    """
     model = measurement_model(s)
     h, err, C = [], [], []
     for f in forecasts:
@@ -141,7 +163,8 @@ def forecast_errors(s: Scenario, sim: Simulation, forecasts: list[Measurement]) 
     return {"horizon": np.array(h), "err": np.array(err), "cov": np.array(C)}
 
 
-def _arm_result(sc: Any, noisy: bool) -> dict:
+def _arm_result(sc: ArmScore, noisy: bool) -> dict[str, float]:
+    """Return an arm's score as results (its mean NEES only for a noisy scenario)."""
     r = {"epsilon": sc.epsilon, "pos_err_mean": sc.pos_err_mean_km,
          "pos_err_final": sc.pos_err_final_km}
     if noisy and sc.nees_mean is not None:
@@ -149,16 +172,18 @@ def _arm_result(sc: Any, noisy: bool) -> dict:
     return r
 
 
-def run_scenario(s: Scenario, seed: int, nees_runs: int = 1) -> dict:
-    """Every arm on `s`: a dict of results, and of arrays for plots under `_` keys. For
-    noisy scenarios with nees_runs > 1 the DMD-EKF's NEES is averaged over `nees_runs`
+def run_scenario(s: Scenario, seed: int, nees_runs: int = 1) -> dict[str, Any]:
+    """Run every arm on `s`: return a dict of results, and of arrays for plots under `_` keys.
+
+    For noisy scenarios with nees_runs > 1 the DMD-EKF's NEES is averaged over `nees_runs`
     independent noise seeds (seed, seed+1, ...), the first of which is the one scored and
-    plotted. Position errors are in the state's units (km for orbits)."""
+    plotted. Position errors are in the state's units (km for orbits).
+    """
     sim = simulate(s, seed)
     ev, run = evaluate_sim(s, sim, seed)
     noisy = bool(np.any(sim.sigma > 0))
-    result: dict = {"arms": {str(k): _arm_result(sc, noisy) for k, sc in ev.scores.items()},
-                    "noisy": noisy}
+    result: dict[str, Any] = {
+        "arms": {str(k): _arm_result(sc, noisy) for k, sc in ev.scores.items()}, "noisy": noisy}
     # how much of the DMD-EKF is forecasts (the rest: the filter's predictions)
     result["arms"]["dmd_ekf"]["forecast_fraction"] = ev.coverage
     if noisy:
@@ -169,14 +194,16 @@ def run_scenario(s: Scenario, seed: int, nees_runs: int = 1) -> dict:
                                    only=(ArmName.DMD_EKF, ArmName.HYPOTHETICAL_EKF))
             runs.append(ev_j.scores[ArmName.DMD_EKF].nees)
             hyp_runs.append(ev_j.scores[ArmName.HYPOTHETICAL_EKF].nees)
-        if all(r is not None for r in runs + hyp_runs):
-            avg = np.mean(runs, axis=0)  # per-epoch NEES averaged over the runs
+        dmd_nees = [r for r in runs if r is not None]
+        hyp_nees = [r for r in hyp_runs if r is not None]
+        if len(dmd_nees) == len(runs) and len(hyp_nees) == len(hyp_runs):  # all invertible
+            avg = np.mean(dmd_nees, axis=0)  # per-epoch NEES averaged over the runs
             lo, hi = chi2_bounds(s.n, len(runs))
             result["nees"] = {
                 "runs": len(runs), "dof": s.n, "band95": [lo, hi],
                 "dmd_ekf_mean": float(np.mean(avg)),
                 "dmd_ekf_fraction_in_band": float(np.mean((avg >= lo) & (avg <= hi))),
-                "hypothetical_ekf_mean": float(np.mean(np.mean(hyp_runs, axis=0))),
+                "hypothetical_ekf_mean": float(np.mean(np.mean(hyp_nees, axis=0))),
             }
             result["arms"]["dmd_ekf"]["nees_mean"] = result["nees"]["dmd_ekf_mean"]
             result["arms"]["hypothetical_ekf"]["nees_mean"] = \
@@ -196,10 +223,14 @@ def run_scenario(s: Scenario, seed: int, nees_runs: int = 1) -> dict:
 
 
 # ----------------------------------------------------------------------------------------
-def vdp_sweep(s: Scenario, seed: int, mus: np.ndarray) -> dict:
-    """Paper fig. "VDP with different mu": epsilon of each arm vs the placeholder's mu_p."""
+def vdp_sweep(s: Scenario, seed: int, mus: np.ndarray) -> dict[str, list[float]]:
+    """Return epsilon of each arm against the placeholder's mu_p.
+
+    The paper's figure "VDP with different mu".
+    """
     sim = simulate(s, seed)
-    out: dict[str, list] = {"mu_p": [], "placeholder": [], "dmd_ekf": [], "hypothetical_ekf": []}
+    out: dict[str, list[float]] = {"mu_p": [], "placeholder": [], "dmd_ekf": [],
+                                   "hypothetical_ekf": []}
     for mu in mus:
         sm = s.with_(placeholder_params={**s.placeholder_params, "mu": float(mu)})
         ev, _ = evaluate_sim(sm, sim, seed, only=(ArmName.PLACEHOLDER, ArmName.DMD_EKF,

@@ -1,4 +1,4 @@
-"""The gap study (issue 19): forecasting through the gaps between passes of the real sky.
+"""The gap study: forecasting through the gaps between passes of the real sky.
 
 Per run (a `sky` scenario from a start offset, with a seed) and per placeholder motion model
 (``kepler``: the filter with a two-body model and the Keplerian filters' process noise
@@ -8,21 +8,21 @@ it (`sky_runs.run_dmd_ekf`). Every inter-pass gap is then scored at the truth ep
 (on a `GRID_S` grid), for the arms:
 
 * ``coast`` -- the filter predicting from its estimate at the end of the pass (with the
-  ``kepler`` placeholder it is the issue's `coast`, with ``j2`` its `j2_coast`);
+  ``kepler`` placeholder it is the `coast` arm, with ``j2`` the `j2_coast` arm);
 * ``dmd_ekf`` -- the filter fusing the Hankel-DMD surrogate's forecasts (its prediction
   where none came: then equal to the coast);
-* one arm per residual setting (e.g. ``hill_h1``) -- variant (b),
+* one arm per residual setting (e.g. ``hill_h1``) --
   `core.residual.ResidualSurrogate`: the placeholder from the pass-end estimate plus the
   learned residual, with the held-out calibrated covariance (the filter's motion model
   corrected; coasting where it did not forecast);
-* ``bopdmd`` -- variant (a), `core.residual.bopdmd_residual_forecast`: BOP-DMD on the same
+* ``bopdmd`` -- `studies.bopdmd.bopdmd_residual_forecast`: BOP-DMD on the same
   irregular residual series, with its bagging variance (coasting where it did not forecast).
 
 Per gap: the mean position error over its epochs (km), the mean NEES (6 dof) of each arm,
 its length (h), whether it lies after the surrogate's training span (its first anchor at
 least `ResidualConfig.min_span_s` before the gap) and whether each surrogate forecast.
 Summaries per run are means over the gaps after the training span (all, and those of
-1.5-16 h, the issue's range), then medians [quartiles] over runs.
+1.5-16 h, `GAP_RANGE_H`), then medians [quartiles] over runs.
 
 Settings are chosen on the tuning seeds 1-3 only (`tune`); `distributions.EVALUATION_SEEDS`
 x `START_OFFSETS_H` are reported. Units: km, h.
@@ -31,15 +31,16 @@ x `START_OFFSETS_H` are reported. Units: km, h.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from ssa_fusion.core import residual
 from ssa_fusion.core.metrics import chi2_bounds
-from ssa_fusion.core.types import UpdateSource
+from ssa_fusion.core.types import Measurement, StateEstimate, UpdateSource
 from ssa_fusion.evaluation import arms, passes
 from ssa_fusion.sim import sky
 from ssa_fusion.studies import bopdmd, sky_runs
@@ -56,17 +57,19 @@ GRID_S = 300.0
 """The truth epochs a gap is scored at are those on this grid (s after the run's start)."""
 
 GAP_RANGE_H = (1.5, 16.0)
-"""The issue's gap lengths for the j2 target, h."""
+"""The gap lengths the j2 target is judged on, h."""
 
 TUNING_SEEDS = (1, 2, 3)
 """The seeds `tune` chooses the residual surrogate's settings on (start offset 0 h)."""
 
 
 def tuning_candidates() -> dict[str, residual.ResidualConfig]:
-    """The residual settings `tune` compares (name -> config): the Hill model with empirical
-    accelerations (constants, + once-, + twice-per-revolution terms), one with a 1-day
-    window, one whose held-out covariance scale grows with the horizon, and the free
-    basis."""
+    """Return the residual settings `tune` compares (name -> config).
+
+    The Hill model with empirical accelerations (constants, + once-, + twice-per-revolution
+    terms), one with a 1-day window, one whose held-out covariance scale grows with the
+    horizon, variants of its relative model error, and the free basis.
+    """
     hill = residual.ResidualConfig(model="hill")
     return {
         "hill_h0": replace(hill, harmonics=0),
@@ -74,7 +77,7 @@ def tuning_candidates() -> dict[str, residual.ResidualConfig]:
         "hill_h2": replace(hill, harmonics=2),
         "hill_h1_w1d": replace(hill, harmonics=1, window_s=86400.0, min_span_s=43200.0),
         "hill_h1_hs": replace(hill, harmonics=1, horizon_scale=True),
-        # session 10, live: the chosen setting's NEES over the gaps is 16-64 (overconfident);
+        # live, hill_h1's NEES over the gaps was 16-64 (overconfident): so these variants of
         # the relative model error (covariance only: no mean error changes) on these seeds
         "hill_h1_me5": replace(hill, harmonics=1, model_error=0.05),
         "hill_h1_me10": replace(hill, harmonics=1, model_error=0.1),
@@ -95,8 +98,11 @@ band on both ISS scenarios (13.4 and 23.1; 0.01: 21.8 and 38.2; 0.1: 13.0 and 27
 
 @dataclass(frozen=True)
 class Case:
-    """One run: scenario name, start offset (h), seed, residual variants (name -> config),
-    and whether the BOP-DMD variant runs too."""
+    """One run of the study.
+
+    Scenario name, start offset (h), seed, residual variants (name -> config), and whether
+    the BOP-DMD variant runs too.
+    """
 
     name: str
     offset_h: float
@@ -105,11 +111,15 @@ class Case:
     bopdmd: bool = True
 
 
-def _anchors(estimates: dict[float, object], real: list) -> list[tuple[float, float]]:
-    """(end epoch of each pass's last real measurement the filter fused, start epoch of the
-    next pass) for the passes of `real` the filter fused."""
+def _anchors(estimates: Mapping[float, StateEstimate],
+             real: list[Measurement]) -> list[tuple[float, float]]:
+    """Return (end epoch, start epoch of the next pass) of each pass of `real` the filter fused.
+
+    The end epoch is that of the pass's last real measurement the filter fused; the last
+    pass's next start is inf.
+    """
     fused = [m for m in real if m.t in estimates
-             and getattr(estimates[m.t], "update_source", None) == UpdateSource.SENSOR]
+             and estimates[m.t].update_source == UpdateSource.SENSOR]
     ps = passes.passes(fused)
     out = []
     for (_, last), (nxt, _) in itertools.pairwise(ps):
@@ -120,16 +130,19 @@ def _anchors(estimates: dict[float, object], real: list) -> list[tuple[float, fl
 
 
 def _score(arm: arms.ArmTrajectory, x_true: np.ndarray) -> tuple[float, float]:
+    """Return `arm`'s mean position error (km) and mean NEES (NaN if none) against `x_true`."""
     sc = arms.score(arm, x_true)
     return sc.pos_err_mean_km, (np.nan if sc.nees_mean is None else sc.nees_mean)
 
 
 def _traj(t: np.ndarray, x: np.ndarray, P: np.ndarray) -> arms.ArmTrajectory:
+    """Return forecasts (states `x`, covariances `P` at epochs `t`) as an arm's trajectory."""
     return arms.ArmTrajectory(t, x, P, np.full(len(t), UpdateSource.FORECAST))
 
 
-def run_placeholder(sim: sky.SkySimulation, placeholder: str, case: Case) -> list[dict]:
-    """Every inter-pass gap of one run with one placeholder, scored (one dict per gap)."""
+def run_placeholder(sim: sky.SkySimulation, placeholder: str,
+                    case: Case) -> list[dict[str, Any]]:
+    """Score every inter-pass gap of one run with one placeholder (one dict per gap)."""
     model, q, dyn = PLACEHOLDERS[placeholder]
     s = sim.scenario.with_(motion_model=model, q=q)
     c = s.estimator()
@@ -139,7 +152,7 @@ def run_placeholder(sim: sky.SkySimulation, placeholder: str, case: Case) -> lis
     surrogates = {n: residual.ResidualSurrogate(cfg, prop) for n, cfg in case.variants}
     grid = sim.t[np.isclose(np.mod(sim.t - sim.t[0], GRID_S), 0.0)]
     x_grid = sim.x[np.isin(sim.t, grid)]
-    gaps: list[dict] = []
+    gaps: list[dict[str, Any]] = []
     t_first = None
     for t_end, t_next in _anchors(est, sim.real):
         e = est[t_end]
@@ -150,7 +163,7 @@ def run_placeholder(sim: sky.SkySimulation, placeholder: str, case: Case) -> lis
         if not np.isfinite(t_next) or not inside.any():
             continue
         t_gap, x_true = grid[inside], x_grid[inside]
-        row: dict = {"placeholder": placeholder, "gap_h": (t_next - t_end) / 3600.0,
+        row: dict[str, Any] = {"placeholder": placeholder, "gap_h": (t_next - t_end) / 3600.0,
                      "since_first_h": (t_end - t_first) / 3600.0, "err": {}, "nees": {},
                      "forecast": {}}
         coast = arms.coast(c, e, t_gap)
@@ -181,8 +194,8 @@ def run_placeholder(sim: sky.SkySimulation, placeholder: str, case: Case) -> lis
     return gaps
 
 
-def run_case(case: Case) -> dict:
-    """One run: both placeholders, every gap scored, and the count of Hankel-DMD forecasts."""
+def run_case(case: Case) -> dict[str, Any]:
+    """Run one case: both placeholders, every gap scored (with its Hankel-DMD forecasts)."""
     base = sky.SKY_SCENARIOS[case.name]
     s = base.with_(t0=base.t0 + 3600.0 * case.offset_h)
     sim = sky.simulate_sky(s, seed=case.seed)
@@ -193,8 +206,9 @@ def run_case(case: Case) -> dict:
 # --------------------------------------------------------------------------------------------
 # Summaries
 # --------------------------------------------------------------------------------------------
-def _q(v: list[float] | np.ndarray) -> str:
-    v = np.asarray(v, float)
+def _q(values: list[float] | np.ndarray) -> str:
+    """Return the median [quartiles] of the finite `values`, as text ("-" if none)."""
+    v = np.asarray(values, float)
     v = v[np.isfinite(v)]
     if not len(v):
         return "-"
@@ -202,8 +216,9 @@ def _q(v: list[float] | np.ndarray) -> str:
     return f"{med:.3g} [{q25:.3g}, {q75:.3g}]"
 
 
-def _scored(run: dict, placeholder: str, min_span_h: float,
-            gap_range: tuple[float, float] | None = None) -> list[dict]:
+def _scored(run: dict[str, Any], placeholder: str, min_span_h: float,
+            gap_range: tuple[float, float] | None = None) -> list[dict[str, Any]]:
+    """Return the run's gaps with `placeholder` after the training span (and in `gap_range`)."""
     out = [g for g in run["gaps"] if g["placeholder"] == placeholder
            and g["since_first_h"] >= min_span_h]
     if gap_range is not None:
@@ -211,11 +226,14 @@ def _scored(run: dict, placeholder: str, min_span_h: float,
     return out
 
 
-def run_summary(run: dict, min_span_h: float,
-                gap_range: tuple[float, float] | None = None) -> dict:
-    """Per placeholder and arm: mean over the run's scored gaps of the gap-mean position
-    error (km) and NEES, and the fraction of gaps each surrogate forecast."""
-    out: dict = {}
+def run_summary(run: dict[str, Any], min_span_h: float,
+                gap_range: tuple[float, float] | None = None) -> dict[str, Any]:
+    """Return a run's means over its scored gaps, per placeholder and arm.
+
+    The mean of the gap-mean position error (km) and NEES, and the fraction of gaps each
+    surrogate forecast.
+    """
+    out: dict[str, Any] = {}
     for p in PLACEHOLDERS:
         gs = _scored(run, p, min_span_h, gap_range)
         if not gs:
@@ -229,16 +247,16 @@ def run_summary(run: dict, min_span_h: float,
     return out
 
 
-def summarise(name: str, runs: list[dict], min_span_h: float, variants: list[str]
-              ) -> tuple[str, dict]:
-    """Markdown for one scenario, and its JSON summary (medians over runs)."""
+def summarise(name: str, runs: list[dict[str, Any]], min_span_h: float, variants: list[str]
+              ) -> tuple[str, dict[str, Any]]:
+    """Return the Markdown for one scenario, and its JSON summary (medians over runs)."""
     lo, hi = chi2_bounds(6)
     arms_list = ["coast", "dmd_ekf", *variants]
     if any("bopdmd" in g["err"] for r in runs for g in r["gaps"]):
         arms_list.append("bopdmd")
     lines = [f"### {name} ({len(runs)} runs: medians [quartiles] over runs of the run's mean "
              f"over its gaps after the training span)", ""]
-    summary: dict = {"runs": len(runs)}
+    summary: dict[str, Any] = {"runs": len(runs)}
     for label, rng in (("all gaps", None), (f"gaps of {GAP_RANGE_H[0]}-{GAP_RANGE_H[1]} h",
                                              GAP_RANGE_H)):
         per = [run_summary(r, min_span_h, rng) for r in runs]
@@ -271,7 +289,7 @@ def summarise(name: str, runs: list[dict], min_span_h: float, variants: list[str
                                                   & (np.asarray(nees) <= hi)))}
             lines.append(f"| {p} | ({n_gaps} gaps over {len(rs)} runs) | | | | |")
         lines.append("")
-    # the issue's kepler target compares with the kepler filter's coast, the j2 one with j2
+    # the kepler target compares with the kepler filter's coast, the j2 one with j2
     per = [run_summary(r, min_span_h, GAP_RANGE_H) for r in runs]
     both = [s for s in per if "kepler" in s and "j2" in s]
     for a in [*variants, *(["bopdmd"] if "bopdmd" in arms_list else [])]:
@@ -294,12 +312,15 @@ def summarise(name: str, runs: list[dict], min_span_h: float, variants: list[str
 def run_gap_study(names: list[str], seeds: tuple[int, ...], offsets_h: tuple[float, ...],
                   variants: dict[str, residual.ResidualConfig], bopdmd: bool = True,
                   workers: int = 2, progress: Callable[[str], None] | None = None
-                  ) -> tuple[str, dict, list[dict]]:
-    """Every run of the scenarios over seeds x offsets in `workers` processes: (markdown,
-    summary by scenario, the raw runs). The result does not depend on `workers`."""
+                  ) -> tuple[str, dict[str, dict[str, Any]], list[dict[str, Any]]]:
+    """Run the scenarios over seeds x offsets; return (markdown, summaries, the raw runs).
+
+    The runs go to `workers` processes; the summaries are by scenario. The result does not
+    depend on `workers`.
+    """
     vs = tuple(variants.items())
     todo = [Case(n, o, s, vs, bopdmd) for n in names for o in offsets_h for s in seeds]
-    runs: list[dict] = []
+    runs: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max(1, workers)) as pool:
         for r in pool.map(run_case, todo):
             runs.append(r)
@@ -314,7 +335,7 @@ def run_gap_study(names: list[str], seeds: tuple[int, ...], offsets_h: tuple[flo
     return "\n\n".join(texts), result, runs
 
 
-def tune(names: list[str], workers: int = 2) -> tuple[str, dict]:
+def tune(names: list[str], workers: int = 2) -> tuple[str, dict[str, dict[str, Any]]]:
     """Compare `tuning_candidates` on `TUNING_SEEDS` (offset 0 h): markdown and summary."""
     cands = tuning_candidates()
     text, result, _ = run_gap_study(names, TUNING_SEEDS, (0.0,), cands, bopdmd=True,

@@ -8,10 +8,14 @@ are written by the Agg renderer whatever the importer's backend is.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from matplotlib.figure import Figure
+
+if TYPE_CHECKING:
+    from ssa_fusion.evaluation.arms import ArmName, ArmTrajectory
+    from ssa_fusion.sim.simulate import Simulation
 
 ARM_STYLE = {
     "placeholder": dict(color="tab:red", label="placeholder alone (MC, 200)"),
@@ -24,10 +28,13 @@ STATE_NAMES = {6: ["x", "y", "z", "u", "v", "w"], 2: ["θ or x", "rate"]}
 
 
 def subplots(nrows: int = 1, ncols: int = 1, *, figsize: tuple[float, float] | None = None,
-             **kw: Any) -> tuple[Figure, Any]:
-    """A new figure and its axes, as `matplotlib.pyplot.subplots` (without pyplot)."""
+             sharex: bool = False) -> tuple[Figure, Any]:
+    """Return a new figure and its axes, as `matplotlib.pyplot.subplots` (without pyplot).
+
+    The axes are one `Axes`, or an array of them for several rows or columns.
+    """
     fig = Figure(figsize=figsize)
-    return fig, fig.subplots(nrows, ncols, **kw)
+    return fig, fig.subplots(nrows, ncols, sharex=sharex)
 
 
 def save(fig: Figure, path: Path, dpi: int = 110) -> None:
@@ -38,15 +45,20 @@ def save(fig: Figure, path: Path, dpi: int = 110) -> None:
 
 def _pointwise_error(x_hat: np.ndarray, x_true: np.ndarray, pos_max: float,
                      vel_max: float) -> np.ndarray:
+    """Return the pointwise normalised error: |dr| / `pos_max` + |dv| / `vel_max`."""
     d = x_hat.shape[1] // 2
     e = x_hat - x_true
-    return (np.linalg.norm(e[:, :d], axis=1) / pos_max
-            + np.linalg.norm(e[:, d:], axis=1) / vel_max)
+    err: np.ndarray = (np.linalg.norm(e[:, :d], axis=1) / pos_max
+                       + np.linalg.norm(e[:, d:], axis=1) / vel_max)
+    return err
 
 
-def error_plot(name: str, sim, arms: dict, path: Path, time_unit: str) -> Path:
-    """Pointwise normalised error (the summand of epsilon) of every arm against time;
-    `time_unit` "h" (sim seconds shown in hours) or the label of the sim's own unit."""
+def error_plot(name: str, sim: Simulation, arms: dict[ArmName, ArmTrajectory], path: Path,
+               time_unit: str) -> Path:
+    """Plot the pointwise normalised error (the summand of epsilon) of every arm against time.
+
+    `time_unit`: "h" (sim seconds shown in hours) or the label of the sim's own unit.
+    """
     d = sim.x.shape[1] // 2
     gap = sim.gap_index
     pos_max = np.max(np.linalg.norm(sim.x[gap, :d], axis=1))
@@ -69,8 +81,9 @@ def error_plot(name: str, sim, arms: dict, path: Path, time_unit: str) -> Path:
     return path
 
 
-def sigma_plot(name: str, sim, arm, path: Path, time_unit: str) -> Path:
-    """DMD-EKF estimation error per state with its ±3σ bounds, around and through the gap."""
+def sigma_plot(name: str, sim: Simulation, arm: ArmTrajectory, path: Path,
+               time_unit: str) -> Path:
+    """Plot the DMD-EKF's error per state with its ±3σ bounds, around and through the gap."""
     n = sim.x.shape[1]
     gap = sim.gap_index
     span = len(gap)
@@ -101,7 +114,8 @@ def sigma_plot(name: str, sim, arm, path: Path, time_unit: str) -> Path:
     return path
 
 
-def vdp_sweep_plot(sweep: dict, path: Path) -> Path:
+def vdp_sweep_plot(sweep: dict[str, list[float]], path: Path) -> Path:
+    """Plot epsilon of each arm against the placeholder's mu_p (`experiments.vdp_sweep`)."""
     fig, ax = subplots(figsize=(6.5, 4))
     for key in ("placeholder", "dmd_ekf", "hypothetical_ekf"):
         ax.semilogy(sweep["mu_p"], sweep[key], marker="o", ms=3, **ARM_STYLE[key])
@@ -115,9 +129,11 @@ def vdp_sweep_plot(sweep: dict, path: Path) -> Path:
     return path
 
 
-def consistency_plot(study: dict, path: Path) -> Path:
-    """Forecast error variance (trace) against horizon: one-shot vs retrained, measured
-    and as predicted by the surrogate."""
+def consistency_plot(study: dict[str, Any], path: Path) -> Path:
+    """Plot the forecast error variance (trace) against horizon.
+
+    One-shot vs retrained, measured and as predicted by the surrogate.
+    """
     fig, ax = subplots(figsize=(7, 4.2))
     h = np.asarray(study["horizon_s"]) / study.get("time_scale", 1.0)
     for key, color in (("one_shot", "tab:red"), ("retrained", "tab:blue")):

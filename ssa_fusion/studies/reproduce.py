@@ -1,5 +1,6 @@
-"""`ssa-fusion reproduce`: the paper's experiments, every arm of `paper.arms` per scenario
-(the paper's three plus the coasting EKF and the J2 EKF coasting), plus the Van der Pol
+"""`ssa-fusion reproduce`: the paper's experiments, every arm of `evaluation.arms` per scenario.
+
+The paper's three arms plus the coasting EKF and the J2 EKF coasting, plus the Van der Pol
 sweep and the surrogate consistency study (paper section 4).
 
 Writes OUT/results.json, OUT/results.md (the table) and PNG plots; prints the table.
@@ -8,19 +9,21 @@ Same seed, same numbers. ``--quick`` shortens the tracking windows and gaps (for
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
 import sys
 import time
 from pathlib import Path
+from typing import Any, TextIO
 
 import numpy as np
 
 from ssa_fusion.core.hankel_dmd import HankelDMD
 from ssa_fusion.core.iod import razel_to_gcrs
 from ssa_fusion.sim import scenarios, sky
-from ssa_fusion.sim.simulate import simulate
+from ssa_fusion.sim.simulate import Simulation, simulate
 from ssa_fusion.studies import distributions, experiments, sky_study
 
 ARMS = ("placeholder", "dmd_ekf", "hypothetical_ekf")
@@ -42,13 +45,14 @@ CONSISTENCY_RETRAIN_STEPS = 31  # new measurements (and a refit) every 31 cadenc
 class Progress:
     """A one-line progress bar on stderr (no dependency)."""
 
-    def __init__(self, total: int, stream=None, width: int = 30) -> None:
+    def __init__(self, total: int, stream: TextIO | None = None, width: int = 30) -> None:
         # sys.stderr looked up now, not at import (it may have been replaced since)
         self.total, self.done, self.width = total, 0, width
         self.stream = stream if stream is not None else sys.stderr
         self.t0 = time.monotonic()
 
     def step(self, label: str) -> None:
+        """Count one step done, `label` shown beside the bar."""
         self.done += 1
         frac = self.done / max(1, self.total)
         bar = "#" * round(frac * self.width)
@@ -62,14 +66,15 @@ class Progress:
 
 
 def quick_variant(s: scenarios.Scenario) -> scenarios.Scenario:
-    """Shorter tracking window and gap (same cadence and estimator settings)."""
+    """Return `s` with a shorter tracking window and gap (same cadence and estimator settings)."""
     track = max(s.track_s / 2, 2 * s.delays * s.cadence_s + 4 * s.cadence_s)
     track = s.cadence_s * round(track / s.cadence_s)
     gap = s.cadence_s * max(10, round(s.gap_s / 2 / s.cadence_s))
     return s.with_(track_s=track, gap_s=gap)
 
 
-def settings_of(s: scenarios.Scenario, sim) -> dict:
+def settings_of(s: scenarios.Scenario, sim: Simulation) -> dict[str, Any]:
+    """Return the settings `s` ran with (simulation, surrogate, filter), for results.json."""
     sc = experiments.make_surrogate(s).config
     return {
         "truth": s.truth, "placeholder": s.placeholder,
@@ -95,7 +100,12 @@ def settings_of(s: scenarios.Scenario, sim) -> dict:
     }
 
 
-def run_one(s: scenarios.Scenario, seed: int, nees_runs: int, out: Path, plots: bool) -> dict:
+def run_one(s: scenarios.Scenario, seed: int, nees_runs: int, out: Path,
+            plots: bool) -> dict[str, Any]:
+    """Run every arm on `s`; return its results, with ratios, settings and targets.
+
+    With `plots`, the error (and, when noisy, ±3σ) plots go to `out`.
+    """
     t0 = time.monotonic()
     r = experiments.run_scenario(s, seed, nees_runs=nees_runs)
     sim, ev, dmd = r.pop("_sim"), r.pop("_eval"), r.pop("_dmd_trajectory")
@@ -124,8 +134,11 @@ def run_one(s: scenarios.Scenario, seed: int, nees_runs: int, out: Path, plots: 
     return r
 
 
-def targets(name: str, r: dict) -> dict:
-    """The issue's targets where the paper found DMD-EKF close to hypothetical."""
+def targets(name: str, r: dict[str, Any]) -> dict[str, bool]:
+    """Return which targets `r` meets, for the scenarios where the paper found DMD-EKF close.
+
+    Close to the hypothetical EKF (`TARGET_CLOSE`); empty for the other scenarios.
+    """
     if name not in TARGET_CLOSE:
         return {}
     out = {
@@ -138,7 +151,7 @@ def targets(name: str, r: dict) -> dict:
 
 
 # ----------------------------------------------------------------------------------------
-def consistency_study(s: scenarios.Scenario, seeds: int, retrain_steps: int) -> dict:
+def consistency_study(s: scenarios.Scenario, seeds: int, retrain_steps: int) -> dict[str, Any]:
     """Paper section 4: the surrogate's forecast error variance against horizon.
 
     one-shot: one Hankel-DMD fit on the tracking window, forecasts through the whole gap.
@@ -146,15 +159,19 @@ def consistency_study(s: scenarios.Scenario, seeds: int, retrain_steps: int) -> 
     the window ending at the newest real measurement and forecasts the next cadences.
     Errors are forecast minus the (noisy) measurement the sensor would have made, the
     quantity the surrogate's covariance describes; the statistics pool `seeds` noise
-    realisations. Only the surrogate is involved (no filter)."""
+    realisations. Only the surrogate is involved (no filter).
+    """
     H = round(s.gap_s / s.cadence_s)
     n_train = round(s.track_s / s.cadence_s)
+    lift_station = scenarios.station(s) if s.lift == "eci" else None  # range/az/el -> GCRF
+    if s.lift == "eci" and lift_station is None:
+        raise ValueError(f"scenario {s.name!r}: the 'eci' lift needs its station")
     e_one, c_one, e_re, c_re = [], [], [], []
     for seed in range(seeds):
         sim = simulate(s, seed)
         Z = sim.z
-        if s.lift == "eci":
-            Z = razel_to_gcrs(Z, s.unix0 + sim.t, scenarios.station(s))
+        if lift_station is not None:
+            Z = razel_to_gcrs(Z, s.unix0 + sim.t, lift_station)
         g0 = int(np.flatnonzero(sim.in_gap)[0])
         m = HankelDMD(s.delays, s.rank).fit(Z[g0 - n_train:g0].T)
         e_one.append(m.forecast(H).T - Z[g0:g0 + H])
@@ -169,8 +186,8 @@ def consistency_study(s: scenarios.Scenario, seeds: int, retrain_steps: int) -> 
         e_re.append(np.concatenate(er))
         c_re.append(np.concatenate(cr))
 
-    def stats(e: list, c: list) -> dict:
-        e, c = np.array(e), np.array(c)  # (seeds, H, m), (seeds, H, m, m)
+    def stats(errors: list[np.ndarray], covariances: list[np.ndarray]) -> dict[str, Any]:
+        e, c = np.array(errors), np.array(covariances)  # (seeds, H, m), (seeds, H, m, m)
         emp = np.mean(np.sum(e**2, axis=2), axis=0)
         pred = np.mean(np.trace(c, axis1=2, axis2=3), axis=0)
         sol = np.linalg.solve(c, e[..., None])[..., 0]
@@ -192,10 +209,12 @@ def consistency_study(s: scenarios.Scenario, seeds: int, retrain_steps: int) -> 
 
 # ----------------------------------------------------------------------------------------
 def _fmt(v: float | None) -> str:
+    """Return `v` with 3 significant digits, "—" for None or a value not finite."""
     return "—" if v is None or not math.isfinite(v) else f"{v:.3g}"
 
 
-def table(results: dict) -> str:
+def table(results: dict[str, Any]) -> str:
+    """Return the Markdown table of every scenario's arms, ratios, NEES and targets."""
     rows = ["| scenario | ε placeholder | ε coast | ε J2 coast | ε DMD-EKF | ε hypothetical | "
             "DMD/hyp | coast/DMD | J2 coast/DMD | NEES DMD-EKF (95 % band) | targets | paper |",
             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -224,14 +243,15 @@ def table(results: dict) -> str:
     return "\n".join(rows)
 
 
-def _ratio(d: dict, key: str) -> str:
+def _ratio(d: dict[str, Any], key: str) -> str:
+    """Return the ratio `key` of a distribution as median [quartiles] worst, "—" if absent."""
     r = d["ratios"].get(key)
     if r is None:
         return "—"
     return f"{_fmt(r['median'])} [{_fmt(r['q25'])}–{_fmt(r['q75'])}] {_fmt(r['worst'])}"
 
 
-def distribution_table(dist: dict) -> str:
+def distribution_table(dist: dict[str, dict[str, Any]]) -> str:
     """Markdown table of the distributions over the evaluation seeds (and start epochs)."""
     rows = ["| scenario | runs | ε DMD-EKF (median) | ε(DMD-EKF)/ε(coast) | "
             "ε(DMD-EKF)/ε(J2 coast) | ε(DMD-EKF)/ε(hypothetical) | DMD-EKF beats coasting |",
@@ -250,7 +270,8 @@ def distribution_table(dist: dict) -> str:
     return "\n".join(rows)
 
 
-def markdown(results: dict) -> str:
+def markdown(results: dict[str, Any]) -> str:
+    """Return results.md: every table of `results`."""
     lines = ["# Reproduction of the paper's experiments", "",
              f"seed {results['seed']}, quick={results['quick']}, "
              f"{results['seconds']:.0f} s", "", table(results), ""]
@@ -280,8 +301,11 @@ def markdown(results: dict) -> str:
 
 
 def update_doc(path: Path, md: str) -> None:
-    """Replace the text between the `GENERATED_BEGIN` and `GENERATED_END` lines of `path`
-    with `md` (ValueError if the markers are missing)."""
+    """Replace the generated block of the file `path` with `md`.
+
+    The block is the text between the `GENERATED_BEGIN` and `GENERATED_END` lines
+    (ValueError if the markers are missing).
+    """
     text = path.read_text()
     try:
         head, rest = text.split(GENERATED_BEGIN + "\n", 1)
@@ -292,7 +316,8 @@ def update_doc(path: Path, md: str) -> None:
     path.write_text(f"{head}{GENERATED_BEGIN}\n{body.rstrip()}\n{GENERATED_END}{tail}")
 
 
-def _jsonable(o):
+def _jsonable(o: object) -> object:
+    """Return `o` as JSON can hold it (numpy scalars and arrays as Python's, NaN as None)."""
     if isinstance(o, dict):
         return {str(k): _jsonable(v) for k, v in o.items()}
     if isinstance(o, (list, tuple)):
@@ -309,7 +334,8 @@ def _jsonable(o):
 
 
 # ----------------------------------------------------------------------------------------
-def add_arguments(parser) -> None:
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the options of `ssa-fusion reproduce` to `parser`."""
     parser.add_argument("--scenario", nargs="+", metavar="NAME", default=None,
                         help=f"scenarios to run (default: the paper's: "
                              f"{', '.join(scenarios.SCENARIOS)}; also the real-sky ones: "
@@ -336,7 +362,8 @@ def add_arguments(parser) -> None:
                         help="processes for the distributions (default: the CPU count)")
 
 
-def run(args) -> int:
+def run(args: argparse.Namespace) -> int:
+    """Run `ssa-fusion reproduce`; return the exit code."""
     names = args.scenario or list(scenarios.SCENARIOS)
     sky_names = [n for n in names if n in sky.SKY_SCENARIOS]
     names = [n for n in names if n not in sky.SKY_SCENARIOS]
@@ -360,7 +387,7 @@ def run(args) -> int:
     nees_runs = NEES_RUNS_QUICK if args.quick else NEES_RUNS
     t0 = time.monotonic()
     bar = Progress(len(chosen) + int(do_vdp) + int(do_cons))
-    results = {"seed": args.seed, "quick": bool(args.quick), "scenarios": {}}
+    results: dict[str, Any] = {"seed": args.seed, "quick": bool(args.quick), "scenarios": {}}
     for s in chosen:
         results["scenarios"][s.name] = run_one(s, args.seed, nees_runs, out, plots)
         bar.step(s.name)
@@ -376,8 +403,8 @@ def run(args) -> int:
         sc = scenarios.get(CONSISTENCY_SCENARIO)
         if args.quick:
             sc = quick_variant(sc)
-        seeds = 3 if args.quick else CONSISTENCY_SEEDS
-        results["consistency"] = consistency_study(sc, seeds, CONSISTENCY_RETRAIN_STEPS)
+        cons_seeds = 3 if args.quick else CONSISTENCY_SEEDS
+        results["consistency"] = consistency_study(sc, cons_seeds, CONSISTENCY_RETRAIN_STEPS)
         if plots:
             from ssa_fusion.studies import plots as pl
             pl.consistency_plot(results["consistency"], out / "consistency.png")

@@ -22,18 +22,22 @@ from ssa_fusion.sim.sky import SkySimulation
 
 @dataclass
 class SkyDmdRun:
-    """The filter's estimates fusing the surrogate's forecasts (last per epoch), and the
-    forecasts the surrogate issued."""
+    """The filter's estimates fusing the surrogate's forecasts, and the forecasts issued.
+
+    The estimates are the last per epoch, keyed by epoch (Unix s).
+    """
 
     estimates: dict[float, StateEstimate]
     forecasts: list[Measurement]
 
 
 def run_dmd_ekf(sim: SkySimulation) -> SkyDmdRun:
-    """Surrogate + filter over the delivered measurements, driven as the live graph drives
-    them: every real measurement goes to the surrogate (whose forecasts still owed go to the
+    """Run surrogate + filter over the delivered measurements as the live graph drives them.
+
+    Every real measurement goes to the surrogate (whose forecasts still owed go to the
     filter first) and to the filter; at every truth epoch between measurements the
-    surrogate's timer releases the forecasts due."""
+    surrogate's timer releases the forecasts due.
+    """
     c = sim.scenario.estimator()
     tracker, surrogate = make_tracker(c), make_surrogate(c)
     run = SkyDmdRun({}, [])
@@ -58,8 +62,11 @@ def run_dmd_ekf(sim: SkySimulation) -> SkyDmdRun:
 
 @dataclass
 class SkyEvaluation:
-    """A real-sky run scored: the passes and gaps, the arms over the scheduled outage, and
-    how many forecasts the surrogate made."""
+    """A real-sky run scored.
+
+    The passes and gaps, the arms over the scheduled outage, and how many forecasts the
+    surrogate made.
+    """
 
     passes: PassReport
     outage: arms.GapEvaluation | None
@@ -68,9 +75,11 @@ class SkyEvaluation:
 
 def evaluate_sky(sim: SkySimulation, seed: int = 0,
                  only: tuple[arms.ArmName, ...] = tuple(arms.ArmName)) -> SkyEvaluation:
-    """Run the scenario's graph (filter and surrogate) over the delivered measurements and
-    score it: after each pass, at every truth epoch, and every arm over the scheduled
-    outage (`outage_epochs`)."""
+    """Run the scenario's filter and surrogate over the delivered measurements; score them.
+
+    After each pass, at every truth epoch, and every arm over the scheduled outage
+    (`outage_epochs`).
+    """
     s = sim.scenario
     c = s.estimator()
     real, withheld = sim.real, sim.withheld_measurements

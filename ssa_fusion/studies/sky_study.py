@@ -1,8 +1,8 @@
-"""The real-sky study: distributions over evaluation seeds and start epochs of what the filter
-achieves with stations that see only above their masks (`sky`).
+"""The real-sky study: what the filter achieves with stations that see only above their masks.
 
-Per run (simulate, then filter + surrogate over the delivered measurements as the live graph
-drives them): the position error right after each pass, the NEES at every truth epoch
+Distributions over evaluation seeds and start epochs, on the scenarios of `sky`. Per run
+(simulate, then filter + surrogate over the delivered measurements as the live graph drives
+them): the position error right after each pass, the NEES at every truth epoch
 (predictions through the gaps included), and every arm over the scheduled outage
 (`placeholder`, `coast`, `j2_coast`, `dmd_ekf`, `hypothetical_ekf`: mean position error and
 NEES); also the after-pass error of the same filter with its light-time correction off (the
@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
+from typing import Any
 
 import numpy as np
 
@@ -26,8 +27,8 @@ from ssa_fusion.studies import sky_runs
 ARMS = [str(a) for a in arms.ArmName]
 
 
-def run_case(case: tuple[str, float, int]) -> dict:
-    """One run: scenario name, start offset (h), seed -> its numbers."""
+def run_case(case: tuple[str, float, int]) -> dict[str, Any]:
+    """Run one case (scenario name, start offset h, seed); return its numbers."""
     name, offset_h, seed = case
     base = sky.SKY_SCENARIOS[name]
     s = base.with_(t0=base.t0 + 3600.0 * offset_h)
@@ -51,12 +52,13 @@ def run_case(case: tuple[str, float, int]) -> dict:
 
 
 def _q(v: list[float] | np.ndarray) -> str:
+    """Return the median [quartiles] of `v`, as text."""
     q25, med, q75 = np.percentile(np.asarray(v, float), [25, 50, 75])
     return f"{med:.3g} [{q25:.3g}, {q75:.3g}]"
 
 
-def summarise(name: str, runs: list[dict]) -> tuple[str, dict]:
-    """Markdown for one scenario and its JSON summary."""
+def summarise(name: str, runs: list[dict[str, Any]]) -> tuple[str, dict[str, Any]]:
+    """Return the Markdown for one scenario and its JSON summary."""
     with_passes = [r for r in runs if r["after_pass_km"]]
     after_med = [float(np.median(r["after_pass_km"])) for r in with_passes]
     after_max = [float(np.max(r["after_pass_km"])) for r in with_passes]
@@ -112,11 +114,15 @@ def summarise(name: str, runs: list[dict]) -> tuple[str, dict]:
 
 def run_sky_study(names: list[str], seeds: tuple[int, ...], offsets_h: tuple[float, ...],
                   workers: int = 2,
-                  progress: Callable[[str], None] | None = None) -> tuple[str, dict]:
-    """Every run of the scenarios `names` over `seeds` x `offsets_h` in `workers` processes;
-    returns (markdown, summary by scenario name). The result does not depend on `workers`."""
+                  progress: Callable[[str], None] | None = None
+                  ) -> tuple[str, dict[str, dict[str, Any]]]:
+    """Run the scenarios `names` over `seeds` x `offsets_h`; return (markdown, summaries).
+
+    The runs go to `workers` processes; the summaries are by scenario name. The result does
+    not depend on `workers`.
+    """
     todo = [(n, o, s) for n in names for o in offsets_h for s in seeds]
-    outs: list[dict] = []
+    outs: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max(1, workers)) as pool:
         for (n, _, _), r in zip(todo, pool.map(run_case, todo), strict=True):
             outs.append(r)

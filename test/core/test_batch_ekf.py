@@ -14,21 +14,16 @@ import math
 import numpy as np
 import pytest
 
-from ssa_fusion.core import batch_ekf, dynamics, kepler
-from ssa_fusion.core.batch_ekf import (
-    REASONS,
-    BatchEKF,
-    BatchEKFConfig,
-    Code,
-    integrate_stm,
-    kepler_state,
-    kepler_stm,
-)
+from ssa_fusion.core import dynamics, kepler, propagation
+from ssa_fusion.core.batch_ekf import REASONS, BatchEKF, Code
 from ssa_fusion.core.config import EstimatorConfig, make_tracker
 from ssa_fusion.core.dynamics import elements_to_state
 from ssa_fusion.core.ekf import ExtendedKalmanFilter, bound_covariance, process_noise
+from ssa_fusion.core.filter_options import FilterOptions
 from ssa_fusion.core.frames import razel_gcrs, wrap_angle
+from ssa_fusion.core.kepler import kepler_state, kepler_stm
 from ssa_fusion.core.measurement import RazelModel
+from ssa_fusion.core.propagation import integrate_stm
 from ssa_fusion.core.stations import RADAR_SIGMA, STATIONS
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.types import Cause, Kind, Measurement
@@ -76,7 +71,8 @@ def _objects(n: int = 20, seed: int = 3) -> dict[str, np.ndarray]:
 def _tracker_cycle(model: str, x0: np.ndarray, t: float, z: np.ndarray,
                    station: int) -> tuple[np.ndarray, np.ndarray]:
     """One cycle of the project's per-object filter (a `Tracker` past its IOD)."""
-    tracker = make_tracker(EstimatorConfig(station=",".join(NAMES), motion_model=model))
+    tracker = make_tracker(EstimatorConfig(station=",".join(NAMES),
+                                           filter=FilterOptions().with_(motion_model=model)))
     tracker.ekf = ExtendedKalmanFilter(x0, P0)
     tracker.t = tracker.t_real = T0
     out = tracker.process(Measurement(t, z, R, Kind.RANGE_AZ_EL, frame_id=NAMES[station]))
@@ -87,7 +83,7 @@ def _tracker_cycle(model: str, x0: np.ndarray, t: float, z: np.ndarray,
 @pytest.mark.parametrize("model", ["kepler", "j2"])
 def test_equals_per_object_tracker(model: str) -> None:
     o = _objects()
-    bank = BatchEKF(BatchEKFConfig(motion_model=model), STATION_LIST)
+    bank = BatchEKF(FilterOptions().with_(motion_model=model), STATION_LIST)
     out = bank.step(o["x"], o["P"], o["dt"], o["z"], R, o["t"], o["station"])
     assert (out.code == Code.FUSED).all(), [out.reason(i) for i in range(len(out.code))]
     worst = 0.0
@@ -101,7 +97,7 @@ def test_equals_per_object_tracker(model: str) -> None:
 def test_equals_filterpy() -> None:
     filterpy = pytest.importorskip("filterpy.kalman")
     o = _objects(seed=5)
-    bank = BatchEKF(BatchEKFConfig(), STATION_LIST)
+    bank = BatchEKF(FilterOptions(), STATION_LIST)
     out = bank.step(o["x"], o["P"], o["dt"], o["z"], R, o["t"], o["station"])
 
     def residual(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -129,6 +125,12 @@ def test_motion_models_match_per_object() -> None:
     for i in range(len(x1)):
         xr, pr = kepler.propagate(o["x"][i], float(o["dt"][i]))
         assert _rel(x1[i], xr) < 1e-12 and _rel(phi[i], pr) < 1e-12 and _rel(xs[i], xr) < 1e-12
+    # one Kepler solver: against an independent reference, the two-body variational
+    # equations integrated (numpy DOP853, 5 s steps)
+    xi, phii, oki = propagation._integrate_stm_numpy("two_body", o["x"], o["dt"], 5.0)
+    assert oki.all()
+    for i in range(len(x1)):
+        assert _rel(x1[i], xi[i]) < 1e-12 and _rel(phi[i], phii[i]) < 1e-12, i
     # J2: the batched fixed-step integrator equals a per-object integration with the same
     # fixed-step DOP853 scheme (dynamics' own right-hand side and Jacobian) to round-off
     from scipy.integrate._ivp import dop853_coefficients as dop
@@ -156,7 +158,7 @@ def test_motion_models_match_per_object() -> None:
 
 def test_mask_and_update_only() -> None:
     o = _objects()
-    bank = BatchEKF(BatchEKFConfig(), STATION_LIST)
+    bank = BatchEKF(FilterOptions(), STATION_LIST)
     full = bank.step(o["x"], o["P"], o["dt"], o["z"], R, o["t"], o["station"])
     mask = np.arange(len(o["x"])) % 3 == 0
     part = bank.step(o["x"], o["P"], o["dt"], o["z"], R, o["t"], o["station"], mask=mask)
@@ -185,7 +187,7 @@ def test_mask_and_update_only() -> None:
 
 def test_bad_input_rejected_per_object() -> None:
     o = _objects()
-    bank = BatchEKF(BatchEKFConfig(), STATION_LIST)
+    bank = BatchEKF(FilterOptions(), STATION_LIST)
     clean = bank.step(o["x"], o["P"], o["dt"], o["z"], R, o["t"], o["station"])
     z, x = o["z"].copy(), o["x"].copy()
     Rs = np.tile(R, (len(x), 1, 1))
@@ -217,7 +219,7 @@ def test_bad_input_rejected_per_object() -> None:
 
 def test_sigma_bound_and_inplace() -> None:
     o = _objects()
-    cfg = BatchEKFConfig(sigma_bound=1e-4, q=1e-6)  # a bound that bites after a long gap
+    cfg = FilterOptions().with_(sigma_bound=1e-4, q=1e-6)  # a bound that bites after a long gap
     bank = BatchEKF(cfg, STATION_LIST)
     pred = bank.predict(o["x"], o["P"], o["dt"] * 50.0, T0)
     assert pred.ok.all()
@@ -234,7 +236,7 @@ def test_sigma_bound_and_inplace() -> None:
 def test_input_layouts() -> None:
     """Broadcast, scalar, list, strided, Fortran-ordered and read-only inputs: the same cycle."""
     o = _objects()
-    bank = BatchEKF(BatchEKFConfig(), STATION_LIST)
+    bank = BatchEKF(FilterOptions(), STATION_LIST)
     n = len(o["x"])
     ref = bank.step(o["x"], o["P"], 30.0, o["z"], np.tile(R, (n, 1, 1)), np.full(n, T0 + 30.0),
                     np.full(n, 2))
@@ -250,15 +252,6 @@ def test_input_layouts() -> None:
     assert np.array_equal(x1[0], kepler_stm(o["x"], 30.0)[0][0])
 
 
-def test_compiled_kernels_cache_key() -> None:
-    """The cached compiled kernels contain `kepler.lagrange_partials`: its digest is noted."""
-    from ssa_fusion.core import batch_ekf
-
-    assert batch_ekf._lagrange_partials_digest() == batch_ekf._KEPLER_PARTIALS_SHA256, (
-        "kepler.lagrange_partials changed: set batch_ekf._KEPLER_PARTIALS_SHA256 to "
-        f"{batch_ekf._lagrange_partials_digest()!r} (the kernels are not cached until then)")
-
-
 @pytest.mark.parametrize("model,params", [("j2", {}), ("two_body", {}),
                                           ("j2", {"mu": 4.0e5, "j2": 2e-3, "re": 6400.0})])
 def test_compiled_integration_equals_numpy(model: str, params: dict[str, float]) -> None:
@@ -268,7 +261,7 @@ def test_compiled_integration_equals_numpy(model: str, params: dict[str, float])
     the model's parameters as given (not its defaults); a non-finite input gives what the
     numpy path gives (no step: x1 = x, Phi = I, not ok).
     """
-    from ssa_fusion.core.batch_ekf import _integrate_stm_numpy
+    from ssa_fusion.core.propagation import _integrate_stm_numpy
 
     o = _objects(n=24, seed=11)
     x = o["x"].copy()
@@ -292,7 +285,7 @@ def test_compiled_integration_equals_numpy(model: str, params: dict[str, float])
 
 def test_numpy_integration_kept_where_not_compiled() -> None:
     """"drag" (and a parameter the model does not take) go through the numpy path as before."""
-    from ssa_fusion.core.batch_ekf import _integrate_stm_numpy
+    from ssa_fusion.core.propagation import _integrate_stm_numpy
 
     o = _objects(n=6)
     a = integrate_stm("drag", o["x"], o["dt"], bc=50.0)
@@ -326,7 +319,7 @@ def test_j2_acts_about_the_earths_pole_in_the_gcrf() -> None:
     np.testing.assert_allclose(x1, dynamics.rotate_states(xr, pole.T), rtol=0, atol=1e-9)
     B = np.kron(np.eye(2), pole)
     np.testing.assert_allclose(phi[0], B.T @ phir[0] @ B, rtol=1e-11, atol=1e-12)
-    xn, phin, _ = batch_ekf._integrate_stm_numpy("j2", dynamics.rotate_states(x0, pole), 86400.0)
+    xn, phin, _ = propagation._integrate_stm_numpy("j2", dynamics.rotate_states(x0, pole), 86400.0)
     np.testing.assert_allclose(x1, dynamics.rotate_states(xn, pole.T), rtol=0, atol=1e-8)
     np.testing.assert_allclose(phi[0], B.T @ phin[0] @ B, rtol=1e-9, atol=1e-12)
     # the numpy (scipy) truth propagator takes the same pole

@@ -7,17 +7,18 @@ import numpy as np
 import pytest
 
 from ssa_fusion.core import config, kepler
-from ssa_fusion.core.config import EstimatorConfig, Lift, MotionModel
+from ssa_fusion.core.config import EstimatorConfig, Lift
+from ssa_fusion.core.filter_options import FilterOptions
 from ssa_fusion.core.surrogate import EciLift, SurrogateConfig
-from ssa_fusion.core.tracker import TrackerConfig
-from ssa_fusion.core.types import Kind
+from ssa_fusion.core.types import Kind, MotionModel
 
 X0 = np.array([6778.0, 0.0, 0.0, 0.0, 5.0, 5.8])
 
 
 def test_to_dict_round_trips_through_json():
-    c = EstimatorConfig(motion_model=MotionModel.J2, lift=Lift.ECI,
-                        tracker=TrackerConfig(p0_sigma=(2.0,) * 6, q=3e-9, gate=None),
+    c = EstimatorConfig(lift=Lift.ECI,
+                        filter=FilterOptions().with_(motion_model=MotionModel.J2,
+                                                     p0_sigma=(2.0,) * 6, q=3e-9, gate=None),
                         surrogate=SurrogateConfig(delays=77, rank=5, retrain_period_s=math.inf))
     d = json.loads(json.dumps(config.to_dict(c)))
     assert d["frame"] == "gcrf"  # settings recorded with a bag name the states' frame
@@ -28,9 +29,9 @@ def test_to_dict_round_trips_through_json():
 
 
 def test_from_dict_keeps_the_base_for_missing_keys_and_names_unknown_ones():
-    base = EstimatorConfig(tracker=TrackerConfig(q=5e-8))
+    base = EstimatorConfig(filter=FilterOptions().with_(q=5e-8))
     got = config.from_dict({"surrogate": {"delays": 12}}, base)
-    assert got.tracker.q == 5e-8 and got.surrogate.delays == 12
+    assert got.filter.noise.q == 5e-8 and got.surrogate.delays == 12
     with pytest.raises(ValueError, match=r"unknown tracker setting.*qq"):
         config.from_dict({"tracker": {"qq": 1}})
     with pytest.raises(ValueError, match="kind 'radar' unknown"):
@@ -42,13 +43,17 @@ def test_from_dict_keeps_the_base_for_missing_keys_and_names_unknown_ones():
 def test_builders_wire_the_stream_into_tracker_and_surrogate():
     c = EstimatorConfig(lift=Lift.ECI)
     tracker = config.make_tracker(c, "iss")
-    assert tracker.config.frame_id == "columbus" and tracker.object_id == "iss"
-    assert tracker.config is not c.tracker  # run-time changes go through Tracker.config
+    assert tracker.frame_id == "columbus" and tracker.object_id == "iss"
+    assert tracker.config == c.filter  # frozen: run-time changes replace Tracker.config
     surrogate = config.make_surrogate(c)
     assert surrogate.config.kind == Kind.RANGE_AZ_EL and surrogate.config.frame_id == "columbus"
     assert isinstance(surrogate.config.lift, EciLift)
     pos = config.make_tracker(EstimatorConfig(kind=Kind.POSITION))
-    assert pos.config.frame_id == "gcrf"
+    assert pos.frame_id == "gcrf"
+
+
+def _with_model(name: str) -> EstimatorConfig:
+    return EstimatorConfig(filter=FilterOptions().with_(motion_model=name))
 
 
 def test_kepler_motion_is_the_analytic_two_body_and_j2_differs_by_j2():
@@ -57,8 +62,8 @@ def test_kepler_motion_is_the_analytic_two_body_and_j2_differs_by_j2():
     x1, _ = f(X0, 600.0, t0)
     x_ref, F_ref = kepler.propagate(X0, 600.0)
     np.testing.assert_array_equal(x1, x_ref)
-    two = config.motion(EstimatorConfig(motion_model=MotionModel.TWO_BODY))(X0, 600.0, t0)
+    two = config.motion(_with_model("two_body"))(X0, 600.0, t0)
     np.testing.assert_allclose(two[0], x_ref, atol=1e-6)  # integrated (1e-9 km tolerance)
     np.testing.assert_allclose(two[1], F_ref, atol=1e-6)
-    j2 = config.motion(EstimatorConfig(motion_model=MotionModel.J2))(X0, 600.0, t0)[0]
+    j2 = config.motion(_with_model("j2"))(X0, 600.0, t0)[0]
     assert 0.1 < np.linalg.norm(j2[:3] - x_ref[:3]) < 10.0  # J2 moves LEO km in 10 min

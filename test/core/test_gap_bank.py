@@ -1,5 +1,5 @@
 """Tests for ssa_fusion.core.gap_bank: the catalog's gap forecasts equal each object's own
-`residual.GapForecaster`, beat coasting on the motion model against a J2 truth, and the fits
+`gap_forecaster.GapForecaster`, beat coasting on the motion model against a J2 truth, and the fits
 keep to their wall-time budget (newest pass end first, a gap that ends first skipped)."""
 
 from dataclasses import replace
@@ -9,7 +9,8 @@ import pytest
 
 from ssa_fusion.core import dynamics
 from ssa_fusion.core.gap_bank import GapBank, GapBankConfig
-from ssa_fusion.core.residual import LIVE_RESIDUAL, GapForecaster
+from ssa_fusion.core.gap_forecaster import GapForecaster
+from ssa_fusion.core.residual import LIVE_RESIDUAL
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
 X0 = np.array(dynamics.elements_to_state(**ISS_ELEMENTS))

@@ -1,4 +1,4 @@
-"""Hostile input to the core (issue 22): implausible values are refused with a cause, and
+"""Hostile input to the core: implausible values are refused with a cause, and
 `Tracker.process` never raises and never returns a non-finite estimate, whatever the values
 in the initial-orbit-determination batch or after it."""
 
@@ -22,7 +22,7 @@ def razel(t: float, z, cov=R) -> Measurement:
 
 @pytest.mark.parametrize(("z", "cov", "what"), [
     ([2e7, 1.0, 0.5], R, "range"),
-    ([0.0, 1.0, 0.5], R, "range"),  # finding 6: a range of 0 has no direction
+    ([0.0, 1.0, 0.5], R, "range"),  # a range of 0 has no direction
     ([0.5, 1.0, 0.5], R, "range"),
     ([7000.0, 1e6, 0.5], R, "azimuth"),
     ([7000.0, 1.0, 0.5], 1e200 * np.eye(3), "covariance"),
@@ -42,8 +42,8 @@ def test_covariance_check_does_not_overflow():
 
 
 def test_an_enormous_covariance_in_the_iod_batch_does_not_silence_the_filter():
-    """Issue 22 finding 3: one measurement with a finite but enormous covariance among the
-    first three made the filter reject every later good one; now it is refused."""
+    """One measurement with a finite but enormous covariance among the first three once
+    made the filter reject every later good one; now it is refused."""
     tr = make_tracker(EstimatorConfig())
     good = [razel(T0 + 30 * k, [7000.0 - 10 * k, 1.0 + 0.01 * k, 0.5]) for k in range(6)]
     assert tr.process(razel(T0 - 30, [7010.0, 0.99, 0.5], 1e200 * np.eye(3))).rejected \
@@ -54,8 +54,8 @@ def test_an_enormous_covariance_in_the_iod_batch_does_not_silence_the_filter():
 
 
 def test_an_outlier_range_in_the_iod_batch_is_not_fused_into_the_initial_orbit():
-    """Issue 22 (audit): a range of 1e6 km (below the 1e7 km plausibility limit) as the
-    second IOD sample was fused into the initial orbit, and the filter then refused every
+    """A range of 1e6 km (below the 1e7 km plausibility limit) as the second IOD sample
+    was once fused into the initial orbit, and the filter then refused every
     later good measurement at its gate. The IOD of that batch is no bound Earth orbit: it
     fails and the next batch, of good measurements, starts the filter."""
     from ssa_fusion.core.initiation import earth_orbit_problem
@@ -93,7 +93,7 @@ variances = st.one_of(st.floats(0.0, 1e300), st.sampled_from([0.0, 1e-300, 1.0, 
 @settings(max_examples=300, deadline=None, derandomize=True)
 @given(st.lists(st.tuples(values, values, values, variances), min_size=1, max_size=8))
 def test_tracker_never_raises_on_any_finite_sequence(rows):
-    """Issue 22 finding 4: ranges >= 1e6 km in the IOD batch raised OverflowError or
+    """Ranges >= 1e6 km in the IOD batch once raised OverflowError or
     ValueError from the IOD (419 of 500 random batches before the fix)."""
     tr = make_tracker(EstimatorConfig())
     for k, (r, az, el, var) in enumerate(rows):

@@ -208,3 +208,13 @@ def test_accepts_lists_and_custom_mu() -> None:
 def test_bad_input_raises(x0: list[float], dt: float) -> None:
     with pytest.raises(ValueError, match="finite state"):
         propagate(np.array(x0), dt)
+
+
+def test_a_newton_step_below_an_ulp_at_the_bracket_end_is_converged() -> None:
+    """Kepler's equation converged with a last Newton step smaller than an ulp of chi, at
+    the end of the safeguarding bracket: chi is that Newton iterate, not a bisection of the
+    bracket (a multi-revolution arc of an eccentric orbit, a day backwards)."""
+    x0 = _state(20464.806022994962, 0.844428199578132, 0.5296541048224832, 4.713413951671188,
+                1.1067339419218458, 2.909397918019619)
+    x1, _ = propagate(x0, -86400.0)
+    np.testing.assert_allclose(x1, _integrate(x0, -86400.0), rtol=0, atol=1e-6)

@@ -170,7 +170,7 @@ def _leap_second_day(t_unix: Array) -> NDArray[np.bool_]:
 
 
 # --------------------------------------------------------------------------------------------
-# The simulator (paper.sky) and the filter's measurement models
+# The simulator (sim.sky) and the filter's measurement models
 # --------------------------------------------------------------------------------------------
 def test_simulated_radar_and_optical_measurements_match_skyfield_with_light_time(
         skyfield_ts: Timescale) -> None:

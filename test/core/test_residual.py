@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from ssa_fusion.core import dynamics, residual
+from ssa_fusion.core import dynamics, gap_forecaster, residual
 from ssa_fusion.core.constants import MU_EARTH
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
@@ -144,7 +144,7 @@ def test_gap_forecaster_on_a_filter_stream_forecasts_the_gap_and_never_a_pass():
     t_pass = np.concatenate([_passes(rng, 2.0), [2 * 86400.0]])
     x = _truth(f, t_pass)
     P = np.diag([1e-4] * 3 + [1e-10] * 3)
-    gf = residual.GapForecaster.for_model("kepler", 60.0)
+    gf = gap_forecaster.GapForecaster.for_model("kepler", 60.0)
     for ti, xi in zip(t_pass, x, strict=True):
         gf.on_estimate(float(ti), xi, P)  # pass ends become anchors as the next pass starts
     t_end = float(t_pass[-1])

@@ -112,7 +112,7 @@ def test_optical_rules():
 
 def test_light_time_of_the_iss_in_view():
     """1.4-5 ms from the ISS to Columbus while above 10 deg (range / c), and the exact
-    retarded positions move 11-39 m (the issue's measured numbers)."""
+    retarded positions move 11-39 m (7.7 km/s for 1.4-5 ms)."""
     t = 1577836800.0 + np.arange(0.0, 86400.0, 10.0)
     x = _iss_states(t)
     st = STATIONS["columbus"]

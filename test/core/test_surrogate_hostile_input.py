@@ -1,5 +1,5 @@
-"""Issue 22 finding 6 (surrogate part): the surrogate trained on range 1e308 m, azimuth
-1e6 rad and elevation beyond +pi/2, and a covariance of 1e308 broke the covariance check.
+"""Hostile input to the surrogate: training on range 1e308 m, azimuth 1e6 rad and
+elevation beyond +pi/2, and a covariance of 1e308, once broke the covariance check.
 Now `Surrogate.add` refuses each with a cause and buffers nothing; elevation exactly +-pi/2
 (zenith/nadir) is a legal value and is buffered."""
 

@@ -1,20 +1,18 @@
-"""TrackBank (issue 20): the batched catalog filter equals one per-object `Tracker` per
+"""TrackBank: the batched catalog filter equals one per-object `Tracker` per
 object, object by object, on a day-long radar survey of a synthetic LEO catalog."""
 
 import itertools
 import math
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from ssa_fusion.core import catalog
-from ssa_fusion.core.batch_ekf import BatchEKFConfig
-from ssa_fusion.core.config import EstimatorConfig, MotionModel, make_tracker
+from ssa_fusion.core.config import EstimatorConfig, make_tracker
+from ssa_fusion.core.filter_options import FilterOptions
 from ssa_fusion.core.stations import NETWORKS, SENSORS
-from ssa_fusion.core.track_bank import TrackBank, TrackBankConfig
-from ssa_fusion.core.tracker import TrackerConfig
+from ssa_fusion.core.track_bank import TrackBank
 from ssa_fusion.core.types import Cause, Kind, Measurement
 from ssa_fusion.sim import survey
 
@@ -42,18 +40,19 @@ CASES = {  # motion model, q km^2/s^3, IOD samples, reinit_after, tolerance
 
 def _bank(case: str = "kepler") -> TrackBank:
     model, q, samples, reinit, _ = CASES[case]
-    ekf = BatchEKFConfig(motion_model=model, q=q, sigma_bound=BOUND)
-    return TrackBank(TrackBankConfig(ekf=ekf, iod_samples=samples, iod_max_span_s=SPAN,
-                                     reinit_after=reinit), NETWORK, capacity=2)
+    options = FilterOptions().with_(motion_model=model, q=q, sigma_bound=BOUND,
+                                    iod_samples=samples, iod_max_span_s=SPAN,
+                                    reinit_after=reinit)
+    return TrackBank(options, NETWORK, capacity=2)
 
 
 def _per_object(obs, k: int, case: str) -> dict[float, tuple[np.ndarray, np.ndarray]]:
     """Object k's measurements through its own `Tracker`: estimate by epoch."""
     model, q, samples, reinit, _ = CASES[case]
-    tc = replace(TrackerConfig(), q=q, iod_samples=samples, iod_max_span_s=SPAN,
-                 sigma_bound=BOUND, reinit_after=reinit)
-    tr = make_tracker(EstimatorConfig(station=",".join(NETWORK), tracker=tc,
-                                      motion_model=MotionModel(model)))
+    options = FilterOptions().with_(motion_model=model, q=q, iod_samples=samples,
+                                    iod_max_span_s=SPAN, sigma_bound=BOUND,
+                                    reinit_after=reinit)
+    tr = make_tracker(EstimatorConfig(station=",".join(NETWORK), filter=options))
     out = {}
     for i in np.flatnonzero(obs.obj == k):
         s = obs.sensors[obs.sensor[i]]

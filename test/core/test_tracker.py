@@ -29,7 +29,8 @@ from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
 from ssa_fusion.core import iod
-from ssa_fusion.core.tracker import HISTORY_REAL, Outcome, Tracker, TrackerConfig
+from ssa_fusion.core.filter_options import FilterOptions
+from ssa_fusion.core.tracker import HISTORY_REAL, Outcome, Tracker
 from ssa_fusion.core.types import Kind, Measurement, Source, UpdateSource
 from ssa_fusion.sim import scenarios as sc
 from ssa_fusion.sim.simulate import Simulation, simulate
@@ -48,7 +49,9 @@ def _tracker(sim: Simulation, **config) -> Tracker:
     s = sim.scenario
     cfg = dict(p0_sigma=s.p0_sigma, q=s.q)
     cfg.update(config)
-    return Tracker(sc.placeholder(s), sc.measurement_model(s), TrackerConfig(**cfg))
+    frame_id = cfg.pop("frame_id", "")
+    return Tracker(sc.placeholder(s), sc.measurement_model(s), FilterOptions().with_(**cfg),
+                   frame_id=frame_id)
 
 
 def _frame(sim: Simulation) -> str:
@@ -682,7 +685,7 @@ def _measurement(data, tr: Tracker, sim: Simulation, limit: float, dt_limit: flo
         t=t, z=z, R=R,
         kind=data.draw(st.one_of(st.just(tr.kind), st.integers(0, 255))),
         source=data.draw(st.one_of(st.sampled_from(list(Source)), st.integers(0, 255))),
-        frame_id=data.draw(st.one_of(st.just(tr.config.frame_id), st.text(max_size=6))),
+        frame_id=data.draw(st.one_of(st.just(tr.frame_id), st.text(max_size=6))),
         horizon=data.draw(_floats(limit)),
     )
 
@@ -737,7 +740,7 @@ def test_extreme_finite_values_are_rejected_not_raised(name, case):
     tr0, sim = _initialised(name)
     tr = copy.deepcopy(tr0)
     if case == "gated_z_1e200":
-        tr.config = TrackerConfig(**{**tr.config.__dict__, "gate": 16.0})
+        tr.config = tr.config.with_(gate=16.0)
     m = _meas(sim, 20)
     if case.endswith("z_1e200"):
         m.z[0] = 1e200

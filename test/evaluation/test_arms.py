@@ -1,4 +1,4 @@
-"""`paper.arms` against independent computations: scipy-integrated two-body and J2 orbits
+"""`evaluation.arms` against independent computations: scipy-integrated two-body and J2 orbits
 from the arm's own start (J2 about the Earth's pole of date, from ERFA's X, Y of the CIP),
 hand-computed scores."""
 
@@ -8,9 +8,9 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from ssa_fusion.core import kepler
-from ssa_fusion.core.config import EstimatorConfig, MotionModel
-from ssa_fusion.core.tracker import TrackerConfig
-from ssa_fusion.core.types import Kind, Measurement, StateEstimate, UpdateSource
+from ssa_fusion.core.config import EstimatorConfig
+from ssa_fusion.core.filter_options import FilterOptions
+from ssa_fusion.core.types import Kind, Measurement, MotionModel, StateEstimate, UpdateSource
 from ssa_fusion.evaluation import arms
 
 MU, RE, J2 = 398600.4418, 6378.137, 1.08262668e-3
@@ -23,7 +23,8 @@ def pole(t_unix: float) -> np.ndarray:
     x, y, _ = erfa.xys06a(2440587.5, t_unix / 86400.0 + 69.184 / 86400.0)
     return np.array([x, y, np.sqrt(1.0 - x * x - y * y)])
 CONFIG = EstimatorConfig(kind=Kind.POSITION, lift="none",
-                         tracker=TrackerConfig(p0_sigma=(1.0,) * 3 + (1e-2,) * 3, q=1e-12))
+                         filter=FilterOptions().with_(p0_sigma=(1.0,) * 3 + (1e-2,) * 3,
+                                                      q=1e-12))
 
 
 def orbit(x0, t, j2=True):
@@ -66,7 +67,7 @@ def test_j2_coast_tracks_with_j2_then_follows_an_independent_j2_orbit():
                         frame_id="gcrf") for ti, xi in zip(t[:150], truth[:150], strict=True)]
     t_gap = t[150:]
     got = arms.j2_coast(CONFIG, real, t_gap)
-    j2 = CONFIG.with_(motion_model=MotionModel.J2)
+    j2 = CONFIG.with_(filter=CONFIG.filter.with_(motion_model=MotionModel.J2))
     start = arms.start_estimate(arms.run_filter(j2, real), float(t_gap[0]))
     assert start.t == t[149]
     ref = orbit(start.x, np.concatenate([[start.t], t_gap]))[1:]
@@ -74,7 +75,8 @@ def test_j2_coast_tracks_with_j2_then_follows_an_independent_j2_orbit():
     # and tracking with J2 found the true orbit: 50 min later still within 100 m
     assert np.linalg.norm(got.x[-1, :3] - truth[-1, :3]) < 0.1
     assert arms.j2_coast(EstimatorConfig(kind=Kind.POSITION, n=2, observed=(0,), lift="none",
-                                         motion_model=MotionModel.PENDULUM), real, t_gap) is None
+                                         filter=FilterOptions().with_(motion_model="pendulum")),
+                          real, t_gap) is None
 
 
 def test_score_by_hand():

@@ -1,0 +1,104 @@
+"""What a filter publishes in a gap between passes: `GapForecaster`, the live policy.
+
+The residual fit (`residual.ResidualSurrogate`) learns what the filter's motion model leaves
+out from the estimates at the ends of past passes; `GapForecaster` decides when and with
+what it is used on a live stream: which estimate ends a pass (an anchor), when to fit (once
+per pass end, when the gap is reached), and the forecast it tabulates for the gap's grid
+epochs. The filter node and the catalog's `gap_bank.GapBank` run it.
+
+Frames and units: GCRF km, km/s; times s (sim time, e.g. Unix s).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .residual import LIVE_RESIDUAL, ResidualConfig, ResidualSurrogate, orbit_propagator
+from .types import MotionModel
+
+__all__ = ["PLACEHOLDER_TRAJECTORY", "GapForecaster"]
+
+Array = NDArray[np.float64]
+
+PLACEHOLDER_TRAJECTORY = {MotionModel.KEPLER: MotionModel.TWO_BODY, MotionModel.J2: MotionModel.J2}
+"""The trajectory (a `residual.orbit_propagator` model) of each filter motion model a gap
+forecaster serves."""
+
+
+@dataclass
+class GapForecaster:
+    """The residual surrogate on a filter's live stream: what to publish in a gap.
+
+    `on_estimate` takes every estimate that fused a real measurement (epoch order). Once a
+    prediction epoch lies `pass_break_s` or more after the newest of them, that estimate is
+    a pass end: it becomes an anchor (`ResidualSurrogate.add_anchor`), the surrogate fits at
+    it, and the fit's forecast is computed once on the grid of multiples of `period_s` up to
+    ``max_horizon_s`` after it (one integration). `forecast(t)` returns that forecast at a
+    grid epoch t of the gap (state km, km/s GCRF; covariance), or None: no fit (too few
+    anchors, refused), t before `pass_break_s` after the pass or beyond the horizon. A real
+    measurement always wins: the filter's own state is not touched.
+    """
+
+    surrogate: ResidualSurrogate
+    period_s: float
+    pass_break_s: float = 600.0
+    last: tuple[float, Array, Array] | None = None
+    anchored_t: float = -math.inf
+    fitted_t: float = -math.inf
+    table: dict[float, tuple[Array, Array]] = field(default_factory=dict)
+
+    @classmethod
+    def for_model(cls, motion_model: MotionModel | str, period_s: float,
+                  cfg: ResidualConfig = LIVE_RESIDUAL) -> GapForecaster:
+        """Build the forecaster of a filter with `motion_model` ("kepler" or "j2")."""
+        prop = orbit_propagator(PLACEHOLDER_TRAJECTORY[MotionModel(motion_model)])
+        return cls(ResidualSurrogate(cfg, prop), float(period_s))
+
+    def on_estimate(self, t: float, x: ArrayLike, P: ArrayLike) -> None:
+        """Take the filter's estimate (epoch t s) after it fused a real measurement.
+
+        The previous one is a pass end (an anchor) when t is `pass_break_s` or more after it.
+        """
+        if self.last is not None and t <= self.last[0]:
+            return
+        if self.last is not None and t - self.last[0] >= self.pass_break_s:
+            self._anchor()
+        self.last = (float(t), np.asarray(x, float).copy(), np.asarray(P, float).copy())
+
+    def _anchor(self) -> bool:
+        """Make the newest estimate an anchor, once; True when it became one now."""
+        if self.last is None or self.last[0] <= self.anchored_t:
+            return False
+        t_end, x, P = self.last
+        self.anchored_t = t_end
+        try:
+            self.surrogate.add_anchor(t_end, x, P)
+        except ValueError:
+            return False
+        return True
+
+    def forecast(self, t: float) -> tuple[Array, Array] | None:
+        """Return the surrogate's state and covariance at gap epoch t (s), or None."""
+        if self.last is None or t - self.last[0] < self.pass_break_s:
+            return None
+        t_end = self.last[0]
+        self._anchor()
+        if self.fitted_t != t_end:  # a pass ended: fit once, tabulate the forecast
+            self.fitted_t = t_end
+            self.table = {}
+            k0 = math.floor(t_end / self.period_s) + 1
+            k1 = math.floor((t_end + self.surrogate.cfg.max_horizon_s) / self.period_s)
+            grid = self.period_s * np.arange(k0, k1 + 1, dtype=float)
+            try:  # a fit or propagation that fails leaves the gap to the EKF's coasting
+                fit = self.surrogate.fit()
+                if fit is not None and grid.size:
+                    xs, Ps = fit.predict(grid)
+                    self.table = {float(g): (xs[i], Ps[i]) for i, g in enumerate(grid)
+                                  if np.isfinite(xs[i]).all() and np.isfinite(Ps[i]).all()}
+            except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError):
+                self.table = {}
+        return self.table.get(float(t))
