@@ -1,6 +1,6 @@
-"""Benchmark of gap forecasts over a catalog (issue 20, the surrogate part).
+"""Benchmark of gap forecasts over a catalog (the catalog_surrogate's method).
 
-1. Offline (`paper.catalog_gaps.offline_run`), the method's accuracy: per evaluation seed
+1. Offline (`studies.catalog_gaps.offline_run`), the method's accuracy: per evaluation seed
    (101-105, never used for tuning), a synthetic LEO catalog (the sample's CBERS 2 element
    set spread around the Earth) measured for two days by the radar network, fused by the
    batched J2 filter, every gap after a day of pass ends fitted by the residual surrogate

@@ -1,9 +1,9 @@
-"""Benchmark of the gap study (issue 19): forecasting through the gaps between passes.
+"""Benchmark of the gap study: forecasting through the gaps between passes.
 
-Runs `paper.gap_study` over the evaluation seeds (101-120) x start epochs (0, 8, 16 h) of
+Runs `studies.gap_study` over the evaluation seeds (101-120) x start epochs (0, 8, 16 h) of
 the real-sky scenarios with the residual surrogate setting chosen on the tuning seeds 1-3
 (`gap_study.CHOSEN`), and prints per scenario the distributions over runs (medians
-[quartiles]) of every arm, then the issue's targets against the measured values:
+[quartiles]) of every arm, then the targets against the measured values:
 
 - the surrogate forecasts in >= 95 % of the inter-pass gaps after its training span;
 - kepler placeholder: mean gap position error >= 5x smaller than coast (kepler);
@@ -39,7 +39,7 @@ from ssa_fusion.studies.distributions import EVALUATION_SEEDS, START_OFFSETS_H  
 
 
 def targets(name: str, r: dict, arm: str) -> list[str]:
-    """The issue's targets against the measured medians, for scenario `name`."""
+    """The targets against the measured medians, for scenario `name`."""
     lo, hi = chi2_bounds(6)
     rows = []
     rng = r.get("range", {})

@@ -1,4 +1,4 @@
-"""Benchmark of the live graph (issue targets): measurement -> estimate latency at 50/s,
+"""Benchmark of the live graph against its targets: measurement -> estimate latency at 50/s,
 and the sustained rate through surrogate + filter + recorder with zero loss.
 
 Starts surrogate, filter and recorder as processes (loopback, private domain); this process

@@ -1,4 +1,4 @@
-"""Benchmark of replay (issue targets): offline replay of a 24 h bag at 10 s cadence
+"""Benchmark of replay against its targets: offline replay of a 24 h bag at 10 s cadence
 (8,640 epochs, a one-orbit gap after 12 h of tracking) in <= 10 s, and a replay over ROS 2
 at --rate 100 that loses no message.
 

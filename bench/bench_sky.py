@@ -1,4 +1,4 @@
-"""Benchmark of the real-sky scenarios (issue 18): `paper.sky_study` over the evaluation
+"""Benchmark of the real-sky scenarios: `studies.sky_study` over the evaluation
 seeds and start epochs (the same study as `ssa-fusion reproduce --scenario
 iss_radar_columbus ...`), with the time it took.
 

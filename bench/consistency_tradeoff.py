@@ -3,7 +3,7 @@
 For each scenario, process-noise density q and forecast `noise_share` a (the k-th forecast
 of a gap carries a R + k D(k); the reproduction uses a = 1), runs the DMD-EKF and the
 hypothetical EKF on `--seeds` noise seeds and prints the ratio eps(DMD-EKF) / eps(hyp) per
-seed, its mean and maximum, how many seeds meet the issue's ratio target (<= 1.5), and the
+seed, its mean and maximum, how many seeds meet the ratio target (<= 1.5), and the
 mean NEES of both filters over the gap (per-epoch NEES averaged over the seeds, as in
 `ssa-fusion reproduce`) with its two-sided 95 % chi-square band. This is how
 docs/RESULTS.md shows that no q and no share puts cr3bp_halo_noisy's DMD-EKF inside the NEES

@@ -1,4 +1,4 @@
-"""`colcon build` of both packages, as a ROS user builds them (issue 21).
+"""`colcon build` of both packages, as a ROS user builds them.
 
 The repository root is the ament_python package ssa_fusion and colcon does not descend into
 a package, so msg_defs/ (ament_cmake ssa_fusion_msgs) is named as a second base path. The

@@ -1,4 +1,4 @@
-"""Importing ssa_fusion does no work (issue 16): importing every module leaves the process
+"""Importing ssa_fusion does no work: importing every module leaves the process
 environment, the SIGINT/SIGTERM handlers and matplotlib's backend as they were. The node
 executables set up the handlers and the BLAS thread limit (`ssa_fusion.nodes.start_process`)
 before numpy is imported, so every BLAS library a node loads runs one thread."""

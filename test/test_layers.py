@@ -30,7 +30,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "ssa_fusion"
 ROS = ("rclpy", "rcl_interfaces", "rosidl_runtime_py", "builtin_interfaces", "std_msgs",
        "rosgraph_msgs", "diagnostic_msgs", "ssa_fusion_msgs", "rosbags", "mcap_ros2",
        "launch", "launch_ros", "ament_index_python")
-"""ROS packages (and ROS bag libraries): none in core or paper."""
+"""ROS packages (and ROS bag libraries): none in core, sim or evaluation."""
 
 FLOORS = ("core", "sim", "evaluation", "studies", "ros", "nodes", "graphs", "apps")
 

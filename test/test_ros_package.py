@@ -1,4 +1,4 @@
-"""ssa_fusion as a ROS package, without colcon (issue 21): the venv is an ament prefix of it,
+"""ssa_fusion as a ROS package, without colcon: the venv is an ament prefix of it,
 and package.xml declares what the code imports.
 
 The bootstrap installs setup.py's data_files into the venv prefix as `colcon build` would
@@ -99,7 +99,7 @@ IMPORT_KEYS = {
     "erfa": "python3-pyerfa-pip",  # frames and time scales (core/frames.py, timescales.py)
     "astropy_iers_data": "python3-astropy-iers-data-pip",  # IERS EOP and leap seconds
     "threadpoolctl": None,  # optional: used when installed (ssa_fusion.limit_blas_threads)
-    "pydmd": None,  # optional: the BOP-DMD variant of core.residual (issue 19's study)
+    "pydmd": None,  # optional: the BOP-DMD variant of the gap study (studies.bopdmd)
 }
 """Third-party modules the code imports -> their rosdep key (None: optional, undeclared)."""
 ROSDISTRO_KEYS = {"python3-numpy", "python3-scipy", "python3-matplotlib", "python3-yaml",

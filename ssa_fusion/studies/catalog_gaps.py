@@ -128,7 +128,8 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
     names = [r.station.name for r in radars]
     bank = TrackBank(bank_config(s), {r.station.name: r.station for r in radars})
     wall = _FrozenWall()
-    gaps = GapBank(gap_config or GapBankConfig(motion_model=s.motion_model), wall=wall)
+    gaps = GapBank(gap_config or GapBankConfig(motion_model=MotionModel(s.motion_model)),
+                   wall=wall)
     estimates: Rows = defaultdict(list)
     forecasts: Rows = defaultdict(list)
     R = np.array([r.R for r in radars])

@@ -1,4 +1,4 @@
-"""Real-sky scenarios (`paper.sky`): sensors measure only above their masks (optical: dark
+"""Real-sky scenarios (`sim.sky`): sensors measure only above their masks (optical: dark
 site, sunlit object), in passes separated by hours; the scheduled outage withholds exactly
 its station's measurements; a J2 filter fusing one radar's passes is within 1 km after each.
 

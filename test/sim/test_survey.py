@@ -1,4 +1,4 @@
-"""Catalog survey (issue 20): what a radar network measures of a whole catalog, against
+"""Catalog survey: what a radar network measures of a whole catalog, against
 per-object SGP4 (the `sgp4` package's Satrec, one object and one epoch at a time)."""
 
 import dataclasses
