@@ -37,10 +37,11 @@ def sim_seconds(s: scenarios.Scenario | sky.SkyScenario) -> float:
 
 
 def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, seed: int,
-                    bag: Path) -> dict[str, dict]:
+                    bag: Path) -> dict[str, dict[str, Any]]:
     """Per-node parameters (SI units) that run scenario `s` live."""
-    sensor: dict = {"scenario": s.name, "object_id": s.name, "time_scale": time_scale,
-                    "seed": seed, "wait_for": WAIT_FOR, "wait_for_readers": READERS}
+    sensor: dict[str, Any] = {"scenario": s.name, "object_id": s.name,
+                              "time_scale": time_scale, "seed": seed, "wait_for": WAIT_FOR,
+                              "wait_for_readers": READERS}
     if isinstance(s, sky.SkyScenario):  # the truth's cadence; the filter publishes at it
         sensor["cadence"] = s.truth_cadence_s
         extra = {"predict_period": s.truth_cadence_s, "gap_forecast": "residual"}
@@ -56,12 +57,15 @@ def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, 
 
 
 def default_bag() -> str:
-    """A recorder output directory named like ``ros2 bag record``'s (`BAG_PATTERN`, now)."""
+    """Return a recorder output directory named like ``ros2 bag record``'s (`BAG_PATTERN`, now)."""
     return time.strftime(BAG_PATTERN)
 
 
 def catalog_scenario(name: str) -> sky.SkyScenario:
-    """The real-sky scenario `name` whose radars observe a catalog (ValueError naming them)."""
+    """Return the real-sky scenario `name`, whose radars observe a catalog.
+
+    Raises ValueError naming the real-sky scenarios with radars when `name` is not one.
+    """
     scenario = sky.SKY_SCENARIOS.get(name)
     if scenario is None or not scenario.radars:
         radar = [n for n, s in sky.SKY_SCENARIOS.items() if s.radars]
@@ -71,7 +75,7 @@ def catalog_scenario(name: str) -> sky.SkyScenario:
 
 
 def live_scenario(name: str) -> scenarios.Scenario | sky.SkyScenario:
-    """The scenario `name` of `LIVE_SCENARIOS` (ValueError naming the known ones)."""
+    """Return the scenario `name` of `LIVE_SCENARIOS` (ValueError naming the known ones)."""
     if name not in LIVE_SCENARIOS:
         raise ValueError(f"scenario {name!r} unknown; known: {', '.join(LIVE_SCENARIOS)}")
     return sky.SKY_SCENARIOS.get(name) or scenarios.get(name)
@@ -82,7 +86,7 @@ DEFAULT_SCENARIO = "iss_network"
 
 
 def node_names(shards: int, node: str = "catalog_filter") -> list[str]:
-    """The node names of `shards` shards of `node`: node_0, node_1, ..."""
+    """Return the node names of `shards` shards of `node`: node_0, node_1, ..."""
     return [f"{node}_{k}" for k in range(shards)]
 
 
@@ -97,11 +101,13 @@ class NodeSpec(NamedTuple):
 def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthetic: int,
                   sim_s: float, time_scale: float, seed: int, shards: int, surrogate: bool,
                   surrogate_extra: dict[str, Any], bag: Path | None) -> list[NodeSpec]:
-    """The processes of a catalog run, in start order (sensor_sim last: it waits for the
-    others): the recorder (`bag`, None: its default), `shards` catalog_filter and, with
-    `surrogate`, as many catalog_surrogate (`surrogate_extra` over their defaults), and
-    sensor_sim simulating `scenario`'s radars measuring the catalog. The same for
-    `ssa-fusion live --catalog` and `ros2 launch ssa_fusion catalog.launch.py`."""
+    """Return the processes of a catalog run, in start order.
+
+    The recorder (`bag`, None: its default), `shards` catalog_filter and, with `surrogate`,
+    as many catalog_surrogate (`surrogate_extra` over their defaults), and sensor_sim
+    simulating `scenario`'s radars measuring the catalog (last: it waits for the others).
+    The same for `ssa-fusion live --catalog` and `ros2 launch ssa_fusion catalog.launch.py`.
+    """
     names = node_names(shards)
     gaps = node_names(shards, "catalog_surrogate") if surrogate else []
     readers = ["recorder:" + TOPIC_MEASUREMENT, "recorder:" + TOPIC_ESTIMATE,

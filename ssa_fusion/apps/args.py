@@ -7,7 +7,7 @@ import os
 
 
 def positive_float(text: str) -> float:
-    """argparse type: a finite float > 0."""
+    """Parse a finite float > 0 (an argparse type)."""
     try:
         value = float(text)
     except ValueError:
@@ -22,7 +22,7 @@ MAX_DOMAIN_ID = 232
 
 
 def domain_id(text: str) -> int:
-    """argparse type of `--domain-id`: an integer in 0..`MAX_DOMAIN_ID`."""
+    """Parse `--domain-id` (an argparse type): an integer in 0..`MAX_DOMAIN_ID`."""
     try:
         value = int(text)
     except ValueError:
@@ -35,8 +35,11 @@ def domain_id(text: str) -> int:
 
 
 def add_domain_id(p: argparse.ArgumentParser) -> None:
-    """`--domain-id`, defaulting to $ROS_DOMAIN_ID when that is set (so that ROS tools in
-    the same shell see the run), else to a free-looking id chosen by `graph.Graph`."""
+    """Add `--domain-id` to `p`.
+
+    It defaults to $ROS_DOMAIN_ID when that is set (so that ROS tools in the same shell see
+    the run), else to a free-looking id chosen by `graph.Graph`.
+    """
     env = os.environ.get("ROS_DOMAIN_ID", "").strip()
     p.add_argument("--domain-id", type=domain_id, default=int(env) if env.isdigit() else None,
                    help="ROS domain id (default: $ROS_DOMAIN_ID if set, else a free-looking "

@@ -17,6 +17,7 @@ from ssa_fusion.ros.bagio import BagError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the `bag` subcommands (`repair`) to `p`."""
     sub = p.add_subparsers(dest="bag_command", required=True, metavar="{repair}")
     r = sub.add_parser(
         "repair", help="rewrite an unclosed bag (recorder killed) as a complete one",
@@ -33,6 +34,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the chosen `bag` subcommand; return its exit code."""
     return int(args._bag_run(args))
 
 

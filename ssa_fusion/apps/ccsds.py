@@ -49,10 +49,11 @@ import re
 import sys
 import warnings
 from collections import Counter, defaultdict
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TypeVar
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import erfa
 import numpy as np
@@ -63,6 +64,12 @@ from ssa_fusion.core.frames import Frame
 from ssa_fusion.core.stations import SENSORS, STATIONS
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_MEASUREMENT, TOPIC_TRUTH
+
+if TYPE_CHECKING:  # ccsds-ndm is imported on use (`_ndm`)
+    from ccsds_ndm.mapping import NDMFileFormats
+    from ccsds_ndm.models.ndmxml4.ndmxml_4_0_0_master_4_0 import Oem, Tdm
+    from ccsds_ndm.models.ndmxml4.ndmxml_4_0_0_tdm_2_0 import TrackingDataObservationType
+    from ccsds_ndm.ndm_io import NdmIo
 
 Array = NDArray[np.float64]
 
@@ -193,7 +200,7 @@ class CcsdsError(ValueError):
 
 @functools.cache
 def frame_bias() -> Array:
-    """The rotation GCRF -> EME2000 (3, 3): the IAU 2006 frame bias (``rb`` of `erfa.bp06`).
+    """Return the rotation GCRF -> EME2000 (3, 3): the IAU 2006 frame bias (`erfa.bp06`'s rb).
 
     A constant rotation of ~23 mas (0.6 m at 7000 km, 5 m at GEO), the same for positions,
     velocities and directions.
@@ -203,7 +210,7 @@ def frame_bias() -> Array:
 
 
 def gcrf_rotation(frame: OemFrame, t_unix: Array) -> Array:
-    """The rotations GCRF -> `frame` at Unix (UTC) stamps `t_unix` (n,): (n, 3, 3)."""
+    """Return the rotations GCRF -> `frame` at Unix (UTC) stamps `t_unix` (n,): (n, 3, 3)."""
     n = len(t_unix)
     if frame == OemFrame.EME2000:
         return np.broadcast_to(frame_bias(), (n, 3, 3)).copy()
@@ -218,7 +225,7 @@ def gcrf_rotation(frame: OemFrame, t_unix: Array) -> Array:
 
 
 def rotate_radec(ra: float, dec: float, m: Array) -> tuple[float, float]:
-    """The direction (ra, dec) (rad) rotated by `m` (3, 3): (ra in [0, 2 pi), dec), rad."""
+    """Return the direction (ra, dec) (rad) rotated by `m` (3, 3): (ra in [0, 2 pi), dec)."""
     cd = math.cos(dec)
     u = m @ np.array([cd * math.cos(ra), cd * math.sin(ra), math.sin(dec)])
     return (math.atan2(u[1], u[0]) % (2 * math.pi),
@@ -263,8 +270,10 @@ def _parse_ns(text: str) -> int:
 
 
 def _ns_to_seconds(ns: int) -> float:
-    """ns -> Unix seconds, computed as `messages.stamp_to_seconds` does (so a bag's stamps
-    round-trip exactly)."""
+    """Convert ns to Unix seconds as `messages.stamp_to_seconds` does.
+
+    So a bag's stamps round-trip exactly.
+    """
     return messages.stamp_to_seconds(_Stamp(ns // 1_000_000_000, ns % 1_000_000_000))
 
 
@@ -287,12 +296,18 @@ def parse_epoch(text: str, time_system: TimeSystem = TimeSystem.UTC) -> float:
 
 @dataclass(frozen=True)
 class _Stamp:
+    """A stamp as the messages hold it: whole seconds and nanoseconds."""
+
     sec: int
     nanosec: int
 
 
-def _ndm() -> tuple[Any, Any, Any, Any, Any, Any]:
-    """The ccsds-ndm modules (imported on use: only these commands need the library)."""
+def _ndm() -> tuple[NdmIo, type[NDMFileFormats], ModuleType, ModuleType, ModuleType,
+                    ModuleType]:
+    """Return the ccsds-ndm reader/writer, its formats and its common, master, OEM, TDM models.
+
+    Imported on use: only these commands need the library.
+    """
     from ccsds_ndm.mapping import NDMFileFormats
     from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_common_4_0 as common
     from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_master_4_0 as master
@@ -304,15 +319,16 @@ def _ndm() -> tuple[Any, Any, Any, Any, Any, Any]:
 
 
 def _now() -> str:
+    """Return the time now, UTC, as a CCSDS epoch to the second (``CREATION_DATE``)."""
     return f"{dt.datetime.now(dt.UTC):%Y-%m-%dT%H:%M:%S}"
 
 
 def _one_line(exc: BaseException | str) -> str:
-    """An exception's (or warning's) message on one line (or its type's name)."""
+    """Return an exception's (or warning's) message on one line (or its type's name)."""
     return " ".join(str(exc).split()) or type(exc).__name__
 
 
-def write_ndm(doc: Any, out: Path, fmt: str) -> None:
+def write_ndm(doc: object, out: Path, fmt: str) -> None:
     """Write an NDM object tree to `out` as ``kvn`` or ``xml`` (ccsds-ndm)."""
     io, formats, *_ = _ndm()
     text = io.to_string(doc, formats.XML if fmt == "xml" else formats.KVN)
@@ -324,9 +340,11 @@ _GCRF_REFERENCE = re.compile(r"(REFERENCE_FRAME\s*(?:=|>)\s*)GCRF(?=\s*(?:<|$))"
 """``REFERENCE_FRAME = GCRF`` (KVN) or ``<REFERENCE_FRAME>GCRF<`` (XML): read as ICRF."""
 
 
-def read_ndm(path: Path) -> Any:
-    """Parse a CCSDS NDM file (KVN or XML) with ccsds-ndm; CcsdsError (one line naming the
-    file) if it cannot, or if the library could not convert a value (XML).
+def read_ndm(path: Path) -> object:
+    """Parse a CCSDS NDM file (KVN or XML) with ccsds-ndm; return its object tree.
+
+    CcsdsError (one line naming the file) if it cannot, or if the library could not convert
+    a value (XML).
 
     A TDM ``REFERENCE_FRAME = GCRF``, which the TDM 2.0 schema lacks, is read as ``ICRF``
     (the same axes; module docstring).
@@ -369,9 +387,10 @@ class BagContents:
 
 
 def load_bag(bag: Path) -> BagContents:
-    """The estimates and measurements of `bag`, and the frames of its state messages.
+    """Return the estimates and measurements of `bag`, and the frames of its state messages.
 
-    Messages that do not decode are skipped with a warning (as `evaluate.load` does)."""
+    Messages that do not decode are skipped with a warning (as `evaluate.load` does).
+    """
     out = BagContents()
     undecodable: Counter[str] = Counter()
     topics = (TOPIC_ESTIMATE, TOPIC_TRUTH, TOPIC_MEASUREMENT)
@@ -389,8 +408,11 @@ def load_bag(bag: Path) -> BagContents:
 
 
 def require_gcrf(bag: Path, contents: BagContents, topics: Iterable[str], what: str) -> None:
-    """CcsdsError (one line naming the bag and the frame) unless every state message on
-    `topics` says frame ``gcrf``: `what` (e.g. "estimates") would be exported as GCRF."""
+    """Check that every state message on `topics` says frame ``gcrf``.
+
+    CcsdsError (one line naming the bag and the frame) otherwise: `what` (e.g. "estimates")
+    would be exported as GCRF.
+    """
     for topic in topics:
         other = sorted(f for f in contents.state_frames.get(topic, ()) if f != Frame.GCRF)
         if other:
@@ -405,8 +427,11 @@ def require_gcrf(bag: Path, contents: BagContents, topics: Iterable[str], what: 
 # ------------------------------------------------------------------------------------------
 def ephemerides(estimates: Iterable[types.StateEstimate],
                 object_id: str | None = None) -> dict[str, list[types.StateEstimate]]:
-    """Estimates by object id (sorted by epoch, the last one published per epoch), for one
-    object or all; CcsdsError if there are none (naming the objects there are)."""
+    """Return the estimates by object id, for one object or all.
+
+    Sorted by epoch, the last one published per epoch; CcsdsError if there are none (naming
+    the objects there are).
+    """
     by_object: dict[str, dict[float, types.StateEstimate]] = defaultdict(dict)
     for e in estimates:
         by_object[e.object_id or "unknown"][e.t] = e
@@ -422,9 +447,11 @@ def ephemerides(estimates: Iterable[types.StateEstimate],
 
 def in_frame(rows: Sequence[types.StateEstimate],
              frame: OemFrame) -> list[types.StateEstimate]:
-    """GCRF estimates (km, km/s, km²...) -> the same in `frame`: ``x' = B x``,
-    ``P' = B P B^T`` with ``B = diag(M, M)``, ``M`` the rotation GCRF -> `frame` at each
-    epoch (`gcrf_rotation`)."""
+    """Rotate GCRF estimates (km, km/s, km²...) to `frame`.
+
+    ``x' = B x``, ``P' = B P B^T`` with ``B = diag(M, M)``, ``M`` the rotation GCRF ->
+    `frame` at each epoch (`gcrf_rotation`).
+    """
     if frame == OemFrame.GCRF:
         return list(rows)
     m = gcrf_rotation(frame, np.array([e.t for e in rows], dtype=float))
@@ -437,7 +464,7 @@ def in_frame(rows: Sequence[types.StateEstimate],
 
 
 def _oem_comment(frame: OemFrame) -> str:
-    """What the segment's REF_FRAME is and how it was computed."""
+    """Return a comment saying what the segment's REF_FRAME is and how it was computed."""
     source = Path(eop.default().source).name
     return {
         OemFrame.GCRF: f"GCRF: the estimates as ssa_fusion computes them (IERS 2010, "
@@ -450,9 +477,12 @@ def _oem_comment(frame: OemFrame) -> str:
 
 
 def oem_document(ephem: dict[str, list[types.StateEstimate]],
-                 frame: OemFrame = OemFrame.GCRF) -> Any:
-    """An OEM 3.0 object tree: one segment per object, state + covariance per epoch, in
-    `frame` (the estimates are GCRF; `in_frame`), TIME_SYSTEM UTC."""
+                 frame: OemFrame = OemFrame.GCRF) -> Oem:
+    """Return an OEM 3.0 object tree of the GCRF estimates `ephem`.
+
+    One segment per object, state + covariance per epoch, in `frame` (the estimates are
+    GCRF; `in_frame`), TIME_SYSTEM UTC.
+    """
     _, _, common, master, oem, _ = _ndm()
     km, kms = common.PositionUnits.KM, common.VelocityUnits.KM_S
     cov_types = {f: _cov_type(common, f) for f in _cov_fields()}
@@ -488,18 +518,22 @@ def _cov_fields() -> dict[str, tuple[int, int]]:
     return {f"c{_COV[i]}_{_COV[j]}": (i, j) for i in range(6) for j in range(i + 1)}
 
 
-def _cov_type(common: Any, name: str) -> Any:
-    """The ccsds-ndm wrapper type of covariance field `name` (km², km²/s or km²/s²)."""
-    return (common.PositionCovarianceType, common.PositionVelocityCovarianceType,
-            common.VelocityCovarianceType)[name.count("dot")]
+def _cov_type(common: ModuleType, name: str) -> Callable[..., object]:
+    """Return the ccsds-ndm wrapper type of covariance field `name` (km², km²/s or km²/s²)."""
+    wrappers: tuple[Callable[..., object], ...] = (
+        common.PositionCovarianceType, common.PositionVelocityCovarianceType,
+        common.VelocityCovarianceType)
+    return wrappers[name.count("dot")]
 
 
-def oem_states(doc: Any) -> dict[str, list[types.StateEstimate]]:
-    """OEM object tree (as ccsds-ndm parses it) -> estimates by OBJECT_ID (km, km/s, km²),
-    in the file's REF_FRAME and UTC epochs (not converted).
+def oem_states(doc: Oem) -> dict[str, list[types.StateEstimate]]:
+    """Return the estimates of an OEM object tree (as ccsds-ndm parses it) by OBJECT_ID.
+
+    In km, km/s, km², in the file's REF_FRAME and UTC epochs (not converted).
 
     Only segments with covariances at the state vectors' epochs keep them; others get
-    zero covariance."""
+    zero covariance.
+    """
     out: dict[str, list[types.StateEstimate]] = {}
     for seg in doc.body.segment:
         oid = seg.metadata.object_id
@@ -524,12 +558,13 @@ def oem_states(doc: Any) -> dict[str, list[types.StateEstimate]]:
 class TdmExport:
     """A TDM object tree, the measurements in it by kind, and how many were left out."""
 
-    doc: Any
+    doc: Tdm
     counts: Counter[int]
     skipped: int
 
 
 def _radec_frame_comment(frame: AngleFrame) -> str:
+    """Return a comment saying how the RADEC angles of a segment in `frame` were computed."""
     return ("RA/Dec astrometric (station to object, no aberration), "
             + ("GCRF axes, which are the ICRF axes" if frame == AngleFrame.ICRF else
                "GCRF rotated to EME2000 by the IAU 2006 frame bias (ERFA bp06)"))
@@ -537,10 +572,12 @@ def _radec_frame_comment(frame: AngleFrame) -> str:
 
 def tdm_document(measurements: Iterable[types.Measurement],
                  frame: AngleFrame = AngleFrame.ICRF) -> TdmExport:
-    """A TDM 2.0 object tree of the real range/az/el and ra/dec measurements, one segment
-    per object, station, kind and noise level, TIME_SYSTEM UTC; RADEC in `frame` (ICRF: the
-    GCRF values; EME2000: rotated by `frame_bias`). CcsdsError if no measurement is left
-    (forecasts and other kinds are left out and counted)."""
+    """Return a TDM 2.0 object tree of the real range/az/el and ra/dec measurements.
+
+    One segment per object, station, kind and noise level, TIME_SYSTEM UTC; RADEC in
+    `frame` (ICRF: the GCRF values; EME2000: rotated by `frame_bias`). CcsdsError if no
+    measurement is left (forecasts and other kinds are left out and counted).
+    """
     if frame not in TDM_EXPORT_FRAMES:
         raise CcsdsError(f"TDM export writes RADEC in {', '.join(TDM_EXPORT_FRAMES)}, "
                          f"not {frame}")
@@ -596,7 +633,7 @@ def tdm_document(measurements: Iterable[types.Measurement],
 # ------------------------------------------------------------------------------------------
 @dataclass
 class Imported:
-    """Measurements read from a TDM, and what was left out (counted, never silently).
+    r"""Measurements read from a TDM, and what was left out (counted, never silently).
 
     Attributes
     ----------
@@ -605,7 +642,7 @@ class Imported:
     incomplete : int
         Epochs lacking one of their layout's keywords (`Layout.keywords`).
     invalid : int
-        Epochs with a non-finite or impossible value (negative range, \\|el\\| or \\|dec\\|
+        Epochs with a non-finite or impossible value (negative range, \|el\| or \|dec\|
         over 90 deg); `first_invalid` says the first one read.
     unused : Counter
         Observations of keywords not read (e.g. DOPPLER_INSTANTANEOUS, RANGE in a RADEC
@@ -619,7 +656,7 @@ class Imported:
     unused: Counter[str] = field(default_factory=Counter)
 
     def left_out(self) -> str:
-        """What was left out, as a clause of the summary line ("" if nothing)."""
+        """Return what was left out, as a clause of the summary line ("" if nothing)."""
         parts = []
         if self.incomplete:
             parts.append(f"{self.incomplete} epoch(s) without all their keywords")
@@ -635,17 +672,19 @@ class Imported:
 _E = TypeVar("_E", bound=enum.StrEnum)
 
 
-def _meta_value(meta: Any, key: str) -> str | None:
-    """A metadata keyword's value (enum or str) in capitals, or None if absent."""
+def _meta_value(meta: object, key: str) -> str | None:
+    """Return a metadata keyword's value (enum or str) in capitals, or None if absent."""
     got = getattr(meta, key, None)
     got = getattr(got, "value", got)
     return None if got is None or str(got).strip() == "" else str(got).strip().upper()
 
 
-def _choice(meta: Any, key: str, allowed: Iterable[_E], where: str,
+def _choice(meta: object, key: str, allowed: Iterable[_E], where: str,
             default: _E | None = None) -> _E:
-    """The metadata keyword `key` as one of `allowed` (its `default` if absent); CcsdsError
-    (one line naming `where` and the value) otherwise."""
+    """Return the metadata keyword `key` as one of `allowed` (its `default` if absent).
+
+    CcsdsError (one line naming `where` and the value) otherwise.
+    """
     allowed = list(allowed)
     got = _meta_value(meta, key)
     if got is None and default is not None:
@@ -664,9 +703,11 @@ class _RangeUnits(enum.StrEnum):
     KM = "KM"
 
 
-def _segment_layout(meta: Any, where: str) -> tuple[Layout, Array | None]:
-    """The segment's layout (ANGLE_TYPE, RANGE_UNITS) and, for RADEC, the rotation of its
-    REFERENCE_FRAME to GCRF (None: none needed)."""
+def _segment_layout(meta: object, where: str) -> tuple[Layout, Array | None]:
+    """Return the segment's layout (ANGLE_TYPE, RANGE_UNITS) and its RADEC frame's rotation.
+
+    For RADEC, the rotation of its REFERENCE_FRAME to GCRF (None: none needed).
+    """
     angle_type = _choice(meta, "angle_type", AngleType, where)
     if angle_type == AngleType.AZEL:
         _choice(meta, "range_units", _RangeUnits, where, default=_RangeUnits.KM)
@@ -675,9 +716,11 @@ def _segment_layout(meta: Any, where: str) -> tuple[Layout, Array | None]:
     return RADEC, (frame_bias().T if ref == AngleFrame.EME2000 else None)
 
 
-def _participants(meta: Any, where: str) -> tuple[str, str]:
-    """(station id, object id) of a TDM segment: the one participant that is a known station
-    and the one that is not."""
+def _participants(meta: object, where: str) -> tuple[str, str]:
+    """Return (station id, object id) of a TDM segment.
+
+    The one participant that is a known station and the one that is not.
+    """
     names = [p for i in range(1, 6) if (p := getattr(meta, f"participant_{i}", None))]
     stations = [p for p in names if p.lower() in STATIONS]
     others = [p for p in names if p.lower() not in STATIONS]
@@ -688,10 +731,13 @@ def _participants(meta: Any, where: str) -> tuple[str, str]:
     return stations[0].lower(), others[0]
 
 
-def _segment_sigma(meta: Any, station: str, layout: Layout,
+def _segment_sigma(meta: object, station: str, layout: Layout,
                    sigma: Sequence[float] | None, where: str) -> Array:
-    """Noise of a segment's measurements in core units (km, rad): `sigma` (TDM units), else
-    the segment's `SIGMA_COMMENT`, else the station's sensor preset of that kind."""
+    """Return the noise of a segment's measurements in core units (km, rad).
+
+    `sigma` (TDM units), else the segment's `SIGMA_COMMENT`, else the station's sensor
+    preset of that kind.
+    """
     want = " ".join(layout.sigma_names)
     if sigma is None:
         for line in getattr(meta, "comment", None) or []:
@@ -718,8 +764,8 @@ def _segment_sigma(meta: Any, station: str, layout: Layout,
 _FIELDS: dict[type, tuple[str, ...]] = {}
 
 
-def _observation_fields(ob: Any) -> tuple[str, ...]:
-    """The value fields of a ccsds-ndm observation (all but EPOCH and COMMENT), by class."""
+def _observation_fields(ob: TrackingDataObservationType) -> tuple[str, ...]:
+    """Return the value fields of a ccsds-ndm observation (all but EPOCH and COMMENT)."""
     cls = type(ob)
     if cls not in _FIELDS:
         _FIELDS[cls] = tuple(f.name for f in dataclasses.fields(cls)
@@ -741,10 +787,12 @@ def _why_invalid(layout: Layout, v: Array) -> str:
     return ""
 
 
-def tdm_measurements(doc: Any, sigma: Mapping[types.Kind, Sequence[float]] | None = None,
+def tdm_measurements(doc: object, sigma: Mapping[types.Kind, Sequence[float]] | None = None,
                      source: str = "TDM") -> Imported:
-    """TDM object tree -> RANGE_AZ_EL (km, rad) and RA_DEC (rad, GCRF) measurements, sorted
-    by epoch (UTC stamps).
+    """Return the RANGE_AZ_EL (km, rad) and RA_DEC (rad, GCRF) measurements of a TDM.
+
+    `doc` is the TDM's object tree (`read_ndm`); the measurements are sorted by epoch (UTC
+    stamps).
 
     `sigma`: noise by measurement kind in TDM units (range km, azimuth deg, elevation deg;
     ra deg, dec deg) for every segment of that kind, else each segment's ``ssa_fusion
@@ -816,8 +864,10 @@ def tdm_measurements(doc: Any, sigma: Mapping[types.Kind, Sequence[float]] | Non
 
 
 def write_measurement_bag(out: Path, measurements: Sequence[types.Measurement]) -> None:
-    """A bag of `measurements` on /ssa/measurement, each logged at its own stamp (what
-    `replay` plays; it derives /clock from the stamps)."""
+    """Write the bag `out` of `measurements` on /ssa/measurement, each logged at its stamp.
+
+    What `replay` plays; it derives /clock from the stamps.
+    """
     classes = bagio.rosbags_classes()
     writer = bagio.BagWriter(out)
     try:
@@ -834,6 +884,7 @@ def write_measurement_bag(out: Path, measurements: Sequence[types.Measurement]) 
 # command line
 # ------------------------------------------------------------------------------------------
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the `export` or the `import` subcommands to `p` (by the last word of its name)."""
     if p.prog.split()[-1] == "import":
         _add_import(p)
     else:
@@ -841,11 +892,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _add_format(p: argparse.ArgumentParser) -> None:
+    """Add ``--format`` (kvn or xml) to `p`."""
     p.add_argument("--format", choices=("kvn", "xml"), default=None,
                    help="file format (default: xml if --out ends in .xml, else kvn)")
 
 
 def _add_export(p: argparse.ArgumentParser) -> None:
+    """Add `export oem` and `export tdm` to `p`."""
     sub = p.add_subparsers(dest="ccsds_command", required=True, metavar="{oem,tdm}")
     o = sub.add_parser("oem", help="the filter's estimates with covariance as a CCSDS OEM",
                        description="Write the estimates of a bag (/ssa/estimate) as a CCSDS "
@@ -878,6 +931,7 @@ def _add_export(p: argparse.ArgumentParser) -> None:
 
 
 def _add_import(p: argparse.ArgumentParser) -> None:
+    """Add `import tdm` to `p`."""
     sub = p.add_subparsers(dest="ccsds_command", required=True, metavar="{tdm}")
     t = sub.add_parser("tdm", help="a CCSDS TDM (range, az/el or ra/dec) into a bag `replay` "
                                    "runs",
@@ -908,6 +962,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _output(args: argparse.Namespace) -> tuple[Path, str]:
+    """Return the file to write (``--out``, else next to the bag) and its format."""
     bag: Path = args.bag
     out = args.out or (bag.with_suffix("") if bag.suffix == ".mcap" else bag).with_name(
         bag.name.removesuffix(".mcap") + args._suffix)
@@ -917,6 +972,7 @@ def _output(args: argparse.Namespace) -> tuple[Path, str]:
 
 
 def run_export_oem(args: argparse.Namespace) -> int:
+    """Run `export oem`: write the bag's estimates as an OEM; return 0."""
     out, fmt = _output(args)
     contents = load_bag(args.bag)
     require_gcrf(args.bag, contents, (TOPIC_ESTIMATE,), "estimates")
@@ -929,6 +985,7 @@ def run_export_oem(args: argparse.Namespace) -> int:
 
 
 def run_export_tdm(args: argparse.Namespace) -> int:
+    """Run `export tdm`: write the bag's real measurements as a TDM; return 0."""
     out, fmt = _output(args)
     contents = load_bag(args.bag)
     ms = contents.measurements
@@ -947,6 +1004,7 @@ def run_export_tdm(args: argparse.Namespace) -> int:
 
 
 def run_import_tdm(args: argparse.Namespace) -> int:
+    """Run `import tdm`: write the TDM's measurements to a new bag; return 0."""
     if args.bag.exists():
         raise CcsdsError(f"{args.bag} exists already; choose another --bag")
     sigma = {layout.kind: s for layout in LAYOUTS.values()

@@ -6,6 +6,7 @@ import argparse
 import importlib
 import signal
 import sys
+from types import ModuleType
 
 from ssa_fusion import limit_blas_threads
 
@@ -25,7 +26,7 @@ _COMMANDS = {
 }
 
 
-def _available() -> dict[str, tuple[object, str]]:
+def _available() -> dict[str, tuple[ModuleType, str]]:
     found = {}
     for name, (module, help_text) in _COMMANDS.items():
         try:
@@ -37,6 +38,7 @@ def _available() -> dict[str, tuple[object, str]]:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """Return the `ssa-fusion` parser, one subcommand per command whose module imports."""
     parser = argparse.ArgumentParser(prog="ssa-fusion", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     for name, (module, help_text) in _available().items():
@@ -47,8 +49,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 class Interrupted(BaseException):
-    """SIGTERM or SIGHUP, raised in the main thread like KeyboardInterrupt for SIGINT, so a
-    command's cleanup (`finally`: stop every node it started, close the bag) runs."""
+    """SIGTERM or SIGHUP, raised in the main thread like KeyboardInterrupt for SIGINT.
+
+    So a command's cleanup (`finally`: stop every node it started, close the bag) runs.
+    """
 
     def __init__(self, signum: int) -> None:
         super().__init__(signal.Signals(signum).name)
@@ -65,9 +69,12 @@ def _interrupt(signum: int, _frame: object) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one subcommand. SIGINT, SIGTERM and SIGHUP stop it cleanly: the command's cleanup
-    runs (a live run stops every node it started and closes the bag), a line says so, and
-    the exit code is 128 + the signal's number (130, 143, 129), as a shell reports it."""
+    """Run one subcommand; return its exit code.
+
+    SIGINT, SIGTERM and SIGHUP stop it cleanly: the command's cleanup runs (a live run stops
+    every node it started and closes the bag), a line says so, and the exit code is 128 +
+    the signal's number (130, 143, 129), as a shell reports it.
+    """
     limit_blas_threads()  # before build_parser imports the commands, and with them numpy
     args = build_parser().parse_args(argv)
     previous = {sig: signal.signal(sig, _interrupt) for sig in _STOP_SIGNALS}

@@ -1,8 +1,8 @@
 """Evaluate a bag the graph recorded: every arm of `ssa_fusion.evaluation.arms` over the gap.
 
 The arms (placeholder, coast, j2_coast, dmd_ekf, hypothetical_ekf) are defined and scored
-once, in `paper.arms`, for the offline study and for bags alike. Here the DMD-EKF arm is the
-filter's live estimates during the gap (`/ssa/estimate`); the gap epochs are the
+once, in `evaluation.arms`, for the offline study and for bags alike. Here the DMD-EKF arm
+is the filter's live estimates during the gap (`/ssa/estimate`); the gap epochs are the
 `/ssa/withheld` stamps; the truth is `/ssa/truth`.
 
 The estimator settings the other arms run with are, in this order: a ROS params file
@@ -71,21 +71,17 @@ class BagData:
 def load(path: Path | str) -> BagData:
     """Read the /ssa topics of a bag into core types (other topics are counted only)."""
     data = BagData()
-    lists = {
-        TOPIC_TRUTH: (data.truth, estimate_from_msg),
-        TOPIC_ESTIMATE: (data.estimates, estimate_from_msg),
-        TOPIC_MEASUREMENT: (data.measurements, measurement_from_msg),
-        TOPIC_WITHHELD: (data.withheld, measurement_from_msg),
-        TOPIC_FORECAST: (data.forecasts, measurement_from_msg),
-    }
+    states = {TOPIC_TRUTH: data.truth, TOPIC_ESTIMATE: data.estimates}
+    measurements = {TOPIC_MEASUREMENT: data.measurements, TOPIC_WITHHELD: data.withheld,
+                    TOPIC_FORECAST: data.forecasts}
     undecodable: Counter[str] = Counter()
     for m in bagio.read_bag(path, undecodable=undecodable):
         data.counts[m.topic] = data.counts.get(m.topic, 0) + 1
-        if m.topic in lists:
-            target, convert = lists[m.topic]
-            target.append(convert(m.msg))
-            if m.topic in (TOPIC_TRUTH, TOPIC_ESTIMATE):
-                data.frames.add(m.msg.header.frame_id)
+        if m.topic in states:
+            states[m.topic].append(estimate_from_msg(m.msg))
+            data.frames.add(m.msg.header.frame_id)
+        elif m.topic in measurements:
+            measurements[m.topic].append(measurement_from_msg(m.msg))
         elif m.topic == TOPIC_CONFIG:
             data.config.append(m.msg.data)
     for topic, n in undecodable.items():
@@ -105,7 +101,7 @@ class Settings:
 
 def estimator_for(recorded: list[str], kind: int, scenario: str = "",
                   params_file: Path | None = None) -> Settings:
-    """The estimator settings for a bag (see the module docstring for the order).
+    """Return the estimator settings for a bag (see the module docstring for the order).
 
     `recorded`: the bag's /ssa/config messages; `kind`: its measurement kind, for a bag
     without them. ValueError: a bad params file, an unknown scenario or malformed recorded
@@ -127,8 +123,11 @@ def estimator_for(recorded: list[str], kind: int, scenario: str = "",
 
 @dataclass
 class Evaluation:
-    """A bag's gap evaluation and the settings it ran with; for a station network (the real
-    sky), also how the filter did after each pass and through the gaps."""
+    """A bag's gap evaluation and the settings it ran with.
+
+    For a station network (the real sky), also how the filter did after each pass and
+    through the gaps.
+    """
 
     gap: GapEvaluation
     settings: Settings
@@ -185,30 +184,27 @@ class LateForecasts:
     """The earliest such epoch, s (sim time), or None."""
 
 
-def _same_epoch(a: float, b: float) -> bool:
-    """a == b up to the round-off of epochs computed as t0 + k * cadence (1 µs, or 1e-12
-    relative on Unix times): the rule of `paper.arms` for matching gap epochs."""
-    return abs(a - b) <= max(1e-6, 1e-12 * abs(b))
-
-
 def unfused_forecasts(data: BagData, t_gap: np.ndarray) -> LateForecasts:
-    """Count the gap's forecasts the filter never fused (`LateForecasts`); `t_gap`: the gap
-    epochs, s (as `evaluate` scores them; their first and last bound the span)."""
+    """Count the gap's forecasts the filter never fused (`LateForecasts`).
+
+    `t_gap`: the gap epochs, s (as `evaluate` scores them; their first and last bound the
+    span).
+    """
     if not len(t_gap) or not data.forecasts:
         return LateForecasts(0, 0)
     lo, hi = float(np.min(t_gap)), float(np.max(t_gap))
     wanted = sorted({f.t for f in data.forecasts
-                     if lo <= f.t <= hi or _same_epoch(f.t, lo) or _same_epoch(f.t, hi)})
+                     if lo <= f.t <= hi or types.same_epoch(f.t, lo) or types.same_epoch(f.t, hi)})
     fused = sorted({e.t for e in data.estimates
                     if e.update_source != types.UpdateSource.NONE})
     late = []
     for t in wanted:
         k = int(np.searchsorted(fused, t))
-        if not any(0 <= j < len(fused) and _same_epoch(fused[j], t) for j in (k - 1, k)):
+        if not any(0 <= j < len(fused) and types.same_epoch(fused[j], t) for j in (k - 1, k)):
             late.append(t)
     # epochs that differ by round-off only are one epoch
-    distinct = [t for i, t in enumerate(wanted) if i == 0 or not _same_epoch(wanted[i - 1], t)]
-    late = [t for i, t in enumerate(late) if i == 0 or not _same_epoch(late[i - 1], t)]
+    distinct = [t for i, t in enumerate(wanted) if i == 0 or not types.same_epoch(wanted[i - 1], t)]
+    late = [t for i, t in enumerate(late) if i == 0 or not types.same_epoch(late[i - 1], t)]
     return LateForecasts(len(late), len(distinct), late[0] if late else None)
 
 
@@ -218,7 +214,7 @@ ARM_COLUMNS = ("arm", "ε over the gap", "mean position error [km]",
 
 
 def arm_rows(g: GapEvaluation) -> list[list[str]]:
-    """The arms table's cells (`ARM_COLUMNS`), one row per scored arm, formatted."""
+    """Return the arms table's cells (`ARM_COLUMNS`), one row per scored arm, formatted."""
     rows = []
     for arm in ArmName:
         sc = g.scores.get(arm)

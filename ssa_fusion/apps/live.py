@@ -23,8 +23,9 @@ import json
 import re
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from ssa_fusion import graphs
 from ssa_fusion.apps import evaluate, report, runs
@@ -33,6 +34,9 @@ from ssa_fusion.ros import visual_msgs
 from ssa_fusion.ros.processes import Graph
 from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
 from ssa_fusion.sim import scenarios, sky
+
+if TYPE_CHECKING:
+    from ssa_fusion.ros.interfaces import Message
 
 LIVE_ROOT = Path("out/live")
 """Where runs go by default, one directory each."""
@@ -46,6 +50,7 @@ FILTER_COUNTERS = ("forecast_superseded", "forecasts_rolled_back", "rejected_gat
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the options of `ssa-fusion live` (with the catalog ones) to `p`."""
     p.add_argument("--scenario", default=scenarios.DEFAULT_LIVE.name, choices=graphs.LIVE_SCENARIOS)
     p.add_argument("--time-scale", type=positive_float, default=1000.0,
                    help="sim seconds per wall second (default 1000)")
@@ -79,7 +84,7 @@ _FOXGLOVE_URL = re.compile(r"Foxglove WebSocket server on (ws://\S+)")
 
 
 def _port(text: str) -> int:
-    """argparse type: a TCP port 0..65535."""
+    """Parse a TCP port 0..65535 (an argparse type)."""
     try:
         value = int(text)
     except ValueError:
@@ -89,20 +94,24 @@ def _port(text: str) -> int:
     return value
 
 
-def foxglove_parameters(params: dict[str, dict], port: int) -> dict:
-    """Parameters of the foxglove_bridge node beside the graph `params` (`node_parameters`):
-    sim time, `port` on loopback, and the filter's stations (drawn in the scene)."""
-    out: dict = {"use_sim_time": True, "host": "127.0.0.1", "port": port}
+def foxglove_parameters(params: dict[str, dict[str, Any]], port: int) -> dict[str, Any]:
+    """Parameters of the foxglove_bridge node beside the graph `params` (`node_parameters`).
+
+    Sim time, `port` on loopback, and the filter's stations (drawn in the scene).
+    """
+    out: dict[str, Any] = {"use_sim_time": True, "host": "127.0.0.1", "port": port}
     station = params.get("filter", {}).get("station")
     if station:
         out["station"] = station
     return out
 
 
-def start_foxglove(graph: Graph, params: dict[str, dict], port: int,
+def start_foxglove(graph: Graph, params: dict[str, dict[str, Any]], port: int,
                    say: Callable[[str], None] = print) -> str:
-    """Start foxglove_bridge in `graph`, wait until its server listens, say its address
-    (``ws://127.0.0.1:PORT``) and return it."""
+    """Start foxglove_bridge in `graph`; say and return its address once its server listens.
+
+    The address is ``ws://127.0.0.1:PORT``.
+    """
     proc = graph.start_node("foxglove_bridge", params=foxglove_parameters(params, port))
 
     def url() -> str | None:
@@ -120,8 +129,11 @@ def start_foxglove(graph: Graph, params: dict[str, dict], port: int,
 
 
 def slow_warning(ran_s: float, sim_s: float, time_scale: float) -> str | None:
-    """One warning line when `ran_s` wall seconds exceed `SLOW_FACTOR` times (and
-    `SLOW_SLACK_S` over) the `sim_s / time_scale` asked for; else None."""
+    """Return one warning line when the run was too slow for `time_scale`; else None.
+
+    Too slow: `ran_s` wall seconds exceed `SLOW_FACTOR` times (and `SLOW_SLACK_S` over) the
+    `sim_s / time_scale` asked for.
+    """
     asked = sim_s / time_scale
     if ran_s <= SLOW_FACTOR * asked or ran_s - asked <= SLOW_SLACK_S:
         return None
@@ -131,9 +143,12 @@ def slow_warning(ran_s: float, sim_s: float, time_scale: float) -> str | None:
             "a lower --time-scale gives the nodes time to keep up")
 
 
-def filter_counters(diagnostics: list) -> dict[str, int]:
-    """`FILTER_COUNTERS` of the filter's last /diagnostics message in `diagnostics`
-    (DiagnosticArray messages); empty when none came from the filter."""
+def filter_counters(diagnostics: Sequence[Message]) -> dict[str, int]:
+    """Return `FILTER_COUNTERS` of the filter's last /diagnostics message in `diagnostics`.
+
+    `diagnostics`: DiagnosticArray messages. The result is empty when none came from the
+    filter.
+    """
     for msg in reversed(diagnostics):
         for status in msg.status:
             if status.name == "filter":
@@ -144,7 +159,7 @@ def filter_counters(diagnostics: list) -> dict[str, int]:
 
 
 def late_warning(late: evaluate.LateForecasts, counters: dict[str, int]) -> str | None:
-    """One warning line when forecasts for gap epochs never went into the filter; else None."""
+    """Return a warning line when forecasts for gap epochs never reached the filter, or None."""
     if not late.epochs:
         return None
     seen = ", ".join(f"{k}={v}" for k, v in counters.items() if v)
@@ -156,6 +171,7 @@ def late_warning(late: evaluate.LateForecasts, counters: dict[str, int]) -> str 
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run `ssa-fusion live` (or, with ``--catalog``, `live_catalog.run`); return the exit code."""
     if getattr(args, "catalog", None) is not None:
         from ssa_fusion.apps import live_catalog
 
@@ -174,7 +190,7 @@ def run(args: argparse.Namespace) -> int:
     t_start = time.monotonic()
     last_output = 0.0  # wall time (Unix s) the probe last saw an estimate or forecast arrive
     try:
-        from diagnostic_msgs.msg import DiagnosticArray
+        from ssa_fusion.ros.interfaces import DiagnosticArray
 
         diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
         if getattr(args, "foxglove", False):
@@ -186,7 +202,7 @@ def run(args: argparse.Namespace) -> int:
         sensor = graph.start_node("sensor_sim", params=params["sensor_sim"])
         graph.wait_exit(sensor, timeout=60.0 + 3.0 * sim_s / args.time_scale)
         # let surrogate, filter and recorder finish what is in flight
-        from ssa_fusion_msgs.msg import Measurement, StateEstimate
+        from ssa_fusion.ros.interfaces import Measurement, StateEstimate
 
         seen = [graph.collect(StateEstimate, "/ssa/estimate"),
                 graph.collect(Measurement, "/ssa/forecast")]

@@ -2,7 +2,7 @@
 
 sensor_sim simulates the radars of the scenario (`--scenario` when it is a real-sky one,
 else ``iss_network``'s radars) measuring every object of the catalog (SGP4/SDP4 truth,
-`core.survey`); `--shards` K ``catalog_filter`` processes each track the objects of their
+`sim.survey`); `--shards` K ``catalog_filter`` processes each track the objects of their
 shard (DDS content filter on ``Measurement.shard_key``), and as many ``catalog_surrogate``
 processes forecast through the gaps between passes of the same shards' objects
 (`core.gap_bank`, residual fits under a wall-time budget; ``--no-surrogate`` leaves them
@@ -25,9 +25,10 @@ import json
 import sys
 import time
 from collections import Counter, defaultdict
+from collections.abc import Sequence
 from dataclasses import fields
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypedDict
 
 import numpy as np
 
@@ -47,9 +48,12 @@ from ssa_fusion.ros.topics import (
 from ssa_fusion.sim import sky, survey
 from ssa_fusion.studies.catalog_gaps import gap_errors
 
+if TYPE_CHECKING:
+    from ssa_fusion.ros.interfaces import Message
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    """The catalog options of `ssa-fusion live`."""
+    """Add the catalog options of `ssa-fusion live` to `p`."""
     p.add_argument("--catalog", type=Path, default=None,
                    help="run a catalog instead of the scenario's one object: element sets "
                         "(TLE, 3LE, OMM XML/CSV), e.g. config/catalogs/sample.tle")
@@ -71,7 +75,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def check(args: argparse.Namespace) -> str | None:
-    """Why the catalog options cannot run, or None."""
+    """Return why the catalog options cannot run, or None."""
     if args.objects < 0 or args.synthetic < 0 or args.duration < 0:
         return "--objects, --synthetic and --duration must be >= 0"
     if not 1 <= args.shards <= 64:
@@ -88,7 +92,7 @@ def check(args: argparse.Namespace) -> str | None:
 
 
 def entries_of(args: argparse.Namespace) -> list[catalog_io.CatalogEntry]:
-    """The objects the run simulates (as sensor_sim builds them from the same options)."""
+    """Return the objects the run simulates (as sensor_sim builds them from the options)."""
     entries = catalog_io.read_catalog(args.catalog)
     if args.synthetic:
         entries = survey.synthetic_catalog(entries[0], args.synthetic, seed=args.seed)
@@ -96,8 +100,11 @@ def entries_of(args: argparse.Namespace) -> list[catalog_io.CatalogEntry]:
 
 
 def surrogate_params(args: argparse.Namespace) -> dict[str, Any]:
-    """The ``--surrogate-param NAME=VALUE`` options as parameters (YAML values: numbers,
-    booleans, strings); ValueError naming the one that is not NAME=VALUE."""
+    """Return the ``--surrogate-param NAME=VALUE`` options as parameters.
+
+    The values are YAML (numbers, booleans, strings); ValueError naming an option that is
+    not NAME=VALUE or names no parameter of catalog_surrogate.
+    """
     import yaml
 
     known = {f.name: getattr(CATALOG_SURROGATE, f.name) for f in fields(CATALOG_SURROGATE)}
@@ -117,8 +124,8 @@ def surrogate_params(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
-def _statuses(diagnostics: list) -> dict[str, dict[str, str]]:
-    """The last /diagnostics key/values of each node (by node name)."""
+def _statuses(diagnostics: Sequence[Message]) -> dict[str, dict[str, str]]:
+    """Return the last /diagnostics key/values of each node (by node name)."""
     out: dict[str, dict[str, str]] = {}
     for msg in diagnostics:
         for status in msg.status:
@@ -127,6 +134,7 @@ def _statuses(diagnostics: list) -> dict[str, dict[str, str]]:
 
 
 def _rss_kib(pid: int) -> int:
+    """Return the resident set size of process `pid`, KiB (0 when unknown)."""
     try:
         for line in Path(f"/proc/{pid}/status").read_text().splitlines():
             if line.startswith("VmRSS:"):
@@ -153,6 +161,7 @@ def position_errors(entries: list[catalog_io.CatalogEntry],
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run `ssa-fusion live --catalog`; return the exit code (1 when measurements were lost)."""
     problem = check(args)
     if problem:
         print(f"error: {problem}", file=sys.stderr)
@@ -178,8 +187,7 @@ def run(args: argparse.Namespace) -> int:
     rss: dict[str, int] = {}
     last_output = time.time()
     try:
-        from diagnostic_msgs.msg import DiagnosticArray
-        from ssa_fusion_msgs.msg import StateEstimate
+        from ssa_fusion.ros.interfaces import DiagnosticArray, StateEstimate
 
         diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
         seen: Counter[int] = Counter()  # estimates heard, by update source
@@ -217,13 +225,30 @@ def run(args: argparse.Namespace) -> int:
     return 0 if summary["lost_measurements"] == 0 else 1
 
 
+class ShardSummary(TypedDict):
+    """One catalog_filter shard in the summary (``per_shard`` of ``catalog.json``)."""
+
+    received: int
+    ignored_other_shard: int
+    refused: int
+    dropped: int
+    consumed: int
+    estimates: int
+    objects: int
+    rss_mib: float
+    bank_bytes_per_object: str
+    object_ids: list[str]
+
+
 def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
               status: dict[str, dict[str, str]], names: list[str], rss: dict[str, int],
               sim_wall: tuple[float, float] | None, sim_s: float,
               gap_nodes: list[str] | None = None) -> dict[str, Any]:
-    """The run's accounting (every measurement), speed, memory and accuracy. `sim_wall`:
-    wall times (Unix s) of the first measurement published and of the last estimate heard;
-    `gap_nodes`: the catalog_surrogate processes."""
+    """Return the run's accounting (every measurement), speed, memory and accuracy.
+
+    `sim_wall`: wall times (Unix s) of the first measurement published and of the last
+    estimate heard; `gap_nodes`: the catalog_surrogate processes.
+    """
     recorded: Counter[str] = Counter()
     estimates: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
     forecasts: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
@@ -241,21 +266,21 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
         return int(v) if v.isdigit() else 0
 
     published = num("sensor_sim", "published")
-    per_shard = {}
+    per_shard: dict[str, ShardSummary] = {}
     causes: Counter[str] = Counter()
-    for n in names:
-        st = status.get(n, {})
+    for shard in names:
+        st = status.get(shard, {})
         counts = {k: int(v) for k, v in st.items() if v.isdigit()}
-        per_shard[n] = {"received": counts.get("received", 0),
-                        "ignored_other_shard": counts.get("ignored_other_shard", 0),
-                        "refused": counts.get("refused", 0),
-                        "dropped": counts.get("dropped", 0),
-                        "consumed": counts.get("consumed", 0),
-                        "estimates": counts.get("published_sensor", 0),
-                        "objects": int(st.get("objects", "0") or 0),
-                        "rss_mib": rss.get(n, 0) / 1024.0,
-                        "bank_bytes_per_object": st.get("bank_bytes_per_object", ""),
-                        "object_ids": [x for x in st.get("object_ids", "").split(",") if x]}
+        per_shard[shard] = {"received": counts.get("received", 0),
+                            "ignored_other_shard": counts.get("ignored_other_shard", 0),
+                            "refused": counts.get("refused", 0),
+                            "dropped": counts.get("dropped", 0),
+                            "consumed": counts.get("consumed", 0),
+                            "estimates": counts.get("published_sensor", 0),
+                            "objects": int(st.get("objects", "0") or 0),
+                            "rss_mib": rss.get(shard, 0) / 1024.0,
+                            "bank_bytes_per_object": st.get("bank_bytes_per_object", ""),
+                            "object_ids": [x for x in st.get("object_ids", "").split(",") if x]}
         for k, v in counts.items():
             if k.startswith(("rejected_", "iod_", "reinitialised", "internal_error")):
                 causes[k] += v
@@ -268,7 +293,7 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
     err = position_errors(entries, estimates)
     ran = None if sim_wall is None else sim_wall[1] - sim_wall[0]
     n = max(len(entries), 1)
-    surrogates = {}
+    surrogates: dict[str, dict[str, float | list[str]]] = {}
     for g in gap_nodes or []:
         st = status.get(g, {})
         surrogates[g] = {k: num(g, k) for k in (
@@ -305,7 +330,7 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
 
 
 def table(s: dict[str, Any]) -> str:
-    """The summary as lines of text."""
+    """Return the summary as lines of text."""
     rows = [
         f"\nmeasurements: published {s['published']}, recorded {s['recorded_measurements']}, "
         f"received by the shards {s['received_by_shards']} (refused at the door "

@@ -14,6 +14,9 @@ measurements, and the offline replay fuses forecasts at the positions the record
 in the bag's log-time order. A bag without recorded forecasts gets them when the clock
 (the measurement stamps) passes each missed epoch by the live grace, and those still owed
 when the measurement ending a gap arrives with it, as the surrogate node publishes them.
+What the filter publishes besides its updates, the predictions through a gap, follows the
+filter node's own policy (`core.gap_publisher.GapPublisher`, with the ``predict_period`` and
+``gap_forecast`` the bag records), driven by the bag's /clock.
 
 The estimator settings are those recorded with the bag (``/ssa/config``) unless
 ``--params-file`` or ``--scenario`` says otherwise (`settings`). A bag at another cadence
@@ -30,14 +33,18 @@ import statistics
 import sys
 import time
 from collections import Counter
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 from ssa_fusion.apps import evaluate
 from ssa_fusion.apps.args import add_domain_id, positive_float
 from ssa_fusion.core import types
 from ssa_fusion.core.config import EstimatorConfig, make_surrogate, make_tracker
 from ssa_fusion.core.frames import Frame
+from ssa_fusion.core.gap_publisher import GapFill, GapPublisher, Published
+from ssa_fusion.core.types import Cause
 from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S, ahead_of_clock
 from ssa_fusion.nodes import settings as node_settings
 from ssa_fusion.ros import bagio, messages
@@ -58,6 +65,7 @@ KNOWN = (*PLAYED, TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_CLOCK, TOPIC_CONFIG, "/d
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the options of `ssa-fusion replay` to `p`."""
     p.add_argument("bag", type=Path, help="rosbag2 directory or .mcap file")
     p.add_argument("--rate", type=positive_float, default=1.0,
                    help="playback rate (sim seconds per wall second / bag timing), default 1")
@@ -75,6 +83,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run `ssa-fusion replay` (live over ROS 2, or ``--offline``); return the exit code."""
     try:
         undecodable: Counter[str] = Counter()
         stream = list(bagio.read_bag(args.bag, undecodable=undecodable))
@@ -113,13 +122,17 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _sibling(bag: Path, suffix: str) -> Path:
+    """Return the path beside `bag` named after it plus `suffix` (``.mcap`` dropped)."""
     base = bag.with_suffix("") if bag.suffix == ".mcap" else bag
     return base.with_name(base.name + suffix)
 
 
 def check_topics(path: Path, stream: list[bagio.BagMessage]) -> None:
-    """A bag to replay needs measurements; a topic this tool does not know is an error
-    (naming it) rather than silently dropped."""
+    """Check that the bag at `path` can be replayed; ValueError saying why not.
+
+    A bag to replay needs measurements, and states in the GCRF; a topic this tool does not
+    know is an error (naming it) rather than silently dropped.
+    """
     unknown = sorted({m.topic for m in stream if m.topic not in KNOWN})
     if unknown:
         raise ValueError(f"{path}: unknown topic(s) {', '.join(unknown)}; this replay plays "
@@ -136,10 +149,13 @@ def check_topics(path: Path, stream: list[bagio.BagMessage]) -> None:
 
 
 def drop_ahead_of_clock(stream: list[bagio.BagMessage]) -> tuple[list[bagio.BagMessage], int]:
-    """The stream without the measurements stamped more than `MAX_CLOCK_LEAD_S` after their
-    log time (the recorder's clock when they arrived), and how many those were. Live, the
-    nodes refuse them against their clock; a replay's clock follows the stamps, so they are
-    taken out before either replay (a year-ahead stamp would also stretch the playback)."""
+    """Drop the measurements stamped ahead of the recorder's clock; return the rest and how many.
+
+    Ahead: more than `MAX_CLOCK_LEAD_S` after their log time (the recorder's clock when they
+    arrived). Live, the nodes refuse them against their clock; a replay's clock follows the
+    stamps, so they are taken out before either replay (a year-ahead stamp would also
+    stretch the playback).
+    """
     kept = [m for m in stream if m.topic != TOPIC_MEASUREMENT or not ahead_of_clock(
         messages.stamp_to_seconds(m.msg.header.stamp), m.t_ns * 1e-9, MAX_CLOCK_LEAD_S)[0]]
     return kept, len(stream) - len(kept)
@@ -147,14 +163,17 @@ def drop_ahead_of_clock(stream: list[bagio.BagMessage]) -> tuple[list[bagio.BagM
 
 def settings(stream: list[bagio.BagMessage], scenario: str = "",
              params_file: Path | None = None) -> evaluate.Settings:
-    """Estimator settings (`evaluate.estimator_for`: params file, scenario, those recorded
-    with the bag, else the measurement kind's default).
+    """Return the estimator settings to replay `stream` with.
+
+    As `evaluate.estimator_for` chooses them: params file, scenario, those recorded with the
+    bag, else the measurement kind's default.
 
     The bag's own cadence wins: if its measurements come at another interval than the
     settings' cadence (beyond the surrogate's jitter tolerance), the cadence is set to 0 and
     the surrogate infers it from the stamps, as the surrogate node does with `cadence` 0 (a
     fixed 30 s cadence against 10 s data would find every interval off its grid and never
-    fit). Data at the settings' cadence keep it, so a replay reproduces the live run."""
+    fit). Data at the settings' cadence keep it, so a replay reproduces the live run.
+    """
     first = next(m for m in stream if m.topic == TOPIC_MEASUREMENT)
     recorded = [m.msg.data for m in stream if m.topic == TOPIC_CONFIG]
     chosen = evaluate.estimator_for(recorded, first.msg.kind, scenario, params_file)
@@ -166,8 +185,10 @@ def settings(stream: list[bagio.BagMessage], scenario: str = "",
 
 
 def bag_cadence(stream: list[bagio.BagMessage]) -> float:
-    """Median interval (s) between successive stamps of the sensor measurements (NaN with
-    fewer than two): the cadence of the data, gaps and all."""
+    """Return the median interval (s) between successive stamps of the sensor measurements.
+
+    The cadence of the data, gaps and all; NaN with fewer than two measurements.
+    """
     t = sorted({messages.stamp_to_seconds(m.msg.header.stamp) for m in stream
                 if m.topic == TOPIC_MEASUREMENT and m.msg.source == types.Source.SENSOR})
     if len(t) < 2:
@@ -184,10 +205,19 @@ class OfflineResult:
     rejected: dict[str, int] = field(default_factory=dict)
 
 
-def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig) -> OfflineResult:
-    """Surrogate + filter of estimator `c` through the core over the bag's messages in
-    log-time order."""
-    tracker = make_tracker(c)
+def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig,
+                   gaps: Mapping[str, Any] | None = None) -> OfflineResult:
+    """Run surrogate + filter of estimator `c` through the core over the bag's messages.
+
+    The messages are taken in log-time order. The filter publishes what the filter node
+    publishes (`core.gap_publisher.GapPublisher`): the estimate of every fused measurement
+    and, through a gap, predictions (or residual forecasts) on the grid of the filter's
+    `gaps` parameters (``predict_period``, ``gap_forecast``; default: those recorded with
+    the bag), as the bag's /clock passes them, the rest once the bag ends.
+    """
+    g = gaps if gaps is not None else recorded_gaps(stream)
+    publisher = GapPublisher.of(make_tracker(c), float(g["predict_period"]),
+                                GapFill(g["gap_forecast"]), c.filter.motion.motion_model)
     # Forecasts always come from a fit on the buffer up to the last real measurement, so the
     # live node's optional periodic refits (retrain_period) would change nothing here.
     surrogate = make_surrogate(c.with_(surrogate=replace(c.surrogate, retrain_period_s=math.inf)))
@@ -195,16 +225,18 @@ def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig) -> Offlin
     recorded = {messages.stamp_to_seconds(m.msg.header.stamp)
                 for m in stream if m.topic == TOPIC_FORECAST}
     pool: dict[float, types.Measurement] = {}
-    last_clock = -float("inf")
+    last_clock, last_ns = -float("inf"), 0
+
+    def publish(out: Published, t_ns: int) -> bool:
+        causes = [out.outcome.rejected] if out.outcome and out.outcome.rejected else []
+        causes += [Cause.PREDICTIONS_SKIPPED] * out.skipped
+        for cause in causes:
+            result.rejected[cause] = result.rejected.get(cause, 0) + 1
+        result.estimates += [(t_ns, e) for e in out.estimates]
+        return bool(out.estimates)
 
     def fuse(m: types.Measurement, t_ns: int) -> None:
-        out = tracker.process(m)
-        if out.rejected:
-            result.rejected[out.rejected] = result.rejected.get(out.rejected, 0) + 1
-        for e in (out.estimate, *out.fused_again):
-            if e is not None:
-                e.object_id = e.object_id or m.object_id
-                result.estimates.append((t_ns, e))
+        publish(publisher.measurement(m), t_ns)
 
     def forecast(f: types.Measurement, t_ns: int) -> None:
         result.forecasts.append((t_ns, f))
@@ -214,10 +246,11 @@ def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig) -> Offlin
         if msg.topic == TOPIC_CLOCK:
             now = messages.stamp_to_seconds(msg.msg.clock)
             if now < last_clock:  # a looping bag: both start over, as the nodes do
-                tracker.reset()
+                publisher.reset()
                 surrogate.reset()
                 pool.clear()
-            last_clock = now
+            last_clock, last_ns = now, msg.t_ns
+            publish(publisher.advance(now), msg.t_ns)
         elif msg.topic == TOPIC_MEASUREMENT:
             m = messages.measurement_from_msg(msg.msg)
             if m.source != types.Source.SENSOR:
@@ -237,15 +270,25 @@ def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig) -> Offlin
             if t not in pool:
                 for f in surrogate.due(t + surrogate.config.grace * surrogate.cadence()):
                     pool[f.t] = f
-            f = pool.pop(t, None)
-            if f is not None:
-                forecast(f, msg.t_ns)
+            due = pool.pop(t, None)
+            if due is not None:
+                forecast(due, msg.t_ns)
+    while publish(publisher.advance(last_clock), last_ns):  # the node's timer works it off
+        pass
     return result
 
 
+def recorded_gaps(stream: list[bagio.BagMessage]) -> dict[str, Any]:
+    """Return the filter's gap parameters recorded with the bag (else its defaults)."""
+    return node_settings.recorded_gaps([m.msg.data for m in stream if m.topic == TOPIC_CONFIG])
+
+
 def write_offline(out: Path, stream: list[bagio.BagMessage], result: OfflineResult) -> None:
-    """A bag of the live layout: the played topics as recorded, plus the new estimates and
-    forecasts at the log times of the inputs that produced them."""
+    """Write the bag `out` of the live layout with the new estimates and forecasts.
+
+    The played topics as recorded, plus the new estimates and forecasts at the log times of
+    the inputs that produced them.
+    """
     classes = bagio.rosbags_classes()
     writer = bagio.BagWriter(out)
     try:
@@ -278,7 +321,8 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
         return 2
     params = {"recorder": {"use_sim_time": True, "bag": str(record)},
               "surrogate": {"use_sim_time": True, **node_settings.surrogate_params(c)},
-              "filter": {"use_sim_time": True, **node_settings.filter_params(c)}}
+              "filter": {"use_sim_time": True, **node_settings.filter_params(c),
+                         **recorded_gaps(stream)}}
     logs = record.with_name(record.name + "_logs")
     try:
         graph = Graph(logs, args.domain_id)
@@ -308,7 +352,7 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
         player.start()
         graph.wait_for(player.done, player.duration_s + 60.0, "playback to finish")
         player.finish(graph.scaled(5.0))
-        from ssa_fusion_msgs.msg import Measurement, StateEstimate
+        from ssa_fusion.ros.interfaces import Measurement, StateEstimate
 
         seen = [graph.collect(StateEstimate, TOPIC_ESTIMATE),
                 graph.collect(Measurement, TOPIC_FORECAST)]

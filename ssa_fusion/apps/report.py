@@ -13,6 +13,8 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,10 +22,14 @@ from ssa_fusion.apps import evaluate
 from ssa_fusion.core import config, types
 from ssa_fusion.ros import bagio
 
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
 STATE_LABELS = ("x [km]", "y [km]", "z [km]", "vx [km/s]", "vy [km/s]", "vz [km/s]")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the options of `ssa-fusion report` to `p`."""
     p.add_argument("bag", type=Path, help="rosbag2 directory (or .mcap file) to report on")
     p.add_argument("--out", type=Path, default=None, help="output directory (default: BAG_report)")
     p.add_argument("--scenario", default="",
@@ -34,6 +40,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run `ssa-fusion report`; return the exit code (2 when the bag cannot be evaluated)."""
     out = args.out or args.bag.with_name(args.bag.name + "_report")
     try:
         data = evaluate.load(args.bag)
@@ -50,8 +57,8 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def summary(data: evaluate.BagData, ev: evaluate.Evaluation) -> dict:
-    """What report.json (and live.json) hold of an evaluation."""
+def summary(data: evaluate.BagData, ev: evaluate.Evaluation) -> dict[str, Any]:
+    """Return what report.json (and live.json) hold of an evaluation."""
     g = ev.gap
     return {
         "arms": {str(name): {"epsilon": sc.epsilon, "pos_err_mean_km": sc.pos_err_mean_km,
@@ -68,7 +75,7 @@ def summary(data: evaluate.BagData, ev: evaluate.Evaluation) -> dict:
 
 
 def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
-    """results JSON, PNG plots, report.html and visual.mcap (Foxglove) into `out`."""
+    """Write report.json, the PNG plots, report.html and visual.mcap (Foxglove) into `out`."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "report.json").write_text(json.dumps(summary(data, ev), indent=2))
     plot_arms(ev, out / "arms.png")
@@ -84,21 +91,25 @@ def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
     visual_mcap.write(data, out / "visual.mcap", stations)
 
 
-def _plt():
-    """The figure maker (`plots.subplots`; imported on first use: `report` works without
-    plots)."""
+def _plt() -> ModuleType:
+    """Return the figure maker, `studies.plots` (`plots.subplots`).
+
+    Imported on first use: `report` works without plots.
+    """
     from ssa_fusion.studies import plots
 
     return plots
 
 
-def save(fig, path: Path, dpi: int = 100) -> None:
+def save(fig: Figure, path: Path, dpi: int = 100) -> None:
+    """Lay out and write `fig` as PNG (`plots.save`)."""
     from ssa_fusion.studies import plots
 
     plots.save(fig, path, dpi)
 
 
 def plot_arms(ev: evaluate.Evaluation, path: Path) -> None:
+    """Plot every arm's position error over the gap (km, log scale) to `path`."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(8, 4))
     g = ev.gap
@@ -114,6 +125,7 @@ def plot_arms(ev: evaluate.Evaluation, path: Path) -> None:
 
 
 def plot_sigma(data: evaluate.BagData, path: Path) -> None:
+    """Plot the fused estimates' error per state with ±3σ to `path` (at epochs with a truth)."""
     plt = _plt()
     truth = {e.t: e.x for e in data.truth}
     est = [e for e in data.estimates if e.t in truth and e.update_source != types.UpdateSource.NONE]
@@ -137,6 +149,7 @@ def plot_sigma(data: evaluate.BagData, path: Path) -> None:
 
 
 def plot_forecasts(data: evaluate.BagData, path: Path) -> None:
+    """Plot the forecasts against the withheld measurements to `path` (if any match)."""
     if not data.forecasts or not data.withheld:
         return
     plt = _plt()
@@ -162,6 +175,7 @@ def plot_forecasts(data: evaluate.BagData, path: Path) -> None:
 
 
 def plot_nis(data: evaluate.BagData, path: Path) -> None:
+    """Plot the filter's NIS over time, by update source, to `path`."""
     est = [e for e in data.estimates if e.update_source != types.UpdateSource.NONE]
     if not est:
         return

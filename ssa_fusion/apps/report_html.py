@@ -1,5 +1,6 @@
-"""`report.html` of a bag: one self-contained, interactive page (Plotly, its JavaScript
-inlined, so it opens offline and can be mailed as one file).
+"""`report.html` of a bag: one self-contained, interactive page.
+
+Plotly, its JavaScript inlined, so it opens offline and can be mailed as one file.
 
 Figures: the orbit in 3D (truth and the filter's estimates, GCRF km, the gap highlighted);
 the ground tracks of truth and estimate with the run's stations and the visibility circle of
@@ -36,12 +37,14 @@ COLORS = {ArmName.PLACEHOLDER: "#7f7f7f", ArmName.COAST: "#1f77b4",
 """One colour per arm, the same in every figure."""
 AXIS_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c")
 """Colours of the x, y, z components."""
-MEASUREMENT_LABELS = {
+MEASUREMENT_LABELS: dict[int, tuple[str, ...]] = {
     types.Kind.POSITION: ("x GCRF [km]", "y GCRF [km]", "z GCRF [km]"),
     types.Kind.RANGE_AZ_EL: ("range [km]", "azimuth [rad]", "elevation [rad]"),
     types.Kind.RA_DEC: ("right ascension [rad]", "declination [rad]"),
 }
 """Axis titles of a measurement's components, by kind."""
+WRAPPED_COMPONENT: dict[int, int] = {types.Kind.RANGE_AZ_EL: 1, types.Kind.RA_DEC: 0}
+"""The component that wraps at 2π (azimuth, right ascension), by measurement kind."""
 MAX_POINTS = 4000
 """Longest line drawn (points); longer series are thinned evenly (the page stays small)."""
 CONFIG = {"displaylogo": False, "responsive": True}
@@ -66,7 +69,7 @@ th { background: #eee; } td:first-child { text-align: left; }
 
 
 def _thin(n: int) -> np.ndarray:
-    """Indices of at most `MAX_POINTS` of `n` samples, evenly spread, first and last kept."""
+    """Return indices of at most `MAX_POINTS` of `n` samples, evenly spread, ends kept."""
     if n <= MAX_POINTS:
         return np.arange(n)
     return np.unique(np.linspace(0, n - 1, MAX_POINTS).round().astype(int))
@@ -78,8 +81,10 @@ def _hours(t: np.ndarray, t0: float) -> np.ndarray:
 
 
 def orbit_3d(data: evaluate.BagData, ev: evaluate.Evaluation) -> go.Figure:
-    """The true orbit and the filter's fused estimates in GCRF (km) around the Earth, the
-    truth over the gap drawn thick, and the DMD-EKF arm over the gap."""
+    """Return the 3D orbit: truth and the filter's fused estimates in GCRF (km), the Earth.
+
+    The truth over the gap drawn thick, and the DMD-EKF arm over the gap.
+    """
     fig = go.Figure()
     u, v = np.mgrid[0:2 * np.pi:37j, 0:np.pi:19j]
     fig.add_trace(go.Surface(
@@ -124,10 +129,13 @@ measures through the Earth (`stations.SENSORS["columbus_paper"]`)."""
 
 
 def run_stations(c: EstimatorConfig) -> list[tuple[Station, float]]:
-    """The stations of a run and each one's elevation mask (deg), from its estimator settings
-    (the bag's ``/ssa/config``): for a network (the real sky) each sensor's
-    ``min_elevation_deg`` (`stations.SENSORS`, by sensor or station id); for one station (a
-    paper scenario, whose simulated sensor has no horizon) `NO_MASK_DEG`; none for positions."""
+    """Return the stations of a run and each one's elevation mask (deg).
+
+    From its estimator settings (the bag's ``/ssa/config``): for a network (the real sky)
+    each sensor's ``min_elevation_deg`` (`stations.SENSORS`, by sensor or station id); for
+    one station (a paper scenario, whose simulated sensor has no horizon) `NO_MASK_DEG`;
+    none for positions.
+    """
     if c.kind == types.Kind.POSITION:
         return []
     if not c.is_network:
@@ -144,17 +152,23 @@ def run_stations(c: EstimatorConfig) -> list[tuple[Station, float]]:
 
 
 def visibility_central_angle(h_km: float, el_rad: float, r_km: float = R_EARTH) -> float:
-    """Earth-central angle (rad) between a station and the sub-satellite point of an object
-    at altitude `h_km` (km) seen at elevation `el_rad` (rad) from it, on a spherical Earth of
-    radius `r_km`: λ = arccos(R cos(el) / (R + h)) − el. Below λ the object is above that
-    elevation; π for el = −90° (visible from everywhere)."""
+    """Return the Earth-central angle (rad) of a station's visibility circle.
+
+    The angle between a station and the sub-satellite point of an object at altitude `h_km`
+    (km) seen at elevation `el_rad` (rad) from it, on a spherical Earth of radius `r_km`:
+    λ = arccos(R cos(el) / (R + h)) − el. Below λ the object is above that elevation; π for
+    el = −90° (visible from everywhere).
+    """
     return float(np.arccos(r_km * np.cos(el_rad) / (r_km + h_km)) - el_rad)
 
 
 def small_circle(lat_rad: float, lon_rad: float, radius_rad: float,
                  n: int = 361) -> tuple[np.ndarray, np.ndarray]:
-    """`n` points (latitude, longitude in (−π, π], rad) of the circle at central angle
-    `radius_rad` around (`lat_rad`, `lon_rad`) on a sphere, bearing 0 to 2π from north."""
+    """Return `n` points (latitude, longitude in (−π, π], rad) of a circle on a sphere.
+
+    The circle at central angle `radius_rad` around (`lat_rad`, `lon_rad`), bearing 0 to 2π
+    from north.
+    """
     b = np.linspace(0.0, 2.0 * np.pi, n)
     sl, cl, sr, cr = np.sin(lat_rad), np.cos(lat_rad), np.sin(radius_rad), np.cos(radius_rad)
     lat = np.arcsin(np.clip(sl * cr + cl * sr * np.cos(b), -1.0, 1.0))
@@ -163,15 +177,20 @@ def small_circle(lat_rad: float, lon_rad: float, radius_rad: float,
 
 
 def _unwrapped(lat_deg: np.ndarray, lon_deg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A lat/lon (deg) line with NaN inserted where it crosses the ±180° meridian, so no
-    segment is drawn across the map."""
+    """Return a lat/lon (deg) line with NaN inserted where it crosses the ±180° meridian.
+
+    So no segment is drawn across the map.
+    """
     jump = np.flatnonzero(np.abs(np.diff(lon_deg)) > 180.0) + 1
     return np.insert(lat_deg, jump, np.nan), np.insert(lon_deg, jump, np.nan)
 
 
 def _track(states: list[types.StateEstimate]) -> tuple[np.ndarray, np.ndarray]:
-    """Geodetic latitude and longitude (deg) of the sub-satellite points of `states` (GCRF
-    km at their Unix epochs), at most `MAX_POINTS`, broken at the ±180° meridian."""
+    """Return the geodetic latitude and longitude (deg) of the sub-satellite points of `states`.
+
+    The states are GCRF km at their Unix epochs; at most `MAX_POINTS`, broken at the ±180°
+    meridian.
+    """
     k = _thin(len(states))
     ll = np.array([foxglove_scene.gcrs_to_geodetic(states[i].x[:3], states[i].t)[:2]
                    for i in k]).reshape(-1, 2)
@@ -179,12 +198,14 @@ def _track(states: list[types.StateEstimate]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def ground_track(data: evaluate.BagData, stations: list[tuple[Station, float]]) -> go.Figure:
-    """Ground tracks (geodetic longitude and latitude, deg) of the truth and of the filter's
-    fused estimates, the run's stations, and each station's visibility circle: the
-    sub-satellite points from which the object, at its mean altitude over the run
+    """Return the ground tracks of the truth and of the filter's fused estimates, with stations.
+
+    Geodetic longitude and latitude, deg; the run's stations, and each station's visibility
+    circle: the sub-satellite points from which the object, at its mean altitude over the run
     (‖r‖ − R_EARTH of the truth, spherical Earth), is above the station's elevation mask
     (`visibility_central_angle`). A station without a mask gets its geometric horizon
-    (0°) dotted instead: its sensor sees the object from anywhere."""
+    (0°) dotted instead: its sensor sees the object from anywhere.
+    """
     fig = go.Figure()
     lat, lon = _track(data.truth)
     fig.add_trace(go.Scatter(x=lon, y=lat, mode="lines", line={"color": "#444", "width": 1},
@@ -222,8 +243,10 @@ def ground_track(data: evaluate.BagData, stations: list[tuple[Station, float]]) 
 
 
 def arm_errors(ev: evaluate.Evaluation) -> go.Figure:
-    """Per arm, its position error along x, y, z GCRF (km) over the gap with ±3σ of its
-    covariance (dashed), against hours into the gap."""
+    """Return, per arm, its position error along x, y, z GCRF (km) over the gap, with ±3σ.
+
+    The ±3σ of its covariance dashed, against hours into the gap.
+    """
     g = ev.gap
     names = [a for a in ArmName if a in g.arms]
     fig = make_subplots(rows=len(names), cols=1, shared_xaxes=True, vertical_spacing=0.04,
@@ -254,9 +277,11 @@ def arm_errors(ev: evaluate.Evaluation) -> go.Figure:
 
 
 def forecasts(data: evaluate.BagData) -> go.Figure | None:
-    """The surrogate's forecasts (with ±3σ of their covariance) against the withheld
-    measurements of the same epochs, per component, in the measurement's units; None
-    without both."""
+    """Return the surrogate's forecasts against the withheld measurements of the same epochs.
+
+    With ±3σ of their covariance, per component, in the measurement's units; None without
+    both.
+    """
     withheld = {m.t: m for m in data.withheld}
     f = sorted((m for m in data.forecasts if m.t in withheld), key=lambda m: m.t)
     if not f:
@@ -270,7 +295,7 @@ def forecasts(data: evaluate.BagData) -> go.Figure | None:
     kind = int(f[0].kind)  # an unknown kind gets z[i] axis titles, not an error
     labels = MEASUREMENT_LABELS.get(kind, ())
     n = zf.shape[1]
-    wrapped = {types.Kind.RANGE_AZ_EL: 1, types.Kind.RA_DEC: 0}.get(kind)
+    wrapped = WRAPPED_COMPONENT.get(kind)
     if wrapped is not None:  # azimuth / right ascension wrap at 2π: no line across a wrap
         jump = np.flatnonzero(np.abs(np.diff(zf[:, wrapped])) > np.pi) + 1
         t, sf = np.insert(t, jump, np.nan), np.insert(sf, jump, np.nan, axis=0)
@@ -298,8 +323,10 @@ def forecasts(data: evaluate.BagData) -> go.Figure | None:
 
 
 def _band(fig: go.Figure, x0: float, x1: float, lo: float, hi: float) -> None:
-    """The 95 % χ² band [lo, hi] from x0 to x1 (h), shaded, as one legend entry (traces,
-    not shapes: their data coordinates hold on log axes)."""
+    """Draw the 95 % χ² band [lo, hi] from x0 to x1 (h), shaded, as one legend entry.
+
+    Traces, not shapes: their data coordinates hold on log axes.
+    """
     style = {"color": "#2ca02c", "dash": "dash", "width": 1}
     fig.add_trace(go.Scatter(x=[x0, x1], y=[lo, lo], mode="lines", line=style,
                              legendgroup="band", showlegend=False, hoverinfo="skip"))
@@ -309,8 +336,10 @@ def _band(fig: go.Figure, x0: float, x1: float, lo: float, hi: float) -> None:
 
 
 def nees(ev: evaluate.Evaluation) -> go.Figure:
-    """Each arm's NEES (dimensionless, log scale) over the gap against the 95 % χ² band of
-    one epoch's NEES (dof: the state dimension)."""
+    """Return each arm's NEES (dimensionless, log scale) over the gap against the χ² band.
+
+    The 95 % band of one epoch's NEES (dof: the state dimension).
+    """
     g = ev.gap
     dof = g.truth.shape[1]
     lo, hi = metrics.chi2_bounds(dof)
@@ -331,10 +360,12 @@ def nees(ev: evaluate.Evaluation) -> go.Figure:
 
 
 def nis(data: evaluate.BagData) -> go.Figure | None:
-    """The filter's NIS (dimensionless, log scale) at each fused epoch over the run,
-    sensor and forecast updates apart, against the 95 % χ² band of one update's NIS (dof:
+    """Return the filter's NIS (dimensionless, log scale) at each fused epoch over the run.
+
+    Sensor and forecast updates apart, against the 95 % χ² band of one update's NIS (dof:
     the measurement dimension); None without fused epochs. Epochs with NIS 0 (the initial
-    orbit determination: no innovation) are left out."""
+    orbit determination: no innovation) are left out.
+    """
     est = [e for e in data.estimates
            if e.update_source != types.UpdateSource.NONE and e.nis > 0]
     if not est:
@@ -360,7 +391,7 @@ def nis(data: evaluate.BagData) -> go.Figure | None:
 
 
 def _table(header: list[str], rows: list[list[str]]) -> str:
-    """An HTML table (cells escaped)."""
+    """Return an HTML table (cells escaped)."""
     head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in r) + "</tr>"
                    for r in rows)
@@ -368,7 +399,7 @@ def _table(header: list[str], rows: list[list[str]]) -> str:
 
 
 def arms_table(ev: evaluate.Evaluation) -> str:
-    """The arms table of `evaluate.table` in HTML, with its notes."""
+    """Return the arms table of `evaluate.table` in HTML, with its notes."""
     g = ev.gap
     rows = evaluate.arm_rows(g)
     lo, hi = metrics.chi2_bounds(g.truth.shape[1])
@@ -382,7 +413,7 @@ def arms_table(ev: evaluate.Evaluation) -> str:
 
 
 def passes_table(passes: PassReport) -> str:
-    """The per-pass table of a station network's run (`PassReport`) in HTML."""
+    """Return the per-pass table of a station network's run (`PassReport`) in HTML."""
     rows = [[f"{(t_end - passes.t_start) / 3600:.2f}", who, str(n), f"{err:.3f}",
              f"{sig:.3f}"] for t_end, who, n, err, sig in passes.passes]
     lo, hi = passes.nees_band
@@ -396,7 +427,7 @@ def passes_table(passes: PassReport) -> str:
 
 
 def figures(data: evaluate.BagData, ev: evaluate.Evaluation) -> list[go.Figure]:
-    """The report's figures, in page order (those without data left out)."""
+    """Return the report's figures, in page order (those without data left out)."""
     figs = [orbit_3d(data, ev), ground_track(data, run_stations(ev.settings.estimator)),
             arm_errors(ev), forecasts(data), nees(ev), nis(data)]
     return [f for f in figs if f is not None]
@@ -404,7 +435,7 @@ def figures(data: evaluate.BagData, ev: evaluate.Evaluation) -> list[go.Figure]:
 
 def build(data: evaluate.BagData, ev: evaluate.Evaluation,
           title: str = "ssa_fusion report") -> str:
-    """The page: figures (plotly.js inlined once, with the first) and tables."""
+    """Return the page: figures (plotly.js inlined once, with the first) and tables."""
     parts = [f"<h1>{html.escape(title)}</h1>", "<h2>Arms over the gap</h2>", arms_table(ev)]
     if ev.passes is not None:
         parts += ["<h2>After each pass</h2>", passes_table(ev.passes)]

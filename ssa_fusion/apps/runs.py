@@ -19,7 +19,7 @@ LIVE_ROOT = Path("out/live")
 
 
 def default_out(scenario: str, root: Path = LIVE_ROOT) -> Path:
-    """A new run directory named like rosbag2's default bag names, never an existing one."""
+    """Return a new run directory named like rosbag2's default bags, never an existing one."""
     stamp = time.strftime("%Y_%m_%d-%H_%M_%S")
     out = root / f"{scenario}_{stamp}"
     n = 1
@@ -44,9 +44,11 @@ _LOG_STAMP = re.compile(r"\[(\d+(?:\.\d+)?)\]")
 
 
 def sensor_wall_times(log: Path) -> tuple[float, float] | None:
-    """(start, end) of the simulation in wall time (Unix s) from sensor_sim's log (its stderr,
-    rcutils' default format): the lines "starting" and "schedule done"; None when either
-    is missing or unreadable."""
+    """Return (start, end) of the simulation in wall time (Unix s) from sensor_sim's log.
+
+    The log is its stderr, in rcutils' default format: the lines "starting" and "schedule
+    done"; None when either is missing or unreadable.
+    """
     try:
         lines = log.read_text(errors="replace").splitlines()
     except OSError:
@@ -65,9 +67,12 @@ def sensor_wall_times(log: Path) -> tuple[float, float] | None:
 
 
 def run_dirs(args: argparse.Namespace, name: str) -> tuple[Path, Path] | None:
-    """The run directory (`--out`, else a new one named after `name`, linked as latest)
-    and the bag in it (`--bag`, else OUT/bag), created; None after a one-line error when
-    the bag exists or the directory cannot be made."""
+    """Create and return the run directory and the bag path in it.
+
+    The directory is `--out`, else a new one named after `name`, linked as latest; the bag
+    is `--bag`, else OUT/bag. None after a one-line error when the bag exists or the
+    directory cannot be made.
+    """
     out: Path = args.out or default_out(name)
     bag: Path = args.bag or out / "bag"
     if bag.exists():

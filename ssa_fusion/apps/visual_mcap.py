@@ -1,6 +1,8 @@
-"""`visual.mcap` of a bag: the Foxglove visual topics the `foxglove_bridge` node would have
-served for it, written with foxglove-sdk's MCAP writer, so that opening the file in Foxglove
-with ``config/foxglove_layout.json`` shows the scene, the ground tracks and the plots.
+"""`visual.mcap` of a bag: the Foxglove visual topics the `foxglove_bridge` would serve.
+
+The topics the `foxglove_bridge` node would have served for the bag, written with
+foxglove-sdk's MCAP writer, so that opening the file in Foxglove with
+``config/foxglove_layout.json`` shows the scene, the ground tracks and the plots.
 
 The bag itself is rosbag2 (CDR messages of ``ssa_fusion_msgs``), which Foxglove cannot draw
 as a scene; this file holds, in Foxglove's own schemas:
@@ -40,8 +42,10 @@ _MEASUREMENT, _TRUTH, _ESTIMATE = 0, 1, 2
 
 
 def _events(data: evaluate.BagData) -> list[tuple[float, int, int, Any]]:
-    """The bag's truth states, estimates, measurements and forecasts in epoch order:
-    (t Unix s, what, index in its list, the item)."""
+    """Return the bag's truth states, estimates, measurements and forecasts in epoch order.
+
+    Each as (t Unix s, what, index in its list, the item).
+    """
     ev: list[tuple[float, int, int, Any]] = []
     for i, m in enumerate([*data.measurements, *data.forecasts]):
         ev.append((m.t, _MEASUREMENT, i, m))
@@ -53,9 +57,11 @@ def _events(data: evaluate.BagData) -> list[tuple[float, int, int, Any]]:
 
 def write(data: evaluate.BagData, path: Path, stations: dict[str, Station],
           scene_period_s: float = SCENE_PERIOD_S) -> dict[str, int]:
-    """Write the visual topics of `data` (a bag read by `evaluate.load`) to the MCAP file
-    `path` (replaced if it exists), with `stations` (id -> site) drawn in the scene and used
-    to place range/az/el measurements. Returns the message count per topic."""
+    """Write the visual topics of `data` to the MCAP file `path`; return counts per topic.
+
+    `data` is a bag read by `evaluate.load`; `path` is replaced if it exists; `stations`
+    (id -> site) are drawn in the scene and used to place range/az/el measurements.
+    """
     import foxglove
     from foxglove.channels import LocationFixChannel, SceneUpdateChannel
 

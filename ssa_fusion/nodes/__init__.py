@@ -12,7 +12,7 @@ import threading
 from ssa_fusion import limit_blas_threads
 
 STOP = threading.Event()
-"""Set by SIGINT/SIGTERM once `start_process` installed its handlers; `common.run` ends the
+"""Set by SIGINT/SIGTERM once `start_process` installed its handlers; `process.run` ends the
 node's loop when it is set."""
 
 

@@ -43,7 +43,8 @@ from ssa_fusion.core.validation import ahead_of_clock
 from ssa_fusion.nodes import start_process
 from ssa_fusion.nodes.clock_hold import ClockHold
 from ssa_fusion.nodes.diagnostics import Diagnostics, wall_timer
-from ssa_fusion.nodes.parameters import NodeParameters, ParameterTable, ParamValue
+from ssa_fusion.nodes.node_parameters import NodeParameters
+from ssa_fusion.nodes.parameters import ParameterTable, ParamValue
 from ssa_fusion.nodes.process import run
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Message, Time
@@ -129,12 +130,16 @@ class SsaNode(Node):
         if object_id and msg.object_id != object_id:
             self.diag.count(Cause.IGNORED_OTHER_OBJECT, f"object_id {msg.object_id!r}")
             return None
+        m = self.measurement_of(msg)
+        return None if m is None or self.ahead_of_clock(m.t) else m
+
+    def measurement_of(self, msg: Message) -> Measurement | None:
+        """Return the core measurement of `msg`, or None (counted) for a kind it lacks."""
         try:
-            m = messages.measurement_from_msg(msg)
+            return messages.measurement_from_msg(msg)
         except ValueError as exc:
             self.diag.count(Cause.REJECTED_KIND, str(exc))
             return None
-        return None if self.ahead_of_clock(m.t) else m
 
     def ahead_of_clock(self, t: float) -> bool:
         """Return True, counted, when epoch `t` is beyond ``max_clock_lead`` of the clock."""

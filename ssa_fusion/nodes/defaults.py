@@ -1,13 +1,14 @@
-"""Default parameter values of the four nodes, one dataclass per node, in the parameters'
-units (SI: m, m/s, rad, s; see docs/NODES.md for each parameter's meaning).
+"""Default parameter values of the nodes, one dataclass per node.
 
-Every field is named like the ROS parameter it is the default of, and the nodes declare
-their parameters with these values; ``config/default.yaml`` holds the same values (a few
-differ on purpose, for the default *run*: test/nodes/test_config.py lists them and keeps
-the rest equal). The estimator defaults are those of the default live scenario (the ISS,
-two-body + J2, range/az/el from Columbus every 30 s, ten orbits of tracking): the same
-numbers `ssa-fusion live` derives from that scenario (the same test checks it), written
-out here so that the nodes need nothing from the simulated world (`ssa_fusion.sim`).
+In the parameters' units (SI: m, m/s, rad, s; each node's parameter table in its module, and
+docs/NODES.md, say what each means). Every field is named like the ROS parameter it is the
+default of, and the nodes declare their parameters with these values;
+``config/default.yaml`` holds the same values (a few differ on purpose, for the default
+*run*: test/nodes/test_config.py lists them and keeps the rest equal). The estimator
+defaults are those of the default live scenario (the ISS, two-body + J2, range/az/el from
+Columbus every 30 s, ten orbits of tracking): the same numbers `ssa-fusion live` derives
+from that scenario (the same test checks it), written out here so that the nodes need
+nothing from the simulated world (`ssa_fusion.sim`).
 
 A field whose default is ``None`` is computed when the node starts (said per field).
 Plain values only, so that importing this module imports nothing else (the recorder needs no
@@ -27,9 +28,12 @@ STATION = "columbus"
 
 @dataclass(frozen=True)
 class SensorSimDefaults:
-    """sensor_sim. ``object_id``, ``cadence``, ``gap_start``, ``gap_length`` and
-    ``after_gap`` default to the chosen scenario's (its name; cadence_s, track_s, gap_s,
-    after_s), so they are None here."""
+    """sensor_sim's defaults.
+
+    ``object_id``, ``cadence``, ``gap_start``, ``gap_length`` and ``after_gap`` default to
+    the chosen scenario's (its name; cadence_s, track_s, gap_s, after_s), so they are None
+    here.
+    """
 
     scenario: str = "iss_j2_rae"
     object_id: str | None = None
@@ -52,8 +56,10 @@ class SensorSimDefaults:
 
 @dataclass(frozen=True)
 class SurrogateDefaults:
-    """surrogate: Hankel-DMD settings of the default scenario (buffer = its ten-orbit
-    tracking window, delays = two orbits of samples)."""
+    """surrogate's defaults: the Hankel-DMD settings of the default scenario.
+
+    Buffer = its ten-orbit tracking window, delays = two orbits of samples.
+    """
 
     kind: str = KIND
     station: str = STATION
@@ -72,8 +78,11 @@ class SurrogateDefaults:
 
 @dataclass(frozen=True)
 class FilterDefaults:
-    """filter: EKF settings of the default scenario (P0 floor 1 km and 1 m/s per axis,
-    q = 1e-7 km^2/s^3 for the J2 the Keplerian model leaves out)."""
+    """filter's defaults: the EKF settings of the default scenario.
+
+    P0 floor 1 km and 1 m/s per axis, q = 1e-7 km^2/s^3 for the J2 the Keplerian model
+    leaves out.
+    """
 
     kind: str = KIND
     station: str = STATION
@@ -95,10 +104,12 @@ class FilterDefaults:
 
 @dataclass(frozen=True)
 class CatalogFilterDefaults:
-    """catalog_filter: the real-sky scenarios' filter (`sim.sky.SkyScenario`: two-body +
-    J2, P0 floor 1 km / 1 m/s, q = 1e-7 m^2/s^3 = 1e-13 km^2/s^3, IOD from 7 measurements
-    within 300 s, initialised again after 10 gate misses, covariance bounded by the orbit;
-    no light time)."""
+    """catalog_filter's defaults: the real-sky scenarios' filter.
+
+    `sim.sky.SkyScenario`: two-body + J2, P0 floor 1 km / 1 m/s, q = 1e-7 m^2/s^3 = 1e-13
+    km^2/s^3, IOD from 7 measurements within 300 s, initialised again after 10 gate misses,
+    covariance bounded by the orbit; no light time.
+    """
 
     station: str = "radar_network"
     motion_model: str = "j2"
@@ -117,9 +128,11 @@ class CatalogFilterDefaults:
 
 @dataclass(frozen=True)
 class CatalogSurrogateDefaults:
-    """catalog_surrogate: residual gap forecasts of a catalog (`core.gap_bank`), for the
-    catalog_filter's two-body + J2 tracks; the residual model is the live filter's
-    (`core.residual.LIVE_RESIDUAL`: 5 pass ends over a day at least, in a 2-day window)."""
+    """catalog_surrogate's defaults: residual gap forecasts of a catalog (`core.gap_bank`).
+
+    For the catalog_filter's two-body + J2 tracks; the residual model is the live filter's
+    (`core.residual.LIVE_RESIDUAL`: 5 pass ends over a day at least, in a 2-day window).
+    """
 
     motion_model: str = "j2"
     predict_period: float = 600.0
@@ -139,8 +152,10 @@ BAG_PATTERN = "bags/ssa_%Y%m%d_%H%M%S"
 
 @dataclass(frozen=True)
 class RecorderDefaults:
-    """recorder. ``bag`` defaults to `BAG_PATTERN` at the node's start time, so it is None
-    here."""
+    """recorder's defaults.
+
+    ``bag`` defaults to `BAG_PATTERN` at the node's start time, so it is None here.
+    """
 
     bag: str | None = None
     topics: tuple[str, ...] = ("/clock",)

@@ -71,6 +71,8 @@ RECORDED = "recorded "
 Key = Cause | NodeCause | Count | str
 """A counter's key (a str: a key made of a prefix and a topic)."""
 
+REJECTIONS = frozenset(k for k in (*Cause, *NodeCause) if k.name.startswith("REJECTED_"))
+"""The keys of refused input: once any is counted, the report's level is WARN."""
 INFO = frozenset({Cause.IGNORED_OTHER_OBJECT, Cause.IGNORED_BEFORE_IOD, Cause.IOD_PENDING,
                   Cause.IOD_FAILED, Cause.FORECAST_SUPERSEDED, Cause.REINITIALISED,
                   Cause.RESET_CLOCK_JUMP, Cause.HELD_UNTIL_CLOCK, Cause.PREDICTIONS_SKIPPED,
@@ -192,7 +194,7 @@ class Diagnostics:
         st = DiagnosticStatus()
         st.name = f"{self.node.get_name()}"
         st.hardware_id = "ssa_fusion"
-        rejected = sum(v for k, v in self.counts.items() if k.startswith("rejected"))
+        rejected = sum(v for k, v in self.counts.items() if k in REJECTIONS)
         st.level = DiagnosticStatus.WARN if rejected else DiagnosticStatus.OK
         st.message = "; ".join(f"{k}={v}" for k, v in self.status.items()) or "ok"
         st.values = [KeyValue(key=str(k), value=str(v)) for k, v in sorted(self.counts.items())]

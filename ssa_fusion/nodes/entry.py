@@ -29,30 +29,37 @@ def run_node(name: str, args: list[str] | None = None) -> int:
 
 
 def sensor_sim() -> int:
+    """Run the sensor_sim node (its executable)."""
     return run_node("sensor_sim")
 
 
 def surrogate() -> int:
+    """Run the surrogate node (its executable)."""
     return run_node("surrogate")
 
 
 def filter_node() -> int:
+    """Run the filter node (its executable)."""
     return run_node("filter")
 
 
 def recorder() -> int:
+    """Run the recorder node (its executable)."""
     return run_node("recorder")
 
 
 def foxglove_bridge() -> int:
+    """Run the foxglove_bridge node (its executable)."""
     return run_node("foxglove_bridge")
 
 
 def catalog_filter() -> int:
+    """Run the catalog_filter node (its executable)."""
     return run_node("catalog_filter")
 
 
 def catalog_surrogate() -> int:
+    """Run the catalog_surrogate node (its executable)."""
     return run_node("catalog_surrogate")
 
 

@@ -32,23 +32,30 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from rclpy.node import Node
-from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
-from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
+import numpy as np
+from rclpy.publisher import Publisher
 
-from ssa_fusion.core.types import Source
-from ssa_fusion.nodes import start_process
-from ssa_fusion.nodes.common import (
-    Diagnostics,
-    ParameterError,
-    declare,
-    positive,
-    run,
-    wall_timer,
-)
+from ssa_fusion.core.stations import network_stations
+from ssa_fusion.core.types import Cause, Source
+from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import STATION
+from ssa_fusion.nodes.diagnostics import Count
+from ssa_fusion.nodes.parameters import (
+    POSITIVE,
+    STATIONS,
+    Check,
+    Param,
+    ParameterError,
+    ParameterTable,
+    ParamValue,
+    at_least,
+    object_filter,
+)
 from ssa_fusion.ros import foxglove_scene as scene
 from ssa_fusion.ros import messages, visual_msgs
+from ssa_fusion.ros.interfaces import MarkerArray, Message, NavSatFix
+from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
+from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
 from ssa_fusion.ros.topics import (
     DATA_QOS,
     TOPIC_ESTIMATE,
@@ -63,74 +70,64 @@ DEFAULT_PORT = 8765
 """Foxglove's usual WebSocket port."""
 
 
-def _port(value: Any) -> str | None:
+def _port(value: ParamValue) -> str | None:
     ok = isinstance(value, int) and 0 <= value <= 65535
     return None if ok else "must be an integer in 0..65535 (0 = any free port)"
 
 
-def _host(value: Any) -> str | None:
+def _host(value: ParamValue) -> str | None:
     return None if isinstance(value, str) and value.strip() else "must be a host name or address"
 
 
-def _count(value: Any) -> str | None:
-    return None if isinstance(value, int) and value >= 1 else "must be an integer >= 1"
+def _stations(value: ParamValue) -> str | None:
+    return None if value == "" else STATIONS(value)
 
 
-def _station(value: Any) -> str | None:
-    if value == "":
-        return None
-    from ssa_fusion.core.stations import network_stations
+PARAMETERS = ParameterTable("foxglove_bridge", (
+    Param("host", DEFAULT_HOST, "address the WebSocket server binds to (loopback by default)",
+          check=Check("a host name or address", _host)),
+    Param("port", DEFAULT_PORT, "TCP port of the WebSocket server (0 = any free port; the log "
+          "says which)", check=Check("0..65535", _port)),
+    Param("station", STATION, "stations drawn in the scene ('' = none); range/az/el from them "
+          "are drawn as points", check=Check(STATIONS.text + ", or ''", _stations)),
+    Param("scene_period", 0.2, "time between scene updates", unit="wall s", check=POSITIVE),
+    Param("trail_length", 600, "positions kept per trail", check=at_least(1)),
+    Param("points", 300, "forecast and measurement points kept in the scene",
+          check=at_least(1)),
+    Param("marker_size", 150.0, "diameter of the position markers in the scene", unit="km",
+          check=POSITIVE),
+    object_filter("", "show"),
+    Param("ros_topics", True, "also publish the scene and ground tracks as ROS messages "
+          "(`/ssa/visual/*`: MarkerArray, NavSatFix), so that the recorder puts the picture "
+          "in the bag"),
+))
+"""The foxglove_bridge's parameters."""
 
-    try:
-        network_stations(value)
-    except ValueError as exc:
-        return str(exc)
-    return None
 
+class FoxgloveBridgeNode(SsaNode):
+    """The Foxglove bridge node: graph topics in, `VisualTopics`, a WebSocket server out."""
 
-class FoxgloveBridgeNode(Node):
+    PARAMETERS = PARAMETERS
+
     def __init__(self) -> None:
-        super().__init__("foxglove_bridge")
-        from ssa_fusion.core.stations import network_stations
-
-        host = declare(self, "host", DEFAULT_HOST,
-                       "address the Foxglove WebSocket server binds to (loopback by default)",
-                       _host)
-        port = declare(self, "port", DEFAULT_PORT,
-                       "TCP port of the Foxglove WebSocket server (0 = any free port)", _port)
-        station = declare(self, "station", STATION,
-                          "stations drawn in the scene: a station id, a network id, or ids "
-                          "separated by commas ('' = none); range/az/el from them are drawn "
-                          "as points", _station)
-        period = declare(self, "scene_period", 0.2,
-                         "wall s between scene updates", positive)
-        trail = declare(self, "trail_length", 600,
-                        "positions kept in the truth and estimate trails", _count)
-        points = declare(self, "points", 300,
-                         "forecast and measurement points kept in the scene", _count)
-        marker_km = float(declare(self, "marker_size", 150.0,
-                                  "diameter of the position markers in the scene, km",
-                                  positive))
-        self.object_id = declare(self, "object_id", "", "only show this object ('' = any)")
-        ros_topics = declare(self, "ros_topics", True,
-                             "also publish the scene and ground tracks as ROS messages "
-                             "(/ssa/visual/*: MarkerArray, NavSatFix), so the recorder puts "
-                             "them in the bag")
+        super().__init__()
+        p = self.params
+        host, port, station = p.text("host"), p.integer("port"), p.text("station")
+        self.object_id = p.text("object_id")
         self.visual = scene.VisualTopics(network_stations(station) if station else {},
-                                         trail=int(trail), points=int(points),
-                                         marker_km=marker_km)
-        self.diag = Diagnostics(self)
-        self.activity = 0
+                                         trail=p.integer("trail_length"),
+                                         points=p.integer("points"),
+                                         marker_km=p.number("marker_size"))
 
-        import foxglove
+        import foxglove  # the WebSocket server, only in this node
         from foxglove.channels import LocationFixChannel, SceneUpdateChannel
 
         try:
-            self.server = foxglove.start_server(name="ssa_fusion", host=host, port=int(port))
+            self.server = foxglove.start_server(name="ssa_fusion", host=host, port=port)
         except Exception as exc:  # address in use, unknown host, ...
             raise ParameterError(f"parameter 'port' = {port!r} (host {host!r}): cannot serve "
                                  f"there: {exc}") from exc
-        self.channels: dict[str, Any] = {
+        self.channels: dict[str, Any] = {  # foxglove channels of several message types
             scene.SCENE_TOPIC: SceneUpdateChannel(scene.SCENE_TOPIC),
             scene.TRACK_TOPIC: LocationFixChannel(scene.TRACK_TOPIC),
             scene.TRUTH_TRACK_TOPIC: LocationFixChannel(scene.TRUTH_TRACK_TOPIC),
@@ -141,11 +138,8 @@ class FoxgloveBridgeNode(Node):
         self.diag.status["url"] = f"ws://{host}:{self.port}"
         self.get_logger().info(f"Foxglove WebSocket server on ws://{host}:{self.port}")
 
-        self.ros_pubs: dict[str, Any] = {}
-        if ros_topics:
-            from sensor_msgs.msg import NavSatFix
-            from visualization_msgs.msg import MarkerArray
-
+        self.ros_pubs: dict[str, Publisher[Message]] = {}
+        if p.flag("ros_topics"):
             self.ros_pubs = {
                 visual_msgs.MARKERS_TOPIC: self.create_publisher(
                     MarkerArray, visual_msgs.MARKERS_TOPIC, DATA_QOS),
@@ -153,25 +147,28 @@ class FoxgloveBridgeNode(Node):
                    for topic in (visual_msgs.TRACK_TOPIC, visual_msgs.TRUTH_TRACK_TOPIC)},
             }
 
-        subs = ((StateEstimateMsg, TOPIC_TRUTH, self.on_truth),
-                (StateEstimateMsg, TOPIC_ESTIMATE, self.on_estimate),
-                (MeasurementMsg, TOPIC_MEASUREMENT, self.on_measurement),
-                (MeasurementMsg, TOPIC_FORECAST, self.on_measurement))
+        subs: tuple[tuple[type[MeasurementMsg], str, Callable[[MeasurementMsg], None]], ...] = (
+            (StateEstimateMsg, TOPIC_TRUTH, self.on_truth),
+            (StateEstimateMsg, TOPIC_ESTIMATE, self.on_estimate),
+            (MeasurementMsg, TOPIC_MEASUREMENT, self.on_measurement),
+            (MeasurementMsg, TOPIC_FORECAST, self.on_measurement))
         for msg_type, topic, callback in subs:
-            self.diag.subscribe(msg_type, topic, self.diag.guard(callback), DATA_QOS)
-        wall_timer(self, float(period), self.diag.guard(self.publish_scene))
+            self.subscribe(msg_type, topic, callback, DATA_QOS)
+        self.wall_timer(p.number("scene_period"), self.publish_scene)
 
     def _ours(self, object_id: str) -> bool:
+        """Return True when `object_id` is shown (else count it)."""
         if self.object_id and object_id != self.object_id:
-            self.diag.count("ignored_other_object", f"object_id {object_id!r}", warn=False)
+            self.diag.count(Cause.IGNORED_OTHER_OBJECT, f"object_id {object_id!r}")
             return False
         return True
 
     def _log(self, logged: list[scene.Logged]) -> None:
+        """Log `logged` on their Foxglove channels."""
         for item in logged:
             self.channels[item.topic].log(item.message, log_time=item.log_time)
 
-    def _show(self, make: Callable[[], object], counter: str) -> bool:
+    def _show(self, make: Callable[[], object], counter: Count) -> bool:
         """Run `make` (a `VisualTopics` call); count `counter`, or why it was not shown."""
         try:
             made = make()
@@ -184,44 +181,44 @@ class FoxgloveBridgeNode(Node):
         return True
 
     def on_truth(self, msg: StateEstimateMsg) -> None:
-        self.activity += 1
+        """Show a true state (and its ground track)."""
         if not self._ours(msg.object_id):
             return
         e = messages.estimate_from_msg(msg)
-        if self._show(lambda: self.visual.truth(e.t, e.x), "truth"):
+        if self._show(lambda: self.visual.truth(e.t, e.x), Count.TRUTH):
             self._publish_fix(visual_msgs.TRUTH_TRACK_TOPIC, e.t, e.x, "truth")
 
     def on_estimate(self, msg: StateEstimateMsg) -> None:
-        self.activity += 1
+        """Show an estimate (and its ground track)."""
         if not self._ours(msg.object_id):
             return
         e = messages.estimate_from_msg(msg)
         if self._show(lambda: self.visual.estimate(e.t, e.x, e.P, e.update_source, e.nis),
-                      "estimates"):  # the ground track only of what the scene shows
+                      Count.ESTIMATES):  # the ground track only of what the scene shows
             self._publish_fix(visual_msgs.TRACK_TOPIC, e.t, e.x, "estimate")
 
-    def _publish_fix(self, topic: str, t: float, x: Any, frame_id: str) -> None:
+    def _publish_fix(self, topic: str, t: float, x: np.ndarray, frame_id: str) -> None:
         """Publish the ground-track NavSatFix of a state the scene showed."""
         pub = self.ros_pubs.get(topic)
         if pub is not None:
             pub.publish(visual_msgs.nav_sat_fix(t, x, frame_id))
 
     def on_measurement(self, msg: MeasurementMsg) -> None:
-        self.activity += 1
+        """Show the point a measurement or forecast implies."""
         if not self._ours(msg.object_id):
             return
-        try:
-            m = messages.measurement_from_msg(msg)
-        except ValueError as exc:
-            self.diag.count("rejected_kind", str(exc))
+        m = self.measurement_of(msg)
+        if m is None:
             return
         forecast = m.source == Source.FORECAST
         self._show(lambda: self.visual.measurement(m.kind, m.z, m.frame_id, m.t, forecast),
-                   "forecasts" if forecast else "measurements")
+                   Count.FORECASTS if forecast else Count.MEASUREMENTS)
 
     def publish_scene(self) -> None:
-        """Log the scene (when something changed since the last one and a truth or estimate
-        was heard), stamped with the newest epoch heard."""
+        """Log the scene, stamped with the newest epoch heard.
+
+        When something changed since the last one and a truth or estimate was heard.
+        """
         if not self.visual.scene_due:
             return
         logged = self.visual.scene()
@@ -229,17 +226,18 @@ class FoxgloveBridgeNode(Node):
         pub = self.ros_pubs.get(visual_msgs.MARKERS_TOPIC)
         if pub is not None:
             pub.publish(visual_msgs.marker_array(self.visual.shapes, self.visual.state.t or 0.0))
-        self.diag.counts["scene_updates"] += 1
+        self.diag.counts[Count.SCENE_UPDATES] += 1
 
     def close(self) -> None:
+        """Stop the WebSocket server."""
         server = getattr(self, "server", None)
         if server is not None:
             server.stop()
 
 
 def main(args: list[str] | None = None) -> int:
-    start_process()
-    return run(FoxgloveBridgeNode, args)
+    """Run the Foxglove bridge node (``ros2 run ssa_fusion foxglove_bridge``)."""
+    return FoxgloveBridgeNode.main(args)
 
 
 if __name__ == "__main__":

@@ -2,11 +2,12 @@
 
 A row (`Param`) holds a parameter's name, default, unit, rule (`Check`: bounds, choices),
 whether it can be set at run time, and its description; a table (`ParameterTable`) holds
-a node's rows and the rules over several of them (`Rule`). `NodeParameters` declares a
-table on a node, refuses an invalid value at start-up (`ParameterError`, which the node's
-process reports as ``error: parameter '<name>' …`` with exit code 2) and on every later
-``ros2 param set``, and keeps the values in effect. ``docs/NODES.md``'s parameter tables
-are generated from the same rows (`ssa_fusion.nodes.parameter_doc`).
+a node's rows and the rules over several of them (`Rule`). `node_parameters.NodeParameters`
+declares a table on a node, refuses an invalid value at start-up (`ParameterError`, which
+the node's process reports as ``error: parameter '<name>' …`` with exit code 2) and on
+every later ``ros2 param set``, and keeps the values in effect. ``docs/NODES.md``'s
+parameter tables are generated from the same rows (`ssa_fusion.nodes.parameter_doc`). No
+rclpy here: the tables can be read without ROS.
 
 Values are in the parameters' units (SI: m, m/s, rad, s); `ssa_fusion.nodes.settings` is
 the one translation to the core's (km, km/s).
@@ -15,16 +16,12 @@ the one translation to the core's (km, km/s).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
-from typing import Any
-
-from rclpy.exceptions import ParameterException
-from rclpy.node import Node
-from rclpy.parameter import Parameter
 
 from ssa_fusion.core.stations import network_stations
-from ssa_fusion.ros.interfaces import ParameterDescriptor, SetParametersResult
+from ssa_fusion.core.types import KIND_NAMES
+from ssa_fusion.nodes.defaults import CatalogFilterDefaults, FilterDefaults
 
 ParamValue = bool | int | float | str | list[bool] | list[int] | list[float] | list[str]
 """What a ROS parameter of these nodes holds."""
@@ -205,16 +202,10 @@ class Rule:
 
 @dataclass(frozen=True)
 class ParameterTable:
-    """Every parameter of one node, in declaration order, and the rules between them.
+    """Every parameter of node `node`, and the rules between them.
 
-    Attributes
-    ----------
-    node : str
-        The node's name.
-    params : tuple of Param
-        Its parameters, declared in this order (a `Computed` default reads earlier ones).
-    rules : tuple of Rule
-        Rules over several parameters.
+    `params` are declared in their order (a `Computed` default reads earlier ones); `rules`
+    read several of them.
     """
 
     node: str
@@ -247,156 +238,6 @@ class ParameterTable:
         return tuple(p.name for p in self.params)
 
 
-def _ros(value: Default) -> ParamValue:
-    """Return a default as rclpy declares it (arrays as lists)."""
-    if isinstance(value, tuple):
-        items: list[Any] = list(value)
-        return items
-    return value
-
-
-class NodeParameters:
-    """A `ParameterTable` declared on a node: the values in effect, checked on every set.
-
-    Declares every row (with its description and read-only flag), raises `ParameterError`
-    for an invalid start-up value or combination, and from then on refuses an invalid
-    ``ros2 param set`` (logged, with the reason; old values kept). After an accepted set of
-    run-time parameters, `on_set` gets the new values of those that changed (one call per
-    set, however many parameters it sets at once).
-    """
-
-    def __init__(self, node: Node, table: ParameterTable,
-                 on_set: Callable[[dict[str, ParamValue]], None]) -> None:
-        self.node = node
-        self.table = table
-        self._on_set = on_set
-        self.values: dict[str, ParamValue] = {}
-        for p in table:
-            self.values[p.name] = self._declare(p)
-        for rule in table.rules:
-            reason = rule.test(self.values)
-            if reason:
-                first = rule.names[0]
-                raise ParameterError(f"parameter '{first}' = {self.values[first]!r}: {reason}")
-        node.add_on_set_parameters_callback(self._validate)
-        node.add_post_set_parameters_callback(self._apply)
-
-    def _declare(self, p: Param) -> ParamValue:
-        default = (p.default.compute(self.values) if isinstance(p.default, Computed)
-                   else _ros(p.default))
-        descriptor = ParameterDescriptor(description=p.description, read_only=not p.runtime,
-                                         additional_constraints=p.check.text if p.check else "")
-        try:
-            self.node.declare_parameter(p.name, default, descriptor)
-        except ParameterException as exc:  # e.g. a string given for a number
-            raise ParameterError(f"parameter '{p.name}': {exc}") from exc
-        value = _plain(self.node.get_parameter(p.name).value)
-        reason = p.reason(value)
-        if reason:
-            raise ParameterError(f"parameter '{p.name}' = {value!r}: {reason}")
-        return value
-
-    def _validate(self, params: list[Parameter[ParamValue]]) -> SetParametersResult:
-        """Judge a set: each value by its row, then every rule with the values it leaves."""
-        ours = [p for p in params if p.name in self.values]
-        for p in ours:
-            reason = self.table[p.name].reason(_plain(p.value))
-            if reason:
-                self.node.get_logger().warning(
-                    f"refused parameter '{p.name}' = {p.value!r}: {reason}")
-                return SetParametersResult(successful=False, reason=f"{p.name}: {reason}")
-        new = {p.name: _plain(p.value) for p in ours}
-        for rule in self.table.rules:
-            changed = [name for name in rule.names if name in new]
-            if not changed:
-                continue
-            reason = rule.test({**self.values, **new})
-            if reason:
-                text = ", ".join(f"'{name}' = {new[name]!r}" for name in changed)
-                self.node.get_logger().warning(f"refused parameter {text}: {reason}")
-                return SetParametersResult(successful=False,
-                                           reason=f"{', '.join(changed)}: {reason}")
-        return SetParametersResult(successful=True)
-
-    def _apply(self, params: list[Parameter[ParamValue]]) -> None:
-        """Put an accepted set into effect (values first, then the node's `on_set`)."""
-        changed = {p.name: _plain(p.value) for p in params
-                   if p.name in self.values and self.table[p.name].runtime}
-        if not changed:
-            return
-        self.values.update(changed)
-        self._on_set(changed)
-        for name, value in changed.items():
-            self.node.get_logger().info(f"parameter '{name}' = {value!r} in effect")
-
-    def __getitem__(self, name: str) -> ParamValue:
-        """Return the value in effect of parameter `name`."""
-        return self.values[name]
-
-    def number(self, name: str) -> float:
-        """Return the value of numeric parameter `name` as a float."""
-        value = self.values[name]
-        assert isinstance(value, int | float), name
-        return float(value)
-
-    def integer(self, name: str) -> int:
-        """Return the value of integer parameter `name`."""
-        value = self.values[name]
-        assert isinstance(value, int), name
-        return int(value)
-
-    def text(self, name: str) -> str:
-        """Return the value of string parameter `name`."""
-        value = self.values[name]
-        assert isinstance(value, str), name
-        return value
-
-    def flag(self, name: str) -> bool:
-        """Return the value of bool parameter `name`."""
-        value = self.values[name]
-        assert isinstance(value, bool), name
-        return value
-
-    def numbers(self, name: str) -> list[float]:
-        """Return the value of numeric array parameter `name` as floats."""
-        value = self.values[name]
-        assert isinstance(value, list), name
-        return [float(v) for v in value]
-
-    def texts(self, name: str) -> list[str]:
-        """Return the value of string array parameter `name`."""
-        value = self.values[name]
-        assert isinstance(value, list), name
-        return [str(v) for v in value]
-
-    def subset(self, names: tuple[str, ...]) -> dict[str, ParamValue]:
-        """Return the values in effect of `names`."""
-        return {name: self.values[name] for name in names}
-
-    def reject_unknown(self) -> None:
-        """Raise ParameterError naming every parameter given to the node that it lacks.
-
-        Given by ``-p`` or a params file: a misspelt name would otherwise be ignored
-        silently (rclpy's default). The message lists the parameters the node takes.
-        """
-        declared = set(self.node._parameters)  # rclpy keeps no public list of either
-        given = set(getattr(self.node, "_parameter_overrides", {}))
-        unknown = sorted(p for p in given - declared if not p.startswith("qos_overrides."))
-        if unknown:
-            names = ", ".join(f"parameter '{p}'" for p in unknown)
-            raise ParameterError(f"unknown {names}; {self.node.get_name()} takes: "
-                                 f"{', '.join(sorted(declared))}")
-
-
-def _plain(value: object) -> ParamValue:
-    """Return a parameter value as a plain Python value (arrays may come as array.array)."""
-    if isinstance(value, bool | int | float | str):
-        return value
-    assert isinstance(value, Iterable), value
-    items: list[Any] = list(value)  # the elements of one ROS type
-    return items
-
-
 # rows several nodes share ----------------------------------------------------------------
 def clock_lead(default: float) -> Param:
     """Return the row of ``max_clock_lead`` (s), which every node judging stamps has."""
@@ -409,3 +250,74 @@ def clock_lead(default: float) -> Param:
 def object_filter(default: str, what: str) -> Param:
     """Return the row of ``object_id``: the node `what`s only this object ('' = any)."""
     return Param("object_id", default, f"{what} only this object; `\"\"` = any")
+
+
+KINDS = {name: kind for kind, name in KIND_NAMES.items()}
+"""The `kind` parameter's values: measurement kind by name."""
+
+
+def measurement_stream(kind: str, station: str, verb: str) -> tuple[Param, Param]:
+    """Return the rows of ``kind`` and ``station``: the measurements a node `verb`s.
+
+    The station is the frame_id of range/az/el and ra/dec measurements ("gcrf" for
+    positions, whatever the parameter says).
+    """
+    return (Param("kind", kind, f"measurement kind it {verb} (sets the measurement model)",
+                  check=one_of(*KINDS)),
+            Param("station", station,
+                  "station (frame_id) of range/az/el or ra/dec measurements "
+                  "(`ssa_fusion.core.stations.STATIONS`), or a network: a `NETWORKS` id or "
+                  "station ids separated by commas (`columbus,` for a network of one), whose "
+                  "radar and optical measurements it takes, each with its station's model; "
+                  "ignored for position (frame `gcrf`)", check=STATIONS))
+
+
+P0_SIGMA = numbers(6, "needs 6 standard deviations, each a finite number >= 0")
+"""The check of ``p0_sigma``: 3 position and 3 velocity standard deviations."""
+MAX_IOD_SAMPLES = 1000
+"""Most measurements one IOD batch may take (a pass of 10 s samples has at most ~100)."""
+MOTION_MODELS = one_of("kepler", "j2")
+"""The motion models a filter node offers (Earth orbits on the Unix clock)."""
+
+
+def filter_rows(d: FilterDefaults | CatalogFilterDefaults, runtime: bool,
+                unlimited_span: bool) -> tuple[Param, ...]:
+    """Return the rows of a filter's settings (the object filter's and the catalog's).
+
+    Defaults `d`; `runtime`: the tuning rows (all but ``motion_model``) can be set at run
+    time; `unlimited_span`: ``iod_max_span`` 0 means no limit (else it must be > 0).
+    """
+    span = ("longest span of one IOD batch (one pass of one station); a later measurement, "
+            "or one of another station or kind, starts a new batch")
+    return (
+        Param("motion_model", d.motion_model,
+              "the EKF's motion model: `kepler` (analytic two-body) or `j2` (two-body + J2, "
+              "integrated with its state transition matrix; ~3 ms per 30 s prediction "
+              "instead of ~0.1 ms)", check=MOTION_MODELS),
+        Param("p0_sigma", d.p0_sigma,
+              "standard deviations added (in quadrature) to the IOD covariance (take effect "
+              "at the next IOD)", unit="3 × m, 3 × m/s", check=P0_SIGMA, runtime=runtime),
+        Param("q", d.q, "process noise: white-noise acceleration spectral density (0.1 "
+              "m²/s³ = 1e-7 km²/s³ is sized for the J2 a Keplerian model leaves out)",
+              unit="m²/s³", check=NON_NEGATIVE, runtime=runtime),
+        Param("gate", d.gate, "normalized innovation squared beyond which an update is "
+              "rejected; 0 = no gate", unit="NIS", check=NON_NEGATIVE, runtime=runtime),
+        Param("iod_samples", d.iod_samples,
+              "real measurements used by the initial orbit determination",
+              check=integer_in(3, MAX_IOD_SAMPLES), runtime=runtime),
+        Param("iod_max_span", d.iod_max_span, span + ("; 0 = no limit" if unlimited_span
+                                                       else ""),
+              unit="s", check=NON_NEGATIVE if unlimited_span else POSITIVE, runtime=runtime),
+        Param("reinit_after", d.reinit_after,
+              "after this many real measurements of an object in a row refused by the gate "
+              "the filter has lost it: it forgets its state and initialises again "
+              "(`reinitialised` on /diagnostics); 0 = never", unit="measurements",
+              check=at_least(0), runtime=runtime),
+        Param("sigma_bound", d.sigma_bound,
+              "after each prediction, every position standard deviation is limited to "
+              "`sigma_bound` × the position's norm and every velocity one to `sigma_bound` "
+              "× the velocity's (rows and columns scaled, correlations kept): with 2, the "
+              "orbit's diameter and twice its speed, so a gap of days cannot blow the "
+              "covariance up beyond what is physically possible; 0 = no limit",
+              check=NON_NEGATIVE, runtime=runtime),
+    )

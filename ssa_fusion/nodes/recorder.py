@@ -16,87 +16,85 @@ from __future__ import annotations
 
 import importlib
 import time
+from functools import partial
 from pathlib import Path
 
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ssa_fusion.core.types import Cause
-from ssa_fusion.nodes import start_process
-from ssa_fusion.nodes.common import (
-    Diagnostics,
-    ParameterError,
-    declare,
-    positive,
-    run,
-    wall_timer,
-)
+from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import BAG_PATTERN, RECORDER
+from ssa_fusion.nodes.diagnostics import RECORDED
+from ssa_fusion.nodes.parameters import (
+    POSITIVE,
+    Check,
+    Computed,
+    Param,
+    ParameterError,
+    ParameterTable,
+    ParamValue,
+)
 from ssa_fusion.ros.bagio import BagWriter, qos_from_rclpy
+from ssa_fusion.ros.interfaces import Message
 from ssa_fusion.ros.topics import DATA_DEPTH
 
 HOLD_LIMIT = 10_000
 """Most messages held until sim time starts (beyond, they are written stamped 0)."""
 
 
-def _import_type(type_name: str):
+def _import_type(type_name: str) -> type[Message]:
+    """Return the message class of a ROS type name (``pkg/msg/Name``)."""
     pkg, _, name = type_name.split("/")
-    return getattr(importlib.import_module(f"{pkg}.msg"), name)
+    cls: type[Message] = getattr(importlib.import_module(f"{pkg}.msg"), name)
+    return cls
 
 
-class Recorder(Node):
+def _new_bag(value: ParamValue) -> str | None:
+    if not value:
+        return "must be a directory path"
+    return "exists already, not overwriting" if Path(str(value)).exists() else None
+
+
+PARAMETERS = ParameterTable("recorder", (
+    Param("bag", Computed(lambda _: time.strftime(BAG_PATTERN),
+                          "`bags/ssa_<YYYYmmdd_HHMMSS>` (start time; not in the yaml: the "
+                          "launch file's `bag:=`)", "bags/ssa_20260101_120000"),
+          "output bag directory", check=Check("must not exist", _new_bag)),
+    Param("topics", RECORDER.topics, "topics recorded besides every topic under `prefix`"),
+    Param("prefix", RECORDER.prefix, "record every topic whose name starts with this"),
+    Param("flush_period", RECORDER.flush_period, "time between flushes of the bag to disk",
+          unit="wall s", check=POSITIVE),
+    Param("discover_period", RECORDER.discover_period, "time between topic discovery scans",
+          unit="wall s", check=POSITIVE),
+))
+"""The recorder's parameters."""
+
+
+class Recorder(SsaNode):
+    """The recorder node: raw subscriptions to every topic wanted, into a `BagWriter`."""
+
+    PARAMETERS = PARAMETERS
+
     def __init__(self) -> None:
-        super().__init__("recorder")
-        default_bag = RECORDER.bag or time.strftime(BAG_PATTERN)
-        bag = declare(
-            self,
-            "bag",
-            default_bag,
-            "output bag directory (must not exist)",
-            lambda v: None if v else "must be a directory path",
-        )
-        self.topics = set(
-            declare(
-                self,
-                "topics",
-                list(RECORDER.topics),
-                "topics recorded besides every topic under prefix",
-            )
-        )
-        self.prefix = declare(
-            self, "prefix", RECORDER.prefix, "record every topic whose name starts with this"
-        )
-        flush = declare(
-            self,
-            "flush_period",
-            RECORDER.flush_period,
-            "s of wall time between flushes of the bag to disk",
-            positive,
-        )
-        discover = declare(
-            self,
-            "discover_period",
-            RECORDER.discover_period,
-            "s between topic discovery scans",
-            positive,
-        )
-        if Path(bag).exists():
-            raise ParameterError(f"parameter 'bag' = {bag!r}: exists already, not overwriting")
+        super().__init__()
+        p = self.params
+        bag = p.text("bag")
+        self.topics = set(p.texts("topics"))
+        self.prefix = p.text("prefix")
         try:
             self.writer = BagWriter(bag)
         except Exception as exc:  # rosbags raises several types for a path it cannot use
             raise ParameterError(f"parameter 'bag' = {bag!r}: cannot create the bag there: "
                                  f"{exc}") from exc
-        self.diag = Diagnostics(self)
-        self._subs = {}
-        self.activity = 0
-        wall_timer(self, discover, self.diag.guard(self.discover))
+        self._subs: dict[str, object] = {}
         self._held: list[tuple[str, bytes]] = []  # received before sim time started
-        wall_timer(self, flush, self.flush)
+        self.wall_timer(p.number("discover_period"), self.discover)
+        self.wall_timer(p.number("flush_period"), self.flush)
         self.get_logger().info(f"recording to {bag}")
         self.discover()
 
     def wanted(self, topic: str) -> bool:
+        """Return True when `topic` is to be recorded."""
         return topic in self.topics or topic.startswith(self.prefix)
 
     def discover(self) -> None:
@@ -132,15 +130,14 @@ class Recorder(Node):
                 if latched
                 else DurabilityPolicy.VOLATILE,
             )
-            self._subs[topic] = self.diag.subscribe(
-                msg_class, topic, lambda data, t=topic: self.on_message(t, data), qos, raw=True
-            )
+            self._subs[topic] = self.subscribe(
+                msg_class, topic, partial(self.on_message, topic), qos, raw=True)
             self.get_logger().info(f"recording {topic} [{type_name}]")
 
     def on_message(self, topic: str, data: bytes) -> None:
+        """Write one message of `topic` (its CDR bytes), stamped with the node's clock."""
         now = self.get_clock().now().nanoseconds
-        self.activity += 1
-        self.diag.counts[f"recorded {topic}"] += 1
+        self.diag.counts[RECORDED + topic] += 1
         if now == 0 and len(self._held) < HOLD_LIMIT:  # sim time has not started yet
             self._held.append((topic, data))
             return
@@ -154,12 +151,14 @@ class Recorder(Node):
         self._held.clear()
 
     def flush(self) -> None:
+        """Write what was held once sim time runs; push the pending chunk to disk."""
         now = self.get_clock().now().nanoseconds
         if now and self._held:
             self._release(now)
         self.writer.flush()
 
     def close(self) -> None:
+        """Close the bag with everything received."""
         self._release(self.get_clock().now().nanoseconds)  # a graph whose clock never ran: 0
         self.writer.close()
         total = sum(self.writer.counts.values())
@@ -167,8 +166,8 @@ class Recorder(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    start_process()
-    return run(Recorder, args)
+    """Run the recorder node (``ros2 run ssa_fusion recorder``)."""
+    return Recorder.main(args)
 
 
 if __name__ == "__main__":

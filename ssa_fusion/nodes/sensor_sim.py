@@ -22,32 +22,36 @@ from __future__ import annotations
 
 import enum
 import time
-from typing import Any
 
 import numpy as np
-from builtin_interfaces.msg import Time as TimeMsg
 from rclpy.duration import Duration
-from rclpy.node import Node
-from rosgraph_msgs.msg import Clock
-from ssa_fusion_msgs.msg import Measurement as MeasurementMsg
-from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 
 from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core import types
 from ssa_fusion.core.frames import Frame
-from ssa_fusion.nodes import start_process
-from ssa_fusion.nodes.common import (
-    Diagnostics,
-    ParameterError,
-    all_non_negative,
-    declare,
-    finish,
-    non_negative,
-    positive,
-    run,
-)
+from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import SENSOR_SIM
+from ssa_fusion.nodes.diagnostics import Count
+from ssa_fusion.nodes.parameters import (
+    NON_NEGATIVE,
+    POSITIVE,
+    Check,
+    Computed,
+    Param,
+    ParameterError,
+    ParameterTable,
+    ParamValue,
+    Rule,
+    Values,
+    all_non_negative,
+    at_least,
+    one_of,
+)
+from ssa_fusion.nodes.process import finish
 from ssa_fusion.ros import messages
+from ssa_fusion.ros.interfaces import Clock, Time
+from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
+from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
 from ssa_fusion.ros.readiness import ReadyNodes, check_needs
 from ssa_fusion.ros.topics import (
     CATALOG_QOS,
@@ -58,7 +62,7 @@ from ssa_fusion.ros.topics import (
     TOPIC_WITHHELD,
 )
 from ssa_fusion.sim import scenarios, sky, survey
-from ssa_fusion.sim.simulate import simulate
+from ssa_fusion.sim.simulate import Simulation, simulate
 
 ORBIT_SCENARIOS = [name for name, s in scenarios.SCENARIOS.items() if s.is_orbit]
 SCENARIO_NAMES = [*ORBIT_SCENARIOS, *sky.SKY_SCENARIOS]
@@ -77,8 +81,8 @@ Schedule = list[tuple[float, Event, types.Measurement | types.StateEstimate]]
 """Publications in epoch order: (epoch s, what, the message's content)."""
 
 
-def paper_schedule(sim: Any, in_gap: np.ndarray, object_id: str) -> Schedule:
-    """One measurement (or withheld one) and the truth at every epoch of a paper scenario."""
+def paper_schedule(sim: Simulation, in_gap: np.ndarray, object_id: str) -> Schedule:
+    """Return a measurement (or a withheld one) and the truth per epoch of a paper scenario."""
     s = sim.scenario
     out: Schedule = []
     for i, t in enumerate(sim.t.tolist()):
@@ -90,7 +94,7 @@ def paper_schedule(sim: Any, in_gap: np.ndarray, object_id: str) -> Schedule:
 
 
 def sky_schedule(sim: sky.SkySimulation, object_id: str) -> Schedule:
-    """The truth on its cadence and the stations' measurements, merged in epoch order."""
+    """Return the truth on its cadence and the stations' measurements in epoch order."""
     out: Schedule = [(t, Event.TRUTH, types.StateEstimate(t=t, x=x, object_id=object_id))
                      for t, x in zip(sim.t.tolist(), sim.x, strict=True)]
     for m, w in zip(sim.measurements, sim.withheld, strict=True):
@@ -100,16 +104,34 @@ def sky_schedule(sim: sky.SkySimulation, object_id: str) -> Schedule:
     return out
 
 
-def _or(default: Any, scenario_value: Any) -> Any:
-    """A default of `defaults.SENSOR_SIM`, or the scenario's value where it is None."""
-    return scenario_value if default is None else default
+def _scenario(values: Values) -> tuple[scenarios.Scenario, sky.SkyScenario | None]:
+    """Return the paper scenario of the chosen ``scenario``, and the real-sky one or None.
+
+    For a real-sky scenario, the paper scenario is the default live one.
+    """
+    name = str(values["scenario"])
+    real_sky = sky.SKY_SCENARIOS.get(name)
+    return (scenarios.get(name) if real_sky is None else scenarios.DEFAULT_LIVE), real_sky
 
 
-def _scenario_check(value: str) -> str | None:
-    return None if value in SCENARIO_NAMES else f"unknown scenario; known: {SCENARIO_NAMES}"
+def _cadence(values: Values) -> float:
+    """Return the chosen scenario's cadence (real sky: of its truth samples), s."""
+    base, real_sky = _scenario(values)
+    return base.cadence_s if real_sky is None else real_sky.truth_cadence_s
 
 
-def _gaps_check(value: list) -> str | None:
+def _from_scenario(field: str) -> Computed:
+    """Return the default of a paper scenario's `field` (s)."""
+    def compute(values: Values) -> float:
+        return float(getattr(_scenario(values)[0], field))
+
+    default = float(getattr(scenarios.get(SENSOR_SIM.scenario), field))
+    return Computed(compute, f"the scenario's ({default:g})", default)
+
+
+def _gaps(value: ParamValue) -> str | None:
+    if not isinstance(value, list) or value == [0.0]:
+        return None
     if len(value) % 2:
         return "needs pairs [start_s, length_s, ...]"
     if not all_non_negative(value):
@@ -117,115 +139,125 @@ def _gaps_check(value: list) -> str | None:
     return None
 
 
-def _noise_check(value: list) -> str | None:
-    if list(value) == [-1.0] or (len(value) == 3 and all_non_negative(value)):
+def _noise(value: ParamValue) -> str | None:
+    if value == [-1.0] or (isinstance(value, list) and len(value) == 3
+                           and all_non_negative(value)):
         return None
     return "needs 3 values, each a finite number >= 0 (or [-1.0])"
 
 
-def _count_check(value: Any) -> str | None:
-    return None if isinstance(value, int) and value >= 0 else "must be an integer >= 0"
-
-
-def _wait_check(value: list) -> str | None:
+def _wait(value: ParamValue) -> str | None:
+    assert isinstance(value, list)
     for item in value:
-        topic, _, count = item.partition("=")
-        if not topic.startswith("/") or not count.isdigit():
+        topic, _, count = str(item).partition("=")
+        if item and (not topic.startswith("/") or not count.isdigit()):
             return f"{item!r} is not '/topic=count'"
     return None
 
 
-class SensorSim(Node):
-    def __init__(self) -> None:
-        super().__init__("sensor_sim")
-        name = declare(
-            self,
-            "scenario",
-            SENSOR_SIM.scenario,
-            "orbit scenario (truth model, orbit, measurement kind)",
-            _scenario_check,
-        )
-        real_sky = sky.SKY_SCENARIOS.get(name)
-        base = scenarios.get(name) if real_sky is None else scenarios.DEFAULT_LIVE
-        d = SENSOR_SIM
-        self.object_id = declare(self, "object_id", _or(d.object_id, name),
-                                 "object id put in every message")
-        cadence = declare(self, "cadence", _or(d.cadence, base.cadence_s if real_sky is None
-                                               else real_sky.truth_cadence_s),
-                          "s between measurements (real sky: between truth samples)", positive)
-        duration = declare(self, "duration", d.duration,
-                           "real-sky scenarios: s of sim time (0 = the scenario's)", non_negative)
-        track = declare(
-            self,
-            "gap_start",
-            _or(d.gap_start, base.track_s),
-            "s of tracking before the gap (ignored when 'gaps' is set)",
-            non_negative,
-        )
-        gap = declare(self, "gap_length", _or(d.gap_length, base.gap_s), "s of the sensor outage",
-                      non_negative)
-        gaps = declare(
-            self,
-            "gaps",
-            list(d.gaps),
-            "optional list [start_s, length_s, ...] of "
-            "outages after the start; [0.0] = use gap_start/gap_length",
-            lambda v: None if list(v) == [0.0] else _gaps_check(v),
-        )
-        after = declare(self, "after_gap", _or(d.after_gap, base.after_s),
-                        "s of tracking after the (last) gap", non_negative)
-        noise = declare(
-            self,
-            "noise_sigma",
-            list(d.noise_sigma),
-            "measurement noise std per channel (m, or m, rad, rad for "
-            "range/az/el); [-1.0] = the scenario's noise",
-            _noise_check,
-        )
-        self.time_scale = declare(
-            self, "time_scale", d.time_scale, "sim seconds per wall second", positive
-        )
-        seed = declare(self, "seed", d.seed, "noise random seed")
-        self.wait_for = declare(
-            self,
-            "wait_for",
-            list(d.wait_for),
-            "start only when each '/topic=count' has that many "
-            "subscribers (e.g. /ssa/measurement=3)",
-            lambda v: _wait_check([x for x in v if x]),
-        )
-        self.wait_for_readers = [x for x in declare(
-            self,
-            "wait_for_readers",
-            list(d.wait_for_readers),
-            "start only when each 'node:/topic' reports a matched publisher on /diagnostics "
-            "(e.g. filter:/ssa/measurement): the readers' side of the match exists too",
-            lambda v: check_needs([x for x in v if x]),
-        ) if x]
-        self.readers = ReadyNodes(self)
-        tick = declare(self, "tick", d.tick, "wall s between publication ticks", positive)
-        catalog = declare(self, "catalog", d.catalog,
-                          "element sets (TLE, 3LE, OMM XML/CSV) of the objects to simulate; "
-                          "'' = the scenario's one object")
-        objects = declare(self, "objects", d.objects,
-                          "catalog: simulate the first N objects (0 = all)", _count_check)
-        synthetic = declare(self, "synthetic", d.synthetic,
-                            "catalog: spread its first element set into N objects on orbits "
-                            "of the same regime (0 = the catalog's own objects)", _count_check)
+def _readers(value: ParamValue) -> str | None:
+    assert isinstance(value, list)
+    return check_needs([str(x) for x in value if x])
 
+
+def _catalog_needs_sky(values: Values) -> str | None:
+    if values["catalog"] and values["scenario"] not in sky.SKY_SCENARIOS:
+        return (f"needs a real-sky scenario (its radars observe the catalog); known: "
+                f"{list(sky.SKY_SCENARIOS)}")
+    return None
+
+
+DEFAULT_CADENCE = _cadence({"scenario": SENSOR_SIM.scenario})
+"""The default scenario's cadence, s."""
+
+PARAMETERS = ParameterTable("sensor_sim", (
+    Param("scenario", SENSOR_SIM.scenario,
+          "orbit scenario (truth model, orbit, measurement kind, noise): a paper one (see "
+          "DESIGN.md) or a real-sky one", check=one_of(*SCENARIO_NAMES)),
+    Param("object_id", Computed(lambda v: str(v["scenario"]),
+                                f"the scenario's name (`{SENSOR_SIM.scenario}`)",
+                                SENSOR_SIM.scenario),
+          "object id put in every message"),
+    Param("cadence", Computed(_cadence, f"the scenario's ({DEFAULT_CADENCE:g}; real sky: its "
+                                        "truth cadence)", DEFAULT_CADENCE),
+          "time between measurements (real sky: between truth samples)", unit="s",
+          check=POSITIVE),
+    Param("duration", SENSOR_SIM.duration,
+          "real-sky scenarios: sim time to run; 0 = the scenario's (3 days)", unit="s",
+          check=NON_NEGATIVE),
+    Param("gap_start", _from_scenario("track_s"),
+          "tracking before the gap, from the first epoch; ignored when `gaps` is set",
+          unit="s", check=NON_NEGATIVE),
+    Param("gap_length", _from_scenario("gap_s"), "length of the sensor outage", unit="s",
+          check=NON_NEGATIVE),
+    Param("gaps", SENSOR_SIM.gaps, "outages as pairs `[start, length, start, length, …]` "
+          "after the first epoch; `[0.0]` = one gap from `gap_start`/`gap_length`", unit="s",
+          check=Check("pairs, each ≥ 0", _gaps)),
+    Param("after_gap", _from_scenario("after_s"), "tracking after the (last) gap", unit="s",
+          check=NON_NEGATIVE),
+    Param("noise_sigma", SENSOR_SIM.noise_sigma,
+          "measurement noise standard deviation per channel; `[-1.0]` = the scenario's noise "
+          "(iss_j2_rae: 1000 m, 0.01 rad, 0.01 rad)",
+          unit="m (position); m, rad, rad (range/az/el)",
+          check=Check("3 values, each ≥ 0", _noise)),
+    Param("time_scale", SENSOR_SIM.time_scale, "simulation speed", unit="sim s per wall s",
+          check=POSITIVE),
+    Param("seed", SENSOR_SIM.seed, "noise random seed"),
+    Param("wait_for", SENSOR_SIM.wait_for, "start only when each `/topic=count` has that "
+          "many subscribers (e.g. `/ssa/measurement=3`); `[\"\"]` = none",
+          check=Check("`/topic=count` entries", _wait)),
+    Param("wait_for_readers", SENSOR_SIM.wait_for_readers,
+          "start only when each `node:/topic` reports a matched publisher on `/diagnostics` "
+          "(e.g. `filter:/ssa/measurement`): the readers' side of the match exists too; "
+          "`[\"\"]` = none", check=Check("`node:/topic` entries", _readers)),
+    Param("tick", SENSOR_SIM.tick, "period of the publication timer", unit="wall s",
+          check=POSITIVE),
+    Param("catalog", SENSOR_SIM.catalog,
+          "element sets (TLE, 3LE, OMM XML/CSV) of the objects to simulate instead of the "
+          "scenario's one object; needs a real-sky `scenario`, whose radars observe every "
+          "object (`sim.survey`: SGP4/SDP4 truth, masks, noise); no `/ssa/truth` (the truth "
+          "is SGP4 of the catalog); measurements on `/ssa/measurement` with keep-last depth "
+          "1e6 (`CATALOG_QOS`); one `/clock` per tick; '' = off"),
+    Param("objects", SENSOR_SIM.objects, "catalog: only the first N objects (0 = all)",
+          check=at_least(0)),
+    Param("synthetic", SENSOR_SIM.synthetic,
+          "catalog: spread its first element set into N objects of the same regime "
+          "(`survey.synthetic_catalog`, seeded by `seed`; 0 = the catalog's own)",
+          check=at_least(0)),
+), rules=(Rule(("catalog", "scenario"), _catalog_needs_sky),))
+"""The sensor_sim's parameters."""
+
+
+class SensorSim(SsaNode):
+    """The simulator node: a schedule of what the sensors measure, published in sim time."""
+
+    PARAMETERS = PARAMETERS
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.sim_stamp = Time()  # the sim time last published on /clock (0: none yet)
+        p = self.params
+        name = p.text("scenario")
+        base, real_sky = _scenario(p.values)
+        self.object_id = p.text("object_id")
+        cadence, duration, gaps = p.number("cadence"), p.number("duration"), p.numbers("gaps")
+        seed = p.integer("seed")
+        self.time_scale = p.number("time_scale")
+        self.wait_for = p.texts("wait_for")
+        self.wait_for_readers = [x for x in p.texts("wait_for_readers") if x]
+        self.readers = ReadyNodes(self)
+        catalog = p.text("catalog")
         self.catalog: survey.Observations | None = None
+        self.schedule: Schedule = []
         if catalog:
-            if real_sky is None:
-                raise ParameterError(f"parameter 'catalog' = {catalog!r}: needs a real-sky "
-                                     f"scenario (its radars observe the catalog); known: "
-                                     f"{list(sky.SKY_SCENARIOS)}")
-            self.catalog, summary = self._catalog(real_sky, catalog, objects, synthetic,
-                                                  duration, seed)
-            self.schedule = []
+            assert real_sky is not None  # the rule `_catalog_needs_sky`
+            self.catalog, summary = self._catalog(real_sky, catalog, p.integer("objects"),
+                                                  p.integer("synthetic"), duration, seed)
             self.times = self.catalog.t
         elif real_sky is None:
-            self.schedule, summary = self._paper(base, cadence, track, gap, gaps, after, noise,
-                                                 seed)
+            self.schedule, summary = self._paper(
+                base, cadence, p.number("gap_start"), p.number("gap_length"), gaps,
+                p.number("after_gap"), p.numbers("noise_sigma"), seed)
         else:
             self.schedule, summary = self._sky(real_sky, cadence, duration, gaps, seed)
         if self.catalog is None:
@@ -239,18 +271,21 @@ class SensorSim(Node):
             MeasurementMsg, TOPIC_MEASUREMENT, DATA_QOS if self.catalog is None else CATALOG_QOS)
         self.pub_withheld = self.create_publisher(MeasurementMsg, TOPIC_WITHHELD, DATA_QOS)
         self.pub_truth = self.create_publisher(StateEstimateMsg, TOPIC_TRUTH, DATA_QOS)
-        self.sim_stamp = TimeMsg()  # the sim time last published on /clock (0: none yet)
-        self.diag = Diagnostics(self, stamp=lambda: self.sim_stamp)  # sim time, like the rest
         self.next = 0
         self.finished = False
         self._next_wait_log = time.monotonic() + 5.0  # quiet while discovery runs
         self.wall0: float | None = None
-        self.create_timer(tick, self.step)
+        self.create_timer(p.number("tick"), self.step)
         self.get_logger().info(f"{name}: {summary}, time scale {self.time_scale}x")
 
+    def diagnostics_stamp(self) -> Time:
+        """Return the sim time last published on /clock: sim time, like the other nodes'."""
+        return self.sim_stamp
+
     def _paper(self, base: scenarios.Scenario, cadence: float, track: float, gap: float,
-               gaps: list, after: float, noise: list, seed: int) -> tuple[Schedule, str]:
-        """The schedule of a paper scenario with the node's overrides, and a log line."""
+               gaps: list[float], after: float, noise: list[float],
+               seed: int) -> tuple[Schedule, str]:
+        """Return the schedule of a paper scenario with the node's overrides, and a log line."""
         gap_list = list(gaps) if list(gaps) != [0.0] else [track, gap]
         windows = [(gap_list[i], gap_list[i] + gap_list[i + 1]) for i in range(0, len(gap_list), 2)]
         last_end = max(end for _, end in windows)
@@ -278,9 +313,9 @@ class SensorSim(Node):
         return (paper_schedule(sim, in_gap, self.object_id),
                 f"{len(sim.t)} epochs every {cadence} s, gaps {windows} s")
 
-    def _sky(self, s: sky.SkyScenario, cadence: float, duration: float, gaps: list,
+    def _sky(self, s: sky.SkyScenario, cadence: float, duration: float, gaps: list[float],
              seed: int) -> tuple[Schedule, str]:
-        """The schedule of a real-sky scenario (`gaps`, if set: whole-network outages)."""
+        """Return the schedule of a real-sky scenario (`gaps`, if set: network outages)."""
         s = s.with_(truth_cadence_s=cadence, duration_s=duration or s.duration_s)
         if list(gaps) != [0.0]:
             s = s.with_(outages=tuple((sky.ALL_STATIONS, gaps[i], gaps[i + 1])
@@ -293,8 +328,11 @@ class SensorSim(Node):
 
     def _catalog(self, s: sky.SkyScenario, path: str, objects: int, synthetic: int,
                  duration: float, seed: int) -> tuple[survey.Observations, str]:
-        """The measurements of a catalog by the scenario's radars (no truth topic: the truth
-        is SGP4 of the catalog, recomputed by whoever scores the run)."""
+        """Return the measurements of a catalog by the scenario's radars.
+
+        No truth topic: the truth is SGP4 of the catalog, recomputed by whoever scores the
+        run.
+        """
         try:
             entries = catalog_io.read_catalog(path)
         except ValueError as exc:
@@ -316,9 +354,12 @@ class SensorSim(Node):
                      f"from t0={t0:.0f}")
 
     def waiting_for(self) -> list[str]:
-        """What start-up still waits for: '/topic=count' entries whose subscriber count is
-        short (matched by this node's own publishers where it publishes the topic), then
-        'node:/topic' entries not reported as matched on /diagnostics."""
+        """Return what start-up still waits for.
+
+        '/topic=count' entries whose subscriber count is short (matched by this node's own
+        publishers where it publishes the topic), then 'node:/topic' entries not reported as
+        matched on /diagnostics.
+        """
         own = {p.topic_name: p for p in (self.pub_clock, self.pub_meas, self.pub_withheld,
                                          self.pub_truth)}
         short = []
@@ -333,6 +374,7 @@ class SensorSim(Node):
         return short + self.readers.unmatched(self.wait_for_readers)
 
     def ready(self) -> bool:
+        """Return True once nothing is awaited (log what is, every 5 s)."""
         missing = self.waiting_for()
         if missing and time.monotonic() >= self._next_wait_log:
             self._next_wait_log = time.monotonic() + 5.0
@@ -340,6 +382,7 @@ class SensorSim(Node):
         return not missing
 
     def step(self) -> None:
+        """Publish what is due by the wall clock since the start (once ready)."""
         if self.finished:
             return
         if self.wall0 is None:
@@ -364,12 +407,14 @@ class SensorSim(Node):
             self.done()
 
     def publish_clock(self, t: float) -> None:
+        """Publish sim time `t` (s) on /clock."""
         msg = Clock()
         msg.clock = messages.seconds_to_stamp(t)
         self.pub_clock.publish(msg)
         self.sim_stamp = msg.clock
 
     def publish_event(self, i: int) -> None:
+        """Publish scheduled event `i` (after the clock of its epoch)."""
         t, what, content = self.schedule[i]
         self.publish_clock(t)
         if what == Event.TRUTH:
@@ -379,10 +424,10 @@ class SensorSim(Node):
         assert isinstance(content, types.Measurement)
         if what == Event.WITHHELD:
             self.pub_withheld.publish(messages.measurement_to_msg(content))
-            self.diag.counts["withheld"] += 1
+            self.diag.counts[Count.WITHHELD] += 1
         else:
             self.pub_meas.publish(messages.measurement_to_msg(content))
-            self.diag.counts["published"] += 1
+            self.diag.counts[Count.PUBLISHED] += 1
 
     def publish_catalog(self, i: int) -> None:
         """Publish catalog measurement `i` (its epoch is at or before the clock published)."""
@@ -394,23 +439,24 @@ class SensorSim(Node):
                               object_id=self.catalog_ids[int(obs.obj[i])],
                               frame_id=obs.sensors[k].station.name)
         self.pub_meas.publish(messages.measurement_to_msg(m))
-        self.diag.counts["published"] += 1
+        self.diag.counts[Count.PUBLISHED] += 1
 
     def done(self) -> None:
+        """End the run: wait for the readers' acknowledgements, report, exit 0."""
         self.finished = True
         for pub in (self.pub_meas, self.pub_withheld, self.pub_truth, self.pub_clock):
             pub.wait_for_all_acked(Duration(seconds=5.0))
         self.diag.publish()
         self.get_logger().info(
-            f"schedule done: {self.diag.counts['published']} measurements, "
-            f"{self.diag.counts['withheld']} withheld"
+            f"schedule done: {self.diag.counts[Count.PUBLISHED]} measurements, "
+            f"{self.diag.counts[Count.WITHHELD]} withheld"
         )
         finish()
 
 
 def main(args: list[str] | None = None) -> int:
-    start_process()
-    return run(SensorSim, args)
+    """Run the simulator node (``ros2 run ssa_fusion sensor_sim``)."""
+    return SensorSim.main(args)
 
 
 if __name__ == "__main__":

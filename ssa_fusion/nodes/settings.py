@@ -18,11 +18,11 @@ from pathlib import Path
 from typing import Any
 
 from ssa_fusion.core import config
-from ssa_fusion.core.config import EstimatorConfig, Lift, MotionModel
+from ssa_fusion.core.config import EstimatorConfig, Lift
+from ssa_fusion.core.filter_options import FilterOptions
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.tracker import TrackerConfig
-from ssa_fusion.core.types import KIND_NAMES, Kind
+from ssa_fusion.core.types import KIND_NAMES, Kind, MotionModel
 from ssa_fusion.nodes.defaults import FILTER, SURROGATE
 
 KM = 1000.0
@@ -30,6 +30,8 @@ KM = 1000.0
 FILTER_KEYS = ("kind", "station", "motion_model", "p0_sigma", "q", "gate", "iod_samples",
                "iod_max_span", "reinit_after", "sigma_bound", "light_time", "refraction")
 """The filter's parameters that are estimator settings."""
+GAP_KEYS = ("predict_period", "gap_forecast")
+"""The filter's parameters that say what it publishes in a gap (`core.gap_publisher`)."""
 SURROGATE_KEYS = ("kind", "station", "buffer_length", "retrain_period", "delays", "rank",
                   "max_horizon", "grace", "cadence", "lift")
 """The surrogate's parameters that are estimator settings."""
@@ -38,18 +40,19 @@ NODE_MOTION_MODELS = (MotionModel.KEPLER, MotionModel.J2)
 
 
 def filter_params(c: EstimatorConfig) -> dict[str, Any]:
-    """The filter's parameters (SI) for estimator `c`."""
-    t = c.tracker
-    return {"kind": KIND_NAMES[c.kind], "station": c.station, "motion_model": str(c.motion_model),
-            "p0_sigma": [v * KM for v in t.p0_sigma], "q": t.q * KM * KM,
-            "gate": t.gate or 0.0, "iod_samples": t.iod_samples,
-            "iod_max_span": 0.0 if math.isinf(t.iod_max_span_s) else t.iod_max_span_s,
-            "reinit_after": t.reinit_after, "sigma_bound": t.sigma_bound,
+    """Return the filter's parameters (SI) for estimator `c`."""
+    noise, iod = c.filter.noise, c.filter.iod
+    return {"kind": KIND_NAMES[c.kind], "station": c.station,
+            "motion_model": str(c.filter.motion.motion_model),
+            "p0_sigma": [v * KM for v in iod.p0_sigma], "q": noise.q * KM * KM,
+            "gate": noise.gate or 0.0, "iod_samples": iod.iod_samples,
+            "iod_max_span": 0.0 if math.isinf(iod.iod_max_span_s) else iod.iod_max_span_s,
+            "reinit_after": iod.reinit_after, "sigma_bound": noise.sigma_bound,
             "light_time": c.light_time, "refraction": c.refraction}
 
 
 def surrogate_params(c: EstimatorConfig) -> dict[str, Any]:
-    """The surrogate's parameters (SI) for estimator `c`."""
+    """Return the surrogate's parameters (SI) for estimator `c`."""
     s = c.surrogate
     return {"kind": KIND_NAMES[c.kind], "station": c.station, "buffer_length": s.buffer_s,
             "retrain_period": 0.0 if math.isinf(s.retrain_period_s) else s.retrain_period_s,
@@ -64,11 +67,32 @@ def _stream(filt: Mapping[str, Any], surr: Mapping[str, Any], key: str, default:
     return values.pop() if values else default
 
 
+def filter_settings(f: Mapping[str, Any]) -> dict[str, Any]:
+    """Return the settings a filter's parameters `f` (SI) give, in core units (km, km/s).
+
+    By the names of `FilterOptions`' fields (its ``with_``); the object filter's and the
+    catalog filter's parameters alike (``gate`` 0 and ``iod_max_span`` 0 mean none).
+    """
+    return {"p0_sigma": tuple(float(v) / KM for v in f["p0_sigma"]),
+            "q": float(f["q"]) / (KM * KM), "gate": float(f["gate"]) or None,
+            "iod_samples": int(f["iod_samples"]),
+            "iod_max_span_s": float(f["iod_max_span"]) or math.inf,
+            "reinit_after": int(f["reinit_after"]), "sigma_bound": float(f["sigma_bound"])}
+
+
+def filter_options(f: Mapping[str, Any]) -> FilterOptions:
+    """Return the `FilterOptions` of a filter's parameters `f` (SI; the catalog's too)."""
+    return FilterOptions().with_(motion_model=MotionModel(str(f["motion_model"])),
+                                 **filter_settings(f))
+
+
 def estimator_from(filt: Mapping[str, Any], surr: Mapping[str, Any]) -> EstimatorConfig:
-    """The `EstimatorConfig` of the filter's and the surrogate's parameters (SI); a missing
-    parameter takes the node's default (`defaults`), except that `lift` defaults to eci
-    only for range/az/el (none for positions and right ascension/declination). ValueError
-    names a bad value."""
+    """Return the `EstimatorConfig` of the filter's and the surrogate's parameters (SI).
+
+    A missing parameter takes the node's default (`defaults`), except that `lift` defaults
+    to eci only for range/az/el (none for positions and right ascension/declination).
+    ValueError names a bad value.
+    """
     f = {**dataclasses.asdict(FILTER), **filt}
     s = {**dataclasses.asdict(SURROGATE), **surr}
     kinds = {name: kind for kind, name in KIND_NAMES.items()}
@@ -79,12 +103,6 @@ def estimator_from(filt: Mapping[str, Any], surr: Mapping[str, Any]) -> Estimato
     if motion not in NODE_MOTION_MODELS:
         raise ValueError(f"motion_model {motion!r}: must be one of "
                          f"{', '.join(map(str, NODE_MOTION_MODELS))}")
-    tracker = TrackerConfig(p0_sigma=tuple(float(v) / KM for v in f["p0_sigma"]),
-                            q=float(f["q"]) / (KM * KM), gate=float(f["gate"]) or None,
-                            iod_samples=int(f["iod_samples"]),
-                            iod_max_span_s=float(f["iod_max_span"]) or math.inf,
-                            reinit_after=int(f["reinit_after"]),
-                            sigma_bound=float(f["sigma_bound"]))
     surrogate = dataclasses.replace(
         LIVE_SURROGATE, buffer_s=float(s["buffer_length"]),
         retrain_period_s=float(s["retrain_period"]) or math.inf, delays=int(s["delays"]),
@@ -92,12 +110,12 @@ def estimator_from(filt: Mapping[str, Any], surr: Mapping[str, Any]) -> Estimato
         grace=float(s["grace"]), cadence_s=float(s["cadence"]))
     return EstimatorConfig(kind=kinds[kind_name],
                            station=_stream(filt, surr, "station", FILTER.station),
-                           motion_model=MotionModel(motion), jd0=UNIX_EPOCH_JD,
+                           jd0=UNIX_EPOCH_JD,
                            light_time=bool(f["light_time"]),
                            refraction=bool(f["refraction"]),
                            lift=Lift(str(s["lift"]) if "lift" in surr
                                      or kind_name == KIND_NAMES[Kind.RANGE_AZ_EL] else Lift.NONE),
-                           tracker=tracker, surrogate=surrogate)
+                           filter=filter_options(f), surrogate=surrogate)
 
 
 DEFAULT_ESTIMATOR = estimator_from({}, {})
@@ -105,9 +123,11 @@ DEFAULT_ESTIMATOR = estimator_from({}, {})
 
 
 def node_section(params_file: Mapping[str, Any], node: str) -> dict[str, Any]:
-    """The ``ros__parameters`` of `node` in a loaded ROS params file: wildcard sections
-    (``/**``, ``**``, ``/*``, ``*``) first, then the node's own (``node`` or ``/node``), as
-    rcl applies them."""
+    """Return the ``ros__parameters`` of `node` in a loaded ROS params file.
+
+    Wildcard sections (``/**``, ``**``, ``/*``, ``*``) first, then the node's own
+    (``node`` or ``/node``), as rcl applies them.
+    """
     out: dict[str, Any] = {}
     for key in ("/**", "**", "/*", "*", node, f"/{node}"):
         section = params_file.get(key)
@@ -117,9 +137,11 @@ def node_section(params_file: Mapping[str, Any], node: str) -> dict[str, Any]:
 
 
 def load_params_file(path: Path | str) -> EstimatorConfig:
-    """The estimator a ROS params YAML (``--ros-args --params-file``'s format) gives the
-    filter and the surrogate. ValueError (naming the file) if it cannot be read or holds a
-    bad value; parameters that are not estimator settings are ignored."""
+    """Return the estimator a ROS params YAML gives the filter and the surrogate.
+
+    The YAML of ``--ros-args --params-file``. ValueError (naming the file) if it cannot be
+    read or holds a bad value; parameters that are not estimator settings are ignored.
+    """
     import yaml
 
     try:
@@ -140,20 +162,53 @@ _OWN = {"filter": ("tracker", "motion_model", "motion_params"), "surrogate": ("s
 """The parts of the estimator settings each node owns (and records)."""
 
 
-def config_message(node: str, c: EstimatorConfig) -> str:
-    """The JSON a node publishes on ``/ssa/config``: its part of `c` (core units; the
-    measurement stream and what `_OWN` lists for the node)."""
+def config_message(node: str, c: EstimatorConfig,
+                   gaps: Mapping[str, Any] | None = None) -> str:
+    """Return the JSON a node publishes on ``/ssa/config``.
+
+    Its part of `c` (core units; the measurement stream and what `_OWN` lists for the
+    node), and the filter's `gaps` parameters (`GAP_KEYS`: what it publishes in a gap,
+    which a replay repeats).
+    """
     d = config.to_dict(c)
     other = next(n for n in _OWN if n != node)
     for key in _OWN[other]:
         d.pop(key)
-    return json.dumps({"node": node, "estimator": d}, sort_keys=True)
+    msg: dict[str, Any] = {"node": node, "estimator": d}
+    if gaps is not None:
+        msg["gaps"] = dict(gaps)
+    return json.dumps(msg, sort_keys=True)
+
+
+def recorded_gaps(messages: Iterable[str]) -> dict[str, Any]:
+    """Return the filter's `GAP_KEYS` parameters recorded on ``/ssa/config``.
+
+    Those of its last message that has them, else the filter's defaults (bags recorded
+    before they were recorded). ValueError on a malformed message.
+    """
+    gaps = gap_params(dataclasses.asdict(FILTER))
+    for text in messages:
+        try:
+            msg = json.loads(text)
+            if msg["node"] == "filter" and "gaps" in msg:
+                gaps = {k: msg["gaps"][k] for k in GAP_KEYS}
+        except (ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"malformed /ssa/config message {text[:80]!r}: {exc}") from exc
+    return gaps
+
+
+def gap_params(values: Mapping[str, Any]) -> dict[str, Any]:
+    """Return the `GAP_KEYS` of a filter's parameter `values`."""
+    return {k: values[k] for k in GAP_KEYS}
 
 
 def recorded_estimator(messages: Iterable[str]) -> EstimatorConfig | None:
-    """The estimator recorded on ``/ssa/config`` (JSON strings in recording order): the last
-    filter's and the last surrogate's message merged; None if there is none. A part
-    without its node's message keeps `DEFAULT_ESTIMATOR`'s. ValueError on a malformed one."""
+    """Return the estimator recorded on ``/ssa/config`` (JSON strings in recording order).
+
+    The last filter's and the last surrogate's message merged; None if there is none. A
+    part without its node's message keeps `DEFAULT_ESTIMATOR`'s. ValueError on a malformed
+    one.
+    """
     last: dict[str, dict[str, Any]] = {}
     for text in messages:
         try:

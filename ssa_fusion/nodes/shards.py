@@ -1,5 +1,7 @@
-"""Shards of a catalog graph: which objects a `catalog_filter` or `catalog_surrogate`
-process owns, by the ``shard_key`` (CRC-32 of ``object_id``) of its messages.
+"""Shards of a catalog graph: which objects a catalog node process owns.
+
+A `catalog_filter` or `catalog_surrogate` process owns objects by the ``shard_key`` (CRC-32
+of ``object_id``) of its messages.
 
 Shard k of K owns the keys of the k-th of K equal ranges of the uint32 key space, and
 subscribes with a DDS content filter on that range, so it never receives the others'
@@ -9,10 +11,10 @@ several in one ROS domain.
 
 from __future__ import annotations
 
-from rclpy.node import Node
 from rclpy.subscription_content_filter_options import ContentFilterOptions
 
-from ssa_fusion.nodes.common import at_least, cross_check, declare
+from ssa_fusion.nodes.diagnostics import NodeCause
+from ssa_fusion.nodes.parameters import Param, Rule, Values, at_least
 from ssa_fusion.ros import messages
 
 KEY_SPACE = 2**32
@@ -22,47 +24,59 @@ LIST_OBJECTS = 200
 
 
 def shard_range(shard: int, shards: int) -> tuple[int, int]:
-    """The closed range [lo, hi] of shard keys shard `shard` of `shards` owns."""
+    """Return the closed range [lo, hi] of shard keys shard `shard` of `shards` owns."""
     lo = shard * KEY_SPACE // shards
     return lo, (shard + 1) * KEY_SPACE // shards - 1
 
 
-def shard_problem(key: int, object_id: str, shard: int, shards: int) -> tuple[str, str] | None:
-    """Why shard `shard` of `shards` does not take a message of `object_id` carrying
-    `key`, as (counter, reason), or None. One shard takes everything (a publisher that does
-    not set ``shard_key`` included); with several, a key that is not the CRC-32 of the id is
-    ``rejected_shard_key`` (its publisher did not set it: every shard would refuse it), and
-    one of another shard's range ``ignored_other_shard`` (a DDS without content filters)."""
+def shard_problem(key: int, object_id: str, shard: int,
+                  shards: int) -> tuple[NodeCause, str] | None:
+    """Return why shard `shard` of `shards` does not take a message, or None.
+
+    The message is of `object_id` and carries `key`; the answer is (cause, reason). One
+    shard takes everything (a publisher that does not set ``shard_key`` included); with
+    several, a key that is not the CRC-32 of the id is ``rejected_shard_key`` (its
+    publisher did not set it: every shard would refuse it), and one of another shard's
+    range ``ignored_other_shard`` (a DDS without content filters).
+    """
     if shards <= 1:
         return None
     want = messages.shard_key(object_id)
     if key != want:
-        return ("rejected_shard_key", f"object {object_id!r}: shard_key {key} is not the "
+        return (NodeCause.REJECTED_SHARD_KEY, f"object {object_id!r}: shard_key {key} is not the "
                 f"CRC-32 of its id ({want}); the publisher must set it (ros.messages."
                 "shard_key) for a sharded graph")
     lo, hi = shard_range(shard, shards)
     if not lo <= key <= hi:
-        return ("ignored_other_shard", f"object {object_id!r}, shard_key {key}: not in "
+        return (NodeCause.IGNORED_OTHER_SHARD, f"object {object_id!r}, shard_key {key}: not in "
                 f"[{lo}, {hi}]")
     return None
 
 
-def declare_shard(node: Node, shards: int, shard: int) -> tuple[int, int]:
-    """Declare the ``shards`` and ``shard`` parameters (defaults given) on `node`, checked
-    together; return (shard, shards)."""
-    k = declare(node, "shards", shards, "number of shards (>= 1)", at_least(1))
-    i = declare(node, "shard", shard, "this node's shard, 0..shards-1", at_least(0))
-    cross_check(node, ("shard", "shards"),
-                lambda v: None if v["shard"] < v["shards"] else
-                f"must be < shards ({v['shards']})")
-    return i, k
+def shard_rows(shards: int, shard: int) -> tuple[Param, Param]:
+    """Return the rows of ``shards`` and ``shard`` (their defaults given); see `SHARD_RULE`."""
+    return (Param("shards", shards, "number of shards", check=at_least(1)),
+            Param("shard", shard, "this node's shard, 0..shards−1 (checked against `shards` "
+                  "at start and on set)", check=at_least(0)))
+
+
+def _shard_in_range(v: Values) -> str | None:
+    shard, shards = v["shard"], v["shards"]
+    assert isinstance(shard, int) and isinstance(shards, int)
+    return None if shard < shards else f"must be < shards ({shards})"
+
+
+SHARD_RULE = Rule(("shard", "shards"), _shard_in_range)
+"""``shard`` must be below ``shards``."""
 
 
 def content_filter(shard: int, shards: int, condition: str = "",
                    parameters: tuple[str, ...] = ()) -> ContentFilterOptions | None:
-    """The DDS content filter of shard `shard` of `shards`: its key range, AND `condition`
-    (an expression whose parameters %0.. are `parameters`) when given; None when there is
-    nothing to filter (one shard, no condition)."""
+    """Return the DDS content filter of shard `shard` of `shards`, or None.
+
+    Its key range, AND `condition` (an expression whose parameters %0.. are `parameters`)
+    when given; None when there is nothing to filter (one shard, no condition).
+    """
     terms, params = [], list(parameters)
     if condition:
         terms.append(condition)

@@ -1,2 +1,4 @@
-"""rclpy/rosbags plumbing: topics and QoS, message conversion, bags, executors,
-readiness, playback, node processes."""
+"""rclpy/rosbags plumbing of ssa_fusion.
+
+Topics and QoS, message conversion, bags, executors, readiness, playback, node processes.
+"""

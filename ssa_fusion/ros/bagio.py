@@ -11,10 +11,10 @@ from __future__ import annotations
 import os
 import sys
 from collections import Counter
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rosbags.interfaces import (
     Qos,
@@ -26,8 +26,16 @@ from rosbags.interfaces import (
 )
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
+
+if TYPE_CHECKING:
+    from rclpy.duration import Duration
+    from rclpy.qos import QoSProfile
+
+    from ssa_fusion.ros.interfaces import Message
+    from ssa_fusion.ros.messages import MsgClasses
 
 ROS_DISTRO = "kilted"
 MSG_PACKAGE = "ssa_fusion_msgs"
@@ -39,7 +47,7 @@ class BagError(RuntimeError):
 
 
 def _msg_dir() -> Path:
-    """share/ssa_fusion_msgs/msg of the first prefix (AMENT_PREFIX_PATH, then sys.prefix)."""
+    """Return share/ssa_fusion_msgs/msg of the first prefix (AMENT_PREFIX_PATH, sys.prefix)."""
     prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
     for prefix in [*prefixes, sys.prefix]:
         d = Path(prefix) / "share" / MSG_PACKAGE / "msg"
@@ -52,7 +60,7 @@ _TYPESTORE: Typestore | None = None
 
 
 def typestore() -> Typestore:
-    """The Kilted typestore with the ssa_fusion_msgs types registered (cached)."""
+    """Return the Kilted typestore with the ssa_fusion_msgs types registered (cached)."""
     global _TYPESTORE
     if _TYPESTORE is None:
         store = get_typestore(Stores.ROS2_KILTED)
@@ -65,10 +73,10 @@ def typestore() -> Typestore:
     return _TYPESTORE
 
 
-def qos_from_rclpy(profile: Any) -> Qos:
-    """rclpy QoSProfile -> rosbags Qos (for metadata.yaml offered_qos_profiles)."""
+def qos_from_rclpy(profile: QoSProfile) -> Qos:
+    """Return an rclpy QoSProfile as a rosbags Qos (metadata.yaml offered_qos_profiles)."""
 
-    def t(d: Any) -> QosTime:
+    def t(d: Duration) -> QosTime:
         ns = int(d.nanoseconds)
         return QosTime(ns // 1_000_000_000, ns % 1_000_000_000)
 
@@ -85,8 +93,8 @@ def qos_from_rclpy(profile: Any) -> Qos:
     )
 
 
-def rosbags_classes() -> Any:
-    """`messages.MsgClasses` of the typestore, to build messages for bags without ROS."""
+def rosbags_classes() -> MsgClasses:
+    """Return the `messages.MsgClasses` of the typestore (messages for bags, no ROS)."""
     from ssa_fusion.ros.messages import MsgClasses
 
     t = typestore().types
@@ -123,6 +131,7 @@ class BagWriter:
         self.counts[topic] = 0
 
     def has_topic(self, topic: str) -> bool:
+        """Return True when `topic` is registered."""
         return topic in self._connections
 
     def write(self, topic: str, t_ns: int, cdr: bytes | memoryview) -> None:
@@ -130,18 +139,21 @@ class BagWriter:
         self._writer.write(self._connections[topic], int(t_ns), cdr)
         self.counts[topic] += 1
 
-    def write_msg(self, topic: str, t_ns: int, msg: Any) -> None:
+    def write_msg(self, topic: str, t_ns: int, msg: Message) -> None:
         """Serialize a rosbags message object with the typestore and write it."""
         conn = self._connections[topic]
         self.write(topic, t_ns, typestore().serialize_cdr(msg, conn.msgtype))
 
     def flush(self) -> None:
+        """Close the pending MCAP chunk and push the file to disk (a crash keeps it)."""
         storage = self._writer.storage
-        if storage is not None and storage.chunk.bio.tell():
+        if storage is None:
+            return
+        assert isinstance(storage, McapWriter)  # its chunking is what a flush reaches into
+        if storage.chunk.bio.tell():
             storage.close_chunk()
-        if storage is not None:
-            storage.bio.flush()
-            os.fsync(storage.bio.fileno())
+        storage.bio.flush()
+        os.fsync(storage.bio.fileno())
 
     def close(self) -> None:
         """Write the MCAP summary and metadata.yaml (with ros_distro)."""
@@ -152,8 +164,10 @@ class BagWriter:
 
 
 def set_ros_distro(path: Path, distro: str = ROS_DISTRO) -> None:
-    """Name `distro` as ros_distro in the metadata.yaml `rosbags.rosbag2.Writer` wrote into
-    bag directory `path` (it writes ``rosbags`` there)."""
+    """Name `distro` as ros_distro in the metadata.yaml of bag directory `path`.
+
+    `rosbags.rosbag2.Writer` writes ``rosbags`` there.
+    """
     meta = Path(path) / "metadata.yaml"
     text = meta.read_text().replace("ros_distro: rosbags", f"ros_distro: {distro}")
     meta.write_text(text)
@@ -161,19 +175,21 @@ def set_ros_distro(path: Path, distro: str = ROS_DISTRO) -> None:
 
 @dataclass
 class BagMessage:
+    """One message of a bag: its topic, type ("pkg/msg/Name"), log time (ns), message."""
+
     topic: str
     msgtype: str
     t_ns: int
-    msg: Any
+    msg: Message
 
 
 def read_bag(path: Path | str, topics: Iterable[str] | None = None,
              undecodable: Counter[str] | None = None) -> Iterator[BagMessage]:
-    """Messages of a bag in log-time order, deserialized with the Kilted + ssa_fusion_msgs
-    typestore.
+    """Return the messages of a bag in log-time order.
 
-    `path` is a rosbag2 directory (metadata.yaml + storage files, as this project or
-    `ros2 bag record` writes them) or a bare ``.mcap`` file. Unknown message types raise
+    Deserialized with the Kilted + ssa_fusion_msgs typestore. `path` is a rosbag2
+    directory (metadata.yaml + storage files, as this project or `ros2 bag record` writes
+    them) or a bare ``.mcap`` file. Unknown message types raise
     BagError naming topic and type. A message whose bytes do not decode as its type (a
     malformed payload the recorder stored as it arrived) is skipped and counted by topic
     in `undecodable` (when given): one bad message does not make the bag unreadable.
@@ -219,16 +235,19 @@ def read_bag(path: Path | str, topics: Iterable[str] | None = None,
 
 
 def _check_types(path: Path, topic_types: list[tuple[str, str]]) -> None:
+    """Raise BagError for a topic whose type the typestore does not know."""
     store = typestore()
     for topic, msgtype in topic_types:
         if msgtype not in store.fielddefs:
             raise BagError(f"{path}: topic {topic} has unknown message type {msgtype}")
 
 
-def _decode(deserialize: Any, data: Any, msgtype: str, topic: str,
-            undecodable: Counter[str] | None) -> Any:
-    """deserialize(data, msgtype), or None (counted under `topic`) if the bytes are not a
-    valid message of that type."""
+def _decode(deserialize: Callable[[bytes, str], Message], data: bytes, msgtype: str,
+            topic: str, undecodable: Counter[str] | None) -> Message | None:
+    """Return ``deserialize(data, msgtype)``, or None if the bytes are no such message.
+
+    None is counted under `topic` in `undecodable`.
+    """
     try:
         return deserialize(data, msgtype)
     except Exception:  # rosbags/CDR raise several unrelated types on malformed bytes
@@ -239,8 +258,10 @@ def _decode(deserialize: Any, data: Any, msgtype: str, topic: str,
 
 def _read_mcap_file(path: Path, wanted: set[str] | None,
                     undecodable: Counter[str] | None = None) -> Iterator[BagMessage]:
-    """A bare MCAP file (ROS 2 profile, CDR): log-time order via its index when it has
-    one, else in file order."""
+    """Return the messages of a bare MCAP file (ROS 2 profile, CDR).
+
+    In log-time order via its index when it has one, else in file order.
+    """
     from mcap.exceptions import McapError
     from mcap.reader import make_reader
 
@@ -269,7 +290,7 @@ MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
 def _check_mcap_magic(path: Path) -> None:
-    """BagError unless `path` starts like an MCAP file (its magic bytes)."""
+    """Raise BagError unless `path` starts like an MCAP file (its magic bytes)."""
     try:
         with open(path, "rb") as f:
             head = f.read(len(MCAP_MAGIC))
@@ -281,7 +302,7 @@ def _check_mcap_magic(path: Path) -> None:
 
 
 def _mcap_finished(path: Path) -> bool:
-    """True when the MCAP file ends with its closing magic (its writer closed it)."""
+    """Return True when the MCAP file ends with its closing magic (its writer closed it)."""
     with path.open("rb") as f:
         f.seek(0, os.SEEK_END)
         if f.tell() < 2 * len(MCAP_MAGIC):
@@ -292,13 +313,17 @@ def _mcap_finished(path: Path) -> bool:
 
 def _recover_mcap_file(path: Path, wanted: set[str] | None,
                        undecodable: Counter[str] | None = None) -> Iterator[BagMessage]:
-    """Messages of an MCAP file its writer never closed (no summary, no footer; maybe a
-    torn last record): read record by record up to the last complete one, in log-time
-    order. Everything the recorder flushed (a whole chunk per `flush_period`) is there."""
+    """Return the messages of an MCAP file its writer never closed, in log-time order.
+
+    No summary, no footer, maybe a torn last record: read record by record up to the last
+    complete one. Everything the recorder flushed (a whole chunk per `flush_period`) is
+    there.
+    """
     import struct
 
     from mcap.exceptions import McapError
-    from mcap.records import Channel, Message, Schema
+    from mcap.records import Channel, Schema
+    from mcap.records import Message as McapRecord
     from mcap.stream_reader import StreamReader
 
     store = typestore()
@@ -312,7 +337,7 @@ def _recover_mcap_file(path: Path, wanted: set[str] | None,
                     schemas[record.id] = record
                 elif isinstance(record, Channel):
                     channels[record.id] = record
-                elif isinstance(record, Message):
+                elif isinstance(record, McapRecord):
                     channel = channels.get(record.channel_id)
                     if channel is None or (wanted is not None and channel.topic not in wanted):
                         continue

@@ -16,12 +16,15 @@ import shutil
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 
 from ssa_fusion.ros.bagio import MCAP_MAGIC, ROS_DISTRO, BagError, set_ros_distro, typestore
+
+if TYPE_CHECKING:
+    from mcap.records import Channel, Schema
 
 SEPARATOR = "=" * 80
 
@@ -77,15 +80,17 @@ class RepairResult:
 
 
 def default_out(bag: Path) -> Path:
-    """``<bag>_repaired`` next to the input (for ``x.mcap``: ``x_repaired``)."""
+    """Return ``<bag>_repaired`` next to the input (for ``x.mcap``: ``x_repaired``)."""
     bag = Path(bag)
     name = bag.stem if bag.is_file() else bag.name
     return bag.parent / f"{name}_repaired"
 
 
 def mcap_files(bag: Path) -> list[Path]:
-    """The ``.mcap`` files of a bag directory (sorted), or the bare ``.mcap`` file itself.
-    BagError when there are none."""
+    """Return the ``.mcap`` files of a bag directory (sorted), or the bare ``.mcap`` file.
+
+    BagError when there are none.
+    """
     bag = Path(bag)
     if not bag.exists():
         raise BagError(f"{bag}: no such bag")
@@ -100,10 +105,10 @@ def mcap_files(bag: Path) -> list[Path]:
 
 
 def repair(bag: Path | str, out: Path | str | None = None) -> RepairResult:
-    """Write the complete records of bag `bag` (a rosbag2 directory or a bare ``.mcap``)
-    as a new closed rosbag2 v9 MCAP bag at `out` (default `default_out`).
+    """Write the complete records of bag `bag` as a new closed rosbag2 v9 MCAP bag.
 
-    BagError (the message names the file and why): no such bag, not an MCAP bag, an
+    `bag`: a rosbag2 directory or a bare ``.mcap``; the new bag goes to `out` (default
+    `default_out`). BagError (the message names the file and why): no such bag, not an MCAP bag, an
     unreadable file, an existing `out`, or no complete message to recover.
     """
     bag = Path(bag)
@@ -171,8 +176,8 @@ def _scan_file(path: Path, scan: _Scan) -> None:
     scan.complete = scan.complete and footer
 
 
-def _topic(path: Path, channel: Any, schema: Any) -> _Topic | None:
-    """The connection to write `channel`'s messages on, or None if it has no schema."""
+def _topic(path: Path, channel: Channel, schema: Schema | None) -> _Topic | None:
+    """Return the connection to write `channel`'s messages on, or None without a schema."""
     if schema is None or not schema.name:
         return None
     if channel.message_encoding != "cdr":
@@ -195,8 +200,11 @@ def _topic(path: Path, channel: Any, schema: Any) -> _Topic | None:
 
 
 def _rihs01(path: Path, topic: str, msgtype: str, encoding: str, msgdef: str) -> str:
-    """The RIHS01 type hash of `msgtype` as its recorded definition `msgdef` gives it (the
-    hash rosidl computes), else as the project's typestore knows the type."""
+    """Return the RIHS01 type hash of `msgtype`.
+
+    As its recorded definition `msgdef` gives it (the hash rosidl computes), else as the
+    project's typestore knows the type.
+    """
     from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 
     try:
@@ -219,7 +227,7 @@ def _rihs01(path: Path, topic: str, msgtype: str, encoding: str, msgdef: str) ->
 
 
 def _ros_distro(bag: Path) -> str:
-    """The ros_distro of the input's metadata.yaml if it has one, else this project's."""
+    """Return the ros_distro of the input's metadata.yaml if it has one, else this project's."""
     try:
         found = re.search(r"^\s*ros_distro:\s*(\w+)", (bag / "metadata.yaml").read_text(),
                           re.MULTILINE)

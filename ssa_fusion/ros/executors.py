@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
-from typing import Any
+from rclpy.context import Context
+from rclpy.executors import Executor, SingleThreadedExecutor
 
-from rclpy.executors import SingleThreadedExecutor
 
+def make_executor(context: Context | None = None) -> Executor:
+    """Return rclpy's EventsExecutor where available, else the SingleThreadedExecutor.
 
-def make_executor(context: Any = None) -> Any:
-    """rclpy's EventsExecutor where available (about half the per-message overhead of the
-    SingleThreadedExecutor: measurement-to-estimate latency p50 3.6 -> 2.2 ms here), else
-    the SingleThreadedExecutor."""
+    The EventsExecutor has about half the per-message overhead of the
+    SingleThreadedExecutor (measurement-to-estimate latency p50 3.6 -> 2.2 ms here).
+    """
     try:
         from rclpy.experimental import EventsExecutor
 

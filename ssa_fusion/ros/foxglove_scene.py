@@ -1,6 +1,7 @@
-"""What the foxglove_bridge node shows, as pure functions: GCRF -> geodetic latitude/longitude,
-covariance -> 3σ ellipsoid, range/az/el -> GCRF point, and the 3D scene's entities.
+"""What the foxglove_bridge node shows, as pure functions.
 
+The 3D scene's entities (the Earth, truth, estimate, trails, 3σ ellipsoid, stations,
+forecasts, measurements), ground tracks and metrics, from the geometry of `scene_geometry`.
 No rclpy here (testable with numpy alone); `foxglove` (foxglove-sdk) is imported only by the
 functions that build its messages. Units and frames: positions in km in the GCRF
 (`core.frames`); the 3D scene is drawn in frame ``gcrf`` with one scene unit = 1 km; ground
@@ -13,16 +14,35 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ssa_fusion.core.constants import R_EARTH, WGS84_F
-from ssa_fusion.core.frames import Frame, Station, gcrs_to_itrs, itrs_to_gcrs, site_gcrs
-from ssa_fusion.core.iod import razel_to_gcrs
-from ssa_fusion.core.types import Kind
+from ssa_fusion.core.frames import Frame, Station, site_gcrs
+from ssa_fusion.core.types import Cause
+from ssa_fusion.ros.scene_geometry import (
+    covariance_ellipsoid,
+    gcrs_to_geodetic,
+    measurement_point,
+    meridian_gcrs,
+)
+
+if TYPE_CHECKING:  # foxglove-sdk is imported when a message is built
+    from foxglove.messages import (
+        Color,
+        LinePrimitive,
+        LocationFix,
+        Pose,
+        SceneEntity,
+        SceneUpdate,
+        SpherePrimitive,
+        TextPrimitive,
+        Timestamp,
+    )
 
 SCENE_FRAME = Frame.GCRF
 """frame_id of every scene entity (the GCRF, km)."""
@@ -36,8 +56,6 @@ METRICS_TOPIC = "/ssa/foxglove/metrics"
 """JSON: per estimate, its position error against the truth (km) and its σ (km)."""
 TOPICS = (SCENE_TOPIC, TRACK_TOPIC, TRUTH_TRACK_TOPIC, METRICS_TOPIC)
 
-_E2 = WGS84_F * (2.0 - WGS84_F)
-
 Rgba = tuple[float, float, float, float]
 EARTH_RGBA: Rgba = (0.15, 0.35, 0.8, 0.55)
 TRUTH_RGBA: Rgba = (0.1, 0.85, 0.2, 1.0)
@@ -46,134 +64,6 @@ ELLIPSOID_RGBA: Rgba = (1.0, 0.6, 0.1, 0.45)
 STATION_RGBA: Rgba = (1.0, 1.0, 0.2, 1.0)
 FORECAST_RGBA: Rgba = (0.85, 0.2, 0.9, 0.9)
 MEASUREMENT_RGBA: Rgba = (0.75, 0.75, 0.75, 0.8)
-
-
-def itrs_to_geodetic(r_itrs_km: ArrayLike) -> tuple[float, float, float]:
-    """ITRF position (3,) km -> WGS-84 geodetic (latitude rad, longitude rad in (-π, π],
-    ellipsoidal height km); the inverse of `core.frames.site_itrs` (fixed-point iteration on
-    the latitude, converged to ~1e-12 rad)."""
-    x, y, z = (float(v) for v in np.asarray(r_itrs_km, dtype=float)[:3])
-    lon = math.atan2(y, x)
-    p = math.hypot(x, y)
-    if p < 1e-9:  # on the polar axis
-        lat = math.copysign(math.pi / 2, z)
-        return lat, lon, abs(z) - R_EARTH * math.sqrt(1.0 - _E2)
-    lat = math.atan2(z, p * (1.0 - _E2))
-    for _ in range(20):
-        n = R_EARTH / math.sqrt(1.0 - _E2 * math.sin(lat) ** 2)
-        new = math.atan2(z + _E2 * n * math.sin(lat), p)
-        done = abs(new - lat) < 1e-14
-        lat = new
-        if done:
-            break
-    n = R_EARTH / math.sqrt(1.0 - _E2 * math.sin(lat) ** 2)
-    if abs(lat) < math.radians(80.0):
-        alt = p / math.cos(lat) - n
-    else:
-        alt = z / math.sin(lat) - n * (1.0 - _E2)
-    return lat, lon, alt
-
-
-def gcrs_to_geodetic(r_gcrs_km: ArrayLike, t_unix: float) -> tuple[float, float, float]:
-    """GCRF position (3,) km at Unix time `t_unix` (s) -> geodetic (latitude rad, longitude
-    rad, height km) of the point below it (its sub-satellite point), via `core.frames`."""
-    r = np.asarray(r_gcrs_km, dtype=float)[:3]
-    return itrs_to_geodetic(gcrs_to_itrs(r, t_unix))
-
-
-@dataclass(frozen=True)
-class Ellipsoid:
-    """An n-σ ellipsoid of a 3x3 position covariance (km²).
-
-    ``axes`` (3, 3): its principal directions, one unit vector per column (a proper
-    rotation, det +1), in the covariance's frame; ``semi_axes`` (3,) km: n σ along each;
-    ``quaternion`` (x, y, z, w): the same rotation, as `foxglove.Pose` takes it; ``size`` (3,)
-    km: the diameters (2 × semi-axes), as `foxglove.SpherePrimitive` takes them.
-    """
-
-    axes: NDArray[np.float64]
-    semi_axes: NDArray[np.float64]
-    quaternion: tuple[float, float, float, float]
-
-    @property
-    def size(self) -> NDArray[np.float64]:
-        return 2.0 * self.semi_axes
-
-
-def rotation_to_quaternion(rot: ArrayLike) -> tuple[float, float, float, float]:
-    """Proper rotation matrix (3, 3) -> unit quaternion (x, y, z, w) with w >= 0
-    (Shepperd's method: the largest of the four components is taken from the diagonal)."""
-    m = np.asarray(rot, dtype=float)
-    tr = float(np.trace(m))
-    cands = [tr, m[0, 0], m[1, 1], m[2, 2]]
-    k = int(np.argmax(cands))
-    if k == 0:
-        w = 0.5 * math.sqrt(1.0 + tr)
-        x, y, z = ((m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w),
-                   (m[1, 0] - m[0, 1]) / (4 * w))
-    elif k == 1:
-        x = 0.5 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        w, y, z = ((m[2, 1] - m[1, 2]) / (4 * x), (m[0, 1] + m[1, 0]) / (4 * x),
-                   (m[0, 2] + m[2, 0]) / (4 * x))
-    elif k == 2:
-        y = 0.5 * math.sqrt(1.0 - m[0, 0] + m[1, 1] - m[2, 2])
-        w, x, z = ((m[0, 2] - m[2, 0]) / (4 * y), (m[0, 1] + m[1, 0]) / (4 * y),
-                   (m[1, 2] + m[2, 1]) / (4 * y))
-    else:
-        z = 0.5 * math.sqrt(1.0 - m[0, 0] - m[1, 1] + m[2, 2])
-        w, x, y = ((m[1, 0] - m[0, 1]) / (4 * z), (m[0, 2] + m[2, 0]) / (4 * z),
-                   (m[1, 2] + m[2, 1]) / (4 * z))
-    q = np.array([x, y, z, w], dtype=float)
-    q /= np.linalg.norm(q)
-    if q[3] < 0:
-        q = -q
-    return (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
-
-
-def quaternion_to_rotation(q: ArrayLike) -> NDArray[np.float64]:
-    """Unit quaternion (x, y, z, w) -> rotation matrix (3, 3)."""
-    x, y, z, w = (float(v) for v in np.asarray(q, dtype=float))
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
-
-
-def covariance_ellipsoid(p_pos_km2: ArrayLike, n_sigma: float = 3.0) -> Ellipsoid:
-    """The `n_sigma` ellipsoid of position covariance `p_pos_km2` (3, 3), km²: eigenvectors
-    as axes, n σ = n √λ (km) along each (negative eigenvalues of a numerically indefinite
-    matrix count as 0). Its quadric is ``(x)ᵀ (n² P)⁻¹ x = 1``."""
-    p = np.asarray(p_pos_km2, dtype=float)[:3, :3]
-    p = 0.5 * (p + p.T)
-    lam, vec = np.linalg.eigh(p)
-    if np.linalg.det(vec) < 0:
-        vec[:, 2] = -vec[:, 2]
-    semi = n_sigma * np.sqrt(np.clip(lam, 0.0, None))
-    return Ellipsoid(axes=vec, semi_axes=semi, quaternion=rotation_to_quaternion(vec))
-
-
-def measurement_point(kind: int, z: ArrayLike, frame_id: str, t_unix: float,
-                      stations: dict[str, Station]) -> NDArray[np.float64] | None:
-    """GCRF point (3,) km a measurement (core units: km, rad) implies: a position measurement
-    itself, range/az/el from its station (`frame_id` among `stations`); None for one without
-    range (ra/dec) or from an unknown station."""
-    if kind == Kind.POSITION:
-        return np.asarray(z, dtype=float)[:3].copy()
-    if kind == Kind.RANGE_AZ_EL and frame_id in stations:
-        return razel_to_gcrs(np.asarray(z, dtype=float)[:3], t_unix, stations[frame_id])
-    return None
-
-
-def meridian_gcrs(t_unix: float, n: int = 37, lon_rad: float = 0.0) -> NDArray[np.float64]:
-    """Points (n, 3) km of the meridian at longitude `lon_rad` on the Earth's surface
-    (spherical, radius `R_EARTH` + 1 km), pole to pole, in the GCRF at Unix time `t_unix` (s):
-    shows the Earth's rotation in the inertial scene."""
-    lat = np.linspace(-math.pi / 2, math.pi / 2, n)
-    r = R_EARTH + 1.0
-    itrs = np.stack([r * np.cos(lat) * math.cos(lon_rad), r * np.cos(lat) * math.sin(lon_rad),
-                     r * np.sin(lat)], -1)
-    return np.asarray(itrs_to_gcrs(itrs, t_unix), dtype=float)
 
 
 @dataclass
@@ -195,44 +85,49 @@ class SceneState:
     measurements: deque[NDArray[np.float64]] = field(default_factory=deque)
 
     def add_truth(self, t: float, x: ArrayLike) -> None:
+        """Take the true state `x` at `t`."""
         self.truth = (t, np.asarray(x, dtype=float))
         _push(self.truth_trail, self.truth[1][:3], self.trail)
 
     def add_estimate(self, t: float, x: ArrayLike, p: ArrayLike) -> None:
+        """Take the estimate `x`, `p` at `t`."""
         self.estimate = (t, np.asarray(x, dtype=float))
         self.covariance = np.asarray(p, dtype=float).reshape(6, 6)
         _push(self.estimate_trail, self.estimate[1][:3], self.trail)
 
     def add_forecast(self, r_gcrs_km: ArrayLike) -> None:
+        """Take the point a forecast implies."""
         _push(self.forecasts, np.asarray(r_gcrs_km, dtype=float), self.points)
 
     def add_measurement(self, r_gcrs_km: ArrayLike) -> None:
+        """Take the point a measurement implies."""
         _push(self.measurements, np.asarray(r_gcrs_km, dtype=float), self.points)
 
     @property
     def t(self) -> float | None:
-        """Newest epoch heard (Unix s), None before any."""
+        """Return the newest epoch heard (Unix s), None before any."""
         ts = [s[0] for s in (self.truth, self.estimate) if s is not None]
         return max(ts) if ts else None
 
 
 def _push(buf: deque[NDArray[np.float64]], item: NDArray[np.float64], limit: int) -> None:
+    """Append `item`, keeping the newest `limit`."""
     buf.append(item)
     while len(buf) > limit:
         buf.popleft()
 
 
 def position_error_km(estimate: ArrayLike, truth: ArrayLike) -> float:
-    """‖r̂ − r‖ (km) of two states (km)."""
+    """Return ‖r̂ − r‖ (km) of two states (km)."""
     return float(np.linalg.norm(np.asarray(estimate, float)[:3] - np.asarray(truth, float)[:3]))
 
 
 def metrics(t: float, x: ArrayLike, p: ArrayLike, truth: ArrayLike | None,
             update_source: int, nis: float) -> dict[str, Any]:
-    """The JSON message of `METRICS_TOPIC` for an estimate at `t` (Unix s): state `x` km,
-    covariance `p` (6, 6) km²; `truth` the true state at the same epoch, or None.
+    """Return the JSON message of `METRICS_TOPIC` for an estimate at `t` (Unix s).
 
-    Keys: ``t`` (s), ``position_error_km`` (None without truth), ``sigma_km``
+    State `x` km, covariance `p` (6, 6) km²; `truth` the true state at the same epoch, or
+    None. Keys: ``t`` (s), ``position_error_km`` (None without truth), ``sigma_km``
     (√trace of the position block, km), ``three_sigma_max_km`` (the largest semi-axis of the
     3σ ellipsoid, km), ``velocity_sigma_km_s``, ``nis``, ``update_source`` (0 none, 1 sensor,
     2 forecast).
@@ -269,21 +164,24 @@ METRICS_SCHEMA: dict[str, Any] = {
 
 # foxglove messages ------------------------------------------------------------------------
 
-def _stamp(t_unix: float) -> Any:
+def _stamp(t_unix: float) -> Timestamp:
+    """Return Unix s as a foxglove timestamp (clamped at 0)."""
     from foxglove.messages import Timestamp
 
     ns = max(round(t_unix * 1e9), 0)
     return Timestamp(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
 
 
-def _color(rgba: Rgba) -> Any:
+def _color(rgba: Rgba) -> Color:
+    """Return `rgba` as a foxglove colour."""
     from foxglove.messages import Color
 
     return Color(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3])
 
 
 def _pose(position: ArrayLike, quaternion: tuple[float, float, float, float] = (0, 0, 0, 1)
-          ) -> Any:
+          ) -> Pose:
+    """Return a foxglove pose at `position` (km), rotated by `quaternion`."""
     from foxglove.messages import Pose, Quaternion, Vector3
 
     x, y, z = (float(v) for v in np.asarray(position, dtype=float)[:3])
@@ -293,7 +191,8 @@ def _pose(position: ArrayLike, quaternion: tuple[float, float, float, float] = (
 
 
 def _sphere(position: ArrayLike, size: ArrayLike, rgba: Rgba,
-            quaternion: tuple[float, float, float, float] = (0, 0, 0, 1)) -> Any:
+            quaternion: tuple[float, float, float, float] = (0, 0, 0, 1)) -> SpherePrimitive:
+    """Return a foxglove sphere (an ellipsoid of diameters `size` km)."""
     from foxglove.messages import SpherePrimitive, Vector3
 
     sx, sy, sz = (float(v) for v in np.broadcast_to(np.asarray(size, dtype=float), (3,)))
@@ -301,16 +200,19 @@ def _sphere(position: ArrayLike, size: ArrayLike, rgba: Rgba,
                            color=_color(rgba))
 
 
-def _line(points: Any, rgba: Rgba, thickness: float = 2.0) -> Any:
+def _line(points: ArrayLike, rgba: Rgba, thickness: float = 2.0) -> LinePrimitive:
+    """Return a foxglove line strip through `points` (n, 3) km."""
     from foxglove.messages import LinePrimitive, LinePrimitiveLineType, Point3
 
-    pts = [Point3(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in points]
+    pts = [Point3(x=float(p[0]), y=float(p[1]), z=float(p[2]))
+           for p in np.asarray(points, dtype=float).reshape(-1, 3)]
     return LinePrimitive(type=LinePrimitiveLineType.LineStrip, pose=_pose((0, 0, 0)),
                          thickness=thickness, scale_invariant=True, points=pts,
                          color=_color(rgba))
 
 
-def _text(position: ArrayLike, text: str, rgba: Rgba) -> Any:
+def _text(position: ArrayLike, text: str, rgba: Rgba) -> TextPrimitive:
+    """Return a foxglove text label at `position` (km), facing the viewer."""
     from foxglove.messages import TextPrimitive
 
     return TextPrimitive(pose=_pose(position), billboard=True, font_size=14.0,
@@ -319,8 +221,11 @@ def _text(position: ArrayLike, text: str, rgba: Rgba) -> Any:
 
 @dataclass(frozen=True)
 class Sphere:
-    """A sphere (ellipsoid) of the scene: centre ``position`` (3,) km GCRF, diameters ``size``
-    (3,) km along its axes, rotated by ``quaternion`` (x, y, z, w)."""
+    """A sphere (ellipsoid) of the scene.
+
+    Centre ``position`` (3,) km GCRF, diameters ``size`` (3,) km along its axes, rotated by
+    ``quaternion`` (x, y, z, w).
+    """
 
     position: NDArray[np.float64]
     size: NDArray[np.float64]
@@ -348,9 +253,11 @@ class Label:
 
 @dataclass(frozen=True)
 class Shape:
-    """One entity of the scene (``id``: earth, truth, estimate, covariance, stations,
-    forecasts, measurements) as plain geometry, drawn by `scene_entities` in Foxglove's
-    schema and by `ssa_fusion.ros.visual_msgs` as ROS markers."""
+    """One entity of the scene as plain geometry.
+
+    ``id``: earth, truth, estimate, covariance, stations, forecasts, measurements; drawn by
+    `scene_entities` in Foxglove's schema and by `ssa_fusion.ros.visual_msgs` as ROS markers.
+    """
 
     id: str
     spheres: tuple[Sphere, ...] = ()
@@ -360,22 +267,27 @@ class Shape:
 
 def _ball(position: ArrayLike, size: ArrayLike, rgba: Rgba,
           quaternion: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)) -> Sphere:
+    """Return a `Sphere` (its arrays copied)."""
     return Sphere(np.asarray(position, dtype=float)[:3].copy(),
                   np.broadcast_to(np.asarray(size, dtype=float), (3,)).copy(), rgba, quaternion)
 
 
-def _polyline(points: Any, rgba: Rgba, thickness: float = 2.0) -> Line:
+def _polyline(points: Iterable[ArrayLike], rgba: Rgba, thickness: float = 2.0) -> Line:
+    """Return a `Line` through `points` (3-vectors, km)."""
     pts = np.asarray([np.asarray(p, dtype=float)[:3] for p in points], dtype=float)
     return Line(pts.reshape(-1, 3), rgba, thickness)
 
 
 def scene_shapes(state: SceneState, stations: dict[str, Station],
                  marker_km: float = 150.0) -> list[Shape]:
-    """The scene of `state` as `Shape` s (GCRF, km): ``earth`` (WGS-84-sized sphere, its prime
-    meridian), ``truth`` and ``estimate`` (a `marker_km`-wide sphere and the recent trail
-    each), ``covariance`` (the 3σ ellipsoid of the estimate's position block, true size),
-    ``stations`` (one marker and label per station of `stations`), ``forecasts`` and
-    ``measurements`` (the recent points they imply). Entities without data are left out."""
+    """Return the scene of `state` as `Shape` s (GCRF, km).
+
+    ``earth`` (WGS-84-sized sphere, its prime meridian), ``truth`` and ``estimate`` (a
+    `marker_km`-wide sphere and the recent trail each), ``covariance`` (the 3σ ellipsoid of
+    the estimate's position block, true size), ``stations`` (one marker and label per
+    station of `stations`), ``forecasts`` and ``measurements`` (the recent points they
+    imply). Entities without data are left out.
+    """
     t = state.t if state.t is not None else 0.0
     earth_d = 2.0 * R_EARTH
     out = [Shape("earth",
@@ -414,13 +326,16 @@ def scene_shapes(state: SceneState, stations: dict[str, Station],
 
 
 def scene_entities(state: SceneState, stations: dict[str, Station],
-                   marker_km: float = 150.0) -> list[Any]:
-    """`scene_shapes` as `foxglove.SceneEntity` s (frame ``gcrf``, km), stamped with the
-    state's newest epoch."""
+                   marker_km: float = 150.0) -> list[SceneEntity]:
+    """Return `scene_shapes` as `foxglove.SceneEntity` s (frame ``gcrf``, km).
+
+    Stamped with the state's newest epoch.
+    """
     return _entities(scene_shapes(state, stations, marker_km), state.t or 0.0)
 
 
-def _entities(shapes: list[Shape], t: float) -> list[Any]:
+def _entities(shapes: list[Shape], t: float) -> list[SceneEntity]:
+    """Return `shapes` as foxglove scene entities stamped `t` (Unix s)."""
     from foxglove.messages import SceneEntity
 
     stamp = _stamp(t)
@@ -433,16 +348,22 @@ def _entities(shapes: list[Shape], t: float) -> list[Any]:
 
 
 def scene_update(state: SceneState, stations: dict[str, Station],
-                 marker_km: float = 150.0) -> Any:
-    """`foxglove.SceneUpdate` of `scene_entities` (each replaces its entity of the same id)."""
+                 marker_km: float = 150.0) -> SceneUpdate:
+    """Return the `foxglove.SceneUpdate` of `scene_entities`.
+
+    Each replaces its entity of the same id.
+    """
     from foxglove.messages import SceneUpdate
 
     return SceneUpdate(entities=scene_entities(state, stations, marker_km))
 
 
-def location_fix(t_unix: float, r_gcrs_km: ArrayLike, frame_id: str = "estimate") -> Any:
-    """`foxglove.LocationFix` of the point below GCRF position `r_gcrs_km` (km) at `t_unix`
-    (Unix s): latitude and longitude in degrees (WGS-84), altitude in m."""
+def location_fix(t_unix: float, r_gcrs_km: ArrayLike,
+                 frame_id: str = "estimate") -> LocationFix:
+    """Return the `foxglove.LocationFix` of the point below GCRF position `r_gcrs_km` (km).
+
+    At `t_unix` (Unix s): latitude and longitude in degrees (WGS-84), altitude in m.
+    """
     from foxglove.messages import LocationFix
 
     lat, lon, alt = gcrs_to_geodetic(r_gcrs_km, t_unix)
@@ -453,19 +374,24 @@ def location_fix(t_unix: float, r_gcrs_km: ArrayLike, frame_id: str = "estimate"
 
 # what one truth / estimate / measurement adds to the visual topics ------------------------
 
+NOT_DRAWN = "not_drawn"
+"""Diagnostics key of a measurement that implies no point to draw (ra/dec, other station)."""
 TRUTH_KEEP = 5000
 """Truth states kept by epoch, to score estimates that arrive after their truth."""
 
 
 def log_time_ns(t_unix: float) -> int:
-    """Unix s (sim time) -> int ns (>= 0), the foxglove log time of a message stamped `t_unix`."""
+    """Return the foxglove log time (int ns >= 0) of a message stamped `t_unix` (Unix s)."""
     return max(round(t_unix * 1e9), 0) if math.isfinite(t_unix) else 0
 
 
 @dataclass(frozen=True)
 class Logged:
-    """One message for a visual topic: ``topic`` (one of `TOPICS`), ``message`` (a foxglove
-    message, or the JSON dict of `METRICS_TOPIC`), ``log_time`` (int ns, the sim-time stamp)."""
+    """One message for a visual topic.
+
+    ``topic`` (one of `TOPICS`), ``message`` (a foxglove message, or the JSON dict of
+    `METRICS_TOPIC`), ``log_time`` (int ns, the sim-time stamp).
+    """
 
     topic: str
     message: Any
@@ -473,9 +399,11 @@ class Logged:
 
 
 class NotShownError(Exception):
-    """A message the visual topics leave out: ``key`` is the diagnostics counter
-    (``rejected_nonfinite``, ``rejected_kind``, ``not_drawn``), ``warn`` whether it is worth
-    a warning."""
+    """A message the visual topics leave out.
+
+    ``key`` is the diagnostics key (`Cause.REJECTED_NONFINITE`, `NOT_DRAWN`), ``warn``
+    whether it is worth a warning.
+    """
 
     def __init__(self, key: str, detail: str, warn: bool = True) -> None:
         super().__init__(detail)
@@ -485,9 +413,10 @@ class NotShownError(Exception):
 
 
 class VisualTopics:
-    """The visual topics of a stream of truth states, estimates and measurements, in the order
-    they arrive: one object shared by the live `foxglove_bridge` and the `visual.mcap` writer
-    of `ssa-fusion report`, so both serve the same messages.
+    """The visual topics of a stream of truth states, estimates and measurements.
+
+    In the order they arrive: one object shared by the live `foxglove_bridge` and the
+    `visual.mcap` writer of `ssa-fusion report`, so both serve the same messages.
 
     Inputs are in core units (km, km/s, rad; GCRF; Unix s, sim time). `truth` and `estimate`
     return the `Logged` messages they produce at once (ground tracks, metrics, log time = their
@@ -507,10 +436,10 @@ class VisualTopics:
         """The geometry of the last `scene` (GCRF, km)."""
 
     def truth(self, t: float, x: ArrayLike) -> list[Logged]:
-        """A true state `x` (6,) km, km/s at `t` (Unix s) -> its `TRUTH_TRACK_TOPIC` fix."""
+        """Take a true state `x` (6,) km, km/s at `t` (Unix s); return its track's fix."""
         xs = np.asarray(x, dtype=float)
         if not np.all(np.isfinite(xs)):
-            raise NotShownError("rejected_nonfinite", "a truth state with NaN/inf")
+            raise NotShownError(Cause.REJECTED_NONFINITE, "a truth state with NaN/inf")
         self.state.add_truth(t, xs)
         self.truths[t] = xs
         while len(self.truths) > TRUTH_KEEP:
@@ -520,12 +449,14 @@ class VisualTopics:
 
     def estimate(self, t: float, x: ArrayLike, p: ArrayLike, update_source: int,
                  nis: float) -> list[Logged]:
-        """An estimate (state `x` km, km/s, covariance `p` (6, 6) km² at `t` Unix s) -> its
-        `TRACK_TOPIC` fix and `METRICS_TOPIC` JSON (scored against the truth of the same
-        epoch, when it came first)."""
+        """Take an estimate; return its `TRACK_TOPIC` fix and `METRICS_TOPIC` JSON.
+
+        State `x` km, km/s, covariance `p` (6, 6) km² at `t` Unix s; scored against the
+        truth of the same epoch, when it came first.
+        """
         xs, ps = np.asarray(x, dtype=float), np.asarray(p, dtype=float)
         if not (np.all(np.isfinite(xs)) and np.all(np.isfinite(ps))):
-            raise NotShownError("rejected_nonfinite", "an estimate with NaN/inf")
+            raise NotShownError(Cause.REJECTED_NONFINITE, "an estimate with NaN/inf")
         self.state.add_estimate(t, xs, ps)
         self.dirty = True
         ns = log_time_ns(t)
@@ -535,14 +466,16 @@ class VisualTopics:
 
     def measurement(self, kind: int, z: ArrayLike, frame_id: str, t: float,
                     forecast: bool) -> None:
-        """A measurement or (`forecast`) a surrogate forecast (core units) -> the point it
-        implies in the scene."""
+        """Put the point a measurement or (`forecast`) a forecast implies in the scene.
+
+        In core units.
+        """
         zs = np.asarray(z, dtype=float)
         if not np.all(np.isfinite(zs)):
-            raise NotShownError("rejected_nonfinite", "a measurement with NaN/inf")
+            raise NotShownError(Cause.REJECTED_NONFINITE, "a measurement with NaN/inf")
         point = measurement_point(kind, zs, frame_id, t, self.stations)
         if point is None:
-            raise NotShownError("not_drawn", f"kind {kind} from {frame_id!r}: no point to draw "
+            raise NotShownError(NOT_DRAWN, f"kind {kind} from {frame_id!r}: no point to draw "
                            "(ra/dec, or a station not in 'station')", warn=False)
         if forecast:
             self.state.add_forecast(point)
@@ -552,12 +485,14 @@ class VisualTopics:
 
     @property
     def scene_due(self) -> bool:
-        """True when the scene changed since the last `scene` and has an epoch to be stamped
-        with (a truth or an estimate was heard)."""
+        """Return True when the scene changed since the last `scene` and can be stamped.
+
+        It can be once a truth or an estimate was heard.
+        """
         return self.dirty and self.state.t is not None
 
     def scene(self) -> Logged:
-        """The `SCENE_TOPIC` update of the current state, logged at its newest epoch."""
+        """Return the `SCENE_TOPIC` update of the current state, logged at its newest epoch."""
         from foxglove.messages import SceneUpdate
 
         self.dirty = False

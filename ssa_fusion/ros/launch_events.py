@@ -6,17 +6,23 @@
 
 from __future__ import annotations
 
-from typing import Any
 
+def shutdown_handlers(sensor_sim: object, recorder: object, drain_s: float) -> list[object]:
+    """Return two event handlers for a launch description (`launch` actions).
 
-def shutdown_handlers(sensor_sim: Any, recorder: Any, drain_s: float) -> list[Any]:
-    """Two event handlers for a launch description: when the `sensor_sim` action's process
-    exits (its schedule is done), shut the launch down after `drain_s` wall s, in which the
-    other nodes take what is still in flight; when the `recorder`'s exits (it died, or
-    refused its parameters: a bag that exists already), at once, as nothing would be
-    recorded and sensor_sim would wait for it forever."""
-    from launch.actions import LogInfo, RegisterEventHandler, Shutdown, TimerAction
-    from launch.event_handlers import OnProcessExit
+    When the `sensor_sim` action's process exits (its schedule is done), shut the launch
+    down after `drain_s` wall s, in which the other nodes take what is still in flight; when
+    the `recorder`'s exits (it died, or refused its parameters: a bag that exists already),
+    at once, as nothing would be recorded and sensor_sim would wait for it forever.
+    """
+    # not installed here (no type information then either); there under `ros2 launch`
+    from launch.actions import (  # type: ignore[import-not-found, unused-ignore]
+        LogInfo,
+        RegisterEventHandler,
+        Shutdown,
+        TimerAction,
+    )
+    from launch.event_handlers import OnProcessExit  # type: ignore[import-not-found, unused-ignore]
 
     done = OnProcessExit(target_action=sensor_sim, on_exit=[
         LogInfo(msg=f"sensor_sim exited: the rest of the graph stops in {drain_s:g} s"),

@@ -11,13 +11,16 @@ from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ssa_fusion.core import types
 from ssa_fusion.core.frames import Frame
 from ssa_fusion.core.timescales import EPOCH_MAX, iso
+
+if TYPE_CHECKING:  # the message packages are imported when first needed (`rclpy_classes`)
+    from ssa_fusion.ros.interfaces import Message
 
 KM = 1000.0
 """m per km."""
@@ -35,16 +38,15 @@ _X_SCALE = np.full(6, KM)
 class MsgClasses:
     """Constructors of builtin_interfaces/Time, std_msgs/Header and the two messages."""
 
-    time: Any
-    header: Any
-    measurement: Any
-    estimate: Any
+    time: type[Message]
+    header: type[Message]
+    measurement: type[Message]
+    estimate: type[Message]
 
 
 def rclpy_classes() -> MsgClasses:
-    from builtin_interfaces.msg import Time
-    from ssa_fusion_msgs.msg import Measurement, StateEstimate
-    from std_msgs.msg import Header
+    """Return the rclpy message classes (imported on the first call)."""
+    from ssa_fusion.ros.interfaces import Header, Measurement, StateEstimate, Time
 
     return MsgClasses(Time, Header, Measurement, StateEstimate)
 
@@ -53,6 +55,7 @@ _RCLPY: MsgClasses | None = None
 
 
 def _default(classes: MsgClasses | None) -> MsgClasses:
+    """Return `classes`, or the rclpy classes when None."""
     global _RCLPY
     if classes is not None:
         return classes
@@ -61,13 +64,13 @@ def _default(classes: MsgClasses | None) -> MsgClasses:
     return _RCLPY
 
 
-def stamp_to_seconds(stamp: Any) -> float:
-    """builtin_interfaces/Time -> float seconds."""
+def stamp_to_seconds(stamp: Message) -> float:
+    """Return a builtin_interfaces/Time in float seconds."""
     return stamp.sec + stamp.nanosec * 1e-9
 
 
-def seconds_to_stamp(t: float, classes: MsgClasses | None = None) -> Any:
-    """float seconds (>= 0) -> builtin_interfaces/Time, rounded to the nanosecond.
+def seconds_to_stamp(t: float, classes: MsgClasses | None = None) -> Message:
+    """Return float seconds (>= 0) as a builtin_interfaces/Time, rounded to the nanosecond.
 
     ValueError for a stamp a ROS 2 Time cannot carry (negative, not finite, or beyond its
     int32 seconds, 2038-01-19): never a wrapped stamp.
@@ -79,18 +82,18 @@ def seconds_to_stamp(t: float, classes: MsgClasses | None = None) -> Any:
 
 
 def z_scale(kind: int) -> np.ndarray:
-    """Scale from core units to SI for measurement `kind`; ValueError for an unknown kind."""
+    """Return the scale from core units to SI of measurement `kind` (ValueError: unknown)."""
     try:
-        return _Z_SCALE[kind]
-    except KeyError:
+        return _Z_SCALE[types.Kind(kind)]
+    except (KeyError, ValueError):
         raise ValueError(
             f"unknown measurement kind {kind} (expected "
             + ", ".join(f"{k.value}={k.name}" for k in types.Kind) + ")"
         ) from None
 
 
-def measurement_to_msg(m: types.Measurement, classes: MsgClasses | None = None) -> Any:
-    """Core Measurement (km) -> ssa_fusion_msgs/Measurement (m).
+def measurement_to_msg(m: types.Measurement, classes: MsgClasses | None = None) -> Message:
+    """Return core Measurement `m` (km) as an ssa_fusion_msgs/Measurement (m).
 
     A two-channel kind (RA_DEC) fills z[:2] and the covariance's upper-left 2x2; the rest is 0.
     """
@@ -113,10 +116,13 @@ def measurement_to_msg(m: types.Measurement, classes: MsgClasses | None = None) 
     )
 
 
-def recode(msg: Any, msgtype: str, classes: MsgClasses | None = None) -> Any:
-    """A Measurement or StateEstimate message read from a bag (of any version of the types)
-    -> the current type, through the core types: fields newer than the bag (e.g.
-    ``shard_key``) are filled in. Messages of other types are returned as they are."""
+def recode(msg: Message, msgtype: str, classes: MsgClasses | None = None) -> Message:
+    """Return a message read from a bag as the current version of its type.
+
+    A Measurement or StateEstimate of any version of the types goes through the core types:
+    fields newer than the bag (e.g. ``shard_key``) are filled in. Messages of other types
+    are returned as they are.
+    """
     if not msgtype.startswith("ssa_fusion_msgs/"):
         return msg
     if msgtype.endswith("Measurement"):
@@ -125,14 +131,16 @@ def recode(msg: Any, msgtype: str, classes: MsgClasses | None = None) -> Any:
 
 
 def shard_key(object_id: str) -> int:
-    """The ``shard_key`` of `object_id` (Measurement and StateEstimate messages): CRC-32 of
-    its UTF-8 bytes (0 .. 2**32 - 1), the same on every machine and in every process (unlike
-    `hash`)."""
+    """Return the ``shard_key`` of `object_id` (Measurement and StateEstimate messages).
+
+    The CRC-32 of its UTF-8 bytes (0 .. 2**32 - 1), the same on every machine and in every
+    process (unlike `hash`).
+    """
     return zlib.crc32(object_id.encode("utf-8"))
 
 
-def measurement_from_msg(msg: Any) -> types.Measurement:
-    """Measurement message (m) -> core Measurement (km); ValueError for an unknown kind.
+def measurement_from_msg(msg: Message) -> types.Measurement:
+    """Return a Measurement message (m) as a core Measurement (km); ValueError: unknown kind.
 
     A two-channel kind (RA_DEC) takes z[:2] and the covariance's upper-left 2x2.
     """
@@ -150,8 +158,8 @@ def measurement_from_msg(msg: Any) -> types.Measurement:
     )
 
 
-def estimate_to_msg(e: types.StateEstimate, classes: MsgClasses | None = None) -> Any:
-    """Core StateEstimate (km, km/s) -> ssa_fusion_msgs/StateEstimate (m, m/s)."""
+def estimate_to_msg(e: types.StateEstimate, classes: MsgClasses | None = None) -> Message:
+    """Return core StateEstimate `e` (km, km/s) as an ssa_fusion_msgs/StateEstimate (m, m/s)."""
     c = _default(classes)
     return c.estimate(
         header=c.header(stamp=seconds_to_stamp(e.t, c), frame_id=Frame.GCRF),
@@ -164,8 +172,8 @@ def estimate_to_msg(e: types.StateEstimate, classes: MsgClasses | None = None) -
     )
 
 
-def estimate_from_msg(msg: Any) -> types.StateEstimate:
-    """StateEstimate message (m, m/s) -> core StateEstimate (km, km/s)."""
+def estimate_from_msg(msg: Message) -> types.StateEstimate:
+    """Return a StateEstimate message (m, m/s) as a core StateEstimate (km, km/s)."""
     return types.StateEstimate(
         t=stamp_to_seconds(msg.header.stamp),
         x=np.asarray(msg.state, dtype=float) / _X_SCALE,

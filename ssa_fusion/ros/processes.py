@@ -24,8 +24,10 @@ from typing import Any
 import rclpy
 from rclpy.context import Context
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
 
 from ssa_fusion.ros.executors import make_executor
+from ssa_fusion.ros.interfaces import Message
 from ssa_fusion.ros.topics import DATA_QOS
 
 NODE_BIN = Path(sys.prefix) / "lib" / "ssa_fusion"
@@ -35,13 +37,16 @@ _domain_counter = itertools.count()
 
 
 def fresh_domain_id() -> int:
-    """A ROS domain id in 1..100 unlikely to be shared with another graph or test run."""
+    """Return a ROS domain id in 1..100 unlikely to be shared with another graph or run."""
     return 1 + (os.getpid() * 7 + next(_domain_counter)) % 100
 
 
 def node_command(executable: str) -> list[str]:
-    """Command running node `executable`: the installed file, else the same entry point
-    through the module (`ssa_fusion.nodes.entry`)."""
+    """Return the command that runs node `executable`.
+
+    The installed file, else the same entry point through the module
+    (`ssa_fusion.nodes.entry`).
+    """
     path = NODE_BIN / executable
     if path.exists():
         return [str(path)]
@@ -53,22 +58,26 @@ class Proc:
     """A started executable and its log files."""
 
     name: str
-    popen: subprocess.Popen
+    popen: subprocess.Popen[bytes]
     stdout_path: Path
     stderr_path: Path
     expect_returncode: int | None = 0
 
     @property
     def returncode(self) -> int | None:
+        """Return the exit code, or None while it runs."""
         return self.popen.poll()
 
     def stdout(self) -> str:
+        """Return what it printed on stdout so far."""
         return self.stdout_path.read_text(errors="replace")
 
     def stderr(self) -> str:
+        """Return what it printed on stderr so far."""
         return self.stderr_path.read_text(errors="replace")
 
     def describe(self) -> str:
+        """Return its name, pid, exit code and the end of its stderr."""
         tail = "\n".join(self.stderr().splitlines()[-30:])
         return f"process {self.name!r} (pid {self.popen.pid}) exit {self.returncode}:\n{tail}"
 
@@ -114,32 +123,34 @@ class Graph:
 
     def start_node(self, executable: str, *ros_args: str, params: dict[str, Any] | None = None,
                    params_file: Path | None = None, name: str | None = None,
-                   **kw: Any) -> Proc:
+                   expect_returncode: int | None = 0) -> Proc:
         """Start an ssa_fusion node executable with parameters (`-p key:=value`)."""
         cmd = [*node_command(executable), "--ros-args"]
         if params_file is not None:
             cmd += ["--params-file", str(params_file)]
         for key, value in (params or {}).items():
             cmd += ["-p", f"{key}:={_ros_value(value)}"]
-        return self.start(name or executable, cmd + list(ros_args), **kw)
+        return self.start(name or executable, cmd + list(ros_args), expect_returncode)
 
-    def start_python(self, script: Path | str, *args: str, name: str, **kw: Any) -> Proc:
+    def start_python(self, script: Path | str, *args: str, name: str,
+                     expect_returncode: int | None = 0) -> Proc:
         """Start a Python script with this interpreter."""
-        return self.start(name, [sys.executable, str(script), *args], **kw)
+        return self.start(name, [sys.executable, str(script), *args], expect_returncode)
 
     def scaled(self, seconds: float) -> float:
-        """A nominal timeout of `seconds` times `timeout_factor`."""
+        """Return a nominal timeout of `seconds` times `timeout_factor`."""
         return seconds * self.timeout_factor
 
     def wait_exit(self, proc: Proc, timeout: float) -> int:
-        """Wait for `proc` to end by itself, spinning the probe meanwhile (`timeout` is
-        scaled)."""
+        """Wait for `proc` to end by itself, spinning the probe meanwhile; return its code.
+
+        `timeout` is scaled.
+        """
         self.wait_for(lambda: proc.popen.poll() is not None, timeout, f"{proc.name} to exit")
         return proc.popen.returncode
 
     def stop(self, proc: Proc, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int:
-        """Send `sig`; SIGKILL if still alive after `timeout` s (scaled). Returns the exit
-        code."""
+        """Send `sig`; SIGKILL if still alive after `timeout` s (scaled); return the code."""
         if proc.popen.poll() is None:
             proc.popen.send_signal(sig)
             self._await(proc, timeout)
@@ -155,11 +166,14 @@ class Graph:
 
     # probe -------------------------------------------------------------------------------
     def spin_once(self, timeout: float = 0.05) -> None:
+        """Run the probe's callbacks that are ready (waiting up to `timeout` s)."""
         self.executor.spin_once(timeout_sec=timeout)
 
     def wait_for(self, predicate: Callable[[], bool], timeout: float, what: str) -> None:
-        """Spin the probe until `predicate()`; after `timeout` s (scaled) raise with the
-        processes' stderr."""
+        """Spin the probe until `predicate()`; raise TimeoutError after `timeout` s (scaled).
+
+        The error holds the processes' stderr.
+        """
         limit = self.scaled(timeout)
         deadline = time.monotonic() + limit
         while not predicate():
@@ -172,22 +186,28 @@ class Graph:
             self.spin_once()
 
     def wait_for_publisher(self, topic: str, count: int = 1, timeout: float = 20.0) -> None:
+        """Wait until `topic` has `count` publishers."""
         self.wait_for(lambda: self.probe.count_publishers(topic) >= count, timeout,
                       f"{count} publisher(s) on {topic}")
 
     def wait_for_subscriber(self, topic: str, count: int = 1, timeout: float = 20.0) -> None:
+        """Wait until `topic` has `count` subscribers."""
         self.wait_for(lambda: self.probe.count_subscribers(topic) >= count, timeout,
                       f"{count} subscriber(s) on {topic}")
 
-    def collect(self, msg_type: Any, topic: str, qos: Any = DATA_QOS) -> list:
+    def collect(self, msg_type: type[Message], topic: str,
+                qos: QoSProfile = DATA_QOS) -> list[Message]:
         """Subscribe the probe to `topic`; the returned list fills as messages arrive."""
-        received: list = []
+        received: list[Message] = []
         self.probe.create_subscription(msg_type, topic, received.append, qos)
         return received
 
-    def wait_quiet(self, counts: Callable[[], Any], quiet_s: float, limit_s: float) -> None:
-        """Spin until `counts()` has not changed for `quiet_s` s (at most `limit_s`, scaled;
-        `quiet_s` is not: it is how long a run must stay still, not a timeout)."""
+    def wait_quiet(self, counts: Callable[[], object], quiet_s: float, limit_s: float) -> None:
+        """Spin until `counts()` has not changed for `quiet_s` s.
+
+        At most `limit_s` (scaled; `quiet_s` is not: it is how long a run must stay still,
+        not a timeout).
+        """
         deadline = time.monotonic() + self.scaled(limit_s)
         last, since = counts(), time.monotonic()
         while time.monotonic() < deadline and time.monotonic() - since < quiet_s:
@@ -197,6 +217,7 @@ class Graph:
                 last, since = now, time.monotonic()
 
     def report(self) -> str:
+        """Return every process's description (`Proc.describe`)."""
         return "\n".join(p.describe() for p in self.procs)
 
     # teardown ----------------------------------------------------------------------------
@@ -227,7 +248,8 @@ class Graph:
         return problems
 
 
-def _ros_value(value: Any) -> str:
+def _ros_value(value: object) -> str:
+    """Return `value` as a ``-p name:=value`` rule writes it."""
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, (list, tuple)):

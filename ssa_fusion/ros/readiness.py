@@ -3,17 +3,17 @@
 A publisher's matched-subscription count rises when *its* side of the DDS match exists; what
 it sends before the subscriber's side exists is lost to a volatile reader. ssa_fusion nodes
 report each input subscription's matched-publisher count on /diagnostics (see
-`nodes.common.Diagnostics.subscribe`); `ReadyNodes` reads those reports so that a sender
+`nodes.diagnostics.Diagnostics.subscribe`); `ReadyNodes` reads those reports so that a sender
 (the sensor simulator, replay's player) starts only when each named node has matched a
 publisher on each named topic ('node:/topic').
 """
 
 from __future__ import annotations
 
-from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
+from ssa_fusion.ros.interfaces import DiagnosticArray
 from ssa_fusion.ros.topics import (
     TOPIC_CLOCK,
     TOPIC_DIAGNOSTICS,
@@ -37,14 +37,19 @@ READERS = [f"{node}:{topic}" for node, topics in (
 
 
 def readers_of(topics: set[str] | tuple[str, ...]) -> list[str]:
-    """The `READERS` entries whose topic is in `topics` (those with a publisher in a graph
-    that lacks some topics, e.g. a bag without /ssa/withheld)."""
+    """Return the `READERS` entries whose topic is in `topics`.
+
+    Those with a publisher in a graph that lacks some topics (e.g. a bag without
+    /ssa/withheld).
+    """
     return [r for r in READERS if r.split(":", 1)[1] in topics]
 
 
 class ReadyNodes:
-    """The latest matched-publisher counts each node reported on /diagnostics, by node name
-    and topic."""
+    """The latest matched-publisher counts each node reported on /diagnostics.
+
+    By node name and topic (`reports`).
+    """
 
     def __init__(self, node: Node) -> None:
         self.reports: dict[str, dict[str, int]] = {}
@@ -52,6 +57,7 @@ class ReadyNodes:
                                              QoSProfile(depth=100))
 
     def _on(self, msg: DiagnosticArray) -> None:
+        """Take one /diagnostics report."""
         for st in msg.status:
             counts = {kv.key[len(MATCHED_KEY):]: int(kv.value)
                       for kv in st.values if kv.key.startswith(MATCHED_KEY)}
@@ -59,8 +65,10 @@ class ReadyNodes:
                 self.reports[st.name] = counts
 
     def unmatched(self, needs: list[str]) -> list[str]:
-        """The entries of `needs` ('node:/topic') whose node has not reported a matched
-        publisher on that topic yet."""
+        """Return the entries of `needs` ('node:/topic') not matched yet.
+
+        Those whose node has not reported a matched publisher on that topic yet.
+        """
         missing = []
         for need in needs:
             name, _, topic = need.partition(":")
@@ -69,11 +77,12 @@ class ReadyNodes:
         return missing
 
     def ready(self, needs: list[str]) -> bool:
+        """Return True once every entry of `needs` ('node:/topic') is matched."""
         return not self.unmatched(needs)
 
 
 def check_needs(needs: list[str]) -> str | None:
-    """Why a list of 'node:/topic' entries is malformed, or None."""
+    """Return why a list of 'node:/topic' entries is malformed, or None."""
     for need in needs:
         name, _, topic = need.partition(":")
         if not name or "/" in name or not topic.startswith("/"):

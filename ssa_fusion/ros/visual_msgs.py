@@ -19,14 +19,9 @@ Pure conversions (no rclpy): shapes and states in, ROS messages out.
 from __future__ import annotations
 
 import math
-from typing import Any
 
-from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Point
+import numpy as np
 from numpy.typing import ArrayLike
-from sensor_msgs.msg import NavSatFix, NavSatStatus
-from std_msgs.msg import ColorRGBA
-from visualization_msgs.msg import Marker, MarkerArray
 
 from ssa_fusion.ros.foxglove_scene import (
     SCENE_FRAME,
@@ -34,6 +29,15 @@ from ssa_fusion.ros.foxglove_scene import (
     Shape,
     gcrs_to_geodetic,
     log_time_ns,
+)
+from ssa_fusion.ros.interfaces import (
+    ColorRGBA,
+    Marker,
+    MarkerArray,
+    NavSatFix,
+    NavSatStatus,
+    Point,
+    Time,
 )
 
 MARKERS_TOPIC = "/ssa/visual/markers"
@@ -51,20 +55,24 @@ LABEL_HEIGHT_KM = 400.0
 
 
 def stamp(t_unix: float) -> Time:
-    """Unix s (sim time) -> builtin_interfaces/Time (clamped at 0, like the log times)."""
+    """Return Unix s (sim time) as a builtin_interfaces/Time (clamped at 0, as log times)."""
     ns = log_time_ns(t_unix)
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
 def _color(rgba: Rgba) -> ColorRGBA:
+    """Return `rgba` as a std_msgs/ColorRGBA."""
     return ColorRGBA(r=float(rgba[0]), g=float(rgba[1]), b=float(rgba[2]), a=float(rgba[3]))
 
 
-def _point(p: Any) -> Point:
-    return Point(x=float(p[0]), y=float(p[1]), z=float(p[2]))
+def _point(p: ArrayLike) -> Point:
+    """Return a 3-vector (km) as a geometry_msgs/Point."""
+    x, y, z = (float(v) for v in np.ravel(p))
+    return Point(x=x, y=y, z=z)
 
 
 def _marker(t: Time, ns: str, mid: int, kind: int, rgba: Rgba) -> Marker:
+    """Return an ADD marker of `kind` in the scene's frame, stamped `t`."""
     m = Marker(ns=ns, id=mid, type=kind, action=Marker.ADD, color=_color(rgba))
     m.header.stamp = t
     m.header.frame_id = SCENE_FRAME
@@ -73,8 +81,10 @@ def _marker(t: Time, ns: str, mid: int, kind: int, rgba: Rgba) -> Marker:
 
 
 def marker_array(shapes: list[Shape], t_unix: float) -> MarkerArray:
-    """`shapes` (GCRF, km) stamped `t_unix` (Unix s) -> MarkerArray that replaces the scene
-    (its first marker deletes all earlier ones)."""
+    """Return the MarkerArray of `shapes` (GCRF, km) stamped `t_unix` (Unix s).
+
+    It replaces the scene: its first marker deletes all earlier ones.
+    """
     t = stamp(t_unix)
     clear = Marker(action=Marker.DELETEALL)
     clear.header.stamp = t
@@ -116,9 +126,12 @@ def marker_array(shapes: list[Shape], t_unix: float) -> MarkerArray:
 
 
 def nav_sat_fix(t_unix: float, r_gcrs_km: ArrayLike, frame_id: str) -> NavSatFix:
-    """The point below GCRF position `r_gcrs_km` (km) at `t_unix` (Unix s, sim time) ->
-    NavSatFix: WGS-84 latitude and longitude (deg), height (m), status FIX, covariance
-    unknown; the same values as the Foxglove ground track (`foxglove_scene.location_fix`)."""
+    """Return the NavSatFix of the point below GCRF position `r_gcrs_km` (km) at `t_unix`.
+
+    At Unix s `t_unix` (sim time): WGS-84 latitude and longitude (deg), height (m), status
+    FIX, covariance unknown; the same values as the Foxglove ground track
+    (`foxglove_scene.location_fix`).
+    """
     lat, lon, alt = gcrs_to_geodetic(r_gcrs_km, t_unix)
     msg = NavSatFix(latitude=math.degrees(lat), longitude=math.degrees(lon),
                     altitude=alt * 1000.0,

@@ -1,4 +1,4 @@
-"""`ssa-fusion bag repair` (issue 22, finding 7): a bag whose recorder was killed (SIGKILL:
+"""`ssa-fusion bag repair`: a bag whose recorder was killed (SIGKILL:
 no metadata.yaml, no MCAP summary, a torn last chunk) becomes one that plain rosbags and the
 mcap reader open, with every message of its complete chunks, byte for byte. No ROS needed.
 """

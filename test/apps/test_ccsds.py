@@ -381,7 +381,7 @@ AZEL_META = {"TIME_SYSTEM": "UTC", "PARTICIPANT_1": "OBJ-1", "PARTICIPANT_2": "m
 def test_hand_written_radec_and_azel_are_read_as_written(tmp_path, capsys, frame):
     """A KVN TDM of an optical (RADEC, in `frame`) and a radar (AZEL) segment, the values
     computed for a known GCRF state: imported, they are `frames.radec_gcrs` and
-    `frames.razel_gcrs` of it (<= 1 mas, within the issue's 0.1")."""
+    `frames.razel_gcrs` of it (<= 1 mas, well within 0.1")."""
     epoch = ccsds.format_epoch(T_SEEN)
     f = kvn_tdm(tmp_path / "hand.tdm", [
         kvn_segment({**RADEC_META, "REFERENCE_FRAME": frame}, radec_rows(epoch, frame)),

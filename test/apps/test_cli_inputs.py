@@ -1,4 +1,4 @@
-"""CLI input errors are one clear line and exit 2 (issue 22 finding 7): a ROS domain id out
+"""CLI input errors are one clear line and exit 2: a ROS domain id out
 of range, and a file named .mcap that is not an MCAP file."""
 
 from __future__ import annotations

@@ -7,7 +7,6 @@ from gap_bags import around_a_gap
 from ssa_fusion.apps import evaluate
 from ssa_fusion.core import kepler, metrics, types
 from ssa_fusion.core.ekf import process_noise
-from ssa_fusion.core.tracker import TrackerConfig
 from ssa_fusion.evaluation.arms import ArmName
 from ssa_fusion.nodes import settings
 from ssa_fusion.sim import scenarios
@@ -59,19 +58,19 @@ def test_dmd_ekf_is_scored_over_the_whole_gap_with_the_filters_prediction():
 def test_settings_come_from_the_bag_else_the_kinds_default(tmp_path):
     data = synthetic()
     assert evaluate.evaluate(data).settings.origin.startswith("scenario iss_j2_pos")
-    recorded = settings.config_message("filter", scenarios.get("iss_j2_pos").estimator()
-                                       .with_(tracker=TrackerConfig(q=3e-9)))
+    est = scenarios.get("iss_j2_pos").estimator()
+    recorded = settings.config_message("filter", est.with_(filter=est.filter.with_(q=3e-9)))
     data.config.append(recorded)
     ev = evaluate.evaluate(data)
     assert ev.settings.origin.startswith("recorded")
-    assert ev.settings.estimator.tracker.q == 3e-9
+    assert ev.settings.estimator.filter.noise.q == 3e-9
     params = tmp_path / "p.yaml"
     params.write_text("/**:\n  ros__parameters:\n    kind: position\n"
                       "filter:\n  ros__parameters:\n    q: 0.002\n    gate: 0.0\n")
     ev = evaluate.evaluate(data, params_file=params)
     assert ev.settings.origin == f"params file {params}"
-    assert ev.settings.estimator.tracker.q == pytest.approx(2e-9)  # m^2/s^3 -> km^2/s^3
-    assert ev.settings.estimator.tracker.gate is None
+    assert ev.settings.estimator.filter.noise.q == pytest.approx(2e-9)  # m^2/s^3 -> km^2/s^3
+    assert ev.settings.estimator.filter.noise.gate is None
 
 
 def test_sample_bag_coast_matches_an_independent_kepler_propagation():

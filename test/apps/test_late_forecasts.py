@@ -1,4 +1,4 @@
-"""Late or dropped forecasts (issue 22, finding 5): `evaluate.unfused_forecasts` counts the gap
+"""Late or dropped forecasts: `evaluate.unfused_forecasts` counts the gap
 epochs the surrogate forecast but the filter never fused, and `live` turns that, and a time
 scale the machine did not sustain, into one warning line each. Synthetic data, no ROS."""
 

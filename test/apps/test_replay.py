@@ -224,7 +224,7 @@ def test_replay_over_ros2_of_a_measurement_only_bag(tmp_path):
 
 
 def test_a_huge_range_in_the_iod_batch_neither_crashes_replay_nor_report(tmp_path, capsys):
-    """Issue 22 finding 4: one range >= 1e6 km among the first three measurements raised
+    """One range >= 1e6 km among the first three measurements once raised
     from the IOD, and `replay --offline` and `report` of such a bag ended in a traceback.
     Now the measurement is refused (rejected_implausible) and both finish."""
     stream = list(bagio.read_bag(SAMPLE))
@@ -242,7 +242,7 @@ def test_a_huge_range_in_the_iod_batch_neither_crashes_replay_nor_report(tmp_pat
 
 
 def test_a_malformed_payload_in_the_bag_is_skipped_and_counted(tmp_path, capsys):
-    """Issue 22 finding 6: the recorder stores what arrives, and one undecodable payload
+    """The recorder stores what arrives, and one undecodable payload once
     made `report` and `replay` reject the whole bag. Now it is skipped and counted."""
     stream = list(bagio.read_bag(SAMPLE))
     bag = tmp_path / "junk"

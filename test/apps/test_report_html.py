@@ -1,4 +1,4 @@
-"""report.html (issue 21 item 5): `ssa-fusion report` writes one self-contained page beside
+"""report.html: `ssa-fusion report` writes one self-contained page beside
 its PNGs, and it renders in a real browser: headless Chromium (Debian's `chromium`; .ci/run
 installs it) draws every plot, shows no error, and its screenshot is not blank.
 

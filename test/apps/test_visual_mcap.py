@@ -1,4 +1,4 @@
-"""visual.mcap (issue 21 item 4, "the same visual topics in the bag"): `ssa-fusion report`
+"""visual.mcap (the same visual topics as the bridge serves, in a file): `ssa-fusion report`
 writes the Foxglove visual topics of a bag with foxglove-sdk's MCAP writer; read back here
 with the independent `mcap` reader."""
 

@@ -1,4 +1,4 @@
-"""Graph test of a sharded catalog run (issue 20): `ssa-fusion live --catalog` starts
+"""Graph test of a sharded catalog run: `ssa-fusion live --catalog` starts
 sensor_sim (catalog mode), the recorder, two catalog_filter shards and two catalog_surrogate
 shards as separate processes over DDS (private domain, loopback). Every object's estimates
 come from exactly one shard, the one its shard key belongs to, and its gap forecasts from

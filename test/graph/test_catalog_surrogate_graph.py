@@ -2,7 +2,7 @@
 /clock and publishes the filter's estimates of two objects, plus bad ones. Every bad
 estimate is refused by cause on /diagnostics (or never delivered: the content filter), the
 node lives on, and the forecast it publishes through the gap that follows equals the
-in-process `core.residual.GapForecaster` fed the same estimates (through the same messages).
+in-process `core.gap_forecaster.GapForecaster` fed the same estimates (through the same messages).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from test_faults import Diag, publisher
 
 from ssa_fusion.core import dynamics, types
 from ssa_fusion.core.gap_bank import CATALOG_RESIDUAL
-from ssa_fusion.core.residual import GapForecaster
+from ssa_fusion.core.gap_forecaster import GapForecaster
 from ssa_fusion.nodes.shards import shard_range
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.topics import CATALOG_QOS

@@ -34,9 +34,10 @@ from ssa_fusion_msgs.msg import Measurement, StateEstimate
 from ssa_fusion.core import types
 from ssa_fusion.core.config import EstimatorConfig
 from ssa_fusion.core.config import motion as config_motion
+from ssa_fusion.core.filter_options import DEFAULT_GATE, FilterOptions
 from ssa_fusion.core.measurement import RazelModel
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.tracker import DEFAULT_GATE, Tracker, TrackerConfig
+from ssa_fusion.core.tracker import Tracker
 from ssa_fusion.graphs import node_parameters
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.readiness import ReadyNodes
@@ -114,9 +115,8 @@ def assert_sane(est: list[types.StateEstimate]) -> None:
 def offline_tracker() -> Tracker:
     """The filter node's Tracker for SHORT, built from the core alone."""
     model = RazelModel(scenarios.STATIONS["columbus"], UNIX_EPOCH_JD)
-    config = TrackerConfig(p0_sigma=SHORT.p0_sigma, q=SHORT.q, gate=DEFAULT_GATE,
-                           frame_id="columbus")
-    return Tracker(config_motion(EstimatorConfig()), model, config, n=6)
+    config = FilterOptions().with_(p0_sigma=SHORT.p0_sigma, q=SHORT.q, gate=DEFAULT_GATE)
+    return Tracker(config_motion(EstimatorConfig()), model, config, n=6, frame_id="columbus")
 
 
 def filter_params(**extra) -> dict:
@@ -473,9 +473,9 @@ def test_invalid_parameters_refuse_to_start(ros_graph, tmp_path):
         "p0_sigma": ("filter", {"p0_sigma": [1.0, 2.0]}),
         "kind": ("filter", {"kind": "sonar"}),
         "bag": ("recorder", {"bag": str(existing)}),
-        "qq": ("filter", {"qq": 0.1}),  # a misspelt name (issue 22 finding 7)
+        "qq": ("filter", {"qq": 0.1}),  # a misspelt name
         "dealys": ("surrogate", {"dealys": 300}),
-        "iod_samples": ("filter", {"iod_samples": 1000000}),  # issue 22 finding 7
+        "iod_samples": ("filter", {"iod_samples": 1000000}),  # beyond 1000
         "bag/unwritable": ("recorder", {"bag": "/proc/nope/bag"}),  # cannot be created
         "delays/huge": ("surrogate", {"delays": 1000000000000}),  # cadence 0: inferred
         "catalog": ("sensor_sim", {"scenario": "iss_network", "catalog": "/nope/cat.tle"}),
@@ -553,7 +553,7 @@ def test_bad_param_set_at_run_time_is_refused_and_old_value_kept(ros_graph):
 
 
 def test_a_run_time_set_gets_the_same_cross_check_as_start_up(ros_graph):
-    """Issue 21: `ros2 param set /surrogate delays 100000` was accepted at run time although
+    """`ros2 param set /surrogate delays 100000` was once accepted at run time although
     the same value is refused at start (the buffer cannot hold 2 x delays x cadence)."""
     g = ros_graph
     surr = g.start_node("surrogate", params=surrogate_params())
@@ -765,7 +765,7 @@ def test_sensor_sim_interrupted_twice_during_shutdown_exits_0(ros_graph, sig):
 
 
 def test_a_negative_or_huge_clock_is_survived_and_no_node_dies(ros_graph, tmp_path):
-    """Issue 22 finding 1: one /clock with negative seconds killed filter, surrogate and
+    """One /clock with negative seconds used to kill filter, surrogate and
     recorder (rclpy raises in its clock handling, outside the nodes' callbacks). Now each
     counts it as rejected_clock and carries on. A clock at the end of time (int32 seconds,
     2038) is taken as a jump ahead; the return to the real clock is a jump back that resets
@@ -797,7 +797,7 @@ def test_a_negative_or_huge_clock_is_survived_and_no_node_dies(ros_graph, tmp_pa
 
 def test_the_forecast_topic_takes_only_forecasts_and_the_measurement_topic_only_sensors(
         ros_graph):
-    """Issue 22 finding 6: a source=SENSOR message on /ssa/forecast was fused as a real
+    """A source=SENSOR message on /ssa/forecast was once fused as a real
     measurement (and a forecast on /ssa/measurement as a forecast)."""
     g = ros_graph
     got = g.collect(StateEstimate, "/ssa/estimate")
@@ -818,7 +818,7 @@ def test_the_forecast_topic_takes_only_forecasts_and_the_measurement_topic_only_
 
 
 def test_a_payload_that_does_not_decode_is_counted_and_the_stream_goes_on(ros_graph):
-    """Issue 22 finding 6: malformed bytes were dropped inside rclpy with no log and no
+    """Malformed bytes were once dropped inside rclpy with no log and no
     count. Filter and surrogate take the bytes and decode them themselves: junk is counted
     as rejected_malformed, and the sender's next messages are fused. (An *empty* payload is
     different: the publishing side never delivers it, and a reliable reader then waits for
@@ -841,7 +841,7 @@ def test_a_payload_that_does_not_decode_is_counted_and_the_stream_goes_on(ros_gr
 
 
 def test_a_future_stamp_before_the_first_clock_does_not_poison_later_ones(ros_graph):
-    """Issue 22 finding 3: before the first /clock nothing could judge a stamp, so one
+    """Before the first /clock nothing can judge a stamp: once, one
     stamped a year ahead went in and made every later measurement stale. Now measurements
     wait for the clock (held_until_clock), then the year-ahead one is refused."""
     g = ros_graph

@@ -1,4 +1,4 @@
-"""`ssa-fusion live` stopped by a signal (issue 22 finding 2): SIGTERM and SIGHUP, like
+"""`ssa-fusion live` stopped by a signal: SIGTERM and SIGHUP, like
 SIGINT, stop every node the CLI started, close the bag, and exit 128 + the signal number.
 Before, SIGTERM ended the CLI with 143 and left all four nodes running, the bag unclosed."""
 

@@ -1,4 +1,4 @@
-"""Arguments rcl itself cannot parse (issue 22 finding 7): an empty `-p x:=`, a list of mixed
+"""Arguments rcl itself cannot parse: an empty `-p x:=`, a list of mixed
 types, a corrupt params file. The node exits 2 with one `error:` line of ours, no traceback.
 (rcl fails before any DDS participant exists; the environment is loopback-only anyway.)"""
 

@@ -1,4 +1,4 @@
-"""catalog_filter's shard rules (issue 20): which shard takes which measurement."""
+"""catalog_filter's shard rules: which shard takes which measurement."""
 
 import itertools
 

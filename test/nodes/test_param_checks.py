@@ -9,9 +9,14 @@ import math
 
 import pytest
 
-from ssa_fusion.nodes.common import non_negative, positive
-from ssa_fusion.nodes.filter import _p0_check
-from ssa_fusion.nodes.sensor_sim import _gaps_check, _noise_check
+from ssa_fusion.nodes.filter import PARAMETERS as FILTER
+from ssa_fusion.nodes.parameters import NON_NEGATIVE, POSITIVE
+from ssa_fusion.nodes.sensor_sim import PARAMETERS as SENSOR_SIM
+
+non_negative, positive = NON_NEGATIVE, POSITIVE
+_p0_check = FILTER["p0_sigma"].reason
+_gaps_check = SENSOR_SIM["gaps"].reason
+_noise_check = SENSOR_SIM["noise_sigma"].reason
 
 NON_FINITE = [math.inf, -math.inf, math.nan]
 

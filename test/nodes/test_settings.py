@@ -51,7 +51,7 @@ def test_params_file_errors_name_the_file_and_value(tmp_path):
 
 def test_recorded_settings_merge_both_nodes_last_message():
     c = scenarios.DEFAULT_LIVE.estimator()
-    changed = c.with_(tracker=c.tracker.__class__(q=7e-8))
+    changed = c.with_(filter=c.filter.with_(q=7e-8))
     msgs = [settings.config_message("filter", c), settings.config_message("surrogate", c),
             settings.config_message("filter", changed)]  # a `ros2 param set` during the run
     assert settings.recorded_estimator(msgs) == changed

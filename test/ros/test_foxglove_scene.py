@@ -29,6 +29,7 @@ from ssa_fusion.core.frames import (
 from ssa_fusion.core.stations import network_stations
 from ssa_fusion.core.types import Kind
 from ssa_fusion.ros import foxglove_scene as fs
+from ssa_fusion.ros import scene_geometry as geo
 from ssa_fusion.ros import visual_msgs as vm
 
 T = 1_718_000_000.0  # 2024-06-10, Unix s
@@ -45,7 +46,7 @@ def _rot_x(a: float) -> np.ndarray:
 
 
 def test_ellipsoid_of_a_diagonal_covariance():
-    ell = fs.covariance_ellipsoid(np.diag([4.0, 9.0, 16.0]))  # σ = 2, 3, 4 km
+    ell = geo.covariance_ellipsoid(np.diag([4.0, 9.0, 16.0]))  # σ = 2, 3, 4 km
     assert ell.semi_axes == pytest.approx([6.0, 9.0, 12.0])
     assert ell.size == pytest.approx([12.0, 18.0, 24.0])
     # each axis is a coordinate axis (up to sign), a proper rotation
@@ -56,12 +57,12 @@ def test_ellipsoid_of_a_diagonal_covariance():
 def test_ellipsoid_of_a_rotated_covariance():
     rot = _rot_z(math.radians(30.0)) @ _rot_x(math.radians(50.0))
     p = rot @ np.diag([1.0, 25.0, 100.0]) @ rot.T  # km²
-    ell = fs.covariance_ellipsoid(p)
+    ell = geo.covariance_ellipsoid(p)
     assert ell.semi_axes == pytest.approx([3.0, 15.0, 30.0])
     for i in range(3):  # principal directions are the rotated axes (up to sign)
         assert abs(ell.axes[:, i] @ rot[:, i]) == pytest.approx(1.0)
     # the pose foxglove gets (quaternion, diameters) rebuilds 9 P
-    r = fs.quaternion_to_rotation(ell.quaternion)
+    r = geo.quaternion_to_rotation(ell.quaternion)
     assert r @ np.diag((ell.size / 2) ** 2) @ r.T == pytest.approx(9.0 * p)
     assert np.linalg.norm(ell.quaternion) == pytest.approx(1.0)
 
@@ -69,7 +70,7 @@ def test_ellipsoid_of_a_rotated_covariance():
 def test_ellipsoid_of_a_singular_covariance_is_flat_not_nan():
     p = np.diag([0.0, 1.0, 4.0])
     p[0, 0] = -1e-18  # round-off makes it indefinite
-    ell = fs.covariance_ellipsoid(p, n_sigma=1.0)
+    ell = geo.covariance_ellipsoid(p, n_sigma=1.0)
     assert ell.semi_axes == pytest.approx([0.0, 1.0, 2.0])
     assert np.all(np.isfinite(ell.quaternion))
 
@@ -80,8 +81,8 @@ def test_quaternion_round_trip(angle, axis):
     u = np.asarray(axis, float) / np.linalg.norm(axis)
     k = np.array([[0, -u[2], u[1]], [u[2], 0, -u[0]], [-u[1], u[0], 0]])
     rot = np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k  # Rodrigues
-    q = fs.rotation_to_quaternion(rot)
-    assert fs.quaternion_to_rotation(q) == pytest.approx(rot, abs=1e-12)
+    q = geo.rotation_to_quaternion(rot)
+    assert geo.quaternion_to_rotation(q) == pytest.approx(rot, abs=1e-12)
     assert q[3] == pytest.approx(math.cos(angle / 2), abs=1e-12)
 
 
@@ -102,7 +103,7 @@ def test_sub_satellite_point_matches_astropy():
     itrs = gcrs.transform_to(coords.ITRS(obstime=t))
     ref = itrs.earth_location.to_geodetic("WGS84")
     for i in range(len(r)):
-        lat, lon, alt = fs.gcrs_to_geodetic(r[i], T)
+        lat, lon, alt = geo.gcrs_to_geodetic(r[i], T)
         assert lat == pytest.approx(ref.lat.rad[i], abs=1e-9)
         assert float(wrap_pi(lon - ref.lon.rad[i])) == pytest.approx(0.0, abs=1e-9)
         assert alt == pytest.approx(ref.height.to_value(units.km)[i], abs=1e-6)
@@ -110,7 +111,7 @@ def test_sub_satellite_point_matches_astropy():
 
 def test_geodetic_of_the_pole():
     b = R_EARTH * (1 - WGS84_F)
-    lat, _lon, alt = fs.itrs_to_geodetic([0.0, 0.0, b + 500.0])
+    lat, _lon, alt = geo.itrs_to_geodetic([0.0, 0.0, b + 500.0])
     assert lat == pytest.approx(math.pi / 2)
     assert alt == pytest.approx(500.0, abs=1e-9)
 
@@ -123,7 +124,7 @@ def test_geodetic_inverts_core_frames(lat_deg, lon_deg, alt_km):
     gcrs_to_geodetic gets the site back at the same epoch."""
     lat, lon = math.radians(lat_deg), math.radians(lon_deg)
     r_gcrs = itrs_to_gcrs(site_itrs(lat, lon, alt_km), T)
-    got = fs.gcrs_to_geodetic(r_gcrs, T)
+    got = geo.gcrs_to_geodetic(r_gcrs, T)
     assert got[0] == pytest.approx(lat, abs=1e-11)
     assert float(wrap_pi(got[1] - lon)) == pytest.approx(0.0, abs=1e-11)
     assert got[2] == pytest.approx(alt_km, abs=1e-7)
@@ -133,16 +134,16 @@ def test_measurement_point_inverts_core_razel():
     r_eci = np.array([4000.0, -3000.0, 4500.0])
     z = razel_gcrs(r_eci, T, COLUMBUS)
     stations = {"columbus": COLUMBUS}
-    assert fs.measurement_point(Kind.RANGE_AZ_EL, z, "columbus", T, stations) == \
+    assert geo.measurement_point(Kind.RANGE_AZ_EL, z, "columbus", T, stations) == \
         pytest.approx(r_eci, abs=1e-8)
-    assert fs.measurement_point(Kind.POSITION, r_eci, Frame.GCRF, T, {}) == \
+    assert geo.measurement_point(Kind.POSITION, r_eci, Frame.GCRF, T, {}) == \
         pytest.approx(r_eci)
-    assert fs.measurement_point(Kind.RA_DEC, z[1:], "columbus", T, stations) is None
-    assert fs.measurement_point(Kind.RANGE_AZ_EL, z, "elsewhere", T, stations) is None
+    assert geo.measurement_point(Kind.RA_DEC, z[1:], "columbus", T, stations) is None
+    assert geo.measurement_point(Kind.RANGE_AZ_EL, z, "elsewhere", T, stations) is None
 
 
 def test_meridian_and_station_turn_with_the_earth():
-    m0, m1 = fs.meridian_gcrs(T), fs.meridian_gcrs(T + 6 * 3600.0)
+    m0, m1 = geo.meridian_gcrs(T), geo.meridian_gcrs(T + 6 * 3600.0)
     assert np.linalg.norm(m0, axis=1) == pytest.approx(R_EARTH + 1.0)
     mid0, mid1 = m0[len(m0) // 2], m1[len(m1) // 2]  # on the equator
     turned = math.acos(mid0 @ mid1 / (np.linalg.norm(mid0) * np.linalg.norm(mid1)))
@@ -199,7 +200,7 @@ def test_scene_messages_encode():
     assert isinstance(update, SceneUpdate)
     assert len(update.encode()) > 500
     fix = repr(fs.location_fix(T, [7000.0, 0.0, 0.0]))
-    lat, lon, alt = fs.gcrs_to_geodetic([7000.0, 0.0, 0.0], T)
+    lat, lon, alt = geo.gcrs_to_geodetic([7000.0, 0.0, 0.0], T)
     values = {k: float(v) for k, v in re.findall(r"\b(latitude|longitude|altitude)=([-\d.e]+)",
                                                  fix)}
     assert values == pytest.approx({"latitude": math.degrees(lat),
@@ -256,7 +257,7 @@ def test_ros_markers_draw_the_same_shapes_as_the_foxglove_scene():
     assert all(m.header.frame_id == fs.SCENE_FRAME and m.header.stamp.sec == int(T + 60.0)
                for m in ma.markers)
     cov = by[("covariance", Marker.SPHERE)]
-    ell = fs.covariance_ellipsoid(p[:3, :3])
+    ell = geo.covariance_ellipsoid(p[:3, :3])
     assert [cov.scale.x, cov.scale.y, cov.scale.z] == pytest.approx(list(ell.size))
     o = cov.pose.orientation
     assert (o.x, o.y, o.z, o.w) == pytest.approx(ell.quaternion)
@@ -272,7 +273,7 @@ def test_ros_markers_draw_the_same_shapes_as_the_foxglove_scene():
 def test_nav_sat_fix_is_the_sub_satellite_point():
     r = [4000.0, 3000.0, 4500.0]
     fix = vm.nav_sat_fix(T, r, "estimate")
-    lat, lon, alt = fs.gcrs_to_geodetic(r, T)
+    lat, lon, alt = geo.gcrs_to_geodetic(r, T)
     assert (fix.latitude, fix.longitude, fix.altitude) == (math.degrees(lat),
                                                            math.degrees(lon), alt * 1000.0)
     assert fix.header.frame_id == "estimate" and fix.header.stamp.sec == int(T)
