@@ -12,11 +12,11 @@ bootstrap:
 demo: bootstrap
 	.venv/bin/ssa-fusion live
 
-# Gates first: ruff on the whole tree (docstring and annotation rules on ssa_fusion/core
-# only, pyproject.toml) and mypy on ssa_fusion/core; any finding fails. The tests then run
+# Gates first: ruff on the whole tree (docstring and annotation rules on every module of
+# the package, pyproject.toml) and mypy on the package; any finding fails. The tests then run
 # in a network namespace of their own where the machine allows (tools/isolated.sh): no
 # other ROS graph on the machine can cross-talk with the test graphs.
 test: bootstrap
 	.venv/bin/ruff check .
-	.venv/bin/mypy ssa_fusion/core
+	.venv/bin/mypy
 	tools/isolated.sh .venv/bin/python -m pytest

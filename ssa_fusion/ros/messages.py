@@ -66,7 +66,7 @@ def _default(classes: MsgClasses | None) -> MsgClasses:
 
 def stamp_to_seconds(stamp: Message) -> float:
     """Return a builtin_interfaces/Time in float seconds."""
-    return stamp.sec + stamp.nanosec * 1e-9
+    return float(stamp.sec) + float(stamp.nanosec) * 1e-9
 
 
 def seconds_to_stamp(t: float, classes: MsgClasses | None = None) -> Message:
