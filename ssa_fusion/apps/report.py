@@ -19,10 +19,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ssa_fusion.apps import evaluate
-from ssa_fusion.core import config, types
+from ssa_fusion.core import config, metrics, types
 from ssa_fusion.ros import bagio
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
 STATE_LABELS = ("x [km]", "y [km]", "z [km]", "vx [km/s]", "vy [km/s]", "vz [km/s]")
@@ -108,6 +109,41 @@ def save(fig: Figure, path: Path, dpi: int = 100) -> None:
     plots.save(fig, path, dpi)
 
 
+GAP_BREAK_S = 1800.0
+"""Samples further apart than this (s) are not joined by a line: a gap between passes, not a
+trend."""
+
+
+def line(t_s: np.ndarray, y: np.ndarray, t0: float, angle: bool = False
+         ) -> tuple[np.ndarray, np.ndarray]:
+    """Return (hours after `t0`, y) to plot as a line, NaN where it must not be drawn.
+
+    A NaN between samples more than `GAP_BREAK_S` apart and, for an `angle` (rad, shown in
+    deg), where it wraps (a jump over 180 deg): no line across a gap or across 0/360.
+    """
+    x = np.asarray(t_s, dtype=float)
+    v = np.degrees(np.asarray(y, dtype=float)) if angle else np.asarray(y, dtype=float)
+    cut = set((np.flatnonzero(np.diff(x) > GAP_BREAK_S) + 1).tolist())
+    if angle:
+        cut |= set((np.flatnonzero(np.abs(np.diff(v)) > 180.0) + 1).tolist())
+    where = sorted(cut)
+    return np.insert((x - t0) / 3600.0, where, np.nan), np.insert(v, where, np.nan)
+
+
+def outage_hours(data: evaluate.BagData, t0: float) -> tuple[float, float] | None:
+    """Return the scheduled outage (first to last withheld measurement) in h after `t0`."""
+    if not data.withheld:
+        return None
+    w = [m.t for m in data.withheld]
+    return (min(w) - t0) / 3600.0, (max(w) - t0) / 3600.0
+
+
+def shade(ax: Axes, span: tuple[float, float] | None) -> None:
+    """Shade the outage `span` (h) on `ax`, labelled once."""
+    if span is not None:
+        ax.axvspan(*span, color="0.85", zorder=0, label="outage (withheld)")
+
+
 def plot_arms(ev: evaluate.Evaluation, path: Path) -> None:
     """Plot every arm's position error over the gap (km, log scale) to `path`."""
     plt = _plt()
@@ -117,15 +153,20 @@ def plot_arms(ev: evaluate.Evaluation, path: Path) -> None:
     for arm, traj in g.arms.items():
         err = np.linalg.norm(traj.x[:, :3] - g.truth[:, :3], axis=1)
         ax.semilogy(hours, err, label=f"{arm} (ε={g.scores[arm].epsilon:.2e})")
-    ax.set_xlabel("hours into the gap")
+    ax.set_xlabel("hours into the gap [h]")
     ax.set_ylabel("position error [km]")
-    ax.legend()
+    ax.set_title("Position error of every arm over the gap")
+    ax.legend(fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
     save(fig, path, dpi=100)
 
 
 def plot_sigma(data: evaluate.BagData, path: Path) -> None:
-    """Plot the fused estimates' error per state with ±3σ to `path` (at epochs with a truth)."""
+    """Plot the fused estimates' error per state with ±3σ to `path` (at epochs with a truth).
+
+    No line joins epochs further apart than `GAP_BREAK_S` (the gaps between passes); the
+    outage is shaded.
+    """
     plt = _plt()
     truth = {e.t: e.x for e in data.truth}
     est = [e for e in data.estimates if e.t in truth and e.update_source != types.UpdateSource.NONE]
@@ -134,22 +175,42 @@ def plot_sigma(data: evaluate.BagData, path: Path) -> None:
     t = np.array([e.t for e in est])
     err = np.array([e.x - truth[e.t] for e in est])
     sig = np.sqrt(np.array([np.diag(e.P) for e in est]))
-    hours = (t - t[0]) / 3600.0
+    span = outage_hours(data, float(t[0]))
     fig, axes = plt.subplots(3, 2, figsize=(10, 7), sharex=True)
     for i, ax in enumerate(axes.T.ravel()):
-        ax.plot(hours, err[:, i], lw=0.8, label="error")
-        ax.plot(hours, 3 * sig[:, i], "r--", lw=0.8, label="±3σ")
-        ax.plot(hours, -3 * sig[:, i], "r--", lw=0.8)
+        shade(ax, span)
+        ax.plot(*line(t, err[:, i], t[0]), lw=0.8, label="error")
+        hours, three = line(t, 3 * sig[:, i], t[0])
+        ax.plot(hours, three, "r--", lw=0.8, label="±3σ")
+        ax.plot(hours, -three, "r--", lw=0.8)
+        # the scale of the run, not of the initial orbit determination's first sigmas
+        ax.set_ylim(-1.5 * np.nanpercentile(three, 99), 1.5 * np.nanpercentile(three, 99))
         ax.set_ylabel(STATE_LABELS[i])
         ax.grid(alpha=0.3)
-    axes[0, 0].legend()
+    axes[0, 0].legend(fontsize=8)
     for ax in axes[-1]:
-        ax.set_xlabel("hours")
+        ax.set_xlabel("hours since the first estimate [h]")
+    fig.suptitle("Error of the fused estimates (GCRF) against their ±3σ")
     save(fig, path, dpi=100)
 
 
+FORECAST_LABELS = {types.Kind.RANGE_AZ_EL: ("range [km]", "azimuth [deg]", "elevation [deg]"),
+                   types.Kind.RA_DEC: ("right ascension [deg]", "declination [deg]"),
+                   types.Kind.POSITION: ("x GCRF [km]", "y GCRF [km]", "z GCRF [km]")}
+"""Axis labels of a measurement's channels, by kind (angles shown in degrees)."""
+
+
+def _is_angle(kind: int, i: int) -> bool:
+    """Return whether channel `i` of a measurement of `kind` is an angle (rad)."""
+    return i in {types.Kind.RANGE_AZ_EL: (1, 2), types.Kind.RA_DEC: (0, 1)}.get(
+        types.Kind(kind), ())
+
+
 def plot_forecasts(data: evaluate.BagData, path: Path) -> None:
-    """Plot the forecasts against the withheld measurements to `path` (if any match)."""
+    """Plot the forecasts against the withheld measurements to `path` (if any match).
+
+    Angles in degrees, without lines across their wrap or across gaps.
+    """
     if not data.forecasts or not data.withheld:
         return
     plt = _plt()
@@ -161,35 +222,49 @@ def plot_forecasts(data: evaluate.BagData, path: Path) -> None:
     zf = np.array([m.z for m in f])
     zw = np.array([withheld[m.t] for m in f])
     kind = f[0].kind
-    labels = (("range [km]", "azimuth [rad]", "elevation [rad]")
-              if kind == types.Kind.RANGE_AZ_EL else ("x GCRF [km]", "y GCRF [km]", "z GCRF [km]"))
+    labels = FORECAST_LABELS.get(types.Kind(kind), ())
     fig, axes = plt.subplots(zf.shape[1], 1, figsize=(8, 6), sharex=True)
     for i, ax in enumerate(np.atleast_1d(axes)):
-        ax.plot((t - t[0]) / 3600.0, zw[:, i], ".", ms=2, label="withheld (sensor)")
-        ax.plot((t - t[0]) / 3600.0, zf[:, i], "-", lw=0.8, label="forecast")
+        angle = _is_angle(kind, i)
+        ax.plot(*line(t, zw[:, i], t[0], angle), ".", ms=2, label="withheld (sensor)")
+        ax.plot(*line(t, zf[:, i], t[0], angle), "-", lw=0.8, label="forecast")
         ax.set_ylabel(labels[i] if i < len(labels) else f"z[{i}]")
         ax.grid(alpha=0.3)
-    np.atleast_1d(axes)[0].legend()
-    np.atleast_1d(axes)[-1].set_xlabel("hours into the gap")
+    np.atleast_1d(axes)[0].legend(fontsize=8)
+    np.atleast_1d(axes)[-1].set_xlabel("hours into the gap [h]")
+    fig.suptitle("Forecasts against the measurements withheld in the outage")
     save(fig, path, dpi=100)
 
 
 def plot_nis(data: evaluate.BagData, path: Path) -> None:
-    """Plot the filter's NIS over time, by update source, to `path`."""
-    est = [e for e in data.estimates if e.update_source != types.UpdateSource.NONE]
+    """Plot the filter's NIS over time, by update source, against its 95 % χ² band.
+
+    Epochs without an innovation (NIS 0: the initial orbit determination) are left out; the
+    outage is shaded.
+    """
+    est = [e for e in data.estimates if e.update_source != types.UpdateSource.NONE and e.nis > 0]
     if not est:
         return
     plt = _plt()
     t = np.array([e.t for e in est])
     nis = np.array([e.nis for e in est])
     src = np.array([e.update_source for e in est])
+    dof = len(data.measurements[0].z) if data.measurements else 3
+    lo, hi = metrics.chi2_bounds(dof)
     fig, ax = plt.subplots(figsize=(8, 3.5))
-    for s, label in ((types.UpdateSource.SENSOR, "sensor"),
-                     (types.UpdateSource.FORECAST, "forecast")):
+    shade(ax, outage_hours(data, float(t[0])))
+    end = (t[-1] - t[0]) / 3600.0
+    ax.fill_between([0.0, end], lo, hi, color="tab:green", alpha=0.15,
+                    label=f"95 % χ² band [{lo:.2f}, {hi:.2f}] ({dof} dof)")
+    for s, label in ((types.UpdateSource.SENSOR, "sensor update"),
+                     (types.UpdateSource.FORECAST, "forecast update")):
         k = src == s
-        ax.semilogy((t[k] - t[0]) / 3600.0, np.maximum(nis[k], 1e-6), ".", ms=2, label=label)
-    ax.set_xlabel("hours")
-    ax.set_ylabel("NIS")
-    ax.legend()
+        if k.any():
+            ax.semilogy((t[k] - t[0]) / 3600.0, nis[k], ".", ms=2, label=label)
+    ax.set_yscale("log")
+    ax.set_xlabel("hours since the first update [h]")
+    ax.set_ylabel("NIS [-]")
+    ax.set_title("Normalised innovation squared of the filter")
+    ax.legend(fontsize=8)
     ax.grid(alpha=0.3, which="both")
     save(fig, path, dpi=100)

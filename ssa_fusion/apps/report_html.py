@@ -352,7 +352,7 @@ def nees(ev: evaluate.Evaluation) -> go.Figure:
             continue
         fig.add_trace(go.Scatter(x=hours, y=np.maximum(sc.nees, 1e-6), mode="lines",
                                  line={"color": COLORS[name]}, name=str(name)))
-    fig.update_yaxes(type="log", title_text="NEES [-]", exponentformat="power")
+    fig.update_yaxes(type="log", title_text="NEES [-]", exponentformat="power", dtick=1)
     fig.update_xaxes(title_text="hours into the gap [h]")
     fig.update_layout(title=f"NEES over the gap against the 95 % χ² band ({dof} dof)",
                       height=450)
@@ -383,7 +383,7 @@ def nis(data: evaluate.BagData) -> go.Figure | None:
             fig.add_trace(go.Scatter(x=_hours(np.array([e.t for e in sel]), t0),
                                      y=[e.nis for e in sel], mode="markers",
                                      marker={"size": 3, "color": color}, name=label))
-    fig.update_yaxes(type="log", title_text="NIS [-]", exponentformat="power")
+    fig.update_yaxes(type="log", title_text="NIS [-]", exponentformat="power", dtick=1)
     fig.update_xaxes(title_text="hours since the first estimate [h]")
     fig.update_layout(title=f"NIS of the filter against the 95 % χ² band ({dof} dof; "
                             f"[{lo:.2f}, {hi:.2f}])", height=400)
