@@ -9,6 +9,16 @@ measured (the hypothetical arm fuses it). The truth is sampled at a regular cade
 every gap, where `evaluation.passes` and `evaluation.arms` score a filter (the study that runs
 both is `studies.sky_runs`).
 
+Optical sites and the seasons: an optical site sees an object only while the site is dark
+(Sun below -12 deg) and the object sunlit and above the 20 deg mask. A 400 km orbit is
+sunlit over a dark site only near the terminator, and the ISS state of these scenarios has
+its orbit plane far from the terminator in early January: over `iss_network`'s three days
+from 2025-01-01 the object is in the Earth's shadow whenever a GEODSS site is dark, and the
+optical sites measure nothing. The plane turns against the Sun (nodal regression ~5 deg/day,
+the Sun ~1 deg/day): in 85 of 122 three-day windows of 2025 (every third day) the optical
+sites see it, and from day 105 (2025-04-16, `iss_network_april`) all three do, ~100
+measurements in three days.
+
 Units: km, km/s, rad, s; times are Unix seconds (UTC).
 """
 
@@ -138,6 +148,10 @@ class SkyScenario:
 
 
 _DAY = 86400.0
+NETWORK_SENSORS = ("millstone", "tira", "altair", "socorro", "maui", "diego_garcia")
+"""The radar + optical network of `iss_network`: three radars and the three GEODSS sites."""
+OPTICAL_SEASON_DAY = 105
+"""Day of 2025 (2025-04-16) from which `iss_network_april` runs."""
 SKY_SCENARIOS: dict[str, SkyScenario] = {
     s.name: s
     for s in [
@@ -146,10 +160,16 @@ SKY_SCENARIOS: dict[str, SkyScenario] = {
             outages=(("columbus", 1.5 * _DAY, 0.5 * _DAY),),
             finding="one radar, 10 deg mask: ~5 passes a day, gaps of 1.5-16 h"),
         SkyScenario(
-            name="iss_network", sensors=("millstone", "tira", "altair", "socorro", "maui",
-                                         "diego_garcia"),
+            name="iss_network", sensors=NETWORK_SENSORS,
             outages=((ALL_STATIONS, 1.5 * _DAY, 0.25 * _DAY),),
-            finding="radar + optical network, whole-network outage of 6 h"),
+            finding="radar + optical network, whole-network outage of 6 h; in these three "
+                    "days of January the optical sites see nothing (module docstring)"),
+        SkyScenario(
+            name="iss_network_april", sensors=NETWORK_SENSORS,
+            t0=ORBIT_EPOCH_UNIX + OPTICAL_SEASON_DAY * _DAY,
+            outages=((ALL_STATIONS, 1.5 * _DAY, 0.25 * _DAY),),
+            finding="the same network and orbit from 2025-04-16, when the optical sites see "
+                    "the object at dusk and dawn (module docstring)"),
         SkyScenario(
             name="leo_optical", sensors=("socorro", "maui", "diego_garcia"),
             x0=tuple(dynamics.elements_to_state(**SSO_ELEMENTS)),

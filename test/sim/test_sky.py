@@ -122,3 +122,22 @@ def test_reproduce_runs_the_real_sky_study_over_evaluation_seeds(tmp_path, monke
     assert set(arms_km) == {"placeholder", "coast", "j2_coast", "dmd_ekf", "hypothetical_ekf"}
     assert all(0.0 < v < 5.0 for v in arms_km.values()), arms_km  # km over a 3.6 h outage
     assert "## The real sky" in (tmp_path / "results.md").read_text()
+
+
+def test_the_optical_network_observes_in_april_and_not_in_january():
+    """iss_network's optical sites measure nothing in its three days of January (the ISS is
+    in the Earth's shadow whenever they are dark: module docstring of sim.sky); the same
+    network from 2025-04-16 (iss_network_april) has every optical site measuring, only at
+    night, of a sunlit object."""
+    january = sky.simulate_sky(sky.SKY_SCENARIOS["iss_network"], seed=1)
+    assert not [m for m in january.measurements if m.kind == Kind.RA_DEC]
+    s = sky.SKY_SCENARIOS["iss_network_april"]
+    april = sky.simulate_sky(s, seed=1)
+    optical = [m for m in april.measurements if m.kind == Kind.RA_DEC]
+    assert {m.frame_id for m in optical} == {"socorro", "maui", "diego_garcia"}
+    assert len(optical) > 60
+    t = np.array([m.t for m in optical])
+    for name in ("socorro", "maui", "diego_garcia"):
+        tn = np.array([m.t for m in optical if m.frame_id == name])
+        assert sun.sun_elevation(tn, SENSORS[name].station).max() < math.radians(-12.0)
+    assert sun.sunlit(sky.truth(s, t)[:, :3], t).all()
