@@ -48,42 +48,32 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+# test/references.py: astropy and skyfield on our IERS table, as the frame tests set them up
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "test"))
 
 from ssa_fusion import limit_blas_threads
 
 limit_blas_threads()
 
 import astropy.units as u  # noqa: E402
-import astropy_iers_data  # noqa: E402
 import numpy as np  # noqa: E402
-from astropy.coordinates import (  # noqa: E402
-    GCRS,
-    ITRS,
-    TEME,
-    AltAz,
-    CartesianDifferential,
-    CartesianRepresentation,
-    EarthLocation,
-)
+import references  # noqa: E402
+from astropy.coordinates import GCRS, ITRS, TEME, CartesianRepresentation  # noqa: E402
 from astropy.time import Time  # noqa: E402
 from astropy.utils import iers  # noqa: E402
 from numpy.typing import NDArray  # noqa: E402
 from sgp4.api import SatrecArray  # noqa: E402
-from skyfield.api import wgs84  # noqa: E402
 from skyfield.constants import AU_KM, DAY_S  # noqa: E402
-from skyfield.data import iers as skyfield_iers  # noqa: E402
 from skyfield.framelib import itrs as sky_itrs  # noqa: E402
 from skyfield.positionlib import ICRF  # noqa: E402
 from skyfield.sgp4lib import TEME as SKY_TEME  # noqa: E402
-from skyfield.timelib import Timescale  # noqa: E402
 
 from ssa_fusion.core import catalog, frames, timescales  # noqa: E402
 from ssa_fusion.core.constants import ARCSEC  # noqa: E402
 from ssa_fusion.core.stations import SENSORS  # noqa: E402
 
 Array = NDArray[np.float64]
-ROOT = Path(__file__).resolve().parents[1]
-CATALOG = ROOT / "config" / "catalogs" / "celestrak_active_2025-07.tle"
+CATALOG = references.ACTIVE
 N = 10_000
 STATION = SENSORS["millstone"].station
 GEO_KM = 50_000.0
@@ -141,69 +131,30 @@ def _astropy_time(t: Array) -> Time:
     return Time(e, format="unix", scale="utc")
 
 
-def _astropy_coord(x: Array, frame: type, obstime: Time) -> Any:
-    rep = CartesianRepresentation(
-        x[:, :3].T * u.km, differentials=CartesianDifferential(x[:, 3:].T * u.km / u.s))
-    return frame(rep, obstime=obstime)
-
-
-def _astropy_states(c: Any) -> Array:
-    return np.concatenate([c.cartesian.xyz.to_value(u.km).T,
-                           c.velocity.d_xyz.to_value(u.km / u.s).T], axis=1)
-
-
 def astropy_teme_to_gcrs(x: Array, t: Array) -> Array:
     tt = _astropy_time(t)
-    return _astropy_states(_astropy_coord(x, TEME, tt).transform_to(GCRS(obstime=tt)))
+    return references.states(references.astropy_state(x, tt, TEME).transform_to(GCRS(obstime=tt)))
 
 
 def astropy_gcrs_to_itrs(x: Array, t: Array) -> Array:
     tt = _astropy_time(t)
-    return _astropy_states(_astropy_coord(x, GCRS, tt).transform_to(ITRS(obstime=tt)))
+    return references.states(references.astropy_state(x, tt, GCRS).transform_to(ITRS(obstime=tt)))
 
 
-_LOC = EarthLocation.from_geodetic(np.degrees(STATION.lon_rad) * u.deg,
-                                   np.degrees(STATION.lat_rad) * u.deg, STATION.alt_km * u.km)
+_LOC = references.location(STATION)
 
 
 def astropy_razel(x: Array, t: Array) -> Array:
     tt = _astropy_time(t)
     itrs = GCRS(CartesianRepresentation(x[:, :3].T * u.km), obstime=tt).transform_to(
         ITRS(obstime=tt))
-    topo = ITRS(itrs.cartesian - _LOC.get_itrs(tt).cartesian, obstime=tt, location=_LOC)
-    aa = topo.transform_to(AltAz(obstime=tt, location=_LOC, pressure=0 * u.hPa))
-    return np.stack([aa.distance.to_value(u.km), aa.az.rad, aa.alt.rad], axis=-1)
+    return references.astropy_razel(itrs, tt, _LOC)
 
 
-def _skyfield_ts() -> Any:
-    """Skyfield's timescale and polar motion from the same finals2000A.all, offline.
-
-    Skyfield's reader takes the Bulletin A columns; ours and astropy's take Bulletin B where a
-    row has it (UT1 differs by ~20 us in 2025: 0.3 m at 175,000 km), so B replaces A where
-    given before skyfield builds its tables.
-    """
-    path = Path(astropy_iers_data.IERS_A_FILE)
-    with path.open("rb") as f:
-        rows = skyfield_iers.parse_x_y_dut1_from_finals_all(f)
-    bulletin_b = {}
-    for line in path.read_text().splitlines():
-        fields = line[134:144].strip(), line[144:154].strip(), line[154:165].strip()
-        if all(fields):
-            bulletin_b[float(line[7:15])] = tuple(float(v) for v in fields)
-    for row in rows:
-        b = bulletin_b.get(float(row["utc_mjd"]))
-        if b is not None:
-            row["x_arcseconds"], row["y_arcseconds"], row["dut1"] = b
-    daily_tt, daily_delta_t, leap_dates, leap_offsets = skyfield_iers.build_timescale_arrays(
-        rows["utc_mjd"], rows["dut1"])
-    ts = Timescale((daily_tt, daily_delta_t), leap_dates, leap_offsets)
-    skyfield_iers.install_polar_motion_table(ts, rows)
-    return ts
-
-
-SKY_TS = _skyfield_ts()
-TOPOS = wgs84.latlon(np.degrees(STATION.lat_rad), np.degrees(STATION.lon_rad),
-                     elevation_m=STATION.alt_km * 1e3)
+SKY_TS = references.skyfield_timescale()
+"""Skyfield on the same finals2000A.all, Bulletin B where given (UT1 differs from A by ~20 us
+in 2025: 0.3 m at 175,000 km)."""
+TOPOS = references.topos(STATION)
 
 
 def _sky_time(t: Array) -> Any:
@@ -226,11 +177,7 @@ def skyfield_gcrs_to_itrs(x: Array, t: Array) -> Array:
 
 
 def skyfield_razel(x: Array, t: Array) -> Array:
-    tt = _sky_time(t)
-    site = TOPOS.at(tt).position.km
-    site = site[:, None] if site.ndim == 1 else site
-    alt, az, dist = ICRF((x[:, :3].T - site) / AU_KM, t=tt, center=TOPOS).altaz()
-    return np.stack([dist.km, az.radians, alt.radians], axis=-1)
+    return references.sky_razel(references.topocentric(x[:, :3].T, _sky_time(t), TOPOS))
 
 
 # --------------------------------------------------------------------------------------------

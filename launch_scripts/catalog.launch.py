@@ -22,11 +22,10 @@ from typing import Any
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch_ros.actions import Node
 
 from ssa_fusion.graphs import DEFAULT_SCENARIO, catalog_graph, catalog_scenario, default_bag
-from ssa_fusion.ros.launch_events import shutdown_handlers
+from ssa_fusion.ros.launch_events import launch_description, shutdown_handlers
 
 DRAIN_S = 2.0
 """Wall s between sensor_sim's exit and the shutdown of the rest."""
@@ -89,8 +88,4 @@ def generate_launch_description() -> LaunchDescription:
         "seed": "0",
         "bag": default_bag(),
     }
-    return LaunchDescription([
-        *(DeclareLaunchArgument(name, default_value=defaults[name], description=text)
-          for name, text in ARGUMENTS.items()),
-        OpaqueFunction(function=graph),
-    ])
+    return launch_description(ARGUMENTS, defaults, graph)

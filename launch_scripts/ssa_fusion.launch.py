@@ -27,11 +27,10 @@ from typing import Any
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch_ros.actions import Node
 
 from ssa_fusion.graphs import READERS, WAIT_FOR, default_bag, live_scenario, node_parameters
-from ssa_fusion.ros.launch_events import shutdown_handlers
+from ssa_fusion.ros.launch_events import launch_description, shutdown_handlers
 
 NODES = ("recorder", "surrogate", "filter", "sensor_sim")
 """Started in this order; sensor_sim waits until the others have matched its topics."""
@@ -92,8 +91,4 @@ def generate_launch_description() -> LaunchDescription:
         "time_scale": "",
         "bag": default_bag(),
     }
-    return LaunchDescription([
-        *(DeclareLaunchArgument(name, default_value=defaults[name], description=text)
-          for name, text in ARGUMENTS.items()),
-        OpaqueFunction(function=graph),
-    ])
+    return launch_description(ARGUMENTS, defaults, graph)

@@ -16,6 +16,9 @@ as soon as their condition holds, a larger factor never slows a passing test; ra
 
 import math
 import os
+import signal
+from collections.abc import Callable
+from typing import Any
 
 from ssa_fusion.ros.processes import Graph as RosGraph
 from ssa_fusion.ros.processes import Proc as NodeProcess
@@ -37,4 +40,30 @@ TIMEOUT_FACTOR = _timeout_factor()
 
 RosGraph.timeout_factor = TIMEOUT_FACTOR
 
-__all__ = ["TIMEOUT_FACTOR", "NodeProcess", "RosGraph"]
+OBJECT_NODES = ("recorder", "surrogate", "filter")
+"""The nodes of the one-object graph that sensor_sim feeds."""
+
+
+def run_object_graph(g: RosGraph, params: dict[str, dict[str, Any]], sensor_timeout: float,
+                     settled: Callable[[], object],
+                     before_sensor: Callable[[], object] | None = None) -> dict[str, Any]:
+    """Run the one-object graph once on `g` and stop it; what the tests of a run check.
+
+    Starts `OBJECT_NODES`, then (after `before_sensor()`) sensor_sim, with their `params`
+    by node (`graphs.node_parameters`); waits for sensor_sim to exit (`sensor_timeout` s)
+    and for `settled()` to stop changing (1 s, at most 20 s), then SIGTERMs the three at
+    once (their shutdowns overlap). Returns ``sensor_code``, ``codes`` (by node), ``report``.
+    """
+    nodes = {n: g.start_node(n, params=params[n]) for n in OBJECT_NODES}
+    if before_sensor is not None:
+        before_sensor()
+    sensor = g.start_node("sensor_sim", params=params["sensor_sim"])
+    sensor_code = g.wait_exit(sensor, timeout=sensor_timeout)
+    g.wait_quiet(settled, quiet_s=1.0, limit_s=20)
+    for p in nodes.values():
+        p.popen.send_signal(signal.SIGTERM)
+    codes = {n: g.wait_exit(p, timeout=10.0) for n, p in nodes.items()}
+    return {"sensor_code": sensor_code, "codes": codes, "report": g.report()}
+
+
+__all__ = ["OBJECT_NODES", "TIMEOUT_FACTOR", "NodeProcess", "RosGraph", "run_object_graph"]

@@ -93,7 +93,7 @@ IMPORT_KEYS = {
     "sgp4": "python3-sgp4-pip",
     "plotly": "python3-plotly-pip",  # report.html (apps/report_html.py)
     "foxglove": "python3-foxglove-sdk-pip",  # foxglove-sdk: the foxglove_bridge node
-    "ccsds_ndm": "python3-ccsds-ndm-pip",  # CCSDS OEM/TDM (apps/ccsds.py)
+    "ccsds_ndm": "python3-ccsds-ndm-pip",  # CCSDS OEM/TDM (apps/ccsds*.py)
     "xsdata": "python3-ccsds-ndm-pip",  # ccsds-ndm's own dependency (its warnings' class)
     "numba": "python3-numba-pip",  # the batched EKF's compiled kernels (core/batch_ekf.py)
     "erfa": "python3-pyerfa-pip",  # frames and time scales (core/frames.py, timescales.py)

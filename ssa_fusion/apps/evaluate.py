@@ -26,16 +26,8 @@ from ssa_fusion.core.frames import Frame
 from ssa_fusion.evaluation import passes as passes_
 from ssa_fusion.evaluation.arms import ArmName, GapEvaluation, evaluate_gap
 from ssa_fusion.nodes import settings
-from ssa_fusion.ros import bagio
+from ssa_fusion.ros import bagio, topics
 from ssa_fusion.ros.messages import estimate_from_msg, measurement_from_msg
-from ssa_fusion.ros.topics import (
-    TOPIC_CONFIG,
-    TOPIC_ESTIMATE,
-    TOPIC_FORECAST,
-    TOPIC_MEASUREMENT,
-    TOPIC_TRUTH,
-    TOPIC_WITHHELD,
-)
 from ssa_fusion.sim import scenarios, sky
 
 
@@ -71,9 +63,9 @@ class BagData:
 def load(path: Path | str) -> BagData:
     """Read the /ssa topics of a bag into core types (other topics are counted only)."""
     data = BagData()
-    states = {TOPIC_TRUTH: data.truth, TOPIC_ESTIMATE: data.estimates}
-    measurements = {TOPIC_MEASUREMENT: data.measurements, TOPIC_WITHHELD: data.withheld,
-                    TOPIC_FORECAST: data.forecasts}
+    states = {topics.TOPIC_TRUTH: data.truth, topics.TOPIC_ESTIMATE: data.estimates}
+    measurements = {topics.TOPIC_MEASUREMENT: data.measurements,
+                    topics.TOPIC_WITHHELD: data.withheld, topics.TOPIC_FORECAST: data.forecasts}
     undecodable: Counter[str] = Counter()
     for m in bagio.read_bag(path, undecodable=undecodable):
         data.counts[m.topic] = data.counts.get(m.topic, 0) + 1
@@ -82,7 +74,7 @@ def load(path: Path | str) -> BagData:
             data.frames.add(m.msg.header.frame_id)
         elif m.topic in measurements:
             measurements[m.topic].append(measurement_from_msg(m.msg))
-        elif m.topic == TOPIC_CONFIG:
+        elif m.topic == topics.TOPIC_CONFIG:
             data.config.append(m.msg.data)
     for topic, n in undecodable.items():
         data.counts[f"undecodable {topic}"] = n
@@ -99,7 +91,7 @@ class Settings:
     origin: str
 
 
-def estimator_for(recorded: list[str], kind: int, scenario: str = "",
+def settings_for_bag(recorded: list[str], kind: int, scenario: str = "",
                   params_file: Path | None = None) -> Settings:
     """Return the estimator settings for a bag (see the module docstring for the order).
 
@@ -115,9 +107,9 @@ def estimator_for(recorded: list[str], kind: int, scenario: str = "",
         return Settings(scenarios.get(scenario).estimator(), f"scenario {scenario}")
     estimator = settings.recorded_estimator(recorded)
     if estimator is not None:
-        return Settings(estimator, f"recorded with the bag ({TOPIC_CONFIG})")
+        return Settings(estimator, f"recorded with the bag ({topics.TOPIC_CONFIG})")
     s = scenarios.settings_for("", kind)
-    return Settings(s.estimator(), f"scenario {s.name} (the bag has no {TOPIC_CONFIG}; "
+    return Settings(s.estimator(), f"scenario {s.name} (the bag has no {topics.TOPIC_CONFIG}; "
                                    f"the default for its measurement kind)")
 
 
@@ -142,7 +134,7 @@ def evaluate(data: BagData, scenario: str = "", seed: int = 0,
     if not data.truth:
         raise ValueError("the bag has no /ssa/truth messages: nothing to compare against")
     kind = data.measurements[0].kind if data.measurements else types.Kind.POSITION
-    chosen = estimator_for(data.config, kind, scenario, params_file)
+    chosen = settings_for_bag(data.config, kind, scenario, params_file)
     truth = {e.t: e.x for e in data.truth}
     t_gap = np.array(sorted({m.t for m in data.withheld}))
     network = chosen.estimator.is_network

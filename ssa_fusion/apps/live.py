@@ -218,8 +218,7 @@ def run(args: argparse.Namespace) -> int:
         graph.wait_quiet(counts, quiet_s=1.0, limit_s=30.0)
     finally:
         problems = graph.close()
-    if problems:
-        print("error: node process(es) ended badly:\n" + "\n\n".join(problems), file=sys.stderr)
+    if runs.ended_badly(problems):
         return 1
     wall = time.monotonic() - t_start
     data = evaluate.load(bag)

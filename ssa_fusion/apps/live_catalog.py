@@ -74,14 +74,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "repeatable")
 
 
-def check(args: argparse.Namespace) -> str | None:
+def args_problem(args: argparse.Namespace) -> str | None:
     """Return why the catalog options cannot run, or None."""
     if args.objects < 0 or args.synthetic < 0 or args.duration < 0:
         return "--objects, --synthetic and --duration must be >= 0"
     if not 1 <= args.shards <= 64:
         return "--shards must be in 1..64"
     try:
-        surrogate_params(args)
+        catalog_surrogate_params(args)
     except ValueError as exc:
         return str(exc)
     try:
@@ -99,7 +99,7 @@ def entries_of(args: argparse.Namespace) -> list[catalog_io.CatalogEntry]:
     return entries[: args.objects] if args.objects else entries
 
 
-def surrogate_params(args: argparse.Namespace) -> dict[str, Any]:
+def catalog_surrogate_params(args: argparse.Namespace) -> dict[str, Any]:
     """Return the ``--surrogate-param NAME=VALUE`` options as parameters.
 
     The values are YAML (numbers, booleans, strings); ValueError naming an option that is
@@ -162,7 +162,7 @@ def position_errors(entries: list[catalog_io.CatalogEntry],
 
 def run(args: argparse.Namespace) -> int:
     """Run `ssa-fusion live --catalog`; return the exit code (1 when measurements were lost)."""
-    problem = check(args)
+    problem = args_problem(args)
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         return 2
@@ -175,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
     sim_s = args.duration * 3600.0 or s.duration_s
     specs = graphs.catalog_graph(s, args.catalog, args.objects, args.synthetic, sim_s,
                           args.time_scale, args.seed, args.shards, args.surrogate,
-                          surrogate_params(args), bag)
+                          catalog_surrogate_params(args), bag)
     names = [n.name for n in specs if n.executable == "catalog_filter"]
     gaps = [n.name for n in specs if n.executable == "catalog_surrogate"]
     graph = Graph(out / "logs", args.domain_id)
@@ -211,8 +211,7 @@ def run(args: argparse.Namespace) -> int:
             rss = {n: _rss_kib(p.popen.pid) for n, p in zip(names + gaps, procs, strict=True)}
     finally:
         problems = graph.close()
-    if problems:
-        print("error: node process(es) ended badly:\n" + "\n\n".join(problems), file=sys.stderr)
+    if runs.ended_badly(problems):
         return 1
     wall = time.monotonic() - t_start
     sim_wall = runs.sensor_wall_times(out / "logs" / "sensor_sim.err")

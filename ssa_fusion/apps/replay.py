@@ -165,7 +165,7 @@ def settings(stream: list[bagio.BagMessage], scenario: str = "",
              params_file: Path | None = None) -> evaluate.Settings:
     """Return the estimator settings to replay `stream` with.
 
-    As `evaluate.estimator_for` chooses them: params file, scenario, those recorded with the
+    As `evaluate.settings_for_bag` chooses them: params file, scenario, those recorded with the
     bag, else the measurement kind's default.
 
     The bag's own cadence wins: if its measurements come at another interval than the
@@ -176,7 +176,7 @@ def settings(stream: list[bagio.BagMessage], scenario: str = "",
     """
     first = next(m for m in stream if m.topic == TOPIC_MEASUREMENT)
     recorded = [m.msg.data for m in stream if m.topic == TOPIC_CONFIG]
-    chosen = evaluate.estimator_for(recorded, first.msg.kind, scenario, params_file)
+    chosen = evaluate.settings_for_bag(recorded, first.msg.kind, scenario, params_file)
     c = chosen.estimator
     dt, cadence = bag_cadence(stream), c.surrogate.cadence_s
     if not math.isnan(dt) and cadence > 0 and abs(dt - cadence) > c.surrogate.jitter * cadence:

@@ -335,7 +335,7 @@ def _band(fig: go.Figure, x0: float, x1: float, lo: float, hi: float) -> None:
                              name=f"95 % χ² band [{lo:.2f}, {hi:.2f}]"))
 
 
-def nees(ev: evaluate.Evaluation) -> go.Figure:
+def nees_plot(ev: evaluate.Evaluation) -> go.Figure:
     """Return each arm's NEES (dimensionless, log scale) over the gap against the χ² band.
 
     The 95 % band of one epoch's NEES (dof: the state dimension).
@@ -359,7 +359,7 @@ def nees(ev: evaluate.Evaluation) -> go.Figure:
     return fig
 
 
-def nis(data: evaluate.BagData) -> go.Figure | None:
+def nis_plot(data: evaluate.BagData) -> go.Figure | None:
     """Return the filter's NIS (dimensionless, log scale) at each fused epoch over the run.
 
     Sensor and forecast updates apart, against the 95 % χ² band of one update's NIS (dof:
@@ -429,7 +429,7 @@ def passes_table(passes: PassReport) -> str:
 def figures(data: evaluate.BagData, ev: evaluate.Evaluation) -> list[go.Figure]:
     """Return the report's figures, in page order (those without data left out)."""
     figs = [orbit_3d(data, ev), ground_track(data, run_stations(ev.settings.estimator)),
-            arm_errors(ev), forecasts(data), nees(ev), nis(data)]
+            arm_errors(ev), forecasts(data), nees_plot(ev), nis_plot(data)]
     return [f for f in figs if f is not None]
 
 

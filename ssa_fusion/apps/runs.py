@@ -2,7 +2,8 @@
 
 `default_out` names a new directory (`out/live/<scenario>_<date-time>`), `link_latest`
 points `out/live/latest` at it, `run_dirs` makes it and picks the bag inside, and
-`sensor_wall_times` reads from sensor_sim's log when the simulation started and ended.
+`sensor_wall_times` reads from sensor_sim's log when the simulation started and ended, and
+`ended_badly` says which node processes of a run did not end well.
 """
 
 from __future__ import annotations
@@ -38,6 +39,13 @@ def link_latest(out: Path, root: Path = LIVE_ROOT) -> None:
     tmp.unlink(missing_ok=True)
     tmp.symlink_to(os.path.relpath(out.resolve(), root.resolve()), target_is_directory=True)
     os.replace(tmp, latest)
+
+
+def ended_badly(problems: list[str]) -> bool:
+    """Say on stderr how node processes ended badly (`Graph.close`'s problems); True if any."""
+    if problems:
+        print("error: node process(es) ended badly:\n" + "\n\n".join(problems), file=sys.stderr)
+    return bool(problems)
 
 
 _LOG_STAMP = re.compile(r"\[(\d+(?:\.\d+)?)\]")

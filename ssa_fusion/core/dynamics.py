@@ -142,15 +142,8 @@ def rotate_states(x: Array, rotation: Array | None) -> Array:
     return out
 
 
-def propagate(
-    model: str,
-    x0: ArrayLike,
-    t_s: ArrayLike,
-    rtol: float = 1e-12,
-    atol: float = 1e-12,
-    pole_frame: Array | None = None,
-    **params: float,
-) -> Array:
+def propagate(model: str, x0: ArrayLike, t_s: ArrayLike, rtol: float = 1e-12,
+              atol: float = 1e-12, pole_frame: Array | None = None, **params: float) -> Array:
     """Integrate ``model`` from ``x0`` (at ``t_s[0]``) and sample it at ``t_s``.
 
     Parameters
@@ -270,14 +263,8 @@ def jacobian(model: str, x: ArrayLike, **params: float) -> Array:
     return jac
 
 
-def propagate_stm(
-    model: str,
-    x0: ArrayLike,
-    dt_s: float,
-    rtol: float = 1e-11,
-    atol: float = 1e-12,
-    **params: float,
-) -> tuple[Array, Array]:
+def propagate_stm(model: str, x0: ArrayLike, dt_s: float, rtol: float = 1e-11,
+                  atol: float = 1e-12, **params: float) -> tuple[Array, Array]:
     """Propagate one state ``x0`` (n,) by ``dt_s`` with its state transition matrix.
 
     Integrates the variational equations dPhi/dt = A(x) Phi (DOP853) alongside the state;

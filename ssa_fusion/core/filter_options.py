@@ -21,9 +21,9 @@ One set of defaults, the per-object and the catalog filter's alike: q 1e-10 km^2
 `DEFAULT_GATE`, no covariance bound; 3 IOD samples within an unlimited span, a P0 floor of
 1 km and 1 m/s, no re-initialisation; Kepler, 60 s integration steps. The span is
 unlimited so that a scenario measured every 600 s (Molniya) still has an IOD batch; a
-catalog user sets the span of one pass (the catalog node and the sky scenarios: 300 s). The
-catalog bank's own requirements (3 samples or more for Herrick-Gibbs, 6 states) are
-checked by `track_bank.TrackBank`.
+catalog user sets the span of one pass (`SKY_FILTER`, the catalog node's and the real-sky
+scenarios' filter: 300 s). The catalog bank's own requirements (3 samples or more for
+Herrick-Gibbs, 6 states) are checked by `track_bank.TrackBank`.
 
 Units are the core's: km, km/s, s.
 """
@@ -37,7 +37,8 @@ from typing import Any
 
 from .types import MotionModel
 
-__all__ = ["DEFAULT_GATE", "FilterOptions", "IodOptions", "MotionOptions", "NoiseOptions"]
+__all__ = ["DEFAULT_GATE", "SKY_FILTER", "FilterOptions", "IodOptions", "MotionOptions",
+           "NoiseOptions"]
 
 DEFAULT_GATE = 1000.0
 """Default NIS gate: rejects gross glitches only (a 3-channel innovation ~30 sigma away)."""
@@ -172,3 +173,16 @@ class FilterOptions:
     def flat(self) -> dict[str, Any]:
         """Return every option by its name (what `with_` takes)."""
         return {name: getattr(getattr(self, part), name) for name, part in _PART_OF.items()}
+
+
+SKY_FILTER = FilterOptions(
+    noise=NoiseOptions(q=1e-13, sigma_bound=2.0),
+    iod=IodOptions(iod_samples=7, iod_max_span_s=300.0, reinit_after=10),
+    motion=MotionOptions(motion_model=MotionModel.J2))
+"""The filter of the real sky: the real-sky scenarios' (`sim.sky`) and, in SI, the catalog
+filter node's defaults (`nodes.defaults`).
+
+Two-body + J2; q 1e-13 km^2/s^3 (tuned on the real sky: `sim.sky.SKY_Q`); IOD from 7
+measurements within 300 s (one pass of one station), initialised again after 10 real
+measurements in a row refused by the gate; covariance bounded by the orbit (2); the P0
+floor (1 km, 1 m/s) and the gate are the defaults."""

@@ -535,55 +535,34 @@ def razel_jacobian_gcrs(x_gcrs6: ArrayLike, t_unix: float, station: Station,
 def wrap_angle(a: float | ArrayLike) -> NDArray[np.float64] | float:
     """Wrap angle(s) into (-pi, pi] (residuals: the EKF innovation).
 
-    Parameters
-    ----------
-    a : float or array_like
-        Angle(s), rad.
-
-    Returns
-    -------
-    float or ndarray
-        ``pi - (pi - a) mod 2 pi``; a float for a Python float or 0-d input.
+    ``pi - (pi - a) mod 2 pi`` of `a` (rad, float or array_like): a float for a Python float
+    or a 0-d input, else an array.
     """
     if isinstance(a, float):  # the EKF's per-channel hot path
         return math.pi - (math.pi - a) % TWO_PI
-    w = math.pi - np.mod(math.pi - np.asarray(a, dtype=float), TWO_PI)
-    return float(w) if np.ndim(w) == 0 else w
+    return _float_if_scalar(math.pi - np.mod(math.pi - np.asarray(a, dtype=float), TWO_PI))
 
 
 def wrap_2pi(a: float | ArrayLike) -> NDArray[np.float64] | float:
     """Wrap angle(s) into [0, 2 pi) (azimuths, orbital angles).
 
-    Parameters
-    ----------
-    a : float or array_like
-        Angle(s), rad.
-
-    Returns
-    -------
-    float or ndarray
-        ``a mod 2 pi`` (floor convention); a float for a Python float or 0-d input.
+    ``a mod 2 pi`` (floor convention); a float or an array as `wrap_angle`.
     """
     if isinstance(a, float):
         return a % TWO_PI
-    w = np.mod(np.asarray(a, dtype=float), TWO_PI)
-    return float(w) if np.ndim(w) == 0 else w
+    return _float_if_scalar(np.mod(np.asarray(a, dtype=float), TWO_PI))
 
 
 def wrap_pi(a: float | ArrayLike) -> NDArray[np.float64] | float:
     """Wrap angle(s) into [-pi, pi) (errors of forecasts against truth).
 
-    Parameters
-    ----------
-    a : float or array_like
-        Angle(s), rad.
-
-    Returns
-    -------
-    float or ndarray
-        ``(a + pi) mod 2 pi - pi``; a float for a Python float or 0-d input.
+    ``(a + pi) mod 2 pi - pi``; a float or an array as `wrap_angle`.
     """
     if isinstance(a, float):
         return (a + math.pi) % TWO_PI - math.pi
-    w = np.mod(np.asarray(a, dtype=float) + math.pi, TWO_PI) - math.pi
+    return _float_if_scalar(np.mod(np.asarray(a, dtype=float) + math.pi, TWO_PI) - math.pi)
+
+
+def _float_if_scalar(w: NDArray[np.float64]) -> NDArray[np.float64] | float:
+    """Return a 0-d array as a float, any other as it is."""
     return float(w) if np.ndim(w) == 0 else w

@@ -54,6 +54,7 @@ from numpy.typing import ArrayLike, NDArray
 from . import frames
 from .constants import MU_EARTH
 from .propagation import integrate_stm
+from .timescales import DAY_S
 from .types import MotionModel
 
 Array = NDArray[np.float64]
@@ -268,14 +269,14 @@ class ResidualConfig:
 
     model: str = "hill"
     accel_components: tuple[bool, bool, bool] = (True, True, True)
-    window_s: float = 2 * 86400.0
+    window_s: float = 2 * DAY_S
     min_anchors: int = 5
-    min_span_s: float = 86400.0
+    min_span_s: float = DAY_S
     degrees: tuple[int, int, int] = (1, 2, 0)
     harmonics: int = 2
     secular_harmonics: bool = True
     ridge: float = 1e-6
-    max_horizon_s: float = 86400.0
+    max_horizon_s: float = DAY_S
     max_residual_km: float = 2000.0
     heldout_fits: int = 0
     calibration_samples: int = 30
@@ -435,7 +436,7 @@ class ResidualFit:
 
         The covariance scale at epochs t (s): max(1, a + b * horizon in days).
         """
-        h = (np.atleast_1d(np.asarray(t, float)) - self.t0) / 86400.0
+        h = (np.atleast_1d(np.asarray(t, float)) - self.t0) / DAY_S
         return np.maximum(1.0, self.scale[0] + self.scale[1] * h)
 
     def design(self, tau: Array, x_ref: Array) -> Array:
@@ -646,7 +647,7 @@ class ResidualSurrogate:
                 S = to_eci_covariance(x_ref, cov)[0] + Pa
                 try:
                     self.heldout.append((float(e @ np.linalg.solve(S, e)) / 6.0,
-                                         (t - f.t0) / 86400.0))
+                                         (t - f.t0) / DAY_S))
                 except np.linalg.LinAlgError:
                     continue
         self.fits = [f for f in self.fits if t - f.t0 <= self.cfg.max_horizon_s]

@@ -249,7 +249,7 @@ class Surrogate:
         slot = np.concatenate(([0.0], np.cumsum(np.rint(d / dt))))
         self._dt = float(np.polyfit(slot, t - t[0], 1)[0])
 
-    def check(self, m: Measurement) -> Problem:
+    def problem(self, m: Measurement) -> Problem:
         """Return why `add` would refuse `m`: (cause, reason), or ("", "") if it would not.
 
         Refused are: a forecast; a wrong kind or frame (against the configuration, else the
@@ -273,10 +273,10 @@ class Surrogate:
     def add(self, m: Measurement) -> list[Measurement]:
         """Buffer a real measurement; returns forecasts still owed for epochs before it.
 
-        A measurement `check` finds fault with is ignored; `rejected` holds the (cause,
+        A measurement `problem` finds fault with is ignored; `rejected` holds the (cause,
         reason), `status` says why. A real backwards clock jump goes through `reset()`.
         """
-        self.rejected = cause, reason = self.check(m)
+        self.rejected = cause, reason = self.problem(m)
         if cause:
             self.status = f"ignored: {reason}"
             return []

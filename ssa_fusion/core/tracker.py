@@ -132,11 +132,11 @@ class Tracker:
                  frame_id: str = "") -> None:
         self.f = placeholder
         self.model = model
+        self.kind = model.kind
         self.config = config
         self.n = n
         self.object_id = object_id
         self.frame_id = frame_id
-        self.kind = model.kind
         self.reset()
 
     # ----------------------------------------------------------------------------------

@@ -11,6 +11,7 @@ core types, holds its parameters and timers, and calls the core:
 * the clock hold: measurements that come before the first /clock wait for it
   (`measurement_in`, `replay_held`), and a backwards jump of sim time resets what the node
   learnt (`reset_on_backward_jump`);
+* the settings in effect, published latched on ``/ssa/config`` (`publish_settings`);
 * its process: `main` runs it until SIGINT/SIGTERM or `finish`, exit 0, or 2 with a message
   for an invalid parameter (`nodes.process`).
 
@@ -33,6 +34,7 @@ from typing import ClassVar
 from rclpy.clock import JumpThreshold, TimeJump
 from rclpy.duration import Duration
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
 from rclpy.subscription import Subscription
 from rclpy.subscription_content_filter_options import ContentFilterOptions
@@ -47,7 +49,8 @@ from ssa_fusion.nodes.node_parameters import NodeParameters
 from ssa_fusion.nodes.parameters import ParameterTable, ParamValue
 from ssa_fusion.nodes.process import run
 from ssa_fusion.ros import messages
-from ssa_fusion.ros.interfaces import Message, Time
+from ssa_fusion.ros.interfaces import Message, String, Time
+from ssa_fusion.ros.topics import CONFIG_QOS, TOPIC_CONFIG
 
 
 class SsaNode(Node):
@@ -73,6 +76,7 @@ class SsaNode(Node):
         self.diag = Diagnostics(self, stamp=self.diagnostics_stamp)
         self.clock_hold = ClockHold(self, self.diag)
         self._jump_handles: list[object] = []
+        self._settings_pub: Publisher[String] | None = None
 
     # parameters ------------------------------------------------------------------------
     def on_parameters_set(self, changed: dict[str, ParamValue]) -> None:
@@ -152,6 +156,16 @@ class SsaNode(Node):
         """Handle the messages held until the clock started, once it has (in order)."""
         for again in self.clock_hold.release():
             again()
+
+    # output ------------------------------------------------------------------------------
+    def publish_settings(self, text: str) -> None:
+        """Publish the settings in effect on /ssa/config, latched (every bag records them).
+
+        `text` is `nodes.settings.config_message`'s; the publisher is created at the first.
+        """
+        if self._settings_pub is None:
+            self._settings_pub = self.create_publisher(String, TOPIC_CONFIG, CONFIG_QOS)
+        self._settings_pub.publish(String(data=text))
 
     # process -----------------------------------------------------------------------------
     def close(self) -> None:

@@ -11,14 +11,33 @@ from that scenario (the same test checks it), written out here so that the nodes
 nothing from the simulated world (`ssa_fusion.sim`).
 
 A field whose default is ``None`` is computed when the node starts (said per field).
-Plain values only, so that importing this module imports nothing else (the recorder needs no
-estimator); those that are core defaults (`surrogate.LIVE_SURROGATE.grace`,
-`tracker.DEFAULT_GATE`, `validation.MAX_CLOCK_LEAD_S`) are checked against them by the test.
+Plain values, and the core's where the core has them in a module this one may import
+without weight (every node imports them anyway): the catalog filter's are the real-sky
+filter (`filter_options.SKY_FILTER`, which the real-sky scenarios run too) in SI, the gate
+`filter_options.DEFAULT_GATE`, the clock lead `validation.MAX_CLOCK_LEAD_S`. Other core
+defaults written here (`surrogate.LIVE_SURROGATE.grace`) are checked against them by the
+test.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+from ssa_fusion.core.filter_options import DEFAULT_GATE, SKY_FILTER
+from ssa_fusion.core.timescales import DAY_S
+from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S
+
+KM = 1000.0
+"""m per km: the parameters' SI against the core's km (`nodes.settings` converts with it)."""
+
+
+def _si(value: float) -> float:
+    """Return a value converted to SI as a default is written: to 15 significant digits.
+
+    The conversion's last bit is no digit of the parameter (1e-13 km²/s³ x 1e6 is
+    1.0000000000000001e-07 m²/s³; the parameter is 1e-07, as it would be given).
+    """
+    return float(f"{value:.15g}")
 
 KIND = "range_az_el"
 """Measurement kind filter and surrogate expect (``position`` | ``range_az_el`` | ``ra_dec``)."""
@@ -65,7 +84,7 @@ class SurrogateDefaults:
     station: str = STATION
     buffer_length: float = 55770.0
     retrain_period: float = 0.0
-    delays: int = 372
+    delays: int = 2 * 186  # two orbits of 30 s samples (186 an orbit)
     rank: int = 0
     max_horizon: float = 7200.0
     grace: float = 2.0
@@ -73,7 +92,7 @@ class SurrogateDefaults:
     lift: str = "eci"
     check_period: float = 0.02
     object_id: str = ""
-    max_clock_lead: float = 3600.0
+    max_clock_lead: float = MAX_CLOCK_LEAD_S
 
 
 @dataclass(frozen=True)
@@ -89,7 +108,7 @@ class FilterDefaults:
     motion_model: str = "kepler"
     p0_sigma: tuple[float, ...] = (1000.0, 1000.0, 1000.0, 1.0, 1.0, 1.0)
     q: float = 0.1
-    gate: float = 1000.0
+    gate: float = DEFAULT_GATE
     object_id: str = ""
     iod_samples: int = 3
     iod_max_span: float = 0.0
@@ -98,32 +117,32 @@ class FilterDefaults:
     light_time: bool = False
     refraction: bool = False
     predict_period: float = 300.0
-    max_clock_lead: float = 3600.0
+    max_clock_lead: float = MAX_CLOCK_LEAD_S
     gap_forecast: str = "none"
 
 
 @dataclass(frozen=True)
 class CatalogFilterDefaults:
-    """catalog_filter's defaults: the real-sky scenarios' filter.
+    """catalog_filter's defaults: the real-sky scenarios' filter (`filter_options.SKY_FILTER`).
 
-    `sim.sky.SkyScenario`: two-body + J2, P0 floor 1 km / 1 m/s, q = 1e-7 m^2/s^3 = 1e-13
-    km^2/s^3, IOD from 7 measurements within 300 s, initialised again after 10 gate misses,
-    covariance bounded by the orbit; no light time.
+    Two-body + J2, P0 floor 1 km / 1 m/s, q = 1e-7 m^2/s^3 = 1e-13 km^2/s^3, IOD from 7
+    measurements within 300 s, initialised again after 10 gate misses, covariance bounded
+    by the orbit; no light time.
     """
 
     station: str = "radar_network"
-    motion_model: str = "j2"
-    q: float = 1e-7
-    gate: float = 1000.0
-    p0_sigma: tuple[float, ...] = (1000.0, 1000.0, 1000.0, 1.0, 1.0, 1.0)
-    iod_samples: int = 7
-    iod_max_span: float = 300.0
-    reinit_after: int = 10
-    sigma_bound: float = 2.0
+    motion_model: str = str(SKY_FILTER.motion.motion_model)
+    q: float = _si(SKY_FILTER.noise.q * KM * KM)
+    gate: float = SKY_FILTER.noise.gate or 0.0
+    p0_sigma: tuple[float, ...] = tuple(_si(v * KM) for v in SKY_FILTER.iod.p0_sigma)
+    iod_samples: int = SKY_FILTER.iod.iod_samples
+    iod_max_span: float = SKY_FILTER.iod.iod_max_span_s
+    reinit_after: int = SKY_FILTER.iod.reinit_after
+    sigma_bound: float = SKY_FILTER.noise.sigma_bound
     shards: int = 1
     shard: int = 0
     batch_period: float = 0.05
-    max_clock_lead: float = 3600.0
+    max_clock_lead: float = MAX_CLOCK_LEAD_S
 
 
 @dataclass(frozen=True)
@@ -140,10 +159,10 @@ class CatalogSurrogateDefaults:
     hold: float = 120.0
     fit_budget: float = 0.5
     min_anchors: int = 5
-    min_span: float = 86400.0
+    min_span: float = DAY_S
     shards: int = 1
     shard: int = 0
-    max_clock_lead: float = 3600.0
+    max_clock_lead: float = MAX_CLOCK_LEAD_S
 
 
 BAG_PATTERN = "bags/ssa_%Y%m%d_%H%M%S"

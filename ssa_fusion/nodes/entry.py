@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import importlib
 import sys
+from collections.abc import Callable
 
 from ssa_fusion.nodes import start_process
 
@@ -28,39 +29,22 @@ def run_node(name: str, args: list[str] | None = None) -> int:
     return int(importlib.import_module(f"ssa_fusion.nodes.{name}").main(args) or 0)
 
 
-def sensor_sim() -> int:
-    """Run the sensor_sim node (its executable)."""
-    return run_node("sensor_sim")
+def _executable(name: str) -> Callable[[], int]:
+    """Return the console script of node `name` (setup.py): ``run_node(name)``."""
+    def executable() -> int:
+        return run_node(name)
+
+    executable.__doc__ = f"Run the {name} node (its executable)."
+    return executable
 
 
-def surrogate() -> int:
-    """Run the surrogate node (its executable)."""
-    return run_node("surrogate")
-
-
-def filter_node() -> int:
-    """Run the filter node (its executable)."""
-    return run_node("filter")
-
-
-def recorder() -> int:
-    """Run the recorder node (its executable)."""
-    return run_node("recorder")
-
-
-def foxglove_bridge() -> int:
-    """Run the foxglove_bridge node (its executable)."""
-    return run_node("foxglove_bridge")
-
-
-def catalog_filter() -> int:
-    """Run the catalog_filter node (its executable)."""
-    return run_node("catalog_filter")
-
-
-def catalog_surrogate() -> int:
-    """Run the catalog_surrogate node (its executable)."""
-    return run_node("catalog_surrogate")
+sensor_sim = _executable("sensor_sim")
+surrogate = _executable("surrogate")
+filter_node = _executable("filter")
+recorder = _executable("recorder")
+foxglove_bridge = _executable("foxglove_bridge")
+catalog_filter = _executable("catalog_filter")
+catalog_surrogate = _executable("catalog_surrogate")
 
 
 if __name__ == "__main__":

@@ -30,7 +30,6 @@ from ssa_fusion.nodes.parameters import (
     ParameterTable,
     ParamValue,
     Rule,
-    Values,
     clock_lead,
     filter_rows,
     measurement_stream,
@@ -40,27 +39,10 @@ from ssa_fusion.nodes.parameters import (
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
 from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
-from ssa_fusion.ros.interfaces import String
-from ssa_fusion.ros.topics import (
-    CONFIG_QOS,
-    DATA_QOS,
-    TOPIC_CONFIG,
-    TOPIC_ESTIMATE,
-    TOPIC_FORECAST,
-    TOPIC_MEASUREMENT,
-)
+from ssa_fusion.ros.topics import DATA_QOS, TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_MEASUREMENT
 
 TICK_S = 0.1
 """Wall s between two publications of the predictions due (at most 100 each)."""
-
-
-def _consistent(values: Values) -> str | None:
-    """Return why the estimator settings do not go together, or None."""
-    try:
-        settings.estimator_from({k: values[k] for k in settings.FILTER_KEYS}, {})
-    except ValueError as exc:
-        return str(exc)
-    return None
 
 
 PARAMETERS = ParameterTable("filter", (
@@ -95,7 +77,7 @@ PARAMETERS = ParameterTable("filter", (
           "`ssa-fusion live` sets `residual` for the real-sky scenarios",
           check=one_of(*GapFill)),
     clock_lead(FILTER.max_clock_lead),
-), rules=(Rule(settings.FILTER_KEYS, _consistent),))
+), rules=(Rule(settings.FILTER_KEYS, partial(settings.estimator_problem, "filter")),))
 """The filter's parameters."""
 
 
@@ -106,7 +88,6 @@ class FilterNode(SsaNode):
 
     def __init__(self) -> None:
         super().__init__()
-        self.config_pub = self.create_publisher(String, TOPIC_CONFIG, CONFIG_QOS)
         self.estimator = self._estimator()
         self.tracker = make_tracker(self.estimator, self.params.text("object_id"))
         self.gaps = GapPublisher.of(self.tracker, self.params.number("predict_period"),
@@ -123,7 +104,7 @@ class FilterNode(SsaNode):
 
     def _estimator(self) -> EstimatorConfig:
         """Return the estimator settings of the parameters in effect (core units)."""
-        return settings.estimator_from(self.params.subset(settings.FILTER_KEYS), {})
+        return settings.node_estimator("filter", self.params.values)
 
     def on_parameters_set(self, changed: dict[str, ParamValue]) -> None:
         """Put new tuning values or a new `predict_period` into effect (and record them)."""
@@ -138,9 +119,8 @@ class FilterNode(SsaNode):
 
     def publish_config(self) -> None:
         """Publish the settings in effect on /ssa/config (latched)."""
-        self.config_pub.publish(String(data=settings.config_message(
-            "filter", self.estimator,
-            settings.gap_params(self.params.values))))
+        self.publish_settings(settings.config_message(
+            "filter", self.estimator, settings.gap_params(self.params.values)))
 
     def on_measurement(self, msg: MeasurementMsg, topic: str, source: Source) -> None:
         """Fuse one message of `topic`, which carries only `source`.

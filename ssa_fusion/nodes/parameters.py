@@ -111,7 +111,7 @@ def one_of(*choices: str) -> Check:
     return Check(", ".join(f"`{c}`" for c in choices), test)
 
 
-def numbers(count: int, reason: str) -> Check:
+def non_negative_numbers(count: int, reason: str) -> Check:
     """Return the check of a list of `count` finite numbers >= 0 (`reason` when not)."""
     def test(v: ParamValue) -> str | None:
         return None if isinstance(v, list) and len(v) == count and all_non_negative(v) else reason
@@ -272,7 +272,7 @@ def measurement_stream(kind: str, station: str, verb: str) -> tuple[Param, Param
                   "ignored for position (frame `gcrf`)", check=STATIONS))
 
 
-P0_SIGMA = numbers(6, "needs 6 standard deviations, each a finite number >= 0")
+P0_SIGMA = non_negative_numbers(6, "needs 6 standard deviations, each a finite number >= 0")
 """The check of ``p0_sigma``: 3 position and 3 velocity standard deviations."""
 MAX_IOD_SAMPLES = 1000
 """Most measurements one IOD batch may take (a pass of 10 s samples has at most ~100)."""

@@ -29,6 +29,7 @@ from rclpy.duration import Duration
 from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core import types
 from ssa_fusion.core.frames import Frame
+from ssa_fusion.nodes import parameters
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import SENSOR_SIM
 from ssa_fusion.nodes.diagnostics import Count
@@ -38,7 +39,6 @@ from ssa_fusion.nodes.parameters import (
     Check,
     Computed,
     Param,
-    ParameterError,
     ParameterTable,
     ParamValue,
     Rule,
@@ -263,8 +263,8 @@ class SensorSim(SsaNode):
         if self.catalog is None:
             self.times = np.array([e[0] for e in self.schedule])
         if not self.times.size:
-            raise ParameterError(f"scenario {name!r}: nothing to publish (no measurement and "
-                                 "no truth epoch)")
+            raise parameters.ParameterError(
+                f"scenario {name!r}: nothing to publish (no measurement and no truth epoch)")
 
         self.pub_clock = self.create_publisher(Clock, TOPIC_CLOCK, DATA_QOS)
         self.pub_meas = self.create_publisher(
@@ -305,7 +305,8 @@ class SensorSim(SsaNode):
         try:
             sim = simulate(scenario, seed=seed)
         except ValueError as exc:
-            raise ParameterError(f"cannot simulate scenario {base.name!r}: {exc}") from exc
+            raise parameters.ParameterError(
+                f"cannot simulate scenario {base.name!r}: {exc}") from exc
         rel = sim.t - scenario.t0
         in_gap = np.zeros(len(rel), dtype=bool)
         for start, end in windows:
@@ -336,14 +337,15 @@ class SensorSim(SsaNode):
         try:
             entries = catalog_io.read_catalog(path)
         except ValueError as exc:
-            raise ParameterError(f"parameter 'catalog' = {path!r}: {exc}") from exc
+            raise parameters.ParameterError(f"parameter 'catalog' = {path!r}: {exc}") from exc
         if synthetic:
             entries = survey.synthetic_catalog(entries[0], synthetic, seed=seed)
         if objects:
             entries = entries[:objects]
         radars = s.radars
         if not radars:
-            raise ParameterError(f"scenario {s.name!r} has no radar to observe a catalog")
+            raise parameters.ParameterError(
+                f"scenario {s.name!r} has no radar to observe a catalog")
         t0 = survey.catalog_start(entries)
         span = duration or s.duration_s
         obs = survey.observe_catalog(entries, radars, t0, span, seed=seed)

@@ -23,10 +23,8 @@ from ssa_fusion.core.filter_options import FilterOptions
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.types import KIND_NAMES, Kind, MotionModel
-from ssa_fusion.nodes.defaults import FILTER, SURROGATE
+from ssa_fusion.nodes.defaults import FILTER, KM, SURROGATE
 
-KM = 1000.0
-"""m per km."""
 FILTER_KEYS = ("kind", "station", "motion_model", "p0_sigma", "q", "gate", "iod_samples",
                "iod_max_span", "reinit_after", "sigma_bound", "light_time", "refraction")
 """The filter's parameters that are estimator settings."""
@@ -120,6 +118,29 @@ def estimator_from(filt: Mapping[str, Any], surr: Mapping[str, Any]) -> Estimato
 
 DEFAULT_ESTIMATOR = estimator_from({}, {})
 """The estimator the nodes run with every parameter at its default."""
+
+
+def node_estimator(node: str, values: Mapping[str, Any]) -> EstimatorConfig:
+    """Return the `EstimatorConfig` of one node's parameters (SI), the other's at their defaults.
+
+    `node` is "filter" (its `FILTER_KEYS` of `values`) or "surrogate" (`SURROGATE_KEYS`).
+    ValueError names a bad value.
+    """
+    if node == "filter":
+        return estimator_from({k: values[k] for k in FILTER_KEYS}, {})
+    return estimator_from({}, {k: values[k] for k in SURROGATE_KEYS})
+
+
+def estimator_problem(node: str, values: Mapping[str, Any]) -> str | None:
+    """Return why `node`'s estimator parameters in `values` do not go together, or None.
+
+    The rule of the filter's and the surrogate's parameter tables (`node_estimator`).
+    """
+    try:
+        node_estimator(node, values)
+    except ValueError as exc:
+        return str(exc)
+    return None
 
 
 def node_section(params_file: Mapping[str, Any], node: str) -> dict[str, Any]:

@@ -39,14 +39,7 @@ from ssa_fusion.nodes.parameters import (
 )
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
-from ssa_fusion.ros.interfaces import String
-from ssa_fusion.ros.topics import (
-    CONFIG_QOS,
-    DATA_QOS,
-    TOPIC_CONFIG,
-    TOPIC_FORECAST,
-    TOPIC_MEASUREMENT,
-)
+from ssa_fusion.ros.topics import DATA_QOS, TOPIC_FORECAST, TOPIC_MEASUREMENT
 
 MAX_DELAYS = 10_000
 """Most Hankel-DMD delays (a Hankel matrix of 10^4 x channels rows; with `cadence` 0 the
@@ -61,15 +54,6 @@ def _fits(v: Values) -> str | None:
     if cadence > 0 and delays * cadence * 2 > buffer:
         return (f"needs a buffer of at least 2 x delays x cadence = {2 * delays * cadence} s, "
                 f"but 'buffer_length' = {buffer} s")
-    return None
-
-
-def _consistent(values: Values) -> str | None:
-    """Return why the estimator settings do not go together, or None."""
-    try:
-        settings.estimator_from({}, {k: values[k] for k in settings.SURROGATE_KEYS})
-    except ValueError as exc:
-        return str(exc)
     return None
 
 
@@ -103,7 +87,7 @@ PARAMETERS = ParameterTable("surrogate", (
     object_filter(SURROGATE.object_id, "learn"),
     clock_lead(SURROGATE.max_clock_lead),
 ), rules=(Rule(("delays", "cadence", "buffer_length"), _fits),
-          Rule(settings.SURROGATE_KEYS, _consistent)))
+          Rule(settings.SURROGATE_KEYS, partial(settings.estimator_problem, "surrogate"))))
 """The surrogate's parameters."""
 
 
@@ -114,18 +98,17 @@ class SurrogateNode(SsaNode):
 
     def __init__(self) -> None:
         super().__init__()
-        self.config_pub = self.create_publisher(String, TOPIC_CONFIG, CONFIG_QOS)
         self.estimator = self._estimator()
         self.core = make_surrogate(self.estimator)
         self.publish_config()
         self.pub = self.create_publisher(MeasurementMsg, TOPIC_FORECAST, DATA_QOS)
         self.subscribe(MeasurementMsg, TOPIC_MEASUREMENT, self.on_measurement, DATA_QOS)
-        self.wall_timer(self.params.number("check_period"), self.check)
+        self.wall_timer(self.params.number("check_period"), self.publish_missed)
         self.reset_on_backward_jump(self.core.reset, "buffer emptied")
 
     def _estimator(self) -> EstimatorConfig:
         """Return the estimator settings of the parameters in effect (core units)."""
-        return settings.estimator_from({}, self.params.subset(settings.SURROGATE_KEYS))
+        return settings.node_estimator("surrogate", self.params.values)
 
     def on_parameters_set(self, changed: dict[str, ParamValue]) -> None:
         """Put new model settings into effect at the next fit (and record them)."""
@@ -139,8 +122,8 @@ class SurrogateNode(SsaNode):
     def publish_config(self) -> None:
         """Publish the estimator settings in effect on /ssa/config (latched)."""
         surrogate = replace(self.core.config, lift=None)
-        self.config_pub.publish(String(data=settings.config_message(
-            "surrogate", self.estimator.with_(surrogate=surrogate))))
+        self.publish_settings(settings.config_message(
+            "surrogate", self.estimator.with_(surrogate=surrogate)))
 
     def on_measurement(self, msg: MeasurementMsg) -> None:
         """Learn one real measurement (and publish the forecasts it releases)."""
@@ -156,7 +139,7 @@ class SurrogateNode(SsaNode):
         self.publish(forecasts)
         self.diag.counts[Count.BUFFERED] += 1
 
-    def check(self) -> None:
+    def publish_missed(self) -> None:
         """Take what waited for the clock; publish the forecasts of the epochs missed."""
         self.replay_held()
         self.publish(self.core.due(self.now_s()))

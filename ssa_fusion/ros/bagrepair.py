@@ -79,7 +79,7 @@ class RepairResult:
                 f"{tail}")
 
 
-def default_out(bag: Path) -> Path:
+def repaired_path(bag: Path) -> Path:
     """Return ``<bag>_repaired`` next to the input (for ``x.mcap``: ``x_repaired``)."""
     bag = Path(bag)
     name = bag.stem if bag.is_file() else bag.name
@@ -108,12 +108,12 @@ def repair(bag: Path | str, out: Path | str | None = None) -> RepairResult:
     """Write the complete records of bag `bag` as a new closed rosbag2 v9 MCAP bag.
 
     `bag`: a rosbag2 directory or a bare ``.mcap``; the new bag goes to `out` (default
-    `default_out`). BagError (the message names the file and why): no such bag, not an MCAP bag, an
-    unreadable file, an existing `out`, or no complete message to recover.
+    `repaired_path`). BagError (the message names the file and why): no such bag, not an MCAP
+    bag, an unreadable file, an existing `out`, or no complete message to recover.
     """
     bag = Path(bag)
     files = mcap_files(bag)
-    target = Path(out) if out is not None else default_out(bag)
+    target = Path(out) if out is not None else repaired_path(bag)
     if target.exists():
         raise BagError(f"{target} exists already; choose another --out or delete it")
     scan = _Scan()

@@ -1,10 +1,37 @@
-"""What the launch files (launch_scripts/*.launch.py) share: the graph shuts itself down.
+"""What the launch files (launch_scripts/*.launch.py) share: arguments, self-shutdown.
+
+Their launch arguments are declared alike (`launch_description`), and the graph shuts
+itself down (`shutdown_handlers`).
 
 `launch` is imported when called, not with this module: it is there under ``ros2 launch``
 (and stood in for in tests), not in every environment that imports ssa_fusion.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+
+
+def launch_description(arguments: Mapping[str, str], defaults: Mapping[str, str],
+                       graph: Callable[[object], list[object]]) -> object:
+    """Return a launch file's description: its launch arguments, then `graph` of their values.
+
+    `arguments` maps each argument's name to its description, `defaults` to its default;
+    `graph(context)` returns the nodes and event handlers of the values given (run by
+    ``ros2 launch`` once they are known: an ``OpaqueFunction``).
+    """
+    # not installed here (no type information then either); there under `ros2 launch`
+    from launch import LaunchDescription  # type: ignore[import-not-found, unused-ignore]
+    from launch.actions import (  # type: ignore[import-not-found, unused-ignore]
+        DeclareLaunchArgument,
+        OpaqueFunction,
+    )
+
+    return LaunchDescription([
+        *(DeclareLaunchArgument(name, default_value=defaults[name], description=text)
+          for name, text in arguments.items()),
+        OpaqueFunction(function=graph),
+    ])
 
 
 def shutdown_handlers(sensor_sim: object, recorder: object, drain_s: float) -> list[object]:

@@ -328,7 +328,7 @@ def station(s: Scenario) -> Station | None:
     return STATIONS.get(s.station)
 
 
-def placeholder(s: Scenario) -> Placeholder:
+def placeholder_model(s: Scenario) -> Placeholder:
     """Return the EKF's model f(x, dt, t0) -> (x1, F): analytic Kepler or `dynamics` + STM."""
     return config.motion(s.estimator())
 

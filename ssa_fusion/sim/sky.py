@@ -31,19 +31,20 @@ import numpy as np
 
 from ssa_fusion.core import dynamics, frames, lighttime, refraction, visibility
 from ssa_fusion.core.config import EstimatorConfig
-from ssa_fusion.core.filter_options import FilterOptions
+from ssa_fusion.core.filter_options import SKY_FILTER, FilterOptions
 from ssa_fusion.core.stations import SENSORS, Sensor, SensorType
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.types import Measurement
 from ssa_fusion.sim.scenarios import ISS_BSTAR, ISS_ELEMENTS, ORBIT_EPOCH_UNIX
 
-SKY_Q = 1e-13
-"""Process noise of the real-sky filters, (km/s^2)^2 s: the value of {1e-12, 3e-13, 1e-13,
-3e-14} whose mean NEES over every truth epoch (gaps included) is nearest its 6 degrees of
-freedom on the tuning seeds 1-3 of iss_radar_columbus (5.9-6.5, 92-95 % of epochs in the
-per-epoch 95 % band; 1e-12, the rule-of-thumb q ~ a^2 tau with a ~ 3e-8 km/s^2, gave 1.3-1.6:
-too cautious). The evaluation seeds never saw it (docs/HISTORY.md, 2026-11-24: the real sky)."""
+SKY_Q = SKY_FILTER.noise.q
+"""Process noise of the real-sky filters (`filter_options.SKY_FILTER`'s), (km/s^2)^2 s: 1e-13,
+the value of {1e-12, 3e-13, 1e-13, 3e-14} whose mean NEES over every truth epoch (gaps
+included) is nearest its 6 degrees of freedom on the tuning seeds 1-3 of iss_radar_columbus
+(5.9-6.5, 92-95 % of epochs in the per-epoch 95 % band; 1e-12, the rule-of-thumb
+q ~ a^2 tau with a ~ 3e-8 km/s^2, gave 1.3-1.6: too cautious). The evaluation seeds never
+saw it (docs/HISTORY.md, 2026-11-24: the real sky)."""
 
 ALL_STATIONS = "*"
 """The station id of an outage of the whole network."""
@@ -83,7 +84,8 @@ class SkyScenario:
         Scheduled outages: (sensor id, or `ALL_STATIONS`; start s after t0; length s).
     motion_model, q, p0_sigma, iod_samples, iod_max_span_s, reinit_after, sigma_bound,
     light_time
-        The filter: motion model, process noise spectral density (km/s^2)^2 s, IOD
+        The filter (by default `filter_options.SKY_FILTER`, which the catalog filter node
+        has too): motion model, process noise spectral density (km/s^2)^2 s, IOD
         covariance floor, IOD batch size and span (one pass), real measurements beyond the
         gate in a row after which it initialises again, the bound on its standard
         deviations relative to |r| and |v| (`ekf.bound_covariance`), light-time correction
@@ -103,13 +105,13 @@ class SkyScenario:
     duration_s: float = 3 * 86400.0
     truth_cadence_s: float = 60.0
     outages: tuple[tuple[str, float, float], ...] = ()
-    motion_model: str = "j2"
+    motion_model: str = str(SKY_FILTER.motion.motion_model)
     q: float = SKY_Q
-    p0_sigma: tuple[float, ...] = (1.0, 1.0, 1.0, 1e-3, 1e-3, 1e-3)
-    iod_samples: int = 7
-    iod_max_span_s: float = 300.0
-    reinit_after: int = 10
-    sigma_bound: float = 2.0
+    p0_sigma: tuple[float, ...] = SKY_FILTER.iod.p0_sigma
+    iod_samples: int = SKY_FILTER.iod.iod_samples
+    iod_max_span_s: float = SKY_FILTER.iod.iod_max_span_s
+    reinit_after: int = SKY_FILTER.iod.reinit_after
+    sigma_bound: float = SKY_FILTER.noise.sigma_bound
     light_time: bool = True
     refraction: bool = False
     finding: str = ""

@@ -39,28 +39,28 @@ from ssa_fusion.evaluation.montecarlo import N_PARTICLES
 from ssa_fusion.sim.scenarios import Scenario, measurement_model
 from ssa_fusion.sim.simulate import Simulation, simulate
 
-__all__ = ["N_PARTICLES", "DmdEkfRun", "estimator", "evaluate_sim", "make_surrogate",
-           "make_tracker", "run_dmd_ekf", "run_scenario", "vdp_sweep"]
+__all__ = ["N_PARTICLES", "DmdEkfRun", "evaluate_sim", "run_dmd_ekf", "run_scenario",
+           "scenario_estimator", "scenario_surrogate", "scenario_tracker", "vdp_sweep"]
 
 
-def estimator(s: Scenario) -> EstimatorConfig:
+def scenario_estimator(s: Scenario) -> EstimatorConfig:
     """Return the scenario's estimator without the innovation gate (see the module docstring)."""
     c = s.estimator()
     return c.with_(filter=c.filter.with_(gate=None))
 
 
-def make_tracker(s: Scenario) -> Tracker:
-    """Return the scenario's EKF, built as the live filter node builds it (`estimator`)."""
-    return config.make_tracker(estimator(s), object_id=s.name)
+def scenario_tracker(s: Scenario) -> Tracker:
+    """Return the scenario's EKF, built as the live filter node builds it (`scenario_estimator`)."""
+    return config.make_tracker(scenario_estimator(s), object_id=s.name)
 
 
-def make_surrogate(s: Scenario, **overrides: object) -> Surrogate:
+def scenario_surrogate(s: Scenario, **overrides: object) -> Surrogate:
     """Return the scenario's surrogate, built as the live surrogate node builds it.
 
     Trained on the tracking window, one fit at the start of the gap, forecasts for every
     missed epoch. `overrides`: `SurrogateConfig` fields for studies.
     """
-    c = estimator(s)
+    c = scenario_estimator(s)
     # arg-type: `overrides` are fields of different types by name, which mypy cannot match
     # to `object`; replace itself rejects a name that is no field
     surrogate = replace(c.surrogate, **overrides)  # type: ignore[arg-type]
@@ -92,8 +92,8 @@ def run_dmd_ekf(s: Scenario, sim: Simulation, **surrogate_overrides: object) -> 
 
     `surrogate_overrides`: `SurrogateConfig` fields for studies (none in the reproduction).
     """
-    tr = make_tracker(s)
-    su = make_surrogate(s, **surrogate_overrides)
+    tr = scenario_tracker(s)
+    su = scenario_surrogate(s, **surrogate_overrides)
     run = DmdEkfRun({}, [])
     grace = su.config.grace
 
@@ -128,8 +128,8 @@ def evaluate_sim(s: Scenario, sim: Simulation, seed: int,
     real, withheld = measurements(s, sim)
     run = run_dmd_ekf(s, sim, **surrogate_overrides)
     gap = sim.gap_index
-    ev = evaluate_gap(estimator(s), run.estimates, real, withheld, sim.t[gap], sim.x[gap], seed,
-                      only)
+    ev = evaluate_gap(scenario_estimator(s), run.estimates, real, withheld, sim.t[gap],
+                      sim.x[gap], seed, only)
     return ev, run
 
 

@@ -75,7 +75,7 @@ def quick_variant(s: scenarios.Scenario) -> scenarios.Scenario:
 
 def settings_of(s: scenarios.Scenario, sim: Simulation) -> dict[str, Any]:
     """Return the settings `s` ran with (simulation, surrogate, filter), for results.json."""
-    sc = experiments.make_surrogate(s).config
+    sc = experiments.scenario_surrogate(s).config
     return {
         "truth": s.truth, "placeholder": s.placeholder,
         "placeholder_params": s.placeholder_params, "observed": (

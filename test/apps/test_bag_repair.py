@@ -113,7 +113,7 @@ def test_default_output_is_next_to_the_bag_and_never_overwritten(bags, tmp_path,
     assert len(err) == 1 and err[0].startswith("error:") and "exists already" in err[0]
     # a bare .mcap works too, and a closed bag is copied whole
     mcap = next(bag.glob("*.mcap"))
-    assert bagrepair.default_out(mcap) == bag / "killed_repaired"
+    assert bagrepair.repaired_path(mcap) == bag / "killed_repaired"
     assert cli.main(["bag", "repair", str(bags["complete"]), "--out",
                      str(tmp_path / "copy")]) == 0
     assert "complete already" in capsys.readouterr().out

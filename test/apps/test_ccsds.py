@@ -1,8 +1,8 @@
-"""CCSDS in and out (apps.ccsds): OEM and TDM round-trip through the ccsds-ndm library; the
-OEM's GCRF, EME2000 and TEME states are where astropy puts them; TDM angles (AZEL, RADEC in
-GCRF/ICRF/EME2000) and time systems (UTC, TAI, TT, GPS) are read as written; what is not
-supported is refused with one line; and a TDM of a recorded run, imported and replayed,
-gives that run's estimates."""
+"""CCSDS in and out (apps.ccsds and its ccsds_* modules): OEM and TDM round-trip through the
+ccsds-ndm library; the OEM's GCRF, EME2000 and TEME states are where astropy puts them; TDM
+angles (AZEL, RADEC in GCRF/ICRF/EME2000) and time systems (UTC, TAI, TT, GPS) are read as
+written; what is not supported is refused with one line; and a TDM of a recorded run,
+imported and replayed, gives that run's estimates."""
 
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_master_4_0 as master
 from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_tdm_2_0 as tdm
 from ccsds_ndm.ndm_io import NdmIo
 
-from ssa_fusion.apps import ccsds, cli, evaluate
+from ssa_fusion.apps import ccsds, ccsds_format, ccsds_oem, cli, evaluate
 from ssa_fusion.core import frames, types
 from ssa_fusion.core.constants import ARCSEC
 from ssa_fusion.core.frames import Frame
@@ -110,8 +110,8 @@ def test_oem_round_trips_through_ccsds_ndm(tmp_path, capsys, fmt):
     assert (seg.metadata.object_id, seg.metadata.ref_frame, seg.metadata.time_system) == (
         "a", "GCRF", "UTC")
     assert seg.metadata.start_time.startswith("2025-01-01T00:00:00.2499")  # the bag's stamp
-    assert ccsds.parse_epoch(seg.metadata.stop_time) == written[3].t
-    back = ccsds.oem_states(doc)
+    assert ccsds_format.parse_epoch(seg.metadata.stop_time) == written[3].t
+    back = ccsds_oem.oem_states(doc)
     for e, b in zip(written, [*back["a"], *back["b"]], strict=True):
         assert (b.object_id, b.t) == (e.object_id, e.t)
         np.testing.assert_array_equal(b.x, e.x)  # km, km/s, every digit
@@ -180,7 +180,7 @@ def exported_oem(tmp_path: Path, frame: str) -> tuple[
                      "--out", str(out)]) == 0
     doc = NdmIo().from_path(out)
     assert {s.metadata.ref_frame for s in doc.body.segment} == {frame}
-    file_states = ccsds.oem_states(doc)
+    file_states = ccsds_oem.oem_states(doc)
     for rows in file_states.values():
         np.testing.assert_allclose([r.t for r in rows], t, rtol=0, atol=1e-6)  # bag stamps
     return np.array([r.t for r in file_states["leo"]]), gcrf, file_states, estimates
@@ -257,7 +257,7 @@ def library_tdm(path: Path, comment: list[str]) -> list[tuple[float, float, floa
              20.0 + k) for k in range(5)]
     obs = []
     for t, r, az, el in rows:
-        epoch = ccsds.format_epoch(t).replace("2025-01-01", "2025-001")
+        epoch = ccsds_format.format_epoch(t).replace("2025-01-01", "2025-001")
         obs += [tdm.TrackingDataObservationType(epoch=epoch, range=r),
                 tdm.TrackingDataObservationType(epoch=epoch, angle_1=common.AngleType(
                     value=az, units=common.AngleUnits.DEG)),
@@ -382,7 +382,7 @@ def test_hand_written_radec_and_azel_are_read_as_written(tmp_path, capsys, frame
     """A KVN TDM of an optical (RADEC, in `frame`) and a radar (AZEL) segment, the values
     computed for a known GCRF state: imported, they are `frames.radec_gcrs` and
     `frames.razel_gcrs` of it (<= 1 mas, well within 0.1")."""
-    epoch = ccsds.format_epoch(T_SEEN)
+    epoch = ccsds_format.format_epoch(T_SEEN)
     f = kvn_tdm(tmp_path / "hand.tdm", [
         kvn_segment({**RADEC_META, "REFERENCE_FRAME": frame}, radec_rows(epoch, frame)),
         kvn_segment(AZEL_META, azel_rows(epoch))])
@@ -413,13 +413,13 @@ def test_hand_written_radec_and_azel_are_read_as_written(tmp_path, capsys, frame
                                                ("GPS", 18.0)])
 def test_time_systems_become_utc_stamps(tmp_path, system, shift):
     """The same epoch text in TAI is 37 s earlier in UTC in 2025 (TT 69.184 s, GPS 18 s)."""
-    epoch = ccsds.format_epoch(T_SEEN)
+    epoch = ccsds_format.format_epoch(T_SEEN)
     f = kvn_tdm(tmp_path / "t.tdm", [kvn_segment({**AZEL_META, "TIME_SYSTEM": system},
                                                  azel_rows(epoch))])
     assert cli.main(["import", "tdm", str(f), "--bag", str(tmp_path / "bag")]) == 0
     (m,) = evaluate.load(tmp_path / "bag").measurements
     assert abs(m.t - (T_SEEN - shift)) <= 1e-6
-    assert ccsds.parse_epoch(epoch, ccsds.TimeSystem(system)) == m.t
+    assert ccsds_format.parse_epoch(epoch, ccsds_format.TimeSystem(system)) == m.t
 
 
 @pytest.mark.parametrize(("edit", "says"), [
@@ -432,7 +432,7 @@ def test_time_systems_become_utc_stamps(tmp_path, system, shift):
     ({"PARTICIPANT_1": "DSS-24"}, "segment 1: participants DSS-24, OBJ-1: need one known"),
 ])
 def test_unsupported_kvn_is_refused_with_one_line(tmp_path, capsys, edit, says):
-    epoch = ccsds.format_epoch(T_SEEN)
+    epoch = ccsds_format.format_epoch(T_SEEN)
     f = kvn_tdm(tmp_path / "bad.tdm", [kvn_segment({**RADEC_META, **edit},
                                                    radec_rows(epoch, "EME2000"))])
     err = one_line_error(capsys, ["import", "tdm", str(f), "--bag", str(tmp_path / "bag")],
@@ -443,8 +443,8 @@ def test_unsupported_kvn_is_refused_with_one_line(tmp_path, capsys, edit, says):
 def test_invalid_values_are_counted_and_left_out(tmp_path, capsys):
     """Non-finite values, a negative range, |el| or |dec| over 90 deg: those epochs are left
     out, counted and the first named; a file with nothing else is refused."""
-    good = ccsds.format_epoch(T_SEEN)
-    bad = [ccsds.format_epoch(T_SEEN + k) for k in range(1, 5)]
+    good = ccsds_format.format_epoch(T_SEEN)
+    bad = [ccsds_format.format_epoch(T_SEEN + k) for k in range(1, 5)]
     azel = azel_rows(good)
     azel += [("RANGE", bad[0], -1.0), ("ANGLE_1", bad[0], 10.0), ("ANGLE_2", bad[0], 10.0)]
     azel += [("RANGE", bad[1], 900.0), ("ANGLE_1", bad[1], 10.0), ("ANGLE_2", bad[1], 95.0)]
@@ -542,17 +542,17 @@ def test_tdm_of_a_recorded_run_replays_to_its_estimates(tmp_path, capsys):
 
 def test_epochs_round_trip_to_the_nanosecond():
     for t in (T0, T0 + 0.123456789, 1.5e9 + 86399.999999999):
-        text = ccsds.format_epoch(t)
-        assert ccsds.parse_epoch(text) == messages.stamp_to_seconds(
+        text = ccsds_format.format_epoch(t)
+        assert ccsds_format.parse_epoch(text) == messages.stamp_to_seconds(
             messages.seconds_to_stamp(t, bagio.rosbags_classes()))
-    assert ccsds.parse_epoch("2025-001T00:00:01Z") == T0 + 1
-    with pytest.raises(ccsds.CcsdsError, match="not a CCSDS epoch"):
-        ccsds.parse_epoch("yesterday")
+    assert ccsds_format.parse_epoch("2025-001T00:00:01Z") == T0 + 1
+    with pytest.raises(ccsds_format.CcsdsError, match="not a CCSDS epoch"):
+        ccsds_format.parse_epoch("yesterday")
 
 
 def test_frame_bias_is_erfas():
     """The EME2000 rotation is ERFA's IAU 2006 frame bias: ~23 mas, orthonormal."""
-    b = ccsds.frame_bias()
+    b = ccsds_format.frame_bias()
     np.testing.assert_allclose(b @ b.T, np.eye(3), atol=1e-15)
     angle = math.acos((np.trace(b) - 1) / 2)
     assert 20 * MAS < angle < 26 * MAS

@@ -48,13 +48,13 @@ def test_a_text_file_named_mcap_is_not_an_mcap(tmp_path, layout):
 def test_surrogate_params_of_a_catalog_run_are_checked_before_anything_starts(tmp_path):
     import argparse
 
-    from ssa_fusion.apps.live_catalog import surrogate_params
+    from ssa_fusion.apps.live_catalog import catalog_surrogate_params
 
     ok = argparse.Namespace(surrogate_param=["min_span=21600", "fit_budget=0.25",
                                              "min_anchors=3"])
-    assert surrogate_params(ok) == {"min_span": 21600.0, "fit_budget": 0.25,
+    assert catalog_surrogate_params(ok) == {"min_span": 21600.0, "fit_budget": 0.25,
                                     "min_anchors": 3}  # an integer for seconds: a double
-    assert type(surrogate_params(ok)["min_span"]) is float
+    assert type(catalog_surrogate_params(ok)["min_span"]) is float
     out = tmp_path / "run"
     for bad, says in (("min_spam=1", "catalog_surrogate has no parameter 'min_spam'"),
                       ("shards=2", "shards come from --shards"),

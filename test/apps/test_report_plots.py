@@ -82,7 +82,7 @@ def test_the_html_log_axes_are_labelled_at_each_decade():
 
     data = evaluate.load(SAMPLE)
     ev = evaluate.evaluate(data)
-    for fig in (report_html.nees(ev), report_html.nis(data)):
+    for fig in (report_html.nees_plot(ev), report_html.nis_plot(data)):
         assert fig is not None
         assert fig.layout.yaxis.type == "log" and fig.layout.yaxis.dtick == 1
         assert fig.layout.title.text and fig.layout.yaxis.title.text

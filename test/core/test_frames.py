@@ -5,39 +5,51 @@ same IERS finals2000A table as ours), skyfield (equinox-based IAU 2006/2000A, it
 and polar motion, reading the same table), Vallado's published worked examples, the SOFA/ERFA
 test values, the IERS definitions, and finite differences. Units km, km/s, rad; epochs Unix
 seconds (UTC).
+
+One module of ~650 lines: the astropy and skyfield references (test/references.py) are set
+up once per module (module-scoped fixtures) for every comparison here.
 """
 
 from __future__ import annotations
 
-import calendar
 import math
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 import astropy.units as u
-import astropy_iers_data
 import erfa
 import numpy as np
 import pytest
-import sgp4
 from astropy.coordinates import (
     GCRS,
     ITRS,
     TEME,
-    AltAz,
-    CartesianDifferential,
     CartesianRepresentation,
     EarthLocation,
 )
 from astropy.table import QTable
-from astropy.time import Time
 from astropy.utils import iers
-from numpy.typing import NDArray
-from sgp4.api import Satrec
-from skyfield.api import EarthSatellite, wgs84
-from skyfield.data import iers as skyfield_iers
-from skyfield.timelib import Time as SkyTime
+from references import (
+    SAMPLE,
+    Array,
+    assert_radec,
+    assert_razel,
+    astropy_offline_eop,
+    astropy_razel,
+    astropy_state,
+    astropy_time,
+    checked_skyfield_timescale,
+    leap_second_day,
+    location,
+    sgp4_ver_cases,
+    sky_radec,
+    sky_razel,
+    sky_time,
+    states,
+    topos,
+    unix,
+)
+from skyfield.api import EarthSatellite
 from skyfield.timelib import Timescale
 
 from ssa_fusion.core import catalog, eop, frames, timescales
@@ -63,12 +75,6 @@ from ssa_fusion.core.frames import (
     wrap_pi,
 )
 from ssa_fusion.core.stations import SENSORS
-
-Array = NDArray[np.float64]
-
-ROOT = Path(__file__).resolve().parents[2]
-SAMPLE = ROOT / "config" / "catalogs" / "sample.tle"
-SGP4_VER = Path(sgp4.__file__).with_name("SGP4-VER.TLE")
 
 POS_TOL_KM = 0.05e-3
 """Position agreement with astropy, km (5 cm). Measured <= 1.6 cm, growing with distance and
@@ -98,119 +104,34 @@ SITES = {s.station.name: s.station for s in SENSORS.values()}
 """The project's real sensor sites (columbus, millstone, altair, tira, socorro, maui, ...)."""
 
 
-def _unix(year: int, month: int, day: int, hour: int = 0, minute: int = 0,
-          second: float = 0.0) -> float:
-    """Unix seconds of a UTC calendar date."""
-    whole = int(second)
-    return calendar.timegm((year, month, day, hour, minute, whole, 0, 0, 0)) + (second - whole)
-
-
 def _sgp4_ver_states() -> tuple[Array, Array]:
     """TEME states (n, 6) of Vallado's SGP4 verification set at its own test times, and epochs.
 
-    SGP4-VER.TLE (shipped with `sgp4`) gives each element set's start, stop and step
-    (minutes) after column 69 of line 2; states SGP4 flags as errors (decay cases of the
-    set) are left out. Epochs are Unix s (UTC).
+    States SGP4 flags as errors (decay cases of the set) are left out. Epochs are Unix s
+    (UTC).
     """
-    lines = [ln.rstrip() for ln in SGP4_VER.read_text().splitlines() if ln[:2] in ("1 ", "2 ")]
     xs, ts = [], []
-    for l1, l2 in zip(lines[::2], lines[1::2], strict=True):
-        sat = Satrec.twoline2rv(l1[:69], l2[:69])
-        start, stop, step = (float(v) for v in l2[69:].split())
-        minutes = np.arange(start, stop + 0.5 * step, step)
-        jd = np.full(minutes.shape, sat.jdsatepoch)
-        fr = sat.jdsatepochF + minutes / 1440.0
-        err, r, v = sat.sgp4_array(jd, fr)
+    for _, t, err, r, v in sgp4_ver_cases():
         ok = (err == 0) & np.all(np.isfinite(r), axis=1)
         xs.append(np.concatenate([r, v], axis=1)[ok])
-        ts.append(((jd - timescales.UNIX_EPOCH_JD) + fr)[ok] * 86400.0)
+        ts.append(t[ok])
     return np.concatenate(xs), np.concatenate(ts)
 
 
 # --------------------------------------------------------------------------------------------
-# astropy and skyfield, on the same IERS table as ours
+# astropy and skyfield, on the same IERS table as ours (test/references.py)
 # --------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def astropy_eop() -> Iterator[None]:
     """astropy on the bundled finals2000A (the same table as `eop.bundled`), offline."""
-    with iers.conf.set_temp("auto_download", False), iers.conf.set_temp("auto_max_age", None), \
-            iers.earth_orientation_table.set(iers.IERS_A.open(iers.IERS_A_FILE)):
+    with astropy_offline_eop():
         yield
 
 
 @pytest.fixture(scope="module")
 def skyfield_ts() -> Timescale:
     """Skyfield on the same EOP as ours (checked against `eop.bundled`)."""
-    ts = _skyfield_timescale()
-    t = np.linspace(_unix(1975, 1, 1), _unix(2027, 10, 1), 2000)
-    t = t[~_leap_second_day(t)]
-    np.testing.assert_allclose(_sky_time(ts, t).dut1, eop.bundled().at(t).dut1, rtol=0,
-                               atol=1e-6)
-    return ts
-
-
-def _skyfield_timescale() -> Timescale:
-    """Skyfield's timescale and polar motion from finals2000A.all (astropy-iers-data), offline.
-
-    Skyfield's reader (`skyfield.data.iers.parse_x_y_dut1_from_finals_all`) takes the
-    Bulletin A columns; ours and astropy's take Bulletin B where a row has it (they differ
-    by up to 3 ms of UT1 in 1980, 1 m of topocentric range), so the rows' Bulletin B values
-    (bytes 135-165 of the IERS ReadMe) replace A where given before skyfield builds its
-    tables (`build_timescale_arrays`, `install_polar_motion_table`).
-    """
-    path = Path(astropy_iers_data.IERS_A_FILE)
-    with path.open("rb") as f:
-        rows = skyfield_iers.parse_x_y_dut1_from_finals_all(f)
-    bulletin_b = {}
-    for line in path.read_text().splitlines():
-        fields = line[134:144].strip(), line[144:154].strip(), line[154:165].strip()
-        if all(fields):
-            bulletin_b[float(line[7:15])] = tuple(float(v) for v in fields)
-    for row in rows:
-        b = bulletin_b.get(float(row["utc_mjd"]))
-        if b is not None:
-            row["x_arcseconds"], row["y_arcseconds"], row["dut1"] = b
-    daily_tt, daily_delta_t, leap_dates, leap_offsets = skyfield_iers.build_timescale_arrays(
-        rows["utc_mjd"], rows["dut1"])
-    ts = Timescale((daily_tt, daily_delta_t), leap_dates, leap_offsets)
-    skyfield_iers.install_polar_motion_table(ts, rows)
-    return ts
-
-
-def _astropy_time(t_unix: Array) -> Time:
-    """astropy Time of Unix (POSIX) stamps, through their calendar strings (sub-microsecond).
-
-    Not ``format="unix"``: astropy's unix time runs 86400 s per UTC day also on a day with a
-    leap second, so it differs from POSIX by up to 1 s on such days (its documentation).
-    """
-    ns = np.round(np.asarray(t_unix, dtype=float) * 1e9).astype(np.int64)
-    return Time(np.datetime_as_string(ns.astype("datetime64[ns]")), format="isot", scale="utc")
-
-
-def _leap_second_day(t_unix: Array) -> NDArray[np.bool_]:
-    """True for stamps on a UTC day that ends with a leap second (e.g. 2016-12-31)."""
-    day = np.floor(np.asarray(t_unix, dtype=float) / 86400.0) * 86400.0
-    out: NDArray[np.bool_] = timescales.tai_minus_utc(day + 86400.0) != \
-        timescales.tai_minus_utc(day)
-    return out
-
-
-def _sky_time(ts: Timescale, t_unix: Array) -> SkyTime:
-    """Skyfield Time of Unix (UTC) stamps (whole days added to the date, leap seconds right)."""
-    days = np.floor(t_unix / 86400.0)
-    return ts.utc(1970, 1, 1 + days, 0, 0, t_unix - days * 86400.0)
-
-
-def _astropy_state(x: Array, t: Time, frame: type) -> Any:
-    rep = CartesianRepresentation(
-        x[:, :3].T * u.km, differentials=CartesianDifferential(x[:, 3:].T * u.km / u.s))
-    return frame(rep, obstime=t)
-
-
-def _states(coord: Any) -> Array:
-    c = coord.cartesian
-    return np.concatenate([c.xyz.to_value(u.km).T,
-                           c.differentials["s"].d_xyz.to_value(u.km / u.s).T], axis=1)
+    return checked_skyfield_timescale()
 
 
 def _assert_states_close(ours: Array, ref: Array, pos_tol: float, vel_tol: float,
@@ -228,15 +149,15 @@ def _assert_states_close(ours: Array, ref: Array, pos_tol: float, vel_tol: float
 def _compare_chain_with_astropy(x_teme: Array, t_unix: Array,
                                 e: eop.EarthOrientation) -> None:
     """TEME -> GCRS, TEME -> ITRS, GCRS -> ITRS, ITRS -> GCRS, GCRS -> TEME vs astropy."""
-    t = _astropy_time(t_unix)
-    teme = _astropy_state(x_teme, t, TEME)
-    g_ref = _states(teme.transform_to(GCRS(obstime=t)))
-    i_ref = _states(teme.transform_to(ITRS(obstime=t)))
+    t = astropy_time(t_unix)
+    teme = astropy_state(x_teme, t, TEME)
+    g_ref = states(teme.transform_to(GCRS(obstime=t)))
+    i_ref = states(teme.transform_to(ITRS(obstime=t)))
     # Each leg on its own too: astropy's GCRS -> ITRS of our GCRS, ITRS -> GCRS of its ITRS.
     g = teme_to_gcrs(x_teme, t_unix, e)
-    i_of_g = _states(_astropy_state(g, t, GCRS).transform_to(
+    i_of_g = states(astropy_state(g, t, GCRS).transform_to(
         ITRS(obstime=t)))
-    g_of_i = _states(_astropy_state(i_ref, t, ITRS).transform_to(
+    g_of_i = states(astropy_state(i_ref, t, ITRS).transform_to(
         GCRS(obstime=t)))
     pairs = [(g, g_ref), (gcrs_to_itrs(g, t_unix, e), i_ref),
              (gcrs_to_itrs(g, t_unix, e), i_of_g), (itrs_to_gcrs(i_ref, t_unix, e), g_of_i),
@@ -258,7 +179,7 @@ def test_teme_gcrs_itrs_of_real_element_sets_match_astropy_at_their_epochs(
         assert err == 0
         x = np.vstack([x, np.concatenate([r, v])])
     t = np.concatenate([t, t_sample])
-    keep = ~_leap_second_day(t)  # 2005-12-31: see test_leap_second_day_* below
+    keep = ~leap_second_day(t)  # 2005-12-31: see test_leap_second_day_* below
     assert len(t) > 500 and np.ptp(t) > 20 * 365 * 86400.0 and keep.sum() > len(t) - 20
     _compare_chain_with_astropy(x[keep], t[keep], eop.bundled())
 
@@ -293,16 +214,16 @@ def test_teme_gcrs_itrs_at_epochs_spread_over_2000_2035_match_astropy(
     rng = np.random.default_rng(2035)
     x = x[rng.choice(len(x), 300, replace=False)]
     if span.startswith("bundled"):
-        lo, hi = _unix(2000, 1, 1), eop.bundled().span[1] - 86400.0
+        lo, hi = unix(2000, 1, 1), eop.bundled().span[1] - 86400.0
         e, table = eop.bundled(), iers.earth_orientation_table.get()
     else:
-        lo, hi = eop.bundled().span[1] + 86400.0, _unix(2035, 12, 31)
+        lo, hi = eop.bundled().span[1] + 86400.0, unix(2035, 12, 31)
         e, table = _synthetic_eop(lo - 5 * 86400.0, hi + 5 * 86400.0)
     t = np.sort(rng.uniform(lo, hi, len(x)))
-    t = np.where(_leap_second_day(t), t - 86400.0, t)  # see test_leap_second_day_* below
+    t = np.where(leap_second_day(t), t - 86400.0, t)  # see test_leap_second_day_* below
     with iers.earth_orientation_table.set(table):
         assert np.all(e.covers(t))
-        np.testing.assert_allclose(_astropy_time(t).delta_ut1_utc,
+        np.testing.assert_allclose(astropy_time(t).delta_ut1_utc,
                                    e.at(t).dut1, rtol=0, atol=1e-9)
         _compare_chain_with_astropy(x, t, e)
 
@@ -316,53 +237,31 @@ def test_topocentric_razel_and_radec_match_skyfield_and_astropy(
     entries = catalog.read_catalog(SAMPLE)
     n_up = 0
     for station in SITES.values():
-        lat, lon = math.degrees(station.lat_rad), math.degrees(station.lon_rad)
-        topos = wgs84.latlon(lat, lon, elevation_m=station.alt_km * 1e3)
-        loc = EarthLocation.from_geodetic(lon * u.deg, lat * u.deg, station.alt_km * u.km)
+        site, loc = topos(station), location(station)
         for ent in entries:
             t = ent.epoch_unix + np.arange(0.0, 86400.0, 900.0)
             x = catalog.catalog_states([ent], t).x[0]
             z = razel_gcrs(x, t, station)
-            ts = _sky_time(skyfield_ts, t)
-            geo = (EarthSatellite.from_satrec(ent.satrec, skyfield_ts) - topos).at(ts)
-            alt, az, dist = geo.altaz()
-            ra, dec, _ = geo.radec()
-            _assert_razel(z, dist.km, az.radians, alt.radians)
-            _assert_angles(frames.radec_gcrs(x, t, station), ra.radians, dec.radians)
-            n_up += int(np.sum(alt.degrees > 0.0))
+            geo = (EarthSatellite.from_satrec(ent.satrec, skyfield_ts) - site).at(
+                sky_time(skyfield_ts, t))
+            ref = sky_razel(geo)
+            assert_razel(z, ref, TOPO_RANGE_TOL_KM, TOPO_ANGLE_TOL)
+            assert_radec(frames.radec_gcrs(x, t, station), sky_radec(geo), TOPO_ANGLE_TOL)
+            n_up += int(np.sum(ref[:, 2] > 0.0))
             # astropy
-            tt = _astropy_time(t)
+            tt = astropy_time(t)
             jd, fr = timescales.jd_utc(t)
             _, r, _ = ent.satrec.sgp4_array(jd, fr)
             itrs = TEME(CartesianRepresentation(r.T * u.km), obstime=tt).transform_to(
                 ITRS(obstime=tt))
-            topo = ITRS(itrs.cartesian - loc.get_itrs(tt).cartesian, obstime=tt, location=loc)
-            aa = topo.transform_to(AltAz(obstime=tt, location=loc, pressure=0 * u.hPa))
-            _assert_razel(z, aa.distance.to_value(u.km), aa.az.rad, aa.alt.rad)
+            assert_razel(z, astropy_razel(itrs, tt, loc), TOPO_RANGE_TOL_KM, TOPO_ANGLE_TOL)
     assert n_up > 500  # the comparison includes plenty of real passes
-
-
-def _assert_razel(z: Array, rng: Array, az: Array, el: Array) -> None:
-    """Range within TOPO_RANGE_TOL_KM; azimuth (times cos el), elevation within TOPO_ANGLE_TOL."""
-    dr = np.abs(z[:, 0] - rng)
-    daz = np.abs(wrap_pi(z[:, 1] - az)) * np.cos(el)
-    de = np.abs(z[:, 2] - el)
-    assert dr.max() <= TOPO_RANGE_TOL_KM, f"range differs by {dr.max() * 1e3:.6f} m"
-    assert daz.max() <= TOPO_ANGLE_TOL, f"azimuth differs by {daz.max() / ARCSEC:.6f} arcsec"
-    assert de.max() <= TOPO_ANGLE_TOL, f"elevation differs by {de.max() / ARCSEC:.6f} arcsec"
-
-
-def _assert_angles(z: Array, ra: Array, dec: Array) -> None:
-    dra = np.abs(wrap_pi(z[:, 0] - ra)) * np.cos(dec)
-    dd = np.abs(z[:, 1] - dec)
-    assert dra.max() <= TOPO_ANGLE_TOL, f"right ascension differs by {dra.max() / ARCSEC:.6f}\""
-    assert dd.max() <= TOPO_ANGLE_TOL, f"declination differs by {dd.max() / ARCSEC:.6f}\""
 
 
 # --------------------------------------------------------------------------------------------
 # Vallado's worked example
 # --------------------------------------------------------------------------------------------
-VALLADO_T = _unix(2004, 4, 6, 7, 51, 28.386009)
+VALLADO_T = unix(2004, 4, 6, 7, 51, 28.386009)
 """2004-04-06 07:51:28.386009 UTC (Vallado, Fundamentals of Astrodynamics and Applications,
 4th ed., Example 3-15; AIAA 2006-6753 Appendix C)."""
 VALLADO_ITRF = np.array([-1033.4793830, 7901.2952754, 6380.3565958,
@@ -376,7 +275,7 @@ VALLADO_TEME = np.array([5094.18016210, 6127.64465950, 6380.34453270,
                          -4.7461314870, 0.7858180410, 5.5319312880])
 """TEME of the same example (Table 3-6; astropy's test_teme_itrf quotes it too)."""
 VALLADO_EOP = eop.EarthOrientation(
-    np.array([_unix(2004, 4, 5), _unix(2004, 4, 8)]), np.full(2, -0.4399619 - 32.0),
+    np.array([unix(2004, 4, 5), unix(2004, 4, 8)]), np.full(2, -0.4399619 - 32.0),
     np.full(2, -0.140682 * ARCSEC), np.full(2, 0.333309 * ARCSEC), "Vallado example 3-15")
 """The example's EOP: UT1 - UTC = -0.4399619 s (TAI - UTC = 32 s), x_p = -0.140682",
 y_p = 0.333309" (held constant over the days around it)."""
@@ -414,7 +313,7 @@ def test_vallado_example_3_15_itrf_gcrf_teme() -> None:
 def test_gmst82_against_vallado_and_sofa() -> None:
     # Vallado Example 3-5: 1992-08-20 12:14:00 UT1 -> GMST = 152.578787810 deg, from
     # JD 2448855.009722 (1.9e-5 s early: 8e-8 deg; ERFA gives 152.5787878517 deg).
-    g = gmst82(_unix(1992, 8, 20, 12, 14, 0), eop.NO_EOP)
+    g = gmst82(unix(1992, 8, 20, 12, 14, 0), eop.NO_EOP)
     assert math.degrees(float(g)) == pytest.approx(152.578787810, abs=1e-7)
     # Vallado Example 3-15 (UT1 = UTC - 0.4399619 s): GMST = 312.8098943 deg.
     g = gmst82(VALLADO_T, VALLADO_EOP)
@@ -426,13 +325,13 @@ def test_gmst82_against_vallado_and_sofa() -> None:
 
 def test_earth_rotation_angle_definition_sofa_and_rate() -> None:
     # IERS 2003: ERA(J2000.0 UT1) = 2 pi 0.7790572732640 (UT1 = UTC without EOP).
-    era0 = earth_rotation_angle(_unix(2000, 1, 1, 12), eop.NO_EOP)
+    era0 = earth_rotation_angle(unix(2000, 1, 1, 12), eop.NO_EOP)
     assert float(era0) == pytest.approx(2 * math.pi * 0.7790572732640, abs=1e-11)
     # SOFA/ERFA test value: eraEra00(2400000.5, 54388.0) = 0.4022837240028158102 rad.
     era = earth_rotation_angle((54388.0 - 40587.0) * 86400.0, eop.NO_EOP)
     assert float(era) == pytest.approx(0.4022837240028158102, abs=1e-11)
     # With the EOP, ERA is that of UT1 = UTC + dut1.
-    t = np.array([_unix(2020, 3, 1, 6), _unix(2024, 11, 5, 18, 30)])
+    t = np.array([unix(2020, 3, 1, 6), unix(2024, 11, 5, 18, 30)])
     d = eop.bundled().at(t).dut1
     np.testing.assert_allclose(earth_rotation_angle(t), earth_rotation_angle(t + d, eop.NO_EOP),
                                rtol=0, atol=1e-9)
@@ -442,34 +341,34 @@ def test_earth_rotation_angle_definition_sofa_and_rate() -> None:
 
 
 def test_leap_seconds_tai_minus_utc() -> None:
-    t = np.array([_unix(1972, 1, 1), _unix(1972, 7, 1), _unix(2016, 7, 1), _unix(2017, 1, 1),
-                  _unix(2026, 5, 1)])
+    t = np.array([unix(1972, 1, 1), unix(1972, 7, 1), unix(2016, 7, 1), unix(2017, 1, 1),
+                  unix(2026, 5, 1)])
     np.testing.assert_array_equal(timescales.tai_minus_utc(t), [10, 11, 36, 37, 37])
     np.testing.assert_array_equal(timescales.tt_minus_utc(t[-1:]), [37 + 32.184])
     # Elapsed TT over a year without a leap second is the difference of the stamps; over
     # the year that ends with the leap second 2016-12-31T23:59:60, one second more.
-    assert float(timescales.tt_elapsed(_unix(2017, 6, 1), _unix(2018, 6, 1))) == 365 * 86400
-    assert float(timescales.tt_elapsed(_unix(2016, 6, 1), _unix(2017, 6, 1))) == 365 * 86400 + 1
+    assert float(timescales.tt_elapsed(unix(2017, 6, 1), unix(2018, 6, 1))) == 365 * 86400
+    assert float(timescales.tt_elapsed(unix(2016, 6, 1), unix(2017, 6, 1))) == 365 * 86400 + 1
 
 
 def test_leap_second_day_tai_minus_utc() -> None:
     # POSIX stamps of a day that ends with a leap second: the second is inserted after
     # 23:59:59, so TAI - UTC is the day's old value until then (36 s on 2016-12-31).
-    t = np.array([_unix(1972, 6, 30, 12), _unix(1972, 6, 30, 23, 59, 59),
-                  _unix(2016, 12, 31, 12), _unix(2016, 12, 31, 23, 59, 59)])
+    t = np.array([unix(1972, 6, 30, 12), unix(1972, 6, 30, 23, 59, 59),
+                  unix(2016, 12, 31, 12), unix(2016, 12, 31, 23, 59, 59)])
     np.testing.assert_array_equal(timescales.tai_minus_utc(t), [10, 10, 36, 36])
-    assert float(timescales.tt_elapsed(_unix(2016, 12, 31, 23, 59, 59), _unix(2017, 1, 1))) == 2
+    assert float(timescales.tt_elapsed(unix(2016, 12, 31, 23, 59, 59), unix(2017, 1, 1))) == 2
 
 
 def test_leap_second_day_earth_rotation_matches_astropy(astropy_eop: None) -> None:
     # The same as the astropy comparisons above, on 2016-12-31 (UT1 - UTC = -0.408 s all
     # day): the leap second must not smear into the Earth rotation angle.
-    t = np.array([_unix(2016, 12, 31, 6), _unix(2016, 12, 31, 12), _unix(2016, 12, 31, 23)])
-    np.testing.assert_allclose(eop.bundled().at(t).dut1, _astropy_time(t).delta_ut1_utc,
+    t = np.array([unix(2016, 12, 31, 6), unix(2016, 12, 31, 12), unix(2016, 12, 31, 23)])
+    np.testing.assert_allclose(eop.bundled().at(t).dut1, astropy_time(t).delta_ut1_utc,
                                rtol=0, atol=1e-6)
     x = np.tile([6778.0, 0.0, 0.0, 0.0, 7.5, 0.0], (len(t), 1))
-    ref = _states(_astropy_state(x, _astropy_time(t), GCRS).transform_to(
-        ITRS(obstime=_astropy_time(t))))
+    ref = states(astropy_state(x, astropy_time(t), GCRS).transform_to(
+        ITRS(obstime=astropy_time(t))))
     _assert_states_close(gcrs_to_itrs(x, t), ref, POS_TOL_KM, VEL_TOL_KM_S)
 
 
@@ -523,9 +422,9 @@ def test_read_finals_parses_a_hand_written_table_and_interpolates_linearly(
     path = tmp_path / "finals2000A.snippet"
     path.write_text("\n".join(rows) + "\n")
     table = eop.read_finals(path)
-    assert table.span == (_unix(2016, 12, 31), _unix(2017, 1, 2))
+    assert table.span == (unix(2016, 12, 31), unix(2017, 1, 2))
     # At the rows: Bulletin B where given, else A.
-    v = table.at(np.array([_unix(2016, 12, 31), _unix(2017, 1, 1), _unix(2017, 1, 2)]))
+    v = table.at(np.array([unix(2016, 12, 31), unix(2017, 1, 1), unix(2017, 1, 2)]))
     np.testing.assert_allclose(v.dut1, [-0.4077600, 0.5912975, 0.5901752], atol=1e-12)
     np.testing.assert_allclose(v.xp / ARCSEC, [0.081318, 0.080450, 0.080285], atol=1e-12)
     np.testing.assert_allclose(v.yp / ARCSEC, [0.262990, 0.263074, 0.263605], atol=1e-12)
@@ -534,14 +433,14 @@ def test_read_finals_parses_a_hand_written_table_and_interpolates_linearly(
                                                0.5901752 - 37], rtol=0, atol=1e-12)
     # In between: linear (on 2016-12-31, the leap-second day, UT1 - UTC is checked by
     # test_read_finals_interpolates_across_a_leap_second).
-    v = table.at(np.array([_unix(2016, 12, 31, 12), _unix(2017, 1, 1, 6)]))
+    v = table.at(np.array([unix(2016, 12, 31, 12), unix(2017, 1, 1, 6)]))
     assert float(v.dut1[1]) == pytest.approx(0.5912975 + (0.5901752 - 0.5912975) / 4, abs=1e-12)
     np.testing.assert_allclose(v.xp / ARCSEC, [(0.081318 + 0.080450) / 2,
                                                0.080450 + (0.080285 - 0.080450) / 4], atol=1e-12)
     np.testing.assert_allclose(v.yp / ARCSEC, [(0.262990 + 0.263074) / 2,
                                                0.263074 + (0.263605 - 0.263074) / 4], atol=1e-12)
     # Outside the table: the no-EOP values, and `covers` says so.
-    out = table.at(np.array([_unix(2016, 12, 30), _unix(2017, 1, 3)]))
+    out = table.at(np.array([unix(2016, 12, 30), unix(2017, 1, 3)]))
     assert not out.covered.any() and not out.dut1.any() and not out.xp.any()
     # A file that is not a finals table: a ValueError naming it.
     bad = tmp_path / "not_finals.txt"
@@ -553,16 +452,16 @@ def test_read_finals_parses_a_hand_written_table_and_interpolates_linearly(
 def test_read_finals_interpolates_across_a_leap_second(tmp_path: Path) -> None:
     path = tmp_path / "finals2000A.snippet"
     path.write_text("\n".join(FINALS_ROWS) + "\n")
-    v = eop.read_finals(path).at(np.array([_unix(2016, 12, 31, 12)]))
+    v = eop.read_finals(path).at(np.array([unix(2016, 12, 31, 12)]))
     # Halfway between the rows in UT1 - TAI, then UT1 - UTC with the day's 36 s.
     assert float(v.dut1[0]) == pytest.approx((-0.4077600 + 0.5912975 - 1.0) / 2, abs=1e-9)
 
 
 def test_bundled_table_matches_astropy_reading_of_the_same_file(astropy_eop: None) -> None:
-    t = np.linspace(_unix(1980, 1, 1), eop.bundled().span[1] - 86400.0, 3000)
-    t = t[~_leap_second_day(t)]  # see test_leap_second_day_* below
+    t = np.linspace(unix(1980, 1, 1), eop.bundled().span[1] - 86400.0, 3000)
+    t = t[~leap_second_day(t)]  # see test_leap_second_day_* below
     v = eop.bundled().at(t)
-    tt = _astropy_time(t)
+    tt = astropy_time(t)
     np.testing.assert_allclose(v.dut1, tt.delta_ut1_utc, rtol=0, atol=1e-9)
     xp, yp = iers.earth_orientation_table.get().pm_xy(tt)
     np.testing.assert_allclose(v.xp, xp.to_value(u.rad), rtol=0, atol=1e-14)
@@ -571,7 +470,7 @@ def test_bundled_table_matches_astropy_reading_of_the_same_file(astropy_eop: Non
 
 def test_no_eop_gives_zeros_and_the_default_follows_the_environment(
         monkeypatch: pytest.MonkeyPatch) -> None:
-    t = np.array([_unix(1990, 1, 1), _unix(2025, 1, 1), _unix(2090, 1, 1)])
+    t = np.array([unix(1990, 1, 1), unix(2025, 1, 1), unix(2090, 1, 1)])
     v = eop.NO_EOP.at(t)
     assert not v.dut1.any() and not v.xp.any() and not v.yp.any() and not v.covered.any()
     assert eop.NO_EOP.span == (math.inf, -math.inf)
@@ -607,10 +506,10 @@ def test_no_eop_error_is_within_the_size_eop_documents() -> None:
 @DUBIOUS_YEAR
 def test_scalar_matrix_equals_vectorised_one() -> None:
     rng = np.random.default_rng(16)
-    leap = _unix(2017, 1, 1)
-    t = np.concatenate([rng.uniform(_unix(1990, 1, 1), _unix(2035, 1, 1), 300),
+    leap = unix(2017, 1, 1)
+    t = np.concatenate([rng.uniform(unix(1990, 1, 1), unix(2035, 1, 1), 300),
                         leap + rng.uniform(-3600.0, 3600.0, 60),  # the leap second's hours
-                        [leap - 1.0, leap, leap - 3600.0, _unix(2025, 1, 1, 0, 59, 59.999)]])
+                        [leap - 1.0, leap, leap - 3600.0, unix(2025, 1, 1, 0, 59, 59.999)]])
     m = gcrs_to_itrs_matrix(t)
     m1 = np.array([gcrs_to_itrs_matrix1(float(ti)) for ti in t])
     assert np.abs(m - m1).max() <= 1e-10
@@ -621,7 +520,7 @@ def test_scalar_matrix_equals_vectorised_one() -> None:
 def test_round_trips() -> None:
     rng = np.random.default_rng(1)
     x = np.concatenate([rng.normal(0, 20000, (50, 3)), rng.normal(0, 5, (50, 3))], axis=1)
-    t = rng.uniform(_unix(1995, 1, 1), _unix(2027, 1, 1), 50)
+    t = rng.uniform(unix(1995, 1, 1), unix(2027, 1, 1), 50)
     np.testing.assert_allclose(itrs_to_gcrs(gcrs_to_itrs(x, t), t), x, rtol=0, atol=1e-9)
     np.testing.assert_allclose(gcrs_to_teme(teme_to_gcrs(x, t), t), x, rtol=0, atol=1e-9)
     # One epoch for many states, and positions alone, broadcast the same way.
@@ -636,7 +535,7 @@ def test_velocity_transform_matches_finite_differences_of_positions() -> None:
     # docstring: < 1e-11 rad/s, i.e. < 1e-11 |r| km/s; measured 0.26 mm/s at GEO).
     entries = catalog.read_catalog(SAMPLE)
     x = catalog.catalog_states(entries, entries[0].epoch_unix + 3600.0).x[:, 0]
-    t = np.random.default_rng(7).uniform(_unix(2001, 1, 1), _unix(2027, 1, 1), 40)
+    t = np.random.default_rng(7).uniform(unix(2001, 1, 1), unix(2027, 1, 1), 40)
     h = 1.0  # s
     for xi in x:
         v = gcrs_to_itrs(np.broadcast_to(xi, (len(t), 6)), t)[:, 3:]
@@ -671,8 +570,8 @@ def test_site_itrs_vallado_example_3_1_and_astropy() -> None:
 
 @DUBIOUS_YEAR
 def test_cip_matches_erfa_xys06a_of_astropy_tt() -> None:
-    t = np.random.default_rng(3).uniform(_unix(1975, 1, 1), _unix(2095, 1, 1), 300)
-    tt = _astropy_time(t).tt
+    t = np.random.default_rng(3).uniform(unix(1975, 1, 1), unix(2095, 1, 1), 300)
+    tt = astropy_time(t).tt
     x, y, _ = erfa.xys06a(tt.jd1, tt.jd2)
     ref = np.stack([x, y, np.sqrt(1.0 - x * x - y * y)], axis=-1)
     cip = frames.cip_gcrs(t)

@@ -15,6 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
+from scipy.spatial.transform import Rotation
 
 from ssa_fusion.core.constants import MU_EARTH
 from ssa_fusion.core.kepler import propagate, stumpff
@@ -26,16 +27,7 @@ def _state(a: float, e: float, i: float, raan: float, argp: float, nu: float) ->
     r = p / (1.0 + e * math.cos(nu))
     r_pf = np.array([r * math.cos(nu), r * math.sin(nu), 0.0])
     v_pf = math.sqrt(MU_EARTH / p) * np.array([-math.sin(nu), e + math.cos(nu), 0.0])
-
-    def rz(t: float) -> np.ndarray:
-        c, s = math.cos(t), math.sin(t)
-        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-    def rx(t: float) -> np.ndarray:
-        c, s = math.cos(t), math.sin(t)
-        return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-    q = rz(raan) @ rx(i) @ rz(argp)
+    q = Rotation.from_euler("ZXZ", [raan, i, argp]).as_matrix()  # Rz(raan) Rx(i) Rz(argp)
     return np.concatenate([q @ r_pf, q @ v_pf])
 
 

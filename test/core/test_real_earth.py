@@ -19,39 +19,38 @@ km/s, rad; epochs Unix s (UTC).
 
 from __future__ import annotations
 
-import calendar
 import math
 from collections import Counter
 from dataclasses import replace
-from pathlib import Path
 
-import astropy_iers_data
 import numpy as np
 import pytest
-import sgp4
-from numpy.typing import NDArray
-from sgp4.api import Satrec
-from skyfield.api import EarthSatellite, wgs84
-from skyfield.constants import AU_KM, DAY_S
-from skyfield.data import iers as skyfield_iers
-from skyfield.positionlib import ICRF
-from skyfield.timelib import Time as SkyTime
+from references import (
+    ACTIVE,
+    SAMPLE,
+    Array,
+    assert_radec,
+    assert_razel,
+    checked_skyfield_timescale,
+    leap_second_day,
+    sgp4_ver_cases,
+    sky_radec,
+    sky_razel,
+    sky_time,
+    topocentric,
+    topos,
+)
+from skyfield.api import EarthSatellite
+from skyfield.constants import DAY_S
 from skyfield.timelib import Timescale
 from skyfield.toposlib import GeographicPosition
 
-from ssa_fusion.core import catalog, dynamics, eop, frames, lighttime, timescales
+from ssa_fusion.core import catalog, dynamics, frames, lighttime, timescales
 from ssa_fusion.core.constants import ARCSEC, C_KM_S
 from ssa_fusion.core.frames import Station, wrap_pi
 from ssa_fusion.core.measurement import RadecModel, RazelModel
 from ssa_fusion.core.stations import OPTICAL_SIGMA, RADAR_SIGMA, SENSORS, SensorType
 from ssa_fusion.sim import sky
-
-Array = NDArray[np.float64]
-
-ROOT = Path(__file__).resolve().parents[2]
-SAMPLE = ROOT / "config" / "catalogs" / "sample.tle"
-ACTIVE = ROOT / "config" / "catalogs" / "celestrak_active_2025-07.tle"
-SGP4_VER = Path(sgp4.__file__).with_name("SGP4-VER.TLE")
 
 RANGE_TOL_KM = 1e-3
 """Range agreement, km: 1 m, 5 % of the radar's 20 m noise. Measured: 0.9 mm for the
@@ -67,106 +66,38 @@ SITES: dict[str, Station] = {s.station.name: s.station for s in SENSORS.values()
 
 
 # --------------------------------------------------------------------------------------------
-# skyfield on the same EOP
+# skyfield on the same EOP (test/references.py)
 # --------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def skyfield_ts() -> Timescale:
     """Skyfield on the same EOP as ours (checked against `eop.bundled`)."""
-    ts = _skyfield_timescale()
-    t = np.linspace(_unix(1975, 1, 1), _unix(2027, 10, 1), 2000)
-    t = t[~_leap_second_day(t)]
-    np.testing.assert_allclose(_sky_time(ts, t).dut1, eop.bundled().at(t).dut1, rtol=0,
-                               atol=1e-6)
-    return ts
+    return checked_skyfield_timescale()
 
 
-def _skyfield_timescale() -> Timescale:
-    """Skyfield's timescale and polar motion from finals2000A.all (astropy-iers-data), offline.
-
-    Skyfield's reader (`skyfield.data.iers.parse_x_y_dut1_from_finals_all`) takes the
-    Bulletin A columns; ours and astropy's take Bulletin B where a row has it (they differ
-    by up to 3 ms of UT1 in 1980, 1 m of topocentric range), so the rows' Bulletin B values
-    (bytes 135-165 of the IERS ReadMe) replace A where given before skyfield builds its
-    tables (`build_timescale_arrays`, `install_polar_motion_table`).
-    """
-    path = Path(astropy_iers_data.IERS_A_FILE)
-    with path.open("rb") as f:
-        rows = skyfield_iers.parse_x_y_dut1_from_finals_all(f)
-    bulletin_b = {}
-    for line in path.read_text().splitlines():
-        fields = line[134:144].strip(), line[144:154].strip(), line[154:165].strip()
-        if all(fields):
-            bulletin_b[float(line[7:15])] = tuple(float(v) for v in fields)
-    for row in rows:
-        b = bulletin_b.get(float(row["utc_mjd"]))
-        if b is not None:
-            row["x_arcseconds"], row["y_arcseconds"], row["dut1"] = b
-    daily_tt, daily_delta_t, leap_dates, leap_offsets = skyfield_iers.build_timescale_arrays(
-        rows["utc_mjd"], rows["dut1"])
-    ts = Timescale((daily_tt, daily_delta_t), leap_dates, leap_offsets)
-    skyfield_iers.install_polar_motion_table(ts, rows)
-    return ts
-
-
-def _unix(year: int, month: int, day: int) -> float:
-    return float(calendar.timegm((year, month, day, 0, 0, 0, 0, 0, 0)))
-
-
-def _sky_time(ts: Timescale, t_unix: Array) -> SkyTime:
-    """Skyfield Time of Unix (UTC, POSIX) stamps."""
-    days = np.floor(t_unix / 86400.0)
-    return ts.utc(1970, 1, 1 + days, 0, 0, t_unix - days * 86400.0)
-
-
-def _topos(station: Station) -> GeographicPosition:
-    return wgs84.latlon(math.degrees(station.lat_rad), math.degrees(station.lon_rad),
-                        elevation_m=station.alt_km * 1e3)
-
-
-def _skyfield_observed(sat: EarthSatellite, topos: GeographicPosition, ts: Timescale,
+def _skyfield_observed(sat: EarthSatellite, site: GeographicPosition, ts: Timescale,
                        t_unix: Array, light_time: bool) -> tuple[Array, Array]:
-    """Skyfield's [range km, az, el] (n, 3) and [ra, dec] (n, 2) of `sat` from `topos`.
+    """Skyfield's [range km, az, el] (n, 3) and [ra, dec] (n, 2) of `sat` from `site`.
 
     Received at `t_unix`; with `light_time` the satellite is taken where it was ``tau``
     earlier, ``tau = |r_sat(t - tau) - r_site(t)| / c`` iterated to convergence (GCRS).
     """
-    t = _sky_time(ts, t_unix)
-    site = topos.at(t).position.km
+    t = sky_time(ts, t_unix)
     r = sat.at(t).position.km
     if light_time:
+        here = site.at(t).position.km
         for _ in range(4):  # each iteration gains |v| / c ~ 3e-5
-            tau = np.linalg.norm(r - site, axis=0) / C_KM_S
+            tau = np.linalg.norm(r - here, axis=0) / C_KM_S
             r = sat.at(t - tau / DAY_S).position.km
-    pos = ICRF((r - site) / AU_KM, t=t, center=topos)
-    alt, az, dist = pos.altaz()
-    ra, dec, _ = pos.radec()
-    return (np.stack([dist.km, az.radians, alt.radians], axis=-1),
-            np.stack([ra.radians, dec.radians], axis=-1))
+    pos = topocentric(r, t, site)
+    return sky_razel(pos), sky_radec(pos)
 
 
 def _assert_razel(z: Array, ref: Array) -> None:
-    dr = np.abs(z[:, 0] - ref[:, 0])
-    daz = np.abs(wrap_pi(z[:, 1] - ref[:, 1])) * np.cos(ref[:, 2])
-    de = np.abs(z[:, 2] - ref[:, 2])
-    assert dr.max() <= RANGE_TOL_KM, f"range differs by {dr.max() * 1e3:.4f} m"
-    assert daz.max() <= ANGLE_TOL, f"azimuth differs by {daz.max() / ARCSEC:.4f} arcsec"
-    assert de.max() <= ANGLE_TOL, f"elevation differs by {de.max() / ARCSEC:.4f} arcsec"
+    assert_razel(z, ref, RANGE_TOL_KM, ANGLE_TOL)
 
 
 def _assert_radec(z: Array, ref: Array) -> None:
-    dra = np.abs(wrap_pi(z[:, 0] - ref[:, 0])) * np.cos(ref[:, 1])
-    dd = np.abs(z[:, 1] - ref[:, 1])
-    assert dra.max() <= ANGLE_TOL, f"right ascension differs by {dra.max() / ARCSEC:.4f}\""
-    assert dd.max() <= ANGLE_TOL, f"declination differs by {dd.max() / ARCSEC:.4f}\""
-
-
-def _leap_second_day(t_unix: Array) -> NDArray[np.bool_]:
-    """True on a UTC day ending with a leap second: timescales smears TAI - UTC over it (see
-    test_frames.test_leap_second_day_*), so those stamps are left out here."""
-    day = np.floor(t_unix / 86400.0) * 86400.0
-    out: NDArray[np.bool_] = timescales.tai_minus_utc(day + 86400.0) != \
-        timescales.tai_minus_utc(day)
-    return out
+    assert_radec(z, ref, ANGLE_TOL)
 
 
 # --------------------------------------------------------------------------------------------
@@ -199,7 +130,7 @@ def test_simulated_radar_and_optical_measurements_match_skyfield_with_light_time
                 continue
             t = np.array([m.t for m in ms])
             z = np.array([m.z for m in ms])
-            razel, radec = _skyfield_observed(sat, _topos(sensor.station), skyfield_ts, t,
+            razel, radec = _skyfield_observed(sat, topos(sensor.station), skyfield_ts, t,
                                               light_time=True)
             if sensor.type == SensorType.RADAR:
                 _assert_razel(z, razel)
@@ -207,7 +138,7 @@ def test_simulated_radar_and_optical_measurements_match_skyfield_with_light_time
             else:
                 _assert_radec(z, radec)
             # Light time matters at this tolerance: without it skyfield is metres away.
-            geo, geo_radec = _skyfield_observed(sat, _topos(sensor.station), skyfield_ts, t,
+            geo, geo_radec = _skyfield_observed(sat, topos(sensor.station), skyfield_ts, t,
                                                 light_time=False)
             if sensor.type == SensorType.RADAR:
                 assert np.abs(geo[:, 0] - z[:, 0]).max() > 5 * RANGE_TOL_KM
@@ -238,7 +169,7 @@ def test_measurement_models_with_light_time_match_skyfield_for_the_sample_catalo
             if not up.any():
                 continue
             t, x = t_all[up], x_all[up]
-            razel, radec = _skyfield_observed(sat, _topos(station), skyfield_ts, t, True)
+            razel, radec = _skyfield_observed(sat, topos(station), skyfield_ts, t, True)
             radar = RazelModel(station, timescales.UNIX_EPOCH_JD, light_time=True)
             optical = RadecModel(station, timescales.UNIX_EPOCH_JD, light_time=True)
             _assert_razel(np.array([radar.h(xi, ti) for xi, ti in zip(x, t, strict=True)]),
@@ -258,23 +189,15 @@ def test_measurement_models_with_light_time_match_skyfield_for_the_sample_catalo
 def test_sgp4_verification_set_geometry_matches_skyfield(skyfield_ts: Timescale) -> None:
     # Vallado's verification set (1980-2006 epochs; LEO to deep space) at its own test
     # times: geometric razel and radec from every site.
-    lines = [ln.rstrip() for ln in SGP4_VER.read_text().splitlines() if ln[:2] in ("1 ", "2 ")]
     n = 0
-    for l1, l2 in zip(lines[::2], lines[1::2], strict=True):
-        satrec = Satrec.twoline2rv(l1[:69], l2[:69])
-        start, stop, step = (float(v) for v in l2[69:].split())
-        minutes = np.arange(start, stop + 0.5 * step, step)
-        jd = np.full(minutes.shape, satrec.jdsatepoch)
-        fr = satrec.jdsatepochF + minutes / 1440.0
-        err, r, v = satrec.sgp4_array(jd, fr)
-        t = ((jd - timescales.UNIX_EPOCH_JD) + fr) * 86400.0
-        ok = (err == 0) & ~_leap_second_day(t)
+    for satrec, t, err, r, v in sgp4_ver_cases():
+        ok = (err == 0) & ~leap_second_day(t)
         if not ok.any():
             continue
         t, x = t[ok], frames.teme_to_gcrs(np.concatenate([r, v], axis=1)[ok], t[ok])
         sat = EarthSatellite.from_satrec(satrec, skyfield_ts)
         for station in SITES.values():
-            razel, radec = _skyfield_observed(sat, _topos(station), skyfield_ts, t, False)
+            razel, radec = _skyfield_observed(sat, topos(station), skyfield_ts, t, False)
             _assert_razel(frames.razel_gcrs(x, t, station), razel)
             _assert_radec(frames.radec_gcrs(x, t, station), radec)
             n += len(t)
@@ -295,7 +218,7 @@ def test_celestrak_active_catalog_geometry_matches_skyfield(skyfield_ts: Timesca
     cs = catalog.catalog_states(entries, t)
     assert not cs.error.any()
     n_obj, n_t = cs.x.shape[:2]
-    tt = _sky_time(skyfield_ts, t)
+    tt = sky_time(skyfield_ts, t)
     sky_gcrs = np.stack([EarthSatellite.from_satrec(e.satrec, skyfield_ts).at(tt).position.km
                          for e in entries])  # (n_obj, 3, n_t)
     t_flat = np.tile(t, n_obj)
@@ -303,14 +226,11 @@ def test_celestrak_active_catalog_geometry_matches_skyfield(skyfield_ts: Timesca
     for station in SITES.values():
         z = frames.razel_gcrs(cs.x, t[None, :], station).reshape(-1, 3)
         zr = frames.radec_gcrs(cs.x, np.broadcast_to(t, (n_obj, n_t)), station).reshape(-1, 2)
-        topos = _topos(station)
-        t_sky = _sky_time(skyfield_ts, t_flat)
-        site = np.tile(topos.at(tt).position.km, n_obj)  # (3, n_obj * n_t), epoch fastest
-        vec = np.moveaxis(sky_gcrs, 1, 0).reshape(3, -1) - site
-        pos = ICRF(vec / AU_KM, t=t_sky, center=topos)
-        alt, az, dist = pos.altaz()
-        ra, dec, _ = pos.radec()
-        _assert_razel(z, np.stack([dist.km, az.radians, alt.radians], axis=-1))
-        _assert_radec(zr, np.stack([ra.radians, dec.radians], axis=-1))
-        n_up += int((alt.degrees > 10.0).sum())
+        site = topos(station)
+        pos = topocentric(np.moveaxis(sky_gcrs, 1, 0).reshape(3, -1),
+                          sky_time(skyfield_ts, t_flat), site)
+        ref = sky_razel(pos)
+        _assert_razel(z, ref)
+        _assert_radec(zr, sky_radec(pos))
+        n_up += int((ref[:, 2] > math.radians(10.0)).sum())
     assert n_up > 100

@@ -297,9 +297,9 @@ def test_a_stray_kind_or_frame_is_refused_and_changes_nothing():
     _track(sur, sim, TRACK_N - 1, R=R_FREE)
     stray = _meas(sim, TRACK_N - 1, R_FREE)
     stray.kind, stray.frame_id = Kind.RANGE_AZ_EL, "columbus"
-    assert sur.check(stray)[0] == "rejected_kind"
+    assert sur.problem(stray)[0] == "rejected_kind"
     other = _replace(_meas(sim, TRACK_N - 1, R_FREE), frame_id="teme")
-    assert sur.check(other)[0] == "rejected_frame"
+    assert sur.problem(other)[0] == "rejected_frame"
     for m in (stray, other):
         assert sur.add(m) == []
         assert "ignored" in sur.status
@@ -329,7 +329,7 @@ def test_impossible_range_az_el_is_refused(z, cause):
     sur = Surrogate(_config())
     _track(sur, sim, 10)
     m = _replace(_meas(sim, 10), z=np.array(z))
-    assert sur.check(m)[0] == cause
+    assert sur.problem(m)[0] == cause
     assert sur.add(m) == [] and sur.last.t == sim.t[9]
 
 

@@ -13,6 +13,10 @@ statistical test therefore uses truth = two-body (the placeholder is then exact)
 cross-range, the Herrick-Gibbs/EKF linearisation makes NEES ~17). Over 30 Monte Carlo runs the
 mean NEES at each checked epoch must lie in the two-sided 99.9 % chi-square interval of
 6 * 30 degrees of freedom (Bar-Shalom, Li & Kirubarajan 2001, sec. 5.4).
+
+One module of ~800 lines: every test drives the one `Tracker` through the cached simulations
+and helpers at the top; its sections (IOD, tracking, rejections, real vs forecast, reset,
+property tests) are the rules checked.
 """
 
 from __future__ import annotations
@@ -50,7 +54,7 @@ def _tracker(sim: Simulation, **config) -> Tracker:
     cfg = dict(p0_sigma=s.p0_sigma, q=s.q)
     cfg.update(config)
     frame_id = cfg.pop("frame_id", "")
-    return Tracker(sc.placeholder(s), sc.measurement_model(s), FilterOptions().with_(**cfg),
+    return Tracker(sc.placeholder_model(s), sc.measurement_model(s), FilterOptions().with_(**cfg),
                    frame_id=frame_id)
 
 

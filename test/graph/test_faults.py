@@ -9,6 +9,10 @@ non-symmetric covariance) is in test/core/test_tracker.py.
 
 Every timeout below is nominal: `Graph` multiplies it by SSA_TEST_TIMEOUT_FACTOR (default 3,
 see test/ros_graph.py), and so does `g.scaled` in this file's own deadline loops.
+
+One module of ~850 lines: the tests share the probe helpers at the top (crafted messages,
+a /clock driven by the test, /diagnostics counts by cause); its sections (bad input, clock,
+surrogate cannot fit, parameters, shutdown) are the faults.
 """
 
 from __future__ import annotations
@@ -228,12 +232,7 @@ def test_nodes_report_when_their_subscriptions_have_matched(ros_graph):
 
 def test_a_real_measurement_beats_a_forecast_for_the_same_epoch(ros_graph):
     g = ros_graph
-    got = g.collect(StateEstimate, "/ssa/estimate")
-    diag = Diag(g)
-    g.start_node("filter", params=filter_params())
-    real = publisher(g, Measurement, "/ssa/measurement", ("filter",))
-    fcst = publisher(g, Measurement, "/ssa/forecast", ("filter",))
-    run_clock_at(g, diag, float(T[5]), ("filter",))
+    got, diag, real, fcst = filter_with_both_inputs(g, float(T[5]))
 
     def forecast(i: int) -> Measurement:  # a plausible forecast: 2 km off, honest R
         return meas(i, z=SIM.z[i] + np.array([2.0, 0.0, 0.0]), source=types.Source.FORECAST,
@@ -333,6 +332,18 @@ def filter_and_surrogate(g, filter_extra: dict | None = None,
     clock = publisher(g, Clock, "/clock", NODES)
     pub = publisher(g, Measurement, "/ssa/measurement", NODES)
     return got, diag, clock, pub
+
+
+def filter_with_both_inputs(g, t: float) -> tuple[list, Diag, Any, Any]:
+    """Start a filter and run its clock at `t`; (estimates received, diagnostics,
+    /ssa/measurement publisher, /ssa/forecast publisher), both matched with it."""
+    got = g.collect(StateEstimate, "/ssa/estimate")
+    diag = Diag(g)
+    g.start_node("filter", params=filter_params())
+    sensor = publisher(g, Measurement, "/ssa/measurement", ("filter",))
+    forecasts = publisher(g, Measurement, "/ssa/forecast", ("filter",))
+    run_clock_at(g, diag, t, ("filter",))
+    return got, diag, sensor, forecasts
 
 
 def test_backwards_clock_jump_resets_filter_and_surrogate(ros_graph):
@@ -800,12 +811,7 @@ def test_the_forecast_topic_takes_only_forecasts_and_the_measurement_topic_only_
     """A source=SENSOR message on /ssa/forecast was once fused as a real
     measurement (and a forecast on /ssa/measurement as a forecast)."""
     g = ros_graph
-    got = g.collect(StateEstimate, "/ssa/estimate")
-    diag = Diag(g)
-    g.start_node("filter", params=filter_params())
-    forecasts = publisher(g, Measurement, "/ssa/forecast", ("filter",))
-    sensor = publisher(g, Measurement, "/ssa/measurement", ("filter",))
-    run_clock_at(g, diag, float(T[7]), ("filter",))
+    got, diag, sensor, forecasts = filter_with_both_inputs(g, float(T[7]))
     for i in range(3):
         forecasts.publish(meas(i))  # sensor data on the forecast topic
     sensor.publish(meas(3, source=types.Source.FORECAST))

@@ -2,13 +2,13 @@
 processes over DDS, on a shortened default scenario (range/az/el of the ISS)."""
 
 import json
-import signal
 from collections import Counter
 
 import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import QoSProfile
+from ros_graph import run_object_graph
 from rosgraph_msgs.msg import Clock
 from ssa_fusion_msgs.msg import Measurement, StateEstimate
 
@@ -44,20 +44,13 @@ def run(tmp_path_factory):
         got = {topic: g.collect(t, topic) for topic, t in TOPICS.items()}
         clock = g.collect(Clock, "/clock")
         diagnostics = g.collect(DiagnosticArray, "/diagnostics", QoSProfile(depth=100))
-        nodes = {n: g.start_node(n, params=params[n]) for n in ("recorder", "surrogate", "filter")}
-        g.wait_for_subscriber("/ssa/forecast", 3)  # filter, recorder, probe
-        sensor = g.start_node("sensor_sim", params=params["sensor_sim"])
-        sensor_code = g.wait_exit(sensor, timeout=90)
-        g.wait_quiet(lambda: tuple(len(v) for v in got.values()), quiet_s=1.0, limit_s=20)
-        for p in nodes.values():  # SIGTERM all at once: their shutdowns overlap
-            p.popen.send_signal(signal.SIGTERM)
-        codes = {n: g.wait_exit(p, timeout=10.0) for n, p in nodes.items()}
-        report = g.report()
+        ran = run_object_graph(  # sensor_sim starts once filter, recorder, probe take forecasts
+            g, params, 90, lambda: tuple(len(v) for v in got.values()),
+            before_sensor=lambda: g.wait_for_subscriber("/ssa/forecast", 3))
     finally:
         problems = g.close()
-    yield {"got": got, "clock": clock, "diagnostics": diagnostics, "bag": bag,
-           "sensor_code": sensor_code,
-           "codes": codes, "report": report, "problems": problems}
+    yield {"got": got, "clock": clock, "diagnostics": diagnostics, "bag": bag, **ran,
+           "problems": problems}
 
 
 def test_all_nodes_exit_0(run):

@@ -6,10 +6,10 @@ initialise from a pass, publish at the truth's cadence through the gaps, and be 
 after each pass."""
 
 import math
-import signal
 
 import numpy as np
 import pytest
+from ros_graph import run_object_graph
 from ssa_fusion_msgs.msg import StateEstimate
 
 from ssa_fusion.apps import evaluate
@@ -37,18 +37,10 @@ def run(tmp_path_factory):
     g = Graph(tmp)
     try:
         estimates = g.collect(StateEstimate, TOPIC_ESTIMATE)
-        nodes = {n: g.start_node(n, params=params[n]) for n in ("recorder", "surrogate", "filter")}
-        sensor = g.start_node("sensor_sim", params=params["sensor_sim"])
-        sensor_code = g.wait_exit(sensor, timeout=120)
-        g.wait_quiet(lambda: len(estimates), quiet_s=1.0, limit_s=20)
-        for p in nodes.values():  # SIGTERM all at once: their shutdowns overlap
-            p.popen.send_signal(signal.SIGTERM)
-        codes = {n: g.wait_exit(p, timeout=10.0) for n, p in nodes.items()}
-        report = g.report()
+        ran = run_object_graph(g, params, 120, lambda: len(estimates))
     finally:
         problems = g.close()
-    yield {"bag": bag, "sensor_code": sensor_code, "codes": codes, "report": report,
-           "problems": problems, "estimates": estimates}
+    yield {"bag": bag, **ran, "problems": problems, "estimates": estimates}
 
 
 def test_all_nodes_exit_0(run):

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 from visualization_msgs.msg import Marker
 
@@ -35,16 +36,6 @@ from ssa_fusion.ros import visual_msgs as vm
 T = 1_718_000_000.0  # 2024-06-10, Unix s
 
 
-def _rot_z(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
-def _rot_x(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
 def test_ellipsoid_of_a_diagonal_covariance():
     ell = geo.covariance_ellipsoid(np.diag([4.0, 9.0, 16.0]))  # σ = 2, 3, 4 km
     assert ell.semi_axes == pytest.approx([6.0, 9.0, 12.0])
@@ -55,7 +46,7 @@ def test_ellipsoid_of_a_diagonal_covariance():
 
 
 def test_ellipsoid_of_a_rotated_covariance():
-    rot = _rot_z(math.radians(30.0)) @ _rot_x(math.radians(50.0))
+    rot = Rotation.from_euler("ZX", [30.0, 50.0], degrees=True).as_matrix()  # Rz(30) Rx(50)
     p = rot @ np.diag([1.0, 25.0, 100.0]) @ rot.T  # km²
     ell = geo.covariance_ellipsoid(p)
     assert ell.semi_axes == pytest.approx([3.0, 15.0, 30.0])

@@ -122,7 +122,7 @@ def test_dmd_arm_predicts_where_no_forecast_arrives(monkeypatch):
 
     s = quick_variant(scenarios.SCENARIOS["iss_j2_pos"])
     sim = simulate(s, seed=1)
-    config = experiments.make_surrogate(s).config
+    config = experiments.scenario_surrogate(s).config
 
     class Silent:
         def __init__(self) -> None:
@@ -134,7 +134,7 @@ def test_dmd_arm_predicts_where_no_forecast_arrives(monkeypatch):
         def due(self, t):
             return []
 
-    monkeypatch.setattr(experiments, "make_surrogate", lambda s: Silent())
+    monkeypatch.setattr(experiments, "scenario_surrogate", lambda s: Silent())
     ev, run = experiments.evaluate_sim(s, sim, seed=1)
     assert run.forecasts == []
     dmd, coast = ev.arms[ArmName.DMD_EKF], ev.arms[ArmName.COAST]
