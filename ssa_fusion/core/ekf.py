@@ -80,7 +80,72 @@ def _inv_sym(s: Array) -> Array:
     return cast(Array, np.linalg.inv(s))
 
 
-class ExtendedKalmanFilter:
+class GaussianFilter:
+    """What the Kalman filters share: a Gaussian estimate, its checks, snapshots.
+
+    Parameters
+    ----------
+    x0 : array_like, shape (n,)
+        Initial state estimate.
+    P0 : array_like, shape (n, n)
+        Initial covariance (symmetric positive definite; it is symmetrised).
+
+    Attributes
+    ----------
+    x, P, x_prior, P_prior, x_post, P_post, y, S, K, nis
+        As `ExtendedKalmanFilter` describes them.
+    """
+
+    def __init__(self, x0: ArrayLike, P0: ArrayLike) -> None:
+        x = np.array(x0, dtype=float).reshape(-1)
+        P = np.array(P0, dtype=float)
+        n = x.shape[0]
+        if P.shape != (n, n):
+            raise ValueError(f"P0 must have shape ({n}, {n}), got {P.shape}")
+        if not (np.isfinite(x).all() and np.isfinite(P).all()):
+            raise ValueError("x0 and P0 must be finite")
+        self.dim_x = n
+        self.x: Array = x
+        self.P: Array = 0.5 * (P + P.T)
+        self.x_prior: Array = self.x.copy()
+        self.P_prior: Array = self.P.copy()
+        self.x_post: Array = self.x.copy()
+        self.P_post: Array = self.P.copy()
+        self.y: Array | None = None
+        self.S: Array | None = None
+        self.K: Array | None = None
+        self.nis: float = math.nan
+
+    def snapshot(self) -> tuple[Array, Array]:
+        """Return copies of the current estimate, for :meth:`restore`.
+
+        Returns
+        -------
+        x : ndarray, shape (n,)
+            Copy of ``x``.
+        P : ndarray, shape (n, n)
+            Copy of ``P``.
+        """
+        return self.x.copy(), self.P.copy()
+
+    def restore(self, x: ArrayLike, P: ArrayLike) -> None:
+        """Set the current estimate back to (copies of) a :meth:`snapshot`.
+
+        Only ``x`` and ``P`` are set; the diagnostics of the last step (``x_prior``,
+        ``x_post``, ``y``, ``S``, ``K``, ``nis``, ...) are left as they are.
+
+        Parameters
+        ----------
+        x : array_like, shape (n,)
+            Estimate to restore.
+        P : array_like, shape (n, n)
+            Its covariance.
+        """
+        self.x = np.array(x, dtype=float)
+        self.P = np.array(P, dtype=float)
+
+
+class ExtendedKalmanFilter(GaussianFilter):
     """Extended Kalman filter (FilterPy-like attributes).
 
     Parameters
@@ -107,25 +172,8 @@ class ExtendedKalmanFilter:
     """
 
     def __init__(self, x0: ArrayLike, P0: ArrayLike) -> None:
-        x = np.array(x0, dtype=float).reshape(-1)
-        P = np.array(P0, dtype=float)
-        n = x.shape[0]
-        if P.shape != (n, n):
-            raise ValueError(f"P0 must have shape ({n}, {n}), got {P.shape}")
-        if not (np.isfinite(x).all() and np.isfinite(P).all()):
-            raise ValueError("x0 and P0 must be finite")
-        self.dim_x = n
-        self.x: Array = x
-        self.P: Array = 0.5 * (P + P.T)
-        self._eye = np.eye(n)
-        self.x_prior: Array = self.x.copy()
-        self.P_prior: Array = self.P.copy()
-        self.x_post: Array = self.x.copy()
-        self.P_post: Array = self.P.copy()
-        self.y: Array | None = None
-        self.S: Array | None = None
-        self.K: Array | None = None
-        self.nis: float = math.nan
+        super().__init__(x0, P0)
+        self._eye = np.eye(self.dim_x)
 
     def predict(self, f: PredictFn, Q: ArrayLike) -> None:
         """Propagate the estimate: ``x <- f(x)``, ``P <- F P F^T + Q``.
@@ -222,34 +270,6 @@ class ExtendedKalmanFilter:
         self.x_post = x.copy()
         self.P_post = P.copy()
         return UpdateResult(True, nis, y)
-
-    def snapshot(self) -> tuple[Array, Array]:
-        """Return copies of the current estimate, for :meth:`restore`.
-
-        Returns
-        -------
-        x : ndarray, shape (n,)
-            Copy of ``x``.
-        P : ndarray, shape (n, n)
-            Copy of ``P``.
-        """
-        return self.x.copy(), self.P.copy()
-
-    def restore(self, x: ArrayLike, P: ArrayLike) -> None:
-        """Set the current estimate back to (copies of) a :meth:`snapshot`.
-
-        Only ``x`` and ``P`` are set; the diagnostics of the last step (``x_prior``,
-        ``x_post``, ``y``, ``S``, ``K``, ``nis``, ...) are left as they are.
-
-        Parameters
-        ----------
-        x : array_like, shape (n,)
-            Estimate to restore.
-        P : array_like, shape (n, n)
-            Its covariance.
-        """
-        self.x = np.array(x, dtype=float)
-        self.P = np.array(P, dtype=float)
 
 
 def _raise_non_finite(z: Array, R: Array, zp: Array, S: Array) -> None:

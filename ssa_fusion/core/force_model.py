@@ -46,7 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .constants import J2, MU_EARTH, OMEGA_EARTH, R_EARTH
 from .jit import f64, jit
-from .propagation import _tableau
+from .propagation import _tableau, j2_gravity
 
 __all__ = ["NOMINAL", "PARAMETERS", "ForceModel", "Trajectory", "acceleration",
            "parameter_index", "trajectory"]
@@ -141,31 +141,15 @@ def _force_rhs(y: Array, ncol: int, c: Array, prm: Array, which: IntArray,
     px, py, pz = c[3], c[4], c[5]
     x, yy, zz = y[0], y[1], y[2]
     vx, vy, vz = y[3], y[4], y[5]
-    r2 = x * x + yy * yy + zz * zz
-    r = math.sqrt(r2)
-    k = -mu / (r2 * r)
-    f = 1.5 * j2 * re * re / r2
-    z = px * x + py * yy + pz * zz
-    w = 5.0 * z * z / r2
-    g = 1.0 + f * (1.0 - w)
-    cz = 2.0 * f * z
-    ax = k * (g * x + cz * px)
-    ay = k * (g * yy + cz * py)
-    az = k * (g * zz + cz * pz)
-    ir2 = 1.0 / r2
-    e = k * ir2 * (4.0 * f * w - 2.0 * f - 3.0 * g)
-    d = -10.0 * k * f * z * ir2
-    h = 2.0 * k * f
-    kg = k * g
+    r = math.sqrt(x * x + yy * yy + zz * zz)
+    ax, ay, az, g00, g01, g02, g11, g12, g22 = j2_gravity(x, yy, zz, mu, j2, re, px, py, pz)
     # gravity gradient (symmetric), row-major in a 3x3 array of the position partials
     ar = np.empty((3, 3))
     av = np.zeros((3, 3))
-    ar[0, 0] = kg + e * x * x + 2.0 * d * x * px + h * px * px
-    ar[1, 1] = kg + e * yy * yy + 2.0 * d * yy * py + h * py * py
-    ar[2, 2] = kg + e * zz * zz + 2.0 * d * zz * pz + h * pz * pz
-    ar[0, 1] = ar[1, 0] = e * x * yy + d * (x * py + px * yy) + h * px * py
-    ar[0, 2] = ar[2, 0] = e * x * zz + d * (x * pz + px * zz) + h * px * pz
-    ar[1, 2] = ar[2, 1] = e * yy * zz + d * (yy * pz + py * zz) + h * py * pz
+    ar[0, 0], ar[1, 1], ar[2, 2] = g00, g11, g22
+    ar[0, 1] = ar[1, 0] = g01
+    ar[0, 2] = ar[2, 0] = g02
+    ar[1, 2] = ar[2, 1] = g12
     anx = any_ = anz = 0.0  # the drag acceleration with k_D = 1
     if c[6] != 0.0:
         om = c[11]

@@ -43,6 +43,38 @@ INTEGRATED_MODELS = (MotionModel.TWO_BODY, MotionModel.J2, MotionModel.DRAG)
 
 
 @jit
+def j2_gravity(x: float, yy: float, zz: float, mu: float, j2: float, re: float, px: float,
+               py: float, pz: float) -> tuple[float, float, float, float, float, float,
+                                                float, float, float]:
+    """Return the two-body + J2 acceleration and its gradient at (x, yy, zz) km.
+
+    J2 about the pole (px, py, pz): (a_x, a_y, a_z, G00, G01, G02, G11, G12, G22), km/s^2
+    and 1/s^2, by the formulas of `_gravity_rhs`'s docstring (G symmetric: its upper
+    triangle).
+    """
+    r2 = x * x + yy * yy + zz * zz
+    r = math.sqrt(r2)
+    k = -mu / (r2 * r)
+    f = 1.5 * j2 * re * re / r2
+    z = px * x + py * yy + pz * zz
+    w = 5.0 * z * z / r2
+    g = 1.0 + f * (1.0 - w)
+    c = 2.0 * f * z
+    ir2 = 1.0 / r2
+    e = k * ir2 * (4.0 * f * w - 2.0 * f - 3.0 * g)  # the r r^T term
+    d = -10.0 * k * f * z * ir2  # the (r p^T + p r^T) term
+    h = 2.0 * k * f  # the p p^T term
+    kg = k * g
+    return (k * (g * x + c * px), k * (g * yy + c * py), k * (g * zz + c * pz),
+            kg + e * x * x + 2.0 * d * x * px + h * px * px,
+            e * x * yy + d * (x * py + px * yy) + h * px * py,
+            e * x * zz + d * (x * pz + px * zz) + h * px * pz,
+            kg + e * yy * yy + 2.0 * d * yy * py + h * py * py,
+            e * yy * zz + d * (yy * pz + py * zz) + h * py * pz,
+            kg + e * zz * zz + 2.0 * d * zz * pz + h * pz * pz)
+
+
+@jit
 def _gravity_rhs(y: Array, mu: float, j2: float, re: float, px: float, py: float, pz: float,
                  out: Array, s: int) -> None:
     """``out[s] = dy/dt`` of the state + STM ``y`` (42,) under two-body + J2 gravity.
@@ -63,30 +95,10 @@ def _gravity_rhs(y: Array, mu: float, j2: float, re: float, px: float, py: float
 
     (symmetric, as the Hessian of the potential is; two-body: ``k (I - 3 r r^T / r2)``).
     """
-    x, yy, zz = y[0], y[1], y[2]
-    r2 = x * x + yy * yy + zz * zz
-    r = math.sqrt(r2)
-    k = -mu / (r2 * r)
-    f = 1.5 * j2 * re * re / r2
-    z = px * x + py * yy + pz * zz
-    w = 5.0 * z * z / r2
-    g = 1.0 + f * (1.0 - w)
-    c = 2.0 * f * z
+    ax, ay, az, g00, g01, g02, g11, g12, g22 = j2_gravity(y[0], y[1], y[2], mu, j2, re,
+                                                          px, py, pz)
     out[s, 0], out[s, 1], out[s, 2] = y[3], y[4], y[5]
-    out[s, 3] = k * (g * x + c * px)
-    out[s, 4] = k * (g * yy + c * py)
-    out[s, 5] = k * (g * zz + c * pz)
-    ir2 = 1.0 / r2
-    e = k * ir2 * (4.0 * f * w - 2.0 * f - 3.0 * g)  # the r r^T term
-    d = -10.0 * k * f * z * ir2  # the (r p^T + p r^T) term
-    h = 2.0 * k * f  # the p p^T term
-    kg = k * g
-    g00 = kg + e * x * x + 2.0 * d * x * px + h * px * px
-    g11 = kg + e * yy * yy + 2.0 * d * yy * py + h * py * py
-    g22 = kg + e * zz * zz + 2.0 * d * zz * pz + h * pz * pz
-    g01 = e * x * yy + d * (x * py + px * yy) + h * px * py
-    g02 = e * x * zz + d * (x * pz + px * zz) + h * px * pz
-    g12 = e * yy * zz + d * (yy * pz + py * zz) + h * py * pz
+    out[s, 3], out[s, 4], out[s, 5] = ax, ay, az
     for j in range(6):  # dPhi/dt: rows 0-2 = Phi rows 3-5, rows 3-5 = G Phi rows 0-2
         p0, p1, p2 = y[6 + j], y[12 + j], y[18 + j]
         out[s, 6 + j] = y[24 + j]

@@ -38,7 +38,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .ekf import UpdateResult, _inv_sym
+from .ekf import GaussianFilter, UpdateResult, _inv_sym
 from .frames import wrap_angle
 
 __all__ = ["UnscentedKalmanFilter", "merwe_weights", "sigma_points"]
@@ -94,7 +94,7 @@ def _value(out: tuple[Array, Array] | Array) -> Array:
     return np.asarray(v, dtype=float).reshape(-1)
 
 
-class UnscentedKalmanFilter:
+class UnscentedKalmanFilter(GaussianFilter):
     """Unscented Kalman filter (the EKF's attributes and methods; module docstring).
 
     Parameters
@@ -109,25 +109,8 @@ class UnscentedKalmanFilter:
 
     def __init__(self, x0: ArrayLike, P0: ArrayLike, alpha: float = 1.0, beta: float = 2.0,
                  kappa: float = 0.0) -> None:
-        x = np.array(x0, dtype=float).reshape(-1)
-        P = np.array(P0, dtype=float)
-        n = x.size
-        if P.shape != (n, n):
-            raise ValueError(f"P0 must have shape ({n}, {n}), got {P.shape}")
-        if not (np.isfinite(x).all() and np.isfinite(P).all()):
-            raise ValueError("x0 and P0 must be finite")
-        self.dim_x = n
-        self.Wm, self.Wc, self.lam = merwe_weights(n, alpha, beta, kappa)
-        self.x: Array = x
-        self.P: Array = 0.5 * (P + P.T)
-        self.x_prior: Array = self.x.copy()
-        self.P_prior: Array = self.P.copy()
-        self.x_post: Array = self.x.copy()
-        self.P_post: Array = self.P.copy()
-        self.y: Array | None = None
-        self.S: Array | None = None
-        self.K: Array | None = None
-        self.nis: float = math.nan
+        super().__init__(x0, P0)
+        self.Wm, self.Wc, self.lam = merwe_weights(self.dim_x, alpha, beta, kappa)
 
     def sigma_points(self) -> Array:
         """Return the sigma points (2n+1, n) of the current estimate."""
@@ -230,12 +213,3 @@ class UnscentedKalmanFilter:
         self.x_post = self.x.copy()
         self.P_post = self.P.copy()
         return UpdateResult(True, nis, y)
-
-    def snapshot(self) -> tuple[Array, Array]:
-        """Return copies of the current estimate (x (n,), P (n, n)), for `restore`."""
-        return self.x.copy(), self.P.copy()
-
-    def restore(self, x: ArrayLike, P: ArrayLike) -> None:
-        """Set the current estimate back to (copies of) a `snapshot` (x and P only)."""
-        self.x = np.array(x, dtype=float)
-        self.P = np.array(P, dtype=float)

@@ -13,6 +13,7 @@ from filterpy.kalman import rts_smoother
 
 from ssa_fusion.core import config, smoother
 from ssa_fusion.core.ekf import ExtendedKalmanFilter, process_noise
+from ssa_fusion.core.tracker import Tracker
 from ssa_fusion.core.types import Measurement, Source, StateEstimate
 from ssa_fusion.sim import sky
 
@@ -103,14 +104,21 @@ def test_orbit_smoothed_below_filtered(sky_run: tuple[sky.SkyScenario, list[Meas
     assert np.median(nees) < 7.8  # chi2(3) 95 %
 
 
-def test_recorder_follows_a_rollback(sky_run: tuple[sky.SkyScenario, list[Measurement]]
-                                     ) -> None:
-    """A late forecast goes in front of fused real measurements: the chain is re-fused."""
+def recorded(sky_run: tuple[sky.SkyScenario, list[Measurement]], n: int
+             ) -> tuple[Tracker, smoother.TrackerRecorder, list[Measurement]]:
+    """The scenario's tracker, its recorder after the first `n` real measurements, and them."""
     s, real = sky_run
     tracker = config.make_tracker(s.estimator())
     rec = smoother.TrackerRecorder(tracker)
-    for m in real[:12]:
+    for m in real[:n]:
         rec.process(m)
+    return tracker, rec, real
+
+
+def test_recorder_follows_a_rollback(sky_run: tuple[sky.SkyScenario, list[Measurement]]
+                                     ) -> None:
+    """A late forecast goes in front of fused real measurements: the chain is re-fused."""
+    tracker, rec, real = recorded(sky_run, 12)
     base = real[9]
     z = 0.5 * (base.z + real[10].z)  # halfway between two measurements 10 s apart
     late = Measurement(base.t + 5.0, z, base.R, base.kind, Source.FORECAST,
@@ -126,11 +134,7 @@ def test_recorder_follows_a_rollback(sky_run: tuple[sky.SkyScenario, list[Measur
 
 def test_recorder_splits_at_a_new_filter(sky_run: tuple[sky.SkyScenario, list[Measurement]]
                                          ) -> None:
-    s, real = sky_run
-    tracker = config.make_tracker(s.estimator())
-    rec = smoother.TrackerRecorder(tracker)
-    for m in real[:15]:
-        rec.process(m)
+    tracker, rec, real = recorded(sky_run, 15)
     tracker.reset()  # a clock jump: the filter starts again with a new IOD
     for m in real[15:23]:  # the rest of the first pass: 7 for the IOD, then one update
         rec.process(m)
