@@ -1,4 +1,4 @@
-"""Benchmark: one batch least-squares window re-fit, against issue 30's 50 ms target.
+"""Benchmark: one batch least-squares window re-fit, against a live re-fit's 50 ms budget.
 
 The window is three consecutive passes of the ``iss_radar_columbus`` radar (range/az/el,
 20 m and 0.02 deg, light time, ~70-100 measurements over ~3 h; truth SGP4 with drag), fitted

@@ -3,7 +3,7 @@ seeds and start epochs (the same study as `ssa-fusion reproduce --scenario
 iss_radar_columbus ...`), with the time it took.
 
 Asserts what it claims: every scenario ran every seed and start epoch, every run scored
-passes after initialisation, and at least half of them all five arms over their outage (a
+passes after initialisation, and at least half of them all six arms over their outage (a
 station's outage can fall where it would have seen nothing; the table says how often).
 Prints one markdown table per scenario and, last, one JSON line.
 

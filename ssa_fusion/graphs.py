@@ -44,7 +44,7 @@ def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, 
                               "wait_for_readers": READERS}
     if isinstance(s, sky.SkyScenario):  # the truth's cadence; the filter publishes at it
         sensor["cadence"] = s.truth_cadence_s
-        extra = {"predict_period": s.truth_cadence_s, "gap_forecast": "residual"}
+        extra = {"predict_period": s.truth_cadence_s, "gap_forecast": str(s.gap_fill)}
     else:
         sensor.update({"cadence": s.cadence_s, "gap_start": s.track_s, "gap_length": s.gap_s,
                        "after_gap": s.after_s})

@@ -20,6 +20,7 @@ from typing import Any
 
 import astropy.units as u
 import astropy_iers_data
+import erfa
 import numpy as np
 import sgp4
 from astropy.coordinates import (
@@ -32,6 +33,7 @@ from astropy.coordinates import (
 from astropy.time import Time
 from astropy.utils import iers
 from numpy.typing import NDArray
+from scipy.integrate import solve_ivp
 from sgp4.api import Satrec
 from skyfield.api import wgs84
 from skyfield.constants import AU_KM
@@ -240,3 +242,35 @@ def assert_radec(z: Array, ref: Array, angle_tol: float) -> None:
     dd = np.abs(z[:, 1] - ref[:, 1])
     assert dra.max() <= angle_tol, f"right ascension differs by {dra.max() / ARCSEC:.6f}\""
     assert dd.max() <= angle_tol, f"declination differs by {dd.max() / ARCSEC:.6f}\""
+
+
+MU_J2 = (398600.4418, 6378.137, 1.08262668e-3)
+"""GM (km^3/s^2), equatorial radius (km) and J2 of the reference orbits (EGM96/WGS-84)."""
+
+
+def cip_pole(t_unix: float) -> Array:
+    """The CIP in the GCRS at `t_unix`: (X, Y, sqrt(1 - X^2 - Y^2)) of `erfa.xys06a` (TT)."""
+    x, y, _ = erfa.xys06a(2440587.5, t_unix / 86400.0 + 69.184 / 86400.0)
+    return np.array([x, y, np.sqrt(1.0 - x * x - y * y)])
+
+
+def scipy_orbit(x0: Array, t: Array, j2: bool = True) -> Array:
+    """Two-body (+ J2 about the pole at t[0]) by scipy, independently of core.dynamics.
+
+    `x0` (6,) km, km/s at t[0]; `t` (K,) increasing Unix s; returns (K, 6).
+    """
+    mu, re, j2_ = MU_J2
+    p = cip_pole(float(t[0]))
+
+    def f(_t: float, y: Array) -> Array:
+        r = np.linalg.norm(y[:3])
+        a = -mu * y[:3] / r**3
+        if j2:
+            z = float(y[:3] @ p)
+            k = 1.5 * j2_ * mu * re**2 / r**5
+            a = a - k * ((1 - 5 * z * z / r**2) * y[:3] + 2 * z * p)
+        return np.concatenate([y[3:], a])
+
+    sol = solve_ivp(f, (t[0], t[-1]), x0, t_eval=t, rtol=1e-12, atol=1e-12, method="DOP853")
+    out: Array = sol.y.T
+    return out

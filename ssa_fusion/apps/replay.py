@@ -217,7 +217,7 @@ def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig,
     """
     g = gaps if gaps is not None else recorded_gaps(stream)
     publisher = GapPublisher.of(make_tracker(c), float(g["predict_period"]),
-                                GapFill(g["gap_forecast"]), c.filter.motion.motion_model)
+                                GapFill(g["gap_forecast"]), c)
     # Forecasts always come from a fit on the buffer up to the last real measurement, so the
     # live node's optional periodic refits (retrain_period) would change nothing here.
     surrogate = make_surrogate(c.with_(surrogate=replace(c.surrogate, retrain_period_s=math.inf)))

@@ -32,7 +32,8 @@ from ssa_fusion.evaluation.passes import PassReport
 from ssa_fusion.ros import foxglove_scene
 
 COLORS = {ArmName.PLACEHOLDER: "#7f7f7f", ArmName.COAST: "#1f77b4",
-          ArmName.J2_COAST: "#2ca02c", ArmName.DMD_EKF: "#d62728",
+          ArmName.J2_COAST: "#2ca02c", ArmName.BATCH_FIT: "#8c564b",
+          ArmName.DMD_EKF: "#d62728",
           ArmName.HYPOTHETICAL_EKF: "#9467bd"}
 """One colour per arm, the same in every figure."""
 AXIS_COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c")

@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .residual import LIVE_RESIDUAL, ResidualConfig, ResidualSurrogate, orbit_propagator
-from .types import MotionModel
+from .types import Measurement, MotionModel
 
 __all__ = ["PLACEHOLDER_TRAJECTORY", "GapForecaster"]
 
@@ -68,6 +68,9 @@ class GapForecaster:
         if self.last is not None and t - self.last[0] >= self.pass_break_s:
             self._anchor()
         self.last = (float(t), np.asarray(x, float).copy(), np.asarray(P, float).copy())
+
+    def on_measurement(self, m: Measurement) -> None:
+        """Take a real measurement the filter fused: unused (the residual learns from estimates)."""
 
     def _anchor(self) -> bool:
         """Make the newest estimate an anchor, once; True when it became one now."""

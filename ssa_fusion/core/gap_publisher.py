@@ -13,10 +13,12 @@ and the offline replay, so that both publish the same estimates for the same inp
   (`advance`); before a real measurement is fused, every prediction due before its epoch
   is published first (`measurement`), so the grid through a gap is complete however fast
   sim time runs, and what is published does not depend on how often the clock is read;
-* with a gap forecaster (`GapForecast`, e.g. `gap_forecaster.GapForecaster`), a prediction epoch
-  it covers is published as its forecast instead (update source FORECAST): the motion
-  model plus its residual learned from past pass ends. The EKF itself coasts on: the next
-  real measurement updates its own prediction.
+* with a gap forecaster (`GapForecast`), a prediction epoch it covers is published as its
+  forecast instead (update source FORECAST): the motion model plus its residual learned
+  from past pass ends (`gap_forecaster.GapForecaster`), or a batch least-squares fit of
+  the last passes (`batch_gap.BatchGapForecaster`, which takes the real measurements the
+  filter fused as well). The EKF itself coasts on: the next real measurement updates its
+  own prediction.
 
 Predictions never change the tracker; at most `limit` are published per call, and the
 earliest are skipped when more than ten times that many are due at once (a clock that
@@ -34,9 +36,12 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .batch_gap import BatchGapForecaster
+from .config import EstimatorConfig, measurement_model
 from .gap_forecaster import GapForecaster
+from .timescales import DAY_S, UNIX_EPOCH_JD
 from .tracker import Outcome, Tracker, prediction_epochs
-from .types import Measurement, MotionModel, Source, StateEstimate, UpdateSource
+from .types import Measurement, Source, StateEstimate, UpdateSource
 
 Array = NDArray[np.float64]
 
@@ -53,6 +58,8 @@ class GapFill(enum.StrEnum):
     """The EKF's predictions (it coasts)."""
     RESIDUAL = "residual"
     """The motion model plus its residual learned from past pass ends (`GapForecaster`)."""
+    BATCH_FIT = "batch_fit"
+    """A batch least-squares fit of the last passes (`batch_gap.BatchGapForecaster`)."""
 
 
 class GapForecast(Protocol):
@@ -66,6 +73,9 @@ class GapForecast(Protocol):
 
     def forecast(self, t: float) -> tuple[Array, Array] | None:
         """Return the state and covariance at gap epoch t (s), or None where it has none."""
+
+    def on_measurement(self, m: Measurement) -> None:
+        """Take a real measurement the filter fused (epoch order)."""
 
 
 @dataclass
@@ -116,15 +126,23 @@ class GapPublisher:
 
     @classmethod
     def of(cls, tracker: Tracker, period_s: float, fill: GapFill,
-           motion_model: MotionModel) -> GapPublisher:
-        """Return the publisher of a filter that fills its gaps with `fill`.
+           c: EstimatorConfig) -> GapPublisher:
+        """Return the publisher of the filter of `c` that fills its gaps with `fill`.
 
-        With `GapFill.RESIDUAL`, the residual of `motion_model` (`GapForecaster.for_model`).
+        With `GapFill.RESIDUAL`, the residual of the filter's motion model
+        (`GapForecaster.for_model`); with `GapFill.BATCH_FIT`, the batch fit of its last
+        passes with its measurement model (`batch_gap.BatchGapForecaster`).
         """
-        if GapFill(fill) == GapFill.NONE:
+        fill = GapFill(fill)
+        if fill == GapFill.NONE:
             return cls(tracker, period_s)
+        if fill == GapFill.BATCH_FIT:
+            model, clock = measurement_model(c), (c.jd0 - UNIX_EPOCH_JD) * DAY_S
+            return cls(tracker, period_s,
+                       lambda period: BatchGapForecaster(model, period, clock_unix0=clock))
+        motion = c.filter.motion.motion_model
         return cls(tracker, period_s,
-                   lambda period: GapForecaster.for_model(str(motion_model), period))
+                   lambda period: GapForecaster.for_model(str(motion), period))
 
     def _new_forecaster(self) -> GapForecast | None:
         if self._make_forecaster is None or self.period_s <= 0:
@@ -163,6 +181,8 @@ class GapPublisher:
         out.outcome = outcome
         if not outcome.rejected:
             self.last_object = m.object_id
+            if m.source == Source.SENSOR and self.forecaster is not None:
+                self.forecaster.on_measurement(m)
         for e in (outcome.estimate, *outcome.fused_again):  # fused again even if m was not
             if e is not None:
                 out.estimates.append(self._published(e))

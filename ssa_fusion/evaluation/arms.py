@@ -15,6 +15,11 @@ the position error and the NEES.
 * ``j2_coast`` -- the physics-only filter an orbit-determination user would run: the same
   EKF settings and real measurements with a two-body + J2 motion model (and the process
   noise of what J2 leaves out, `J2_COAST_Q`), coasting through the gap (Earth orbits only);
+* ``batch_fit`` -- the best physics-only estimate, what a flight-dynamics engineer would
+  fit by hand: batch least squares over the real measurements of the last passes before
+  the gap, two-body + J2, from the filter's estimate at the last of them, predicted through
+  the gap with its realistic covariance (`core.batch_gap`: `GAP_FIT_PASSES`, `GAP_FIT`; the
+  fit the filter publishes in gaps with ``gap_forecast: batch_fit``); Earth orbits only;
 * ``dmd_ekf`` -- the filter's estimates at the gap epochs, fusing the surrogate's forecasts;
   at an epoch without one (no forecast, or one refused) its prediction from the last estimate
   before it, as the live filter would publish;
@@ -28,14 +33,16 @@ from __future__ import annotations
 
 import bisect
 import enum
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from ssa_fusion.core import frames
-from ssa_fusion.core.config import ORBIT_MODELS, EstimatorConfig, make_tracker
+from ssa_fusion.core.batch_gap import GAP_FIT_PASSES, fit_passes
+from ssa_fusion.core.config import ORBIT_MODELS, EstimatorConfig, make_tracker, measurement_model
 from ssa_fusion.core.metrics import epsilon, nees
+from ssa_fusion.core.pass_windows import last_passes
 from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
 from ssa_fusion.core.types import (
     Measurement,
@@ -60,6 +67,7 @@ class ArmName(enum.StrEnum):
     PLACEHOLDER = "placeholder"
     COAST = "coast"
     J2_COAST = "j2_coast"
+    BATCH_FIT = "batch_fit"
     DMD_EKF = "dmd_ekf"
     HYPOTHETICAL_EKF = "hypothetical_ekf"
 
@@ -183,6 +191,28 @@ def j2_coast(c: EstimatorConfig, real: Iterable[Measurement],
     return coast(j2, start_estimate(run_filter(j2, before), float(t_gap[0])), t_gap)
 
 
+def batch_fit(c: EstimatorConfig, real: Sequence[Measurement], start: StateEstimate,
+              t_gap: np.ndarray) -> ArmTrajectory | None:
+    """Return the batch least-squares fit over the last passes, predicted through the gap.
+
+    See the module docstring. `real` in epoch order; `start` (the filter's estimate at its
+    last real measurement before the gap) is the first guess. None unless `c` tracks an Earth
+    orbit with measurements a batch fit models, or when the fit diverges or is
+    underdetermined (then no engineer would have an orbit either).
+    """
+    if c.filter.motion.motion_model not in ORBIT_MODELS:
+        return None
+    sensor = [m for m in real if m.source == Source.SENSOR]
+    window = last_passes(sensor, GAP_FIT_PASSES, float(t_gap[0]))
+    fit = fit_passes(window, measurement_model(c), start.x, start.t,
+                     (c.jd0 - UNIX_EPOCH_JD) * DAY_S)
+    if fit is None:
+        return None
+    x, P = fit.predict(t_gap)
+    return ArmTrajectory(np.asarray(t_gap, float), x, P,
+                         np.full(len(t_gap), UpdateSource.NONE))
+
+
 class _Epochs:
     """A filter's estimates by epoch, looked up up to round-off (`types.same_epoch`)."""
 
@@ -249,8 +279,8 @@ def hypothetical(c: EstimatorConfig, real_and_withheld: Iterable[Measurement],
 class GapEvaluation:
     """Every arm over one gap, scored.
 
-    t : (k,) gap epochs; truth : (k, n); arms / scores by `ArmName` (j2_coast absent where it
-    does not apply); coverage : fraction of gap epochs with a filter estimate that fused a
+    t : (k,) gap epochs; truth : (k, n); arms / scores by `ArmName` (j2_coast and batch_fit absent
+    where they do not apply); coverage : fraction of gap epochs with a filter estimate that fused a
     forecast; predicted : gap epochs where dmd_ekf is the filter's prediction.
     """
 
@@ -283,6 +313,9 @@ def evaluate_gap(c: EstimatorConfig, estimates: Mapping[float, StateEstimate],
     j2 = j2_coast(c, real, t_gap) if ArmName.J2_COAST in wanted else None
     if j2 is not None:
         arms[ArmName.J2_COAST] = j2
+    fitted = batch_fit(c, real, start, t_gap) if ArmName.BATCH_FIT in wanted else None
+    if fitted is not None:
+        arms[ArmName.BATCH_FIT] = fitted
     if ArmName.DMD_EKF in wanted:
         arms[ArmName.DMD_EKF] = dmd_ekf(c, estimates, t_gap)
     if ArmName.HYPOTHETICAL_EKF in wanted:

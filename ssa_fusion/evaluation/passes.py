@@ -17,27 +17,11 @@ import numpy as np
 
 from ssa_fusion.core.config import EstimatorConfig
 from ssa_fusion.core.metrics import chi2_bounds, nees
+from ssa_fusion.core.pass_windows import PASS_BREAK_S, passes
 from ssa_fusion.core.types import Measurement, StateEstimate
 from ssa_fusion.evaluation import arms
 
-PASS_BREAK_S = 600.0
-"""Measurements further apart than this (s) belong to different passes."""
-
-
-def passes(measurements: list[Measurement], gap_s: float = PASS_BREAK_S
-           ) -> list[tuple[int, int]]:
-    """Return the index ranges [first, last] of the passes in `measurements` (epoch order).
-
-    A pass is a run with no two consecutive measurements more than `gap_s` apart.
-    """
-    if not measurements:
-        return []
-    t = np.array([m.t for m in measurements])
-    breaks = np.flatnonzero(np.diff(t) > gap_s)
-    starts = np.concatenate([[0], breaks + 1])
-    ends = np.concatenate([breaks, [len(t) - 1]])
-    return list(zip(starts.tolist(), ends.tolist(), strict=True))
-
+__all__ = ["PASS_BREAK_S", "PassReport", "estimates_at", "outage_epochs", "pass_report", "passes"]
 
 @dataclass
 class PassReport:

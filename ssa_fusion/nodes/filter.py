@@ -65,7 +65,7 @@ PARAMETERS = ParameterTable("filter", (
           "`predictions_skipped`); 0 = never", unit="sim s", check=NON_NEGATIVE,
           runtime=True),
     Param("gap_forecast", FILTER.gap_forecast,
-          "what the predictions in a gap between passes are: `none` (the EKF coasting) or "
+          "what the predictions in a gap between passes are: `none` (the EKF coasting), "
           "`residual`: once a prediction epoch is 600 s after the last estimate that fused a "
           "real measurement, that estimate becomes an anchor of "
           "`core.gap_forecaster.GapForecaster` (the motion model plus its residual — Hill "
@@ -73,8 +73,13 @@ PARAMETERS = ParameterTable("filter", (
           "fitted to the pass ends of the last 2 days, covariance scaled by held-out "
           "errors); from 5 anchors spanning a day on, the gap's predictions are its "
           "forecast, tagged update source FORECAST, up to 1 day after the pass. The EKF "
-          "itself coasts on: the next real measurement updates its own prediction. "
-          "`ssa-fusion live` sets `residual` for the real-sky scenarios",
+          "itself coasts on: the next real measurement updates its own prediction; or "
+          "`batch_fit`: from 600 s after the last estimate that fused a real measurement, "
+          "a two-body + J2 batch least-squares fit of the real measurements fused in the "
+          "last 3 passes (`core.batch_gap`, realistic covariance with state-noise "
+          "compensation), up to 1 day after the pass, tagged FORECAST. "
+          "`ssa-fusion live` sets each real-sky scenario's `gap_fill` (leo_optical: "
+          "`batch_fit`, the others `residual`)",
           check=one_of(*GapFill)),
     clock_lead(FILTER.max_clock_lead),
 ), rules=(Rule(settings.FILTER_KEYS, partial(settings.estimator_problem, "filter")),))
@@ -91,8 +96,7 @@ class FilterNode(SsaNode):
         self.estimator = self._estimator()
         self.tracker = make_tracker(self.estimator, self.params.text("object_id"))
         self.gaps = GapPublisher.of(self.tracker, self.params.number("predict_period"),
-                                    GapFill(self.params.text("gap_forecast")),
-                                    self.estimator.filter.motion.motion_model)
+                                    GapFill(self.params.text("gap_forecast")), self.estimator)
         self.publish_config()
         self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, DATA_QOS)
         for topic, source in ((TOPIC_MEASUREMENT, Source.SENSOR),

@@ -11,6 +11,9 @@ it (`sky_runs.run_dmd_ekf`). Every inter-pass gap is then scored at the truth ep
   ``kepler`` placeholder it is the `coast` arm, with ``j2`` the `j2_coast` arm);
 * ``dmd_ekf`` -- the filter fusing the Hankel-DMD surrogate's forecasts (its prediction
   where none came: then equal to the coast);
+* ``batch_fit`` -- the physics-only estimate an engineer would make by hand (`arms.batch_fit`:
+  a J2 batch least-squares fit of the last passes, from the pass-end estimate; coasting
+  where it failed);
 * one arm per residual setting (e.g. ``hill_h1``) --
   `core.residual.ResidualSurrogate`: the placeholder from the pass-end estimate plus the
   learned residual, with the held-out calibrated covariance (the filter's motion model
@@ -31,6 +34,7 @@ x `START_OFFSETS_H` are reported. Units: km, h.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Callable, Mapping
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, replace
@@ -39,8 +43,12 @@ from typing import Any
 import numpy as np
 
 from ssa_fusion.core import residual
+from ssa_fusion.core.batch_gap import GAP_FIT_PASSES, fit_passes
+from ssa_fusion.core.config import measurement_model
 from ssa_fusion.core.metrics import chi2_bounds
-from ssa_fusion.core.types import Measurement, StateEstimate, UpdateSource
+from ssa_fusion.core.pass_windows import last_passes
+from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
+from ssa_fusion.core.types import Measurement, Source, StateEstimate, UpdateSource
 from ssa_fusion.evaluation import arms, passes
 from ssa_fusion.sim import sky
 from ssa_fusion.studies import bopdmd, sky_runs
@@ -58,6 +66,9 @@ GRID_S = 300.0
 
 GAP_RANGE_H = (1.5, 16.0)
 """The gap lengths the j2 target is judged on, h."""
+
+FIT_SUFFIX = "_fit"
+"""The name suffix of a residual variant anchored on the batch fits (`Case.fit_anchors`)."""
 
 TUNING_SEEDS = (1, 2, 3)
 """The seeds `tune` chooses the residual surrogate's settings on (start offset 0 h)."""
@@ -100,8 +111,9 @@ band on both ISS scenarios (13.4 and 23.1; 0.01: 21.8 and 38.2; 0.1: 13.0 and 27
 class Case:
     """One run of the study.
 
-    Scenario name, start offset (h), seed, residual variants (name -> config), and whether
-    the BOP-DMD variant runs too.
+    Scenario name, start offset (h), seed, residual variants (name -> config), whether the
+    BOP-DMD variant runs too, and whether each variant runs a second time anchored on the
+    batch fit of the last passes instead of the filter's pass-end estimate (``<name>_fit``).
     """
 
     name: str
@@ -109,6 +121,7 @@ class Case:
     seed: int
     variants: tuple[tuple[str, residual.ResidualConfig], ...]
     bopdmd: bool = True
+    fit_anchors: bool = False
 
 
 def _anchors(estimates: Mapping[float, StateEstimate],
@@ -150,6 +163,11 @@ def run_placeholder(sim: sky.SkySimulation, placeholder: str,
     est = run.estimates if not run.forecasts else arms.run_filter(c, sim.real)
     prop = residual.orbit_propagator(dyn)
     surrogates = {n: residual.ResidualSurrogate(cfg, prop) for n, cfg in case.variants}
+    fit_anchored = ({f"{n}{FIT_SUFFIX}": residual.ResidualSurrogate(cfg, prop)
+                     for n, cfg in case.variants} if case.fit_anchors else {})
+    meas_model = measurement_model(c)
+    clock = (c.jd0 - UNIX_EPOCH_JD) * DAY_S
+    sensor = [m for m in sim.real if m.source == Source.SENSOR]
     grid = sim.t[np.isclose(np.mod(sim.t - sim.t[0], GRID_S), 0.0)]
     x_grid = sim.x[np.isin(sim.t, grid)]
     gaps: list[dict[str, Any]] = []
@@ -159,6 +177,14 @@ def run_placeholder(sim: sky.SkySimulation, placeholder: str,
         t_first = t_end if t_first is None else t_first
         for sur in surrogates.values():
             sur.add_anchor(t_end, e.x, e.P)
+        if fit_anchored:
+            window = last_passes(sensor, GAP_FIT_PASSES, math.nextafter(t_end, math.inf))
+            anchor = fit_passes(window, meas_model, e.x, e.t, clock)
+            for sur in fit_anchored.values():
+                if anchor is not None:
+                    sur.add_anchor(t_end, anchor.x, anchor.covariance_realistic)
+                else:
+                    sur.add_anchor(t_end, e.x, e.P)
         inside = (grid > t_end) & (grid < t_next)
         if not np.isfinite(t_next) or not inside.any():
             continue
@@ -172,7 +198,10 @@ def run_placeholder(sim: sky.SkySimulation, placeholder: str,
         row["err"]["dmd_ekf"], row["nees"]["dmd_ekf"] = _score(dmd, x_true)
         row["dmd_forecasts"] = sum(t_end < f.t < t_next for f in run.forecasts)
         row["forecast"]["dmd_ekf"] = row["dmd_forecasts"] > 0
-        for name, sur in surrogates.items():
+        fitted = arms.batch_fit(c, sim.real, e, t_gap)
+        row["err"]["batch_fit"], row["nees"]["batch_fit"] = _score(fitted or coast, x_true)
+        row["forecast"]["batch_fit"] = fitted is not None
+        for name, sur in {**surrogates, **fit_anchored}.items():
             fit = sur.fit()
             ok = fit is not None and t_gap[-1] - t_end <= sur.cfg.max_horizon_s
             if ok:
@@ -251,7 +280,7 @@ def summarise(name: str, runs: list[dict[str, Any]], min_span_h: float, variants
               ) -> tuple[str, dict[str, Any]]:
     """Return the Markdown for one scenario, and its JSON summary (medians over runs)."""
     lo, hi = chi2_bounds(6)
-    arms_list = ["coast", "dmd_ekf", *variants]
+    arms_list = ["coast", "dmd_ekf", "batch_fit", *variants]
     if any("bopdmd" in g["err"] for r in runs for g in r["gaps"]):
         arms_list.append("bopdmd")
     lines = [f"### {name} ({len(runs)} runs: medians [quartiles] over runs of the run's mean "
@@ -296,13 +325,15 @@ def summarise(name: str, runs: list[dict[str, Any]], min_span_h: float, variants
         k = [s["kepler"]["err"]["coast"] / s["kepler"]["err"][a] for s in both]
         j = [s["j2"]["err"]["coast"] / s["j2"]["err"][a] for s in both]
         kj = [s["j2"]["err"]["coast"] / s["kepler"]["err"][a] for s in both]
+        fit = [s["j2"]["err"]["batch_fit"] / s["j2"]["err"][a] for s in both]
         lines.append(f"- {a}: coast(kepler) / {a}(kepler) {_q(k)}; j2_coast / {a}(j2) "
-                     f"{_q(j)}; j2_coast / {a}(kepler) {_q(kj)} (gaps "
-                     f"{GAP_RANGE_H[0]}-{GAP_RANGE_H[1]} h)")
+                     f"{_q(j)}; j2_coast / {a}(kepler) {_q(kj)}; batch_fit / {a}(j2) "
+                     f"{_q(fit)} (gaps {GAP_RANGE_H[0]}-{GAP_RANGE_H[1]} h)")
         summary.setdefault("ratios", {})[a] = {
             "coast_kepler_over_kepler": float(np.median(k)) if k else None,
             "j2_coast_over_j2": float(np.median(j)) if j else None,
-            "j2_coast_over_kepler": float(np.median(kj)) if kj else None}
+            "j2_coast_over_kepler": float(np.median(kj)) if kj else None,
+            "batch_fit_over_j2": float(np.median(fit)) if fit else None}
     dmd = sum(g.get("dmd_forecasts", 0) for r in runs for g in r["gaps"])
     lines.append(f"- Hankel-DMD forecasts issued inside the gaps: {dmd} in all runs")
     summary["hankel_forecasts"] = dmd
@@ -311,6 +342,7 @@ def summarise(name: str, runs: list[dict[str, Any]], min_span_h: float, variants
 
 def run_gap_study(names: list[str], seeds: tuple[int, ...], offsets_h: tuple[float, ...],
                   variants: dict[str, residual.ResidualConfig], bopdmd: bool = True,
+                  fit_anchors: bool = False,
                   workers: int = 2, progress: Callable[[str], None] | None = None
                   ) -> tuple[str, dict[str, dict[str, Any]], list[dict[str, Any]]]:
     """Run the scenarios over seeds x offsets; return (markdown, summaries, the raw runs).
@@ -319,7 +351,8 @@ def run_gap_study(names: list[str], seeds: tuple[int, ...], offsets_h: tuple[flo
     depend on `workers`.
     """
     vs = tuple(variants.items())
-    todo = [Case(n, o, s, vs, bopdmd) for n in names for o in offsets_h for s in seeds]
+    todo = [Case(n, o, s, vs, bopdmd, fit_anchors)
+            for n in names for o in offsets_h for s in seeds]
     runs: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max(1, workers)) as pool:
         for r in pool.map(run_case, todo):
@@ -330,14 +363,20 @@ def run_gap_study(names: list[str], seeds: tuple[int, ...], offsets_h: tuple[flo
     texts, result = [], {}
     for n in names:
         text, result[n] = summarise(n, [r for r in runs if r["name"] == n], min_span_h,
-                                    list(variants))
+                                    [*variants, *([f"{v}{FIT_SUFFIX}" for v in variants]
+                                                  if fit_anchors else [])])
         texts.append(text)
     return "\n\n".join(texts), result, runs
 
 
-def tune(names: list[str], workers: int = 2) -> tuple[str, dict[str, dict[str, Any]]]:
-    """Compare `tuning_candidates` on `TUNING_SEEDS` (offset 0 h): markdown and summary."""
-    cands = tuning_candidates()
-    text, result, _ = run_gap_study(names, TUNING_SEEDS, (0.0,), cands, bopdmd=True,
-                                    workers=workers)
+def tune(names: list[str], workers: int = 2, only: list[str] | None = None,
+         fit_anchors: bool = False) -> tuple[str, dict[str, dict[str, Any]]]:
+    """Compare `tuning_candidates` on `TUNING_SEEDS` (offset 0 h): markdown and summary.
+
+    Only those in `only` (BOP-DMD too when all), each also anchored on the batch fits with
+    `fit_anchors`.
+    """
+    cands = {k: v for k, v in tuning_candidates().items() if only is None or k in only}
+    text, result, _ = run_gap_study(names, TUNING_SEEDS, (0.0,), cands, bopdmd=only is None,
+                                    fit_anchors=fit_anchors, workers=workers)
     return text, result

@@ -21,6 +21,7 @@ ARM_STYLE = {
     "placeholder": dict(color="tab:red", label="placeholder alone (MC, 200)"),
     "coast": dict(color="tab:gray", label="EKF coasting (no surrogate)", ls=":"),
     "j2_coast": dict(color="tab:purple", label="J2 EKF coasting", ls="-."),
+    "batch_fit": dict(color="tab:brown", label="J2 batch fit (3 passes)"),
     "dmd_ekf": dict(color="tab:blue", label="DMD-EKF"),
     "hypothetical_ekf": dict(color="tab:green", label="hypothetical EKF", ls="--"),
 }

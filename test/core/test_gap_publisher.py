@@ -4,11 +4,13 @@ import math
 
 import numpy as np
 import pytest
+from references import scipy_orbit
 
 from ssa_fusion.core.config import EstimatorConfig, make_tracker
 from ssa_fusion.core.constants import MU_EARTH
+from ssa_fusion.core.filter_options import FilterOptions
 from ssa_fusion.core.gap_publisher import GapFill, GapPublisher
-from ssa_fusion.core.types import Kind, Measurement, MotionModel, Source, UpdateSource
+from ssa_fusion.core.types import Kind, Measurement, Source, UpdateSource
 
 R_KM = 7000.0
 T0 = 1.7e9  # Unix s
@@ -30,7 +32,7 @@ def meas(t: float, source: int = Source.SENSOR) -> Measurement:
 
 def publisher(period_s: float = 300.0, fill: GapFill = GapFill.NONE) -> GapPublisher:
     c = EstimatorConfig(kind=Kind.POSITION)
-    return GapPublisher.of(make_tracker(c), period_s, fill, MotionModel.KEPLER)
+    return GapPublisher.of(make_tracker(c), period_s, fill, c)
 
 
 TRACK = [T0 + i * CADENCE for i in range(10)]
@@ -112,3 +114,38 @@ def test_a_residual_publisher_coasts_until_it_has_learnt_from_pass_ends():
     residual = published(publisher(fill=GapFill.RESIDUAL), [])
     assert [(e.t, e.update_source) for e in residual] == [(e.t, e.update_source)
                                                          for e in plain]
+
+
+def test_a_batch_fit_publisher_fills_the_gap_with_the_fit_of_the_last_passes():
+    """`GapFill.BATCH_FIT`: three passes of 10 m positions of a J2 orbit (scipy), a filter
+    on a two-body model; from `pass_break_s` after the last pass on, the gap's predictions
+    are the J2 batch fit of those passes (update source FORECAST, within 30 m of scipy's
+    orbit over the next two hours) while the two-body EKF's own predictions drift by
+    kilometres; before it, the EKF's predictions."""
+    x0 = np.array([6778.0, 0.0, 0.0, 0.0, 4.8, 5.9])
+    t = T0 + np.concatenate([k * 2400.0 + 60.0 * np.arange(10) for k in range(3)])
+    grid = 60.0 * np.arange(math.floor(t[-1] / 60.0) + 1, math.floor((t[-1] + 7200) / 60) + 1)
+    truth = scipy_orbit(x0, np.concatenate([t, grid]))
+    c = EstimatorConfig(kind=Kind.POSITION, lift="none",
+                        filter=FilterOptions().with_(p0_sigma=(1.0,) * 3 + (1e-2,) * 3,
+                                                     q=1e-9))
+    pubs = {f: GapPublisher.of(make_tracker(c), 60.0, f, c)
+            for f in (GapFill.NONE, GapFill.BATCH_FIT)}
+    out = {}
+    for f, pub in pubs.items():
+        rng = np.random.default_rng(5)
+        for ti, xi in zip(t, truth[: t.size], strict=True):
+            pub.measurement(Measurement(float(ti), xi[:3] + 0.01 * rng.standard_normal(3),
+                                        1e-4 * np.eye(3), kind=Kind.POSITION, frame_id="gcrf"))
+        out[f] = pub.advance(float(grid[-1]), limit=1000).estimates
+    fits = out[GapFill.BATCH_FIT]
+    assert [e.t for e in fits] == [e.t for e in out[GapFill.NONE]] == list(grid)
+    late = grid - t[-1] >= 600.0
+    assert all((e.update_source == UpdateSource.FORECAST) == lt for e, lt in zip(fits, late,
+                                                                              strict=True))
+    x_fit = np.array([e.x for e in fits])
+    x_ekf = np.array([e.x for e in out[GapFill.NONE]])
+    err_fit = np.linalg.norm(x_fit[late, :3] - truth[t.size:][late, :3], axis=1)
+    err_ekf = np.linalg.norm(x_ekf[late, :3] - truth[t.size:][late, :3], axis=1)
+    assert err_fit.max() < 0.03 and err_ekf.max() > 1.0
+    np.testing.assert_array_equal(x_fit[~late], x_ekf[~late])

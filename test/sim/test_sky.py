@@ -119,7 +119,8 @@ def test_reproduce_runs_the_real_sky_study_over_evaluation_seeds(tmp_path, monke
     assert got["runs"] == 3 and EVALUATION_SEEDS[0] == 101
     assert got["after_pass_km_max"] < 1.0
     arms_km = got["outage_mean_km_median"]
-    assert set(arms_km) == {"placeholder", "coast", "j2_coast", "dmd_ekf", "hypothetical_ekf"}
+    assert set(arms_km) == {"placeholder", "coast", "j2_coast", "batch_fit", "dmd_ekf",
+                            "hypothetical_ekf"}
     assert all(0.0 < v < 5.0 for v in arms_km.values()), arms_km  # km over a 3.6 h outage
     assert "## The real sky" in (tmp_path / "results.md").read_text()
 

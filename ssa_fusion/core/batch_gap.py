@@ -1,0 +1,127 @@
+"""A batch fit over the last passes, as a filter's gap forecaster.
+
+What a flight-dynamics engineer does between passes, on the filter's live stream: once the
+filter has fused nothing for `pass_break_s`, the real measurements it fused in its last
+`GAP_FIT_PASSES` passes are fitted by batch least squares (`batch_ls.fit`, from the
+filter's estimate at the last of them, with `GAP_FIT`'s options: two-body + J2, the state,
+a realistic covariance with state-noise compensation), and the fit's prediction is tabulated
+once on the grid of multiples of ``period_s`` up to ``max_horizon_s`` after the pass. It is
+a `gap_publisher.GapForecast`: the filter publishes it at the gap's prediction epochs
+(update source FORECAST); the EKF itself coasts on, and the next real measurement updates
+the EKF's own prediction.
+
+The same fit is the ``batch_fit`` arm of the evaluation (`evaluation.arms.batch_fit`).
+Units: km, km/s, s; states GCRF.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import batch_ls
+from .batch_ls import BatchFit, BatchOptions, FitStatus
+from .measurement import MeasurementModel
+from .pass_windows import PASS_BREAK_S
+from .timescales import DAY_S
+from .types import Measurement
+
+__all__ = ["GAP_FIT", "GAP_FIT_PASSES", "GAP_FIT_SNC", "BatchGapForecaster", "fit_passes"]
+
+Array = NDArray[np.float64]
+
+GAP_FIT_PASSES = 3
+"""Passes of real measurements a gap's batch fit spans."""
+
+GAP_FIT_SNC = 3e-14
+"""Power spectral density of the gap fit's state-noise compensation, km^2/s^3 in R, T and N
+alike: ~ 3e-9 km/s^2 of unmodelled acceleration correlated over ~ 3e3 s (a^2 tau), chosen on
+the tuning seeds of iss_radar_columbus (`bench/bench_batch_ls.py`'s gap NEES), never on an
+evaluation seed."""
+
+GAP_FIT = BatchOptions(snc_psd=(GAP_FIT_SNC,) * 3)
+"""The gap fit: two-body + J2, the state only (a drag factor solved for as well is biased by
+its prior where there is no drag, and is weakly observed over three passes)."""
+
+_FAILED = (FitStatus.DIVERGED, FitStatus.UNDERDETERMINED)
+
+
+def fit_passes(window: list[Measurement], model: MeasurementModel, x_guess: ArrayLike,
+               t_guess: float, clock_unix0: float = 0.0) -> BatchFit | None:
+    """Fit `GAP_FIT` to `window`; None when it diverges, is underdetermined or has no model.
+
+    `clock_unix0`: Unix time (s) of t = 0 of the measurements' clock.
+    """
+    if not window:
+        return None
+    opts = replace(GAP_FIT, clock_unix0=float(clock_unix0))
+    try:
+        fit = batch_ls.fit(window, model, np.asarray(x_guess, float)[:6], t_guess, opts)
+    except ValueError:  # a measurement the fit has no model for
+        return None
+    return None if fit.status in _FAILED else fit
+
+
+@dataclass
+class BatchGapForecaster:
+    """The batch fit of the last passes on a filter's live stream (module docstring).
+
+    `on_measurement` takes every real measurement the filter fused (epoch order),
+    `on_estimate` the filter's estimate after it. `forecast(t)` returns the fit's state and
+    covariance at a grid epoch t of the gap, or None: t less than `pass_break_s` after the
+    last estimate, beyond ``max_horizon_s``, or no fit (it failed).
+    """
+
+    model: MeasurementModel
+    period_s: float
+    clock_unix0: float = 0.0
+    passes: int = GAP_FIT_PASSES
+    pass_break_s: float = PASS_BREAK_S
+    max_horizon_s: float = DAY_S
+    window: list[Measurement] = field(default_factory=list)
+    starts: list[int] = field(default_factory=list)
+    last: tuple[float, Array] | None = None
+    fitted_t: float = -math.inf
+    fit: BatchFit | None = None
+    table: dict[float, tuple[Array, Array]] = field(default_factory=dict)
+
+    def on_measurement(self, m: Measurement) -> None:
+        """Take a real measurement the filter fused; keep those of the last passes."""
+        if self.window and m.t <= self.window[-1].t:
+            return
+        if not self.window or m.t - self.window[-1].t > self.pass_break_s:
+            self.starts.append(len(self.window))
+            if len(self.starts) > self.passes:  # forget the oldest pass
+                k = self.starts[1]
+                del self.window[:k]
+                self.starts = [s - k for s in self.starts[1:]]
+        self.window.append(m)
+
+    def on_estimate(self, t: float, x: ArrayLike, P: ArrayLike) -> None:
+        """Take the filter's estimate (epoch t s) after it fused a real measurement."""
+        if self.last is None or t > self.last[0]:
+            self.last = (float(t), np.asarray(x, float).copy())
+
+    def forecast(self, t: float) -> tuple[Array, Array] | None:
+        """Return the fit's state and covariance at gap epoch t (s), or None."""
+        if self.last is None or t - self.last[0] < self.pass_break_s:
+            return None
+        t_end, x_end = self.last
+        if self.fitted_t != t_end:  # a pass ended: fit once, tabulate the prediction
+            self.fitted_t = t_end
+            self.table = {}
+            self.fit = fit_passes(self.window, self.model, x_end, t_end, self.clock_unix0)
+            k0 = math.floor(t_end / self.period_s) + 1
+            k1 = math.floor((t_end + self.max_horizon_s) / self.period_s)
+            grid = self.period_s * np.arange(k0, k1 + 1, dtype=float)
+            if self.fit is not None and grid.size:
+                try:  # a propagation that fails leaves the gap to the EKF's coasting
+                    xs, Ps = self.fit.predict(grid)
+                except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+                    xs, Ps = np.full((grid.size, 6), np.nan), np.full((grid.size, 6, 6), np.nan)
+                self.table = {float(g): (xs[i], Ps[i]) for i, g in enumerate(grid)
+                              if np.isfinite(xs[i]).all() and np.isfinite(Ps[i]).all()}
+        return self.table.get(float(t))
