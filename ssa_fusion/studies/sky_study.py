@@ -6,7 +6,9 @@ them): the position error right after each pass, the NEES at every truth epoch
 (predictions through the gaps included), and every arm over the scheduled outage
 (`placeholder`, `coast`, `j2_coast`, `batch_fit`, `dmd_ekf`, `hypothetical_ekf`: mean
 position error and NEES); also the after-pass error of the same filter with its light-time
-correction off (the cost of ignoring light time). Seeds are
+correction off (the cost of ignoring light time); and what the filter publishes between
+passes with each ``gap_forecast`` (`evaluation.gap_scores`: error at every gap epoch and
+over gaps > 12 h, after each pass, position NEES against chi2(3)). Seeds are
 `distributions.EVALUATION_SEEDS` (never used to choose a setting: `sky.SKY_Q` was chosen on
 seeds 1-3); start epochs `distributions.START_OFFSETS_H` after the nominal one move the
 passes. Each run asserts that it scored passes and all six arms. Units: km, h.
@@ -16,11 +18,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict
 from typing import Any
 
 import numpy as np
 
-from ssa_fusion.evaluation import arms, passes
+from ssa_fusion.core.gap_publisher import GapFill
+from ssa_fusion.evaluation import arms, gap_scores, passes
 from ssa_fusion.sim import sky
 from ssa_fusion.studies import sky_runs
 
@@ -41,7 +45,13 @@ def run_case(case: tuple[str, float, int]) -> dict[str, Any]:
     if o is not None and set(o.scores) != set(arms.ArmName):
         raise RuntimeError(f"{case}: an arm is missing over the outage")
     lo, hi = ev.passes.nees_band
-    return {"after_pass_km": after, "nees_mean": float(np.mean(ev.passes.nees)),
+    c = s.estimator()
+    published = {}
+    for f in GapFill:
+        est = gap_scores.published(c, sim.real, sim.t, f)
+        published[str(f)] = asdict(gap_scores.score_gaps(est, sim.real, sim.t, sim.x))
+    return {"published": published, "after_pass_km": after,
+            "nees_mean": float(np.mean(ev.passes.nees)),
             "nees_in_band": ev.passes.nees_in_band, "nees_band": [lo, hi],
             "gaps_h": ev.passes.gaps_h.tolist(), "forecasts": ev.forecasts,
             "outage_mean_km": None if o is None else
@@ -52,9 +62,35 @@ def run_case(case: tuple[str, float, int]) -> dict[str, Any]:
 
 
 def _q(v: list[float] | np.ndarray) -> str:
-    """Return the median [quartiles] of `v`, as text."""
-    q25, med, q75 = np.percentile(np.asarray(v, float), [25, 50, 75])
+    """Return the median [quartiles] of the finite values of `v`, as text ("-" if none)."""
+    a = np.asarray(v, float)
+    if not np.isfinite(a).any():
+        return "-"
+    q25, med, q75 = np.nanpercentile(a, [25, 50, 75])
     return f"{med:.3g} [{q25:.3g}, {q75:.3g}]"
+
+
+PUBLISHED_KEYS = ("err_median_km", "long_err_median_km", "after_pass_median_km", "nees_in_95",
+                  "nees_median")
+"""The `gap_scores.GapScores` fields the study summarises (medians over runs)."""
+
+
+def _published_table(runs: list[dict[str, Any]]) -> tuple[list[str], dict[str, Any]]:
+    """Return the table of what the filter publishes between passes, per gap fill."""
+    lines = ["| filter's gap_forecast | median error at gap epochs [km] | gaps > 12 h [km] | "
+             "after each pass [km] | position NEES <= chi2(3) 95 % [%] | median position "
+             "NEES (chi2(3): 2.37) |", "|---|---|---|---|---|---|"]
+    out: dict[str, Any] = {}
+    for f in GapFill:
+        vals = {k: np.array([r["published"][str(f)][k] for r in runs], float)
+                for k in PUBLISHED_KEYS}
+        out[str(f)] = {k: float(np.nanmedian(v)) if np.isfinite(v).any() else None
+                       for k, v in vals.items()}
+        cov = 100 * vals["nees_in_95"]
+        lines.append(f"| {f} | {_q(vals['err_median_km'])} | {_q(vals['long_err_median_km'])} "
+                     f"| {_q(vals['after_pass_median_km'])} | {_q(cov)} | "
+                     f"{_q(vals['nees_median'])} |")
+    return lines, out
 
 
 def summarise(name: str, runs: list[dict[str, Any]]) -> tuple[str, dict[str, Any]]:
@@ -102,7 +138,9 @@ def summarise(name: str, runs: list[dict[str, Any]]) -> tuple[str, dict[str, Any
         + (f"; dmd_ekf / coast {_q(ratio)}, dmd_ekf / j2_coast {_q(ratio_j2)}, "
            f"dmd_ekf / batch_fit {_q(ratio_fit)}" if scored else ""),
     ]
-    summary = {"runs": len(runs), "runs_with_outage": len(scored),
+    pub_lines, pub_summary = _published_table(runs)
+    lines += ["", *pub_lines]
+    summary = {"runs": len(runs), "runs_with_outage": len(scored), "published": pub_summary,
                "runs_with_passes": sum(bool(r["after_pass_km"]) for r in runs),
                "after_pass_km_median": float(np.median(after_all)),
                "after_pass_km_max": float(after_all.max()),
