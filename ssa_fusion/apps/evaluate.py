@@ -25,6 +25,7 @@ from ssa_fusion.core.config import EstimatorConfig
 from ssa_fusion.core.frames import Frame
 from ssa_fusion.evaluation import passes as passes_
 from ssa_fusion.evaluation.arms import ArmName, GapEvaluation, evaluate_gap
+from ssa_fusion.evaluation.gap_scores import GapScores, score_gaps
 from ssa_fusion.nodes import settings
 from ssa_fusion.ros import bagio, topics
 from ssa_fusion.ros.messages import estimate_from_msg, measurement_from_msg
@@ -118,12 +119,13 @@ class Evaluation:
     """A bag's gap evaluation and the settings it ran with.
 
     For a station network (the real sky), also how the filter did after each pass and
-    through the gaps.
+    through the gaps, and what it published between passes (`gap_scores`).
     """
 
     gap: GapEvaluation
     settings: Settings
     passes: passes_.PassReport | None = None
+    between: GapScores | None = None
 
 
 def evaluate(data: BagData, scenario: str = "", seed: int = 0,
@@ -148,12 +150,13 @@ def evaluate(data: BagData, scenario: str = "", seed: int = 0,
     live = {e.t: e for e in data.estimates if e.update_source != types.UpdateSource.NONE}
     real = [m for m in data.measurements if m.source == types.Source.SENSOR]
     gap = evaluate_gap(chosen.estimator, live, real, data.withheld, t_gap, x_true, seed)
-    passes = None
+    passes, between = None, None
     if network:
         t_all = np.array(sorted(truth))
-        passes = passes_.pass_report(chosen.estimator, live, real, t_all,
-                                 np.array([truth[t] for t in t_all]))
-    return Evaluation(gap, chosen, passes)
+        x_all = np.array([truth[t] for t in t_all])
+        passes = passes_.pass_report(chosen.estimator, live, real, t_all, x_all)
+        between = score_gaps({e.t: e for e in data.estimates}, real, t_all, x_all)
+    return Evaluation(gap, chosen, passes, between)
 
 
 @dataclass
@@ -241,4 +244,12 @@ def table(ev: Evaluation) -> str:
     rows.append(f"settings: {ev.settings.origin}")
     if ev.passes is not None:
         rows.append("\n" + ev.passes.table())
+    b = ev.between
+    if b is not None and b.gap_epochs:
+        rows.append(f"\nbetween passes, what the filter published ({b.gap_epochs} truth epochs): "
+                    f"median position error {b.err_median_km:.3g} km (gaps > 12 h: "
+                    f"{b.long_err_median_km:.3g} km over {b.long_gap_epochs} epochs); right "
+                    f"after each pass {b.after_pass_median_km:.3g} km (median); position NEES "
+                    f"inside chi2(3)'s 95 % bound at {100 * b.nees_in_95:.1f} % of the epochs, "
+                    f"median {b.nees_median:.2f} (chi2(3)'s median: 2.37)")
     return "\n".join(rows)

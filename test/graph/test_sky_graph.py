@@ -81,3 +81,7 @@ def test_filter_publishes_through_the_gaps_and_is_within_a_km_after_each_pass(ru
     err = [p[3] for p in ev.passes.passes]
     assert max(err) < 1.0, ev.passes.table()
     assert np.isfinite(ev.passes.nees).all()
+    b = ev.between  # what the live filter published between passes, scored
+    assert b is not None and b.gap_epochs > 100 and 0.0 < b.err_median_km < 5.0
+    assert 0.0 < b.nees_in_95 <= 1.0
+    assert "between passes, what the filter published" in evaluate.table(ev)
