@@ -18,6 +18,11 @@ What the filter publishes besides its updates, the predictions through a gap, fo
 filter node's own policy (`core.gap_publisher.GapPublisher`, with the ``predict_period`` and
 ``gap_forecast`` the bag records), driven by the bag's /clock.
 
+``--offline --smooth`` adds the definitive orbit: the filter's fused estimates smoothed
+backwards (Rauch-Tung-Striebel, `core.smoother`; never across a re-initialisation), written
+on ``/ssa/estimate_smoothed`` after the bag's last message; with truth in the bag, the
+smoothed and the filtered position errors at the fused epochs the truth has are printed.
+
 The estimator settings are those recorded with the bag (``/ssa/config``) unless
 ``--params-file`` or ``--scenario`` says otherwise (`settings`). A bag at another cadence
 than its settings' is replayed at its own: the surrogate infers the cadence from the stamps,
@@ -38,12 +43,15 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ssa_fusion.apps import evaluate
 from ssa_fusion.apps.args import add_domain_id, positive_float
 from ssa_fusion.core import types
 from ssa_fusion.core.config import EstimatorConfig, make_surrogate, make_tracker
 from ssa_fusion.core.frames import Frame
 from ssa_fusion.core.gap_publisher import GapFill, GapPublisher, Published
+from ssa_fusion.core.smoother import TrackerRecorder
 from ssa_fusion.core.types import Cause
 from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S, ahead_of_clock
 from ssa_fusion.nodes import settings as node_settings
@@ -54,14 +62,15 @@ from ssa_fusion.ros.topics import (
     TOPIC_ESTIMATE,
     TOPIC_FORECAST,
     TOPIC_MEASUREMENT,
+    TOPIC_SMOOTHED,
     TOPIC_TRUTH,
     TOPIC_WITHHELD,
 )
 
 PLAYED = (TOPIC_MEASUREMENT, TOPIC_TRUTH, TOPIC_WITHHELD)
 """Topics a replay plays back (estimates and forecasts are what it recomputes)."""
-KNOWN = (*PLAYED, TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_CLOCK, TOPIC_CONFIG, "/diagnostics",
-         "/rosout", "/parameter_events")
+KNOWN = (*PLAYED, TOPIC_ESTIMATE, TOPIC_SMOOTHED, TOPIC_FORECAST, TOPIC_CLOCK, TOPIC_CONFIG,
+         "/diagnostics", "/rosout", "/parameter_events")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -74,6 +83,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--offline", action="store_true", help="estimate through the core, no ROS")
     p.add_argument("--out", type=Path, default=None,
                    help="with --offline: output bag (default: BAG_offline)")
+    p.add_argument("--smooth", action="store_true",
+                   help="with --offline: also the RTS-smoothed estimates (the definitive orbit) "
+                        "on /ssa/estimate_smoothed, and their error against the bag's truth")
     p.add_argument("--scenario", default="",
                    help="replay with this paper scenario's estimator settings (default: "
                         "those recorded with the bag, else the measurement kind's default)")
@@ -104,19 +116,25 @@ def run(args: argparse.Namespace) -> int:
         print(f"replay: {ahead} measurement(s) stamped more than {MAX_CLOCK_LEAD_S:g} s after "
               f"the recorder's clock (log time) not played: the nodes refuse them live "
               f"(rejected_future)")
+    if args.smooth and not args.offline:
+        print("error: --smooth needs --offline (the smoother runs in the core)", file=sys.stderr)
+        return 2
     if args.offline:
         out = args.out or _sibling(args.bag, "_offline")
         if out.exists():
             print(f"error: {out} exists already; choose another --out", file=sys.stderr)
             return 2
-        result = replay_offline(stream, s)
+        result = replay_offline(stream, s, smooth=args.smooth)
         try:
             write_offline(out, stream, result)
         except OSError as exc:
             print(f"error: cannot write {out}: {exc}", file=sys.stderr)
             return 2
         print(f"offline replay of {args.bag}: {len(result.estimates)} estimates, "
-              f"{len(result.forecasts)} forecasts -> {out}")
+              f"{len(result.forecasts)} forecasts"
+              + (f", {len(result.smoothed)} smoothed" if args.smooth else "") + f" -> {out}")
+        if args.smooth:
+            print(smoothing_summary(stream, result))
         return 0
     return replay_live(args, stream, s)
 
@@ -203,21 +221,27 @@ class OfflineResult:
     estimates: list[tuple[int, types.StateEstimate]] = field(default_factory=list)
     forecasts: list[tuple[int, types.Measurement]] = field(default_factory=list)
     rejected: dict[str, int] = field(default_factory=dict)
+    smoothed: list[types.StateEstimate] = field(default_factory=list)
+    """With ``smooth``: the smoothed estimates, epoch order (segment after segment)."""
+    end_ns: int = 0
+    """Log time (ns) of the bag's last message."""
 
 
 def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig,
-                   gaps: Mapping[str, Any] | None = None) -> OfflineResult:
+                   gaps: Mapping[str, Any] | None = None, smooth: bool = False) -> OfflineResult:
     """Run surrogate + filter of estimator `c` through the core over the bag's messages.
 
     The messages are taken in log-time order. The filter publishes what the filter node
     publishes (`core.gap_publisher.GapPublisher`): the estimate of every fused measurement
     and, through a gap, predictions (or residual forecasts) on the grid of the filter's
     `gaps` parameters (``predict_period``, ``gap_forecast``; default: those recorded with
-    the bag), as the bag's /clock passes them, the rest once the bag ends.
+    the bag), as the bag's /clock passes them, the rest once the bag ends. With `smooth`,
+    also the fused estimates smoothed (`core.smoother.TrackerRecorder`).
     """
     g = gaps if gaps is not None else recorded_gaps(stream)
     publisher = GapPublisher.of(make_tracker(c), float(g["predict_period"]),
                                 GapFill(g["gap_forecast"]), c)
+    recorder = TrackerRecorder(publisher.tracker) if smooth else None
     # Forecasts always come from a fit on the buffer up to the last real measurement, so the
     # live node's optional periodic refits (retrain_period) would change nothing here.
     surrogate = make_surrogate(c.with_(surrogate=replace(c.surrogate, retrain_period_s=math.inf)))
@@ -236,7 +260,10 @@ def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig,
         return bool(out.estimates)
 
     def fuse(m: types.Measurement, t_ns: int) -> None:
-        publish(publisher.measurement(m), t_ns)
+        out = publisher.measurement(m)
+        if recorder is not None and out.outcome is not None:
+            recorder.observe(m, out.outcome)
+        publish(out, t_ns)
 
     def forecast(f: types.Measurement, t_ns: int) -> None:
         result.forecasts.append((t_ns, f))
@@ -247,6 +274,8 @@ def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig,
             now = messages.stamp_to_seconds(msg.msg.clock)
             if now < last_clock:  # a looping bag: both start over, as the nodes do
                 publisher.reset()
+                if recorder is not None:
+                    recorder.reset()
                 surrogate.reset()
                 pool.clear()
             last_clock, last_ns = now, msg.t_ns
@@ -275,7 +304,28 @@ def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig,
                 forecast(due, msg.t_ns)
     while publish(publisher.advance(last_clock), last_ns):  # the node's timer works it off
         pass
+    result.end_ns = max((m.t_ns for m in stream), default=0)
+    if recorder is not None:
+        object_id = publisher.last_object
+        result.smoothed = [e for seg in recorder.smooth() for e in seg.estimates(object_id)]
     return result
+
+
+def smoothing_summary(stream: list[bagio.BagMessage], result: OfflineResult) -> str:
+    """Return the smoothed against the filtered position error at the truth's fused epochs."""
+    truth = {messages.stamp_to_seconds(m.msg.header.stamp): messages.estimate_from_msg(m.msg).x
+             for m in stream if m.topic == TOPIC_TRUTH}
+    filtered = {e.t: e for _, e in result.estimates
+                if e.update_source != types.UpdateSource.NONE}
+    both = [e for e in result.smoothed if e.t in truth and e.t in filtered]
+    if not both:
+        return ("smoothed: no fused epoch has a truth message in the bag (nothing to score; "
+                "the smoothed estimates are on /ssa/estimate_smoothed)")
+    err_s = [float(np.linalg.norm(e.x[:3] - truth[e.t][:3])) for e in both]
+    err_f = [float(np.linalg.norm(filtered[e.t].x[:3] - truth[e.t][:3])) for e in both]
+    return (f"smoothed against filtered, position error at the {len(both)} fused epochs with "
+            f"truth: median {statistics.median(err_s):.4g} vs {statistics.median(err_f):.4g}, "
+            f"largest {max(err_s):.4g} vs {max(err_f):.4g} (the bag's units: km for orbits)")
 
 
 def recorded_gaps(stream: list[bagio.BagMessage]) -> dict[str, Any]:
@@ -287,7 +337,7 @@ def write_offline(out: Path, stream: list[bagio.BagMessage], result: OfflineResu
     """Write the bag `out` of the live layout with the new estimates and forecasts.
 
     The played topics as recorded, plus the new estimates and forecasts at the log times of
-    the inputs that produced them.
+    the inputs that produced them, and the smoothed estimates (if any) after the last.
     """
     classes = bagio.rosbags_classes()
     writer = bagio.BagWriter(out)
@@ -302,6 +352,10 @@ def write_offline(out: Path, stream: list[bagio.BagMessage], result: OfflineResu
                  for t, f in result.forecasts]
         rows += [(t, 2, TOPIC_ESTIMATE, messages.estimate_to_msg(e, classes))
                  for t, e in result.estimates]
+        if result.smoothed:
+            writer.add_topic(TOPIC_SMOOTHED, f"{bagio.MSG_PACKAGE}/msg/StateEstimate")
+            rows += [(result.end_ns + 1, 3, TOPIC_SMOOTHED, messages.estimate_to_msg(e, classes))
+                     for e in result.smoothed]
         for t_ns, _, topic, msg in sorted(rows, key=lambda r: (r[0], r[1])):
             writer.write_msg(topic, t_ns, msg)
     finally:

@@ -187,9 +187,9 @@ def tracker_noise(tracker: Tracker) -> NoiseFunction:
 class TrackerRecorder:
     """Keeps the chain of a `Tracker`'s fused estimates for smoothing (module docstring).
 
-    Feed measurements through `process` instead of ``tracker.process``; the tracker's
-    behaviour is unchanged. `segments` are the chains between re-initialisations; each
-    ends at the tracker's current estimate.
+    Feed measurements through `process` instead of ``tracker.process`` (or tell it what the
+    tracker did with `observe`); the tracker's behaviour is unchanged. `segments` are the
+    chains between re-initialisations; each ends at the tracker's current estimate.
 
     Parameters
     ----------
@@ -205,6 +205,11 @@ class TrackerRecorder:
     def process(self, m: Measurement) -> Outcome:
         """``tracker.process(m)``, recording what it fused (and what it undid)."""
         out = self.tracker.process(m)
+        self.observe(m, out)
+        return out
+
+    def observe(self, m: Measurement, out: Outcome) -> None:
+        """Record what the tracker did with `m` (`out`), when something else fed it `m`."""
         if self.tracker.ekf is not self._ekf:  # a new filter: IOD (first or again), reset
             self._ekf = self.tracker.ekf
             if self.segments[-1]:
@@ -214,7 +219,12 @@ class TrackerRecorder:
             chain = self.segments[-1]
             chain[:] = [e for e in chain if e.t < m.t]  # steps at or after m.t were undone
             chain.extend(fused)
-        return out
+
+    def reset(self) -> None:
+        """Start a new segment: the tracker was reset (a backwards clock jump)."""
+        self._ekf = self.tracker.ekf
+        if self.segments[-1]:
+            self.segments.append([])
 
     def steps(self) -> list[list[FilterStep]]:
         """Return the recorded segments as `FilterStep` lists (`steps_from_estimates`)."""

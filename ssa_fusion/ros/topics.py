@@ -32,6 +32,8 @@ CATALOG_QOS = QoSProfile(
 TOPIC_MEASUREMENT = "/ssa/measurement"
 TOPIC_FORECAST = "/ssa/forecast"
 TOPIC_ESTIMATE = "/ssa/estimate"
+TOPIC_SMOOTHED = "/ssa/estimate_smoothed"
+"""Smoothed estimates (`replay --offline --smooth`): the definitive orbit at the fused epochs."""
 TOPIC_TRUTH = "/ssa/truth"
 TOPIC_WITHHELD = "/ssa/withheld"
 TOPIC_CLOCK = "/clock"
