@@ -110,7 +110,9 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     """
     names = node_names(shards)
     gaps = node_names(shards, "catalog_surrogate") if surrogate else []
-    readers = ["recorder:" + TOPIC_MEASUREMENT, "recorder:" + TOPIC_ESTIMATE,
+    # the recorder hears every estimate publisher (shards and surrogates) from the first
+    readers = ["recorder:" + TOPIC_MEASUREMENT,
+               f"recorder:{TOPIC_ESTIMATE}={len(names) + len(gaps)}",
                *(f"{n}:{TOPIC_MEASUREMENT}" for n in names)]
     recorder: dict[str, Any] = {"use_sim_time": True}
     if bag is not None:

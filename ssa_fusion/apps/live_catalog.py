@@ -21,6 +21,7 @@ same numbers.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import time
@@ -37,6 +38,7 @@ from ssa_fusion.apps import runs
 from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core.types import UpdateSource
 from ssa_fusion.nodes.defaults import CATALOG_FILTER, CATALOG_SURROGATE
+from ssa_fusion.nodes.diagnostics import RECORDED, Count
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.processes import Graph
 from ssa_fusion.ros.topics import (
@@ -133,6 +135,29 @@ def _statuses(diagnostics: Sequence[Message]) -> dict[str, dict[str, str]]:
     return out
 
 
+def _count(status: dict[str, dict[str, str]], node: str, key: str) -> int:
+    """Return the count `key` of `node` in `status` (`_statuses`), 0 when absent."""
+    v = status.get(node, {}).get(key, "0")
+    return int(v) if v.isdigit() else 0
+
+
+def unrecorded(status: dict[str, dict[str, str]], names: list[str], gaps: list[str]) -> int:
+    """Return how many measurements and estimates are published but not yet recorded.
+
+    As the nodes and the recorder report them (`status`: `_statuses`; `names`: the filter
+    shards, `gaps`: the surrogate shards).
+    """
+
+    def num(node: str, key: str) -> int:
+        return _count(status, node, key)
+
+    published = (num("sensor_sim", Count.PUBLISHED)
+                 + sum(num(n, Count.PUBLISHED_SENSOR) for n in names)
+                 + sum(num(g, Count.PUBLISHED_FORECAST) for g in gaps))
+    return published - num("recorder", RECORDED + TOPIC_MEASUREMENT) \
+        - num("recorder", RECORDED + TOPIC_ESTIMATE)
+
+
 def _rss_kib(pid: int) -> int:
     """Return the resident set size of process `pid`, KiB (0 when unknown)."""
     try:
@@ -208,6 +233,10 @@ def run(args: argparse.Namespace) -> int:
             graph.wait_for(lambda: set(names + gaps) <= {st.name for d in diagnostics[since:]
                                                          for st in d.status}, 10.0,
                            "a last /diagnostics report of every shard")
+            # and the recorder (last stopped, but stopped) has written all they published
+            with contextlib.suppress(TimeoutError):  # the summary counts what it lacks
+                graph.wait_for(lambda: unrecorded(_statuses(diagnostics), names, gaps) == 0,
+                               60.0, "the recorder to write every measurement and estimate")
             rss = {n: _rss_kib(p.popen.pid) for n, p in zip(names + gaps, procs, strict=True)}
     finally:
         problems = graph.close()
@@ -261,10 +290,9 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
                 estimates[e.object_id].append((e.t, e.x))
 
     def num(node: str, key: str) -> int:
-        v = status.get(node, {}).get(key, "0")
-        return int(v) if v.isdigit() else 0
+        return _count(status, node, key)
 
-    published = num("sensor_sim", "published")
+    published = num("sensor_sim", Count.PUBLISHED)
     per_shard: dict[str, ShardSummary] = {}
     causes: Counter[str] = Counter()
     for shard in names:

@@ -208,8 +208,9 @@ PARAMETERS = ParameterTable("sensor_sim", (
           check=Check("`/topic=count` entries", _wait)),
     Param("wait_for_readers", SENSOR_SIM.wait_for_readers,
           "start only when each `node:/topic` reports a matched publisher on `/diagnostics` "
-          "(e.g. `filter:/ssa/measurement`): the readers' side of the match exists too; "
-          "`[\"\"]` = none", check=Check("`node:/topic` entries", _readers)),
+          "(e.g. `filter:/ssa/measurement`), or `node:/topic=count` that many: the readers' "
+          "side of the match exists too; `[\"\"]` = none",
+          check=Check("`node:/topic[=count]` entries", _readers)),
     Param("tick", SENSOR_SIM.tick, "period of the publication timer", unit="wall s",
           check=POSITIVE),
     Param("catalog", SENSOR_SIM.catalog,

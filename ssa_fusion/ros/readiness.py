@@ -5,7 +5,8 @@ it sends before the subscriber's side exists is lost to a volatile reader. ssa_f
 report each input subscription's matched-publisher count on /diagnostics (see
 `nodes.diagnostics.Diagnostics.subscribe`); `ReadyNodes` reads those reports so that a sender
 (the sensor simulator, replay's player) starts only when each named node has matched a
-publisher on each named topic ('node:/topic').
+publisher on each named topic ('node:/topic'), or as many publishers as it names
+('node:/topic=count': a recorder that must hear every shard from its first message).
 """
 
 from __future__ import annotations
@@ -65,14 +66,15 @@ class ReadyNodes:
                 self.reports[st.name] = counts
 
     def unmatched(self, needs: list[str]) -> list[str]:
-        """Return the entries of `needs` ('node:/topic') not matched yet.
+        """Return the entries of `needs` ('node:/topic[=count]') not matched yet.
 
-        Those whose node has not reported a matched publisher on that topic yet.
+        Those whose node has not reported `count` (default 1) matched publishers on that
+        topic yet.
         """
         missing = []
         for need in needs:
-            name, _, topic = need.partition(":")
-            if self.reports.get(name, {}).get(topic, 0) < 1:
+            name, topic, count = split_need(need)
+            if self.reports.get(name, {}).get(topic, 0) < count:
                 missing.append(need)
         return missing
 
@@ -81,10 +83,23 @@ class ReadyNodes:
         return not self.unmatched(needs)
 
 
+def split_need(need: str) -> tuple[str, str, int]:
+    """Return the node, topic and publisher count (default 1) of 'node:/topic[=count]'.
+
+    A malformed count reads as 1 (`check_needs` says why it is malformed).
+    """
+    name, _, rest = need.partition(":")
+    topic, _, count = rest.partition("=")
+    return name, topic, int(count) if count.isdigit() else 1
+
+
 def check_needs(needs: list[str]) -> str | None:
-    """Return why a list of 'node:/topic' entries is malformed, or None."""
+    """Return why a list of 'node:/topic[=count]' entries is malformed, or None."""
     for need in needs:
-        name, _, topic = need.partition(":")
-        if not name or "/" in name or not topic.startswith("/"):
-            return f"{need!r} is not 'node:/topic' (node: the node's name, no namespace)"
+        name, topic, _ = split_need(need)
+        count = need.partition(":")[2].partition("=")[2]
+        if (not name or "/" in name or not topic.startswith("/")
+                or ("=" in need and not (count.isdigit() and int(count) >= 1))):
+            return (f"{need!r} is not 'node:/topic' or 'node:/topic=count' (node: the node's "
+                    f"name, no namespace; count: publishers to match, at least 1)")
     return None

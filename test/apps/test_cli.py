@@ -85,6 +85,32 @@ def test_reader_entries_name_a_node_and_a_topic():
     assert check_needs(READERS) is None
     assert "no namespace" in check_needs(["/ns/filter:/ssa/measurement"])
     assert "is not 'node:/topic'" in check_needs(["filter"])
+    assert check_needs(["recorder:/ssa/estimate=4"]) is None
+    for bad in ("recorder:/ssa/estimate=0", "recorder:/ssa/estimate=two",
+                "recorder:/ssa/estimate="):
+        assert "count: publishers to match" in check_needs([bad])
+
+
+def test_a_reader_with_a_count_waits_for_that_many_publishers():
+    from types import SimpleNamespace
+
+    from ssa_fusion.ros.readiness import MATCHED_KEY, ReadyNodes
+
+    class _Node:
+        def create_subscription(self, *_args):
+            return None
+
+    ready = ReadyNodes(_Node())
+
+    def report(n: int) -> None:
+        kv = SimpleNamespace(key=MATCHED_KEY + "/ssa/estimate", value=str(n))
+        ready._on(SimpleNamespace(status=[SimpleNamespace(name="recorder", values=[kv])]))
+
+    needs = ["recorder:/ssa/estimate=3", "recorder:/ssa/estimate"]
+    report(1)
+    assert ready.unmatched(needs) == ["recorder:/ssa/estimate=3"]
+    report(3)
+    assert ready.ready(needs)
 
 
 class _FakeGraph:
