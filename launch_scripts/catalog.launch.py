@@ -24,6 +24,7 @@ from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch_ros.actions import Node
 
+from ssa_fusion.core.timescales import parse_utc
 from ssa_fusion.graphs import DEFAULT_SCENARIO, catalog_graph, catalog_scenario, default_bag
 from ssa_fusion.ros.launch_events import launch_description, shutdown_handlers
 
@@ -34,6 +35,7 @@ ARGUMENTS = {
     "objects": "only the catalog's first N objects (0 = all)",
     "synthetic": "spread the catalog's first element set into N objects (0 = the catalog's)",
     "duration": "hours of sim time (0 = the scenario's)",
+    "start": "first epoch, ISO 8601 UTC ('' = the catalog's first element set's)",
     "shards": "filter (and surrogate) processes, each owning the objects of its key range",
     "surrogate": "true: a catalog_surrogate per shard (gap forecasts); false: none",
     "scenario": "real-sky scenario whose radars observe the catalog",
@@ -62,11 +64,14 @@ def graph(context: Any) -> list[Any]:
     if args["surrogate"] not in ("true", "false"):
         raise ValueError(f"surrogate:={args['surrogate']!r}: true or false")
     hours = _number(args, "duration", float, 0.0)
+    if args["start"]:
+        parse_utc(args["start"])  # ValueError: one line naming the epoch
     specs = catalog_graph(
         scenario, Path(args["catalog"]), _number(args, "objects", int, 0),
         _number(args, "synthetic", int, 0), hours * 3600.0 or scenario.duration_s,
         _number(args, "time_scale", float, 1e-9), _number(args, "seed", int, 0),
-        _number(args, "shards", int, 1), args["surrogate"] == "true", {}, Path(args["bag"]))
+        _number(args, "shards", int, 1), args["surrogate"] == "true", {}, Path(args["bag"]),
+        args["start"])
     nodes = {s.name: Node(package="ssa_fusion", executable=s.executable, name=s.name,
                           output="screen", parameters=[s.params]) for s in specs}
     return [*nodes.values(),
@@ -81,6 +86,7 @@ def generate_launch_description() -> LaunchDescription:
         "objects": "0",
         "synthetic": "0",
         "duration": "0",
+        "start": "",
         "shards": "1",
         "surrogate": "true",
         "scenario": DEFAULT_SCENARIO,

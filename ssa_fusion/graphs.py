@@ -12,10 +12,12 @@ the apps and the launch files import it, nothing below them does.
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 from typing import Any, NamedTuple
 
+from ssa_fusion.core import timescales
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import BAG_PATTERN
 from ssa_fusion.ros.readiness import READERS
@@ -43,7 +45,8 @@ def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, 
                               "time_scale": time_scale, "seed": seed, "wait_for": WAIT_FOR,
                               "wait_for_readers": READERS}
     if isinstance(s, sky.SkyScenario):  # the truth's cadence; the filter publishes at it
-        sensor["cadence"] = s.truth_cadence_s
+        sensor.update({"cadence": s.truth_cadence_s, "start": timescales.iso(s.t0),
+                       "duration": s.duration_s})
         extra = {"predict_period": s.truth_cadence_s, "gap_forecast": str(s.gap_fill)}
     else:
         sensor.update({"cadence": s.cadence_s, "gap_start": s.track_s, "gap_length": s.gap_s,
@@ -74,11 +77,38 @@ def catalog_scenario(name: str) -> sky.SkyScenario:
     return scenario
 
 
-def live_scenario(name: str) -> scenarios.Scenario | sky.SkyScenario:
-    """Return the scenario `name` of `LIVE_SCENARIOS` (ValueError naming the known ones)."""
+def live_scenario(name: str, start: str = "",
+                  duration_h: float = 0.0) -> scenarios.Scenario | sky.SkyScenario:
+    """Return the scenario `name` of `LIVE_SCENARIOS` from `start` for `duration_h`.
+
+    `start`: ISO 8601 UTC ('' = the scenario's epoch); a real-sky scenario's object starts
+    from its initial GCRF state at it (`sky.SkyScenario.t0`). `duration_h`: hours of sim
+    time (0 = the scenario's); a paper scenario keeps its tracking and gap and tracks after
+    the gap for the rest. ValueError with one line: an unknown name, a bad epoch, a start
+    for a paper scenario (it keeps the paper's epoch), a paper scenario shorter than its
+    tracking and gap.
+    """
     if name not in LIVE_SCENARIOS:
         raise ValueError(f"scenario {name!r} unknown; known: {', '.join(LIVE_SCENARIOS)}")
-    return sky.SKY_SCENARIOS.get(name) or scenarios.get(name)
+    if not (math.isfinite(duration_h) and duration_h >= 0.0):
+        raise ValueError(f"--duration {duration_h!r}: hours of sim time, a number >= 0")
+    real_sky = sky.SKY_SCENARIOS.get(name)
+    if real_sky is not None:
+        t0 = timescales.parse_utc(start) if start else real_sky.t0
+        return real_sky.with_(t0=t0, duration_s=duration_h * 3600.0 or real_sky.duration_s)
+    paper = scenarios.get(name)
+    if start:
+        raise ValueError(f"--start applies to the real-sky scenarios "
+                         f"({', '.join(sky.SKY_SCENARIOS)}) and catalogs; {name} keeps the "
+                         "paper's epoch")
+    if not duration_h:
+        return paper
+    after = duration_h * 3600.0 - paper.track_s - paper.gap_s
+    if after <= 0.0:
+        raise ValueError(f"--duration {duration_h:g} h: {name} tracks {paper.track_s:g} s, then "
+                         f"has a gap of {paper.gap_s:g} s; its duration must exceed "
+                         f"{(paper.track_s + paper.gap_s) / 3600:g} h")
+    return paper.with_(after_s=after)
 
 
 DEFAULT_SCENARIO = "iss_network"
@@ -100,13 +130,15 @@ class NodeSpec(NamedTuple):
 
 def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthetic: int,
                   sim_s: float, time_scale: float, seed: int, shards: int, surrogate: bool,
-                  surrogate_extra: dict[str, Any], bag: Path | None) -> list[NodeSpec]:
+                  surrogate_extra: dict[str, Any], bag: Path | None,
+                  start: str = "") -> list[NodeSpec]:
     """Return the processes of a catalog run, in start order.
 
     The recorder (`bag`, None: its default), `shards` catalog_filter and, with `surrogate`,
     as many catalog_surrogate (`surrogate_extra` over their defaults), and sensor_sim
-    simulating `scenario`'s radars measuring the catalog (last: it waits for the others).
-    The same for `ssa-fusion live --catalog` and `ros2 launch ssa_fusion catalog.launch.py`.
+    simulating `scenario`'s radars measuring the catalog for `sim_s` from `start` (ISO 8601
+    UTC; '' = the catalog's first epoch) (last: it waits for the others). The same for
+    `ssa-fusion live --catalog` and `ros2 launch ssa_fusion catalog.launch.py`.
     """
     names = node_names(shards)
     gaps = node_names(shards, "catalog_surrogate") if surrogate else []
@@ -128,7 +160,7 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
         NodeSpec("sensor_sim", "sensor_sim", {
             "scenario": scenario.name, "catalog": str(Path(catalog).resolve()),
             "objects": objects, "synthetic": synthetic, "duration": float(sim_s),
-            "time_scale": float(time_scale), "seed": seed,
+            "time_scale": float(time_scale), "seed": seed, "start": start,
             "wait_for": [f"{TOPIC_MEASUREMENT}={shards + 1}",
                          f"{TOPIC_ESTIMATE}={len(gaps) + 1}"],
             "wait_for_readers": readers}),

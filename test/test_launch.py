@@ -35,7 +35,7 @@ from ssa_fusion.sim import scenarios
 ROOT = Path(__file__).resolve().parents[1]
 LAUNCH_FILE = ROOT / "launch_scripts" / "ssa_fusion.launch.py"
 NODES = ("recorder", "surrogate", "filter", "sensor_sim")
-ARGUMENTS = ("params_file", "scenario", "time_scale", "bag")
+ARGUMENTS = ("params_file", "scenario", "time_scale", "start", "duration", "bag")
 
 
 class Recorded:
@@ -189,6 +189,20 @@ def test_scenario_and_time_scale_set_every_node(launch):
     assert type(nodes["sensor_sim"].kwargs["parameters"][1]["time_scale"]) is float
 
 
+def test_start_and_duration_set_the_scenarios_window(launch):
+    """start:= and duration:= as `ssa-fusion live --start/--duration`: the real-sky
+    simulator's first epoch and length; a paper scenario tracks after its gap for the rest."""
+    nodes, _ = run_graph(launch, scenario="iss_radar_columbus", start="2025-06-01T06:00:00Z",
+                         duration="6")
+    sensor = nodes["sensor_sim"].kwargs["parameters"][1]
+    assert sensor["start"] == "2025-06-01T06:00:00.000Z" and sensor["duration"] == 21600.0
+    nodes, _ = run_graph(launch, scenario="iss_j2_rae", duration="20")
+    paper = scenarios.get("iss_j2_rae")
+    sensor = nodes["sensor_sim"].kwargs["parameters"][1]
+    assert sensor["gap_start"] + sensor["gap_length"] + sensor["after_gap"] == 72000.0
+    assert (sensor["gap_start"], sensor["gap_length"]) == (paper.track_s, paper.gap_s)
+
+
 def test_without_scenario_or_time_scale_the_params_file_decides(launch):
     nodes, _ = run_graph(launch)
     for node in nodes.values():
@@ -199,6 +213,10 @@ def test_without_scenario_or_time_scale_the_params_file_decides(launch):
 @pytest.mark.parametrize(("given", "message"), [
     ({"scenario": "mars_base"}, "scenario 'mars_base' unknown; known: "),
     ({"time_scale": "fast"}, "time_scale:='fast' is not a number"),
+    ({"start": "2025-06-01"}, "start:= and duration:= need scenario:="),
+    ({"scenario": "iss_j2_rae", "start": "2025-06-01"}, "iss_j2_rae keeps the paper's epoch"),
+    ({"scenario": "iss_network", "start": "June"}, "'June' is not an ISO 8601 epoch"),
+    ({"scenario": "iss_network", "duration": "six"}, "duration:='six' is not a number"),
 ])
 def test_bad_arguments_are_named(launch, given, message):
     with pytest.raises(ValueError, match=re.escape(message)):

@@ -37,11 +37,12 @@ def test_declares_its_arguments_and_installs_the_sample_catalog(launch):
 
 def test_starts_k_filter_and_k_surrogate_shards_as_live_catalog_does(launch):
     nodes, handlers = run_graph(launch, shards="3", synthetic="50", duration="2",
-                                time_scale="200", bag="/tmp/cat_bag", seed="7")
+                                time_scale="200", bag="/tmp/cat_bag", seed="7",
+                                start="2025-03-01T00:00:00Z")
     s = sky.SKY_SCENARIOS["iss_network"]
     want = catalog_graph(s, Path(declared(launch.generate_launch_description())["catalog"]
                                  .kwargs["default_value"]), 0, 50, 7200.0, 200.0, 7, 3, True,
-                         {}, Path("/tmp/cat_bag"))
+                         {}, Path("/tmp/cat_bag"), "2025-03-01T00:00:00Z")
     assert list(nodes) == [n.name for n in want]  # sensor_sim last
     assert [n for n in nodes if n.startswith("catalog_filter")] == \
         [f"catalog_filter_{k}" for k in range(3)]
@@ -58,6 +59,7 @@ def test_starts_k_filter_and_k_surrogate_shards_as_live_catalog_does(launch):
     assert ranges[0][0] == 0 and all(a[1] + 1 == b[0] for a, b in pairwise(ranges))
     sensor = nodes["sensor_sim"].kwargs["parameters"][0]
     assert sensor["duration"] == 7200.0 and sensor["time_scale"] == 200.0
+    assert sensor["start"] == "2025-03-01T00:00:00Z"
     assert sensor["wait_for"] == ["/ssa/measurement=4", "/ssa/estimate=4"]
     targets = {next(n for n, a in nodes.items() if a is h.kwargs["target_action"])
                for h in handlers}
@@ -78,6 +80,7 @@ def test_without_surrogates_only_the_filter_shards_run(launch):
     ({"shards": "two"}, "shards:='two' is not an integer"),
     ({"duration": "-1"}, "duration:='-1' must be >= 0.0"),
     ({"surrogate": "maybe"}, "surrogate:='maybe': true or false"),
+    ({"start": "2040-01-01"}, "is outside the range ssa_fusion represents"),
 ])
 def test_bad_arguments_are_named(launch, given, message):
     with pytest.raises(ValueError, match=re.escape(message)):

@@ -33,7 +33,7 @@ from ssa_fusion.apps.args import add_domain_id, positive_float
 from ssa_fusion.ros import visual_msgs
 from ssa_fusion.ros.processes import Graph
 from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
-from ssa_fusion.sim import scenarios, sky
+from ssa_fusion.sim import scenarios
 
 if TYPE_CHECKING:
     from ssa_fusion.ros.interfaces import Message
@@ -60,6 +60,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"output directory (default: {LIVE_ROOT}/<scenario>_<date-time>, "
                         f"also linked as {LIVE_ROOT}/latest)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--start", default="", metavar="UTC",
+                   help="first epoch, ISO 8601 UTC (e.g. 2025-06-01T00:00:00Z) of a real-sky "
+                        "scenario (its object starts from the scenario's initial GCRF state "
+                        "then) or a catalog (default: the scenario's epoch; a catalog's: its "
+                        "first element set's)")
+    p.add_argument("--duration", type=float, default=0.0, metavar="HOURS",
+                   help="hours of sim time (default: the scenario's; a paper scenario keeps "
+                        "its tracking and gap and tracks after the gap for the rest)")
     p.add_argument("--strict", action="store_true",
                    help="exit 1 when forecasts for gap epochs never went into the filter "
                         "(they arrived late or were dropped, e.g. at too high a time scale)")
@@ -176,7 +184,11 @@ def run(args: argparse.Namespace) -> int:
         from ssa_fusion.apps import live_catalog
 
         return live_catalog.run(args)
-    s = sky.SKY_SCENARIOS.get(args.scenario) or scenarios.get(args.scenario)
+    try:
+        s = graphs.live_scenario(args.scenario, args.start, args.duration)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     dirs = runs.run_dirs(args, s.name)
     if dirs is None:
         return 2

@@ -36,6 +36,7 @@ import numpy as np
 from ssa_fusion import graphs
 from ssa_fusion.apps import runs
 from ssa_fusion.core import catalog as catalog_io
+from ssa_fusion.core import timescales
 from ssa_fusion.core.types import UpdateSource
 from ssa_fusion.nodes.defaults import CATALOG_FILTER, CATALOG_SURROGATE
 from ssa_fusion.nodes.diagnostics import RECORDED, Count
@@ -64,8 +65,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--synthetic", type=int, default=0,
                    help="catalog: spread its first element set into N objects of the same "
                         "orbital regime (core.survey.synthetic_catalog)")
-    p.add_argument("--duration", type=float, default=0.0,
-                   help="catalog: hours of sim time (default: the scenario's)")
     p.add_argument("--shards", type=int, default=1,
                    help="catalog: filter (and surrogate) processes, each owning the objects "
                         "of its shard (default 1)")
@@ -78,8 +77,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def args_problem(args: argparse.Namespace) -> str | None:
     """Return why the catalog options cannot run, or None."""
-    if args.objects < 0 or args.synthetic < 0 or args.duration < 0:
+    if args.objects < 0 or args.synthetic < 0 or not args.duration >= 0:
         return "--objects, --synthetic and --duration must be >= 0"
+    if args.start:
+        try:
+            timescales.parse_utc(args.start)
+        except ValueError as exc:
+            return f"--start: {exc}"
     if not 1 <= args.shards <= 64:
         return "--shards must be in 1..64"
     try:
@@ -200,7 +204,7 @@ def run(args: argparse.Namespace) -> int:
     sim_s = args.duration * 3600.0 or s.duration_s
     specs = graphs.catalog_graph(s, args.catalog, args.objects, args.synthetic, sim_s,
                           args.time_scale, args.seed, args.shards, args.surrogate,
-                          catalog_surrogate_params(args), bag)
+                          catalog_surrogate_params(args), bag, args.start)
     names = [n.name for n in specs if n.executable == "catalog_filter"]
     gaps = [n.name for n in specs if n.executable == "catalog_surrogate"]
     graph = Graph(out / "logs", args.domain_id)

@@ -64,6 +64,22 @@ def iso(t_unix: float) -> str:
     return dt.strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"
 
 
+def parse_utc(text: str) -> float:
+    """Return the Unix stamp (s) of an ISO 8601 epoch, UTC unless it names a zone offset.
+
+    E.g. ``2025-06-01T00:00:00Z``, ``2025-06-01 12:30``, ``2025-06-01``. ValueError with
+    one line when `text` is not ISO 8601 or lies outside `EPOCH_MIN` .. `EPOCH_MAX`.
+    """
+    try:
+        dt = datetime.fromisoformat(text.strip())
+    except ValueError:
+        raise ValueError(f"{text!r} is not an ISO 8601 epoch (e.g. 2025-06-01T00:00:00Z)") \
+            from None
+    t = (dt if dt.tzinfo is not None else dt.replace(tzinfo=UTC)).timestamp()
+    check_epochs(t)
+    return t
+
+
 def check_epochs(t_unix: ArrayLike, what: str = "epoch") -> None:
     """Raise ValueError unless every stamp is finite and within `EPOCH_MIN` .. `EPOCH_MAX`."""
     t = np.asarray(t_unix, dtype=float)

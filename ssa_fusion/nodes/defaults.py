@@ -62,6 +62,7 @@ class SensorSimDefaults:
     gaps: tuple[float, ...] = (0.0,)
     after_gap: float | None = None
     duration: float = 0.0
+    start: str = ""
     noise_sigma: tuple[float, ...] = (-1.0,)
     time_scale: float = 100.0
     seed: int = 0

@@ -27,7 +27,7 @@ import numpy as np
 from rclpy.duration import Duration
 
 from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core import types
+from ssa_fusion.core import timescales, types
 from ssa_fusion.core.frames import Frame
 from ssa_fusion.nodes import parameters
 from ssa_fusion.nodes.base import SsaNode
@@ -160,6 +160,23 @@ def _readers(value: ParamValue) -> str | None:
     return check_needs([str(x) for x in value if x])
 
 
+def _start(value: ParamValue) -> str | None:
+    if not value:
+        return None
+    try:
+        timescales.parse_utc(str(value))
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
+def _start_needs_sky(values: Values) -> str | None:
+    if values["start"] and values["scenario"] not in sky.SKY_SCENARIOS:
+        return ("applies to the real-sky scenarios and catalogs; a paper scenario keeps the "
+                f"paper's epoch (real-sky: {list(sky.SKY_SCENARIOS)})")
+    return None
+
+
 def _catalog_needs_sky(values: Values) -> str | None:
     if values["catalog"] and values["scenario"] not in sky.SKY_SCENARIOS:
         return (f"needs a real-sky scenario (its radars observe the catalog); known: "
@@ -183,8 +200,14 @@ PARAMETERS = ParameterTable("sensor_sim", (
           "time between measurements (real sky: between truth samples)", unit="s",
           check=POSITIVE),
     Param("duration", SENSOR_SIM.duration,
-          "real-sky scenarios: sim time to run; 0 = the scenario's (3 days)", unit="s",
-          check=NON_NEGATIVE),
+          "real-sky scenarios and catalogs: sim time to run; 0 = the scenario's (3 days)",
+          unit="s", check=NON_NEGATIVE),
+    Param("start", SENSOR_SIM.start,
+          "real-sky scenarios and catalogs: the first epoch, ISO 8601 UTC (e.g. "
+          "`2025-06-01T00:00:00Z`); the object starts from the scenario's initial GCRF state "
+          "at it, so its orbit plane meets the Sun and the sites elsewhere; '' = the "
+          "scenario's epoch (a catalog: its first element set's)",
+          check=Check("ISO 8601 UTC, 1972..2038", _start)),
     Param("gap_start", _from_scenario("track_s"),
           "tracking before the gap, from the first epoch; ignored when `gaps` is set",
           unit="s", check=NON_NEGATIVE),
@@ -225,7 +248,8 @@ PARAMETERS = ParameterTable("sensor_sim", (
           "catalog: spread its first element set into N objects of the same regime "
           "(`survey.synthetic_catalog`, seeded by `seed`; 0 = the catalog's own)",
           check=at_least(0)),
-), rules=(Rule(("catalog", "scenario"), _catalog_needs_sky),))
+), rules=(Rule(("catalog", "scenario"), _catalog_needs_sky),
+          Rule(("start", "scenario"), _start_needs_sky)))
 """The sensor_sim's parameters."""
 
 
@@ -242,6 +266,7 @@ class SensorSim(SsaNode):
         base, real_sky = _scenario(p.values)
         self.object_id = p.text("object_id")
         cadence, duration, gaps = p.number("cadence"), p.number("duration"), p.numbers("gaps")
+        start = timescales.parse_utc(p.text("start")) if p.text("start") else None
         seed = p.integer("seed")
         self.time_scale = p.number("time_scale")
         self.wait_for = p.texts("wait_for")
@@ -253,14 +278,15 @@ class SensorSim(SsaNode):
         if catalog:
             assert real_sky is not None  # the rule `_catalog_needs_sky`
             self.catalog, summary = self._catalog(real_sky, catalog, p.integer("objects"),
-                                                  p.integer("synthetic"), duration, seed)
+                                                  p.integer("synthetic"), duration, start,
+                                                  seed)
             self.times = self.catalog.t
         elif real_sky is None:
             self.schedule, summary = self._paper(
                 base, cadence, p.number("gap_start"), p.number("gap_length"), gaps,
                 p.number("after_gap"), p.numbers("noise_sigma"), seed)
         else:
-            self.schedule, summary = self._sky(real_sky, cadence, duration, gaps, seed)
+            self.schedule, summary = self._sky(real_sky, cadence, duration, start, gaps, seed)
         if self.catalog is None:
             self.times = np.array([e[0] for e in self.schedule])
         if not self.times.size:
@@ -315,22 +341,31 @@ class SensorSim(SsaNode):
         return (paper_schedule(sim, in_gap, self.object_id),
                 f"{len(sim.t)} epochs every {cadence} s, gaps {windows} s")
 
-    def _sky(self, s: sky.SkyScenario, cadence: float, duration: float, gaps: list[float],
-             seed: int) -> tuple[Schedule, str]:
-        """Return the schedule of a real-sky scenario (`gaps`, if set: network outages)."""
-        s = s.with_(truth_cadence_s=cadence, duration_s=duration or s.duration_s)
+    def _sky(self, s: sky.SkyScenario, cadence: float, duration: float, start: float | None,
+             gaps: list[float], seed: int) -> tuple[Schedule, str]:
+        """Return the schedule of a real-sky scenario (`gaps`, if set: network outages).
+
+        `duration` (s; 0: the scenario's) from `start` (Unix s; None: the scenario's t0).
+        """
+        s = s.with_(truth_cadence_s=cadence, duration_s=duration or s.duration_s,
+                    t0=s.t0 if start is None else start)
         if list(gaps) != [0.0]:
             s = s.with_(outages=tuple((sky.ALL_STATIONS, gaps[i], gaps[i + 1])
                                       for i in range(0, len(gaps), 2)))
         sim = sky.simulate_sky(s, seed=seed, object_id=self.object_id)
         return (sky_schedule(sim, self.object_id),
                 f"{len(sim.measurements)} measurements ({int(sim.withheld.sum())} withheld) "
-                f"from {', '.join(s.sensors)} over {s.duration_s / 3600:g} h, truth every "
+                f"from {', '.join(s.sensors)} from {timescales.iso(s.t0)} over "
+                f"{s.duration_s / 3600:g} h, truth every "
                 f"{cadence} s, outages {list(s.outages)}")
 
     def _catalog(self, s: sky.SkyScenario, path: str, objects: int, synthetic: int,
-                 duration: float, seed: int) -> tuple[survey.Observations, str]:
+                 duration: float, start: float | None,
+                 seed: int) -> tuple[survey.Observations, str]:
         """Return the measurements of a catalog by the scenario's radars.
+
+        Over `duration` (s; 0: the scenario's) from `start` (Unix s; None: the catalog's
+        first element set epoch).
 
         No truth topic: the truth is SGP4 of the catalog, recomputed by whoever scores the
         run.
@@ -347,14 +382,14 @@ class SensorSim(SsaNode):
         if not radars:
             raise parameters.ParameterError(
                 f"scenario {s.name!r} has no radar to observe a catalog")
-        t0 = survey.catalog_start(entries)
+        t0 = survey.catalog_start(entries) if start is None else start
         span = duration or s.duration_s
         obs = survey.observe_catalog(entries, radars, t0, span, seed=seed)
         self.catalog_ids = list(obs.object_ids)
         self.catalog_R = [r.R for r in radars]
         return obs, (f"catalog {path}: {len(entries)} objects, {len(obs)} measurements from "
                      f"{', '.join(r.station.name for r in radars)} over {span / 3600:g} h "
-                     f"from t0={t0:.0f}")
+                     f"from {timescales.iso(t0)}")
 
     def waiting_for(self) -> list[str]:
         """Return what start-up still waits for.
