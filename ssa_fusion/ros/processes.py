@@ -11,6 +11,7 @@ the headless graph tests.
 from __future__ import annotations
 
 import itertools
+import json
 import os
 import signal
 import subprocess
@@ -249,10 +250,15 @@ class Graph:
 
 
 def _ros_value(value: object) -> str:
-    """Return `value` as a ``-p name:=value`` rule writes it."""
+    """Return `value` as a ``-p name:=value`` rule writes it (rcl reads it as YAML).
+
+    Strings are double-quoted (JSON is YAML): an empty one, or one YAML would read as
+    another type (``'123'``, ``'true'``), stays a string.
+    """
     if isinstance(value, bool):
         return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value)
     if isinstance(value, (list, tuple)):
-        return "[" + ",".join(_ros_value(v) if not isinstance(v, str) else f'"{v}"'
-                              for v in value) + "]"
+        return "[" + ",".join(_ros_value(v) for v in value) + "]"
     return str(value)

@@ -24,7 +24,7 @@ OBJECTS = 12
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("catalog")
     args = argparse.Namespace(
-        catalog=SAMPLE, objects=0, synthetic=OBJECTS, duration=6.0, shards=2,
+        catalog=SAMPLE, objects=0, synthetic=OBJECTS, duration=6.0, start="", shards=2,
         scenario="iss_network", time_scale=2000.0, seed=4, out=out, bag=None, domain_id=None,
         surrogate=True, surrogate_param=["min_span=7200", "min_anchors=3"])
     rc = live_catalog.run(args)
