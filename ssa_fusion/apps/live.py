@@ -178,6 +178,29 @@ def late_warning(late: evaluate.LateForecasts, counters: dict[str, int]) -> str 
             "the surrogate time")
 
 
+def _drain(graph: Graph) -> float:
+    """Let surrogate, filter and recorder finish what is in flight (until 1 s of quiet).
+
+    Return the wall time (Unix s) the probe last saw an estimate or forecast arrive (0: none).
+    """
+    from ssa_fusion.ros.interfaces import Measurement, StateEstimate
+
+    seen = [graph.collect(StateEstimate, "/ssa/estimate"),
+            graph.collect(Measurement, "/ssa/forecast")]
+    before: tuple[int, ...] = (0, 0)
+    last_output = 0.0
+
+    def counts() -> tuple[int, ...]:
+        nonlocal before, last_output
+        now = tuple(len(x) for x in seen)
+        if now != before:
+            before, last_output = now, time.time()
+        return now
+
+    graph.wait_quiet(counts, quiet_s=1.0, limit_s=30.0)
+    return last_output
+
+
 def run(args: argparse.Namespace) -> int:
     """Run `ssa-fusion live` (or, with ``--catalog``, `live_catalog.run`); return the exit code."""
     if getattr(args, "catalog", None) is not None:
@@ -212,22 +235,10 @@ def run(args: argparse.Namespace) -> int:
         for name in ("recorder", "surrogate", "filter"):
             graph.start_node(name, params=params[name])
         sensor = graph.start_node("sensor_sim", params=params["sensor_sim"])
-        graph.wait_exit(sensor, timeout=60.0 + 3.0 * sim_s / args.time_scale)
-        # let surrogate, filter and recorder finish what is in flight
-        from ssa_fusion.ros.interfaces import Measurement, StateEstimate
-
-        seen = [graph.collect(StateEstimate, "/ssa/estimate"),
-                graph.collect(Measurement, "/ssa/forecast")]
-        before: tuple[int, ...] = (0, 0)
-
-        def counts() -> tuple[int, ...]:
-            nonlocal before, last_output
-            now = tuple(len(x) for x in seen)
-            if now != before:
-                before, last_output = now, time.time()
-            return now
-
-        graph.wait_quiet(counts, quiet_s=1.0, limit_s=30.0)
+        # a node that ends early (a recorder that cannot write its bag) ends the run at once:
+        # graph.close says which and why
+        if graph.wait_done_or_broken(sensor, timeout=60.0 + 3.0 * sim_s / args.time_scale):
+            last_output = _drain(graph)
     finally:
         problems = graph.close()
     if runs.ended_badly(problems):

@@ -226,9 +226,8 @@ def run(args: argparse.Namespace) -> int:
                                             name=n.name, params=n.params) for n in specs}
         sim = started["sensor_sim"]
         procs = [started[n] for n in names + gaps]
-        graph.wait_for(lambda: any(p.popen.poll() is not None for p in (sim, *procs)),
-                       300.0 + 3.0 * sim_s / args.time_scale, "sensor_sim to exit")
-        if sim.popen.poll() is not None:  # else a node ended early: graph.close says which
+        # else a node ended early (the recorder too): graph.close says which
+        if graph.wait_done_or_broken(sim, 300.0 + 3.0 * sim_s / args.time_scale):
             # the filters are done when their estimates stop (surrogates may still be fitting)
             graph.wait_quiet(lambda: seen[UpdateSource.SENSOR], quiet_s=1.0, limit_s=600.0)
             last_output = time.time() - 1.0  # wall time (Unix s) the last estimate arrived

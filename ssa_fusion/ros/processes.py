@@ -150,6 +150,19 @@ class Graph:
         self.wait_for(lambda: proc.popen.poll() is not None, timeout, f"{proc.name} to exit")
         return proc.popen.returncode
 
+    def wait_done_or_broken(self, proc: Proc, timeout: float) -> bool:
+        """Wait until `proc` ends by itself or any other process of the graph ends.
+
+        Return True when `proc` ended. Another process ending first means the graph cannot
+        finish (a recorder that could not create its bag, a node that died): the caller
+        stops at once rather than waiting out `timeout` (s, scaled; TimeoutError after it).
+        """
+        others = [p for p in self.procs if p is not proc]
+        self.wait_for(lambda: proc.popen.poll() is not None
+                      or any(p.popen.poll() is not None for p in others),
+                      timeout, f"{proc.name} to exit")
+        return proc.popen.poll() is not None
+
     def stop(self, proc: Proc, sig: int = signal.SIGTERM, timeout: float = 10.0) -> int:
         """Send `sig`; SIGKILL if still alive after `timeout` s (scaled); return the code."""
         if proc.popen.poll() is None:

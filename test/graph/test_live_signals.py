@@ -65,3 +65,26 @@ def test_live_stops_every_node_and_closes_the_bag(sig, tmp_path):
         counts[m.topic] = counts.get(m.topic, 0) + 1
     assert counts.get("/ssa/measurement", 0) > 0 and counts.get("/ssa/config", 0) == 2
     assert (out / "bag" / "metadata.yaml").exists()  # closed, not recovered
+
+
+@pytest.mark.parametrize("catalog", [False, True])
+def test_a_recorder_that_cannot_create_its_bag_ends_the_run_at_once(catalog, tmp_path):
+    """`--bag` under a file: the recorder exits 2 at start with the reason, and `live`
+    stops every node and says so (it once waited 4 minutes for the simulator, then raised
+    a TimeoutError)."""
+    domain = fresh_domain_id()
+    extra = ["--catalog", "config/catalogs/sample.tle"] if catalog else []
+    start = time.monotonic()
+    done = subprocess.run(
+        [sys.executable, "-m", "ssa_fusion.apps.cli", "live", "--bag", "/dev/null/bag",
+         "--out", str(tmp_path / "run"), "--domain-id", str(domain), *extra],
+        capture_output=True, text=True, timeout=120 * TIMEOUT_FACTOR,
+        cwd=Path(__file__).resolve().parents[2],
+        env={**os.environ, "ROS_DOMAIN_ID": str(domain)})
+    took = time.monotonic() - start
+    assert done.returncode == 1, done.stderr
+    assert "process 'recorder'" in done.stderr
+    assert "parameter 'bag' = '/dev/null/bag': cannot create the bag there" in done.stderr
+    assert "Traceback" not in done.stderr
+    assert took < 60 * TIMEOUT_FACTOR  # not the simulator's timeout (60 s + 3 x sim/scale)
+    assert processes_in_domain(domain) == []
