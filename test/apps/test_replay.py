@@ -222,7 +222,7 @@ def test_missing_bag_gives_a_clear_error(tmp_path, capsys):
 @pytest.mark.graph
 def test_replay_over_ros2_loses_nothing_and_matches_offline(tmp_path):
     record = tmp_path / "replayed"
-    assert cli.main(["replay", str(SAMPLE), "--rate", "3000", "--record", str(record)]) == 0
+    assert cli.main(["replay", str(SAMPLE), "--rate", "6000", "--record", str(record)]) == 0
     counts = Counter(m.topic for m in bagio.read_bag(record))
     played = Counter(m.topic for m in bagio.read_bag(SAMPLE, topics=replay.PLAYED))
     for topic in replay.PLAYED:
