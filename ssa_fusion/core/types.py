@@ -76,6 +76,7 @@ class Cause(enum.StrEnum):
     REINITIALISED = "reinitialised"
     RESET_CLOCK_JUMP = "reset_clock_jump"
     HELD_UNTIL_CLOCK = "held_until_clock"
+    HELD_AHEAD_OF_CLOCK = "held_ahead_of_clock"
     DROPPED_BEFORE_CLOCK = "dropped_before_clock"
     FORECASTS_ROLLED_BACK = "forecasts_rolled_back"
     FORECAST_INVALID = "forecast_invalid"

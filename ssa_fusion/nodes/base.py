@@ -135,7 +135,13 @@ class SsaNode(Node):
             self.diag.count(Cause.IGNORED_OTHER_OBJECT, f"object_id {msg.object_id!r}")
             return None
         m = self.measurement_of(msg)
-        return None if m is None or self.ahead_of_clock(m.t) else m
+        if m is None or self.clock_hold.hold_ahead(again, m.t, self.max_clock_lead()):
+            return None
+        return None if self.ahead_of_clock(m.t) else m
+
+    def max_clock_lead(self) -> float:
+        """Return ``max_clock_lead``: how far (s) a stamp may be ahead of the clock."""
+        return self.params.number("max_clock_lead")
 
     def measurement_of(self, msg: Message) -> Measurement | None:
         """Return the core measurement of `msg`, or None (counted) for a kind it lacks."""
@@ -147,15 +153,22 @@ class SsaNode(Node):
 
     def ahead_of_clock(self, t: float) -> bool:
         """Return True, counted, when epoch `t` is beyond ``max_clock_lead`` of the clock."""
-        cause, reason = ahead_of_clock(t, self.now_s(), self.params.number("max_clock_lead"))
+        cause, reason = ahead_of_clock(t, self.now_s(), self.max_clock_lead())
         if cause:
             self.diag.count(cause, reason)
         return bool(cause)
 
     def replay_held(self) -> None:
-        """Handle the messages held until the clock started, once it has (in order)."""
-        for again in self.clock_hold.release():
-            again()
+        """Handle the messages held for the clock, once they may go (in order)."""
+        released = self.clock_hold.release()
+        if not released:
+            return
+        self.clock_hold.passing = True
+        try:
+            for again in released:
+                again()
+        finally:
+            self.clock_hold.passing = False
 
     # output ------------------------------------------------------------------------------
     def publish_settings(self, text: str) -> None:

@@ -20,6 +20,8 @@ exactly once, on one host or several in one ROS domain.
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
 from ssa_fusion.core.stations import network_stations
@@ -49,7 +51,12 @@ from ssa_fusion.nodes.shards import (
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
 from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
-from ssa_fusion.ros.topics import CATALOG_QOS, TOPIC_ESTIMATE, TOPIC_MEASUREMENT
+from ssa_fusion.ros.topics import (
+    CATALOG_DEPTH,
+    CATALOG_QOS,
+    TOPIC_ESTIMATE,
+    TOPIC_MEASUREMENT,
+)
 
 PARAMETERS = ParameterTable("catalog_filter", (
     Param("station", CATALOG_FILTER.station, "stations of the measurements", check=STATIONS),
@@ -86,6 +93,7 @@ class CatalogFilterNode(SsaNode):
                             "the DDS implementation does not filter by content: every "
                             "measurement arrives and those of other shards are ignored here")
         self._pending: list[Measurement] = []
+        self.clock_hold.limit = CATALOG_DEPTH  # a stalled catalog's burst is held whole
         self.wall_timer(p.number("batch_period"), self.fuse)
         self.reset_on_backward_jump(self.reset, "every track forgotten")
 
@@ -133,13 +141,28 @@ class CatalogFilterNode(SsaNode):
         if cause:
             self.diag.count(Cause(cause), reason)
             return False
+        if self.clock_hold.hold_ahead(partial(self._take_late, m), m.t, self.max_clock_lead()):
+            return True  # received; taken or refused once the clock catches up
+        return self._take(m)
+
+    def _take(self, m: Measurement) -> bool:
+        """Keep `m` for the next batch and return True, or count it ahead of the clock."""
         if self.ahead_of_clock(m.t):
             return False
         self._pending.append(m)
         return True
 
+    def _take_late(self, m: Measurement) -> None:
+        """`_take` a measurement held ahead of the clock (counted refused if still ahead)."""
+        if not self._take(m):
+            self.diag.counts[Count.REFUSED] += 1
+
     def fuse(self) -> None:
-        """Fuse what arrived since the last batch (in epoch order) and publish the estimates."""
+        """Fuse what arrived since the last batch (in epoch order) and publish the estimates.
+
+        With what waited for the clock to catch up, once it has.
+        """
+        self.replay_held()
         if not self._pending:
             return
         batch = sorted(self._pending, key=lambda m: m.t)  # stable: arrival order at a tie

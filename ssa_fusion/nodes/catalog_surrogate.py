@@ -20,6 +20,7 @@ Sharding as catalog_filter: with ``shards`` = K > 1 the node takes the objects w
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 
@@ -131,7 +132,8 @@ class CatalogSurrogateNode(SsaNode):
             self.diag.count(*why)
             return
         e = messages.estimate_from_msg(msg)
-        if self.ahead_of_clock(e.t):
+        if self.clock_hold.hold_ahead(partial(self.on_estimate, msg), e.t,
+                                      self.max_clock_lead()) or self.ahead_of_clock(e.t):
             return
         if not e.object_id:
             self.diag.count(NodeCause.REJECTED_OBJECT_ID,
@@ -145,7 +147,8 @@ class CatalogSurrogateNode(SsaNode):
         self.publish(self.bank.on_estimate(e.object_id, e.t, e.x, e.P))
 
     def tick(self) -> None:
-        """Fit what the budget allows and publish the forecasts due."""
+        """Take what waited for the clock; fit what the budget allows; publish what is due."""
+        self.replay_held()
         self.publish(self.bank.step(self.now_s()))
         b, status = self.bank, self.diag.status
         for key, name in COUNTERS.items():

@@ -381,7 +381,9 @@ def test_a_stamp_far_ahead_of_the_clock_is_refused_and_nothing_is_lost(ros_graph
     year = 365.25 * 86400.0
     for m in [meas(i) for i in range(4)] + [meas(4, year)] + [meas(i) for i in range(4, 8)]:
         pub.publish(m)
-    c = diag.wait(g, "filter", {"rejected_future": 1, "published_sensor": 6})
+    # held a few wall seconds for the clock to catch up (it does not), then refused
+    c = diag.wait(g, "filter", {"held_ahead_of_clock": 1, "rejected_future": 1,
+                                "published_sensor": 6})
     assert "rejected_stale" not in c and "internal_error" not in c
     c = diag.wait(g, "surrogate", {"rejected_future": 1, "buffered": 8})
     assert "rejected_stale" not in c and "internal_error" not in c
@@ -391,6 +393,27 @@ def test_a_stamp_far_ahead_of_the_clock_is_refused_and_nothing_is_lost(ros_graph
     for i in range(8):
         out = tracker.process(messages.measurement_from_msg(meas(i)))
     np.testing.assert_allclose(est[-1].x, out.estimate.x, rtol=1e-9)
+
+
+def test_a_burst_ahead_of_the_clock_waits_for_it_and_is_fused(ros_graph):
+    """After a stall (a paused simulator, a loaded machine) a burst of measurements can reach
+    a node before the /clock messages that cover it: held until the clock catches up, then
+    fused, none refused (they were refused as 'future' and lost)."""
+    g = ros_graph
+    lead = {"max_clock_lead": 60.0}
+    got, diag, clock, pub = filter_and_surrogate(g, lead, lead)
+    set_clock(g, clock, diag, float(T[0]) - 600.0, NODES)  # 10 lead's worth behind
+    for i in range(8):
+        pub.publish(meas(i))
+    diag.wait(g, "filter", {"held_ahead_of_clock": 8})
+    diag.wait(g, "surrogate", {"held_ahead_of_clock": 8})
+    assert got == []  # nothing fused ahead of the clock
+    set_clock(g, clock, diag, float(T[7]), NODES)
+    c = diag.wait(g, "filter", {"published_sensor": 6})
+    assert not {"rejected_future", "rejected_stale", "internal_error"} & set(c)
+    c = diag.wait(g, "surrogate", {"buffered": 8})
+    assert not {"rejected_future", "internal_error"} & set(c)
+    assert [e.t for e in estimates(got)] == [float(T[i]) for i in range(2, 8)]
 
 
 def test_surrogate_learns_only_its_configured_object_and_kind(ros_graph):
