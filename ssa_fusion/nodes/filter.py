@@ -26,6 +26,7 @@ from ssa_fusion.nodes.defaults import FILTER
 from ssa_fusion.nodes.diagnostics import PUBLISHED_BY_SOURCE
 from ssa_fusion.nodes.parameters import (
     NON_NEGATIVE,
+    STATION_RULE_NAMES,
     Param,
     ParameterTable,
     ParamValue,
@@ -35,6 +36,7 @@ from ssa_fusion.nodes.parameters import (
     measurement_stream,
     object_filter,
     one_of,
+    sites_problem,
 )
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
@@ -46,7 +48,7 @@ TICK_S = 0.1
 
 
 PARAMETERS = ParameterTable("filter", (
-    *measurement_stream(FILTER.kind, FILTER.station, "fuses"),
+    *measurement_stream(FILTER.kind, FILTER.station, FILTER.sites, "fuses"),
     *filter_rows(FILTER, runtime=True, unlimited_span=True),
     Param("light_time", FILTER.light_time,
           "station models see the object where it was range / c earlier (the ISS moves "
@@ -82,7 +84,8 @@ PARAMETERS = ParameterTable("filter", (
           "`batch_fit`, the others `residual`)",
           check=one_of(*GapFill)),
     clock_lead(FILTER.max_clock_lead),
-), rules=(Rule(settings.FILTER_KEYS, partial(settings.estimator_problem, "filter")),))
+), rules=(Rule(STATION_RULE_NAMES, sites_problem),
+          Rule(settings.FILTER_KEYS, partial(settings.estimator_problem, "filter"))))
 """The filter's parameters."""
 
 
