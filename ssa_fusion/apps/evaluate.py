@@ -148,6 +148,14 @@ def _settings_for_bag(recorded: list[str], kind: int, scenario: str,
                                    f"the default for its measurement kind)"), True
 
 
+class NoTruthError(ValueError):
+    """The bag lacks what an evaluation scores against.
+
+    A simulated outage's withheld measurements (/ssa/withheld) or the simulated truth
+    (/ssa/truth).
+    """
+
+
 @dataclass
 class Evaluation:
     """A bag's gap evaluation and the settings it ran with.
@@ -166,9 +174,9 @@ def evaluate(data: BagData, scenario: str = "", seed: int = 0,
              params_file: Path | None = None) -> Evaluation:
     """Every arm over the bag's gap (see the module docstring)."""
     if not data.withheld:
-        raise ValueError("the bag has no /ssa/withheld messages: no gap to evaluate")
+        raise NoTruthError("the bag has no /ssa/withheld messages: no gap to evaluate")
     if not data.truth:
-        raise ValueError("the bag has no /ssa/truth messages: nothing to compare against")
+        raise NoTruthError("the bag has no /ssa/truth messages: nothing to compare against")
     kind = data.measurements[0].kind if data.measurements else types.Kind.POSITION
     chosen = settings_for_bag(data.config, kind, scenario, params_file)
     truth = {e.t: e.x for e in data.truth}

@@ -206,3 +206,17 @@ def test_import_without_the_sites_file_is_refused_with_one_line(passes, tmp_path
     assert "participants NORDLYS, SAT-99001: need one known station (altair, columbus" in err
     assert "a station of your own: --sites FILE" in err
     assert not (tmp_path / "bag").exists()
+
+
+def test_report_on_your_own_measurements_says_what_to_run_instead(passes, tmp_path, capsys):
+    """A bag of real measurements has no simulated truth or outage to score: `report`
+    refuses it with one line saying what is missing and what to run instead."""
+    tdm, sites, *_ = passes
+    bag = tmp_path / "bag"
+    assert cli.main(["import", "tdm", str(tdm), "--sites", str(sites), "--bag", str(bag)]) == 0
+    capsys.readouterr()
+    assert cli.main(["report", str(bag), "--out", str(tmp_path / "report")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"error: {bag}: the bag has no "
+                                                   f"/ssa/withheld messages"), err
+    assert f"run `ssa-fusion replay {bag} --offline --smooth` (add --sites FILE" in err
