@@ -24,9 +24,14 @@ on ``/ssa/estimate_smoothed`` after the bag's last message; with truth in the ba
 smoothed and the filtered position errors at the fused epochs the truth has are printed.
 
 The estimator settings are those recorded with the bag (``/ssa/config``) unless
-``--params-file`` or ``--scenario`` says otherwise (`settings`). A bag at another cadence
-than its settings' is replayed at its own: the surrogate infers the cadence from the stamps,
-as the node does with ``cadence`` 0.
+``--params-file`` or ``--scenario`` says otherwise (`settings`). With ``--sites`` (a sites
+file, `core.site_file`), or for a bag without recorded settings, the filter takes the
+stations the bag's measurements name (`core.config.for_stations`; the real-sky filter,
+`core.config.station_estimator`, for a bag without settings whose stations are not the
+default's). An offline replay that produces no estimate says why (`why_no_estimate`).
+
+A bag at another cadence than its settings' is replayed at its own: the surrogate infers the
+cadence from the stamps, as the node does with ``cadence`` 0.
 """
 
 from __future__ import annotations

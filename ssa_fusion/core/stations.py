@@ -4,9 +4,10 @@ A station's measurement names it in ``frame_id``: range/azimuth/elevation from a
 topocentric right ascension/declination from an optical telescope. `STATIONS` maps station
 ids to their sites (`frames.Station`; the nodes' ``station`` parameter takes these keys, or a
 `NETWORKS` key); `SENSORS` maps sensor presets to what the sensor there measures, how well,
-above which elevation and how often during a pass. Live and recorded measurements are stamped
-in Unix seconds (UTC; ROS time under sim time too), so a station's measurement model has its
-reference epoch at `timescales.UNIX_EPOCH_JD`.
+above which elevation and how often during a pass. Stations of one's own come from a sites
+file (`site_file`) and are resolved beside these (`network_stations`' ``sites``). Live and
+recorded measurements are stamped in Unix seconds (UTC; ROS time under sim time too), so a
+station's measurement model has its reference epoch at `timescales.UNIX_EPOCH_JD`.
 
 Sites of the network are real, publicly documented tracking sites; coordinates are rounded
 to about 0.01 deg (~1 km) from the public descriptions cited with each, which is more than
