@@ -220,3 +220,21 @@ def test_report_on_your_own_measurements_says_what_to_run_instead(passes, tmp_pa
     assert err.count("\n") == 1 and err.startswith(f"error: {bag}: the bag has no "
                                                    f"/ssa/withheld messages"), err
     assert f"run `ssa-fusion replay {bag} --offline --smooth` (add --sites FILE" in err
+
+
+def test_a_replay_whose_orbit_determination_never_converges_says_so(passes, tmp_path, capsys):
+    """Five measurements, where the real-sky filter's IOD takes seven of one pass."""
+    tdm, sites, *_ = passes
+    lines = tdm.read_text().splitlines()
+    start = lines.index("DATA_START")
+    short = tmp_path / "short.tdm"
+    short.write_text("\n".join([*lines[:start + 1], *lines[start + 1:start + 16], "DATA_STOP",
+                                ""]))
+    bag = tmp_path / "bag"
+    assert cli.main(["import", "tdm", str(short), "--sites", str(sites), "--bag", str(bag)]) == 0
+    assert cli.main(["replay", str(bag), "--offline", "--sites", str(sites), "--out",
+                     str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert ("replay: no estimate: the initial orbit determination never converged (5 "
+            "measurement(s) waited for it, 0 attempt(s) failed; it needs 7 real measurements "
+            "of one station within 300 s (one pass))") in out, out
