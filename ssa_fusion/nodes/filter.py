@@ -8,7 +8,8 @@ and through a gap predictions or residual forecasts on the grid of multiples of
 `predict_period`: what it publishes is `core.gap_publisher.GapPublisher`'s policy, which
 the offline replay (`ssa-fusion replay --offline`) follows too. Rejected input is counted by
 cause on ``/diagnostics``. The settings in effect are published (latched) on
-``/ssa/config``, so every bag records them.
+``/ssa/config``, so every bag records them. ``station`` names built-in stations
+(`core.stations`) or those of the ``sites`` file (`core.site_file`).
 
     ros2 run ssa_fusion filter --ros-args -p use_sim_time:=true -p kind:=range_az_el
 """
