@@ -17,6 +17,7 @@ setup(
         ("share/" + package_name + "/config",
          glob("config/*.yaml") + glob("config/*.json")),  # params; the Foxglove layout
         ("share/" + package_name + "/config/catalogs", glob("config/catalogs/*")),
+        ("share/" + package_name + "/config/sites", glob("config/sites/*.yaml")),
     ],
     install_requires=["setuptools"],
     zip_safe=True,

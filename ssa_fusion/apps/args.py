@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+from pathlib import Path
 
 
 def positive_float(text: str) -> float:
@@ -44,3 +45,9 @@ def add_domain_id(p: argparse.ArgumentParser) -> None:
     p.add_argument("--domain-id", type=domain_id, default=int(env) if env.isdigit() else None,
                    help="ROS domain id (default: $ROS_DOMAIN_ID if set, else a free-looking "
                         "one in 1..100)")
+
+
+def add_sites(p: argparse.ArgumentParser, what: str) -> None:
+    """Add ``--sites FILE`` (a sites file, `core.site_file`; `what` it gives) to `p`."""
+    p.add_argument("--sites", type=Path, default=None, metavar="SITES.yaml",
+                   help=f"sites file (YAML, docs/SITES.md): {what}")

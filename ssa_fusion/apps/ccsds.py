@@ -23,7 +23,9 @@ docs/CCSDS.md.
 
 TDM carries no measurement noise. The noise of imported measurements is, in this order,
 ``--sigma`` (AZEL) / ``--sigma-radec`` (RADEC), the metadata comment ``ssa_fusion sigma:``
-that `export tdm` writes, else the station's sensor preset (`stations.SENSORS`).
+that `export tdm` writes, else the station's sensor: of the sites file ``--sites`` (stations
+of one's own, `core.site_file`, which PARTICIPANTs may then name), else the built-in preset
+(`stations.SENSORS`).
 
 `cli` registers this module under two commands, ``export`` and ``import``; the parser's
 name (its last word) says which one `add_arguments` builds. Here: the bag read for the
@@ -39,6 +41,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ssa_fusion.apps.args import add_sites
 from ssa_fusion.apps.ccsds_format import (
     LAYOUTS,
     SIGMA_COMMENT,
@@ -54,6 +57,7 @@ from ssa_fusion.apps.ccsds_tdm_in import tdm_measurements
 from ssa_fusion.apps.ccsds_tdm_out import tdm_document
 from ssa_fusion.core import types
 from ssa_fusion.core.frames import Frame
+from ssa_fusion.core.site_file import SiteFileError, load_sites
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_MEASUREMENT, TOPIC_TRUTH
 
@@ -197,6 +201,8 @@ def _add_import(p: argparse.ArgumentParser) -> None:
                                    "surrogate and filter.")
     t.add_argument("file", type=Path, help="the TDM file")
     t.add_argument("--bag", type=Path, required=True, help="bag to write; must not exist")
+    add_sites(t, "stations of your own that the TDM's PARTICIPANTs may name besides the "
+                 "built-in ones, and their noise")
     for layout in LAYOUTS.values():
         t.add_argument(layout.option, type=float, nargs=len(layout.sigma_names), default=None,
                        metavar=layout.sigma_names, dest=f"sigma_{layout.angle_type.lower()}",
@@ -210,7 +216,7 @@ def run(args: argparse.Namespace) -> int:
     """Exit 0 with one summary line; 2 with one `error:` line."""
     try:
         return int(args._ccsds_run(args))
-    except (CcsdsError, bagio.BagError, OSError) as exc:
+    except (CcsdsError, SiteFileError, bagio.BagError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
 
@@ -265,13 +271,15 @@ def run_import_tdm(args: argparse.Namespace) -> int:
         raise CcsdsError(f"{args.bag} exists already; choose another --bag")
     sigma = {layout.kind: s for layout in LAYOUTS.values()
              if (s := getattr(args, f"sigma_{layout.angle_type.lower()}", None)) is not None}
-    imported = tdm_measurements(read_ndm(args.file), sigma, str(args.file))
+    sites = load_sites(args.sites) if args.sites else {}
+    imported = tdm_measurements(read_ndm(args.file), sigma, str(args.file), sites)
     write_measurement_bag(args.bag, imported.measurements)
     ms = imported.measurements
     objects = sorted({m.object_id for m in ms})
     stations = sorted({m.frame_id for m in ms})
     said = _measurements_said(Counter(int(m.kind) for m in ms))
+    with_sites = f" --sites {args.sites}" if args.sites else ""
     print(f"import tdm: {said} measurements of {', '.join(objects)} from "
           f"{', '.join(stations)}{imported.left_out()} -> {args.bag}; run it with "
-          f"`ssa-fusion replay {args.bag}`")
+          f"`ssa-fusion replay {args.bag}{with_sites}`")
     return 0

@@ -7,7 +7,8 @@ measurement) or ANGLE_1 / ANGLE_2 (right ascension / declination, deg, ``RADEC``
 GCRF); epochs in ``UTC``, ``TAI``, ``TT`` or ``GPS`` (converted to UTC stamps,
 `timescales`). TDM carries no measurement noise: it is given per kind, else read from the
 metadata comment `ccsds_format.SIGMA_COMMENT` that `export tdm` writes, else the station's
-sensor preset (`stations.SENSORS`).
+sensor (a sites file's, `core.site_file`, or the built-in preset, `stations.SENSORS`).
+Participants name built-in stations or those of a sites file (``--sites``).
 """
 
 from __future__ import annotations
@@ -40,7 +41,7 @@ from ssa_fusion.apps.ccsds_format import (
     rotate_radec,
 )
 from ssa_fusion.core import timescales, types
-from ssa_fusion.core.stations import SENSORS, STATIONS
+from ssa_fusion.core.stations import SENSORS, STATIONS, Sensor
 
 if TYPE_CHECKING:  # ccsds-ndm is imported on use (`ccsds_format.ndm`)
     from ccsds_ndm.models.ndmxml4.ndmxml_4_0_0_tdm_2_0 import TrackingDataObservationType
@@ -130,27 +131,32 @@ def _segment_layout(meta: object, where: str) -> tuple[Layout, Array | None]:
     return RADEC, (frame_bias().T if ref == AngleFrame.EME2000 else None)
 
 
-def _participants(meta: object, where: str) -> tuple[str, str]:
+def _participants(meta: object, where: str, sites: Mapping[str, Sensor]) -> tuple[str, str]:
     """Return (station id, object id) of a TDM segment.
 
-    The one participant that is a known station and the one that is not.
+    The one participant that is a known station (built in, or of `sites`; by its id in
+    lowercase) and the one that is not.
     """
     names = [p for i in range(1, 6) if (p := getattr(meta, f"participant_{i}", None))]
-    stations = [p for p in names if p.lower() in STATIONS]
-    others = [p for p in names if p.lower() not in STATIONS]
+    known = {*STATIONS, *sites}
+    stations = [p for p in names if p.lower() in known]
+    others = [p for p in names if p.lower() not in known]
     if len(stations) != 1 or len(others) != 1:
+        own = (f"; your sites: {', '.join(sites)}" if sites else
+               "; a station of your own: --sites FILE (docs/SITES.md)")
         raise CcsdsError(
             f"{where}: participants {', '.join(names)}: need one known station "
-            f"({', '.join(sorted(STATIONS))}) and one object")
+            f"({', '.join(sorted(STATIONS))}{own}) and one object")
     return stations[0].lower(), others[0]
 
 
 def _segment_sigma(meta: object, station: str, layout: Layout,
-                   sigma: Sequence[float] | None, where: str) -> Array:
+                   sigma: Sequence[float] | None, where: str,
+                   sites: Mapping[str, Sensor]) -> Array:
     """Return the noise of a segment's measurements in core units (km, rad).
 
     `sigma` (TDM units), else the segment's `SIGMA_COMMENT`, else the station's sensor
-    preset of that kind.
+    (of `sites`, else its built-in preset) if it measures that kind.
     """
     want = " ".join(layout.sigma_names)
     if sigma is None:
@@ -164,7 +170,7 @@ def _segment_sigma(meta: object, station: str, layout: Layout,
                     raise CcsdsError(f"{where}: malformed comment {line.strip()!r} (want "
                                      f"'{SIGMA_COMMENT} {want}' for {layout.angle_type})")
     if sigma is None:
-        preset = SENSORS.get(station)
+        preset = sites.get(station) or SENSORS.get(station)
         if preset is None or preset.kind != layout.kind:
             raise CcsdsError(f"{where}: no noise for {layout.angle_type} measurements of "
                              f"station {station}: give {layout.option} {want}")
@@ -202,7 +208,7 @@ def _why_invalid(layout: Layout, v: Array) -> str:
 
 
 def tdm_measurements(doc: object, sigma: Mapping[types.Kind, Sequence[float]] | None = None,
-                     source: str = "TDM") -> Imported:
+                     source: str = "TDM", sites: Mapping[str, Sensor] | None = None) -> Imported:
     """Return the RANGE_AZ_EL (km, rad) and RA_DEC (rad, GCRF) measurements of a TDM.
 
     `doc` is the TDM's object tree (`read_ndm`); the measurements are sorted by epoch (UTC
@@ -210,7 +216,9 @@ def tdm_measurements(doc: object, sigma: Mapping[types.Kind, Sequence[float]] | 
 
     `sigma`: noise by measurement kind in TDM units (range km, azimuth deg, elevation deg;
     ra deg, dec deg) for every segment of that kind, else each segment's ``ssa_fusion
-    sigma:`` comment, else its station's sensor preset. CcsdsError (one line naming
+    sigma:`` comment, else its station's sensor. `sites`: stations of one's own by id
+    (`core.site_file.load_sites`), which participants may name besides the built-in
+    stations. CcsdsError (one line naming
     `source`, the segment and the value) for what this importer does not support: time
     systems other than UTC, TAI, TT, GPS; angle types other than AZEL and RADEC; RADEC in
     frames other than GCRF, ICRF, EME2000; range units other than km; unknown stations;
@@ -223,13 +231,15 @@ def tdm_measurements(doc: object, sigma: Mapping[types.Kind, Sequence[float]] | 
         raise CcsdsError(f"{source}: not a TDM (it is {type(doc).__name__})")
     out = Imported([])
     sigma = sigma or {}
+    sites = sites or {}
     for k, seg in enumerate(doc.body.segment, 1):
         where = f"{source}: segment {k}"
         meta = seg.metadata
         time_system = _choice(meta, "time_system", TimeSystem, where)
         layout, to_gcrf = _segment_layout(meta, where)
-        station, oid = _participants(meta, where)
-        R = np.diag(_segment_sigma(meta, station, layout, sigma.get(layout.kind), where)**2)
+        station, oid = _participants(meta, where, sites)
+        R = np.diag(_segment_sigma(meta, station, layout, sigma.get(layout.kind), where,
+                                   sites)**2)
         stamps: dict[str, float] = {}  # epoch text -> UTC stamp
         epochs: dict[float, dict[str, float]] = defaultdict(dict)
         for ob in seg.data.observation:

@@ -15,14 +15,16 @@ from __future__ import annotations
 
 import sys
 from collections import Counter
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ssa_fusion.core import metrics, types
+from ssa_fusion.core import config, metrics, types
 from ssa_fusion.core.config import EstimatorConfig
-from ssa_fusion.core.frames import Frame
+from ssa_fusion.core.frames import Frame, Station
+from ssa_fusion.core.stations import find_station
 from ssa_fusion.evaluation import passes as passes_
 from ssa_fusion.evaluation.arms import ArmName, GapEvaluation, evaluate_gap
 from ssa_fusion.evaluation.gap_scores import GapScores, score_gaps
@@ -93,25 +95,65 @@ class Settings:
 
 
 def settings_for_bag(recorded: list[str], kind: int, scenario: str = "",
-                  params_file: Path | None = None) -> Settings:
+                     params_file: Path | None = None, stations: Iterable[str] = (),
+                     sites: tuple[Station, ...] = ()) -> Settings:
     """Return the estimator settings for a bag (see the module docstring for the order).
 
     `recorded`: the bag's /ssa/config messages; `kind`: its measurement kind, for a bag
     without them. ValueError: a bad params file, an unknown scenario or malformed recorded
     settings.
+
+    `stations`: the station ids its measurements name (their frame_id); `sites`: stations
+    of one's own (a sites file), which the settings then know besides the built-in ones and
+    those recorded. With `sites`, or when the bag has no settings of its own, settings whose
+    stations do not include the bag's take the bag's (`config.for_stations`); a bag without
+    settings whose stations are not the default's gets the real-sky filter for them
+    (`config.station_estimator`).
     """
+    chosen, default = _settings_for_bag(recorded, kind, scenario, params_file)
+    c = chosen.estimator
+    if sites:
+        own = {s.name: s for s in (*c.sites, *sites)}  # the file's win
+        c = c.with_(sites=tuple(own.values()))
+    ids = sorted(set(stations))
+    if not ids or not (sites or default) or not config.uncovered_stations(c, ids):
+        return Settings(c, chosen.origin)
+    known = [i for i in ids if find_station(i, c.site_map) is not None]
+    if not known:
+        return Settings(c, chosen.origin)
+    if default:
+        c = config.station_estimator(types.Kind(kind), ",".join(known) + ",", c.sites)
+        return Settings(c, f"the real-sky filter for the stations its measurements name "
+                           f"({', '.join(known)}; the bag has no {topics.TOPIC_CONFIG})")
+    c = config.for_stations(c, known)
+    return Settings(c, f"{chosen.origin}, with the stations its measurements name "
+                       f"({', '.join(known)})")
+
+
+def _settings_for_bag(recorded: list[str], kind: int, scenario: str,
+                      params_file: Path | None) -> tuple[Settings, bool]:
+    """Return the settings by the module docstring's order; True if the kind's default."""
     if params_file is not None:
-        return Settings(settings.load_params_file(params_file), f"params file {params_file}")
+        return Settings(settings.load_params_file(params_file),
+                        f"params file {params_file}"), False
     if scenario in sky.SKY_SCENARIOS:
-        return Settings(sky.SKY_SCENARIOS[scenario].estimator(), f"scenario {scenario}")
+        return Settings(sky.SKY_SCENARIOS[scenario].estimator(), f"scenario {scenario}"), False
     if scenario:
-        return Settings(scenarios.get(scenario).estimator(), f"scenario {scenario}")
+        return Settings(scenarios.get(scenario).estimator(), f"scenario {scenario}"), False
     estimator = settings.recorded_estimator(recorded)
     if estimator is not None:
-        return Settings(estimator, f"recorded with the bag ({topics.TOPIC_CONFIG})")
+        return Settings(estimator, f"recorded with the bag ({topics.TOPIC_CONFIG})"), False
     s = scenarios.settings_for("", kind)
     return Settings(s.estimator(), f"scenario {s.name} (the bag has no {topics.TOPIC_CONFIG}; "
-                                   f"the default for its measurement kind)")
+                                   f"the default for its measurement kind)"), True
+
+
+class NoTruthError(ValueError):
+    """The bag lacks what an evaluation scores against.
+
+    A simulated outage's withheld measurements (/ssa/withheld) or the simulated truth
+    (/ssa/truth).
+    """
 
 
 @dataclass
@@ -132,9 +174,9 @@ def evaluate(data: BagData, scenario: str = "", seed: int = 0,
              params_file: Path | None = None) -> Evaluation:
     """Every arm over the bag's gap (see the module docstring)."""
     if not data.withheld:
-        raise ValueError("the bag has no /ssa/withheld messages: no gap to evaluate")
+        raise NoTruthError("the bag has no /ssa/withheld messages: no gap to evaluate")
     if not data.truth:
-        raise ValueError("the bag has no /ssa/truth messages: nothing to compare against")
+        raise NoTruthError("the bag has no /ssa/truth messages: nothing to compare against")
     kind = data.measurements[0].kind if data.measurements else types.Kind.POSITION
     chosen = settings_for_bag(data.config, kind, scenario, params_file)
     truth = {e.t: e.x for e in data.truth}

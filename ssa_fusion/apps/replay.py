@@ -24,9 +24,14 @@ on ``/ssa/estimate_smoothed`` after the bag's last message; with truth in the ba
 smoothed and the filtered position errors at the fused epochs the truth has are printed.
 
 The estimator settings are those recorded with the bag (``/ssa/config``) unless
-``--params-file`` or ``--scenario`` says otherwise (`settings`). A bag at another cadence
-than its settings' is replayed at its own: the surrogate infers the cadence from the stamps,
-as the node does with ``cadence`` 0.
+``--params-file`` or ``--scenario`` says otherwise (`settings`). With ``--sites`` (a sites
+file, `core.site_file`), or for a bag without recorded settings, the filter takes the
+stations the bag's measurements name (`core.config.for_stations`; the real-sky filter,
+`core.config.station_estimator`, for a bag without settings whose stations are not the
+default's). An offline replay that produces no estimate says why (`why_no_estimate`).
+
+A bag at another cadence than its settings' is replayed at its own: the surrogate infers the
+cadence from the stamps, as the node does with ``cadence`` 0.
 """
 
 from __future__ import annotations
@@ -46,13 +51,19 @@ from typing import Any
 import numpy as np
 
 from ssa_fusion.apps import evaluate
-from ssa_fusion.apps.args import add_domain_id, positive_float
-from ssa_fusion.core import types
-from ssa_fusion.core.config import EstimatorConfig, make_surrogate, make_tracker
-from ssa_fusion.core.frames import Frame
+from ssa_fusion.apps.args import add_domain_id, add_sites, positive_float
+from ssa_fusion.core import site_file, types
+from ssa_fusion.core.config import (
+    EstimatorConfig,
+    make_surrogate,
+    make_tracker,
+    uncovered_stations,
+)
+from ssa_fusion.core.frames import Frame, Station
 from ssa_fusion.core.gap_publisher import GapFill, GapPublisher, Published
 from ssa_fusion.core.smoother import TrackerRecorder
-from ssa_fusion.core.types import Cause
+from ssa_fusion.core.stations import find_station
+from ssa_fusion.core.types import KIND_NAMES, Cause
 from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S, ahead_of_clock
 from ssa_fusion.nodes import settings as node_settings
 from ssa_fusion.ros import bagio, messages
@@ -91,6 +102,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "those recorded with the bag, else the measurement kind's default)")
     p.add_argument("--params-file", type=Path, default=None,
                    help="replay with the filter/surrogate settings of this ROS params YAML")
+    add_sites(p, "stations of your own that the bag's measurements name; the filter takes "
+                 "the stations its measurements name")
     add_domain_id(p)
 
 
@@ -102,7 +115,8 @@ def run(args: argparse.Namespace) -> int:
         for topic, n in undecodable.items():
             print(f"replay: {n} message(s) on {topic} do not decode as their type; skipped")
         check_topics(args.bag, stream)
-        chosen = settings(stream, args.scenario, args.params_file)
+        sites = site_file.load_stations(args.sites) if args.sites else ()
+        chosen = settings(stream, args.scenario, args.params_file, sites)
     except (bagio.BagError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -133,6 +147,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"offline replay of {args.bag}: {len(result.estimates)} estimates, "
               f"{len(result.forecasts)} forecasts"
               + (f", {len(result.smoothed)} smoothed" if args.smooth else "") + f" -> {out}")
+        if not result.estimates:
+            print(f"replay: no estimate: {why_no_estimate(stream, result, s)}")
         if args.smooth:
             print(smoothing_summary(stream, result))
         return 0
@@ -180,11 +196,13 @@ def drop_ahead_of_clock(stream: list[bagio.BagMessage]) -> tuple[list[bagio.BagM
 
 
 def settings(stream: list[bagio.BagMessage], scenario: str = "",
-             params_file: Path | None = None) -> evaluate.Settings:
+             params_file: Path | None = None,
+             sites: tuple[Station, ...] = ()) -> evaluate.Settings:
     """Return the estimator settings to replay `stream` with.
 
     As `evaluate.settings_for_bag` chooses them: params file, scenario, those recorded with the
-    bag, else the measurement kind's default.
+    bag, else the measurement kind's default; with `sites` (stations of one's own), or
+    without recorded settings, the filter takes the stations the measurements name.
 
     The bag's own cadence wins: if its measurements come at another interval than the
     settings' cadence (beyond the surrogate's jitter tolerance), the cadence is set to 0 and
@@ -194,12 +212,58 @@ def settings(stream: list[bagio.BagMessage], scenario: str = "",
     """
     first = next(m for m in stream if m.topic == TOPIC_MEASUREMENT)
     recorded = [m.msg.data for m in stream if m.topic == TOPIC_CONFIG]
-    chosen = evaluate.settings_for_bag(recorded, first.msg.kind, scenario, params_file)
+    chosen = evaluate.settings_for_bag(recorded, first.msg.kind, scenario, params_file,
+                                       stations=bag_stations(stream), sites=sites)
     c = chosen.estimator
     dt, cadence = bag_cadence(stream), c.surrogate.cadence_s
     if not math.isnan(dt) and cadence > 0 and abs(dt - cadence) > c.surrogate.jitter * cadence:
         chosen.estimator = c.with_(surrogate=replace(c.surrogate, cadence_s=0.0))
     return chosen
+
+
+def bag_stations(stream: list[bagio.BagMessage]) -> list[str]:
+    """Return the station ids (frame_id) the bag's sensor measurements name, sorted."""
+    return sorted({str(m.msg.header.frame_id) for m in stream
+                   if m.topic == TOPIC_MEASUREMENT and m.msg.source == types.Source.SENSOR})
+
+
+def why_no_estimate(stream: list[bagio.BagMessage], result: OfflineResult,
+                    c: EstimatorConfig) -> str:
+    """Return why an offline replay of `stream` with estimator `c` gave no estimate.
+
+    From what the filter refused (`OfflineResult.rejected`, by cause): no sensor
+    measurement, measurements of stations or a kind the settings do not take, an initial
+    orbit determination that never converged; else the refusals by cause.
+    """
+    n = sum(1 for m in stream if m.topic == TOPIC_MEASUREMENT
+            and m.msg.source == types.Source.SENSOR)
+    if not n:
+        return f"the bag has no sensor measurement (source SENSOR) on {TOPIC_MEASUREMENT}"
+    got = dict(result.rejected)
+    reasons = []
+    if got.get(Cause.REJECTED_FRAME):
+        ids = uncovered_stations(c, bag_stations(stream))
+        unknown = [i for i in ids if find_station(i, c.site_map) is None]
+        hint = (f"station id(s) {', '.join(unknown)} are neither built in nor in a sites "
+                f"file: define them in one and give it with --sites" if unknown else
+                "give --sites (the filter then takes the stations the measurements name) or "
+                "settings whose station includes them (--params-file, --scenario)")
+        reasons.append(f"{got.pop(Cause.REJECTED_FRAME)} measurement(s) from stations the "
+                       f"filter does not take ({', '.join(ids) or 'see the bag'}; its station "
+                       f"setting is {c.station!r}): {hint}")
+    if got.get(Cause.REJECTED_KIND):
+        reasons.append(f"{got.pop(Cause.REJECTED_KIND)} measurement(s) of another kind than "
+                       f"the settings' {KIND_NAMES[c.kind]}")
+    pending, failed = got.pop(Cause.IOD_PENDING, 0), got.pop(Cause.IOD_FAILED, 0)
+    if pending or failed:
+        iod = c.filter.iod
+        span = ("" if math.isinf(iod.iod_max_span_s)
+                else f" within {iod.iod_max_span_s:g} s (one pass)")
+        reasons.append(f"the initial orbit determination never converged ({pending} "
+                       f"measurement(s) waited for it, {failed} attempt(s) failed; it needs "
+                       f"{iod.iod_samples} real measurements of one station{span})")
+    reasons += [f"{k} {v}" for k, v in sorted(got.items()) if v]
+    return "; ".join(reasons) or f"the filter took none of the {n} measurement(s)"
 
 
 def bag_cadence(stream: list[bagio.BagMessage]) -> float:
@@ -373,10 +437,16 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
     if record.exists():
         print(f"error: {record} exists already; choose another --record", file=sys.stderr)
         return 2
+    if c.sites and args.sites is None:
+        print(f"error: the settings name stations of your own ("
+              f"{', '.join(s.name for s in c.sites)}): give their sites file with --sites "
+              f"for a replay over ROS (or replay --offline)", file=sys.stderr)
+        return 2
+    own = {"sites": str(args.sites.resolve())} if args.sites else {}
     params = {"recorder": {"use_sim_time": True, "bag": str(record)},
-              "surrogate": {"use_sim_time": True, **node_settings.surrogate_params(c)},
+              "surrogate": {"use_sim_time": True, **node_settings.surrogate_params(c), **own},
               "filter": {"use_sim_time": True, **node_settings.filter_params(c),
-                         **recorded_gaps(stream)}}
+                         **recorded_gaps(stream), **own}}
     logs = record.with_name(record.name + "_logs")
     try:
         graph = Graph(logs, args.domain_id)

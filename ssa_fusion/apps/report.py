@@ -47,6 +47,13 @@ def run(args: argparse.Namespace) -> int:
         data = evaluate.load(args.bag)
         ev = evaluate.evaluate(data, args.scenario, params_file=args.params_file)
         write(data, ev, out)
+    except evaluate.NoTruthError as exc:
+        print(f"error: {args.bag}: {exc}; `report` scores a simulated run against its truth "
+              f"over its outage, which measurements of your own (e.g. from `import tdm`) do "
+              f"not have: for their estimates run `ssa-fusion replay {args.bag} --offline "
+              f"--smooth` (add --sites FILE for stations of your own), and `ssa-fusion export "
+              f"oem` on the bag it writes for the ephemeris", file=sys.stderr)
+        return 2
     except (bagio.BagError, ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

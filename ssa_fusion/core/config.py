@@ -15,7 +15,7 @@ Units are the core's: km, km/s, rad, s.
 from __future__ import annotations
 
 import enum
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
@@ -23,12 +23,12 @@ import numpy as np
 
 from . import dynamics, frames, kepler
 from .constants import MU_EARTH
-from .filter_options import FilterOptions
-from .frames import Frame
+from .filter_options import SKY_FILTER, FilterOptions
+from .frames import Frame, Station
 from .measurement import MeasurementModel, PositionModel, RadecModel, RazelModel, StationModels
 from .propagation import INTEGRATED_MODELS, integrate_stm
-from .stations import NETWORKS, STATIONS, network_stations
-from .surrogate import EciLift, Surrogate, SurrogateConfig
+from .stations import NETWORKS, find_station, network_stations
+from .surrogate import LIVE_SURROGATE, EciLift, Surrogate, SurrogateConfig
 from .timescales import DAY_S, UNIX_EPOCH_JD
 from .tracker import Tracker
 from .types import KIND_NAMES, Kind, MotionModel
@@ -83,6 +83,9 @@ class EstimatorConfig:
         ``filter.motion``).
     surrogate : SurrogateConfig
         Surrogate settings (`kind`, `frame_id` and `lift` are set by `make_surrogate`).
+    sites : tuple of frames.Station
+        Stations of one's own (a sites file, `site_file`) that `station` may name besides
+        the built-in ones; each ``name`` is its id (the ``frame_id`` of its measurements).
     """
 
     kind: Kind = Kind.RANGE_AZ_EL
@@ -95,19 +98,26 @@ class EstimatorConfig:
     refraction: bool = False
     filter: FilterOptions = field(default_factory=FilterOptions)
     surrogate: SurrogateConfig = field(default_factory=SurrogateConfig)
+    sites: tuple[Station, ...] = ()
 
     def __post_init__(self) -> None:
         """Coerce the enums and check the combination (ValueError naming the field)."""
         self.kind = Kind(self.kind)
         self.lift = Lift(self.lift)
         self.observed = tuple(int(i) for i in self.observed)
+        self.sites = tuple(self.sites)
         if self.kind in (Kind.RANGE_AZ_EL, Kind.RA_DEC):
-            network_stations(self.station)  # ValueError naming the known ids
+            network_stations(self.station, self.site_map)  # ValueError naming the known ids
         if self.lift == Lift.ECI and self.kind != Kind.RANGE_AZ_EL:
             raise ValueError("lift 'eci' needs kind range_az_el")
         model = self.filter.motion.motion_model
         if model in ORBIT_MODELS and self.n != 6:
             raise ValueError(f"motion model {model} needs n = 6, got {self.n}")
+
+    @property
+    def site_map(self) -> dict[str, Station]:
+        """`sites` by id."""
+        return {s.name: s for s in self.sites}
 
     @property
     def is_network(self) -> bool:
@@ -129,6 +139,52 @@ class EstimatorConfig:
         return replace(self, **changes)
 
 
+STATION_KINDS = (Kind.RANGE_AZ_EL, Kind.RA_DEC)
+"""Measurement kinds taken at a station (their ``frame_id`` is the station id)."""
+
+
+def uncovered_stations(c: EstimatorConfig, frame_ids: Iterable[str]) -> list[str]:
+    """Return the station ids among `frame_ids` that `c`'s stations do not include (sorted).
+
+    Empty for positions (they have no station).
+    """
+    if c.kind not in STATION_KINDS:
+        return []
+    return sorted(set(frame_ids) - set(network_stations(c.station, c.site_map)))
+
+
+def for_stations(c: EstimatorConfig, frame_ids: Iterable[str]) -> EstimatorConfig:
+    """Return `c` taking the measurements of the stations `frame_ids` (their ids).
+
+    `c` itself when its stations include them all (so a bag replays with the settings it
+    was recorded with). Otherwise its ``station`` becomes the ids among `frame_ids` that are
+    known (built in, or in ``c.sites``): the one id, or "a,b," for several (or when `c`
+    was a network). Unknown ids stay out: the filter refuses their measurements
+    (``rejected_frame``); `c` is returned as it is when none is known.
+    """
+    ids = sorted(set(frame_ids))
+    if c.kind not in STATION_KINDS or not uncovered_stations(c, ids):
+        return c
+    known = [i for i in ids if find_station(i, c.site_map) is not None]
+    if not known:
+        return c
+    one = len(known) == 1 and not c.is_network
+    return c.with_(station=known[0] if one else ",".join(known) + ",")
+
+
+def station_estimator(kind: Kind, station: str,
+                      sites: tuple[Station, ...] = ()) -> EstimatorConfig:
+    """Return the estimator for measurements of real stations whose settings are unknown.
+
+    The real sky's filter (`filter_options.SKY_FILTER`: two-body + J2, IOD from one pass,
+    initialised again when it loses the object, covariance bounded by the orbit), light
+    time in the station models, the live surrogate's settings; `station` and `sites` as
+    `EstimatorConfig` takes them.
+    """
+    return EstimatorConfig(kind=kind, station=station, light_time=True, filter=SKY_FILTER,
+                           surrogate=LIVE_SURROGATE, sites=sites)
+
+
 def measurement_model(c: EstimatorConfig) -> MeasurementModel:
     """Return h(x, t) of the configured measurement kind, or a network's models.
 
@@ -137,8 +193,9 @@ def measurement_model(c: EstimatorConfig) -> MeasurementModel:
     if c.kind == Kind.POSITION:
         return PositionModel(c.observed)
     if c.is_network:
-        return StationModels(network_stations(c.station), c.jd0, c.light_time, c.refraction)
-    station = STATIONS[c.station]
+        return StationModels(network_stations(c.station, c.site_map), c.jd0, c.light_time,
+                             c.refraction)
+    station = network_stations(c.station, c.site_map)[c.station]
     if c.kind == Kind.RA_DEC:
         return RadecModel(station, c.jd0, c.light_time)
     return RazelModel(station, c.jd0, c.light_time, c.refraction)
@@ -241,7 +298,22 @@ def to_dict(c: EstimatorConfig) -> dict[str, Any]:
     out["tracker"] = _plain(options)
     out["surrogate"] = _plain({f.name: getattr(c.surrogate, f.name) for f in fields(c.surrogate)
                                if f.name not in _NOT_SERIALISED})
+    if c.sites:  # stations of one's own: recorded, so that the bag alone replays
+        out["sites"] = [{"id": s.name, "lat_rad": s.lat_rad, "lon_rad": s.lon_rad,
+                         "alt_km": s.alt_km} for s in c.sites]
     return out
+
+
+def _sites_from(raw: object) -> tuple[Station, ...]:
+    """Return the stations of the ``sites`` of a `to_dict` dict (ValueError if malformed)."""
+    try:
+        if isinstance(raw, list):
+            return tuple(Station(str(d["id"]), float(d["lat_rad"]), float(d["lon_rad"]),
+                                 float(d["alt_km"])) for d in raw)
+    except (KeyError, TypeError, ValueError):
+        pass
+    raise ValueError(f"malformed sites setting {str(raw)[:80]!r}: want a list of "
+                     f"{{id, lat_rad, lon_rad, alt_km}}")
 
 
 def from_dict(d: dict[str, Any], base: EstimatorConfig | None = None) -> EstimatorConfig:
@@ -251,13 +323,15 @@ def from_dict(d: dict[str, Any], base: EstimatorConfig | None = None) -> Estimat
     values raise ValueError naming them.
     """
     base = base or EstimatorConfig()
-    unknown = set(d) - {*_STREAM_KEYS, *_MOTION_KEYS, "tracker", "surrogate", "frame"}
+    unknown = set(d) - {*_STREAM_KEYS, *_MOTION_KEYS, "tracker", "surrogate", "frame", "sites"}
     if unknown:
         raise ValueError(f"unknown estimator setting(s): {', '.join(sorted(unknown))}")
     if d.get("frame", Frame.GCRF) != Frame.GCRF:
         raise ValueError(f"estimator settings of frame {d['frame']!r}: this version estimates "
                          f"in the GCRF")
     stream: dict[str, Any] = {k: d[k] for k in _STREAM_KEYS if k in d}
+    if "sites" in d:
+        stream["sites"] = _sites_from(d["sites"])
     if "kind" in stream:
         names = {name: kind for kind, name in KIND_NAMES.items()}
         if stream["kind"] not in names:

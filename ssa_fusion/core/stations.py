@@ -4,9 +4,10 @@ A station's measurement names it in ``frame_id``: range/azimuth/elevation from a
 topocentric right ascension/declination from an optical telescope. `STATIONS` maps station
 ids to their sites (`frames.Station`; the nodes' ``station`` parameter takes these keys, or a
 `NETWORKS` key); `SENSORS` maps sensor presets to what the sensor there measures, how well,
-above which elevation and how often during a pass. Live and recorded measurements are stamped
-in Unix seconds (UTC; ROS time under sim time too), so a station's measurement model has its
-reference epoch at `timescales.UNIX_EPOCH_JD`.
+above which elevation and how often during a pass. Stations of one's own come from a sites
+file (`site_file`) and are resolved beside these (`network_stations`' ``sites``). Live and
+recorded measurements are stamped in Unix seconds (UTC; ROS time under sim time too), so a
+station's measurement model has its reference epoch at `timescales.UNIX_EPOCH_JD`.
 
 Sites of the network are real, publicly documented tracking sites; coordinates are rounded
 to about 0.01 deg (~1 km) from the public descriptions cited with each, which is more than
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,6 +67,9 @@ class Sensor:
         Constant bias added to every measurement, same units as `sigma` (empty: none).
     source : str
         Where the site's coordinates come from.
+    max_range_km : float
+        Farthest range a radar measures, km (inf: no limit; a sites file's
+        ``max_range_km``).
     """
 
     station: Station
@@ -75,6 +80,7 @@ class Sensor:
     cadence_s: float = 10.0
     bias: tuple[float, ...] = ()
     source: str = ""
+    max_range_km: float = math.inf
 
     def __post_init__(self) -> None:
         """Check the channel count of `sigma` and `bias` against the type (ValueError)."""
@@ -164,17 +170,37 @@ STATIONS: dict[str, Station] = {s.station.name: s.station for s in SENSORS.value
 """Known stations by id (the ``frame_id`` of their measurements)."""
 
 
-def network_stations(name: str) -> dict[str, Station]:
+def station_ids(name: str) -> tuple[str, ...]:
+    """Return the ids a ``station`` setting names: a network's, or those of "a,b,c"."""
+    return NETWORKS.get(name) or tuple(x.strip() for x in name.split(",") if x.strip())
+
+
+def find_station(station_id: str, sites: Mapping[str, Station] | None = None) -> Station | None:
+    """Return the station of a station id or sensor preset id, built in or of `sites`.
+
+    `sites`: stations of one's own by id (`site_file`), which may not reuse a built-in id.
+    None when the id is unknown.
+    """
+    if station_id in STATIONS:
+        return STATIONS[station_id]
+    if station_id in SENSORS:
+        return SENSORS[station_id].station
+    return (sites or {}).get(station_id)
+
+
+def network_stations(name: str,
+                     sites: Mapping[str, Station] | None = None) -> dict[str, Station]:
     """Return the stations (id -> Station) of a network id, a station id, or "a,b,c" ids.
 
-    ValueError naming the known ids for an unknown one.
+    Ids are built-in (`STATIONS`, `SENSORS`) or of `sites` (stations of one's own by id,
+    `site_file`). ValueError naming the known ids for an unknown one.
     """
-    ids = NETWORKS.get(name) or tuple(x.strip() for x in name.split(",") if x.strip())
     out = {}
-    for i in ids:
-        station = STATIONS.get(i) or (SENSORS[i].station if i in SENSORS else None)
+    for i in station_ids(name):
+        station = find_station(i, sites)
         if station is None:
-            raise ValueError(f"station {i!r} unknown; known stations: {', '.join(STATIONS)}; "
-                             f"networks: {', '.join(NETWORKS)}")
+            own = f"; your sites: {', '.join(sites)}" if sites else ""
+            raise ValueError(f"station {i!r} unknown; known stations: {', '.join(STATIONS)}"
+                             f"{own}; networks: {', '.join(NETWORKS)}")
         out[station.name] = station
     return out

@@ -42,7 +42,9 @@ def _si(value: float) -> float:
 KIND = "range_az_el"
 """Measurement kind filter and surrogate expect (``position`` | ``range_az_el`` | ``ra_dec``)."""
 STATION = "columbus"
-"""Station (a `core.stations.STATIONS` id) of their range/az/el measurements, or a network."""
+"""Station (a `core.stations.STATIONS` id) of their range/az/el measurements, or a network.
+
+``sites`` (a sites file, `core.site_file`) adds stations of one's own; '' = none."""
 
 
 @dataclass(frozen=True)
@@ -83,6 +85,7 @@ class SurrogateDefaults:
 
     kind: str = KIND
     station: str = STATION
+    sites: str = ""
     buffer_length: float = 55770.0
     retrain_period: float = 0.0
     delays: int = 2 * 186  # two orbits of 30 s samples (186 an orbit)
@@ -106,6 +109,7 @@ class FilterDefaults:
 
     kind: str = KIND
     station: str = STATION
+    sites: str = ""
     motion_model: str = "kepler"
     p0_sigma: tuple[float, ...] = (1000.0, 1000.0, 1000.0, 1.0, 1.0, 1.0)
     q: float = 0.1

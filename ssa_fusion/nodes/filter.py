@@ -8,7 +8,8 @@ and through a gap predictions or residual forecasts on the grid of multiples of
 `predict_period`: what it publishes is `core.gap_publisher.GapPublisher`'s policy, which
 the offline replay (`ssa-fusion replay --offline`) follows too. Rejected input is counted by
 cause on ``/diagnostics``. The settings in effect are published (latched) on
-``/ssa/config``, so every bag records them.
+``/ssa/config``, so every bag records them. ``station`` names built-in stations
+(`core.stations`) or those of the ``sites`` file (`core.site_file`).
 
     ros2 run ssa_fusion filter --ros-args -p use_sim_time:=true -p kind:=range_az_el
 """
@@ -26,6 +27,7 @@ from ssa_fusion.nodes.defaults import FILTER
 from ssa_fusion.nodes.diagnostics import PUBLISHED_BY_SOURCE
 from ssa_fusion.nodes.parameters import (
     NON_NEGATIVE,
+    STATION_RULE_NAMES,
     Param,
     ParameterTable,
     ParamValue,
@@ -35,6 +37,7 @@ from ssa_fusion.nodes.parameters import (
     measurement_stream,
     object_filter,
     one_of,
+    sites_problem,
 )
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
@@ -46,7 +49,7 @@ TICK_S = 0.1
 
 
 PARAMETERS = ParameterTable("filter", (
-    *measurement_stream(FILTER.kind, FILTER.station, "fuses"),
+    *measurement_stream(FILTER.kind, FILTER.station, FILTER.sites, "fuses"),
     *filter_rows(FILTER, runtime=True, unlimited_span=True),
     Param("light_time", FILTER.light_time,
           "station models see the object where it was range / c earlier (the ISS moves "
@@ -82,7 +85,8 @@ PARAMETERS = ParameterTable("filter", (
           "`batch_fit`, the others `residual`)",
           check=one_of(*GapFill)),
     clock_lead(FILTER.max_clock_lead),
-), rules=(Rule(settings.FILTER_KEYS, partial(settings.estimator_problem, "filter")),))
+), rules=(Rule(STATION_RULE_NAMES, sites_problem),
+          Rule(settings.FILTER_KEYS, partial(settings.estimator_problem, "filter"))))
 """The filter's parameters."""
 
 

@@ -19,7 +19,8 @@ import math
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 
-from ssa_fusion.core.stations import network_stations
+from ssa_fusion.core.site_file import SiteFileError, load_stations
+from ssa_fusion.core.stations import network_stations, station_ids
 from ssa_fusion.core.types import KIND_NAMES
 from ssa_fusion.nodes.defaults import CatalogFilterDefaults, FilterDefaults
 
@@ -129,6 +130,39 @@ def _stations(value: ParamValue) -> str | None:
 
 STATIONS = Check("a station id, a network id, or station ids separated by commas", _stations)
 """Stations (`core.stations.network_stations`): a station, a network, or ids with commas."""
+
+
+def _station_ids(value: ParamValue) -> str | None:
+    ok = isinstance(value, str) and station_ids(value)
+    return None if ok else "must name a station, a network, or station ids separated by commas"
+
+
+STATION_IDS = Check("a station id (built in, or of `sites`), a network id, or station ids "
+                    "separated by commas", _station_ids)
+"""Station ids, built in or of a sites file: whether they are known is the rule over
+``station`` and ``sites`` (`sites_problem`)."""
+
+
+def _sites_file(value: ParamValue) -> str | None:
+    try:
+        load_stations(str(value))
+    except SiteFileError as exc:
+        return str(exc)
+    return None
+
+
+SITES = Check("'' or a readable, valid sites file", _sites_file)
+"""A sites file (`core.site_file`), or '' for the built-in stations only."""
+
+
+def sites_problem(values: Values) -> str | None:
+    """Return why ``station`` names a station neither built in nor in ``sites``, or None."""
+    try:
+        sites = {s.name: s for s in load_stations(str(values["sites"]))}
+        network_stations(str(values["station"]), sites)
+    except ValueError as exc:
+        return str(exc)
+    return None
 
 
 @dataclass(frozen=True)
@@ -256,20 +290,32 @@ KINDS = {name: kind for kind, name in KIND_NAMES.items()}
 """The `kind` parameter's values: measurement kind by name."""
 
 
-def measurement_stream(kind: str, station: str, verb: str) -> tuple[Param, Param]:
-    """Return the rows of ``kind`` and ``station``: the measurements a node `verb`s.
+def measurement_stream(kind: str, station: str, sites: str,
+                       verb: str) -> tuple[Param, Param, Param]:
+    """Return the rows of ``kind``, ``station`` and ``sites``: the measurements a node `verb`s.
 
     The station is the frame_id of range/az/el and ra/dec measurements ("gcrf" for
-    positions, whatever the parameter says).
+    positions, whatever the parameter says); it names built-in stations or those of the
+    sites file ``sites`` (the table's rule `sites_problem` checks which).
     """
     return (Param("kind", kind, f"measurement kind it {verb} (sets the measurement model)",
                   check=one_of(*KINDS)),
             Param("station", station,
                   "station (frame_id) of range/az/el or ra/dec measurements "
-                  "(`ssa_fusion.core.stations.STATIONS`), or a network: a `NETWORKS` id or "
-                  "station ids separated by commas (`columbus,` for a network of one), whose "
-                  "radar and optical measurements it takes, each with its station's model; "
-                  "ignored for position (frame `gcrf`)", check=STATIONS))
+                  "(`ssa_fusion.core.stations.STATIONS`, or a site of `sites`), or a "
+                  "network: a `NETWORKS` id or station ids separated by commas (`columbus,` "
+                  "for a network of one), whose radar and optical measurements it takes, "
+                  "each with its station's model; ignored for position (frame `gcrf`)",
+                  check=STATION_IDS),
+            Param("sites", sites,
+                  "sites file (YAML, docs/SITES.md: latitude, longitude, height, sensor "
+                  "type, noise, cadence, mask of each station of one's own) whose ids "
+                  "`station` may name besides the built-in ones; `\"\"` = built-in stations "
+                  "only", unit="path", check=SITES))
+
+
+STATION_RULE_NAMES = ("station", "sites")
+"""The parameters `sites_problem` reads (a rule of every table with `measurement_stream`)."""
 
 
 P0_SIGMA = non_negative_numbers(6, "needs 6 standard deviations, each a finite number >= 0")

@@ -20,17 +20,18 @@ from typing import Any
 from ssa_fusion.core import config
 from ssa_fusion.core.config import EstimatorConfig, Lift
 from ssa_fusion.core.filter_options import FilterOptions
+from ssa_fusion.core.site_file import load_stations
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.types import KIND_NAMES, Kind, MotionModel
 from ssa_fusion.nodes.defaults import FILTER, KM, SURROGATE
 
-FILTER_KEYS = ("kind", "station", "motion_model", "p0_sigma", "q", "gate", "iod_samples",
+FILTER_KEYS = ("kind", "station", "sites", "motion_model", "p0_sigma", "q", "gate", "iod_samples",
                "iod_max_span", "reinit_after", "sigma_bound", "light_time", "refraction")
 """The filter's parameters that are estimator settings."""
 GAP_KEYS = ("predict_period", "gap_forecast")
 """The filter's parameters that say what it publishes in a gap (`core.gap_publisher`)."""
-SURROGATE_KEYS = ("kind", "station", "buffer_length", "retrain_period", "delays", "rank",
+SURROGATE_KEYS = ("kind", "station", "sites", "buffer_length", "retrain_period", "delays", "rank",
                   "max_horizon", "grace", "cadence", "lift")
 """The surrogate's parameters that are estimator settings."""
 NODE_MOTION_MODELS = (MotionModel.KEPLER, MotionModel.J2)
@@ -89,7 +90,8 @@ def estimator_from(filt: Mapping[str, Any], surr: Mapping[str, Any]) -> Estimato
 
     A missing parameter takes the node's default (`defaults`), except that `lift` defaults
     to eci only for range/az/el (none for positions and right ascension/declination).
-    ValueError names a bad value.
+    ``sites`` is a sites file's path (`core.site_file`; '' = none), read here. ValueError
+    names a bad value.
     """
     f = {**dataclasses.asdict(FILTER), **filt}
     s = {**dataclasses.asdict(SURROGATE), **surr}
@@ -108,6 +110,7 @@ def estimator_from(filt: Mapping[str, Any], surr: Mapping[str, Any]) -> Estimato
         grace=float(s["grace"]), cadence_s=float(s["cadence"]))
     return EstimatorConfig(kind=kinds[kind_name],
                            station=_stream(filt, surr, "station", FILTER.station),
+                           sites=load_stations(_stream(filt, surr, "sites", FILTER.sites)),
                            jd0=UNIX_EPOCH_JD,
                            light_time=bool(f["light_time"]),
                            refraction=bool(f["refraction"]),

@@ -26,6 +26,7 @@ from ssa_fusion.nodes.diagnostics import Count
 from ssa_fusion.nodes.parameters import (
     NON_NEGATIVE,
     POSITIVE,
+    STATION_RULE_NAMES,
     Param,
     ParameterTable,
     ParamValue,
@@ -36,6 +37,7 @@ from ssa_fusion.nodes.parameters import (
     measurement_stream,
     object_filter,
     one_of,
+    sites_problem,
 )
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
@@ -77,7 +79,7 @@ PARAMETERS = ParameterTable("surrogate", (
     Param("cadence", SURROGATE.cadence,
           "expected time between measurements; 0 = inferred from the buffered stamps",
           unit="s", check=NON_NEGATIVE, runtime=True),
-    *measurement_stream(SURROGATE.kind, SURROGATE.station, "learns"),
+    *measurement_stream(SURROGATE.kind, SURROGATE.station, SURROGATE.sites, "learns"),
     Param("lift", SURROGATE.lift,
           "what the DMD learns: `none` (the measurement itself) or `eci` (range/az/el "
           "lifted to the inertial (GCRF) position it implies, forecasts mapped back; needs "
@@ -87,6 +89,7 @@ PARAMETERS = ParameterTable("surrogate", (
     object_filter(SURROGATE.object_id, "learn"),
     clock_lead(SURROGATE.max_clock_lead),
 ), rules=(Rule(("delays", "cadence", "buffer_length"), _fits),
+          Rule(STATION_RULE_NAMES, sites_problem),
           Rule(settings.SURROGATE_KEYS, partial(settings.estimator_problem, "surrogate"))))
 """The surrogate's parameters."""
 

@@ -137,3 +137,28 @@ def test_nodes_take_every_value_of_the_default_yaml(tmp_path):
         for key, value in config[node]["ros__parameters"].items():
             if key != "use_sim_time":
                 assert values[key] == value, (node, key)
+
+
+def test_filter_and_surrogate_take_a_station_of_a_sites_file(tmp_path):
+    """`station` names a site of the `sites` file: the nodes start with it; without the
+    file they refuse it, naming the parameter and the station."""
+    example = str(CONFIG.parent / "sites" / "example.yaml")
+    params = tmp_path / "params.yaml"
+    for sites in (example, ""):
+        params.write_text(yaml.safe_dump({node: {"ros__parameters": {
+            "station": "nordlys", "sites": sites}} for node in ("filter", "surrogate")}))
+        env = {k: v for k, v in os.environ.items() if k != "ROS_DOMAIN_ID"}
+        env.update(ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
+                   ROS_DOMAIN_ID=str(fresh_domain_id()))
+        done = subprocess.run([sys.executable, str(WORKER), "--ros-args", "--params-file",
+                               str(params)], cwd=tmp_path, env=env, capture_output=True,
+                              text=True, timeout=120)
+        if sites:
+            assert done.returncode == 0, done.stderr
+            declared = json.loads(done.stdout)
+            for node in ("filter", "surrogate"):
+                assert (declared[node]["station"], declared[node]["sites"]) == ("nordlys",
+                                                                               example)
+        else:
+            assert done.returncode != 0
+            assert "parameter 'station' = 'nordlys': station 'nordlys' unknown" in done.stderr

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from ssa_fusion.core import config
-from ssa_fusion.nodes import settings
+from ssa_fusion.nodes import parameters, settings
 from ssa_fusion.sim import scenarios
 
 CONFIG = Path(__file__).resolve().parents[2] / "config" / "default.yaml"
@@ -69,3 +69,23 @@ def test_a_filter_of_ra_dec_alone_gets_no_eci_lift():
     c = settings.estimator_from({"kind": "ra_dec", "station": "socorro"}, {})
     assert c.kind == Kind.RA_DEC and c.lift == Lift.NONE
     assert settings.estimator_from({"kind": "range_az_el"}, {}).lift == Lift.ECI
+
+
+def test_station_and_sites_parameters(tmp_path):
+    """The filter's and surrogate's `station` may name a site of their `sites` file; the
+    rule over both names what is wrong, and so does the check of `sites`."""
+    example = str(CONFIG.parent / "sites" / "example.yaml")
+    c = settings.estimator_from({"station": "nordlys", "sites": example}, {})
+    assert c.station == "nordlys" and [s.name for s in c.sites] == ["nordlys", "kestrel",
+                                                                    "pampa-obs"]
+    assert settings.estimator_problem("filter", {**settings.filter_params(c),
+                                                 "sites": ""}) is not None
+    assert parameters.sites_problem({"station": "nordlys,tira,", "sites": example}) is None
+    said = parameters.sites_problem({"station": "nordlys", "sites": ""})
+    assert said is not None and "station 'nordlys' unknown" in said
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("sites:\n  - {id: x, latitude_deg: 91}\n")
+    said = parameters.SITES(str(bad))
+    assert said is not None and "site 'x': longitude_deg: missing" in said
+    assert parameters.SITES("") is None
+    assert parameters.STATION_IDS("nordlys") is None and parameters.STATION_IDS(",") is not None

@@ -1,0 +1,172 @@
+"""`core.site_file`: the example sites file loads as written, sites land where astropy puts
+them, and every bad input is refused with one line naming the file, the site and the field."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from astropy import units as u
+from astropy.coordinates import EarthLocation
+
+from ssa_fusion.core import config, frames
+from ssa_fusion.core.constants import ARCSEC
+from ssa_fusion.core.site_file import SiteFileError, load_sites, load_stations, parse_sites
+from ssa_fusion.core.stations import SensorType, network_stations
+from ssa_fusion.core.types import Kind
+
+EXAMPLE = Path(__file__).resolve().parents[2] / "config" / "sites" / "example.yaml"
+RADAR = {"id": "my_radar", "latitude_deg": 47.25, "longitude_deg": -122.5, "height_m": 120.0,
+         "type": "radar", "noise": {"range_m": 25.0, "azimuth_deg": 0.03,
+                                    "elevation_deg": 0.03},
+         "cadence_s": 10.0, "min_elevation_deg": 10.0}
+OPTICAL = {"id": "my_scope", "latitude_deg": -30.0, "longitude_deg": 70.0, "height_m": 2000.0,
+           "type": "optical", "noise": {"ra_arcsec": 1.0, "dec_arcsec": 2.0},
+           "cadence_s": 20.0, "min_elevation_deg": 20.0}
+
+
+def test_the_example_loads_as_its_comments_say():
+    sites = load_sites(EXAMPLE)
+    assert list(sites) == ["nordlys", "kestrel", "pampa-obs"]
+    n = sites["nordlys"]
+    assert n.type == SensorType.RADAR and n.kind == Kind.RANGE_AZ_EL
+    assert n.station == frames.Station("nordlys", math.radians(69.60), math.radians(19.20),
+                                       0.110)
+    assert n.sigma == pytest.approx((0.025, math.radians(0.03), math.radians(0.03)),
+                                    rel=1e-15)
+    assert (n.cadence_s, n.min_elevation_deg, n.max_range_km) == (10.0, 8.0, 3500.0)
+    k = sites["kestrel"]
+    assert k.mask_by_azimuth_deg == ((0.0, 5.0), (90.0, 18.0), (180.0, 12.0), (270.0, 5.0))
+    assert k.max_range_km == math.inf
+    # the mask: 18 deg due east, halfway to south 15 deg, the 5 deg floor due west
+    mask = np.degrees(k.min_elevation(np.radians([90.0, 135.0, 270.0])))
+    np.testing.assert_allclose(mask, [18.0, 15.0, 5.0], atol=1e-12)
+    p = sites["pampa-obs"]
+    assert p.type == SensorType.OPTICAL and p.kind == Kind.RA_DEC
+    assert p.sigma == pytest.approx((ARCSEC, ARCSEC), rel=1e-15)
+    assert p.station.alt_km == pytest.approx(2.635, rel=1e-15)
+
+
+@pytest.mark.parametrize("name", ["nordlys", "kestrel", "pampa-obs"])
+def test_sites_are_where_astropy_puts_them(name):
+    """ITRF position of each example site against astropy's WGS-84 geodetic -> geocentric
+    (ERFA's gd2gc), to 1 mm."""
+    raw = {s["id"]: s for s in yaml.safe_load(EXAMPLE.read_text())["sites"]}[name]
+    ref = EarthLocation.from_geodetic(raw["longitude_deg"] * u.deg, raw["latitude_deg"] * u.deg,
+                                      raw["height_m"] * u.m, ellipsoid="WGS84")
+    want = np.array([ref.x.to_value(u.km), ref.y.to_value(u.km), ref.z.to_value(u.km)])
+    got = load_sites(EXAMPLE)[name].station.itrs
+    assert np.abs(got - want).max() < 1e-6  # km: 1 mm
+
+
+def test_stations_of_a_sites_file_resolve_beside_the_built_in_ones():
+    own = {s.name: s for s in load_stations(EXAMPLE)}
+    assert set(network_stations("nordlys,millstone,", own)) == {"nordlys", "millstone"}
+    with pytest.raises(ValueError, match="station 'nordlys' unknown"):
+        network_stations("nordlys")
+    c = config.EstimatorConfig(station="kestrel", sites=tuple(own.values()))
+    assert config.measurement_model(c).station == own["kestrel"]
+    assert config.from_dict(config.to_dict(c)) == c  # recorded with the settings
+    assert load_stations("") == ()
+
+
+def test_for_stations_takes_the_stations_measurements_name():
+    own = load_stations(EXAMPLE)
+    c = config.EstimatorConfig(station="columbus", sites=own)
+    assert config.for_stations(c, ["columbus"]) is c
+    assert config.for_stations(c, ["nordlys"]).station == "nordlys"
+    assert config.for_stations(c, ["tira", "kestrel", "nowhere"]).station == "kestrel,tira,"
+    assert config.uncovered_stations(c, ["tira", "columbus"]) == ["tira"]
+
+
+def write(tmp_path: Path, sites: object) -> Path:
+    path = tmp_path / "sites.yaml"
+    path.write_text(yaml.safe_dump({"sites": sites}))
+    return path
+
+
+def edited(base: dict, **changes: object) -> dict:
+    """`base` with `changes` (a value of None removes the key; "noise__x" edits noise.x)."""
+    out = {**base, "noise": dict(base["noise"])}
+    for key, value in changes.items():
+        target, k = (out["noise"], key[7:]) if key.startswith("noise__") else (out, key)
+        if value is None:
+            target.pop(k)
+        else:
+            target[k] = value
+    return out
+
+
+BAD = [
+    (edited(RADAR, colour="red"), "site 'my_radar': colour: unknown field"),
+    (edited(RADAR, cadence_s=None), "site 'my_radar': cadence_s: missing"),
+    (edited(RADAR, id=None), "site #2: id: missing"),  # by its place in the list
+    (edited(RADAR, latitude_deg=90.5), "site 'my_radar': latitude_deg: must be in -90..90"),
+    (edited(RADAR, latitude_deg=float("nan")),
+     "site 'my_radar': latitude_deg: must be a finite number"),
+    (edited(RADAR, longitude_deg=float("inf")),
+     "site 'my_radar': longitude_deg: must be a finite number"),
+    (edited(RADAR, longitude_deg=181.0), "site 'my_radar': longitude_deg: must be in -180..180"),
+    (edited(RADAR, height_m="120"), "site 'my_radar': height_m: must be a number, got '120'"),
+    (edited(RADAR, height_m=True), "site 'my_radar': height_m: must be a number, got True"),
+    (edited(RADAR, height_m=20000.0), "site 'my_radar': height_m: must be in -1000..10000"),
+    (edited(RADAR, type="lidar"), "site 'my_radar': type: must be one of radar, optical"),
+    (edited(RADAR, noise__range_m=-1.0), "site 'my_radar': noise.range_m: must be > 0"),
+    (edited(RADAR, noise__azimuth_deg=0.0), "site 'my_radar': noise.azimuth_deg: must be > 0"),
+    (edited(RADAR, noise__elevation_deg=None), "site 'my_radar': noise.elevation_deg: missing"),
+    (edited(RADAR, noise__ra_arcsec=1.0),
+     "site 'my_radar': noise.ra_arcsec: unknown for a radar"),
+    (edited(OPTICAL, noise__dec_arcsec=-0.5), "site 'my_scope': noise.dec_arcsec: must be > 0"),
+    (edited(OPTICAL, max_range_km=1000.0),
+     "site 'my_scope': max_range_km: is for a radar only"),
+    (edited(RADAR, max_range_km=0.0), "site 'my_radar': max_range_km: must be > 0"),
+    (edited(RADAR, cadence_s=0.0), "site 'my_radar': cadence_s: must be > 0"),
+    (edited(RADAR, min_elevation_deg=95.0),
+     "site 'my_radar': min_elevation_deg: must be in -90..90"),
+    (edited(RADAR, mask_by_azimuth=[[0.0, 5.0], [400.0, 5.0]]),
+     "site 'my_radar': mask_by_azimuth[1] azimuth: must be in 0..360"),
+    (edited(RADAR, mask_by_azimuth=[[0.0, 5.0, 1.0]]),
+     "site 'my_radar': mask_by_azimuth[0]: must be [azimuth_deg, min_elevation_deg]"),
+    (edited(RADAR, mask_by_azimuth=[[10.0, 5.0], [10.0, 7.0]]),
+     "site 'my_radar': mask_by_azimuth[1]: azimuth 10 deg given twice"),
+    (edited(RADAR, id="tira"), "site 'tira': id: is a built-in station, sensor or network id"),
+    (edited(RADAR, id="radar_network"), "site 'radar_network': id: is a built-in station"),
+    (edited(RADAR, id="My Radar"), "site 'My Radar': id: must be lowercase letters"),
+    (edited(RADAR, id="a,b"), "site 'a,b': id: must be lowercase letters"),
+]
+
+
+@pytest.mark.parametrize(("site", "says"), BAD)
+def test_a_bad_site_is_one_line_naming_the_file_site_and_field(tmp_path, site, says):
+    path = write(tmp_path, [OPTICAL, site])
+    with pytest.raises(SiteFileError) as exc:
+        load_sites(path)
+    text = str(exc.value)
+    assert text.startswith(f"{path}: ") and says in text and "\n" not in text, text
+
+
+def test_duplicate_ids_and_bad_files_are_refused(tmp_path):
+    dup = write(tmp_path, [RADAR, edited(OPTICAL, id="my_radar")])
+    with pytest.raises(SiteFileError, match=r"site 'my_radar': id: given twice"):
+        load_sites(dup)
+    twice = tmp_path / "twice.yaml"
+    twice.write_text("sites:\n  - id: a\n    id: b\n")
+    with pytest.raises(SiteFileError, match=r"twice\.yaml: not valid YAML: .*'id' given twice"):
+        load_sites(twice)
+    for data, says in (({"stations": [RADAR]}, "one key, 'sites'"),
+                       ({"sites": []}, "sites: must be a non-empty list"),
+                       ({"sites": ["x"]}, "site #1: must be a mapping"),
+                       ([RADAR], "one key, 'sites'")):
+        with pytest.raises(SiteFileError, match=says):
+            parse_sites(data, "f.yaml")
+    with pytest.raises(SiteFileError, match="cannot read sites file"):
+        load_sites(tmp_path / "missing.yaml")
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("sites: [\n")
+    with pytest.raises(SiteFileError, match=r"broken\.yaml: not valid YAML") as exc:
+        load_sites(broken)
+    assert "\n" not in str(exc.value)
+    assert issubclass(SiteFileError, ValueError)
