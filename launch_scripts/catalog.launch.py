@@ -24,7 +24,6 @@ from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch_ros.actions import Node
 
-from ssa_fusion.core.timescales import parse_utc
 from ssa_fusion.graphs import DEFAULT_SCENARIO, catalog_graph, catalog_scenario, default_bag
 from ssa_fusion.ros.launch_events import launch_description, shutdown_handlers
 
@@ -64,8 +63,6 @@ def graph(context: Any) -> list[Any]:
     if args["surrogate"] not in ("true", "false"):
         raise ValueError(f"surrogate:={args['surrogate']!r}: true or false")
     hours = _number(args, "duration", float, 0.0)
-    if args["start"]:
-        parse_utc(args["start"])  # ValueError: one line naming the epoch
     specs = catalog_graph(
         scenario, Path(args["catalog"]), _number(args, "objects", int, 0),
         _number(args, "synthetic", int, 0), hours * 3600.0 or scenario.duration_s,

@@ -55,6 +55,9 @@ def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, 
     estimator = s.estimator()
     surrogate = {"use_sim_time": True, **settings.surrogate_params(estimator)}
     filt = {"use_sim_time": True, **settings.filter_params(estimator), **extra}
+    if isinstance(s, sky.SkyScenario) and s.sites_file:  # stations of a sites file
+        for node in (sensor, surrogate, filt):
+            node["sites"] = s.sites_file
     recorder = {"use_sim_time": True, "bag": str(bag)}
     return {"sensor_sim": sensor, "surrogate": surrogate, "filter": filt, "recorder": recorder}
 
@@ -77,9 +80,12 @@ def catalog_scenario(name: str) -> sky.SkyScenario:
     return scenario
 
 
-def live_scenario(name: str, start: str = "",
-                  duration_h: float = 0.0) -> scenarios.Scenario | sky.SkyScenario:
+def live_scenario(name: str, start: str = "", duration_h: float = 0.0,
+                  sites: str = "") -> scenarios.Scenario | sky.SkyScenario:
     """Return the scenario `name` of `LIVE_SCENARIOS` from `start` for `duration_h`.
+
+    `sites`: a sites file whose sites observe a real-sky scenario's object instead of its
+    sensors ('' = its own; `sky.SkyScenario.with_sites`).
 
     `start`: ISO 8601 UTC ('' = the scenario's epoch); a real-sky scenario's object starts
     from its initial GCRF state at it (`sky.SkyScenario.t0`). `duration_h`: hours of sim
@@ -95,8 +101,12 @@ def live_scenario(name: str, start: str = "",
     real_sky = sky.SKY_SCENARIOS.get(name)
     if real_sky is not None:
         t0 = timescales.parse_utc(start) if start else real_sky.t0
-        return real_sky.with_(t0=t0, duration_s=duration_h * 3600.0 or real_sky.duration_s)
+        real_sky = real_sky.with_window(t0, duration_h * 3600.0 or real_sky.duration_s)
+        return real_sky.with_sites(sites) if sites else real_sky
     paper = scenarios.get(name)
+    if sites:
+        raise ValueError(f"--sites applies to the real-sky scenarios "
+                         f"({', '.join(sky.SKY_SCENARIOS)}); {name} keeps the paper's station")
     if start:
         raise ValueError(f"--start applies to the real-sky scenarios "
                          f"({', '.join(sky.SKY_SCENARIOS)}) and catalogs; {name} keeps the "
@@ -138,8 +148,11 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     as many catalog_surrogate (`surrogate_extra` over their defaults), and sensor_sim
     simulating `scenario`'s radars measuring the catalog for `sim_s` from `start` (ISO 8601
     UTC; '' = the catalog's first epoch) (last: it waits for the others). The same for
-    `ssa-fusion live --catalog` and `ros2 launch ssa_fusion catalog.launch.py`.
+    `ssa-fusion live --catalog` and `ros2 launch ssa_fusion catalog.launch.py`. ValueError
+    with one line for a `start` that is not an epoch ssa_fusion represents.
     """
+    if start:
+        timescales.parse_utc(start)
     names = node_names(shards)
     gaps = node_names(shards, "catalog_surrogate") if surrogate else []
     # the recorder hears every estimate publisher (shards and surrogates) from the first

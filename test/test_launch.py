@@ -35,7 +35,7 @@ from ssa_fusion.sim import scenarios
 ROOT = Path(__file__).resolve().parents[1]
 LAUNCH_FILE = ROOT / "launch_scripts" / "ssa_fusion.launch.py"
 NODES = ("recorder", "surrogate", "filter", "sensor_sim")
-ARGUMENTS = ("params_file", "scenario", "time_scale", "start", "duration", "bag")
+ARGUMENTS = ("params_file", "scenario", "time_scale", "start", "duration", "sites", "bag")
 
 
 class Recorded:
@@ -196,6 +196,11 @@ def test_start_and_duration_set_the_scenarios_window(launch):
                          duration="6")
     sensor = nodes["sensor_sim"].kwargs["parameters"][1]
     assert sensor["start"] == "2025-06-01T06:00:00.000Z" and sensor["duration"] == 21600.0
+    sites = str(ROOT / "config" / "sites" / "example.yaml")
+    nodes, _ = run_graph(launch, scenario="iss_radar_columbus", sites=sites)
+    for name in ("sensor_sim", "filter", "surrogate"):
+        assert nodes[name].kwargs["parameters"][1]["sites"] == sites
+    assert nodes["filter"].kwargs["parameters"][1]["station"] == "nordlys,kestrel,pampa-obs,"
     nodes, _ = run_graph(launch, scenario="iss_j2_rae", duration="20")
     paper = scenarios.get("iss_j2_rae")
     sensor = nodes["sensor_sim"].kwargs["parameters"][1]
@@ -213,7 +218,9 @@ def test_without_scenario_or_time_scale_the_params_file_decides(launch):
 @pytest.mark.parametrize(("given", "message"), [
     ({"scenario": "mars_base"}, "scenario 'mars_base' unknown; known: "),
     ({"time_scale": "fast"}, "time_scale:='fast' is not a number"),
-    ({"start": "2025-06-01"}, "start:= and duration:= need scenario:="),
+    ({"start": "2025-06-01"}, "start:=, duration:= and sites:= need scenario:="),
+    ({"scenario": "iss_j2_rae", "sites": str(ROOT / "config" / "sites" / "example.yaml")},
+     "iss_j2_rae keeps the paper's station"),
     ({"scenario": "iss_j2_rae", "start": "2025-06-01"}, "iss_j2_rae keeps the paper's epoch"),
     ({"scenario": "iss_network", "start": "June"}, "'June' is not an ISO 8601 epoch"),
     ({"scenario": "iss_network", "duration": "six"}, "duration:='six' is not a number"),

@@ -65,6 +65,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "scenario (its object starts from the scenario's initial GCRF state "
                         "then) or a catalog (default: the scenario's epoch; a catalog's: its "
                         "first element set's)")
+    p.add_argument("--sites", default="", metavar="FILE",
+                   help="a sites file (YAML, docs/SITES.md) whose sites observe a real-sky "
+                        "scenario's object instead of its sensors "
+                        "(e.g. config/sites/example.yaml)")
     p.add_argument("--duration", type=float, default=0.0, metavar="HOURS",
                    help="hours of sim time (default: the scenario's; a paper scenario keeps "
                         "its tracking and gap and tracks after the gap for the rest)")
@@ -208,7 +212,7 @@ def run(args: argparse.Namespace) -> int:
 
         return live_catalog.run(args)
     try:
-        s = graphs.live_scenario(args.scenario, args.start, args.duration)
+        s = graphs.live_scenario(args.scenario, args.start, args.duration, args.sites)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -79,6 +79,9 @@ def args_problem(args: argparse.Namespace) -> str | None:
     """Return why the catalog options cannot run, or None."""
     if args.objects < 0 or args.synthetic < 0 or not args.duration >= 0:
         return "--objects, --synthetic and --duration must be >= 0"
+    if getattr(args, "sites", ""):
+        return ("--sites: a catalog is observed by the radars of its --scenario (the catalog "
+                "filter takes the built-in stations only)")
     if args.start:
         try:
             timescales.parse_utc(args.start)

@@ -111,6 +111,18 @@ class Sensor:
         out: NDArray[np.float64] = np.maximum(floor, by_az)
         return out
 
+    def in_view(self, rae: NDArray[np.float64]) -> NDArray[np.bool_]:
+        """Return where the sensor sees topocentric range/azimuth/elevation `rae`.
+
+        `rae`: (..., 3), km, rad, rad. In view: above the mask and, for a radar, within
+        ``max_range_km`` (NaN: not in view).
+        """
+        with np.errstate(invalid="ignore"):
+            up = rae[..., 2] >= self.min_elevation(rae[..., 1])
+            if self.type == SensorType.RADAR:
+                up &= rae[..., 0] <= self.max_range_km
+        return np.asarray(up, dtype=bool)
+
 
 def _site(name: str, lat_deg: float, lon_deg: float, alt_km: float) -> Station:
     return Station(name, math.radians(lat_deg), math.radians(lon_deg), alt_km)

@@ -65,6 +65,7 @@ class SensorSimDefaults:
     after_gap: float | None = None
     duration: float = 0.0
     start: str = ""
+    sites: str = ""
     noise_sigma: tuple[float, ...] = (-1.0,)
     time_scale: float = 100.0
     seed: int = 0

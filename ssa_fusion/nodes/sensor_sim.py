@@ -36,6 +36,7 @@ from ssa_fusion.nodes.diagnostics import Count
 from ssa_fusion.nodes.parameters import (
     NON_NEGATIVE,
     POSITIVE,
+    SITES,
     Check,
     Computed,
     Param,
@@ -177,6 +178,13 @@ def _start_needs_sky(values: Values) -> str | None:
     return None
 
 
+def _sites_need_sky(values: Values) -> str | None:
+    if values["sites"] and values["scenario"] not in sky.SKY_SCENARIOS:
+        return (f"needs a real-sky scenario (its object is what the sites observe); known: "
+                f"{list(sky.SKY_SCENARIOS)}")
+    return None
+
+
 def _catalog_needs_sky(values: Values) -> str | None:
     if values["catalog"] and values["scenario"] not in sky.SKY_SCENARIOS:
         return (f"needs a real-sky scenario (its radars observe the catalog); known: "
@@ -200,7 +208,8 @@ PARAMETERS = ParameterTable("sensor_sim", (
           "time between measurements (real sky: between truth samples)", unit="s",
           check=POSITIVE),
     Param("duration", SENSOR_SIM.duration,
-          "real-sky scenarios and catalogs: sim time to run; 0 = the scenario's (3 days)",
+          "real-sky scenarios and catalogs: sim time to run (a scenario's outages keep "
+          "their place in the run: `sky.SkyScenario.with_window`); 0 = the scenario's (3 days)",
           unit="s", check=NON_NEGATIVE),
     Param("start", SENSOR_SIM.start,
           "real-sky scenarios and catalogs: the first epoch, ISO 8601 UTC (e.g. "
@@ -208,6 +217,10 @@ PARAMETERS = ParameterTable("sensor_sim", (
           "at it, so its orbit plane meets the Sun and the sites elsewhere; '' = the "
           "scenario's epoch (a catalog: its first element set's)",
           check=Check("ISO 8601 UTC, 1972..2038", _start)),
+    Param("sites", SENSOR_SIM.sites,
+          "real-sky scenarios: a sites file (YAML, docs/SITES.md) whose sites observe the "
+          "object instead of the scenario's sensors (their masks, maximum range, noise and "
+          "cadence); '' = the scenario's", check=SITES),
     Param("gap_start", _from_scenario("track_s"),
           "tracking before the gap, from the first epoch; ignored when `gaps` is set",
           unit="s", check=NON_NEGATIVE),
@@ -249,7 +262,8 @@ PARAMETERS = ParameterTable("sensor_sim", (
           "(`survey.synthetic_catalog`, seeded by `seed`; 0 = the catalog's own)",
           check=at_least(0)),
 ), rules=(Rule(("catalog", "scenario"), _catalog_needs_sky),
-          Rule(("start", "scenario"), _start_needs_sky)))
+          Rule(("start", "scenario"), _start_needs_sky),
+          Rule(("sites", "scenario"), _sites_need_sky)))
 """The sensor_sim's parameters."""
 
 
@@ -264,6 +278,8 @@ class SensorSim(SsaNode):
         p = self.params
         name = p.text("scenario")
         base, real_sky = _scenario(p.values)
+        if real_sky is not None and p.text("sites"):
+            real_sky = real_sky.with_sites(p.text("sites"))  # valid: the check `SITES`
         self.object_id = p.text("object_id")
         cadence, duration, gaps = p.number("cadence"), p.number("duration"), p.numbers("gaps")
         start = timescales.parse_utc(p.text("start")) if p.text("start") else None
@@ -347,8 +363,8 @@ class SensorSim(SsaNode):
 
         `duration` (s; 0: the scenario's) from `start` (Unix s; None: the scenario's t0).
         """
-        s = s.with_(truth_cadence_s=cadence, duration_s=duration or s.duration_s,
-                    t0=s.t0 if start is None else start)
+        s = s.with_window(s.t0 if start is None else start, duration or s.duration_s)
+        s = s.with_(truth_cadence_s=cadence)
         if list(gaps) != [0.0]:
             s = s.with_(outages=tuple((sky.ALL_STATIONS, gaps[i], gaps[i + 1])
                                       for i in range(0, len(gaps), 2)))

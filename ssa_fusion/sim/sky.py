@@ -29,7 +29,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ssa_fusion.core import dynamics, frames, lighttime, refraction, visibility
+from ssa_fusion.core import dynamics, frames, lighttime, refraction, site_file, visibility
 from ssa_fusion.core.config import EstimatorConfig
 from ssa_fusion.core.filter_options import SKY_FILTER, FilterOptions
 from ssa_fusion.core.gap_publisher import GapFill
@@ -102,6 +102,9 @@ class SkyScenario:
         0.40 / 0.12 / 0.10 km against the residual's 0.31 / 0.11 / 0.08 km).
     finding : str
         What the scenario shows.
+    own_sensors, sites_file
+        Sensors of a sites file (`with_sites`) that `sensors` may name besides the built-in
+        presets, and that file's path ('' = none).
     """
 
     name: str
@@ -123,25 +126,57 @@ class SkyScenario:
     refraction: bool = False
     gap_fill: GapFill = GapFill.RESIDUAL
     finding: str = ""
+    own_sensors: tuple[Sensor, ...] = ()
+    sites_file: str = ""
+
+    def sensor(self, name: str) -> Sensor:
+        """Return sensor `name`: a site of the scenario's sites file, else a built-in preset."""
+        for own in self.own_sensors:
+            if own.station.name == name:
+                return own
+        return SENSORS[name]
 
     @property
     def radars(self) -> list[Sensor]:
         """The scenario's radar sensors (those a catalog run simulates)."""
-        return [SENSORS[n] for n in self.sensors if SENSORS[n].type == SensorType.RADAR]
+        return [r for r in map(self.sensor, self.sensors) if r.type == SensorType.RADAR]
 
     @property
     def network(self) -> str:
         """The filter's ``station`` setting: the sensors' station ids, comma-separated."""
-        return ",".join(dict.fromkeys(SENSORS[s].station.name for s in self.sensors)) + ","
+        return ",".join(dict.fromkeys(self.sensor(s).station.name for s in self.sensors)) + ","
 
     def estimator(self) -> EstimatorConfig:
         """Return the filter of this scenario (the surrogate settings are the live defaults)."""
-        kind = SENSORS[self.sensors[0]].kind
+        kind = self.sensor(self.sensors[0]).kind
         return EstimatorConfig(
             kind=kind, station=self.network,
             jd0=UNIX_EPOCH_JD, light_time=self.light_time, refraction=self.refraction,
             filter=self.filter_options(),
-            surrogate=LIVE_SURROGATE)
+            surrogate=LIVE_SURROGATE, sites=tuple(o.station for o in self.own_sensors))
+
+    def with_sites(self, path: str) -> SkyScenario:
+        """Return this scenario observed by the sites of the sites file `path` instead.
+
+        Every site of the file (`core.site_file`), in its order; an outage of one of the
+        scenario's stations becomes an outage of the whole network at the same time.
+        SiteFileError (a ValueError) with one line when the file is wrong.
+        """
+        own = site_file.load_sites(path)
+        return self.with_(sensors=tuple(own), own_sensors=tuple(own.values()),
+                          sites_file=str(path),
+                          outages=tuple((ALL_STATIONS, a, b) for _, a, b in self.outages))
+
+    def with_window(self, t0: float, duration_s: float) -> SkyScenario:
+        """Return this scenario from `t0` (Unix s) for `duration_s` (s).
+
+        The object starts from `x0` at `t0`. The outages keep their place in the run: their
+        start and length scale with the duration (the scenario's 36 h outage of a 72 h run
+        falls at 12 h of a 24 h one), so every run has its outage to evaluate.
+        """
+        f = duration_s / self.duration_s
+        return self.with_(t0=t0, duration_s=duration_s,
+                          outages=tuple((who, a * f, b * f) for who, a, b in self.outages))
 
     def filter_options(self) -> FilterOptions:
         """Return the options of this scenario's filter (the per-object and the batched one)."""
@@ -222,8 +257,7 @@ def truth(s: SkyScenario, t: np.ndarray) -> np.ndarray:
 
 def _visible(sensor: Sensor, t: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Where `sensor` measures the object at epochs `t` with states `x` (N, 6)."""
-    rae = frames.razel_gcrs(x, t, sensor.station)
-    up = rae[:, 2] >= sensor.min_elevation(rae[:, 1])
+    up = sensor.in_view(frames.razel_gcrs(x, t, sensor.station))
     if sensor.type == SensorType.OPTICAL:
         up &= visibility.station_dark(t, sensor.station) & visibility.sunlit(x[:, :3], t)
     return np.asarray(up, dtype=bool)
@@ -263,7 +297,7 @@ def _withheld(s: SkyScenario, sensor_of: list[str], t: np.ndarray) -> np.ndarray
     names = np.array(sensor_of)
     for who, start, length in s.outages:
         inside = (t >= s.t0 + start) & (t < s.t0 + start + length)
-        out |= inside & ((names == SENSORS[who].station.name) if who != ALL_STATIONS else True)
+        out |= inside & ((names == s.sensor(who).station.name) if who != ALL_STATIONS else True)
     return out
 
 
@@ -271,7 +305,7 @@ def simulate_sky(s: SkyScenario, seed: int = 0, object_id: str = "") -> SkySimul
     """Truth and measurements of `s`, reproducible by `seed` (one noise stream per sensor)."""
     rngs = np.random.default_rng(seed).spawn(len(s.sensors))
     meas = [m for name, rng in zip(s.sensors, rngs, strict=True)
-            for m in _observe(s, SENSORS[name], rng, object_id or s.name)]
+            for m in _observe(s, s.sensor(name), rng, object_id or s.name)]
     meas.sort(key=lambda m: (m.t, m.frame_id))
     t_meas = np.array([m.t for m in meas])
     withheld = _withheld(s, [m.frame_id for m in meas], t_meas)

@@ -80,7 +80,8 @@ def observe_catalog(entries: Sequence[CatalogEntry], sensors: Sequence[Sensor], 
     one noise stream per sensor.
 
     Each sensor measures at the multiples of its ``cadence_s`` after `t0` where the object
-    is at or above its elevation mask (by azimuth where it has one); no light time. Objects
+    is at or above its elevation mask (by azimuth where it has one) and within its maximum
+    range (`Sensor.in_view`); no light time. Objects
     SGP4 cannot propagate at an epoch (decayed) are not measured then. The states are
     computed `chunk_states` (object x epoch) at a time, bounding memory at ~100 B each.
     ValueError for an optical sensor (only radars are supported here).
@@ -105,9 +106,7 @@ def observe_catalog(entries: Sequence[CatalogEntry], sensors: Sequence[Sensor], 
             t = t_all[i:i + step]
             x = catalog_states(entries, t).x  # (N, T, 6)
             rae = razel_gcrs(x, t, sensor.station)  # (N, T, 3)
-            with np.errstate(invalid="ignore"):
-                up = (rae[..., 2] >= sensor.min_elevation(rae[..., 1])) \
-                    & np.isfinite(rae).all(-1)
+            up = sensor.in_view(rae) & np.isfinite(rae).all(-1)
             obj, ti = np.nonzero(up)
             ts.append(np.asarray(t[ti], dtype=np.float64))
             objs.append(obj.astype(np.int64))

@@ -125,8 +125,8 @@ class _FakeGraph:
     def start_node(self, *_args, **_kwargs) -> object:
         return object()
 
-    def wait_exit(self, *_args, **_kwargs) -> int:
-        return 0
+    def wait_done_or_broken(self, *_args, **_kwargs) -> bool:
+        return True
 
     def wait_quiet(self, *_args, **_kwargs) -> None:
         return None

@@ -494,6 +494,9 @@ def test_surrogate_that_cannot_fit_forecasts_nothing_and_filter_keeps_predicting
 
 
 # parameters ------------------------------------------------------------------------------
+EXAMPLE_SITES = Path(__file__).resolve().parents[2] / "config" / "sites" / "example.yaml"
+
+
 def test_invalid_parameters_refuse_to_start(ros_graph, tmp_path):
     g = ros_graph
     existing = tmp_path / "existing_bag"
@@ -516,6 +519,8 @@ def test_invalid_parameters_refuse_to_start(ros_graph, tmp_path):
         "catalog/paper": ("sensor_sim", {"catalog": "config/catalogs/sample.tle"}),
         "start": ("sensor_sim", {"scenario": "iss_network", "start": "June"}),
         "start/paper": ("sensor_sim", {"start": "2025-06-01T00:00:00Z"}),
+        "sites": ("sensor_sim", {"scenario": "iss_network", "sites": "/nope/sites.yaml"}),
+        "sites/paper": ("sensor_sim", {"sites": str(EXAMPLE_SITES)}),
         "shard": ("catalog_filter", {"shards": 2, "shard": 2}),
         "station": ("catalog_filter", {"station": "atlantis"}),
         "fit_budget": ("catalog_surrogate", {"fit_budget": 2.0}),

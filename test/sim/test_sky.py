@@ -146,3 +146,56 @@ def test_the_optical_network_observes_in_april_and_not_in_january():
         tn = np.array([m.t for m in optical if m.frame_id == name])
         assert sun.sun_elevation(tn, SENSORS[name].station).max() < math.radians(-12.0)
     assert sun.sunlit(sky.truth(s, t)[:, :3], t).all()
+
+
+SITES_YAML = """
+sites:
+  - id: near_radar
+    latitude_deg: 39.0
+    longitude_deg: -83.0
+    height_m: 250.0
+    type: radar
+    noise: {range_m: 20.0, azimuth_deg: 0.02, elevation_deg: 0.02}
+    cadence_s: 10.0
+    min_elevation_deg: 10.0
+    max_range_km: 1000.0
+  - id: far_radar
+    latitude_deg: 39.0
+    longitude_deg: -83.0
+    height_m: 250.0
+    type: radar
+    noise: {range_m: 20.0, azimuth_deg: 0.02, elevation_deg: 0.02}
+    cadence_s: 10.0
+    min_elevation_deg: 10.0
+"""
+
+
+def test_sites_of_a_file_observe_within_their_mask_and_range(tmp_path):
+    """`with_sites`: the file's sites replace the scenario's sensors, in the simulator and in
+    the filter's settings; a radar's maximum range removes the far part of each pass (the
+    geometry is checked independently with the measured range, not the simulator's)."""
+    path = tmp_path / "sites.yaml"
+    path.write_text(SITES_YAML)
+    s = sky.SKY_SCENARIOS["iss_radar_columbus"].with_window(sky.ORBIT_EPOCH_UNIX, 86400.0)
+    own = s.with_sites(str(path))
+    assert own.sensors == ("near_radar", "far_radar")
+    assert own.outages == tuple((sky.ALL_STATIONS, a, b) for _, a, b in s.outages)
+    assert {st.name for st in own.estimator().sites} == {"near_radar", "far_radar"}
+    assert own.network == "near_radar,far_radar,"
+    sim = sky.simulate_sky(own, seed=3)
+    by = {k: np.array([m.z for m in sim.measurements if m.frame_id == k])
+          for k in own.sensors}
+    near, far = by["near_radar"], by["far_radar"]
+    assert len(far) > len(near) > 20  # the same site: the range limit cuts passes short
+    assert near[:, 0].max() <= 1000.0 + 0.5  # noise is 20 m: 25 sigma of slack
+    assert far[:, 0].max() > 1500.0
+    assert np.degrees(np.concatenate([near, far])[:, 2]).min() > 10.0 - 0.1
+
+
+def test_a_shorter_window_keeps_the_outage_inside_the_run():
+    s = sky.SKY_SCENARIOS["iss_radar_columbus"]
+    (who, start, length), = s.outages
+    short = s.with_window(s.t0 + 86400.0 * 30, s.duration_s / 3)
+    assert short.t0 == s.t0 + 86400.0 * 30 and short.duration_s == s.duration_s / 3
+    assert short.outages == ((who, start / 3, length / 3),)
+    assert start / 3 + length / 3 < short.duration_s
