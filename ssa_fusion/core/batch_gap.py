@@ -27,9 +27,10 @@ from .batch_ls import BatchFit, BatchOptions, FitStatus
 from .measurement import MeasurementModel
 from .pass_windows import PASS_BREAK_S
 from .timescales import DAY_S
-from .types import Measurement
+from .types import Kind, Measurement
 
-__all__ = ["GAP_FIT", "GAP_FIT_PASSES", "GAP_FIT_SNC", "BatchGapForecaster", "fit_passes"]
+__all__ = ["GAP_FIT", "GAP_FIT_ANGLES", "GAP_FIT_PASSES", "GAP_FIT_SNC", "GAP_FIT_SNC_ANGLES",
+           "BatchGapForecaster", "fit_passes", "gap_fit_options"]
 
 Array = NDArray[np.float64]
 
@@ -38,26 +39,45 @@ GAP_FIT_PASSES = 3
 
 GAP_FIT_SNC = 3e-14
 """Power spectral density of the gap fit's state-noise compensation, km^2/s^3 in R, T and N
-alike: ~ 3e-9 km/s^2 of unmodelled acceleration correlated over ~ 3e3 s (a^2 tau), chosen on
-the tuning seeds of iss_radar_columbus (`bench/bench_batch_ls.py`'s gap NEES), never on an
-evaluation seed."""
+alike, for a window with ranges (radar): ~ 3e-9 km/s^2 of unmodelled acceleration
+correlated over ~ 3e3 s (a^2 tau), chosen on the tuning seeds of iss_radar_columbus
+(`bench/bench_batch_ls.py`'s gap NEES), never on an evaluation seed."""
+
+GAP_FIT_SNC_ANGLES = 3e-13
+"""The same for a window of angles only (optical sites): the smallest of {3e-14, 1e-13,
+3e-13, 1e-12, 3e-12} whose position NEES over the gap epochs lies inside chi2(3)'s 95 %
+bound at >= 90 % of them on the tuning seeds 1-3 of leo_optical (3e-14: 35-40 %, 1e-13:
+66-71 %, 3e-13: 98.9 %, median NEES 1.6-1.9; the fit's state does not depend on it). Angles
+alone leave the along-track and radial errors correlated over the window, which a radar's
+ranges pin down: the same unmodelled acceleration shows as a larger error."""
 
 GAP_FIT = BatchOptions(snc_psd=(GAP_FIT_SNC,) * 3)
-"""The gap fit: two-body + J2, the state only (a drag factor solved for as well is biased by
-its prior where there is no drag, and is weakly observed over three passes)."""
+"""The gap fit of a window with ranges: two-body + J2, the state only (a drag factor solved
+for as well is biased by its prior where there is no drag, and is weakly observed over
+three passes)."""
+
+GAP_FIT_ANGLES = replace(GAP_FIT, snc_psd=(GAP_FIT_SNC_ANGLES,) * 3)
+"""The gap fit of a window of angles only (`GAP_FIT_SNC_ANGLES`)."""
+
+
+def gap_fit_options(window: list[Measurement]) -> BatchOptions:
+    """Return `GAP_FIT`, or `GAP_FIT_ANGLES` when no measurement of `window` has a range."""
+    ranged = any(m.kind in (Kind.RANGE_AZ_EL, Kind.POSITION) for m in window)
+    return GAP_FIT if ranged else GAP_FIT_ANGLES
 
 _FAILED = (FitStatus.DIVERGED, FitStatus.UNDERDETERMINED)
 
 
 def fit_passes(window: list[Measurement], model: MeasurementModel, x_guess: ArrayLike,
                t_guess: float, clock_unix0: float = 0.0) -> BatchFit | None:
-    """Fit `GAP_FIT` to `window`; None when it diverges, is underdetermined or has no model.
+    """Fit `gap_fit_options(window)` to `window`; None if it fails.
 
+    It fails when it diverges, is underdetermined or has no model for a measurement.
     `clock_unix0`: Unix time (s) of t = 0 of the measurements' clock.
     """
     if not window:
         return None
-    opts = replace(GAP_FIT, clock_unix0=float(clock_unix0))
+    opts = replace(gap_fit_options(window), clock_unix0=float(clock_unix0))
     try:
         fit = batch_ls.fit(window, model, np.asarray(x_guess, float)[:6], t_guess, opts)
     except ValueError:  # a measurement the fit has no model for

@@ -149,3 +149,22 @@ def test_a_batch_fit_publisher_fills_the_gap_with_the_fit_of_the_last_passes():
     err_ekf = np.linalg.norm(x_ekf[late, :3] - truth[t.size:][late, :3], axis=1)
     assert err_fit.max() < 0.03 and err_ekf.max() > 1.0
     np.testing.assert_array_equal(x_fit[~late], x_ekf[~late])
+
+
+def test_the_gap_fit_of_angles_only_has_its_own_process_noise():
+    """A window of RA/Dec alone gets `GAP_FIT_SNC_ANGLES` (chosen on leo_optical's tuning
+    seeds), one with any range `GAP_FIT_SNC` (chosen on iss_radar_columbus's)."""
+    from ssa_fusion.core import batch_gap
+
+    def m(kind: Kind) -> Measurement:
+        return Measurement(T0, np.zeros(3), np.eye(3), kind=kind, frame_id="maui")
+
+    angles = [m(Kind.RA_DEC)] * 3
+    assert batch_gap.gap_fit_options(angles).snc_psd == (batch_gap.GAP_FIT_SNC_ANGLES,) * 3
+    assert batch_gap.gap_fit_options([*angles, m(Kind.RANGE_AZ_EL)]).snc_psd == \
+        (batch_gap.GAP_FIT_SNC,) * 3
+    assert batch_gap.GAP_FIT_SNC_ANGLES > batch_gap.GAP_FIT_SNC
+    assert batch_gap.GAP_FIT_ANGLES.snc_psd != batch_gap.GAP_FIT.snc_psd
+    same = ("force", "solve_for", "consider", "param_sigma", "solver")
+    assert all(getattr(batch_gap.GAP_FIT_ANGLES, k) == getattr(batch_gap.GAP_FIT, k)
+               for k in same)
