@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from rclpy.exceptions import ParameterException
+from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -63,7 +63,12 @@ class NodeParameters:
             self.node.declare_parameter(p.name, default, descriptor)
         except ParameterException as exc:  # e.g. a string given for a number
             raise ParameterError(f"parameter '{p.name}': {exc}") from exc
-        value = _plain(self.node.get_parameter(p.name).value)
+        try:
+            value = _plain(self.node.get_parameter(p.name).value)
+        except ParameterUninitializedException:  # `-p name:=[]`: a list of no type
+            raise ParameterError(
+                f"parameter '{p.name}' = []: an empty list has no type; give at least one "
+                f"value (default: {default!r})") from None
         reason = p.reason(value)
         if reason:
             raise ParameterError(f"parameter '{p.name}' = {value!r}: {reason}")

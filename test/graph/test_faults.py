@@ -508,6 +508,8 @@ def test_invalid_parameters_refuse_to_start(ros_graph, tmp_path):
         "wait_for_readers": ("sensor_sim", {"wait_for_readers": ["filter"]}),
         "delays": ("surrogate", {"delays": 200, "buffer_length": 3000.0, "cadence": 30.0}),
         "p0_sigma": ("filter", {"p0_sigma": [1.0, 2.0]}),
+        "p0_sigma/empty": ("filter", {"p0_sigma": []}),  # a list of no type: was a traceback
+        "topics/empty": ("recorder", {"topics": [], "bag": str(tmp_path / "b")}),
         "kind": ("filter", {"kind": "sonar"}),
         "bag": ("recorder", {"bag": str(existing)}),
         "qq": ("filter", {"qq": 0.1}),  # a misspelt name
