@@ -94,8 +94,9 @@ def run_own(args: argparse.Namespace, data: evaluate.BagData, out: Path, why: st
     print(f"{args.bag}: no simulated truth ({why}): the filter judged by its residuals, NIS "
           f"and covariance\n")
     print(report_own.table(rep))
-    print(f"\nwrote {out}/report.json, {out}/report.html and plots "
-          f"({', '.join(report_own.PLOTS)})")
+    drawn = [name for name in report_own.PLOTS if (out / name).exists()]
+    print(f"\nwrote {out}/report.json, {out}/report.html"
+          + (f" and plots ({', '.join(drawn)})" if drawn else ""))
     return 0
 
 

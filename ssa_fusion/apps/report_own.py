@@ -34,6 +34,7 @@ import numpy as np
 
 from ssa_fusion.apps import ccsds_format, evaluate, report
 from ssa_fusion.core import types
+from ssa_fusion.core.config import uncovered_stations
 from ssa_fusion.evaluation import residuals as res_
 from ssa_fusion.evaluation.residuals import PASS_BREAK_S
 
@@ -59,6 +60,8 @@ class OwnReport:
 
     settings: evaluate.Settings
     residuals: list[res_.Residual]
+    published: list[res_.Nis]
+    """The NIS the filter published with each fused real measurement."""
     nis: res_.NisSummary
     passes: list[res_.PassRow]
     gaps: list[tuple[float, float]]
@@ -71,12 +74,12 @@ def build(data: evaluate.BagData, settings: evaluate.Settings) -> OwnReport:
     c = settings.estimator
     real = [m for m in data.measurements if m.source == types.Source.SENSOR]
     res = res_.residuals(c, data.estimates, real)
+    published = res_.published_nis(data.estimates, real)
     fused = [e.t for e in data.estimates if e.update_source == types.UpdateSource.SENSOR]
-    known = set(c.site_map) | {s for s in c.station.split(",") if s}
-    unknown = sorted({m.frame_id for m in real} - known) if c.kind != types.Kind.POSITION else []
-    unknown = [s for s in unknown if not any(r.station == s for r in res)]
-    return OwnReport(settings, res, res_.nis_summary(res), res_.pass_rows(real, fused, res),
-                     res_.gaps(real), unknown)
+    unknown = ([] if c.kind == types.Kind.POSITION
+               else uncovered_stations(c, {m.frame_id for m in real}))
+    return OwnReport(settings, res, published, res_.nis_summary(published),
+                     res_.pass_rows(real, fused, res), res_.gaps(real), unknown)
 
 
 def utc(t: float) -> str:
@@ -105,10 +108,14 @@ def notes(rep: OwnReport) -> list[str]:
                           sorted(n.band.items()))
         out.append(f"NIS inside the 95 % χ² band {bands}: {100 * n.fraction:.1f} % of "
                    f"{n.n} fused measurements (a consistent filter: about 95 %)")
+    else:
+        out.append("no fused measurement with an innovation: no NIS")
+    if rep.residuals:
         norm = np.concatenate([r.normalised for r in rep.residuals])
+        first = rep.residuals[0]
         per = np.sqrt(np.mean(np.array([r.normalised for r in rep.residuals
-                                        if len(r.y) == len(rep.residuals[0].y)]) ** 2, axis=0))
-        names = [c[0] for c in CHANNELS.get(rep.residuals[0].kind, ())]
+                                        if r.kind == first.kind]) ** 2, axis=0))
+        names = [c[0] for c in CHANNELS.get(first.kind, ())]
         out.append(f"residual RMS in units of the innovation σ: {np.sqrt(np.mean(norm ** 2)):.2f}"
                    f" over all channels (" + ", ".join(
                        f"{names[i] if i < len(names) else i} {v:.2f}" for i, v in enumerate(per))
@@ -117,11 +124,9 @@ def notes(rep: OwnReport) -> list[str]:
         out.append(f"residuals: pre-fit (measurement minus the filter's predicted measurement "
                    f"before its update; its NIS reproduces the filter's published one to "
                    f"{worst:.1e} relative)")
-    else:
-        out.append("no fused measurement with an innovation: no residual, no NIS")
     if rep.unknown_stations:
-        out.append(f"no residuals for station(s) {', '.join(rep.unknown_stations)}: their "
-                   f"positions are not known here; give their sites file with --sites")
+        out.append(f"no residuals for station(s) {', '.join(rep.unknown_stations)}: the "
+                   f"settings do not take them (give their sites file with --sites)")
     if rep.gaps:
         h = [(b - a) / 3600.0 for a, b in rep.gaps]
         out.append(f"gaps between passes (measurements more than {PASS_BREAK_S:g} s apart): "
@@ -160,6 +165,8 @@ def write(data: evaluate.BagData, rep: OwnReport, out: Path, title: str) -> None
     """Write the PNGs, report.json and report.html into `out`."""
     out.mkdir(parents=True, exist_ok=True)
     (out / "report.json").write_text(json.dumps(summary(data, rep), indent=2))
+    for name in PLOTS:  # an earlier report's plot that this one does not draw
+        (out / name).unlink(missing_ok=True)
     t0 = min(m.t for m in data.measurements)
     plot_residuals(rep, t0, out / "residuals.png")
     plot_nis(rep, t0, out / "nis.png")
@@ -232,20 +239,20 @@ def plot_residuals(rep: OwnReport, t0: float, path: Path) -> None:
 
 def plot_nis(rep: OwnReport, t0: float, path: Path) -> None:
     """Plot the published NIS of each fused real measurement against its 95 % χ² band."""
-    if not rep.residuals:
+    if not rep.published:
         return
     plt = report._plt()
     fig, ax = plt.subplots(figsize=(9, 3.5))
     shade_gaps(ax, rep, t0)
-    t = np.array([r.t for r in rep.residuals])
-    nis = np.array([r.nis_filter for r in rep.residuals])
+    t = np.array([v.t for v in rep.published])
+    nis = np.array([v.nis for v in rep.published])
     x0, x1 = float(_hours([t[0]], t0)[0]), float(_hours([t[-1]], t0)[0])
     for dof, (lo, hi) in sorted(rep.nis.band.items()):
         ax.fill_between([x0, x1], lo, hi, color="tab:green", alpha=0.15,
                         label=f"95 % χ² band [{lo:.2f}, {hi:.2f}] ({dof} dof)")
-    stations = sorted({r.station for r in rep.residuals})
+    stations = sorted({v.station for v in rep.published})
     for j, st in enumerate(stations):
-        k = np.array([r.station == st for r in rep.residuals])
+        k = np.array([v.station == st for v in rep.published])
         ax.plot(_hours(t[k], t0), nis[k], ".", ms=3, color=f"C{j}", label=st)
     ax.set_yscale("log")
     ax.set_xlabel(_xlabel(t0))

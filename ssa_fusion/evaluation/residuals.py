@@ -8,8 +8,8 @@ What an orbit-determination engineer checks when there is nothing to compare aga
   motion model and process noise (`Tracker.predict_from`), h the station's measurement model
   of the run's settings. With it S = H P⁻ Hᵀ + R, the innovation covariance, and the NIS
   yᵀ S⁻¹ y, which must reproduce the NIS the filter published (`Residual.nis_filter`).
-* `nis_summary`: the published NIS of each fused real measurement against the two-sided 95 %
-  χ² band of the measurement's dimension.
+* `published_nis`, `nis_summary`: the NIS the filter published with each fused real
+  measurement against the two-sided 95 % χ² band of the measurement's dimension.
 * `pass_rows`: per station pass (measurements no more than `PASS_BREAK_S` apart): its span,
   measurements fused and not, the largest elevation (a radar's measured one), and the RMS of
   the residuals normalised by their innovation σ (√diag S): near 1 for a consistent filter.
@@ -33,9 +33,21 @@ from ssa_fusion.core.measurement import StationModels
 from ssa_fusion.core.metrics import chi2_bounds
 from ssa_fusion.core.pass_windows import PASS_BREAK_S, passes
 from ssa_fusion.core.types import Kind, Measurement, Source, StateEstimate, UpdateSource
+from ssa_fusion.core.validation import OK, measurement_problem
 
-__all__ = ["PASS_BREAK_S", "NisSummary", "PassRow", "Residual", "gaps", "nis_summary",
-           "pass_rows", "position_sigma", "residuals"]
+__all__ = [
+    "PASS_BREAK_S",
+    "Nis",
+    "NisSummary",
+    "PassRow",
+    "Residual",
+    "gaps",
+    "nis_summary",
+    "pass_rows",
+    "position_sigma",
+    "published_nis",
+    "residuals",
+]
 
 
 @dataclass
@@ -90,6 +102,8 @@ def residuals(c: EstimatorConfig, estimates: Sequence[StateEstimate],
         e = fused[k]
         if e.update_source != UpdateSource.SENSOR or not e.nis > 0.0:
             continue  # the initial orbit determination: no innovation
+        if measurement_problem(m, tracker.kind, tracker.frame_id) != OK:
+            continue  # a kind or a station the settings do not take
         one = model.get(m.kind, m.frame_id) if isinstance(model, StationModels) else model
         if one is None:
             continue
@@ -107,6 +121,32 @@ def residuals(c: EstimatorConfig, estimates: Sequence[StateEstimate],
 
 
 @dataclass
+class Nis:
+    """The NIS the filter published with the estimate of one fused real measurement."""
+
+    t: float
+    station: str
+    dof: int
+    """The measurement's dimension."""
+    nis: float
+
+
+def published_nis(estimates: Sequence[StateEstimate],
+                  measurements: Sequence[Measurement]) -> list[Nis]:
+    """Return the published NIS of every real measurement the filter fused, in epoch order.
+
+    Fused: an estimate of update source SENSOR at its epoch, with a NIS (not 0: the initial
+    orbit determination has no innovation). Needs no station position: the filter's own
+    number.
+    """
+    nis = {e.t: e.nis for e in estimates
+           if e.update_source == UpdateSource.SENSOR and e.nis > 0.0}
+    return [Nis(m.t, m.frame_id, len(m.z), nis[m.t])
+            for m in sorted(measurements, key=lambda m: m.t)
+            if m.source == Source.SENSOR and m.t in nis]
+
+
+@dataclass
 class NisSummary:
     """The filter's NIS of its fused real measurements against the 95 % χ² band."""
 
@@ -121,19 +161,18 @@ class NisSummary:
         return self.inside / self.n if self.n else math.nan
 
 
-def nis_summary(res: Sequence[Residual], alpha: float = 0.05) -> NisSummary:
-    """Count the published NIS of `res` inside the 95 % χ² band of its dimension.
+def nis_summary(values: Sequence[Nis], alpha: float = 0.05) -> NisSummary:
+    """Count the NIS `values` inside the 95 % χ² band of their dimension.
 
     Two-sided, (1 - alpha), per measurement dimension (`metrics.chi2_bounds`,
     scipy.stats.chi2).
     """
     band: dict[int, tuple[float, float]] = {}
     inside = 0
-    for r in res:
-        dof = len(r.y)
-        lo, hi = band.setdefault(dof, chi2_bounds(dof, alpha=alpha))
-        inside += int(lo <= r.nis_filter <= hi)
-    return NisSummary(len(res), inside, band)
+    for v in values:
+        lo, hi = band.setdefault(v.dof, chi2_bounds(v.dof, alpha=alpha))
+        inside += int(lo <= v.nis <= hi)
+    return NisSummary(len(values), inside, band)
 
 
 @dataclass

@@ -301,6 +301,22 @@ def test_report_on_your_own_radar_residuals_nis_sigma_and_passes(passes, replaye
     assert all(float(r[6]) > SITE["mask_deg"] for r in rows)
 
 
+def test_report_without_the_sites_file_has_no_residuals_and_says_why(passes, replayed,
+                                                                      tmp_path, capsys):
+    """The replayed bag records no station positions: without --sites the report keeps the
+    filter's NIS and σ, and names the station it cannot compute residuals for."""
+    _, bag = replayed
+    out = tmp_path / "report"
+    assert cli.main(["report", str(bag), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert ("no residuals for station(s) nordlys: the settings do not take them (give their "
+            "sites file with --sites)") in text, text
+    assert re.search(r"NIS inside the 95 % χ² band \[0\.22, 9\.35\] \(3 dof\): [\d.]+ % of "
+                     r"1\d\d fused measurements", text), text
+    assert not (out / "residuals.png").exists()
+    assert (out / "nis.png").exists() and (out / "position_sigma.png").exists()
+
+
 def test_a_replay_whose_orbit_determination_never_converges_says_so(passes, tmp_path, capsys):
     """Five measurements, where the real-sky filter's IOD takes seven of one pass."""
     tdm, sites, *_ = passes

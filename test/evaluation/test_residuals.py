@@ -74,16 +74,27 @@ def test_passes_by_hand():
 def test_nis_inside_the_two_sided_95_percent_band_of_each_dimension():
     """3 dof: band [0.216, 9.348]: 0.1 and 10 out, 1 and 5 in; 2 dof: [0.0506, 7.378]:
     0.06 in, 8 out. 3 of 6 inside."""
-    three = [res(t, [0, 0, 0], nis=v) for t, v in enumerate((0.1, 1.0, 10.0, 5.0))]
-    two = [rs.Residual(10.0 + i, "o", Kind.RA_DEC, np.zeros(2), np.ones(2), np.ones(2), v, v)
-           for i, v in enumerate((0.06, 8.0))]
-    s = rs.nis_summary(three + two)
+    values = [rs.Nis(float(t), "a", 3, v) for t, v in enumerate((0.1, 1.0, 10.0, 5.0))]
+    values += [rs.Nis(10.0 + i, "o", 2, v) for i, v in enumerate((0.06, 8.0))]
+    s = rs.nis_summary(values)
     assert s.n == 6 and s.inside == 3 and s.fraction == 0.5
     for dof in (2, 3):
         lo, hi = s.band[dof]
         assert chi2.cdf(lo, dof) == pytest.approx(0.025) and chi2.cdf(hi, dof) == pytest.approx(
             0.975)
     assert math.isnan(rs.nis_summary([]).fraction)
+
+
+def test_published_nis_of_the_fused_real_measurements_only():
+    """The IOD estimate (NIS 0), a prediction, a forecast update and an unfused measurement
+    give none; the dimension is the measurement's."""
+    es = [StateEstimate(0.0, X0, update_source=UpdateSource.SENSOR),
+          StateEstimate(10.0, X0, update_source=UpdateSource.SENSOR, nis=2.5),
+          StateEstimate(15.0, X0), StateEstimate(20.0, X0, update_source=UpdateSource.FORECAST,
+                                                 nis=1.0)]
+    ms = [Measurement(t, np.zeros(2), np.eye(2), kind=Kind.RA_DEC, frame_id="o")
+          for t in (0.0, 10.0, 20.0, 30.0)]
+    assert rs.published_nis(es, ms) == [rs.Nis(10.0, "o", 2, 2.5)]
 
 
 def test_position_sigma_is_the_root_of_the_trace():
