@@ -43,6 +43,8 @@ class BagData:
     measurements: list[types.Measurement] = field(default_factory=list)
     withheld: list[types.Measurement] = field(default_factory=list)
     forecasts: list[types.Measurement] = field(default_factory=list)
+    smoothed: list[types.StateEstimate] = field(default_factory=list)
+    """`replay --offline --smooth`'s smoothed estimates (/ssa/estimate_smoothed)."""
     config: list[str] = field(default_factory=list)
     counts: dict[str, int] = field(default_factory=dict)
     frames: set[str] = field(default_factory=set)
@@ -66,7 +68,8 @@ class BagData:
 def load(path: Path | str) -> BagData:
     """Read the /ssa topics of a bag into core types (other topics are counted only)."""
     data = BagData()
-    states = {topics.TOPIC_TRUTH: data.truth, topics.TOPIC_ESTIMATE: data.estimates}
+    states = {topics.TOPIC_TRUTH: data.truth, topics.TOPIC_ESTIMATE: data.estimates,
+              topics.TOPIC_SMOOTHED: data.smoothed}
     measurements = {topics.TOPIC_MEASUREMENT: data.measurements,
                     topics.TOPIC_WITHHELD: data.withheld, topics.TOPIC_FORECAST: data.forecasts}
     undecodable: Counter[str] = Counter()

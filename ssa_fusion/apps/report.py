@@ -19,7 +19,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ssa_fusion.apps import evaluate
-from ssa_fusion.core import config, metrics, types
+from ssa_fusion.apps.args import add_sites
+from ssa_fusion.core import config, metrics, site_file, types
 from ssa_fusion.ros import bagio
 
 if TYPE_CHECKING:
@@ -38,22 +39,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "those recorded with the bag)")
     p.add_argument("--params-file", type=Path, default=None,
                    help="evaluate with the filter/surrogate settings of this ROS params YAML")
+    add_sites(p, "stations of your own that the bag's measurements name (their residuals "
+                 "need the stations' positions)")
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run `ssa-fusion report`; return the exit code (2 when the bag cannot be evaluated)."""
+    """Run `ssa-fusion report`; return the exit code (2 when the bag cannot be evaluated).
+
+    A bag without simulated truth or outage (your own measurements, replayed) gets the
+    report of `report_own`: residuals, NIS, σ through the gaps, passes.
+    """
     out = args.out or args.bag.with_name(args.bag.name + "_report")
     try:
         data = evaluate.load(args.bag)
         ev = evaluate.evaluate(data, args.scenario, params_file=args.params_file)
         write(data, ev, out)
     except evaluate.NoTruthError as exc:
-        print(f"error: {args.bag}: {exc}; `report` scores a simulated run against its truth "
-              f"over its outage, which measurements of your own (e.g. from `import tdm`) do "
-              f"not have: for their estimates run `ssa-fusion replay {args.bag} --offline "
-              f"--smooth` (add --sites FILE for stations of your own), and `ssa-fusion export "
-              f"oem` on the bag it writes for the ephemeris", file=sys.stderr)
-        return 2
+        return run_own(args, data, out, str(exc))
     except (bagio.BagError, ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -62,6 +64,39 @@ def run(args: argparse.Namespace) -> int:
         print(data.frame_note(args.bag))
     print(f"\nwrote {out}/report.json, {out}/report.html, {out}/visual.mcap (open it in "
           "Foxglove with config/foxglove_layout.json) and plots")
+    return 0
+
+
+def run_own(args: argparse.Namespace, data: evaluate.BagData, out: Path, why: str) -> int:
+    """Report on a bag without simulated truth (`report_own`); return the exit code.
+
+    Its estimates are needed: a bag of measurements only is refused (exit 2) saying to
+    replay it first. The settings are chosen as `replay` chooses them (with ``--sites``).
+    """
+    from ssa_fusion.apps import report_own
+
+    if not any(e.update_source != types.UpdateSource.NONE for e in data.estimates):
+        print(f"error: {args.bag}: {why}, and no estimates of a filter to report on: run "
+              f"`ssa-fusion replay {args.bag} --offline --smooth` (add --sites FILE for "
+              f"stations of your own) and report on the bag it writes", file=sys.stderr)
+        return 2
+    try:
+        sites = site_file.load_stations(args.sites) if args.sites else ()
+        real = [m for m in data.measurements if m.source == types.Source.SENSOR]
+        kind = real[0].kind if real else types.Kind.POSITION
+        chosen = evaluate.settings_for_bag(data.config, kind, args.scenario, args.params_file,
+                                           stations={m.frame_id for m in real}, sites=sites)
+        rep = report_own.build(data, chosen)
+        report_own.write(data, rep, out, title=f"ssa_fusion report: {out.name}")
+    except (ValueError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"{args.bag}: no simulated truth ({why}): the filter judged by its residuals, NIS "
+          f"and covariance\n")
+    print(report_own.table(rep))
+    drawn = [name for name in report_own.PLOTS if (out / name).exists()]
+    print(f"\nwrote {out}/report.json, {out}/report.html"
+          + (f" and plots ({', '.join(drawn)})" if drawn else ""))
     return 0
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from plot_checks import assert_readable  # test/apps on sys.path
 
 from ssa_fusion.apps import evaluate, report
 
@@ -42,14 +43,7 @@ def test_every_plot_has_a_title_and_labelled_axes(figures):
     assert set(figures) == {"arms.png", "estimate_3sigma.png", "forecast_vs_withheld.png",
                             "nis.png"}
     for name, fig in figures.items():
-        axes = fig.get_axes()
-        title = fig._suptitle.get_text() if fig._suptitle is not None else ""
-        assert title or all(ax.get_title() for ax in axes), f"{name}: no title"
-        for ax in axes:
-            assert ax.get_ylabel(), f"{name}: an axis without a y label"
-            assert "[" in ax.get_ylabel(), f"{name}: {ax.get_ylabel()!r} has no unit"
-        bottom = [ax for ax in axes if ax.get_xlabel()]
-        assert bottom and all("[h]" in ax.get_xlabel() for ax in bottom), name
+        assert_readable(name, fig)
 
 
 def test_angles_in_degrees_without_wrap_lines(figures):
