@@ -182,6 +182,14 @@ def late_warning(late: evaluate.LateForecasts, counters: dict[str, int]) -> str 
             "the surrogate time")
 
 
+def catalog_options_given(args: argparse.Namespace) -> list[str]:
+    """Return the catalog-only options of `args` set away from their defaults."""
+    given = {"--objects": args.objects != 0, "--synthetic": args.synthetic != 0,
+             "--shards": args.shards != 1, "--no-surrogate": not args.surrogate,
+             "--surrogate-param": bool(args.surrogate_param)}
+    return [name for name, set_ in given.items() if set_]
+
+
 def _drain(graph: Graph) -> float:
     """Let surrogate, filter and recorder finish what is in flight (until 1 s of quiet).
 
@@ -211,6 +219,11 @@ def run(args: argparse.Namespace) -> int:
         from ssa_fusion.apps import live_catalog
 
         return live_catalog.run(args)
+    catalog_only = catalog_options_given(args)
+    if catalog_only:
+        print(f"error: {', '.join(catalog_only)} apply to a catalog run (--catalog FILE)",
+              file=sys.stderr)
+        return 2
     try:
         s = graphs.live_scenario(args.scenario, args.start, args.duration, args.sites)
     except ValueError as exc:

@@ -148,3 +148,14 @@ def test_live_run_that_cannot_be_evaluated_says_why_without_a_traceback(tmp_path
     err = capsys.readouterr().err
     assert "error: the run cannot be evaluated: the bag has no /ssa/withheld messages" in err
     assert "recorded 3 messages" in err
+
+
+@pytest.mark.parametrize("option", [["--objects", "5"], ["--shards", "2"], ["--no-surrogate"],
+                                    ["--surrogate-param", "min_span=1"], ["--synthetic", "3"]])
+def test_catalog_options_without_a_catalog_are_refused(option, tmp_path, capsys):
+    """They were silently ignored: the scenario ran as if they were not given."""
+    args = cli.build_parser().parse_args(["live", "--out", str(tmp_path / "run"), *option])
+    assert live.run(args) == 2
+    assert f"error: {option[0]} apply to a catalog run (--catalog FILE)" in \
+        capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
