@@ -68,6 +68,7 @@ from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S, ahead_of_clock
 from ssa_fusion.nodes import settings as node_settings
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import (
+    CONFIG_QOS,
     TOPIC_CLOCK,
     TOPIC_CONFIG,
     TOPIC_ESTIMATE,
@@ -139,8 +140,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"error: {out} exists already; choose another --out", file=sys.stderr)
             return 2
         result = replay_offline(stream, s, smooth=args.smooth)
+        settings_used = [node_settings.config_message("filter", s, recorded_gaps(stream)),
+                         node_settings.config_message("surrogate", s)]
         try:
-            write_offline(out, stream, result)
+            write_offline(out, stream, result, settings_used)
         except OSError as exc:
             print(f"error: cannot write {out}: {exc}", file=sys.stderr)
             return 2
@@ -397,15 +400,26 @@ def recorded_gaps(stream: list[bagio.BagMessage]) -> dict[str, Any]:
     return node_settings.recorded_gaps([m.msg.data for m in stream if m.topic == TOPIC_CONFIG])
 
 
-def write_offline(out: Path, stream: list[bagio.BagMessage], result: OfflineResult) -> None:
+def write_offline(out: Path, stream: list[bagio.BagMessage], result: OfflineResult,
+                  settings_used: list[str] | None = None) -> None:
     """Write the bag `out` of the live layout with the new estimates and forecasts.
 
     The played topics as recorded, plus the new estimates and forecasts at the log times of
-    the inputs that produced them, and the smoothed estimates (if any) after the last.
+    the inputs that produced them, and the smoothed estimates (if any) after the last; the
+    estimator settings the replay used (`settings_used`: ``/ssa/config`` JSON of the filter
+    and the surrogate, latched, at the first log time), as the live nodes record theirs, so
+    that the bag alone says how it was made (frame, stations and sites, filter).
     """
     classes = bagio.rosbags_classes()
     writer = bagio.BagWriter(out)
     try:
+        if settings_used:
+            writer.add_topic(TOPIC_CONFIG, "std_msgs/msg/String",
+                             [bagio.qos_from_rclpy(CONFIG_QOS)])
+            first_ns = min((m.t_ns for m in stream), default=0)
+            text = bagio.typestore().types["std_msgs/msg/String"]
+            for data in settings_used:
+                writer.write_msg(TOPIC_CONFIG, first_ns, text(data=data))
         for topic, msgtype in ((TOPIC_MEASUREMENT, "Measurement"), (TOPIC_TRUTH, "StateEstimate"),
                                (TOPIC_WITHHELD, "Measurement"), (TOPIC_FORECAST, "Measurement"),
                                (TOPIC_ESTIMATE, "StateEstimate")):

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import math
 import re
 from pathlib import Path
@@ -33,6 +34,7 @@ from sgp4.api import WGS72, Satrec
 
 from ssa_fusion.apps import ccsds_format, cli, evaluate
 from ssa_fusion.core import types
+from ssa_fusion.ros import bagio
 
 T0 = 1736035200.0  # 2025-01-05T00:00:00 UTC
 SPAN_S = 3.0 * 3600.0  # two passes: ~0.9 h and ~2.6 h after T0, ~9.5 min each
@@ -301,20 +303,30 @@ def test_report_on_your_own_radar_residuals_nis_sigma_and_passes(passes, replaye
     assert all(float(r[6]) > SITE["mask_deg"] for r in rows)
 
 
-def test_report_without_the_sites_file_has_no_residuals_and_says_why(passes, replayed,
-                                                                      tmp_path, capsys):
-    """The replayed bag records no station positions: without --sites the report keeps the
-    filter's NIS and σ, and names the station it cannot compute residuals for."""
+def test_the_replayed_bag_records_its_settings_so_the_report_needs_no_sites_file(
+        passes, replayed, tmp_path, capsys):
+    """`replay --offline` writes the settings it used on /ssa/config (the sites' positions
+    included), as the live nodes do: the report of its bag needs no --sites."""
     _, bag = replayed
+    recorded = [json.loads(m.msg.data) for m in bagio.read_bag(bag, topics=["/ssa/config"])]
+    assert sorted(r["node"] for r in recorded) == ["filter", "surrogate"]
+    filt = next(r for r in recorded if r["node"] == "filter")
+    assert filt["estimator"]["frame"] == "gcrf"
+    assert [s["id"] for s in filt["estimator"]["sites"]] == ["nordlys"]
     out = tmp_path / "report"
     assert cli.main(["report", str(bag), "--out", str(out)]) == 0
     text = capsys.readouterr().out
+    assert "settings: recorded with the bag (/ssa/config)" in text, text
+    assert "no residuals for station" not in text, text
+    assert (out / "residuals.png").exists() and (out / "nis.png").exists()
+    # settings that do not know the station: its NIS and sigma, and why no residuals
+    other = tmp_path / "report_columbus"
+    assert cli.main(["report", str(bag), "--scenario", "iss_radar_columbus",
+                     "--out", str(other)]) == 0
+    text = capsys.readouterr().out
     assert ("no residuals for station(s) nordlys: the settings do not take them (give their "
             "sites file with --sites)") in text, text
-    assert re.search(r"NIS inside the 95 % χ² band \[0\.22, 9\.35\] \(3 dof\): [\d.]+ % of "
-                     r"1\d\d fused measurements", text), text
-    assert not (out / "residuals.png").exists()
-    assert (out / "nis.png").exists() and (out / "position_sigma.png").exists()
+    assert not (other / "residuals.png").exists() and (other / "nis.png").exists()
 
 
 def test_a_replay_whose_orbit_determination_never_converges_says_so(passes, tmp_path, capsys):
