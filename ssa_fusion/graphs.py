@@ -58,6 +58,8 @@ def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, 
     if isinstance(s, sky.SkyScenario) and s.sites_file:  # stations of a sites file
         for node in (sensor, surrogate, filt):
             node["sites"] = s.sites_file
+    if isinstance(s, sky.SkyScenario) and s.elements_file:  # the object of an element set
+        sensor["elements"] = s.elements_file
     recorder = {"use_sim_time": True, "bag": str(bag)}
     return {"sensor_sim": sensor, "surrogate": surrogate, "filter": filt, "recorder": recorder}
 
@@ -80,12 +82,14 @@ def catalog_scenario(name: str) -> sky.SkyScenario:
     return scenario
 
 
-def live_scenario(name: str, start: str = "", duration_h: float = 0.0,
-                  sites: str = "") -> scenarios.Scenario | sky.SkyScenario:
+def live_scenario(name: str, start: str = "", duration_h: float = 0.0, sites: str = "",
+                  elements: str = "") -> scenarios.Scenario | sky.SkyScenario:
     """Return the scenario `name` of `LIVE_SCENARIOS` from `start` for `duration_h`.
 
     `sites`: a sites file whose sites observe a real-sky scenario's object instead of its
-    sensors ('' = its own; `sky.SkyScenario.with_sites`).
+    sensors ('' = its own; `sky.SkyScenario.with_sites`). `elements`: an element set file
+    whose first object they observe instead ('' = the scenario's; `with_elements`: from
+    its epoch unless `start`).
 
     `start`: ISO 8601 UTC ('' = the scenario's epoch); a real-sky scenario's object starts
     from its initial GCRF state at it (`sky.SkyScenario.t0`). `duration_h`: hours of sim
@@ -100,12 +104,14 @@ def live_scenario(name: str, start: str = "", duration_h: float = 0.0,
         raise ValueError(f"--duration {duration_h!r}: hours of sim time, a number >= 0")
     real_sky = sky.SKY_SCENARIOS.get(name)
     if real_sky is not None:
+        if elements:
+            real_sky = real_sky.with_elements(elements)
         t0 = timescales.parse_utc(start) if start else real_sky.t0
         real_sky = real_sky.with_window(t0, duration_h * 3600.0 or real_sky.duration_s)
         return real_sky.with_sites(sites) if sites else real_sky
     paper = scenarios.get(name)
-    if sites:
-        raise ValueError(f"--sites applies to the real-sky scenarios "
+    if sites or elements:
+        raise ValueError(f"--sites and --elements apply to the real-sky scenarios "
                          f"({', '.join(sky.SKY_SCENARIOS)}); {name} keeps the paper's station")
     if start:
         raise ValueError(f"--start applies to the real-sky scenarios "

@@ -69,6 +69,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="a sites file (YAML, docs/SITES.md) whose sites observe a real-sky "
                         "scenario's object instead of its sensors "
                         "(e.g. config/sites/example.yaml)")
+    p.add_argument("--elements", "--tle", "--omm", default="", metavar="FILE",
+                   help="an element set file (TLE, 3LE, OMM XML/CSV) whose first object a "
+                        "real-sky scenario's sensors observe instead of its own (truth: its "
+                        "SGP4/SDP4, from its epoch unless --start)")
     p.add_argument("--duration", type=float, default=0.0, metavar="HOURS",
                    help="hours of sim time (default: the scenario's; a paper scenario keeps "
                         "its tracking and gap and tracks after the gap for the rest)")
@@ -225,7 +229,8 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     try:
-        s = graphs.live_scenario(args.scenario, args.start, args.duration, args.sites)
+        s = graphs.live_scenario(args.scenario, args.start, args.duration, args.sites,
+                                 args.elements)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

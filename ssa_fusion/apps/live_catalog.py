@@ -82,6 +82,8 @@ def args_problem(args: argparse.Namespace) -> str | None:
     if getattr(args, "sites", ""):
         return ("--sites: a catalog is observed by the radars of its --scenario (the catalog "
                 "filter takes the built-in stations only)")
+    if getattr(args, "elements", ""):
+        return "--elements is one object; a catalog's element sets are --catalog FILE"
     if args.start:
         try:
             timescales.parse_utc(args.start)

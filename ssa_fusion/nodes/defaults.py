@@ -66,6 +66,7 @@ class SensorSimDefaults:
     duration: float = 0.0
     start: str = ""
     sites: str = ""
+    elements: str = ""
     noise_sigma: tuple[float, ...] = (-1.0,)
     time_scale: float = 100.0
     seed: int = 0

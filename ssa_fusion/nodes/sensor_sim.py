@@ -178,6 +178,25 @@ def _start_needs_sky(values: Values) -> str | None:
     return None
 
 
+def _elements(value: ParamValue) -> str | None:
+    if not value:
+        return None
+    try:
+        catalog_io.read_catalog(str(value))
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
+def _elements_need_sky(values: Values) -> str | None:
+    if values["elements"] and values["scenario"] not in sky.SKY_SCENARIOS:
+        return (f"needs a real-sky scenario (its sensors observe the object); known: "
+                f"{list(sky.SKY_SCENARIOS)}")
+    if values["elements"] and values["catalog"]:
+        return "one object or a catalog: not both (`catalog` simulates every object)"
+    return None
+
+
 def _sites_need_sky(values: Values) -> str | None:
     if values["sites"] and values["scenario"] not in sky.SKY_SCENARIOS:
         return (f"needs a real-sky scenario (its object is what the sites observe); known: "
@@ -221,6 +240,11 @@ PARAMETERS = ParameterTable("sensor_sim", (
           "real-sky scenarios: a sites file (YAML, docs/SITES.md) whose sites observe the "
           "object instead of the scenario's sensors (their masks, maximum range, noise and "
           "cadence); '' = the scenario's", check=SITES),
+    Param("elements", SENSOR_SIM.elements,
+          "real-sky scenarios: an element set file (TLE, 3LE, OMM XML/CSV) whose first object "
+          "the scenario's sensors observe instead of the scenario's (truth: its SGP4/SDP4, "
+          "from the first whole minute after its epoch unless `start`); '' = the scenario's",
+          check=Check("'' or a readable element set file", _elements)),
     Param("gap_start", _from_scenario("track_s"),
           "tracking before the gap, from the first epoch; ignored when `gaps` is set",
           unit="s", check=NON_NEGATIVE),
@@ -263,7 +287,8 @@ PARAMETERS = ParameterTable("sensor_sim", (
           check=at_least(0)),
 ), rules=(Rule(("catalog", "scenario"), _catalog_needs_sky),
           Rule(("start", "scenario"), _start_needs_sky),
-          Rule(("sites", "scenario"), _sites_need_sky)))
+          Rule(("sites", "scenario"), _sites_need_sky),
+          Rule(("elements", "scenario", "catalog"), _elements_need_sky)))
 """The sensor_sim's parameters."""
 
 
@@ -280,6 +305,8 @@ class SensorSim(SsaNode):
         base, real_sky = _scenario(p.values)
         if real_sky is not None and p.text("sites"):
             real_sky = real_sky.with_sites(p.text("sites"))  # valid: the check `SITES`
+        if real_sky is not None and p.text("elements"):
+            real_sky = real_sky.with_elements(p.text("elements"))  # valid: `_elements`
         self.object_id = p.text("object_id")
         cadence, duration, gaps = p.number("cadence"), p.number("duration"), p.numbers("gaps")
         start = timescales.parse_utc(p.text("start")) if p.text("start") else None

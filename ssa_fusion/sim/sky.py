@@ -29,7 +29,16 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ssa_fusion.core import dynamics, frames, lighttime, refraction, site_file, visibility
+from ssa_fusion.core import (
+    catalog,
+    dynamics,
+    frames,
+    lighttime,
+    refraction,
+    site_file,
+    timescales,
+    visibility,
+)
 from ssa_fusion.core.config import EstimatorConfig
 from ssa_fusion.core.filter_options import SKY_FILTER, FilterOptions
 from ssa_fusion.core.gap_publisher import GapFill
@@ -105,6 +114,9 @@ class SkyScenario:
     own_sensors, sites_file
         Sensors of a sites file (`with_sites`) that `sensors` may name besides the built-in
         presets, and that file's path ('' = none).
+    element_set, elements_file
+        The object's element set and the file it came from (`with_elements`): the truth is
+        its SGP4/SDP4 instead of `x0`/`bstar` (None, '': the scenario's object).
     """
 
     name: str
@@ -128,6 +140,8 @@ class SkyScenario:
     finding: str = ""
     own_sensors: tuple[Sensor, ...] = ()
     sites_file: str = ""
+    element_set: catalog.CatalogEntry | None = None
+    elements_file: str = ""
 
     def sensor(self, name: str) -> Sensor:
         """Return sensor `name`: a site of the scenario's sites file, else a built-in preset."""
@@ -166,6 +180,18 @@ class SkyScenario:
         return self.with_(sensors=tuple(own), own_sensors=tuple(own.values()),
                           sites_file=str(path),
                           outages=tuple((ALL_STATIONS, a, b) for _, a, b in self.outages))
+
+    def with_elements(self, path: str) -> SkyScenario:
+        """Return this scenario's sensors observing the object of the element set file `path`.
+
+        Its first object (TLE, 3LE, OMM XML/CSV: `core.catalog.read_catalog`; ValueError
+        naming the file and line when it is wrong); the truth is its SGP4/SDP4, from the
+        first whole minute at or after its epoch (as a catalog run starts).
+        """
+        entry = catalog.read_catalog(path)[0]
+        start = 60.0 * math.ceil(entry.epoch_unix / 60.0)
+        return self.with_window(start, self.duration_s).with_(element_set=entry,
+                                                              elements_file=str(path))
 
     def with_window(self, t0: float, duration_s: float) -> SkyScenario:
         """Return this scenario from `t0` (Unix s) for `duration_s` (s).
@@ -250,7 +276,19 @@ class SkySimulation:
 
 
 def truth(s: SkyScenario, t: np.ndarray) -> np.ndarray:
-    """Return the true GCRF states (len(t), 6) at Unix epochs `t` (SGP4, the scenario's bstar)."""
+    """Return the true GCRF states (len(t), 6) at Unix epochs `t`.
+
+    SGP4/SDP4 of the scenario's element set (`SkyScenario.with_elements`), else SGP4
+    from `x0` at `t0` with the scenario's bstar. ValueError when SGP4 cannot propagate the
+    element set to an epoch (a decayed object).
+    """
+    if s.element_set is not None:
+        x: np.ndarray = catalog.catalog_states([s.element_set], np.asarray(t, float)).x[0]
+        if not np.isfinite(x).all():
+            bad = float(np.asarray(t, float)[~np.isfinite(x).all(axis=1)][0])
+            raise ValueError(f"{s.element_set.source or s.element_set.object_id}: SGP4 cannot "
+                             f"propagate the element set to {timescales.iso(bad)} (decayed?)")
+        return x
     return dynamics.sgp4_ephemeris(np.array(s.x0), s.t0, np.asarray(t, float) - s.t0,
                                    bstar=s.bstar)
 

@@ -523,6 +523,7 @@ def test_invalid_parameters_refuse_to_start(ros_graph, tmp_path):
         "start/paper": ("sensor_sim", {"start": "2025-06-01T00:00:00Z"}),
         "sites": ("sensor_sim", {"scenario": "iss_network", "sites": "/nope/sites.yaml"}),
         "sites/paper": ("sensor_sim", {"sites": str(EXAMPLE_SITES)}),
+        "elements": ("sensor_sim", {"scenario": "iss_network", "elements": "/nope/one.tle"}),
         "shard": ("catalog_filter", {"shards": 2, "shard": 2}),
         "station": ("catalog_filter", {"station": "atlantis"}),
         "fit_budget": ("catalog_surrogate", {"fit_budget": 2.0}),

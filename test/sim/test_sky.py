@@ -199,3 +199,42 @@ def test_a_shorter_window_keeps_the_outage_inside_the_run():
     assert short.t0 == s.t0 + 86400.0 * 30 and short.duration_s == s.duration_s / 3
     assert short.outages == ((who, start / 3, length / 3),)
     assert start / 3 + length / 3 < short.duration_s
+
+
+CALSPHERE = """CALSPHERE 1
+1 00900U 64063C   25207.12662947  .00000539  00000+0  54429-3 0  9994
+2 00900  90.2135  64.2751 0024196 195.2435 287.7917 13.76124948 26562
+"""
+
+
+def test_an_element_set_is_the_object_a_scenario_observes(tmp_path):
+    """`with_elements`: the truth is the element set's SGP4 (here against the `sgp4`
+    package directly, TEME rotated to the GCRF by astropy), from the first whole minute
+    after its epoch; the scenario's radars measure it."""
+    from astropy import units as u
+    from astropy.coordinates import GCRS, TEME, CartesianDifferential, CartesianRepresentation
+    from astropy.time import Time
+    from sgp4.api import Satrec
+
+    path = tmp_path / "calsphere.tle"
+    path.write_text(CALSPHERE)
+    s = sky.SKY_SCENARIOS["iss_network"].with_elements(str(path))
+    line1, line2 = CALSPHERE.splitlines()[1:3]
+    sat = Satrec.twoline2rv(line1, line2)
+    epoch = (sat.jdsatepoch - 2440587.5) * 86400.0 + sat.jdsatepochF * 86400.0
+    assert s.t0 == 60.0 * math.ceil(epoch / 60.0) and s.t0 - epoch < 60.0
+    t = s.t0 + np.array([0.0, 3600.0, 86400.0])
+    x = sky.truth(s, t)
+    when = Time(t, format="unix", scale="utc")
+    err, r, v = sat.sgp4_array(when.jd1, when.jd2)
+    assert not err.any()
+    teme = TEME(CartesianRepresentation(r.T * u.km, differentials=CartesianDifferential(
+        v.T * u.km / u.s)), obstime=when)
+    gcrs = teme.transform_to(GCRS(obstime=when))
+    ref = np.hstack([gcrs.cartesian.xyz.to_value(u.km).T,
+                     gcrs.velocity.d_xyz.to_value(u.km / u.s).T])
+    np.testing.assert_allclose(x[:, :3], ref[:, :3], atol=1e-4)  # 0.1 m
+    sim = sky.simulate_sky(s.with_window(s.t0, 86400.0), seed=1)
+    radar = {r.station.name for r in s.radars}
+    assert {m.frame_id for m in sim.measurements} & radar  # the radars see it in a day
+    assert sim.t[0] == s.t0
