@@ -2,7 +2,7 @@
 
     ros2 launch ssa_fusion ssa_fusion.launch.py [scenario:=NAME] [time_scale:=X]
                                                 [start:=UTC] [duration:=HOURS]
-                                                [sites:=FILE]
+                                                [sites:=FILE] [elements:=FILE]
                                                 [bag:=DIR] [params_file:=FILE]
 
 Arguments (``ros2 launch ssa_fusion ssa_fusion.launch.py --show-args``):
@@ -16,6 +16,8 @@ Arguments (``ros2 launch ssa_fusion ssa_fusion.launch.py --show-args``):
   as ``ssa-fusion live --start/--duration`` (need ``scenario``; '' = the scenario's);
 * ``sites``: a sites file whose sites observe a real-sky scenario's object, as ``ssa-fusion
   live --sites`` (needs ``scenario``; '' = the scenario's sensors);
+* ``elements``: an element set file whose first object a real-sky scenario observes, as
+  ``ssa-fusion live --elements`` (needs ``scenario``; '' = the scenario's object);
 * ``bag``: the recorder's output directory, which must not exist (default, like ``ros2 bag
   record``'s: ``bags/ssa_<date>_<time>`` at launch, `graphs.default_bag`).
 
@@ -52,22 +54,23 @@ ARGUMENTS = {
     "start": "first epoch of a real-sky scenario, ISO 8601 UTC (needs scenario; '' = its own)",
     "duration": "hours of sim time (needs scenario; '' = the scenario's)",
     "sites": "sites file (docs/SITES.md) observing a real-sky scenario (needs scenario)",
+    "elements": "element set file (TLE/3LE/OMM) of the object observed (needs scenario)",
     "bag": "recorder output directory, must not exist (default: bags/ssa_<date>_<time>)",
 }
 """The launch arguments and their descriptions."""
 
 
 def scenario_parameters(name: str, bag: str, start: str = "", duration: str = "",
-                        sites: str = "") -> dict[str, dict[str, Any]]:
+                        sites: str = "", elements: str = "") -> dict[str, dict[str, Any]]:
     """Per-node parameters that run scenario `name`, as `ssa-fusion live --scenario` sets
     them (its time scale and seed left to the params file); `start` (ISO 8601 UTC),
-    `duration` (hours) and `sites` (a file) as its ``--start``/``--duration``/``--sites``
-    ('' = the scenario's)."""
+    `duration` (hours), `sites` and `elements` (files) as its ``--start``, ``--duration``,
+    ``--sites`` and ``--elements`` ('' = the scenario's)."""
     try:
         hours = float(duration or 0.0)
     except ValueError:
         raise ValueError(f"duration:={duration!r} is not a number") from None
-    s = live_scenario(name, start, hours, sites)
+    s = live_scenario(name, start, hours, sites, elements)
     params = node_parameters(s, time_scale=1.0, seed=0, bag=Path(bag))
     for key in ("time_scale", "seed"):
         params["sensor_sim"].pop(key)
@@ -81,10 +84,10 @@ def graph(context: Any) -> list[Any]:
     extra: dict[str, dict[str, Any]] = {name: {} for name in NODES}
     if args["scenario"]:
         extra = scenario_parameters(args["scenario"], bag, args["start"], args["duration"],
-                                    args["sites"])
-    elif args["start"] or args["duration"] or args["sites"]:
-        raise ValueError("start:=, duration:= and sites:= need scenario:= (the scenario they "
-                         "change)")
+                                    args["sites"], args["elements"])
+    elif any(args[k] for k in ("start", "duration", "sites", "elements")):
+        raise ValueError("start:=, duration:=, sites:= and elements:= need scenario:= (the "
+                         "scenario they change)")
     extra["recorder"].update(bag=bag)
     for name in ("recorder", "surrogate", "filter"):
         extra[name].update(use_sim_time=True)
@@ -112,6 +115,7 @@ def generate_launch_description() -> LaunchDescription:
         "start": "",
         "duration": "",
         "sites": "",
+        "elements": "",
         "bag": default_bag(),
     }
     return launch_description(ARGUMENTS, defaults, graph)

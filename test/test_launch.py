@@ -35,7 +35,8 @@ from ssa_fusion.sim import scenarios
 ROOT = Path(__file__).resolve().parents[1]
 LAUNCH_FILE = ROOT / "launch_scripts" / "ssa_fusion.launch.py"
 NODES = ("recorder", "surrogate", "filter", "sensor_sim")
-ARGUMENTS = ("params_file", "scenario", "time_scale", "start", "duration", "sites", "bag")
+ARGUMENTS = ("params_file", "scenario", "time_scale", "start", "duration", "sites", "elements",
+             "bag")
 
 
 class Recorded:
@@ -201,6 +202,11 @@ def test_start_and_duration_set_the_scenarios_window(launch):
     for name in ("sensor_sim", "filter", "surrogate"):
         assert nodes[name].kwargs["parameters"][1]["sites"] == sites
     assert nodes["filter"].kwargs["parameters"][1]["station"] == "nordlys,kestrel,pampa-obs,"
+    tle = str(ROOT / "config" / "catalogs" / "sample.tle")
+    nodes, _ = run_graph(launch, scenario="iss_network", elements=tle, duration="6")
+    sensor = nodes["sensor_sim"].kwargs["parameters"][1]
+    assert sensor["elements"] == tle and sensor["duration"] == 21600.0
+    assert sensor["start"].startswith("2006-06-26T")  # the first element set's epoch
     nodes, _ = run_graph(launch, scenario="iss_j2_rae", duration="20")
     paper = scenarios.get("iss_j2_rae")
     sensor = nodes["sensor_sim"].kwargs["parameters"][1]
@@ -218,7 +224,7 @@ def test_without_scenario_or_time_scale_the_params_file_decides(launch):
 @pytest.mark.parametrize(("given", "message"), [
     ({"scenario": "mars_base"}, "scenario 'mars_base' unknown; known: "),
     ({"time_scale": "fast"}, "time_scale:='fast' is not a number"),
-    ({"start": "2025-06-01"}, "start:=, duration:= and sites:= need scenario:="),
+    ({"start": "2025-06-01"}, "start:=, duration:=, sites:= and elements:= need scenario:="),
     ({"scenario": "iss_j2_rae", "sites": str(ROOT / "config" / "sites" / "example.yaml")},
      "iss_j2_rae keeps the paper's station"),
     ({"scenario": "iss_j2_rae", "start": "2025-06-01"}, "iss_j2_rae keeps the paper's epoch"),
