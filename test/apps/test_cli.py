@@ -2,6 +2,9 @@
 and `live` never overwrites an earlier run."""
 
 import argparse
+import os
+import signal
+import time
 from pathlib import Path
 
 import pytest
@@ -159,3 +162,32 @@ def test_catalog_options_without_a_catalog_are_refused(option, tmp_path, capsys)
     assert f"error: {option[0]} apply to a catalog run (--catalog FILE)" in \
         capsys.readouterr().err
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_a_stop_signal_runs_the_commands_cleanup_and_exits_128_plus_its_number(
+        sig, monkeypatch, capsys):
+    """In process: the command's `finally` (a live run's: stop every node, close the bag)
+    runs, a second signal during it is ignored, the exit code is a shell's. (A real `live`
+    stopped by SIGTERM: test/graph/test_live_signals.py.)"""
+    cleaned = []
+
+    def command(_args) -> int:
+        try:
+            os.kill(os.getpid(), sig)
+            time.sleep(5.0)  # the signal interrupts this
+            return 0
+        finally:
+            os.kill(os.getpid(), sig)  # a second one must not cut the cleanup short
+            cleaned.append(True)
+
+    class Parser:  # a command line that runs `command`
+        def parse_args(self, _argv) -> argparse.Namespace:
+            return argparse.Namespace(command="report", _run=command)
+
+    monkeypatch.setattr(cli, "build_parser", Parser)
+    before = signal.getsignal(sig)
+    assert cli.main(["report", "bag"]) == 128 + sig
+    assert cleaned == [True]
+    assert f"stopped by {signal.Signals(sig).name}" in capsys.readouterr().err
+    assert signal.getsignal(sig) == before  # the handlers are put back

@@ -38,8 +38,8 @@ def wait_for(cond, timeout: float, what: str) -> None:
         time.sleep(0.2)
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
-def test_live_stops_every_node_and_closes_the_bag(sig, tmp_path):
+@pytest.mark.parametrize("sig", [signal.SIGTERM])  # SIGHUP, SIGINT: the same handler
+def test_live_stops_every_node_and_closes_the_bag(sig, tmp_path):  # (test/apps/test_cli.py)
     domain = fresh_domain_id()
     out = tmp_path / "run"
     cli = subprocess.Popen(
