@@ -83,6 +83,7 @@ class Cause(enum.StrEnum):
     PREDICTIONS_SKIPPED = "predictions_skipped"
     INTERNAL_ERROR = "internal_error"
     UNRECORDABLE_TOPIC = "unrecordable_topic"
+    UNRECORDED_BAG_FAILED = "unrecorded_bag_failed"
 
 
 KIND_NAMES = {Kind.POSITION: "position", Kind.RANGE_AZ_EL: "range_az_el", Kind.RA_DEC: "ra_dec"}

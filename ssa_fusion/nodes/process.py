@@ -28,8 +28,13 @@ if TYPE_CHECKING:
 
 EXIT_OK = 0
 """The node ended: its job was done, or SIGINT/SIGTERM stopped it."""
+EXIT_FAILED = 1
+"""The node could not go on doing its job (a recorder whose disk is full; stderr says why)."""
 EXIT_BAD_PARAMETERS = 2
 """The node could not start: a parameter or a ROS argument is invalid (stderr says which)."""
+
+_finish_code = [EXIT_OK]
+"""The exit code a callback asked for with `finish` (one process runs one node)."""
 
 
 def run(make_node: Callable[[], SsaNode], args: list[str] | None = None) -> int:
@@ -75,16 +80,17 @@ def run(make_node: Callable[[], SsaNode], args: list[str] | None = None) -> int:
         # interrupt would kill the exiting process (-15/-2); ignored signals stay ignored.
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    return code
+    return max(code, _finish_code[0])
 
 
-def finish() -> None:
-    """End the node's loop from a callback: the node's job is done.
+def finish(code: int = EXIT_OK) -> None:
+    """End the node's loop from a callback: the node's job is done, or cannot go on.
 
-    `run` leaves its loop after this callback returns, closes the node and exits 0. (Not an
-    exception: rclpy's executor logs an exception escaping a callback as FATAL with a
-    traceback.)
+    `run` leaves its loop after this callback returns, closes the node and exits with
+    `code` (0: done; `EXIT_FAILED`: it cannot go on, having said why). (Not an exception:
+    rclpy's executor logs an exception escaping a callback as FATAL with a traceback.)
     """
+    _finish_code[0] = max(_finish_code[0], code)
     STOP.set()
 
 

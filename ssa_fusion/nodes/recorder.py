@@ -7,7 +7,9 @@ latched /ssa/config) is held and stamped with the clock's first time, so the bag
 start at time 0, 55 years before its data (which `ros2 bag play` would wait through).
 Topics are discovered as publishers appear. The pending MCAP chunk is flushed to disk every
 `flush_period` s, which bounds what a SIGKILL can lose; SIGINT or SIGTERM close the bag with
-everything received.
+everything received. A bag that cannot be written (a full disk) ends the node with one line
+naming the bag and the reason, exit code 1; what was flushed before stays readable (`ssa-fusion
+bag repair`).
 
     ros2 run ssa_fusion recorder --ros-args -p bag:=bags/run1
 """
@@ -34,6 +36,7 @@ from ssa_fusion.nodes.parameters import (
     ParameterTable,
     ParamValue,
 )
+from ssa_fusion.nodes.process import EXIT_FAILED, finish
 from ssa_fusion.ros.bagio import BagWriter, qos_from_rclpy
 from ssa_fusion.ros.interfaces import Message
 from ssa_fusion.ros.topics import DATA_DEPTH
@@ -88,6 +91,7 @@ class Recorder(SsaNode):
                                  f"{exc}") from exc
         self._subs: dict[str, object] = {}
         self._held: list[tuple[str, bytes]] = []  # received before sim time started
+        self.failed: OSError | None = None  # why the bag cannot be written (then: exit 1)
         self.wall_timer(p.number("discover_period"), self.discover)
         self.wall_timer(p.number("flush_period"), self.flush)
         self.get_logger().info(f"recording to {bag}")
@@ -135,14 +139,43 @@ class Recorder(SsaNode):
             self.get_logger().info(f"recording {topic} [{type_name}]")
 
     def on_message(self, topic: str, data: bytes) -> None:
-        """Write one message of `topic` (its CDR bytes), stamped with the node's clock."""
+        """Write one message of `topic` (its CDR bytes), stamped with the node's clock.
+
+        Once the bag cannot be written (`_cannot_write`), messages are counted as
+        ``unrecorded_bag_failed``, never silently lost.
+        """
+        if self.failed is not None:
+            self.diag.count(Cause.UNRECORDED_BAG_FAILED, f"the bag cannot be written: "
+                                                         f"{self.failed}")
+            return
         now = self.get_clock().now().nanoseconds
-        self.diag.counts[RECORDED + topic] += 1
         if now == 0 and len(self._held) < HOLD_LIMIT:  # sim time has not started yet
             self._held.append((topic, data))
+            self.diag.counts[RECORDED + topic] += 1
             return
-        self._release(now)
-        self.writer.write(topic, now, data)
+        try:
+            self._release(now)
+            self.writer.write(topic, now, data)
+        except OSError as exc:
+            self._cannot_write(exc)
+            self.diag.count(Cause.UNRECORDED_BAG_FAILED, str(exc))
+            return
+        self.diag.counts[RECORDED + topic] += 1
+
+    def _cannot_write(self, exc: OSError) -> None:
+        """Say once why the bag cannot be written (a full disk), and end the node (exit 1).
+
+        What was flushed before stays readable; ``ssa-fusion bag repair`` makes it a whole
+        bag.
+        """
+        if self.failed is not None:
+            return
+        self.failed = exc
+        self.get_logger().error(
+            f"cannot write the bag {self.writer.path}: {exc.strerror or exc} "
+            f"({exc.filename or self.writer.path}); it holds what was flushed before "
+            f"(`ssa-fusion bag repair {self.writer.path}` makes it a whole bag); stopping")
+        finish(EXIT_FAILED)
 
     def _release(self, now: int) -> None:
         """Write what was held until sim time started, stamped `now` (ns)."""
@@ -152,15 +185,27 @@ class Recorder(SsaNode):
 
     def flush(self) -> None:
         """Write what was held once sim time runs; push the pending chunk to disk."""
+        if self.failed is not None:
+            return
         now = self.get_clock().now().nanoseconds
-        if now and self._held:
-            self._release(now)
-        self.writer.flush()
+        try:
+            if now and self._held:
+                self._release(now)
+            self.writer.flush()
+        except OSError as exc:
+            self._cannot_write(exc)
 
     def close(self) -> None:
-        """Close the bag with everything received."""
-        self._release(self.get_clock().now().nanoseconds)  # a graph whose clock never ran: 0
-        self.writer.close()
+        """Close the bag with everything received (or say how to repair it)."""
+        try:
+            if self.failed is None:
+                self._release(self.get_clock().now().nanoseconds)  # no clock ran: stamp 0
+            self.writer.close()
+        except OSError as exc:
+            self.get_logger().error(
+                f"bag {self.writer.path} not closed: {exc.strerror or exc}; `ssa-fusion bag "
+                f"repair {self.writer.path}` recovers what was flushed")
+            return
         total = sum(self.writer.counts.values())
         self.get_logger().info(f"bag closed: {self.writer.path} ({total} messages)")
 

@@ -11,6 +11,7 @@ any ROS 2 message type is kept, not only those this project knows.
 
 from __future__ import annotations
 
+import contextlib
 import re
 import shutil
 import struct
@@ -255,7 +256,10 @@ def _write(target: Path, scan: _Scan, distro: str) -> dict[str, int]:
         writer.close()
         set_ros_distro(target, distro)
     except Exception as exc:
-        writer.abort()
+        with contextlib.suppress(OSError):  # a full disk fails the abort's flush too
+            writer.abort()
         shutil.rmtree(target, ignore_errors=True)
-        raise BagError(f"{target}: cannot write: {exc}") from exc
+        why = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise BagError(f"{target}: cannot write: {why}; nothing written there, the input "
+                       f"bag is unchanged") from exc
     return counts

@@ -901,3 +901,59 @@ def test_a_future_stamp_before_the_first_clock_does_not_poison_later_ones(ros_gr
     c = diag.wait(g, "surrogate", {"rejected_future": 1, "buffered": 6})
     assert "rejected_stale" not in c
     assert [e.t for e in estimates(got)] == [float(T[i]) for i in range(2, 6)]
+
+
+# disk full --------------------------------------------------------------------------------
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 256 KiB tmpfs mounted for the test (skipped where the machine allows no mount)."""
+    import subprocess
+
+    mnt = tmp_path / "disk"
+    mnt.mkdir()
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(mnt)],
+                          capture_output=True, text=True, check=False)
+    if done.returncode:
+        pytest.skip(f"cannot mount a small tmpfs here ({done.stderr.strip() or 'mount'}): "
+                    "the disk-full test needs one")
+    try:
+        yield mnt
+    finally:
+        subprocess.run(["umount", "-l", str(mnt)], check=False)
+
+
+def test_a_full_disk_ends_the_recorder_with_one_line_and_the_bag_repairs(ros_graph, small_disk,
+                                                                         tmp_path, capsys):
+    """The recorder logged a traceback per message and the run went on; now one line names
+    the bag and the reason, the node exits 1 (so `live` ends the run, saying why), and what
+    was flushed before is recovered by `bag repair` (which, onto the full disk itself,
+    says it cannot write and leaves nothing there)."""
+    from ssa_fusion.apps import cli
+
+    g = ros_graph
+    bag = small_disk / "bag"
+    rec = g.start_node("recorder", params={"bag": str(bag), "flush_period": 0.2},
+                       expect_returncode=1)
+    pub = publisher(g, Measurement, "/ssa/measurement", ("recorder",))
+    rng = np.random.default_rng(0)  # random values: zstd cannot shrink them
+    sent = 0
+    while rec.popen.poll() is None and sent < 200_000:
+        m = types.Measurement(t=1.7e9 + sent, z=rng.standard_normal(3), R=np.diag(rng.random(3)),
+                              kind=types.Kind.RANGE_AZ_EL, object_id=f"o{rng.integers(1e9)}",
+                              frame_id="columbus")
+        pub.publish(messages.measurement_to_msg(m))
+        sent += 1
+        if sent % 200 == 0:
+            g.spin_once(0.01)
+    assert g.wait_exit(rec, timeout=30.0) == 1, rec.describe()
+    err = rec.stderr()
+    assert f"cannot write the bag {bag}: No space left on device" in err, err
+    assert "bag repair" in err and "Traceback" not in err, err
+    full = small_disk / "repaired"
+    assert cli.main(["bag", "repair", str(bag), "--out", str(full)]) == 2
+    assert "cannot write: No space left on device" in capsys.readouterr().err
+    assert not full.exists()
+    out = tmp_path / "repaired"
+    assert cli.main(["bag", "repair", str(bag), "--out", str(out)]) == 0
+    recovered = sum(1 for _ in bagio.read_bag(out))
+    assert 0 < recovered < sent
