@@ -40,7 +40,7 @@ ARGUMENTS = {
     "scenario": "real-sky scenario whose radars observe the catalog",
     "time_scale": "sim seconds per wall second",
     "seed": "measurement noise (and synthetic catalog) seed",
-    "bag": "recorder output directory, must not exist (default: bags/ssa_<date>_<time>)",
+    "bag": "recorder output directory, must not exist (default: out/bags/ssa_<date>_<time>)",
 }
 """The launch arguments and their descriptions."""
 

@@ -19,7 +19,7 @@ Arguments (``ros2 launch ssa_fusion ssa_fusion.launch.py --show-args``):
 * ``elements``: an element set file whose first object a real-sky scenario observes, as
   ``ssa-fusion live --elements`` (needs ``scenario``; '' = the scenario's object);
 * ``bag``: the recorder's output directory, which must not exist (default, like ``ros2 bag
-  record``'s: ``bags/ssa_<date>_<time>`` at launch, `graphs.default_bag`).
+  record``'s: ``out/bags/ssa_<date>_<time>`` at launch, `graphs.default_bag`).
 
 The graph shuts itself down: when sensor_sim exits (its schedule is done), after
 `DRAIN_S` s in which filter, surrogate and recorder take what is still in flight; and at once
@@ -55,7 +55,7 @@ ARGUMENTS = {
     "duration": "hours of sim time (needs scenario; '' = the scenario's)",
     "sites": "sites file (docs/SITES.md) observing a real-sky scenario (needs scenario)",
     "elements": "element set file (TLE/3LE/OMM) of the object observed (needs scenario)",
-    "bag": "recorder output directory, must not exist (default: bags/ssa_<date>_<time>)",
+    "bag": "recorder output directory, must not exist (default: out/bags/ssa_<date>_<time>)",
 }
 """The launch arguments and their descriptions."""
 

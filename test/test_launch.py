@@ -140,7 +140,7 @@ def test_the_default_bag_is_named_by_the_launch_time(launch):
     before = time.strftime(BAG_PATTERN)
     bag = declared(launch.generate_launch_description())["bag"].kwargs["default_value"]
     assert before <= bag <= time.strftime(BAG_PATTERN)
-    assert re.fullmatch(r"bags/ssa_\d{8}_\d{6}", bag), bag
+    assert re.fullmatch(r"out/bags/ssa_\d{8}_\d{6}", bag), bag
     nodes, _ = run_graph(launch)
     assert nodes["recorder"].kwargs["parameters"][1]["bag"] == bag
 

@@ -172,8 +172,9 @@ class CatalogSurrogateDefaults:
     max_clock_lead: float = MAX_CLOCK_LEAD_S
 
 
-BAG_PATTERN = "bags/ssa_%Y%m%d_%H%M%S"
-"""`time.strftime` pattern of the recorder's default bag directory (start time)."""
+BAG_PATTERN = "out/bags/ssa_%Y%m%d_%H%M%S"
+"""`time.strftime` pattern of the recorder's default bag directory (start time), under the
+working directory's ``out/`` (never the repository's tracked ``bags/``)."""
 
 
 @dataclass(frozen=True)

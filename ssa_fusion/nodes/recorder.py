@@ -60,8 +60,8 @@ def _new_bag(value: ParamValue) -> str | None:
 
 PARAMETERS = ParameterTable("recorder", (
     Param("bag", Computed(lambda _: time.strftime(BAG_PATTERN),
-                          "`bags/ssa_<YYYYmmdd_HHMMSS>` (start time; not in the yaml: the "
-                          "launch file's `bag:=`)", "bags/ssa_20260101_120000"),
+                          "`out/bags/ssa_<YYYYmmdd_HHMMSS>` (start time; not in the yaml: the "
+                          "launch file's `bag:=`)", "out/bags/ssa_20260101_120000"),
           "output bag directory", check=Check("must not exist", _new_bag)),
     Param("topics", RECORDER.topics, "topics recorded besides every topic under `prefix`"),
     Param("prefix", RECORDER.prefix, "record every topic whose name starts with this"),

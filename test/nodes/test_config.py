@@ -122,7 +122,7 @@ def test_nodes_declare_exactly_the_defaults(tmp_path):
     for node, values in declared.items():
         expected = _expected(node)
         if node == "recorder":
-            assert values.pop("bag").startswith("bags/ssa_")
+            assert values.pop("bag").startswith("out/bags/ssa_")
         assert set(values) == set(expected), node
         for key, value in values.items():
             assert value == expected[key], (node, key)
