@@ -291,9 +291,10 @@ def table(ev: Evaluation) -> str:
         rows.append("\n" + ev.passes.table())
     b = ev.between
     if b is not None and b.gap_epochs:
+        long = (f"gaps > 12 h: {b.long_err_median_km:.3g} km over {b.long_gap_epochs} epochs"
+                if b.long_gap_epochs else "no gap > 12 h")
         rows.append(f"\nbetween passes, what the filter published ({b.gap_epochs} truth epochs): "
-                    f"median position error {b.err_median_km:.3g} km (gaps > 12 h: "
-                    f"{b.long_err_median_km:.3g} km over {b.long_gap_epochs} epochs); right "
+                    f"median position error {b.err_median_km:.3g} km ({long}); right "
                     f"after each pass {b.after_pass_median_km:.3g} km (median); position NEES "
                     f"inside chi2(3)'s 95 % bound at {100 * b.nees_in_95:.1f} % of the epochs, "
                     f"median {b.nees_median:.2f} (chi2(3)'s median: 2.37)")
