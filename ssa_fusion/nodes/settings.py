@@ -25,6 +25,7 @@ from ssa_fusion.core.surrogate import LIVE_SURROGATE
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.types import KIND_NAMES, Kind, MotionModel
 from ssa_fusion.nodes.defaults import FILTER, KM, SURROGATE
+from ssa_fusion.nodes.parameters import ParameterTable
 
 FILTER_KEYS = ("kind", "station", "sites", "motion_model", "p0_sigma", "q", "gate", "iod_samples",
                "iod_max_span", "reinit_after", "sigma_bound", "light_time", "refraction")
@@ -160,6 +161,33 @@ def node_section(params_file: Mapping[str, Any], node: str) -> dict[str, Any]:
     return out
 
 
+PARAMS_FILE_MAX_BYTES = 1_000_000
+"""Largest params file read offline (a node's own settings are a few hundred bytes)."""
+
+ROS_OWN_PARAMETERS = ("use_sim_time", "qos_overrides", "start_type_description_service")
+"""Parameters rclpy declares on every node itself (not in the nodes' tables)."""
+
+
+def section_problem(section: Mapping[str, Any], table: ParameterTable) -> str | None:
+    """Return why a node's ``ros__parameters`` `section` would not start the node, or None.
+
+    As the node judges them at start-up: a name it does not declare, a value its row refuses
+    (`Param.reason`) or of another type. (Rules across parameters are the node's own.)
+    """
+    for key, value in section.items():
+        if key in ROS_OWN_PARAMETERS:
+            continue
+        if key not in table.names:
+            return f"'{key}' is not a parameter of {table.node} (docs/NODES.md)"
+        try:
+            reason = table[key].reason(value)
+        except (TypeError, ValueError, AttributeError):
+            reason = f"of the wrong type ({type(value).__name__})"
+        if reason:
+            return f"parameter '{key}' = {value!r}: {reason}"
+    return None
+
+
 def load_params_file(path: Path | str) -> EstimatorConfig:
     """Return the estimator a ROS params YAML gives the filter and the surrogate.
 
@@ -169,11 +197,23 @@ def load_params_file(path: Path | str) -> EstimatorConfig:
     import yaml
 
     try:
+        if Path(path).stat().st_size > PARAMS_FILE_MAX_BYTES:
+            raise ValueError(f"params file {path}: larger than {PARAMS_FILE_MAX_BYTES} bytes; "
+                             "a params file holds a few settings per node")
         loaded = yaml.safe_load(Path(path).read_text())
     except (OSError, yaml.YAMLError) as exc:
         raise ValueError(f"cannot read params file {path}: {exc}") from exc
+    except (RecursionError, MemoryError):
+        raise ValueError(f"params file {path}: nested too deeply or too large to read") from None
     if not isinstance(loaded, Mapping):
         raise ValueError(f"params file {path}: not a mapping of node names to ros__parameters")
+    from ssa_fusion.nodes.filter import PARAMETERS as FILTER_TABLE
+    from ssa_fusion.nodes.surrogate import PARAMETERS as SURROGATE_TABLE
+
+    for node, table in (("filter", FILTER_TABLE), ("surrogate", SURROGATE_TABLE)):
+        problem = section_problem(node_section(loaded, node), table)
+        if problem:
+            raise ValueError(f"params file {path}: {node}: {problem}")
     filt = {k: v for k, v in node_section(loaded, "filter").items() if k in FILTER_KEYS}
     surr = {k: v for k, v in node_section(loaded, "surrogate").items() if k in SURROGATE_KEYS}
     try:

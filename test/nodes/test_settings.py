@@ -1,6 +1,7 @@
 """`nodes.settings`: the one translation between ROS parameters (SI) and EstimatorConfig."""
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -38,7 +39,7 @@ def test_default_yaml_is_the_default_live_scenario():
 def test_params_file_errors_name_the_file_and_value(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("filter:\n  ros__parameters:\n    motion_model: sgp4\n")
-    with pytest.raises(ValueError, match=r"bad\.yaml.*motion_model 'sgp4'"):
+    with pytest.raises(ValueError, match=r"bad\.yaml.*motion_model' = 'sgp4'"):
         settings.load_params_file(bad)
     mixed = tmp_path / "mixed.yaml"
     mixed.write_text("filter:\n  ros__parameters:\n    kind: position\n"
@@ -47,6 +48,22 @@ def test_params_file_errors_name_the_file_and_value(tmp_path):
         settings.load_params_file(mixed)
     with pytest.raises(ValueError, match="cannot read params file"):
         settings.load_params_file(tmp_path / "missing.yaml")
+
+
+@pytest.mark.parametrize(("text", "says"), [
+    ("filter:\n  ros__parameters:\n    q: .nan\n", "filter: parameter 'q' = nan: must be"),
+    ("filter:\n  ros__parameters:\n    q: [1, 2]\n", "filter: parameter 'q' = [1, 2]"),
+    ("filter:\n  ros__parameters:\n    qq: 1.0\n", "filter: 'qq' is not a parameter of filter"),
+    ("surrogate:\n  ros__parameters:\n    delays: -3\n", "surrogate: parameter 'delays' = -3"),
+    ("[" * 50000 + "]" * 50000, "nested too deeply or too large to read"),
+])
+def test_a_params_file_offline_gets_the_nodes_checks(tmp_path, text, says):
+    """`report`/`replay --params-file` judged the file less than the nodes do: a NaN q gave
+    a garbage table with exit 0, deep nesting a RecursionError traceback."""
+    path = tmp_path / "p.yaml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=re.escape(says)):
+        settings.load_params_file(path)
 
 
 def test_recorded_settings_merge_both_nodes_last_message():
