@@ -193,6 +193,23 @@ class SkyScenario:
         return self.with_window(start, self.duration_s).with_(element_set=entry,
                                                               elements_file=str(path))
 
+    def with_geometry(self, d_raan_rad: float, d_phase_rad: float) -> SkyScenario:
+        """Return this scenario with its object's orbit turned: another plane and phase.
+
+        `x0` rotated by `d_phase_rad` about its angular momentum (the argument of latitude
+        moves along the same orbit), then by `d_raan_rad` about the GCRF z axis (the
+        ascending node moves; inclination, shape and energy stay). ValueError for an
+        object of an element set (its orbit is the element set's).
+        """
+        if self.element_set is not None:
+            raise ValueError("the orbit of an element set's object is its own: not turned")
+        x = np.array(self.x0, dtype=float)
+        h = np.cross(x[:3], x[3:])
+        phase = _rotation(h / np.linalg.norm(h), d_phase_rad)
+        node = _rotation(np.array([0.0, 0.0, 1.0]), d_raan_rad)
+        turn = node @ phase
+        return self.with_(x0=tuple(np.concatenate([turn @ x[:3], turn @ x[3:]]).tolist()))
+
     def with_window(self, t0: float, duration_s: float) -> SkyScenario:
         """Return this scenario from `t0` (Unix s) for `duration_s` (s).
 
@@ -273,6 +290,14 @@ class SkySimulation:
     def withheld_measurements(self) -> list[Measurement]:
         """What the sensors would have measured during the scheduled outages."""
         return [m for m, w in zip(self.measurements, self.withheld, strict=True) if w]
+
+
+def _rotation(axis: np.ndarray, angle_rad: float) -> np.ndarray:
+    """Return the 3x3 rotation by `angle_rad` about the unit vector `axis` (Rodrigues)."""
+    k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],
+                  [-axis[1], axis[0], 0.0]])
+    out: np.ndarray = np.eye(3) + math.sin(angle_rad) * k + (1.0 - math.cos(angle_rad)) * (k @ k)
+    return out
 
 
 def truth(s: SkyScenario, t: np.ndarray) -> np.ndarray:

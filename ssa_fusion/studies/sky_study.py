@@ -11,11 +11,15 @@ passes with each ``gap_forecast`` (`evaluation.gap_scores`: error at every gap e
 over gaps > 12 h, after each pass, position NEES against chi2(3)). Seeds are
 `distributions.EVALUATION_SEEDS` (never used to choose a setting: `sky.SKY_Q` was chosen on
 seeds 1-3); start epochs `distributions.START_OFFSETS_H` after the nominal one move the
-passes. Each run asserts that it scored passes and all six arms. Units: km, h.
+passes, and each seed turns the orbit (`case_geometry`: its plane by up to
+`RAAN_SPREAD_DEG` about the pole, its phase anywhere along it), so that no two runs share
+their passes and gaps. Each run asserts that it scored passes and all six arms. Units: km,
+h.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict
@@ -31,11 +35,28 @@ from ssa_fusion.studies import sky_runs
 ARMS = [str(a) for a in arms.ArmName]
 
 
+RAAN_SPREAD_DEG = 15.0
+"""How far (deg, either way) an evaluation case turns its orbit's plane about the pole: far
+enough that the passes and the gaps differ from seed to seed, near enough that a scenario
+keeps its character (leo_optical's plane near the terminator, where optical sites see it)."""
+
+
+def case_geometry(seed: int) -> tuple[float, float]:
+    """Return the orbit turn of evaluation case `seed`: (node shift, phase shift), rad.
+
+    The node shift uniform in +-`RAAN_SPREAD_DEG`, the phase uniform in [0, 360) deg, from a
+    generator of its own (the measurement noise of `seed` is not disturbed).
+    """
+    rng = np.random.default_rng([seed, 7])
+    return (math.radians(rng.uniform(-RAAN_SPREAD_DEG, RAAN_SPREAD_DEG)),
+            rng.uniform(0.0, 2.0 * math.pi))
+
+
 def run_case(case: tuple[str, float, int]) -> dict[str, Any]:
     """Run one case (scenario name, start offset h, seed); return its numbers."""
     name, offset_h, seed = case
     base = sky.SKY_SCENARIOS[name]
-    s = base.with_(t0=base.t0 + 3600.0 * offset_h)
+    s = base.with_(t0=base.t0 + 3600.0 * offset_h).with_geometry(*case_geometry(seed))
     sim = sky.simulate_sky(s, seed=seed)
     ev = sky_runs.evaluate_sky(sim, seed=seed)
     after = [p[3] for p in ev.passes.passes]

@@ -238,3 +238,35 @@ def test_an_element_set_is_the_object_a_scenario_observes(tmp_path):
     radar = {r.station.name for r in s.radars}
     assert {m.frame_id for m in sim.measurements} & radar  # the radars see it in a day
     assert sim.t[0] == s.t0
+
+
+def test_an_evaluation_case_turns_the_orbit_but_keeps_its_shape():
+    """`with_geometry` (the real-sky study's cases, `sky_study.case_geometry`): the node
+    moves by the shift asked, the phase along the orbit by its own; inclination, energy and
+    angular momentum's size stay (checked on the state, not on the rotation code)."""
+    from ssa_fusion.core.constants import MU_EARTH
+    from ssa_fusion.studies.sky_study import RAAN_SPREAD_DEG, case_geometry
+
+    def elements(x: np.ndarray) -> tuple[float, float, float, float]:
+        r, v = x[:3], x[3:]
+        h = np.cross(r, v)
+        node = math.atan2(h[0], -h[1])
+        inc = math.acos(h[2] / np.linalg.norm(h))
+        energy = v @ v / 2 - MU_EARTH / np.linalg.norm(r)
+        return node, inc, energy, float(np.linalg.norm(h))
+
+    base = sky.SKY_SCENARIOS["iss_radar_columbus"]
+    shifts = [case_geometry(seed) for seed in range(101, 121)]
+    assert all(abs(d) <= math.radians(RAAN_SPREAD_DEG) for d, _ in shifts)
+    assert len({round(p, 6) for _, p in shifts}) == 20  # every case its own phase
+    d_raan, d_phase = shifts[0]
+    x0, x1 = np.array(base.x0), np.array(base.with_geometry(d_raan, d_phase).x0)
+    n0, i0, e0, h0 = elements(x0)
+    n1, i1, e1, h1 = elements(x1)
+    assert math.remainder(n1 - n0 - d_raan, 2 * math.pi) == pytest.approx(0.0, abs=1e-12)
+    assert (i1, e1, h1) == pytest.approx((i0, e0, h0), rel=1e-12)
+    # the phase: the angle between the positions, seen in the (turned back) plane
+    back = base.with_geometry(0.0, d_phase).x0
+    cos = np.dot(x0[:3], back[:3]) / np.linalg.norm(x0[:3]) / np.linalg.norm(back[:3])
+    assert math.acos(np.clip(cos, -1, 1)) == pytest.approx(
+        abs(math.remainder(d_phase, 2 * math.pi)), abs=1e-9)
