@@ -51,3 +51,15 @@ def add_sites(p: argparse.ArgumentParser, what: str) -> None:
     """Add ``--sites FILE`` (a sites file, `core.site_file`; `what` it gives) to `p`."""
     p.add_argument("--sites", type=Path, default=None, metavar="SITES.yaml",
                    help=f"sites file (YAML, docs/SITES.md): {what}")
+
+
+def add_settings(p: argparse.ArgumentParser, verb: str, default: str) -> None:
+    """Add ``--scenario`` and ``--params-file``: the estimator settings to `verb` with.
+
+    `default`: what is used without either.
+    """
+    p.add_argument("--scenario", default="",
+                   help=f"{verb} with this paper scenario's estimator settings (default: "
+                        f"{default})")
+    p.add_argument("--params-file", type=Path, default=None,
+                   help=f"{verb} with the filter/surrogate settings of this ROS params YAML")

@@ -51,7 +51,7 @@ from typing import Any
 import numpy as np
 
 from ssa_fusion.apps import evaluate
-from ssa_fusion.apps.args import add_domain_id, add_sites, positive_float
+from ssa_fusion.apps.args import add_domain_id, add_settings, add_sites, positive_float
 from ssa_fusion.core import site_file, types
 from ssa_fusion.core.config import (
     EstimatorConfig,
@@ -98,11 +98,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--smooth", action="store_true",
                    help="with --offline: also the RTS-smoothed estimates (the definitive orbit) "
                         "on /ssa/estimate_smoothed, and their error against the bag's truth")
-    p.add_argument("--scenario", default="",
-                   help="replay with this paper scenario's estimator settings (default: "
-                        "those recorded with the bag, else the measurement kind's default)")
-    p.add_argument("--params-file", type=Path, default=None,
-                   help="replay with the filter/surrogate settings of this ROS params YAML")
+    add_settings(p, "replay", "those recorded with the bag, else the measurement kind's "
+                              "default")
     add_sites(p, "stations of your own that the bag's measurements name; the filter takes "
                  "the stations its measurements name")
     add_domain_id(p)

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ssa_fusion.apps import evaluate
-from ssa_fusion.apps.args import add_sites
+from ssa_fusion.apps.args import add_settings, add_sites
 from ssa_fusion.core import config, metrics, site_file, types
 from ssa_fusion.ros import bagio
 
@@ -34,11 +34,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """Add the options of `ssa-fusion report` to `p`."""
     p.add_argument("bag", type=Path, help="rosbag2 directory (or .mcap file) to report on")
     p.add_argument("--out", type=Path, default=None, help="output directory (default: BAG_report)")
-    p.add_argument("--scenario", default="",
-                   help="evaluate with this paper scenario's estimator settings (default: "
-                        "those recorded with the bag)")
-    p.add_argument("--params-file", type=Path, default=None,
-                   help="evaluate with the filter/surrogate settings of this ROS params YAML")
+    add_settings(p, "evaluate", "those recorded with the bag")
     add_sites(p, "stations of your own that the bag's measurements name (their residuals "
                  "need the stations' positions)")
 

@@ -19,7 +19,7 @@ import math
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 
-from ssa_fusion.core.site_file import SiteFileError, load_stations
+from ssa_fusion.core.site_file import load_stations
 from ssa_fusion.core.stations import network_stations, station_ids
 from ssa_fusion.core.types import KIND_NAMES
 from ssa_fusion.nodes.defaults import CatalogFilterDefaults, FilterDefaults
@@ -120,15 +120,26 @@ def non_negative_numbers(count: int, reason: str) -> Check:
     return Check(f"{count} values, each ≥ 0", test)
 
 
-def _stations(value: ParamValue) -> str | None:
-    try:
-        network_stations(str(value))
-    except ValueError as exc:
-        return str(exc)
-    return None
+def read_by(read: Callable[[str], object],
+            empty_ok: bool = False) -> Callable[[ParamValue], str | None]:
+    """Return a check that passes a value `read` takes, else gives `read`'s ValueError.
+
+    `empty_ok`: '' passes unread (a parameter whose '' means "none").
+    """
+    def check(value: ParamValue) -> str | None:
+        if empty_ok and value == "":
+            return None
+        try:
+            read(str(value))
+        except ValueError as exc:
+            return str(exc)
+        return None
+
+    return check
 
 
-STATIONS = Check("a station id, a network id, or station ids separated by commas", _stations)
+STATIONS = Check("a station id, a network id, or station ids separated by commas",
+                 read_by(network_stations))
 """Stations (`core.stations.network_stations`): a station, a network, or ids with commas."""
 
 
@@ -143,15 +154,7 @@ STATION_IDS = Check("a station id (built in, or of `sites`), a network id, or st
 ``station`` and ``sites`` (`sites_problem`)."""
 
 
-def _sites_file(value: ParamValue) -> str | None:
-    try:
-        load_stations(str(value))
-    except SiteFileError as exc:
-        return str(exc)
-    return None
-
-
-SITES = Check("'' or a readable, valid sites file", _sites_file)
+SITES = Check("'' or a readable, valid sites file", read_by(load_stations))
 """A sites file (`core.site_file`), or '' for the built-in stations only."""
 
 

@@ -47,6 +47,7 @@ from ssa_fusion.nodes.parameters import (
     all_non_negative,
     at_least,
     one_of,
+    read_by,
 )
 from ssa_fusion.nodes.process import finish
 from ssa_fusion.ros import messages
@@ -161,53 +162,19 @@ def _readers(value: ParamValue) -> str | None:
     return check_needs([str(x) for x in value if x])
 
 
-def _start(value: ParamValue) -> str | None:
-    if not value:
+def _needs_sky(name: str, why: str) -> Rule:
+    """Return the rule that parameter `name`, when set, needs a real-sky `scenario` (`why`)."""
+    def test(values: Values) -> str | None:
+        if values[name] and values["scenario"] not in sky.SKY_SCENARIOS:
+            return f"needs a real-sky scenario ({why}); known: {list(sky.SKY_SCENARIOS)}"
         return None
-    try:
-        timescales.parse_utc(str(value))
-    except ValueError as exc:
-        return str(exc)
-    return None
+
+    return Rule((name, "scenario"), test)
 
 
-def _start_needs_sky(values: Values) -> str | None:
-    if values["start"] and values["scenario"] not in sky.SKY_SCENARIOS:
-        return ("applies to the real-sky scenarios and catalogs; a paper scenario keeps the "
-                f"paper's epoch (real-sky: {list(sky.SKY_SCENARIOS)})")
-    return None
-
-
-def _elements(value: ParamValue) -> str | None:
-    if not value:
-        return None
-    try:
-        catalog_io.read_catalog(str(value))
-    except ValueError as exc:
-        return str(exc)
-    return None
-
-
-def _elements_need_sky(values: Values) -> str | None:
-    if values["elements"] and values["scenario"] not in sky.SKY_SCENARIOS:
-        return (f"needs a real-sky scenario (its sensors observe the object); known: "
-                f"{list(sky.SKY_SCENARIOS)}")
+def _one_object_or_a_catalog(values: Values) -> str | None:
     if values["elements"] and values["catalog"]:
         return "one object or a catalog: not both (`catalog` simulates every object)"
-    return None
-
-
-def _sites_need_sky(values: Values) -> str | None:
-    if values["sites"] and values["scenario"] not in sky.SKY_SCENARIOS:
-        return (f"needs a real-sky scenario (its object is what the sites observe); known: "
-                f"{list(sky.SKY_SCENARIOS)}")
-    return None
-
-
-def _catalog_needs_sky(values: Values) -> str | None:
-    if values["catalog"] and values["scenario"] not in sky.SKY_SCENARIOS:
-        return (f"needs a real-sky scenario (its radars observe the catalog); known: "
-                f"{list(sky.SKY_SCENARIOS)}")
     return None
 
 
@@ -235,7 +202,7 @@ PARAMETERS = ParameterTable("sensor_sim", (
           "`2025-06-01T00:00:00Z`); the object starts from the scenario's initial GCRF state "
           "at it, so its orbit plane meets the Sun and the sites elsewhere; '' = the "
           "scenario's epoch (a catalog: its first element set's)",
-          check=Check("ISO 8601 UTC, 1972..2038", _start)),
+          check=Check("ISO 8601 UTC, 1972..2038", read_by(timescales.parse_utc, empty_ok=True))),
     Param("sites", SENSOR_SIM.sites,
           "real-sky scenarios: a sites file (YAML, docs/SITES.md) whose sites observe the "
           "object instead of the scenario's sensors (their masks, maximum range, noise and "
@@ -244,7 +211,8 @@ PARAMETERS = ParameterTable("sensor_sim", (
           "real-sky scenarios: an element set file (TLE, 3LE, OMM XML/CSV) whose first object "
           "the scenario's sensors observe instead of the scenario's (truth: its SGP4/SDP4, "
           "from the first whole minute after its epoch unless `start`); '' = the scenario's",
-          check=Check("'' or a readable element set file", _elements)),
+          check=Check("'' or a readable element set file",
+                      read_by(catalog_io.read_catalog, empty_ok=True))),
     Param("gap_start", _from_scenario("track_s"),
           "tracking before the gap, from the first epoch; ignored when `gaps` is set",
           unit="s", check=NON_NEGATIVE),
@@ -285,10 +253,11 @@ PARAMETERS = ParameterTable("sensor_sim", (
           "catalog: spread its first element set into N objects of the same regime "
           "(`survey.synthetic_catalog`, seeded by `seed`; 0 = the catalog's own)",
           check=at_least(0)),
-), rules=(Rule(("catalog", "scenario"), _catalog_needs_sky),
-          Rule(("start", "scenario"), _start_needs_sky),
-          Rule(("sites", "scenario"), _sites_need_sky),
-          Rule(("elements", "scenario", "catalog"), _elements_need_sky)))
+), rules=(_needs_sky("catalog", "its radars observe the catalog"),
+          _needs_sky("start", "a paper scenario keeps the paper's epoch"),
+          _needs_sky("sites", "its object is what the sites observe"),
+          _needs_sky("elements", "its sensors observe the object"),
+          Rule(("elements", "catalog"), _one_object_or_a_catalog)))
 """The sensor_sim's parameters."""
 
 
@@ -319,7 +288,7 @@ class SensorSim(SsaNode):
         self.catalog: survey.Observations | None = None
         self.schedule: Schedule = []
         if catalog:
-            assert real_sky is not None  # the rule `_catalog_needs_sky`
+            assert real_sky is not None  # the rule `_needs_sky("catalog", ...)`
             self.catalog, summary = self._catalog(real_sky, catalog, p.integer("objects"),
                                                   p.integer("synthetic"), duration, start,
                                                   seed)

@@ -148,26 +148,19 @@ def test_the_optical_network_observes_in_april_and_not_in_january():
     assert sun.sunlit(sky.truth(s, t)[:, :3], t).all()
 
 
-SITES_YAML = """
-sites:
-  - id: near_radar
+RADAR_AT = """
+  - id: {id}
     latitude_deg: 39.0
     longitude_deg: -83.0
     height_m: 250.0
     type: radar
-    noise: {range_m: 20.0, azimuth_deg: 0.02, elevation_deg: 0.02}
-    cadence_s: 10.0
-    min_elevation_deg: 10.0
-    max_range_km: 1000.0
-  - id: far_radar
-    latitude_deg: 39.0
-    longitude_deg: -83.0
-    height_m: 250.0
-    type: radar
-    noise: {range_m: 20.0, azimuth_deg: 0.02, elevation_deg: 0.02}
+    noise: {{range_m: 20.0, azimuth_deg: 0.02, elevation_deg: 0.02}}
     cadence_s: 10.0
     min_elevation_deg: 10.0
 """
+SITES_YAML = ("sites:" + RADAR_AT.format(id="near_radar") + "    max_range_km: 1000.0\n"
+              + RADAR_AT.format(id="far_radar"))
+"""Two radars at one site; the near one measures only within 1000 km."""
 
 
 def test_sites_of_a_file_observe_within_their_mask_and_range(tmp_path):
