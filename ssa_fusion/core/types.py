@@ -77,6 +77,7 @@ class Cause(enum.StrEnum):
     RESET_CLOCK_JUMP = "reset_clock_jump"
     HELD_UNTIL_CLOCK = "held_until_clock"
     HELD_AHEAD_OF_CLOCK = "held_ahead_of_clock"
+    REJECTED_ID = "rejected_id"
     DROPPED_BEFORE_CLOCK = "dropped_before_clock"
     FORECASTS_ROLLED_BACK = "forecasts_rolled_back"
     FORECAST_INVALID = "forecast_invalid"

@@ -39,19 +39,38 @@ MAX_VARIANCE = 1e12
 rad carries no information, and such a measurement fused in the initial orbit determination
 would poison the filter."""
 TWO_PI = 2.0 * math.pi
+MAX_ID_CHARS = 128
+"""Longest object id or frame id taken (characters): a NORAD number, an international
+designator, a station name fit many times over; a megabyte id would be copied into every
+estimate and every /diagnostics report."""
+
+
+def id_problem(object_id: str, frame_id: str) -> Problem:
+    """Return `REJECTED_ID` for an object or frame id over `MAX_ID_CHARS`, else `OK`.
+
+    The reason quotes only the id's start: it must stay a line.
+    """
+    for what, value in (("object_id", object_id), ("frame_id", frame_id)):
+        if len(value) > MAX_ID_CHARS:
+            return (Cause.REJECTED_ID, f"{what} of {len(value)} characters (at most "
+                                       f"{MAX_ID_CHARS}): {value[:32]!r}...")
+    return OK
 
 
 def measurement_problem(m: Measurement, kind: int | tuple[int, ...] | None,
                         frame_id: str = "") -> Problem:
     """Return what is wrong with `m` for a consumer of `kind` from `frame_id`, or `OK`.
 
-    `kind` (one kind or a tuple of them) None and `frame_id` "" accept any. Problems: wrong
-    kind or frame, NaN/inf anywhere, an impossible range/az/el or ra/dec (declination beyond
-    +-pi/2), an implausible value (range below `MIN_RANGE_KM` or beyond `MAX_RANGE_KM`,
-    azimuth or right ascension outside [-2pi, 2pi], any value beyond `MAX_ABS_VALUE`, a
-    covariance entry beyond `MAX_VARIANCE`), or a covariance that is not symmetric positive
-    semi-definite.
+    `kind` (one kind or a tuple of them) None and `frame_id` "" accept any. Problems: an
+    object or frame id over `MAX_ID_CHARS`, wrong kind or frame, NaN/inf anywhere, an
+    impossible range/az/el or ra/dec (declination beyond +-pi/2), an implausible value
+    (range below `MIN_RANGE_KM` or beyond `MAX_RANGE_KM`, azimuth or right ascension outside
+    [-2pi, 2pi], any value beyond `MAX_ABS_VALUE`, a covariance entry beyond
+    `MAX_VARIANCE`), or a covariance that is not symmetric positive semi-definite.
     """
+    problem = id_problem(m.object_id, m.frame_id)
+    if problem != OK:
+        return problem
     z = np.asarray(m.z, dtype=float)
     R = np.asarray(m.R, dtype=float)
     if kind is not None and m.kind not in (kind if isinstance(kind, tuple) else (kind,)):

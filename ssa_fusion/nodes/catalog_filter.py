@@ -27,7 +27,7 @@ import numpy as np
 from ssa_fusion.core.stations import network_stations
 from ssa_fusion.core.track_bank import TrackBank
 from ssa_fusion.core.types import Cause, Kind, Measurement, Source, StateEstimate, UpdateSource
-from ssa_fusion.core.validation import measurement_problem
+from ssa_fusion.core.validation import id_problem, measurement_problem
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
@@ -123,6 +123,10 @@ class CatalogFilterNode(SsaNode):
         if msg.source != Source.SENSOR:
             self.diag.count(Cause.REJECTED_SOURCE, f"source {msg.source} on "
                             f"{TOPIC_MEASUREMENT}, which carries only sensor data")
+            return False
+        cause, reason = id_problem(msg.object_id, msg.header.frame_id)
+        if cause:
+            self.diag.count(Cause(cause), reason)
             return False
         why = shard_problem(msg.shard_key, msg.object_id, self.shard, self.shards)
         if why:

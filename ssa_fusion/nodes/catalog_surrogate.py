@@ -26,6 +26,7 @@ import numpy as np
 
 from ssa_fusion.core.gap_bank import CATALOG_RESIDUAL, GapBank, GapBankConfig, GapForecast
 from ssa_fusion.core.types import Cause, MotionModel, StateEstimate, UpdateSource
+from ssa_fusion.core.validation import id_problem
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import CATALOG_SURROGATE
 from ssa_fusion.nodes.diagnostics import Count, NodeCause
@@ -126,6 +127,10 @@ class CatalogSurrogateNode(SsaNode):
         """Take one estimate of the filter: a real measurement's is an object's newest."""
         if msg.update_source != UpdateSource.SENSOR:
             self.diag.counts[NodeCause.IGNORED_NOT_SENSOR] += 1  # forecasts, ours included
+            return
+        cause, reason = id_problem(msg.object_id, "")
+        if cause:
+            self.diag.count(Cause(cause), reason)
             return
         why = shard_problem(msg.shard_key, msg.object_id, self.shard, self.shards)
         if why:

@@ -33,6 +33,19 @@ def test_implausible_measurements_are_refused_with_a_reason(z, cov, what):
     assert cause == Cause.REJECTED_IMPLAUSIBLE and what in detail
 
 
+@pytest.mark.parametrize("field", ["object_id", "frame_id"])
+def test_a_megabyte_id_is_refused_in_one_line(field):
+    """A 1 MB object id made every status report 2 MB; now it is refused, and the reason
+    quotes only its start."""
+    m = razel(T0, [7000.0, 1.0, 0.5])
+    setattr(m, field, "x" * 1_000_000)
+    cause, detail = validation.measurement_problem(m, Kind.RANGE_AZ_EL)
+    assert cause == Cause.REJECTED_ID and f"{field} of 1000000 characters" in detail
+    assert len(detail) < 120
+    setattr(m, field, "x" * validation.MAX_ID_CHARS)  # at the limit: taken
+    assert validation.id_problem(m.object_id, m.frame_id) == validation.OK
+
+
 def test_covariance_check_does_not_overflow():
     """A covariance of 1e308 made eigvalsh fail ("did not converge") before: now it is only
     judged by its shape, at any scale."""
