@@ -39,6 +39,7 @@ from .initiation import InitialState, OrbitInitiator
 from .measurement import StationModels
 from .timescales import UNIX_EPOCH_JD
 from .types import Cause, Kind, Measurement
+from .validation import MAX_OBJECTS
 
 Array = NDArray[np.float64]
 
@@ -80,12 +81,17 @@ class TrackBank:
         The network: the ``frame_id`` of a measurement names its station.
     capacity : int
         Initial number of rows (grows by doubling as objects arrive).
+    max_objects : int
+        The most objects it holds: a measurement of one more is refused
+        (``rejected_bank_full``), so a flood of new object ids cannot take the machine's
+        memory (~0.5 kB per object).
     jd0 : float
         UTC Julian date of t = 0 of the measurement clock (Unix time by default).
     """
 
     def __init__(self, config: FilterOptions, stations: dict[str, Station],
-                 capacity: int = 64, jd0: float = UNIX_EPOCH_JD) -> None:
+                 capacity: int = 64, jd0: float = UNIX_EPOCH_JD,
+                 max_objects: int = MAX_OBJECTS) -> None:
         iod = config.iod
         if iod.iod_samples < 3:
             raise ValueError(f"iod_samples must be >= 3 (Herrick-Gibbs), got {iod.iod_samples}")
@@ -96,6 +102,7 @@ class TrackBank:
         self.models = StationModels(stations, jd0)
         self.rows: dict[str, int] = {}
         self.object_ids: list[str] = []
+        self.max_objects = int(max_objects)
         cap = max(1, int(capacity))
         self.x = np.zeros((cap, 6))
         self.P = np.zeros((cap, 6, 6))
@@ -118,8 +125,13 @@ class TrackBank:
         return x1[0], F[0]
 
     def row(self, object_id: str) -> int:
-        """Return the row of `object_id`, added (without a track) when new."""
+        """Return the row of `object_id`, added (without a track) when new.
+
+        -1 when it is new and the bank holds `max_objects` already.
+        """
         r = self.rows.get(object_id)
+        if r is None and len(self.object_ids) >= self.max_objects:
+            return -1
         if r is None:
             r = self.rows[object_id] = len(self.object_ids)
             self.object_ids.append(object_id)
@@ -161,6 +173,9 @@ class TrackBank:
         out_nis: list[Array] = []
         for i in np.flatnonzero(station < 0).tolist():
             cause[i] = Cause.REJECTED_FRAME
+        for i in np.flatnonzero(rows < 0).tolist():
+            cause[i] = Cause.REJECTED_BANK_FULL
+            station[i] = -1  # out of every round
         for i in np.flatnonzero(~np.isfinite(tt)).tolist():
             cause[i] = Cause.REJECTED_NONFINITE
             station[i] = -1  # out of every round

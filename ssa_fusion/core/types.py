@@ -78,6 +78,7 @@ class Cause(enum.StrEnum):
     HELD_UNTIL_CLOCK = "held_until_clock"
     HELD_AHEAD_OF_CLOCK = "held_ahead_of_clock"
     REJECTED_ID = "rejected_id"
+    REJECTED_BANK_FULL = "rejected_bank_full"
     DROPPED_BEFORE_CLOCK = "dropped_before_clock"
     FORECASTS_ROLLED_BACK = "forecasts_rolled_back"
     FORECAST_INVALID = "forecast_invalid"

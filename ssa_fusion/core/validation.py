@@ -39,6 +39,9 @@ MAX_VARIANCE = 1e12
 rad carries no information, and such a measurement fused in the initial orbit determination
 would poison the filter."""
 TWO_PI = 2.0 * math.pi
+MAX_OBJECTS = 200_000
+"""Default of the most objects a catalog's bank holds (`track_bank.TrackBank`): the public
+catalogue's ~30,000 tracked objects several times over, ~100 MB of tracks."""
 MAX_ID_CHARS = 128
 """Longest object id or frame id taken (characters): a NORAD number, an international
 designator, a station name fit many times over; a megabyte id would be copied into every

@@ -37,6 +37,7 @@ from ssa_fusion.nodes.parameters import (
     STATIONS,
     Param,
     ParameterTable,
+    at_least,
     clock_lead,
     filter_rows,
 )
@@ -66,6 +67,10 @@ PARAMETERS = ParameterTable("catalog_filter", (
           "time between batches: what arrived meanwhile is fused at once", unit="wall s",
           check=POSITIVE),
     clock_lead(CATALOG_FILTER.max_clock_lead),
+    Param("max_objects", CATALOG_FILTER.max_objects,
+          "the most objects the shard tracks (~0.5 kB each); a measurement of one more is "
+          "refused (`rejected_bank_full`): a flood of new object ids cannot take the "
+          "machine's memory", check=at_least(1)),
 ), rules=(SHARD_RULE,))
 """The catalog_filter's parameters."""
 
@@ -81,7 +86,8 @@ class CatalogFilterNode(SsaNode):
         self.shard, self.shards = p.integer("shard"), p.integer("shards")
         self.options = settings.filter_options(p.values)
         self.stations = network_stations(p.text("station"))
-        self.bank = TrackBank(self.options, self.stations)
+        self.bank = TrackBank(self.options, self.stations,
+                              max_objects=p.integer("max_objects"))
         self.lo, self.hi = shard_range(self.shard, self.shards)
         self.diag.status["shard"] = f"{self.shard}/{self.shards} keys [{self.lo}, {self.hi}]"
         self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, CATALOG_QOS)
@@ -99,7 +105,8 @@ class CatalogFilterNode(SsaNode):
 
     def reset(self) -> None:
         """Forget every track and what waits for the next batch."""
-        self.bank = TrackBank(self.options, self.stations)
+        self.bank = TrackBank(self.options, self.stations,
+                              max_objects=self.params.integer("max_objects"))
         self.diag.counts[Count.DROPPED] += len(self._pending)
         self._pending.clear()
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 from ssa_fusion.core.filter_options import DEFAULT_GATE, SKY_FILTER
 from ssa_fusion.core.timescales import DAY_S
-from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S
+from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S, MAX_OBJECTS
 
 KM = 1000.0
 """m per km: the parameters' SI against the core's km (`nodes.settings` converts with it)."""
@@ -150,6 +150,7 @@ class CatalogFilterDefaults:
     shard: int = 0
     batch_period: float = 0.05
     max_clock_lead: float = MAX_CLOCK_LEAD_S
+    max_objects: int = MAX_OBJECTS
 
 
 @dataclass(frozen=True)

@@ -111,6 +111,20 @@ def test_stale_duplicate_and_unknown_station_are_refused_per_measurement():
     assert math.isfinite(bank.x[bank.rows["b"]].sum())
 
 
+def test_a_flood_of_new_object_ids_stops_at_max_objects():
+    """Objects beyond `max_objects` are refused per measurement (`rejected_bank_full`), the
+    ones it holds go on; memory stays at that many rows."""
+    bank = TrackBank(_bank().config, NETWORK, capacity=2, max_objects=3)
+    R = np.diag([1e-4, 1e-8, 1e-8])
+    z = np.array([1500.0, 1.0, 0.5])
+    ids = [f"o{k}" for k in range(10)] + ["o1"]
+    res = bank.process(np.arange(11.0), ids, ["millstone"] * 11, [z] * 11, [R] * 11)
+    assert res.cause == [Cause.IOD_PENDING] * 3 + [Cause.REJECTED_BANK_FULL] * 7 \
+        + [Cause.IOD_PENDING]
+    assert len(bank) == 3 and bank.object_ids == ["o0", "o1", "o2"]
+    assert bank.t.size <= 4
+
+
 def test_the_bank_keeps_copies_and_refuses_a_non_finite_epoch():
     """Measurements waiting in an IOD batch do not change when the caller reuses its
     arrays; a NaN epoch is refused with a cause, not reported as fused."""
