@@ -38,6 +38,7 @@ ARGUMENTS = {
     "shards": "filter (and surrogate) processes, each owning the objects of its key range",
     "surrogate": "true: a catalog_surrogate per shard (gap forecasts); false: none",
     "scenario": "real-sky scenario whose radars observe the catalog",
+    "sites": "sites file (docs/SITES.md) whose radars observe the catalog instead ('' = none)",
     "time_scale": "sim seconds per wall second",
     "seed": "measurement noise (and synthetic catalog) seed",
     "bag": "recorder output directory, must not exist (default: out/bags/ssa_<date>_<time>)",
@@ -60,6 +61,8 @@ def graph(context: Any) -> list[Any]:
     """The catalog graph's nodes and the two shutdown handlers, for the arguments given."""
     args = context.launch_configurations
     scenario = catalog_scenario(args["scenario"])
+    if args["sites"]:
+        scenario = scenario.with_sites(args["sites"])  # SiteFileError: one line
     if args["surrogate"] not in ("true", "false"):
         raise ValueError(f"surrogate:={args['surrogate']!r}: true or false")
     hours = _number(args, "duration", float, 0.0)
@@ -87,6 +90,7 @@ def generate_launch_description() -> LaunchDescription:
         "shards": "1",
         "surrogate": "true",
         "scenario": DEFAULT_SCENARIO,
+        "sites": "",
         "time_scale": "100",
         "seed": "0",
         "bag": default_bag(),

@@ -169,17 +169,19 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     if bag is not None:
         recorder["bag"] = str(bag)
     station = ",".join(st.station.name for st in scenario.radars)
+    own = {"sites": scenario.sites_file} if scenario.sites_file else {}  # radars of a file
     return [
         NodeSpec("recorder", "recorder", recorder),
         *(NodeSpec("catalog_filter", n, {"use_sim_time": True, "shards": shards, "shard": k,
-                                         "station": station}) for k, n in enumerate(names)),
+                                         "station": station, **own})
+          for k, n in enumerate(names)),
         *(NodeSpec("catalog_surrogate", n, {**surrogate_extra, "use_sim_time": True,
                                             "shards": shards, "shard": k})
           for k, n in enumerate(gaps)),
         NodeSpec("sensor_sim", "sensor_sim", {
             "scenario": scenario.name, "catalog": str(Path(catalog).resolve()),
             "objects": objects, "synthetic": synthetic, "duration": float(sim_s),
-            "time_scale": float(time_scale), "seed": seed, "start": start,
+            "time_scale": float(time_scale), "seed": seed, "start": start, **own,
             "wait_for": [f"{TOPIC_MEASUREMENT}={shards + 1}",
                          f"{TOPIC_ESTIMATE}={len(gaps) + 1}"],
             "wait_for_readers": readers}),

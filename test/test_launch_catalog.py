@@ -68,6 +68,16 @@ def test_starts_k_filter_and_k_surrogate_shards_as_live_catalog_does(launch):
     assert [kind(h) for h in handlers] == ["OnProcessExit", "OnProcessExit"]
 
 
+def test_a_sites_file_gives_the_radars_that_observe_the_catalog(launch):
+    """sites:= (as `live --catalog --sites`): its radars, not the scenario's, for the
+    simulator and every filter shard (which then need the file to know them)."""
+    sites = str(Path(__file__).resolve().parents[1] / "config" / "sites" / "example.yaml")
+    nodes, _ = run_graph(launch, shards="2", sites=sites)
+    for name in ("sensor_sim", "catalog_filter_0", "catalog_filter_1"):
+        assert nodes[name].kwargs["parameters"][0]["sites"] == sites, name
+    assert nodes["catalog_filter_0"].kwargs["parameters"][0]["station"] == "nordlys,kestrel"
+
+
 def test_without_surrogates_only_the_filter_shards_run(launch):
     nodes, _ = run_graph(launch, shards="2", surrogate="false")
     assert not [n for n in nodes if n.startswith("catalog_surrogate")]
@@ -81,6 +91,7 @@ def test_without_surrogates_only_the_filter_shards_run(launch):
     ({"duration": "-1"}, "duration:='-1' must be >= 0.0"),
     ({"surrogate": "maybe"}, "surrogate:='maybe': true or false"),
     ({"start": "2040-01-01"}, "is outside the range ssa_fusion represents"),
+    ({"sites": "/nope/sites.yaml"}, "/nope/sites.yaml"),
 ])
 def test_bad_arguments_are_named(launch, given, message):
     with pytest.raises(ValueError, match=re.escape(message)):

@@ -67,7 +67,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "first element set's)")
     p.add_argument("--sites", default="", metavar="FILE",
                    help="a sites file (YAML, docs/SITES.md) whose sites observe a real-sky "
-                        "scenario's object instead of its sensors "
+                        "scenario's object (with --catalog: whose radars observe the "
+                        "catalog) instead of the scenario's sensors "
                         "(e.g. config/sites/example.yaml)")
     p.add_argument("--elements", "--tle", "--omm", default="", metavar="FILE",
                    help="an element set file (TLE, 3LE, OMM XML/CSV) whose first object a "

@@ -80,8 +80,11 @@ def args_problem(args: argparse.Namespace) -> str | None:
     if args.objects < 0 or args.synthetic < 0 or not args.duration >= 0:
         return "--objects, --synthetic and --duration must be >= 0"
     if getattr(args, "sites", ""):
-        return ("--sites: a catalog is observed by the radars of its --scenario (the catalog "
-                "filter takes the built-in stations only)")
+        try:
+            if not catalog_scenario(args).radars:
+                return f"--sites {args.sites}: no radar in it to observe a catalog"
+        except ValueError as exc:
+            return str(exc)
     if getattr(args, "elements", ""):
         return "--elements is one object; a catalog's element sets are --catalog FILE"
     if args.start:
@@ -100,6 +103,17 @@ def args_problem(args: argparse.Namespace) -> str | None:
     except ValueError as exc:
         return str(exc)
     return None
+
+
+def catalog_scenario(args: argparse.Namespace) -> sky.SkyScenario:
+    """Return the real-sky scenario whose radars observe the catalog.
+
+    ``--scenario`` (a paper one: `graphs.DEFAULT_SCENARIO`), observed by the radars of
+    ``--sites`` instead when given (SiteFileError, a ValueError, when the file is wrong).
+    """
+    s = sky.SKY_SCENARIOS.get(args.scenario) or sky.SKY_SCENARIOS[graphs.DEFAULT_SCENARIO]
+    sites = getattr(args, "sites", "")
+    return s.with_sites(sites) if sites else s
 
 
 def entries_of(args: argparse.Namespace) -> list[catalog_io.CatalogEntry]:
@@ -200,7 +214,7 @@ def run(args: argparse.Namespace) -> int:
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         return 2
-    s = sky.SKY_SCENARIOS.get(args.scenario) or sky.SKY_SCENARIOS[graphs.DEFAULT_SCENARIO]
+    s = catalog_scenario(args)
     dirs = runs.run_dirs(args, f"catalog_{s.name}")
     if dirs is None:
         return 2

@@ -24,6 +24,7 @@ from functools import partial
 
 import numpy as np
 
+from ssa_fusion.core.site_file import load_stations
 from ssa_fusion.core.stations import network_stations
 from ssa_fusion.core.track_bank import TrackBank
 from ssa_fusion.core.types import Cause, Kind, Measurement, Source, StateEstimate, UpdateSource
@@ -34,12 +35,16 @@ from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.nodes.diagnostics import Count, NodeCause
 from ssa_fusion.nodes.parameters import (
     POSITIVE,
-    STATIONS,
+    STATION_IDS,
+    STATION_RULE_NAMES,
     Param,
     ParameterTable,
+    Rule,
     at_least,
     clock_lead,
     filter_rows,
+    sites_problem,
+    sites_row,
 )
 from ssa_fusion.nodes.shards import (
     LIST_OBJECTS,
@@ -60,7 +65,10 @@ from ssa_fusion.ros.topics import (
 )
 
 PARAMETERS = ParameterTable("catalog_filter", (
-    Param("station", CATALOG_FILTER.station, "stations of the measurements", check=STATIONS),
+    Param("station", CATALOG_FILTER.station,
+          "radar stations of the measurements: a network id, or station ids (built in, or "
+          "sites of `sites`) separated by commas", check=STATION_IDS),
+    sites_row(CATALOG_FILTER.sites),
     *filter_rows(CATALOG_FILTER, runtime=False, unlimited_span=False),
     *shard_rows(CATALOG_FILTER.shards, CATALOG_FILTER.shard),
     Param("batch_period", CATALOG_FILTER.batch_period,
@@ -71,7 +79,7 @@ PARAMETERS = ParameterTable("catalog_filter", (
           "the most objects the shard tracks (~0.5 kB each); a measurement of one more is "
           "refused (`rejected_bank_full`): a flood of new object ids cannot take the "
           "machine's memory", check=at_least(1)),
-), rules=(SHARD_RULE,))
+), rules=(SHARD_RULE, Rule(STATION_RULE_NAMES, sites_problem)))
 """The catalog_filter's parameters."""
 
 
@@ -85,7 +93,8 @@ class CatalogFilterNode(SsaNode):
         p = self.params
         self.shard, self.shards = p.integer("shard"), p.integer("shards")
         self.options = settings.filter_options(p.values)
-        self.stations = network_stations(p.text("station"))
+        own = {st.name: st for st in load_stations(p.text("sites"))}  # valid: `SITES`
+        self.stations = network_stations(p.text("station"), own)
         self.bank = TrackBank(self.options, self.stations,
                               max_objects=p.integer("max_objects"))
         self.lo, self.hi = shard_range(self.shard, self.shards)

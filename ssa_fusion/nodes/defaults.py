@@ -138,6 +138,7 @@ class CatalogFilterDefaults:
     """
 
     station: str = "radar_network"
+    sites: str = ""
     motion_model: str = str(SKY_FILTER.motion.motion_model)
     q: float = _si(SKY_FILTER.noise.q * KM * KM)
     gate: float = SKY_FILTER.noise.gate or 0.0

@@ -310,11 +310,16 @@ def measurement_stream(kind: str, station: str, sites: str,
                   "for a network of one), whose radar and optical measurements it takes, "
                   "each with its station's model; ignored for position (frame `gcrf`)",
                   check=STATION_IDS),
-            Param("sites", sites,
-                  "sites file (YAML, docs/SITES.md: latitude, longitude, height, sensor "
-                  "type, noise, cadence, mask of each station of one's own) whose ids "
-                  "`station` may name besides the built-in ones; `\"\"` = built-in stations "
-                  "only", unit="path", check=SITES))
+            sites_row(sites))
+
+
+def sites_row(default: str) -> Param:
+    """Return the row of ``sites``: a sites file whose ids ``station`` may name too."""
+    return Param("sites", default,
+                 "sites file (YAML, docs/SITES.md: latitude, longitude, height, sensor "
+                 "type, noise, cadence, mask of each station of one's own) whose ids "
+                 "`station` may name besides the built-in ones; `\"\"` = built-in stations "
+                 "only", unit="path", check=SITES)
 
 
 STATION_RULE_NAMES = ("station", "sites")
