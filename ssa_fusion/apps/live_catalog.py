@@ -227,7 +227,9 @@ def run(args: argparse.Namespace) -> int:
     names = [n.name for n in specs if n.executable == "catalog_filter"]
     gaps = [n.name for n in specs if n.executable == "catalog_surrogate"]
     graph = Graph(out / "logs", args.domain_id)
-    print(f"live: catalog {args.catalog} ({len(entries)} objects), radars of {s.name}, "
+    radars = (f"radars of {s.sites_file} ({', '.join(r.station.name for r in s.radars)})"
+              if s.sites_file else f"radars of {s.name}")
+    print(f"live: catalog {args.catalog} ({len(entries)} objects), {radars}, "
           f"{sim_s / 3600:g} h of sim time at {args.time_scale:g}x, {args.shards} filter "
           f"shard(s){' with a surrogate each' if gaps else ''}; ROS domain {graph.domain_id}; "
           f"logs in {out}/logs", flush=True)
