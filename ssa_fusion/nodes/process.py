@@ -6,6 +6,7 @@ invalid parameter at start-up exits 2 with one line naming it (`ParameterError`)
 
 from __future__ import annotations
 
+import faulthandler
 import signal
 import sys
 import time
@@ -32,6 +33,10 @@ EXIT_FAILED = 1
 """The node could not go on doing its job (a recorder whose disk is full; stderr says why)."""
 EXIT_BAD_PARAMETERS = 2
 """The node could not start: a parameter or a ROS argument is invalid (stderr says which)."""
+
+SLOW_STOP_S = 7.0
+"""Wall s after a stop began when a node still stopping dumps its threads' stacks to stderr
+(it drains for at most 3 s; a supervisor such as the test graphs' kills it at 10 s)."""
 
 _finish_code = [EXIT_OK]
 """The exit code a callback asked for with `finish` (one process runs one node)."""
@@ -66,6 +71,9 @@ def run(make_node: Callable[[], SsaNode], args: list[str] | None = None) -> int:
                 executor.spin_once(timeout_sec=0.1)
             except Exception as exc:  # raised outside the node's guarded callbacks
                 escaped(node, exc)
+        # a stop that takes longer than it should says where it is stuck (every thread's
+        # stack on stderr), so that a node killed for it leaves the reason behind
+        faulthandler.dump_traceback_later(SLOW_STOP_S, exit=False, file=sys.stderr)
         _drain(executor, node)
     except ParameterError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -80,6 +88,7 @@ def run(make_node: Callable[[], SsaNode], args: list[str] | None = None) -> int:
         # interrupt would kill the exiting process (-15/-2); ignored signals stay ignored.
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        faulthandler.cancel_dump_traceback_later()
     return max(code, _finish_code[0])
 
 
