@@ -17,6 +17,7 @@ which every place that takes a station id then knows: ``ssa-fusion import tdm --
         min_elevation_deg: 10.0 # elevation mask, deg, -90..90
         mask_by_azimuth: [[0, 15.0], [90, 10.0], [180, 20.0]]   # optional: [az deg, min el deg]
         max_range_km: 3000.0    # optional, radar only: farthest range it measures, km, > 0
+        # optical only, optional: limiting_magnitude: 14.0 (faintest visual magnitude seen)
 
 Optical noise is ``{ra_arcsec: ..., dec_arcsec: ...}``. Every value is a finite number
 (YAML ``.nan``/``.inf`` and booleans are refused); unknown keys, missing keys, values out
@@ -64,7 +65,7 @@ NOISE_FIELDS: dict[SensorType, tuple[tuple[str, float], ...]] = {
 
 _REQUIRED = ("id", "latitude_deg", "longitude_deg", "height_m", "type", "noise", "cadence_s",
              "min_elevation_deg")
-_OPTIONAL = ("mask_by_azimuth", "max_range_km")
+_OPTIONAL = ("mask_by_azimuth", "max_range_km", "limiting_magnitude")
 
 
 class SiteFileError(ValueError):
@@ -160,9 +161,15 @@ class _Site:
                 self.fail("max_range_km", "is for a radar only (an optical sensor measures "
                                           "no range)")
             max_range = self.number("max_range_km", positive=True)
+        limit = math.inf
+        if "limiting_magnitude" in raw:
+            if sensor_type != SensorType.OPTICAL:
+                self.fail("limiting_magnitude", "is for an optical sensor only")
+            limit = self.number("limiting_magnitude", -30.0, 30.0)
         station = Station(site_id, math.radians(lat), math.radians(lon), height / 1000.0)
         return Sensor(station, sensor_type, sigma, min_el, mask_by_azimuth_deg=mask,
-                      cadence_s=cadence, source=source, max_range_km=max_range)
+                      cadence_s=cadence, source=source, max_range_km=max_range,
+                      limiting_magnitude=limit)
 
     def noise(self, sensor_type: SensorType) -> tuple[float, ...]:
         """Return the ``noise`` mapping as 1-sigma values in core units (km, rad)."""

@@ -70,6 +70,9 @@ class Sensor:
     max_range_km : float
         Farthest range a radar measures, km (inf: no limit; a sites file's
         ``max_range_km``).
+    limiting_magnitude : float
+        Faintest visual magnitude an optical sensor measures (inf: no limit; a sites file's
+        ``limiting_magnitude``; `visibility.apparent_magnitude`).
     """
 
     station: Station
@@ -81,6 +84,7 @@ class Sensor:
     bias: tuple[float, ...] = ()
     source: str = ""
     max_range_km: float = math.inf
+    limiting_magnitude: float = math.inf
 
     def __post_init__(self) -> None:
         """Check the channel count of `sigma` and `bias` against the type (ValueError)."""

@@ -56,6 +56,10 @@ included) is nearest its 6 degrees of freedom on the tuning seeds 1-3 of iss_rad
 q ~ a^2 tau with a ~ 3e-8 km/s^2, gave 1.3-1.6: too cautious). The evaluation seeds never
 saw it (docs/HISTORY.md, 2026-11-24: the real sky)."""
 
+ISS_STANDARD_MAGNITUDE = -1.3
+"""The ISS's standard magnitude (1000 km, 90 deg phase), the usual catalogue value; every
+scenario's object has it unless set (a sensor without a limiting magnitude ignores it)."""
+
 ALL_STATIONS = "*"
 """The station id of an outage of the whole network."""
 
@@ -117,6 +121,9 @@ class SkyScenario:
     element_set, elements_file
         The object's element set and the file it came from (`with_elements`): the truth is
         its SGP4/SDP4 instead of `x0`/`bstar` (None, '': the scenario's object).
+    standard_magnitude
+        The object's visual magnitude at 1000 km and a 90 deg phase angle, for sensors with a
+        limiting magnitude (`visibility.apparent_magnitude`).
     """
 
     name: str
@@ -142,6 +149,7 @@ class SkyScenario:
     sites_file: str = ""
     element_set: catalog.CatalogEntry | None = None
     elements_file: str = ""
+    standard_magnitude: float = ISS_STANDARD_MAGNITUDE
 
     def sensor(self, name: str) -> Sensor:
         """Return sensor `name`: a site of the scenario's sites file, else a built-in preset."""
@@ -318,11 +326,19 @@ def truth(s: SkyScenario, t: np.ndarray) -> np.ndarray:
                                    bstar=s.bstar)
 
 
-def _visible(sensor: Sensor, t: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Where `sensor` measures the object at epochs `t` with states `x` (N, 6)."""
+def _visible(sensor: Sensor, t: np.ndarray, x: np.ndarray,
+             standard_magnitude: float) -> np.ndarray:
+    """Where `sensor` measures the object at epochs `t` with states `x` (N, 6).
+
+    An optical sensor with a limiting magnitude sees the object only as bright as that
+    (`visibility.apparent_magnitude` of its `standard_magnitude`).
+    """
     up = sensor.in_view(frames.razel_gcrs(x, t, sensor.station))
     if sensor.type == SensorType.OPTICAL:
         up &= visibility.station_dark(t, sensor.station) & visibility.sunlit(x[:, :3], t)
+        if math.isfinite(sensor.limiting_magnitude):
+            up &= visibility.apparent_magnitude(x, t, sensor.station, standard_magnitude) \
+                <= sensor.limiting_magnitude
     return np.asarray(up, dtype=bool)
 
 
@@ -331,7 +347,7 @@ def _observe(s: SkyScenario, sensor: Sensor, rng: np.random.Generator,
     """Return the noisy measurements of `sensor` over the scenario (light time in the truth)."""
     t = s.t0 + sensor.cadence_s * np.arange(int(s.duration_s // sensor.cadence_s) + 1)
     x = truth(s, t)
-    up = _visible(sensor, t, x)
+    up = _visible(sensor, t, x, s.standard_magnitude)
     t, x = t[up], x[up]
     if not len(t):
         return []

@@ -125,3 +125,33 @@ def test_light_time_of_the_iss_in_view():
     # the delay from the retarded position differs from range / c by v_r tau / c (~1e-5)
     again = lighttime.light_time_delay(ret[:, :3], st, t[up])
     assert np.allclose(again, tau, rtol=1e-4)
+
+
+def test_the_diffuse_sphere_phase_function_and_the_apparent_magnitude():
+    """F(0) = 1, F(90 deg) = 1/pi, F(180 deg) = 0; the magnitude against the same formula
+    evaluated with astropy's site and Sun (GCRS), within 0.01 mag."""
+    assert visibility.diffuse_sphere_phase([0.0, math.pi / 2, math.pi]) == pytest.approx(
+        [1.0, 1.0 / math.pi, 0.0], abs=1e-15)
+    astropy_time = pytest.importorskip("astropy.time")
+    coords = pytest.importorskip("astropy.coordinates")
+    from astropy import units as u
+    from astropy.utils import iers
+
+    iers.conf.auto_download = False
+    iers.conf.auto_max_age = None
+    st = STATIONS["socorro"]
+    t = 1.7e9 + np.array([0.0, 3600.0, 7200.0])
+    x = np.array([[7000.0, 0.0, 0.0], [0.0, 7000.0, 1000.0], [-3000.0, -4000.0, 5000.0]])
+    ours = visibility.apparent_magnitude(x, t, st, -1.3)
+    when = astropy_time.Time(t, format="unix", scale="utc")
+    site = coords.EarthLocation.from_geodetic(math.degrees(st.lon_rad) * u.deg,
+                                              math.degrees(st.lat_rad) * u.deg,
+                                              st.alt_km * u.km)
+    r_site = site.get_gcrs(when).cartesian.xyz.to_value(u.km).T
+    r_sun = coords.get_sun(when).cartesian.xyz.to_value(u.km).T
+    to_site, to_sun = r_site - x, r_sun - x
+    rng = np.linalg.norm(to_site, axis=1)
+    phase = np.arccos(np.sum(to_site * to_sun, axis=1) / rng / np.linalg.norm(to_sun, axis=1))
+    f = (np.sin(phase) + (math.pi - phase) * np.cos(phase)) / math.pi
+    ref = -1.3 + 5 * np.log10(rng / 1000.0) - 2.5 * np.log10(f * math.pi)
+    np.testing.assert_allclose(ours, ref, atol=0.01)

@@ -263,3 +263,36 @@ def test_an_evaluation_case_turns_the_orbit_but_keeps_its_shape():
     cos = np.dot(x0[:3], back[:3]) / np.linalg.norm(x0[:3]) / np.linalg.norm(back[:3])
     assert math.acos(np.clip(cos, -1, 1)) == pytest.approx(
         abs(math.remainder(d_phase, 2 * math.pi)), abs=1e-9)
+
+
+def test_an_optical_site_sees_only_what_is_brighter_than_its_limiting_magnitude(tmp_path):
+    """`limiting_magnitude`: the same telescope with a limit of 3 measures a subset of what it
+    measures without one, and every epoch it keeps has the object at most that faint (the
+    magnitude recomputed from the truth); `iss_network_april`'s orbit over two days, an
+    object of standard magnitude 4 (the ISS, -1.3, is brighter than 0 at every pass)."""
+    from ssa_fusion.core import visibility
+
+    scope = """
+  - id: {id}
+    latitude_deg: 32.5
+    longitude_deg: -106.0
+    height_m: 1500.0
+    type: optical
+    noise: {{ra_arcsec: 1.5, dec_arcsec: 1.5}}
+    cadence_s: 20.0
+    min_elevation_deg: 20.0
+"""
+    path = tmp_path / "scopes.yaml"
+    path.write_text("sites:" + scope.format(id="any") + scope.format(id="faint")
+                    + "    limiting_magnitude: 3.0\n")
+    base = sky.SKY_SCENARIOS["iss_network_april"]
+    s = base.with_window(base.t0, 2 * 86400.0).with_sites(str(path)).with_(
+        standard_magnitude=4.0)
+    sim = sky.simulate_sky(s, seed=2)
+    t = {k: np.array([m.t for m in sim.measurements if m.frame_id == k]) for k in s.sensors}
+    assert len(t["any"]) > len(t["faint"]) > 0
+    assert set(t["faint"]) <= set(t["any"])
+    kept = sky.truth(s, t["faint"])
+    mag = visibility.apparent_magnitude(kept, t["faint"], s.sensor("faint").station,
+                                        s.standard_magnitude)
+    assert mag.max() <= 3.0
