@@ -17,7 +17,8 @@ which every place that takes a station id then knows: ``ssa-fusion import tdm --
         min_elevation_deg: 10.0 # elevation mask, deg, -90..90
         mask_by_azimuth: [[0, 15.0], [90, 10.0], [180, 20.0]]   # optional: [az deg, min el deg]
         max_range_km: 3000.0    # optional, radar only: farthest range it measures, km, > 0
-        # optical only, optional: limiting_magnitude: 14.0 (faintest visual magnitude seen)
+        # optical only, optional: limiting_magnitude: 14.0 (faintest visual magnitude seen),
+        # dark_below_deg: -12.0 (it observes while the Sun is below this elevation)
 
 Optical noise is ``{ra_arcsec: ..., dec_arcsec: ...}``. Every value is a finite number
 (YAML ``.nan``/``.inf`` and booleans are refused); unknown keys, missing keys, values out
@@ -42,7 +43,7 @@ from typing import Any, NoReturn
 
 from .constants import ARCSEC
 from .frames import Station
-from .stations import NETWORKS, SENSORS, STATIONS, Sensor, SensorType
+from .stations import DARK_BELOW_DEG, NETWORKS, SENSORS, STATIONS, Sensor, SensorType
 
 RESERVED_IDS = frozenset({*STATIONS, *SENSORS, *NETWORKS, "gcrf"})
 """Ids a site may not take: the built-in stations, sensor presets, networks, and ``gcrf``
@@ -65,7 +66,7 @@ NOISE_FIELDS: dict[SensorType, tuple[tuple[str, float], ...]] = {
 
 _REQUIRED = ("id", "latitude_deg", "longitude_deg", "height_m", "type", "noise", "cadence_s",
              "min_elevation_deg")
-_OPTIONAL = ("mask_by_azimuth", "max_range_km", "limiting_magnitude")
+_OPTIONAL = ("mask_by_azimuth", "max_range_km", "limiting_magnitude", "dark_below_deg")
 
 
 class SiteFileError(ValueError):
@@ -166,10 +167,16 @@ class _Site:
             if sensor_type != SensorType.OPTICAL:
                 self.fail("limiting_magnitude", "is for an optical sensor only")
             limit = self.number("limiting_magnitude", -30.0, 30.0)
+        dark = DARK_BELOW_DEG
+        if "dark_below_deg" in raw:
+            if sensor_type != SensorType.OPTICAL:
+                self.fail("dark_below_deg", "is for an optical sensor only (a radar works "
+                                            "day and night)")
+            dark = self.number("dark_below_deg", -90.0, 0.0)
         station = Station(site_id, math.radians(lat), math.radians(lon), height / 1000.0)
         return Sensor(station, sensor_type, sigma, min_el, mask_by_azimuth_deg=mask,
                       cadence_s=cadence, source=source, max_range_km=max_range,
-                      limiting_magnitude=limit)
+                      limiting_magnitude=limit, dark_below_deg=dark)
 
     def noise(self, sensor_type: SensorType) -> tuple[float, ...]:
         """Return the ``noise`` mapping as 1-sigma values in core units (km, rad)."""

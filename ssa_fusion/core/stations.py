@@ -30,6 +30,10 @@ from numpy.typing import NDArray
 from .constants import ARCSEC
 from .frames import COLUMBUS, Station
 from .types import Kind
+from .visibility import ASTRONOMICAL_DARK
+
+DARK_BELOW_DEG = math.degrees(ASTRONOMICAL_DARK)
+"""Default Sun elevation (deg) below which an optical site observes."""
 
 
 class SensorType(enum.StrEnum):
@@ -73,6 +77,9 @@ class Sensor:
     limiting_magnitude : float
         Faintest visual magnitude an optical sensor measures (inf: no limit; a sites file's
         ``limiting_magnitude``; `visibility.apparent_magnitude`).
+    dark_below_deg : float
+        Sun elevation below which an optical site observes, deg (nautical twilight's end,
+        -12, by default; a sites file's ``dark_below_deg``).
     """
 
     station: Station
@@ -85,6 +92,7 @@ class Sensor:
     source: str = ""
     max_range_km: float = math.inf
     limiting_magnitude: float = math.inf
+    dark_below_deg: float = DARK_BELOW_DEG
 
     def __post_init__(self) -> None:
         """Check the channel count of `sigma` and `bias` against the type (ValueError)."""

@@ -9,7 +9,7 @@ tracker is the facade over two parts: until its EKF exists, the measurements it 
 `initiation.OrbitInitiator` (the initial orbit determination, with its own rules during IOD);
 after that, every fused step is logged in `history.FusedHistory`, which rolls the filter back
 when a measurement goes in front of fused ones. The admission and arbitration rules are here
-(DESIGN.md "Behaviour users rely on"):
+(the behaviour users rely on, README and docs/NODES.md):
 
 * bad input is never fused (`validation.measurement_problem`, shared with the surrogate):
   non-finite values, negative range, elevation outside [-pi/2, pi/2], a kind or frame the

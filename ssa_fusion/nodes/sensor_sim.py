@@ -184,7 +184,7 @@ DEFAULT_CADENCE = _cadence({"scenario": SENSOR_SIM.scenario})
 PARAMETERS = ParameterTable("sensor_sim", (
     Param("scenario", SENSOR_SIM.scenario,
           "orbit scenario (truth model, orbit, measurement kind, noise): a paper one (see "
-          "DESIGN.md) or a real-sky one", check=one_of(*SCENARIO_NAMES)),
+          "`sim/scenarios.py`) or a real-sky one (`sim/sky.py`)", check=one_of(*SCENARIO_NAMES)),
     Param("object_id", Computed(lambda v: str(v["scenario"]),
                                 f"the scenario's name (`{SENSOR_SIM.scenario}`)",
                                 SENSOR_SIM.scenario),

@@ -1,4 +1,4 @@
-"""Scenarios of the paper (DESIGN.md table) and the pieces built from them.
+"""Scenarios of the paper (docs/RESULTS.md, "Settings") and the pieces built from them.
 
 A `Scenario` fixes everything an experiment needs: the true dynamics, what is observed and
 how noisily, the cadence, the tracking window before the gap, the gap, and the estimator

@@ -335,7 +335,8 @@ def _visible(sensor: Sensor, t: np.ndarray, x: np.ndarray,
     """
     up = sensor.in_view(frames.razel_gcrs(x, t, sensor.station))
     if sensor.type == SensorType.OPTICAL:
-        up &= visibility.station_dark(t, sensor.station) & visibility.sunlit(x[:, :3], t)
+        up &= visibility.station_dark(t, sensor.station, math.radians(sensor.dark_below_deg)) \
+            & visibility.sunlit(x[:, :3], t)
         if math.isfinite(sensor.limiting_magnitude):
             up &= visibility.apparent_magnitude(x, t, sensor.station, standard_magnitude) \
                 <= sensor.limiting_magnitude

@@ -158,6 +158,17 @@ RADAR_AT = """
     cadence_s: 10.0
     min_elevation_deg: 10.0
 """
+SCOPE_AT = """
+  - id: {id}
+    latitude_deg: 32.5
+    longitude_deg: -106.0
+    height_m: 1500.0
+    type: optical
+    noise: {{ra_arcsec: 1.5, dec_arcsec: 1.5}}
+    cadence_s: 20.0
+    min_elevation_deg: 20.0
+"""
+"""A telescope near Socorro, as a sites file's entry (`id` to fill in)."""
 SITES_YAML = ("sites:" + RADAR_AT.format(id="near_radar") + "    max_range_km: 1000.0\n"
               + RADAR_AT.format(id="far_radar"))
 """Two radars at one site; the near one measures only within 1000 km."""
@@ -272,18 +283,8 @@ def test_an_optical_site_sees_only_what_is_brighter_than_its_limiting_magnitude(
     object of standard magnitude 4 (the ISS, -1.3, is brighter than 0 at every pass)."""
     from ssa_fusion.core import visibility
 
-    scope = """
-  - id: {id}
-    latitude_deg: 32.5
-    longitude_deg: -106.0
-    height_m: 1500.0
-    type: optical
-    noise: {{ra_arcsec: 1.5, dec_arcsec: 1.5}}
-    cadence_s: 20.0
-    min_elevation_deg: 20.0
-"""
     path = tmp_path / "scopes.yaml"
-    path.write_text("sites:" + scope.format(id="any") + scope.format(id="faint")
+    path.write_text("sites:" + SCOPE_AT.format(id="any") + SCOPE_AT.format(id="faint")
                     + "    limiting_magnitude: 3.0\n")
     base = sky.SKY_SCENARIOS["iss_network_april"]
     s = base.with_window(base.t0, 2 * 86400.0).with_sites(str(path)).with_(
@@ -296,3 +297,21 @@ def test_an_optical_site_sees_only_what_is_brighter_than_its_limiting_magnitude(
     mag = visibility.apparent_magnitude(kept, t["faint"], s.sensor("faint").station,
                                         s.standard_magnitude)
     assert mag.max() <= 3.0
+
+
+def test_a_site_that_waits_for_a_darker_sky_sees_less(tmp_path):
+    """`dark_below_deg`: -18 (astronomical night) keeps a subset of what -12 (nautical
+    twilight's end, the default) sees, each kept epoch with the Sun below -18 deg there."""
+    from ssa_fusion.core import sun
+
+    path = tmp_path / "scopes.yaml"
+    path.write_text("sites:" + SCOPE_AT.format(id="nautical") + SCOPE_AT.format(id="night")
+                    + "    dark_below_deg: -18.0\n")
+    base = sky.SKY_SCENARIOS["iss_network_april"]
+    s = base.with_window(base.t0, 2 * 86400.0).with_sites(str(path))
+    sim = sky.simulate_sky(s, seed=2)
+    t = {k: np.array([m.t for m in sim.measurements if m.frame_id == k]) for k in s.sensors}
+    assert len(t["nautical"]) > len(t["night"])
+    assert set(t["night"]) <= set(t["nautical"])
+    if len(t["night"]):
+        assert np.degrees(sun.sun_elevation(t["night"], s.sensor("night").station)).max() < -18
