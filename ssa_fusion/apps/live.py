@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 from ssa_fusion import graphs
 from ssa_fusion.apps import evaluate, report, runs
 from ssa_fusion.apps.args import add_domain_id, positive_float
+from ssa_fusion.core.types import UpdateSource
 from ssa_fusion.ros import visual_msgs
 from ssa_fusion.ros.processes import Graph
 from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
@@ -271,6 +272,14 @@ def run(args: argparse.Namespace) -> int:
     try:
         ev = evaluate.evaluate(data, seed=args.seed)  # with the settings recorded in the bag
     except ValueError as exc:  # e.g. a real-sky seed whose outage fell where no pass was
+        fused = any(e.update_source != UpdateSource.NONE for e in data.estimates)
+        if isinstance(exc, evaluate.NoTruthError) and fused:
+            # no outage to score the arms over: the filter judged as your own data is
+            print(f"recorded {sum(data.counts.values())} messages to {bag} in {wall:.1f} s; "
+                  f"{exc} (no pass fell in the run's outage)")
+            own = argparse.Namespace(bag=bag, sites=args.sites or None, scenario="",
+                                     params_file=None)
+            return report.run_own(own, data, out, str(exc))
         print(f"recorded {sum(data.counts.values())} messages to {bag} in {wall:.1f} s\n"
               f"error: the run cannot be evaluated: {exc}", file=sys.stderr)
         return 1

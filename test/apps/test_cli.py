@@ -153,6 +153,26 @@ def test_live_run_that_cannot_be_evaluated_says_why_without_a_traceback(tmp_path
     assert "recorded 3 messages" in err
 
 
+def test_a_live_run_whose_outage_withheld_nothing_gets_the_report_without_truth(
+        tmp_path, monkeypatch, capsys):
+    """No pass fell in the outage (a short run, one's own sites): no arms to score, so the
+    run is judged as one's own data is (residuals, NIS, sigma, passes), exit 0; it was an
+    error, exit 1."""
+    from ssa_fusion.apps import evaluate
+
+    data = evaluate.load(Path(SAMPLE))
+    data.withheld = []
+    monkeypatch.setattr(live, "Graph", _FakeGraph)
+    monkeypatch.setattr(evaluate, "load", lambda _bag: data)
+    out = tmp_path / "run"
+    args = cli.build_parser().parse_args(["live", "--out", str(out)])
+    assert live.run(args) == 0
+    text = capsys.readouterr().out
+    assert "no pass fell in the run's outage" in text
+    assert "NIS inside the 95 % χ² band" in text
+    assert (out / "report.html").exists() and (out / "nis.png").exists()
+
+
 @pytest.mark.parametrize("option", [["--objects", "5"], ["--shards", "2"], ["--no-surrogate"],
                                     ["--surrogate-param", "min_span=1"], ["--synthetic", "3"]])
 def test_catalog_options_without_a_catalog_are_refused(option, tmp_path, capsys):
