@@ -326,8 +326,10 @@ def test_window_process_noise_is_the_brute_force_sum(j2_world: World) -> None:
             c = cbar[min(at[float(tm[i])], at[float(tm[j])])]
             K += U[i].T @ U[i] @ c @ U[j].T @ U[j]
     expected = f.P + f.P @ K @ f.P
+    # P K P through a formal covariance of condition 6e10 and STM inverses: BLAS kernels
+    # (OPENBLAS_CORETYPE Haswell vs SkylakeX) differ by up to 7e-9 of the largest entry
     np.testing.assert_allclose(f.P_realistic, expected, rtol=1e-6,
-                               atol=1e-9 * np.abs(expected).max())
+                               atol=1e-8 * np.abs(expected).max())
     # realistic >= formal, and predictions grow by the noise accumulated after the epoch
     assert np.linalg.eigvalsh(f.P_realistic - f.P).min() > -1e-15
     _, Pr = f.predict([f.t + 7200.0])
