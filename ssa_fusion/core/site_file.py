@@ -270,3 +270,8 @@ def site_stations(sensors: Mapping[str, Sensor]) -> tuple[Station, ...]:
 def load_stations(path: Path | str) -> tuple[Station, ...]:
     """Return the stations of the sites file at `path` ('' = none; `load_sites`)."""
     return site_stations(load_sites(path)) if str(path) else ()
+
+
+def load_station_map(path: Path | str) -> dict[str, Station]:
+    """Return the stations of the sites file at `path` by id ('' = none)."""
+    return {st.name: st for st in load_stations(path)}

@@ -24,7 +24,7 @@ from functools import partial
 
 import numpy as np
 
-from ssa_fusion.core.site_file import load_stations
+from ssa_fusion.core.site_file import load_station_map
 from ssa_fusion.core.stations import network_stations
 from ssa_fusion.core.track_bank import TrackBank
 from ssa_fusion.core.types import Cause, Kind, Measurement, Source, StateEstimate, UpdateSource
@@ -93,8 +93,8 @@ class CatalogFilterNode(SsaNode):
         p = self.params
         self.shard, self.shards = p.integer("shard"), p.integer("shards")
         self.options = settings.filter_options(p.values)
-        own = {st.name: st for st in load_stations(p.text("sites"))}  # valid: `SITES`
-        self.stations = network_stations(p.text("station"), own)
+        self.stations = network_stations(p.text("station"),
+                                         load_station_map(p.text("sites")))  # valid: `SITES`
         self.bank = TrackBank(self.options, self.stations,
                               max_objects=p.integer("max_objects"))
         self.lo, self.hi = shard_range(self.shard, self.shards)

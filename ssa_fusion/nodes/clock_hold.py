@@ -62,7 +62,7 @@ class ClockHold:
         Too far: more than `lead_s` ahead of the running clock. Else (and always while
         handing back, or without a clock) return False.
         """
-        now = self.node.get_clock().now().nanoseconds * 1e-9
+        now = self._now_s()
         if self.passing or now <= 0.0 or not t > now + lead_s:
             return False
         if len(self.ahead) >= self.limit:  # the oldest is judged now (refused if still ahead)
@@ -77,6 +77,10 @@ class ClockHold:
                         f"t={t} is more than {lead_s:g} s ahead of the clock ({now}): held up "
                         f"to {self.ahead_wait_s:g} wall s for the clock to catch up")
         return True
+
+    def _now_s(self) -> float:
+        """Return the node's clock, s (0 before the first /clock under sim time)."""
+        return self.node.get_clock().now().nanoseconds * 1e-9
 
     def _running(self) -> bool:
         return self.node.get_clock().now().nanoseconds > 0
@@ -112,7 +116,7 @@ class ClockHold:
     def _release_ahead(self) -> list[Callable[[], None]]:
         if not self.ahead:
             return []
-        now = self.node.get_clock().now().nanoseconds * 1e-9
+        now = self._now_s()
         wall = time.monotonic()
         out: list[Callable[[], None]] = []
         keep: deque[_Ahead] = deque()

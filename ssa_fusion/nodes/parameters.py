@@ -19,7 +19,7 @@ import math
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 
-from ssa_fusion.core.site_file import load_stations
+from ssa_fusion.core.site_file import load_station_map, load_stations
 from ssa_fusion.core.stations import network_stations, station_ids
 from ssa_fusion.core.types import KIND_NAMES
 from ssa_fusion.nodes.defaults import CatalogFilterDefaults, FilterDefaults
@@ -161,8 +161,7 @@ SITES = Check("'' or a readable, valid sites file", read_by(load_stations))
 def sites_problem(values: Values) -> str | None:
     """Return why ``station`` names a station neither built in nor in ``sites``, or None."""
     try:
-        sites = {s.name: s for s in load_stations(str(values["sites"]))}
-        network_stations(str(values["station"]), sites)
+        network_stations(str(values["station"]), load_station_map(str(values["sites"])))
     except ValueError as exc:
         return str(exc)
     return None
