@@ -62,8 +62,10 @@ class GapForecaster:
         """Take the filter's estimate (epoch t s) after it fused a real measurement.
 
         The previous one is a pass end (an anchor) when t is `pass_break_s` or more after it.
+        A second estimate at the same epoch (another station's measurement fused after the
+        first) replaces it.
         """
-        if self.last is not None and t <= self.last[0]:
+        if self.last is not None and t < self.last[0]:
             return
         if self.last is not None and t - self.last[0] >= self.pass_break_s:
             self._anchor()

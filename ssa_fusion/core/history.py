@@ -91,6 +91,10 @@ class FusedHistory:
         """Return the index of the first step at or after epoch `t` (len(self) if none)."""
         return bisect.bisect_left([e.m.t for e in self.steps], t)
 
+    def position_after(self, t: float) -> int:
+        """Return the index of the first step after epoch `t` (len(self) if none)."""
+        return bisect.bisect_right([e.m.t for e in self.steps], t)
+
     def record(self, step: FusedStep) -> None:
         """Log a fused step (the newest); a real one trims the history to `keep_real` reals.
 

@@ -7,8 +7,9 @@ or the initial state. The two settings come with each call (the tracker's curren
 to the batch being collected). The rules during IOD:
 
 * a forecast is ignored (`Cause.IGNORED_BEFORE_IOD`): IOD uses real measurements only;
-* a real measurement older than the last one collected is stale, one at its epoch a
-  duplicate (`Cause.REJECTED_STALE`, `Cause.REJECTED_DUPLICATE`);
+* a real measurement older than the last one collected is stale, one at its epoch from
+  the same station a duplicate (`Cause.REJECTED_STALE`, `Cause.REJECTED_DUPLICATE`), one
+  at its epoch from another station is not used by the batch (`Cause.IGNORED_BEFORE_IOD`);
 * a batch comes from one station, of one kind, within ``max_span_s`` of its first
   measurement (one pass): a measurement from another station, of another kind, or later
   than that starts a new batch;
@@ -124,9 +125,13 @@ class OrbitInitiator:
         """
         if m.source == Source.FORECAST:
             return Cause.IGNORED_BEFORE_IOD, "forecast before IOD"
-        if self.batch and m.t <= self.batch[-1].t:
-            return (Cause.REJECTED_STALE if m.t < self.batch[-1].t
-                    else Cause.REJECTED_DUPLICATE), f"t={m.t} during IOD"
+        if self.batch and m.t < self.batch[-1].t:
+            return Cause.REJECTED_STALE, f"t={m.t} during IOD"
+        if self.batch and m.t == self.batch[-1].t:
+            if m.frame_id == self.batch[-1].frame_id:
+                return Cause.REJECTED_DUPLICATE, f"t={m.t} during IOD"
+            return (Cause.IGNORED_BEFORE_IOD,
+                    f"t={m.t} from {m.frame_id!r}: the IOD batch is {self.batch[-1].frame_id!r}'s")
         if self.batch and (m.frame_id != self.batch[0].frame_id or m.kind != self.batch[0].kind
                            or m.t - self.batch[0].t > max_span_s):
             self.batch = []  # a new pass, station or kind: start again from m

@@ -12,9 +12,11 @@ tracker's options (`filter_options.FilterOptions`):
 * an object with a track predicts to each measurement and fuses it (`batch_ekf.BatchEKF`:
   one call per *round*, a round holding at most one measurement per object: the k-th
   measurement of every object in the batch goes in round k);
-* a measurement older than the object's last fused one is stale, one at the same epoch a
-  duplicate (the per-object tracker's rules: a second station measuring at the same epoch
-  is refused too); a rejected update leaves the track as it was;
+* a measurement older than the object's last fused one is stale; one at the same epoch
+  from a station that has not yet measured the object at that epoch is fused (networks
+  see an object from two sites at once: both are information), one from the same
+  station again a duplicate (the per-object tracker's rules); a rejected update leaves
+  the track as it was;
 * after ``reinit_after`` measurements in a row beyond the gate the track is dropped and
   its IOD starts again from the last of them (`Cause.REINITIALISED`).
 
@@ -69,6 +71,11 @@ class BankResult:
     nis: Array
 
 
+def station_bit(station: NDArray[np.int64]) -> NDArray[np.uint64]:
+    """Return each station index's bit in `TrackBank.stations_at_t` (``1 << index % 64``)."""
+    return np.left_shift(np.uint64(1), (station % 64).astype(np.uint64))
+
+
 class TrackBank:
     """Tracks of many objects (module docstring).
 
@@ -111,6 +118,10 @@ class TrackBank:
         self.tracking = np.zeros(cap, dtype=bool)
         self.gate_misses = np.zeros(cap, dtype=np.int64)
         """Measurements refused by the gate in a row, per object."""
+        self.stations_at_t = np.zeros(cap, dtype=np.uint64)
+        """The stations whose measurements were fused at each track's epoch `t`: bit
+        ``index % 64`` of the network's station index (with more than 64 stations two may
+        share a bit, and the second one's same-epoch measurement is counted a duplicate)."""
         self._initiators: dict[int, OrbitInitiator] = {}
 
     def __len__(self) -> int:
@@ -143,6 +154,8 @@ class TrackBank:
                 self.tracking = np.concatenate([self.tracking, np.zeros(grow, dtype=bool)])
                 self.gate_misses = np.concatenate([self.gate_misses,
                                                    np.zeros(grow, dtype=np.int64)])
+                self.stations_at_t = np.concatenate([self.stations_at_t,
+                                                     np.zeros(grow, dtype=np.uint64)])
         return r
 
     def process(self, t: ArrayLike, object_ids: Sequence[str], frame_ids: Sequence[str],
@@ -206,12 +219,14 @@ class TrackBank:
                 continue
             r = rows[idx]
             dt = tt[idx] - self.t[r]
+            bit = station_bit(station[idx])
+            again = (dt == 0) & ((self.stations_at_t[r] & bit) != 0)
             for i in idx[dt < 0].tolist():
                 cause[i] = Cause.REJECTED_STALE
-            for i in idx[dt == 0].tolist():
+            for i in idx[again].tolist():
                 cause[i] = Cause.REJECTED_DUPLICATE
-            go = dt > 0
-            idx, r, dt = idx[go], r[go], dt[go]
+            go = (dt > 0) | ((dt == 0) & ~again)
+            idx, r, dt, bit = idx[go], r[go], dt[go], bit[go]
             if not idx.size:
                 continue
             res = self.ekf.step(self.x[r], self.P[r], dt, zz[idx], RR[idx], tt[idx],
@@ -231,6 +246,7 @@ class TrackBank:
             r_ok = r[ok]
             self.x[r_ok] = res.x[ok]
             self.P[r_ok] = res.P[ok]
+            self.stations_at_t[r_ok] = np.where(dt[ok] == 0, self.stations_at_t[r_ok], 0) | bit[ok]
             self.t[r_ok] = tt[idx[ok]]
             out_i.append(idx[ok])
             out_x.append(res.x[ok])
@@ -246,6 +262,7 @@ class TrackBank:
         """Drop the row's track (it lost its object) and start its IOD again from `m`."""
         self.tracking[row] = False
         self.t[row] = -math.inf
+        self.stations_at_t[row] = 0
         self.gate_misses[row] = 0
         self._initiators.pop(row, None)
         self._initiate(row, m)
@@ -262,5 +279,6 @@ class TrackBank:
             return out[0]
         del self._initiators[row]
         self.x[row], self.P[row], self.t[row] = out.x, out.P, out.t
+        self.stations_at_t[row] = station_bit(np.array([self.ekf.index[m.frame_id]]))[0]
         self.tracking[row] = True
         return out

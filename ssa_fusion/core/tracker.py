@@ -16,6 +16,8 @@ when a measurement goes in front of fused ones. The admission and arbitration ru
   tracker is not configured for, a covariance that is not symmetric positive semi-definite
   (to round-off), a negative forecast horizon, a stamp older than the last real
   measurement fused, a duplicate epoch, or an innovation beyond the NIS gate;
+* a second station's measurement at the epoch of the last real one is fused after it; the
+  same station's again is a duplicate;
 * a real measurement always beats a forecast for the same epoch: a forecast for an epoch
   that already has a real measurement is dropped, and a real measurement for an epoch at or
   before fused forecasts rolls them back, fuses the real one and re-fuses the later forecasts
@@ -147,6 +149,7 @@ class Tracker:
         self.t_real = -math.inf
         self._initiator = OrbitInitiator(self.f, self.model, self.n)
         self._gate_misses = 0  # real measurements refused by the gate in a row
+        self._iod_end = (-math.inf, "")  # epoch and frame of the IOD batch's last measurement
         # the steps fused since `HISTORY_REAL` real measurements back, oldest first
         self._history = FusedHistory(HISTORY_REAL)
 
@@ -294,9 +297,20 @@ class Tracker:
             return Outcome(rejected=Cause.REJECTED_STALE,
                            detail=f"t={m.t} older than the last real measurement t={self.t_real}")
         if m.t == self.t_real:
-            return Outcome(rejected=Cause.REJECTED_DUPLICATE,
-                           detail=f"second measurement at t={m.t}")
+            if m.frame_id in self._frames_at_real():
+                return Outcome(rejected=Cause.REJECTED_DUPLICATE,
+                               detail=f"second measurement at t={m.t} from {m.frame_id!r}")
+            # another station at the same epoch: fused after the ones already fused
+            return self._insert(self._history.position_after(m.t), m, UpdateSource.SENSOR)
         return self._insert(self._history.position(m.t), m, UpdateSource.SENSOR)
+
+    def _frames_at_real(self) -> set[str]:
+        """Return the frames (stations) of the real measurements fused at ``t_real``."""
+        frames = {e.m.frame_id for e in self._history.steps
+                  if e.m.t == self.t_real and e.m.source != Source.FORECAST}
+        if self.t_real == self._iod_end[0]:
+            frames.add(self._iod_end[1])
+        return frames
 
     def _insert(self, k: int, m: Measurement, source: int) -> Outcome:
         """Undo the fused steps from index k on (epochs at or after m.t), fuse m, fuse again.
@@ -362,4 +376,5 @@ class Tracker:
             return Outcome(rejected=cause, detail=detail)
         self.ekf = ExtendedKalmanFilter(got.x, got.P)
         self.t = self.t_real = got.t
+        self._iod_end = (got.t, m.frame_id)
         return Outcome(estimate=self.estimate(UpdateSource.SENSOR))

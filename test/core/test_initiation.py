@@ -85,6 +85,10 @@ def test_rules_during_iod():
     assert ini.add(_pos(29.0, [7000, 1, 0], R)) == (Cause.REJECTED_STALE, "t=29.0 during IOD")
     assert ini.add(_pos(30.0, [7000, 1, 0], R)) == (Cause.REJECTED_DUPLICATE,
                                                     "t=30.0 during IOD")
+    other = Measurement(30.0, np.array([7000.0, 1, 0]), R, kind=Kind.POSITION,
+                        frame_id="elsewhere")
+    assert ini.add(other)[0] == Cause.IGNORED_BEFORE_IOD  # another station, same epoch
+    assert len(ini.batch) == 1
     assert ini.add(_pos(60.0, [7000, 2, 0], R))[0] == Cause.IOD_PENDING
     assert len(ini.batch) == 2
     got = ini.add(_pos(90.0, [7000, 3, 0], R))

@@ -1,6 +1,7 @@
 """TrackBank: the batched catalog filter equals one per-object `Tracker` per
 object, object by object, on a day-long radar survey of a synthetic LEO catalog."""
 
+import dataclasses
 import itertools
 import math
 from pathlib import Path
@@ -12,7 +13,7 @@ from ssa_fusion.core import catalog
 from ssa_fusion.core.config import EstimatorConfig, make_tracker
 from ssa_fusion.core.filter_options import FilterOptions
 from ssa_fusion.core.stations import NETWORKS, SENSORS
-from ssa_fusion.core.track_bank import TrackBank
+from ssa_fusion.core.track_bank import TrackBank, station_bit
 from ssa_fusion.core.types import Cause, Kind, Measurement
 from ssa_fusion.sim import survey
 
@@ -105,6 +106,7 @@ def test_stale_duplicate_and_unknown_station_are_refused_per_measurement():
     bank.x[bank.rows["b"]] = [7000.0, 0.0, 0.0, 0.0, 7.5, 0.0]
     bank.P[bank.rows["b"]] = np.eye(6)
     bank.t[bank.rows["b"]] = 100.0
+    bank.stations_at_t[bank.rows["b"]] = station_bit(np.array([bank.ekf.index["millstone"]]))[0]
     res = bank.process([50.0, 100.0], ["b", "b"], ["millstone", "millstone"], [z, z], [R, R])
     assert res.cause == [Cause.REJECTED_STALE, Cause.REJECTED_DUPLICATE]
     assert res.fused.size == 0 and bank.t[bank.rows["b"]] == 100.0
@@ -141,3 +143,58 @@ def test_the_bank_keeps_copies_and_refuses_a_non_finite_epoch():
     bank.t[bank.rows["a"]] = 10.0
     res = bank.process([float("nan")], ["a"], ["millstone"], [[1500.0, 1.0, 0.5]], [R])
     assert res.cause == [Cause.REJECTED_NONFINITE] and res.fused.size == 0
+
+
+@pytest.fixture(scope="module")
+def twin_sites_3h():
+    """Millstone and a twin radar 3 km east of it: every pass is seen by both at once."""
+    mill = SENSORS["millstone"]
+    twin = dataclasses.replace(mill, station=dataclasses.replace(
+        mill.station, name="millstone_east", lon_rad=mill.station.lon_rad + 3.0 / 4880.0))
+    base = catalog.read_catalog(SAMPLE)[0]
+    cat = survey.synthetic_catalog(base, 6, seed=7)
+    return survey.observe_catalog(cat, [mill, twin], base.epoch_unix, 3 * 3600.0, seed=2)
+
+
+def test_two_stations_at_one_epoch_are_both_fused_and_equal_the_tracker(twin_sites_3h):
+    """Networks see an object from two sites at once: the second site's measurement at the
+    epoch of the first is fused (a zero-length prediction), in the bank as in the per-object
+    tracker, and only the same site's measurement again is a duplicate."""
+    obs = twin_sites_3h
+    sensors = {s.station.name: s.station for s in obs.sensors}
+    bank = TrackBank(_bank().config, sensors, capacity=2)
+    ids = [obs.object_ids[k] for k in obs.obj]
+    frames = [obs.sensors[j].station.name for j in obs.sensor]
+    R = np.stack([obs.sensors[j].R for j in obs.sensor])
+    key = obs.obj * 1e12 + obs.t
+    _, pairs = np.unique(key, return_counts=True)
+    assert (pairs == 2).sum() > 100  # the geometry gives simultaneous measurements
+    res = bank.process(obs.t, ids, frames, obs.z, R)
+    assert Cause.REJECTED_DUPLICATE not in res.cause
+    fused = np.zeros(len(obs), bool)
+    fused[res.fused] = True
+    assert fused.sum() > 0.8 * len(obs)
+    # the second of a same-epoch pair was fused, and shrank the covariance further
+    shrunk = 0
+    for j in range(1, res.fused.size):
+        a, b = res.fused[j - 1], res.fused[j]
+        if ids[a] == ids[b] and obs.t[a] == obs.t[b] and frames[a] != frames[b]:
+            assert np.trace(res.P[j][:3, :3]) < np.trace(res.P[j - 1][:3, :3])
+            shrunk += 1
+    assert shrunk > 50
+    # the per-object tracker (its own EKF, no batching) fuses the same pairs to the same state
+    tracker_options = dataclasses.replace(bank.config)
+    for k in range(2):
+        tr = make_tracker(EstimatorConfig(station=",".join(sensors), filter=tracker_options,
+                                          sites=(sensors["millstone_east"],)))
+        for i in np.flatnonzero(obs.obj == k):
+            o = tr.process(Measurement(float(obs.t[i]), obs.z[i], R[i], Kind.RANGE_AZ_EL,
+                                       frame_id=frames[i]))
+            assert fused[i] == (o.estimate is not None), (i, o.rejected)
+            if o.estimate is not None:
+                j = int(np.flatnonzero(res.fused == i)[0])
+                assert _rel(o.estimate.x, res.x[j]) < 1e-9
+    # the same site again at the bank's epoch: a duplicate; the tracker says the same
+    last = int(res.fused[-1])
+    again = bank.process([obs.t[last]], [ids[last]], [frames[last]], [obs.z[last]], [R[last]])
+    assert again.cause == [Cause.REJECTED_DUPLICATE]
