@@ -51,6 +51,10 @@ def run(make_node: Callable[[], SsaNode], args: list[str] | None = None) -> int:
     a message naming the parameter. A callback may call `finish()` to end with exit 0.
     """
     stop = STOP  # set by the handlers `start_process` installed (the node's main calls it)
+    problem = params_file_problem(sys.argv[1:] if args is None else args)
+    if problem:
+        print(f"error: cannot start: {problem}", file=sys.stderr)
+        return EXIT_BAD_PARAMETERS
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except _rclpy.RCLError as exc:  # rcl could not parse the arguments: a -p rule, a params file
@@ -90,6 +94,43 @@ def run(make_node: Callable[[], SsaNode], args: list[str] | None = None) -> int:
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
         faulthandler.cancel_dump_traceback_later()
     return max(code, _finish_code[0])
+
+
+PARAMS_FILE_MAX_LINES = 20_000
+"""Most lines of a params file a node starts with. rcl's YAML parser takes time quadratic in
+the number of keys (0.24 s for 10,000, 2.2 s for 40,000; a million would take most of an
+hour and ignore SIGTERM meanwhile); a node's settings are a few dozen lines."""
+
+
+def params_file_problem(args: list[str]) -> str | None:
+    """Return why a ``--params-file`` among the ROS arguments `args` is refused, or None.
+
+    Checked before rcl reads it: a file larger than `settings.PARAMS_FILE_MAX_BYTES` or with
+    more than `PARAMS_FILE_MAX_LINES` lines. (A file that cannot be read is left to rcl,
+    whose error names it.)
+    """
+    from ssa_fusion.nodes.settings import PARAMS_FILE_MAX_BYTES
+
+    ros = False
+    for k, arg in enumerate(args):
+        if arg == "--ros-args":
+            ros = True
+        elif arg == "--":
+            ros = False
+        elif ros and arg == "--params-file" and k + 1 < len(args):
+            path = args[k + 1]
+            try:
+                with open(path, "rb") as f:
+                    head = f.read(PARAMS_FILE_MAX_BYTES + 1)
+            except OSError:
+                continue
+            if len(head) > PARAMS_FILE_MAX_BYTES:
+                return (f"params file {path} is larger than {PARAMS_FILE_MAX_BYTES} bytes; "
+                        "a node's settings are a few dozen lines")
+            if head.count(b"\n") > PARAMS_FILE_MAX_LINES:
+                return (f"params file {path} has more than {PARAMS_FILE_MAX_LINES} lines; "
+                        "a node's settings are a few dozen lines")
+    return None
 
 
 def finish(code: int = EXIT_OK) -> None:
