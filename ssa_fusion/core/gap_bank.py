@@ -35,6 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 from .gap_forecaster import PLACEHOLDER_TRAJECTORY, GapForecaster
 from .residual import LIVE_RESIDUAL, ResidualConfig
 from .types import MotionModel
+from .validation import MAX_OBJECTS
 
 Array = NDArray[np.float64]
 
@@ -109,9 +110,12 @@ class GapBank:
     """
 
     def __init__(self, config: GapBankConfig,
-                 wall: Callable[[], float] = time.perf_counter) -> None:
+                 wall: Callable[[], float] = time.perf_counter,
+                 max_objects: int = MAX_OBJECTS) -> None:
         self.config = config
         self.wall = wall
+        self.max_objects = int(max_objects)
+        """The most objects the bank holds: an estimate of one more is refused (`admits`)."""
         self.counts: Counter[str] = Counter()
         """``fitted`` (a fit with a forecast), ``refused`` (too few anchors, or the fit
         refused), ``skipped`` (the gap ended before its turn), ``forecasts``, ``overtaken``."""
@@ -142,6 +146,10 @@ class GapBank:
         """Return the number of objects waiting for their fit."""
         return int(self._queued.sum())
 
+    def admits(self, object_id: str) -> bool:
+        """Return whether an estimate of `object_id` is taken: one held, or room for one more."""
+        return object_id in self._rows or len(self._ids) < self.max_objects
+
     def _row(self, object_id: str) -> int:
         r = self._rows.get(object_id)
         if r is None:
@@ -163,11 +171,16 @@ class GapBank:
         """Take an estimate of `object_id` that fused a real measurement.
 
         Epoch t (s), state x (6,) km, km/s GCRF, covariance P (6, 6). Return the forecasts
-        of the gap it ends that were not yet released (their epochs before t).
+        of the gap it ends that were not yet released (their epochs before t). A second
+        estimate at the epoch of the newest (another station's measurement fused after the
+        first) replaces it. The caller checks `admits` first.
         """
         r = self._row(object_id)
-        if not t > self._last[r]:
-            return []  # out of order or a repeat: nothing new
+        if not t >= self._last[r]:
+            return []  # out of order: nothing new
+        if t == self._last[r]:
+            self._gaps[r].on_estimate(t, x, P)  # the better estimate of the same epoch
+            return []
         out = list(self._release(r, math.nextafter(t, -math.inf))) if r in self._active else []
         if self._released[r] >= t:
             self.counts["overtaken"] += int(

@@ -151,6 +151,23 @@ def is_covariance(R: np.ndarray) -> bool:
     return bool(eig[0] >= -1e-12 * np.abs(eig).max())
 
 
+def state_problem(x: np.ndarray, P: np.ndarray) -> Problem:
+    """Return why an estimate (state `x`, covariance `P`, km and km/s) cannot be used, or `OK`.
+
+    Non-finite values (`REJECTED_NONFINITE`), a covariance that is not symmetric positive
+    semi-definite (`REJECTED_COVARIANCE`), or a variance over `MAX_VARIANCE`
+    (`REJECTED_IMPLAUSIBLE`: a standard deviation of 1e6 km says nothing).
+    """
+    if not (np.isfinite(x).all() and np.isfinite(P).all()):
+        return Cause.REJECTED_NONFINITE, "state or covariance not finite"
+    if not is_covariance(P):
+        return Cause.REJECTED_COVARIANCE, "covariance not symmetric positive semi-definite"
+    if float(np.abs(P).max(initial=0.0)) > MAX_VARIANCE:
+        return (Cause.REJECTED_IMPLAUSIBLE,
+                f"covariance entry {float(np.abs(P).max()):.3g} over {MAX_VARIANCE:g} km^2")
+    return OK
+
+
 def ahead_of_clock(t: float, now: float, max_lead_s: float) -> Problem:
     """Refuse a stamp `t` more than `max_lead_s` after the clock time `now` (all s).
 

@@ -40,7 +40,6 @@ from ssa_fusion.nodes.parameters import (
     Param,
     ParameterTable,
     Rule,
-    at_least,
     clock_lead,
     filter_rows,
     sites_problem,
@@ -50,6 +49,7 @@ from ssa_fusion.nodes.shards import (
     LIST_OBJECTS,
     SHARD_RULE,
     content_filter,
+    max_objects_row,
     shard_problem,
     shard_range,
     shard_rows,
@@ -75,10 +75,7 @@ PARAMETERS = ParameterTable("catalog_filter", (
           "time between batches: what arrived meanwhile is fused at once", unit="wall s",
           check=POSITIVE),
     clock_lead(CATALOG_FILTER.max_clock_lead),
-    Param("max_objects", CATALOG_FILTER.max_objects,
-          "the most objects the shard tracks (~0.5 kB each); a measurement of one more is "
-          "refused (`rejected_bank_full`): a flood of new object ids cannot take the "
-          "machine's memory", check=at_least(1)),
+    max_objects_row(CATALOG_FILTER.max_objects, "tracks (~0.5 kB each)", "a measurement"),
 ), rules=(SHARD_RULE, Rule(STATION_RULE_NAMES, sites_problem)))
 """The catalog_filter's parameters."""
 

@@ -22,11 +22,9 @@ from __future__ import annotations
 from dataclasses import replace
 from functools import partial
 
-import numpy as np
-
 from ssa_fusion.core.gap_bank import CATALOG_RESIDUAL, GapBank, GapBankConfig, GapForecast
 from ssa_fusion.core.types import Cause, MotionModel, StateEstimate, UpdateSource
-from ssa_fusion.core.validation import id_problem
+from ssa_fusion.core.validation import id_problem, state_problem
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import CATALOG_SURROGATE
 from ssa_fusion.nodes.diagnostics import Count, NodeCause
@@ -45,6 +43,7 @@ from ssa_fusion.nodes.shards import (
     LIST_OBJECTS,
     SHARD_RULE,
     content_filter,
+    max_objects_row,
     shard_problem,
     shard_rows,
 )
@@ -85,6 +84,7 @@ PARAMETERS = ParameterTable("catalog_surrogate", (
           "the pass ends of a fit must span at least this", unit="s", check=NON_NEGATIVE),
     *shard_rows(CATALOG_SURROGATE.shards, CATALOG_SURROGATE.shard),
     clock_lead(CATALOG_SURROGATE.max_clock_lead),
+    max_objects_row(CATALOG_SURROGATE.max_objects, "holds", "an estimate"),
 ), rules=(SHARD_RULE,))
 """The catalog_surrogate's parameters."""
 
@@ -105,7 +105,7 @@ class CatalogSurrogateNode(SsaNode):
                                     pass_break_s=p.number("pass_break"),
                                     hold_s=p.number("hold"), fit_budget=p.number("fit_budget"),
                                     residual=residual)
-        self.bank = GapBank(self.config)
+        self.bank = GapBank(self.config, max_objects=p.integer("max_objects"))
         self.diag.status["shard"] = f"{self.shard}/{self.shards}"
         self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, CATALOG_QOS)
         cft = content_filter(self.shard, self.shards, "update_source = %0",
@@ -121,7 +121,7 @@ class CatalogSurrogateNode(SsaNode):
 
     def reset(self) -> None:
         """Forget every object."""
-        self.bank = GapBank(self.config)
+        self.bank = GapBank(self.config, max_objects=self.params.integer("max_objects"))
 
     def on_estimate(self, msg: StateEstimateMsg) -> None:
         """Take one estimate of the filter: a real measurement's is an object's newest."""
@@ -144,9 +144,14 @@ class CatalogSurrogateNode(SsaNode):
             self.diag.count(NodeCause.REJECTED_OBJECT_ID,
                             "an estimate without object_id: whose it is cannot be known")
             return
-        if not (np.isfinite(e.x).all() and np.isfinite(e.P).all()):
-            self.diag.count(Cause.REJECTED_NONFINITE, f"object {e.object_id!r} at t={e.t}: "
-                            "state or covariance not finite")
+        cause, reason = state_problem(e.x, e.P)
+        if cause:
+            self.diag.count(Cause(cause), f"object {e.object_id!r} at t={e.t}: {reason}")
+            return
+        if not self.bank.admits(e.object_id):
+            self.diag.count(Cause.REJECTED_BANK_FULL,
+                            f"object {e.object_id!r}: the bank holds max_objects "
+                            f"({self.bank.max_objects}) objects already")
             return
         self.diag.counts[Count.RECEIVED] += 1
         self.publish(self.bank.on_estimate(e.object_id, e.t, e.x, e.P))

@@ -172,6 +172,7 @@ class CatalogSurrogateDefaults:
     shards: int = 1
     shard: int = 0
     max_clock_lead: float = MAX_CLOCK_LEAD_S
+    max_objects: int = MAX_OBJECTS
 
 
 BAG_PATTERN = "out/bags/ssa_%Y%m%d_%H%M%S"

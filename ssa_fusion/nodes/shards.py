@@ -60,6 +60,18 @@ def shard_rows(shards: int, shard: int) -> tuple[Param, Param]:
                   "at start and on set)", check=at_least(0)))
 
 
+def max_objects_row(default: int, holds: str, what: str) -> Param:
+    """Return the ``max_objects`` row of a catalog node's parameters.
+
+    The most objects the shard `holds` (a phrase: "tracks (~0.5 kB each)"); `what` of one
+    more is refused.
+    """
+    return Param("max_objects", default,
+                 f"the most objects the shard {holds}; {what} of one more is refused "
+                 "(`rejected_bank_full`): a flood of new object ids cannot take the machine's "
+                 "memory", check=at_least(1))
+
+
 def _shard_in_range(v: Values) -> str | None:
     shard, shards = v["shard"], v["shards"]
     assert isinstance(shard, int) and isinstance(shards, int)

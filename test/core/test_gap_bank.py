@@ -172,3 +172,19 @@ def test_the_configuration_is_checked():
         GapBankConfig(motion_model="sgp4")
     with pytest.raises(ValueError, match="period_s"):
         GapBankConfig(period_s=float("nan"))
+
+
+def test_a_flood_of_object_ids_stops_at_max_objects_and_a_same_epoch_estimate_replaces():
+    """`admits` holds the bank at `max_objects`; a second estimate at an object's newest
+    epoch (another station's measurement fused after the first) replaces the first."""
+    bank = GapBank(CFG, max_objects=2)
+    assert bank.admits("a") and bank.admits("b")
+    bank.on_estimate("a", 0.0, X0, P)
+    bank.on_estimate("b", 0.0, X0, P)
+    assert not bank.admits("c") and bank.admits("a") and len(bank) == 2
+    better = X0 + 1e-3
+    assert bank.on_estimate("a", 0.0, better, 0.5 * P) == []
+    r = bank._rows["a"]
+    last = bank._gaps[r].last
+    assert last is not None and np.array_equal(last[1], better)
+    assert bank.on_estimate("a", -1.0, X0, P) == [] and bank._gaps[r].last[0] == 0.0

@@ -1,5 +1,6 @@
 """Graph test of the catalog_surrogate node alone: the test process drives sim time on
-/clock and publishes the filter's estimates of two objects, plus bad ones. Every bad
+/clock and publishes the filter's estimates of two objects, plus bad ones (non-finite,
+negative or enormous covariances, an object beyond `max_objects`). Every bad
 estimate is refused by cause on /diagnostics (or never delivered: the content filter), the
 node lives on, and the forecast it publishes through the gap that follows equals the
 in-process `core.gap_forecaster.GapForecaster` fed the same estimates (through the same messages).
@@ -17,7 +18,7 @@ from test_faults import Diag, publisher
 from ssa_fusion.core import dynamics, types
 from ssa_fusion.core.gap_bank import CATALOG_RESIDUAL
 from ssa_fusion.core.gap_forecaster import GapForecaster
-from ssa_fusion.nodes.shards import shard_range
+from ssa_fusion.nodes.shards import shard_problem, shard_range
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.topics import CATALOG_QOS
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS
@@ -51,7 +52,7 @@ def test_bad_estimates_are_refused_and_the_gap_forecast_equals_the_core(ros_grap
     span = 3 * 5820.0  # first to last pass end: only the last one may fit
     params = {"use_sim_time": True, "shards": 2, "shard": 0, "hold": 0.0,
               "predict_period": PERIOD, "min_anchors": 3, "min_span": span - 1.0,
-              "fit_budget": 1.0}
+              "fit_budget": 1.0, "max_objects": 1}
     node = g.start_node("catalog_surrogate", params=params)
     diag = Diag(g)
     forecasts: list = []
@@ -76,10 +77,13 @@ def test_bad_estimates_are_refused_and_the_gap_forecast_equals_the_core(ros_grap
     future = messages.estimate_to_msg(replace(good[0], t=T0 + 1e5))
     forecast = messages.estimate_to_msg(replace(good[0], update_source=2))
     other = messages.estimate_to_msg(replace(good[0], object_id=theirs))
-    for m in (nan, no_id, wrong_key, future, forecast, other):
+    negative = messages.estimate_to_msg(replace(good[0], P=-P))
+    huge = messages.estimate_to_msg(replace(good[0], P=1e300 * np.eye(6)))
+    for m in (nan, no_id, wrong_key, future, forecast, other, negative, huge):
         est.publish(m)
     diag.wait(g, "catalog_surrogate", {"rejected_nonfinite": 1, "rejected_object_id": 1,
-                                       "rejected_shard_key": 1, "rejected_future": 1})
+                                       "rejected_shard_key": 1, "rejected_future": 1,
+                                       "rejected_covariance": 1, "rejected_implausible": 1})
     # then the object's passes, sim time running every minute, and on into the gap after
     # the last (a clock and an estimate arrive on separate topics, so in either order)
     end = good[-1].t
@@ -107,4 +111,9 @@ def test_bad_estimates_are_refused_and_the_gap_forecast_equals_the_core(ros_grap
             t=f.t, x=ref.forecast(f.t)[0], P=ref.forecast(f.t)[1], object_id=mine)))
         np.testing.assert_allclose(f.x, want.x, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(f.P, want.P, rtol=1e-9, atol=1e-15)
+    # an object more than max_objects (1): refused by cause, the node lives on
+    flood = next(o for o in (f"8{k:04d}" for k in range(1000))
+                 if shard_problem(messages.shard_key(o), o, 0, 2) is None)
+    est.publish(messages.estimate_to_msg(replace(good[-1], object_id=flood)))
+    diag.wait(g, "catalog_surrogate", {"rejected_bank_full": 1})
     assert node.popen.poll() is None
