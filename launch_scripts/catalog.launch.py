@@ -2,7 +2,7 @@
 
     ros2 launch ssa_fusion catalog.launch.py [catalog:=FILE] [objects:=N] [synthetic:=N]
         [duration:=HOURS] [shards:=K] [surrogate:=true|false] [scenario:=NAME]
-        [time_scale:=X] [seed:=N] [bag:=DIR]
+        [time_scale:=X] [lockstep:=true|false] [seed:=N] [bag:=DIR]
 
 The same processes and parameters as ``ssa-fusion live --catalog`` (`apps.live_catalog.
 catalog_graph`): the recorder, ``shards`` catalog_filter processes each owning the objects of
@@ -39,7 +39,9 @@ ARGUMENTS = {
     "surrogate": "true: a catalog_surrogate per shard (gap forecasts); false: none",
     "scenario": "real-sky scenario whose radars observe the catalog",
     "sites": "sites file (docs/SITES.md) whose radars observe the catalog instead ('' = none)",
-    "time_scale": "sim seconds per wall second",
+    "time_scale": "sim seconds per wall second (in lockstep: at most)",
+    "lockstep": "true: sim time waits for the shards and the recorder at each step (nothing "
+                "lost on a loaded machine); false: open loop at time_scale",
     "seed": "measurement noise (and synthetic catalog) seed",
     "bag": "recorder output directory, must not exist (default: out/bags/ssa_<date>_<time>)",
 }
@@ -63,15 +65,16 @@ def graph(context: Any) -> list[Any]:
     scenario = catalog_scenario(args["scenario"])
     if args["sites"]:
         scenario = scenario.with_sites(args["sites"])  # SiteFileError: one line
-    if args["surrogate"] not in ("true", "false"):
-        raise ValueError(f"surrogate:={args['surrogate']!r}: true or false")
+    for flag in ("surrogate", "lockstep"):
+        if args[flag] not in ("true", "false"):
+            raise ValueError(f"{flag}:={args[flag]!r}: true or false")
     hours = _number(args, "duration", float, 0.0)
     specs = catalog_graph(
         scenario, Path(args["catalog"]), _number(args, "objects", int, 0),
         _number(args, "synthetic", int, 0), hours * 3600.0 or scenario.duration_s,
         _number(args, "time_scale", float, 1e-9), _number(args, "seed", int, 0),
         _number(args, "shards", int, 1), args["surrogate"] == "true", {}, Path(args["bag"]),
-        args["start"])
+        args["start"], args["lockstep"] == "true")
     nodes = {s.name: Node(package="ssa_fusion", executable=s.executable, name=s.name,
                           output="screen", parameters=[s.params]) for s in specs}
     return [*nodes.values(),
@@ -92,6 +95,7 @@ def generate_launch_description() -> LaunchDescription:
         "scenario": DEFAULT_SCENARIO,
         "sites": "",
         "time_scale": "100",
+        "lockstep": "true",
         "seed": "0",
         "bag": default_bag(),
     }

@@ -144,16 +144,23 @@ class NodeSpec(NamedTuple):
     params: dict[str, Any]
 
 
+MAX_TIME_SCALE = 1e9
+"""The time scale of ``--time-scale max`` (a catalog in lockstep as fast as its slowest
+consumer): sim time a billion times faster than the wall clock is no ceiling at all."""
+
+
 def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthetic: int,
                   sim_s: float, time_scale: float, seed: int, shards: int, surrogate: bool,
                   surrogate_extra: dict[str, Any], bag: Path | None,
-                  start: str = "") -> list[NodeSpec]:
+                  start: str = "", lockstep: bool = True) -> list[NodeSpec]:
     """Return the processes of a catalog run, in start order.
 
     The recorder (`bag`, None: its default), `shards` catalog_filter and, with `surrogate`,
     as many catalog_surrogate (`surrogate_extra` over their defaults), and sensor_sim
     simulating `scenario`'s radars measuring the catalog for `sim_s` from `start` (ISO 8601
-    UTC; '' = the catalog's first epoch) (last: it waits for the others). The same for
+    UTC; '' = the catalog's first epoch) (last: it waits for the others), in lockstep with
+    the shards and the recorder (`nodes.progress`; `time_scale` a ceiling) unless
+    `lockstep` is False (open loop: sim time follows the wall clock). The same for
     `ssa-fusion live --catalog` and `ros2 launch ssa_fusion catalog.launch.py`. ValueError
     with one line for a `start` that is not an epoch ssa_fusion represents.
     """
@@ -181,7 +188,9 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
         NodeSpec("sensor_sim", "sensor_sim", {
             "scenario": scenario.name, "catalog": str(Path(catalog).resolve()),
             "objects": objects, "synthetic": synthetic, "duration": float(sim_s),
-            "time_scale": float(time_scale), "seed": seed, "start": start, **own,
+            "time_scale": min(float(time_scale), MAX_TIME_SCALE), "seed": seed,
+            "start": start, **own,
+            "lockstep": [*names, *gaps, "recorder"] if lockstep else [""],
             "wait_for": [f"{TOPIC_MEASUREMENT}={shards + 1}",
                          f"{TOPIC_ESTIMATE}={len(gaps) + 1}"],
             "wait_for_readers": readers}),

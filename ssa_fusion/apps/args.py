@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 from pathlib import Path
 
@@ -16,6 +17,11 @@ def positive_float(text: str) -> float:
     if not value > 0 or value == float("inf"):
         raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
     return value
+
+
+def time_scale(text: str) -> float:
+    """Parse a time scale: a finite float > 0, or ``max`` (inf: as fast as the graph goes)."""
+    return math.inf if text == "max" else positive_float(text)
 
 
 MAX_DOMAIN_ID = 232

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import re
 import sys
 import time
@@ -29,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 from ssa_fusion import graphs
 from ssa_fusion.apps import evaluate, report, runs
-from ssa_fusion.apps.args import add_domain_id, positive_float
+from ssa_fusion.apps.args import add_domain_id, time_scale
 from ssa_fusion.core.types import UpdateSource
 from ssa_fusion.ros import visual_msgs
 from ssa_fusion.ros.processes import Graph
@@ -53,8 +54,9 @@ FILTER_COUNTERS = ("forecast_superseded", "forecasts_rolled_back", "rejected_gat
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Add the options of `ssa-fusion live` (with the catalog ones) to `p`."""
     p.add_argument("--scenario", default=scenarios.DEFAULT_LIVE.name, choices=graphs.LIVE_SCENARIOS)
-    p.add_argument("--time-scale", type=positive_float, default=1000.0,
-                   help="sim seconds per wall second (default 1000)")
+    p.add_argument("--time-scale", type=time_scale, default=1000.0,
+                   help="sim seconds per wall second (default 1000); a catalog in lockstep: "
+                        "the ceiling, `max` for none (as fast as its slowest node)")
     p.add_argument("--bag", type=Path, default=None,
                    help="bag directory to record (default: OUT/bag)")
     p.add_argument("--out", type=Path, default=None,
@@ -191,6 +193,7 @@ def late_warning(late: evaluate.LateForecasts, counters: dict[str, int]) -> str 
 def catalog_options_given(args: argparse.Namespace) -> list[str]:
     """Return the catalog-only options of `args` set away from their defaults."""
     given = {"--objects": args.objects != 0, "--synthetic": args.synthetic != 0,
+             "--time-scale max": math.isinf(args.time_scale), "--open-loop": not args.lockstep,
              "--shards": args.shards != 1, "--no-surrogate": not args.surrogate,
              "--surrogate-param": bool(args.surrogate_param)}
     return [name for name, set_ in given.items() if set_]

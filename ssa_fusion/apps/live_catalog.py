@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import math
 import sys
 import time
 from collections import Counter, defaultdict
@@ -68,6 +69,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--shards", type=int, default=1,
                    help="catalog: filter (and surrogate) processes, each owning the objects "
                         "of its shard (default 1)")
+    p.add_argument("--open-loop", dest="lockstep", action="store_false",
+                   help="catalog: sim time follows the wall clock at --time-scale whatever "
+                        "the nodes keep up with (default: lockstep, `nodes.progress`: each "
+                        "step waits until the shards and the recorder took the last)")
     p.add_argument("--no-surrogate", dest="surrogate", action="store_false",
                    help="catalog: no catalog_surrogate (gap forecasts)")
     p.add_argument("--surrogate-param", action="append", default=[], metavar="NAME=VALUE",
@@ -103,6 +108,14 @@ def args_problem(args: argparse.Namespace) -> str | None:
     except ValueError as exc:
         return str(exc)
     return None
+
+
+def pace(args: argparse.Namespace) -> str:
+    """Return how sim time runs: "in lockstep (at most 100x)", "at 100x (open loop)"."""
+    if not args.lockstep:
+        return f"at {args.time_scale:g}x (open loop)"
+    return ("in lockstep (as fast as the nodes go)" if math.isinf(args.time_scale)
+            else f"in lockstep (at most {args.time_scale:g}x)")
 
 
 def catalog_scenario(args: argparse.Namespace) -> sky.SkyScenario:
@@ -223,14 +236,14 @@ def run(args: argparse.Namespace) -> int:
     sim_s = args.duration * 3600.0 or s.duration_s
     specs = graphs.catalog_graph(s, args.catalog, args.objects, args.synthetic, sim_s,
                           args.time_scale, args.seed, args.shards, args.surrogate,
-                          catalog_surrogate_params(args), bag, args.start)
+                          catalog_surrogate_params(args), bag, args.start, args.lockstep)
     names = [n.name for n in specs if n.executable == "catalog_filter"]
     gaps = [n.name for n in specs if n.executable == "catalog_surrogate"]
     graph = Graph(out / "logs", args.domain_id)
     radars = (f"radars of {s.sites_file} ({', '.join(r.station.name for r in s.radars)})"
               if s.sites_file else f"radars of {s.name}")
     print(f"live: catalog {args.catalog} ({len(entries)} objects), {radars}, "
-          f"{sim_s / 3600:g} h of sim time at {args.time_scale:g}x, {args.shards} filter "
+          f"{sim_s / 3600:g} h of sim time {pace(args)}, {args.shards} filter "
           f"shard(s){' with a surrogate each' if gaps else ''}; ROS domain {graph.domain_id}; "
           f"logs in {out}/logs", flush=True)
     t_start = time.monotonic()
@@ -248,7 +261,9 @@ def run(args: argparse.Namespace) -> int:
         sim = started["sensor_sim"]
         procs = [started[n] for n in names + gaps]
         # else a node ended early (the recorder too): graph.close says which
-        if graph.wait_done_or_broken(sim, 300.0 + 3.0 * sim_s / args.time_scale):
+        # in lockstep no step waits longer than its timeout: no limit needed
+        limit = math.inf if args.lockstep else 300.0 + 3.0 * sim_s / args.time_scale
+        if graph.wait_done_or_broken(sim, limit):
             # the filters are done when their estimates stop (surrogates may still be fitting)
             graph.wait_quiet(lambda: seen[UpdateSource.SENSOR], quiet_s=1.0, limit_s=600.0)
             last_output = time.time() - 1.0  # wall time (Unix s) the last estimate arrived
@@ -271,7 +286,9 @@ def run(args: argparse.Namespace) -> int:
     ran = None if sim_wall is None else (sim_wall[0], max(sim_wall[1], last_output))
     summary = summarise(bag, entries, _statuses(diagnostics), names, rss, ran, sim_s, gaps)
     summary.update({"catalog": str(args.catalog), "objects": len(entries), "scenario": s.name,
-                    "time_scale": args.time_scale, "shards": args.shards, "wall_s": wall})
+                    "time_scale": args.time_scale if math.isfinite(args.time_scale) else "max",
+                    "lockstep": args.lockstep,
+                    "shards": args.shards, "wall_s": wall})
     (out / "catalog.json").write_text(json.dumps(summary, indent=2))
     print(table(summary))
     return 0 if summary["lost_measurements"] == 0 else 1

@@ -45,6 +45,7 @@ from ssa_fusion.nodes.parameters import (
     sites_problem,
     sites_row,
 )
+from ssa_fusion.nodes.progress import SHARD, TAKEN, ProgressReporter
 from ssa_fusion.nodes.shards import (
     LIST_OBJECTS,
     SHARD_RULE,
@@ -108,6 +109,14 @@ class CatalogFilterNode(SsaNode):
         self.clock_hold.limit = CATALOG_DEPTH  # a stalled catalog's burst is held whole
         self.wall_timer(p.number("batch_period"), self.fuse)
         self.reset_on_backward_jump(self.reset, "every track forgotten")
+        self.progress = ProgressReporter(self, self.taken)
+
+    def taken(self) -> dict[str, str | int]:
+        """Return the lockstep progress: measurements with a final fate, estimates published."""
+        c = self.diag.counts
+        return {SHARD: f"{self.shard}/{self.shards}",
+                TAKEN: c[Count.REFUSED] + c[Count.CONSUMED] + c[Count.DROPPED],
+                Count.PUBLISHED_SENSOR: c[Count.PUBLISHED_SENSOR]}
 
     def reset(self) -> None:
         """Forget every track and what waits for the next batch."""

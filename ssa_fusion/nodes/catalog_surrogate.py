@@ -39,6 +39,7 @@ from ssa_fusion.nodes.parameters import (
     at_least,
     clock_lead,
 )
+from ssa_fusion.nodes.progress import SHARD, TAKEN_ESTIMATES, ProgressReporter
 from ssa_fusion.nodes.shards import (
     LIST_OBJECTS,
     SHARD_RULE,
@@ -110,18 +111,27 @@ class CatalogSurrogateNode(SsaNode):
         self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, CATALOG_QOS)
         cft = content_filter(self.shard, self.shards, "update_source = %0",
                              (str(UpdateSource.SENSOR.value),))
-        self.sub = self.subscribe(StateEstimateMsg, TOPIC_ESTIMATE, self.on_estimate,
+        self.sub = self.subscribe(StateEstimateMsg, TOPIC_ESTIMATE, self.on_message,
                                   CATALOG_QOS, content_filter=cft)
+        self.taken = 0  # SENSOR estimates arrived (used or refused): lockstep progress
         if not self.sub.is_cft_enabled:
             self.diag.count(NodeCause.CONTENT_FILTER_UNAVAILABLE,
                             "the DDS implementation does not filter by content: every "
                             "estimate arrives and those not taken are ignored here")
         self.wall_timer(TICK_S, self.tick)
+        self.progress = ProgressReporter(self, lambda: {
+            SHARD: f"{self.shard}/{self.shards}", TAKEN_ESTIMATES: self.taken,
+            Count.PUBLISHED_FORECAST: self.diag.counts[Count.PUBLISHED_FORECAST]})
         self.reset_on_backward_jump(self.reset, "every object forgotten")
 
     def reset(self) -> None:
         """Forget every object."""
         self.bank = GapBank(self.config, max_objects=self.params.integer("max_objects"))
+
+    def on_message(self, msg: StateEstimateMsg) -> None:
+        """Take one message of /ssa/estimate (counted for lockstep when a filter's)."""
+        self.taken += msg.update_source == UpdateSource.SENSOR
+        self.on_estimate(msg)
 
     def on_estimate(self, msg: StateEstimateMsg) -> None:
         """Take one estimate of the filter: a real measurement's is an object's newest."""

@@ -14,6 +14,7 @@ from collections import Counter
 from collections.abc import Callable
 
 from rclpy.clock import Clock, ClockType
+from rclpy.duration import Duration
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -38,6 +39,10 @@ class NodeCause(enum.StrEnum):
     CONTENT_FILTER_UNAVAILABLE = "content_filter_unavailable"
 
 
+FINAL_REPORT_WAIT_S = 1.0
+"""Wall s a stopping node waits for its last /diagnostics report to be acknowledged."""
+
+
 class Count(enum.StrEnum):
     """What a node did: counters that are no cause."""
 
@@ -60,6 +65,7 @@ class Count(enum.StrEnum):
     ESTIMATES = "estimates"
     MEASUREMENTS = "measurements"
     SCENE_UPDATES = "scene_updates"
+    LOCKSTEP_TIMEOUTS = "lockstep_timeouts"
 
 
 PUBLISHED_BY_SOURCE = (Count.PUBLISHED_PREDICTION, Count.PUBLISHED_SENSOR,
@@ -203,3 +209,11 @@ class Diagnostics:
                                value=str(sub.get_publisher_count())) for sub in self._watched]
         msg.status = [st]
         self._pub.publish(msg)
+
+    def publish_last(self, timeout_s: float = FINAL_REPORT_WAIT_S) -> None:
+        """Publish the final counts; wait until every reader acknowledged them.
+
+        At most `timeout_s` wall s: a node's last word reaches whoever sums up the run.
+        """
+        self.publish()
+        self._pub.wait_for_all_acked(Duration(nanoseconds=int(timeout_s * 1e9)))

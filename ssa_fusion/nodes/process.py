@@ -6,6 +6,7 @@ invalid parameter at start-up exits 2 with one line naming it (`ParameterError`)
 
 from __future__ import annotations
 
+import contextlib
 import faulthandler
 import signal
 import sys
@@ -84,6 +85,8 @@ def run(make_node: Callable[[], SsaNode], args: list[str] | None = None) -> int:
         code = EXIT_BAD_PARAMETERS
     finally:
         if node is not None:
+            with contextlib.suppress(Exception):  # a context already shut down: no last word
+                node.diag.publish_last()
             node.close()
             node.destroy_node()
         executor.shutdown()

@@ -37,6 +37,7 @@ from ssa_fusion.nodes.parameters import (
     ParamValue,
 )
 from ssa_fusion.nodes.process import EXIT_FAILED, finish
+from ssa_fusion.nodes.progress import RECORDED_ESTIMATES, RECORDED_MEASUREMENTS, ProgressReporter
 from ssa_fusion.ros.bagio import BagWriter, qos_from_rclpy
 from ssa_fusion.ros.interfaces import Message
 from ssa_fusion.ros.topics import DATA_DEPTH
@@ -94,6 +95,8 @@ class Recorder(SsaNode):
         self.failed: OSError | None = None  # why the bag cannot be written (then: exit 1)
         self.wall_timer(p.number("discover_period"), self.discover)
         self.wall_timer(p.number("flush_period"), self.flush)
+        self.progress = ProgressReporter(self, lambda: {
+            k: self.diag.counts[k] for k in (RECORDED_MEASUREMENTS, RECORDED_ESTIMATES)})
         self.get_logger().info(f"recording to {bag}")
         self.discover()
 

@@ -6,7 +6,9 @@ Propagates the scenario's true orbit (two-body + J2, drag, or SGP4/SDP4), and pu
 * ``/ssa/withheld``: what they would have measured during a scheduled outage (evaluation
   only);
 * ``/ssa/truth`` (ssa_fusion_msgs/StateEstimate, zero covariance): the true state;
-* ``/clock``: sim time, UTC (Unix seconds), advancing `time_scale` sim s per wall s.
+* ``/clock``: sim time, UTC (Unix seconds), advancing `time_scale` sim s per wall s; for
+  a catalog with ``lockstep`` consumers, by ``lockstep_step`` once they have taken the last
+  step's measurements, `time_scale` being a ceiling (`nodes.progress`).
 
 A paper scenario (`sim.scenarios`) has one idealised sensor measuring at every epoch of
 its cadence; a real-sky scenario (`sim.sky`) has stations that measure only above their
@@ -29,6 +31,7 @@ from rclpy.duration import Duration
 from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core import timescales, types
 from ssa_fusion.core.frames import Frame
+from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S
 from ssa_fusion.nodes import parameters
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import SENSOR_SIM
@@ -50,6 +53,7 @@ from ssa_fusion.nodes.parameters import (
     read_by,
 )
 from ssa_fusion.nodes.process import finish
+from ssa_fusion.nodes.progress import Lockstep
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Clock, Time
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
@@ -178,6 +182,19 @@ def _one_object_or_a_catalog(values: Values) -> str | None:
     return None
 
 
+def _step(value: ParamValue) -> str | None:
+    ok = isinstance(value, float) and 0.0 < value <= MAX_CLOCK_LEAD_S / 2
+    return None if ok else f"must be in (0, {MAX_CLOCK_LEAD_S / 2:g}]"
+
+
+def _lockstep_needs_a_catalog(values: Values) -> str | None:
+    names = values["lockstep"]
+    assert isinstance(names, list)
+    if any(names) and not values["catalog"]:
+        return "lockstep is for catalog runs (`catalog`): their consumers report progress"
+    return None
+
+
 DEFAULT_CADENCE = _cadence({"scenario": SENSOR_SIM.scenario})
 """The default scenario's cadence, s."""
 
@@ -253,7 +270,20 @@ PARAMETERS = ParameterTable("sensor_sim", (
           "catalog: spread its first element set into N objects of the same regime "
           "(`survey.synthetic_catalog`, seeded by `seed`; 0 = the catalog's own)",
           check=at_least(0)),
+    Param("lockstep", SENSOR_SIM.lockstep,
+          "catalog: the consumers (node names: catalog_filter and catalog_surrogate shards, "
+          "the recorder) sim time waits for: `/clock` advances by `lockstep_step` only once "
+          "each has taken all it was sent (`nodes.progress`), `time_scale` being a ceiling; "
+          "`[\"\"]` = open loop (sim time follows the wall clock, whatever is missed)"),
+    Param("lockstep_step", SENSOR_SIM.lockstep_step,
+          "lockstep: sim time per step (its measurements run ahead of the clock by up to "
+          "this: keep it below the consumers' `max_clock_lead`)", unit="s",
+          check=Check(f"in (0, {MAX_CLOCK_LEAD_S / 2:g}]", _step)),
+    Param("lockstep_timeout", SENSOR_SIM.lockstep_timeout,
+          "lockstep: wall time a step waits for its consumers before it goes on without "
+          "them (counted `lockstep_timeouts`, and logged)", unit="wall s", check=POSITIVE),
 ), rules=(_needs_sky("catalog", "its radars observe the catalog"),
+          Rule(("lockstep", "catalog"), _lockstep_needs_a_catalog),
           _needs_sky("start", "a paper scenario keeps the paper's epoch"),
           _needs_sky("sites", "its object is what the sites observe"),
           _needs_sky("elements", "its sensors observe the object"),
@@ -314,6 +344,14 @@ class SensorSim(SsaNode):
         self.finished = False
         self._next_wait_log = time.monotonic() + 5.0  # quiet while discovery runs
         self.wall0: float | None = None
+        self.lockstep: Lockstep | None = None
+        if self.catalog is not None and any(p.texts("lockstep")):
+            keys = np.array([messages.shard_key(o) for o in self.catalog_ids], dtype=np.int64)
+            self.lockstep = Lockstep(self, [n for n in p.texts("lockstep") if n],
+                                     keys[self.catalog.obj], p.number("lockstep_timeout"))
+        self.lockstep_step = p.number("lockstep_step")
+        self.sim_now = float(self.times[0])  # lockstep: the end of the last step published
+        self.clock_behind = False  # lockstep: its clock waits until its measurements are taken
         self.create_timer(p.number("tick"), self.step)
         self.get_logger().info(f"{name}: {summary}, time scale {self.time_scale}x")
 
@@ -444,6 +482,9 @@ class SensorSim(SsaNode):
                                    else "starting (no subscribers awaited: wait_for is empty)")
         times = self.times
         now = times[0] + (time.monotonic() - self.wall0) * self.time_scale
+        if self.lockstep is not None:
+            self.step_lockstep(now)
+            return
         stop = int(np.searchsorted(times, now, side="right"))
         publish = self.publish_event
         if self.catalog is not None:  # one clock per tick, ahead of the tick's measurements
@@ -455,6 +496,45 @@ class SensorSim(SsaNode):
         self.publish_clock(min(now, times[-1]))
         if self.next >= len(times):
             self.done()
+
+    def step_lockstep(self, ceiling: float) -> None:
+        """Publish the next step once the consumers took the last (time scale: `ceiling`).
+
+        A step's measurements (epochs in (T - lockstep_step, T]) go first, ahead of the
+        clock; once every consumer took them (and the estimates they gave), `/clock` moves
+        to T: whatever a consumer does at T (a surrogate releasing a gap's forecasts) sees
+        everything before T.
+        """
+        lockstep = self.lockstep
+        assert lockstep is not None and self.catalog is not None
+        go, missing = lockstep.go_on(time.monotonic())
+        if not go:
+            if time.monotonic() >= self._next_wait_log:
+                self._next_wait_log = time.monotonic() + 5.0
+                self.get_logger().info(f"lockstep: waiting for {', '.join(missing)}")
+            return
+        if missing:
+            self.diag.count(Count.LOCKSTEP_TIMEOUTS,
+                            f"lockstep: went on after {lockstep.timeout_s:g} s without "
+                            f"{', '.join(missing)}")
+        times = self.times
+        if self.sim_stamp.sec == 0 or self.clock_behind:
+            # the last step's measurements are all taken: now its clock (the first: t0)
+            self.publish_clock(min(self.sim_now, float(times[-1])))
+            self.clock_behind = False
+        if self.next >= len(times):
+            self.done()
+            return
+        target = self.sim_now + self.lockstep_step
+        if target > ceiling:
+            return
+        self.sim_now = target
+        stop = int(np.searchsorted(times, target, side="right"))
+        for i in range(self.next, stop):
+            self.publish_catalog(i)
+        self.next = max(self.next, stop)
+        lockstep.sent = self.next
+        self.clock_behind = True
 
     def publish_clock(self, t: float) -> None:
         """Publish sim time `t` (s) on /clock."""
@@ -496,7 +576,7 @@ class SensorSim(SsaNode):
         self.finished = True
         for pub in (self.pub_meas, self.pub_withheld, self.pub_truth, self.pub_clock):
             pub.wait_for_all_acked(Duration(seconds=5.0))
-        self.diag.publish()
+        self.diag.publish_last()
         self.get_logger().info(
             f"schedule done: {self.diag.counts[Count.PUBLISHED]} measurements, "
             f"{self.diag.counts[Count.WITHHELD]} withheld"
