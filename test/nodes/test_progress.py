@@ -1,0 +1,75 @@
+"""Lockstep bookkeeping (`nodes.progress`): what the simulator still waits for, from the
+consumers' latest reports, and the measurements sent to each shard."""
+
+import numpy as np
+
+from ssa_fusion.nodes.progress import (
+    RECORDED_ESTIMATES,
+    RECORDED_MEASUREMENTS,
+    SHARD,
+    TAKEN,
+    TAKEN_ESTIMATES,
+    Lockstep,
+    waiting,
+)
+from ssa_fusion.nodes.shards import shard_range
+from ssa_fusion.ros import messages
+
+NODES = ["catalog_filter_0", "catalog_filter_1", "catalog_surrogate_0", "recorder"]
+
+
+def _sent(counts):
+    return lambda shards: np.array(counts[:shards])
+
+
+def _reports(taken=(5, 7), published=(4, 6), gap_taken=4, forecasts=2, recorded=(12, 12)):
+    return {
+        **{f"catalog_filter_{k}": {SHARD: f"{k}/2", TAKEN: str(taken[k]),
+                                   "published_sensor": str(published[k])} for k in range(2)},
+        "catalog_surrogate_0": {SHARD: "0/2", TAKEN_ESTIMATES: str(gap_taken),
+                                "published_forecast": str(forecasts)},
+        "recorder": {RECORDED_MEASUREMENTS: str(recorded[0]), RECORDED_ESTIMATES: str(recorded[1])},
+    }
+
+
+def test_all_taken_and_recorded_lets_the_simulator_go_on():
+    assert waiting(_reports(), NODES, 12, _sent([5, 7])) == []
+
+
+def test_each_shortfall_is_named():
+    assert waiting({}, NODES, 0, _sent([0, 0])) == [f"{n} (no report yet)" for n in NODES]
+    got = waiting(_reports(taken=(5, 6)), NODES, 12, _sent([5, 7]))
+    assert got == ["catalog_filter_1 (taken 6 of 7 measurements)"]
+    # the surrogate waits for its own filter shard's estimates (4), not the other's
+    got = waiting(_reports(gap_taken=3), NODES, 12, _sent([5, 7]))
+    assert got == ["catalog_surrogate_0 (taken 3 of 4 estimates)"]
+    # the recorder: every measurement sent, every estimate and forecast published (4+6+2)
+    got = waiting(_reports(recorded=(11, 11)), NODES, 12, _sent([5, 7]))
+    assert got == ["recorder (recorded 11 of 12 measurements)",
+                   "recorder (recorded 11 of 12 estimates)"]
+
+
+class _Node:
+    def create_subscription(self, *args, **kwargs):
+        return None
+
+
+def test_measurements_sent_per_shard_follow_the_shard_keys():
+    ids = [f"{k:05d}" for k in range(300)]
+    keys = np.array([messages.shard_key(o) for o in ids], dtype=np.int64)
+    lock = Lockstep(_Node(), NODES, keys, 30.0)
+    for sent in (0, 17, 300):  # grows as the simulator publishes
+        lock.sent = sent
+        for shards in (1, 2, 3):
+            want = [sum(shard_range(k, shards)[0] <= key <= shard_range(k, shards)[1]
+                        for key in keys[:sent]) for k in range(shards)]
+            assert lock.sent_by_shard(shards).tolist() == want
+
+
+def test_a_consumer_that_does_not_answer_is_left_after_the_timeout():
+    lock = Lockstep(_Node(), ["recorder"], np.zeros(0, dtype=np.int64), 30.0)
+    assert lock.go_on(100.0) == (False, ["recorder (no report yet)"])
+    assert lock.go_on(129.0)[0] is False
+    assert lock.go_on(131.0) == (True, ["recorder (no report yet)"])
+    lock.watch.reports["recorder"] = {RECORDED_MEASUREMENTS: "0", RECORDED_ESTIMATES: "0"}
+    assert lock.go_on(132.0) == (True, [])
