@@ -38,13 +38,13 @@ def _prediction(zp: np.ndarray, HPHt: np.ndarray) -> ScanPrediction:
     """A one-epoch prediction of N tracks given directly in measurement space."""
     n = zp.shape[0]
     return ScanPrediction(np.array([T0]), np.zeros(0, np.int64), zp[None], HPHt[None],
-                          np.ones((1, n), bool))
+                          np.ones((1, n), bool), np.zeros((1, n)))
 
 
 def _gated(zp, HPHt, z, R):
     pred = _prediction(np.asarray(zp, float), np.asarray(HPHt, float))
     pred = ScanPrediction(pred.epochs, np.zeros(len(z), np.int64), pred.zp, pred.HPHt,
-                          pred.ok)
+                          pred.ok, pred.sigma_pos)
     return gate_scan(pred, np.asarray(z, float), np.asarray(R, float), GATE)
 
 
