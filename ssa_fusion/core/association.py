@@ -504,7 +504,8 @@ class Associator:
         station : str
             Id of the scanning station (a key of the network).
         t : array_like (M,) or scalar
-            Epoch of each detection (or of the scan), Unix s; scans come in epoch order.
+            Epoch of each detection (or of the scan: a scalar, needed when M = 0), Unix s;
+            scans come in epoch order.
         z : array_like (M, 3)
             Detections [range km, azimuth rad, elevation rad].
         R : array_like (M, 3, 3) or (3, 3)
@@ -515,6 +516,7 @@ class Associator:
         """
         zz = np.asarray(z, dtype=float).reshape(-1, 3)
         m = zz.shape[0]
+        t_scan = float(np.min(t))
         tt = np.broadcast_to(np.asarray(t, dtype=float), (m,)).copy()
         RR = np.broadcast_to(np.asarray(R, dtype=float), (m, 3, 3)).copy()
         st = self.bank.ekf.index[station]
@@ -522,19 +524,21 @@ class Associator:
         self.counts[TrackEvent.DETECTIONS] += m
         ids = [""] * m
         fate = np.full(m, DetectionFate.NEW_TRACKLET, dtype=np.int8)
-        if not m:
-            return ScanOutcome(ids, fate)
-        t_scan = float(tt.min())
         self._grow()
         self._expire(t_scan)
-        free = self._tracks(station, st, tt, zz, RR, min_elevation_rad, ids, fate)
+        free = self._tracks(station, st, t_scan, tt, zz, RR, min_elevation_rad, ids, fate)
         self._tracklets(station, st, free, tt, zz, RR, ids, fate)
         self._grow()
         return ScanOutcome(ids, fate)
 
-    def _tracks(self, station: str, st: int, tt: Array, zz: Array, RR: Array,
-                min_el: float, ids: list[str], fate: NDArray[np.int8]) -> IntArray:
-        """Associate with the tracks, fuse, keep the counters: the free detections."""
+    def _tracks(self, station: str, st: int, t_scan: float, tt: Array, zz: Array,
+                RR: Array, min_el: float, ids: list[str],
+                fate: NDArray[np.int8]) -> IntArray:
+        """Associate with the tracks, fuse, keep the counters: the free detections.
+
+        A scan without detections (M = 0, at `t_scan`) still counts the tracks it
+        expected as missed.
+        """
         m = zz.shape[0]
         n = len(self.bank)
         rows = np.flatnonzero(self.bank.tracking[:n] & (self.status != TrackStatus.DELETED))
@@ -542,19 +546,22 @@ class Associator:
             return np.arange(m)
         cfg = self.config
         bank = self.bank
-        out = associate(bank.ekf, bank.x[rows], bank.P[rows], bank.t[rows], tt, zz, RR, st,
-                        cfg)
-        pred = out.prediction
+        pred = predict_scan(bank.ekf, bank.x[rows], bank.P[rows], bank.t[rows],
+                            tt if m else t_scan, st)
+        track = np.zeros(0, dtype=np.int64)
+        if m:
+            gated = gate_scan(pred, zz, RR, self._gate)
+            track = assign(gated.cost, gated.feasible)
         sigma = pred.sigma_pos.max(0)
         lost = rows[sigma > cfg.max_position_sigma_km]
-        got = out.track >= 0
+        got = track >= 0
         hit = np.zeros(rows.size, dtype=bool)
-        hit[out.track[got]] = True
+        hit[track[got]] = True
         expected = (pred.ok & (pred.zp[..., 2] >= min_el)).any(0) | hit
         # fuse what was assigned, in epoch order
         det = np.flatnonzero(got)
         det = det[np.argsort(tt[det], kind="stable")]
-        names = [bank.object_ids[r] for r in rows[out.track[det]]]
+        names = [bank.object_ids[r] for r in rows[track[det]]]
         res = bank.process(tt[det], names, [station] * det.size, zz[det], RR[det])
         refused = np.array([c != "" for c in res.cause], dtype=bool)
         for j, name in zip(det.tolist(), names, strict=True):
@@ -563,7 +570,6 @@ class Associator:
         self.counts[TrackEvent.ASSIGNED] += int((~refused).sum())
         self.counts[TrackEvent.REFUSED] += int(refused.sum())
         # passes and M of N
-        t_scan = float(tt.min())
         r_exp, h_exp = rows[expected], hit[expected]
         new_pass = t_scan - self._last_expected[r_exp] > cfg.pass_gap_s
         self._pass_hits[r_exp[new_pass]] = 0

@@ -257,3 +257,116 @@ def test_gating_and_assignment_equal_stone_soup_gnn(seed):
     g = _gated(zp, HPHt, z, R)
     assert g.feasible.any()  # the case exercises the gate
     assert assign(g.cost, g.feasible).tolist() == _stone_soup(zp, HPHt, z, R)
+
+
+# ------------------------------------------------------------------------------------------
+# Track management on a simulated train (unlabelled scans, truth kept aside)
+# ------------------------------------------------------------------------------------------
+from ssa_fusion.core.association import (  # noqa: E402
+    Associator,
+    DetectionFate,
+    TrackEvent,
+    TrackStatus,
+)
+from ssa_fusion.core.filter_options import SKY_FILTER  # noqa: E402
+from ssa_fusion.sim import survey  # noqa: E402
+
+MASK = math.radians(RADAR.min_elevation_deg)
+NETWORK = {RADAR.station.name: RADAR.station}
+
+
+@pytest.fixture(scope="module")
+def train_obs():
+    """A train of 5 objects 1-5 km apart over the radar, 4 h: its first passes."""
+    cat = survey.satellite_train(RADAR.station, T0 + 600.0, 5, seed=2)
+    return survey.observe_catalog(cat, [RADAR], T0, 4 * 3600.0, seed=2)
+
+
+def _passes(scans, gap: float = 600.0):
+    t = np.array([s.t for s in scans])
+    return np.split(np.arange(len(scans)), np.flatnonzero(np.diff(t) > gap) + 1)
+
+
+def _feed(assoc, scans, empty: bool = False):
+    out = []
+    for s in scans:
+        z = s.z[:0] if empty else s.z
+        out.append(assoc.process_scan(RADAR.station.name, s.t, z,
+                                      np.broadcast_to(RADAR.R, (z.shape[0], 3, 3)), MASK))
+    return out
+
+
+def test_scans_hide_the_labels_and_keep_every_measurement(train_obs):
+    scans = train_obs.scans(seed=0)
+    index = np.concatenate([s.index for s in scans])
+    assert np.array_equal(np.sort(index), np.arange(len(train_obs)))
+    for s in scans:
+        assert np.array_equal(s.truth, train_obs.obj[s.index])
+        assert np.array_equal(s.z, train_obs.z[s.index])
+        assert np.all(train_obs.t[s.index] == s.t)
+    # shuffled: the simulator orders a scan by object, the scans do not
+    assert any(not np.all(np.diff(s.truth) > 0) for s in scans if s.truth.size > 2)
+    assert {s.truth.size for s in scans} >= {5}
+
+
+def test_a_train_is_tracked_one_track_per_object(train_obs):
+    scans = train_obs.scans(seed=0)
+    assoc = Associator(SKY_FILTER, NETWORK)
+    outs = _feed(assoc, scans)
+    confirmed = set(assoc.track_ids(TrackStatus.CONFIRMED))
+    assert len(confirmed) == 5
+    assert assoc.counts[TrackEvent.TRACK_INITIATED] == 5
+    assert assoc.counts[TrackEvent.TRACK_CONFIRMED] == 5
+    owner: dict[str, set[int]] = {}
+    for s, o in zip(scans, outs, strict=True):
+        assert set(o.fate.tolist()) <= {DetectionFate.TRACK, DetectionFate.TRACKLET,
+                                        DetectionFate.NEW_TRACKLET}
+        for i, obj in zip(o.ids, s.truth.tolist(), strict=True):
+            owner.setdefault(i, set()).add(obj)
+    # every track (and the tracklet it came from) holds one object's detections only
+    assert all(len(v) == 1 for v in owner.values())
+    assert sorted(next(iter(owner[i])) for i in confirmed) == list(range(5))
+    assert len(_passes(scans)) >= 2  # the second pass went to the tracks of the first
+
+
+def _first_pass_tracked(obs, config: AssociationConfig):
+    """An associator that tracked the first pass (5 confirmed tracks), the scans, passes."""
+    scans = obs.scans(seed=0)
+    passes = _passes(scans)
+    assoc = Associator(SKY_FILTER, NETWORK, config)
+    _feed(assoc, [scans[i] for i in passes[0]])
+    assert len(assoc.track_ids(TrackStatus.CONFIRMED)) == 5
+    return assoc, scans, passes
+
+
+def test_tracks_missing_their_passes_are_deleted(train_obs):
+    assoc, scans, passes = _first_pass_tracked(
+        train_obs, AssociationConfig(delete_after_missed_passes=1))
+    _feed(assoc, [scans[i] for i in passes[1]], empty=True)  # the radar saw nothing
+    _feed(assoc, [scans[passes[-1][-1]]], empty=True)  # a scan after: the pass has ended
+    assert assoc.track_ids(TrackStatus.CONFIRMED) == []
+    assert assoc.counts[TrackEvent.DELETED_MISSED_PASSES] == 5
+
+
+def test_tracks_whose_covariance_outgrows_the_bound_are_deleted(train_obs):
+    assoc, scans, passes = _first_pass_tracked(
+        train_obs, AssociationConfig(max_position_sigma_km=5.0))
+    s = scans[passes[0][-1]]
+    _feed(assoc, [survey.Scan(s.t + 24 * 3600.0, s.sensor, s.z[:0], s.truth[:0],
+                              s.index[:0])], empty=True)
+    assert assoc.counts[TrackEvent.DELETED_COVARIANCE] == 5
+    assert assoc.track_ids(TrackStatus.CONFIRMED) == []
+
+
+def test_a_tentative_track_that_stops_being_seen_is_dropped(train_obs):
+    scans = train_obs.scans(seed=0)
+    first = _passes(scans)[0]
+    assoc = Associator(SKY_FILTER, NETWORK)
+    samples = SKY_FILTER.iod.iod_samples
+    _feed(assoc, [scans[i] for i in first[:samples]])
+    assert len(assoc.track_ids(TrackStatus.TENTATIVE)) == 5
+    window = AssociationConfig().confirm_window
+    _feed(assoc, [scans[i] for i in first[samples:samples + window]], empty=True)
+    assert assoc.track_ids(TrackStatus.TENTATIVE) == []
+    assert assoc.counts[TrackEvent.TENTATIVE_DROPPED] == 5
+    assert assoc.counts[TrackEvent.TRACK_CONFIRMED] == 0
