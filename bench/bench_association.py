@@ -80,9 +80,8 @@ def _catalog(case: str, seed: int) -> list:
 def _observe(entries: list, sensors: list, hours: float, seed: int) -> survey.Observations:
     """Every sensor's measurements, the k-th sensor's scans 5k s after the first's.
 
-    (Two radars scanning at the same epochs would have the second's detections of an object
-    refused by the bank as duplicates: `track_bank.TrackBank` fuses one measurement per
-    object and epoch.)
+    (A bank that fuses one measurement per object and epoch would refuse the second radar's
+    detections at the first's epochs as duplicates.)
     """
     parts = [survey.observe_catalog(entries, [s], T0 + 5.0 * k, hours * 3600.0, seed=seed + k)
              for k, s in enumerate(sensors)]
