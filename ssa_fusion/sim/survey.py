@@ -4,7 +4,10 @@
 radar's cadence, keeps the epochs where the object is above the radar's elevation mask, and
 adds the radar's noise: one array of measurements for the whole catalog, in epoch order.
 `synthetic_catalog` spreads one real element set into many objects (a test catalog of any
-size when no real one of that size is at hand).
+size when no real one of that size is at hand); `satellite_train` and `crossing_trains` make
+crowded catalogs (objects launched together, a few km apart, and two such groups crossing
+over a station). `Observations.scans` hands the measurements out as a radar reports them:
+one scan per sensor and epoch, without object ids, the truth kept aside for scoring.
 
 Units and frames as in the rest of the core: epochs Unix seconds (UTC), range km, azimuth
 (from north, clockwise, [0, 2π)) and elevation rad, states GCRF km, km/s.
@@ -21,8 +24,10 @@ from numpy.typing import NDArray
 from sgp4.api import WGS72, Satrec
 
 from ssa_fusion.core.catalog import CatalogEntry, catalog_states
-from ssa_fusion.core.frames import razel_gcrs
+from ssa_fusion.core.constants import MU_EARTH, R_EARTH
+from ssa_fusion.core.frames import Station, razel_gcrs, site_gcrs
 from ssa_fusion.core.stations import Sensor, SensorType
+from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
 
 SGP4_EPOCH_JD = 2433281.5
 """Julian date of SGP4's epoch origin (1949 December 31 00:00 UTC), for `Satrec.sgp4init`."""
@@ -60,6 +65,50 @@ class Observations:
     def per_object(self) -> NDArray[np.int64]:
         """Return the number of measurements (len(object_ids),) of each object."""
         return np.bincount(self.obj, minlength=len(self.object_ids)).astype(np.int64)
+
+    def scans(self, seed: int = 0) -> list[Scan]:
+        """Return the measurements as unlabelled scans, one per sensor and epoch.
+
+        In epoch order (ties: sensor order); within a scan the detections are shuffled
+        (`seed`), so that their order tells nothing of the objects (`observe_catalog`
+        orders them by object).
+        """
+        rng = np.random.default_rng(seed)
+        if not len(self):
+            return []
+        cut = np.flatnonzero((np.diff(self.t) != 0) | (np.diff(self.sensor) != 0)) + 1
+        out = []
+        for a, b in zip(np.r_[0, cut].tolist(), np.r_[cut, len(self)].tolist(), strict=True):
+            idx = a + rng.permutation(b - a)
+            out.append(Scan(float(self.t[a]), int(self.sensor[a]), self.z[idx], self.obj[idx],
+                            idx))
+        return out
+
+
+@dataclass(frozen=True)
+class Scan:
+    """One sensor's detections at one epoch, without object ids (`Observations.scans`).
+
+    Attributes
+    ----------
+    t : float
+        Epoch, Unix s (UTC).
+    sensor : int
+        Index of the sensor in `Observations.sensors`.
+    z : ndarray (M, 3)
+        Range km, azimuth rad in [0, 2π), elevation rad.
+    truth : ndarray (M,) of int
+        The object of each detection (index in `Observations.object_ids`): for scoring only,
+        never for the association.
+    index : ndarray (M,) of int
+        Each detection's index in the `Observations`.
+    """
+
+    t: float
+    sensor: int
+    z: NDArray[np.float64]
+    truth: NDArray[np.int64]
+    index: NDArray[np.int64]
 
 
 def catalog_start(entries: Sequence[CatalogEntry]) -> float:
@@ -147,12 +196,82 @@ def synthetic_catalog(base: CatalogEntry, n: int, seed: int = 0,
     mean_anomaly = rng.uniform(0.0, 2.0 * math.pi, n)
     s = base.satrec
     epoch = s.jdsatepoch + s.jdsatepochF - SGP4_EPOCH_JD
-    out = []
-    for i in range(n):
-        sat = Satrec()
-        sat.sgp4init(WGS72, "i", first_id + i, epoch, s.bstar, s.ndot, s.nddot, s.ecco,
-                     s.argpo, s.inclo, float(mean_anomaly[i]), s.no_kozai, float(raan[i]))
-        oid = str(first_id + i)
-        out.append(CatalogEntry(oid, f"SYNTH {oid}", sat,
-                                f"synthetic_catalog({base.object_id}, seed={seed})"))
-    return out
+    return [_entry(first_id + i, epoch, s.bstar, s.ecco, s.argpo, s.inclo,
+                   float(mean_anomaly[i]), s.no_kozai, float(raan[i]),
+                   f"synthetic_catalog({base.object_id}, seed={seed})", s.ndot, s.nddot)
+            for i in range(n)]
+
+
+def _entry(satnum: int, epoch: float, bstar: float, ecco: float, argpo: float, inclo: float,
+           mo: float, no_kozai: float, nodeo: float, source: str, ndot: float = 0.0,
+           nddot: float = 0.0) -> CatalogEntry:
+    """Return one SGP4 element set, named "SYNTH <satnum>".
+
+    `Satrec.sgp4init` (WGS-72): angles rad, mean motion rad/min, epoch days after
+    `SGP4_EPOCH_JD`.
+    """
+    sat = Satrec()
+    sat.sgp4init(WGS72, "i", satnum, epoch, bstar, ndot, nddot, ecco, argpo, inclo, mo,
+                 no_kozai, nodeo)
+    return CatalogEntry(str(satnum), f"SYNTH {satnum}", sat, source)
+
+
+def _over(station: Station, t_unix: float, inc_rad: float,
+          ascending: bool) -> tuple[float, float]:
+    """Return (RAAN, argument of latitude) rad of an orbit over `station` at `t_unix`.
+
+    A circular orbit of inclination `inc_rad` through the station's geocentric direction
+    (TEME taken as the GCRF, ~0.4 deg), on its ascending or descending half. ValueError
+    when the inclination is below the station's latitude.
+    """
+    p = site_gcrs(station, t_unix)
+    lat, ra = math.asin(p[2] / float(np.linalg.norm(p))), math.atan2(p[1], p[0])
+    s = math.sin(lat) / math.sin(inc_rad)
+    if abs(s) > 1.0:
+        raise ValueError(f"an inclination of {math.degrees(inc_rad):.1f} deg never passes "
+                         f"over latitude {math.degrees(lat):.1f} deg")
+    u = math.asin(s) if ascending else math.pi - math.asin(s)
+    raan = ra - math.atan2(math.cos(inc_rad) * math.sin(u), math.cos(u))
+    return raan % (2 * math.pi), u
+
+
+def satellite_train(station: Station, t_over: float, n: int = 20, altitude_km: float = 550.0,
+                    inc_deg: float = 53.0, spacing_km: tuple[float, float] = (1.0, 5.0),
+                    ascending: bool = True, bstar: float = 1e-4, seed: int = 0,
+                    first_id: int = 80000) -> list[CatalogEntry]:
+    """Objects launched together: `n` near-circular orbits in one plane, in a row.
+
+    The train's first object is over `station` at Unix `t_over` (the element sets' epoch);
+    each next one trails the previous along track by a spacing drawn uniformly in
+    `spacing_km` (`seed`). Same altitude (km above the equatorial radius), inclination,
+    eccentricity 1e-4 and drag term for all; ids `first_id`, `first_id` + 1, ...
+    """
+    raan, u = _over(station, t_over, math.radians(inc_deg), ascending)
+    a = R_EARTH + altitude_km
+    no_kozai = math.sqrt(MU_EARTH / a**3) * 60.0
+    gaps = np.random.default_rng(seed).uniform(*spacing_km, n)
+    gaps[0] = 0.0
+    lag = np.cumsum(gaps) / a  # rad of argument of latitude behind the first object
+    epoch = (t_over / DAY_S + UNIX_EPOCH_JD) - SGP4_EPOCH_JD
+    src = f"satellite_train({station.name}, n={n}, spacing={spacing_km} km, seed={seed})"
+    return [_entry(first_id + i, epoch, bstar, 1e-4, 0.0, math.radians(inc_deg),
+                   float((u - lag[i]) % (2 * math.pi)), no_kozai, raan, src)
+            for i in range(n)]
+
+
+def crossing_trains(station: Station, t_over: float, n: int = 10, seed: int = 0,
+                    lag_s: float = 4.0, first_id: int = 81000, altitude_km: float = 550.0,
+                    inc_deg: float = 53.0,
+                    spacing_km: tuple[float, float] = (1.0, 5.0)) -> list[CatalogEntry]:
+    """Two trains of `n` objects each (`satellite_train`) whose planes cross over `station`.
+
+    One train passes over it on the ascending half of its orbit, the other on the
+    descending half (its plane turned by the crossing angle, ~70 deg at 53 deg inclination
+    over 40 deg latitude), the second `lag_s` s after the first: both are in the station's
+    view together, and cross there.
+    """
+    a = satellite_train(station, t_over, n, altitude_km, inc_deg, spacing_km, seed=seed,
+                        first_id=first_id)
+    b = satellite_train(station, t_over + lag_s, n, altitude_km, inc_deg, spacing_km,
+                        ascending=False, seed=seed + 1, first_id=first_id + n)
+    return a + b

@@ -1,0 +1,203 @@
+"""Benchmark: association of unlabelled radar detections on crowded cases (not a test).
+
+Cases (`sim.survey`), each over ``--hours`` of radar scans of every object:
+
+* ``train``: 20 satellites launched together, one plane (550 km, 53 deg), 1-5 km apart
+  along track (`survey.satellite_train`), the first over Columbus at the start + 10 min;
+* ``crossing``: two trains of 10 whose planes cross over Columbus at that epoch, 4 s apart
+  (`survey.crossing_trains`).
+
+Each is seen by one radar (Columbus, 10 deg mask) and by two (Columbus and Millstone, 5 deg,
+its scans 5 s after Columbus's), with the tracking-radar noise of the scenarios
+(`stations.RADAR_SIGMA`: 20 m, 0.02 deg; 10 s cadence), truth by SGP4
+(`survey.observe_catalog`). The scans come without object ids (`survey.Observations.scans`,
+shuffled within each scan) into `core.association.Associator` (the real-sky filter
+`filter_options.SKY_FILTER`: two-body + J2, IOD from 7 detections of a pass), one scan at
+a time. Scored by the truth labels kept aside:
+
+* accuracy: of the detections fused into confirmed tracks, the fraction whose object is the
+  track's object (the object of the majority of the track's detections);
+* coverage: the fraction of all detections that went into a confirmed track (tracklets
+  that made it included);
+* swapped: confirmed tracks whose object (majority per pass) differs from their first
+  pass's in more than one pass; any_swap: in at least one;
+* confirmed tracks, objects with a confirmed track, duplicate tracks (a second confirmed
+  track of an object), tracklets and tentative tracks dropped;
+* cost per scan: wall time of `Associator.process_scan` (association, fusion, tentative
+  tracks), median and p95 in us, over the scans with detections.
+
+Usage::
+
+    nice -n 10 python bench/bench_association.py [--hours 24] [--cases train,crossing]
+
+Prints ``key: value`` lines per run; the last line is one JSON object.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import argparse
+import json
+import math
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a source checkout
+
+from ssa_fusion.core.association import (
+    AssociationConfig,
+    Associator,
+    DetectionFate,
+    TrackEvent,
+    TrackStatus,
+)
+from ssa_fusion.core.filter_options import SKY_FILTER
+from ssa_fusion.core.stations import SENSORS
+from ssa_fusion.sim import survey
+
+T0 = 1_735_732_800.0
+"""Start of every run: 2025-01-01T12:00:00Z."""
+RADARS = {1: ("columbus",), 2: ("columbus", "millstone")}
+
+
+def _catalog(case: str, seed: int) -> list:
+    station = SENSORS["columbus"].station
+    if case == "train":
+        return survey.satellite_train(station, T0 + 600.0, 20, seed=seed)
+    if case == "crossing":
+        return survey.crossing_trains(station, T0 + 600.0, 10, seed=seed)
+    raise ValueError(f"case {case!r}: train or crossing")
+
+
+def _observe(entries: list, sensors: list, hours: float, seed: int) -> survey.Observations:
+    """Every sensor's measurements, the k-th sensor's scans 5k s after the first's.
+
+    (A bank that fuses one measurement per object and epoch would refuse the second radar's
+    detections at the first's epochs as duplicates.)
+    """
+    parts = [survey.observe_catalog(entries, [s], T0 + 5.0 * k, hours * 3600.0, seed=seed + k)
+             for k, s in enumerate(sensors)]
+    t = np.concatenate([p.t for p in parts])
+    obj = np.concatenate([p.obj for p in parts])
+    sensor = np.concatenate([np.full(len(p), k, np.int64) for k, p in enumerate(parts)])
+    z = np.concatenate([p.z for p in parts])
+    order = np.lexsort((obj, sensor, t))
+    return survey.Observations(t[order], obj[order], sensor[order], z[order],
+                               parts[0].object_ids, tuple(sensors))
+
+
+def run(case: str, radars: int, hours: float, seed: int,
+        config: AssociationConfig) -> dict[str, float | int | str]:
+    """One case seen by 1 or 2 radars: the scores of the module docstring."""
+    sensors = [SENSORS[s] for s in RADARS[radars]]
+    entries = _catalog(case, seed)
+    obs = _observe(entries, sensors, hours, seed)
+    scans = obs.scans(seed)
+    assoc = Associator(SKY_FILTER, {s.station.name: s.station for s in sensors}, config)
+    m = len(obs)
+    label = np.full(m, "", dtype=object)
+    fate = np.zeros(m, dtype=np.int8)
+    ever_confirmed: set[str] = set()
+    cost_us = []
+    for scan in scans:
+        s = sensors[scan.sensor]
+        R = np.broadcast_to(s.R, (scan.z.shape[0], 3, 3))
+        t1 = time.perf_counter()
+        out = assoc.process_scan(s.station.name, scan.t, scan.z, R,
+                                 math.radians(s.min_elevation_deg))
+        cost_us.append((time.perf_counter() - t1) * 1e6)
+        label[scan.index] = out.ids
+        fate[scan.index] = out.fate
+        ever_confirmed.update(assoc.track_ids(TrackStatus.CONFIRMED))
+    truth = obs.obj
+    in_track = np.array([lab in ever_confirmed for lab in label]) & (
+        fate != DetectionFate.REFUSED)
+    owner: dict[str, int] = {}
+    share: dict[str, int] = {}
+    for tid in ever_confirmed:
+        objs = truth[in_track & (label == tid)]
+        if objs.size:
+            c = Counter(objs.tolist()).most_common(1)[0]
+            owner[tid], share[tid] = c
+    right = np.array([owner.get(lab, -1) == o for lab, o in zip(label, truth, strict=True)])
+    fused = in_track & (fate == DetectionFate.TRACK)
+    # objects and duplicates: the object's track is its confirmed track with most of it
+    by_object: dict[int, list[str]] = {}
+    for tid, o in owner.items():
+        by_object.setdefault(o, []).append(tid)
+    duplicates = sum(len(v) - 1 for v in by_object.values())
+    # swaps: per confirmed track, the majority object of each pass
+    swapped = any_swap = 0
+    for tid in owner:
+        idx = np.flatnonzero(in_track & (label == tid))
+        t = obs.t[idx]
+        cut = np.flatnonzero(np.diff(t) > config.pass_gap_s) + 1
+        per_pass = [Counter(truth[p].tolist()).most_common(1)[0][0]
+                    for p in np.split(idx, cut)]
+        other = sum(o != per_pass[0] for o in per_pass)
+        swapped += other > 1
+        any_swap += other > 0
+    seen = np.unique(truth).size
+    assert len(scans) > 0 and m > 0, "no scan, no detection"
+    assert seen == len(entries), f"only {seen} of {len(entries)} objects were seen"
+    costs = np.array(cost_us)
+    counts = assoc.counts
+    return {
+        "case": case, "radars": radars, "hours": hours, "seed": seed,
+        "objects": len(entries), "objects_seen": int(seen),
+        "scans": len(scans), "detections": m,
+        "accuracy": float(right[fused].mean()) if fused.any() else math.nan,
+        "accuracy_all_in_tracks": float(right[in_track].mean()) if in_track.any() else math.nan,
+        "coverage": float(in_track.mean()),
+        "confirmed_tracks": len(ever_confirmed),
+        "objects_with_track": len(by_object),
+        "duplicate_tracks": duplicates,
+        "swapped_gt1_pass": swapped, "swapped_any_pass": any_swap,
+        "tentative_dropped": counts[TrackEvent.TENTATIVE_DROPPED],
+        "tracklets_started": counts[TrackEvent.TRACKLET_STARTED],
+        "tracklets_expired": counts[TrackEvent.TRACKLET_EXPIRED],
+        "tracks_initiated": counts[TrackEvent.TRACK_INITIATED],
+        "iod_failed": counts[TrackEvent.IOD_FAILED],
+        "refused": counts[TrackEvent.REFUSED],
+        "deleted_missed_passes": counts[TrackEvent.DELETED_MISSED_PASSES],
+        "deleted_covariance": counts[TrackEvent.DELETED_COVARIANCE],
+        "cost_us_median": float(np.median(costs)),
+        "cost_us_p95": float(np.percentile(costs, 95)),
+        "cost_us_max": float(costs.max()),
+        "detections_per_scan_max": int(max(s.z.shape[0] for s in scans)),
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--hours", type=float, default=24.0)
+    ap.add_argument("--cases", default="train,crossing")
+    ap.add_argument("--radars", default="1,2", help="1, 2 or 1,2")
+    ap.add_argument("--seed", type=int, default=1)
+    args = ap.parse_args(argv)
+    config = AssociationConfig()
+    results = []
+    for case in args.cases.split(","):
+        for radars in (int(r) for r in args.radars.split(",")):
+            t1 = time.perf_counter()
+            res = run(case, radars, args.hours, args.seed, config)
+            res["wall_s"] = round(time.perf_counter() - t1, 1)
+            results.append(res)
+            print(f"\n{case}, {radars} radar(s), {args.hours:g} h:")
+            for k, v in res.items():
+                print(f"  {k}: {v:.5g}" if isinstance(v, float) else f"  {k}: {v}")
+    print(json.dumps({"config": {k: getattr(config, k) for k in config.__dataclass_fields__},
+                      "runs": results}))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,746 @@
+"""Association of unlabelled radar detections with tracks: gating and global nearest neighbour.
+
+A radar does not label its detections with an object id. One *scan* of one station (M
+detections ``z`` (M, 3) [range km, azimuth rad, elevation rad] with noise ``R`` (M, 3, 3)
+km^2, rad^2, at one epoch or at one epoch per detection, Unix s UTC) is associated with N
+tracks (GCRF states ``x`` (N, 6) km, km/s, covariances ``P`` (N, 6, 6), epochs ``t`` (N,)
+Unix s; a `track_bank.TrackBank`'s arrays) in three vectorised steps:
+
+1. *prediction* (`predict_scan`): every track is predicted to every distinct epoch of the
+   scan by the bank's motion model (`batch_ekf.BatchEKF.predict`) and measured by the
+   batched range/az/el model (`batch_ekf.BatchEKF.measure`): predicted measurement
+   ``h(x)`` and ``H P H^T`` per track and epoch;
+2. *gating* (`gate_scan`): for every (track, detection) pair the innovation
+   ``y = z - h(x)`` (angles wrapped to (-pi, pi]), its covariance ``S = H P H^T + R``, the
+   squared Mahalanobis distance ``d^2 = y^T S^-1 y`` and the cost ``d^2 + ln det S`` (the
+   negative log-likelihood of the pair up to a constant); a pair is feasible when ``d^2``
+   is within the chi-square gate (`AssociationConfig.gate`: probability
+   ``gate_probability`` of a chi-square law with 3 degrees of freedom);
+3. *assignment* (`assign`): global nearest neighbour, one detection per track and one
+   track per detection, by `scipy.optimize.linear_sum_assignment`: among the assignments of
+   feasible pairs with the most pairs, the one of least total cost (the assignment Stone
+   Soup's ``GNNWith2DAssignment`` makes with a missed-detection distance beyond every
+   feasible cost).
+
+`associate` runs the three. Costs need no Python loop over tracks or detections: the
+(N, M) arrays are computed at once (O(N M) memory: a scan of 50 detections against 10,000
+tracks is 5e5 pairs, ~40 MB).
+
+Track management (`Associator`): a catalog of unlabelled objects, scan by scan.
+
+* Every scan is first associated with the tracks (tentative and confirmed, the rows of a
+  `track_bank.TrackBank` named by track ids "T1", "T2", ...) as above; each assigned
+  detection is fused by the bank under its track's id.
+* The detections no track took extend *tracklets* (detections of one station in one pass
+  not yet an orbit), by the same gate and assignment on a tracklet's prediction: from its
+  last two detections (their GCRF positions, `iod.razel_to_gcrs`, with the range/az/el
+  noise pushed through the inverse Jacobian of `batch_ekf.BatchEKF.measure`) by two-body
+  gravity; a tracklet of one detection has no velocity yet, and a detection extends it
+  when the speed the pair implies is near the circular speed at its radius
+  (``tracklet_speed_sigma_km_s``: a prior of near-circular orbits, gated at the same
+  probability with 1 degree of freedom). The rest start new tracklets. A tracklet of
+  ``iod_samples`` detections (the bank's `filter_options.IodOptions`) is handed to the
+  bank under a new track id: its initial orbit determination (Herrick-Gibbs over the
+  pass, `initiation.OrbitInitiator`) starts a *tentative* track. A tracklet without a
+  detection for ``tracklet_max_gap_s`` is dropped.
+* A tentative track is *confirmed* after ``confirm_hits`` detections in its last
+  ``confirm_window`` expected scans (M of N; expected: predicted above the scanning
+  sensor's mask), and deleted once it can no longer be (``confirm_window`` expected scans
+  with fewer hits). Any track is deleted after ``delete_after_missed_passes`` passes in a
+  row in which it was expected and got nothing, or when its predicted position standard
+  deviation exceeds ``max_position_sigma_km``.
+* `TrackEvent` counts each outcome; `Associator.counts` holds the counters.
+
+Deleted tracks keep their bank rows (never reused): a bank holds at most
+``max_objects`` rows (`validation.MAX_OBJECTS`) over its life.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import linear_sum_assignment
+from scipy.stats import chi2
+
+from .batch_ekf import BatchEKF
+from .constants import MU_EARTH
+from .filter_options import FilterOptions
+from .frames import Station
+from .iod import razel_to_gcrs
+from .track_bank import TrackBank
+
+__all__ = [
+    "UNASSIGNED",
+    "AssociationConfig",
+    "Associator",
+    "DetectionFate",
+    "Gated",
+    "ScanAssociation",
+    "ScanOutcome",
+    "ScanPrediction",
+    "TrackEvent",
+    "TrackStatus",
+    "assign",
+    "associate",
+    "gate_scan",
+    "predict_scan",
+]
+
+Array = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+IntArray = NDArray[np.int64]
+
+UNASSIGNED = -1
+"""The track index of a detection assigned to no track."""
+
+MEASUREMENT_DOF = 3
+"""Degrees of freedom of a range/az/el innovation (the chi-square gate's)."""
+
+
+@dataclass(frozen=True)
+class AssociationConfig:
+    """Gate and track-management rules of the association (module docstring, `Associator`).
+
+    Attributes
+    ----------
+    gate_probability : float
+        Probability that a detection of a track falls inside the track's gate: the gate on
+        ``d^2`` is the chi-square quantile of this probability with 3 degrees of freedom
+        (0.9999: d^2 <= 21.1).
+    confirm_hits, confirm_window : int
+        M-of-N confirmation: a tentative track is confirmed once ``confirm_hits``
+        detections were assigned to it in the last ``confirm_window`` scans in which it was
+        expected (predicted above the scanning sensor's mask).
+    delete_after_missed_passes : int
+        A track is deleted after this many passes in a row in which it was expected and got
+        no detection.
+    pass_gap_s : float
+        Two scans of one track further apart than this, s, belong to different passes.
+    max_position_sigma_km : float
+        A track whose predicted position standard deviation (the largest axis of its
+        position covariance) exceeds this, km, is deleted: it can no longer be told from
+        its neighbours.
+    tracklet_max_gap_s : float
+        A tracklet (unassigned detections not yet an orbit) that got no detection for this
+        long, s, is dropped.
+    tracklet_speed_sigma_km_s : float
+        Standard deviation, km/s, of an object's speed about the circular speed at its
+        radius, the prior that pairs a tracklet's first detection with its second (a
+        near-circular orbit: 0.3 km/s is an eccentricity of ~0.04 in low orbit).
+    tracklet_accel_sigma_km_s2 : float
+        Standard deviation, km/s^2, of the acceleration left out of a tracklet's
+        prediction (two-body gravity is in it), per axis.
+    """
+
+    gate_probability: float = 0.9999
+    confirm_hits: int = 6
+    confirm_window: int = 8
+    delete_after_missed_passes: int = 3
+    pass_gap_s: float = 600.0
+    max_position_sigma_km: float = 100.0
+    tracklet_max_gap_s: float = 60.0
+    tracklet_speed_sigma_km_s: float = 0.3
+    tracklet_accel_sigma_km_s2: float = 1e-4
+
+    def __post_init__(self) -> None:
+        """Check the settings (ValueError naming the field)."""
+        if not 0.0 < self.gate_probability < 1.0:
+            raise ValueError(f"gate_probability must be in (0, 1), got {self.gate_probability}")
+        if not 1 <= self.confirm_hits <= self.confirm_window <= 62:
+            raise ValueError("need 1 <= confirm_hits <= confirm_window <= 62, got "
+                             f"{self.confirm_hits} of {self.confirm_window}")
+        if self.delete_after_missed_passes < 1:
+            raise ValueError("delete_after_missed_passes must be >= 1, got "
+                             f"{self.delete_after_missed_passes}")
+        for name in ("pass_gap_s", "max_position_sigma_km", "tracklet_max_gap_s",
+                     "tracklet_speed_sigma_km_s", "tracklet_accel_sigma_km_s2"):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+
+    @property
+    def gate(self) -> float:
+        """Threshold on the squared Mahalanobis distance (chi-square quantile, 3 dof)."""
+        return float(chi2.ppf(self.gate_probability, MEASUREMENT_DOF))
+
+
+@dataclass(frozen=True)
+class ScanPrediction:
+    """Tracks predicted to the epochs of a scan (`predict_scan`).
+
+    Attributes
+    ----------
+    epochs : ndarray (K,)
+        The scan's distinct epochs, Unix s.
+    epoch_index : ndarray (M,) of int
+        Index in `epochs` of each detection's epoch.
+    zp : ndarray (K, N, 3)
+        Predicted measurement of every track at every epoch [km, rad in [0, 2 pi), rad].
+    HPHt : ndarray (K, N, 3, 3)
+        ``H P H^T`` at those predictions (km^2, km rad, rad^2).
+    ok : ndarray (K, N) of bool
+        False where the prediction was not computable.
+    sigma_pos : ndarray (K, N)
+        Largest standard deviation of each predicted position, km (the square root of the
+        largest eigenvalue of its 3 x 3 covariance).
+    """
+
+    epochs: Array
+    epoch_index: IntArray
+    zp: Array
+    HPHt: Array
+    ok: BoolArray
+    sigma_pos: Array
+
+
+@dataclass(frozen=True)
+class Gated:
+    """Every (track, detection) pair of a scan scored (`gate_scan`).
+
+    Attributes
+    ----------
+    d2 : ndarray (N, M)
+        Squared Mahalanobis distance of each pair (inf where not computable).
+    cost : ndarray (N, M)
+        ``d^2 + ln det S`` (S in km^2, rad^2; inf where not computable).
+    feasible : ndarray (N, M) of bool
+        ``d^2`` within the gate.
+    """
+
+    d2: Array
+    cost: Array
+    feasible: BoolArray
+
+
+@dataclass(frozen=True)
+class ScanAssociation:
+    """The outcome of `associate` for one scan.
+
+    Attributes
+    ----------
+    track : ndarray (M,) of int
+        Per detection, the index of its track among the N, or `UNASSIGNED`.
+    gated : Gated
+        The pairs' distances, costs and gate.
+    prediction : ScanPrediction
+        The tracks' predicted measurements.
+    """
+
+    track: IntArray
+    gated: Gated
+    prediction: ScanPrediction
+
+
+def predict_scan(ekf: BatchEKF, x: ArrayLike, P: ArrayLike, t_track: ArrayLike,
+                 t_scan: ArrayLike, station: int) -> ScanPrediction:
+    """Predict N tracks to the epochs of one station's scan and measure them there.
+
+    Parameters
+    ----------
+    ekf : BatchEKF
+        The tracks' filter (its motion model and stations; a `track_bank.TrackBank`'s
+        ``ekf``).
+    x, P : array_like (N, 6), (N, 6, 6)
+        GCRF states km, km/s at `t_track` and their covariances.
+    t_track : array_like (N,)
+        Epochs of the states, s after the filter's jd0 (Unix s by default).
+    t_scan : array_like (M,) or scalar
+        Epoch of each detection (or of the whole scan), same clock.
+    station : int
+        Index of the scanning station in ``ekf.stations``.
+    """
+    X = np.asarray(x, dtype=float).reshape(-1, 6)
+    PP = np.asarray(P, dtype=float).reshape(-1, 6, 6)
+    t0 = np.asarray(t_track, dtype=float).reshape(-1)
+    ts = np.atleast_1d(np.asarray(t_scan, dtype=float))
+    epochs, index = np.unique(ts, return_inverse=True)
+    n, k = X.shape[0], epochs.size
+    dt = (epochs[:, None] - t0[None, :]).reshape(-1)
+    pred = ekf.predict(np.tile(X, (k, 1)), np.tile(PP, (k, 1, 1)), dt, np.tile(t0, k))
+    tt = np.repeat(epochs, n)
+    zp, H = ekf.measure(pred.x, tt, np.full(k * n, station, dtype=np.intp))
+    HPHt = np.matmul(np.matmul(H, pred.P), np.swapaxes(H, -1, -2))
+    ok = pred.ok & np.isfinite(zp).all(-1) & np.isfinite(HPHt).all((-1, -2))
+    Pr = np.where(ok[:, None, None], pred.P[:, :3, :3], 0.0)
+    sigma = np.sqrt(np.clip(np.linalg.eigvalsh(Pr)[:, -1], 0.0, None))
+    return ScanPrediction(epochs, index.reshape(-1).astype(np.int64),
+                          zp.reshape(k, n, 3), HPHt.reshape(k, n, 3, 3), ok.reshape(k, n),
+                          np.where(ok, sigma, np.inf).reshape(k, n))
+
+
+def gate_scan(prediction: ScanPrediction, z: ArrayLike, R: ArrayLike, gate: float) -> Gated:
+    """Score every (track, detection) pair of a scan (module docstring, step 2).
+
+    Parameters
+    ----------
+    prediction : ScanPrediction
+        The N tracks predicted to the scan (`predict_scan`).
+    z : array_like (M, 3)
+        Detections [range km, azimuth rad, elevation rad].
+    R : array_like (M, 3, 3) or (3, 3)
+        Their noise covariances, km^2, rad^2.
+    gate : float
+        Threshold on ``d^2`` (`AssociationConfig.gate`).
+    """
+    zz = np.asarray(z, dtype=float).reshape(-1, 3)
+    m = zz.shape[0]
+    RR = np.broadcast_to(np.asarray(R, dtype=float), (m, 3, 3))
+    e = prediction.epoch_index
+    zp = np.swapaxes(prediction.zp[e], 0, 1)  # (N, M, 3): track i at detection j's epoch
+    y = zz[None, :, :] - zp
+    y[..., 1:] = math.pi - np.mod(math.pi - y[..., 1:], 2.0 * math.pi)  # (-pi, pi]
+    S = np.swapaxes(prediction.HPHt[e], 0, 1) + RR[None]  # (N, M, 3, 3)
+    ok = np.swapaxes(prediction.ok[e], 0, 1) & np.isfinite(y).all(-1) & np.isfinite(S).all(
+        (-1, -2))
+    S = np.where(ok[..., None, None], 0.5 * (S + np.swapaxes(S, -1, -2)), np.eye(3))
+    d2 = np.full(ok.shape, np.inf)
+    cost = np.full(ok.shape, np.inf)
+    if ok.any():
+        L = np.linalg.cholesky(S[ok])  # LinAlgError only for a non-positive S: below
+        w = np.linalg.solve(L, y[ok][..., None])[..., 0]
+        d2[ok] = np.einsum("ij,ij->i", w, w)
+        cost[ok] = d2[ok] + 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(-1)
+    return Gated(d2, cost, d2 <= gate)
+
+
+def assign(cost: ArrayLike, feasible: ArrayLike) -> IntArray:
+    """Global nearest neighbour: the track of each detection (module docstring, step 3).
+
+    Parameters
+    ----------
+    cost : array_like (N, M)
+        Cost of assigning detection j to track i (only feasible pairs are read).
+    feasible : array_like (N, M) of bool
+        The pairs that may be assigned.
+
+    Returns
+    -------
+    ndarray (M,) of int
+        Per detection its track index, or `UNASSIGNED`: the assignment of feasible pairs
+        with the most pairs, of least total cost among those.
+    """
+    C = np.asarray(cost, dtype=float)
+    F = np.asarray(feasible, dtype=bool) & np.isfinite(C)
+    out = np.full(C.shape[1], UNASSIGNED, dtype=np.int64)
+    rows, cols = np.flatnonzero(F.any(1)), np.flatnonzero(F.any(0))
+    if not rows.size:
+        return out
+    sub, fs = C[np.ix_(rows, cols)], F[np.ix_(rows, cols)]
+    low = sub[fs].min()
+    # an infeasible pair costs more than any assignment of feasible pairs: the most
+    # feasible pairs first, then the least cost
+    big = (float((sub[fs] - low).max()) + 1.0) * (min(fs.shape) + 1)
+    work = np.where(fs, sub - low, big)
+    r, c = linear_sum_assignment(work)
+    keep = fs[r, c]
+    out[cols[c[keep]]] = rows[r[keep]]
+    return out
+
+
+def associate(ekf: BatchEKF, x: ArrayLike, P: ArrayLike, t_track: ArrayLike,
+              t_scan: ArrayLike, z: ArrayLike, R: ArrayLike, station: int,
+              config: AssociationConfig) -> ScanAssociation:
+    """Predict, gate and assign one station's scan to N tracks (module docstring).
+
+    Parameters as `predict_scan` and `gate_scan`; the gate is ``config.gate``.
+    """
+    pred = predict_scan(ekf, x, P, t_track, t_scan, station)
+    gated = gate_scan(pred, z, R, config.gate)
+    return ScanAssociation(assign(gated.cost, gated.feasible), gated, pred)
+
+
+# ------------------------------------------------------------------------------------------
+# Track management
+# ------------------------------------------------------------------------------------------
+class TrackStatus(enum.IntEnum):
+    """Where a track stands (`Associator.status`)."""
+
+    TENTATIVE = 0
+    """Started by an initial orbit determination, not yet confirmed."""
+    CONFIRMED = 1
+    """Passed the M-of-N rule."""
+    DELETED = 2
+    """Dropped: no longer predicted, associated or fused."""
+
+
+class DetectionFate(enum.IntEnum):
+    """What `Associator.process_scan` did with a detection."""
+
+    TRACK = 0
+    """Assigned to a track and fused."""
+    TRACKLET = 1
+    """Added to an existing tracklet (it may have started a track by its IOD)."""
+    NEW_TRACKLET = 2
+    """Started a tracklet."""
+    REFUSED = 3
+    """Assigned to a track, whose filter refused it (its own NIS gate or a numeric
+    failure), or ended a tracklet whose initial orbit determination failed."""
+
+
+class TrackEvent(enum.StrEnum):
+    """The counted outcomes of the association (`Associator.counts` keys)."""
+
+    SCANS = "scans"
+    DETECTIONS = "detections"
+    ASSIGNED = "assigned"
+    """Detections assigned to a track and fused."""
+    REFUSED = "refused"
+    """Detections assigned to a track that its filter refused."""
+    TRACKLET_EXTENDED = "tracklet_extended"
+    TRACKLET_STARTED = "tracklet_started"
+    TRACKLET_EXPIRED = "tracklet_expired"
+    TRACK_INITIATED = "track_initiated"
+    """Tracklets whose initial orbit determination started a tentative track."""
+    IOD_FAILED = "iod_failed"
+    TRACK_CONFIRMED = "track_confirmed"
+    TENTATIVE_DROPPED = "tentative_dropped"
+    """Tentative tracks deleted because they can no longer pass the M-of-N rule."""
+    DELETED_MISSED_PASSES = "deleted_missed_passes"
+    DELETED_COVARIANCE = "deleted_covariance"
+
+
+@dataclass(frozen=True)
+class ScanOutcome:
+    """What `Associator.process_scan` did with a scan of M detections.
+
+    Attributes
+    ----------
+    ids : list of str
+        Per detection, the id of the track or tracklet it went to (a tracklet's id is the
+        id of the track its IOD starts).
+    fate : ndarray (M,) of int8
+        Per detection, its `DetectionFate`.
+    """
+
+    ids: list[str]
+    fate: NDArray[np.int8]
+
+
+def _popcount(bits: IntArray, width: int) -> IntArray:
+    """Return the number of set bits among the low `width` bits of each element."""
+    out = np.zeros(bits.shape, dtype=np.int64)
+    for k in range(width):  # over the bits, not the tracks
+        out += (bits >> k) & 1
+    return out
+
+
+class Associator:
+    """Tracks of unlabelled objects from scans of detections (module docstring).
+
+    Parameters
+    ----------
+    filter_options : FilterOptions
+        The tracks' filter (`track_bank.TrackBank`; its ``reinit_after`` is set to 0: a
+        track that loses its object is deleted here, not initialised again from a detection
+        that may be another object's).
+    stations : dict of str to Station
+        The network: a scan names its station by id.
+    config : AssociationConfig
+        Gate and track-management rules.
+    """
+
+    def __init__(self, filter_options: FilterOptions, stations: dict[str, Station],
+                 config: AssociationConfig | None = None) -> None:
+        self.config = AssociationConfig() if config is None else config
+        options = filter_options.with_(reinit_after=0)
+        self.bank = TrackBank(options, stations)
+        self.stations = dict(stations)
+        self.iod_samples = int(options.iod.iod_samples)
+        self.counts: Counter[TrackEvent] = Counter()
+        self._gate = self.config.gate
+        self._gate1 = float(chi2.ppf(self.config.gate_probability, 1))
+        self._next_id = 1
+        # per bank row (grown with the bank)
+        self.status = np.zeros(0, dtype=np.int8)
+        self._bits = np.zeros(0, dtype=np.int64)
+        self._expected = np.zeros(0, dtype=np.int64)
+        self._last_expected = np.zeros(0)
+        self._pass_open = np.zeros(0, dtype=bool)
+        self._pass_hits = np.zeros(0, dtype=np.int64)
+        self._missed = np.zeros(0, dtype=np.int64)
+        # tracklets: one row each; their raw detections by id (for the IOD)
+        self._tl_ids: list[str] = []
+        self._tl_station = np.zeros(0, dtype=np.int64)
+        self._tl_len = np.zeros(0, dtype=np.int64)
+        self._tl_t = np.zeros((0, 2))
+        self._tl_r = np.zeros((0, 2, 3))
+        self._tl_C = np.zeros((0, 2, 3, 3))
+        self._tl_raw: dict[str, list[tuple[float, Array, Array]]] = {}
+
+    # --------------------------------------------------------------------------------------
+    def track_ids(self, status: TrackStatus) -> list[str]:
+        """Return the ids of the tracks of a status."""
+        return [self.bank.object_ids[r] for r in np.flatnonzero(self.status == status)]
+
+    def _grow(self) -> None:
+        """Per-track arrays as long as the bank."""
+        extra = len(self.bank) - self.status.size
+        if extra <= 0:
+            return
+        self.status = np.r_[self.status, np.full(extra, TrackStatus.TENTATIVE, np.int8)]
+        self._bits = np.r_[self._bits, np.zeros(extra, np.int64)]
+        self._expected = np.r_[self._expected, np.zeros(extra, np.int64)]
+        self._last_expected = np.r_[self._last_expected, np.full(extra, -math.inf)]
+        self._pass_open = np.r_[self._pass_open, np.zeros(extra, bool)]
+        self._pass_hits = np.r_[self._pass_hits, np.zeros(extra, np.int64)]
+        self._missed = np.r_[self._missed, np.zeros(extra, np.int64)]
+
+    def _delete(self, rows: IntArray, event: TrackEvent) -> None:
+        self.status[rows] = TrackStatus.DELETED
+        self.bank.tracking[rows] = False
+        self.counts[event] += int(rows.size)
+
+    # --------------------------------------------------------------------------------------
+    def process_scan(self, station: str, t: ArrayLike, z: ArrayLike, R: ArrayLike,
+                     min_elevation_rad: float) -> ScanOutcome:
+        """Associate one station's scan, fuse it, and manage the tracks (module docstring).
+
+        Parameters
+        ----------
+        station : str
+            Id of the scanning station (a key of the network).
+        t : array_like (M,) or scalar
+            Epoch of each detection (or of the scan: a scalar, needed when M = 0), Unix s;
+            scans come in epoch order.
+        z : array_like (M, 3)
+            Detections [range km, azimuth rad, elevation rad].
+        R : array_like (M, 3, 3) or (3, 3)
+            Their noise covariances, km^2, rad^2.
+        min_elevation_rad : float
+            The sensor's elevation mask, rad: a track predicted above it is expected in the
+            scan (the sensor sees its whole sky above the mask).
+        """
+        zz = np.asarray(z, dtype=float).reshape(-1, 3)
+        m = zz.shape[0]
+        t_scan = float(np.min(t))
+        tt = np.broadcast_to(np.asarray(t, dtype=float), (m,)).copy()
+        RR = np.broadcast_to(np.asarray(R, dtype=float), (m, 3, 3)).copy()
+        st = self.bank.ekf.index[station]
+        self.counts[TrackEvent.SCANS] += 1
+        self.counts[TrackEvent.DETECTIONS] += m
+        ids = [""] * m
+        fate = np.full(m, DetectionFate.NEW_TRACKLET, dtype=np.int8)
+        self._grow()
+        self._expire(t_scan)
+        free = self._tracks(station, st, t_scan, tt, zz, RR, min_elevation_rad, ids, fate)
+        self._tracklets(station, st, free, tt, zz, RR, ids, fate)
+        self._grow()
+        return ScanOutcome(ids, fate)
+
+    def _tracks(self, station: str, st: int, t_scan: float, tt: Array, zz: Array,
+                RR: Array, min_el: float, ids: list[str],
+                fate: NDArray[np.int8]) -> IntArray:
+        """Associate with the tracks, fuse, keep the counters: the free detections.
+
+        A scan without detections (M = 0, at `t_scan`) still counts the tracks it
+        expected as missed.
+        """
+        m = zz.shape[0]
+        n = len(self.bank)
+        rows = np.flatnonzero(self.bank.tracking[:n] & (self.status != TrackStatus.DELETED))
+        if not rows.size:
+            return np.arange(m)
+        cfg = self.config
+        bank = self.bank
+        pred = predict_scan(bank.ekf, bank.x[rows], bank.P[rows], bank.t[rows],
+                            tt if m else t_scan, st)
+        track = np.zeros(0, dtype=np.int64)
+        if m:
+            gated = gate_scan(pred, zz, RR, self._gate)
+            track = assign(gated.cost, gated.feasible)
+        sigma = pred.sigma_pos.max(0)
+        lost = rows[sigma > cfg.max_position_sigma_km]
+        got = track >= 0
+        hit = np.zeros(rows.size, dtype=bool)
+        hit[track[got]] = True
+        expected = (pred.ok & (pred.zp[..., 2] >= min_el)).any(0) | hit
+        # fuse what was assigned, in epoch order
+        det = np.flatnonzero(got)
+        det = det[np.argsort(tt[det], kind="stable")]
+        names = [bank.object_ids[r] for r in rows[track[det]]]
+        res = bank.process(tt[det], names, [station] * det.size, zz[det], RR[det])
+        refused = np.array([c != "" for c in res.cause], dtype=bool)
+        for j, name in zip(det.tolist(), names, strict=True):
+            ids[j] = name
+        fate[det] = np.where(refused, DetectionFate.REFUSED, DetectionFate.TRACK)
+        self.counts[TrackEvent.ASSIGNED] += int((~refused).sum())
+        self.counts[TrackEvent.REFUSED] += int(refused.sum())
+        # passes and M of N
+        r_exp, h_exp = rows[expected], hit[expected]
+        new_pass = t_scan - self._last_expected[r_exp] > cfg.pass_gap_s
+        self._pass_hits[r_exp[new_pass]] = 0
+        self._pass_open[r_exp] = True
+        self._last_expected[r_exp] = t_scan
+        self._pass_hits[r_exp] += h_exp
+        width = cfg.confirm_window
+        self._bits[r_exp] = ((self._bits[r_exp] << 1) | h_exp) & ((1 << width) - 1)
+        self._expected[r_exp] += 1
+        hits = _popcount(self._bits[r_exp], width)
+        tentative = self.status[r_exp] == TrackStatus.TENTATIVE
+        confirm = r_exp[tentative & (hits >= cfg.confirm_hits)]
+        self.status[confirm] = TrackStatus.CONFIRMED
+        self.counts[TrackEvent.TRACK_CONFIRMED] += int(confirm.size)
+        hopeless = tentative & (hits < cfg.confirm_hits) & (self._expected[r_exp] >= width)
+        self._delete(r_exp[hopeless], TrackEvent.TENTATIVE_DROPPED)
+        self._delete(lost[self.status[lost] != TrackStatus.DELETED],
+                     TrackEvent.DELETED_COVARIANCE)
+        return np.flatnonzero(~got)
+
+    def _close_passes(self, t_scan: float) -> None:
+        """Count the passes that ended before `t_scan` without a detection."""
+        ended = self._pass_open & (t_scan - self._last_expected > self.config.pass_gap_s)
+        self._pass_open[ended] = False
+        miss = ended & (self._pass_hits == 0)
+        self._missed[ended & ~miss] = 0
+        self._missed[miss] += 1
+        gone = np.flatnonzero((self._missed >= self.config.delete_after_missed_passes)
+                              & (self.status != TrackStatus.DELETED))
+        self._delete(gone, TrackEvent.DELETED_MISSED_PASSES)
+
+    def _expire(self, t_scan: float) -> None:
+        """Drop the tracklets too old to extend; close the ended passes."""
+        self._close_passes(t_scan)
+        old = t_scan - self._tl_t[:, 1] > self.config.tracklet_max_gap_s
+        self.counts[TrackEvent.TRACKLET_EXPIRED] += int(old.sum())
+        self._keep_tracklets(~old)
+
+    # --------------------------------------------------------------------------------------
+    def _keep_tracklets(self, keep: BoolArray) -> None:
+        for i in np.flatnonzero(~keep).tolist():
+            self._tl_raw.pop(self._tl_ids[i], None)
+        self._tl_ids = [s for s, k in zip(self._tl_ids, keep.tolist(), strict=True) if k]
+        self._tl_station = self._tl_station[keep]
+        self._tl_len = self._tl_len[keep]
+        self._tl_t = self._tl_t[keep]
+        self._tl_r = self._tl_r[keep]
+        self._tl_C = self._tl_C[keep]
+
+    def _positions(self, st: int, tt: Array, zz: Array, RR: Array) -> tuple[Array, Array]:
+        """GCRF positions (M, 3) km of detections and their covariances (M, 3, 3)."""
+        r = razel_to_gcrs(zz, tt, self.bank.ekf.stations[st])
+        x = np.concatenate([r, np.zeros_like(r)], -1)
+        _, H = self.bank.ekf.measure(x, tt, np.full(tt.size, st, dtype=np.intp))
+        Hi = np.linalg.inv(H[:, :, :3])
+        return r, Hi @ RR @ np.swapaxes(Hi, -1, -2)
+
+    def _tracklets(self, station: str, st: int, free: IntArray, tt: Array, zz: Array,
+                   RR: Array, ids: list[str], fate: NDArray[np.int8]) -> None:
+        """Extend tracklets with the free detections, start new ones, start tracks."""
+        if not free.size:
+            return
+        r, C = self._positions(st, tt[free], zz[free], RR[free])
+        tf = tt[free]
+        take = np.full(free.size, UNASSIGNED, dtype=np.int64)
+        mine = self._tl_station == st
+        for cost_of, which in ((self._cost_moving, mine & (self._tl_len >= 2)),
+                               (self._cost_first, mine & (self._tl_len == 1))):
+            cand = np.flatnonzero(which)
+            left = np.flatnonzero(take == UNASSIGNED)
+            if not cand.size or not left.size:
+                continue
+            cost, feasible = cost_of(cand, r[left], C[left], tf[left])
+            got = assign(cost, feasible)
+            take[left[got >= 0]] = cand[got[got >= 0]]
+        ext = np.flatnonzero(take >= 0)
+        k = take[ext]
+        self._tl_t[k, 0], self._tl_r[k, 0], self._tl_C[k, 0] = (
+            self._tl_t[k, 1], self._tl_r[k, 1], self._tl_C[k, 1])
+        self._tl_t[k, 1], self._tl_r[k, 1], self._tl_C[k, 1] = tf[ext], r[ext], C[ext]
+        self._tl_len[k] += 1
+        self.counts[TrackEvent.TRACKLET_EXTENDED] += int(ext.size)
+        new = np.flatnonzero(take == UNASSIGNED)
+        new_ids = [f"T{self._next_id + i}" for i in range(new.size)]
+        self._next_id += new.size
+        self.counts[TrackEvent.TRACKLET_STARTED] += int(new.size)
+        self._tl_ids += new_ids
+        self._tl_station = np.r_[self._tl_station, np.full(new.size, st, np.int64)]
+        self._tl_len = np.r_[self._tl_len, np.ones(new.size, np.int64)]
+        self._tl_t = np.concatenate([self._tl_t, np.repeat(tf[new, None], 2, 1)])
+        self._tl_r = np.concatenate([self._tl_r, np.repeat(r[new, None], 2, 1)])
+        self._tl_C = np.concatenate([self._tl_C, np.repeat(C[new, None], 2, 1)])
+        owner = np.empty(free.size, dtype=np.int64)
+        owner[ext], owner[new] = k, self._tl_station.size - new.size + np.arange(new.size)
+        for j, o in zip(free.tolist(), owner.tolist(), strict=True):
+            name = self._tl_ids[o]
+            ids[j] = name
+            self._tl_raw.setdefault(name, []).append((float(tt[j]), zz[j], RR[j]))
+        fate[free[ext]] = DetectionFate.TRACKLET
+        done = np.flatnonzero(self._tl_len >= self.iod_samples)
+        for i in done.tolist():
+            if not self._initiate(station, self._tl_ids[i]):
+                fate[[j for j in free.tolist() if ids[j] == self._tl_ids[i]]] = (
+                    DetectionFate.REFUSED)
+        keep = np.ones(self._tl_len.size, dtype=bool)
+        keep[done] = False
+        self._keep_tracklets(keep)
+
+    def _initiate(self, station: str, name: str) -> bool:
+        """Hand a complete tracklet to the bank: whether its IOD started a track."""
+        raw = self._tl_raw[name]
+        res = self.bank.process([d[0] for d in raw], [name] * len(raw), [station] * len(raw),
+                                [d[1] for d in raw], [d[2] for d in raw])
+        ok = res.cause[-1] == "" and bool(self.bank.tracking[self.bank.rows[name]])
+        self.counts[TrackEvent.TRACK_INITIATED if ok else TrackEvent.IOD_FAILED] += 1
+        if not ok:
+            self.bank.tracking[self.bank.rows[name]] = False
+        return ok
+
+    @staticmethod
+    def _gravity(r: Array) -> Array:
+        """Two-body acceleration (..., 3) km/s^2 at GCRF positions r (..., 3) km."""
+        n = np.linalg.norm(r, axis=-1, keepdims=True)
+        out: Array = -MU_EARTH * r / n**3
+        return out
+
+    def _cost_moving(self, cand: IntArray, r: Array, C: Array,
+                     t: Array) -> tuple[Array, BoolArray]:
+        """Cost (T, M) of adding each detection to each tracklet of two or more detections.
+
+        The tracklet's next position from its last two by two-body gravity (module
+        docstring); the gate and cost as `gate_scan`'s, in GCRF position.
+        """
+        t1, t2 = self._tl_t[cand, 0], self._tl_t[cand, 1]
+        r1, r2 = self._tl_r[cand, 0], self._tl_r[cand, 1]
+        h = (t2 - t1)[:, None]
+        a = self._gravity(r2)
+        v2 = (r2 - r1) / h + 0.5 * a * h
+        tau = t[None, :] - t2[:, None]  # (T, M)
+        pred = r2[:, None] + v2[:, None] * tau[..., None] + 0.5 * a[:, None] * tau[..., None] ** 2
+        c = (tau / h)[..., None, None]
+        q = (self.config.tracklet_accel_sigma_km_s2 * 0.5 * tau * (tau + h)) ** 2
+        S = ((1 + c) ** 2 * self._tl_C[cand, 1][:, None] + c**2 * self._tl_C[cand, 0][:, None]
+             + C[None] + q[..., None, None] * np.eye(3))
+        y = r[None] - pred
+        L = np.linalg.cholesky(S)
+        w = np.linalg.solve(L, y[..., None])[..., 0]
+        d2 = np.einsum("...i,...i->...", w, w)
+        cost = d2 + 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(-1)
+        return cost, (d2 <= self._gate) & (tau > 0)
+
+    def _cost_first(self, cand: IntArray, r: Array, C: Array,
+                    t: Array) -> tuple[Array, BoolArray]:
+        """Cost (T, M) of pairing each one-detection tracklet with each detection.
+
+        The speed the pair implies (two-body gravity taken out) against the circular speed
+        at the tracklet's radius, with ``tracklet_speed_sigma_km_s`` and the detections'
+        noise along the displacement; gate at the same probability, 1 degree of freedom.
+        """
+        t1, r1, C1 = self._tl_t[cand, 1], self._tl_r[cand, 1], self._tl_C[cand, 1]
+        tau = t[None, :] - t1[:, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            d = (r[None] - r1[:, None]
+                 - 0.5 * self._gravity(r1)[:, None] * tau[..., None] ** 2)  # (T, M, 3)
+            dist = np.linalg.norm(d, axis=-1)
+            u = d / dist[..., None]
+            var_pos = (np.einsum("tmi,tij,tmj->tm", u, C1, u)
+                       + np.einsum("tmi,mij,tmj->tm", u, C, u))
+            v_circ = np.sqrt(MU_EARTH / np.linalg.norm(r1, axis=-1))[:, None]
+            var = self.config.tracklet_speed_sigma_km_s ** 2 + var_pos / tau**2
+            d2 = (dist / tau - v_circ) ** 2 / var
+            cost = d2 + np.log(var)
+        feasible = (tau > 0) & (d2 <= self._gate1)
+        return np.where(feasible, cost, np.inf), feasible
