@@ -62,7 +62,9 @@ def main() -> None:
                                  surrogate=False, extra=extra, lossless=not extra)
             runs[name] = {"published": s["published"],
                           "recorded": s["recorded_measurements"],
-                          "lost": s["lost_measurements"], "wall_s": round(s["wall_s"], 1),
+                          "lost": s["lost_measurements"],
+                          "refused_by_shards": s["received_by_shards"] - s["consumed_by_banks"],
+                          "wall_s": round(s["wall_s"], 1),
                           "real_time_factor": round(args.hours * 3600.0 / s["wall_s"], 1)}
             print(f"  {runs[name]}")
         for name in ("lockstep_loaded", "open_loop_loaded"):
