@@ -254,13 +254,23 @@ def cip_pole(t_unix: float) -> Array:
     return np.array([x, y, np.sqrt(1.0 - x * x - y * y)])
 
 
-def scipy_orbit(x0: Array, t: Array, j2: bool = True) -> Array:
-    """Two-body (+ J2 about the pole at t[0]) by scipy, independently of core.dynamics.
+J3_J4 = (-2.5324105e-6, -1.6198976e-6)
+"""EGM2008's J3 and J4 (unnormalised)."""
 
-    `x0` (6,) km, km/s at t[0]; `t` (K,) increasing Unix s; returns (K, 6).
+
+def scipy_orbit(x0: Array, t: Array, j2: bool = True, j3_j4: bool = False) -> Array:
+    """Two-body (+ J2, + J3 and J4, about the pole at t[0]) by scipy, independently of
+    core.dynamics.
+
+    `x0` (6,) km, km/s at t[0]; `t` (K,) increasing Unix s; returns (K, 6). J3 and J4 by
+    the textbook component formulas (Vallado 8-31) in a frame whose z axis is the pole.
     """
     mu, re, j2_ = MU_J2
     p = cip_pole(float(t[0]))
+    e1 = np.cross(p, [1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    rot = np.array([e1, np.cross(p, e1), p])  # GCRF -> pole frame
+    j3, j4 = J3_J4
 
     def f(_t: float, y: Array) -> Array:
         r = np.linalg.norm(y[:3])
@@ -269,6 +279,18 @@ def scipy_orbit(x0: Array, t: Array, j2: bool = True) -> Array:
             z = float(y[:3] @ p)
             k = 1.5 * j2_ * mu * re**2 / r**5
             a = a - k * ((1 - 5 * z * z / r**2) * y[:3] + 2 * z * p)
+        if j3_j4:
+            x_, y_, z_ = rot @ y[:3]
+            u = z_ / r
+            c3 = -2.5 * j3 * mu * re**3 / r**7
+            a3 = np.array([c3 * x_ * (3 * z_ - 7 * z_**3 / r**2),
+                           c3 * y_ * (3 * z_ - 7 * z_**3 / r**2),
+                           c3 * (6 * z_**2 - 7 * z_**4 / r**2 - 0.6 * r**2)])
+            c4 = 0.625 * j4 * mu * re**4 / r**7
+            a4 = np.array([c4 * x_ * (3 - 42 * u**2 + 63 * u**4),
+                           c4 * y_ * (3 - 42 * u**2 + 63 * u**4),
+                           c4 * z_ * (15 - 70 * u**2 + 63 * u**4)])
+            a = a + rot.T @ (a3 + a4)
         return np.concatenate([y[3:], a])
 
     sol = solve_ivp(f, (t[0], t[-1]), x0, t_eval=t, rtol=1e-12, atol=1e-12, method="DOP853")

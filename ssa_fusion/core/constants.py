@@ -8,6 +8,10 @@ R_EARTH = 6378.137
 
 J2 = 1.08262668e-3
 """Earth second zonal harmonic (EGM-96), dimensionless."""
+J3 = -2.5324105e-6
+"""Earth third zonal harmonic (EGM2008, unnormalised: -sqrt(7) C30), dimensionless."""
+J4 = -1.6198976e-6
+"""Earth fourth zonal harmonic (EGM2008, unnormalised: -3 C40), dimensionless."""
 
 OMEGA_EARTH = 7.292115146706979e-5
 """Earth rotation rate, rad/s (IERS)."""

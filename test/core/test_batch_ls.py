@@ -235,7 +235,8 @@ def test_outlier_is_edited_out(j2_world: World) -> None:
     assert not with_outlier.accepted[k]
     assert with_outlier.normalized[k] > 900.0
     np.testing.assert_array_equal(np.delete(with_outlier.accepted, k), without.accepted)
-    np.testing.assert_allclose(with_outlier.x, without.x, rtol=0, atol=1e-10)
+    # the same solution to the convergence test's round-off (1 um, 3e-13 relative)
+    np.testing.assert_allclose(with_outlier.x, without.x, rtol=0, atol=1e-9)
     np.testing.assert_allclose(with_outlier.P, without.P, rtol=1e-9, atol=0)
 
 

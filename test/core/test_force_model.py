@@ -1,17 +1,20 @@
 """Tests for ssa_fusion.core.force_model: the batch fit's force model and its sensitivities.
 
 References: `propagation.integrate_stm` (the compiled two-body + J2 integrator with its STM,
-and its numpy path for two-body + drag), `dynamics`' right-hand sides, and central finite
-differences of the integrated states for the parameter sensitivities.
+and its numpy path for two-body + drag), `dynamics`' right-hand sides, the gradient of the
+J3 and J4 potential (numpy's Legendre series), and central finite differences of the
+integrated states for the STM (J3 and J4 on) and the parameter sensitivities.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from numpy.polynomial import legendre
 
 from ssa_fusion.core import dynamics, frames
 from ssa_fusion.core import force_model as fm
+from ssa_fusion.core.constants import J3, J4, MU_EARTH, R_EARTH
 from ssa_fusion.core.propagation import integrate_stm
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS, ORBIT_EPOCH_UNIX
 
@@ -40,7 +43,7 @@ def _chained(model: str, **params: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def test_gravity_equals_integrate_stm() -> None:
-    tr = fm.trajectory(fm.ForceModel(), X0, T0, EPOCHS, pole=POLE)
+    tr = fm.trajectory(fm.ForceModel(j3=0.0, j4=0.0), X0, T0, EPOCHS, pole=POLE)
     x, phi = _chained("j2")
     assert tr.ok.all()
     np.testing.assert_allclose(tr.x, x, rtol=0, atol=1e-9)
@@ -50,14 +53,15 @@ def test_gravity_equals_integrate_stm() -> None:
 
 def test_drag_equals_integrate_stm_drag() -> None:
     """J2 off: the "drag" model of `dynamics` (integrated by the numpy path, A by complex step)."""
-    tr = fm.trajectory(fm.ForceModel(j2=0.0, drag=True), X0, T0, EPOCHS, pole=POLE)
+    tr = fm.trajectory(fm.ForceModel(j2=0.0, j3=0.0, j4=0.0, drag=True), X0, T0, EPOCHS,
+                       pole=POLE)
     x, phi = _chained("drag")
     np.testing.assert_allclose(tr.x, x, rtol=0, atol=1e-8)
     np.testing.assert_allclose(tr.phi, phi, rtol=0, atol=1e-10 * np.abs(phi).max())
 
 
 def test_acceleration_is_dynamics_rhs() -> None:
-    f = fm.ForceModel(drag=True)
+    f = fm.ForceModel(drag=True, j3=0.0, j4=0.0)
     a = fm.acceleration(f, X0)  # pole = z: dynamics' own frame
     a_j2 = dynamics.rhs("j2", X0)[3:]
     a_drag = dynamics.rhs("drag", X0)[3:] - dynamics.rhs("two_body", X0)[3:]
@@ -68,6 +72,32 @@ def test_acceleration_is_dynamics_rhs() -> None:
     m[:, 1] = np.cross(m[:, 2], m[:, 0])
     expected = a_j2 + 0.5 * a_drag + m @ p[1:]
     np.testing.assert_allclose(fm.acceleration(f, X0, p), expected, rtol=1e-13, atol=1e-20)
+
+
+def _zonal_potential(r: np.ndarray, pole: np.ndarray) -> float:
+    """The J3 + J4 terms of the gravity potential, km^2/s^2 (numpy's Legendre series)."""
+    rr = float(np.linalg.norm(r))
+    s = float(pole @ r) / rr
+    return -sum(MU_EARTH * j * (R_EARTH / rr) ** n / rr * legendre.legval(s, [0] * n + [1])
+                for n, j in ((3, J3), (4, J4)))
+
+
+def test_j3_j4_acceleration_is_the_gradient_of_their_potential() -> None:
+    """About a tilted pole, at positions all over a LEO shell and a GEO one."""
+    rng = np.random.default_rng(3)
+    pole = np.array([0.1, -0.2, 1.0]) / np.linalg.norm([0.1, -0.2, 1.0])
+    with_zonal, without = fm.ForceModel(), fm.ForceModel(j3=0.0, j4=0.0)
+    for radius in (6800.0, 42164.0):
+        for _ in range(20):
+            u = rng.normal(size=3)
+            r = radius * u / np.linalg.norm(u)
+            x = np.r_[r, 0.0, 7.5, 0.0]
+            got = fm.acceleration(with_zonal, x, pole=pole) - fm.acceleration(without, x,
+                                                                                pole=pole)
+            h = 1e-3
+            grad = np.array([(_zonal_potential(r + h * e, pole)
+                              - _zonal_potential(r - h * e, pole)) / (2 * h) for e in np.eye(3)])
+            np.testing.assert_allclose(got, grad, rtol=1e-6, atol=1e-6 * np.abs(grad).max())
 
 
 @pytest.mark.parametrize("j", range(4))

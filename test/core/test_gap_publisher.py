@@ -117,7 +117,7 @@ def test_a_residual_publisher_coasts_until_it_has_learnt_from_pass_ends():
 
 
 def test_a_batch_fit_publisher_fills_the_gap_with_the_fit_of_the_last_passes():
-    """`GapFill.BATCH_FIT`: three passes of 10 m positions of a J2 orbit (scipy), a filter
+    """`GapFill.BATCH_FIT`: three passes of 10 m positions of a J2-J4 orbit (scipy), a filter
     on a two-body model; from `pass_break_s` after the last pass on, the gap's predictions
     are the J2 batch fit of those passes (update source FORECAST, within 30 m of scipy's
     orbit over the next two hours) while the two-body EKF's own predictions drift by
@@ -125,7 +125,7 @@ def test_a_batch_fit_publisher_fills_the_gap_with_the_fit_of_the_last_passes():
     x0 = np.array([6778.0, 0.0, 0.0, 0.0, 4.8, 5.9])
     t = T0 + np.concatenate([k * 2400.0 + 60.0 * np.arange(10) for k in range(3)])
     grid = 60.0 * np.arange(math.floor(t[-1] / 60.0) + 1, math.floor((t[-1] + 7200) / 60) + 1)
-    truth = scipy_orbit(x0, np.concatenate([t, grid]))
+    truth = scipy_orbit(x0, np.concatenate([t, grid]), j3_j4=True)
     c = EstimatorConfig(kind=Kind.POSITION, lift="none",
                         filter=FilterOptions().with_(p0_sigma=(1.0,) * 3 + (1e-2,) * 3,
                                                      q=1e-9))

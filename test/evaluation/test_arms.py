@@ -80,15 +80,15 @@ def test_dmd_ekf_matches_epochs_up_to_round_off():
     np.testing.assert_array_equal(got.x[:, 0], X0[0] + np.arange(1, 4))
 
 
-def test_batch_fit_spans_the_last_passes_and_follows_an_independent_j2_orbit():
-    """Four 'passes' of noisy positions (10 m) of a J2 orbit, 30 min apart; the first is
+def test_batch_fit_spans_the_last_passes_and_follows_an_independent_zonal_orbit():
+    """Four 'passes' of noisy positions (10 m) of a J2-J4 orbit, 30 min apart; the first is
     50 km off (a different object): the arm fits the last three only, from a first guess
-    1 km and 1 m/s off, and predicts the next hour within 30 m of scipy's J2 orbit, with a
+    1 km and 1 m/s off, and predicts the next hour within 30 m of scipy's orbit, with a
     covariance that covers the error (NEES below chi2(6)'s 99.9 % point at every epoch)."""
     rng = np.random.default_rng(3)
     t = T0 + np.concatenate([k * 2400.0 + 60.0 * np.arange(10) for k in range(4)])
     t_gap = t[-1] + 60.0 * np.arange(1, 61)
-    truth = orbit(X0, np.concatenate([t, t_gap]))
+    truth = orbit(X0, np.concatenate([t, t_gap]), j3_j4=True)
     z = truth[: t.size, :3] + 0.01 * rng.standard_normal((t.size, 3))
     z[:10] += 50.0
     real = [Measurement(float(ti), zi, 1e-4 * np.eye(3), kind=Kind.POSITION, frame_id="gcrf")

@@ -117,7 +117,7 @@ def test_each_shards_surrogate_forecasts_its_objects_gaps_only(run):
 def test_the_estimates_equal_the_same_measurements_fused_in_process(run):
     """Lockstep under load: each shard's estimates are what a `TrackBank` with the node's
     default settings gives for the recorded measurements of its objects, in order."""
-    _, out, s = run
+    _, out, _ = run
     bag = list(bagio.read_bag(out / "bag", topics=["/ssa/measurement", "/ssa/estimate"]))
     ms = [messages.measurement_from_msg(m.msg) for m in bag if m.topic == "/ssa/measurement"]
     got: dict[str, list[np.ndarray]] = defaultdict(list)
