@@ -1,10 +1,10 @@
 """Run ssa_fusion node executables as separate processes over real DDS, loopback by default.
 
 `Graph` starts executables (the files `ros2 run ssa_fusion <node>` runs) with
-``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (or the `ros.discovery.Discovery` it is given:
-nodes on other hosts) and a ROS domain id of its own, gives the
-caller a probe node in that domain to wait for topic matches and to receive messages
-(never a fixed sleep), and tears every process down with SIGTERM (SIGKILL after a
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and Fast DDS listening on loopback only (or the
+`ros.discovery.Discovery` it is given: nodes on other hosts) and a ROS domain id of its own,
+gives the caller a probe node in that domain to wait for topic matches and to receive
+messages (never a fixed sleep), and tears every process down with SIGTERM (SIGKILL after a
 timeout), reporting exit codes and log tails. Used by `ssa-fusion live`/`replay` and by
 the headless graph tests.
 """
@@ -106,6 +106,7 @@ class Graph:
         self.discovery = discovery
         self.procs: list[Proc] = []
         discovery.apply(os.environ)  # the probe's too (read at rclpy.init)
+        discovery.bind(os.environ, self.workdir)
         self.env = dict(os.environ)
         self.env.update(ROS_DOMAIN_ID=str(self.domain_id), PYTHONUNBUFFERED="1")
         self.context = Context()

@@ -31,6 +31,7 @@ from ros_graph import TIMEOUT_FACTOR
 
 from ssa_fusion.nodes.shards import shard_range
 from ssa_fusion.ros import bagio, messages
+from ssa_fusion.ros.discovery import PROFILE_VAR, Discovery
 from ssa_fusion.ros.processes import fresh_domain_id, node_command
 from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_MEASUREMENT
 
@@ -125,7 +126,9 @@ def run(hosts, tmp_path_factory):
     a, b = hosts
     out = tmp_path_factory.mktemp("multihost")
     live_out, live_err = out / "live.out", out / "live.err"
-    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    # as on a host of its own: not the loopback-only profile of this process's earlier graphs
+    env = {k: v for k, v in os.environ.items() if k != PROFILE_VAR}
+    env["PYTHONUNBUFFERED"] = "1"
     live_cmd = ["ip", "netns", "exec", a.netns, sys.executable, "-m", "ssa_fusion.apps.cli",
                 "live", "--catalog", str(SAMPLE),
                 "--synthetic", str(OBJECTS), "--duration", "6", "--shards", "2",
@@ -234,3 +237,58 @@ def test_the_shards_traffic_crossed_the_veth(run):
     assert b["rx_bytes"] >= mine_in > 0
     assert b["tx_bytes"] >= mine_out > 0
     assert run["a"]["tx_bytes"] >= mine_in and run["a"]["rx_bytes"] >= mine_out
+
+
+def test_a_graph_on_one_host_listens_on_loopback_only(hosts, tmp_path):
+    """What `ssa-fusion live` runs by default, seen from the other host.
+
+    Host A runs a catalog_filter with a graph's default settings (LOCALHOST, loopback
+    profile) and a control catalog_filter with LOCALHOST alone (Fast DDS listening on every
+    address). A participant on host B that names A in ROS_STATIC_PEERS discovers the
+    control, never the node bound to loopback; and that node's DDS ports are on 127.0.0.1.
+    """
+    a, b = hosts
+    domain = str(fresh_domain_id())
+    base = {k: v for k, v in os.environ.items() if k != PROFILE_VAR}
+    base["ROS_DOMAIN_ID"] = domain
+    bound = dict(base)
+    Discovery().apply(bound)
+    Discovery().bind(bound, tmp_path)
+    control = dict(base)
+    Discovery().apply(control)
+    peer = {**base, "ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_STATIC_PEERS": a.address}
+    procs: list[subprocess.Popen[bytes]] = []
+
+    def start(host: Host, env: dict[str, str], *cmd: str, name: str) -> subprocess.Popen[bytes]:
+        p = subprocess.Popen(["ip", "netns", "exec", host.netns, *cmd], env=env,
+                             stdout=(tmp_path / f"{name}.out").open("wb"),
+                             stderr=(tmp_path / f"{name}.err").open("wb"),
+                             stdin=subprocess.DEVNULL, start_new_session=True)
+        procs.append(p)
+        return p
+
+    try:
+        node = start(a, bound, *node_command("catalog_filter"), "--ros-args", "-r",
+                     "__node:=loopback_only", name="loopback_only")
+        logs = [tmp_path / "loopback_only.err"]
+        ports = range(7400 + 250 * int(domain), 7400 + 250 * (int(domain) + 1))
+
+        def dds_sockets() -> list[str]:  # local address:port of its sockets on DDS ports
+            lines = a.run("ss", "-lunpH").splitlines()
+            addrs = [ln.split()[3] for ln in lines if f"pid={node.pid}," in ln]
+            return [x for x in addrs if int(x.rsplit(":", 1)[1]) in ports]
+
+        _wait(lambda: len(dds_sockets()) >= 2, 30, "the node's DDS sockets", logs)
+        assert all(x.startswith("127.0.0.1:") for x in dds_sockets()), dds_sockets()
+        start(a, control, *node_command("catalog_filter"), "--ros-args", "-r",
+              "__node:=listening_everywhere", name="control")
+        watcher = start(b, peer, sys.executable, str(Path(__file__).with_name("watch_nodes.py")),
+                        "listening_everywhere", "3", str(30 * TIMEOUT_FACTOR), name="watcher")
+        _wait(lambda: watcher.poll() is not None, 40, "the watcher on host B",
+              [*logs, tmp_path / "watcher.err", tmp_path / "control.err"])
+        seen = json.loads((tmp_path / "watcher.out").read_text() or "[]")
+        assert watcher.returncode == 0 and "listening_everywhere" in seen, seen
+        assert "loopback_only" not in seen
+    finally:
+        for p in reversed(procs):
+            _stop(p)
