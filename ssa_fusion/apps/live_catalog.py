@@ -330,9 +330,19 @@ def run(args: argparse.Namespace) -> int:
                 graph.wait_for(lambda: unrecorded(_statuses(diagnostics), names, gaps) == 0,
                                60.0, "the recorder to write every measurement and estimate")
             rss = {n: _rss_kib(started[n].popen.pid) for n in names + gaps if n in started}
+    except TimeoutError as exc:  # its message holds every log's tail: the first line says what
+        timed_out = str(exc).splitlines()[0]
+    else:
+        timed_out = ""
     finally:
         problems = graph.close()
     if runs.ended_badly(problems):
+        return 1
+    if timed_out:
+        elsewhere = (f"; shard(s) {','.join(map(str, remote))} run on other hosts: were they "
+                     "started there with the commands above, and can the hosts reach each "
+                     "other? (docs/MULTIHOST.md)") if remote else ""
+        print(f"error: {timed_out}{elsewhere}; logs in {out}/logs", file=sys.stderr)
         return 1
     wall = time.monotonic() - t_start
     sim_wall = runs.sensor_wall_times(out / "logs" / "sensor_sim.err")
