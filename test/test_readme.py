@@ -7,8 +7,8 @@
   indented lines below it; a module is named by its file name (``tracker.py``). The other
   entries (``msg_defs/``, ``config/``, ...) must name paths that exist.
 * Commands: every ``ssa-fusion ...`` (or ``.venv/bin/ssa-fusion ...``) line of the code blocks
-  of README.md, docs/CCSDS.md and docs/MULTIHOST.md names an existing subcommand and only options its parser
-  knows: each is parsed by `ssa_fusion.apps.cli.build_parser`, never run.
+  of README.md, docs/CCSDS.md and docs/MULTIHOST.md names an existing subcommand and only
+  options its parser knows: each is parsed by `ssa_fusion.apps.cli.build_parser`, never run.
 """
 
 from __future__ import annotations
