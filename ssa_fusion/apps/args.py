@@ -7,6 +7,8 @@ import math
 import os
 from pathlib import Path
 
+from ssa_fusion.ros.discovery import Discovery, DiscoveryRange, peer_problem
+
 
 def positive_float(text: str) -> float:
     """Parse a finite float > 0 (an argparse type)."""
@@ -51,6 +53,47 @@ def add_domain_id(p: argparse.ArgumentParser) -> None:
     p.add_argument("--domain-id", type=domain_id, default=int(env) if env.isdigit() else None,
                    help="ROS domain id (default: $ROS_DOMAIN_ID if set, else a free-looking "
                         "one in 1..100)")
+
+
+def static_peers(text: str) -> tuple[str, ...]:
+    """Parse `--static-peers` (an argparse type): comma-separated IP addresses or host names."""
+    peers = tuple(x.strip() for x in text.split(",") if x.strip())
+    for peer in peers:
+        problem = peer_problem(peer)
+        if problem:
+            raise argparse.ArgumentTypeError(problem)
+    return peers
+
+
+def discovery_range(text: str) -> DiscoveryRange:
+    """Parse `--discovery-range` (an argparse type): a `DiscoveryRange`, any case."""
+    try:
+        return DiscoveryRange(text.strip().upper())
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not one of {', '.join(DiscoveryRange)}") from None
+
+
+def add_discovery(p: argparse.ArgumentParser) -> None:
+    """Add `--discovery-range` and `--static-peers` to `p` (read back by `discovery`).
+
+    Without them every node discovers only nodes of this host (docs/MULTIHOST.md), whatever
+    the shell's ``ROS_AUTOMATIC_DISCOVERY_RANGE``/``ROS_STATIC_PEERS`` say.
+    """
+    p.add_argument("--discovery-range", type=discovery_range, default=DiscoveryRange.LOCALHOST,
+                   metavar="{" + ",".join(DiscoveryRange) + "}",
+                   help="ROS_AUTOMATIC_DISCOVERY_RANGE of every node: LOCALHOST (default: this "
+                        "host only) or SUBNET (multicast on this host's networks: nodes on other "
+                        "hosts, docs/MULTIHOST.md)")
+    p.add_argument("--static-peers", type=static_peers, default=(), metavar="ADDR[,ADDR...]",
+                   help="ROS_STATIC_PEERS of every node: other hosts' addresses to announce to "
+                        "by unicast (for networks without multicast; docs/MULTIHOST.md)")
+
+
+def discovery(args: argparse.Namespace) -> Discovery:
+    """Return the discovery settings of `add_discovery`'s options in `args` (default: loopback)."""
+    return Discovery(getattr(args, "discovery_range", DiscoveryRange.LOCALHOST),
+                     getattr(args, "static_peers", ()))
 
 
 def add_sites(p: argparse.ArgumentParser, what: str) -> None:

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 from ssa_fusion import graphs
 from ssa_fusion.apps import evaluate, report, runs
-from ssa_fusion.apps.args import add_domain_id, time_scale
+from ssa_fusion.apps.args import add_discovery, add_domain_id, discovery, time_scale
 from ssa_fusion.core.types import UpdateSource
 from ssa_fusion.ros import visual_msgs
 from ssa_fusion.ros.processes import Graph
@@ -89,6 +89,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--foxglove-port", type=_port, default=FOXGLOVE_PORT,
                    help=f"port of that WebSocket server (default {FOXGLOVE_PORT}; 0 = any free)")
     add_domain_id(p)
+    add_discovery(p)
     from ssa_fusion.apps import live_catalog
 
     live_catalog.add_arguments(p)
@@ -195,7 +196,8 @@ def catalog_options_given(args: argparse.Namespace) -> list[str]:
     given = {"--objects": args.objects != 0, "--synthetic": args.synthetic != 0,
              "--time-scale max": math.isinf(args.time_scale), "--open-loop": not args.lockstep,
              "--shards": args.shards != 1, "--no-surrogate": not args.surrogate,
-             "--surrogate-param": bool(args.surrogate_param)}
+             "--surrogate-param": bool(args.surrogate_param),
+             "--remote-shards": bool(args.remote_shards)}
     return [name for name, set_ in given.items() if set_]
 
 
@@ -245,7 +247,7 @@ def run(args: argparse.Namespace) -> int:
     out, bag = dirs
     params = graphs.node_parameters(s, args.time_scale, args.seed, bag)
     sim_s = graphs.sim_seconds(s)
-    graph = Graph(out / "logs", args.domain_id)
+    graph = Graph(out / "logs", args.domain_id, discovery(args))
     print(f"live: {s.name}, {sim_s / 3600:.1f} h of sim time at {args.time_scale:g}x "
           f"(~{sim_s / args.time_scale:.0f} s of simulation after start-up); ROS domain "
           f"{graph.domain_id}; logs in {out}/logs", flush=True)

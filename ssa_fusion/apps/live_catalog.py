@@ -24,6 +24,7 @@ import argparse
 import contextlib
 import json
 import math
+import shlex
 import sys
 import time
 from collections import Counter, defaultdict
@@ -36,13 +37,15 @@ import numpy as np
 
 from ssa_fusion import graphs
 from ssa_fusion.apps import runs
+from ssa_fusion.apps.args import discovery
 from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core import timescales
 from ssa_fusion.core.types import UpdateSource
 from ssa_fusion.nodes.defaults import CATALOG_FILTER, CATALOG_SURROGATE
 from ssa_fusion.nodes.diagnostics import RECORDED, Count
 from ssa_fusion.ros import bagio, messages
-from ssa_fusion.ros.processes import Graph
+from ssa_fusion.ros.discovery import Discovery
+from ssa_fusion.ros.processes import Graph, ros_arguments
 from ssa_fusion.ros.topics import (
     CATALOG_QOS,
     TOPIC_DIAGNOSTICS,
@@ -73,11 +76,27 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="catalog: sim time follows the wall clock at --time-scale whatever "
                         "the nodes keep up with (default: lockstep, `nodes.progress`: each "
                         "step waits until the shards and the recorder took the last)")
+    p.add_argument("--remote-shards", type=shard_list, default=(), metavar="K[,K...]",
+                   help="catalog: shards (filter and surrogate) that run on other hosts: not "
+                        "started here; the run prints their commands, waits for them and "
+                        "accounts for them like its own (needs --discovery-range SUBNET or "
+                        "--static-peers; docs/MULTIHOST.md)")
     p.add_argument("--no-surrogate", dest="surrogate", action="store_false",
                    help="catalog: no catalog_surrogate (gap forecasts)")
     p.add_argument("--surrogate-param", action="append", default=[], metavar="NAME=VALUE",
                    help="catalog: a catalog_surrogate parameter (e.g. min_span=21600), "
                         "repeatable")
+
+
+def shard_list(text: str) -> tuple[int, ...]:
+    """Parse `--remote-shards` (an argparse type): comma-separated shard indices >= 0."""
+    try:
+        shards = tuple(sorted({int(x) for x in text.split(",") if x.strip()}))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not comma-separated integers") from None
+    if not shards or shards[0] < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: shard indices 0..shards-1")
+    return shards
 
 
 def args_problem(args: argparse.Namespace) -> str | None:
@@ -99,6 +118,12 @@ def args_problem(args: argparse.Namespace) -> str | None:
             return f"--start: {exc}"
     if not 1 <= args.shards <= 64:
         return "--shards must be in 1..64"
+    remote = getattr(args, "remote_shards", ())
+    if remote and remote[-1] >= args.shards:
+        return f"--remote-shards {remote[-1]}: there are shards 0..{args.shards - 1}"
+    if remote and not discovery(args).reaches_other_hosts:
+        return ("--remote-shards: nodes on other hosts cannot discover this host's on loopback; "
+                "add --discovery-range SUBNET or --static-peers ADDR (docs/MULTIHOST.md)")
     try:
         catalog_surrogate_params(args)
     except ValueError as exc:
@@ -221,6 +246,31 @@ def position_errors(entries: list[catalog_io.CatalogEntry],
     return np.concatenate(errs) if errs else np.zeros(0)
 
 
+SHARD_EXECUTABLES = ("catalog_filter", "catalog_surrogate")
+"""The executables of a catalog graph that own a shard (`graphs.catalog_graph`)."""
+
+
+def is_remote(spec: graphs.NodeSpec, remote: Sequence[int]) -> bool:
+    """Return True when `spec` is a shard process of one of the `remote` shards."""
+    return spec.executable in SHARD_EXECUTABLES and spec.params["shard"] in remote
+
+
+def remote_commands(specs: Sequence[graphs.NodeSpec], remote: Sequence[int], domain_id: int,
+                    reach: Discovery) -> list[tuple[int, str]]:
+    """Return (shard, shell command) of each process of the `remote` shards, in start order.
+
+    What another host runs to be shard k of this graph: ``ros2 run`` of its executable with
+    its node name and parameters, in ROS domain `domain_id` with the discovery range of
+    `reach` (its static peers name other hosts: they are this host's to announce to, and one
+    side naming the other is enough).
+    """
+    env = [f"ROS_DOMAIN_ID={domain_id}", *Discovery(reach.range).exports()]
+    return [(s.params["shard"],
+             shlex.join([*env, "ros2", "run", "ssa_fusion", s.executable,
+                         *ros_arguments(s.params), "-r", f"__node:={s.name}"]))
+            for s in specs if is_remote(s, remote)]
+
+
 def run(args: argparse.Namespace) -> int:
     """Run `ssa-fusion live --catalog`; return the exit code (1 when measurements were lost)."""
     problem = args_problem(args)
@@ -239,13 +289,16 @@ def run(args: argparse.Namespace) -> int:
                           catalog_surrogate_params(args), bag, args.start, args.lockstep)
     names = [n.name for n in specs if n.executable == "catalog_filter"]
     gaps = [n.name for n in specs if n.executable == "catalog_surrogate"]
-    graph = Graph(out / "logs", args.domain_id)
+    remote = getattr(args, "remote_shards", ())
+    graph = Graph(out / "logs", args.domain_id, discovery(args))
     radars = (f"radars of {s.sites_file} ({', '.join(r.station.name for r in s.radars)})"
               if s.sites_file else f"radars of {s.name}")
     print(f"live: catalog {args.catalog} ({len(entries)} objects), {radars}, "
           f"{sim_s / 3600:g} h of sim time {pace(args)}, {args.shards} filter "
           f"shard(s){' with a surrogate each' if gaps else ''}; ROS domain {graph.domain_id}; "
           f"logs in {out}/logs", flush=True)
+    for k, command in remote_commands(specs, remote, graph.domain_id, graph.discovery):
+        print(f"  on shard {k}'s host: {command}", flush=True)
     t_start = time.monotonic()
     rss: dict[str, int] = {}
     last_output = time.time()
@@ -257,9 +310,9 @@ def run(args: argparse.Namespace) -> int:
         graph.probe.create_subscription(StateEstimate, TOPIC_ESTIMATE,
                                         lambda m: seen.update((m.update_source,)), CATALOG_QOS)
         started = {n.name: graph.start_node(n.executable, "-r", f"__node:={n.name}",
-                                            name=n.name, params=n.params) for n in specs}
+                                            name=n.name, params=n.params)
+                   for n in specs if not is_remote(n, remote)}
         sim = started["sensor_sim"]
-        procs = [started[n] for n in names + gaps]
         # else a node ended early (the recorder too): graph.close says which
         # in lockstep no step waits longer than its timeout: no limit needed
         limit = math.inf if args.lockstep else 300.0 + 3.0 * sim_s / args.time_scale
@@ -276,10 +329,20 @@ def run(args: argparse.Namespace) -> int:
             with contextlib.suppress(TimeoutError):  # the summary counts what it lacks
                 graph.wait_for(lambda: unrecorded(_statuses(diagnostics), names, gaps) == 0,
                                60.0, "the recorder to write every measurement and estimate")
-            rss = {n: _rss_kib(p.popen.pid) for n, p in zip(names + gaps, procs, strict=True)}
+            rss = {n: _rss_kib(started[n].popen.pid) for n in names + gaps if n in started}
+    except TimeoutError as exc:  # its message holds every log's tail: the first line says what
+        timed_out = str(exc).splitlines()[0]
+    else:
+        timed_out = ""
     finally:
         problems = graph.close()
     if runs.ended_badly(problems):
+        return 1
+    if timed_out:
+        elsewhere = (f"; shard(s) {','.join(map(str, remote))} run on other hosts: were they "
+                     "started there with the commands above, and can the hosts reach each "
+                     "other? (docs/MULTIHOST.md)") if remote else ""
+        print(f"error: {timed_out}{elsewhere}; logs in {out}/logs", file=sys.stderr)
         return 1
     wall = time.monotonic() - t_start
     sim_wall = runs.sensor_wall_times(out / "logs" / "sensor_sim.err")
@@ -288,7 +351,8 @@ def run(args: argparse.Namespace) -> int:
     summary.update({"catalog": str(args.catalog), "objects": len(entries), "scenario": s.name,
                     "time_scale": args.time_scale if math.isfinite(args.time_scale) else "max",
                     "lockstep": args.lockstep,
-                    "shards": args.shards, "wall_s": wall})
+                    "shards": args.shards, "wall_s": wall,
+                    "remote_nodes": [n.name for n in specs if is_remote(n, remote)]})
     (out / "catalog.json").write_text(json.dumps(summary, indent=2))
     print(table(summary))
     return 0 if summary["lost_measurements"] == 0 else 1
@@ -414,9 +478,14 @@ def table(s: dict[str, Any]) -> str:
                     f"{s['sim_wall_s']:.1f} s of wall time (first measurement to last "
                     f"estimate) = {s['live_real_time_factor']:.0f}x real time, "
                     f"{s['throughput_per_s']:.0f} measurements/s")
+    remote = s.get("remote_nodes", [])
+
+    def rss(node: str, mib: float) -> str:
+        return "RSS on its own host" if node in remote else f"RSS {mib:.0f} MiB"
+
     for n, p in s["per_shard"].items():
         rows.append(f"{n}: {p['objects']} objects, {p['received']} received, "
-                    f"{p['estimates']} estimates, RSS {p['rss_mib']:.0f} MiB, bank "
+                    f"{p['estimates']} estimates, {rss(n, p['rss_mib'])}, bank "
                     f"{p['bank_bytes_per_object']} B/object")
     pe = s["position_error_km"]
     if pe["median"] is not None:
@@ -428,7 +497,7 @@ def table(s: dict[str, Any]) -> str:
                     f"{g['fits_skipped']}, waiting {g['waiting_for_fit']}; "
                     f"{g['fit_seconds']:.0f} s of fitting; {g['published_forecast']} "
                     f"forecasts ({g['forecasts_overtaken']} overtaken by a measurement); "
-                    f"RSS {g['rss_mib']:.0f} MiB")
+                    f"{rss(n, g['rss_mib'])}")
     ge = s.get("gap_errors")
     if ge and ge.get("gaps_scored"):
         rows.append(

@@ -1,9 +1,10 @@
-"""Run ssa_fusion node executables as separate processes over real DDS, loopback only.
+"""Run ssa_fusion node executables as separate processes over real DDS, loopback by default.
 
 `Graph` starts executables (the files `ros2 run ssa_fusion <node>` runs) with
-``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and a ROS domain id of its own, gives the
-caller a probe node in that domain to wait for topic matches and to receive messages
-(never a fixed sleep), and tears every process down with SIGTERM (SIGKILL after a
+``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` and Fast DDS listening on loopback only (or the
+`ros.discovery.Discovery` it is given: nodes on other hosts) and a ROS domain id of its own,
+gives the caller a probe node in that domain to wait for topic matches and to receive
+messages (never a fixed sleep), and tears every process down with SIGTERM (SIGKILL after a
 timeout), reporting exit codes and log tails. Used by `ssa-fusion live`/`replay` and by
 the headless graph tests.
 """
@@ -27,6 +28,7 @@ from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
+from ssa_fusion.ros.discovery import LOOPBACK, Discovery
 from ssa_fusion.ros.executors import make_executor
 from ssa_fusion.ros.interfaces import Message
 from ssa_fusion.ros.topics import DATA_QOS
@@ -96,12 +98,15 @@ class Graph:
     hold on a loaded machine. A wait ends as soon as its condition holds, so a larger factor
     lets a slow run take longer and never slows a passing one."""
 
-    def __init__(self, workdir: Path, domain_id: int | None = None) -> None:
+    def __init__(self, workdir: Path, domain_id: int | None = None,
+                 discovery: Discovery = LOOPBACK) -> None:
         self.workdir = Path(workdir)
         self.workdir.mkdir(parents=True, exist_ok=True)
         self.domain_id = fresh_domain_id() if domain_id is None else domain_id
+        self.discovery = discovery
         self.procs: list[Proc] = []
-        os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        discovery.apply(os.environ)  # the probe's too (read at rclpy.init)
+        discovery.bind(os.environ, self.workdir)
         self.env = dict(os.environ)
         self.env.update(ROS_DOMAIN_ID=str(self.domain_id), PYTHONUNBUFFERED="1")
         self.context = Context()
@@ -126,11 +131,7 @@ class Graph:
                    params_file: Path | None = None, name: str | None = None,
                    expect_returncode: int | None = 0) -> Proc:
         """Start an ssa_fusion node executable with parameters (`-p key:=value`)."""
-        cmd = [*node_command(executable), "--ros-args"]
-        if params_file is not None:
-            cmd += ["--params-file", str(params_file)]
-        for key, value in (params or {}).items():
-            cmd += ["-p", f"{key}:={_ros_value(value)}"]
+        cmd = [*node_command(executable), *ros_arguments(params, params_file)]
         return self.start(name or executable, cmd + list(ros_args), expect_returncode)
 
     def start_python(self, script: Path | str, *args: str, name: str,
@@ -260,6 +261,17 @@ class Graph:
         self.probe.destroy_node()
         self.context.try_shutdown()
         return problems
+
+
+def ros_arguments(params: dict[str, Any] | None = None,
+                  params_file: Path | None = None) -> list[str]:
+    """Return ``--ros-args`` with `params_file` and `params` (``-p key:=value`` each)."""
+    out = ["--ros-args"]
+    if params_file is not None:
+        out += ["--params-file", str(params_file)]
+    for key, value in (params or {}).items():
+        out += ["-p", f"{key}:={_ros_value(value)}"]
+    return out
 
 
 def _ros_value(value: object) -> str:

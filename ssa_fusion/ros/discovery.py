@@ -1,0 +1,137 @@
+"""How far a graph's DDS discovery reaches: this host only (the default), or other hosts.
+
+The nodes' middleware (rmw_fastrtps_cpp, Fast DDS) reads two environment variables when a
+process creates its ROS context: ``ROS_AUTOMATIC_DISCOVERY_RANGE`` (`DiscoveryRange`) and
+``ROS_STATIC_PEERS`` (addresses to announce to by unicast, ';'-separated). `Discovery`
+holds both for the processes ssa_fusion starts (`ros.processes.Graph`). Neither binds a
+socket to an address: they decide whom a participant announces itself to, and Fast DDS
+listens on every address of the host (measured in docs/MULTIHOST.md). So a graph that stays
+on this host also gets a Fast DDS profile (`LOOPBACK_PROFILE`, `Discovery.bind`) that
+listens on loopback only: a participant elsewhere that knows this host's address cannot
+reach it either.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import re
+from collections.abc import MutableMapping
+from dataclasses import dataclass
+from enum import StrEnum
+from pathlib import Path
+
+RANGE_VAR = "ROS_AUTOMATIC_DISCOVERY_RANGE"
+"""The environment variable of the automatic discovery range."""
+PEERS_VAR = "ROS_STATIC_PEERS"
+"""The environment variable of the static peers (';'-separated addresses)."""
+PROFILE_VAR = "FASTDDS_DEFAULT_PROFILES_FILE"
+"""The environment variable naming the Fast DDS XML profiles file a process loads."""
+PROFILE_NAME = "fastdds_loopback.xml"
+"""The file name `Discovery.bind` writes `LOOPBACK_PROFILE` to."""
+LOOPBACK_PROFILE = """\
+<?xml version="1.0" encoding="UTF-8"?>
+<!-- ssa_fusion: every participant listens on loopback only (UDPv4 on lo, and shared memory) -->
+<dds xmlns="http://www.eprosima.com">
+  <profiles>
+    <transport_descriptors>
+      <transport_descriptor>
+        <transport_id>ssa_fusion_shm</transport_id>
+        <type>SHM</type>
+      </transport_descriptor>
+      <transport_descriptor>
+        <transport_id>ssa_fusion_loopback_udp</transport_id>
+        <type>UDPv4</type>
+        <interfaces>
+          <allowlist>
+            <interface name="lo"/>
+          </allowlist>
+        </interfaces>
+      </transport_descriptor>
+    </transport_descriptors>
+    <participant profile_name="ssa_fusion_loopback" is_default_profile="true">
+      <rtps>
+        <userTransports>
+          <transport_id>ssa_fusion_shm</transport_id>
+          <transport_id>ssa_fusion_loopback_udp</transport_id>
+        </userTransports>
+        <useBuiltinTransports>false</useBuiltinTransports>
+      </rtps>
+    </participant>
+  </profiles>
+</dds>
+"""
+"""Fast DDS's default transports (shared memory, UDPv4) with UDP on the loopback interface."""
+_HOSTNAME = re.compile(r"^(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]*[A-Za-z0-9])?"
+                       r"(\.[A-Za-z0-9]([A-Za-z0-9-]*[A-Za-z0-9])?)*$")
+
+
+class DiscoveryRange(StrEnum):
+    """Values of ``ROS_AUTOMATIC_DISCOVERY_RANGE`` a graph runs with."""
+
+    LOCALHOST = "LOCALHOST"
+    """Announce to participants of this host only (no multicast): the default."""
+    SUBNET = "SUBNET"
+    """Announce by multicast on the host's networks: nodes on other hosts of the subnet."""
+
+
+@dataclass(frozen=True)
+class Discovery:
+    """The discovery settings of every process of a graph."""
+
+    range: DiscoveryRange = DiscoveryRange.LOCALHOST
+    static_peers: tuple[str, ...] = ()
+    """Addresses (IP or host name) of other hosts to announce to by unicast."""
+
+    @property
+    def reaches_other_hosts(self) -> bool:
+        """Return True when nodes on other hosts can discover this graph's."""
+        return self.range is DiscoveryRange.SUBNET or bool(self.static_peers)
+
+    def apply(self, env: MutableMapping[str, str]) -> None:
+        """Set these settings in `env` (an environment), removing an inherited peer list."""
+        env[RANGE_VAR] = self.range.value
+        if self.static_peers:
+            env[PEERS_VAR] = ";".join(self.static_peers)
+        else:
+            env.pop(PEERS_VAR, None)
+
+    def bind(self, env: MutableMapping[str, str], directory: Path) -> None:
+        """Make the processes of `env` listen on loopback only, unless they reach other hosts.
+
+        Writes `LOOPBACK_PROFILE` to `directory` and names it in `env` (`PROFILE_VAR`); a
+        profiles file the user named there already is kept (theirs decides). Reaching other
+        hosts, any loopback profile of an earlier graph is taken out of `env`.
+        """
+        current = env.get(PROFILE_VAR, "")
+        ours = Path(current).name == PROFILE_NAME
+        if self.reaches_other_hosts:
+            if ours:
+                del env[PROFILE_VAR]
+            return
+        if current and not ours:
+            return
+        path = Path(directory) / PROFILE_NAME
+        path.write_text(LOOPBACK_PROFILE)
+        env[PROFILE_VAR] = str(path)
+
+    def exports(self) -> list[str]:
+        """Return the ``NAME=value`` assignments of `apply` (for a shell command line)."""
+        env: dict[str, str] = {}
+        self.apply(env)
+        return [f"{k}={v}" for k, v in env.items()]
+
+
+def peer_problem(peer: str) -> str | None:
+    """Return why `peer` is not an IP address or a host name, or None."""
+    try:
+        ipaddress.ip_address(peer)
+        return None
+    except ValueError:
+        pass
+    if _HOSTNAME.match(peer):
+        return None
+    return f"{peer!r} is not an IP address or a host name"
+
+
+LOOPBACK = Discovery()
+"""The default: automatic discovery on this host only, no static peers."""
