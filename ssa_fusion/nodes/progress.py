@@ -149,8 +149,9 @@ class Lockstep:
     keys : ndarray of int (M,)
         The ``shard_key`` of each measurement of the schedule, in publication order.
     timeout_s : float
-        Wall s the simulator waits for a step's consumers before it goes on all the same
-        (a stopped consumer must not stop the run; `go_on` then reports it).
+        Wall s the simulator waits for a step's consumers before it goes on without the
+        late ones, for the rest of the run (a stopped or never started consumer must not
+        stop the run; `go_on` reports them).
     """
 
     def __init__(self, node: Node, nodes: Sequence[str], keys: NDArray[np.int64],
@@ -178,7 +179,7 @@ class Lockstep:
         """Return (whether the next step may be published, what is still awaited).
 
         At wall time `now` (s, monotonic). True with a non-empty list: the consumers listed
-        took longer than `timeout_s`, and the simulator goes on without them.
+        took longer than `timeout_s`; they are no longer waited for.
         """
         missing = waiting(self.watch.reports, self.nodes, self.sent, self.sent_by_shard)
         if not missing:
@@ -188,5 +189,7 @@ class Lockstep:
             self._since = now
         if now - self._since > self.timeout_s:
             self._since = None
+            self.nodes = [n for n in self.nodes if not any(m.startswith(f"{n} (")
+                                                           for m in missing)]
             return True, missing
         return False, missing
