@@ -5,8 +5,10 @@ The window is three consecutive passes of the ``iss_radar_columbus`` radar (rang
 by `ssa_fusion.core.batch_ls.fit` from the per-object filter's estimate at the window's last
 measurement (what a live re-fit after a pass starts from), with
 
-* ``j2``: two-body + J2, the state only;
-* ``j2+drag``: two-body + J2 + drag, the state and the drag factor.
+* ``j2+drag``: two-body + J2 + drag, the state and the drag factor (the model before J3 and
+  J4 were added: the comparison);
+* ``j2-j4``: two-body + the zonal harmonics J2, J3, J4, the state only;
+* ``j2-j4+drag``: the same + drag, the state and the drag factor (the default model).
 
 For each window the fit is timed (``--repeats`` runs after one untimed warm-up; numba's
 kernels are cached on disk), then its prediction through the gap to the next pass on the
@@ -49,10 +51,11 @@ SCENARIO = "iss_radar_columbus"
 
 def _options(name: str, psd: float) -> batch_ls.BatchOptions:
     snc = (psd, psd, psd)
-    if name == "j2":
+    if name == "j2-j4":
         return batch_ls.BatchOptions(snc_psd=snc)
-    return batch_ls.BatchOptions(force=ForceModel(drag=True), solve_for=("drag_scale",),
-                                 snc_psd=snc)
+    force = ForceModel(drag=True) if name == "j2-j4+drag" else ForceModel(drag=True, j3=0.0,
+                                                                           j4=0.0)
+    return batch_ls.BatchOptions(force=force, solve_for=("drag_scale",), snc_psd=snc)
 
 
 def main() -> None:
@@ -82,7 +85,7 @@ def main() -> None:
           f"passes; {len(windows)} windows of 3 passes; SNC {a.snc:g} km^2/s^3")
     summary: dict[str, dict[str, float | int | bool]] = {}
     ok = True
-    for name in ("j2", "j2+drag"):
+    for name in ("j2+drag", "j2-j4", "j2-j4+drag"):
         opts = _options(name, a.snc)
         ms, pred_ms, rms, iters, nmeas, ep_err, gap_err, nees = [], [], [], [], [], [], [], []
         for w in windows:
