@@ -49,13 +49,14 @@ TARGET_MS = 50.0
 SCENARIO = "iss_radar_columbus"
 
 
-def _options(name: str, psd: float) -> batch_ls.BatchOptions:
+def _options(name: str, psd: float, drag_sigma: float = 1.0) -> batch_ls.BatchOptions:
     snc = (psd, psd, psd)
     if name == "j2-j4":
         return batch_ls.BatchOptions(snc_psd=snc)
     force = ForceModel(drag=True) if name == "j2-j4+drag" else ForceModel(drag=True, j3=0.0,
                                                                            j4=0.0)
-    return batch_ls.BatchOptions(force=force, solve_for=("drag_scale",), snc_psd=snc)
+    return batch_ls.BatchOptions(force=force, solve_for=("drag_scale",), snc_psd=snc,
+                                 param_sigma=(drag_sigma, 1e-8, 1e-8, 1e-8))
 
 
 def main() -> None:
@@ -65,6 +66,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--snc", type=float, default=3e-14,
                     help="SNC PSD of the realistic covariance, km^2/s^3 (R, T, N alike)")
+    ap.add_argument("--drag-sigma", type=float, default=1.0,
+                    help="a priori standard deviation of the drag factor (nominal 1)")
     a = ap.parse_args()
 
     s = sky.SKY_SCENARIOS[SCENARIO]
@@ -86,7 +89,7 @@ def main() -> None:
     summary: dict[str, dict[str, float | int | bool]] = {}
     ok = True
     for name in ("j2+drag", "j2-j4", "j2-j4+drag"):
-        opts = _options(name, a.snc)
+        opts = _options(name, a.snc, a.drag_sigma)
         ms, pred_ms, rms, iters, nmeas, ep_err, gap_err, nees = [], [], [], [], [], [], [], []
         for w in windows:
             win = real[ps[w][0]:ps[w + 2][1] + 1]

@@ -165,6 +165,7 @@ def test_the_gap_fit_of_angles_only_has_its_own_process_noise():
         (batch_gap.GAP_FIT_SNC,) * 3
     assert batch_gap.GAP_FIT_SNC_ANGLES > batch_gap.GAP_FIT_SNC
     assert batch_gap.GAP_FIT_ANGLES.snc_psd != batch_gap.GAP_FIT.snc_psd
-    same = ("force", "solve_for", "consider", "param_sigma", "solver")
-    assert all(getattr(batch_gap.GAP_FIT_ANGLES, k) == getattr(batch_gap.GAP_FIT, k)
-               for k in same)
+    # ranges: the drag factor solved for with the state; angles: the state alone
+    assert batch_gap.GAP_FIT.solve_for == ("drag_scale",) and batch_gap.GAP_FIT.force.drag
+    assert batch_gap.GAP_FIT_ANGLES.solve_for == () and not batch_gap.GAP_FIT_ANGLES.force.drag
+    assert batch_gap.GAP_FIT_ANGLES.consider == batch_gap.GAP_FIT.consider == ()

@@ -80,15 +80,21 @@ def test_dmd_ekf_matches_epochs_up_to_round_off():
     np.testing.assert_array_equal(got.x[:, 0], X0[0] + np.arange(1, 4))
 
 
-def test_batch_fit_spans_the_last_passes_and_follows_an_independent_zonal_orbit():
-    """Four 'passes' of noisy positions (10 m) of a J2-J4 orbit, 30 min apart; the first is
-    50 km off (a different object): the arm fits the last three only, from a first guess
-    1 km and 1 m/s off, and predicts the next hour within 30 m of scipy's orbit, with a
-    covariance that covers the error (NEES below chi2(6)'s 99.9 % point at every epoch)."""
+@pytest.mark.parametrize(("x0", "bound_km"), [
+    (np.array([7378.0, 0.0, 0.0, 0.0, 4.7, 5.67]), 0.03),  # 1,000 km: no air
+    (X0, 1.0),  # 400 km: the fit solves for a drag factor the 1.3 h window hardly observes
+])
+def test_batch_fit_spans_the_last_passes_and_follows_an_independent_zonal_orbit(x0, bound_km):
+    """Four 'passes' of noisy positions (10 m) of a drag-free J2-J4 orbit, 30 min apart; the
+    first is 50 km off (a different object): the arm fits the last three only (the state
+    and a drag factor), from a first guess 1 km and 1 m/s off, and predicts the next hour
+    within 30 m of scipy's orbit at 1,000 km; at 400 km the drag factor the short window
+    leaves uncertain (0.32 here, truly 0) costs up to a kilometre in that hour, and the
+    covariance says so: at both, NEES below chi2(6)'s 99.9 % point at every epoch."""
     rng = np.random.default_rng(3)
     t = T0 + np.concatenate([k * 2400.0 + 60.0 * np.arange(10) for k in range(4)])
     t_gap = t[-1] + 60.0 * np.arange(1, 61)
-    truth = orbit(X0, np.concatenate([t, t_gap]), j3_j4=True)
+    truth = orbit(x0, np.concatenate([t, t_gap]), j3_j4=True)
     z = truth[: t.size, :3] + 0.01 * rng.standard_normal((t.size, 3))
     z[:10] += 50.0
     real = [Measurement(float(ti), zi, 1e-4 * np.eye(3), kind=Kind.POSITION, frame_id="gcrf")
@@ -98,7 +104,7 @@ def test_batch_fit_spans_the_last_passes_and_follows_an_independent_zonal_orbit(
     got = arms.batch_fit(CONFIG, real, start, t_gap)
     assert got is not None
     err = got.x - truth[t.size:]
-    assert np.max(np.linalg.norm(err[:, :3], axis=1)) < 0.03
+    assert np.max(np.linalg.norm(err[:, :3], axis=1)) < bound_km
     n = np.einsum("ki,kij,kj->k", err, np.linalg.inv(got.P), err)
     assert np.all(n < 22.46)  # chi2(6) 99.9 %
     assert set(got.source) == {UpdateSource.NONE}
