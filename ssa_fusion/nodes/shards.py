@@ -16,9 +16,8 @@ from rclpy.subscription_content_filter_options import ContentFilterOptions
 from ssa_fusion.nodes.diagnostics import NodeCause
 from ssa_fusion.nodes.parameters import Param, Rule, Values, at_least
 from ssa_fusion.ros import messages
+from ssa_fusion.ros.messages import KEY_SPACE
 
-KEY_SPACE = 2**32
-"""Values of ``shard_key`` (uint32)."""
 LIST_OBJECTS = 200
 """Up to this many objects, a shard lists their ids on /diagnostics (``object_ids``)."""
 
