@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import array
 import zlib
+from collections.abc import Sized
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -237,7 +238,7 @@ def estimate_from_msg(msg: Message) -> types.StateEstimate:
     )
 
 
-def _column(values: NDArray[Any], code: str, classes: MsgClasses) -> Any:
+def _column(values: NDArray[Any], code: str, classes: MsgClasses) -> object:
     """Return a numeric column as the message classes take it.
 
     An ``array.array`` of type `code` (rclpy: no check or copy per element) or a numpy
@@ -306,23 +307,23 @@ def measurement_batch_from_msg(msg: Message) -> MeasurementRows:
     """
     m = len(msg.object_id)
     kind = np.asarray(msg.kind, dtype=np.uint8)
-    columns = {"shard_key": np.asarray(msg.shard_key, dtype=np.uint32), "kind": kind,
-               "source": np.asarray(msg.source, dtype=np.uint8),
-               "stamp_ns": np.asarray(msg.stamp_ns, dtype=np.int64),
-               "z": np.asarray(msg.z, dtype=float),
-               "covariance": np.asarray(msg.covariance, dtype=float),
-               "horizon": np.asarray(msg.horizon, dtype=float)}
-    _check_rows(m, {**columns, "frame_id": msg.frame_id}, {"z": 3, "covariance": 9})
+    source = np.asarray(msg.source, dtype=np.uint8)
+    key = np.asarray(msg.shard_key, dtype=np.uint32)
+    ns = np.asarray(msg.stamp_ns, dtype=np.int64)
+    z = np.asarray(msg.z, dtype=float)
+    cov = np.asarray(msg.covariance, dtype=float)
+    horizon = np.asarray(msg.horizon, dtype=float)
+    _check_rows(m, {"shard_key": key, "kind": kind, "source": source, "frame_id": msg.frame_id,
+                    "stamp_ns": ns, "z": z, "covariance": cov, "horizon": horizon},
+                {"z": 3, "covariance": 9})
     s = _Z_SCALE_ROWS[kind]
     return MeasurementRows(
-        t=ns_to_seconds(columns["stamp_ns"]), object_id=list(msg.object_id),
-        frame_id=list(msg.frame_id), z=columns["z"].reshape(m, 3) / s,
-        R=columns["covariance"].reshape(m, 3, 3) / (s[:, :, None] * s[:, None, :]),
-        kind=kind, source=columns["source"], horizon=columns["horizon"],
-        shard_key=columns["shard_key"])
+        t=ns_to_seconds(ns), object_id=list(msg.object_id), frame_id=list(msg.frame_id),
+        z=z.reshape(m, 3) / s, R=cov.reshape(m, 3, 3) / (s[:, :, None] * s[:, None, :]),
+        kind=kind, source=source, horizon=horizon, shard_key=key)
 
 
-def _check_rows(m: int, columns: dict[str, Any], per_row: dict[str, int]) -> None:
+def _check_rows(m: int, columns: dict[str, Sized], per_row: dict[str, int]) -> None:
     """Raise ValueError unless every column has `m` rows (`per_row` values per row)."""
     for name, col in columns.items():
         want = m * per_row.get(name, 1)
@@ -356,18 +357,17 @@ def estimate_batch_from_msg(msg: Message) -> EstimateRows:
     an update source that is none of `types.UpdateSource`.
     """
     m = len(msg.object_id)
-    columns = {"shard_key": np.asarray(msg.shard_key, dtype=np.uint32),
-               "stamp_ns": np.asarray(msg.stamp_ns, dtype=np.int64),
-               "state": np.asarray(msg.state, dtype=float),
-               "covariance": np.asarray(msg.covariance, dtype=float),
-               "nis": np.asarray(msg.nis, dtype=float)}
-    _check_rows(m, columns, {"state": 6, "covariance": 36})
+    key = np.asarray(msg.shard_key, dtype=np.uint32)
+    ns = np.asarray(msg.stamp_ns, dtype=np.int64)
+    x = np.asarray(msg.state, dtype=float)
+    cov = np.asarray(msg.covariance, dtype=float)
+    nis = np.asarray(msg.nis, dtype=float)
+    _check_rows(m, {"shard_key": key, "stamp_ns": ns, "state": x, "covariance": cov,
+                    "nis": nis}, {"state": 6, "covariance": 36})
     try:
         source = types.UpdateSource(msg.update_source)
     except ValueError:
         raise ValueError(f"unknown update_source {msg.update_source}") from None
-    return EstimateRows(t=ns_to_seconds(columns["stamp_ns"]), object_id=list(msg.object_id),
-                        x=columns["state"].reshape(m, 6) / _X_SCALE,
-                        P=columns["covariance"].reshape(m, 6, 6) / (KM * KM),
-                        nis=columns["nis"], update_source=source,
-                        shard_key=columns["shard_key"])
+    return EstimateRows(t=ns_to_seconds(ns), object_id=list(msg.object_id),
+                        x=x.reshape(m, 6) / _X_SCALE, P=cov.reshape(m, 6, 6) / (KM * KM),
+                        nis=nis, update_source=source, shard_key=key)

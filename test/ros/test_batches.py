@@ -106,7 +106,8 @@ def test_estimate_rows_round_trip_through_rclpy_cdr_and_a_bag(rows):
     back = messages.estimate_batch_from_msg(deserialize_message(cdr, EstimateBatch))
     km2 = messages.KM * messages.KM
     want = EstimateRows(_via_ns(rows.t), rows.object_id, rows.x * messages.KM / messages.KM,
-                        rows.P * messages.KM * messages.KM / km2, rows.nis, rows.update_source, rows.shard_key)
+                        rows.P * messages.KM * messages.KM / km2, rows.nis,
+                        rows.update_source, rows.shard_key)
     _same(back, want)
     name = "ssa_fusion_msgs/msg/EstimateBatch"
     store = bagio.typestore()
