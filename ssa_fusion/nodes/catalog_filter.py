@@ -127,10 +127,14 @@ class CatalogFilterNode(SsaNode):
         self.progress = ProgressReporter(self, self.taken)
 
     def taken(self) -> dict[str, str | int]:
-        """Return the lockstep progress: measurements with a final fate, estimates published."""
+        """Return the lockstep progress: measurements with a final fate, estimates published.
+
+        And the measurements received (admitted or refused, not yet all fused).
+        """
         c = self.diag.counts
         return {SHARD: f"{self.shard}/{self.shards}",
                 TAKEN: c[Count.REFUSED] + c[Count.CONSUMED] + c[Count.DROPPED],
+                Count.RECEIVED: c[Count.RECEIVED],
                 Count.PUBLISHED_SENSOR: c[Count.PUBLISHED_SENSOR]}
 
     def reset(self) -> None:
