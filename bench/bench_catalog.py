@@ -315,10 +315,11 @@ def same_estimates(a: Path, b: Path) -> tuple[int, int, float]:
 
     def load(bag: Path) -> dict:
         out = {}
-        for m in bagio.read_bag(bag, topics=["/ssa/estimate"]):
-            e = messages.estimate_from_msg(m.msg)
+        for m in bagio.read_bag(bag, topics=["/ssa/estimate_batch"]):
+            e = messages.estimate_batch_from_msg(m.msg)
             if e.update_source == UpdateSource.SENSOR:  # the filters' (no forecasts)
-                out[(e.object_id, e.t)] = (e.x, e.P)
+                for i, (oid, t) in enumerate(zip(e.object_id, e.t.tolist(), strict=True)):
+                    out[(oid, t)] = (e.x[i], e.P[i])
         return out
 
     ea, eb = load(a), load(b)

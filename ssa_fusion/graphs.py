@@ -21,7 +21,7 @@ from ssa_fusion.core import timescales
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import BAG_PATTERN
 from ssa_fusion.ros.readiness import READERS
-from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_MEASUREMENT
+from ssa_fusion.ros.topics import TOPIC_ESTIMATE_BATCH, TOPIC_MEASUREMENT_BATCH
 from ssa_fusion.sim import scenarios, sky
 
 LIVE_SCENARIOS = [*(n for n, s in scenarios.SCENARIOS.items() if s.is_orbit), *sky.SKY_SCENARIOS]
@@ -160,7 +160,9 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     simulating `scenario`'s radars measuring the catalog for `sim_s` from `start` (ISO 8601
     UTC; '' = the catalog's first epoch) (last: it waits for the others), in lockstep with
     the shards and the recorder (`nodes.progress`; `time_scale` a ceiling) unless
-    `lockstep` is False (open loop: sim time follows the wall clock). The same for
+    `lockstep` is False (open loop: sim time follows the wall clock). Measurements and
+    estimates go as batches (``/ssa/measurement_batch``, ``/ssa/estimate_batch``), one
+    measurement batch per shard per step. The same for
     `ssa-fusion live --catalog` and `ros2 launch ssa_fusion catalog.launch.py`. ValueError
     with one line for a `start` that is not an epoch ssa_fusion represents.
     """
@@ -169,9 +171,9 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     names = node_names(shards)
     gaps = node_names(shards, "catalog_surrogate") if surrogate else []
     # the recorder hears every estimate publisher (shards and surrogates) from the first
-    readers = ["recorder:" + TOPIC_MEASUREMENT,
-               f"recorder:{TOPIC_ESTIMATE}={len(names) + len(gaps)}",
-               *(f"{n}:{TOPIC_MEASUREMENT}" for n in names)]
+    readers = ["recorder:" + TOPIC_MEASUREMENT_BATCH,
+               f"recorder:{TOPIC_ESTIMATE_BATCH}={len(names) + len(gaps)}",
+               *(f"{n}:{TOPIC_MEASUREMENT_BATCH}" for n in names)]
     recorder: dict[str, Any] = {"use_sim_time": True}
     if bag is not None:
         recorder["bag"] = str(bag)
@@ -189,9 +191,9 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
             "scenario": scenario.name, "catalog": str(Path(catalog).resolve()),
             "objects": objects, "synthetic": synthetic, "duration": float(sim_s),
             "time_scale": min(float(time_scale), MAX_TIME_SCALE), "seed": seed,
-            "start": start, **own,
+            "start": start, **own, "shards": shards,
             "lockstep": [*names, *gaps, "recorder"] if lockstep else [""],
-            "wait_for": [f"{TOPIC_MEASUREMENT}={shards + 1}",
-                         f"{TOPIC_ESTIMATE}={len(gaps) + 1}"],
+            "wait_for": [f"{TOPIC_MEASUREMENT_BATCH}={shards + 1}",
+                         f"{TOPIC_ESTIMATE_BATCH}={len(gaps) + 1}"],
             "wait_for_readers": readers}),
     ]

@@ -60,7 +60,7 @@ def test_starts_k_filter_and_k_surrogate_shards_as_live_catalog_does(launch):
     sensor = nodes["sensor_sim"].kwargs["parameters"][0]
     assert sensor["duration"] == 7200.0 and sensor["time_scale"] == 200.0
     assert sensor["start"] == "2025-03-01T00:00:00Z"
-    assert sensor["wait_for"] == ["/ssa/measurement=4", "/ssa/estimate=4"]
+    assert sensor["wait_for"] == ["/ssa/measurement_batch=4", "/ssa/estimate_batch=4"]
     targets = {next(n for n, a in nodes.items() if a is h.kwargs["target_action"])
                for h in handlers}
     assert targets == {"sensor_sim", "recorder"}
@@ -81,7 +81,7 @@ def test_a_sites_file_gives_the_radars_that_observe_the_catalog(launch):
 def test_without_surrogates_only_the_filter_shards_run(launch):
     nodes, _ = run_graph(launch, shards="2", surrogate="false")
     assert not [n for n in nodes if n.startswith("catalog_surrogate")]
-    assert nodes["sensor_sim"].kwargs["parameters"][0]["wait_for"][1] == "/ssa/estimate=1"
+    assert nodes["sensor_sim"].kwargs["parameters"][0]["wait_for"][1] == "/ssa/estimate_batch=1"
 
 
 @pytest.mark.parametrize(("given", "message"), [

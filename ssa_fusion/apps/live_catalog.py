@@ -8,7 +8,9 @@ processes forecast through the gaps between passes of the same shards' objects
 (`core.gap_bank`, residual fits under a wall-time budget; ``--no-surrogate`` leaves them
 out); the recorder records everything.
 
-At the end it prints what happened to every measurement (published by the simulator,
+Measurements and estimates travel as batches (``/ssa/measurement_batch``,
+``/ssa/estimate_batch``: many rows a message); every count below is in rows. At the end it
+prints what happened to every measurement (published by the simulator,
 recorded, received by the shards, fused, pending in an IOD batch, rejected by cause: none
 may be missing), the real-time factor the run achieved, each shard's objects and memory, and
 the estimates' position error against the SGP4 truth of the catalog; with the surrogates,
@@ -42,15 +44,16 @@ from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core import timescales
 from ssa_fusion.core.types import UpdateSource
 from ssa_fusion.nodes.defaults import CATALOG_FILTER, CATALOG_SURROGATE
-from ssa_fusion.nodes.diagnostics import RECORDED, Count
+from ssa_fusion.nodes.diagnostics import Count
+from ssa_fusion.nodes.progress import RECORDED_ESTIMATES, RECORDED_MEASUREMENTS
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.discovery import Discovery
 from ssa_fusion.ros.processes import Graph, ros_arguments
 from ssa_fusion.ros.topics import (
     CATALOG_QOS,
     TOPIC_DIAGNOSTICS,
-    TOPIC_ESTIMATE,
-    TOPIC_MEASUREMENT,
+    TOPIC_ESTIMATE_BATCH,
+    TOPIC_MEASUREMENT_BATCH,
 )
 from ssa_fusion.sim import sky, survey
 from ssa_fusion.studies.catalog_gaps import gap_errors
@@ -215,8 +218,8 @@ def unrecorded(status: dict[str, dict[str, str]], names: list[str], gaps: list[s
     published = (num("sensor_sim", Count.PUBLISHED)
                  + sum(num(n, Count.PUBLISHED_SENSOR) for n in names)
                  + sum(num(g, Count.PUBLISHED_FORECAST) for g in gaps))
-    return published - num("recorder", RECORDED + TOPIC_MEASUREMENT) \
-        - num("recorder", RECORDED + TOPIC_ESTIMATE)
+    return published - num("recorder", RECORDED_MEASUREMENTS) \
+        - num("recorder", RECORDED_ESTIMATES)
 
 
 def _rss_kib(pid: int) -> int:
@@ -303,12 +306,13 @@ def run(args: argparse.Namespace) -> int:
     rss: dict[str, int] = {}
     last_output = time.time()
     try:
-        from ssa_fusion.ros.interfaces import DiagnosticArray, StateEstimate
+        from ssa_fusion.ros.interfaces import DiagnosticArray, EstimateBatch
 
         diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
-        seen: Counter[int] = Counter()  # estimates heard, by update source
-        graph.probe.create_subscription(StateEstimate, TOPIC_ESTIMATE,
-                                        lambda m: seen.update((m.update_source,)), CATALOG_QOS)
+        seen: Counter[int] = Counter()  # estimates (rows) heard, by update source
+        graph.probe.create_subscription(
+            EstimateBatch, TOPIC_ESTIMATE_BATCH,
+            lambda m: seen.update({m.update_source: len(m.object_id)}), CATALOG_QOS)
         started = {n.name: graph.start_node(n.executable, "-r", f"__node:={n.name}",
                                             name=n.name, params=n.params)
                    for n in specs if not is_remote(n, remote)}
@@ -382,17 +386,16 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
     `sim_wall`: wall times (Unix s) of the first measurement published and of the last
     estimate heard; `gap_nodes`: the catalog_surrogate processes.
     """
-    recorded: Counter[str] = Counter()
+    recorded: Counter[str] = Counter()  # rows
     estimates: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
     forecasts: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
-    for m in bagio.read_bag(bag, topics=[TOPIC_MEASUREMENT, TOPIC_ESTIMATE]):
-        recorded[m.topic] += 1
-        if m.topic == TOPIC_ESTIMATE:
-            e = messages.estimate_from_msg(m.msg)
-            if e.update_source == UpdateSource.FORECAST:
-                forecasts[e.object_id].append((e.t, e.x))
-            else:
-                estimates[e.object_id].append((e.t, e.x))
+    for m in bagio.read_bag(bag, topics=[TOPIC_MEASUREMENT_BATCH, TOPIC_ESTIMATE_BATCH]):
+        recorded[m.topic] += len(m.msg.object_id)
+        if m.topic == TOPIC_ESTIMATE_BATCH:
+            e = messages.estimate_batch_from_msg(m.msg)
+            into = forecasts if e.update_source == UpdateSource.FORECAST else estimates
+            for oid, t, x in zip(e.object_id, e.t.tolist(), e.x, strict=True):
+                into[oid].append((t, x))
 
     def num(node: str, key: str) -> int:
         return _count(status, node, key)
@@ -436,19 +439,19 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
         surrogates[g]["rss_mib"] = rss.get(g, 0) / 1024.0
     n_forecasts = sum(len(v) for v in forecasts.values())
     return {
-        "published": published, "recorded_measurements": recorded[TOPIC_MEASUREMENT],
+        "published": published, "recorded_measurements": recorded[TOPIC_MEASUREMENT_BATCH],
         "received_by_shards": received, "consumed_by_banks": consumed,
         "estimates_published": fused,
-        "estimates_recorded": recorded[TOPIC_ESTIMATE] - n_forecasts,
+        "estimates_recorded": recorded[TOPIC_ESTIMATE_BATCH] - n_forecasts,
         "surrogates": surrogates, "forecasts_recorded": n_forecasts,
         "gap_errors": gap_errors(entries, estimates, forecasts, CATALOG_FILTER.motion_model)
         if surrogates else None,
         "rejected_and_pending": dict(causes), "refused_at_door": door,
         "dropped": sum(p["dropped"] for p in per_shard.values()),
         "unaccounted": unaccounted,
-        "lost_measurements": abs(published - recorded[TOPIC_MEASUREMENT])
+        "lost_measurements": abs(published - recorded[TOPIC_MEASUREMENT_BATCH])
         + abs(published - received) + abs(unaccounted),
-        "lost_estimates": max(fused - recorded[TOPIC_ESTIMATE], 0),
+        "lost_estimates": max(fused - recorded[TOPIC_ESTIMATE_BATCH], 0),
         "objects_with_estimates": len(estimates),
         "sim_s": sim_s, "sim_wall_s": ran,
         "live_real_time_factor": None if not ran else sim_s / ran,

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from .rows import MeasurementRows
 from .types import Cause, Kind, Measurement
 
 HALF_PI = 0.5 * math.pi
@@ -181,3 +182,72 @@ def ahead_of_clock(t: float, now: float, max_lead_s: float) -> Problem:
                 f"{max_lead_s:g} s ahead is refused (a sensor stamping wall time into a "
                 f"sim-time graph?)")
     return OK
+
+
+def covariances_ok(R: np.ndarray) -> np.ndarray:
+    """Return `is_covariance` of each of the stacked matrices R (M, n, n), as bools (M,).
+
+    The same test, vectorised: relative to each matrix's scale, asymmetry <= 1e-9 and
+    eigenvalues >= -1e-12 of the largest in magnitude; all zeros is a covariance, a
+    non-finite entry is not.
+    """
+    R = np.asarray(R, dtype=float)
+    scale = np.abs(R).max(axis=(1, 2), initial=0.0)
+    finite = np.isfinite(scale)
+    safe = np.where(finite & (scale > 0.0), scale, 1.0)
+    Rn = np.where(finite[:, None, None], R, 0.0) / safe[:, None, None]
+    sym = np.abs(Rn - Rn.transpose(0, 2, 1)).max(axis=(1, 2), initial=0.0) <= 1e-9
+    eig = np.linalg.eigvalsh(0.5 * (Rn + Rn.transpose(0, 2, 1)))
+    psd = eig[:, 0] >= -1e-12 * np.abs(eig).max(axis=1, initial=0.0)
+    ok: np.ndarray = finite & ((scale == 0.0) | (sym & psd))
+    return ok
+
+
+def rows_problems(rows: MeasurementRows, kind: int) -> np.ndarray:
+    """Return the cause `measurement_problem` gives each row for a consumer of `kind`.
+
+    An object array (M,) of `Cause` values, "" where the row has none: the same checks in
+    the same order (the first that fails names the cause), vectorised over the rows. For
+    each cause, `measurement_problem` of its first row gives the reason to log. Ids are
+    checked by length (`MAX_ID_CHARS`); the consumer checks the frame.
+    """
+    m = len(rows)
+    cause = np.full(m, "", dtype=object)
+
+    def refuse(bad: np.ndarray, why: str) -> None:
+        cause[bad & (cause == "")] = why
+
+    too_long = (np.fromiter(map(len, rows.object_id), np.int64, m) > MAX_ID_CHARS) | \
+        (np.fromiter(map(len, rows.frame_id), np.int64, m) > MAX_ID_CHARS)
+    refuse(too_long, Cause.REJECTED_ID)
+    refuse(rows.kind != kind, Cause.REJECTED_KIND)
+    # RA_DEC has two channels: its third, dropped by the per-message conversion, is not read
+    radec = rows.kind == Kind.RA_DEC
+    third = np.array([False, False, True])
+    z = np.where(radec[:, None] & third, 0.0, rows.z)
+    R = np.where(radec[:, None, None] & (third[:, None] | third[None, :]), 0.0, rows.R)
+    finite = (np.isfinite(rows.t) & np.isfinite(z).all(axis=1) & np.isfinite(R).all(axis=(1, 2))
+              & np.isfinite(rows.horizon))
+    refuse(~finite, Cause.REJECTED_NONFINITE)
+    with np.errstate(invalid="ignore"):
+        razel = rows.kind == Kind.RANGE_AZ_EL
+        refuse(razel & (z[:, 0] < 0.0), Cause.REJECTED_NEGATIVE_RANGE)
+        refuse(razel & ~(np.abs(z[:, 2]) <= HALF_PI), Cause.REJECTED_ELEVATION)
+        refuse(razel & ((z[:, 0] < MIN_RANGE_KM) | (z[:, 0] > MAX_RANGE_KM)
+                        | (np.abs(z[:, 1]) > TWO_PI)), Cause.REJECTED_IMPLAUSIBLE)
+        refuse(radec & ~(np.abs(z[:, 1]) <= HALF_PI), Cause.REJECTED_ELEVATION)
+        refuse(radec & (np.abs(z[:, 0]) > TWO_PI), Cause.REJECTED_IMPLAUSIBLE)
+        refuse((np.abs(z).max(axis=1, initial=0.0) > MAX_ABS_VALUE)
+               | (np.abs(R).max(axis=(1, 2), initial=0.0) > MAX_VARIANCE),
+               Cause.REJECTED_IMPLAUSIBLE)
+    refuse(~covariances_ok(R), Cause.REJECTED_COVARIANCE)
+    return cause
+
+
+def row_measurement(rows: MeasurementRows, i: int) -> Measurement:
+    """Return row `i` of `rows` as a `Measurement` (RA_DEC: its two channels)."""
+    k = 2 if rows.kind[i] == Kind.RA_DEC else 3
+    return Measurement(t=float(rows.t[i]), z=rows.z[i, :k], R=rows.R[i, :k, :k],
+                       kind=int(rows.kind[i]), source=int(rows.source[i]),
+                       object_id=rows.object_id[i], frame_id=rows.frame_id[i],
+                       horizon=float(rows.horizon[i]))

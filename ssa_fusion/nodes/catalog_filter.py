@@ -1,18 +1,24 @@
 r"""catalog_filter: IOD + EKF of every object of a catalog in one process, batched.
 
-Subscribes to ``/ssa/measurement`` (range/az/el of any object from the stations of
-`station`), collects what arrives, and every `batch_period` wall s fuses it all at once in a
-`core.track_bank.TrackBank` (one track per ``object_id``, vectorised over objects). Publishes
-``/ssa/estimate`` (``object_id`` set, update source SENSOR) for every fused measurement and
-for every track an IOD starts. Rejected input is counted by cause on ``/diagnostics``;
-``consumed`` counts every measurement the bank took (fused, pending in an IOD batch, or
-rejected by it), so that published = consumed + refused at the door.
+Subscribes to ``/ssa/measurement_batch`` (ssa_fusion_msgs/MeasurementBatch: many rows a
+message, range/az/el of any object from the stations of `station`) and to
+``/ssa/measurement`` (one Measurement a message, for publishers that send them so),
+checks what arrives (a batch's rows at once, vectorised: `validation.rows_problems`),
+and every `batch_period` wall s fuses it all at once in a `core.track_bank.TrackBank` (one
+track per ``object_id``, vectorised over objects). Publishes ``/ssa/estimate_batch``
+(ssa_fusion_msgs/EstimateBatch, update source SENSOR): one batch per fusion, a row for
+every fused measurement and for every track an IOD starts. Refused input is counted by
+cause on ``/diagnostics``, a batch's refused rows each (the good rows of the same batch are
+fused); ``consumed`` counts every measurement the bank took (fused, pending in an IOD batch,
+or rejected by it), so that published = consumed + refused at the door (in rows).
 
-Sharding: with ``shards`` = K > 1 the node owns the objects whose
-``Measurement.shard_key`` (CRC-32 of ``object_id``) lies in the ``shard``-th of K equal
-ranges, and subscribes with a DDS content filter (``shard_key BETWEEN lo AND hi``): the
-other shards' measurements never reach it. K processes with shard 0..K-1 cover every object
-exactly once, on one host or several in one ROS domain.
+Sharding: with ``shards`` = K > 1 the node owns the objects whose ``shard_key`` (CRC-32 of
+``object_id``) lies in the ``shard``-th of K equal ranges, and subscribes with a DDS content
+filter: to the batches whose key range (``key_lo``, ``key_hi``) meets its own, and to the
+Measurements whose ``shard_key`` lies in it. The other shards' measurements never reach it
+(a batch that covers more than its range: their rows are counted ``ignored_other_shard``).
+K processes with shard 0..K-1 cover every object exactly once, on one host or several in
+one ROS domain.
 
     ros2 run ssa_fusion catalog_filter --ros-args -p use_sim_time:=true \
         -p station:=radar_network -p shards:=2 -p shard:=0 -r __node:=catalog_filter_0
@@ -20,14 +26,17 @@ exactly once, on one host or several in one ROS domain.
 
 from __future__ import annotations
 
+from collections import Counter
 from functools import partial
 
 import numpy as np
 
+from ssa_fusion.core import validation
+from ssa_fusion.core.rows import EstimateRows, MeasurementRows
 from ssa_fusion.core.site_file import load_station_map
 from ssa_fusion.core.stations import network_stations
-from ssa_fusion.core.track_bank import TrackBank
-from ssa_fusion.core.types import Cause, Kind, Measurement, Source, StateEstimate, UpdateSource
+from ssa_fusion.core.track_bank import BankResult, TrackBank
+from ssa_fusion.core.types import Cause, Kind, Measurement, Source, UpdateSource
 from ssa_fusion.core.validation import id_problem, measurement_problem
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.base import SsaNode
@@ -51,18 +60,20 @@ from ssa_fusion.nodes.shards import (
     SHARD_RULE,
     content_filter,
     max_objects_row,
+    rows_shard_problems,
     shard_problem,
     shard_range,
     shard_rows,
 )
 from ssa_fusion.ros import messages
+from ssa_fusion.ros.interfaces import EstimateBatch, MeasurementBatch, Message
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
-from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
 from ssa_fusion.ros.topics import (
     CATALOG_DEPTH,
     CATALOG_QOS,
-    TOPIC_ESTIMATE,
+    TOPIC_ESTIMATE_BATCH,
     TOPIC_MEASUREMENT,
+    TOPIC_MEASUREMENT_BATCH,
 )
 
 PARAMETERS = ParameterTable("catalog_filter", (
@@ -97,14 +108,18 @@ class CatalogFilterNode(SsaNode):
                               max_objects=p.integer("max_objects"))
         self.lo, self.hi = shard_range(self.shard, self.shards)
         self.diag.status["shard"] = f"{self.shard}/{self.shards} keys [{self.lo}, {self.hi}]"
-        self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, CATALOG_QOS)
+        self.pub = self.create_publisher(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
         cft = content_filter(self.shard, self.shards)
         self.sub = self.subscribe(MeasurementMsg, TOPIC_MEASUREMENT, self.on_measurement,
                                   CATALOG_QOS, content_filter=cft)
-        if cft is not None and not self.sub.is_cft_enabled:
+        self.sub_batch = self.subscribe(
+            MeasurementBatch, TOPIC_MEASUREMENT_BATCH, self.on_batch, CATALOG_QOS,
+            content_filter=content_filter(self.shard, self.shards, batches=True))
+        if cft is not None and not (self.sub.is_cft_enabled and self.sub_batch.is_cft_enabled):
             self.diag.count(NodeCause.CONTENT_FILTER_UNAVAILABLE,
                             "the DDS implementation does not filter by content: every "
                             "measurement arrives and those of other shards are ignored here")
+        self._pending_rows: list[MeasurementRows] = []  # batches' rows admitted
         self._pending: list[Measurement] = []
         self.clock_hold.limit = CATALOG_DEPTH  # a stalled catalog's burst is held whole
         self.wall_timer(p.number("batch_period"), self.fuse)
@@ -112,18 +127,23 @@ class CatalogFilterNode(SsaNode):
         self.progress = ProgressReporter(self, self.taken)
 
     def taken(self) -> dict[str, str | int]:
-        """Return the lockstep progress: measurements with a final fate, estimates published."""
+        """Return the lockstep progress: measurements with a final fate, estimates published.
+
+        And the measurements received (admitted or refused, not yet all fused).
+        """
         c = self.diag.counts
         return {SHARD: f"{self.shard}/{self.shards}",
                 TAKEN: c[Count.REFUSED] + c[Count.CONSUMED] + c[Count.DROPPED],
+                Count.RECEIVED: c[Count.RECEIVED],
                 Count.PUBLISHED_SENSOR: c[Count.PUBLISHED_SENSOR]}
 
     def reset(self) -> None:
         """Forget every track and what waits for the next batch."""
         self.bank = TrackBank(self.options, self.stations,
                               max_objects=self.params.integer("max_objects"))
-        self.diag.counts[Count.DROPPED] += len(self._pending)
+        self.diag.counts[Count.DROPPED] += len(self._pending) + sum(map(len, self._pending_rows))
         self._pending.clear()
+        self._pending_rows.clear()
 
     def on_measurement(self, msg: MeasurementMsg) -> None:
         """Check one message and keep it for the next batch.
@@ -183,37 +203,141 @@ class CatalogFilterNode(SsaNode):
         if not self._take(m):
             self.diag.counts[Count.REFUSED] += 1
 
+    def on_batch(self, msg: Message) -> None:
+        """Check the rows of one MeasurementBatch; keep the good ones for the next fusion.
+
+        Every row ends counted once, as a Measurement would (`on_measurement`): a batch
+        whose columns disagree is refused whole (``rejected_malformed``, each row).
+        """
+        try:
+            rows = messages.measurement_batch_from_msg(msg)
+        except ValueError as exc:
+            m = len(msg.object_id)
+            self.diag.counts[Count.RECEIVED] += m
+            self.diag.counts[Count.REFUSED] += m
+            self.diag.count(Cause.REJECTED_MALFORMED, f"{TOPIC_MEASUREMENT_BATCH}: {exc}", n=m)
+            return
+        keep = self._admit_rows(rows)
+        if not len(keep):
+            return
+        if self.clock_hold.hold_ahead(partial(self._take_rows, keep), float(keep.t.max()),
+                                      self.max_clock_lead()):
+            return  # taken or refused once the clock catches up
+        self._take_rows(keep)
+
+    def _admit_rows(self, rows: MeasurementRows) -> MeasurementRows:
+        """Return the rows of `rows` to keep; count the others by cause.
+
+        The checks and causes of `_admit`, in its order, vectorised: source, id length,
+        shard key, the measurement (`validation.rows_problems`), station. Rows of another
+        shard are counted ``ignored_other_shard`` only, not received.
+        """
+        m = len(rows)
+        cause = np.full(m, "", dtype=object)
+        problems = validation.rows_problems(rows, Kind.RANGE_AZ_EL)
+        bad_key, other = rows_shard_problems(rows.shard_key, rows.object_id, self.shard,
+                                             self.shards)
+        unknown = ~np.isin(np.asarray(rows.frame_id, dtype=object), list(self.stations))
+        for bad, why in ((rows.source != Source.SENSOR, Cause.REJECTED_SOURCE),
+                         (problems == Cause.REJECTED_ID, Cause.REJECTED_ID),
+                         (bad_key, NodeCause.REJECTED_SHARD_KEY),
+                         (other, NodeCause.IGNORED_OTHER_SHARD),
+                         (problems != "", problems),
+                         (unknown, Cause.REJECTED_FRAME)):
+            free = bad & (cause == "")
+            cause[free] = why[free] if isinstance(why, np.ndarray) else why
+        n_other = int((cause == NodeCause.IGNORED_OTHER_SHARD).sum())
+        self.diag.counts[Count.RECEIVED] += m - n_other
+        self.diag.counts[Count.REFUSED] += int((cause != "").sum()) - n_other
+        for key, n in Counter(cause[cause != ""].tolist()).items():
+            self.diag.count(key, self._reason(key, rows, int(np.argmax(cause == key))), n=n)
+        return rows.take(np.flatnonzero(cause == ""))
+
+    def _reason(self, cause: str, rows: MeasurementRows, i: int) -> str:
+        """Return the line logged for the first row of `rows` refused for `cause`: row `i`."""
+        oid, key = rows.object_id[i], int(rows.shard_key[i])
+        if cause == Cause.REJECTED_SOURCE:
+            return (f"source {rows.source[i]} on {TOPIC_MEASUREMENT_BATCH}, which carries only "
+                    "sensor data")
+        if cause in (NodeCause.REJECTED_SHARD_KEY, NodeCause.IGNORED_OTHER_SHARD):
+            why = shard_problem(key, oid, self.shard, self.shards)
+            return why[1] if why else ""
+        if cause == Cause.REJECTED_FRAME:  # the station check (rows_problems checks none)
+            return (f"station {rows.frame_id[i]!r} is not in the network "
+                    f"({', '.join(self.stations)})")
+        m = validation.row_measurement(rows, i)
+        if m.kind == Kind.RA_DEC:
+            m.z, m.R = m.z[:2], m.R[:2, :2]
+        return measurement_problem(m, Kind.RANGE_AZ_EL)[1]
+
+    def _take_rows(self, rows: MeasurementRows) -> None:
+        """Keep `rows` for the next fusion, but those still ahead of the clock (refused)."""
+        now, lead = self.now_s(), self.max_clock_lead()
+        ahead = (rows.t > now + lead) if now > 0.0 else np.zeros(len(rows), bool)
+        n = int(ahead.sum())
+        if n:
+            first = float(rows.t[np.argmax(ahead)])
+            self.diag.count(Cause.REJECTED_FUTURE,
+                            validation.ahead_of_clock(first, now, lead)[1], n=n)
+            self.diag.counts[Count.REFUSED] += n
+            rows = rows.take(np.flatnonzero(~ahead))
+        if len(rows):
+            self._pending_rows.append(rows)
+
+    def _pending_batch(self) -> MeasurementRows | None:
+        """Return what waits for the fusion as rows in epoch order, and forget it (None: none).
+
+        Stable: arrival order at a tie (a batch's rows, then the Measurements).
+        """
+        parts = list(self._pending_rows)
+        if self._pending:
+            ms = self._pending
+            parts.append(MeasurementRows(
+                np.array([m.t for m in ms]), [m.object_id for m in ms],
+                [m.frame_id for m in ms], np.array([m.z for m in ms]),
+                np.array([m.R for m in ms])))
+        self._pending, self._pending_rows = [], []
+        if not parts:
+            return None
+        rows = MeasurementRows.concat(parts)
+        return rows.take(np.argsort(rows.t, kind="stable"))
+
     def fuse(self) -> None:
         """Fuse what arrived since the last batch (in epoch order) and publish the estimates.
 
         With what waited for the clock to catch up, once it has.
         """
         self.replay_held()
-        if not self._pending:
+        batch = self._pending_batch()
+        if batch is None:
             return
-        batch = sorted(self._pending, key=lambda m: m.t)  # stable: arrival order at a tie
-        self._pending = []
-        t = np.array([m.t for m in batch])
         try:
-            res = self.bank.process(t, [m.object_id for m in batch], [m.frame_id for m in batch],
-                                    np.array([m.z for m in batch]), np.array([m.R for m in batch]))
+            res = self.bank.process(batch.t, batch.object_id, batch.frame_id, batch.z,
+                                    batch.R)
         except Exception:  # counted, then the guard logs the traceback as internal_error
             self.diag.counts[Count.DROPPED] += len(batch)
             raise
         self.diag.counts[Count.CONSUMED] += len(batch)
-        for i, cause in enumerate(res.cause):
-            if cause == Cause.IOD_PENDING:
-                self.diag.counts[cause] += 1
-            elif cause:
-                m = batch[i]
-                self.diag.count(Cause(cause),
-                                f"object {m.object_id!r} at t={m.t} from {m.frame_id!r}")
-        for j, i in enumerate(res.fused.tolist()):
-            e = StateEstimate(t=float(t[i]), x=res.x[j], P=res.P[j], object_id=batch[i].object_id,
-                              update_source=UpdateSource.SENSOR, nis=float(res.nis[j]))
-            self.pub.publish(messages.estimate_to_msg(e))
+        self._count_causes(res, batch)
+        if res.fused.size:
+            ids = batch.take(res.fused).object_id
+            self.pub.publish(messages.estimate_batch_to_msg(
+                EstimateRows(batch.t[res.fused], ids, res.x, res.P, res.nis,
+                             UpdateSource.SENSOR, messages.shard_keys(ids)),
+                (self.lo, self.hi)))
         self.diag.counts[Count.PUBLISHED_SENSOR] += int(res.fused.size)
         self._report(len(batch))
+
+    def _count_causes(self, res: BankResult, batch: MeasurementRows) -> None:
+        """Count the bank's causes (``iod_pending`` silently), logging the first of each."""
+        cause = np.asarray(res.cause, dtype=object)
+        for key, n in Counter(res.cause).items():
+            if key == Cause.IOD_PENDING:
+                self.diag.counts[key] += n
+            elif key:
+                i = int(np.argmax(cause == key))
+                self.diag.count(Cause(key), f"object {batch.object_id[i]!r} at "
+                                f"t={batch.t[i]} from {batch.frame_id[i]!r}", n=n)
 
     def _report(self, batch: int) -> None:
         """Put the bank's size on /diagnostics (status)."""

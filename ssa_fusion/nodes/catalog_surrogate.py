@@ -1,17 +1,19 @@
 r"""catalog_surrogate: residual forecasts through the gaps of every object of a catalog.
 
-Subscribes to ``/ssa/estimate`` for the estimates the catalog_filter made from real
-measurements (update source SENSOR; a DDS content filter keeps the others away), learns per
-object what the filter's motion model gets wrong from its pass-end estimates
-(`core.residual`), and publishes on ``/ssa/estimate`` the object's forecast through each gap
-between passes (update source FORECAST, ``object_id`` set) on the grid of multiples of
-`predict_period`, once `pass_break` sim s have passed without an estimate. The fits
+Subscribes to ``/ssa/estimate_batch`` (ssa_fusion_msgs/EstimateBatch) for the estimates the
+catalog_filter made from real measurements (update source SENSOR; a DDS content filter
+keeps the others away), learns per object what the filter's motion model gets wrong from
+its pass-end estimates (`core.residual`), and publishes on ``/ssa/estimate_batch`` the
+object's forecast through each gap between passes (update source FORECAST, ``object_id``
+set; one batch per round) on the grid of multiples of `predict_period`, once `pass_break`
+sim s have passed without an estimate. The fits
 (`core.gap_bank.GapBank`) take at most `fit_budget` of the wall time on average: a gap that
 ends before its turn is left to the filter's coasting and counted as ``skipped`` on
 ``/diagnostics``.
 
 Sharding as catalog_filter: with ``shards`` = K > 1 the node takes the objects whose
-``StateEstimate.shard_key`` lies in the ``shard``-th of K ranges (content filter).
+``shard_key`` lies in the ``shard``-th of K ranges (content filter on the batches' key
+range; rows of other shards in a batch that covers more are ignored).
 
     ros2 run ssa_fusion catalog_surrogate --ros-args -p use_sim_time:=true \
         -p shards:=2 -p shard:=0 -r __node:=catalog_surrogate_0
@@ -19,12 +21,16 @@ Sharding as catalog_filter: with ``shards`` = K > 1 the node takes the objects w
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import replace
 from functools import partial
 
+import numpy as np
+
 from ssa_fusion.core.gap_bank import CATALOG_RESIDUAL, GapBank, GapBankConfig, GapForecast
-from ssa_fusion.core.types import Cause, MotionModel, StateEstimate, UpdateSource
-from ssa_fusion.core.validation import id_problem, state_problem
+from ssa_fusion.core.rows import EstimateRows
+from ssa_fusion.core.types import Cause, MotionModel, UpdateSource
+from ssa_fusion.core.validation import MAX_ID_CHARS, id_problem, state_problem
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import CATALOG_SURROGATE
 from ssa_fusion.nodes.diagnostics import Count, NodeCause
@@ -45,12 +51,14 @@ from ssa_fusion.nodes.shards import (
     SHARD_RULE,
     content_filter,
     max_objects_row,
+    rows_shard_problems,
     shard_problem,
+    shard_range,
     shard_rows,
 )
 from ssa_fusion.ros import messages
-from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
-from ssa_fusion.ros.topics import CATALOG_QOS, TOPIC_ESTIMATE
+from ssa_fusion.ros.interfaces import EstimateBatch, Message
+from ssa_fusion.ros.topics import CATALOG_QOS, TOPIC_ESTIMATE_BATCH
 
 TICK_S = 0.1
 """Wall s between two rounds of fits and releases."""
@@ -108,10 +116,11 @@ class CatalogSurrogateNode(SsaNode):
                                     residual=residual)
         self.bank = GapBank(self.config, max_objects=p.integer("max_objects"))
         self.diag.status["shard"] = f"{self.shard}/{self.shards}"
-        self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, CATALOG_QOS)
+        self.key_range = shard_range(self.shard, self.shards)
+        self.pub = self.create_publisher(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
         cft = content_filter(self.shard, self.shards, "update_source = %0",
-                             (str(UpdateSource.SENSOR.value),))
-        self.sub = self.subscribe(StateEstimateMsg, TOPIC_ESTIMATE, self.on_message,
+                             (str(UpdateSource.SENSOR.value),), batches=True)
+        self.sub = self.subscribe(EstimateBatch, TOPIC_ESTIMATE_BATCH, self.on_message,
                                   CATALOG_QOS, content_filter=cft)
         self.taken = 0  # SENSOR estimates arrived (used or refused): lockstep progress
         if not self.sub.is_cft_enabled:
@@ -128,43 +137,69 @@ class CatalogSurrogateNode(SsaNode):
         """Forget every object."""
         self.bank = GapBank(self.config, max_objects=self.params.integer("max_objects"))
 
-    def on_message(self, msg: StateEstimateMsg) -> None:
-        """Take one message of /ssa/estimate (counted for lockstep when a filter's)."""
-        self.taken += msg.update_source == UpdateSource.SENSOR
-        self.on_estimate(msg)
+    def on_message(self, msg: Message) -> None:
+        """Take one EstimateBatch: a filter's rows each are an object's newest estimate.
 
-    def on_estimate(self, msg: StateEstimateMsg) -> None:
-        """Take one estimate of the filter: a real measurement's is an object's newest."""
+        Its SENSOR rows are counted for lockstep (taken), forecasts (ours included) are
+        ignored; a batch whose columns disagree is refused whole (``rejected_malformed``).
+        """
+        m = len(msg.object_id)
         if msg.update_source != UpdateSource.SENSOR:
-            self.diag.counts[NodeCause.IGNORED_NOT_SENSOR] += 1  # forecasts, ours included
+            self.diag.counts[NodeCause.IGNORED_NOT_SENSOR] += m  # forecasts, ours included
             return
-        cause, reason = id_problem(msg.object_id, "")
-        if cause:
-            self.diag.count(Cause(cause), reason)
+        self.taken += m
+        try:
+            rows = messages.estimate_batch_from_msg(msg)
+        except ValueError as exc:
+            self.diag.count(Cause.REJECTED_MALFORMED, f"{TOPIC_ESTIMATE_BATCH}: {exc}", n=m)
             return
-        why = shard_problem(msg.shard_key, msg.object_id, self.shard, self.shards)
-        if why:
-            self.diag.count(*why)
-            return
-        e = messages.estimate_from_msg(msg)
-        if self.clock_hold.hold_ahead(partial(self.on_estimate, msg), e.t,
-                                      self.max_clock_lead()) or self.ahead_of_clock(e.t):
-            return
-        if not e.object_id:
+        rows = self._admit_rows(rows)
+        if len(rows) and not self.clock_hold.hold_ahead(
+                partial(self._take_rows, rows), float(rows.t.max()), self.max_clock_lead()):
+            self._take_rows(rows)
+
+    def _admit_rows(self, rows: EstimateRows) -> EstimateRows:
+        """Return the rows with an id and of this shard; count the others by cause."""
+        too_long = np.fromiter(map(len, rows.object_id), np.int64, len(rows)) > MAX_ID_CHARS
+        bad_key, other = rows_shard_problems(rows.shard_key, rows.object_id, self.shard,
+                                             self.shards)
+        cause = np.select([too_long, bad_key, other], [Cause.REJECTED_ID,
+                          NodeCause.REJECTED_SHARD_KEY, NodeCause.IGNORED_OTHER_SHARD], "")
+        for key, n in Counter(cause[cause != ""].tolist()).items():
+            i = int(np.argmax(cause == key))
+            oid = rows.object_id[i]
+            why = (id_problem(oid, "")[1] if key == Cause.REJECTED_ID else
+                   (shard_problem(int(rows.shard_key[i]), oid, self.shard, self.shards)
+                    or ("", ""))[1])
+            self.diag.count(key, why, n=n)
+        return rows.take(np.flatnonzero(cause == ""))
+
+    def _take_rows(self, rows: EstimateRows) -> None:
+        """Give each row to the bank, in order, and publish the forecasts they release."""
+        out: list[GapForecast] = []
+        for i, oid in enumerate(rows.object_id):  # per object: the bank's is a dict of them
+            t = float(rows.t[i])
+            if not self.ahead_of_clock(t):
+                out += self._take_one(oid, t, rows.x[i], rows.P[i])
+        self.publish(out)
+
+    def _take_one(self, oid: str, t: float, x: np.ndarray, P: np.ndarray) -> list[GapForecast]:
+        """Give one estimate (km, km/s) to the bank; return what it releases ([]: refused)."""
+        if not oid:
             self.diag.count(NodeCause.REJECTED_OBJECT_ID,
                             "an estimate without object_id: whose it is cannot be known")
-            return
-        cause, reason = state_problem(e.x, e.P)
+            return []
+        cause, reason = state_problem(x, P)
         if cause:
-            self.diag.count(Cause(cause), f"object {e.object_id!r} at t={e.t}: {reason}")
-            return
-        if not self.bank.admits(e.object_id):
+            self.diag.count(Cause(cause), f"object {oid!r} at t={t}: {reason}")
+            return []
+        if not self.bank.admits(oid):
             self.diag.count(Cause.REJECTED_BANK_FULL,
-                            f"object {e.object_id!r}: the bank holds max_objects "
+                            f"object {oid!r}: the bank holds max_objects "
                             f"({self.bank.max_objects}) objects already")
-            return
+            return []
         self.diag.counts[Count.RECEIVED] += 1
-        self.publish(self.bank.on_estimate(e.object_id, e.t, e.x, e.P))
+        return self.bank.on_estimate(oid, t, x, P)
 
     def tick(self) -> None:
         """Take what waited for the clock; fit what the budget allows; publish what is due."""
@@ -180,11 +215,13 @@ class CatalogSurrogateNode(SsaNode):
         status["fit_seconds"] = f"{b.fit_seconds:.1f}"
 
     def publish(self, forecasts: list[GapForecast]) -> None:
-        """Publish `forecasts` on /ssa/estimate (update source FORECAST)."""
-        for f in forecasts:
-            self.pub.publish(messages.estimate_to_msg(StateEstimate(
-                t=f.t, x=f.x, P=f.P, object_id=f.object_id,
-                update_source=UpdateSource.FORECAST)))
+        """Publish `forecasts` as one EstimateBatch (update source FORECAST), if any."""
+        if forecasts:
+            ids = [f.object_id for f in forecasts]
+            self.pub.publish(messages.estimate_batch_to_msg(EstimateRows(
+                np.array([f.t for f in forecasts]), ids, np.array([f.x for f in forecasts]),
+                np.array([f.P for f in forecasts]), np.zeros(len(forecasts)),
+                UpdateSource.FORECAST, messages.shard_keys(ids)), self.key_range))
         self.diag.counts[Count.PUBLISHED_FORECAST] += len(forecasts)
 
 

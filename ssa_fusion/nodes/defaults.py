@@ -76,6 +76,7 @@ class SensorSimDefaults:
     catalog: str = ""
     objects: int = 0
     synthetic: int = 0
+    shards: int = 1
     lockstep: tuple[str, ...] = ("",)
     lockstep_step: float = 300.0
     lockstep_timeout: float = 30.0

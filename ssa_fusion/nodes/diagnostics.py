@@ -117,12 +117,14 @@ class Diagnostics:
         self._pub = node.create_publisher(DiagnosticArray, TOPIC_DIAGNOSTICS, QoSProfile(depth=10))
         wall_timer(node, period_s, self.publish)  # sim time may stand still (no /clock)
 
-    def count(self, key: Key, detail: str = "", warn: bool | None = None) -> None:
-        """Count one `key`; its first occurrence is logged (with `detail`).
+    def count(self, key: Key, detail: str = "", warn: bool | None = None, n: int = 1) -> None:
+        """Count `n` (one) `key`; its first occurrence is logged (with `detail`).
 
         As a warning, or as information for the keys of `INFO` (`warn` overrides).
         """
-        self.counts[key] += 1
+        if n <= 0:
+            return
+        self.counts[key] += n
         if key in self._logged:
             return
         self._logged.add(key)

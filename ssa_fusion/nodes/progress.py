@@ -3,7 +3,8 @@
 In lockstep (the default of simulated catalog runs) sensor_sim advances ``/clock`` by one
 step only once every consumer it names has taken all it was sent: each catalog_filter shard
 every measurement of its shard (fused, refused or dropped: nothing left waiting), the
-recorder every measurement and every estimate the shards and surrogates published. The time
+recorder every measurement and every estimate the shards and surrogates published. All
+count rows of the batches (MeasurementBatch, EstimateBatch), not messages. The time
 scale is then a ceiling, not a promise: on a loaded machine the run is slower, never lossy,
 and gives the same estimates as on an idle one.
 
@@ -26,7 +27,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from ssa_fusion.nodes.diagnostics import RECORDED, Count, wall_timer
 from ssa_fusion.nodes.shards import shard_range
 from ssa_fusion.ros.interfaces import DiagnosticStatus, KeyValue
-from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_MEASUREMENT
+from ssa_fusion.ros.topics import TOPIC_ESTIMATE_BATCH, TOPIC_MEASUREMENT_BATCH
 
 TOPIC_PROGRESS = "/lockstep"
 """Consumers' progress (``diagnostic_msgs/DiagnosticStatus``, name = node name)."""
@@ -48,8 +49,10 @@ TAKEN_ESTIMATES = "taken estimates"
 """A surrogate shard's filter estimates taken (used or refused)."""
 SHARD = "shard"
 """A filter or surrogate shard's place, ``k/K``."""
-RECORDED_MEASUREMENTS = RECORDED + TOPIC_MEASUREMENT
-RECORDED_ESTIMATES = RECORDED + TOPIC_ESTIMATE
+RECORDED_MEASUREMENTS = RECORDED + TOPIC_MEASUREMENT_BATCH
+"""The recorder's rows of measurement batches recorded."""
+RECORDED_ESTIMATES = RECORDED + TOPIC_ESTIMATE_BATCH
+"""The recorder's rows of estimate batches recorded."""
 
 
 class ProgressReporter:

@@ -5,7 +5,9 @@ Raw subscriptions hand over the CDR bytes as they arrived; they are written unch
 `ros2 bag record` does. Under sim time, what arrives before the first /clock (typically the
 latched /ssa/config) is held and stamped with the clock's first time, so the bag does not
 start at time 0, 55 years before its data (which `ros2 bag play` would wait through).
-Topics are discovered as publishers appear. The pending MCAP chunk is flushed to disk every
+Topics are discovered as publishers appear. The counts ``recorded <topic>`` on /diagnostics
+are messages, and rows for the batch types (MeasurementBatch, EstimateBatch: what a catalog
+run's accounting counts). The pending MCAP chunk is flushed to disk every
 `flush_period` s, which bounds what a SIGKILL can lose; SIGINT or SIGTERM close the bag with
 everything received. A bag that cannot be written (a full disk) ends the node with one line
 naming the bag and the reason, exit code 1; what was flushed before stays readable (`ssa-fusion
@@ -18,10 +20,12 @@ from __future__ import annotations
 
 import importlib
 import time
+from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 
 from ssa_fusion.core.types import Cause
 from ssa_fusion.nodes.base import SsaNode
@@ -51,6 +55,31 @@ def _import_type(type_name: str) -> type[Message]:
     pkg, _, name = type_name.split("/")
     cls: type[Message] = getattr(importlib.import_module(f"{pkg}.msg"), name)
     return cls
+
+
+BATCH_TYPES = ("ssa_fusion_msgs/msg/MeasurementBatch", "ssa_fusion_msgs/msg/EstimateBatch")
+"""Types whose messages are counted in rows (one per ``object_id``)."""
+
+
+def _one(_data: bytes) -> int:
+    return 1
+
+
+def row_counter(type_name: str, msg_class: type[Message]) -> Callable[[bytes], int]:
+    """Return what one message of `type_name` (CDR bytes) counts: its rows for a batch, else 1.
+
+    A batch whose bytes do not decode counts as no row (and is recorded as it came).
+    """
+    if type_name not in BATCH_TYPES:
+        return _one
+
+    def rows(data: bytes) -> int:
+        try:
+            return len(deserialize_message(data, msg_class).object_id)
+        except Exception:  # rclpy raises several types on malformed bytes
+            return 0
+
+    return rows
 
 
 def _new_bag(value: ParamValue) -> str | None:
@@ -92,6 +121,7 @@ class Recorder(SsaNode):
                                  f"{exc}") from exc
         self._subs: dict[str, object] = {}
         self._held: list[tuple[str, bytes]] = []  # received before sim time started
+        self._rows: dict[str, Callable[[bytes], int]] = {}  # topic -> what a message counts
         self.failed: OSError | None = None  # why the bag cannot be written (then: exit 1)
         self.wall_timer(p.number("discover_period"), self.discover)
         self.wall_timer(p.number("flush_period"), self.flush)
@@ -137,6 +167,7 @@ class Recorder(SsaNode):
                 if latched
                 else DurabilityPolicy.VOLATILE,
             )
+            self._rows[topic] = row_counter(type_name, msg_class)
             self._subs[topic] = self.subscribe(
                 msg_class, topic, partial(self.on_message, topic), qos, raw=True)
             self.get_logger().info(f"recording {topic} [{type_name}]")
@@ -152,9 +183,10 @@ class Recorder(SsaNode):
                                                          f"{self.failed}")
             return
         now = self.get_clock().now().nanoseconds
+        n = self._rows.get(topic, _one)(data)
         if now == 0 and len(self._held) < HOLD_LIMIT:  # sim time has not started yet
             self._held.append((topic, data))
-            self.diag.counts[RECORDED + topic] += 1
+            self.diag.counts[RECORDED + topic] += n
             return
         try:
             self._release(now)
@@ -163,7 +195,7 @@ class Recorder(SsaNode):
             self._cannot_write(exc)
             self.diag.count(Cause.UNRECORDED_BAG_FAILED, str(exc))
             return
-        self.diag.counts[RECORDED + topic] += 1
+        self.diag.counts[RECORDED + topic] += n
 
     def _cannot_write(self, exc: OSError) -> None:
         """Say once why the bag cannot be written (a full disk), and end the node (exit 1).

@@ -2,7 +2,9 @@
 
 Propagates the scenario's true orbit (two-body + J2, drag, or SGP4/SDP4), and publishes:
 
-* ``/ssa/measurement`` (ssa_fusion_msgs/Measurement): what the sensors measured;
+* ``/ssa/measurement`` (ssa_fusion_msgs/Measurement): what the sensors measured; for a
+  catalog ``/ssa/measurement_batch`` (ssa_fusion_msgs/MeasurementBatch) instead: per step
+  (lockstep) or tick (open loop) one batch per shard key range of `shards`;
 * ``/ssa/withheld``: what they would have measured during a scheduled outage (evaluation
   only);
 * ``/ssa/truth`` (ssa_fusion_msgs/StateEstimate, zero covariance): the true state;
@@ -31,6 +33,7 @@ from rclpy.duration import Duration
 from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core import timescales, types
 from ssa_fusion.core.frames import Frame
+from ssa_fusion.core.rows import MeasurementRows
 from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S
 from ssa_fusion.nodes import parameters
 from ssa_fusion.nodes.base import SsaNode
@@ -54,8 +57,9 @@ from ssa_fusion.nodes.parameters import (
 )
 from ssa_fusion.nodes.process import finish
 from ssa_fusion.nodes.progress import Lockstep
+from ssa_fusion.nodes.shards import shard_range
 from ssa_fusion.ros import messages
-from ssa_fusion.ros.interfaces import Clock, Time
+from ssa_fusion.ros.interfaces import Clock, MeasurementBatch, Time
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
 from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
 from ssa_fusion.ros.readiness import ReadyNodes, check_needs
@@ -64,6 +68,7 @@ from ssa_fusion.ros.topics import (
     DATA_QOS,
     TOPIC_CLOCK,
     TOPIC_MEASUREMENT,
+    TOPIC_MEASUREMENT_BATCH,
     TOPIC_TRUTH,
     TOPIC_WITHHELD,
 )
@@ -262,14 +267,20 @@ PARAMETERS = ParameterTable("sensor_sim", (
           "element sets (TLE, 3LE, OMM XML/CSV) of the objects to simulate instead of the "
           "scenario's one object; needs a real-sky `scenario`, whose radars observe every "
           "object (`sim.survey`: SGP4/SDP4 truth, masks, noise); no `/ssa/truth` (the truth "
-          "is SGP4 of the catalog); measurements on `/ssa/measurement` with keep-last depth "
-          "1e6 (`CATALOG_QOS`); one `/clock` per tick; '' = off"),
+          "is SGP4 of the catalog); measurements on `/ssa/measurement_batch` "
+          "(MeasurementBatch, keep-last depth 1e6: `CATALOG_QOS`); one `/clock` per tick; "
+          "'' = off"),
     Param("objects", SENSOR_SIM.objects, "catalog: only the first N objects (0 = all)",
           check=at_least(0)),
     Param("synthetic", SENSOR_SIM.synthetic,
           "catalog: spread its first element set into N objects of the same regime "
           "(`survey.synthetic_catalog`, seeded by `seed`; 0 = the catalog's own)",
           check=at_least(0)),
+    Param("shards", SENSOR_SIM.shards,
+          "catalog: the measurements of a step (or tick) go out as this many batches, one "
+          "per shard key range (`nodes.shards.shard_range`), so that each of as many filter "
+          "shards receives its own batch only (content filter on the batch's key range)",
+          check=at_least(1)),
     Param("lockstep", SENSOR_SIM.lockstep,
           "catalog: the consumers (node names: catalog_filter and catalog_surrogate shards, "
           "the recorder) sim time waits for: `/clock` advances by `lockstep_step` only once "
@@ -336,8 +347,10 @@ class SensorSim(SsaNode):
                 f"scenario {name!r}: nothing to publish (no measurement and no truth epoch)")
 
         self.pub_clock = self.create_publisher(Clock, TOPIC_CLOCK, DATA_QOS)
-        self.pub_meas = self.create_publisher(
-            MeasurementMsg, TOPIC_MEASUREMENT, DATA_QOS if self.catalog is None else CATALOG_QOS)
+        self.pub_meas = self.create_publisher(MeasurementMsg, TOPIC_MEASUREMENT, DATA_QOS)
+        self.pub_batch = self.create_publisher(MeasurementBatch, TOPIC_MEASUREMENT_BATCH,
+                                               CATALOG_QOS)
+        self.shards = p.integer("shards")
         self.pub_withheld = self.create_publisher(MeasurementMsg, TOPIC_WITHHELD, DATA_QOS)
         self.pub_truth = self.create_publisher(StateEstimateMsg, TOPIC_TRUTH, DATA_QOS)
         self.next = 0
@@ -346,7 +359,7 @@ class SensorSim(SsaNode):
         self.wall0: float | None = None
         self.lockstep: Lockstep | None = None
         if self.catalog is not None and any(p.texts("lockstep")):
-            keys = np.array([messages.shard_key(o) for o in self.catalog_ids], dtype=np.int64)
+            keys = self.catalog_keys.astype(np.int64)
             self.lockstep = Lockstep(self, [n for n in p.texts("lockstep") if n],
                                      keys[self.catalog.obj], p.number("lockstep_timeout"))
         self.lockstep_step = p.number("lockstep_step")
@@ -436,7 +449,11 @@ class SensorSim(SsaNode):
         span = duration or s.duration_s
         obs = survey.observe_catalog(entries, radars, t0, span, seed=seed)
         self.catalog_ids = list(obs.object_ids)
-        self.catalog_R = [r.R for r in radars]
+        # per object and per sensor, indexed by a measurement's obj and sensor
+        self.catalog_ids_array = np.asarray(self.catalog_ids, dtype=object)
+        self.catalog_keys = messages.shard_keys(self.catalog_ids)
+        self.catalog_frames = np.asarray([x.station.name for x in obs.sensors], dtype=object)
+        self.catalog_R_array = np.array([r.R for r in radars], dtype=float)  # km^2, rad^2
         return obs, (f"catalog {path}: {len(entries)} objects, {len(obs)} measurements from "
                      f"{', '.join(r.station.name for r in radars)} over {span / 3600:g} h "
                      f"from {timescales.iso(t0)}")
@@ -449,7 +466,7 @@ class SensorSim(SsaNode):
         matched on /diagnostics.
         """
         own = {p.topic_name: p for p in (self.pub_clock, self.pub_meas, self.pub_withheld,
-                                         self.pub_truth)}
+                                         self.pub_truth, self.pub_batch)}
         short = []
         for item in self.wait_for:
             if not item:
@@ -486,12 +503,12 @@ class SensorSim(SsaNode):
             self.step_lockstep(now)
             return
         stop = int(np.searchsorted(times, now, side="right"))
-        publish = self.publish_event
         if self.catalog is not None:  # one clock per tick, ahead of the tick's measurements
             self.publish_clock(min(now, times[-1]))
-            publish = self.publish_catalog
-        for i in range(self.next, stop):
-            publish(i)
+            self.publish_catalog(self.next, stop)
+        else:
+            for i in range(self.next, stop):
+                self.publish_event(i)
         self.next = max(self.next, stop)
         self.publish_clock(min(now, times[-1]))
         if self.next >= len(times):
@@ -530,8 +547,7 @@ class SensorSim(SsaNode):
             return
         self.sim_now = target
         stop = int(np.searchsorted(times, target, side="right"))
-        for i in range(self.next, stop):
-            self.publish_catalog(i)
+        self.publish_catalog(self.next, stop)
         self.next = max(self.next, stop)
         lockstep.sent = self.next
         self.clock_behind = True
@@ -559,22 +575,33 @@ class SensorSim(SsaNode):
             self.pub_meas.publish(messages.measurement_to_msg(content))
             self.diag.counts[Count.PUBLISHED] += 1
 
-    def publish_catalog(self, i: int) -> None:
-        """Publish catalog measurement `i` (its epoch is at or before the clock published)."""
+    def publish_catalog(self, start: int, stop: int) -> None:
+        """Publish catalog measurements `start`..`stop`-1 as one batch per shard key range.
+
+        Their epochs are at or before the clock published (open loop), or at most one
+        `lockstep_step` after it (lockstep). A range with no measurement gets no batch.
+        """
         obs = self.catalog
-        assert obs is not None
-        k = int(obs.sensor[i])
-        m = types.Measurement(float(obs.t[i]), obs.z[i], self.catalog_R[k],
-                              kind=types.Kind.RANGE_AZ_EL,
-                              object_id=self.catalog_ids[int(obs.obj[i])],
-                              frame_id=obs.sensors[k].station.name)
-        self.pub_meas.publish(messages.measurement_to_msg(m))
-        self.diag.counts[Count.PUBLISHED] += 1
+        if obs is None or stop <= start:
+            return
+        sl = slice(start, stop)
+        keys = self.catalog_keys[obs.obj[sl]]
+        rows = MeasurementRows(
+            t=obs.t[sl], object_id=self.catalog_ids_array[obs.obj[sl]].tolist(),
+            frame_id=self.catalog_frames[obs.sensor[sl]].tolist(), z=obs.z[sl],
+            R=self.catalog_R_array[obs.sensor[sl]], shard_key=keys)
+        ranges = [shard_range(k, self.shards) for k in range(self.shards)]
+        shard = np.searchsorted(np.array([hi for _, hi in ranges]), keys)
+        for k in np.unique(shard).tolist():  # one batch per shard, rows in epoch order
+            self.pub_batch.publish(messages.measurement_batch_to_msg(
+                rows.take(np.flatnonzero(shard == k)), ranges[k]))
+        self.diag.counts[Count.PUBLISHED] += stop - start
 
     def done(self) -> None:
         """End the run: wait for the readers' acknowledgements, report, exit 0."""
         self.finished = True
-        for pub in (self.pub_meas, self.pub_withheld, self.pub_truth, self.pub_clock):
+        for pub in (self.pub_meas, self.pub_batch, self.pub_withheld, self.pub_truth,
+                    self.pub_clock):
             pub.wait_for_all_acked(Duration(seconds=5.0))
         self.diag.publish_last()
         self.get_logger().info(

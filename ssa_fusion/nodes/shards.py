@@ -11,14 +11,15 @@ several in one ROS domain.
 
 from __future__ import annotations
 
+import numpy as np
+from numpy.typing import NDArray
 from rclpy.subscription_content_filter_options import ContentFilterOptions
 
 from ssa_fusion.nodes.diagnostics import NodeCause
 from ssa_fusion.nodes.parameters import Param, Rule, Values, at_least
 from ssa_fusion.ros import messages
+from ssa_fusion.ros.messages import KEY_SPACE
 
-KEY_SPACE = 2**32
-"""Values of ``shard_key`` (uint32)."""
 LIST_OBJECTS = 200
 """Up to this many objects, a shard lists their ids on /diagnostics (``object_ids``)."""
 
@@ -53,6 +54,22 @@ def shard_problem(key: int, object_id: str, shard: int,
     return None
 
 
+def rows_shard_problems(keys: NDArray[np.uint32], object_ids: list[str], shard: int,
+                        shards: int) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """Return which rows shard `shard` of `shards` refuses and which it ignores.
+
+    `shard_problem` of each row (its `keys` and `object_ids`), vectorised: (the rows whose
+    key is not the CRC-32 of their id: ``rejected_shard_key``, the rows of another shard's
+    range: ``ignored_other_shard``). One shard refuses and ignores none.
+    """
+    m = len(object_ids)
+    if shards <= 1:
+        return np.zeros(m, bool), np.zeros(m, bool)
+    bad = keys != messages.shard_keys(object_ids)
+    lo, hi = shard_range(shard, shards)
+    return bad, ~bad & ((keys < lo) | (keys > hi))
+
+
 def shard_rows(shards: int, shard: int) -> tuple[Param, Param]:
     """Return the rows of ``shards`` and ``shard`` (their defaults given); see `SHARD_RULE`."""
     return (Param("shards", shards, "number of shards", check=at_least(1)),
@@ -83,11 +100,14 @@ SHARD_RULE = Rule(("shard", "shards"), _shard_in_range)
 
 
 def content_filter(shard: int, shards: int, condition: str = "",
-                   parameters: tuple[str, ...] = ()) -> ContentFilterOptions | None:
+                   parameters: tuple[str, ...] = (),
+                   batches: bool = False) -> ContentFilterOptions | None:
     """Return the DDS content filter of shard `shard` of `shards`, or None.
 
     Its key range, AND `condition` (an expression whose parameters %0.. are `parameters`)
-    when given; None when there is nothing to filter (one shard, no condition).
+    when given; None when there is nothing to filter (one shard, no condition). With
+    `batches` (MeasurementBatch, EstimateBatch), the batches whose key range
+    [``key_lo``, ``key_hi``] meets the shard's.
     """
     terms, params = [], list(parameters)
     if condition:
@@ -95,7 +115,8 @@ def content_filter(shard: int, shards: int, condition: str = "",
     if shards > 1:
         lo, hi = shard_range(shard, shards)
         n = len(params)
-        terms.append(f"shard_key BETWEEN %{n} AND %{n + 1}")
+        terms.append(f"key_hi >= %{n} AND key_lo <= %{n + 1}" if batches
+                     else f"shard_key BETWEEN %{n} AND %{n + 1}")
         params += [str(lo), str(hi)]
     if not terms:
         return None

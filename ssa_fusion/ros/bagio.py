@@ -39,7 +39,7 @@ if TYPE_CHECKING:
 
 ROS_DISTRO = "kilted"
 MSG_PACKAGE = "ssa_fusion_msgs"
-MSG_TYPES = ("Measurement", "StateEstimate")
+MSG_TYPES = ("Measurement", "StateEstimate", "MeasurementBatch", "EstimateBatch")
 
 
 class BagError(RuntimeError):
@@ -99,7 +99,9 @@ def rosbags_classes() -> MsgClasses:
 
     t = typestore().types
     return MsgClasses(t["builtin_interfaces/msg/Time"], t["std_msgs/msg/Header"],
-                      t[f"{MSG_PACKAGE}/msg/Measurement"], t[f"{MSG_PACKAGE}/msg/StateEstimate"])
+                      t[f"{MSG_PACKAGE}/msg/Measurement"], t[f"{MSG_PACKAGE}/msg/StateEstimate"],
+                      t[f"{MSG_PACKAGE}/msg/MeasurementBatch"],
+                      t[f"{MSG_PACKAGE}/msg/EstimateBatch"], numpy_arrays=True)
 
 
 class BagWriter:

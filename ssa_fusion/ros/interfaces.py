@@ -23,14 +23,20 @@ from rcl_interfaces.msg import (  # type: ignore[import-untyped]
 )
 from rosgraph_msgs.msg import Clock  # type: ignore[import-untyped]
 from sensor_msgs.msg import NavSatFix, NavSatStatus  # type: ignore[import-untyped]
-from ssa_fusion_msgs.msg import Measurement, StateEstimate  # type: ignore[import-untyped]
+from ssa_fusion_msgs.msg import (  # type: ignore[import-untyped]
+    EstimateBatch,
+    Measurement,
+    MeasurementBatch,
+    StateEstimate,
+)
 from std_msgs.msg import ColorRGBA, Header, String  # type: ignore[import-untyped]
 from visualization_msgs.msg import Marker, MarkerArray  # type: ignore[import-untyped]
 
 Message: TypeAlias = Any
 """A ROS message instance (of an rclpy class or a rosbags dataclass): untyped."""
 
-__all__ = ["Clock", "ColorRGBA", "DiagnosticArray", "DiagnosticStatus", "Header", "KeyValue",
-           "Marker", "MarkerArray", "Measurement", "Message", "NavSatFix", "NavSatStatus",
+__all__ = ["Clock", "ColorRGBA", "DiagnosticArray", "DiagnosticStatus", "EstimateBatch",
+           "Header", "KeyValue", "Marker", "MarkerArray", "Measurement", "MeasurementBatch",
+           "Message", "NavSatFix", "NavSatStatus",
            "ParameterDescriptor", "Point", "SetParametersResult", "StateEstimate", "String",
            "Time"]

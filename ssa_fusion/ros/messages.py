@@ -9,14 +9,18 @@ e.g. `bagio.ROSBAGS_CLASSES` for writing bags without ROS).
 
 from __future__ import annotations
 
+import array
 import zlib
+from collections.abc import Sized
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ssa_fusion.core import types
 from ssa_fusion.core.frames import Frame
+from ssa_fusion.core.rows import EstimateRows, MeasurementRows
 from ssa_fusion.core.timescales import EPOCH_MAX, iso
 
 if TYPE_CHECKING:  # the message packages are imported when first needed (`rclpy_classes`)
@@ -32,23 +36,50 @@ _Z_SCALE = {
     types.Kind.RA_DEC: np.array([1.0, 1.0]),
 }
 _X_SCALE = np.full(6, KM)
+# The same per row of a batch: row k is the scale of kind k (a kind unknown to the core
+# keeps scale 1: the consumer refuses it by kind).
+_Z_SCALE_ROWS = np.ones((256, 3))
+for _kind, _scale in _Z_SCALE.items():
+    _Z_SCALE_ROWS[_kind, :len(_scale)] = _scale
+
+KEY_SPACE = 2**32
+"""Values of ``shard_key`` (uint32)."""
+ALL_KEYS = (0, KEY_SPACE - 1)
+"""The key range of a batch that may hold any object's rows."""
+NS = 1_000_000_000
+"""ns per s."""
 
 
 @dataclass(frozen=True)
 class MsgClasses:
-    """Constructors of builtin_interfaces/Time, std_msgs/Header and the two messages."""
+    """Constructors of builtin_interfaces/Time, std_msgs/Header and the messages.
+
+    `numpy_arrays`: whether the classes take numeric sequences as numpy arrays (rosbags)
+    rather than as ``array.array`` (rclpy).
+    """
 
     time: type[Message]
     header: type[Message]
     measurement: type[Message]
     estimate: type[Message]
+    measurement_batch: type[Message]
+    estimate_batch: type[Message]
+    numpy_arrays: bool = False
 
 
 def rclpy_classes() -> MsgClasses:
     """Return the rclpy message classes (imported on the first call)."""
-    from ssa_fusion.ros.interfaces import Header, Measurement, StateEstimate, Time
+    from ssa_fusion.ros.interfaces import (
+        EstimateBatch,
+        Header,
+        Measurement,
+        MeasurementBatch,
+        StateEstimate,
+        Time,
+    )
 
-    return MsgClasses(Time, Header, Measurement, StateEstimate)
+    return MsgClasses(Time, Header, Measurement, StateEstimate, MeasurementBatch,
+                      EstimateBatch)
 
 
 _RCLPY: MsgClasses | None = None
@@ -121,13 +152,36 @@ def recode(msg: Message, msgtype: str, classes: MsgClasses | None = None) -> Mes
 
     A Measurement or StateEstimate of any version of the types goes through the core types:
     fields newer than the bag (e.g. ``shard_key``) are filled in. Messages of other types
-    are returned as they are.
+    (the batches included: they are of their first version) are returned as they are.
     """
-    if not msgtype.startswith("ssa_fusion_msgs/"):
-        return msg
-    if msgtype.endswith("Measurement"):
+    if msgtype == "ssa_fusion_msgs/msg/Measurement":
         return measurement_to_msg(measurement_from_msg(msg), classes)
-    return estimate_to_msg(estimate_from_msg(msg), classes)
+    if msgtype == "ssa_fusion_msgs/msg/StateEstimate":
+        return estimate_to_msg(estimate_from_msg(msg), classes)
+    return msg
+
+
+class _KeyCache(dict[str, int]):
+    """object_id -> shard_key, computed on the first lookup of an id."""
+
+    def __missing__(self, object_id: str) -> int:
+        key = shard_key(object_id)
+        if len(self) < _KEY_CACHE_MAX:
+            self[object_id] = key
+        return key
+
+
+_KEY_CACHE_MAX = 1_000_000
+_KEYS = _KeyCache()
+
+
+def shard_keys(object_ids: list[str]) -> NDArray[np.uint32]:
+    """Return the `shard_key` of every id of `object_ids` (M,), each id's computed once.
+
+    A catalog's ids repeat from batch to batch: a cache of up to a million ids makes this a
+    dictionary lookup per row, in C (no Python loop).
+    """
+    return np.fromiter(map(_KEYS.__getitem__, object_ids), np.uint32, len(object_ids))
 
 
 def shard_key(object_id: str) -> int:
@@ -182,3 +236,138 @@ def estimate_from_msg(msg: Message) -> types.StateEstimate:
         update_source=int(msg.update_source),
         nis=float(msg.nis),
     )
+
+
+def _column(values: NDArray[Any], code: str, classes: MsgClasses) -> object:
+    """Return a numeric column as the message classes take it.
+
+    An ``array.array`` of type `code` (rclpy: no check or copy per element) or a numpy
+    array (rosbags).
+    """
+    flat = np.ascontiguousarray(values).ravel()
+    return flat if classes.numpy_arrays else array.array(code, flat.tobytes())
+
+
+def stamps_ns(t: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Return epochs `t` (s) as int64 ns, rounded as `seconds_to_stamp` rounds.
+
+    ValueError naming the first epoch a ROS 2 Time cannot carry (negative, not finite, or
+    beyond 2038-01-19), as `seconds_to_stamp`.
+    """
+    t = np.asarray(t, dtype=float)
+    bad = ~((t >= 0.0) & (t <= EPOCH_MAX))
+    if bad.any():
+        seconds_to_stamp(float(t[np.argmax(bad)]))  # raises, naming it
+    return np.rint(t * 1e9).astype(np.int64)
+
+
+def ns_to_seconds(ns: NDArray[np.int64]) -> NDArray[np.float64]:
+    """Return int64 ns since the Unix epoch as float s, as `stamp_to_seconds` computes them."""
+    ns = np.asarray(ns, dtype=np.int64)
+    sec = ns // NS
+    out: NDArray[np.float64] = sec.astype(float) + (ns - sec * NS).astype(float) * 1e-9
+    return out
+
+
+def _header(classes: MsgClasses, t: NDArray[np.float64], frame_id: str) -> Message:
+    """Return the header of a batch: stamp its last epoch (0 when empty), `frame_id`."""
+    last = float(t.max()) if len(t) else 0.0
+    return classes.header(stamp=seconds_to_stamp(last, classes), frame_id=frame_id)
+
+
+def measurement_batch_to_msg(rows: MeasurementRows, key_range: tuple[int, int] = ALL_KEYS,
+                             classes: MsgClasses | None = None) -> Message:
+    """Return `rows` (core units) as an ssa_fusion_msgs/MeasurementBatch (SI).
+
+    `key_range`: the closed range of shard keys of the rows (``key_lo``, ``key_hi``). The
+    rows' shard_key is what `rows` holds: `shard_keys` computes it. ValueError for an epoch
+    a ROS 2 Time cannot carry.
+    """
+    c = _default(classes)
+    s = _Z_SCALE_ROWS[rows.kind]
+    return c.measurement_batch(
+        header=_header(c, rows.t, ""), key_lo=int(key_range[0]), key_hi=int(key_range[1]),
+        object_id=list(rows.object_id),
+        shard_key=_column(rows.shard_key.astype(np.uint32), "I", c),
+        kind=_column(rows.kind.astype(np.uint8), "B", c),
+        source=_column(rows.source.astype(np.uint8), "B", c),
+        frame_id=list(rows.frame_id),
+        stamp_ns=_column(stamps_ns(rows.t), "q", c),
+        z=_column(rows.z * s, "d", c),
+        covariance=_column(rows.R * (s[:, :, None] * s[:, None, :]), "d", c),
+        horizon=_column(rows.horizon.astype(float), "d", c))
+
+
+def measurement_batch_from_msg(msg: Message) -> MeasurementRows:
+    """Return an ssa_fusion_msgs/MeasurementBatch (SI) as `MeasurementRows` (core units).
+
+    ValueError (one line) when its columns do not all have the same number of rows. Each
+    row is what `measurement_from_msg` gives for the same Measurement, to the bit (RA_DEC:
+    z and R keep 3 channels, the third 0).
+    """
+    m = len(msg.object_id)
+    kind = np.asarray(msg.kind, dtype=np.uint8)
+    source = np.asarray(msg.source, dtype=np.uint8)
+    key = np.asarray(msg.shard_key, dtype=np.uint32)
+    ns = np.asarray(msg.stamp_ns, dtype=np.int64)
+    z = np.asarray(msg.z, dtype=float)
+    cov = np.asarray(msg.covariance, dtype=float)
+    horizon = np.asarray(msg.horizon, dtype=float)
+    _check_rows(m, {"shard_key": key, "kind": kind, "source": source, "frame_id": msg.frame_id,
+                    "stamp_ns": ns, "z": z, "covariance": cov, "horizon": horizon},
+                {"z": 3, "covariance": 9})
+    s = _Z_SCALE_ROWS[kind]
+    return MeasurementRows(
+        t=ns_to_seconds(ns), object_id=list(msg.object_id), frame_id=list(msg.frame_id),
+        z=z.reshape(m, 3) / s, R=cov.reshape(m, 3, 3) / (s[:, :, None] * s[:, None, :]),
+        kind=kind, source=source, horizon=horizon, shard_key=key)
+
+
+def _check_rows(m: int, columns: dict[str, Sized], per_row: dict[str, int]) -> None:
+    """Raise ValueError unless every column has `m` rows (`per_row` values per row)."""
+    for name, col in columns.items():
+        want = m * per_row.get(name, 1)
+        if len(col) != want:
+            raise ValueError(f"batch of {m} rows (object_id) has {len(col)} values in "
+                             f"{name}, expected {want}")
+
+
+def estimate_batch_to_msg(rows: EstimateRows, key_range: tuple[int, int] = ALL_KEYS,
+                          classes: MsgClasses | None = None) -> Message:
+    """Return `rows` (km, km/s) as an ssa_fusion_msgs/EstimateBatch (m, m/s), frame GCRF.
+
+    `key_range` as `measurement_batch_to_msg`; ValueError for an epoch a ROS 2 Time cannot
+    carry.
+    """
+    c = _default(classes)
+    return c.estimate_batch(
+        header=_header(c, rows.t, Frame.GCRF), update_source=int(rows.update_source),
+        key_lo=int(key_range[0]), key_hi=int(key_range[1]), object_id=list(rows.object_id),
+        shard_key=_column(rows.shard_key.astype(np.uint32), "I", c),
+        stamp_ns=_column(stamps_ns(rows.t), "q", c),
+        state=_column(rows.x * _X_SCALE, "d", c),
+        covariance=_column(rows.P * KM * KM, "d", c),  # as estimate_to_msg: to the bit
+        nis=_column(rows.nis.astype(float), "d", c))
+
+
+def estimate_batch_from_msg(msg: Message) -> EstimateRows:
+    """Return an ssa_fusion_msgs/EstimateBatch (m, m/s) as `EstimateRows` (km, km/s).
+
+    ValueError (one line) when its columns do not all have the same number of rows, or for
+    an update source that is none of `types.UpdateSource`.
+    """
+    m = len(msg.object_id)
+    key = np.asarray(msg.shard_key, dtype=np.uint32)
+    ns = np.asarray(msg.stamp_ns, dtype=np.int64)
+    x = np.asarray(msg.state, dtype=float)
+    cov = np.asarray(msg.covariance, dtype=float)
+    nis = np.asarray(msg.nis, dtype=float)
+    _check_rows(m, {"shard_key": key, "stamp_ns": ns, "state": x, "covariance": cov,
+                    "nis": nis}, {"state": 6, "covariance": 36})
+    try:
+        source = types.UpdateSource(msg.update_source)
+    except ValueError:
+        raise ValueError(f"unknown update_source {msg.update_source}") from None
+    return EstimateRows(t=ns_to_seconds(ns), object_id=list(msg.object_id),
+                        x=x.reshape(m, 6) / _X_SCALE, P=cov.reshape(m, 6, 6) / (KM * KM),
+                        nis=nis, update_source=source, shard_key=key)

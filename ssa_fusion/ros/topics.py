@@ -30,6 +30,10 @@ CATALOG_QOS = QoSProfile(
 )
 
 TOPIC_MEASUREMENT = "/ssa/measurement"
+TOPIC_MEASUREMENT_BATCH = "/ssa/measurement_batch"
+"""A catalog's measurements as ssa_fusion_msgs/MeasurementBatch (many rows a message)."""
+TOPIC_ESTIMATE_BATCH = "/ssa/estimate_batch"
+"""A catalog's estimates and forecasts as ssa_fusion_msgs/EstimateBatch."""
 TOPIC_FORECAST = "/ssa/forecast"
 TOPIC_ESTIMATE = "/ssa/estimate"
 TOPIC_SMOOTHED = "/ssa/estimate_smoothed"

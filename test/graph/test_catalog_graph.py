@@ -8,7 +8,8 @@ estimates follow the SGP4 truth, and the forecasts lie in the gaps between passe
 The run is in lockstep (the default) beside two CPU burners the test starts, at a time scale
 the loaded machine does not sustain: nothing is lost all the same, and the estimates equal
 those of the same measurements fused in this process (`TrackBank`), bit for bit or to
-round-off: what a run gives does not depend on the machine's load."""
+round-off: what a run gives does not depend on the machine's load. Measurements and
+estimates travel as batches (MeasurementBatch, EstimateBatch); every count is in rows."""
 
 import argparse
 import json
@@ -22,12 +23,31 @@ import numpy as np
 import pytest
 
 from ssa_fusion.apps import live_catalog
+from ssa_fusion.core.rows import EstimateRows, MeasurementRows
 from ssa_fusion.core.stations import network_stations
 from ssa_fusion.core.track_bank import TrackBank
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.nodes.shards import shard_range
 from ssa_fusion.ros import bagio, messages
+
+
+def _rows(bag: Path, topic: str) -> list:
+    """The rows of every batch of `topic` in `bag` (MeasurementRows or EstimateRows)."""
+    convert = {"/ssa/measurement_batch": messages.measurement_batch_from_msg,
+               "/ssa/estimate_batch": messages.estimate_batch_from_msg}[topic]
+    return [convert(m.msg) for m in bagio.read_bag(bag, topics=[topic])]
+
+
+def _estimates(bag: Path) -> list[tuple[int, str, float, np.ndarray, np.ndarray]]:
+    """(update source, object id, t, x, P) of every estimate row in `bag`, in bag order."""
+    out = []
+    for r in _rows(bag, "/ssa/estimate_batch"):
+        assert isinstance(r, EstimateRows)
+        out += [(int(r.update_source), o, float(t), x, P)
+                for o, t, x, P in zip(r.object_id, r.t, r.x, r.P, strict=True)]
+    return out
+
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"
 OBJECTS = 12
@@ -72,9 +92,8 @@ def test_every_object_is_tracked_by_exactly_the_shard_of_its_key(run):
         assert all(lo <= messages.shard_key(o) <= hi for o in p["object_ids"])
         assert p["received"] > 0
     # and the recorded estimates are those objects' (counted per shard as they published)
-    est = Counter(m.msg.object_id for m in bagio.read_bag(out / "bag",
-                                                          topics=["/ssa/estimate"])
-                  if m.msg.update_source == 1)  # the filters' (not the surrogates' forecasts)
+    est = Counter(e[1] for e in _estimates(out / "bag")
+                  if e[0] == 1)  # the filters' (not the surrogates' forecasts)
     for p, mine in zip(shards.values(), ids, strict=True):
         assert sum(est[o] for o in mine) == p["estimates"]
 
@@ -97,9 +116,8 @@ def test_each_shards_surrogate_forecasts_its_objects_gaps_only(run):
     assert made >= 4 and published > 20
     assert s["forecasts_recorded"] == published
     sensor, forecast = {}, {}
-    for m in bagio.read_bag(out / "bag", topics=["/ssa/estimate"]):
-        e = messages.estimate_from_msg(m.msg)
-        (forecast if e.update_source == 2 else sensor).setdefault(e.object_id, []).append(e.t)
+    for source, oid, t, _, _ in _estimates(out / "bag"):
+        (forecast if source == 2 else sensor).setdefault(oid, []).append(t)
     mine = {o: k for k, g in enumerate(gaps) for o in g["object_ids"]}
     for oid, ts in forecast.items():
         assert oid in mine
@@ -118,27 +136,24 @@ def test_the_estimates_equal_the_same_measurements_fused_in_process(run):
     """Lockstep under load: each shard's estimates are what a `TrackBank` with the node's
     default settings gives for the recorded measurements of its objects, in order."""
     _, out, _ = run
-    bag = list(bagio.read_bag(out / "bag", topics=["/ssa/measurement", "/ssa/estimate"]))
-    ms = [messages.measurement_from_msg(m.msg) for m in bag if m.topic == "/ssa/measurement"]
+    ms = MeasurementRows.concat(_rows(out / "bag", "/ssa/measurement_batch"))
     got: dict[str, list[np.ndarray]] = defaultdict(list)
-    for m in bag:
-        if m.topic == "/ssa/estimate" and m.msg.update_source == 1:
-            e = messages.estimate_from_msg(m.msg)
-            got[e.object_id].append(np.r_[e.t, e.x, e.P.ravel()])
+    for source, oid, t, x, P in _estimates(out / "bag"):
+        if source == 1:
+            got[oid].append(np.r_[t, x, P.ravel()])
     station = ",".join(r.station.name for r in live_catalog.catalog_scenario(
         argparse.Namespace(scenario="iss_network", sites="")).radars)
     want: dict[str, list[np.ndarray]] = defaultdict(list)
     for k in range(2):
         lo, hi = shard_range(k, 2)
-        mine = sorted((m for m in ms if lo <= messages.shard_key(m.object_id) <= hi),
-                      key=lambda m: m.t)
+        keys = messages.shard_keys(ms.object_id)
+        mine = ms.take(np.flatnonzero((keys >= lo) & (keys <= hi)))
+        mine = mine.take(np.argsort(mine.t, kind="stable"))
         bank = TrackBank(settings.filter_options({**asdict(CATALOG_FILTER), "station": station}),
                          network_stations(station, {}))
-        res = bank.process([m.t for m in mine], [m.object_id for m in mine],
-                           [m.frame_id for m in mine], np.array([m.z for m in mine]),
-                           np.array([m.R for m in mine]))
+        res = bank.process(mine.t, mine.object_id, mine.frame_id, mine.z, mine.R)
         for j, i in enumerate(res.fused.tolist()):
-            want[mine[i].object_id].append(np.r_[mine[i].t, res.x[j], res.P[j].ravel()])
+            want[mine.object_id[i]].append(np.r_[mine.t[i], res.x[j], res.P[j].ravel()])
     assert set(got) == set(want) and len(got) == OBJECTS
     worst = 0.0
     for oid, rows in want.items():

@@ -1,5 +1,6 @@
 """Graph test of the catalog_surrogate node alone: the test process drives sim time on
-/clock and publishes the filter's estimates of two objects, plus bad ones (non-finite,
+/clock and publishes the filter's estimates of two objects (EstimateBatch, a row each), plus
+bad ones (non-finite,
 negative or enormous covariances, an object beyond `max_objects`). Every bad
 estimate is refused by cause on /diagnostics (or never delivered: the content filter), the
 node lives on, and the forecast it publishes through the gap that follows equals the
@@ -12,12 +13,13 @@ from dataclasses import replace
 
 import numpy as np
 from rosgraph_msgs.msg import Clock
-from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
+from ssa_fusion_msgs.msg import EstimateBatch
 from test_faults import Diag, publisher
 
 from ssa_fusion.core import dynamics, types
 from ssa_fusion.core.gap_bank import CATALOG_RESIDUAL
 from ssa_fusion.core.gap_forecaster import GapForecaster
+from ssa_fusion.core.rows import EstimateRows
 from ssa_fusion.nodes.shards import shard_problem, shard_range
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.topics import CATALOG_QOS
@@ -47,6 +49,16 @@ def _estimates(oid: str) -> list[types.StateEstimate]:
         for ti, xi in zip(t, x, strict=True)]
 
 
+def _batch(e: types.StateEstimate, key: int | None = None) -> EstimateBatch:
+    """`e` as a one-row EstimateBatch (its shard_key `key`, default its id's), of the key
+    range of the shard (of 2) the key is in."""
+    k = messages.shard_key(e.object_id) if key is None else key
+    rows = EstimateRows(np.array([e.t]), [e.object_id], np.asarray(e.x)[None],
+                        np.asarray(e.P)[None], np.zeros(1), types.UpdateSource(e.update_source),
+                        np.array([k], np.uint32))
+    return messages.estimate_batch_to_msg(rows, shard_range(int(k > shard_range(0, 2)[1]), 2))
+
+
 def test_bad_estimates_are_refused_and_the_gap_forecast_equals_the_core(ros_graph):
     g = ros_graph
     span = 3 * 5820.0  # first to last pass end: only the last one may fit
@@ -55,12 +67,18 @@ def test_bad_estimates_are_refused_and_the_gap_forecast_equals_the_core(ros_grap
               "fit_budget": 1.0, "max_objects": 1}
     node = g.start_node("catalog_surrogate", params=params)
     diag = Diag(g)
-    forecasts: list = []
-    g.probe.create_subscription(StateEstimateMsg, "/ssa/estimate",
-                                lambda m: forecasts.append(m) if m.update_source == 2 else None,
-                                CATALOG_QOS)
+    forecasts: list[types.StateEstimate] = []
+
+    def on_batch(m: EstimateBatch) -> None:
+        rows = messages.estimate_batch_from_msg(m)
+        if rows.update_source == types.UpdateSource.FORECAST:
+            forecasts.extend(types.StateEstimate(t=float(t), x=x, P=P_, object_id=o)
+                             for t, x, P_, o in zip(rows.t, rows.x, rows.P, rows.object_id,
+                                                    strict=True))
+
+    g.probe.create_subscription(EstimateBatch, "/ssa/estimate_batch", on_batch, CATALOG_QOS)
     clock = publisher(g, Clock, "/clock", ("catalog_surrogate",))
-    est = publisher(g, StateEstimateMsg, "/ssa/estimate", ("catalog_surrogate",))
+    est = publisher(g, EstimateBatch, "/ssa/estimate_batch", ("catalog_surrogate",))
 
     def tick(t: float) -> None:
         clock.publish(Clock(clock=messages.seconds_to_stamp(t)))
@@ -69,16 +87,16 @@ def test_bad_estimates_are_refused_and_the_gap_forecast_equals_the_core(ros_grap
     good = _estimates(mine)
     tick(T0)
     # bad input first: each refused by cause (or kept away by the content filter)
-    nan = messages.estimate_to_msg(good[0])
-    nan.state[2] = float("nan")
-    no_id = messages.estimate_to_msg(replace(good[0], object_id=""))
-    wrong_key = messages.estimate_to_msg(good[0])
-    wrong_key.shard_key = messages.shard_key(mine) + 1  # in range, not the id's CRC-32
-    future = messages.estimate_to_msg(replace(good[0], t=T0 + 1e5))
-    forecast = messages.estimate_to_msg(replace(good[0], update_source=2))
-    other = messages.estimate_to_msg(replace(good[0], object_id=theirs))
-    negative = messages.estimate_to_msg(replace(good[0], P=-P))
-    huge = messages.estimate_to_msg(replace(good[0], P=1e300 * np.eye(6)))
+    x_nan = good[0].x.copy()
+    x_nan[2] = float("nan")
+    nan = _batch(replace(good[0], x=x_nan))
+    no_id = _batch(replace(good[0], object_id=""))
+    wrong_key = _batch(good[0], key=messages.shard_key(mine) + 1)  # in range, not the CRC
+    future = _batch(replace(good[0], t=T0 + 1e5))
+    forecast = _batch(replace(good[0], update_source=2))
+    other = _batch(replace(good[0], object_id=theirs))
+    negative = _batch(replace(good[0], P=-P))
+    huge = _batch(replace(good[0], P=1e300 * np.eye(6)))
     for m in (nan, no_id, wrong_key, future, forecast, other, negative, huge):
         est.publish(m)
     diag.wait(g, "catalog_surrogate", {"rejected_nonfinite": 1, "rejected_object_id": 1,
@@ -91,7 +109,7 @@ def test_bad_estimates_are_refused_and_the_gap_forecast_equals_the_core(ros_grap
     for t in T0 + 60.0 * np.arange(int((end - T0) / 60.0) + 61):
         tick(float(t))
         while k < len(good) and good[k].t <= t:
-            est.publish(messages.estimate_to_msg(good[k]))
+            est.publish(_batch(good[k]))
             k += 1
     c = diag.wait(g, "catalog_surrogate", {"received": len(good), "fits_made": 1}, 30.0)
     g.wait_for(lambda: len(forecasts) >= 9, 20.0, "the gap's forecasts")
@@ -101,7 +119,7 @@ def test_bad_estimates_are_refused_and_the_gap_forecast_equals_the_core(ros_grap
                                                         min_span_s=span - 1.0))
     for e in good:
         ref.on_estimate(e.t, e.x, e.P)
-    got = [e for e in map(messages.estimate_from_msg, forecasts) if e.t > T0]  # not ours
+    got = [e for e in forecasts if e.t > T0]
     t = np.array([f.t for f in got])
     assert t[0] - PERIOD < end + 600.0 <= t[0]  # the grid's first epoch past pass_break
     assert np.all(np.diff(t) == PERIOD)
@@ -114,6 +132,6 @@ def test_bad_estimates_are_refused_and_the_gap_forecast_equals_the_core(ros_grap
     # an object more than max_objects (1): refused by cause, the node lives on
     flood = next(o for o in (f"8{k:04d}" for k in range(1000))
                  if shard_problem(messages.shard_key(o), o, 0, 2) is None)
-    est.publish(messages.estimate_to_msg(replace(good[-1], object_id=flood)))
+    est.publish(_batch(replace(good[-1], object_id=flood)))
     diag.wait(g, "catalog_surrogate", {"rejected_bank_full": 1})
     assert node.popen.poll() is None
