@@ -225,6 +225,8 @@ def read_bag(path: Path | str, topics: Iterable[str] | None = None,
     try:
         with AnyReader([path], default_typestore=typestore()) as reader:
             conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
+            if not conns:  # none of the topics asked for (rosbags reads all for none)
+                return
             _check_types(path, [(c.topic, c.msgtype) for c in conns])
             for conn, t_ns, raw in reader.messages(connections=conns):
                 msg = _decode(reader.deserialize, raw, conn.msgtype, conn.topic, undecodable)

@@ -26,14 +26,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from rclpy.serialization import serialize_message
 from ros_graph import TIMEOUT_FACTOR
 
 from ssa_fusion.nodes.shards import shard_range
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.discovery import PROFILE_VAR, Discovery
 from ssa_fusion.ros.processes import fresh_domain_id, node_command
-from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_MEASUREMENT
+from ssa_fusion.ros.topics import TOPIC_ESTIMATE_BATCH, TOPIC_MEASUREMENT_BATCH
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"
 OBJECTS = 12
@@ -180,9 +179,11 @@ def run(hosts, tmp_path_factory):
 
 
 def _payload(bag: Path, topic: str, object_ids: set[str]) -> int:
-    """Bytes (CDR) of the recorded messages on `topic` of `object_ids`."""
-    return sum(len(serialize_message(messages.recode(m.msg, m.msgtype)))
-               for m in bagio.read_bag(bag, topics=[topic]) if m.msg.object_id in object_ids)
+    """Bytes (CDR) of the recorded batches on `topic` whose rows are all of `object_ids`."""
+    store = bagio.typestore()
+    return sum(len(store.serialize_cdr(m.msg, m.msgtype))
+               for m in bagio.read_bag(bag, topics=[topic])
+               if set(m.msg.object_id) <= object_ids)
 
 
 def test_the_run_across_two_hosts_ends_with_nothing_lost(run):
@@ -216,8 +217,9 @@ def test_every_object_is_tracked_by_exactly_the_shard_of_its_key(run):
         assert all(lo <= messages.shard_key(o) <= hi for o in p["object_ids"])
         assert p["received"] > 0 and p["ignored_other_shard"] == 0
     published = {}  # recorded estimates by object
-    for m in bagio.read_bag(bag, topics=[TOPIC_ESTIMATE]):
-        published[m.msg.object_id] = published.get(m.msg.object_id, 0) + 1
+    for m in bagio.read_bag(bag, topics=[TOPIC_ESTIMATE_BATCH]):
+        for oid in m.msg.object_id:
+            published[oid] = published.get(oid, 0) + 1
     for p, mine in zip(shards.values(), ids, strict=True):
         assert sum(published.get(o, 0) for o in mine) == p["estimates"] > 0
 
@@ -226,9 +228,9 @@ def test_the_shards_traffic_crossed_the_veth(run):
     """B's veth received at least shard 1's measurements and sent at least its estimates."""
     s, bag = run["summary"], run["out"] / "bag"
     remote = set(s["per_shard"]["catalog_filter_1"]["object_ids"])
-    mine_in = _payload(bag, TOPIC_MEASUREMENT, remote)
-    mine_out = _payload(bag, TOPIC_ESTIMATE, remote)
-    everything = _payload(bag, TOPIC_MEASUREMENT, set(s["per_shard"]["catalog_filter_0"]
+    mine_in = _payload(bag, TOPIC_MEASUREMENT_BATCH, remote)
+    mine_out = _payload(bag, TOPIC_ESTIMATE_BATCH, remote)
+    everything = _payload(bag, TOPIC_MEASUREMENT_BATCH, set(s["per_shard"]["catalog_filter_0"]
                                                       ["object_ids"]) | remote)
     b = run["b"]
     print(f"veth of host B: rx {b['rx_bytes']} B, tx {b['tx_bytes']} B; shard 1's "
