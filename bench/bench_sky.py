@@ -11,6 +11,11 @@ epoch and over gaps > 12 h, after each pass, position NEES coverage of chi2(3)'s
 against what the filter publishes, and, last, one JSON line.
 
 Usage: .venv/bin/python bench/bench_sky.py [--quick] [--workers N] [--scenario NAME ...]
+
+``--tuning`` runs the tuning seeds (`TUNING_SEEDS` 1-3, every start epoch) instead: where
+the gap fit's process noise is chosen (``--gap-fit-snc`` / ``--gap-fit-snc-angles``
+km^2/s^3 replace `batch_gap.GAP_FIT_SNC` / `GAP_FIT_SNC_ANGLES` for the run). The
+evaluation seeds never choose a setting.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ import argparse
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -27,9 +33,14 @@ from ssa_fusion import limit_blas_threads
 
 limit_blas_threads()
 
+from ssa_fusion.core import batch_gap  # noqa: E402
 from ssa_fusion.sim import sky  # noqa: E402
 from ssa_fusion.studies import sky_study  # noqa: E402
-from ssa_fusion.studies.distributions import EVALUATION_SEEDS, START_OFFSETS_H  # noqa: E402
+from ssa_fusion.studies.distributions import (  # noqa: E402
+    EVALUATION_SEEDS,
+    START_OFFSETS_H,
+    TUNING_SEEDS,
+)
 
 TARGETS = {  # scenario -> (all gap epochs, gaps > 12 h, after each pass) km, NEES coverage
     "iss_radar_columbus": (0.20, 0.30, 0.06, 0.90),
@@ -70,9 +81,23 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="3 seeds, one start epoch")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--scenario", nargs="*", default=list(sky.SKY_SCENARIOS))
+    ap.add_argument("--tuning", action="store_true",
+                    help="the tuning seeds 1-3 (every start epoch), not the evaluation seeds")
+    ap.add_argument("--gap-fit-snc", type=float, default=None,
+                    help="with --tuning: the gap fit's SNC for windows with ranges")
+    ap.add_argument("--gap-fit-snc-angles", type=float, default=None,
+                    help="with --tuning: the gap fit's SNC for windows of angles")
     args = ap.parse_args()
-    seeds = EVALUATION_SEEDS[:3] if args.quick else EVALUATION_SEEDS
-    offsets = (0.0,) if args.quick else START_OFFSETS_H
+    if (args.gap_fit_snc or args.gap_fit_snc_angles) and not args.tuning:
+        ap.error("--gap-fit-snc and --gap-fit-snc-angles choose settings: --tuning only")
+    if args.gap_fit_snc:  # the worker processes are forked: they inherit it
+        batch_gap.GAP_FIT = replace(batch_gap.GAP_FIT, snc_psd=(args.gap_fit_snc,) * 3)
+    if args.gap_fit_snc_angles:
+        batch_gap.GAP_FIT_ANGLES = replace(batch_gap.GAP_FIT_ANGLES,
+                                           snc_psd=(args.gap_fit_snc_angles,) * 3)
+    seeds = (TUNING_SEEDS[:3] if args.tuning else
+             EVALUATION_SEEDS[:3] if args.quick else EVALUATION_SEEDS)
+    offsets = (0.0,) if args.quick and not args.tuning else START_OFFSETS_H
     t0 = time.perf_counter()
     text, result = sky_study.run_sky_study(args.scenario, seeds, offsets, args.workers)
     wall = time.perf_counter() - t0
