@@ -72,8 +72,6 @@ _UNITS = {RANGE: "KM", "angle_1": "DEG", "angle_2": "DEG"}
 class SegmentInfo:
     """What the measurements of one TDM segment share."""
 
-    where: str
-    """How errors and counts name it: ``FILE:LINE: segment N``."""
     layout: Layout
     to_gcrf: Array | None
     """RADEC: the rotation of its REFERENCE_FRAME to GCRF (None: none needed)."""
@@ -329,8 +327,7 @@ class _Reading:
         station, oid = _participants(meta, src, self.sites)
         R = np.diag(_segment_sigma(meta, station, self.layout,
                                    self.sigma.get(self.layout.kind), src, self.sites)**2)
-        self.out.segments.append(SegmentInfo(f"{src}:{meta.line}: segment {meta.number}",
-                                             self.layout, to_gcrf, station, oid, R))
+        self.out.segments.append(SegmentInfo(self.layout, to_gcrf, station, oid, R))
         self.meta = meta
         self.channel = {k.upper(): i for i, k in enumerate(self.layout.keywords)}
         self.epoch_text = ""

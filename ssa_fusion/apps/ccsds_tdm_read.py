@@ -257,7 +257,7 @@ class TdmReader:
                                                  if known else "not a TDM keyword"))
         if state is _Kvn.HEADER and not header:
             self.fail(max(n, 1), "no CCSDS_TDM_VERS line: not a CCSDS TDM")
-        if state not in (_Kvn.BETWEEN,) and segments:
+        if state is not _Kvn.BETWEEN and segments:
             want = {_Kvn.META: "META_STOP", _Kvn.AFTER_META: "DATA_START",
                     _Kvn.DATA: "DATA_STOP"}[state]
             self.fail(n, f"the file ends inside segment {segments} (line "
