@@ -94,7 +94,7 @@ IMPORT_KEYS = {
     "plotly": "python3-plotly-pip",  # report.html (apps/report_html.py)
     "foxglove": "python3-foxglove-sdk-pip",  # foxglove-sdk: the foxglove_bridge node
     "ccsds_ndm": "python3-ccsds-ndm-pip",  # CCSDS OEM/TDM (apps/ccsds*.py)
-    "xsdata": "python3-ccsds-ndm-pip",  # ccsds-ndm's own dependency (its warnings' class)
+    "lxml": "python3-lxml",  # a TDM read as a stream (apps/ccsds_tdm_read.py)
     "numba": "python3-numba-pip",  # the batched EKF's compiled kernels (core/batch_ekf.py)
     "erfa": "python3-pyerfa-pip",  # frames and time scales (core/frames.py, timescales.py)
     "astropy_iers_data": "python3-astropy-iers-data-pip",  # IERS EOP and leap seconds
@@ -103,10 +103,11 @@ IMPORT_KEYS = {
 }
 """Third-party modules the code imports -> their rosdep key (None: optional, undeclared)."""
 ROSDISTRO_KEYS = {"python3-numpy", "python3-scipy", "python3-matplotlib", "python3-yaml",
-                  "python3-rosbags-pip", "mcap-ros2-support", "python3-pytest",
+                  "python3-lxml", "python3-rosbags-pip", "mcap-ros2-support", "python3-pytest",
                   "python3-hypothesis"}
 """Non-ROS keys of package.xml that ros/rosdistro's rosdep/python.yaml defines (checked by
-hand against rosdistro of 2026-08-22); the others must be in tools/rosdep.yaml."""
+hand against rosdistro of 2026-08-22; python3-lxml on 2026-11-25); the others must be in
+tools/rosdep.yaml."""
 ROS_PACKAGES = {"rclpy", "rcl_interfaces", "builtin_interfaces", "std_msgs", "rosgraph_msgs",
                 "diagnostic_msgs", "ament_index_python", "launch", "launch_ros",
                 "ssa_fusion_msgs", "geometry_msgs", "sensor_msgs", "visualization_msgs"}

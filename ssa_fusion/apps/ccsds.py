@@ -35,11 +35,14 @@ exports and written by the import, and the commands' options and runs.
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
+import time
 from collections import Counter, defaultdict
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TextIO
 
 from ssa_fusion.apps.args import add_sites
 from ssa_fusion.apps.ccsds_format import (
@@ -49,11 +52,10 @@ from ssa_fusion.apps.ccsds_format import (
     AngleFrame,
     CcsdsError,
     OemFrame,
-    read_ndm,
     write_ndm,
 )
 from ssa_fusion.apps.ccsds_oem import ephemerides, oem_document
-from ssa_fusion.apps.ccsds_tdm_in import tdm_measurements
+from ssa_fusion.apps.ccsds_tdm_in import read_tdm
 from ssa_fusion.apps.ccsds_tdm_out import tdm_document
 from ssa_fusion.core import types
 from ssa_fusion.core.frames import Frame
@@ -112,21 +114,72 @@ def require_gcrf(bag: Path, contents: BagContents, topics: Iterable[str], what: 
                 f"are not GCRF; re-record the bag with this version to export it")
 
 
-def write_measurement_bag(out: Path, measurements: Sequence[types.Measurement]) -> None:
+def write_measurement_bag(out: Path, measurements: Iterable[types.Measurement],
+                          progress: Callable[[int], None] | None = None) -> int:
     """Write the bag `out` of `measurements` on /ssa/measurement, each logged at its stamp.
 
-    What `replay` plays; it derives /clock from the stamps.
+    What `replay` plays; it derives /clock from the stamps. One message at a time;
+    `progress(written so far)` every `PROGRESS_EVERY` messages. A bag not written to its end
+    (an error, an interrupt) is removed. Returns the number of messages written.
     """
     classes = bagio.rosbags_classes()
     writer = bagio.BagWriter(out)
+    n = 0
     try:
         writer.add_topic(TOPIC_MEASUREMENT, f"{bagio.MSG_PACKAGE}/msg/Measurement")
         for m in measurements:
             msg = messages.measurement_to_msg(m, classes)
             stamp = msg.header.stamp
             writer.write_msg(TOPIC_MEASUREMENT, stamp.sec * 1_000_000_000 + stamp.nanosec, msg)
-    finally:
+            n += 1
+            if progress is not None and n % PROGRESS_EVERY == 0:
+                progress(n)
         writer.close()
+    except BaseException:
+        writer.close()
+        shutil.rmtree(out, ignore_errors=True)
+        raise
+    return n
+
+
+PROGRESS_EVERY = 8192
+"""Messages between two calls of `write_measurement_bag`'s progress callback."""
+
+
+class ImportProgress:
+    """Lines on stderr saying how far `import tdm` is, one every `every_s` seconds at most.
+
+    Nothing for an import done within `every_s`: a small file says only its summary.
+    """
+
+    def __init__(self, every_s: float = 5.0, stream: TextIO | None = None) -> None:
+        self.every_s = every_s
+        self.stream = stream if stream is not None else sys.stderr
+        self.t0 = self.last = time.monotonic()
+        self.total = 0
+
+    def _due(self) -> bool:
+        now = time.monotonic()
+        if now - self.last < self.every_s:
+            return False
+        self.last = now
+        return True
+
+    def reading(self, done: int, size: int, measurements: int) -> None:
+        """Say the bytes read of `size` and the measurements so far (if one is due)."""
+        if self._due():
+            self._say(f"read {done / 1e6:.1f} of {size / 1e6:.1f} MB "
+                      f"({100.0 * done / max(size, 1):.0f}%), {measurements} measurements")
+
+    def writing(self, done: int) -> None:
+        """Say the messages written of `total` (if one is due)."""
+        if self._due():
+            self._say(f"wrote {done} of {self.total} measurements to the bag "
+                      f"({100.0 * done / max(self.total, 1):.0f}%)")
+
+    def _say(self, what: str) -> None:
+        print(f"import tdm: {what}, {time.monotonic() - self.t0:.0f} s", file=self.stream,
+              flush=True)
 
 
 # ------------------------------------------------------------------------------------------
@@ -265,21 +318,33 @@ def run_export_tdm(args: argparse.Namespace) -> int:
     return 0
 
 
+def _names(names: Sequence[str], most: int = 5) -> str:
+    """Return `names` joined by commas, the first `most` of them and how many more."""
+    more = f" and {len(names) - most} more" if len(names) > most else ""
+    return ", ".join(names[:most]) + more
+
+
 def run_import_tdm(args: argparse.Namespace) -> int:
-    """Run `import tdm`: write the TDM's measurements to a new bag; return 0."""
+    """Run `import tdm`: write the TDM's measurements to a new bag; return 0.
+
+    The file is read as a stream, then the bag written in epoch order (`ccsds_tdm_in`);
+    a line on stderr every few seconds says how far either has got.
+    """
     if args.bag.exists():
         raise CcsdsError(f"{args.bag} exists already; choose another --bag")
     sigma = {layout.kind: s for layout in LAYOUTS.values()
              if (s := getattr(args, f"sigma_{layout.angle_type.lower()}", None)) is not None}
     sites = load_sites(args.sites) if args.sites else {}
-    imported = tdm_measurements(read_ndm(args.file), sigma, str(args.file), sites)
-    write_measurement_bag(args.bag, imported.measurements)
-    ms = imported.measurements
-    objects = sorted({m.object_id for m in ms})
-    stations = sorted({m.frame_id for m in ms})
-    said = _measurements_said(Counter(int(m.kind) for m in ms))
+    progress = ImportProgress()
+    imported = read_tdm(args.file, sigma, sites, progress=progress.reading)
+    progress.total = len(imported)
+    write_measurement_bag(args.bag, imported.measurements(), progress=progress.writing)
+    used = imported.used_segments()
+    objects = sorted({s.object_id for s in used})
+    stations = sorted({s.station for s in used})
+    said = _measurements_said(imported.counts())
     with_sites = f" --sites {args.sites}" if args.sites else ""
-    print(f"import tdm: {said} measurements of {', '.join(objects)} from "
-          f"{', '.join(stations)}{imported.left_out()} -> {args.bag}; run it with "
+    print(f"import tdm: {said} measurements of {_names(objects)} from "
+          f"{_names(stations)}{imported.left_out()} -> {args.bag}; run it with "
           f"`ssa-fusion replay {args.bag}{with_sites}`")
     return 0

@@ -7,20 +7,21 @@
   (`AngleFrame`), the IAU 2006 frame bias (`frame_bias`) and the rotations out of the GCRF;
 * how a measurement kind is written into and read from a TDM segment (`Layout`: `AZEL`,
   `RADEC`);
-* reading and writing NDM files (KVN or XML) with the ``ccsds-ndm`` library, imported on use.
+* writing NDM files (KVN or XML) with the ``ccsds-ndm`` library, imported on use (a TDM is
+  read as a stream by `ccsds_tdm_read`, which needs no model of the whole file).
 
 The messages themselves: `ccsds_oem` (OEM out), `ccsds_tdm_out` (TDM out), `ccsds_tdm_in`
-(TDM in); the commands: `ccsds`. Conventions: docs/CCSDS.md.
+(TDM in, read by `ccsds_tdm_read`); the commands: `ccsds`. Conventions: docs/CCSDS.md.
 """
 
 from __future__ import annotations
 
+import calendar
 import datetime as dt
 import enum
 import functools
 import math
 import re
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ssa_fusion.core import frames, timescales, types
+from ssa_fusion.core.quoting import quote
 from ssa_fusion.ros import messages
 
 if TYPE_CHECKING:  # ccsds-ndm is imported on use (`ndm`)
@@ -203,7 +205,8 @@ def rotate_radec(ra: float, dec: float, m: Array) -> tuple[float, float]:
 # ------------------------------------------------------------------------------------------
 # epochs: Unix seconds (float, as the bag stamps give them) <-> CCSDS strings, to the ns
 # ------------------------------------------------------------------------------------------
-_EPOCH = re.compile(r"^(\d{4})-(?:(\d{2})-(\d{2})|(\d{3}))T(\d{2}):(\d{2}):(\d{2})(?:\.(\d+))?Z?$")
+_EPOCH = re.compile(r"^(\d{4})-(?:(\d{2})-(\d{2})|(\d{3}))T(\d{2}):(\d{2}):(\d{2})(?:\.(\d+))?Z?$",
+                    re.ASCII)
 
 
 def format_epoch(t: float) -> str:
@@ -223,16 +226,21 @@ def _parse_ns(text: str) -> int:
     """CCSDS epoch (calendar or day-of-year form) -> ns since 1970-01-01 of its calendar."""
     m = _EPOCH.match(text.strip())
     if m is None:
-        raise CcsdsError(f"epoch {text!r} is not a CCSDS epoch (YYYY-MM-DDThh:mm:ss[.f] "
+        raise CcsdsError(f"epoch {quote(text)} is not a CCSDS epoch (YYYY-MM-DDThh:mm:ss[.f] "
                          f"or YYYY-DDDThh:mm:ss[.f])")
     year, month, day, doy, hh, mm, ss, frac = m.groups()
     try:
         if doy is not None:
+            if not 1 <= int(doy) <= (366 if calendar.isleap(int(year)) else 365):
+                raise ValueError(f"day of year {doy} is not in the year {year}")
             date = dt.datetime(int(year), 1, 1, tzinfo=dt.UTC) + dt.timedelta(days=int(doy) - 1)
         else:
             date = dt.datetime(int(year), int(month), int(day), tzinfo=dt.UTC)
-    except ValueError as exc:
-        raise CcsdsError(f"epoch {text!r}: {exc}") from None
+        if int(hh) > 23 or int(mm) > 59 or int(ss) > 60:
+            raise ValueError(f"time of day {hh}:{mm}:{ss} is not one (hh <= 23, mm <= 59, "
+                             f"ss <= 60)")
+    except (ValueError, OverflowError) as exc:
+        raise CcsdsError(f"epoch {quote(text)}: {exc}") from None
     sec = int(date.timestamp()) + int(hh) * 3600 + int(mm) * 60 + int(ss)
     return sec * 1_000_000_000 + (round(float(f"0.{frac}") * 1e9) if frac else 0)
 
@@ -294,50 +302,8 @@ def creation_date() -> str:
     return f"{dt.datetime.now(dt.UTC):%Y-%m-%dT%H:%M:%S}"
 
 
-def _one_line(exc: BaseException | str) -> str:
-    """Return an exception's (or warning's) message on one line (or its type's name)."""
-    return " ".join(str(exc).split()) or type(exc).__name__
-
-
 def write_ndm(doc: object, out: Path, fmt: str) -> None:
     """Write an NDM object tree to `out` as ``kvn`` or ``xml`` (ccsds-ndm)."""
     io, formats, *_ = ndm()
     text = io.to_string(doc, formats.XML if fmt == "xml" else formats.KVN)
     out.write_text(text if text.endswith("\n") else text + "\n")
-
-
-_GCRF_REFERENCE = re.compile(r"(REFERENCE_FRAME\s*(?:=|>)\s*)GCRF(?=\s*(?:<|$))",
-                             re.IGNORECASE | re.MULTILINE)
-"""``REFERENCE_FRAME = GCRF`` (KVN) or ``<REFERENCE_FRAME>GCRF<`` (XML): read as ICRF."""
-
-
-def read_ndm(path: Path) -> object:
-    """Parse a CCSDS NDM file (KVN or XML) with ccsds-ndm; return its object tree.
-
-    CcsdsError (one line naming the file) if it cannot, or if the library could not convert
-    a value (XML).
-
-    A TDM ``REFERENCE_FRAME = GCRF``, which the TDM 2.0 schema lacks, is read as ``ICRF``
-    (the same axes; module docstring).
-    """
-    from xsdata.exceptions import ConverterWarning
-
-    io, *_ = ndm()
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CcsdsError(f"{path}: cannot read: {getattr(exc, 'strerror', None) or exc}") \
-            from None
-    text = _GCRF_REFERENCE.sub(rf"\g<1>{AngleFrame.ICRF}", text)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", ConverterWarning)
-        try:
-            doc = io.from_string(text)
-        except Exception as exc:  # the parser raises many unrelated types; name the file
-            raise CcsdsError(f"{path}: not a readable CCSDS message: {_one_line(exc)}") \
-                from None
-    for w in caught:
-        if issubclass(w.category, ConverterWarning):
-            raise CcsdsError(f"{path}: not a readable CCSDS message: {_one_line(w.message)}")
-        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    return doc

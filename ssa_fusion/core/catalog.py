@@ -19,7 +19,8 @@ element set is checked against the domain of its fields before it is used: finit
 an inclination in [0, 180] deg, an eccentricity in [0, 1), a mean motion of a bound orbit
 above the Earth's surface (0 < n <= `MAX_MEAN_MOTION_REV_DAY`), |B*| <= `MAX_BSTAR`, an
 epoch ssa_fusion represents (`timescales.EPOCH_MIN` .. `EPOCH_MAX`), and for OMM a
-one-letter classification and integer counters in the TLE's ranges. The object id is the
+one-letter classification and integer counters in the TLE's ranges, a name of at most
+`MAX_NAME` characters. The object id is the
 NORAD catalogue number as a decimal string (``"5"`` for ``00005``; Alpha-5 numbers as their
 integer, ``A0001`` -> ``"100001"``), the same for a TLE and the OMM of the same object; an id
 twice in one file is an error.
@@ -57,6 +58,9 @@ from .timescales import DAY_S, UNIX_EPOCH_JD, check_epochs, jd_utc
 
 MAX_QUOTE = 60
 """Characters of a value quoted in an error message (the rest is cut: '...')."""
+MAX_NAME = 128
+"""Longest object name taken (a 3LE name line is 24 characters, an OMM OBJECT_NAME as long;
+`validation.MAX_ID_CHARS` is as long)."""
 MAX_MEAN_MOTION_REV_DAY = 18.0
 """The largest mean motion taken, rev/day: 17 rev/day is an orbit at the Earth's surface."""
 MAX_BSTAR = 1.0
@@ -181,14 +185,22 @@ def parse_tle(text: str, source: str = "<string>") -> list[CatalogEntry]:
         elif line.startswith("2 "):
             raise ValueError(f"{source}:{no}: TLE line 2 without a line 1 before it")
         elif name:
-            raise ValueError(f"{source}:{name_no}: name line {name!r} is not followed by "
-                             f"TLE lines (line {no} is neither)")
+            raise ValueError(f"{source}:{name_no}: name line {_quote(name)} is not followed "
+                             f"by TLE lines (line {no} is neither)")
         else:
             name, name_no = (line[2:] if line.startswith("0 ") else line).strip(), no
+            _check_name(name, f"{source}:{no}: name line")
     if name:
-        raise ValueError(f"{source}:{name_no}: name line {name!r} at the end of the file "
-                         f"without TLE lines")
+        raise ValueError(f"{source}:{name_no}: name line {_quote(name)} at the end of the "
+                         f"file without TLE lines")
     return out
+
+
+def _check_name(name: str, where: str) -> None:
+    """Refuse an object name longer than `MAX_NAME` characters (ValueError naming `where`)."""
+    if len(name) > MAX_NAME:
+        raise ValueError(f"{where}: an object name of {len(name)} characters (at most "
+                         f"{MAX_NAME}): {_quote(name)}")
 
 
 def _numbered(lines: Iterable[str]) -> Iterator[tuple[int, str]]:
@@ -354,6 +366,7 @@ def _omm_entry(fields: dict[str, Any], where: str) -> CatalogEntry:
         raise ValueError(f"{where}: malformed OMM field: {_quote(str(exc))}") from None
     _check_satrec(sat, where)
     name = (fields.get("OBJECT_NAME") or "").strip()
+    _check_name(name, f"{where}: OMM OBJECT_NAME")
     return CatalogEntry(str(sat.satnum), name, sat, where)
 
 

@@ -25,7 +25,11 @@ Optical noise is ``{ra_arcsec: ..., dec_arcsec: ...}``. Every value is a finite 
 of range, a bad ``type``, an id given twice or one that is a built-in station, sensor or
 network id (`RESERVED_IDS`) are refused with one line naming the file, the site (its id,
 else its position in the list) and the field (`SiteFileError`). A mapping that gives a key
-twice is refused too (YAML itself keeps the last).
+twice is refused too (YAML itself keeps the last). The line is bounded whatever the file
+holds: values are quoted to `quoting.MAX_QUOTE` characters without walking all of them (a
+YAML alias bomb of a few hundred bytes loads as 10^8 items), and a file over
+`MAX_FILE_BYTES` is refused before it is parsed (a site is a few hundred bytes; YAML is
+parsed whole, at ~3 MB/s and ~200 bytes of memory per byte).
 
 Units out: a site becomes a `stations.Sensor` at a `frames.Station` (latitude and longitude
 in rad, height in km above the WGS-84 ellipsoid, so its ITRF position is
@@ -43,6 +47,7 @@ from typing import Any, NoReturn
 
 from .constants import ARCSEC
 from .frames import Station
+from .quoting import one_line, quote, shown
 from .stations import DARK_BELOW_DEG, NETWORKS, SENSORS, STATIONS, Sensor, SensorType
 
 RESERVED_IDS = frozenset({*STATIONS, *SENSORS, *NETWORKS, "gcrf"})
@@ -52,6 +57,9 @@ RESERVED_IDS = frozenset({*STATIONS, *SENSORS, *NETWORKS, "gcrf"})
 ID_PATTERN = re.compile(r"[a-z0-9][a-z0-9_-]*")
 """What a site id looks like: a TDM participant name in lowercase (participants are matched
 case-insensitively), without commas (which separate the ids of a network)."""
+
+MAX_FILE_BYTES = 1_000_000
+"""Largest sites file read (thousands of sites; the example's three are 3 kB)."""
 
 HEIGHT_RANGE_M = (-1000.0, 10000.0)
 """Heights a ground site may have, m above the WGS-84 ellipsoid."""
@@ -85,9 +93,14 @@ def _loader() -> type:
             seen: set[object] = set()
             for key_node, _ in node.value:
                 key = self.construct_object(key_node, deep=deep)
+                try:
+                    hash(key)
+                except TypeError:  # a list or mapping as a key
+                    raise yaml.constructor.ConstructorError(
+                        None, None, "found unhashable key", key_node.start_mark) from None
                 if key in seen:
                     raise yaml.constructor.ConstructorError(
-                        None, None, f"key {key!r} given twice", key_node.start_mark)
+                        None, None, f"key {quote(key)} given twice", key_node.start_mark)
                 seen.add(key)
             return super().construct_mapping(node, deep=deep)
 
@@ -105,11 +118,11 @@ class _Site:
         self.raw: Mapping[str, Any] = raw
         site_id = raw.get("id")
         if isinstance(site_id, str) and site_id:
-            self.name = f"site {site_id!r}"
+            self.name = f"site {quote(site_id)}"
 
     def fail(self, field: str, why: str) -> NoReturn:
         """Raise the one-line error of `field` (of this site)."""
-        where = f"{self.name}: {field}" if field else self.name
+        where = f"{self.name}: {shown(field, 80)}" if field else self.name
         raise SiteFileError(f"{self.path}: {where}: {why}")
 
     def number(self, key: str, low: float = -math.inf, high: float = math.inf,
@@ -119,14 +132,17 @@ class _Site:
         v = (self.raw if within is None else within).get(key)
         name = field or key
         if isinstance(v, bool) or not isinstance(v, int | float):
-            self.fail(name, f"must be a number, got {v!r}")
-        x = float(v)
+            self.fail(name, f"must be a number, got {quote(v)}")
+        try:
+            x = float(v)
+        except OverflowError:  # an integer beyond a float's range
+            x = math.inf
         if not math.isfinite(x):
-            self.fail(name, f"must be a finite number, got {v!r}")
+            self.fail(name, f"must be a finite number, got {quote(v)}")
         if positive and not x > 0:
-            self.fail(name, f"must be > 0, got {v!r}")
+            self.fail(name, f"must be > 0, got {quote(v)}")
         if not low <= x <= high:
-            self.fail(name, f"must be in {low:g}..{high:g}, got {v!r}")
+            self.fail(name, f"must be in {low:g}..{high:g}, got {quote(v)}")
         return x
 
     def sensor(self, source: str) -> Sensor:
@@ -134,14 +150,15 @@ class _Site:
         raw = self.raw
         unknown = sorted(str(k) for k in raw if k not in (*_REQUIRED, *_OPTIONAL))
         if unknown:
-            self.fail(unknown[0], f"unknown field (known: {', '.join((*_REQUIRED, *_OPTIONAL))})")
+            self.fail(unknown[0], f"unknown field (known: "
+                                       f"{', '.join((*_REQUIRED, *_OPTIONAL))})")
         for key in _REQUIRED:
             if key not in raw:
                 self.fail(key, "missing")
         site_id = raw["id"]
         if not isinstance(site_id, str) or not ID_PATTERN.fullmatch(site_id):
             self.fail("id", f"must be lowercase letters, digits, '_' or '-' (starting with a "
-                            f"letter or digit), got {site_id!r}")
+                            f"letter or digit), got {quote(site_id)}")
         if site_id in RESERVED_IDS:
             self.fail("id", "is a built-in station, sensor or network id "
                             f"({', '.join(sorted(RESERVED_IDS))}); choose another")
@@ -150,7 +167,7 @@ class _Site:
         height = self.number("height_m", *HEIGHT_RANGE_M)
         kind = raw["type"]
         if kind not in tuple(SensorType):
-            self.fail("type", f"must be one of {', '.join(SensorType)}, got {kind!r}")
+            self.fail("type", f"must be one of {', '.join(SensorType)}, got {quote(kind)}")
         sensor_type = SensorType(kind)
         sigma = self.noise(sensor_type)
         cadence = self.number("cadence_s", positive=True)
@@ -184,11 +201,11 @@ class _Site:
         fields = NOISE_FIELDS[sensor_type]
         names = [k for k, _ in fields]
         if not isinstance(raw, Mapping):
-            self.fail("noise", f"must be a mapping of {', '.join(names)}, got {raw!r}")
+            self.fail("noise", f"must be a mapping of {', '.join(names)}, got {quote(raw)}")
         extra = sorted(str(k) for k in raw if k not in names)
         if extra:
-            self.fail(f"noise.{extra[0]}", f"unknown for a {sensor_type} (a {sensor_type} "
-                                           f"has {', '.join(names)})")
+            self.fail(f"noise.{extra[0]}", f"unknown for a {sensor_type} (a "
+                                                f"{sensor_type} has {', '.join(names)})")
         for k in names:
             if k not in raw:
                 self.fail(f"noise.{k}", "missing")
@@ -200,12 +217,13 @@ class _Site:
         raw = self.raw["mask_by_azimuth"]
         if not isinstance(raw, list) or not raw:
             self.fail("mask_by_azimuth", f"must be a non-empty list of [azimuth_deg, "
-                                         f"min_elevation_deg], got {raw!r}")
+                                         f"min_elevation_deg], got {quote(raw)}")
         out: list[tuple[float, float]] = []
         for i, point in enumerate(raw):
             field = f"mask_by_azimuth[{i}]"
             if not isinstance(point, list) or len(point) != 2:
-                self.fail(field, f"must be [azimuth_deg, min_elevation_deg], got {point!r}")
+                self.fail(field, f"must be [azimuth_deg, min_elevation_deg], got "
+                                 f"{quote(point)}")
             pair = dict(zip(("az", "el"), point, strict=True))
             az = self.number("az", 0.0, 360.0, within=pair, field=f"{field} azimuth")
             el = self.number("el", -90.0, 90.0, within=pair, field=f"{field} elevation")
@@ -223,12 +241,14 @@ def parse_sites(data: object, path: Path | str = "<sites>") -> dict[str, Sensor]
     site and the field) for anything invalid.
     """
     if not isinstance(data, Mapping) or set(data) != {"sites"}:
-        keys = sorted(map(str, data)) if isinstance(data, Mapping) else type(data).__name__
+        keys = quote(sorted(map(str, data))) if isinstance(data, Mapping) else \
+            type(data).__name__
         raise SiteFileError(f"{path}: must be a mapping with one key, 'sites' (a list of "
                             f"sites), got {keys}")
     raw = data["sites"]
     if not isinstance(raw, list) or not raw:
-        raise SiteFileError(f"{path}: sites: must be a non-empty list of sites, got {raw!r}")
+        raise SiteFileError(f"{path}: sites: must be a non-empty list of sites, got "
+                            f"{quote(raw)}")
     out: dict[str, Sensor] = {}
     for i, item in enumerate(raw):
         site = _Site(path, i, item)
@@ -248,14 +268,22 @@ def load_sites(path: Path | str) -> dict[str, Sensor]:
     import yaml
 
     try:
-        text = Path(path).read_text()
+        with Path(path).open("rb") as f:
+            raw = f.read(MAX_FILE_BYTES + 1)
+        if len(raw) > MAX_FILE_BYTES:
+            raise SiteFileError(f"{path}: larger than {MAX_FILE_BYTES} bytes; a sites file "
+                                "holds a few hundred bytes per site")
+        text = raw.decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise SiteFileError(f"cannot read sites file {path}: {exc}") from None
+        raise SiteFileError(f"cannot read sites file {path}: {one_line(exc, 120)}") from None
     try:
         data = yaml.load(text, Loader=_loader())  # a SafeLoader subclass
     except yaml.YAMLError as exc:
-        said = " ".join(str(exc).split())
-        raise SiteFileError(f"{path}: not valid YAML: {said}") from None
+        raise SiteFileError(f"{path}: not valid YAML: {one_line(exc, 240)}") from None
+    except Exception as exc:  # PyYAML's own on odd input (RecursionError, MemoryError too):
+        # ValueError (an int of 5000 digits), IndexError ('!!float' of nothing), ...
+        raise SiteFileError(f"{path}: not a sites file PyYAML can load: "
+                            f"{type(exc).__name__}: {one_line(exc, 120)}") from None
     return parse_sites(data, path)
 
 

@@ -58,8 +58,11 @@ class Check:
 
 def _finite(value: object) -> float | None:
     """Return an int or a finite float as a float, anything else as None."""
-    if isinstance(value, int | float) and math.isfinite(value):
-        return float(value)
+    try:
+        if isinstance(value, int | float) and math.isfinite(value):
+            return float(value)
+    except OverflowError:  # an int beyond a float's range (a params file's YAML)
+        pass
     return None
 
 
@@ -129,8 +132,10 @@ def read_by(read: Callable[[str], object],
     def check(value: ParamValue) -> str | None:
         if empty_ok and value == "":
             return None
+        if not isinstance(value, str):  # a params file's YAML: its str() may be enormous
+            return f"must be a string, got {type(value).__name__}"
         try:
-            read(str(value))
+            read(value)
         except ValueError as exc:
             return str(exc)
         return None

@@ -20,6 +20,7 @@ from typing import Any
 from ssa_fusion.core import config
 from ssa_fusion.core.config import EstimatorConfig, Lift
 from ssa_fusion.core.filter_options import FilterOptions
+from ssa_fusion.core.quoting import one_line, quote, shown
 from ssa_fusion.core.site_file import load_stations
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
@@ -178,13 +179,13 @@ def section_problem(section: Mapping[str, Any], table: ParameterTable) -> str | 
         if key in ROS_OWN_PARAMETERS:
             continue
         if key not in table.names:
-            return f"'{key}' is not a parameter of {table.node} (docs/NODES.md)"
+            return f"{quote(key)} is not a parameter of {table.node} (docs/NODES.md)"
         try:
             reason = table[key].reason(value)
-        except (TypeError, ValueError, AttributeError):
+        except (TypeError, ValueError, AttributeError, ArithmeticError):
             reason = f"of the wrong type ({type(value).__name__})"
         if reason:
-            return f"parameter '{key}' = {value!r}: {reason}"
+            return f"parameter '{key}' = {quote(value)}: {one_line(reason, 200)}"
     return None
 
 
@@ -197,14 +198,21 @@ def load_params_file(path: Path | str) -> EstimatorConfig:
     import yaml
 
     try:
-        if Path(path).stat().st_size > PARAMS_FILE_MAX_BYTES:
+        with Path(path).open("rb") as f:
+            raw = f.read(PARAMS_FILE_MAX_BYTES + 1)
+        if len(raw) > PARAMS_FILE_MAX_BYTES:
             raise ValueError(f"params file {path}: larger than {PARAMS_FILE_MAX_BYTES} bytes; "
                              "a params file holds a few settings per node")
-        loaded = yaml.safe_load(Path(path).read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise ValueError(f"cannot read params file {path}: {exc}") from exc
+        loaded = yaml.safe_load(raw.decode("utf-8"))
+    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise ValueError(f"cannot read params file {shown(str(path), 200)}: "
+                         f"{one_line(exc, 240)}") from None
     except (RecursionError, MemoryError):
         raise ValueError(f"params file {path}: nested too deeply or too large to read") from None
+    except Exception as exc:  # PyYAML's own on odd input: ValueError (an int of over 4300
+        # digits), IndexError ('!!float' of nothing), ...
+        raise ValueError(f"params file {path}: not YAML PyYAML can load: "
+                         f"{type(exc).__name__}: {one_line(exc, 120)}") from None
     if not isinstance(loaded, Mapping):
         raise ValueError(f"params file {path}: not a mapping of node names to ros__parameters")
     from ssa_fusion.nodes.filter import PARAMETERS as FILTER_TABLE
@@ -218,8 +226,8 @@ def load_params_file(path: Path | str) -> EstimatorConfig:
     surr = {k: v for k, v in node_section(loaded, "surrogate").items() if k in SURROGATE_KEYS}
     try:
         return estimator_from(filt, surr)
-    except (ValueError, TypeError, KeyError) as exc:
-        raise ValueError(f"params file {path}: {exc}") from exc
+    except (ValueError, TypeError, KeyError, ArithmeticError) as exc:
+        raise ValueError(f"params file {path}: {one_line(exc, 300)}") from None
 
 
 _OWN = {"filter": ("tracker", "motion_model", "motion_params"), "surrogate": ("surrogate", "lift")}

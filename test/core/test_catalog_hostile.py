@@ -71,6 +71,15 @@ def refused(tmp_path: Path, name: str, text: str) -> str:
     ("epoch.csv", csv_of(ROW.replace("2019-12-31", "2100-06-01")),
      "epoch 2100-06-01T19:42:47.134Z is outside the range ssa_fusion represents"),
     ("big.csv", csv_of(ROW.replace("ISS", "X" * 200_000)), "unreadable CSV row"),
+    # one-line files of 3 MB ("a 100 MB one-line catalog's error line is 100 MB long")
+    ("oneline.tle", "1 " + "x" * 3_000_000, ":1: TLE line 1 is not followed by its line 2"),
+    ("oneline.csv", "NORAD_CAT_ID," + "x" * 3_000_000, "field larger than field limit"),
+    ("oneline.xml", "<ndm>" + "x" * 3_000_000, ":1: not well-formed XML"),
+    # a 3 MB name line was taken as the name, or quoted whole when no TLE followed it
+    ("longname.tle", "x" * 3_000_000 + "\n" + tle(), ":1: name line: an object name of "
+                                                    "3000000 characters (at most 128)"),
+    ("longname.csv", csv_of(ROW.replace("ISS", "X" * 100_000)),
+     ":2: OMM OBJECT_NAME: an object name of 100000 characters"),
     ("empty.xml", '<?xml version="1.0"?><ndm><omm><body><segment><metadata></metadata>'
                   "<data></data></segment></body></omm></ndm>", "lacks (or has empty)"),
 ])

@@ -1,9 +1,12 @@
 """`core.site_file`: the example sites file loads as written, sites land where astropy puts
-them, and every bad input is refused with one line naming the file, the site and the field."""
+them, and every bad input is refused with one line naming the file, the site and the field:
+bounded, whatever the file holds (an alias bomb, a 3 MB line, an integer of 5000 digits),
+and nothing but that error for mutated and random text (hypothesis)."""
 
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import numpy as np
@@ -11,9 +14,12 @@ import pytest
 import yaml
 from astropy import units as u
 from astropy.coordinates import EarthLocation
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from ssa_fusion.core import config, frames
 from ssa_fusion.core.constants import ARCSEC
+from ssa_fusion.core.quoting import MAX_MESSAGE
 from ssa_fusion.core.site_file import SiteFileError, load_sites, load_stations, parse_sites
 from ssa_fusion.core.stations import SensorType, network_stations
 from ssa_fusion.core.types import Kind
@@ -177,3 +183,111 @@ def test_duplicate_ids_and_bad_files_are_refused(tmp_path):
         load_sites(broken)
     assert "\n" not in str(exc.value)
     assert issubclass(SiteFileError, ValueError)
+
+
+# ------------------------------------------------------------------------------------------
+# hostile files: bounded time, memory and message (named cases), and fuzzing
+# ------------------------------------------------------------------------------------------
+BOMB = "&l0 [lol, lol, lol, lol, lol, lol, lol, lol, lol], " + ", ".join(
+    f"&l{i} [{', '.join([f'*l{i - 1}'] * 9)}]" for i in range(1, 12))
+"""YAML flow items whose last list holds 9^11 (3e10) items by aliases: 500 bytes of text."""
+
+
+def refused(path: Path, text: str | bytes) -> str:
+    """The bounded one-line SiteFileError `load_sites` gives for `text` (written to `path`)."""
+    if isinstance(text, bytes):
+        path.write_bytes(text)
+    else:
+        path.write_text(text)
+    with pytest.raises(SiteFileError) as exc:
+        load_sites(path)
+    said = str(exc.value)
+    assert "\n" not in said and len(said) <= MAX_MESSAGE and str(path) in said, said[:300]
+    return said
+
+
+def radar(mask: str = "[[0, 1]]") -> str:
+    """A sites file of one radar site whose mask_by_azimuth is the YAML `mask`."""
+    return ("sites:\n  - {id: x, latitude_deg: 1, longitude_deg: 1, height_m: 1, type: radar,\n"
+            "     noise: {range_m: 1, azimuth_deg: 1, elevation_deg: 1}, cadence_s: 1,\n"
+            f"     min_elevation_deg: 1, mask_by_azimuth: {mask}}}\n")
+
+
+@pytest.mark.parametrize(("name", "text", "says"), [
+    # the repr of an alias bomb in the message was gigabytes (39 MB for 9^7 items)
+    ("mask_bomb.yaml", radar(f"[[{BOMB}]]"),
+     "mask_by_azimuth[0]: must be [azimuth_deg, min_elevation_deg], got [['lol', 'lol', "),
+    ("sites_bomb.yaml", f"sites: {{a: [{BOMB}], b: *l11}}\n",
+     "sites: must be a non-empty list of sites, got {'a': [['lol', 'lol',"),
+    ("long_key.yaml", radar().replace("type: radar", f"type: radar, {'k' * 1000}: 1"),
+     "site 'x': kkkkkkkkkk"),
+    # a 3 MB one-line file: refused before YAML parses it (20 s and 700 MB at 3 MB)
+    ("oneline.yaml", "sites: [" + "1, " * 1_000_000 + "]\n", "larger than 1000000 bytes"),
+    # an integer of 5000 digits: PyYAML's int() raised a bare ValueError without the file
+    ("digits.yaml", "sites: " + "9" * 5000 + "\n", "not a sites file PyYAML can load"),
+    # an integer beyond a float: float() raised OverflowError
+    ("big_int.yaml", radar().replace("latitude_deg: 1", f"latitude_deg: {10**400}"),
+     "latitude_deg: must be a finite number, got <integer of 1329 bits>"),
+    ("latin1.yaml", "sites: [caf\xe9]\n".encode("latin-1"), "cannot read sites file"),
+    # a mapping as a key: the check for keys given twice hashed it (TypeError)
+    ("dict_key.yaml", "? {a: 1}\n: 0\n", "not valid YAML: found unhashable key"),
+    # PyYAML's float constructor indexes the empty string (IndexError)
+    ("empty_float.yaml", "!!float", "not a sites file PyYAML can load: IndexError"),
+])
+def test_a_hostile_sites_file_is_refused_in_one_bounded_line(tmp_path, name, text, says):
+    t0 = time.perf_counter()
+    said = refused(tmp_path / name, text)
+    assert says in said, said
+    assert time.perf_counter() - t0 < 5.0
+
+
+FUZZ = settings(max_examples=150, deadline=None, derandomize=True,
+                suppress_health_check=[HealthCheck.too_slow])
+TOKENS = [": ", "- ", "\n", "  ", "[", "]", "{", "}", ",", "&a ", "*a", "!!binary ", "!!float ",
+          ".nan", ".inf", "-.inf", "1e400", "9" * 400, "true", "~", "id: ", "type: optical",
+          "noise: ", "mask_by_azimuth: [[0, 1], [0, 2]]", "max_range_km: ", "'", '"', "#", "\t",
+          "\x00", "é", "? ", "<<: "]
+
+
+@pytest.fixture(scope="module")
+def fuzz_dir(tmp_path_factory):
+    return tmp_path_factory.mktemp("sites_fuzz")
+
+
+def _only_site_file_errors(path: Path, text: str) -> None:
+    """`load_sites` gives sensors within their domains or a bounded SiteFileError."""
+    path.write_text(text, encoding="utf-8", errors="surrogatepass")
+    try:
+        sites = load_sites(path)
+    except SiteFileError as exc:
+        said = str(exc)
+        assert "\n" not in said and len(said) <= MAX_MESSAGE and str(path) in said, said[:300]
+        return
+    for s in sites.values():
+        assert abs(s.station.lat_rad) <= math.pi / 2 and all(v > 0 for v in s.sigma)
+
+
+def _mutated(text: str):
+    edit = st.tuples(st.integers(0, len(text)), st.integers(0, 8),
+                     st.one_of(st.sampled_from(TOKENS), st.text(max_size=6)))
+    return st.lists(edit, min_size=1, max_size=5).map(lambda edits: _apply(text, edits))
+
+
+def _apply(text: str, edits) -> str:
+    for at, drop, new in edits:
+        at = min(at, len(text))
+        text = text[:at] + new + text[at + drop:]
+    return text
+
+
+@FUZZ
+@given(_mutated(EXAMPLE.read_text()))
+def test_a_mutated_sites_file_gives_sites_or_one_site_file_error(fuzz_dir, text):
+    _only_site_file_errors(fuzz_dir / "m.yaml", text)
+
+
+@FUZZ
+@given(st.one_of(st.text(max_size=300),
+                 st.lists(st.sampled_from(TOKENS), max_size=40).map("".join)))
+def test_random_text_gives_sites_or_one_site_file_error(fuzz_dir, text):
+    _only_site_file_errors(fuzz_dir / "r.yaml", text)
