@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fuzz_text import mutated
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -257,28 +258,14 @@ def _only_ccsds_errors(path: Path, text: str | bytes) -> None:
     assert "\n" not in said and len(said) <= 2 * MAX_MESSAGE, said
 
 
-def mutated(text: str):
-    """`text` with a few insertions, deletions and replacements (tokens of the format)."""
-    edit = st.tuples(st.integers(0, len(text)), st.integers(0, 8),
-                     st.one_of(st.sampled_from(TOKENS), st.text(max_size=6)))
-    return st.lists(edit, min_size=1, max_size=5).map(lambda edits: _apply(text, edits))
-
-
-def _apply(text: str, edits) -> str:
-    for at, drop, new in edits:
-        at = min(at, len(text))
-        text = text[:at] + new + text[at + drop:]
-    return text
-
-
 @FUZZ
-@given(mutated(kvn()))
+@given(mutated(kvn(), TOKENS))
 def test_mutated_kvn_gives_measurements_or_one_ccsds_error(fuzz_dir, text):
     _only_ccsds_errors(fuzz_dir / "m.tdm", text)
 
 
 @FUZZ
-@given(mutated(xml()))
+@given(mutated(xml(), TOKENS))
 def test_mutated_xml_gives_measurements_or_one_ccsds_error(fuzz_dir, text):
     _only_ccsds_errors(fuzz_dir / "m.xml", text)
 

@@ -14,6 +14,7 @@ import pytest
 import yaml
 from astropy import units as u
 from astropy.coordinates import EarthLocation
+from fuzz_text import mutated
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -267,21 +268,8 @@ def _only_site_file_errors(path: Path, text: str) -> None:
         assert abs(s.station.lat_rad) <= math.pi / 2 and all(v > 0 for v in s.sigma)
 
 
-def _mutated(text: str):
-    edit = st.tuples(st.integers(0, len(text)), st.integers(0, 8),
-                     st.one_of(st.sampled_from(TOKENS), st.text(max_size=6)))
-    return st.lists(edit, min_size=1, max_size=5).map(lambda edits: _apply(text, edits))
-
-
-def _apply(text: str, edits) -> str:
-    for at, drop, new in edits:
-        at = min(at, len(text))
-        text = text[:at] + new + text[at + drop:]
-    return text
-
-
 @FUZZ
-@given(_mutated(EXAMPLE.read_text()))
+@given(mutated(EXAMPLE.read_text(), TOKENS))
 def test_a_mutated_sites_file_gives_sites_or_one_site_file_error(fuzz_dir, text):
     _only_site_file_errors(fuzz_dir / "m.yaml", text)
 

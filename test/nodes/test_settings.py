@@ -8,6 +8,7 @@ import re
 from pathlib import Path
 
 import pytest
+from fuzz_text import mutated
 from hypothesis import HealthCheck, given
 from hypothesis import settings as settings_
 from hypothesis import strategies as st
@@ -179,21 +180,8 @@ def _only_value_errors(path: Path, text: str) -> None:
         assert "\n" not in said and len(said) <= MAX_MESSAGE and str(path) in said, said[:300]
 
 
-def _mutated(text: str):
-    edit = st.tuples(st.integers(0, len(text)), st.integers(0, 8),
-                     st.one_of(st.sampled_from(TOKENS), st.text(max_size=6)))
-    return st.lists(edit, min_size=1, max_size=5).map(lambda edits: _apply(text, edits))
-
-
-def _apply(text: str, edits) -> str:
-    for at, drop, new in edits:
-        at = min(at, len(text))
-        text = text[:at] + new + text[at + drop:]
-    return text
-
-
 @FUZZ
-@given(_mutated(CONFIG.read_text()))
+@given(mutated(CONFIG.read_text(), TOKENS))
 def test_a_mutated_params_file_gives_an_estimator_or_one_value_error(fuzz_dir, text):
     _only_value_errors(fuzz_dir / "m.yaml", text)
 
