@@ -15,6 +15,7 @@ The messages themselves: `ccsds_oem` (OEM out), `ccsds_tdm_out` (TDM out), `ccsd
 
 from __future__ import annotations
 
+import calendar
 import datetime as dt
 import enum
 import functools
@@ -226,9 +227,16 @@ def _parse_ns(text: str) -> int:
         raise CcsdsError(f"epoch {text!r} is not a CCSDS epoch (YYYY-MM-DDThh:mm:ss[.f] "
                          f"or YYYY-DDDThh:mm:ss[.f])")
     year, month, day, doy, hh, mm, ss, frac = m.groups()
+    if int(hh) > 23 or int(mm) > 59 or int(ss) > 60:  # 60: an inserted leap second
+        raise CcsdsError(f"epoch {text!r}: time of day out of range "
+                         "(hh 00-23, mm 00-59, ss 00-60)")
     try:
         if doy is not None:
-            date = dt.datetime(int(year), 1, 1, tzinfo=dt.UTC) + dt.timedelta(days=int(doy) - 1)
+            first = dt.datetime(int(year), 1, 1, tzinfo=dt.UTC)
+            days = 365 + calendar.isleap(first.year)
+            if not 1 <= int(doy) <= days:
+                raise ValueError(f"day of year {doy} is outside 001-{days}")
+            date = first + dt.timedelta(days=int(doy) - 1)
         else:
             date = dt.datetime(int(year), int(month), int(day), tzinfo=dt.UTC)
     except ValueError as exc:

@@ -550,6 +550,23 @@ def test_epochs_round_trip_to_the_nanosecond():
         ccsds_format.parse_epoch("yesterday")
 
 
+@pytest.mark.parametrize("text, says", [
+    ("2025-999T00:00:00", "day of year 999 is outside 001-365"),
+    ("2025-000T00:00:00", "day of year 000"),
+    ("2024-367T00:00:00", "day of year 367 is outside 001-366"),
+    ("2025-01-01T99:00:00", "time of day out of range"),
+    ("2025-01-01T00:60:00", "time of day out of range"),
+    ("2025-01-01T00:00:75", "time of day out of range"),
+])
+def test_an_epoch_out_of_its_calendar_is_refused_not_rolled_over(text, says):
+    """Day-of-year 999 and hour 99 were read as days and hours after the date (2027-09,
+    2025-01-05): now a CcsdsError, which `import tdm` turns into one line and exit 2."""
+    with pytest.raises(ccsds_format.CcsdsError, match=says):
+        ccsds_format.parse_epoch(text)
+    assert ccsds_format.parse_epoch("2024-366T23:59:59") == ccsds_format.parse_epoch(
+        "2024-12-31T23:59:59")
+
+
 def test_frame_bias_is_erfas():
     """The EME2000 rotation is ERFA's IAU 2006 frame bias: ~23 mas, orthonormal."""
     b = ccsds_format.frame_bias()
