@@ -87,6 +87,17 @@ class Imported:
 _E = TypeVar("_E", bound=enum.StrEnum)
 
 
+def _number(value: object) -> float:
+    """Return an observation's value as a float, NaN when it is not a number.
+
+    An empty ``<RANGE></RANGE>`` or text: left out as invalid, like a NaN.
+    """
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return math.nan
+
+
 def _meta_value(meta: object, key: str) -> str | None:
     """Return a metadata keyword's value (enum or str) in capitals, or None if absent."""
     got = getattr(meta, key, None)
@@ -197,7 +208,7 @@ def _why_invalid(layout: Layout, v: Array) -> str:
     """Why channel values in TDM units (km, deg) are not a measurement ("" if they are)."""
     names = dict(zip(layout.keywords, v.tolist(), strict=True))
     if not np.all(np.isfinite(v)):
-        return "non-finite " + ", ".join(k.upper() for k, x in names.items()
+        return "non-finite or unreadable " + ", ".join(k.upper() for k, x in names.items()
                                          if not math.isfinite(x))
     if layout is AZEL and names[RANGE] < 0:
         return f"negative RANGE {names[RANGE]!r} km"
@@ -254,7 +265,7 @@ def tdm_measurements(doc: object, sigma: Mapping[types.Kind, Sequence[float]] | 
                 if value is None or value == []:
                     continue
                 if key in layout.keywords:
-                    epochs[stamps[text]][key] = float(getattr(value, "value", value))
+                    epochs[stamps[text]][key] = _number(getattr(value, "value", value))
                 else:
                     out.unused[key.upper()] += 1
         try:

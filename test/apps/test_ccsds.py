@@ -573,3 +573,25 @@ def test_frame_bias_is_erfas():
     np.testing.assert_allclose(b @ b.T, np.eye(3), atol=1e-15)
     angle = math.acos((np.trace(b) - 1) / 2)
     assert 20 * MAS < angle < 26 * MAS
+
+
+def test_an_empty_xml_value_is_counted_and_left_out(tmp_path, capsys):
+    """An empty ``<RANGE></RANGE>`` ended `import tdm` in a ValueError traceback; now that
+    epoch is left out and counted like a NaN."""
+    rows = [("2025-01-01T00:00:00", "9468.2"), ("2025-01-01T00:00:30", "")]
+    obs = "".join(f"<observation><EPOCH>{e}</EPOCH><{k}{u}>{v}</{k}></observation>"
+                  for e, r in rows for k, u, v in (("RANGE", "", r),
+                                                   ("ANGLE_1", ' units="deg"', "35.8"),
+                                                   ("ANGLE_2", ' units="deg"', "-43.6")))
+    f = tmp_path / "empty.xml"
+    f.write_text('<?xml version="1.0" encoding="UTF-8"?><tdm id="CCSDS_TDM_VERS" version="2.0">'
+                 "<header><CREATION_DATE>2025-01-02T00:00:00</CREATION_DATE><ORIGINATOR>t"
+                 "</ORIGINATOR></header><body><segment><metadata><TIME_SYSTEM>UTC</TIME_SYSTEM>"
+                 "<PARTICIPANT_1>columbus</PARTICIPANT_1><PARTICIPANT_2>OBJ-1</PARTICIPANT_2>"
+                 "<MODE>SEQUENTIAL</MODE><PATH>1,2,1</PATH><ANGLE_TYPE>AZEL</ANGLE_TYPE>"
+                 f"</metadata><data>{obs}</data></segment></body></tdm>")
+    assert cli.main(["import", "tdm", str(f), "--bag", str(tmp_path / "bag")]) == 0
+    said = capsys.readouterr().out
+    assert "1 range/az/el measurements of OBJ-1" in said, said
+    assert "left out: 1 epoch(s) with invalid values" in said
+    assert "non-finite or unreadable RANGE" in said
