@@ -391,10 +391,11 @@ def tdm_probe(cls: str, name: str, text: str, judge_: Judge, rerun: bool = True,
 
 def catalog_probe(cls: str, name: str, text: str | bytes | Callable[[Path], None],
                   judge_: Judge, suffix: str = ".tle", timeout: float = 120.0) -> Probe:
-    """`live --catalog` of a catalog file (a short run if it is accepted)."""
-    return cli_probe(cls, name, ["live", "--catalog", "{D}/cat" + suffix, "--duration", "0.02",
-                                 "--no-surrogate", "--time-scale", "max", "--out", "{D}/out"],
-                     judge_, {"cat" + suffix: text}, timeout)
+    """`live --catalog` of a catalog file (if it is accepted, an hour of its first element
+    set spread into 20 objects, so that some are seen: `--synthetic`)."""
+    return cli_probe(cls, name, ["live", "--catalog", "{D}/cat" + suffix, "--synthetic", "20",
+                                 "--duration", "1", "--no-surrogate", "--time-scale", "max",
+                                 "--out", "{D}/out"], judge_, {"cat" + suffix: text}, timeout)
 
 
 def node_probe(cls: str, name: str, node: str, ros_args: Sequence[str], judge_: Judge,
@@ -520,8 +521,11 @@ def catalog_probes() -> Iterator[Probe]:
     yield catalog_probe("6", "tle binary garbage", b"\x00\xff\xfe" * 5000, refused())
     nan = tle_edit
     four = [objs[0], nan(objs[1], 2, 9, "     nan"), objs[2], nan(objs[3], 2, 9, "     nan")]
-    yield catalog_probe("6", "tle 4 objects, 2 NaN", tle_text(four),
-                        refused_or_counted(r"\b2\b.*(nan|skipped|invalid|not finite)"))
+    yield cli_probe("6", "tle 4 objects, 2 NaN", ["live", "--catalog", "{D}/cat.tle",
+                                                 "--duration", "2", "--no-surrogate",
+                                                 "--time-scale", "max", "--out", "{D}/out"],
+                    refused_or_counted(r"\b2\b.*(nan|skipped|invalid|not finite)"),
+                    {"cat.tle": tle_text(four)})
     for year in ("2100", "2039", "9999", "0001", "1957", "1969"):
         yield catalog_probe("2", f"omm csv epoch {year}",
                             omm_csv(EPOCH=f"{year}-01-01T00:00:00"), refused(), ".csv")
