@@ -553,9 +553,47 @@ def test_epochs_round_trip_to_the_nanosecond():
         ccsds_format.parse_epoch("yesterday")
 
 
+@pytest.mark.parametrize("text, says", [
+    ("2025-999T00:00:00", "day of year 999 is not in the year 2025"),
+    ("2025-000T00:00:00", "day of year 000"),
+    ("2024-367T00:00:00", "day of year 367 is not in the year 2024"),
+    ("2025-01-01T99:00:00", "time of day 99:00:00 is not one"),
+    ("2025-01-01T00:60:00", "time of day 00:60:00 is not one"),
+    ("2025-01-01T00:00:75", "time of day 00:00:75 is not one"),
+])
+def test_an_epoch_out_of_its_calendar_is_refused_not_rolled_over(text, says):
+    """Day-of-year 999 and hour 99 were read as days and hours after the date (2027-09,
+    2025-01-05): now a CcsdsError, which `import tdm` turns into one line and exit 2."""
+    with pytest.raises(ccsds_format.CcsdsError, match=says):
+        ccsds_format.parse_epoch(text)
+    assert ccsds_format.parse_epoch("2024-366T23:59:59") == ccsds_format.parse_epoch(
+        "2024-12-31T23:59:59")
+
+
 def test_frame_bias_is_erfas():
     """The EME2000 rotation is ERFA's IAU 2006 frame bias: ~23 mas, orthonormal."""
     b = ccsds_format.frame_bias()
     np.testing.assert_allclose(b @ b.T, np.eye(3), atol=1e-15)
     angle = math.acos((np.trace(b) - 1) / 2)
     assert 20 * MAS < angle < 26 * MAS
+
+
+def test_an_empty_xml_value_is_refused_in_one_line(tmp_path, capsys):
+    """An empty ``<RANGE></RANGE>`` ended `import tdm` in a ValueError traceback; now the
+    file is refused with one line naming the line and the keyword, and no bag is left."""
+    rows = [("2025-01-01T00:00:00", "9468.2"), ("2025-01-01T00:00:30", "")]
+    obs = "".join(f"<observation><EPOCH>{e}</EPOCH><{k}{u}>{v}</{k}></observation>"
+                  for e, r in rows for k, u, v in (("RANGE", "", r),
+                                                   ("ANGLE_1", ' units="deg"', "35.8"),
+                                                   ("ANGLE_2", ' units="deg"', "-43.6")))
+    f = tmp_path / "empty.xml"
+    f.write_text('<?xml version="1.0" encoding="UTF-8"?><tdm id="CCSDS_TDM_VERS" version="2.0">'
+                 "<header><CREATION_DATE>2025-01-02T00:00:00</CREATION_DATE><ORIGINATOR>t"
+                 "</ORIGINATOR></header><body><segment><metadata><TIME_SYSTEM>UTC</TIME_SYSTEM>"
+                 "<PARTICIPANT_1>columbus</PARTICIPANT_1><PARTICIPANT_2>OBJ-1</PARTICIPANT_2>"
+                 "<MODE>SEQUENTIAL</MODE><PATH>1,2,1</PATH><ANGLE_TYPE>AZEL</ANGLE_TYPE>"
+                 f"</metadata><data>{obs}</data></segment></body></tdm>")
+    assert cli.main(["import", "tdm", str(f), "--bag", str(tmp_path / "bag")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "RANGE" in err[0] and str(f) in err[0], err
+    assert not (tmp_path / "bag").exists()
