@@ -76,13 +76,16 @@ def main(argv: list[str] | None = None) -> int:
     the signal's number (130, 143, 129), as a shell reports it.
     """
     limit_blas_threads()  # before build_parser imports the commands, and with them numpy
-    args = build_parser().parse_args(argv)
+    # from the first moment: a signal during the imports (a second or two) ends the same way
     previous = {sig: signal.signal(sig, _interrupt) for sig in _STOP_SIGNALS}
+    command = "ssa-fusion"
     try:
+        args = build_parser().parse_args(argv)
+        command = f"ssa-fusion {args.command}"
         return int(args._run(args) or 0)
     except Interrupted as exc:
-        print(f"ssa-fusion {args.command}: stopped by {exc}; every process it started was "
-              f"stopped", file=sys.stderr)
+        print(f"{command}: stopped by {exc}; every process it started was stopped",
+              file=sys.stderr)
         return 128 + exc.signum
     finally:
         for sig, handler in previous.items():

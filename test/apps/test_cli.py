@@ -211,3 +211,20 @@ def test_a_stop_signal_runs_the_commands_cleanup_and_exits_128_plus_its_number(
     assert cleaned == [True]
     assert f"stopped by {signal.Signals(sig).name}" in capsys.readouterr().err
     assert signal.getsignal(sig) == before  # the handlers are put back
+
+
+def test_a_sigterm_while_the_command_still_imports_ends_it_cleanly(tmp_path):
+    """The handlers are set before the commands' modules are imported (a second or two): a
+    SIGTERM then gave rc -15 with no word; now 143 and the one line, as later."""
+    import subprocess
+    import sys
+
+    exe = Path(sys.executable).parent / "ssa-fusion"
+    p = subprocess.Popen([str(exe), "live", "--catalog", "config/catalogs/sample.tle",
+                          "--out", str(tmp_path / "run")], cwd=Path(__file__).parents[2],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(0.2)
+    p.send_signal(signal.SIGTERM)
+    out, err = p.communicate(timeout=60)
+    assert p.returncode == 143, (out, err)
+    assert "stopped by SIGTERM" in err.splitlines()[-1] and "Traceback" not in err
