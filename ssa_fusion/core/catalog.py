@@ -255,9 +255,29 @@ def _tle_entry(line1: str, line2: str, name: str, where: str, where2: str) -> Ca
     if line1[2:7] != line2[2:7]:
         raise ValueError(f"{where}: catalogue numbers of lines 1 and 2 differ "
                          f"({line1[2:7]!r} and {line2[2:7]!r})")
+    _check_epoch_day(line1, where)
     sat = Satrec.twoline2rv(line1, line2)
     _check_satrec(sat, where)
     return CatalogEntry(str(sat.satnum), name, sat, where)
+
+
+def _check_epoch_day(line1: str, where: str) -> None:
+    """ValueError unless line 1's epoch (columns 19-32, YYDDD.DDDDDDDD) has a day in 1-366.
+
+    SGP4 reads day 999 or 000 of a year as days past or before it without a word. Day 366
+    of a common year (the next 1 January) is taken, as SGP4 takes it.
+    """
+    yy = int(line1[18:20])
+    year = 1900 + yy if yy >= 57 else 2000 + yy  # the TLE convention
+    days = 366
+    try:
+        day = float(line1[20:32])
+    except ValueError:
+        raise ValueError(f"{where}: TLE line 1, columns 21-32: epoch day "
+                         f"{line1[20:32]!r} is not a number") from None
+    if not 1.0 <= day < days + 1.0:
+        raise ValueError(f"{where}: TLE line 1, columns 19-32: day {day:g} of {year} is "
+                         f"not in 1-{days}.999...")
 
 
 def _check_satrec(sat: Satrec, where: str) -> None:

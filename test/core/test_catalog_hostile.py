@@ -61,6 +61,9 @@ def refused(tmp_path: Path, name: str, text: str) -> str:
     ("incl.tle", tle(L1, L2[:8] + "999.0000" + L2[16:]),
      "inclination 999 deg outside [0, 180]"),
     ("bstar.tle", tle(L1[:53] + " 10000+9" + L1[61:]), "B* 1e+08"),
+    # SGP4 reads day 999 of 2019 as a day in 2022 and day 000 as 31 December 2018
+    ("day999.tle", tle(L1[:20] + "999" + L1[23:]), "day 999.821 of 2019 is not in 1-366"),
+    ("day000.tle", tle(L1[:20] + "000" + L1[23:]), "day 0.821379 of 2019 is not in 1-366"),
     ("nan.csv", csv_of(ROW.replace("51.6392", "nan")), "inclination not finite"),
     ("inf.csv", csv_of(ROW.replace("15.49497216", "inf")), "mean motion"),
     ("fast.csv", csv_of(ROW.replace("15.49497216", "25.0")), "decayed"),  # SGP4's own
