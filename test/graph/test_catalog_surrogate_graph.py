@@ -20,8 +20,10 @@ from ssa_fusion.core import dynamics, types
 from ssa_fusion.core.gap_bank import CATALOG_RESIDUAL
 from ssa_fusion.core.gap_forecaster import GapForecaster
 from ssa_fusion.core.rows import EstimateRows
+from ssa_fusion.nodes.progress import PROGRESS_QOS, TAKEN_ESTIMATES, TOPIC_PROGRESS
 from ssa_fusion.nodes.shards import shard_problem, shard_range
 from ssa_fusion.ros import messages
+from ssa_fusion.ros.interfaces import DiagnosticStatus
 from ssa_fusion.ros.topics import CATALOG_QOS
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
@@ -103,14 +105,27 @@ def test_bad_estimates_are_refused_and_the_gap_forecast_equals_the_core(ros_grap
                                        "rejected_shard_key": 1, "rejected_future": 1,
                                        "rejected_covariance": 1, "rejected_implausible": 1})
     # then the object's passes, sim time running every minute, and on into the gap after
-    # the last (a clock and an estimate arrive on separate topics, so in either order)
+    # the last: a clock and an estimate arrive on separate topics, so the next minute's
+    # clock waits until the node has taken the minute's estimates (its /lockstep progress,
+    # as sensor_sim's lockstep does): the same order however loaded the machine
+    taken: dict[str, int] = {}
+    g.probe.create_subscription(
+        DiagnosticStatus, TOPIC_PROGRESS,
+        lambda m: taken.update({m.name: int(next(
+            (kv.value for kv in m.values if kv.key == TAKEN_ESTIMATES), "0"))}), PROGRESS_QOS)
+    g.wait_for(lambda: "catalog_surrogate" in taken, 10.0, "the node's progress")
+    base = taken["catalog_surrogate"]  # the bad estimates it took
     end = good[-1].t
     k = 0
     for t in T0 + 60.0 * np.arange(int((end - T0) / 60.0) + 61):
         tick(float(t))
+        sent = k
         while k < len(good) and good[k].t <= t:
             est.publish(_batch(good[k]))
             k += 1
+        if k > sent:
+            g.wait_for(lambda k=k: taken["catalog_surrogate"] >= base + k, 10.0,
+                       "the node to take the minute's estimates")
     c = diag.wait(g, "catalog_surrogate", {"received": len(good), "fits_made": 1}, 30.0)
     g.wait_for(lambda: len(forecasts) >= 9, 20.0, "the gap's forecasts")
     assert c.get("ignored_not_sensor", "0") == c.get("ignored_other_shard", "0") == "0"
