@@ -132,7 +132,7 @@ def run(hosts, tmp_path_factory):
                 "live", "--catalog", str(SAMPLE),
                 "--synthetic", str(OBJECTS), "--duration", "6", "--shards", "2",
                 "--remote-shards", "1", "--no-surrogate", "--discovery-range", "SUBNET",
-                "--scenario", "iss_network", "--time-scale", "2000", "--seed", "4",
+                "--scenario", "iss_network", "--time-scale", "max", "--seed", "4",
                 "--domain-id", str(fresh_domain_id()), "--out", str(out / "run")]
     procs: list[subprocess.Popen[bytes]] = []
     try:
