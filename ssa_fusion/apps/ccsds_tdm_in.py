@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ssa_fusion.apps.ccsds_format import (
+    ANGLE_1,
     ANGLE_2,
     AZEL,
     RADEC,
@@ -53,7 +54,7 @@ from ssa_fusion.apps.ccsds_tdm_read import Observation, SegmentMeta, TdmReader
 from ssa_fusion.core import timescales, types
 from ssa_fusion.core.quoting import quote, shown
 from ssa_fusion.core.stations import SENSORS, STATIONS, Sensor
-from ssa_fusion.core.validation import MAX_ID_CHARS
+from ssa_fusion.core.validation import MAX_ID_CHARS, MAX_RANGE_KM, MIN_RANGE_KM
 
 PROGRESS_EVERY = 16384
 """Observations between two calls of `read_tdm`'s progress callback."""
@@ -286,6 +287,11 @@ def _segment_sigma(meta: SegmentMeta, station: str, layout: Layout,
     return layout.from_tdm_units(sigma)
 
 
+MAX_ANGLE_DEG = 1e6
+"""Largest ANGLE_1 (azimuth, right ascension) taken, deg: it is wrapped into [0, 360),
+which keeps 2e-10 deg at 1e6 and nothing at 1e308."""
+
+
 def _why_invalid(layout: Layout, v: Sequence[float]) -> str:
     """Why channel values in TDM units (km, deg) are not a measurement ("" if they are)."""
     names = dict(zip(layout.keywords, v, strict=True))
@@ -294,6 +300,13 @@ def _why_invalid(layout: Layout, v: Sequence[float]) -> str:
                                          if not math.isfinite(x))
     if layout is AZEL and names[RANGE] < 0:
         return f"negative RANGE {names[RANGE]!r} km"
+    if layout is AZEL and not MIN_RANGE_KM <= names[RANGE] <= MAX_RANGE_KM:
+        # what every consumer refuses (`validation`): nothing in orbit is within 1 km of
+        # its sensor, nothing tracked beyond 1e7 km
+        return f"RANGE {names[RANGE]!r} km outside [{MIN_RANGE_KM:g}, {MAX_RANGE_KM:g}]"
+    if abs(names[ANGLE_1]) > MAX_ANGLE_DEG:
+        return f"ANGLE_1 {names[ANGLE_1]!r} deg beyond +-{MAX_ANGLE_DEG:g} (wrapping it " \
+               "into a circle would keep only round-off)"
     if abs(names[ANGLE_2]) > 90.0:
         return f"ANGLE_2 ({'elevation' if layout is AZEL else 'declination'}) " \
                f"{names[ANGLE_2]!r} deg beyond +-90"

@@ -277,3 +277,21 @@ def test_random_text_gives_measurements_or_one_ccsds_error(fuzz_dir, text):
     _only_ccsds_errors(fuzz_dir / "r.tdm", text)
     if isinstance(text, str):
         _only_ccsds_errors(fuzz_dir / "r.xml", "<tdm>" + text)
+
+
+@pytest.mark.parametrize(("channel", "value", "says"), [
+    ("RANGE", "0", "RANGE 0.0 km outside [1, 1e+07]"),
+    ("RANGE", "1e300", "RANGE 1e+300 km outside"),
+    ("ANGLE_1", "1e308", "ANGLE_1 1e+308 deg beyond"),
+])
+def test_a_value_every_consumer_would_refuse_is_left_out_and_counted(tmp_path, channel, value,
+                                                                     says):
+    """A range of 0 or 1e300 km, an azimuth of 1e308 deg: left out at import and counted,
+    as the filter would refuse them (`validation`), not imported to be refused later."""
+    lines = data_lines()
+    k = next(i for i, line in enumerate(lines) if line.startswith(channel))
+    lines[k] = lines[k].rsplit(" ", 1)[0] + " " + value
+    f = tmp_path / "one_bad.tdm"
+    f.write_text(kvn(META, lines))
+    got = read_tdm(f)
+    assert got.left_out() and says in got.left_out(), got.left_out()
