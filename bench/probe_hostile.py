@@ -438,12 +438,15 @@ def tdm_probes(large: bool) -> Iterator[Probe]:
     yield tdm_probe("2", "tdm TAI epoch 2100", tdm_kvn(with_row(None, epoch="2100-06-01T00:00:{s}"),
                                                        "TAI"), refused())
     values = {"range": ("nan", "NaN", "inf", "-inf", "-5.0", "0", "1e400", "1e300", "0x10"),
-              "az": ("nan", "inf", "1e308", "-1000"),
+              "az": ("nan", "inf", "1e308"),
               "el": ("1000", "-1000", "90.0001", "nan")}
     for what, bad in values.items():
         for v in bad:
             yield tdm_probe("6", f"tdm one {what} = {v}", tdm_kvn(with_row(7, **{
                 {"range": "rng"}.get(what, what): v})), refused_or_counted())
+    # an azimuth of -1000 deg is 80 deg: wrapped into [0, 360) (docs/CCSDS.md, "Left out")
+    yield tdm_probe("6", "tdm one az = -1000 (wrapped)", tdm_kvn(with_row(7, az="-1000")),
+                    accepted())
     for v in ("nan", "inf", "-5.0"):
         yield tdm_probe("6", f"tdm every range = {v}", tdm_kvn(with_row(None, rng=v)), refused())
     epochs = {"day-of-year 999": "2025-999T00:00:00", "day-of-year 000": "2025-000T00:00:00",
@@ -496,16 +499,21 @@ def catalog_probes() -> Iterator[Probe]:
         "mean motion 0": (2, 53, " 0.00000000"), "mean motion -14": (2, 53, "-14.3547808"),
         "mean motion 99": (2, 53, "99.99999999"), "eccentricity 9999999": (2, 27, "9999999"),
         "B* 0.99999e9": (1, 54, " 99999+9"), "B* nan": (1, 54, "     nan"),
-        "Alpha-5 number 1A2B3": (1, 3, "1A2B3"), "classification X": (1, 8, "X"),
+        "Alpha-5 number 1A2B3": (1, 3, "1A2B3"),
         "epoch day 999": (1, 21, "999.78615833"), "epoch day 000": (1, 21, "000.00000000"),
         "epoch year xx": (1, 19, "xx"), "epoch day nan": (1, 21, "         nan"),
-        "element set number 9999": (1, 65, "9999"),
     }
     for what, (line, col, text) in tle_edits.items():
         yield catalog_probe("6", f"tle {what}", tle_text([tle_edit(cbers, line, col, text)]),
                             refused())
     yield catalog_probe("6", "tle control (sample's first object)", tle_text([cbers]),
                         accepted(r"lost: 0"))
+    # valid element sets, however unusual: the largest element set number of the field's
+    # four digits, a one-letter classification other than U (the OMM reader's rule too)
+    for what, (line, col, text) in {"element set number 9999": (1, 65, "9999"),
+                                    "classification X": (1, 8, "X")}.items():
+        yield catalog_probe("6", f"tle {what} (valid)",
+                            tle_text([tle_edit(cbers, line, col, text)]), accepted(r"lost: 0"))
     yield catalog_probe("6", "tle Alpha-5 number A2345 (valid)",
                         tle_text([tle_edit(tle_edit(cbers, 1, 3, "A2345"), 2, 3, "A2345")]),
                         accepted(r"lost: 0"))
