@@ -1,9 +1,11 @@
-"""Hypothesis strategies of hostile text for the readers' property tests."""
+"""Hostile text for the readers' tests: hypothesis strategies, and the error a reader gives."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from pathlib import Path
 
+import pytest
 from hypothesis import strategies as st
 
 
@@ -20,3 +22,15 @@ def _apply(text: str, edits: list[tuple[int, int, str]]) -> str:
         at = min(at, len(text))
         text = text[:at] + new + text[at + drop:]
     return text
+
+
+def error_of(read: Callable[[Path], object], error: type[Exception], path: Path,
+             text: str | bytes) -> str:
+    """The message of the `error` that `read` raises for `text`, written to `path`."""
+    if isinstance(text, bytes):
+        path.write_bytes(text)
+    else:
+        path.write_text(text)
+    with pytest.raises(error) as exc:
+        read(path)
+    return str(exc.value)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fuzz_text import mutated
+from fuzz_text import error_of, mutated
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -67,13 +67,7 @@ def bounded(message: str, path: Path) -> str:
 
 def refused(path: Path, text: str | bytes) -> str:
     """The bounded one-line CcsdsError `read_tdm` gives for `text`, written to `path`."""
-    if isinstance(text, bytes):
-        path.write_bytes(text)
-    else:
-        path.write_text(text)
-    with pytest.raises(CcsdsError) as err:
-        read_tdm(path)
-    return bounded(str(err.value), path)
+    return bounded(error_of(read_tdm, CcsdsError, path, text), path)
 
 
 def test_the_reference_files_are_read(tmp_path):

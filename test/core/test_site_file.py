@@ -14,7 +14,7 @@ import pytest
 import yaml
 from astropy import units as u
 from astropy.coordinates import EarthLocation
-from fuzz_text import mutated
+from fuzz_text import error_of, mutated
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -196,13 +196,7 @@ BOMB = "&l0 [lol, lol, lol, lol, lol, lol, lol, lol, lol], " + ", ".join(
 
 def refused(path: Path, text: str | bytes) -> str:
     """The bounded one-line SiteFileError `load_sites` gives for `text` (written to `path`)."""
-    if isinstance(text, bytes):
-        path.write_bytes(text)
-    else:
-        path.write_text(text)
-    with pytest.raises(SiteFileError) as exc:
-        load_sites(path)
-    said = str(exc.value)
+    said = error_of(load_sites, SiteFileError, path, text)
     assert "\n" not in said and len(said) <= MAX_MESSAGE and str(path) in said, said[:300]
     return said
 
