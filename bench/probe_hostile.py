@@ -9,7 +9,8 @@ Classes of probes (a class number is the finding it re-creates):
 3. `live` whose recorder cannot create its bag (under a file, a read-only directory, a
    symlink loop): the run ends within seconds and says why;
 5. a full disk under the recorder (a 256 KiB tmpfs in the probe's own mount namespace):
-   one line naming the bag, the bag repairable, `bag repair` onto the full disk one line;
+   one line naming the bag, the bag whole (read as it is), `bag repair` onto the disk
+   filled to its last block one line;
 6. garbage in: `import tdm` and element sets with non-finite or impossible values;
 8. bad parameters: `-p NAME:=[]` to the nodes, offline `--params-file` of `report` and
    `replay` (NaN, wrong types, deep nesting, an alias bomb), a params file of 1M keys;
@@ -863,6 +864,11 @@ def disk_probes(can_mount: bool) -> Iterator[Probe]:
                                              "--bag", str(disk / "bag")], None, _full_disk)
             r, cmd = p.run(d)
             if (disk / "bag").exists():
+                whole = run_cmd([sys.executable, "-c", READ_WHOLE_BAG, str(disk / "bag")],
+                                d / "read", 120.0)
+                if whole.rc != 0:
+                    r.notes.append(f"the bag is not whole: {first_error(whole)}")
+                fill(disk)
                 onto = run_cmd([*CLI, "bag", "repair", str(disk / "bag"), "--out",
                                 str(disk / "rep")], d / "repair_full", 120.0)
                 if onto.rc != 2 or "No space left" not in onto.err or len(error_lines(onto)) != 1:
@@ -883,8 +889,27 @@ def disk_probes(can_mount: bool) -> Iterator[Probe]:
                 graph=True)
 
 
+READ_WHOLE_BAG = """
+import sys
+from rosbags.rosbag2 import Reader
+with Reader(sys.argv[1]) as r:
+    n = sum(1 for _ in r.messages())
+assert n > 0, 'an empty bag'
+print(n, 'messages')
+"""
+"""A bag is whole when `rosbags`' Reader opens it as it is (metadata.yaml, MCAP summary)."""
+
+
+def fill(disk: Path) -> None:
+    """Take what room is left on `disk` (another writer filling it)."""
+    with contextlib.suppress(OSError), (disk / "filler").open("wb", buffering=0) as f:
+        while True:
+            f.write(b"x" * 4096)
+
+
 def _full_disk(r: Result) -> tuple[str, str]:
-    """A run whose disk filled: exit 1, one line naming the bag and the reason."""
+    """A run whose disk filled: exit 1, one line naming the bag and the reason (the probe's
+    notes say whether the bag was whole and what `bag repair` did)."""
     if r.rc == 0:
         return "silent", "exit 0 on a full disk"
     if "No space left on device" not in r.err:

@@ -9,9 +9,10 @@ Topics are discovered as publishers appear. The counts ``recorded <topic>`` on /
 are messages, and rows for the batch types (MeasurementBatch, EstimateBatch: what a catalog
 run's accounting counts). The pending MCAP chunk is flushed to disk every
 `flush_period` s, which bounds what a SIGKILL can lose; SIGINT or SIGTERM close the bag with
-everything received. A bag that cannot be written (a full disk) ends the node with one line
-naming the bag and the reason, exit code 1; what was flushed before stays readable (`ssa-fusion
-bag repair`).
+everything received. A disk too full for the next message and the bag's closing records
+(`bagio.BagWriter`) closes the bag whole, with every message before, and ends the node with
+one line naming the bag and the reason, exit code 1; any other write error leaves what was
+flushed before readable (`ssa-fusion bag repair`).
 
     ros2 run ssa_fusion recorder --ros-args -p bag:=bags/run1
 """
@@ -42,7 +43,7 @@ from ssa_fusion.nodes.parameters import (
 )
 from ssa_fusion.nodes.process import EXIT_FAILED, finish
 from ssa_fusion.nodes.progress import RECORDED_ESTIMATES, RECORDED_MEASUREMENTS, ProgressReporter
-from ssa_fusion.ros.bagio import BagWriter, qos_from_rclpy
+from ssa_fusion.ros.bagio import BagFullError, BagWriter, qos_from_rclpy
 from ssa_fusion.ros.interfaces import Message
 from ssa_fusion.ros.topics import DATA_DEPTH
 
@@ -206,6 +207,18 @@ class Recorder(SsaNode):
         if self.failed is not None:
             return
         self.failed = exc
+        if isinstance(exc, BagFullError):  # nothing of the message written: close the bag whole
+            try:
+                self.writer.close()
+            except OSError as late:
+                exc = late
+            else:
+                total = sum(self.writer.counts.values())
+                self.get_logger().error(
+                    f"cannot write the bag {self.writer.path}: {exc.strerror}; the bag is "
+                    f"closed, whole, with the {total} messages before; stopping")
+                finish(EXIT_FAILED)
+                return
         self.get_logger().error(
             f"cannot write the bag {self.writer.path}: {exc.strerror or exc} "
             f"({exc.filename or self.writer.path}); it holds what was flushed before "

@@ -8,6 +8,7 @@ module so that every bag the project writes has the same layout:
 
 from __future__ import annotations
 
+import errno
 import os
 import sys
 from collections import Counter
@@ -104,11 +105,36 @@ def rosbags_classes() -> MsgClasses:
                       t[f"{MSG_PACKAGE}/msg/EstimateBatch"], numpy_arrays=True)
 
 
+class BagFullError(OSError):
+    """The bag's disk has no room for the next message and the bag's closing records.
+
+    Raised by `BagWriter.write` before anything of that message is written, so the bag can
+    still be closed whole (``errno`` ENOSPC, the bag's path as ``filename``).
+    """
+
+
+CLOSE_RESERVE = 64 * 1024
+"""Bytes kept free for a bag's closing records beyond what `BagWriter` counts (summary
+offsets, footer, the file systems' last partial blocks)."""
+RECORD_OVERHEAD = 64
+"""Bytes an MCAP message record and its index entry add to the message (31 + 16, rounded)."""
+TOPIC_RESERVE = 4096
+"""Bytes kept per topic for its metadata.yaml entry and its summary records."""
+CHUNK_RESERVE = 256
+"""Bytes kept per written chunk for its chunk index in the summary."""
+
+
 class BagWriter:
     """Append CDR messages to a new rosbag2 v9 MCAP bag (zstd-compressed chunks).
 
     ``flush()`` closes the pending MCAP chunk and pushes it to the file so that, after a
     crash, a reader recovers everything written up to the last flush.
+
+    A write that the disk (``statvfs``: blocks available to the user) could not hold
+    together with what closing the bag needs (the pending chunk, its index, the summary and
+    metadata.yaml) raises `BagFullError` before writing anything: the bag can then be closed
+    whole with every message before it, rather than torn by ENOSPC mid-record. The check
+    costs one ``statvfs`` per `CLOSE_RESERVE` / 4 bytes written.
     """
 
     def __init__(self, path: Path | str) -> None:
@@ -119,6 +145,8 @@ class BagWriter:
         self._writer.open()
         self._connections: dict[str, Any] = {}
         self.counts: dict[str, int] = {}
+        self._room = 0  # bytes that may still be written before the disk is asked again
+        self.closed = False
 
     def add_topic(self, topic: str, msgtype: str, qos: Iterable[Qos] = ()) -> None:
         """Register `topic` of `msgtype` ("pkg/msg/Name"); a no-op if already registered.
@@ -137,9 +165,35 @@ class BagWriter:
         return topic in self._connections
 
     def write(self, topic: str, t_ns: int, cdr: bytes | memoryview) -> None:
-        """Write one CDR-serialized message received (or stamped) at `t_ns`."""
+        """Write one CDR-serialized message received (or stamped) at `t_ns`.
+
+        Raises `BagFullError` (nothing written) when the disk could not hold it and the bag's
+        closing records.
+        """
+        need = len(cdr) + RECORD_OVERHEAD
+        if need > self._room:
+            self._room = self._free_after_close()
+            if need > self._room:
+                raise BagFullError(errno.ENOSPC, f"No space left on device for a {need}-byte "
+                                            f"message ({max(self._room, 0)} bytes free beyond "
+                                            f"what closing the bag needs)", str(self.path))
+            self._room = min(self._room, CLOSE_RESERVE // 4)  # ask the disk again soon
         self._writer.write(self._connections[topic], int(t_ns), cdr)
         self.counts[topic] += 1
+        self._room -= need
+
+    def _free_after_close(self) -> int:
+        """Bytes the disk has beyond what closing the bag would write (may be negative)."""
+        storage = self._writer.storage
+        assert isinstance(storage, McapWriter)
+        fs = os.statvfs(self.path)
+        unflushed = storage.bio.tell() - os.fstat(storage.bio.fileno()).st_size
+        pending = storage.chunk.bio.tell() + RECORD_OVERHEAD * sum(
+            len(m) for m in storage.chunk.msgs.values())
+        definitions = sum(len(s.data) for s in storage.schemas)
+        closing = (pending + 2 * definitions + CHUNK_RESERVE * (len(storage.chunks) + 1)
+                   + TOPIC_RESERVE * len(self._connections) + CLOSE_RESERVE)
+        return fs.f_bavail * fs.f_frsize - unflushed - closing
 
     def write_msg(self, topic: str, t_ns: int, msg: Message) -> None:
         """Serialize a rosbags message object with the typestore and write it."""
@@ -158,9 +212,10 @@ class BagWriter:
         os.fsync(storage.bio.fileno())
 
     def close(self) -> None:
-        """Write the MCAP summary and metadata.yaml (with ros_distro)."""
-        if self._writer.storage is None:
+        """Write the MCAP summary and metadata.yaml (with ros_distro); a no-op once closed."""
+        if self._writer.storage is None or self.closed:
             return
+        self.closed = True
         self._writer.close()
         set_ros_distro(self.path)
 

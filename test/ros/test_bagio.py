@@ -15,3 +15,52 @@ def test_topics_select_and_a_topic_the_bag_lacks_gives_nothing():
     # rosbags reads every connection when given none: asking for a topic the bag lacks
     # must not return the others
     assert list(bagio.read_bag(SAMPLE, topics=["/ssa/estimate_batch"])) == []
+
+
+def test_a_disk_too_full_for_the_next_message_leaves_a_whole_bag(tmp_path, monkeypatch):
+    """The writer asks the disk (statvfs) before a message would leave too little room to
+    close the bag: it raises BagFullError (ENOSPC) with nothing of that message written, and the
+    bag then closes whole: metadata.yaml, the MCAP summary, every message before, readable
+    by `rosbags`' own Reader without any repair."""
+    import errno
+    import os
+
+    import pytest
+    from rosbags.rosbag2 import Reader
+
+    real = os.statvfs
+    free = {"bytes": 400_000}
+
+    class Fs:
+        f_frsize = 4096
+
+        @property
+        def f_bavail(self) -> int:
+            return free["bytes"] // 4096
+
+    monkeypatch.setattr(bagio.os, "statvfs", lambda p: Fs())
+    bag = tmp_path / "bag"
+    writer = bagio.BagWriter(bag)
+    writer.add_topic("/ssa/raw", "std_msgs/msg/String")
+    text = bagio.typestore().types["std_msgs/msg/String"]
+    payload = os.urandom(6000).hex()  # 12 kB that zstd cannot shrink much
+    written = 0
+    with pytest.raises(bagio.BagFullError) as full:
+        for k in range(1000):
+            writer.write_msg("/ssa/raw", 1_000_000_000 * (k + 1), text(data=payload))
+            written += 1
+            used = sum(f.stat().st_size for f in bag.iterdir())
+            free["bytes"] = 400_000 - used - 12_000 * len(writer._writer.storage.chunk.msgs.get(
+                writer._connections["/ssa/raw"].id, []))  # the chunk held in memory too
+    assert full.value.errno == errno.ENOSPC
+    assert "No space left on device" in str(full.value)
+    # the room kept for closing: less than the disk's 400 kB went to messages
+    assert 10 < written < 400_000 // 12_000, written
+    assert writer.counts["/ssa/raw"] == written
+    writer.close()
+    monkeypatch.setattr(bagio.os, "statvfs", real)
+    with Reader(bag) as reader:  # a whole bag: rosbags opens it as it is
+        assert reader.message_count == written
+        assert [ts for _, ts, _ in reader.messages()] == [
+            1_000_000_000 * (k + 1) for k in range(written)]
+    assert sum(1 for _ in bagio.read_bag(bag)) == written
