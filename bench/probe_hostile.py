@@ -12,6 +12,10 @@ Classes of probes (a class number is the finding it re-creates):
    one line naming the bag, the bag whole (read as it is), `bag repair` onto the disk
    filled to its last block one line;
 6. garbage in: `import tdm` and element sets with non-finite or impossible values;
+7. floods: 100,000 distinct object ids and a 1 MB object id to a catalog filter shard,
+   negative and 1e300 covariances and one object too many to a catalog surrogate (the graph
+   tests that send them, `test/graph/test_flood_graph.py` and
+   `test_catalog_surrogate_graph.py`, judge: capped, counted, memory bounded);
 8. bad parameters: `-p NAME:=[]` to the nodes, offline `--params-file` of `report` and
    `replay` (NaN, wrong types, deep nesting, an alias bomb), a params file of 1M keys;
 9. SIGTERM to `live --catalog` at several moments: 128 + 15 and "stopped by SIGTERM";
@@ -802,6 +806,34 @@ def graph_probes() -> Iterator[Probe]:
     yield bag_probe("in a read-only directory", "{D}/ro/bag", _read_only_dir)
 
 
+FLOOD_TESTS = {
+    "100,000 object ids and a 1 MB id to a catalog_filter shard":
+        "test/graph/test_flood_graph.py",
+    "negative and 1e300 covariances, an object beyond max_objects to catalog_surrogate":
+        "test/graph/test_catalog_surrogate_graph.py",
+}
+"""Class 7's probes: the graph tests that send each flood (their assertions are the judge)."""
+
+
+def flood_probes() -> Iterator[Probe]:
+    """Class 7: floods of object ids, an object id of 1 MB, absurd covariances."""
+    for name, test in FLOOD_TESTS.items():
+        argv = [sys.executable, "-m", "pytest", "-q", "-s", "-p", "no:cacheprovider",
+                "--tb=line", "--rootdir", str(ROOT), str(ROOT / test)]
+
+        def run(d: Path, argv: list[str] = argv) -> tuple[Result, str]:
+            return run_cmd(argv, d / "run", 300.0), shell(argv)
+
+        yield Probe("7", name, run, _flood_held, graph=True)
+
+
+def _flood_held(r: Result) -> tuple[str, str]:
+    """The flood's graph test passed: capped, counted, memory bounded, the node alive."""
+    if r.rc != 0:
+        return "silent", f"pytest exit {r.rc}"
+    return "clean", ""
+
+
 def _a_file(d: Path) -> None:
     """Make `d`/file, a file."""
     (d / "file").write_text("x")
@@ -1000,7 +1032,7 @@ def all_probes(args: argparse.Namespace, can_mount: bool) -> list[Probe]:
     probes = [*tdm_probes(args.large), *catalog_probes(), *param_probes(),
               *cli_option_probes()]
     if not args.no_graph:
-        probes += [*graph_probes(), *disk_probes(can_mount)]
+        probes += [*graph_probes(), *flood_probes(), *disk_probes(can_mount)]
         if args.listen:
             probes += list(listen_probe())
     if args.only:

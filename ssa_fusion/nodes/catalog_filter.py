@@ -87,7 +87,8 @@ PARAMETERS = ParameterTable("catalog_filter", (
           "time between batches: what arrived meanwhile is fused at once", unit="wall s",
           check=POSITIVE),
     clock_lead(CATALOG_FILTER.max_clock_lead),
-    max_objects_row(CATALOG_FILTER.max_objects, "tracks (~0.5 kB each)", "a measurement"),
+    max_objects_row(CATALOG_FILTER.max_objects, "tracks (~2 kB each: 180 MiB for 100,000)",
+                    "a measurement"),
 ), rules=(SHARD_RULE, Rule(STATION_RULE_NAMES, sites_problem)))
 """The catalog_filter's parameters."""
 

@@ -80,7 +80,7 @@ def shard_rows(shards: int, shard: int) -> tuple[Param, Param]:
 def max_objects_row(default: int, holds: str, what: str) -> Param:
     """Return the ``max_objects`` row of a catalog node's parameters.
 
-    The most objects the shard `holds` (a phrase: "tracks (~0.5 kB each)"); `what` of one
+    The most objects the shard `holds` (a phrase: "tracks (~2 kB each)"); `what` of one
     more is refused.
     """
     return Param("max_objects", default,
