@@ -21,7 +21,8 @@ Classes of probes (a class number is the finding it re-creates):
 9. SIGTERM to `live --catalog` at several moments: 128 + 15 and "stopped by SIGTERM";
 10. large inputs: a 100 MB one-line catalog, catalog options without `--catalog`
     (`--large`: also a 100 MB TDM import);
-11. (`--listen`) what sockets a `live` run's nodes bind beyond loopback.
+11. where the compiled kernels' cache is (the user's own, never one others may write), and
+    (`--listen`) what sockets a `live` run's nodes bind beyond loopback.
 
 Each probe runs with a wall timeout; its outcome is one of ``clean`` (the expected exit
 code; where an error is expected, a bounded error line; no traceback in any output or node
@@ -507,6 +508,8 @@ def catalog_probes() -> Iterator[Probe]:
         "Alpha-5 number 1A2B3": (1, 3, "1A2B3"),
         "epoch day 999": (1, 21, "999.78615833"), "epoch day 000": (1, 21, "000.00000000"),
         "epoch year xx": (1, 19, "xx"), "epoch day nan": (1, 21, "         nan"),
+        "epoch year 39 (2039)": (1, 19, "39"), "epoch year 56 (2056)": (1, 19, "56"),
+        "epoch year 57 (1957)": (1, 19, "57"), "epoch year 71 (1971)": (1, 19, "71"),
     }
     for what, (line, col, text) in tle_edits.items():
         yield catalog_probe("6", f"tle {what}", tle_text([tle_edit(cbers, line, col, text)]),
@@ -622,6 +625,15 @@ def cli_option_probes() -> Iterator[Probe]:
                         ["live", "--catalog", str(SAMPLE_TLE), *opt, *short, "--out",
                          "{D}/out"], refused(), timeout=60.0)
 
+    yield cli_probe("2", "live --catalog ending after 2038-01-19T03:14:07",
+                    ["live", "--catalog", str(SAMPLE_TLE), "--start", "2038-01-19T00:00:00Z",
+                     "--duration", "6", "--out", "{D}/out"], refused(r"end"), timeout=60.0)
+    for start in ("2039-01-01T00:00:00Z", "1969-12-31T00:00:00Z", "2038-01-19T03:00:00Z"):
+        yield cli_probe("2", f"live --start {start[:10]} (iss_radar_columbus)",
+                        ["live", "--scenario", "iss_radar_columbus", "--start", start,
+                         "--duration", "2", "--out", "{D}/out"],
+                        refused(), timeout=60.0)
+
     def one_line(path: Path) -> None:
         with path.open("wb") as f:
             for _ in range(100):
@@ -661,20 +673,23 @@ _DOMAINS = iter(range(150, 232))
 def live_catalog_probe(cls: str, name: str, extra: Sequence[str],
                        during: Callable[[Result, int, Path], Callable[
                            [subprocess.Popen[bytes], float], None]] | None,
-                       judge_: Judge, timeout: float = 400.0) -> Probe:
-    """A `live --catalog` run (its own ROS domain); `during` acts on it while it runs.
-    Any node of the run left behind is ended (by pid) and noted."""
+                       judge_: Judge, timeout: float = 400.0, catalog: bool = True,
+                       burners: int = 0) -> Probe:
+    """A `live --catalog` run (`catalog` False: the single-object `live`) in its own ROS
+    domain; `during` acts on it while it runs, beside `burners` CPU-bound processes. Any
+    node of the run left behind is ended (by pid) and noted."""
 
     def run(d: Path) -> tuple[Result, str]:
         domain = next(_DOMAINS)
         out = d / "out"
-        argv = [*CLI, "live", "--catalog", str(SAMPLE_TLE), *extra, "--out", str(out),
-                "--domain-id", str(domain)]
+        what = ["--catalog", str(SAMPLE_TLE)] if catalog else []
+        argv = [*CLI, "live", *what, *extra, "--out", str(out), "--domain-id", str(domain)]
         notes: list[str] = []
         box = Result(None, "", "", 0.0, notes=notes)
-        r = run_cmd(argv, d / "run", timeout,
-                    during=during(box, domain, out) if during else None,
-                    env={"ROS_DOMAIN_ID": str(domain)})
+        with cpu_burners(burners):
+            r = run_cmd(argv, d / "run", timeout,
+                        during=during(box, domain, out) if during else None,
+                        env={"ROS_DOMAIN_ID": str(domain)})
         r.notes = notes
         left = domain_pids(domain)
         if left:
@@ -691,6 +706,18 @@ def live_catalog_probe(cls: str, name: str, extra: Sequence[str],
     return Probe(cls, name, run, judge_, graph=True)
 
 
+@contextlib.contextmanager
+def cpu_burners(n: int) -> Iterator[None]:
+    """Run `n` CPU-bound processes (a loaded machine) for the duration; end them by pid."""
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+    try:
+        yield
+    finally:
+        for b in procs:
+            b.kill()
+            b.wait()
+
+
 def wait_for_node(domain: int, name: str, out: Path, limit: float = 120.0) -> int | None:
     """Wait until node `name` runs and the recorder has written something; its pid."""
     deadline = time.monotonic() + limit
@@ -702,6 +729,10 @@ def wait_for_node(domain: int, name: str, out: Path, limit: float = 120.0) -> in
     return None
 
 
+LIVE = "ssa-fusion"
+"""`stall`'s name for the `ssa-fusion live` process itself."""
+
+
 def stall(node: str, seconds: float = 10.0) -> Callable[[Result, int, Path], Callable[
         [subprocess.Popen[bytes], float], None]]:
     """Stop `node` with SIGSTOP once the run records, for `seconds`, then SIGCONT."""
@@ -709,7 +740,9 @@ def stall(node: str, seconds: float = 10.0) -> Callable[[Result, int, Path], Cal
     def make(box: Result, domain: int, out: Path) -> Callable[
             [subprocess.Popen[bytes], float], None]:
         def act(p: subprocess.Popen[bytes], start: float) -> None:
-            pid = wait_for_node(domain, node, out)
+            pid = wait_for_node(domain, "sensor_sim" if node == LIVE else node, out)
+            if pid is not None and node == LIVE:
+                pid = p.pid
             if pid is None:
                 box.notes.append(f"{node} never ran: not stalled")
                 return
@@ -722,9 +755,9 @@ def stall(node: str, seconds: float = 10.0) -> Callable[[Result, int, Path], Cal
     return make
 
 
-def sigterm_after(delay: float) -> Callable[[Result, int, Path], Callable[
-        [subprocess.Popen[bytes], float], None]]:
-    """Send SIGTERM to `live` `delay` s after its sensor_sim started (0: at once)."""
+def sigterm_after(delay: float, sig: signal.Signals = signal.SIGTERM) -> Callable[
+        [Result, int, Path], Callable[[subprocess.Popen[bytes], float], None]]:
+    """Send `sig` to `live` `delay` s after its sensor_sim started (0: at once)."""
 
     def make(box: Result, domain: int, out: Path) -> Callable[
             [subprocess.Popen[bytes], float], None]:
@@ -737,7 +770,7 @@ def sigterm_after(delay: float) -> Callable[[Result, int, Path], Callable[
             else:
                 time.sleep(1.0)
             if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
+                p.send_signal(sig)
             else:
                 box.notes.append("the run ended before the signal")
 
@@ -785,25 +818,45 @@ def graph_probes() -> Iterator[Probe]:
         for node in ("sensor_sim", "catalog_filter_1"):
             yield live_catalog_probe("1", f"{mode}: {node} stalled 10 s", [*run, *extra],
                                      stall(node), accounted(mode == "lockstep"))
+    for node in ("recorder", "catalog_surrogate_0", LIVE):
+        for mode, extra in (("lockstep", []), ("open loop", ["--open-loop"])):
+            yield live_catalog_probe("1", f"{mode}: {node} stalled 10 s", [*run, *extra],
+                                     stall(node), accounted(mode == "lockstep"))
+    yield live_catalog_probe("1", "lockstep: sensor_sim stalled 30 s", run,
+                             stall("sensor_sim", 30.0), accounted(True))
+    for mode, extra in (("lockstep", []), ("open loop", ["--open-loop"])):
+        yield live_catalog_probe("4", f"{mode} beside 3 CPU burners", [*run, *extra], None,
+                                 accounted(mode == "lockstep"), burners=3)
     for delay in (0.0, 2.0, 6.0, 12.0):
         yield live_catalog_probe("9", f"SIGTERM {delay:g} s into live --catalog", run,
                                  sigterm_after(delay), _stopped_by_sigterm, timeout=180.0)
+    for sig in (signal.SIGINT, signal.SIGHUP):
+        for delay in (2.0, 6.0):
+            yield live_catalog_probe("9", f"{sig.name} {delay:g} s into live --catalog", run,
+                                     sigterm_after(delay, sig), stopped_by(sig),
+                                     timeout=180.0)
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        yield live_catalog_probe("9", f"{sig.name} 4 s into live (one object)", [],
+                                 sigterm_after(4.0, sig), stopped_by(sig), timeout=180.0,
+                                 catalog=False)
 
-    def bag_probe(what: str, bag: str, setup: Callable[[Path], None]) -> Probe:
+    def bag_probe(what: str, bag: str, setup: Callable[[Path], None], catalog: bool) -> Probe:
         def run_(d: Path) -> tuple[Result, str]:
             d.mkdir(parents=True, exist_ok=True)
             setup(d)
             return live_catalog_probe("3", "", ["--bag", bag.replace("{D}", str(d)),
                                                 "--duration", "0.5"], None,
-                                      _cannot_record, timeout=120.0).run(d)
+                                      _cannot_record, timeout=120.0, catalog=catalog).run(d)
 
-        return Probe("3", f"live --catalog, bag {what}", run_, _cannot_record, graph=True)
+        return Probe("3", f"live{' --catalog' if catalog else ''}, bag {what}", run_,
+                     _cannot_record, graph=True)
 
-    yield bag_probe("under /dev/null", "/dev/null/bag", lambda d: None)
-    yield bag_probe("in a symlink loop", "{D}/loop_a/bag", _symlink_loop)
-    yield bag_probe("is a symlink loop", "{D}/loop_a", _symlink_loop)
-    yield bag_probe("exists as a file", "{D}/file", _a_file)
-    yield bag_probe("in a read-only directory", "{D}/ro/bag", _read_only_dir)
+    for catalog in (True, False):
+        yield bag_probe("under /dev/null", "/dev/null/bag", lambda d: None, catalog)
+        yield bag_probe("in a symlink loop", "{D}/loop_a/bag", _symlink_loop, catalog)
+        yield bag_probe("is a symlink loop", "{D}/loop_a", _symlink_loop, catalog)
+        yield bag_probe("exists as a file", "{D}/file", _a_file, catalog)
+        yield bag_probe("in a read-only directory", "{D}/ro/bag", _read_only_dir, catalog)
 
 
 FLOOD_TESTS = {
@@ -866,13 +919,21 @@ def _cannot_record(r: Result) -> tuple[str, str]:
     return "clean", ""
 
 
-def _stopped_by_sigterm(r: Result) -> tuple[str, str]:
-    """A run stopped by SIGTERM: 143, says so, nothing left behind (checked by the run)."""
-    if r.rc != 128 + signal.SIGTERM:
-        return "unclean", f"exit {r.rc}, expected 143"
-    if "stopped by SIGTERM" not in r.err:
-        return "unclean", "does not say 'stopped by SIGTERM'"
-    return "clean", ""
+def stopped_by(sig: signal.Signals) -> Judge:
+    """A run stopped by `sig`: 128 + its number, says so, nothing left behind (checked by
+    the run)."""
+
+    def judge_(r: Result) -> tuple[str, str]:
+        if r.rc != 128 + sig:
+            return "unclean", f"exit {r.rc}, expected {128 + sig}"
+        if f"stopped by {sig.name}" not in r.err:
+            return "unclean", f"does not say 'stopped by {sig.name}'"
+        return "clean", ""
+
+    return judge_
+
+
+_stopped_by_sigterm = stopped_by(signal.SIGTERM)
 
 
 def disk_probes(can_mount: bool) -> Iterator[Probe]:
@@ -920,6 +981,46 @@ def disk_probes(can_mount: bool) -> Iterator[Probe]:
     yield Probe("5", "live --catalog onto a full disk, then bag repair", full, _full_disk,
                 graph=True)
 
+    def single(d: Path) -> tuple[Result, str]:
+        disk = mount_small(d)
+        try:
+            fill(disk, keep=96 * 1024)  # room for the bag's start, not for the run
+            p = live_catalog_probe("5", "", ["--bag", str(disk / "bag")], None, _full_disk,
+                                   catalog=False)
+            return p.run(d)
+        finally:
+            subprocess.run(["umount", "-l", str(disk)], check=False)
+
+    yield Probe("5", "live (one object) onto a nearly full disk", single, _full_disk,
+                graph=True)
+
+    def onto_full(name: str, args: list[str]) -> Probe:
+        def run(d: Path) -> tuple[Result, str]:
+            disk = mount_small(d)
+            try:
+                (d / "good.tdm").write_text(tdm_kvn(GOOD_ROWS))
+                fill(disk)
+                argv = [*CLI, *(a.replace("{D}", str(d)).replace("{DISK}", str(disk))
+                                for a in args)]
+                r = run_cmd(argv, d / "run", 120.0)
+                left = [q.name for q in disk.iterdir() if q.name != "filler"]
+                if left:
+                    r.notes.append(f"left on the full disk: {left}")
+                return r, shell(argv) + "  (onto a full 256k tmpfs)"
+            finally:
+                subprocess.run(["umount", "-l", str(disk)], check=False)
+
+        return Probe("5", name, run, refused(r"No space left on device", rcs=(1, 2)))
+
+    yield onto_full("import tdm onto a full disk",
+                    ["import", "tdm", "{D}/good.tdm", "--bag", "{DISK}/bag"])
+    yield onto_full("replay --offline onto a full disk",
+                    ["replay", str(SAMPLE_BAG), "--offline", "--out", "{DISK}/rep"])
+    yield onto_full("export oem onto a full disk",
+                    ["export", "oem", str(SAMPLE_BAG), "--out", "{DISK}/x.oem"])
+    yield onto_full("export tdm onto a full disk",
+                    ["export", "tdm", str(SAMPLE_BAG), "--out", "{DISK}/x.tdm"])
+
 
 READ_WHOLE_BAG = """
 import sys
@@ -932,10 +1033,13 @@ print(n, 'messages')
 """A bag is whole when `rosbags`' Reader opens it as it is (metadata.yaml, MCAP summary)."""
 
 
-def fill(disk: Path) -> None:
-    """Take what room is left on `disk` (another writer filling it)."""
+def fill(disk: Path, keep: int = 0) -> None:
+    """Take what room is left on `disk` but `keep` bytes (another writer filling it)."""
     with contextlib.suppress(OSError), (disk / "filler").open("wb", buffering=0) as f:
         while True:
+            fs = os.statvfs(disk)
+            if fs.f_bavail * fs.f_frsize <= keep:
+                return
             f.write(b"x" * 4096)
 
 
@@ -970,6 +1074,49 @@ def listen_probe() -> Iterator[Probe]:
 
     yield live_catalog_probe("11", "live --catalog binds loopback only", [], make,
                              _loopback_only, timeout=180.0)
+
+
+CACHE_CHECK = """
+import os, sys
+from pathlib import Path
+from ssa_fusion.core import jit, kepler
+d = jit.cache_directory(kepler._solve_chi.py_func)
+root = Path(sys.argv[1])
+if os.environ.get('NUMBA_CACHE_DIR'):
+    assert d is None, f'a cache directory others may write is used: {d}'
+else:
+    assert d is not None and root not in d.parents, f'cache in the source tree: {d}'
+    mode = d.stat().st_mode & 0o777
+    assert d.stat().st_uid == os.getuid() and mode == 0o700, oct(mode)
+held = [str(q) for q in (root / 'ssa_fusion').rglob('*.nbi')]
+assert not held, f'numba index files in the source tree: {held[:2]}'
+print('ok', d)
+"""
+"""Where the compiled kernels' cache is (class 11): not in the source tree, the user's own,
+never a directory others may write (a pickle is unpickled from it)."""
+
+
+def cache_probes() -> Iterator[Probe]:
+    """Class 11: the numba cache outside the source tree, owned by the user, 0700."""
+
+    def probe(name: str, planted: Callable[[Path], None] | None) -> Probe:
+        def run(d: Path) -> tuple[Result, str]:
+            env = {}
+            if planted is not None:
+                (d / "shared" / "ssa_fusion").mkdir(parents=True, exist_ok=True)
+                planted(d / "shared" / "ssa_fusion")
+                env = {"NUMBA_CACHE_DIR": str(d / "shared")}
+            argv = [sys.executable, "-c", CACHE_CHECK, str(ROOT)]
+            return run_cmd(argv, d / "run", 120.0, env=env), shell(argv)
+
+        return Probe("11", name, run, accepted(r"^ok"))
+
+    yield probe("the compiled cache: the user's own, 0700, outside the source tree", None)
+    yield probe("the compiled cache: NUMBA_CACHE_DIR's ssa_fusion writable by all: unused",
+                lambda d: d.chmod(0o777))
+    if os.geteuid() == 0:  # only root can give a directory to another user
+        yield probe("the compiled cache: NUMBA_CACHE_DIR's ssa_fusion another user's: unused",
+                    lambda d: os.chown(d, 65534, 65534))
 
 
 def _wild_sockets(pid: int, kind: str) -> list[str]:
@@ -1030,7 +1177,7 @@ def can_mount_tmpfs(where: Path) -> bool:
 def all_probes(args: argparse.Namespace, can_mount: bool) -> list[Probe]:
     """Return the probes the options select."""
     probes = [*tdm_probes(args.large), *catalog_probes(), *param_probes(),
-              *cli_option_probes()]
+              *cli_option_probes(), *cache_probes()]
     if not args.no_graph:
         probes += [*graph_probes(), *flood_probes(), *disk_probes(can_mount)]
         if args.listen:

@@ -35,7 +35,7 @@ exports and written by the import, and the commands' options and runs.
 from __future__ import annotations
 
 import argparse
-import shutil
+import contextlib
 import sys
 import time
 from collections import Counter, defaultdict
@@ -57,6 +57,7 @@ from ssa_fusion.apps.ccsds_format import (
 from ssa_fusion.apps.ccsds_oem import ephemerides, oem_document
 from ssa_fusion.apps.ccsds_tdm_in import read_tdm
 from ssa_fusion.apps.ccsds_tdm_out import tdm_document
+from ssa_fusion.apps.partial import removed_if_unfinished
 from ssa_fusion.core import types
 from ssa_fusion.core.frames import Frame
 from ssa_fusion.core.site_file import SiteFileError, load_sites
@@ -123,22 +124,24 @@ def write_measurement_bag(out: Path, measurements: Iterable[types.Measurement],
     (an error, an interrupt) is removed. Returns the number of messages written.
     """
     classes = bagio.rosbags_classes()
-    writer = bagio.BagWriter(out)
     n = 0
-    try:
-        writer.add_topic(TOPIC_MEASUREMENT, f"{bagio.MSG_PACKAGE}/msg/Measurement")
-        for m in measurements:
-            msg = messages.measurement_to_msg(m, classes)
-            stamp = msg.header.stamp
-            writer.write_msg(TOPIC_MEASUREMENT, stamp.sec * 1_000_000_000 + stamp.nanosec, msg)
-            n += 1
-            if progress is not None and n % PROGRESS_EVERY == 0:
-                progress(n)
+    with removed_if_unfinished(out):
+        writer = bagio.BagWriter(out)
+        try:
+            writer.add_topic(TOPIC_MEASUREMENT, f"{bagio.MSG_PACKAGE}/msg/Measurement")
+            for m in measurements:
+                msg = messages.measurement_to_msg(m, classes)
+                stamp = msg.header.stamp
+                writer.write_msg(TOPIC_MEASUREMENT, stamp.sec * 1_000_000_000 + stamp.nanosec,
+                                 msg)
+                n += 1
+                if progress is not None and n % PROGRESS_EVERY == 0:
+                    progress(n)
+        except BaseException:
+            with contextlib.suppress(OSError):  # a full disk fails the close too
+                writer.close()
+            raise
         writer.close()
-    except BaseException:
-        writer.close()
-        shutil.rmtree(out, ignore_errors=True)
-        raise
     return n
 
 
@@ -294,7 +297,8 @@ def run_export_oem(args: argparse.Namespace) -> int:
     out, fmt, contents = _export(args)
     require_gcrf(args.bag, contents, (TOPIC_ESTIMATE,), "estimates")
     ephem = ephemerides(contents.estimates, args.object)
-    write_ndm(oem_document(ephem, OemFrame(args.frame)), out, fmt)
+    with removed_if_unfinished(out):
+        write_ndm(oem_document(ephem, OemFrame(args.frame)), out, fmt)
     n = sum(len(v) for v in ephem.values())
     print(f"export oem: {n} states with covariance of {len(ephem)} object(s) "
           f"({', '.join(ephem)}) in {args.frame}, UTC -> {out} ({fmt.upper()})")
@@ -310,7 +314,8 @@ def run_export_tdm(args: argparse.Namespace) -> int:
     if any(m.kind == types.Kind.RA_DEC for m in ms):  # their RA/Dec are in the states' frame
         require_gcrf(args.bag, contents, (TOPIC_ESTIMATE, TOPIC_TRUTH), "RA/Dec measurements")
     export = tdm_document(ms, AngleFrame(args.frame))
-    write_ndm(export.doc, out, fmt)
+    with removed_if_unfinished(out):
+        write_ndm(export.doc, out, fmt)
     said = _measurements_said(export.counts)
     left = (f", {export.skipped} forecasts or other kinds left out" if export.skipped else "")
     print(f"export tdm: {said} measurements in {len(export.doc.body.segment)} segment(s)"

@@ -132,7 +132,9 @@ def args_problem(args: argparse.Namespace) -> str | None:
     except ValueError as exc:
         return str(exc)
     try:
-        catalog_io.read_catalog(args.catalog)
+        entries = catalog_io.read_catalog(args.catalog)
+        t0 = timescales.parse_utc(args.start) if args.start else survey.catalog_start(entries)
+        timescales.check_window(t0, args.duration * 3600.0)
     except ValueError as exc:
         return str(exc)
     return None

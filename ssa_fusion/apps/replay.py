@@ -52,6 +52,7 @@ import numpy as np
 
 from ssa_fusion.apps import evaluate
 from ssa_fusion.apps.args import add_domain_id, add_settings, add_sites, positive_float
+from ssa_fusion.apps.partial import removed_if_unfinished
 from ssa_fusion.core import site_file, types
 from ssa_fusion.core.config import (
     EstimatorConfig,
@@ -140,7 +141,8 @@ def run(args: argparse.Namespace) -> int:
         settings_used = [node_settings.config_message("filter", s, recorded_gaps(stream)),
                          node_settings.config_message("surrogate", s)]
         try:
-            write_offline(out, stream, result, settings_used)
+            with removed_if_unfinished(out):
+                write_offline(out, stream, result, settings_used)
         except OSError as exc:
             print(f"error: cannot write {out}: {exc}", file=sys.stderr)
             return 2

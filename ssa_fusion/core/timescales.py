@@ -91,6 +91,15 @@ def check_epochs(t_unix: ArrayLike, what: str = "epoch") -> None:
                          f"second of a ROS 2 stamp)")
 
 
+def check_window(t0: float, span_s: float) -> None:
+    """Raise ValueError (one line) unless a run's start and end are representable epochs.
+
+    `t0`: the start (Unix s); `span_s`: its length (s); both ends go to `check_epochs`.
+    """
+    check_epochs([t0], "start")
+    check_epochs([t0 + span_s], "the run's end (start + duration)")
+
+
 @functools.cache
 def install_leap_seconds() -> str:
     """Bring ERFA's leap-second table up to date from astropy-iers-data's IERS file.

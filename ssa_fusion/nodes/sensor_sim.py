@@ -302,6 +302,17 @@ PARAMETERS = ParameterTable("sensor_sim", (
 """The sensor_sim's parameters."""
 
 
+def window_problem(t0: float, span: float) -> None:
+    """Refuse a run whose start `t0` or end `t0` + `span` (Unix s) ssa_fusion cannot represent.
+
+    `ParameterError` (one line, exit 2) from `timescales.check_window`'s ValueError.
+    """
+    try:
+        timescales.check_window(t0, span)
+    except ValueError as exc:
+        raise parameters.ParameterError(f"parameters 'start', 'duration': {exc}") from exc
+
+
 class SensorSim(SsaNode):
     """The simulator node: a schedule of what the sensors measure, published in sim time."""
 
@@ -410,8 +421,9 @@ class SensorSim(SsaNode):
 
         `duration` (s; 0: the scenario's) from `start` (Unix s; None: the scenario's t0).
         """
-        s = s.with_window(s.t0 if start is None else start, duration or s.duration_s)
-        s = s.with_(truth_cadence_s=cadence)
+        t0, span = s.t0 if start is None else start, duration or s.duration_s
+        window_problem(t0, span)  # what with_window would refuse, as a parameter error
+        s = s.with_window(t0, span).with_(truth_cadence_s=cadence)
         if list(gaps) != [0.0]:
             s = s.with_(outages=tuple((sky.ALL_STATIONS, gaps[i], gaps[i + 1])
                                       for i in range(0, len(gaps), 2)))
@@ -447,6 +459,7 @@ class SensorSim(SsaNode):
                 f"scenario {s.name!r} has no radar to observe a catalog")
         t0 = survey.catalog_start(entries) if start is None else start
         span = duration or s.duration_s
+        window_problem(t0, span)
         obs = survey.observe_catalog(entries, radars, t0, span, seed=seed)
         self.catalog_ids = list(obs.object_ids)
         # per object and per sensor, indexed by a measurement's obj and sensor

@@ -221,10 +221,12 @@ class SkyScenario:
     def with_window(self, t0: float, duration_s: float) -> SkyScenario:
         """Return this scenario from `t0` (Unix s) for `duration_s` (s).
 
-        The object starts from `x0` at `t0`. The outages keep their place in the run: their
+        The object starts from `x0` at `t0`. ValueError (one line) when the start or the end
+        is outside the epochs ssa_fusion represents. The outages keep their place in the run: their
         start and length scale with the duration (the scenario's 36 h outage of a 72 h run
         falls at 12 h of a 24 h one), so every run has its outage to evaluate.
         """
+        timescales.check_window(t0, duration_s)
         f = duration_s / self.duration_s
         return self.with_(t0=t0, duration_s=duration_s,
                           outages=tuple((who, a * f, b * f) for who, a, b in self.outages))

@@ -64,3 +64,14 @@ def test_surrogate_params_of_a_catalog_run_are_checked_before_anything_starts(tm
         assert r.returncode == 2, r
         assert says in r.stderr and "Traceback" not in r.stderr
         assert not out.exists()
+
+
+def test_a_catalog_run_ending_after_2038_is_refused_before_anything_starts(tmp_path):
+    """`live --catalog --start 2038-01-19T00:00:00Z --duration 6` ran into epochs a ROS 2
+    stamp cannot hold; now one line names the run's end, exit 2, nothing made."""
+    out = tmp_path / "run"
+    r = _cli("live", "--catalog", "config/catalogs/sample.tle", "--start",
+             "2038-01-19T00:00:00Z", "--duration", "6", "--out", str(out))
+    assert r.returncode == 2, r
+    assert "the run's end (start + duration) 2038-01-19T06:00:00.000Z is outside" in r.stderr
+    assert "Traceback" not in r.stderr and not out.exists()

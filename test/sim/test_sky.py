@@ -315,3 +315,15 @@ def test_a_site_that_waits_for_a_darker_sky_sees_less(tmp_path):
     assert set(t["night"]) <= set(t["nautical"])
     if len(t["night"]):
         assert np.degrees(sun.sun_elevation(t["night"], s.sensor("night").station)).max() < -18
+
+
+def test_a_window_ending_after_the_last_representable_second_is_refused():
+    """A start in range whose end (start + duration) passes 2038-01-19T03:14:07 (a ROS 2
+    stamp's int32 seconds) ran on and hung; now one line names the end."""
+    s = sky.SKY_SCENARIOS["iss_radar_columbus"]
+    last = 2**31 - 1
+    assert s.with_window(last - 7200.0, 7200.0).t0 == last - 7200.0  # ends on the last second
+    with pytest.raises(ValueError, match=r"the run's end .* 2038-01-19T04:00:00.000Z is outside"):
+        s.with_window(last - 7200.0 - 847.0, 3 * 3600.0)
+    with pytest.raises(ValueError, match=r"start 1971-12-31"):
+        s.with_window(63_072_000.0 - 86400.0, 3600.0)
