@@ -1,0 +1,127 @@
+"""Benchmark: a catalog of tens of thousands of objects over LEO, MEO, GEO and HEO through
+the filter shards in lockstep: real-time factor, losses, memory per object.
+
+The catalog: every element set of ``config/catalogs/celestrak_active_2025-07.tle`` (306 real
+objects: 277 LEO, 8 MEO, 18 GEO, 3 HEO) spread into ``--objects`` / 306 copies each
+(`sim.survey.synthetic_catalog`: the same orbit shape and regime, ascending node and mean
+anomaly drawn uniformly), written as a TLE file (`sgp4.exporter`). Then
+
+    ssa-fusion live --catalog FILE --duration HOURS --shards 2 --time-scale max --no-surrogate
+
+(lockstep, as fast as the nodes go; the radar network of iss_network), and its summary
+(``catalog.json``): measurements published, received and lost, sim time over wall time,
+each filter shard's resident memory at the end over the objects it holds.
+
+    nice -n 10 python bench/bench_catalog_scale.py [--objects 30000] [--hours 24]
+
+Asserts that the run published measurements of objects of every regime it was given and
+that the accounting adds up (lost = published - received). Prints the summary; the last line
+is JSON. The targets it reports against (not asserted): >= 100x real time, 0 lost,
+<= 20 KiB per object.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from sgp4.exporter import export_tle
+
+from ssa_fusion.core import catalog as catalog_io
+from ssa_fusion.sim import survey
+
+ROOT = Path(__file__).resolve().parents[1]
+REAL = ROOT / "config" / "catalogs" / "celestrak_active_2025-07.tle"
+TARGET_SPEED = 100.0  # x real time, the filter path
+TARGET_KIB = 20.0  # per object, the filter processes
+
+
+def regime(entry: catalog_io.CatalogEntry) -> str:
+    """LEO, MEO, GEO or HEO, from the element set's mean motion and eccentricity."""
+    revs_per_day = entry.satrec.no_kozai * 1440.0 / (2.0 * 3.141592653589793)
+    if entry.satrec.ecco > 0.25:
+        return "HEO"
+    if revs_per_day > 11.25:
+        return "LEO"
+    return "GEO" if 0.9 < revs_per_day < 1.1 else "MEO"
+
+
+def write_catalog(path: Path, objects: int, seed: int) -> dict[str, int]:
+    """Write the spread catalog of `objects` as a TLE file; return objects per regime."""
+    bases = catalog_io.read_catalog(REAL)
+    per, extra = divmod(objects, len(bases))
+    counts: dict[str, int] = {}
+    first = 0
+    with path.open("w") as f:
+        for i, base in enumerate(bases):
+            n = per + (i < extra)
+            if not n:
+                continue
+            for e in survey.synthetic_catalog(base, n, seed=seed + i, first_id=first):
+                line1, line2 = export_tle(e.satrec)
+                f.write(f"{e.name}\n{line1}\n{line2}\n")
+            counts[regime(base)] = counts.get(regime(base), 0) + n
+            first += n
+    return counts
+
+
+def main() -> None:
+    """Build the catalog, run it, print the summary and the JSON line."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--objects", type=int, default=30_000)
+    ap.add_argument("--hours", type=float, default=24.0)
+    ap.add_argument("--shards", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=1)
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp)
+        cat = root / "catalog.tle"
+        t = time.perf_counter()
+        regimes = write_catalog(cat, args.objects, args.seed)
+        print(f"catalog: {args.objects} objects {regimes}, written in "
+              f"{time.perf_counter() - t:.1f} s ({cat.stat().st_size / 1e6:.1f} MB)")
+        cmd = [str(Path(sys.executable).parent / "ssa-fusion"), "live", "--catalog", str(cat),
+               "--duration", str(args.hours), "--shards", str(args.shards),
+               "--time-scale", "max", "--no-surrogate", "--out", str(root / "run")]
+        print("$ " + " ".join(cmd[1:]), flush=True)
+        t = time.perf_counter()
+        done = subprocess.run(cmd, env={**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE":
+                                        "LOCALHOST"}, capture_output=True, text=True,
+                              check=False)
+        wall = time.perf_counter() - t
+        print("\n".join(done.stdout.strip().splitlines()[-12:]))
+        assert (root / "run" / "catalog.json").exists(), done.stderr[-3000:]
+        s = json.loads((root / "run" / "catalog.json").read_text())
+    published, received = s["published"], s["received_by_shards"]
+    assert published > 0 and s["objects_with_estimates"] > 0, "nothing published or fused"
+    assert s["lost_measurements"] >= abs(published - received), "the accounting is short"
+    shards = s["per_shard"]
+    held = sum(int(v["objects"]) for v in shards.values())
+    rss_mib = sum(float(v["rss_mib"]) for v in shards.values())
+    kib_per_object = rss_mib * 1024.0 / args.objects
+    ran = s["sim_wall_s"] or float("nan")
+    speed = s["live_real_time_factor"] or float("nan")
+    print(f"published {published}, received {received}, lost {s['lost_measurements']}; "
+          f"{s['sim_s'] / 3600:g} h of sim time in {ran:.0f} s from the first measurement to "
+          f"the last estimate ({wall:.0f} s with start-up and the summary): {speed:.1f}x real "
+          f"time (target >= {TARGET_SPEED:g}x)")
+    print(f"filter shards: {held} objects held ({s['objects_with_estimates']} with estimates), "
+          f"{rss_mib:.0f} MiB resident at the end: {kib_per_object:.1f} KiB per catalog object "
+          f"(target <= {TARGET_KIB:g})")
+    print(json.dumps({"objects": args.objects, "regimes": regimes, "hours": args.hours,
+                      "shards": args.shards, "published": published, "received": received,
+                      "lost": s["lost_measurements"], "sim_s": s["sim_s"],
+                      "graph_wall_s": ran, "command_wall_s": round(wall, 1),
+                      "real_time_factor": round(speed, 1), "objects_held": held,
+                      "objects_with_estimates": s["objects_with_estimates"],
+                      "rss_mib": round(rss_mib, 1),
+                      "kib_per_object": round(kib_per_object, 2)}))
+
+if __name__ == "__main__":
+    main()
