@@ -308,16 +308,20 @@ def live_catalog(out: Path, objects: int, hours: float, time_scale: float | str,
     return json.loads((out / "catalog.json").read_text())
 
 
-def same_estimates(a: Path, b: Path) -> tuple[int, int, float]:
-    """(estimates in both bags, bit-identical ones, largest relative difference of x or P)."""
+def same_estimates(a: Path, b: Path, forecasts: bool = False) -> tuple[int, int, float]:
+    """(estimates in both bags, bit-identical ones, largest relative difference of x or P).
+
+    The filters' estimates, or (`forecasts`) the surrogates' gap forecasts."""
     from ssa_fusion.core.types import UpdateSource
     from ssa_fusion.ros import bagio, messages
+
+    wanted = UpdateSource.FORECAST if forecasts else UpdateSource.SENSOR
 
     def load(bag: Path) -> dict:
         out = {}
         for m in bagio.read_bag(bag, topics=["/ssa/estimate_batch"]):
             e = messages.estimate_batch_from_msg(m.msg)
-            if e.update_source == UpdateSource.SENSOR:  # the filters' (no forecasts)
+            if e.update_source == wanted:
                 for i, (oid, t) in enumerate(zip(e.object_id, e.t.tolist(), strict=True)):
                     out[(oid, t)] = (e.x[i], e.P[i])
         return out

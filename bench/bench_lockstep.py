@@ -1,7 +1,8 @@
 """Benchmark: a catalog run gives the same estimates on an idle and on a loaded machine.
 
 `ssa-fusion live --catalog` (``--synthetic N`` LEO objects, ``--hours`` of the radar network,
-two filter shards, no surrogate) three times:
+two filter shards, no surrogate; ``--surrogate``: two surrogate shards too, every gap fitted,
+fits from 3 pass ends over 6 h, so that a day's run has fits) three times:
 
 * lockstep (the default) as fast as the nodes go (``--time-scale max``), machine idle;
 * the same beside 4 CPU burners (busy loops, 2 cores);
@@ -10,8 +11,10 @@ two filter shards, no surrogate) three times:
 
 Prints each run's accounting (published, recorded, lost), wall time and real-time factor,
 and the estimates of the loaded runs against the idle one (count, bit-identical ones,
-largest relative difference). Asserts that the runs published measurements, that the
-lockstep runs lost none and that their estimates agree to 1e-12. The last line is JSON.
+largest relative difference; with ``--surrogate`` the gap forecasts too), and whether the
+bags hold the same /ssa/* messages (topic, log time, bytes). Asserts that the runs published
+measurements, that the lockstep runs lost none, that their estimates (and forecasts) agree
+to 1e-12 and that their bags are the same. The last line is JSON.
 
     nice -n 10 python bench/bench_lockstep.py [--objects 300] [--hours 6]
 """
@@ -42,12 +45,34 @@ def burners(n: int) -> Iterator[None]:
             p.wait()
 
 
+def same_bag(a: Path, b: Path) -> bool:
+    """Whether two bags hold the same /ssa/* messages: topic, log time and content (in
+    log-time order; messages at one log time in any order). The content is compared as CDR
+    re-serialized by `rosbags` (zero padding): the publishers' CDR leaves the alignment
+    padding after a string unset, so raw bytes differ from run to run where nothing does."""
+    from rosbags.rosbag2 import Reader
+
+    from ssa_fusion.ros.bagio import typestore
+
+    store = typestore()
+
+    def load(bag: Path) -> list[tuple[str, int, bytes]]:
+        with Reader(bag) as r:
+            return sorted((c.topic, t, bytes(store.serialize_cdr(
+                store.deserialize_cdr(d, c.msgtype), c.msgtype)))
+                for c, t, d in r.messages() if c.topic.startswith("/ssa/"))
+
+    return load(a) == load(b)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--objects", type=int, default=300)
     ap.add_argument("--hours", type=float, default=6.0)
     ap.add_argument("--open-scale", type=float, default=20000.0)
     ap.add_argument("--burners", type=int, default=4)
+    ap.add_argument("--surrogate", action="store_true",
+                    help="with the surrogate shards: compare the gap forecasts too")
     args = ap.parse_args()
     runs: dict[str, dict] = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -55,11 +80,14 @@ def main() -> None:
         plan = [("lockstep_idle", 0, "max", ()),
                 ("lockstep_loaded", args.burners, "max", ()),
                 ("open_loop_loaded", args.burners, args.open_scale, ("--open-loop",))]
+        fits = ("--surrogate-param", "min_span=21600", "--surrogate-param", "min_anchors=3")
         for name, load, scale, extra in plan:
+            extra = (*extra, *fits) if args.surrogate else extra
             print(f"{name}: {load} burners, --time-scale {scale} {' '.join(extra)}")
             with burners(load):
                 s = live_catalog(root / name, args.objects, args.hours, scale, 2,
-                                 surrogate=False, extra=extra, lossless=not extra)
+                                 surrogate=args.surrogate, extra=extra,
+                                 lossless=not extra)
             runs[name] = {"published": s["published"],
                           "recorded": s["recorded_measurements"],
                           "lost": s["lost_measurements"],
@@ -71,13 +99,26 @@ def main() -> None:
             try:
                 n, same, worst = same_estimates(root / "lockstep_idle" / "bag", root / name / "bag")
                 runs[name].update(estimates=n, bit_identical=same, worst_relative=worst)
+                if args.surrogate:
+                    n, same, worst = same_estimates(root / "lockstep_idle" / "bag",
+                                                    root / name / "bag", forecasts=True)
+                    runs[name].update(forecasts=n, forecasts_bit_identical=same,
+                                      forecasts_worst_relative=worst)
             except AssertionError as exc:  # different (object, epoch) pairs: lost input
                 runs[name].update(estimates_differ=str(exc))
+            runs[name]["bag_identical"] = same_bag(root / "lockstep_idle" / "bag",
+                                                   root / name / "bag")
             print(f"{name} against lockstep_idle: {runs[name]}")
     for name in ("lockstep_idle", "lockstep_loaded"):
         assert runs[name]["published"] > 1000 and runs[name]["lost"] == 0, runs[name]
     assert runs["lockstep_loaded"]["worst_relative"] <= 1e-12, runs["lockstep_loaded"]
-    print(json.dumps({"objects": args.objects, "hours": args.hours, "runs": runs}))
+    assert runs["lockstep_loaded"]["bag_identical"], "the lockstep runs' bags differ"
+    if args.surrogate:
+        assert runs["lockstep_loaded"]["forecasts"] > 0, "no gap forecast to compare"
+        assert runs["lockstep_loaded"]["forecasts_worst_relative"] <= 1e-12, runs[
+            "lockstep_loaded"]
+    print(json.dumps({"objects": args.objects, "hours": args.hours,
+                      "surrogate": args.surrogate, "runs": runs}))
 
 
 if __name__ == "__main__":

@@ -162,7 +162,8 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     the shards and the recorder (`nodes.progress`; `time_scale` a ceiling) unless
     `lockstep` is False (open loop: sim time follows the wall clock). Measurements and
     estimates go as batches (``/ssa/measurement_batch``, ``/ssa/estimate_batch``), one
-    measurement batch per shard per step. The same for
+    measurement batch per shard per step. In lockstep the surrogates fit every gap
+    (``fit_budget`` 0 unless `surrogate_extra` says otherwise). The same for
     `ssa-fusion live --catalog` and `ros2 launch ssa_fusion catalog.launch.py`. ValueError
     with one line for a `start` that is not an epoch ssa_fusion represents.
     """
@@ -178,14 +179,17 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     if bag is not None:
         recorder["bag"] = str(bag)
     station = ",".join(st.station.name for st in scenario.radars)
+    # lockstep waits for the fits: every gap fitted, whatever the machine (`core.gap_bank`)
+    budget = {"fit_budget": 0.0} if lockstep else {}
     own = {"sites": scenario.sites_file} if scenario.sites_file else {}  # radars of a file
     return [
         NodeSpec("recorder", "recorder", recorder),
         *(NodeSpec("catalog_filter", n, {"use_sim_time": True, "shards": shards, "shard": k,
                                          "station": station, **own})
           for k, n in enumerate(names)),
-        *(NodeSpec("catalog_surrogate", n, {**surrogate_extra, "use_sim_time": True,
-                                            "shards": shards, "shard": k})
+        *(NodeSpec("catalog_surrogate", n, {**budget, **surrogate_extra,
+                                            "use_sim_time": True, "shards": shards,
+                                            "shard": k})
           for k, n in enumerate(gaps)),
         NodeSpec("sensor_sim", "sensor_sim", {
             "scenario": scenario.name, "catalog": str(Path(catalog).resolve()),

@@ -8,7 +8,10 @@ ResidualSurrogate`, about 0.3-0.6 s of one core each with a J2 placeholder). Fit
 passes between calls (a token bucket; one fit may overdraw it, the next waits until the
 debt is repaid), the newest pass end first, since it has the most gap ahead of it. An object
 whose gap ends (a new estimate) before its turn is not fitted (``skipped``): the node keeps
-up with the stream by leaving gaps to the EKF's coasting, and counts every one.
+up with the stream by leaving gaps to the EKF's coasting, and counts every one. With
+``fit_budget`` 0 there is no budget: every pass end found by a `step` is fitted in it, so
+which gaps get a fit depends on sim time alone, never on the machine's speed or load (what
+a lockstep run needs: it waits for the fits).
 
 After its fit an object's forecast (the placeholder plus the learned residual, on the grid of
 multiples of ``period_s``) is released epoch by epoch as sim time passes: `step` returns
@@ -18,7 +21,7 @@ wrong), and `on_estimate` those due before the estimate that ends the gap. A for
 published at or after the epoch of that estimate is counted as ``overtaken``.
 
 Frames and units: GCRF km, km/s; times s (sim time, e.g. Unix s); ``fit_budget`` a fraction
-of wall time.
+of wall time (0: none).
 """
 
 from __future__ import annotations
@@ -60,7 +63,8 @@ class GapBankConfig:
     hold_s : float
         Forecasts are released only for epochs at least this long (sim s) before the clock.
     fit_budget : float
-        Fraction of wall time the fits may take on average (0 < fit_budget <= 1).
+        Fraction of wall time the fits may take on average (0 < fit_budget <= 1), or 0: no
+        budget, every pass end is fitted at the step that finds it (deterministic).
     residual : ResidualConfig
         The residual model: the live filter's (`residual.LIVE_RESIDUAL`), each fit scored
         held-out only where its gap ends (``heldout_fits`` 1: one propagation per fit).
@@ -85,8 +89,9 @@ class GapBankConfig:
                 raise ValueError(f"{name} must be a finite number > 0, got {v}")
         if not (math.isfinite(self.hold_s) and self.hold_s >= 0):
             raise ValueError(f"hold_s must be a finite number >= 0, got {self.hold_s}")
-        if not 0 < self.fit_budget <= 1:
-            raise ValueError(f"fit_budget must be in (0, 1], got {self.fit_budget}")
+        if not 0 <= self.fit_budget <= 1:
+            raise ValueError(f"fit_budget must be in [0, 1] (0: no budget), got "
+                             f"{self.fit_budget}")
 
 
 @dataclass(frozen=True)
@@ -213,7 +218,7 @@ class GapBank:
             self._allowance = min(self._allowance + c.fit_budget * (wall - self._wall_last),
                                   c.fit_budget)  # no more than one wall second saved up
         self._wall_last = wall
-        while self._allowance > 0.0 and self._queued[:n].any():
+        while (self._allowance > 0.0 or not c.fit_budget) and self._queued[:n].any():
             r = int(np.flatnonzero(self._queued[:n])[np.argmax(last[self._queued[:n]])])
             self._queued[r] = False
             spent = self._fit(r)  # the fit's own wall time accrues at the next step

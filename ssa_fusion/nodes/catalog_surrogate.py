@@ -60,8 +60,9 @@ from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import EstimateBatch, Message
 from ssa_fusion.ros.topics import CATALOG_QOS, TOPIC_ESTIMATE_BATCH
 
-TICK_S = 0.1
-"""Wall s between two rounds of fits and releases."""
+TICK_S = 0.01
+"""Wall s between two rounds of fits and releases (in lockstep the simulator's next step
+waits for the round at its clock: `nodes.progress.CLOCK`)."""
 
 COUNTERS = {"fitted": Count.FITS_MADE, "refused": Count.FITS_REFUSED,
             "skipped": Count.FITS_SKIPPED, "overtaken": Count.FORECASTS_OVERTAKEN}
@@ -69,7 +70,7 @@ COUNTERS = {"fitted": Count.FITS_MADE, "refused": Count.FITS_REFUSED,
 
 
 def _fraction(v: ParamValue) -> str | None:
-    return None if isinstance(v, float) and 0.0 < v <= 1.0 else "must be in (0, 1]"
+    return None if isinstance(v, float) and 0.0 <= v <= 1.0 else "must be in [0, 1]"
 
 
 PARAMETERS = ParameterTable("catalog_surrogate", (
@@ -85,8 +86,9 @@ PARAMETERS = ParameterTable("catalog_surrogate", (
           "forecasts only for epochs at least this long before the clock (the filter's "
           "estimates arrive after the clock)", unit="s", check=NON_NEGATIVE),
     Param("fit_budget", CATALOG_SURROGATE.fit_budget,
-          "fraction of wall time the fits may take on average",
-          check=Check("in (0, 1]", _fraction)),
+          "fraction of wall time the fits may take on average; 0 = no budget: every pass "
+          "end is fitted when found, whatever the machine (a lockstep run's, which waits "
+          "for the fits)", check=Check("in [0, 1]", _fraction)),
     Param("min_anchors", CATALOG_SURROGATE.min_anchors, "pass ends a fit needs",
           check=at_least(2)),
     Param("min_span", CATALOG_SURROGATE.min_span,
@@ -128,9 +130,11 @@ class CatalogSurrogateNode(SsaNode):
                             "the DDS implementation does not filter by content: every "
                             "estimate arrives and those not taken are ignored here")
         self.wall_timer(TICK_S, self.tick)
+        self.stepped_ns = 0  # the sim time (ns) the bank was last stepped at: lockstep
         self.progress = ProgressReporter(self, lambda: {
             SHARD: f"{self.shard}/{self.shards}", TAKEN_ESTIMATES: self.taken,
-            Count.PUBLISHED_FORECAST: self.diag.counts[Count.PUBLISHED_FORECAST]})
+            Count.PUBLISHED_FORECAST: self.diag.counts[Count.PUBLISHED_FORECAST]},
+            clock=lambda: self.stepped_ns)
         self.reset_on_backward_jump(self.reset, "every object forgotten")
 
     def reset(self) -> None:
@@ -204,7 +208,9 @@ class CatalogSurrogateNode(SsaNode):
     def tick(self) -> None:
         """Take what waited for the clock; fit what the budget allows; publish what is due."""
         self.replay_held()
-        self.publish(self.bank.step(self.now_s()))
+        now_ns = int(self.get_clock().now().nanoseconds)
+        self.publish(self.bank.step(now_ns * 1e-9))
+        self.stepped_ns = now_ns
         b, status = self.bank, self.diag.status
         for key, name in COUNTERS.items():
             self.diag.counts[name] = b.counts[key]

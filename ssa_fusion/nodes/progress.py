@@ -4,9 +4,13 @@ In lockstep (the default of simulated catalog runs) sensor_sim advances ``/clock
 step only once every consumer it names has taken all it was sent: each catalog_filter shard
 every measurement of its shard (fused, refused or dropped: nothing left waiting), the
 recorder every measurement and every estimate the shards and surrogates published. All
-count rows of the batches (MeasurementBatch, EstimateBatch), not messages. The time
-scale is then a ceiling, not a promise: on a loaded machine the run is slower, never lossy,
-and gives the same estimates as on an idle one.
+count rows of the batches (MeasurementBatch, EstimateBatch), not messages. And it publishes
+the next step's measurements only once every consumer has acted on that clock (`CLOCK`:
+the filters and the recorder have it, a surrogate has stepped its bank at it), so that what
+a node does at a clock never races the next step's data: the bag's log times, the fits and
+the forecasts are the same on any machine. The time scale is then a ceiling, not a promise:
+on a loaded machine the run is slower, never lossy, and gives the same bag as on an idle
+one.
 
 Each consumer publishes its counters on `TOPIC_PROGRESS` (`ProgressReporter`: a
 ``diagnostic_msgs/DiagnosticStatus`` named after the node, latched, sent within
@@ -49,6 +53,8 @@ TAKEN_ESTIMATES = "taken estimates"
 """A surrogate shard's filter estimates taken (used or refused)."""
 SHARD = "shard"
 """A filter or surrogate shard's place, ``k/K``."""
+CLOCK = "clock ns"
+"""The sim time (ns) a consumer has acted on: its clock, or what it last stepped at."""
 RECORDED_MEASUREMENTS = RECORDED + TOPIC_MEASUREMENT_BATCH
 """The recorder's rows of measurement batches recorded."""
 RECORDED_ESTIMATES = RECORDED + TOPIC_ESTIMATE_BATCH
@@ -56,11 +62,16 @@ RECORDED_ESTIMATES = RECORDED + TOPIC_ESTIMATE_BATCH
 
 
 class ProgressReporter:
-    """Publish a node's progress counters (`counters()`: name -> value) when they change."""
+    """Publish a node's progress counters (`counters()`: name -> value) when they change.
 
-    def __init__(self, node: Node, counters: Callable[[], Mapping[str, str | int]]) -> None:
+    With them `CLOCK`: `clock()` (ns), by default the node's clock (sim time).
+    """
+
+    def __init__(self, node: Node, counters: Callable[[], Mapping[str, str | int]],
+                 clock: Callable[[], int] | None = None) -> None:
         self.node = node
         self.counters = counters
+        self.clock = clock or (lambda: int(node.get_clock().now().nanoseconds))
         self.pub = node.create_publisher(DiagnosticStatus, TOPIC_PROGRESS, PROGRESS_QOS)
         self._sent: dict[str, str] = {}
         self.timer = wall_timer(node, REPORT_PERIOD_S, self.report)
@@ -68,6 +79,7 @@ class ProgressReporter:
     def report(self) -> None:
         """Publish the counters if any changed since the last report."""
         now = {k: str(v) for k, v in self.counters().items()}
+        now[CLOCK] = str(self.clock())
         if now == self._sent:
             return
         self._sent = now
@@ -94,7 +106,7 @@ def _num(report: Mapping[str, str], key: str) -> int:
 
 
 def waiting(reports: Mapping[str, Mapping[str, str]], nodes: Sequence[str], sent: int,
-            sent_by_shard: Callable[[int], NDArray[np.int64]]) -> list[str]:
+            sent_by_shard: Callable[[int], NDArray[np.int64]], clock_ns: int = 0) -> list[str]:
     """Return what the named consumers have not taken yet ([] = the simulator may go on).
 
     Parameters
@@ -110,6 +122,9 @@ def waiting(reports: Mapping[str, Mapping[str, str]], nodes: Sequence[str], sent
         Measurements published so far.
     sent_by_shard : callable
         K -> the measurements published so far to each of K shards (K,).
+    clock_ns : int
+        The sim time last published on /clock (ns): a consumer whose `CLOCK` is behind it
+        has not acted on it yet.
     """
     out = []
     mine = [reports.get(n, {}) for n in nodes]
@@ -121,6 +136,8 @@ def waiting(reports: Mapping[str, Mapping[str, str]], nodes: Sequence[str], sent
         if r is None:
             out.append(f"{name} (no report yet)")
             continue
+        if CLOCK in r and _num(r, CLOCK) < clock_ns:
+            out.append(f"{name} (at sim time {_num(r, CLOCK)} ns of {clock_ns})")
         if TAKEN in r:
             k, _, shards = r[SHARD].partition("/")
             want = int(sent_by_shard(int(shards))[int(k)])
@@ -165,6 +182,8 @@ class Lockstep:
         self.timeout_s = timeout_s
         self.sent = 0
         """Measurements published so far (the simulator sets it)."""
+        self.clock_ns = 0
+        """The sim time last published on /clock, ns (the simulator sets it)."""
         self._by_shard: dict[int, tuple[int, NDArray[np.int64]]] = {}
         self._since: float | None = None
 
@@ -184,7 +203,8 @@ class Lockstep:
         At wall time `now` (s, monotonic). True with a non-empty list: the consumers listed
         took longer than `timeout_s`; they are no longer waited for.
         """
-        missing = waiting(self.watch.reports, self.nodes, self.sent, self.sent_by_shard)
+        missing = waiting(self.watch.reports, self.nodes, self.sent, self.sent_by_shard,
+                          self.clock_ns)
         if not missing:
             self._since = None
             return True, []

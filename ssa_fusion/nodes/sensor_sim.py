@@ -533,7 +533,8 @@ class SensorSim(SsaNode):
         A step's measurements (epochs in (T - lockstep_step, T]) go first, ahead of the
         clock; once every consumer took them (and the estimates they gave), `/clock` moves
         to T: whatever a consumer does at T (a surrogate releasing a gap's forecasts) sees
-        everything before T.
+        everything before T. The next step's measurements wait until every consumer has
+        acted on T (`progress.CLOCK`), so nothing after T is seen at T.
         """
         lockstep = self.lockstep
         assert lockstep is not None and self.catalog is not None
@@ -549,9 +550,12 @@ class SensorSim(SsaNode):
                             f"{', '.join(missing)}")
         times = self.times
         if self.sim_stamp.sec == 0 or self.clock_behind:
-            # the last step's measurements are all taken: now its clock (the first: t0)
+            # the last step's measurements are all taken: now its clock (the first: t0);
+            # the next step's go once every consumer has acted on it
             self.publish_clock(min(self.sim_now, float(times[-1])))
             self.clock_behind = False
+            lockstep.clock_ns = self.sim_stamp.sec * 1_000_000_000 + self.sim_stamp.nanosec
+            return
         if self.next >= len(times):
             self.done()
             return

@@ -165,9 +165,40 @@ def test_a_forecast_for_an_epoch_a_real_estimate_covers_is_counted_overtaken(str
     assert bank.counts["overtaken"] == 30  # the forecasts at end + 1800 ... end + 3600 s
 
 
+def test_without_a_budget_every_pass_end_is_fitted_at_its_step_whatever_the_wall(streams,
+                                                                                monkeypatch):
+    """fit_budget 0: which gaps get a fit depends on sim time alone. A machine so slow that
+    each fit takes an hour of wall time, and a wall clock that never moves, fit the same
+    objects at the same step, and give the same forecasts."""
+    real = GapForecaster.forecast
+    runs = []
+    for cost in (0.0, 3600.0):
+        wall = FakeWall()
+
+        def slow(self, t, wall=wall, cost=cost):
+            wall.now += cost
+            return real(self, t)
+
+        monkeypatch.setattr(GapForecaster, "forecast", slow)
+        bank = GapBank(replace(CFG, fit_budget=0.0), wall=wall)
+        for oid, (ts, xs) in streams.items():
+            for t, x in zip(ts[ts < 7 * 3600.0], xs[ts < 7 * 3600.0], strict=True):
+                bank.on_estimate(oid, t, x, P)
+        out = bank.step(8 * 3600.0)  # the first step after both passes ended
+        assert bank.counts["fitted"] + bank.counts["refused"] == 2 and bank.waiting == 0
+        runs.append(out)
+    assert runs[0] and [(f.object_id, f.t) for f in runs[0]] == [(f.object_id, f.t)
+                                                                  for f in runs[1]]
+    for a, b in zip(*runs, strict=True):
+        np.testing.assert_array_equal(a.x, b.x)
+        np.testing.assert_array_equal(a.P, b.P)
+
+
 def test_the_configuration_is_checked():
     with pytest.raises(ValueError, match="fit_budget"):
-        GapBankConfig(fit_budget=0.0)
+        GapBankConfig(fit_budget=-0.1)
+    with pytest.raises(ValueError, match="fit_budget"):
+        GapBankConfig(fit_budget=1.5)
     with pytest.raises(ValueError, match="motion_model"):
         GapBankConfig(motion_model="sgp4")
     with pytest.raises(ValueError, match="period_s"):

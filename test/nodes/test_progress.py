@@ -4,6 +4,7 @@ consumers' latest reports, and the measurements sent to each shard."""
 import numpy as np
 
 from ssa_fusion.nodes.progress import (
+    CLOCK,
     RECORDED_ESTIMATES,
     RECORDED_MEASUREMENTS,
     SHARD,
@@ -47,6 +48,19 @@ def test_each_shortfall_is_named():
     got = waiting(_reports(recorded=(11, 11)), NODES, 12, _sent([5, 7]))
     assert got == ["recorder (recorded 11 of 12 measurements)",
                    "recorder (recorded 11 of 12 estimates)"]
+
+
+def test_the_next_step_waits_until_every_consumer_acted_on_the_clock():
+    """A consumer that has taken everything but whose clock (a surrogate: the sim time it
+    last stepped its bank at) is behind the clock last published is waited for: the next
+    step's data must not reach it before it acted on that clock."""
+    reports = _reports()
+    for r in reports.values():
+        r[CLOCK] = "2000000000000"
+    assert waiting(reports, NODES, 12, _sent([5, 7]), clock_ns=2_000_000_000_000) == []
+    reports["catalog_surrogate_0"][CLOCK] = "1999700000000"
+    assert waiting(reports, NODES, 12, _sent([5, 7]), clock_ns=2_000_000_000_000) == [
+        "catalog_surrogate_0 (at sim time 1999700000000 ns of 2000000000000)"]
 
 
 class _Node:
