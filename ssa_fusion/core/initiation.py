@@ -188,8 +188,11 @@ class OrbitInitiator:
             station = model
 
             if isinstance(model, RazelModel):
+                to_gcrs = iod.itrs_to_gcrs_at(station.unix0 + t3)  # once for every solve
+
                 def solve(zs: np.ndarray) -> np.ndarray:
-                    r = iod.razel_to_gcrs(zs[i3], station.unix0 + t3, station.station)
+                    r = iod.razel_to_gcrs(zs[i3], station.unix0 + t3, station.station,
+                                          to_gcrs)
                     v2 = iod.herrick_gibbs(r[0], r[1], r[2], t3[0], t3[1], t3[2])
                     return np.concatenate([r[1], v2])
             else:
@@ -200,6 +203,7 @@ class OrbitInitiator:
                     return np.concatenate([r2, v2])
 
             t_init = float(t3[1])
+            used = i3  # the other samples do not enter the solution: their Jacobian is 0
         else:
             observed = list(cast(PositionModel, model).observed)
 
@@ -212,10 +216,11 @@ class OrbitInitiator:
                 return x
 
             t_init = float(t[-1])
+            used = list(range(len(batch)))
         x0 = solve(Z)
-        R = [np.asarray(b.R, dtype=float) for b in batch]
         P = np.zeros((self.n, self.n))
-        for j, Rj in enumerate(R):
+        for j in dict.fromkeys(used):  # in order, once each (a batch of 2: i3 repeats one)
+            Rj = np.asarray(batch[j].R, dtype=float)
             sig = np.sqrt(np.clip(np.diag(Rj), 0.0, None))
             if not sig.any():
                 continue

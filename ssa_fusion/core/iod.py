@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .constants import MU_EARTH
-from .frames import Station, enu_matrix, itrs_to_gcrs
+from .frames import Station, enu_matrix, gcrs_to_itrs_matrix, itrs_to_gcrs
 from .kepler import propagate
 
 Array = NDArray[np.float64]
@@ -92,17 +92,30 @@ def finite_difference_state(t_s: ArrayLike, r: ArrayLike) -> Array:
     return np.concatenate([rr[-1], w @ rr])
 
 
-def razel_to_gcrs(z: ArrayLike, t_unix: ArrayLike, station: Station) -> Array:
+def razel_to_gcrs(z: ArrayLike, t_unix: ArrayLike, station: Station,
+                  to_gcrs: Array | None = None) -> Array:
     """[range km, az rad, el rad] (..., 3) seen from ``station`` -> GCRF position (..., 3) km.
 
     At Unix (UTC) epochs ``t_unix``; the inverse of :func:`ssa_fusion.core.frames.razel_gcrs`.
+    `to_gcrs`: the ITRS -> GCRS rotations at those epochs (..., 3, 3), `itrs_to_gcrs_at`,
+    when the same epochs are converted many times (the Earth's orientation is then computed
+    once); equal to the direct conversion to rounding (1e-16 relative).
     """
     zz = np.asarray(z, float)
     rng, az, el = zz[..., 0], zz[..., 1], zz[..., 2]
     ce = np.cos(el)
     enu = np.stack([rng * ce * np.sin(az), rng * ce * np.cos(az), rng * np.sin(el)], -1)
     m = enu_matrix(station.lat_rad, station.lon_rad)
+    if to_gcrs is not None:
+        out: Array = np.einsum("...ij,...j->...i", to_gcrs, enu @ m + station.itrs)
+        return out
     return itrs_to_gcrs(enu @ m + station.itrs, t_unix)
+
+
+def itrs_to_gcrs_at(t_unix: ArrayLike) -> Array:
+    """Return the ITRS -> GCRS rotations (..., 3, 3) at Unix (UTC) epochs (`razel_to_gcrs`)."""
+    out: Array = np.swapaxes(gcrs_to_itrs_matrix(t_unix), -1, -2)
+    return out
 
 
 def radec_los(ra_rad: ArrayLike, dec_rad: ArrayLike) -> Array:

@@ -5,7 +5,13 @@ import pytest
 
 from ssa_fusion.core.dynamics import elements_to_state, propagate
 from ssa_fusion.core.frames import COLUMBUS, razel_gcrs
-from ssa_fusion.core.iod import finite_difference_state, gibbs, herrick_gibbs, razel_to_gcrs
+from ssa_fusion.core.iod import (
+    finite_difference_state,
+    gibbs,
+    herrick_gibbs,
+    itrs_to_gcrs_at,
+    razel_to_gcrs,
+)
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS, MOLNIYA_ELEMENTS
 
 
@@ -66,3 +72,8 @@ def test_razel_to_gcrs_round_trip():
     z = razel_gcrs(r, t, COLUMBUS)
     np.testing.assert_allclose(razel_to_gcrs(z, t, COLUMBUS), r, atol=1e-8)
     np.testing.assert_allclose(razel_to_gcrs(z[0], t[0], COLUMBUS), r[0], atol=1e-8)
+    # the Earth's orientation computed once (what IOD's numerical Jacobian reuses): the same
+    # positions to rounding
+    once = razel_to_gcrs(z, t, COLUMBUS, itrs_to_gcrs_at(t))
+    np.testing.assert_allclose(once, razel_to_gcrs(z, t, COLUMBUS), rtol=0, atol=1e-11)
+    np.testing.assert_allclose(once, r, atol=1e-8)
