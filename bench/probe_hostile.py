@@ -658,11 +658,14 @@ def domain_pids(domain: int) -> list[int]:
 
 
 def node_pid(domain: int, name: str) -> int | None:
-    """Return the pid of the node `name` (``__node:=name``) in `domain`, if running."""
+    """Return the pid of the node `name` in `domain`, if running: renamed ``__node:=name``
+    (a catalog run's) or the executable of that name (the single-object graph's)."""
     for pid in domain_pids(domain):
         with contextlib.suppress(OSError):
             argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
-            if f"__node:={name}".encode() in argv:
+            if f"__node:={name}".encode() in argv or (
+                    not any(a.startswith(b"__node:=") for a in argv)
+                    and any(a.endswith(f"/lib/ssa_fusion/{name}".encode()) for a in argv)):
                 return pid
     return None
 
