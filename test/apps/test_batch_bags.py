@@ -342,3 +342,9 @@ def test_legacy_frames_of_batches_are_said_as_of_single_messages(sample, tmp_pat
     assert "say frame 'eci'" in capsys.readouterr().err
     assert cli.main(["replay", str(bag), "--offline", "--out", str(tmp_path / "o")]) == 2
     assert "in frame 'eci'" in capsys.readouterr().err
+
+
+def test_the_reading_layer_names_the_topics_of_ros_topics():
+    """`bagio` (no rclpy) spells the topic names out; they are those of `ros.topics`."""
+    assert bagio.BATCH_TOPICS == BATCHED
+    assert {t for t, _ in bagio.ROW_TOPICS.values()} == set(BATCHED)
