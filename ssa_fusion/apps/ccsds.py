@@ -17,6 +17,10 @@ does not have), so RA/Dec "in GCRF" and "in ICRF" are the same numbers. The TDM 
 (and with it ccsds-ndm) knows ``ICRF`` but not ``GCRF`` as a ``REFERENCE_FRAME``: exports
 say ``ICRF``; imports read ``GCRF`` as ``ICRF``.
 
+Both exports read estimates and measurements recorded as a catalog's batches
+(``/ssa/estimate_batch``, ``/ssa/measurement_batch``) as if recorded one message each
+(`bagio.read_records`).
+
 Files are written and read with the ``ccsds-ndm`` library (KVN or XML; reading tells the
 format from the content; `ccsds_format`). Conventions, and what is not supported:
 docs/CCSDS.md.
@@ -82,21 +86,23 @@ class BagContents:
 def load_bag(bag: Path) -> BagContents:
     """Return the estimates and measurements of `bag`, and the frames of its state messages.
 
-    Messages that do not decode are skipped with a warning (as `evaluate.load` does).
+    Measurements and estimates recorded as batches are read as their rows
+    (`bagio.read_records`); messages that do not decode and records refused are skipped
+    with a warning (as `evaluate.load` does).
     """
     out = BagContents()
     undecodable: Counter[str] = Counter()
+    refused: Counter[tuple[str, str]] = Counter()
     topics = (TOPIC_ESTIMATE, TOPIC_TRUTH, TOPIC_MEASUREMENT)
-    for m in bagio.read_bag(bag, topics=topics, undecodable=undecodable):
+    for m in bagio.read_records(bag, topics=topics, undecodable=undecodable, refused=refused):
         if m.topic == TOPIC_MEASUREMENT:
             out.measurements.append(messages.measurement_from_msg(m.msg))
             continue
         out.state_frames[m.topic].add(str(m.msg.header.frame_id))
         if m.topic == TOPIC_ESTIMATE:
             out.estimates.append(messages.estimate_from_msg(m.msg))
-    for topic, n in undecodable.items():
-        print(f"warning: {bag}: {n} message(s) on {topic} do not decode as their type; "
-              "skipped", file=sys.stderr)
+    for line in bagio.left_out(undecodable, refused):
+        print(f"warning: {bag}: {line}", file=sys.stderr)
     return out
 
 

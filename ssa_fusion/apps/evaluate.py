@@ -66,14 +66,20 @@ class BagData:
 
 
 def load(path: Path | str) -> BagData:
-    """Read the /ssa topics of a bag into core types (other topics are counted only)."""
+    """Read the /ssa topics of a bag into core types (other topics are counted only).
+
+    Measurements and estimates recorded as batches are read as their rows
+    (`bagio.read_records`) and counted under /ssa/measurement and /ssa/estimate, as if
+    recorded one message each; what was left out is counted and said on stderr.
+    """
     data = BagData()
     states = {topics.TOPIC_TRUTH: data.truth, topics.TOPIC_ESTIMATE: data.estimates,
               topics.TOPIC_SMOOTHED: data.smoothed}
     measurements = {topics.TOPIC_MEASUREMENT: data.measurements,
                     topics.TOPIC_WITHHELD: data.withheld, topics.TOPIC_FORECAST: data.forecasts}
     undecodable: Counter[str] = Counter()
-    for m in bagio.read_bag(path, undecodable=undecodable):
+    refused: Counter[tuple[str, str]] = Counter()
+    for m in bagio.read_records(path, undecodable=undecodable, refused=refused):
         data.counts[m.topic] = data.counts.get(m.topic, 0) + 1
         if m.topic in states:
             states[m.topic].append(estimate_from_msg(m.msg))
@@ -82,10 +88,9 @@ def load(path: Path | str) -> BagData:
             measurements[m.topic].append(measurement_from_msg(m.msg))
         elif m.topic == topics.TOPIC_CONFIG:
             data.config.append(m.msg.data)
-    for topic, n in undecodable.items():
-        data.counts[f"undecodable {topic}"] = n
-        print(f"warning: {path}: {n} message(s) on {topic} do not decode as their type; "
-              "skipped", file=sys.stderr)
+    data.counts.update(bagio.counts_left_out(undecodable, refused))
+    for line in bagio.left_out(undecodable, refused):
+        print(f"warning: {path}: {line}", file=sys.stderr)
     return data
 
 

@@ -30,6 +30,10 @@ stations the bag's measurements name (`core.config.for_stations`; the real-sky f
 `core.config.station_estimator`, for a bag without settings whose stations are not the
 default's). An offline replay that produces no estimate says why (`why_no_estimate`).
 
+A bag whose measurements are recorded as batches (``/ssa/measurement_batch``) is replayed, in
+both modes, as if recorded one message each: every row is the Measurement it means, at its
+batch's log time (`bagio.read_records`), and is played and written as one.
+
 A bag at another cadence than its settings' is replayed at its own: the surrogate infers the
 cadence from the stamps, as the node does with ``cadence`` 0.
 """
@@ -110,9 +114,10 @@ def run(args: argparse.Namespace) -> int:
     """Run `ssa-fusion replay` (live over ROS 2, or ``--offline``); return the exit code."""
     try:
         undecodable: Counter[str] = Counter()
-        stream = list(bagio.read_bag(args.bag, undecodable=undecodable))
-        for topic, n in undecodable.items():
-            print(f"replay: {n} message(s) on {topic} do not decode as their type; skipped")
+        refused: Counter[tuple[str, str]] = Counter()
+        stream = list(bagio.read_records(args.bag, undecodable=undecodable, refused=refused))
+        for line in bagio.left_out(undecodable, refused):
+            print(f"replay: {line}")
         check_topics(args.bag, stream)
         sites = site_file.load_stations(args.sites) if args.sites else ()
         chosen = settings(stream, args.scenario, args.params_file, sites)

@@ -1,7 +1,9 @@
 """foxglove_bridge: serve the graph live to Foxglove over its WebSocket protocol (foxglove-sdk).
 
-Subscribes to ``/ssa/truth``, ``/ssa/estimate``, ``/ssa/measurement`` and ``/ssa/forecast``
-and serves, on a WebSocket server bound to `host`:`port` (loopback by default):
+Subscribes to ``/ssa/truth``, ``/ssa/estimate``, ``/ssa/measurement`` and ``/ssa/forecast``,
+and to a catalog's ``/ssa/measurement_batch`` and ``/ssa/estimate_batch``, whose rows it takes
+as the Measurement and StateEstimate messages they mean (`bagio.batch_records`), and serves,
+on a WebSocket server bound to `host`:`port` (loopback by default):
 
 * ``/ssa/foxglove/scene`` (`foxglove.SceneUpdate`, every `scene_period` wall s): the Earth,
   true and estimated positions with their recent trails, the 3σ ellipsoid of the estimate's
@@ -29,7 +31,9 @@ Foxglove layout of these topics (3D, Map, Plot).
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -51,16 +55,25 @@ from ssa_fusion.nodes.parameters import (
     at_least,
     object_filter,
 )
+from ssa_fusion.ros import bagio, messages, visual_msgs
 from ssa_fusion.ros import foxglove_scene as scene
-from ssa_fusion.ros import messages, visual_msgs
-from ssa_fusion.ros.interfaces import MarkerArray, Message, NavSatFix
+from ssa_fusion.ros.interfaces import (
+    EstimateBatch,
+    MarkerArray,
+    MeasurementBatch,
+    Message,
+    NavSatFix,
+)
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
 from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
 from ssa_fusion.ros.topics import (
+    CATALOG_QOS,
     DATA_QOS,
     TOPIC_ESTIMATE,
+    TOPIC_ESTIMATE_BATCH,
     TOPIC_FORECAST,
     TOPIC_MEASUREMENT,
+    TOPIC_MEASUREMENT_BATCH,
     TOPIC_TRUTH,
 )
 
@@ -154,6 +167,11 @@ class FoxgloveBridgeNode(SsaNode):
             (MeasurementMsg, TOPIC_FORECAST, self.on_measurement))
         for msg_type, topic, callback in subs:
             self.subscribe(msg_type, topic, callback, DATA_QOS)
+        for batch_type, topic, msgtype in (
+                (MeasurementBatch, TOPIC_MEASUREMENT_BATCH, bagio.MEASUREMENT_BATCH),
+                (EstimateBatch, TOPIC_ESTIMATE_BATCH, bagio.ESTIMATE_BATCH)):
+            self.subscribe(batch_type, topic, partial(self.on_batch, topic, msgtype),
+                           CATALOG_QOS)
         self.wall_timer(p.number("scene_period"), self.publish_scene)
 
     def _ours(self, object_id: str) -> bool:
@@ -213,6 +231,19 @@ class FoxgloveBridgeNode(SsaNode):
         forecast = m.source == Source.FORECAST
         self._show(lambda: self.visual.measurement(m.kind, m.z, m.frame_id, m.t, forecast),
                    Count.FORECASTS if forecast else Count.MEASUREMENTS)
+
+    def on_batch(self, topic: str, msgtype: str, msg: Message) -> None:
+        """Show the rows of a MeasurementBatch or EstimateBatch, each as its message would be.
+
+        Rows no reader takes (`bagio.read_records`) are counted by cause.
+        """
+        refused: Counter[tuple[str, str]] = Counter()
+        rows = bagio.batch_records(bagio.BagMessage(topic, msgtype, 0, msg), refused)
+        for (_, cause), n in refused.items():
+            self.diag.count(cause, f"{topic}: {bagio.REFUSED_WHY.get(cause, cause)}", n=n)
+        show = self.on_measurement if msgtype == bagio.MEASUREMENT_BATCH else self.on_estimate
+        for row in rows:
+            show(row.msg)
 
     def publish_scene(self) -> None:
         """Log the scene, stamped with the newest epoch heard.

@@ -3,7 +3,8 @@
 The recorder, the offline replay, the live evaluation and the report all go through this
 module so that every bag the project writes has the same layout:
 ``<dir>/metadata.yaml`` + ``<dir>/<dir>.mcap`` (profile ``ros2``, schema encoding
-``ros2msg``, message encoding ``cdr``).
+``ros2msg``, message encoding ``cdr``). The readers of a bag's measurements and estimates
+read through `read_records`, which takes a catalog's batches as their rows.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
 from rosbags.interfaces import (
     Qos,
     QosDurability,
@@ -31,6 +33,9 @@ from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
+from ssa_fusion.core.timescales import EPOCH_MAX
+from ssa_fusion.core.types import Cause, Kind
+
 if TYPE_CHECKING:
     from rclpy.duration import Duration
     from rclpy.qos import QoSProfile
@@ -41,6 +46,10 @@ if TYPE_CHECKING:
 ROS_DISTRO = "kilted"
 MSG_PACKAGE = "ssa_fusion_msgs"
 MSG_TYPES = ("Measurement", "StateEstimate", "MeasurementBatch", "EstimateBatch")
+MEASUREMENT = f"{MSG_PACKAGE}/msg/Measurement"
+STATE_ESTIMATE = f"{MSG_PACKAGE}/msg/StateEstimate"
+MEASUREMENT_BATCH = f"{MSG_PACKAGE}/msg/MeasurementBatch"
+ESTIMATE_BATCH = f"{MSG_PACKAGE}/msg/EstimateBatch"
 
 
 class BagError(RuntimeError):
@@ -412,3 +421,165 @@ def _recover_mcap_file(path: Path, wanted: set[str] | None,
             pass  # the torn end of an unfinished file: keep what came before
     out.sort(key=lambda m: m.t_ns)
     yield from out
+
+
+# ------------------------------------------------------------------------------------------
+# records: a batch's rows as the messages they mean
+# ------------------------------------------------------------------------------------------
+ROW_TOPICS = {MEASUREMENT_BATCH: ("/ssa/measurement", MEASUREMENT),
+              ESTIMATE_BATCH: ("/ssa/estimate", STATE_ESTIMATE)}
+"""Per batch type, the topic and type of the messages its rows are (`topics.TOPIC_MEASUREMENT`
+and `topics.TOPIC_ESTIMATE`)."""
+BATCH_TOPICS = {"/ssa/measurement": "/ssa/measurement_batch",
+                "/ssa/estimate": "/ssa/estimate_batch"}
+"""Per message topic, the topic of its batches (`topics.TOPIC_MEASUREMENT_BATCH`,
+`topics.TOPIC_ESTIMATE_BATCH`): reading the one reads the other."""
+ROW_BATCHES = frozenset(BATCH_TOPICS.values())
+"""The batch topics (whose refusals count rows)."""
+_NS = 1_000_000_000
+_KINDS = np.zeros(256, bool)
+_KINDS[[int(k) for k in Kind]] = True
+REFUSED_WHY: dict[str, str] = {
+    Cause.REJECTED_KIND: "a measurement kind ssa_fusion does not know",
+    Cause.REJECTED_MALFORMED: "an epoch no ROS time carries (before 1970, after 2038-01-19), "
+                              "or a batch whose columns disagree in length",
+}
+"""What each cause of `read_records` means, for the line that says what was left out."""
+
+
+def read_records(path: Path | str, topics: Iterable[str] | None = None,
+                 undecodable: Counter[str] | None = None,
+                 refused: Counter[tuple[str, str]] | None = None) -> Iterator[BagMessage]:
+    """Return the messages of a bag as `read_bag` does, a batch's rows as messages of their own.
+
+    Every MeasurementBatch and EstimateBatch is replaced by its rows (`batch_records`): a
+    Measurement on /ssa/measurement, a StateEstimate on /ssa/estimate per row, each the
+    message that row published alone would have been, at the batch's log time; so that a
+    bag recorded with batches reads as if it had been recorded one message each, and a bag
+    of both gives the union. Asking for /ssa/measurement or /ssa/estimate (`topics`) reads
+    their batch topics too.
+
+    Measurements and estimates (single messages and rows alike) that no reader can take are
+    left out and counted in `refused` (when given) by (topic recorded on, cause):
+    ``rejected_kind`` for a measurement kind the core does not know, ``rejected_malformed``
+    for an epoch before 1970 or after 2038-01-19 (no ROS time carries it) and for every row
+    of a batch whose columns disagree in length (`REFUSED_WHY`). Messages that do not
+    decode are counted in `undecodable`, as `read_bag` counts them.
+    """
+    wanted = None
+    if topics is not None:
+        wanted = set(topics)
+        wanted |= {BATCH_TOPICS[t] for t in wanted if t in BATCH_TOPICS}
+    for m in read_bag(path, wanted, undecodable):
+        if m.msgtype in ROW_TOPICS:
+            yield from batch_records(m, refused)
+        elif m.msgtype in (MEASUREMENT, STATE_ESTIMATE):
+            cause = _record_problem(m)
+            if not cause:
+                yield m
+            elif refused is not None:
+                refused[m.topic, cause] += 1
+        else:
+            yield m
+
+
+def _record_problem(m: BagMessage) -> str:
+    """Return why a Measurement or StateEstimate message is refused (`read_records`), or ""."""
+    stamp = m.msg.header.stamp
+    ns = int(stamp.sec) * _NS + int(stamp.nanosec)
+    if not 0 <= ns <= EPOCH_MAX * _NS:
+        return Cause.REJECTED_MALFORMED
+    if m.msgtype == MEASUREMENT and not _KINDS[int(m.msg.kind) & 0xFF]:
+        return Cause.REJECTED_KIND
+    return ""
+
+
+def batch_records(batch: BagMessage, refused: Counter[tuple[str, str]] | None = None
+                  ) -> list[BagMessage]:
+    """Return the rows of a MeasurementBatch or EstimateBatch as Measurement or StateEstimate.
+
+    One vectorised pass over the columns, then one message per row: each row is, to the
+    bit, the message the same measurement or estimate published alone is (SI values as the
+    batch carries them; stamp the row's epoch; frame_id the row's station or frame for a
+    measurement, the batch's header.frame_id for an estimate), on the per-message topic
+    (`ROW_TOPICS`), at the batch's log time, in epoch order (a stable sort: publishers
+    write their rows in epoch order). Rows refused as `read_records` says are counted in
+    `refused` by (the batch's topic, cause).
+    """
+    msg = batch.msg
+    measurements = batch.msgtype == MEASUREMENT_BATCH
+    n = len(msg.object_id)
+    ns = np.asarray(msg.stamp_ns, dtype=np.int64)
+    columns: dict[str, Any] = {"shard_key": msg.shard_key, "stamp_ns": ns}
+    if measurements:
+        columns.update(kind=msg.kind, source=msg.source, frame_id=msg.frame_id, z=msg.z,
+                       covariance=msg.covariance, horizon=msg.horizon)
+        width = {"z": 3, "covariance": 9}
+    else:
+        columns.update(state=msg.state, covariance=msg.covariance, nis=msg.nis)
+        width = {"state": 6, "covariance": 36}
+    if any(len(v) != n * width.get(k, 1) for k, v in columns.items()):
+        if refused is not None and n:
+            refused[batch.topic, Cause.REJECTED_MALFORMED] += n
+        return []
+    cause = np.full(n, "", dtype=object)
+    cause[(ns < 0) | (ns > int(EPOCH_MAX) * _NS)] = Cause.REJECTED_MALFORMED
+    if measurements:
+        kind = np.asarray(msg.kind, dtype=np.uint8)
+        cause[(cause == "") & ~_KINDS[kind]] = Cause.REJECTED_KIND
+    bad = cause != ""
+    if refused is not None and bad.any():
+        for c, k in zip(*np.unique(cause[bad].astype(str), return_counts=True), strict=True):
+            refused[batch.topic, str(c)] += int(k)
+    keep = np.flatnonzero(~bad)
+    keep = keep[np.argsort(ns[keep], kind="stable")]
+    if not len(keep):
+        return []
+    c = rosbags_classes()
+    t_ns = ns[keep]
+    sec, nanosec = (t_ns // _NS).tolist(), (t_ns % _NS).tolist()
+    ids = np.asarray(msg.object_id, dtype=object)[keep].tolist()
+    keys = np.asarray(msg.shard_key, dtype=np.uint32)[keep].tolist()
+    cov = np.asarray(msg.covariance, dtype=np.float64).reshape(n, -1)[keep]
+    topic, msgtype = ROW_TOPICS[batch.msgtype]
+    time, header = c.time, c.header
+    if measurements:
+        frames = np.asarray(msg.frame_id, dtype=object)[keep].tolist()
+        z = np.asarray(msg.z, dtype=np.float64).reshape(n, 3)[keep]
+        make = c.measurement
+        rows = [make(header=header(stamp=time(sec=s, nanosec=q), frame_id=f), object_id=o,
+                     kind=k, source=src, z=zi, covariance=ci, horizon=h, shard_key=key)
+                for s, q, f, o, k, src, zi, ci, h, key in zip(
+                    sec, nanosec, frames, ids, kind[keep].tolist(),
+                    np.asarray(msg.source, dtype=np.uint8)[keep].tolist(), z, cov,
+                    np.asarray(msg.horizon, dtype=np.float64)[keep].tolist(), keys,
+                    strict=True)]
+    else:
+        frame, source = str(msg.header.frame_id), int(msg.update_source)
+        x = np.asarray(msg.state, dtype=np.float64).reshape(n, 6)[keep]
+        make = c.estimate
+        rows = [make(header=header(stamp=time(sec=s, nanosec=q), frame_id=frame), object_id=o,
+                     state=xi, covariance=ci, update_source=source, nis=v, shard_key=key)
+                for s, q, o, xi, ci, v, key in zip(
+                    sec, nanosec, ids, x, cov,
+                    np.asarray(msg.nis, dtype=np.float64)[keep].tolist(), keys, strict=True)]
+    return [BagMessage(topic, msgtype, batch.t_ns, row) for row in rows]
+
+
+def left_out(undecodable: Counter[str], refused: Counter[tuple[str, str]]) -> list[str]:
+    """Return one line per topic (and cause) of what `read_records` left out."""
+    lines = [f"{n} message(s) on {topic} do not decode as their type; skipped"
+             for topic, n in undecodable.items()]
+    lines += [f"{n} {'row(s) of batches' if topic in ROW_BATCHES else 'message(s)'} on "
+              f"{topic} refused ({cause}: {REFUSED_WHY.get(cause, cause)}); skipped"
+              for (topic, cause), n in sorted(refused.items())]
+    return lines
+
+
+
+def counts_left_out(undecodable: Counter[str], refused: Counter[tuple[str, str]]
+                    ) -> dict[str, int]:
+    """Return what `read_records` left out as counts: ``undecodable TOPIC``, ``CAUSE TOPIC``."""
+    out = {f"undecodable {topic}": n for topic, n in undecodable.items()}
+    out.update({f"{cause} {topic}": n for (topic, cause), n in sorted(refused.items())})
+    return out

@@ -1,7 +1,8 @@
 """Graph test of foxglove_bridge: the node process serves the graph to Foxglove over its
-WebSocket protocol on loopback. The test publishes estimates and truth over DDS (its own
-ROS domain), connects a minimal WebSocket client (RFC 6455, Foxglove subprotocol) to the
-port the node reports, and checks the advertised channels and a scene message."""
+WebSocket protocol on loopback. The test publishes estimates (one message each and as
+one-row EstimateBatch messages, in turns) and truth over DDS (its own ROS domain), connects
+a minimal WebSocket client (RFC 6455, Foxglove subprotocol) to the port the node reports,
+and checks the advertised channels and a scene message."""
 
 from __future__ import annotations
 
@@ -17,13 +18,14 @@ from collections import Counter
 
 import numpy as np
 from sensor_msgs.msg import NavSatFix
-from ssa_fusion_msgs.msg import StateEstimate
+from ssa_fusion_msgs.msg import EstimateBatch, StateEstimate
 from visualization_msgs.msg import Marker, MarkerArray
 
 from ssa_fusion.core import types
+from ssa_fusion.core.rows import EstimateRows
 from ssa_fusion.ros import bagio, messages, visual_msgs
 from ssa_fusion.ros import foxglove_scene as scene
-from ssa_fusion.ros.topics import DATA_QOS
+from ssa_fusion.ros.topics import CATALOG_QOS, DATA_QOS, TOPIC_ESTIMATE_BATCH
 
 SUBPROTOCOLS = ("foxglove.sdk.v1", "foxglove.websocket.v1")
 T0 = 1_718_000_000.0  # Unix s
@@ -103,6 +105,14 @@ class WsClient:
         self.sock.close()
 
 
+def _batch(msg: StateEstimate) -> EstimateBatch:
+    """The one-row EstimateBatch of `msg`."""
+    e = messages.estimate_from_msg(msg)
+    return messages.estimate_batch_to_msg(EstimateRows(
+        np.array([e.t]), [e.object_id], e.x[None], e.P[None], np.array([e.nis]),
+        types.UpdateSource(e.update_source), messages.shard_keys([e.object_id])))
+
+
 def _estimate(k: int, truth: bool = False) -> StateEstimate:
     r = np.array([6778.0, 0.0, 0.0]) if truth else np.array([6779.0, 1.0, 0.5])
     x = np.concatenate([r, [0.0, 7.67, 0.0]])
@@ -141,6 +151,7 @@ def test_bridge_serves_scene_track_and_metrics_and_records_them_in_the_bag(ros_g
         port = int(match.group(1))
         est_pub = g.probe.create_publisher(StateEstimate, "/ssa/estimate", DATA_QOS)
         truth_pub = g.probe.create_publisher(StateEstimate, "/ssa/truth", DATA_QOS)
+        batch_pub = g.probe.create_publisher(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
 
         client = WsClient("127.0.0.1", port, timeout=g.scaled(10))
         assert any(p in client.head for p in SUBPROTOCOLS), client.head
@@ -163,24 +174,32 @@ def test_bridge_serves_scene_track_and_metrics_and_records_them_in_the_bag(ros_g
             {"id": sid, "channelId": channels[topic]["id"]} for sid, topic in subs.items()]})
 
         received: dict[str, list[bytes]] = {topic: [] for topic in subs.values()}
+        metric_times: list[int] = []
         k = 0
 
         def got_all() -> bool:
             nonlocal k
             # keep publishing (new epochs) until the bridge has matched us and answered
             truth_pub.publish(_estimate(k, truth=True))
-            est_pub.publish(_estimate(k))
+            if k % 2:  # odd epochs as a batch's row
+                batch_pub.publish(_batch(_estimate(k)))
+            else:
+                est_pub.publish(_estimate(k))
             k += 1
             client.poll()
             for data in client.binaries:
                 if data[0] == 0x01:  # message data: op, subscription id, log time, payload
-                    sid, _log_time = struct.unpack("<IQ", data[1:13])
+                    sid, log_time = struct.unpack("<IQ", data[1:13])
                     received[subs[sid]].append(data[13:])
+                    if subs[sid] == scene.METRICS_TOPIC:
+                        metric_times.append(log_time)
             client.binaries.clear()
             # truth and estimate travel on two topics: an estimate can arrive before the
             # truth of its epoch (its error is then unknown, None); wait for one that did not
             errors = [json.loads(m)["position_error_km"] for m in received[scene.METRICS_TOPIC]]
-            return all(received.values()) and any(e is not None for e in errors)
+            odd = {round((t * 1e-9 - T0) / 30.0) % 2 for t in metric_times}
+            return (all(received.values()) and any(e is not None for e in errors)
+                    and odd == {0, 1})  # estimates of both kinds of message shown
 
         g.wait_for(lambda: got_all() and bool(markers) and bool(fixes), 15,
                    "messages on the scene, ground-track and metrics channels and their ROS "
