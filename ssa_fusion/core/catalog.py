@@ -8,18 +8,19 @@ A catalog is a list of `CatalogEntry` (object id, name, `sgp4.api.Satrec`), read
   Every line is checked column by column against the TLE layout (`sgp4.io.LINE1`/`LINE2`)
   and by its checksum (column 69, when present), because ``Satrec.twoline2rv`` accepts
   malformed lines silently (zeros for what it cannot read).
-* **CCSDS OMM** in XML (NDM/XML, as CelesTrak and Space-Track serve it) or CSV (one row per
-  object, CelesTrak's columns), read by `sgp4.omm`. OMM in KVN is not supported (`sgp4`
-  does not read it): the error says so.
+* **CCSDS OMM** in XML (NDM/XML, as CelesTrak and Space-Track serve it; parsed by lxml) or
+  CSV (one row per object, CelesTrak's columns; by `csv`, its field size limit kept), the
+  fields `sgp4.omm` reads, made element sets by `sgp4.omm.initialize`. OMM in KVN is not
+  supported (`sgp4` does not read it): the error says so.
 
 The format is told from the content, not the file name. A file is read as a stream, never
 whole: a TLE/3LE or OMM/CSV file line by line, an OMM/XML file element by element (each
-segment dropped once read), so the memory a read takes is that of its entries (and of its
-longest line), whatever the file's size; `read_catalog`'s ``progress(bytes read, file size,
-objects so far)`` says how far it got, every `PROGRESS_EVERY` objects. Malformed input
-raises ValueError
-naming the file and the line (the XML segment for OMM/XML) in one bounded line (values are
-quoted to `MAX_QUOTE` characters), never an error from deep inside `sgp4` or `csv`. Every
+segment dropped once read), so a read holds its entries (and the longest line) but not the
+file's text, whatever its size; `read_catalog`'s ``progress(bytes read, file size, objects
+so far)`` says how far it got, every `PROGRESS_EVERY` objects. Malformed input raises
+ValueError naming the file and the line (the XML segment for OMM/XML) in one bounded line
+(values are quoted to `MAX_QUOTE` characters), never an error from deep inside `sgp4`,
+`csv` or lxml. Every
 element set is checked against the domain of its fields before it is used: finite angles,
 an inclination in [0, 180] deg, an eccentricity in [0, 1), a mean motion of a bound orbit
 above the Earth's surface (0 < n <= `MAX_MEAN_MOTION_REV_DAY`), |B*| <= `MAX_BSTAR`, an
@@ -50,12 +51,11 @@ import io
 import locale
 import math
 import os
-import xml.etree.ElementTree as ET
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -65,6 +65,9 @@ from sgp4.io import LINE1, LINE2, compute_checksum
 
 from .frames import teme_to_gcrs_matrix
 from .timescales import DAY_S, UNIX_EPOCH_JD, check_epochs, jd_utc
+
+if TYPE_CHECKING:
+    from lxml import etree
 
 MAX_QUOTE = 60
 """Characters of a value quoted in an error message (the rest is cut: '...')."""
@@ -457,23 +460,30 @@ def parse_omm_xml(text: str, source: str = "<string>") -> list[CatalogEntry]:
 def _omm_xml_entries(chunks: Iterable[str], source: str) -> Iterator[CatalogEntry]:
     """Yield the entries of the OMM XML text that `chunks` make, read as a stream.
 
-    Each ``segment`` element (any element so named below the root, in document order, as
-    `sgp4.omm.parse_xml` finds them) is judged when it ends, then dropped with whatever
-    else was read outside a segment. Errors are raised as a whole parse would raise them:
-    XML that is not well formed anywhere first, then a segment lacking a block, then the
-    first segment whose element set is wrong (segments after it are only parsed).
+    lxml's pull parser (no network, no DTD loaded, its limits on text size and depth held;
+    comments and processing instructions left out). Each ``segment`` element (any element so
+    named below the root, in document order, as `sgp4.omm.parse_xml` finds them) is judged
+    when it ends, then dropped with whatever else was read outside a segment. Errors are
+    raised as a parse of the whole document raised them: XML that is not well formed
+    anywhere first, then a segment lacking a block, then the first segment whose element
+    set is wrong (the segments after it are only parsed).
     """
+    from lxml import etree
+
     reader = _OmmXml(source)
-    parser: ET.XMLPullParser[ET.Element] = ET.XMLPullParser(events=("start", "end"))
+    parser = etree.XMLPullParser(events=("start", "end"), remove_comments=True,
+                                 remove_pis=True, no_network=True, load_dtd=False,
+                                 huge_tree=False)
     try:
         for chunk in chunks:
             parser.feed(chunk)
             yield from reader.read(parser.read_events())
         parser.close()
         yield from reader.read(parser.read_events())
-    except ET.ParseError as exc:
-        line, col = exc.position
-        raise ValueError(f"{source}:{line}: not well-formed XML (column {col + 1})") from None
+    except etree.XMLSyntaxError as exc:
+        line, col = exc.position if exc.position else (exc.lineno or 1, 1)
+        raise ValueError(f"{source}:{max(line, 1)}: not well-formed XML (column "
+                         f"{max(col, 1)})") from None
     if reader.failure is not None:
         raise reader.failure
 
@@ -483,7 +493,7 @@ class _OmmXml:
 
     def __init__(self, source: str) -> None:
         self.source = source
-        self.open: list[ET.Element] = []
+        self.open: list[etree._Element] = []
         """Elements started and not yet ended, the root first."""
         self.segments: list[int] = []
         """The numbers of the open segments (from 1, in document order)."""
@@ -511,11 +521,11 @@ class _OmmXml:
             if elem.tag == "segment":
                 self.ended[self.segments.pop()] = _segment_fields(elem)
                 yield from self._judge()
-            if not self.segments:  # outside every segment: done with
+            if not self.segments:  # outside every segment: done with, and so is all before
                 elem.clear()
                 parent = self.open[-1]
-                if len(parent) and parent[-1] is elem:
-                    del parent[-1]
+                while elem.getprevious() is not None:
+                    del parent[0]
 
     def _judge(self) -> Iterator[CatalogEntry]:
         """Yield the entries of the ended segments next in document order."""
@@ -539,7 +549,7 @@ class _OmmXml:
                     yield entry
 
 
-def _segment_fields(segment: ET.Element) -> dict[str, str | None] | None:
+def _segment_fields(segment: etree._Element) -> dict[str, str | None] | None:
     """Return the fields of an OMM ``segment``, None if it lacks one of its blocks.
 
     Tag -> text of the children of its ``metadata``, ``data/meanElements`` and
