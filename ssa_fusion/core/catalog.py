@@ -51,6 +51,7 @@ import io
 import locale
 import math
 import os
+import re
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -61,7 +62,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from sgp4 import omm
 from sgp4.api import SGP4_ERRORS, Satrec, SatrecArray
-from sgp4.io import LINE1, LINE2, compute_checksum
+from sgp4.io import LINE1, LINE2
 
 from .frames import teme_to_gcrs_matrix
 from .timescales import DAY_S, UNIX_EPOCH_JD, check_epochs, jd_utc
@@ -371,23 +372,49 @@ def _check_columns(line: str, template: str, which: int, where: str) -> None:
             or (number[0] in _ALPHA5 and number[1:].isdigit())):
         raise ValueError(f"{where}: TLE line {which}, columns 3-7: catalogue number "
                          f"{number!r} is neither digits nor Alpha-5 (a letter, 4 digits)")
-    for col, (c, want) in enumerate(zip(line, template, strict=False), 1):
-        if 3 <= col <= 7:  # the catalogue number, checked above
-            ok = True
-        elif want == "N":
-            ok = c.isdigit() or c == " "
-        elif want in "+-":
-            ok = c in " +-" or (want == "-" and c.isdigit())
-        elif want in " .12":
-            ok = c == want
-        else:  # classification, international designator: free text
-            ok = True
-        if not ok:
-            raise ValueError(f"{where}: TLE line {which}, column {col}: {c!r} does not fit "
-                             f"the TLE layout ({template[col - 1]!r} there)")
-    if len(line) == 69 and int(line[68]) != compute_checksum(line):
+    if _LAYOUTS[template].fullmatch(line) is None:  # then say which column, and why
+        for col, (c, want) in enumerate(zip(line, template, strict=False), 1):
+            if not _fits(c, want, col):
+                raise ValueError(f"{where}: TLE line {which}, column {col}: {c!r} does not "
+                                 f"fit the TLE layout ({want!r} there)")
+    if len(line) == 69 and int(line[68]) != (total := _checksum(line)):
         raise ValueError(f"{where}: TLE line {which} fails its checksum (column 69 is "
-                         f"{line[-1]!r}, the line sums to {compute_checksum(line)})")
+                         f"{line[-1]!r}, the line sums to {total})")
+
+
+def _fits(c: str, want: str, col: int) -> bool:
+    """Whether character `c` fits column `col` (from 1) of a TLE layout, which has `want`."""
+    if 3 <= col <= 7:  # the catalogue number, checked on its own
+        return True
+    if want == "N":
+        return c.isdigit() or c == " "
+    if want in "+-":
+        return c in " +-" or (want == "-" and c.isdigit())
+    if want in " .12":
+        return c == want
+    return True  # classification, international designator: free text
+
+
+def _layout(template: str) -> re.Pattern[str]:
+    """Return the pattern of the ASCII lines of 68 or 69 columns that `_fits` `template`."""
+    ascii_chars = [chr(i) for i in range(128)]
+    columns = []
+    for col, want in enumerate(template, 1):
+        fit = [c for c in ascii_chars if _fits(c, want, col)]
+        columns.append("." if len(fit) == len(ascii_chars) else
+                       "[" + "".join(re.escape(c) for c in fit) + "]")
+    return re.compile("".join(columns[:68]) + f"(?:{columns[68]})?", re.DOTALL)
+
+
+_LAYOUTS = {LINE1: _layout(LINE1), LINE2: _layout(LINE2)}
+"""The TLE layouts' patterns (`_check_columns` says where a line that fails one fails)."""
+_CHECKSUM_VALUES = bytes(i - 48 if 48 <= i <= 57 else int(i == 45) for i in range(256))
+"""What an ASCII character adds to a TLE line's checksum: a digit its value, '-' one."""
+
+
+def _checksum(line: str) -> int:
+    """Return the checksum of an ASCII TLE line (as `sgp4.io.compute_checksum`)."""
+    return sum(line[:68].encode("ascii").translate(_CHECKSUM_VALUES)) % 10
 
 
 def _tle_entry(line1: str, line2: str, name: str, where: str, where2: str) -> CatalogEntry:

@@ -411,3 +411,62 @@ def test_a_read_holds_its_entries_and_what_does_not_grow_with_the_file(tmp_path,
     assert sizes[1] > 4 * catalog.CHUNK_BYTES
     # the ids seen (to refuse one twice) grow with the objects; no text does
     assert extra[1] - extra[0] < 0.35 * (sizes[1] - sizes[0]), (extra, sizes)
+
+
+# ------------------------------------------------------------------------------------------
+# the TLE layout checked by a pattern first
+# ------------------------------------------------------------------------------------------
+def columns_one_by_one(line: str, template: str, which: int, where: str) -> None:
+    """`_check_columns` as it was: every column in turn, the checksum by `sgp4`."""
+    if not line.isascii():
+        raise ValueError(f"{where}: TLE line {which} has non-ASCII characters")
+    if len(line) not in (68, 69):
+        raise ValueError(f"{where}: TLE line {which} has {len(line)} columns, not 69")
+    number = line[2:7]
+    if not ((number.strip().isdigit() and number == number.strip().rjust(5))
+            or (number[0] in ALPHA5 and number[1:].isdigit())):
+        raise ValueError(f"{where}: TLE line {which}, columns 3-7: catalogue number "
+                         f"{number!r} is neither digits nor Alpha-5 (a letter, 4 digits)")
+    for col, (c, want) in enumerate(zip(line, template, strict=False), 1):
+        if 3 <= col <= 7:
+            ok = True
+        elif want == "N":
+            ok = c.isdigit() or c == " "
+        elif want in "+-":
+            ok = c in " +-" or (want == "-" and c.isdigit())
+        elif want in " .12":
+            ok = c == want
+        else:
+            ok = True
+        if not ok:
+            raise ValueError(f"{where}: TLE line {which}, column {col}: {c!r} does not fit "
+                             f"the TLE layout ({template[col - 1]!r} there)")
+    if len(line) == 69 and int(line[68]) != compute_checksum(line):
+        raise ValueError(f"{where}: TLE line {which} fails its checksum (column 69 is "
+                         f"{line[-1]!r}, the line sums to {compute_checksum(line)})")
+
+
+def said(check: Callable[..., None], *args: object) -> str | None:
+    try:
+        check(*args)
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
+@settings(max_examples=1500, deadline=None, derandomize=True)
+@given(st.sampled_from([1, 2]),
+       st.lists(st.tuples(st.integers(0, 68), st.characters(max_codepoint=130)), max_size=4),
+       st.booleans())
+def test_the_layout_pattern_says_what_the_columns_one_by_one_say(which, edits, checksum):
+    """Every character at every column (ASCII and a few beyond), with and without the
+    checksum column: the same verdict and message."""
+    from sgp4.io import LINE1, LINE2
+
+    line = list(tle_lines(123)[which - 1])
+    for col, c in edits:
+        line[col] = c
+    text = "".join(line) if checksum else "".join(line)[:68]
+    template = LINE1 if which == 1 else LINE2
+    assert said(catalog._check_columns, text, template, which, "f:1") == \
+        said(columns_one_by_one, text, template, which, "f:1")
