@@ -24,7 +24,6 @@ import hashlib
 import importlib.util
 import itertools
 import json
-import resource
 import subprocess
 import sys
 import tempfile
@@ -128,10 +127,11 @@ def write_xml(path: Path, objects: int) -> None:
         f.write("</body>\n</omm>\n</ndm>\n")
 
 
-def rss_now_kib() -> int:
-    """This process's resident memory now, KiB."""
+def status_kib(key: str) -> int:
+    """This process's `key` of /proc/self/status, KiB: VmRSS (resident memory now), VmHWM
+    (its peak; unlike ru_maxrss, not the parent's before exec)."""
     for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
+        if line.startswith(f"{key}:"):
             return int(line.split()[1])
     return 0
 
@@ -150,15 +150,15 @@ def child(reader: str, path: Path, baseline: str) -> None:
         sys.modules[name] = module
         exec(compile(source, f"{baseline}:ssa_fusion/core/catalog.py", "exec"), module.__dict__)
     calls: list[tuple[int, int, int]] = []
-    before = rss_now_kib()
+    before = status_kib("VmRSS")
     t0 = time.perf_counter()
     if reader == "new":
         entries = module.read_catalog(path, progress=lambda *c: calls.append(c))
     else:
         entries = module.read_catalog(path)
     wall = time.perf_counter() - t0
-    after = rss_now_kib()
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    after = status_kib("VmRSS")
+    peak = status_kib("VmHWM")
     digest = hashlib.sha256()
     for e in entries:
         s = e.satrec

@@ -488,23 +488,25 @@ def _omm_xml_entries(chunks: Iterable[str], source: str) -> Iterator[CatalogEntr
     """Yield the entries of the OMM XML text that `chunks` make, read as a stream.
 
     lxml's pull parser (no network, no DTD loaded, its limits on text size and depth held;
-    comments and processing instructions left out). Each ``segment`` element (any element so
-    named below the root, in document order, as `sgp4.omm.parse_xml` finds them) is judged
-    when it ends, then dropped with whatever else was read outside a segment. Errors are
-    raised as a parse of the whole document raised them: XML that is not well formed
-    anywhere first, then a segment lacking a block, then the first segment whose element
-    set is wrong (the segments after it are only parsed).
+    comments and processing instructions left out), telling of ``segment`` elements only.
+    Each (any element so named below the root, in document order, as `sgp4.omm.parse_xml`
+    finds them) is judged when it ends; then it, and whatever else was read outside the
+    segments still open, is dropped. Errors are raised as a parse of the whole document
+    raised them: XML that is not well formed anywhere first, then a segment lacking a
+    block, then the first segment whose element set is wrong (the segments after it are
+    only parsed).
     """
     from lxml import etree
 
     reader = _OmmXml(source)
-    parser = etree.XMLPullParser(events=("start", "end"), remove_comments=True,
+    parser = etree.XMLPullParser(events=("start", "end"), tag="segment", remove_comments=True,
                                  remove_pis=True, no_network=True, load_dtd=False,
                                  huge_tree=False)
     try:
         for chunk in chunks:
             parser.feed(chunk)
             yield from reader.read(parser.read_events())
+            reader.drop_done()
         parser.close()
         yield from reader.read(parser.read_events())
     except etree.XMLSyntaxError as exc:
@@ -520,10 +522,9 @@ class _OmmXml:
 
     def __init__(self, source: str) -> None:
         self.source = source
-        self.open: list[etree._Element] = []
-        """Elements started and not yet ended, the root first."""
-        self.segments: list[int] = []
-        """The numbers of the open segments (from 1, in document order)."""
+        self.root: etree._Element | None = None
+        self.open: list[tuple[int, etree._Element]] = []
+        """The segments started and not yet ended: (number from 1 in document order, it)."""
         self.started = 0
         self.ended: dict[int, dict[str, str | None] | None] = {}
         """Fields of ended segments not yet judged (a segment inside another ends first):
@@ -534,25 +535,36 @@ class _OmmXml:
         self.lacking = False
 
     def read(self, events: Iterable[tuple[Any, ...]]) -> Iterator[CatalogEntry]:
-        """Yield the entries of the segments that `events` (start, end) complete."""
+        """Yield the entries of the segments that `events` (start, end of segments) complete."""
         for event, elem in events:
+            if elem.getparent() is None:  # the root: not one of its segments
+                continue
             if event == "start":
-                if self.open and elem.tag == "segment":
-                    self.started += 1
-                    self.segments.append(self.started)
-                self.open.append(elem)
+                if self.root is None:
+                    self.root = elem.getroottree().getroot()
+                self.started += 1
+                self.open.append((self.started, elem))
                 continue
-            self.open.pop()
-            if not self.open:  # the root
-                continue
-            if elem.tag == "segment":
-                self.ended[self.segments.pop()] = _segment_fields(elem)
-                yield from self._judge()
-            if not self.segments:  # outside every segment: done with, and so is all before
+            number, _ = self.open.pop()
+            self.ended[number] = _segment_fields(elem)
+            yield from self._judge()
+            if not self.open:
                 elem.clear()
-                parent = self.open[-1]
-                while elem.getprevious() is not None:
-                    del parent[0]
+
+    def drop_done(self) -> None:
+        """Drop the elements read outside the open segments.
+
+        All but the last child of each element on the way down from the root, along last
+        children, to the first open segment (left whole) or a leaf.
+        """
+        node = self.root
+        inside = {id(elem) for _, elem in self.open}
+        while node is not None and id(node) not in inside:
+            last = next(reversed(node), None)
+            if last is not None:
+                while last.getprevious() is not None:
+                    del node[0]
+            node = last
 
     def _judge(self) -> Iterator[CatalogEntry]:
         """Yield the entries of the ended segments next in document order."""
