@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from ssa_fusion.core import timescales
+from ssa_fusion.core.catalog import Progress
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import BAG_PATTERN
 from ssa_fusion.ros.readiness import READERS
@@ -83,13 +84,14 @@ def catalog_scenario(name: str) -> sky.SkyScenario:
 
 
 def live_scenario(name: str, start: str = "", duration_h: float = 0.0, sites: str = "",
-                  elements: str = "") -> scenarios.Scenario | sky.SkyScenario:
+                  elements: str = "", progress: Progress | None = None
+                  ) -> scenarios.Scenario | sky.SkyScenario:
     """Return the scenario `name` of `LIVE_SCENARIOS` from `start` for `duration_h`.
 
     `sites`: a sites file whose sites observe a real-sky scenario's object instead of its
     sensors ('' = its own; `sky.SkyScenario.with_sites`). `elements`: an element set file
     whose first object they observe instead ('' = the scenario's; `with_elements`: from
-    its epoch unless `start`).
+    its epoch unless `start`; `progress`: of reading it, `core.catalog.read_catalog`'s).
 
     `start`: ISO 8601 UTC ('' = the scenario's epoch); a real-sky scenario's object starts
     from its initial GCRF state at it (`sky.SkyScenario.t0`). `duration_h`: hours of sim
@@ -105,7 +107,7 @@ def live_scenario(name: str, start: str = "", duration_h: float = 0.0, sites: st
     real_sky = sky.SKY_SCENARIOS.get(name)
     if real_sky is not None:
         if elements:
-            real_sky = real_sky.with_elements(elements)
+            real_sky = real_sky.with_elements(elements, progress)
         t0 = timescales.parse_utc(start) if start else real_sky.t0
         real_sky = real_sky.with_window(t0, duration_h * 3600.0 or real_sky.duration_s)
         return real_sky.with_sites(sites) if sites else real_sky

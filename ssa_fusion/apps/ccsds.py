@@ -41,7 +41,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import sys
-import time
 from collections import Counter, defaultdict
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -62,6 +61,7 @@ from ssa_fusion.apps.ccsds_oem import ephemerides, oem_document
 from ssa_fusion.apps.ccsds_tdm_in import read_tdm
 from ssa_fusion.apps.ccsds_tdm_out import tdm_document
 from ssa_fusion.apps.partial import removed_if_unfinished
+from ssa_fusion.apps.progress_lines import ProgressLines
 from ssa_fusion.core import types
 from ssa_fusion.core.frames import Frame
 from ssa_fusion.core.site_file import SiteFileError, load_sites
@@ -155,40 +155,11 @@ PROGRESS_EVERY = 8192
 """Messages between two calls of `write_measurement_bag`'s progress callback."""
 
 
-class ImportProgress:
-    """Lines on stderr saying how far `import tdm` is, one every `every_s` seconds at most.
-
-    Nothing for an import done within `every_s`: a small file says only its summary.
-    """
+class ImportProgress(ProgressLines):
+    """The progress lines of `import tdm` on stderr (`ProgressLines`): its measurements."""
 
     def __init__(self, every_s: float = 5.0, stream: TextIO | None = None) -> None:
-        self.every_s = every_s
-        self.stream = stream if stream is not None else sys.stderr
-        self.t0 = self.last = time.monotonic()
-        self.total = 0
-
-    def _due(self) -> bool:
-        now = time.monotonic()
-        if now - self.last < self.every_s:
-            return False
-        self.last = now
-        return True
-
-    def reading(self, done: int, size: int, measurements: int) -> None:
-        """Say the bytes read of `size` and the measurements so far (if one is due)."""
-        if self._due():
-            self._say(f"read {done / 1e6:.1f} of {size / 1e6:.1f} MB "
-                      f"({100.0 * done / max(size, 1):.0f}%), {measurements} measurements")
-
-    def writing(self, done: int) -> None:
-        """Say the messages written of `total` (if one is due)."""
-        if self._due():
-            self._say(f"wrote {done} of {self.total} measurements to the bag "
-                      f"({100.0 * done / max(self.total, 1):.0f}%)")
-
-    def _say(self, what: str) -> None:
-        print(f"import tdm: {what}, {time.monotonic() - self.t0:.0f} s", file=self.stream,
-              flush=True)
+        super().__init__("import tdm", "measurements", every_s, stream)
 
 
 # ------------------------------------------------------------------------------------------

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 from ssa_fusion import graphs
 from ssa_fusion.apps import evaluate, report, runs
 from ssa_fusion.apps.args import add_discovery, add_domain_id, discovery, time_scale
+from ssa_fusion.apps.progress_lines import ProgressLines
 from ssa_fusion.core.types import UpdateSource
 from ssa_fusion.ros import visual_msgs
 from ssa_fusion.ros.processes import Graph
@@ -237,7 +238,8 @@ def run(args: argparse.Namespace) -> int:
         return 2
     try:
         s = graphs.live_scenario(args.scenario, args.start, args.duration, args.sites,
-                                 args.elements)
+                                 args.elements, ProgressLines(f"live: elements {args.elements}",
+                                                              "objects").reading)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

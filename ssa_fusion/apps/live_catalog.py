@@ -40,6 +40,7 @@ import numpy as np
 from ssa_fusion import graphs
 from ssa_fusion.apps import runs
 from ssa_fusion.apps.args import discovery
+from ssa_fusion.apps.progress_lines import ProgressLines
 from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core import timescales
 from ssa_fusion.core.types import UpdateSource
@@ -103,7 +104,10 @@ def shard_list(text: str) -> tuple[int, ...]:
 
 
 def args_problem(args: argparse.Namespace) -> str | None:
-    """Return why the catalog options cannot run, or None."""
+    """Return why the catalog options cannot run, or None.
+
+    The catalog is read by `run` (`entries_of`), which then checks the run's window.
+    """
     if args.objects < 0 or args.synthetic < 0 or not args.duration >= 0:
         return "--objects, --synthetic and --duration must be >= 0"
     if getattr(args, "sites", ""):
@@ -131,12 +135,6 @@ def args_problem(args: argparse.Namespace) -> str | None:
         catalog_surrogate_params(args)
     except ValueError as exc:
         return str(exc)
-    try:
-        entries = catalog_io.read_catalog(args.catalog)
-        t0 = timescales.parse_utc(args.start) if args.start else survey.catalog_start(entries)
-        timescales.check_window(t0, args.duration * 3600.0)
-    except ValueError as exc:
-        return str(exc)
     return None
 
 
@@ -159,9 +157,14 @@ def catalog_scenario(args: argparse.Namespace) -> sky.SkyScenario:
     return s.with_sites(sites) if sites else s
 
 
-def entries_of(args: argparse.Namespace) -> list[catalog_io.CatalogEntry]:
-    """Return the objects the run simulates (as sensor_sim builds them from the options)."""
-    entries = catalog_io.read_catalog(args.catalog)
+def entries_of(args: argparse.Namespace,
+               progress: catalog_io.Progress | None = None) -> list[catalog_io.CatalogEntry]:
+    """Return the objects the run simulates (as sensor_sim builds them from the options).
+
+    ValueError (one line naming the file and line) for a catalog that cannot be read;
+    `progress`: `catalog_io.read_catalog`'s.
+    """
+    entries = catalog_io.read_catalog(args.catalog, progress)
     if args.synthetic:
         entries = survey.synthetic_catalog(entries[0], args.synthetic, seed=args.seed)
     return entries[: args.objects] if args.objects else entries
@@ -282,12 +285,19 @@ def run(args: argparse.Namespace) -> int:
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         return 2
+    try:
+        entries = entries_of(args, ProgressLines(f"live: catalog {args.catalog}",
+                                                 "objects").reading)
+        t0 = timescales.parse_utc(args.start) if args.start else survey.catalog_start(entries)
+        timescales.check_window(t0, args.duration * 3600.0)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     s = catalog_scenario(args)
     dirs = runs.run_dirs(args, f"catalog_{s.name}")
     if dirs is None:
         return 2
     out, bag = dirs
-    entries = entries_of(args)
     sim_s = args.duration * 3600.0 or s.duration_s
     specs = graphs.catalog_graph(s, args.catalog, args.objects, args.synthetic, sim_s,
                           args.time_scale, args.seed, args.shards, args.surrogate,

@@ -8,13 +8,19 @@ A catalog is a list of `CatalogEntry` (object id, name, `sgp4.api.Satrec`), read
   Every line is checked column by column against the TLE layout (`sgp4.io.LINE1`/`LINE2`)
   and by its checksum (column 69, when present), because ``Satrec.twoline2rv`` accepts
   malformed lines silently (zeros for what it cannot read).
-* **CCSDS OMM** in XML (NDM/XML, as CelesTrak and Space-Track serve it) or CSV (one row per
-  object, CelesTrak's columns), read by `sgp4.omm`. OMM in KVN is not supported (`sgp4`
-  does not read it): the error says so.
+* **CCSDS OMM** in XML (NDM/XML, as CelesTrak and Space-Track serve it; parsed by lxml) or
+  CSV (one row per object, CelesTrak's columns; by `csv`, its field size limit kept), the
+  fields `sgp4.omm` reads, made element sets by `sgp4.omm.initialize`. OMM in KVN is not
+  supported (`sgp4` does not read it): the error says so.
 
-The format is told from the content, not the file name. Malformed input raises ValueError
-naming the file and the line (the XML segment for OMM/XML) in one bounded line (values are
-quoted to `MAX_QUOTE` characters), never an error from deep inside `sgp4` or `csv`. Every
+The format is told from the content, not the file name. A file is read as a stream, never
+whole: a TLE/3LE or OMM/CSV file line by line, an OMM/XML file element by element (each
+segment dropped once read), so a read holds its entries (and the longest line) but not the
+file's text, whatever its size; `read_catalog`'s ``progress(bytes read, file size, objects
+so far)`` says how far it got, every `PROGRESS_EVERY` objects. Malformed input raises
+ValueError naming the file and the line (the XML segment for OMM/XML) in one bounded line
+(values are quoted to `MAX_QUOTE` characters), never an error from deep inside `sgp4`,
+`csv` or lxml. Every
 element set is checked against the domain of its fields before it is used: finite angles,
 an inclination in [0, 180] deg, an eccentricity in [0, 1), a mean motion of a bound orbit
 above the Earth's surface (0 < n <= `MAX_MEAN_MOTION_REV_DAY`), |B*| <= `MAX_BSTAR`, an
@@ -39,22 +45,30 @@ T. S. Kelso, "Revisiting Spacetrack Report #3", AIAA 2006-6753 (2006).
 
 from __future__ import annotations
 
+import codecs
 import csv
+import io
+import locale
 import math
-import xml.etree.ElementTree as ET
-from collections.abc import Iterable, Iterator, Sequence
+import os
+import re
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from types import TracebackType
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from sgp4 import omm
 from sgp4.api import SGP4_ERRORS, Satrec, SatrecArray
-from sgp4.io import LINE1, LINE2, compute_checksum
+from sgp4.io import LINE1, LINE2
 
 from .frames import teme_to_gcrs_matrix
 from .timescales import DAY_S, UNIX_EPOCH_JD, check_epochs, jd_utc
+
+if TYPE_CHECKING:
+    from lxml import etree
 
 MAX_QUOTE = 60
 """Characters of a value quoted in an error message (the rest is cut: '...')."""
@@ -70,6 +84,15 @@ OMM_INTEGER_RANGES = {"NORAD_CAT_ID": (0, 339999), "ELEMENT_SET_NO": (0, 9999),
 """Integer OMM fields and the ranges a TLE can carry (NORAD numbers: Alpha-5)."""
 _ALPHA5 = "ABCDEFGHJKLMNPQRSTUVWXYZ"
 """Alpha-5's first characters (I and O are not used)."""
+PROGRESS_EVERY = 4096
+"""Objects between two calls of `read_catalog`'s progress callback."""
+CHUNK_BYTES = 1 << 18
+"""Bytes of a catalog file read at a time."""
+_LINE_BREAKS = frozenset("\n\r\v\f\x1c\x1d\x1e\x85\u2028\u2029")
+"""The characters `str.splitlines` ends a line at."""
+
+Progress = Callable[[int, int, int], None]
+"""``progress(bytes read, file size, objects so far)`` of `read_catalog`."""
 
 
 def _quote(value: object) -> str:
@@ -139,40 +162,161 @@ class CatalogStates:
     error: NDArray[np.int_]
 
 
-def read_catalog(path: Path | str) -> list[CatalogEntry]:
+def read_catalog(path: Path | str, progress: Progress | None = None) -> list[CatalogEntry]:
     """Element sets of a TLE, 3LE, OMM/XML or OMM/CSV file (told from its content).
+
+    The file is read as a stream (module docstring), as text in the locale's encoding (as
+    `Path.read_text` reads it); `progress(bytes read, file size, objects so far)` is called
+    every `PROGRESS_EVERY` objects and once at the end (the bytes read are then the file's
+    size).
 
     ValueError, naming the file and line: unreadable file, unknown or unsupported format
     (OMM/KVN), malformed line or field, an element set SGP4 refuses, an object id twice,
-    no element set at all.
+    no element set at all. Bytes that are not text in the encoding are said first, wherever
+    they are in the file (their position counted in bytes from its start).
     """
     path = Path(path)
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path}: cannot read catalog: {exc}") from None
-    head = next((s.strip() for s in text.splitlines()
-                 if s.strip() and not s.startswith("#")), "")
-    if head.startswith("<"):
-        entries = parse_omm_xml(text, str(path))
-    elif head.startswith("CCSDS_OMM_VERS"):
-        raise ValueError(f"{path}: OMM in KVN is not supported (sgp4 reads OMM as XML or "
-                         f"CSV); convert it to one of those")
-    elif "NORAD_CAT_ID" in head.split(","):
-        entries = parse_omm_csv(text, str(path))
-    else:
-        entries = parse_tle(text, str(path))
-    if not entries:
-        raise ValueError(f"{path}: no element sets in the file")
-    return entries
+    source = str(path)
+    with _CatalogFile(path) as f:
+        head = next((s.strip() for s in _lines(f.chunks())
+                     if s.strip() and not s.startswith("#")), "")
+        text = f.chunks()  # from the start again
+        try:
+            if head.startswith("<"):
+                entries = _omm_xml_entries(text, source)
+            elif head.startswith("CCSDS_OMM_VERS"):
+                raise ValueError(f"{path}: OMM in KVN is not supported (sgp4 reads OMM as XML "
+                                 f"or CSV); convert it to one of those")
+            elif "NORAD_CAT_ID" in head.split(","):
+                entries = _omm_csv_entries(_numbered(_lines(text)), source)
+            else:
+                entries = _tle_entries(_numbered(_lines(text)), source)
+            out = _collected(entries, f, progress)
+            if not out:
+                raise ValueError(f"{path}: no element sets in the file")
+        except ValueError:
+            for _ in text:  # the rest of the file: bytes that are not text say so first
+                pass
+            raise
+    return out
+
+
+def _collected(entries: Iterable[CatalogEntry], f: _CatalogFile,
+               progress: Progress | None) -> list[CatalogEntry]:
+    """Return the list of `entries` (read from `f`), calling `progress` as `read_catalog` says."""
+    out: list[CatalogEntry] = []
+    for entry in entries:
+        out.append(entry)
+        if progress is not None and len(out) % PROGRESS_EVERY == 0:
+            progress(f.bytes_read, f.size, len(out))
+    if progress is not None:
+        progress(f.bytes_read, f.size, len(out))
+    return out
+
+
+class _CatalogFile:
+    """A catalog file read as text, a chunk of `CHUNK_BYTES` at a time.
+
+    `size`: its size in bytes; `bytes_read`: how many `chunks` has read. A file that cannot
+    seek (a pipe) is read whole once, to be read from its start again.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.bytes_read = 0
+        self.encoding = locale.getpreferredencoding(False)  # as Path.read_text decodes
+        try:
+            self.file: IO[bytes] = path.open("rb")
+            self.size = os.fstat(self.file.fileno()).st_size
+            if not self.file.seekable():
+                with self.file:
+                    self.file = io.BytesIO(self.file.read())
+                self.size = len(self.file.getbuffer())
+        except OSError as exc:
+            raise self.cannot(exc) from None
+
+    def __enter__(self) -> _CatalogFile:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.file.close()
+
+    def cannot(self, why: object) -> ValueError:
+        """Return the ValueError saying the file cannot be read, and `why`."""
+        return ValueError(f"{self.path}: cannot read catalog: {why}")
+
+    def chunks(self) -> Iterator[str]:
+        """Yield the file's text from its start, every newline (CR LF, CR, LF) made LF.
+
+        ValueError (`cannot`) for bytes that are not text, or a failing read.
+        """
+        decoder = io.IncrementalNewlineDecoder(codecs.getincrementaldecoder(self.encoding)(),
+                                               translate=True)
+        try:
+            self.file.seek(0)
+        except OSError as exc:
+            raise self.cannot(exc) from None
+        self.bytes_read = 0
+        while True:
+            try:
+                data = self.file.read(CHUNK_BYTES)
+            except OSError as exc:
+                raise self.cannot(exc) from None
+            held = len(decoder.getstate()[0])  # bytes of a character the last chunk cut
+            try:
+                text = decoder.decode(data, final=not data)
+            except UnicodeDecodeError as exc:
+                raise self.cannot(_decode_error(exc, self.bytes_read - held)) from None
+            self.bytes_read += len(data)
+            if text:
+                yield text
+            if not data:
+                return
+
+
+def _decode_error(exc: UnicodeDecodeError, offset: int) -> str:
+    """Return what `exc` says, its positions `offset` bytes further on.
+
+    As the decoding of the whole file at once says it.
+    """
+    start, end = exc.start + offset, exc.end + offset
+    if exc.end == exc.start + 1:
+        return (f"'{exc.encoding}' codec can't decode byte 0x{exc.object[exc.start]:02x} in "
+                f"position {start}: {exc.reason}")
+    return f"'{exc.encoding}' codec can't decode bytes in position {start}-{end - 1}: {exc.reason}"
+
+
+def _lines(chunks: Iterable[str]) -> Iterator[str]:
+    """Yield the lines of the text that `chunks` make, as `str.splitlines` splits it.
+
+    The text's newlines are LF only (no CR LF: `_CatalogFile.chunks`).
+    """
+    cut: list[str] = []  # the start of a line that a chunk's end cut
+    for chunk in chunks:
+        parts = chunk.splitlines(keepends=True)
+        rest = parts.pop() if parts[-1][-1] not in _LINE_BREAKS else ""
+        if parts:
+            if cut:
+                parts[0] = "".join(cut) + parts[0]
+                cut = []
+            for line in parts:
+                yield line[:-1]
+        if rest:
+            cut.append(rest)
+    if cut:
+        yield "".join(cut)
 
 
 def parse_tle(text: str, source: str = "<string>") -> list[CatalogEntry]:
     """Entries of TLE/3LE `text` (see the module docstring); `source` names it in errors."""
-    out: list[CatalogEntry] = []
+    return list(_tle_entries(_numbered(text.splitlines()), source))
+
+
+def _tle_entries(lines: Iterator[tuple[int, str]], source: str) -> Iterator[CatalogEntry]:
+    """Yield the entries of TLE/3LE `lines` (numbered, as `_numbered` yields them)."""
     seen: dict[str, str] = {}
     name, name_no = "", 0
-    lines = _numbered(text.splitlines())
     for no, line in lines:
         if line.startswith("1 "):
             nxt = next(lines, None)
@@ -180,7 +324,7 @@ def parse_tle(text: str, source: str = "<string>") -> list[CatalogEntry]:
                 raise ValueError(f"{source}:{no}: TLE line 1 is not followed by its line 2")
             entry = _tle_entry(line, nxt[1], name, f"{source}:{no}", f"{source}:{nxt[0]}")
             _check_new(entry, seen)
-            out.append(entry)
+            yield entry
             name, name_no = "", 0
         elif line.startswith("2 "):
             raise ValueError(f"{source}:{no}: TLE line 2 without a line 1 before it")
@@ -193,7 +337,6 @@ def parse_tle(text: str, source: str = "<string>") -> list[CatalogEntry]:
     if name:
         raise ValueError(f"{source}:{name_no}: name line {_quote(name)} at the end of the "
                          f"file without TLE lines")
-    return out
 
 
 def _check_name(name: str, where: str) -> None:
@@ -229,23 +372,49 @@ def _check_columns(line: str, template: str, which: int, where: str) -> None:
             or (number[0] in _ALPHA5 and number[1:].isdigit())):
         raise ValueError(f"{where}: TLE line {which}, columns 3-7: catalogue number "
                          f"{number!r} is neither digits nor Alpha-5 (a letter, 4 digits)")
-    for col, (c, want) in enumerate(zip(line, template, strict=False), 1):
-        if 3 <= col <= 7:  # the catalogue number, checked above
-            ok = True
-        elif want == "N":
-            ok = c.isdigit() or c == " "
-        elif want in "+-":
-            ok = c in " +-" or (want == "-" and c.isdigit())
-        elif want in " .12":
-            ok = c == want
-        else:  # classification, international designator: free text
-            ok = True
-        if not ok:
-            raise ValueError(f"{where}: TLE line {which}, column {col}: {c!r} does not fit "
-                             f"the TLE layout ({template[col - 1]!r} there)")
-    if len(line) == 69 and int(line[68]) != compute_checksum(line):
+    if _LAYOUTS[template].fullmatch(line) is None:  # then say which column, and why
+        for col, (c, want) in enumerate(zip(line, template, strict=False), 1):
+            if not _fits(c, want, col):
+                raise ValueError(f"{where}: TLE line {which}, column {col}: {c!r} does not "
+                                 f"fit the TLE layout ({want!r} there)")
+    if len(line) == 69 and int(line[68]) != (total := _checksum(line)):
         raise ValueError(f"{where}: TLE line {which} fails its checksum (column 69 is "
-                         f"{line[-1]!r}, the line sums to {compute_checksum(line)})")
+                         f"{line[-1]!r}, the line sums to {total})")
+
+
+def _fits(c: str, want: str, col: int) -> bool:
+    """Whether character `c` fits column `col` (from 1) of a TLE layout, which has `want`."""
+    if 3 <= col <= 7:  # the catalogue number, checked on its own
+        return True
+    if want == "N":
+        return c.isdigit() or c == " "
+    if want in "+-":
+        return c in " +-" or (want == "-" and c.isdigit())
+    if want in " .12":
+        return c == want
+    return True  # classification, international designator: free text
+
+
+def _layout(template: str) -> re.Pattern[str]:
+    """Return the pattern of the ASCII lines of 68 or 69 columns that `_fits` `template`."""
+    ascii_chars = [chr(i) for i in range(128)]
+    columns = []
+    for col, want in enumerate(template, 1):
+        fit = [c for c in ascii_chars if _fits(c, want, col)]
+        columns.append("." if len(fit) == len(ascii_chars) else
+                       "[" + "".join(re.escape(c) for c in fit) + "]")
+    return re.compile("".join(columns[:68]) + f"(?:{columns[68]})?", re.DOTALL)
+
+
+_LAYOUTS = {LINE1: _layout(LINE1), LINE2: _layout(LINE2)}
+"""The TLE layouts' patterns (`_check_columns` says where a line that fails one fails)."""
+_CHECKSUM_VALUES = bytes(i - 48 if 48 <= i <= 57 else int(i == 45) for i in range(256))
+"""What an ASCII character adds to a TLE line's checksum: a digit its value, '-' one."""
+
+
+def _checksum(line: str) -> int:
+    """Return the checksum of an ASCII TLE line (as `sgp4.io.compute_checksum`)."""
+    return sum(line[:68].encode("ascii").translate(_CHECKSUM_VALUES)) % 10
 
 
 def _tle_entry(line1: str, line2: str, name: str, where: str, where2: str) -> CatalogEntry:
@@ -310,24 +479,131 @@ def _check_satrec(sat: Satrec, where: str) -> None:
 
 
 def parse_omm_xml(text: str, source: str = "<string>") -> list[CatalogEntry]:
-    """Entries of CCSDS OMM XML `text` (one per ``segment``; `sgp4.omm.parse_xml`)."""
-    import io
+    """Entries of CCSDS OMM XML `text` (one per ``segment``, as `sgp4.omm.parse_xml` reads)."""
+    chunks = (text[i:i + CHUNK_BYTES] for i in range(0, len(text), CHUNK_BYTES))
+    return list(_omm_xml_entries(chunks, source))
 
+
+def _omm_xml_entries(chunks: Iterable[str], source: str) -> Iterator[CatalogEntry]:
+    """Yield the entries of the OMM XML text that `chunks` make, read as a stream.
+
+    lxml's pull parser (no network, no DTD loaded, its limits on text size and depth held;
+    comments and processing instructions left out), telling of ``segment`` elements only.
+    Each (any element so named below the root, in document order, as `sgp4.omm.parse_xml`
+    finds them) is judged when it ends; then it, and whatever else was read outside the
+    segments still open, is dropped. Errors are raised as a parse of the whole document
+    raised them: XML that is not well formed anywhere first, then a segment lacking a
+    block, then the first segment whose element set is wrong (the segments after it are
+    only parsed).
+    """
+    from lxml import etree
+
+    reader = _OmmXml(source)
+    parser = etree.XMLPullParser(events=("start", "end"), tag="segment", remove_comments=True,
+                                 remove_pis=True, no_network=True, load_dtd=False,
+                                 huge_tree=False)
     try:
-        segments = list(omm.parse_xml(io.StringIO(text)))
-    except ET.ParseError as exc:
-        line, col = exc.position
-        raise ValueError(f"{source}:{line}: not well-formed XML (column {col + 1})") from None
-    except (AttributeError, TypeError, KeyError):  # a segment without a block, or empty
-        raise ValueError(f"{source}: an OMM segment lacks (or has empty) metadata, data, "
-                         f"meanElements or tleParameters") from None
-    seen: dict[str, str] = {}
-    out = []
-    for k, fields in enumerate(segments, 1):
-        entry = _omm_entry(fields, f"{source}:segment {k}")
-        _check_new(entry, seen)
-        out.append(entry)
-    return out
+        for chunk in chunks:
+            parser.feed(chunk)
+            yield from reader.read(parser.read_events())
+            reader.drop_done()
+        parser.close()
+        yield from reader.read(parser.read_events())
+    except etree.XMLSyntaxError as exc:
+        line, col = exc.position if exc.position else (exc.lineno or 1, 1)
+        raise ValueError(f"{source}:{max(line, 1)}: not well-formed XML (column "
+                         f"{max(col, 1)})") from None
+    if reader.failure is not None:
+        raise reader.failure
+
+
+class _OmmXml:
+    """The segments of an OMM XML document, from its parser's events (`_omm_xml_entries`)."""
+
+    def __init__(self, source: str) -> None:
+        self.source = source
+        self.root: etree._Element | None = None
+        self.open: list[tuple[int, etree._Element]] = []
+        """The segments started and not yet ended: (number from 1 in document order, it)."""
+        self.started = 0
+        self.ended: dict[int, dict[str, str | None] | None] = {}
+        """Fields of ended segments not yet judged (a segment inside another ends first):
+        by number; None for a segment lacking a block."""
+        self.judged = 0
+        self.seen: dict[str, str] = {}
+        self.failure: ValueError | None = None
+        self.lacking = False
+
+    def read(self, events: Iterable[tuple[Any, ...]]) -> Iterator[CatalogEntry]:
+        """Yield the entries of the segments that `events` (start, end of segments) complete."""
+        for event, elem in events:
+            if elem.getparent() is None:  # the root: not one of its segments
+                continue
+            if event == "start":
+                if self.root is None:
+                    self.root = elem.getroottree().getroot()
+                self.started += 1
+                self.open.append((self.started, elem))
+                continue
+            number, _ = self.open.pop()
+            self.ended[number] = _segment_fields(elem)
+            yield from self._judge()
+            if not self.open:
+                elem.clear()
+
+    def drop_done(self) -> None:
+        """Drop the elements read outside the open segments.
+
+        All but the last child of each element on the way down from the root, along last
+        children, to the first open segment (left whole) or a leaf.
+        """
+        node = self.root
+        inside = {id(elem) for _, elem in self.open}
+        while node is not None and id(node) not in inside:
+            last = next(reversed(node), None)
+            if last is not None:
+                while last.getprevious() is not None:
+                    del node[0]
+            node = last
+
+    def _judge(self) -> Iterator[CatalogEntry]:
+        """Yield the entries of the ended segments next in document order."""
+        while self.judged + 1 in self.ended:
+            self.judged += 1
+            fields = self.ended.pop(self.judged)
+            if self.lacking:
+                continue
+            if fields is None:
+                self.lacking = True
+                self.failure = ValueError(
+                    f"{self.source}: an OMM segment lacks (or has empty) metadata, data, "
+                    f"meanElements or tleParameters")
+            elif self.failure is None:
+                try:
+                    entry = _omm_entry(fields, f"{self.source}:segment {self.judged}")
+                    _check_new(entry, self.seen)
+                except ValueError as exc:
+                    self.failure = exc
+                else:
+                    yield entry
+
+
+def _segment_fields(segment: etree._Element) -> dict[str, str | None] | None:
+    """Return the fields of an OMM ``segment``, None if it lacks one of its blocks.
+
+    Tag -> text of the children of its ``metadata``, ``data/meanElements`` and
+    ``data/tleParameters``.
+    """
+    data = segment.find("data")
+    if data is None:
+        return None
+    blocks = (segment.find("metadata"), data.find("meanElements"), data.find("tleParameters"))
+    fields: dict[str, str | None] = {}
+    for block in blocks:
+        if block is None:
+            return None
+        fields.update((field.tag, field.text) for field in block)
+    return fields
 
 
 def parse_omm_csv(text: str, source: str = "<string>") -> list[CatalogEntry]:
@@ -336,23 +612,43 @@ def parse_omm_csv(text: str, source: str = "<string>") -> list[CatalogEntry]:
     A header row of OMM keywords, then one row per object; lines starting with ``#`` are
     comments.
     """
-    numbered = list(_numbered(text.splitlines()))
-    rows = csv.DictReader(line for _, line in numbered)
+    return list(_omm_csv_entries(_numbered(text.splitlines()), source))
+
+
+def _omm_csv_entries(lines: Iterator[tuple[int, str]], source: str) -> Iterator[CatalogEntry]:
+    """Yield the entries of OMM CSV `lines` (numbered, as `_numbered` yields them).
+
+    Row k is named by the number of the (k+1)-th line (the header being the first); a row
+    csv cannot read by that of the line after the last row read.
+    """
+    numbers: list[int] = []  # of the lines read, from the `first`-th (from 0) on
+    first = 0
+
+    def fed() -> Iterator[str]:
+        for no, line in lines:
+            numbers.append(no)
+            yield line
+
+    def number(k: int) -> int:
+        """Return the number of the line k (from 0), or of the last line if fewer."""
+        while k - first >= len(numbers) and (nxt := next(lines, None)) is not None:
+            numbers.append(nxt[0])
+        return numbers[min(k - first, len(numbers) - 1)] if numbers else 0
+
     seen: dict[str, str] = {}
-    out = []
     k = 0
     try:
-        for k, fields in enumerate(rows, 1):
-            where = f"{source}:{numbered[k][0]}"
+        for k, fields in enumerate(csv.DictReader(fed()), 1):
+            del numbers[:k - first]
+            first = k
+            where = f"{source}:{numbers[0]}"
             if None in fields:
                 raise ValueError(f"{where}: more values than the header has columns")
             entry = _omm_entry(dict(fields), where)
             _check_new(entry, seen)
-            out.append(entry)
+            yield entry
     except csv.Error as exc:  # e.g. a field beyond csv's size limit (131,072 characters)
-        line = numbered[min(k + 1, len(numbered) - 1)][0] if numbered else 0
-        raise ValueError(f"{source}:{line}: unreadable CSV row: {exc}") from None
-    return out
+        raise ValueError(f"{source}:{number(k + 1)}: unreadable CSV row: {exc}") from None
 
 
 def _omm_entry(fields: dict[str, Any], where: str) -> CatalogEntry:

@@ -189,14 +189,16 @@ class SkyScenario:
                           sites_file=str(path),
                           outages=tuple((ALL_STATIONS, a, b) for _, a, b in self.outages))
 
-    def with_elements(self, path: str) -> SkyScenario:
+    def with_elements(self, path: str,
+                      progress: catalog.Progress | None = None) -> SkyScenario:
         """Return this scenario's sensors observing the object of the element set file `path`.
 
-        Its first object (TLE, 3LE, OMM XML/CSV: `core.catalog.read_catalog`; ValueError
-        naming the file and line when it is wrong); the truth is its SGP4/SDP4, from the
-        first whole minute at or after its epoch (as a catalog run starts).
+        Its first object (TLE, 3LE, OMM XML/CSV: `core.catalog.read_catalog`, which says its
+        `progress`; ValueError naming the file and line when it is wrong); the truth is its
+        SGP4/SDP4, from the first whole minute at or after its epoch (as a catalog run
+        starts).
         """
-        entry = catalog.read_catalog(path)[0]
+        entry = catalog.read_catalog(path, progress)[0]
         start = 60.0 * math.ceil(entry.epoch_unix / 60.0)
         return self.with_window(start, self.duration_s).with_(element_set=entry,
                                                               elements_file=str(path))
