@@ -609,8 +609,10 @@ def param_probes() -> Iterator[Probe]:
                             timeout=120.0)
 
 
-def cli_option_probes() -> Iterator[Probe]:
-    """Class 10: catalog options without a catalog, a 100 MB one-line catalog."""
+def cli_option_probes(large: bool = False) -> Iterator[Probe]:
+    """Class 10: catalog options without a catalog, a 100 MB one-line catalog (`large`: a
+    catalog of 170,000 objects, 26 MB, wrong in its last line; its numbers stay below
+    180000, whose Alpha-5 letter `sgp4.exporter` writes as I, which Alpha-5 skips)."""
     for opt in (["--objects", "5"], ["--shards", "2"], ["--synthetic", "10"], ["--open-loop"],
                 ["--no-surrogate"], ["--surrogate-param", "min_span=1"],
                 ["--remote-shards", "1"]):
@@ -640,6 +642,25 @@ def cli_option_probes() -> Iterator[Probe]:
                 f.write(b"1 28057U 03049A   06177.78615833" * 32768)
 
     yield catalog_probe("10", "catalog of one 100 MB line", one_line, refused(), timeout=120.0)
+    if large:
+        def big(path: Path) -> None:
+            from sgp4.exporter import export_tle
+
+            sys.path.insert(0, str(ROOT))
+            from ssa_fusion.core import catalog as catalog_io
+            from ssa_fusion.sim import survey
+
+            base = catalog_io.read_catalog(SAMPLE_TLE)[0]
+            with path.open("w") as f:
+                for e in survey.synthetic_catalog(base, 170_000, seed=1, first_id=0):
+                    line1, line2 = export_tle(e.satrec)
+                    f.write(f"{e.name}\n{line1}\n{line2}\n")
+                f.write("LAST\n1 99999U garbage\n2 99999 garbage\n")
+
+        yield cli_probe("10", "catalog of 170,000 objects (26 MB), its last object wrong",
+                        ["live", "--catalog", "{D}/big.tle", "--duration", "0.01", "--out",
+                         "{D}/out"], refused(r"big\.tle:510002: TLE line 1"), {"big.tle": big},
+                        timeout=300.0)
 
 
 # ------------------------------------------------------------------- graph probes
@@ -1195,7 +1216,7 @@ def can_mount_tmpfs(where: Path) -> bool:
 def all_probes(args: argparse.Namespace, can_mount: bool) -> list[Probe]:
     """Return the probes the options select."""
     probes = [*tdm_probes(args.large), *catalog_probes(), *param_probes(),
-              *cli_option_probes(), *cache_probes()]
+              *cli_option_probes(args.large), *cache_probes()]
     if not args.no_graph:
         probes += [*graph_probes(), *flood_probes(), *disk_probes(can_mount)]
         if args.listen:
