@@ -80,6 +80,7 @@ class SensorSimDefaults:
     lockstep: tuple[str, ...] = ("",)
     lockstep_step: float = 300.0
     lockstep_timeout: float = 30.0
+    batch_rows: int = 20_000
 
 
 @dataclass(frozen=True)

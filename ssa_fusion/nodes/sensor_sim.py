@@ -290,6 +290,10 @@ PARAMETERS = ParameterTable("sensor_sim", (
           "lockstep: sim time per step (its measurements run ahead of the clock by up to "
           "this: keep it below the consumers' `max_clock_lead`)", unit="s",
           check=Check(f"in (0, {MAX_CLOCK_LEAD_S / 2:g}]", _step)),
+    Param("batch_rows", SENSOR_SIM.batch_rows,
+          "a catalog's measurements go in batches of at most this many rows (a shard's step "
+          "is split: DDS keeps buffers as large as the largest message)",
+          check=at_least(1)),
     Param("lockstep_timeout", SENSOR_SIM.lockstep_timeout,
           "lockstep: wall time a step waits for its consumers before it goes on without "
           "them (counted `lockstep_timeouts`, and logged)", unit="wall s", check=POSITIVE),
@@ -593,10 +597,11 @@ class SensorSim(SsaNode):
             self.diag.counts[Count.PUBLISHED] += 1
 
     def publish_catalog(self, start: int, stop: int) -> None:
-        """Publish catalog measurements `start`..`stop`-1 as one batch per shard key range.
+        """Publish catalog measurements `start`..`stop`-1 in batches per shard key range.
 
         Their epochs are at or before the clock published (open loop), or at most one
-        `lockstep_step` after it (lockstep). A range with no measurement gets no batch.
+        `lockstep_step` after it (lockstep). A range with no measurement gets no batch; one
+        with more than ``batch_rows`` gets several, in epoch order.
         """
         obs = self.catalog
         if obs is None or stop <= start:
@@ -609,9 +614,12 @@ class SensorSim(SsaNode):
             R=self.catalog_R_array[obs.sensor[sl]], shard_key=keys)
         ranges = [shard_range(k, self.shards) for k in range(self.shards)]
         shard = np.searchsorted(np.array([hi for _, hi in ranges]), keys)
-        for k in np.unique(shard).tolist():  # one batch per shard, rows in epoch order
-            self.pub_batch.publish(messages.measurement_batch_to_msg(
-                rows.take(np.flatnonzero(shard == k)), ranges[k]))
+        most = self.params.integer("batch_rows")
+        for k in np.unique(shard).tolist():  # per shard, rows in epoch order, in batches
+            mine = np.flatnonzero(shard == k)
+            for part in np.array_split(mine, -(-mine.size // most)):
+                self.pub_batch.publish(messages.measurement_batch_to_msg(rows.take(part),
+                                                                         ranges[k]))
         self.diag.counts[Count.PUBLISHED] += stop - start
 
     def done(self) -> None:
