@@ -49,6 +49,7 @@ from ssa_fusion.nodes.parameters import (
     Param,
     ParameterTable,
     Rule,
+    at_least,
     clock_lead,
     filter_rows,
     sites_problem,
@@ -86,6 +87,10 @@ PARAMETERS = ParameterTable("catalog_filter", (
     Param("batch_period", CATALOG_FILTER.batch_period,
           "time between batches: what arrived meanwhile is fused at once", unit="wall s",
           check=POSITIVE),
+    Param("batch_rows", CATALOG_FILTER.batch_rows,
+          "a fusion's estimates go in EstimateBatch messages of at most this many rows "
+          "(~0.4 kB each; DDS keeps buffers as large as the largest message)",
+          check=at_least(1)),
     clock_lead(CATALOG_FILTER.max_clock_lead),
     max_objects_row(CATALOG_FILTER.max_objects, "tracks (~2 kB each: 180 MiB for 100,000)",
                     "a measurement"),
@@ -322,10 +327,12 @@ class CatalogFilterNode(SsaNode):
         self._count_causes(res, batch)
         if res.fused.size:
             ids = batch.take(res.fused).object_id
-            self.pub.publish(messages.estimate_batch_to_msg(
-                EstimateRows(batch.t[res.fused], ids, res.x, res.P, res.nis,
-                             UpdateSource.SENSOR, messages.shard_keys(ids)),
-                (self.lo, self.hi)))
+            rows = EstimateRows(batch.t[res.fused], ids, res.x, res.P, res.nis,
+                                UpdateSource.SENSOR, messages.shard_keys(ids))
+            most = self.params.integer("batch_rows")
+            for part in np.array_split(np.arange(len(rows)), -(-len(rows) // most)):
+                self.pub.publish(messages.estimate_batch_to_msg(rows.take(part),
+                                                                (self.lo, self.hi)))
         self.diag.counts[Count.PUBLISHED_SENSOR] += int(res.fused.size)
         self._report(len(batch))
 

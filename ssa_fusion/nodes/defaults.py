@@ -157,6 +157,7 @@ class CatalogFilterDefaults:
     batch_period: float = 0.05
     max_clock_lead: float = MAX_CLOCK_LEAD_S
     max_objects: int = MAX_OBJECTS
+    batch_rows: int = 5_000
 
 
 @dataclass(frozen=True)
