@@ -91,14 +91,19 @@ class TrackBank:
     max_objects : int
         The most objects it holds: a measurement of one more is refused
         (``rejected_bank_full``), so a flood of new object ids cannot take the machine's
-        memory (~0.5 kB per object).
+        memory (~2 kB per object in a node), unless an object can be evicted.
+    evict_after_s : float
+        When the bank is full, the object measured longest ago is evicted (its row goes to
+        the new object; `evicted` counts them) if its last measurement is more than this
+        before the new one (s; inf: never). Objects measured since are never evicted, so a
+        flood of new ids is refused rather than pushing out the catalog.
     jd0 : float
         UTC Julian date of t = 0 of the measurement clock (Unix time by default).
     """
 
     def __init__(self, config: FilterOptions, stations: dict[str, Station],
                  capacity: int = 64, jd0: float = UNIX_EPOCH_JD,
-                 max_objects: int = MAX_OBJECTS) -> None:
+                 max_objects: int = MAX_OBJECTS, evict_after_s: float = math.inf) -> None:
         iod = config.iod
         if iod.iod_samples < 3:
             raise ValueError(f"iod_samples must be >= 3 (Herrick-Gibbs), got {iod.iod_samples}")
@@ -110,6 +115,9 @@ class TrackBank:
         self.rows: dict[str, int] = {}
         self.object_ids: list[str] = []
         self.max_objects = int(max_objects)
+        self.evict_after_s = float(evict_after_s)
+        self.evicted = 0
+        """Objects evicted to make room (`evict_after_s`)."""
         cap = max(1, int(capacity))
         self.x = np.zeros((cap, 6))
         self.P = np.zeros((cap, 6, 6))
@@ -122,6 +130,8 @@ class TrackBank:
         """The stations whose measurements were fused at each track's epoch `t`: bit
         ``index % 64`` of the network's station index (with more than 64 stations two may
         share a bit, and the second one's same-epoch measurement is counted a duplicate)."""
+        self.seen = np.full(cap, -math.inf)
+        """Epoch of the last measurement of each object (Unix s), fused or not."""
         self._initiators: dict[int, OrbitInitiator] = {}
 
     def __len__(self) -> int:
@@ -135,14 +145,16 @@ class TrackBank:
                                       np.array([t0]))
         return x1[0], F[0]
 
-    def row(self, object_id: str) -> int:
+    def row(self, object_id: str, t: float = -math.inf) -> int:
         """Return the row of `object_id`, added (without a track) when new.
 
-        -1 when it is new and the bank holds `max_objects` already.
+        `t`: the epoch of the measurement asking (s). A new object in a full bank takes the
+        row of the object measured longest ago if that was more than `evict_after_s`
+        before `t`; else -1.
         """
         r = self.rows.get(object_id)
         if r is None and len(self.object_ids) >= self.max_objects:
-            return -1
+            return self._evict(object_id, t)
         if r is None:
             r = self.rows[object_id] = len(self.object_ids)
             self.object_ids.append(object_id)
@@ -156,7 +168,25 @@ class TrackBank:
                                                    np.zeros(grow, dtype=np.int64)])
                 self.stations_at_t = np.concatenate([self.stations_at_t,
                                                      np.zeros(grow, dtype=np.uint64)])
+                self.seen = np.concatenate([self.seen, np.full(grow, -math.inf)])
+            self.seen[r] = t if math.isfinite(t) else -math.inf
         return r
+
+    def _evict(self, object_id: str, t: float) -> int:
+        """Give the row of the object measured longest ago to `object_id`, or return -1."""
+        n = len(self.object_ids)
+        old = int(np.argmin(self.seen[:n]))
+        if not (math.isfinite(t) and t - self.seen[old] > self.evict_after_s):
+            return -1
+        del self.rows[self.object_ids[old]]
+        self.object_ids[old] = object_id
+        self.rows[object_id] = old
+        self.x[old], self.P[old], self.t[old] = 0.0, 0.0, -math.inf
+        self.tracking[old], self.gate_misses[old], self.stations_at_t[old] = False, 0, 0
+        self.seen[old] = t
+        self._initiators.pop(old, None)
+        self.evicted += 1
+        return old
 
     def process(self, t: ArrayLike, object_ids: Sequence[str], frame_ids: Sequence[str],
                 z: ArrayLike, R: ArrayLike) -> BankResult:
@@ -177,7 +207,12 @@ class TrackBank:
         zz = np.array(z, dtype=float).reshape(-1, 3)
         RR = np.array(R, dtype=float).reshape(-1, 3, 3)
         m = tt.size
-        rows = np.array([self.row(o) for o in object_ids], dtype=np.int64)
+        known = np.array([self.rows.get(o, -1) for o in object_ids], dtype=np.int64)
+        ok = (known >= 0) & np.isfinite(tt)
+        np.maximum.at(self.seen, known[ok], tt[ok])  # before any eviction: this batch's
+        rows = np.array([k if k >= 0 else self.row(o, float(ti)) for k, o, ti
+                         in zip(known.tolist(), object_ids, tt.tolist(), strict=True)],
+                        dtype=np.int64)
         station = np.array([self.ekf.index.get(f, -1) for f in frame_ids], dtype=np.int64)
         cause = [""] * m
         out_i: list[NDArray[np.int64]] = []

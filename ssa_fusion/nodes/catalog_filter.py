@@ -87,6 +87,11 @@ PARAMETERS = ParameterTable("catalog_filter", (
     Param("batch_period", CATALOG_FILTER.batch_period,
           "time between batches: what arrived meanwhile is fused at once", unit="wall s",
           check=POSITIVE),
+    Param("evict_after", CATALOG_FILTER.evict_after,
+          "when the shard holds max_objects, the object measured longest ago gives its row "
+          "to a new one if silent this long (counted `evicted`); objects measured since are "
+          "never evicted, so a flood of new ids is refused instead", unit="s",
+          check=POSITIVE),
     Param("batch_rows", CATALOG_FILTER.batch_rows,
           "a fusion's estimates go in EstimateBatch messages of at most this many rows "
           "(~0.4 kB each; DDS keeps buffers as large as the largest message)",
@@ -110,8 +115,7 @@ class CatalogFilterNode(SsaNode):
         self.options = settings.filter_options(p.values)
         self.stations = network_stations(p.text("station"),
                                          load_station_map(p.text("sites")))  # valid: `SITES`
-        self.bank = TrackBank(self.options, self.stations,
-                              max_objects=p.integer("max_objects"))
+        self.bank = self.new_bank()
         self.lo, self.hi = shard_range(self.shard, self.shards)
         self.diag.status["shard"] = f"{self.shard}/{self.shards} keys [{self.lo}, {self.hi}]"
         self.pub = self.create_publisher(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
@@ -143,10 +147,15 @@ class CatalogFilterNode(SsaNode):
                 Count.RECEIVED: c[Count.RECEIVED],
                 Count.PUBLISHED_SENSOR: c[Count.PUBLISHED_SENSOR]}
 
+    def new_bank(self) -> TrackBank:
+        """Return an empty bank of this shard's settings."""
+        p = self.params
+        return TrackBank(self.options, self.stations, max_objects=p.integer("max_objects"),
+                         evict_after_s=p.number("evict_after"))
+
     def reset(self) -> None:
         """Forget every track and what waits for the next batch."""
-        self.bank = TrackBank(self.options, self.stations,
-                              max_objects=self.params.integer("max_objects"))
+        self.bank = self.new_bank()
         self.diag.counts[Count.DROPPED] += len(self._pending) + sum(map(len, self._pending_rows))
         self._pending.clear()
         self._pending_rows.clear()
@@ -325,6 +334,7 @@ class CatalogFilterNode(SsaNode):
             raise
         self.diag.counts[Count.CONSUMED] += len(batch)
         self._count_causes(res, batch)
+        self.diag.counts[Count.EVICTED] = self.bank.evicted
         if res.fused.size:
             ids = batch.take(res.fused).object_id
             rows = EstimateRows(batch.t[res.fused], ids, res.x, res.P, res.nis,

@@ -157,6 +157,7 @@ class CatalogFilterDefaults:
     batch_period: float = 0.05
     max_clock_lead: float = MAX_CLOCK_LEAD_S
     max_objects: int = MAX_OBJECTS
+    evict_after: float = 7 * 86400.0
     batch_rows: int = 5_000
 
 

@@ -66,6 +66,7 @@ class Count(enum.StrEnum):
     MEASUREMENTS = "measurements"
     SCENE_UPDATES = "scene_updates"
     LOCKSTEP_TIMEOUTS = "lockstep_timeouts"
+    EVICTED = "evicted"
 
 
 PUBLISHED_BY_SOURCE = (Count.PUBLISHED_PREDICTION, Count.PUBLISHED_SENSOR,

@@ -127,6 +127,34 @@ def test_a_flood_of_new_object_ids_stops_at_max_objects():
     assert bank.t.size <= 4
 
 
+def test_a_full_bank_evicts_only_an_object_silent_for_evict_after():
+    """With `evict_after_s` the object measured longest ago gives its row to a new one if
+    it has been silent that long; one measured since (or in the same batch) is kept, and a
+    new object is refused while nobody is that silent. The evicted object's pending IOD
+    goes with it; the new object starts afresh."""
+    bank = TrackBank(_bank().config, NETWORK, capacity=2, max_objects=2, evict_after_s=100.0)
+    R = np.diag([1e-4, 1e-8, 1e-8])
+    z = np.array([1500.0, 1.0, 0.5])
+    res = bank.process([0.0, 10.0], ["a", "b"], ["millstone"] * 2, [z] * 2, [R] * 2)
+    assert res.cause == [Cause.IOD_PENDING] * 2
+    # at 50 s nobody has been silent for 100 s: refused
+    res = bank.process([50.0], ["c"], ["millstone"], [z], [R])
+    assert res.cause == [Cause.REJECTED_BANK_FULL] and bank.evicted == 0
+    # at 105 s: "a" (last at 0 s) is evicted for "c", "b" (10 s) stays; "b" measured in the
+    # same batch at 112 s is not a candidate for "d" at 112 s
+    res = bank.process([105.0, 112.0, 112.0], ["c", "b", "d"], ["millstone"] * 3, [z] * 3,
+                       [R] * 3)
+    assert res.cause == [Cause.IOD_PENDING, Cause.IOD_PENDING, Cause.REJECTED_BANK_FULL]
+    assert bank.evicted == 1 and sorted(bank.object_ids) == ["b", "c"] and len(bank) == 2
+    assert bank.rows["c"] == 0 and "a" not in bank.rows
+    assert len(bank._initiators[bank.rows["c"]].batch) == 1  # a's measurement went with it
+    # never, by default
+    never = TrackBank(_bank().config, NETWORK, capacity=2, max_objects=1)
+    never.process([0.0], ["a"], ["millstone"], [z], [R])
+    assert never.process([1e9], ["b"], ["millstone"], [z], [R]).cause == [
+        Cause.REJECTED_BANK_FULL]
+
+
 def test_the_bank_keeps_copies_and_refuses_a_non_finite_epoch():
     """Measurements waiting in an IOD batch do not change when the caller reuses its
     arrays; a NaN epoch is refused with a cause, not reported as fused."""
