@@ -480,7 +480,7 @@ def tdm_probes(large: bool) -> Iterator[Probe]:
                      f"{k // 60 % 60:02d}:{k % 60:02d}.000", "9000.0", "30.0", "40.0")
                     for k in range(0, 86400 * 28, 1)]
             with path.open("w") as f:
-                f.write(tdm_kvn(rows[:1])[:-len("DATA_STOP\n") - 3 * 52])
+                f.write(tdm_kvn([])[:-len("DATA_STOP\n")])  # the header, to DATA_START
                 for k in range(0, len(rows)):
                     e = rows[k][0]
                     f.write(f"RANGE = {e} 9000.0\nANGLE_1 = {e} 30.0\nANGLE_2 = {e} 40.0\n")
