@@ -44,12 +44,13 @@ GAP_FIT_SNC = 1e-14
 alike, for a window with ranges (radar): white accelerations between the measurements and
 through the gap, beside the considered constant ones (`GAP_FIT_ACCEL_SIGMA`), which carry
 the level. White noise alone (1e-13, chosen before for coverage) grows the covariance as
-t^1.5 while the error of the fit grows slower (its epoch state's error dominates for hours:
-docs/HISTORY.md, 2026-11-26): at 1e-13 the covariance was cautious at every horizon with
-one radar (median NEES 0.29 on the evaluation runs), and no one level fitted one radar's
-windows (20-40 measurements a pass) and the networks' (up to 260 in three passes, whose
-formal covariance shrinks while the model error does not). 1e-14 is what one radar alone
-took (90.8 % coverage on its tuning runs). The fit's state does not depend on it."""
+t^1.5 while the error of the fit grows slower (its epoch state's error dominates for hours;
+docs/RESULTS.md, "Orbit determination"): at 1e-13 the covariance was cautious at every
+horizon with one radar (median NEES 0.29 on the evaluation runs), and no one level fitted
+one radar's windows (20-40 measurements a pass) and the networks' (up to 260 in three
+passes, whose formal covariance shrinks while the model error does not). 1e-14 is what one
+radar alone took (90.8 % coverage on its tuning runs). The fit's state does not depend on
+it."""
 
 GAP_FIT_SNC_ANGLES = 3e-15
 """The same for a window of angles only (optical sites), white noise alone: the smallest of
