@@ -170,7 +170,8 @@ def summarise(name: str, runs: list[dict[str, Any]]) -> tuple[str, dict[str, Any
         arm_med[a] = float(np.median(v))
         lines.append(f"| {a} | {_q(v)} | {_q(n) if n else '-'} |")
     lines.append(f"\n(over the {len(scored)} runs whose outage withheld measurements; in "
-                 f"{len(runs) - len(scored)} the outage's station would have seen nothing)")
+                 f"{len(runs) - len(scored)} the outage's station would have seen nothing, "
+                 f"or not across a truth epoch)")
     ratio = [r["outage_mean_km"]["dmd_ekf"] / r["outage_mean_km"]["coast"] for r in scored]
     ratio_j2 = [r["outage_mean_km"]["dmd_ekf"] / r["outage_mean_km"]["j2_coast"]
                 for r in scored]
