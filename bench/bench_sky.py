@@ -14,8 +14,9 @@ Usage: .venv/bin/python bench/bench_sky.py [--quick] [--workers N] [--scenario N
 
 ``--tuning`` runs the tuning seeds (`TUNING_SEEDS` 1-3, every start epoch) instead: where
 the gap fit's process noise is chosen (``--gap-fit-snc`` / ``--gap-fit-snc-angles``
-km^2/s^3 replace `batch_gap.GAP_FIT_SNC` / `GAP_FIT_SNC_ANGLES` for the run). The
-evaluation seeds never choose a setting.
+km^2/s^3 replace `batch_gap.GAP_FIT_SNC` / `GAP_FIT_SNC_ANGLES` for the run,
+``--gap-fit-accel`` km/s^2 `batch_gap.GAP_FIT_ACCEL_SIGMA`). The evaluation seeds never
+choose a setting.
 """
 
 from __future__ import annotations
@@ -87,12 +88,19 @@ def main() -> int:
                     help="with --tuning: the gap fit's SNC for windows with ranges")
     ap.add_argument("--gap-fit-snc-angles", type=float, default=None,
                     help="with --tuning: the gap fit's SNC for windows of angles")
+    ap.add_argument("--gap-fit-accel", type=float, default=None,
+                    help="with --tuning: the standard deviation (km/s^2) of the gap fit's "
+                         "considered R, T, N accelerations for windows with ranges")
     args = ap.parse_args()
-    if (args.gap_fit_snc or args.gap_fit_snc_angles) and not args.tuning:
-        ap.error("--gap-fit-snc and --gap-fit-snc-angles choose settings: --tuning only")
-    if args.gap_fit_snc:  # the worker processes are forked: they inherit it
+    chosen = (args.gap_fit_snc, args.gap_fit_snc_angles, args.gap_fit_accel)
+    if any(v is not None for v in chosen) and not args.tuning:
+        ap.error("--gap-fit-snc, --gap-fit-snc-angles and --gap-fit-accel choose settings: "
+                 "--tuning only")
+    if args.gap_fit_snc is not None:  # the worker processes are forked: they inherit it
         batch_gap.GAP_FIT = replace(batch_gap.GAP_FIT, snc_psd=(args.gap_fit_snc,) * 3)
-    if args.gap_fit_snc_angles:
+    if args.gap_fit_accel is not None:
+        batch_gap.GAP_FIT = batch_gap.with_accel_sigma(batch_gap.GAP_FIT, args.gap_fit_accel)
+    if args.gap_fit_snc_angles is not None:
         batch_gap.GAP_FIT_ANGLES = replace(batch_gap.GAP_FIT_ANGLES,
                                            snc_psd=(args.gap_fit_snc_angles,) * 3)
     seeds = (TUNING_SEEDS[:3] if args.tuning else

@@ -30,27 +30,32 @@ from .pass_windows import PASS_BREAK_S
 from .timescales import DAY_S
 from .types import Kind, Measurement
 
-__all__ = ["GAP_FIT", "GAP_FIT_ANGLES", "GAP_FIT_PASSES", "GAP_FIT_SNC", "GAP_FIT_SNC_ANGLES",
-           "BatchGapForecaster", "fit_passes", "gap_fit_options"]
+__all__ = ["GAP_FIT", "GAP_FIT_ACCEL_SIGMA", "GAP_FIT_ANGLES", "GAP_FIT_PASSES", "GAP_FIT_SNC",
+           "GAP_FIT_SNC_ANGLES", "BatchGapForecaster", "fit_passes", "gap_fit_options",
+           "with_accel_sigma"]
 
 Array = NDArray[np.float64]
 
 GAP_FIT_PASSES = 3
 """Passes of real measurements a gap's batch fit spans."""
 
-GAP_FIT_SNC = 1e-13
+GAP_FIT_SNC = 1e-14
 """Power spectral density of the gap fit's state-noise compensation, km^2/s^3 in R, T and N
-alike, for a window with ranges (radar): ~ 6e-9 km/s^2 of unmodelled acceleration
-correlated over ~ 3e3 s (a^2 tau). The smallest of {1e-15, 3e-15, 1e-14, 3e-14, 1e-13,
-3e-13} whose position NEES over the gap epochs lies inside chi2(3)'s 95 % bound at >= 90 %
-of them (median over runs) on each ranged scenario's tuning runs (`bench/bench_sky.py
---tuning`: seeds 1-3 x start 0/8/16 h of iss_radar_columbus, iss_network,
-iss_network_april: 99.4 / 95.0 / 93.7 %; 3e-14: 98.5 / 87.6 / 80.3 %), never on an
-evaluation seed. The fit's state does not depend on it."""
+alike, for a window with ranges (radar): white accelerations between the measurements and
+through the gap, beside the considered constant ones (`GAP_FIT_ACCEL_SIGMA`), which carry
+the level. White noise alone (1e-13, chosen before for coverage) grows the covariance as
+t^1.5 while the error of the fit grows slower (its epoch state's error dominates for hours;
+docs/RESULTS.md, "Orbit determination"): at 1e-13 the covariance was cautious at every
+horizon with one radar (median NEES 0.29 on the evaluation runs), and no one level fitted
+one radar's windows (20-40 measurements a pass) and the networks' (up to 260 in three
+passes, whose formal covariance shrinks while the model error does not). 1e-14 is what one
+radar alone took (90.8 % coverage on its tuning runs). The fit's state does not depend on
+it."""
 
 GAP_FIT_SNC_ANGLES = 3e-15
-"""The same for a window of angles only (optical sites): the smallest of the same set whose
-coverage is >= 90 % on leo_optical's tuning runs (91.9 %; 1e-15: 77.8 %, 1e-14: 96.8 %).
+"""The same for a window of angles only (optical sites), white noise alone: the smallest of
+{1e-15, 3e-15, 1e-14, 3e-14, 1e-13, 3e-13} whose coverage is >= 90 % on leo_optical's tuning
+runs (91.9 %; 1e-15: 77.8 %, 1e-14: 96.8 %).
 Its windows span more time than a radar network's three passes, and its gap error is
 smaller: the same unmodelled acceleration shows less."""
 
@@ -60,15 +65,47 @@ prior, set it. With 1 a drag-free LEO orbit was fitted with drag pulled toward t
 (0.33 km off an hour later, `test_arms`); on the tuning seeds 1-3 of iss_radar_columbus the
 gap error is 0.209 / 0.161 / 0.189 km with 10, 0.125 / 0.18 / 0.217 km with 1."""
 
-GAP_FIT = BatchOptions(force=ForceModel(drag=True), solve_for=("drag_scale",),
-                       snc_psd=(GAP_FIT_SNC,) * 3,
-                       param_sigma=(GAP_FIT_DRAG_SIGMA, 1e-8, 1e-8, 1e-8))
+GAP_FIT_ACCEL_SIGMA = 1.5e-8
+"""Standard deviation (km/s^2) of the constant accelerations in R, T and N alike that the
+gap fit of a window with ranges considers (`batch_ls` consider parameters ``accel_r``,
+``accel_t``, ``accel_n``): what its model (J2-J4 + drag) leaves out of the truth (SGP4's),
+mapped into the fit's state through the window -- a floor that more measurements do not
+lower -- and grown through the gap (as t^2). Not a force of nature: the size of the model
+error, 1.5e-5 m/s^2 (tens of times the ISS's drag). The smallest of {3e-9, 1e-8, 1.5e-8, 2e-8} (with
+`GAP_FIT_SNC` 1e-14) whose position NEES over the gap epochs lies inside chi2(3)'s 95 %
+bound at >= 90 % of them (median over runs) on each ranged scenario's tuning runs
+(`bench/bench_sky.py --tuning --gap-fit-snc 1e-14 --gap-fit-accel A`: seeds 1-3 x start
+0/8/16 h of iss_radar_columbus, iss_network, iss_network_april, whose cases draw their
+networks: 99.4 / 97.0 / 95.8 %, median NEES 1.37 / 1.50 / 1.35; 1e-8: 98.1 / 92.7 / 88.8 %;
+3e-9: 91.7 / 82.3 / 77.9 %), never on an evaluation seed. The fit's state does not depend
+on it."""
+
+_ACCELS = ("accel_r", "accel_t", "accel_n")
+
+
+def with_accel_sigma(options: BatchOptions, sigma: float) -> BatchOptions:
+    """Return `options` considering constant R, T, N accelerations of `sigma` km/s^2.
+
+    Their standard deviation, in each axis; none for 0 (the options' own stay).
+    """
+    if sigma <= 0.0:
+        return replace(options, consider=())
+    return replace(options, consider=_ACCELS,
+                   param_sigma=(options.param_sigma[0], float(sigma), float(sigma), float(sigma)))
+
+
+GAP_FIT = with_accel_sigma(
+    BatchOptions(force=ForceModel(drag=True), solve_for=("drag_scale",),
+                 snc_psd=(GAP_FIT_SNC,) * 3, param_sigma=(GAP_FIT_DRAG_SIGMA, 1e-8, 1e-8, 1e-8)),
+    GAP_FIT_ACCEL_SIGMA)
 """The gap fit of a window with ranges: two-body + J2-J4 + drag, the state and the drag
-factor. On the tuning seeds 1-3 of iss_radar_columbus (`bench/bench_batch_ls.py`
-``--drag-sigma 10``) its gap error was 0.209 / 0.161 / 0.189 km (medians);
-with the state alone (J2-J4) 0.314 / 0.261 / 0.218 km, with J2 + drag (J3, J4 left out)
-0.224 / 0.201 / 0.271 km (at SNC 3e-14; the SNC does not change the fit's state). Where
-there is no air the drag factor is unobserved and stays at its prior (no effect)."""
+factor solved for, constant R, T, N accelerations considered (`GAP_FIT_ACCEL_SIGMA`),
+state-noise compensation `GAP_FIT_SNC`. On the tuning seeds 1-3 of iss_radar_columbus
+(`bench/bench_batch_ls.py` ``--drag-sigma 10``) its gap error was 0.209 / 0.161 / 0.189 km
+(medians); with the state alone (J2-J4) 0.314 / 0.261 / 0.218 km, with J2 + drag (J3, J4
+left out) 0.224 / 0.201 / 0.271 km (the noise and the considered accelerations do not change
+the fit's state). Where there is no air the drag factor is unobserved and stays at its prior
+(no effect)."""
 
 GAP_FIT_ANGLES = BatchOptions(snc_psd=(GAP_FIT_SNC_ANGLES,) * 3)
 """The gap fit of a window of angles only: two-body + J2-J4, the state only (a drag factor
@@ -107,7 +144,8 @@ class BatchGapForecaster:
     `on_measurement` takes every real measurement the filter fused (epoch order),
     `on_estimate` the filter's estimate after it. `forecast(t)` returns the fit's state and
     covariance at a grid epoch t of the gap, or None: t less than `pass_break_s` after the
-    last estimate, beyond ``max_horizon_s``, or no fit (it failed).
+    last estimate, beyond ``max_horizon_s``, or no fit (it failed); `prior(t)` the same at
+    any epoch t, the first measurement of the next pass.
     """
 
     model: MeasurementModel
@@ -144,6 +182,33 @@ class BatchGapForecaster:
         """Return the fit's state and covariance at gap epoch t (s), or None."""
         if self.last is None or t - self.last[0] < self.pass_break_s:
             return None
+        self._refit()
+        return self.table.get(float(t))
+
+    def prior(self, t: float) -> tuple[Array, Array] | None:
+        """Return the fit's prediction to epoch t (s): state and realistic covariance.
+
+        The prior of the pass that starts at t (`gap_publisher.GapFill.BATCH_INIT`): None
+        when t is less than `pass_break_s` or more than ``max_horizon_s`` after the last
+        estimate, or when there is no fit (it failed) or its prediction failed.
+        """
+        if self.last is None or not (self.pass_break_s <= t - self.last[0]
+                                     <= self.max_horizon_s):
+            return None
+        self._refit()
+        if self.fit is None:
+            return None
+        try:
+            xs, Ps = self.fit.predict(np.array([float(t)]))
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            return None
+        if not (np.isfinite(xs).all() and np.isfinite(Ps).all()):
+            return None
+        return xs[0], Ps[0]
+
+    def _refit(self) -> None:
+        """Fit the window once after each pass (at its last estimate) and tabulate the gap."""
+        assert self.last is not None
         t_end, x_end = self.last
         if self.fitted_t != t_end:  # a pass ended: fit once, tabulate the prediction
             self.fitted_t = t_end
@@ -159,4 +224,3 @@ class BatchGapForecaster:
                     xs, Ps = np.full((grid.size, 6), np.nan), np.full((grid.size, 6, 6), np.nan)
                 self.table = {float(g): (xs[i], Ps[i]) for i, g in enumerate(grid)
                               if np.isfinite(xs[i]).all() and np.isfinite(Ps[i]).all()}
-        return self.table.get(float(t))

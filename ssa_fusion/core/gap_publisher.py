@@ -18,11 +18,17 @@ and the offline replay, so that both publish the same estimates for the same inp
   from past pass ends (`gap_forecaster.GapForecaster`), or a batch least-squares fit of
   the last passes (`batch_gap.BatchGapForecaster`, which takes the real measurements the
   filter fused as well). The EKF itself coasts on: the next real measurement updates its
-  own prediction.
+  own prediction;
+* with ``batch_init`` (`GapFill.BATCH_INIT`), the batch fit's prediction also becomes the
+  EKF's prior at the first real measurement of the next pass (more than the forecaster's
+  ``pass_break_s`` after the last one fused): the EKF starts its sequential update there
+  from the fit's state and realistic covariance instead of its own coasted ones
+  (`Tracker.restart_from`), once per fit and from a fit of a full window of passes;
+  otherwise (no fit yet, a failed one, or one of fewer passes) it goes on from its own.
 
-Predictions never change the tracker; at most `limit` are published per call, and the
-earliest are skipped when more than ten times that many are due at once (a clock that
-jumped far ahead), as `tracker.prediction_epochs` says.
+Predictions never change the tracker (only a pass's prior, above); at most `limit` are
+published per call, and the earliest are skipped when more than ten times that many are due
+at once (a clock that jumped far ahead), as `tracker.prediction_epochs` says.
 """
 
 from __future__ import annotations
@@ -60,6 +66,11 @@ class GapFill(enum.StrEnum):
     """The motion model plus its residual learned from past pass ends (`GapForecaster`)."""
     BATCH_FIT = "batch_fit"
     """A batch least-squares fit of the last passes (`batch_gap.BatchGapForecaster`)."""
+    BATCH_INIT = "batch_init"
+    """`BATCH_FIT`, and the EKF starts each pass from the fit: at a pass's first real
+    measurement its state and covariance are the fit's prediction there
+    (`batch_gap.BatchGapForecaster.prior`, `tracker.Tracker.restart_from`), not its own
+    coasted ones; the sequential update inside the pass goes on from them."""
 
 
 class GapForecast(Protocol):
@@ -112,13 +123,19 @@ class GapPublisher:
     forecaster : callable, optional
         ``forecaster(period_s)`` makes the gap forecaster (a new one after `reset`); None:
         the predictions are the EKF coasting.
+    restart : bool
+        The EKF starts each pass from the forecaster's prior (a `BatchGapForecaster`'s
+        ``prior``; `GapFill.BATCH_INIT`).
     """
 
     def __init__(self, tracker: Tracker, period_s: float,
-                 forecaster: Callable[[float], GapForecast] | None = None) -> None:
+                 forecaster: Callable[[float], GapForecast] | None = None,
+                 restart: bool = False) -> None:
         self.tracker = tracker
         self.period_s = float(period_s)
         self._make_forecaster = forecaster
+        self.restart = restart
+        self._restarted_from = -math.inf  # epoch of the fit the EKF last restarted from
         self.forecaster = self._new_forecaster()
         self.last_object = ""  # object id of the last measurement fused
         self._predicted_at = -math.inf  # epoch of the last prediction published
@@ -130,16 +147,18 @@ class GapPublisher:
         """Return the publisher of the filter of `c` that fills its gaps with `fill`.
 
         With `GapFill.RESIDUAL`, the residual of the filter's motion model
-        (`GapForecaster.for_model`); with `GapFill.BATCH_FIT`, the batch fit of its last
-        passes with its measurement model (`batch_gap.BatchGapForecaster`).
+        (`GapForecaster.for_model`); with `GapFill.BATCH_FIT` and `GapFill.BATCH_INIT`,
+        the batch fit of its last passes with its measurement model
+        (`batch_gap.BatchGapForecaster`), with `BATCH_INIT` the EKF's prior of each pass.
         """
         fill = GapFill(fill)
         if fill == GapFill.NONE:
             return cls(tracker, period_s)
-        if fill == GapFill.BATCH_FIT:
+        if fill in (GapFill.BATCH_FIT, GapFill.BATCH_INIT):
             model, clock = measurement_model(c), (c.jd0 - UNIX_EPOCH_JD) * DAY_S
             return cls(tracker, period_s,
-                       lambda period: BatchGapForecaster(model, period, clock_unix0=clock))
+                       lambda period: BatchGapForecaster(model, period, clock_unix0=clock),
+                       restart=fill == GapFill.BATCH_INIT)
         motion = c.filter.motion.motion_model
         return cls(tracker, period_s,
                    lambda period: GapForecaster.for_model(str(motion), period))
@@ -167,6 +186,7 @@ class GapPublisher:
         self.forecaster = self._new_forecaster()
         self._predicted_at = -math.inf
         self._prediction = None
+        self._restarted_from = -math.inf
 
     def measurement(self, m: Measurement) -> Published:
         """Fuse `m`; return the estimates to publish: the predictions due before it, then its.
@@ -177,6 +197,8 @@ class GapPublisher:
         out = Published()
         if m.source == Source.SENSOR:
             self._predict(math.nextafter(m.t, -math.inf), PREDICTIONS_BEFORE_MEASUREMENT, out)
+            if self.restart:
+                self._start_pass(m.t)
         outcome = self.tracker.process(m)
         out.outcome = outcome
         if not outcome.rejected:
@@ -187,6 +209,26 @@ class GapPublisher:
             if e is not None:
                 out.estimates.append(self._published(e))
         return out
+
+    def _start_pass(self, t: float) -> None:
+        """At the first real measurement of a pass (epoch t), restart the EKF from the fit.
+
+        Once per fit (a pass whose first measurements the gate refuses goes on from the
+        restarted state, and the filter can still lose its object and initialise again),
+        and only from a fit of a full window (the forecaster's ``passes`` passes): right
+        after the initial orbit determination a window of one pass of a few angles can fit
+        an orbit thousands of km off that the filter, restarted from it, would follow.
+        """
+        f, tracker = self.forecaster, self.tracker
+        if (not isinstance(f, BatchGapForecaster) or not tracker.initialised
+                or t - tracker.t_real <= f.pass_break_s or len(f.starts) < f.passes):
+            return
+        prior = f.prior(t)
+        if prior is None or f.fitted_t == self._restarted_from:
+            return
+        self._restarted_from = f.fitted_t
+        tracker.restart_from(StateEstimate(t=t, x=prior[0], P=prior[1],
+                                           object_id=self.last_object))
 
     def advance(self, now: float, limit: int = PREDICTIONS_PER_CALL) -> Published:
         """Return the predictions due on the grid up to sim time `now` (s), at most `limit`.

@@ -178,9 +178,50 @@ SENSORS: dict[str, Sensor] = {
         cadence_s=10.0,
         source="GEODSS Diego Garcia, British Indian Ocean Territory "
                "(en.wikipedia.org/wiki/GEODSS)"),
+    "goldstone": Sensor(
+        _site("goldstone", 35.43, -116.89, 0.90), SensorType.RADAR, RADAR_SIGMA, 10.0,
+        source="Goldstone Deep Space Communications Complex, Fort Irwin, California "
+               "(en.wikipedia.org/wiki/Goldstone_Deep_Space_Communications_Complex)"),
+    "fylingdales": Sensor(
+        _site("fylingdales", 54.36, -0.67, 0.30), SensorType.RADAR, RADAR_SIGMA, 5.0,
+        source="RAF Fylingdales, North York Moors, England: a phased array with 360 deg "
+               "coverage (en.wikipedia.org/wiki/RAF_Fylingdales)"),
+    "ogs_tenerife": Sensor(
+        _site("ogs_tenerife", 28.30, -16.51, 2.39), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
+        cadence_s=10.0,
+        source="ESA Optical Ground Station, Teide Observatory, Tenerife "
+               "(en.wikipedia.org/wiki/ESA_Optical_Ground_Station)"),
+    "zimmerwald": Sensor(
+        _site("zimmerwald", 46.88, 7.47, 0.95), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
+        cadence_s=10.0,
+        source="Zimmerwald Observatory (ZIMLAT), University of Bern, Switzerland "
+               "(aiub.unibe.ch; en.wikipedia.org/wiki/Zimmerwald_Observatory)"),
+    "siding_spring": Sensor(
+        _site("siding_spring", -31.27, 149.06, 1.16), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
+        cadence_s=10.0,
+        source="Siding Spring Observatory, New South Wales, Australia "
+               "(en.wikipedia.org/wiki/Siding_Spring_Observatory)"),
+    "xinglong": Sensor(
+        _site("xinglong", 40.40, 117.58, 0.96), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
+        cadence_s=10.0,
+        source="Xinglong Observatory, National Astronomical Observatories of China, Hebei "
+               "(english.nao.cas.cn)"),
+    "calar_alto": Sensor(
+        _site("calar_alto", 37.22, -2.55, 2.17), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
+        cadence_s=10.0,
+        source="Calar Alto Observatory, Almeria, Spain "
+               "(en.wikipedia.org/wiki/Calar_Alto_Observatory)"),
+    "la_silla": Sensor(
+        _site("la_silla", -29.26, -70.73, 2.40), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
+        cadence_s=10.0,
+        source="ESO La Silla Observatory, Coquimbo, Chile "
+               "(en.wikipedia.org/wiki/La_Silla_Observatory)"),
 }
 """Sensor presets by id. ``columbus`` and ``columbus_paper`` are two sensors at one site
-(frame_id "columbus"): a real radar with a 10 deg mask, and the paper's idealised one."""
+(frame_id "columbus"): a real radar with a 10 deg mask, and the paper's idealised one. Beyond
+the sites of `NETWORKS`, two radars and six optical sites the real-sky study's evaluation
+cases draw their networks from (`sim.sky.SITE_POOL`); each is modelled like the others of
+its type (a steerable sensor above its mask; noise the reference values above)."""
 
 NETWORKS: dict[str, tuple[str, ...]] = {
     "network": ("millstone", "tira", "altair", "socorro", "maui", "diego_garcia"),

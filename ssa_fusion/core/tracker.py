@@ -183,6 +183,22 @@ class Tracker:
         P = bound_covariance(x, 0.5 * (P + P.T), self.config.noise.sigma_bound)
         return StateEstimate(t, x, P, e.object_id, 0, 0.0)
 
+    def restart_from(self, e: StateEstimate) -> None:
+        """Go on from estimate `e` (epoch, state, covariance) instead of the EKF's own state.
+
+        The sequential update starts again from a prior made elsewhere (a batch fit's
+        prediction to the first measurement of a pass, `gap_publisher.GapFill.BATCH_INIT`).
+        The fused history is forgotten: nothing before `e.t` is rolled back or fused again,
+        a forecast for an earlier epoch is refused as older than the history; the last real
+        epoch and the count of real measurements refused by the gate in a row stay (the
+        input rules and the re-initialisation still hold). Only after initialisation, with `e.t` at
+        or after the last real measurement fused (AssertionError otherwise).
+        """
+        assert self.ekf is not None and e.t >= self.t_real
+        self.ekf.restore(e.x, e.P)
+        self.t = float(e.t)
+        self._history = FusedHistory(HISTORY_REAL)
+
     # ----------------------------------------------------------------------------------
     def process(self, m: Measurement) -> Outcome:
         """Validate and fuse one measurement (real or forecast); see module docstring."""

@@ -79,10 +79,15 @@ PARAMETERS = ParameterTable("filter", (
           "itself coasts on: the next real measurement updates its own prediction; or "
           "`batch_fit`: from 600 s after the last estimate that fused a real measurement, "
           "a two-body + J2 batch least-squares fit of the real measurements fused in the "
-          "last 3 passes (`core.batch_gap`, realistic covariance with state-noise "
-          "compensation), up to 1 day after the pass, tagged FORECAST. "
+          "last 3 passes (`core.batch_gap`, realistic covariance with considered "
+          "accelerations and state-noise compensation), up to 1 day after the pass, tagged "
+          "FORECAST; or `batch_init`: `batch_fit`, and at the first real measurement of the "
+          "next pass (more than 600 s after the last one fused, up to 1 day after it) the "
+          "EKF starts its sequential update from the fit's prediction there (state and "
+          "realistic covariance) instead of its own coasted state "
+          "(`core.tracker.Tracker.restart_from`), once the fit spans 3 passes. "
           "`ssa-fusion live` sets each real-sky scenario's `gap_fill` (leo_optical: "
-          "`batch_fit`, the others `residual`)",
+          "`batch_init`, the others `residual`)",
           check=one_of(*GapFill)),
     clock_lead(FILTER.max_clock_lead),
 ), rules=(Rule(STATION_RULE_NAMES, sites_problem),

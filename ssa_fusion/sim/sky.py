@@ -24,6 +24,7 @@ Units: km, km/s, rad, s; times are Unix seconds (UTC).
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -112,7 +113,9 @@ class SkyScenario:
         parameter): the residual surrogate, or the batch fit of the last passes where the
         gap study's tuning seeds 1-3 (`bench/bench_gaps.py --tune --variant hill_h1_me20`)
         found it the smaller error (leo_optical: 0.48 km against 13.4 km; the ISS scenarios:
-        0.40 / 0.12 / 0.10 km against the residual's 0.31 / 0.11 / 0.08 km).
+        0.40 / 0.12 / 0.10 km against the residual's 0.31 / 0.11 / 0.08 km); leo_optical's
+        EKF also starts each pass from the fit (``batch_init``: on its tuning runs,
+        `bench/bench_sky.py --tuning`, 8 m after each pass against 29 m, the same gaps).
     finding : str
         What the scenario shows.
     own_sensors, sites_file
@@ -124,6 +127,9 @@ class SkyScenario:
     standard_magnitude
         The object's visual magnitude at 1000 km and a 90 deg phase angle, for sensors with a
         limiting magnitude (`visibility.apparent_magnitude`).
+    site_pool
+        Sensor ids a study case may observe with instead of `sensors` (`network_choices`,
+        `with_sensors`); empty (a single station): the case keeps `sensors`.
     """
 
     name: str
@@ -150,6 +156,7 @@ class SkyScenario:
     element_set: catalog.CatalogEntry | None = None
     elements_file: str = ""
     standard_magnitude: float = ISS_STANDARD_MAGNITUDE
+    site_pool: tuple[str, ...] = ()
 
     def sensor(self, name: str) -> Sensor:
         """Return sensor `name`: a site of the scenario's sites file, else a built-in preset."""
@@ -180,13 +187,14 @@ class SkyScenario:
     def with_sites(self, path: str) -> SkyScenario:
         """Return this scenario observed by the sites of the sites file `path` instead.
 
-        Every site of the file (`core.site_file`), in its order; an outage of one of the
-        scenario's stations becomes an outage of the whole network at the same time.
+        Every site of the file (`core.site_file`), in its order (and no `site_pool`: a
+        study case keeps them); an outage of one of the scenario's stations becomes an
+        outage of the whole network at the same time.
         SiteFileError (a ValueError) with one line when the file is wrong.
         """
         own = site_file.load_sites(path)
         return self.with_(sensors=tuple(own), own_sensors=tuple(own.values()),
-                          sites_file=str(path),
+                          sites_file=str(path), site_pool=(),
                           outages=tuple((ALL_STATIONS, a, b) for _, a, b in self.outages))
 
     def with_elements(self, path: str,
@@ -220,6 +228,45 @@ class SkyScenario:
         turn = node @ phase
         return self.with_(x0=tuple(np.concatenate([turn @ x[:3], turn @ x[3:]]).tolist()))
 
+    def network_choices(self) -> list[tuple[str, ...]]:
+        """Return every network a study case may observe with (`site_pool`), in a fixed order.
+
+        Each keeps the scenario's make-up: as many radars as `sensors` has, drawn from the
+        pool's radars, and as many optical sites from its optical ones, each slot of
+        `sensors` taken by a site of its type (`with_sensors`); every combination once, the
+        pool's order within it. Only `sensors` itself without a pool.
+        """
+        if not self.site_pool:
+            return [self.sensors]
+        by_type = {t: [n for n in self.site_pool if self.sensor(n).type == t]
+                   for t in SensorType}
+        slots = [self.sensor(n).type for n in self.sensors]
+        picks = {t: list(itertools.combinations(by_type[t], slots.count(t)))
+                 for t in SensorType}
+        out = []
+        for combo in itertools.product(*(picks[t] for t in SensorType)):
+            left = {t: iter(c) for t, c in zip(SensorType, combo, strict=True)}
+            out.append(tuple(next(left[t]) for t in slots))
+        return out
+
+    def with_sensors(self, sensors: tuple[str, ...]) -> SkyScenario:
+        """Return this scenario observed by `sensors` instead, slot by slot.
+
+        The k-th of `sensors` takes the place of the k-th of the scenario's: an outage of
+        that one becomes its outage (an outage of the whole network stays). ValueError
+        when the count or a slot's sensor type differs (a network of the same make-up).
+        """
+        if len(sensors) != len(self.sensors) or any(
+                self.sensor(a).type != self.sensor(b).type
+                for a, b in zip(self.sensors, sensors, strict=True)):
+            raise ValueError(f"{sensors} does not take the places of {self.sensors} "
+                             f"(the same count and sensor type per slot)")
+        name = {self.sensor(a).station.name: b for a, b in zip(self.sensors, sensors,
+                                                                strict=True)}
+        return self.with_(sensors=tuple(sensors), outages=tuple(
+            (who if who == ALL_STATIONS else name[self.sensor(who).station.name], a, b)
+            for who, a, b in self.outages))
+
     def with_window(self, t0: float, duration_s: float) -> SkyScenario:
         """Return this scenario from `t0` (Unix s) for `duration_s` (s).
 
@@ -250,6 +297,19 @@ class SkyScenario:
 _DAY = 86400.0
 NETWORK_SENSORS = ("millstone", "tira", "altair", "socorro", "maui", "diego_garcia")
 """The radar + optical network of `iss_network`: three radars and the three GEODSS sites."""
+SITE_POOL = ("millstone", "tira", "altair", "goldstone", "fylingdales", "socorro", "maui",
+             "diego_garcia", "ogs_tenerife", "zimmerwald", "xinglong", "calar_alto",
+             "siding_spring", "la_silla")
+"""The real sites (`stations.SENSORS`) the ISS networks' study cases draw their networks
+from (`SkyScenario.network_choices`): five radars, all within sight of a 51.6 deg orbit,
+and nine optical sites in both hemispheres; three of five radars and three of nine optical
+sites make 840 networks like iss_network's."""
+TWILIGHT_SITE_POOL = ("socorro", "maui", "ogs_tenerife", "zimmerwald", "xinglong",
+                      "calar_alto", "diego_garcia")
+"""The optical sites leo_optical's study cases draw from: those that see its
+sun-synchronous object's twilight passes in January (the southern ones, in their summer's
+short nights, see none); three of seven make 35 networks. Diego Garcia, near the equator,
+sees few: last in the pool, it never takes the outage's slot (the second)."""
 OPTICAL_SEASON_DAY = 105
 """Day of 2025 (2025-04-16) from which `iss_network_april` runs."""
 SKY_SCENARIOS: dict[str, SkyScenario] = {
@@ -260,20 +320,21 @@ SKY_SCENARIOS: dict[str, SkyScenario] = {
             outages=(("columbus", 1.5 * _DAY, 0.5 * _DAY),),
             finding="one radar, 10 deg mask: ~5 passes a day, gaps of 1.5-16 h"),
         SkyScenario(
-            name="iss_network", sensors=NETWORK_SENSORS,
+            name="iss_network", sensors=NETWORK_SENSORS, site_pool=SITE_POOL,
             outages=((ALL_STATIONS, 1.5 * _DAY, 0.25 * _DAY),),
             finding="radar + optical network, whole-network outage of 6 h; in these three "
                     "days of January the optical sites see nothing (module docstring)"),
         SkyScenario(
-            name="iss_network_april", sensors=NETWORK_SENSORS,
+            name="iss_network_april", sensors=NETWORK_SENSORS, site_pool=SITE_POOL,
             t0=ORBIT_EPOCH_UNIX + OPTICAL_SEASON_DAY * _DAY,
             outages=((ALL_STATIONS, 1.5 * _DAY, 0.25 * _DAY),),
             finding="the same network and orbit from 2025-04-16, when the optical sites see "
                     "the object at dusk and dawn (module docstring)"),
         SkyScenario(
             name="leo_optical", sensors=("socorro", "maui", "diego_garcia"),
+            site_pool=TWILIGHT_SITE_POOL,
             x0=tuple(dynamics.elements_to_state(**SSO_ELEMENTS)),
-            outages=(("maui", 1.0 * _DAY, 1.0 * _DAY),), gap_fill=GapFill.BATCH_FIT,
+            outages=(("maui", 1.0 * _DAY, 1.0 * _DAY),), gap_fill=GapFill.BATCH_INIT,
             finding="optical sites only, a sun-synchronous LEO object: twilight passes"),
     ]
 }

@@ -78,7 +78,7 @@ def evaluate_sky(sim: SkySimulation, seed: int = 0,
     """Run the scenario's filter and surrogate over the delivered measurements; score them.
 
     After each pass, at every truth epoch, and every arm over the scheduled outage
-    (`outage_epochs`).
+    (`outage_epochs`; None when it spans no truth epoch).
     """
     s = sim.scenario
     c = s.estimator()
@@ -86,8 +86,8 @@ def evaluate_sky(sim: SkySimulation, seed: int = 0,
     run = run_dmd_ekf(sim)
     report = pass_report(c, run.estimates, real, sim.t, sim.x)
     outage = None
-    if s.outages and withheld:
-        t_gap = outage_epochs(sim.t, withheld)
+    t_gap = outage_epochs(sim.t, withheld) if s.outages else sim.t[:0]
+    if t_gap.size:  # none: the outage withheld nothing, or less than a truth epoch apart
         outage = arms.evaluate_gap(c, run.estimates, real, withheld, t_gap,
                                    sim.x[np.isin(sim.t, t_gap)], seed, only=only)
     return SkyEvaluation(report, outage, len(run.forecasts))

@@ -13,8 +13,10 @@ over gaps > 12 h, after each pass, position NEES against chi2(3)). Seeds are
 seeds 1-3); start epochs `distributions.START_OFFSETS_H` after the nominal one move the
 passes, and each seed turns the orbit (`case_geometry`: its plane by up to
 `RAAN_SPREAD_DEG` about the pole, its phase anywhere along it), so that no two runs share
-their passes and gaps. Each run asserts that it scored passes and all six arms. Units: km,
-h.
+their passes and gaps; a network scenario's case also observes with a network of its own,
+drawn from the scenario's pool of real sites (`case_sites`: as many radars and optical
+sites as the scenario has; no tuning and evaluation case share one). Each run asserts that
+it scored passes and all six arms. Units: km, h.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from ssa_fusion.core.gap_publisher import GapFill
 from ssa_fusion.evaluation import arms, gap_scores, passes
 from ssa_fusion.sim import sky
 from ssa_fusion.studies import sky_runs
+from ssa_fusion.studies.distributions import EVALUATION_SEEDS, TUNING_SEEDS
 
 ARMS = [str(a) for a in arms.ArmName]
 
@@ -52,11 +55,42 @@ def case_geometry(seed: int) -> tuple[float, float]:
             rng.uniform(0.0, 2.0 * math.pi))
 
 
+CASE_SEEDS = (*TUNING_SEEDS, *EVALUATION_SEEDS)
+"""The seeds whose networks `case_sites` keeps apart: every tuning and evaluation seed."""
+
+
+def case_sites(s: sky.SkyScenario, seed: int) -> tuple[str, ...]:
+    """Return the sensors of case `seed` of scenario `s`: a network of its `site_pool`.
+
+    One of `s.network_choices()` (the scenario's own sensors when it has no pool: a single
+    station), drawn without replacement over `CASE_SEEDS`: the choices are shuffled once
+    (a fixed generator) and the k-th of `CASE_SEEDS` takes the k-th, so every tuning and
+    evaluation case has a network of its own (as long as there are as many choices as
+    seeds: 35 and 350 for 30) and no evaluation case shares one with a tuning case. Any
+    other seed draws one from a generator of its own. The same seed, the same sites.
+    """
+    choices = s.network_choices()
+    order = np.random.default_rng([len(choices), 11]).permutation(len(choices))
+    k = (CASE_SEEDS.index(seed) if seed in CASE_SEEDS
+         else int(np.random.default_rng([seed, 11]).integers(len(choices))))
+    return choices[int(order[k % len(choices)])]
+
+
+def case_scenario(name: str, offset_h: float, seed: int) -> sky.SkyScenario:
+    """Return case (scenario name, start offset h, seed): its start, orbit and network.
+
+    The start `offset_h` after the scenario's, the orbit turned (`case_geometry`), the
+    sites drawn (`case_sites`).
+    """
+    base = sky.SKY_SCENARIOS[name]
+    return (base.with_(t0=base.t0 + 3600.0 * offset_h).with_geometry(*case_geometry(seed))
+            .with_sensors(case_sites(base, seed)))
+
+
 def run_case(case: tuple[str, float, int]) -> dict[str, Any]:
     """Run one case (scenario name, start offset h, seed); return its numbers."""
     name, offset_h, seed = case
-    base = sky.SKY_SCENARIOS[name]
-    s = base.with_(t0=base.t0 + 3600.0 * offset_h).with_geometry(*case_geometry(seed))
+    s = case_scenario(name, offset_h, seed)
     sim = sky.simulate_sky(s, seed=seed)
     ev = sky_runs.evaluate_sky(sim, seed=seed)
     after = [p[3] for p in ev.passes.passes]
@@ -136,7 +170,8 @@ def summarise(name: str, runs: list[dict[str, Any]]) -> tuple[str, dict[str, Any
         arm_med[a] = float(np.median(v))
         lines.append(f"| {a} | {_q(v)} | {_q(n) if n else '-'} |")
     lines.append(f"\n(over the {len(scored)} runs whose outage withheld measurements; in "
-                 f"{len(runs) - len(scored)} the outage's station would have seen nothing)")
+                 f"{len(runs) - len(scored)} the outage's station would have seen nothing, "
+                 f"or not across a truth epoch)")
     ratio = [r["outage_mean_km"]["dmd_ekf"] / r["outage_mean_km"]["coast"] for r in scored]
     ratio_j2 = [r["outage_mean_km"]["dmd_ekf"] / r["outage_mean_km"]["j2_coast"]
                 for r in scored]

@@ -208,7 +208,8 @@ def test_import_without_the_sites_file_is_refused_with_one_line(passes, tmp_path
     assert cli.main(["import", "tdm", str(tdm), "--bag", str(tmp_path / "bag")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(f"error: {tdm}:6: segment 1: "), err
-    assert "participants NORDLYS, SAT-99001: need one known station (altair, columbus" in err
+    assert ("participants NORDLYS, SAT-99001: need one known station (altair, calar_alto, "
+            "columbus") in err
     assert "a station of your own: --sites FILE" in err
     assert not (tmp_path / "bag").exists()
 

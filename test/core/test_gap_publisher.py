@@ -167,4 +167,63 @@ def test_the_gap_fit_of_angles_only_has_its_own_process_noise():
     # ranges: the drag factor solved for with the state; angles: the state alone
     assert batch_gap.GAP_FIT.solve_for == ("drag_scale",) and batch_gap.GAP_FIT.force.drag
     assert batch_gap.GAP_FIT_ANGLES.solve_for == () and not batch_gap.GAP_FIT_ANGLES.force.drag
-    assert batch_gap.GAP_FIT_ANGLES.consider == batch_gap.GAP_FIT.consider == ()
+    assert batch_gap.GAP_FIT_ANGLES.consider == ()
+    assert batch_gap.GAP_FIT.consider == ("accel_r", "accel_t", "accel_n")
+    assert batch_gap.GAP_FIT.param_sigma[1:] == (batch_gap.GAP_FIT_ACCEL_SIGMA,) * 3
+
+
+def test_a_batch_init_publisher_starts_each_pass_from_the_fit():
+    """`GapFill.BATCH_INIT`: the gap is the batch fit's, as with `BATCH_FIT`, and at the first
+    measurement of the next pass the EKF updates the fit's prediction there (state and
+    covariance, `BatchGapForecaster.prior`) instead of its own two-body coasting, which has
+    drifted by kilometres: the estimate is that Kalman update, and nearer the truth."""
+    x0 = np.array([6778.0, 0.0, 0.0, 0.0, 4.8, 5.9])
+    t = T0 + np.concatenate([k * 2400.0 + 60.0 * np.arange(10) for k in range(3)])
+    t_next = float(t[-1] + 7200.0)  # the first measurement of the next pass
+    truth = scipy_orbit(x0, np.append(t, t_next), j3_j4=True)
+    c = EstimatorConfig(kind=Kind.POSITION, lift="none",
+                        filter=FilterOptions().with_(p0_sigma=(1.0,) * 3 + (1e-2,) * 3,
+                                                     q=1e-9))
+    R = 1e-4 * np.eye(3)
+    got = {}
+    for f in (GapFill.BATCH_FIT, GapFill.BATCH_INIT):
+        pub = GapPublisher.of(make_tracker(c), 60.0, f, c)
+        rng = np.random.default_rng(5)
+        z = truth[:, :3] + 0.01 * rng.standard_normal((t.size + 1, 3))
+        for ti, zi in zip(t, z[:-1], strict=True):
+            pub.measurement(Measurement(float(ti), zi, R, kind=Kind.POSITION, frame_id="gcrf"))
+        prior = pub.forecaster.prior(t_next)  # the fit of the three passes, predicted
+        last = pub.measurement(Measurement(t_next, z[-1], R, kind=Kind.POSITION,
+                                           frame_id="gcrf")).estimates[-1]
+        got[f] = (prior, last, z[-1])
+    (x, P), init, z = got[GapFill.BATCH_INIT]
+    K = P[:, :3] @ np.linalg.inv(P[:3, :3] + R)
+    np.testing.assert_allclose(init.x, x + K @ (z - x[:3]), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(init.P, P - K @ P[:3], rtol=0, atol=1e-12)
+    coasted = got[GapFill.BATCH_FIT][1]
+    err = {f: np.linalg.norm(e.x[3:] - truth[-1, 3:]) for f, e in
+           ((GapFill.BATCH_FIT, coasted), (GapFill.BATCH_INIT, init))}
+    assert err[GapFill.BATCH_INIT] < 0.1 * err[GapFill.BATCH_FIT], err  # velocity, km/s
+
+
+def test_a_batch_init_publisher_keeps_its_own_state_until_the_fit_spans_its_passes():
+    """Before the window holds `GAP_FIT_PASSES` passes (right after the initial orbit
+    determination) `GapFill.BATCH_INIT` does not restart the EKF: the next pass's first
+    estimate is the same as `BATCH_FIT`'s, whose EKF never restarts."""
+    x0 = np.array([6778.0, 0.0, 0.0, 0.0, 4.8, 5.9])
+    t = T0 + 60.0 * np.arange(10)  # one pass
+    truth = scipy_orbit(x0, np.append(t, t[-1] + 7200.0), j3_j4=True)
+    c = EstimatorConfig(kind=Kind.POSITION, lift="none",
+                        filter=FilterOptions().with_(p0_sigma=(1.0,) * 3 + (1e-2,) * 3,
+                                                     q=1e-9))
+    last = {}
+    for f in (GapFill.BATCH_FIT, GapFill.BATCH_INIT):
+        pub = GapPublisher.of(make_tracker(c), 60.0, f, c)
+        ms = [Measurement(float(ti), xi[:3], 1e-4 * np.eye(3), kind=Kind.POSITION,
+                          frame_id="gcrf") for ti, xi in zip([*t, t[-1] + 7200.0], truth,
+                                                              strict=True)]
+        for m in ms[:-1]:
+            pub.measurement(m)
+        assert pub.forecaster.prior(ms[-1].t) is not None  # a fit it had
+        last[f] = pub.measurement(ms[-1]).estimates[-1]
+    np.testing.assert_array_equal(last[GapFill.BATCH_INIT].x, last[GapFill.BATCH_FIT].x)

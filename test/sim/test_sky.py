@@ -123,7 +123,7 @@ def test_reproduce_runs_the_real_sky_study_over_evaluation_seeds(tmp_path, monke
                             "hypothetical_ekf"}
     assert all(0.0 < v < 5.0 for v in arms_km.values()), arms_km  # km over a 3.6 h outage
     pub = got["published"]  # what the filter publishes between passes, per gap_forecast
-    assert set(pub) == {"none", "residual", "batch_fit"}
+    assert set(pub) == {"none", "residual", "batch_fit", "batch_init"}
     assert all(0.0 < m["err_median_km"] < 5.0 and 0.0 <= m["nees_in_95"] <= 1.0
                for m in pub.values()), pub
     assert "## The real sky" in (tmp_path / "results.md").read_text()
@@ -274,6 +274,38 @@ def test_an_evaluation_case_turns_the_orbit_but_keeps_its_shape():
     cos = np.dot(x0[:3], back[:3]) / np.linalg.norm(x0[:3]) / np.linalg.norm(back[:3])
     assert math.acos(np.clip(cos, -1, 1)) == pytest.approx(
         abs(math.remainder(d_phase, 2 * math.pi)), abs=1e-9)
+
+
+def test_network_cases_draw_their_own_sites_and_tuning_and_evaluation_never_share_one():
+    """`sky_study.case_sites`: every evaluation case of a network scenario observes with its
+    own network of real sites (the scenario's count of radars and optical sites, from its
+    `site_pool`), the same for the same seed; tuning and evaluation seeds are disjoint and
+    so are their networks; the single radar keeps its station. `case_scenario` observes
+    with the drawn sites, the outage of a slot's site moving to its replacement."""
+    from ssa_fusion.studies.distributions import EVALUATION_SEEDS, TUNING_SEEDS
+    from ssa_fusion.studies.sky_study import case_scenario, case_sites
+
+    assert not set(TUNING_SEEDS) & set(EVALUATION_SEEDS)
+    for name in ("iss_network", "iss_network_april", "leo_optical"):
+        base = sky.SKY_SCENARIOS[name]
+        evaluation = [case_sites(base, seed) for seed in EVALUATION_SEEDS]
+        tuning = {frozenset(case_sites(base, seed)) for seed in TUNING_SEEDS}
+        assert len({frozenset(n) for n in evaluation}) == len(EVALUATION_SEEDS)
+        assert len(tuning) == len(TUNING_SEEDS)
+        assert not tuning & {frozenset(n) for n in evaluation}
+        for n in evaluation:
+            assert set(n) <= set(base.site_pool) and len(set(n)) == len(n)
+            assert [SENSORS[a].type for a in n] == [SENSORS[a].type for a in base.sensors]
+    leo = sky.SKY_SCENARIOS["leo_optical"]
+    assert case_sites(leo, 101) == case_sites(leo, 101) == (
+        "zimmerwald", "xinglong", "calar_alto")  # the same seed, the same sites
+    s = case_scenario("leo_optical", 0.0, 101)
+    assert s.network == "zimmerwald,xinglong,calar_alto,"
+    assert [o[0] for o in leo.outages] == ["maui"] and [o[0] for o in s.outages] == ["xinglong"]
+    radar = sky.SKY_SCENARIOS["iss_radar_columbus"]
+    assert {case_sites(radar, seed) for seed in EVALUATION_SEEDS} == {("columbus",)}
+    with pytest.raises(ValueError, match="sensor type"):
+        leo.with_sensors(("millstone", "maui", "socorro"))
 
 
 def test_an_optical_site_sees_only_what_is_brighter_than_its_limiting_magnitude(tmp_path):
