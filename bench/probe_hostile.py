@@ -58,6 +58,8 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from bench_lockstep import burners as cpu_burners
+
 ROOT = Path(__file__).resolve().parents[1]
 CLI = (sys.executable, "-m", "ssa_fusion.apps.cli")
 NODE_DIR = Path(sys.prefix) / "lib" / "ssa_fusion"
@@ -728,18 +730,6 @@ def live_catalog_probe(cls: str, name: str, extra: Sequence[str],
         return r, shell(argv)
 
     return Probe(cls, name, run, judge_, graph=True)
-
-
-@contextlib.contextmanager
-def cpu_burners(n: int) -> Iterator[None]:
-    """Run `n` CPU-bound processes (a loaded machine) for the duration; end them by pid."""
-    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
-    try:
-        yield
-    finally:
-        for b in procs:
-            b.kill()
-            b.wait()
 
 
 def wait_for_node(domain: int, name: str, out: Path, limit: float = 120.0) -> int | None:
