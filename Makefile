@@ -14,9 +14,10 @@ demo: bootstrap
 
 # Gates first: ruff on the whole tree (docstring and annotation rules on every module of
 # the package, pyproject.toml) and mypy on the package; any finding fails. The tests then run
-# in a network namespace of their own where the machine allows (tools/isolated.sh): no
-# other ROS graph on the machine can cross-talk with the test graphs.
+# as two groups side by side (tools/run_tests.sh: the graph tests and the rest), each in a
+# network namespace of its own where the machine allows (tools/isolated.sh): no other ROS
+# graph on the machine can cross-talk with the test graphs.
 test: bootstrap
 	.venv/bin/ruff check .
 	.venv/bin/mypy
-	tools/isolated.sh .venv/bin/python -m pytest
+	tools/run_tests.sh
