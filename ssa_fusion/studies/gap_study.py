@@ -1,6 +1,7 @@
 """The gap study: forecasting through the gaps between passes of the real sky.
 
-Per run (a `sky` scenario from a start offset, with a seed) and per placeholder motion model
+Per run (a `sky` scenario from a start offset, with a seed: `sky_study.case_scenario`, whose
+seed also turns the orbit and draws a network's sites) and per placeholder motion model
 (``kepler``: the filter with a two-body model and the Keplerian filters' process noise
 `KEPLER_Q`; ``j2``: the scenario's own two-body + J2 filter, q = `sky.SKY_Q`), the filter
 runs over the delivered measurements with the live Hankel-DMD surrogate as the graph drives
@@ -51,7 +52,7 @@ from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
 from ssa_fusion.core.types import Measurement, Source, StateEstimate, UpdateSource
 from ssa_fusion.evaluation import arms, passes
 from ssa_fusion.sim import sky
-from ssa_fusion.studies import bopdmd, sky_runs
+from ssa_fusion.studies import bopdmd, sky_runs, sky_study
 
 KEPLER_Q = 1e-7
 """Process noise of the two-body placeholder filter, (km/s^2)^2 s: the Keplerian filters' q
@@ -225,9 +226,8 @@ def run_placeholder(sim: sky.SkySimulation, placeholder: str,
 
 def run_case(case: Case) -> dict[str, Any]:
     """Run one case: both placeholders, every gap scored (with its Hankel-DMD forecasts)."""
-    base = sky.SKY_SCENARIOS[case.name]
-    s = base.with_(t0=base.t0 + 3600.0 * case.offset_h)
-    sim = sky.simulate_sky(s, seed=case.seed)
+    sim = sky.simulate_sky(sky_study.case_scenario(case.name, case.offset_h, case.seed),
+                           seed=case.seed)
     gaps = [g for p in PLACEHOLDERS for g in run_placeholder(sim, p, case)]
     return {"name": case.name, "offset_h": case.offset_h, "seed": case.seed, "gaps": gaps}
 
