@@ -191,6 +191,7 @@ class GapBank:
         self._queued = np.zeros(0, dtype=bool)
         self._released = np.zeros(0)  # newest forecast epoch released per object (s)
         self._active: set[int] = set()  # rows with a forecast to release
+        self._pending: list[MeasurementRows] = []  # measurements waiting for the clock
         self._allowance = 0.0
         self._wall_last: float | None = None
 
@@ -270,28 +271,43 @@ class GapBank:
         return r
 
     def on_measurements(self, rows: MeasurementRows) -> int:
-        """Take real measurements (e.g. a catalog's batch); return how many were kept.
+        """Take real measurements (e.g. a catalog's batch); return how many are kept.
 
         Those of a batch-fit object (objects not yet heard of are, when the config's
-        forecast is `GapFill.BATCH_FIT` and there is room) go to its window, in epoch order
-        (a stable sort of the rows); others, and forecasts, are ignored.
+        forecast is `GapFill.BATCH_FIT` and there is room) wait until `step` reaches their
+        epoch, then go to its window in epoch order (a stable sort); others, and forecasts,
+        are ignored. Waiting for the clock keeps a pass that starts ahead of it (a lockstep
+        step's measurements run ahead of its clock) out of the fit of the gap before it.
         """
         if not len(rows):
             return 0
         default = self.config.gap_forecast == GapFill.BATCH_FIT
         sensor = rows.source == Source.SENSOR if rows.source.size else np.ones(len(rows), bool)
-        kept = 0
-        for i in np.argsort(rows.t, kind="stable").tolist():
+        keep = np.zeros(len(rows), bool)
+        for i in np.flatnonzero(sensor).tolist():
             oid = rows.object_id[i]
             r = self._rows.get(oid)
-            if not sensor[i] or (r is None and not (default and self.admits(oid))):
-                continue
-            r = self._row(oid) if r is None else r
-            if self._batch[r]:
+            if r is None and default and self.admits(oid):
+                r = self._row(oid)
+            keep[i] = r is not None and bool(self._batch[r])
+        if keep.any():
+            self._pending.append(rows.take(np.flatnonzero(keep)))
+        return int(keep.sum())
+
+    def _admit_measurements(self, now: float) -> None:
+        """Move the measurements waiting for the clock up to `now` (s) into the windows."""
+        if not self._pending:
+            return
+        rows = MeasurementRows.concat(self._pending)
+        due = rows.t <= now
+        self._pending = [rows.take(np.flatnonzero(~due))] if not due.all() else []
+        kept = 0
+        for i in np.flatnonzero(due)[np.argsort(rows.t[due], kind="stable")].tolist():
+            r = self._rows.get(rows.object_id[i])
+            if r is not None and self._batch[r]:
                 kept += self.windows.add(r, float(rows.t[i]), rows.z[i], rows.R[i],
                                          int(rows.kind[i]), rows.frame_id[i])
         self.counts["measurements"] += kept
-        return kept
 
     def on_estimate(self, object_id: str, t: float, x: ArrayLike,
                     P: ArrayLike) -> list[GapForecast]:
@@ -333,10 +349,12 @@ class GapBank:
     def step(self, now: float) -> list[GapForecast]:
         """Queue, fit and release at sim time `now` (s).
 
-        Queue the objects whose pass just ended, fit as many as the budget allows (newest
-        pass end first), and return every forecast now due.
+        Move the measurements up to `now` into the windows, queue the objects whose pass
+        just ended, fit as many as the budget allows (newest pass end first), and return
+        every forecast now due.
         """
         c = self.config
+        self._admit_measurements(now)
         n = len(self._ids)
         last = self._last[:n]
         new = (now - last >= c.pass_break_s) & (self._fitted[:n] != last) & ~self._queued[:n]
@@ -383,16 +401,18 @@ class GapBank:
     def batch_fit(self, r: int, first: float) -> dict[float, tuple[Array, Array]]:
         """Return object `r`'s batch fit tabulated on the grid, from its newest estimate.
 
-        `batch_gap.BatchGapForecaster` given the object's window and newest estimate, asked
-        for its forecast at `first` (s), the first grid epoch of the gap: the fit's states
-        and covariances at the grid epochs after the pass end ({} when the fit failed).
+        `batch_gap.BatchGapForecaster` given the object's window up to its newest estimate
+        (a measurement after it was not fused) and that estimate, asked for its forecast
+        at `first` (s), the first grid epoch of the gap: the fit's states and covariances at
+        the grid epochs after the pass end ({} when the fit failed).
         """
         assert self.model is not None
+        end = float(self._last[r])
         f = BatchGapForecaster(self.model, self.config.period_s, clock_unix0=self.clock_unix0,
                                passes=self.config.fit_passes,
                                pass_break_s=self.config.pass_break_s,
-                               window=self.windows.window(r),
-                               last=(float(self._last[r]), self._x[r].copy()))
+                               window=[m for m in self.windows.window(r) if m.t <= end],
+                               last=(end, self._x[r].copy()))
         f.forecast(first)
         return f.table
 

@@ -210,3 +210,25 @@ def test_objects_choose_their_gap_forecast():
     assert len(bank) == 1
     bank.choose("a", GapFill.RESIDUAL)
     assert bank.windows.count(0) == 0 and bank._gaps[0] is not None
+
+
+def test_measurements_ahead_of_the_clock_wait_out_of_the_fit_of_the_gap_before(sky):
+    """A lockstep step's measurements run ahead of its clock: the next pass's, given before
+    the step that fits the gap, change nothing of that fit (they wait for the clock)."""
+    rows, model, est, t0 = sky
+    cut = t0 + 7 * 3600.0
+    now = cut + 1800.0
+    got = []
+    for early in (False, True):
+        bank = GapBank(CFG, wall=FakeWall(), model=model)
+        bank.on_measurements(rows.take(np.flatnonzero(rows.t < cut)))
+        if early:
+            bank.on_measurements(rows.take(np.flatnonzero(rows.t > now)))
+        for oid, (ts, xs) in est.items():
+            for t, x in zip(ts[ts < cut], xs[ts < cut], strict=True):
+                bank.on_estimate(oid, t, x, P)
+        got.append({(f.object_id, f.t): f.x for f in bank.step(now)})
+        assert bank.counts["fitted_batch_fit"] == 3
+    assert got[0] and got[0].keys() == got[1].keys()
+    for k, x in got[0].items():
+        np.testing.assert_array_equal(got[1][k], x)
