@@ -413,7 +413,10 @@ class GapBank:
                                pass_break_s=self.config.pass_break_s,
                                window=[m for m in self.windows.window(r) if m.t <= end],
                                last=(end, self._x[r].copy()))
-        f.forecast(first)
+        try:  # one object's failed fit leaves its gap to the filter's coasting
+            f.forecast(first)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            return {}
         return f.table
 
     def _table(self, r: int) -> dict[float, tuple[Array, Array]]:

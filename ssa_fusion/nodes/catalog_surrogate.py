@@ -46,8 +46,8 @@ from ssa_fusion.core.rows import EstimateRows
 from ssa_fusion.core.site_file import load_station_map
 from ssa_fusion.core.stations import network_stations
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.types import Cause, MotionModel, UpdateSource
-from ssa_fusion.core.validation import MAX_ID_CHARS, id_problem, state_problem
+from ssa_fusion.core.types import Cause, Kind, MotionModel, UpdateSource
+from ssa_fusion.core.validation import MAX_ID_CHARS, id_problem, rows_problems, state_problem
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import CATALOG_SURROGATE
 from ssa_fusion.nodes.diagnostics import Count, NodeCause
@@ -189,8 +189,9 @@ class CatalogSurrogateNode(SsaNode):
     def on_measurement_batch(self, msg: Message) -> None:
         """Take one MeasurementBatch for the batch fits: its rows of this shard's objects.
 
-        Rows of other shards, of another network's stations and forecasts are ignored
-        (the catalog_filter counts what it refuses); a malformed batch is refused whole.
+        Rows of other shards, of another network's stations, forecasts and rows the
+        catalog_filter refuses (`validation.rows_problems`: it counts them) are ignored; a
+        malformed batch is refused whole.
         """
         try:
             rows = messages.measurement_batch_from_msg(msg)
@@ -202,7 +203,8 @@ class CatalogSurrogateNode(SsaNode):
                                              self.shards)
         assert self.model is not None
         known = np.isin(np.asarray(rows.frame_id, dtype=object), list(self.model.stations))
-        self.bank.on_measurements(rows.take(np.flatnonzero(~bad_key & ~other & known)))
+        sound = rows_problems(rows, Kind.RANGE_AZ_EL) == ""
+        self.bank.on_measurements(rows.take(np.flatnonzero(~bad_key & ~other & known & sound)))
 
     def on_message(self, msg: Message) -> None:
         """Take one EstimateBatch: a filter's rows each are an object's newest estimate.
