@@ -19,6 +19,7 @@ from typing import Any, NamedTuple
 
 from ssa_fusion.core import timescales
 from ssa_fusion.core.catalog import Progress
+from ssa_fusion.core.gap_publisher import GapFill
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import BAG_PATTERN
 from ssa_fusion.ros.readiness import READERS
@@ -173,10 +174,12 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
         timescales.parse_utc(start)
     names = node_names(shards)
     gaps = node_names(shards, "catalog_surrogate") if surrogate else []
+    # surrogates that fit the measurements hear them from the first, as the shards do
+    fitting = gaps if surrogate_extra.get("gap_forecast") == str(GapFill.BATCH_FIT) else []
     # the recorder hears every estimate publisher (shards and surrogates) from the first
     readers = ["recorder:" + TOPIC_MEASUREMENT_BATCH,
                f"recorder:{TOPIC_ESTIMATE_BATCH}={len(names) + len(gaps)}",
-               *(f"{n}:{TOPIC_MEASUREMENT_BATCH}" for n in names)]
+               *(f"{n}:{TOPIC_MEASUREMENT_BATCH}" for n in [*names, *fitting])]
     recorder: dict[str, Any] = {"use_sim_time": True}
     if bag is not None:
         recorder["bag"] = str(bag)
@@ -189,9 +192,9 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
         *(NodeSpec("catalog_filter", n, {"use_sim_time": True, "shards": shards, "shard": k,
                                          "station": station, **own})
           for k, n in enumerate(names)),
-        *(NodeSpec("catalog_surrogate", n, {**budget, **surrogate_extra,
-                                            "use_sim_time": True, "shards": shards,
-                                            "shard": k})
+        *(NodeSpec("catalog_surrogate", n, {**budget, "station": station, **own,
+                                            **surrogate_extra, "use_sim_time": True,
+                                            "shards": shards, "shard": k})
           for k, n in enumerate(gaps)),
         NodeSpec("sensor_sim", "sensor_sim", {
             "scenario": scenario.name, "catalog": str(Path(catalog).resolve()),

@@ -32,11 +32,12 @@ from ssa_fusion import graphs
 from ssa_fusion.apps import evaluate, report, runs
 from ssa_fusion.apps.args import add_discovery, add_domain_id, discovery, time_scale
 from ssa_fusion.apps.progress_lines import ProgressLines
+from ssa_fusion.core.gap_publisher import GapFill
 from ssa_fusion.core.types import UpdateSource
 from ssa_fusion.ros import visual_msgs
 from ssa_fusion.ros.processes import Graph
 from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
-from ssa_fusion.sim import scenarios
+from ssa_fusion.sim import scenarios, sky
 
 if TYPE_CHECKING:
     from ssa_fusion.ros.interfaces import Message
@@ -81,6 +82,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=float, default=0.0, metavar="HOURS",
                    help="hours of sim time (default: the scenario's; a paper scenario keeps "
                         "its tracking and gap and tracks after the gap for the rest)")
+    p.add_argument("--gap-forecast", default="", choices=["", *(str(f) for f in GapFill)],
+                   help="what a real-sky scenario's filter publishes through its gaps (its "
+                        "`gap_forecast`: none, residual, batch_fit, batch_init; default: the "
+                        "scenario's)")
     p.add_argument("--strict", action="store_true",
                    help="exit 1 when forecasts for gap epochs never went into the filter "
                         "(they arrived late or were dropped, e.g. at too high a time scale)")
@@ -230,6 +235,11 @@ def run(args: argparse.Namespace) -> int:
     if getattr(args, "catalog", None) is not None:
         from ssa_fusion.apps import live_catalog
 
+        if getattr(args, "gap_forecast", ""):
+            print("error: --gap-forecast applies to a real-sky scenario; a catalog's gaps: "
+                  "--surrogate-param gap_forecast=residual|batch_fit", file=sys.stderr)
+            return 2
+
         return live_catalog.run(args)
     catalog_only = catalog_options_given(args)
     if catalog_only:
@@ -243,6 +253,12 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if args.gap_forecast:
+        if not isinstance(s, sky.SkyScenario):
+            print(f"error: --gap-forecast applies to the real-sky scenarios "
+                  f"({', '.join(sky.SKY_SCENARIOS)})", file=sys.stderr)
+            return 2
+        s = s.with_(gap_fill=GapFill(args.gap_forecast))
     dirs = runs.run_dirs(args, s.name)
     if dirs is None:
         return 2

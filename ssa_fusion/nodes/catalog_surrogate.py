@@ -11,6 +11,12 @@ sim s have passed without an estimate. The fits
 ends before its turn is left to the filter's coasting and counted as ``skipped`` on
 ``/diagnostics``.
 
+With `gap_forecast` ``batch_fit`` the forecast of each gap is instead the batch
+least-squares fit of the object's measurements of its last passes (the single-object
+filter's `core.batch_gap`, with the radars of `station`): the node also subscribes to
+``/ssa/measurement_batch`` (its shard's rows, as the catalog_filter) for them, and schedules
+and publishes these fits as the residual's.
+
 Sharding as catalog_filter: with ``shards`` = K > 1 the node takes the objects whose
 ``shard_key`` lies in the ``shard``-th of K ranges (content filter on the batches' key
 range; rows of other shards in a batch that covers more are ignored).
@@ -27,10 +33,21 @@ from functools import partial
 
 import numpy as np
 
-from ssa_fusion.core.gap_bank import CATALOG_RESIDUAL, GapBank, GapBankConfig, GapForecast
+from ssa_fusion.core.gap_bank import (
+    CATALOG_RESIDUAL,
+    GAP_FORECASTS,
+    GapBank,
+    GapBankConfig,
+    GapForecast,
+)
+from ssa_fusion.core.gap_publisher import GapFill
+from ssa_fusion.core.measurement import StationModels
 from ssa_fusion.core.rows import EstimateRows
-from ssa_fusion.core.types import Cause, MotionModel, UpdateSource
-from ssa_fusion.core.validation import MAX_ID_CHARS, id_problem, state_problem
+from ssa_fusion.core.site_file import load_station_map
+from ssa_fusion.core.stations import network_stations
+from ssa_fusion.core.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.types import Cause, Kind, MotionModel, UpdateSource
+from ssa_fusion.core.validation import MAX_ID_CHARS, id_problem, rows_problems, state_problem
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import CATALOG_SURROGATE
 from ssa_fusion.nodes.diagnostics import Count, NodeCause
@@ -38,12 +55,18 @@ from ssa_fusion.nodes.parameters import (
     MOTION_MODELS,
     NON_NEGATIVE,
     POSITIVE,
+    STATION_IDS,
+    STATION_RULE_NAMES,
     Check,
     Param,
     ParameterTable,
     ParamValue,
+    Rule,
     at_least,
     clock_lead,
+    one_of,
+    sites_problem,
+    sites_row,
 )
 from ssa_fusion.nodes.progress import SHARD, TAKEN_ESTIMATES, ProgressReporter
 from ssa_fusion.nodes.shards import (
@@ -57,8 +80,8 @@ from ssa_fusion.nodes.shards import (
     shard_rows,
 )
 from ssa_fusion.ros import messages
-from ssa_fusion.ros.interfaces import EstimateBatch, Message
-from ssa_fusion.ros.topics import CATALOG_QOS, TOPIC_ESTIMATE_BATCH
+from ssa_fusion.ros.interfaces import EstimateBatch, MeasurementBatch, Message
+from ssa_fusion.ros.topics import CATALOG_QOS, TOPIC_ESTIMATE_BATCH, TOPIC_MEASUREMENT_BATCH
 
 TICK_S = 0.01
 """Wall s between two rounds of fits and releases (in lockstep the simulator's next step
@@ -93,10 +116,19 @@ PARAMETERS = ParameterTable("catalog_surrogate", (
           check=at_least(2)),
     Param("min_span", CATALOG_SURROGATE.min_span,
           "the pass ends of a fit must span at least this", unit="s", check=NON_NEGATIVE),
+    Param("gap_forecast", CATALOG_SURROGATE.gap_forecast,
+          "each gap's forecast: residual (the motion model plus its residual learned from "
+          "pass ends) or batch_fit (a batch least-squares fit of the object's measurements "
+          "of its last passes, which the node then subscribes to)",
+          check=one_of(*(str(f) for f in GAP_FORECASTS))),
+    Param("station", CATALOG_SURROGATE.station,
+          "batch_fit: radar stations of the measurements, as the catalog_filter's "
+          "`station`", check=STATION_IDS),
+    sites_row(CATALOG_SURROGATE.sites),
     *shard_rows(CATALOG_SURROGATE.shards, CATALOG_SURROGATE.shard),
     clock_lead(CATALOG_SURROGATE.max_clock_lead),
     max_objects_row(CATALOG_SURROGATE.max_objects, "holds", "an estimate"),
-), rules=(SHARD_RULE,))
+), rules=(SHARD_RULE, Rule(STATION_RULE_NAMES, sites_problem)))
 """The catalog_surrogate's parameters."""
 
 
@@ -115,8 +147,12 @@ class CatalogSurrogateNode(SsaNode):
                                     period_s=p.number("predict_period"),
                                     pass_break_s=p.number("pass_break"),
                                     hold_s=p.number("hold"), fit_budget=p.number("fit_budget"),
-                                    residual=residual)
-        self.bank = GapBank(self.config, max_objects=p.integer("max_objects"))
+                                    residual=residual,
+                                    gap_forecast=GapFill(p.text("gap_forecast")))
+        batch = self.config.gap_forecast == GapFill.BATCH_FIT
+        self.model = StationModels(network_stations(
+            p.text("station"), load_station_map(p.text("sites"))), UNIX_EPOCH_JD) if batch else None
+        self.bank = self.new_bank()
         self.diag.status["shard"] = f"{self.shard}/{self.shards}"
         self.key_range = shard_range(self.shard, self.shards)
         self.pub = self.create_publisher(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
@@ -125,6 +161,10 @@ class CatalogSurrogateNode(SsaNode):
         self.sub = self.subscribe(EstimateBatch, TOPIC_ESTIMATE_BATCH, self.on_message,
                                   CATALOG_QOS, content_filter=cft)
         self.taken = 0  # SENSOR estimates arrived (used or refused): lockstep progress
+        self.sub_batch = self.subscribe(
+            MeasurementBatch, TOPIC_MEASUREMENT_BATCH, self.on_measurement_batch, CATALOG_QOS,
+            content_filter=content_filter(self.shard, self.shards, batches=True)
+        ) if batch else None
         if not self.sub.is_cft_enabled:
             self.diag.count(NodeCause.CONTENT_FILTER_UNAVAILABLE,
                             "the DDS implementation does not filter by content: every "
@@ -137,9 +177,34 @@ class CatalogSurrogateNode(SsaNode):
             clock=lambda: self.stepped_ns)
         self.reset_on_backward_jump(self.reset, "every object forgotten")
 
+    def new_bank(self) -> GapBank:
+        """Return an empty bank of this node's settings."""
+        return GapBank(self.config, max_objects=self.params.integer("max_objects"),
+                       model=self.model)
+
     def reset(self) -> None:
         """Forget every object."""
-        self.bank = GapBank(self.config, max_objects=self.params.integer("max_objects"))
+        self.bank = self.new_bank()
+
+    def on_measurement_batch(self, msg: Message) -> None:
+        """Take one MeasurementBatch for the batch fits: its rows of this shard's objects.
+
+        Rows of other shards, of another network's stations, forecasts and rows the
+        catalog_filter refuses (`validation.rows_problems`: it counts them) are ignored; a
+        malformed batch is refused whole.
+        """
+        try:
+            rows = messages.measurement_batch_from_msg(msg)
+        except ValueError as exc:
+            self.diag.count(Cause.REJECTED_MALFORMED, f"{TOPIC_MEASUREMENT_BATCH}: {exc}",
+                            n=len(msg.object_id))
+            return
+        bad_key, other = rows_shard_problems(rows.shard_key, rows.object_id, self.shard,
+                                             self.shards)
+        assert self.model is not None
+        known = np.isin(np.asarray(rows.frame_id, dtype=object), list(self.model.stations))
+        sound = rows_problems(rows, Kind.RANGE_AZ_EL) == ""
+        self.bank.on_measurements(rows.take(np.flatnonzero(~bad_key & ~other & known & sound)))
 
     def on_message(self, msg: Message) -> None:
         """Take one EstimateBatch: a filter's rows each are an object's newest estimate.

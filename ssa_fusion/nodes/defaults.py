@@ -176,6 +176,9 @@ class CatalogSurrogateDefaults:
     fit_budget: float = 0.5
     min_anchors: int = 5
     min_span: float = DAY_S
+    gap_forecast: str = "residual"
+    station: str = "radar_network"
+    sites: str = ""
     shards: int = 1
     shard: int = 0
     max_clock_lead: float = MAX_CLOCK_LEAD_S

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 import time
 from collections import defaultdict
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -28,8 +29,12 @@ from ssa_fusion.core import residual
 from ssa_fusion.core.filter_options import FilterOptions
 from ssa_fusion.core.gap_bank import GapBank, GapBankConfig
 from ssa_fusion.core.gap_forecaster import PLACEHOLDER_TRAJECTORY
+from ssa_fusion.core.gap_publisher import GapFill
+from ssa_fusion.core.measurement import StationModels
+from ssa_fusion.core.rows import MeasurementRows
+from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.track_bank import TrackBank
-from ssa_fusion.core.types import MotionModel
+from ssa_fusion.core.types import Kind, MotionModel, Source
 from ssa_fusion.sim import survey
 from ssa_fusion.sim.sky import SKY_SCENARIOS, SkyScenario
 
@@ -112,13 +117,20 @@ class _FrozenWall:
 
 def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_network",
                 batch_s: float = 60.0, gap_config: GapBankConfig | None = None,
-                max_gaps: int = GAPS_SCORED) -> dict[str, Any]:
+                max_gaps: int = GAPS_SCORED,
+                gap_forecasts: tuple[GapFill, ...] = (GapFill.RESIDUAL,)) -> dict[str, Any]:
     """One synthetic catalog through survey, batched filter and gap forecasts, scored.
 
     `objects` LEO objects (the sample catalog's first element set spread by `seed`),
-    measured for `hours` by the radars of `scenario`, fused every `batch_s` sim s; every gap
-    is fitted (no budget). Returns the scores (`gap_errors`) with the fits' counts and
-    their mean wall time.
+    measured for `hours` by the radars of `scenario`, fused every `batch_s` sim s. One
+    `GapBank` per arm of `gap_forecasts` (`gap_bank.GAP_FORECASTS`; `gap_config` with its
+    ``gap_forecast`` replaced) takes the same estimates (and, for the batch fit, every
+    measurement of the object, as the catalog_surrogate does) and fits every gap (no
+    budget). Returns the first arm's scores (`gap_errors`) with its fits' counts, their
+    mean wall time and the surrogate's wall time per object (fits, scoring and keeping the
+    windows), the filter's wall time per object; under ``arms`` the same for every arm, and
+    under ``common`` every arm's scores at the epochs of the gaps every arm forecast (the
+    same gaps: a paired comparison).
     """
     s = SKY_SCENARIOS[scenario]
     entries = survey.synthetic_catalog(catalog_io.read_catalog(SAMPLE)[0], objects, seed=seed)
@@ -126,14 +138,18 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
     t0 = survey.catalog_start(entries)
     obs = survey.observe_catalog(entries, radars, t0, hours * 3600.0, seed=seed)
     names = [r.station.name for r in radars]
-    bank = TrackBank(bank_config(s), {r.station.name: r.station for r in radars})
+    stations = {r.station.name: r.station for r in radars}
+    bank = TrackBank(bank_config(s), stations)
     wall = _FrozenWall()
-    gaps = GapBank(gap_config or GapBankConfig(motion_model=MotionModel(s.motion_model)),
-                   wall=wall)
+    base = gap_config or GapBankConfig(motion_model=MotionModel(s.motion_model))
+    model = StationModels(stations, UNIX_EPOCH_JD)
+    arms = {GapFill(f): GapBank(replace(base, gap_forecast=GapFill(f)), wall=wall, model=model)
+            for f in gap_forecasts}
     estimates: Rows = defaultdict(list)
-    forecasts: Rows = defaultdict(list)
+    forecasts: dict[GapFill, Rows] = {f: defaultdict(list) for f in arms}
     R = np.array([r.R for r in radars])
-    c_fit = 0.0
+    c_fit = dict.fromkeys(arms, 0.0)
+    c_filter = 0.0
     edges = np.searchsorted(obs.t, t0 + batch_s * np.arange(
         1, math.ceil(hours * 3600.0 / batch_s) + 2))
     first = 0
@@ -141,28 +157,52 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
         if last > first:
             sl = slice(first, int(last))
             ids = [obs.object_ids[i] for i in obs.obj[sl]]
-            res = bank.process(obs.t[sl], ids, [names[i] for i in obs.sensor[sl]],
-                               obs.z[sl], R[obs.sensor[sl]])
+            frames = [names[i] for i in obs.sensor[sl]]
             c = time.perf_counter()
-            for j, i in enumerate(res.fused.tolist()):
-                oid, t = ids[i], float(obs.t[sl][i])
+            res = bank.process(obs.t[sl], ids, frames, obs.z[sl], R[obs.sensor[sl]])
+            c_filter += time.perf_counter() - c
+            rows = MeasurementRows(obs.t[sl], ids, frames, obs.z[sl], R[obs.sensor[sl]],
+                                   kind=np.full(len(ids), Kind.RANGE_AZ_EL, np.uint8),
+                                   source=np.full(len(ids), Source.SENSOR, np.uint8))
+            fused = [(ids[i], float(obs.t[sl][i])) for i in res.fused.tolist()]
+            for j, (oid, t) in enumerate(fused):
                 estimates[oid].append((t, res.x[j]))
-                for f in gaps.on_estimate(oid, t, res.x[j], res.P[j]):
-                    forecasts[f.object_id].append((f.t, f.x))
-            c_fit += time.perf_counter() - c
+            for f, gaps in arms.items():
+                c = time.perf_counter()
+                gaps.on_measurements(rows)
+                for j, (oid, t) in enumerate(fused):
+                    for g in gaps.on_estimate(oid, t, res.x[j], res.P[j]):
+                        forecasts[f][g.object_id].append((g.t, g.x))
+                c_fit[f] += time.perf_counter() - c
             first = int(last)
         wall.now += 1.0
-        c = time.perf_counter()
-        for f in gaps.step(t0 + batch_s * (k + 1)):
-            forecasts[f.object_id].append((f.t, f.x))
-        c_fit += time.perf_counter() - c
-    for rows in forecasts.values():
-        rows.sort(key=lambda r: r[0])
-    made = gaps.counts["fitted"]
-    out = gap_errors(entries, estimates, forecasts, s.motion_model, max_gaps)
+        for f, gaps in arms.items():
+            c = time.perf_counter()
+            for g in gaps.step(t0 + batch_s * (k + 1)):
+                forecasts[f][g.object_id].append((g.t, g.x))
+            c_fit[f] += time.perf_counter() - c
+    for by_arm in forecasts.values():
+        for r in by_arm.values():
+            r.sort(key=lambda r: r[0])
+    shared = set.intersection(*({(o, t) for o, r in by_arm.items() for t, _ in r}
+                                for by_arm in forecasts.values()))
+    scores = {}
+    for f, gaps in arms.items():
+        made = gaps.counts["fitted"]
+        one = gap_errors(entries, estimates, forecasts[f], s.motion_model, max_gaps)
+        one.update({"gap_forecast": str(f), "fits_made": made,
+                    "fits_refused": gaps.counts["refused"], "surrogate_wall_s": c_fit[f],
+                    "surrogate_wall_s_per_object": c_fit[f] / objects,
+                    "window_bytes_per_object": gaps.windows.nbytes() / objects,
+                    "wall_s_per_fit": c_fit[f] / made if made else None})
+        scores[str(f)] = one
+    common = {str(f): gap_errors(entries, estimates,
+                                 {o: [r for r in rows if (o, r[0]) in shared]
+                                  for o, rows in forecasts[f].items()},
+                                 s.motion_model, max_gaps) for f in arms}
+    out = dict(scores[str(next(iter(arms)))])
     out.update({"seed": seed, "objects": objects, "hours": hours, "measurements": len(obs),
                 "estimates": sum(len(v) for v in estimates.values()),
-                "fits_made": made, "fits_refused": gaps.counts["refused"],
-                "surrogate_wall_s": c_fit,
-                "wall_s_per_fit": c_fit / made if made else None})
+                "filter_wall_s_per_object": c_filter / objects,
+                "arms": scores, "common": common})
     return out

@@ -241,3 +241,39 @@ def test_a_sigterm_while_the_command_still_imports_ends_it_cleanly(tmp_path):
     out, err = p.communicate(timeout=60)
     assert p.returncode == 143, (out, err)
     assert "stopped by SIGTERM" in err.splitlines()[-1] and "Traceback" not in err
+
+
+@pytest.mark.parametrize(("argv", "error"), [
+    (["--scenario", "iss_j2_pos", "--gap-forecast", "batch_fit"],
+     "--gap-forecast applies to the real-sky scenarios"),
+    (["--catalog", "config/catalogs/sample.tle", "--gap-forecast", "batch_fit"],
+     "--surrogate-param gap_forecast=residual|batch_fit"),
+])
+def test_gap_forecast_is_a_real_sky_scenarios_option(argv, error, tmp_path, capsys):
+    args = cli.build_parser().parse_args(["live", "--out", str(tmp_path / "run"), *argv])
+    assert live.run(args) == 2
+    assert error in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+
+
+def test_gap_forecast_sets_the_filters_gap_forecast(monkeypatch, tmp_path):
+    """The filter node starts with the option's `gap_forecast`, not the scenario's."""
+    started = {}
+
+    class StoppedError(Exception):
+        pass
+
+    class Graph(_FakeGraph):
+        def start_node(self, name, params=None, **_kw):
+            started[name] = params
+            if name == "sensor_sim":
+                raise StoppedError
+            return object()
+
+    monkeypatch.setattr(live, "Graph", Graph)
+    for option, want in (([], "residual"), (["--gap-forecast", "batch_init"], "batch_init")):
+        args = cli.build_parser().parse_args(["live", "--out", str(tmp_path / want),
+                                              "--scenario", "iss_radar_columbus", *option])
+        with pytest.raises(StoppedError):
+            live.run(args)
+        assert started["filter"]["gap_forecast"] == want
