@@ -8,6 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from test_gap_bank import FakeWall
 
 from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core.batch_gap import BatchGapForecaster
@@ -26,16 +27,6 @@ P = np.diag([1e-4] * 3 + [1e-8] * 3)
 CFG = GapBankConfig(motion_model="j2", period_s=600.0, pass_break_s=600.0, hold_s=0.0,
                     fit_budget=0.0, gap_forecast=GapFill.BATCH_FIT)
 HOURS = 14.0
-
-
-class FakeWall:
-    """A wall clock the test moves."""
-
-    def __init__(self) -> None:
-        self.now = 0.0
-
-    def __call__(self) -> float:
-        return self.now
 
 
 @pytest.fixture(scope="module")

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from rosgraph_msgs.msg import Clock
 from ssa_fusion_msgs.msg import EstimateBatch, MeasurementBatch
+from test_catalog_surrogate_graph import forecast_sink
 from test_faults import Diag, publisher
 
 from ssa_fusion.core import catalog as catalog_io
@@ -20,7 +21,6 @@ from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.nodes.progress import CLOCK, PROGRESS_QOS, TAKEN_ESTIMATES, TOPIC_PROGRESS
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import DiagnosticStatus
-from ssa_fusion.ros.topics import CATALOG_QOS
 from ssa_fusion.sim import survey
 from ssa_fusion.sim.sky import SKY_SCENARIOS
 from ssa_fusion.studies.catalog_gaps import SAMPLE
@@ -62,16 +62,7 @@ def test_the_batch_fit_forecasts_equal_the_single_object_forecasters(ros_graph):
               "gap_forecast": "batch_fit", "station": ",".join(names)}
     node = g.start_node("catalog_surrogate", params=params)
     diag = Diag(g)
-    forecasts: list[types.StateEstimate] = []
-
-    def on_batch(m: EstimateBatch) -> None:
-        rows = messages.estimate_batch_from_msg(m)
-        if rows.update_source == types.UpdateSource.FORECAST:
-            forecasts.extend(types.StateEstimate(t=float(t), x=x, P=P_, object_id=o)
-                             for t, x, P_, o in zip(rows.t, rows.x, rows.P, rows.object_id,
-                                                    strict=True))
-
-    g.probe.create_subscription(EstimateBatch, "/ssa/estimate_batch", on_batch, CATALOG_QOS)
+    forecasts = forecast_sink(g)
     clock = publisher(g, Clock, "/clock", ("catalog_surrogate",))
     est_pub = publisher(g, EstimateBatch, "/ssa/estimate_batch", ("catalog_surrogate",))
     meas_pub = publisher(g, MeasurementBatch, "/ssa/measurement_batch", ("catalog_surrogate",))

@@ -61,14 +61,8 @@ def _batch(e: types.StateEstimate, key: int | None = None) -> EstimateBatch:
     return messages.estimate_batch_to_msg(rows, shard_range(int(k > shard_range(0, 2)[1]), 2))
 
 
-def test_bad_estimates_are_refused_and_the_gap_forecast_equals_the_core(ros_graph):
-    g = ros_graph
-    span = 3 * 5820.0  # first to last pass end: only the last one may fit
-    params = {"use_sim_time": True, "shards": 2, "shard": 0, "hold": 0.0,
-              "predict_period": PERIOD, "min_anchors": 3, "min_span": span - 1.0,
-              "fit_budget": 1.0, "max_objects": 1}
-    node = g.start_node("catalog_surrogate", params=params)
-    diag = Diag(g)
+def forecast_sink(g) -> list[types.StateEstimate]:
+    """Subscribe the probe to /ssa/estimate_batch; return the list its forecasts join."""
     forecasts: list[types.StateEstimate] = []
 
     def on_batch(m: EstimateBatch) -> None:
@@ -79,6 +73,18 @@ def test_bad_estimates_are_refused_and_the_gap_forecast_equals_the_core(ros_grap
                                                     strict=True))
 
     g.probe.create_subscription(EstimateBatch, "/ssa/estimate_batch", on_batch, CATALOG_QOS)
+    return forecasts
+
+
+def test_bad_estimates_are_refused_and_the_gap_forecast_equals_the_core(ros_graph):
+    g = ros_graph
+    span = 3 * 5820.0  # first to last pass end: only the last one may fit
+    params = {"use_sim_time": True, "shards": 2, "shard": 0, "hold": 0.0,
+              "predict_period": PERIOD, "min_anchors": 3, "min_span": span - 1.0,
+              "fit_budget": 1.0, "max_objects": 1}
+    node = g.start_node("catalog_surrogate", params=params)
+    diag = Diag(g)
+    forecasts = forecast_sink(g)
     clock = publisher(g, Clock, "/clock", ("catalog_surrogate",))
     est = publisher(g, EstimateBatch, "/ssa/estimate_batch", ("catalog_surrogate",))
 
