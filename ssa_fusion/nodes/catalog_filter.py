@@ -42,6 +42,7 @@ from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.nodes.diagnostics import Count, NodeCause
+from ssa_fusion.nodes.memory import release_free_heap
 from ssa_fusion.nodes.parameters import (
     POSITIVE,
     STATION_IDS,
@@ -102,6 +103,10 @@ PARAMETERS = ParameterTable("catalog_filter", (
 ), rules=(SHARD_RULE, Rule(STATION_RULE_NAMES, sites_problem)))
 """The catalog_filter's parameters."""
 
+RELEASE_HEAP_PERIOD_S = 1.0
+"""Wall s between two returns of the freed C heap to the system (`memory.release_free_heap`):
+the batches' arrays and messages are freed, their pages stay resident until then."""
+
 
 class CatalogFilterNode(SsaNode):
     """The catalog filter node: measurements in, batches into a `TrackBank`, estimates out."""
@@ -133,8 +138,13 @@ class CatalogFilterNode(SsaNode):
         self._pending: list[Measurement] = []
         self.clock_hold.limit = CATALOG_DEPTH  # a stalled catalog's burst is held whole
         self.wall_timer(p.number("batch_period"), self.fuse)
+        self.wall_timer(RELEASE_HEAP_PERIOD_S, self.release_heap)
         self.reset_on_backward_jump(self.reset, "every track forgotten")
         self.progress = ProgressReporter(self, self.taken)
+
+    def release_heap(self) -> None:
+        """Return the pages the fusions freed to the system (`memory.release_free_heap`)."""
+        release_free_heap()
 
     def taken(self) -> dict[str, str | int]:
         """Return the lockstep progress: measurements with a final fate, estimates published.
