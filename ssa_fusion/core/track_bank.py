@@ -233,6 +233,7 @@ class TrackBank:
         start = np.maximum.accumulate(np.where(first, np.arange(m), 0))
         rank = np.empty(m, dtype=np.int64)
         rank[order] = np.arange(m) - start
+        rot: tuple[Array, NDArray[np.intp]] | None = None  # the batch's, at its first round
         for k in range(int(rank.max(initial=-1)) + 1):
             idx = np.flatnonzero((rank == k) & (station >= 0))
             if not idx.size:
@@ -264,8 +265,10 @@ class TrackBank:
             idx, r, dt, bit = idx[go], r[go], dt[go], bit[go]
             if not idx.size:
                 continue
+            if rot is None:
+                rot = self.ekf.rotations(tt)
             res = self.ekf.step(self.x[r], self.P[r], dt, zz[idx], RR[idx], tt[idx],
-                                station[idx])
+                                station[idx], rotations=(rot[0], rot[1][idx]))
             ok = res.code == Code.FUSED
             for i, c in zip(idx[~ok].tolist(), res.code[~ok].tolist(), strict=True):
                 cause[i] = REASONS[c]
