@@ -38,6 +38,10 @@ from .constants import MU_EARTH, R_EARTH
 from .measurement import MeasurementModel, PositionModel, RadecModel, RazelModel, StationModels
 from .types import Cause, Measurement, Source
 
+Rotations = Callable[[np.ndarray], np.ndarray]
+"""ITRS -> GCRS rotations (k, 3, 3) at Unix (UTC) epochs (k,): `iod.itrs_to_gcrs_at`, or a
+caller's look-up of the same matrices computed beforehand (equal bit for bit)."""
+
 Placeholder = Callable[[np.ndarray, float, float], tuple[np.ndarray, np.ndarray]]
 """Placeholder dynamics ``f(x, dt, t0) -> (x_new, F)``: the state ``dt`` s after its epoch
 ``t0`` (s on the measurements' clock, Unix s for orbits) and its Jacobian."""
@@ -89,6 +93,8 @@ class OrbitInitiator:
         a station network, the batch's station's model.
     n : int
         State size (``[position, velocity]``, n/2 each).
+    to_gcrs : Rotations
+        The Earth's orientation at a range/az/el batch's epochs (`Rotations`).
 
     Attributes
     ----------
@@ -96,8 +102,10 @@ class OrbitInitiator:
         The real measurements collected so far, in increasing epoch order.
     """
 
-    def __init__(self, f: Placeholder, model: MeasurementModel, n: int) -> None:
+    def __init__(self, f: Placeholder, model: MeasurementModel, n: int,
+                 to_gcrs: Rotations = iod.itrs_to_gcrs_at) -> None:
         self.f = f
+        self.to_gcrs = to_gcrs
         self.model = model
         self.n = n
         self.batch: list[Measurement] = []
@@ -189,7 +197,7 @@ class OrbitInitiator:
             station = model
 
             if isinstance(model, RazelModel):
-                to_gcrs = iod.itrs_to_gcrs_at(station.unix0 + t3)  # once for every solve
+                to_gcrs = self.to_gcrs(station.unix0 + t3)  # once for every solve
 
                 def solve_all(zs: np.ndarray) -> np.ndarray:
                     r = iod.razel_to_gcrs(zs[:, i3], station.unix0 + t3, station.station,

@@ -34,12 +34,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from . import frames
 from .batch_ekf import REASONS, BatchEKF, Code
 from .filter_options import FilterOptions
 from .frames import Station
 from .initiation import InitialState, OrbitInitiator
 from .measurement import StationModels
-from .timescales import UNIX_EPOCH_JD
+from .timescales import DAY_S, UNIX_EPOCH_JD
 from .types import Cause, Kind, Measurement
 from .validation import MAX_OBJECTS
 
@@ -133,6 +134,31 @@ class TrackBank:
         self.seen = np.full(cap, -math.inf)
         """Epoch of the last measurement of each object (Unix s), fused or not."""
         self._initiators: dict[int, OrbitInitiator] = {}
+        self._unix0 = (jd0 - UNIX_EPOCH_JD) * DAY_S
+        """Unix time of t = 0 of the measurement clock (s), as the station models have it."""
+        self._batch_t = np.zeros(0)
+        """The epochs of the batch being processed (s on the measurement clock)."""
+        self._iod_rotations: dict[float, Array] | None = None
+        """GCRS -> ITRS rotation per Unix epoch of the batch and of the pending IOD batches,
+        computed at the batch's first IOD solve (`_iod_to_gcrs`); None until then."""
+
+    def _iod_to_gcrs(self, t_unix: np.ndarray) -> Array:
+        """ITRS -> GCRS rotations at IOD epochs (Unix s), as `iod.itrs_to_gcrs_at` gives them.
+
+        At the batch's first IOD solve, the rotations of every epoch of the batch and of
+        the measurements pending in IOD batches are computed in one call (one per solve
+        otherwise); an epoch not among them is computed alone.
+        """
+        if self._iod_rotations is None:
+            pending = [m.t for init in self._initiators.values() for m in init.batch]
+            epochs = np.unique(np.r_[self._batch_t[np.isfinite(self._batch_t)],
+                                     pending]) + self._unix0
+            g = frames.gcrs_to_itrs_matrix(epochs)
+            self._iod_rotations = dict(zip(epochs.tolist(), g, strict=True))
+        got = [self._iod_rotations.get(t) for t in np.asarray(t_unix, dtype=float).tolist()]
+        out = np.array([frames.gcrs_to_itrs_matrix(t) if g is None else g
+                        for t, g in zip(np.ravel(t_unix).tolist(), got, strict=True)])
+        return np.swapaxes(out, -1, -2)
 
     def __len__(self) -> int:
         """Return the number of objects heard of."""
@@ -207,6 +233,7 @@ class TrackBank:
         zz = np.array(z, dtype=float).reshape(-1, 3)
         RR = np.array(R, dtype=float).reshape(-1, 3, 3)
         m = tt.size
+        self._batch_t, self._iod_rotations = tt, None
         known = np.array([self.rows.get(o, -1) for o in object_ids], dtype=np.int64)
         ok = (known >= 0) & np.isfinite(tt)
         np.maximum.at(self.seen, known[ok], tt[ok])  # before any eviction: this batch's
@@ -310,7 +337,8 @@ class TrackBank:
         """Feed `m` to the row's initiator: the initial state once solved, else the cause."""
         init = self._initiators.get(row)
         if init is None:
-            init = self._initiators[row] = OrbitInitiator(self._placeholder, self.models, 6)
+            init = self._initiators[row] = OrbitInitiator(
+                self._placeholder, self.models, 6, self._iod_to_gcrs)
         iod = self.config.iod
         out = init.add(m, iod.iod_samples, iod.p0_sigma, iod.iod_max_span_s)
         if isinstance(out, tuple):
