@@ -138,26 +138,30 @@ class TrackBank:
         """Unix time of t = 0 of the measurement clock (s), as the station models have it."""
         self._batch_t = np.zeros(0)
         """The epochs of the batch being processed (s on the measurement clock)."""
-        self._iod_rotations: dict[float, Array] | None = None
-        """GCRS -> ITRS rotation per Unix epoch of the batch and of the pending IOD batches,
-        computed at the batch's first IOD solve (`_iod_to_gcrs`); None until then."""
+        self._iod_rotations: tuple[Array, Array] | None = None
+        """Sorted Unix epochs (k,) of the batch and of the pending IOD batches and their
+        GCRS -> ITRS rotations (k, 3, 3), computed at the batch's first IOD solve
+        (`_iod_to_gcrs`); None until then and after the batch."""
 
     def _iod_to_gcrs(self, t_unix: np.ndarray) -> Array:
         """ITRS -> GCRS rotations at IOD epochs (Unix s), as `iod.itrs_to_gcrs_at` gives them.
 
         At the batch's first IOD solve, the rotations of every epoch of the batch and of
         the measurements pending in IOD batches are computed in one call (one per solve
-        otherwise); an epoch not among them is computed alone.
+        otherwise; each epoch's rotation is the same either way, bit for bit); an epoch not
+        among them is computed alone. Forgotten at the end of the batch.
         """
         if self._iod_rotations is None:
             pending = [m.t for init in self._initiators.values() for m in init.batch]
             epochs = np.unique(np.r_[self._batch_t[np.isfinite(self._batch_t)],
                                      pending]) + self._unix0
-            g = frames.gcrs_to_itrs_matrix(epochs)
-            self._iod_rotations = dict(zip(epochs.tolist(), g, strict=True))
-        got = [self._iod_rotations.get(t) for t in np.asarray(t_unix, dtype=float).tolist()]
-        out = np.array([frames.gcrs_to_itrs_matrix(t) if g is None else g
-                        for t, g in zip(np.ravel(t_unix).tolist(), got, strict=True)])
+            self._iod_rotations = epochs, frames.gcrs_to_itrs_matrix(epochs)
+        epochs, g = self._iod_rotations
+        t = np.asarray(t_unix, dtype=float).reshape(-1)
+        i = np.minimum(np.searchsorted(epochs, t), max(epochs.size - 1, 0))
+        hit = epochs[i] == t if epochs.size else np.zeros(t.size, dtype=bool)
+        out = np.array([g[k] if h else frames.gcrs_to_itrs_matrix(tk)
+                        for k, h, tk in zip(i.tolist(), hit.tolist(), t.tolist(), strict=True)])
         return np.swapaxes(out, -1, -2)
 
     def __len__(self) -> int:
@@ -317,6 +321,7 @@ class TrackBank:
             out_x.append(res.x[ok])
             out_P.append(res.P[ok])
             out_nis.append(res.nis[ok])
+        self._batch_t, self._iod_rotations = tt[:0], None
         if out_i:
             return BankResult(cause, np.concatenate(out_i), np.concatenate(out_x),
                               np.concatenate(out_P), np.concatenate(out_nis))

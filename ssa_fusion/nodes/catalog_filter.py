@@ -11,6 +11,9 @@ every fused measurement and for every track an IOD starts. Refused input is coun
 cause on ``/diagnostics``, a batch's refused rows each (the good rows of the same batch are
 fused); ``consumed`` counts every measurement the bank took (fused, pending in an IOD batch,
 or rejected by it), so that published = consumed + refused at the door (in rows).
+Once a second it gives the C heap the fusions freed back to the system
+(`memory.release_free_heap`), so that its resident memory follows what it holds rather than
+its largest batch.
 
 Sharding: with ``shards`` = K > 1 the node owns the objects whose ``shard_key`` (CRC-32 of
 ``object_id``) lies in the ``shard``-th of K equal ranges, and subscribes with a DDS content
