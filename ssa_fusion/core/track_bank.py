@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from itertools import repeat
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -238,13 +239,13 @@ class TrackBank:
         RR = np.array(R, dtype=float).reshape(-1, 3, 3)
         m = tt.size
         self._batch_t, self._iod_rotations = tt, None
-        known = np.array([self.rows.get(o, -1) for o in object_ids], dtype=np.int64)
+        known = np.fromiter(map(self.rows.get, object_ids, repeat(-1, m)), np.int64, m)
         ok = (known >= 0) & np.isfinite(tt)
         np.maximum.at(self.seen, known[ok], tt[ok])  # before any eviction: this batch's
-        rows = np.array([k if k >= 0 else self.row(o, float(ti)) for k, o, ti
-                         in zip(known.tolist(), object_ids, tt.tolist(), strict=True)],
-                        dtype=np.int64)
-        station = np.array([self.ekf.index.get(f, -1) for f in frame_ids], dtype=np.int64)
+        rows = known.copy()
+        for i in np.flatnonzero(known < 0).tolist():  # new objects, in batch order
+            rows[i] = self.row(object_ids[i], float(tt[i]))
+        station = np.fromiter(map(self.ekf.index.get, frame_ids, repeat(-1, m)), np.int64, m)
         cause = [""] * m
         out_i: list[NDArray[np.int64]] = []
         out_x: list[Array] = []
