@@ -122,3 +122,16 @@ def _write() -> None:
 if __name__ == "__main__":
     if sys.argv[1:] == ["--write"]:
         _write()
+
+
+def test_iod_rotations_equal_the_direct_ones():
+    """The bank's IOD rotations (computed for a batch's epochs at once, or alone for an epoch
+    not among them) are `iod.itrs_to_gcrs_at`'s, bit for bit."""
+    bank = TrackBank(settings.filter_options({**asdict(CATALOG_FILTER),
+                                              "station": ",".join(NETWORK)}), NETWORK)
+    t = 1.75e9 + np.sort(np.random.default_rng(3).uniform(0.0, 86400.0, 500))
+    bank._batch_t = t
+    ask = np.r_[t[[3, 250, 499]], t[10] + 0.5]  # three of the batch's epochs, one not
+    got = bank._iod_to_gcrs(ask)
+    assert bank._iod_rotations is not None and bank._iod_rotations[0].size == t.size
+    assert np.array_equal(got, iod.itrs_to_gcrs_at(ask))
