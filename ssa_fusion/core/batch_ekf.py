@@ -75,6 +75,8 @@ Array = NDArray[np.float64]
 AnyArray = NDArray[Any]
 """An array of any dtype (per-object inputs as given)."""
 BoolArray = NDArray[np.bool_]
+Rotations = tuple[Array, NDArray[np.intp]]
+"""GCRF -> ITRF rotations (k, 3, 3) at k distinct epochs, and each row's index into them."""
 
 _TWO_PI = 2.0 * math.pi
 
@@ -441,10 +443,13 @@ class BatchEKF:
         self._q, self._bound = float(config.noise.q), float(config.noise.sigma_bound)
 
     # ----------------------------------------------------------------------------------
-    def _rotations(self, t: Array) -> tuple[Array, NDArray[np.intp]]:
+    def rotations(self, t: Array) -> tuple[Array, NDArray[np.intp]]:
         """Return GCRF -> ITRF rotations at the distinct epochs of ``t`` (s after jd0).
 
-        With the index of each epoch's: ((k, 3, 3), (len(t),)).
+        With the index of each epoch's: ((k, 3, 3), (len(t),)). Each epoch's rotation is
+        the same whatever other epochs come with it (bit for bit): a caller that steps
+        through the measurements of one batch in rounds computes them once for the batch
+        and hands each round its rows (`step`'s ``rotations``).
         """
         if t.size and bool(np.all(t == t[0])):  # a scan: one epoch
             uniq, inv = t[:1], np.zeros(t.size, dtype=np.intp)
@@ -497,7 +502,7 @@ class BatchEKF:
         ``x`` (m, 6) GCRF states, ``t`` (m,) s after jd0, ``station`` (m,) station indices;
         the batched `measurement.RazelModel.h_and_H` (no light time).
         """
-        g, gi = self._rotations(np.asarray(t, dtype=float))
+        g, gi = self.rotations(np.asarray(t, dtype=float))
         T = np.matmul(self._enu[station], g[gi])  # GCRF -> ENU
         enu = np.einsum("mij,mj->mi", T, x[:, :3]) - self._site[station]
         e, n, u = enu[:, 0], enu[:, 1], enu[:, 2]
@@ -516,30 +521,32 @@ class BatchEKF:
         return zp, H
 
     def _update(self, x: Array, P: Array, z: Array, R: Array, t: Array,
-                station: NDArray[np.intp]) -> tuple[Array, Array, Array, Array, BoolArray]:
+                station: NDArray[np.intp], rot: Rotations | None = None
+                ) -> tuple[Array, Array, Array, Array, BoolArray]:
         """Joseph-form update of m objects: (x, P, nis, y, computable).
 
         A compiled loop over the objects (`_update_kernel`) using the zero velocity columns
         of H. The Joseph form ``A P A^T + K R K^T`` (``A = I - K H``) is evaluated expanded,
         ``P + (K S - 2 P H^T) K^T`` symmetrised (S = H P H^T + R): algebraically the same,
         and like it insensitive to first order to an error in the gain K (the first-order
-        term is antisymmetric).
+        term is antisymmetric). `rot`: the rotations at `t` (`rotations`), computed here
+        when None.
         """
         m = x.shape[0]
         x1, P1 = np.empty((m, 6)), np.empty((m, 6, 6))
         nis, y, ok = np.empty(m), np.empty((m, 3)), np.empty(m, dtype=np.bool_)
-        g, gi = self._rotations(t)
+        g, gi = self.rotations(t) if rot is None else rot
         _update_kernel(x, P, z, R, g, gi, station, self._enu, self._site, x1, P1, nis, y, ok)
         return x1, P1, nis, y, ok
 
     def _kepler_step(self, x: Array, P: Array, dt: Array, z: Array, R: Array, t: Array,
-                     station: NDArray[np.intp]
+                     station: NDArray[np.intp], rot: Rotations | None = None
                      ) -> tuple[Array, Array, Array, Array, BoolArray]:
         """`_predict` then `_update` with the Kepler model (`_kepler_step_kernel`)."""
         m = x.shape[0]
         x1, P1 = np.empty((m, 6)), np.empty((m, 6, 6))
         nis, y, ok = np.empty(m), np.empty((m, 3)), np.empty(m, dtype=np.bool_)
-        g, gi = self._rotations(t)
+        g, gi = self.rotations(t) if rot is None else rot
         _kepler_step_kernel(x, P, dt, z, R, g, gi, station, self._enu, self._site,
                             float(self._params.get("mu", MU_EARTH)),
                             self._q, self._bound, x1, P1, nis, y, ok)
@@ -553,7 +560,7 @@ class BatchEKF:
 
     def step(self, x: ArrayLike, P: ArrayLike, dt: ArrayLike, z: ArrayLike, R: ArrayLike,
              t: ArrayLike, station: ArrayLike, mask: ArrayLike | None = None,
-             inplace: bool = False) -> BatchUpdate:
+             inplace: bool = False, rotations: Rotations | None = None) -> BatchUpdate:
         """One EKF cycle per object: predict by ``dt``, then fuse the measurement ``z``.
 
         Parameters
@@ -577,6 +584,10 @@ class BatchEKF:
         inplace : bool
             Write the posterior into ``x`` and ``P`` (which must then be float64 arrays)
             instead of copies.
+        rotations : (ndarray (k, 3, 3), ndarray (N,) of intp), optional
+            The GCRF -> ITRF rotations of the epochs ``t`` computed beforehand (`rotations`
+            of any set of epochs holding them) and each object's index into them; computed
+            here when None.
 
         Returns
         -------
@@ -616,6 +627,7 @@ class BatchEKF:
         st = pick(np.asarray(station, dtype=np.intp), 0)
         xs, Ps = pick(X, 1), pick(PP, 2)
         zz, RR, tt, dts, xs, Ps = (f64(a) for a in (zz, RR, tt, dts, xs, Ps))
+        gis = None if rotations is None else pick(np.asarray(rotations[1], dtype=np.intp), 0)
         if not (st.dtype == np.intp and st.flags.c_contiguous and st.flags.writeable):
             st = np.array(st, dtype=np.intp)
         c = np.empty(idx.size, dtype=np.int8)
@@ -628,13 +640,16 @@ class BatchEKF:
             def sub(a: AnyArray) -> AnyArray:
                 return a if allv else a[go]
 
+            rot = None if rotations is None or gis is None else (
+                rotations[0], np.ascontiguousarray(sub(gis), dtype=np.intp))
+
             if self._model == MotionModel.KEPLER:  # predict and update by chunks
                 x1, P1, g_nis, g_y, ok = self._kepler_step(sub(xs), sub(Ps), sub(dts), sub(zz),
-                                                           sub(RR), sub(tt), sub(st))
+                                                           sub(RR), sub(tt), sub(st), rot)
             else:
                 xp, Pp, ok = self._predict(sub(xs), sub(Ps), sub(dts), sub(tt) - sub(dts))
                 x1, P1, g_nis, g_y, ok2 = self._update(xp, Pp, sub(zz), sub(RR), sub(tt),
-                                                       sub(st))
+                                                       sub(st), rot)
                 ok &= ok2
             cg = np.where(ok, Code.FUSED, Code.NUMERIC).astype(np.int8)
             gate = self.config.noise.gate

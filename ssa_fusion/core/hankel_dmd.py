@@ -60,11 +60,13 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 import numpy as np
-import scipy.linalg as sla
 from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 
 from .frames import wrap_2pi
+
+# scipy.linalg (14 MB resident) is imported by the functions that use it, so that a process
+# that imports this module but fits no DMD (a catalog filter shard) does not hold it.
 
 __all__ = ["HankelDMD", "resolvable_rank", "svht_rank"]
 
@@ -174,6 +176,7 @@ def _leading_subspace(x: FloatArray, choose_rank: Callable[[FloatArray], int]
     u : ndarray, shape (rows, r)
         Orthonormal left singular vectors of the ``r`` kept singular values, in order.
     """
+    import scipy.linalg as sla
     rows, cols = x.shape
     if rows <= cols:
         fast = _gram_subspace(x, choose_rank)
@@ -205,6 +208,7 @@ def _gram_subspace(x: FloatArray, choose_rank: Callable[[FloatArray], int]
     floor (noise-free data, whose median singular value is round-off): then only the SVD
     resolves what is kept.
     """
+    import scipy.linalg as sla
     gram = x @ x.T
     n = gram.shape[0]
     if n < 3:
@@ -371,6 +375,7 @@ class HankelDMD:
         HankelDMD
             ``self``.
         """
+        import scipy.linalg as sla
         z = np.array(z, dtype=np.float64, ndmin=2)
         if z.ndim != 2:
             raise ValueError("z must be (channels, samples)")
@@ -451,6 +456,7 @@ class HankelDMD:
     @property
     def modes(self) -> NDArray[np.complex128]:
         """Exact DMD modes ``Y P_X^+ W`` (channels*delays, rank_), PyDMD layout."""
+        import scipy.linalg as sla
         self._check()
         if self._modes is None:
             from scipy.optimize import linear_sum_assignment  # 0.2 s to import; modes only

@@ -38,6 +38,10 @@ from .constants import MU_EARTH, R_EARTH
 from .measurement import MeasurementModel, PositionModel, RadecModel, RazelModel, StationModels
 from .types import Cause, Measurement, Source
 
+Rotations = Callable[[np.ndarray], np.ndarray]
+"""ITRS -> GCRS rotations (k, 3, 3) at Unix (UTC) epochs (k,): `iod.itrs_to_gcrs_at`, or a
+caller's look-up of the same matrices computed beforehand (equal bit for bit)."""
+
 Placeholder = Callable[[np.ndarray, float, float], tuple[np.ndarray, np.ndarray]]
 """Placeholder dynamics ``f(x, dt, t0) -> (x_new, F)``: the state ``dt`` s after its epoch
 ``t0`` (s on the measurements' clock, Unix s for orbits) and its Jacobian."""
@@ -89,6 +93,8 @@ class OrbitInitiator:
         a station network, the batch's station's model.
     n : int
         State size (``[position, velocity]``, n/2 each).
+    to_gcrs : Rotations
+        The Earth's orientation at a range/az/el batch's epochs (`Rotations`).
 
     Attributes
     ----------
@@ -96,8 +102,10 @@ class OrbitInitiator:
         The real measurements collected so far, in increasing epoch order.
     """
 
-    def __init__(self, f: Placeholder, model: MeasurementModel, n: int) -> None:
+    def __init__(self, f: Placeholder, model: MeasurementModel, n: int,
+                 to_gcrs: Rotations = iod.itrs_to_gcrs_at) -> None:
         self.f = f
+        self.to_gcrs = to_gcrs
         self.model = model
         self.n = n
         self.batch: list[Measurement] = []
@@ -181,6 +189,7 @@ class OrbitInitiator:
         Z = np.array([b.z for b in batch], dtype=float)
         model = (self.model.get(batch[0].kind, batch[0].frame_id)
                  if isinstance(self.model, StationModels) else self.model)
+        solve_all: Callable[[np.ndarray], np.ndarray] | None = None  # of stacked batches
         if isinstance(model, RazelModel | RadecModel):
             mid = len(batch) // 2
             i3 = [0, mid, len(batch) - 1]
@@ -188,13 +197,13 @@ class OrbitInitiator:
             station = model
 
             if isinstance(model, RazelModel):
-                to_gcrs = iod.itrs_to_gcrs_at(station.unix0 + t3)  # once for every solve
+                to_gcrs = self.to_gcrs(station.unix0 + t3)  # once for every solve
 
-                def solve(zs: np.ndarray) -> np.ndarray:
-                    r = iod.razel_to_gcrs(zs[i3], station.unix0 + t3, station.station,
+                def solve_all(zs: np.ndarray) -> np.ndarray:
+                    r = iod.razel_to_gcrs(zs[:, i3], station.unix0 + t3, station.station,
                                           to_gcrs)
-                    v2 = iod.herrick_gibbs(r[0], r[1], r[2], t3[0], t3[1], t3[2])
-                    return np.concatenate([r[1], v2])
+                    v2 = iod.herrick_gibbs(r[:, 0], r[:, 1], r[:, 2], t3[0], t3[1], t3[2])
+                    return np.concatenate([r[:, 1], v2], -1)
             else:
                 sites = np.array([station.site_gcrs(ti) for ti in t3])
 
@@ -217,19 +226,23 @@ class OrbitInitiator:
 
             t_init = float(t[-1])
             used = list(range(len(batch)))
-        x0 = solve(Z)
+        # the batch and each perturbation of it (one channel of one used sample by its
+        # standard deviation) solved at once: x0, then the Jacobian's columns
+        sigs = {j: np.sqrt(np.clip(np.diag(np.asarray(batch[j].R, dtype=float)), 0.0, None))
+                for j in dict.fromkeys(used)}  # in order, once each (a batch of 2: i3 repeats)
+        cols = [(j, c) for j, sig in sigs.items() for c in range(Z.shape[1]) if sig[c] != 0.0]
+        Zs = np.repeat(Z[None], 1 + len(cols), axis=0)
+        for q, (j, c) in enumerate(cols, 1):
+            Zs[q, j, c] += sigs[j][c]
+        X = solve_all(Zs) if solve_all is not None else np.stack([solve(zs) for zs in Zs])
+        x0 = X[0]
         P = np.zeros((self.n, self.n))
-        for j in dict.fromkeys(used):  # in order, once each (a batch of 2: i3 repeats one)
-            Rj = np.asarray(batch[j].R, dtype=float)
-            sig = np.sqrt(np.clip(np.diag(Rj), 0.0, None))
+        for j, sig in sigs.items():
             if not sig.any():
                 continue
             J = np.zeros((self.n, Z.shape[1]))
-            for c in range(Z.shape[1]):
-                if sig[c] == 0.0:
-                    continue
-                dz = Z.copy()
-                dz[j, c] += sig[c]
-                J[:, c] = (solve(dz) - x0) / sig[c]
-            P += J @ Rj @ J.T
+            for q, (jj, c) in enumerate(cols, 1):
+                if jj == j:
+                    J[:, c] = (X[q] - x0) / sig[c]
+            P += J @ np.asarray(batch[j].R, dtype=float) @ J.T
         return t_init, x0, P

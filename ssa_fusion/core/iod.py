@@ -42,18 +42,20 @@ def herrick_gibbs(
     t3: float,
     mu: float = MU_EARTH,
 ) -> Array:
-    """Herrick-Gibbs: velocity (3,) km/s at ``r2`` from three closely spaced GCRF positions.
+    """Herrick-Gibbs: velocity (..., 3) km/s at ``r2`` from three closely spaced GCRF positions.
 
-    Times in s. Taylor-series method for small separations (Vallado, Algorithm 55).
+    Positions (..., 3) km (many triples at the same three epochs at once), times in s.
+    Taylor-series method for small separations (Vallado, Algorithm 55).
     """
     r1, r2, r3 = (np.asarray(r, float) for r in (r1, r2, r3))
-    n1, n2, n3 = (float(np.linalg.norm(r)) for r in (r1, r2, r3))
+    n1, n2, n3 = (np.linalg.norm(r, axis=-1)[..., None] for r in (r1, r2, r3))
     d21, d31, d32 = t2 - t1, t3 - t1, t3 - t2
-    return (
+    out: Array = (
         -d32 * (1.0 / (d21 * d31) + mu / (12.0 * n1**3)) * r1
         + (d32 - d21) * (1.0 / (d21 * d32) + mu / (12.0 * n2**3)) * r2
         + d21 * (1.0 / (d32 * d31) + mu / (12.0 * n3**3)) * r3
     )
+    return out
 
 
 def lagrange_derivative_weights(t_s: ArrayLike) -> Array:

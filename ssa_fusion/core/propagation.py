@@ -16,9 +16,11 @@ Units: km, km/s, s; states in an inertial frame (GCRF).
 from __future__ import annotations
 
 import functools
+import importlib.util
 import inspect
 import math
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -195,10 +197,20 @@ def _variational(fun: Callable[..., Array], params: dict[str, float]) -> Callabl
 def _dop853() -> tuple[Array, Array, int]:
     """Return the Dormand-Prince 8(5,3) tableau of scipy's DOP853: (A, B, stages).
 
-    Read once (the arrays are shared: not to be written to).
+    Read once (the arrays are shared: not to be written to). From scipy's module of the
+    coefficients (``scipy/integrate/_ivp/dop853_coefficients.py``, numpy only), loaded by
+    its path: importing it as ``scipy.integrate._ivp...`` runs ``scipy.integrate``'s
+    ``__init__``, which imports scipy's optimize, sparse, linalg, special and spatial
+    (~40 MB resident that a filter process would hold for 16 x 16 numbers).
     """
-    from scipy.integrate._ivp import dop853_coefficients as dop
+    import scipy
 
+    path = Path(scipy.__file__).parent / "integrate" / "_ivp" / "dop853_coefficients.py"
+    spec = importlib.util.spec_from_file_location("_ssa_fusion_dop853_coefficients", path)
+    if spec is None or spec.loader is None:
+        raise ImportError(f"scipy's DOP853 coefficients are not at {path}")
+    dop = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(dop)
     return np.asarray(dop.A, float), np.asarray(dop.B, float), int(dop.N_STAGES)
 
 

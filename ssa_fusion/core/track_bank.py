@@ -30,16 +30,18 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from itertools import repeat
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from . import frames
 from .batch_ekf import REASONS, BatchEKF, Code
 from .filter_options import FilterOptions
 from .frames import Station
 from .initiation import InitialState, OrbitInitiator
 from .measurement import StationModels
-from .timescales import UNIX_EPOCH_JD
+from .timescales import DAY_S, UNIX_EPOCH_JD
 from .types import Cause, Kind, Measurement
 from .validation import MAX_OBJECTS
 
@@ -133,6 +135,35 @@ class TrackBank:
         self.seen = np.full(cap, -math.inf)
         """Epoch of the last measurement of each object (Unix s), fused or not."""
         self._initiators: dict[int, OrbitInitiator] = {}
+        self._unix0 = (jd0 - UNIX_EPOCH_JD) * DAY_S
+        """Unix time of t = 0 of the measurement clock (s), as the station models have it."""
+        self._batch_t = np.zeros(0)
+        """The epochs of the batch being processed (s on the measurement clock)."""
+        self._iod_rotations: tuple[Array, Array] | None = None
+        """Sorted Unix epochs (k,) of the batch and of the pending IOD batches and their
+        GCRS -> ITRS rotations (k, 3, 3), computed at the batch's first IOD solve
+        (`_iod_to_gcrs`); None until then and after the batch."""
+
+    def _iod_to_gcrs(self, t_unix: np.ndarray) -> Array:
+        """ITRS -> GCRS rotations at IOD epochs (Unix s), as `iod.itrs_to_gcrs_at` gives them.
+
+        At the batch's first IOD solve, the rotations of every epoch of the batch and of
+        the measurements pending in IOD batches are computed in one call (one per solve
+        otherwise; each epoch's rotation is the same either way, bit for bit); an epoch not
+        among them is computed alone. Forgotten at the end of the batch.
+        """
+        if self._iod_rotations is None:
+            pending = [m.t for init in self._initiators.values() for m in init.batch]
+            epochs = np.unique(np.r_[self._batch_t[np.isfinite(self._batch_t)],
+                                     pending]) + self._unix0
+            self._iod_rotations = epochs, frames.gcrs_to_itrs_matrix(epochs)
+        epochs, g = self._iod_rotations
+        t = np.asarray(t_unix, dtype=float).reshape(-1)
+        i = np.minimum(np.searchsorted(epochs, t), max(epochs.size - 1, 0))
+        hit = epochs[i] == t if epochs.size else np.zeros(t.size, dtype=bool)
+        out = np.array([g[k] if h else frames.gcrs_to_itrs_matrix(tk)
+                        for k, h, tk in zip(i.tolist(), hit.tolist(), t.tolist(), strict=True)])
+        return np.swapaxes(out, -1, -2)
 
     def __len__(self) -> int:
         """Return the number of objects heard of."""
@@ -207,13 +238,14 @@ class TrackBank:
         zz = np.array(z, dtype=float).reshape(-1, 3)
         RR = np.array(R, dtype=float).reshape(-1, 3, 3)
         m = tt.size
-        known = np.array([self.rows.get(o, -1) for o in object_ids], dtype=np.int64)
+        self._batch_t, self._iod_rotations = tt, None
+        known = np.fromiter(map(self.rows.get, object_ids, repeat(-1, m)), np.int64, m)
         ok = (known >= 0) & np.isfinite(tt)
         np.maximum.at(self.seen, known[ok], tt[ok])  # before any eviction: this batch's
-        rows = np.array([k if k >= 0 else self.row(o, float(ti)) for k, o, ti
-                         in zip(known.tolist(), object_ids, tt.tolist(), strict=True)],
-                        dtype=np.int64)
-        station = np.array([self.ekf.index.get(f, -1) for f in frame_ids], dtype=np.int64)
+        rows = known.copy()
+        for i in np.flatnonzero(known < 0).tolist():  # new objects, in batch order
+            rows[i] = self.row(object_ids[i], float(tt[i]))
+        station = np.fromiter(map(self.ekf.index.get, frame_ids, repeat(-1, m)), np.int64, m)
         cause = [""] * m
         out_i: list[NDArray[np.int64]] = []
         out_x: list[Array] = []
@@ -233,6 +265,7 @@ class TrackBank:
         start = np.maximum.accumulate(np.where(first, np.arange(m), 0))
         rank = np.empty(m, dtype=np.int64)
         rank[order] = np.arange(m) - start
+        rot: tuple[Array, NDArray[np.intp]] | None = None  # the batch's, at its first round
         for k in range(int(rank.max(initial=-1)) + 1):
             idx = np.flatnonzero((rank == k) & (station >= 0))
             if not idx.size:
@@ -264,8 +297,10 @@ class TrackBank:
             idx, r, dt, bit = idx[go], r[go], dt[go], bit[go]
             if not idx.size:
                 continue
+            if rot is None:
+                rot = self.ekf.rotations(tt)
             res = self.ekf.step(self.x[r], self.P[r], dt, zz[idx], RR[idx], tt[idx],
-                                station[idx])
+                                station[idx], rotations=(rot[0], rot[1][idx]))
             ok = res.code == Code.FUSED
             for i, c in zip(idx[~ok].tolist(), res.code[~ok].tolist(), strict=True):
                 cause[i] = REASONS[c]
@@ -287,6 +322,7 @@ class TrackBank:
             out_x.append(res.x[ok])
             out_P.append(res.P[ok])
             out_nis.append(res.nis[ok])
+        self._batch_t, self._iod_rotations = tt[:0], None
         if out_i:
             return BankResult(cause, np.concatenate(out_i), np.concatenate(out_x),
                               np.concatenate(out_P), np.concatenate(out_nis))
@@ -307,7 +343,8 @@ class TrackBank:
         """Feed `m` to the row's initiator: the initial state once solved, else the cause."""
         init = self._initiators.get(row)
         if init is None:
-            init = self._initiators[row] = OrbitInitiator(self._placeholder, self.models, 6)
+            init = self._initiators[row] = OrbitInitiator(
+                self._placeholder, self.models, 6, self._iod_to_gcrs)
         iod = self.config.iod
         out = init.add(m, iod.iod_samples, iod.p0_sigma, iod.iod_max_span_s)
         if isinstance(out, tuple):

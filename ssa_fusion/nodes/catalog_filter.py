@@ -11,6 +11,9 @@ every fused measurement and for every track an IOD starts. Refused input is coun
 cause on ``/diagnostics``, a batch's refused rows each (the good rows of the same batch are
 fused); ``consumed`` counts every measurement the bank took (fused, pending in an IOD batch,
 or rejected by it), so that published = consumed + refused at the door (in rows).
+Once a second it gives the C heap the fusions freed back to the system
+(`memory.release_free_heap`), so that its resident memory follows what it holds rather than
+its largest batch.
 
 Sharding: with ``shards`` = K > 1 the node owns the objects whose ``shard_key`` (CRC-32 of
 ``object_id``) lies in the ``shard``-th of K equal ranges, and subscribes with a DDS content
@@ -42,6 +45,7 @@ from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.nodes.diagnostics import Count, NodeCause
+from ssa_fusion.nodes.memory import release_free_heap
 from ssa_fusion.nodes.parameters import (
     POSITIVE,
     STATION_IDS,
@@ -102,6 +106,10 @@ PARAMETERS = ParameterTable("catalog_filter", (
 ), rules=(SHARD_RULE, Rule(STATION_RULE_NAMES, sites_problem)))
 """The catalog_filter's parameters."""
 
+RELEASE_HEAP_PERIOD_S = 1.0
+"""Wall s between two returns of the freed C heap to the system (`memory.release_free_heap`):
+the batches' arrays and messages are freed, their pages stay resident until then."""
+
 
 class CatalogFilterNode(SsaNode):
     """The catalog filter node: measurements in, batches into a `TrackBank`, estimates out."""
@@ -133,8 +141,13 @@ class CatalogFilterNode(SsaNode):
         self._pending: list[Measurement] = []
         self.clock_hold.limit = CATALOG_DEPTH  # a stalled catalog's burst is held whole
         self.wall_timer(p.number("batch_period"), self.fuse)
+        self.wall_timer(RELEASE_HEAP_PERIOD_S, self.release_heap)
         self.reset_on_backward_jump(self.reset, "every track forgotten")
         self.progress = ProgressReporter(self, self.taken)
+
+    def release_heap(self) -> None:
+        """Return the pages the fusions freed to the system (`memory.release_free_heap`)."""
+        release_free_heap()
 
     def taken(self) -> dict[str, str | int]:
         """Return the lockstep progress: measurements with a final fate, estimates published.
