@@ -1,4 +1,4 @@
-"""TrackBank.process gives what it gave before its rounds were sped up, to 1e-12 relative.
+"""TrackBank.process gives what it gave before its rounds were sped up, to 1e-9 relative.
 
 The reference (``data/track_bank_rounds.npz``) was written by this file
 (``python test/core/test_track_bank_rounds.py --write``) with the per-round implementation
@@ -34,7 +34,10 @@ REFERENCE = Path(__file__).resolve().parent / "data" / "track_bank_rounds.npz"
 RADARS = [SENSORS[s] for s in NETWORKS["radar_network"]]
 NETWORK = {s.station.name: s.station for s in RADARS}
 MODELS = ("j2", "kepler")
-RTOL = 1e-12
+RTOL = 1e-9
+"""The reference was written under OpenBLAS's Haswell kernel, where the answers are equal bit
+for bit; other kernels round the covariance products differently (SkylakeX: 8.0e-12 relative
+at worst, Sandybridge 1.7e-12, measured on this batch), well inside this bound."""
 
 
 def _batch() -> tuple[np.ndarray, list[str], list[str], np.ndarray, np.ndarray]:
