@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Run the test suite (`make test`): the tests that start node graphs (test/graph and the
-# replays over ROS 2, test/apps/test_replay.py) and the rest side by side, each group in
-# a network namespace of its own (tools/isolated.sh), so the two cannot hear each other's
-# DDS traffic whatever ROS_DOMAIN_ID their graphs pick. Most of a graph test's time is spent
+# Run the test suite (`make test`): the graph tests (test/graph: real node processes over
+# DDS) and the rest side by side, each group in a network namespace of its own
+# (tools/isolated.sh), so the two cannot hear each other's DDS traffic whatever
+# ROS_DOMAIN_ID their graphs pick. Most of a graph test's time is spent
 # waiting on node processes, so the two groups share 2 cores well. Where no namespace can be
 # made (not root, no iproute2, or SSA_FUSION_NO_NETNS=1) both groups would share the
 # machine's loopback, and the suite runs as one pytest instead.
@@ -23,13 +23,13 @@ ip netns del "$probe"
 log=$(mktemp -d)
 trap 'rm -rf "$log"' EXIT
 # The graphs' group writes to a log, printed when it ends; the rest shows its progress live.
-GRAPHS=(test/graph test/apps/test_replay.py)
+GRAPHS=(test/graph)
 setsid tools/isolated.sh "$PY" -m pytest -p no:cacheprovider "$@" "${GRAPHS[@]}" \
   >"$log/graph" 2>&1 &
 graph=$!
 # its own process group (setsid): a Ctrl-C here reaches it through this trap
 trap 'kill -INT -- "-$graph" 2>/dev/null; wait "$graph"; rm -rf "$log"; exit 130' INT TERM
-echo "run_tests: ${GRAPHS[*]} run beside the rest (their output follows the rest's)"
+echo "run_tests: ${GRAPHS[*]} runs beside the rest (its output follows the rest's)"
 tools/isolated.sh "$PY" -m pytest "$@" "${GRAPHS[@]/#/--ignore=}" test
 rest=$?
 wait "$graph"
