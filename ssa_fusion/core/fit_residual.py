@@ -34,7 +34,7 @@ Frames and units: GCRF km, km/s; times s on the measurements' clock (``clock_uni
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -111,7 +111,11 @@ class FitResidualForecaster(BatchGapForecaster):
         self.max_horizon_s = min(self.max_horizon_s, self.residual_cfg.max_horizon_s)
 
     def prior(self, t: float) -> tuple[Array, Array] | None:
-        """Return the corrected prediction to epoch t (s), else the fit's (`BatchGapForecaster.prior`)."""
+        """Return the corrected prediction to epoch t (s): state and covariance.
+
+        The prior of the pass that starts at t; the fit's own (`BatchGapForecaster.prior`)
+        while the surrogate has no fit or its prediction fails; None as there.
+        """
         fitted = super().prior(t)
         if fitted is None or self.residual is None:
             return fitted
