@@ -13,9 +13,10 @@ import pytest
 from references import scipy_orbit
 
 from ssa_fusion.core.batch_gap import BatchGapForecaster
-from ssa_fusion.core.config import EstimatorConfig, measurement_model
+from ssa_fusion.core.config import EstimatorConfig, make_tracker, measurement_model
 from ssa_fusion.core.constants import MU_EARTH
 from ssa_fusion.core.fit_residual import FitResidualForecaster
+from ssa_fusion.core.gap_publisher import GapFill, GapPublisher
 from ssa_fusion.core.types import Kind, Measurement
 
 T0 = 1.7e9 - (1.7e9 % 600.0)  # Unix s, on the forecast grid
@@ -129,3 +130,14 @@ def test_until_the_surrogate_can_fit_the_forecast_is_the_fit_s():
     assert arms[1].residual is None
     np.testing.assert_array_equal(got[0][0], got[1][0])
     np.testing.assert_array_equal(got[0][1], got[1][1])
+
+
+def test_the_filter_s_fit_residual_fill_is_this_forecaster_and_restarts_each_pass():
+    """``gap_forecast: fit_residual`` publishes this forecaster's gap and, as ``batch_init``,
+    starts the EKF of each pass from its prior; ``batch_init`` keeps the plain fit."""
+    c = EstimatorConfig(kind=Kind.POSITION)
+    pub = GapPublisher.of(make_tracker(c), 60.0, GapFill.FIT_RESIDUAL, c)
+    assert isinstance(pub.forecaster, FitResidualForecaster) and pub.restart
+    plain = GapPublisher.of(make_tracker(c), 60.0, GapFill.BATCH_INIT, c)
+    assert type(plain.forecaster) is BatchGapForecaster and plain.restart
+    assert not GapPublisher.of(make_tracker(c), 60.0, GapFill.BATCH_FIT, c).restart
