@@ -258,12 +258,15 @@ J3_J4 = (-2.5324105e-6, -1.6198976e-6)
 """EGM2008's J3 and J4 (unnormalised)."""
 
 
-def scipy_orbit(x0: Array, t: Array, j2: bool = True, j3_j4: bool = False) -> Array:
+def scipy_orbit(x0: Array, t: Array, j2: bool = True, j3_j4: bool = False,
+                rtn_accel: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Array:
     """Two-body (+ J2, + J3 and J4, about the pole at t[0]) by scipy, independently of
     core.dynamics.
 
     `x0` (6,) km, km/s at t[0]; `t` (K,) increasing Unix s; returns (K, 6). J3 and J4 by
     the textbook component formulas (Vallado 8-31) in a frame whose z axis is the pole.
+    `rtn_accel`: a constant acceleration (km/s^2) along the radial, along-track (h x r)
+    and orbit-normal directions of the current state, beside gravity.
     """
     mu, re, j2_ = MU_J2
     p = cip_pole(float(t[0]))
@@ -291,6 +294,11 @@ def scipy_orbit(x0: Array, t: Array, j2: bool = True, j3_j4: bool = False) -> Ar
                            c4 * y_ * (3 - 42 * u**2 + 63 * u**4),
                            c4 * z_ * (15 - 70 * u**2 + 63 * u**4)])
             a = a + rot.T @ (a3 + a4)
+        if any(rtn_accel):
+            rh = y[:3] / r
+            hn = np.cross(y[:3], y[3:])
+            hn /= np.linalg.norm(hn)
+            a = a + np.array([rh, np.cross(hn, rh), hn]).T @ np.asarray(rtn_accel, float)
         return np.concatenate([y[3:], a])
 
     sol = solve_ivp(f, (t[0], t[-1]), x0, t_eval=t, rtol=1e-12, atol=1e-12, method="DOP853")

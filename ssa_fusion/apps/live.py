@@ -84,8 +84,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "its tracking and gap and tracks after the gap for the rest)")
     p.add_argument("--gap-forecast", default="", choices=["", *(str(f) for f in GapFill)],
                    help="what a real-sky scenario's filter publishes through its gaps (its "
-                        "`gap_forecast`: none, residual, batch_fit, batch_init; default: the "
-                        "scenario's)")
+                        "`gap_forecast`: none, residual, batch_fit, batch_init, "
+                        "fit_residual; default: the scenario's)")
     p.add_argument("--strict", action="store_true",
                    help="exit 1 when forecasts for gap epochs never went into the filter "
                         "(they arrived late or were dropped, e.g. at too high a time scale)")

@@ -24,7 +24,10 @@ and the offline replay, so that both publish the same estimates for the same inp
   ``pass_break_s`` after the last one fused): the EKF starts its sequential update there
   from the fit's state and realistic covariance instead of its own coasted ones
   (`Tracker.restart_from`), once per fit and from a fit of a full window of passes;
-  otherwise (no fit yet, a failed one, or one of fewer passes) it goes on from its own.
+  otherwise (no fit yet, a failed one, or one of fewer passes) it goes on from its own;
+* with ``fit_residual`` (`GapFill.FIT_RESIDUAL`), as ``batch_init``, with the fit's
+  prediction corrected by the residual surrogate learnt against the fit
+  (`fit_residual.FitResidualForecaster`).
 
 Predictions never change the tracker (only a pass's prior, above); at most `limit` are
 published per call, and the earliest are skipped when more than ten times that many are due
@@ -44,6 +47,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .batch_gap import BatchGapForecaster
 from .config import EstimatorConfig, measurement_model
+from .fit_residual import FitResidualForecaster
 from .gap_forecaster import GapForecaster
 from .timescales import DAY_S, UNIX_EPOCH_JD
 from .tracker import Outcome, Tracker, prediction_epochs
@@ -71,6 +75,19 @@ class GapFill(enum.StrEnum):
     measurement its state and covariance are the fit's prediction there
     (`batch_gap.BatchGapForecaster.prior`, `tracker.Tracker.restart_from`), not its own
     coasted ones; the sequential update inside the pass goes on from them."""
+    FIT_RESIDUAL = "fit_residual"
+    """`BATCH_INIT` with the fit's predictions corrected by the residual surrogate learnt
+    against the fit: the fits' states at the pass ends of the last 2 days, against the newest
+    fit's trajectory (`fit_residual.FitResidualForecaster`); the fit's own until the
+    surrogate can fit."""
+
+
+_FITTED: dict[GapFill, type[BatchGapForecaster]] = {
+    GapFill.BATCH_FIT: BatchGapForecaster, GapFill.BATCH_INIT: BatchGapForecaster,
+    GapFill.FIT_RESIDUAL: FitResidualForecaster}
+"""The gap fills that fit the last passes, and their forecaster."""
+_RESTARTED = (GapFill.BATCH_INIT, GapFill.FIT_RESIDUAL)
+"""The gap fills whose forecast is the EKF's prior of each pass."""
 
 
 class GapForecast(Protocol):
@@ -149,16 +166,19 @@ class GapPublisher:
         With `GapFill.RESIDUAL`, the residual of the filter's motion model
         (`GapForecaster.for_model`); with `GapFill.BATCH_FIT` and `GapFill.BATCH_INIT`,
         the batch fit of its last passes with its measurement model
-        (`batch_gap.BatchGapForecaster`), with `BATCH_INIT` the EKF's prior of each pass.
+        (`batch_gap.BatchGapForecaster`), with `BATCH_INIT` the EKF's prior of each pass;
+        with `GapFill.FIT_RESIDUAL` that fit corrected by the residual surrogate
+        (`fit_residual.FitResidualForecaster`), also the EKF's prior of each pass.
         """
         fill = GapFill(fill)
         if fill == GapFill.NONE:
             return cls(tracker, period_s)
-        if fill in (GapFill.BATCH_FIT, GapFill.BATCH_INIT):
+        fitted = _FITTED.get(fill)
+        if fitted is not None:
             model, clock = measurement_model(c), (c.jd0 - UNIX_EPOCH_JD) * DAY_S
             return cls(tracker, period_s,
-                       lambda period: BatchGapForecaster(model, period, clock_unix0=clock),
-                       restart=fill == GapFill.BATCH_INIT)
+                       lambda period: fitted(model, period, clock_unix0=clock),
+                       restart=fill in _RESTARTED)
         motion = c.filter.motion.motion_model
         return cls(tracker, period_s,
                    lambda period: GapForecaster.for_model(str(motion), period))

@@ -85,7 +85,12 @@ PARAMETERS = ParameterTable("filter", (
           "next pass (more than 600 s after the last one fused, up to 1 day after it) the "
           "EKF starts its sequential update from the fit's prediction there (state and "
           "realistic covariance) instead of its own coasted state "
-          "(`core.tracker.Tracker.restart_from`), once the fit spans 3 passes. "
+          "(`core.tracker.Tracker.restart_from`), once the fit spans 3 passes; or "
+          "`fit_residual`: `batch_init` with the fit's predictions (and the EKF's prior) "
+          "corrected by the residual surrogate learnt against the fit -- the fits' states "
+          "at the pass ends of the last 2 days against the newest fit's trajectory "
+          "(`core.fit_residual.FitResidualForecaster`), the fit's own until it has 5 "
+          "spanning a day. "
           "`ssa-fusion live` sets each real-sky scenario's `gap_fill` (leo_optical: "
           "`batch_init`, the others `residual`)",
           check=one_of(*GapFill)),

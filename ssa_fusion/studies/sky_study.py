@@ -8,7 +8,8 @@ them): the position error right after each pass, the NEES at every truth epoch
 position error and NEES); also the after-pass error of the same filter with its light-time
 correction off (the cost of ignoring light time); and what the filter publishes between
 passes with each ``gap_forecast`` (`evaluation.gap_scores`: error at every gap epoch and
-over gaps > 12 h, after each pass, position NEES against chi2(3)). Seeds are
+over gaps > 12 h, after each pass, position NEES against chi2(3); and how many times smaller
+the error of ``fit_residual`` is than ``batch_fit``'s, `fit_ratios`). Seeds are
 `distributions.EVALUATION_SEEDS` (never used to choose a setting: `sky.SKY_Q` was chosen on
 seeds 1-3); start epochs `distributions.START_OFFSETS_H` after the nominal one move the
 passes, and each seed turns the orbit (`case_geometry`: its plane by up to
@@ -148,6 +149,30 @@ def _published_table(runs: list[dict[str, Any]]) -> tuple[list[str], dict[str, A
     return lines, out
 
 
+FIT_RATIOS = {"all gap epochs": "err_median_km", "gaps > 12 h": "long_err_median_km"}
+"""The errors of what the filter publishes whose ratio `fit_ratios` takes."""
+
+
+def fit_ratios(runs: list[dict[str, Any]], fill: GapFill = GapFill.FIT_RESIDUAL,
+               against: GapFill = GapFill.BATCH_FIT) -> dict[str, float | None]:
+    """Return how many times smaller `fill`'s gap errors are than `against`'s.
+
+    Per `FIT_RATIOS` error: the median over runs of each run's ratio (`against` / `fill`;
+    runs where either is missing, e.g. no gap > 12 h, left out), and the ratio of the two
+    medians over runs (as the table shows them); None where no run has both.
+    """
+    out: dict[str, float | None] = {}
+    for label, key in FIT_RATIOS.items():
+        a = np.array([r["published"][str(against)][key] for r in runs], float)
+        b = np.array([r["published"][str(fill)][key] for r in runs], float)
+        ok = np.isfinite(a) & np.isfinite(b) & (b > 0)
+        out[f"{label}: median of run ratios"] = float(np.median(a[ok] / b[ok])) if ok.any() \
+            else None
+        out[f"{label}: ratio of medians"] = (float(np.nanmedian(a) / np.nanmedian(b))
+                                             if ok.any() else None)
+    return out
+
+
 def summarise(name: str, runs: list[dict[str, Any]]) -> tuple[str, dict[str, Any]]:
     """Return the Markdown for one scenario and its JSON summary."""
     with_passes = [r for r in runs if r["after_pass_km"]]
@@ -195,8 +220,13 @@ def summarise(name: str, runs: list[dict[str, Any]]) -> tuple[str, dict[str, Any
            f"dmd_ekf / batch_fit {_q(ratio_fit)}" if scored else ""),
     ]
     pub_lines, pub_summary = _published_table(runs)
-    lines += ["", *pub_lines]
+    ratios = fit_ratios(runs)
+    lines += ["", *pub_lines, "",
+              f"- {GapFill.BATCH_FIT} / {GapFill.FIT_RESIDUAL} (how many times smaller the "
+              "error of the fit corrected by the surrogate is): "
+              + "; ".join(f"{k} {'-' if v is None else f'{v:.3g}'}" for k, v in ratios.items())]
     summary = {"runs": len(runs), "runs_with_outage": len(scored), "published": pub_summary,
+               "batch_fit_over_fit_residual": ratios,
                "runs_with_passes": sum(bool(r["after_pass_km"]) for r in runs),
                "after_pass_km_median": float(np.median(after_all)),
                "after_pass_km_max": float(after_all.max()),
