@@ -2,7 +2,9 @@
 
 What a flight-dynamics engineer does between passes, on the filter's live stream: once the
 filter has fused nothing for `pass_break_s`, the real measurements it fused in its last
-`GAP_FIT_PASSES` passes are fitted by batch least squares (`batch_ls.fit`, from the
+passes (`pass_windows.fit_window`: those that start within `GAP_FIT_SPAN_H` of the last
+measurement, at least `GAP_FIT_PASSES`, at most `GAP_FIT_MAX_MEASUREMENTS` measurements) are
+fitted by batch least squares (`batch_ls.fit`, from the
 filter's estimate at the last of them, with `GAP_FIT`'s options: two-body + J2, the state,
 a realistic covariance with state-noise compensation), and the fit's prediction is tabulated
 once on the grid of multiples of ``period_s`` up to ``max_horizon_s`` after the pass. It is
@@ -26,18 +28,63 @@ from . import batch_ls
 from .batch_ls import BatchFit, BatchOptions, FitStatus
 from .force_model import ForceModel
 from .measurement import MeasurementModel
-from .pass_windows import PASS_BREAK_S
+from .pass_windows import PASS_BREAK_S, fit_window, passes, window_start
 from .timescales import DAY_S
 from .types import Kind, Measurement
 
-__all__ = ["GAP_FIT", "GAP_FIT_ACCEL_SIGMA", "GAP_FIT_ANGLES", "GAP_FIT_PASSES", "GAP_FIT_SNC",
-           "GAP_FIT_SNC_ANGLES", "BatchGapForecaster", "fit_passes", "gap_fit_options",
-           "with_accel_sigma"]
+__all__ = ["GAP_FIT", "GAP_FIT_ACCEL_SIGMA", "GAP_FIT_ANGLES", "GAP_FIT_MAX_MEASUREMENTS",
+           "GAP_FIT_PASSES", "GAP_FIT_SNC", "GAP_FIT_SNC_ANGLES", "GAP_FIT_SOLVE_T_SPAN_H",
+           "GAP_FIT_SPAN_H", "BatchGapForecaster", "GapWindow", "fit_passes", "gap_fit_options",
+           "gap_window", "solving_accel_t", "with_accel_sigma"]
 
 Array = NDArray[np.float64]
 
 GAP_FIT_PASSES = 3
-"""Passes of real measurements a gap's batch fit spans."""
+"""The fewest passes of real measurements a gap's batch fit spans (all of them when fewer
+exist)."""
+
+GAP_FIT_SPAN_H = 0.0
+"""Hours before its last measurement within which a pass must start to join the gap fit's
+window beyond its last `GAP_FIT_PASSES` (0: exactly those)."""
+
+GAP_FIT_MAX_MEASUREMENTS = 600
+"""The most measurements a gap fit's window holds: beyond it its oldest passes go (never one
+of its last `GAP_FIT_PASSES`); it bounds a re-fit's time where a network sees many passes."""
+
+
+@dataclass(frozen=True)
+class GapWindow:
+    """Which passes a gap fit spans (`pass_windows.fit_window`).
+
+    ``passes``: the fewest (the last ones); ``span_h``: h before the window's last measurement
+    within which an earlier pass must start to join; ``max_measurements``: the cap.
+    """
+
+    passes: int = GAP_FIT_PASSES
+    span_h: float = GAP_FIT_SPAN_H
+    max_measurements: int | None = GAP_FIT_MAX_MEASUREMENTS
+
+    def select(self, measurements: list[Measurement], before: float = math.inf,
+               gap_s: float = PASS_BREAK_S) -> list[Measurement]:
+        """Return the window of `measurements` (epoch order) before epoch `before` (s).
+
+        `gap_s`: the break (s) between passes.
+        """
+        return fit_window(measurements, before, self.passes, 3600.0 * self.span_h,
+                          self.max_measurements, gap_s)
+
+    def start(self, measurements: list[Measurement], gap_s: float = PASS_BREAK_S) -> int:
+        """Return the index of the window's first measurement in `measurements`.
+
+        All of `measurements` before the window's end; `gap_s` as `select`.
+        """
+        return window_start(measurements, self.passes, 3600.0 * self.span_h,
+                            self.max_measurements, gap_s)
+
+
+def gap_window() -> GapWindow:
+    """Return the window of the module's settings (read at the call)."""
+    return GapWindow(GAP_FIT_PASSES, GAP_FIT_SPAN_H, GAP_FIT_MAX_MEASUREMENTS)
 
 GAP_FIT_SNC = 1e-14
 """Power spectral density of the gap fit's state-noise compensation, km^2/s^3 in R, T and N
@@ -80,6 +127,11 @@ networks: 99.4 / 97.0 / 95.8 %, median NEES 1.37 / 1.50 / 1.35; 1e-8: 98.1 / 92.
 3e-9: 91.7 / 82.3 / 77.9 %), never on an evaluation seed. The fit's state does not depend
 on it."""
 
+GAP_FIT_SOLVE_T_SPAN_H = math.inf
+"""Hours a ranged window must span (first to last measurement) for its fit to solve for the
+constant along-track acceleration ``accel_t`` (a priori `GAP_FIT_ACCEL_SIGMA`) beside the
+drag factor, instead of considering it (inf: never)."""
+
 _ACCELS = ("accel_r", "accel_t", "accel_n")
 
 
@@ -113,9 +165,23 @@ is too weakly observed by angles over three passes), `GAP_FIT_SNC_ANGLES`."""
 
 
 def gap_fit_options(window: list[Measurement]) -> BatchOptions:
-    """Return `GAP_FIT`, or `GAP_FIT_ANGLES` when no measurement of `window` has a range."""
-    ranged = any(m.kind in (Kind.RANGE_AZ_EL, Kind.POSITION) for m in window)
-    return GAP_FIT if ranged else GAP_FIT_ANGLES
+    """Return the options of the gap fit of `window` (epoch order).
+
+    `GAP_FIT_ANGLES` when no measurement of `window` has a range; else `GAP_FIT`, solving for
+    the along-track acceleration too (`solving_accel_t`) when the window spans at least
+    `GAP_FIT_SOLVE_T_SPAN_H`.
+    """
+    if not any(m.kind in (Kind.RANGE_AZ_EL, Kind.POSITION) for m in window):
+        return GAP_FIT_ANGLES
+    if window[-1].t - window[0].t >= 3600.0 * GAP_FIT_SOLVE_T_SPAN_H:
+        return solving_accel_t(GAP_FIT)
+    return GAP_FIT
+
+
+def solving_accel_t(options: BatchOptions) -> BatchOptions:
+    """Return `options` solving for ``accel_t`` (a priori its considered sigma) too."""
+    return replace(options, solve_for=(*options.solve_for, "accel_t"),
+                   consider=tuple(p for p in options.consider if p != "accel_t"))
 
 _FAILED = (FitStatus.DIVERGED, FitStatus.UNDERDETERMINED)
 
@@ -151,7 +217,9 @@ class BatchGapForecaster:
     model: MeasurementModel
     period_s: float
     clock_unix0: float = 0.0
-    passes: int = GAP_FIT_PASSES
+    passes: int = field(default_factory=lambda: GAP_FIT_PASSES)
+    span_h: float = field(default_factory=lambda: GAP_FIT_SPAN_H)
+    max_measurements: int | None = field(default_factory=lambda: GAP_FIT_MAX_MEASUREMENTS)
     pass_break_s: float = PASS_BREAK_S
     max_horizon_s: float = DAY_S
     window: list[Measurement] = field(default_factory=list)
@@ -161,17 +229,23 @@ class BatchGapForecaster:
     fit: BatchFit | None = None
     table: dict[float, tuple[Array, Array]] = field(default_factory=dict)
 
+    @property
+    def rule(self) -> GapWindow:
+        """The window's rule: ``passes``, ``span_h``, ``max_measurements``."""
+        return GapWindow(self.passes, self.span_h, self.max_measurements)
+
     def on_measurement(self, m: Measurement) -> None:
-        """Take a real measurement the filter fused; keep those of the last passes."""
+        """Take a real measurement the filter fused; keep those a window can still span.
+
+        At the first measurement of a pass the passes no later window can hold are forgotten
+        (a window only moves forward: its last measurement and passes only grow).
+        """
         if self.window and m.t <= self.window[-1].t:
             return
-        if not self.window or m.t - self.window[-1].t > self.pass_break_s:
-            self.starts.append(len(self.window))
-            if len(self.starts) > self.passes:  # forget the oldest pass
-                k = self.starts[1]
-                del self.window[:k]
-                self.starts = [s - k for s in self.starts[1:]]
         self.window.append(m)
+        if len(self.window) == 1 or m.t - self.window[-2].t > self.pass_break_s:
+            del self.window[:self.rule.start(self.window, self.pass_break_s)]
+            self.starts = [a for a, _ in passes(self.window, self.pass_break_s)]
 
     def on_estimate(self, t: float, x: ArrayLike, P: ArrayLike) -> None:
         """Take the filter's estimate (epoch t s) after it fused a real measurement."""
@@ -213,7 +287,8 @@ class BatchGapForecaster:
         if self.fitted_t != t_end:  # a pass ended: fit once, tabulate the prediction
             self.fitted_t = t_end
             self.table = {}
-            self.fit = fit_passes(self.window, self.model, x_end, t_end, self.clock_unix0)
+            window = self.window[self.rule.start(self.window, self.pass_break_s):]
+            self.fit = fit_passes(window, self.model, x_end, t_end, self.clock_unix0)
             k0 = math.floor(t_end / self.period_s) + 1
             k1 = math.floor((t_end + self.max_horizon_s) / self.period_s)
             grid = self.period_s * np.arange(k0, k1 + 1, dtype=float)
