@@ -16,9 +16,10 @@ Usage: .venv/bin/python bench/bench_sky.py [--quick] [--workers N] [--scenario N
 the gap fit's process noise is chosen (``--gap-fit-snc`` / ``--gap-fit-snc-angles``
 km^2/s^3 replace `batch_gap.GAP_FIT_SNC` / `GAP_FIT_SNC_ANGLES` for the run,
 ``--gap-fit-accel`` km/s^2 `batch_gap.GAP_FIT_ACCEL_SIGMA`) and its window
-(``--gap-fit-passes``, ``--gap-fit-span-h``, ``--gap-fit-max-measurements``,
-``--gap-fit-solve-t-span-h``: `batch_gap.GAP_FIT_PASSES`, `GAP_FIT_SPAN_H`,
-`GAP_FIT_MAX_MEASUREMENTS`, `GAP_FIT_SOLVE_T_SPAN_H`). The evaluation seeds never choose a
+(``--gap-fit-passes``, ``--gap-fit-span-h``, ``--gap-fit-span-h-angles``,
+``--gap-fit-max-measurements``, ``--gap-fit-solve-t-span-h``: `batch_gap.GAP_FIT_PASSES`,
+`GAP_FIT_SPAN_H`, `GAP_FIT_SPAN_H_ANGLES`, `GAP_FIT_MAX_MEASUREMENTS`,
+`GAP_FIT_SOLVE_T_SPAN_H`). The evaluation seeds never choose a
 setting.
 """
 
@@ -98,6 +99,8 @@ def main() -> int:
                     help="with --tuning: the fewest passes of the gap fit's window")
     ap.add_argument("--gap-fit-span-h", type=float, default=None,
                     help="with --tuning: the span (h) of the gap fit's window")
+    ap.add_argument("--gap-fit-span-h-angles", type=float, default=None,
+                    help="with --tuning: the span (h) of the window of angles only")
     ap.add_argument("--gap-fit-max-measurements", type=int, default=None,
                     help="with --tuning: the most measurements of the gap fit's window")
     ap.add_argument("--gap-fit-solve-t-span-h", type=float, default=None,
@@ -105,6 +108,7 @@ def main() -> int:
                          "the along-track acceleration")
     args = ap.parse_args()
     window = {"GAP_FIT_PASSES": args.gap_fit_passes, "GAP_FIT_SPAN_H": args.gap_fit_span_h,
+              "GAP_FIT_SPAN_H_ANGLES": args.gap_fit_span_h_angles,
               "GAP_FIT_MAX_MEASUREMENTS": args.gap_fit_max_measurements,
               "GAP_FIT_SOLVE_T_SPAN_H": args.gap_fit_solve_t_span_h}
     chosen = (args.gap_fit_snc, args.gap_fit_snc_angles, args.gap_fit_accel, *window.values())

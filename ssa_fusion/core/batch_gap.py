@@ -2,11 +2,12 @@
 
 What a flight-dynamics engineer does between passes, on the filter's live stream: once the
 filter has fused nothing for `pass_break_s`, the real measurements it fused in its last
-passes (`pass_windows.fit_window`: those that start within `GAP_FIT_SPAN_H` of the last
-measurement, at least `GAP_FIT_PASSES`, at most `GAP_FIT_MAX_MEASUREMENTS` measurements) are
-fitted by batch least squares (`batch_ls.fit`, from the
-filter's estimate at the last of them, with `GAP_FIT`'s options: two-body + J2, the state,
-a realistic covariance with state-noise compensation), and the fit's prediction is tabulated
+passes (`GapWindow`, `pass_windows.fit_window`: those that start within `GAP_FIT_SPAN_H` of
+the last measurement, `GAP_FIT_SPAN_H_ANGLES` for angles only, at least `GAP_FIT_PASSES`, at
+most `GAP_FIT_MAX_MEASUREMENTS` measurements) are fitted by batch least squares
+(`batch_ls.fit`, from the filter's estimate at the last of them, with `gap_fit_options`:
+two-body + J2-J4 + drag, the state and drag factor, a realistic covariance with considered
+accelerations and state-noise compensation), and the fit's prediction is tabulated
 once on the grid of multiples of ``period_s`` up to ``max_horizon_s`` after the pass. It is
 a `gap_publisher.GapForecast`: the filter publishes it at the gap's prediction epochs
 (update source FORECAST); the EKF itself coasts on, and the next real measurement updates
@@ -28,14 +29,15 @@ from . import batch_ls
 from .batch_ls import BatchFit, BatchOptions, FitStatus
 from .force_model import ForceModel
 from .measurement import MeasurementModel
-from .pass_windows import PASS_BREAK_S, fit_window, passes, window_start
+from .pass_windows import PASS_BREAK_S, passes, window_start
 from .timescales import DAY_S
 from .types import Kind, Measurement
 
 __all__ = ["GAP_FIT", "GAP_FIT_ACCEL_SIGMA", "GAP_FIT_ANGLES", "GAP_FIT_MAX_MEASUREMENTS",
            "GAP_FIT_PASSES", "GAP_FIT_SNC", "GAP_FIT_SNC_ANGLES", "GAP_FIT_SOLVE_T_SPAN_H",
-           "GAP_FIT_SPAN_H", "BatchGapForecaster", "GapWindow", "fit_passes", "gap_fit_options",
-           "gap_window", "solving_accel_t", "with_accel_sigma"]
+           "GAP_FIT_SPAN_H", "GAP_FIT_SPAN_H_ANGLES", "BatchGapForecaster", "GapWindow",
+           "fit_passes", "gap_fit_options", "gap_window", "has_ranges", "solving_accel_t",
+           "with_accel_sigma"]
 
 Array = NDArray[np.float64]
 
@@ -44,12 +46,20 @@ GAP_FIT_PASSES = 3
 exist)."""
 
 GAP_FIT_SPAN_H = 0.0
-"""Hours before its last measurement within which a pass must start to join the gap fit's
-window beyond its last `GAP_FIT_PASSES` (0: exactly those)."""
+"""Hours before its last measurement within which a pass must start to join the window of a
+gap fit with ranges beyond its last `GAP_FIT_PASSES` (0: exactly those)."""
+
+GAP_FIT_SPAN_H_ANGLES = 0.0
+"""The same for a window of angles only (optical sites)."""
 
 GAP_FIT_MAX_MEASUREMENTS = 600
 """The most measurements a gap fit's window holds: beyond it its oldest passes go (never one
 of its last `GAP_FIT_PASSES`); it bounds a re-fit's time where a network sees many passes."""
+
+
+def has_ranges(window: list[Measurement]) -> bool:
+    """Whether a measurement of `window` has a range (its fit is `GAP_FIT`'s, not angles')."""
+    return any(m.kind in (Kind.RANGE_AZ_EL, Kind.POSITION) for m in window)
 
 
 @dataclass(frozen=True)
@@ -57,12 +67,15 @@ class GapWindow:
     """Which passes a gap fit spans (`pass_windows.fit_window`).
 
     ``passes``: the fewest (the last ones); ``span_h``: h before the window's last measurement
-    within which an earlier pass must start to join; ``max_measurements``: the cap.
+    within which an earlier pass must start to join, for a window with ranges
+    (``span_h_angles`` for one of angles only: whether the passes the wider of the two spans
+    would hold have a range decides); ``max_measurements``: the cap.
     """
 
     passes: int = GAP_FIT_PASSES
     span_h: float = GAP_FIT_SPAN_H
     max_measurements: int | None = GAP_FIT_MAX_MEASUREMENTS
+    span_h_angles: float = GAP_FIT_SPAN_H_ANGLES
 
     def select(self, measurements: list[Measurement], before: float = math.inf,
                gap_s: float = PASS_BREAK_S) -> list[Measurement]:
@@ -70,21 +83,34 @@ class GapWindow:
 
         `gap_s`: the break (s) between passes.
         """
-        return fit_window(measurements, before, self.passes, 3600.0 * self.span_h,
-                          self.max_measurements, gap_s)
+        earlier = [m for m in measurements if m.t < before]
+        return earlier[self.start(earlier, gap_s):]
 
     def start(self, measurements: list[Measurement], gap_s: float = PASS_BREAK_S) -> int:
         """Return the index of the window's first measurement in `measurements`.
 
         All of `measurements` before the window's end; `gap_s` as `select`.
         """
-        return window_start(measurements, self.passes, 3600.0 * self.span_h,
+        wide = self.keep(measurements, gap_s)
+        span = self.span_h if has_ranges(measurements[wide:]) else self.span_h_angles
+        return window_start(measurements, self.passes, 3600.0 * span, self.max_measurements,
+                            gap_s)
+
+    def keep(self, measurements: list[Measurement], gap_s: float = PASS_BREAK_S) -> int:
+        """Return the index of the first measurement a later window could still span.
+
+        The window of the wider span: a window only moves forward (its last measurement and
+        its passes only grow), so what is before it no later window of either span holds.
+        """
+        return window_start(measurements, self.passes,
+                            3600.0 * max(self.span_h, self.span_h_angles),
                             self.max_measurements, gap_s)
 
 
 def gap_window() -> GapWindow:
     """Return the window of the module's settings (read at the call)."""
-    return GapWindow(GAP_FIT_PASSES, GAP_FIT_SPAN_H, GAP_FIT_MAX_MEASUREMENTS)
+    return GapWindow(GAP_FIT_PASSES, GAP_FIT_SPAN_H, GAP_FIT_MAX_MEASUREMENTS,
+                     GAP_FIT_SPAN_H_ANGLES)
 
 GAP_FIT_SNC = 1e-14
 """Power spectral density of the gap fit's state-noise compensation, km^2/s^3 in R, T and N
@@ -171,7 +197,7 @@ def gap_fit_options(window: list[Measurement]) -> BatchOptions:
     the along-track acceleration too (`solving_accel_t`) when the window spans at least
     `GAP_FIT_SOLVE_T_SPAN_H`.
     """
-    if not any(m.kind in (Kind.RANGE_AZ_EL, Kind.POSITION) for m in window):
+    if not has_ranges(window):
         return GAP_FIT_ANGLES
     if window[-1].t - window[0].t >= 3600.0 * GAP_FIT_SOLVE_T_SPAN_H:
         return solving_accel_t(GAP_FIT)
@@ -220,6 +246,7 @@ class BatchGapForecaster:
     passes: int = field(default_factory=lambda: GAP_FIT_PASSES)
     span_h: float = field(default_factory=lambda: GAP_FIT_SPAN_H)
     max_measurements: int | None = field(default_factory=lambda: GAP_FIT_MAX_MEASUREMENTS)
+    span_h_angles: float = field(default_factory=lambda: GAP_FIT_SPAN_H_ANGLES)
     pass_break_s: float = PASS_BREAK_S
     max_horizon_s: float = DAY_S
     window: list[Measurement] = field(default_factory=list)
@@ -231,8 +258,8 @@ class BatchGapForecaster:
 
     @property
     def rule(self) -> GapWindow:
-        """The window's rule: ``passes``, ``span_h``, ``max_measurements``."""
-        return GapWindow(self.passes, self.span_h, self.max_measurements)
+        """The window's rule: ``passes``, ``span_h``, ``max_measurements``, ``span_h_angles``."""
+        return GapWindow(self.passes, self.span_h, self.max_measurements, self.span_h_angles)
 
     def on_measurement(self, m: Measurement) -> None:
         """Take a real measurement the filter fused; keep those a window can still span.
@@ -244,7 +271,7 @@ class BatchGapForecaster:
             return
         self.window.append(m)
         if len(self.window) == 1 or m.t - self.window[-2].t > self.pass_break_s:
-            del self.window[:self.rule.start(self.window, self.pass_break_s)]
+            del self.window[:self.rule.keep(self.window, self.pass_break_s)]
             self.starts = [a for a, _ in passes(self.window, self.pass_break_s)]
 
     def on_estimate(self, t: float, x: ArrayLike, P: ArrayLike) -> None:

@@ -77,3 +77,14 @@ def test_a_long_ranged_window_solves_for_the_along_track_acceleration(monkeypatc
     assert batch_gap.gap_fit_options(stream([0.0, 20 * H], Kind.RA_DEC)) == \
         batch_gap.GAP_FIT_ANGLES
     assert PASS_BREAK_S < H
+
+
+def test_angles_only_windows_have_their_own_span():
+    """Six passes 5 h apart: with ranges the 24 h span holds the passes starting within 24 h
+    of the last measurement (five), with angles alone its own span 0 the last three."""
+    t = [k * 5 * H + s for k in range(6) for s in (0.0, 30.0)]
+    rule = GapWindow(passes=3, span_h=24.0, max_measurements=None, span_h_angles=0.0)
+    ranged, angles = stream(t), stream(t, Kind.RA_DEC)
+    assert [m.t for m in rule.select(ranged)] == t[2:]
+    assert [m.t for m in rule.select(angles)] == t[6:]
+    assert rule.keep(angles) == rule.keep(ranged) == 2  # the wider span is kept for either
