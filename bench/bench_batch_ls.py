@@ -26,7 +26,8 @@ measurement (at least its three; `pass_windows.fit_window`): the time of a longe
 
 Prints one line per model and window, a summary per model, and as its last line a JSON
 object. Asserts that every fit converged with a weighted RMS of about one noise unit (0.7 to
-1.3), i.e. that it fitted what it claims; the time is reported against the target, not
+1.3), i.e. that it fitted what it claims (with ``--span-h``, every fit of the default model,
+`DEFAULT_MODEL`); the time is reported against the target, not
 asserted (it depends on the machine).
 """
 
@@ -53,6 +54,9 @@ from ssa_fusion.sim import sky
 
 TARGET_MS = 50.0
 SCENARIO = "iss_radar_columbus"
+DEFAULT_MODEL = "j2-j4+drag"
+"""The model of the live gap fit; over a window of a day (``--span-h``) only it must fit
+(without drag, or without J3 and J4, a day of passes leaves residuals above the noise)."""
 
 
 def _options(name: str, psd: float, drag_sigma: float = 1.0) -> batch_ls.BatchOptions:
@@ -127,7 +131,7 @@ def main() -> None:
             gap_err.extend(np.linalg.norm(err, axis=1).tolist())
             nees.extend(n3.tolist())
             good = fit.converged and 0.7 < fit.rms < 1.3
-            ok &= good
+            ok &= good or (a.span_h > 0.0 and name != DEFAULT_MODEL)
             drag = (f" drag factor {fit.params['drag_scale']:.2f}"
                     if "drag_scale" in fit.solve_for else "")
             print(f"{name:8s} window {w:2d}: {len(win):3d} measurements, {fit.status} in "
