@@ -17,8 +17,12 @@ Usage: .venv/bin/python bench/bench_sky.py [--quick] [--workers N] [--scenario N
 ``--tuning`` runs the tuning seeds (`TUNING_SEEDS` 1-3, every start epoch) instead: where
 the gap fit's process noise is chosen (``--gap-fit-snc`` / ``--gap-fit-snc-angles``
 km^2/s^3 replace `batch_gap.GAP_FIT_SNC` / `GAP_FIT_SNC_ANGLES` for the run,
-``--gap-fit-accel`` km/s^2 `batch_gap.GAP_FIT_ACCEL_SIGMA`). The evaluation seeds never
-choose a setting.
+``--gap-fit-accel`` km/s^2 `batch_gap.GAP_FIT_ACCEL_SIGMA`) and its window
+(``--gap-fit-passes``, ``--gap-fit-span-h``, ``--gap-fit-span-h-angles``,
+``--gap-fit-max-measurements``, ``--gap-fit-solve-t-span-h``: `batch_gap.GAP_FIT_PASSES`,
+`GAP_FIT_SPAN_H`, `GAP_FIT_SPAN_H_ANGLES`, `GAP_FIT_MAX_MEASUREMENTS`,
+`GAP_FIT_SOLVE_T_SPAN_H`). The evaluation seeds never choose a
+setting.
 """
 
 from __future__ import annotations
@@ -93,11 +97,28 @@ def main() -> int:
     ap.add_argument("--gap-fit-accel", type=float, default=None,
                     help="with --tuning: the standard deviation (km/s^2) of the gap fit's "
                          "considered R, T, N accelerations for windows with ranges")
+    ap.add_argument("--gap-fit-passes", type=int, default=None,
+                    help="with --tuning: the fewest passes of the gap fit's window")
+    ap.add_argument("--gap-fit-span-h", type=float, default=None,
+                    help="with --tuning: the span (h) of the gap fit's window")
+    ap.add_argument("--gap-fit-span-h-angles", type=float, default=None,
+                    help="with --tuning: the span (h) of the window of angles only")
+    ap.add_argument("--gap-fit-max-measurements", type=int, default=None,
+                    help="with --tuning: the most measurements of the gap fit's window")
+    ap.add_argument("--gap-fit-solve-t-span-h", type=float, default=None,
+                    help="with --tuning: the span (h) from which a ranged gap fit solves for "
+                         "the along-track acceleration")
     args = ap.parse_args()
-    chosen = (args.gap_fit_snc, args.gap_fit_snc_angles, args.gap_fit_accel)
+    window = {"GAP_FIT_PASSES": args.gap_fit_passes, "GAP_FIT_SPAN_H": args.gap_fit_span_h,
+              "GAP_FIT_SPAN_H_ANGLES": args.gap_fit_span_h_angles,
+              "GAP_FIT_MAX_MEASUREMENTS": args.gap_fit_max_measurements,
+              "GAP_FIT_SOLVE_T_SPAN_H": args.gap_fit_solve_t_span_h}
+    chosen = (args.gap_fit_snc, args.gap_fit_snc_angles, args.gap_fit_accel, *window.values())
     if any(v is not None for v in chosen) and not args.tuning:
-        ap.error("--gap-fit-snc, --gap-fit-snc-angles and --gap-fit-accel choose settings: "
-                 "--tuning only")
+        ap.error("--gap-fit-* options choose settings: --tuning only")
+    for name, value in window.items():
+        if value is not None:
+            setattr(batch_gap, name, value)
     if args.gap_fit_snc is not None:  # the worker processes are forked: they inherit it
         batch_gap.GAP_FIT = replace(batch_gap.GAP_FIT, snc_psd=(args.gap_fit_snc,) * 3)
     if args.gap_fit_accel is not None:

@@ -51,6 +51,7 @@ from .gap_forecaster import PLACEHOLDER_TRAJECTORY, GapForecaster
 from .gap_publisher import GapFill
 from .measurement import MeasurementModel
 from .measurement_windows import MAX_WINDOW_ROWS, MeasurementWindows
+from .pass_windows import PASS_BREAK_S
 from .residual import LIVE_RESIDUAL, ResidualConfig
 from .rows import MeasurementRows
 from .types import MotionModel, Source
@@ -67,6 +68,20 @@ GAP_FORECASTS = (GapFill.RESIDUAL, GapFill.BATCH_FIT)
 """The gap forecasts a catalog's objects choose from (a catalog_surrogate cannot restart the
 catalog_filter's EKF: no `GapFill.BATCH_INIT`; no forecast is no surrogate)."""
 
+
+def last_passes_forecaster(model: MeasurementModel, period_s: float, clock_unix0: float = 0.0,
+                           passes: int = GAP_FIT_PASSES,
+                           pass_break_s: float = PASS_BREAK_S) -> BatchGapForecaster:
+    """Return a `batch_gap.BatchGapForecaster` whose window is the last `passes` passes only.
+
+    A catalog's window: each object keeps only its last passes (`MeasurementWindows`), not
+    the single-object filter's passes of the last `batch_gap.GAP_FIT_SPAN_H` hours, which
+    would hold a day of a network's measurements (up to `batch_gap.GAP_FIT_MAX_MEASUREMENTS`
+    rows) for each of tens of thousands of objects.
+    """
+    return BatchGapForecaster(model, period_s, clock_unix0=clock_unix0, passes=passes,
+                              span_h=0.0, max_measurements=None, span_h_angles=0.0,
+                              pass_break_s=pass_break_s)
 
 @dataclass(frozen=True)
 class GapBankConfig:
@@ -408,11 +423,11 @@ class GapBank:
         """
         assert self.model is not None
         end = float(self._last[r])
-        f = BatchGapForecaster(self.model, self.config.period_s, clock_unix0=self.clock_unix0,
-                               passes=self.config.fit_passes,
-                               pass_break_s=self.config.pass_break_s,
-                               window=[m for m in self.windows.window(r) if m.t <= end],
-                               last=(end, self._x[r].copy()))
+        f = last_passes_forecaster(self.model, self.config.period_s,
+                                   clock_unix0=self.clock_unix0, passes=self.config.fit_passes,
+                                   pass_break_s=self.config.pass_break_s)
+        f.window = [m for m in self.windows.window(r) if m.t <= end]
+        f.last = (end, self._x[r].copy())
         try:  # one object's failed fit leaves its gap to the filter's coasting
             f.forecast(first)
         except (ValueError, ArithmeticError, np.linalg.LinAlgError):

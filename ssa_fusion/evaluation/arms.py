@@ -18,7 +18,7 @@ the position error and the NEES.
 * ``batch_fit`` -- the best physics-only estimate, what a flight-dynamics engineer would
   fit by hand: batch least squares over the real measurements of the last passes before
   the gap, two-body + J2, from the filter's estimate at the last of them, predicted through
-  the gap with its realistic covariance (`core.batch_gap`: `GAP_FIT_PASSES`, `GAP_FIT`; the
+  the gap with its realistic covariance (`core.batch_gap`: `gap_window`, `GAP_FIT`; the
   fit the filter publishes in gaps with ``gap_forecast: batch_fit``); Earth orbits only;
 * ``dmd_ekf`` -- the filter's estimates at the gap epochs, fusing the surrogate's forecasts;
   at an epoch without one (no forecast, or one refused) its prediction from the last estimate
@@ -39,10 +39,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ssa_fusion.core import frames
-from ssa_fusion.core.batch_gap import GAP_FIT_PASSES, fit_passes
+from ssa_fusion.core.batch_gap import fit_passes, gap_window
 from ssa_fusion.core.config import ORBIT_MODELS, EstimatorConfig, make_tracker, measurement_model
 from ssa_fusion.core.metrics import epsilon, nees
-from ssa_fusion.core.pass_windows import last_passes
 from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
 from ssa_fusion.core.types import (
     Measurement,
@@ -203,7 +202,7 @@ def batch_fit(c: EstimatorConfig, real: Sequence[Measurement], start: StateEstim
     if c.filter.motion.motion_model not in ORBIT_MODELS:
         return None
     sensor = [m for m in real if m.source == Source.SENSOR]
-    window = last_passes(sensor, GAP_FIT_PASSES, float(t_gap[0]))
+    window = gap_window().select(sensor, float(t_gap[0]))
     fit = fit_passes(window, measurement_model(c), start.x, start.t,
                      (c.jd0 - UNIX_EPOCH_JD) * DAY_S)
     if fit is None:

@@ -44,10 +44,9 @@ from typing import Any
 import numpy as np
 
 from ssa_fusion.core import residual
-from ssa_fusion.core.batch_gap import GAP_FIT_PASSES, fit_passes
+from ssa_fusion.core.batch_gap import fit_passes, gap_window
 from ssa_fusion.core.config import measurement_model
 from ssa_fusion.core.metrics import chi2_bounds
-from ssa_fusion.core.pass_windows import last_passes
 from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
 from ssa_fusion.core.types import Measurement, Source, StateEstimate, UpdateSource
 from ssa_fusion.evaluation import arms, passes
@@ -179,7 +178,7 @@ def run_placeholder(sim: sky.SkySimulation, placeholder: str,
         for sur in surrogates.values():
             sur.add_anchor(t_end, e.x, e.P)
         if fit_anchored:
-            window = last_passes(sensor, GAP_FIT_PASSES, math.nextafter(t_end, math.inf))
+            window = gap_window().select(sensor, math.nextafter(t_end, math.inf))
             anchor = fit_passes(window, meas_model, e.x, e.t, clock)
             for sur in fit_anchored.values():
                 if anchor is not None:

@@ -11,8 +11,7 @@ import pytest
 from test_gap_bank import FakeWall
 
 from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core.batch_gap import BatchGapForecaster
-from ssa_fusion.core.gap_bank import GapBank, GapBankConfig
+from ssa_fusion.core.gap_bank import GapBank, GapBankConfig, last_passes_forecaster
 from ssa_fusion.core.gap_publisher import GapFill
 from ssa_fusion.core.measurement import StationModels
 from ssa_fusion.core.measurement_windows import ROW, MeasurementWindows
@@ -82,7 +81,7 @@ def test_an_objects_forecasts_equal_the_single_object_batch_fits(sky):
     assert bank.counts["fitted_batch_fit"] >= 6 and bank.counts["forecasts"] == len(got) > 100
     assert bank.counts["measurements"] > 0
     for oid, (ts, xs) in est.items():  # the reference: the single-object filter's forecaster
-        ref = BatchGapForecaster(model, CFG.period_s)
+        ref = last_passes_forecaster(model, CFG.period_s)
         mine = sorted(t for o, t in got if o == oid)
         assert mine, oid
         mt = [i for i, o in enumerate(rows.object_id) if o == oid]
@@ -154,7 +153,7 @@ def test_a_window_keeps_the_last_passes_and_at_most_max_rows():
     t = np.concatenate([k * 5700.0 + 10.0 * np.arange(40) for k in range(5)])
     ms = [Measurement(float(ti), np.array([1000.0 + ti, 0.1, 0.2]), R,
                       kind=Kind.RANGE_AZ_EL, frame_id="s1" if ti % 20 else "s2") for ti in t]
-    ref = BatchGapForecaster(None, 60.0)  # type: ignore[arg-type]
+    ref = last_passes_forecaster(None, 60.0)  # type: ignore[arg-type]
     big, small = MeasurementWindows(3, 600.0, 512), MeasurementWindows(3, 600.0, 50)
     one = MeasurementWindows(1, 600.0, 512)
     big.grow(2)

@@ -14,7 +14,7 @@ from test_faults import Diag, publisher
 
 from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core import types
-from ssa_fusion.core.batch_gap import BatchGapForecaster
+from ssa_fusion.core.gap_bank import last_passes_forecaster
 from ssa_fusion.core.measurement import StationModels
 from ssa_fusion.core.rows import EstimateRows, MeasurementRows
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
@@ -103,7 +103,7 @@ def test_the_batch_fit_forecasts_equal_the_single_object_forecasters(ros_graph):
                10.0, "seven fits (a gap after each pass)")
     # the reference: the single-object forecaster fed the same messages
     stations = {r.station.name: r.station for r in SKY_SCENARIOS["iss_network"].radars}
-    ref = BatchGapForecaster(StationModels(stations, UNIX_EPOCH_JD), PERIOD)
+    ref = last_passes_forecaster(StationModels(stations, UNIX_EPOCH_JD), PERIOD)
     rows = [messages.measurement_batch_from_msg(m) for m in meas]
     erows = [messages.estimate_batch_from_msg(m) for m in est]
     assert forecasts
