@@ -94,7 +94,7 @@ PARAMETERS = ParameterTable("filter", (
           "(`core.fit_residual.FitResidualForecaster`), the fit's own until it has 5 "
           "spanning a day. "
           "`ssa-fusion live` sets each real-sky scenario's `gap_fill` (leo_optical: "
-          "`batch_init`, the others `residual`)",
+          "`fit_residual`, the others `batch_init`)",
           check=one_of(*GapFill)),
     clock_lead(FILTER.max_clock_lead),
 ), rules=(Rule(STATION_RULE_NAMES, sites_problem),

@@ -110,12 +110,15 @@ class SkyScenario:
         simulated measurements and in the filter's model alike.
     gap_fill
         What the live filter publishes in the gaps between passes (its ``gap_forecast``
-        parameter): the residual surrogate, or the batch fit of the last passes where the
-        gap study's tuning seeds 1-3 (`bench/bench_gaps.py --tune --variant hill_h1_me20`)
-        found it the smaller error (leo_optical: 0.48 km against 13.4 km; the ISS scenarios:
-        0.40 / 0.12 / 0.10 km against the residual's 0.31 / 0.11 / 0.08 km); leo_optical's
-        EKF also starts each pass from the fit (``batch_init``: on its tuning runs,
-        `bench/bench_sky.py --tuning`, 8 m after each pass against 29 m, the same gaps).
+        parameter), chosen on the real-sky tuning runs (seeds 1-3 x start 0/8/16 h,
+        `bench/bench_sky.py --tuning`, at 3aa8138): the smallest median error at all gap
+        epochs. The ISS scenarios: ``batch_init``, the batch fit of the passes of the last
+        24 h, from which the EKF also starts each pass (0.062 / 0.029 / 0.030 km against
+        ``fit_residual``'s 0.070 / 0.033 / 0.033 and ``residual``'s 0.39 / 0.11 / 0.092;
+        position NEES coverage 97 / 93 / 91 %); leo_optical: ``fit_residual``, its fit of
+        three passes of angles corrected by the residual surrogate (0.035 km against
+        ``batch_init``'s 0.037; gaps > 12 h 0.041 against 0.051; coverage 89 % against
+        87 %).
     finding : str
         What the scenario shows.
     own_sensors, sites_file
@@ -149,7 +152,7 @@ class SkyScenario:
     sigma_bound: float = SKY_FILTER.noise.sigma_bound
     light_time: bool = True
     refraction: bool = False
-    gap_fill: GapFill = GapFill.RESIDUAL
+    gap_fill: GapFill = GapFill.BATCH_INIT
     finding: str = ""
     own_sensors: tuple[Sensor, ...] = ()
     sites_file: str = ""
@@ -334,7 +337,7 @@ SKY_SCENARIOS: dict[str, SkyScenario] = {
             name="leo_optical", sensors=("socorro", "maui", "diego_garcia"),
             site_pool=TWILIGHT_SITE_POOL,
             x0=tuple(dynamics.elements_to_state(**SSO_ELEMENTS)),
-            outages=(("maui", 1.0 * _DAY, 1.0 * _DAY),), gap_fill=GapFill.BATCH_INIT,
+            outages=(("maui", 1.0 * _DAY, 1.0 * _DAY),), gap_fill=GapFill.FIT_RESIDUAL,
             finding="optical sites only, a sun-synchronous LEO object: twilight passes"),
     ]
 }

@@ -271,7 +271,7 @@ def test_gap_forecast_sets_the_filters_gap_forecast(monkeypatch, tmp_path):
             return object()
 
     monkeypatch.setattr(live, "Graph", Graph)
-    for option, want in (([], "residual"), (["--gap-forecast", "batch_init"], "batch_init")):
+    for option, want in (([], "batch_init"), (["--gap-forecast", "residual"], "residual")):
         args = cli.build_parser().parse_args(["live", "--out", str(tmp_path / want),
                                               "--scenario", "iss_radar_columbus", *option])
         with pytest.raises(StoppedError):

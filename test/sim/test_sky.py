@@ -123,7 +123,7 @@ def test_reproduce_runs_the_real_sky_study_over_evaluation_seeds(tmp_path, monke
                             "hypothetical_ekf"}
     assert all(0.0 < v < 5.0 for v in arms_km.values()), arms_km  # km over a 3.6 h outage
     pub = got["published"]  # what the filter publishes between passes, per gap_forecast
-    assert set(pub) == {"none", "residual", "batch_fit", "batch_init"}
+    assert set(pub) == {"none", "residual", "batch_fit", "batch_init", "fit_residual"}
     assert all(0.0 < m["err_median_km"] < 5.0 and 0.0 <= m["nees_in_95"] <= 1.0
                for m in pub.values()), pub
     assert "## The real sky" in (tmp_path / "results.md").read_text()
