@@ -9,9 +9,10 @@ Each object's gaps are forecast as its `GapFill` says (``gap_forecast`` of the c
   with a J2 placeholder);
 * `GapFill.BATCH_FIT`: the object's real measurements (`on_measurements`) of its last
   passes are kept (`measurement_windows.MeasurementWindows`, arrays) and fitted by batch
-  least squares from its newest estimate, exactly as the single-object filter's
-  `batch_gap.BatchGapForecaster` fits them (same options, same window, the same table of
-  its prediction on the grid up to a day after the pass).
+  least squares from its newest estimate by `batch_gap.BatchGapForecaster` (the
+  single-object filter's options and table of its prediction on the grid up to a day after
+  the pass), over the last `GapBankConfig.fit_passes` passes only (`last_passes_forecaster`:
+  not the single-object filter's passes of the last 24 h).
 
 When an object has had no estimate for ``pass_break_s`` of sim time, its newest estimate is
 a pass end: the object waits for its fit, whichever it is. Fits run in

@@ -1,8 +1,9 @@
 """The real measurements of each object's last passes, as arrays: `MeasurementWindows`.
 
 What a catalog's batch fit of the gaps (`gap_bank.GapBank` with `gap_publisher.GapFill.
-BATCH_FIT`) spans per object: the window `batch_gap.BatchGapForecaster.on_measurement`
-keeps for one object (a measurement at or before the window's newest epoch is ignored; one
+BATCH_FIT`) spans per object: the window of the last ``passes`` passes, as
+`gap_bank.last_passes_forecaster`'s `batch_gap.BatchGapForecaster` keeps it for one object
+(a measurement at or before the window's newest epoch is ignored; one
 more than ``pass_break_s`` after it starts a pass; the oldest pass is forgotten when a pass
 beyond ``passes`` starts), here for many objects at once. A catalog holds tens of thousands
 of objects, so an object's window is one structured array (`ROW`, 40 bytes a measurement:
