@@ -23,7 +23,12 @@ from ssa_fusion.core.gap_publisher import GapFill
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import BAG_PATTERN
 from ssa_fusion.ros.readiness import READERS
-from ssa_fusion.ros.topics import TOPIC_ESTIMATE_BATCH, TOPIC_MEASUREMENT_BATCH
+from ssa_fusion.ros.topics import (
+    TOPIC_ASSOCIATED,
+    TOPIC_DETECTION_TRUTH,
+    TOPIC_ESTIMATE_BATCH,
+    TOPIC_MEASUREMENT_BATCH,
+)
 from ssa_fusion.sim import scenarios, sky
 
 LIVE_SCENARIOS = [*(n for n, s in scenarios.SCENARIOS.items() if s.is_orbit), *sky.SKY_SCENARIOS]
@@ -155,7 +160,8 @@ consumer): sim time a billion times faster than the wall clock is no ceiling at 
 def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthetic: int,
                   sim_s: float, time_scale: float, seed: int, shards: int, surrogate: bool,
                   surrogate_extra: dict[str, Any], bag: Path | None,
-                  start: str = "", lockstep: bool = True) -> list[NodeSpec]:
+                  start: str = "", lockstep: bool = True,
+                  unlabelled: bool = False) -> list[NodeSpec]:
     """Return the processes of a catalog run, in start order.
 
     The recorder (`bag`, None: its default), `shards` catalog_filter and, with `surrogate`,
@@ -167,7 +173,10 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     estimates go as batches (``/ssa/measurement_batch``, ``/ssa/estimate_batch``), one
     measurement batch per shard per step. In lockstep the surrogates fit every gap
     (``fit_budget`` 0 unless `surrogate_extra` says otherwise). The same for
-    `ssa-fusion live --catalog` and `ros2 launch ssa_fusion catalog.launch.py`. ValueError
+    `ssa-fusion live --catalog` and `ros2 launch ssa_fusion catalog.launch.py`. With
+    `unlabelled`, the measurements go without object ids (the truth on
+    ``/ssa/detection_truth``) and the one filter shard associates them, publishing what it
+    associated on ``/ssa/measurement_associated``: the recorder hears both. ValueError
     with one line for a `start` that is not an epoch ssa_fusion represents.
     """
     if start:
@@ -180,6 +189,8 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     readers = ["recorder:" + TOPIC_MEASUREMENT_BATCH,
                f"recorder:{TOPIC_ESTIMATE_BATCH}={len(names) + len(gaps)}",
                *(f"{n}:{TOPIC_MEASUREMENT_BATCH}" for n in [*names, *fitting])]
+    if unlabelled:
+        readers += [f"recorder:{TOPIC_DETECTION_TRUTH}", f"recorder:{TOPIC_ASSOCIATED}={shards}"]
     recorder: dict[str, Any] = {"use_sim_time": True}
     if bag is not None:
         recorder["bag"] = str(bag)
@@ -200,7 +211,7 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
             "scenario": scenario.name, "catalog": str(Path(catalog).resolve()),
             "objects": objects, "synthetic": synthetic, "duration": float(sim_s),
             "time_scale": min(float(time_scale), MAX_TIME_SCALE), "seed": seed,
-            "start": start, **own, "shards": shards,
+            "start": start, **own, "shards": shards, "unlabelled": unlabelled,
             "lockstep": [*names, *gaps, "recorder"] if lockstep else [""],
             "wait_for": [f"{TOPIC_MEASUREMENT_BATCH}={shards + 1}",
                          f"{TOPIC_ESTIMATE_BATCH}={len(gaps) + 1}"],

@@ -203,7 +203,8 @@ def catalog_options_given(args: argparse.Namespace) -> list[str]:
              "--time-scale max": math.isinf(args.time_scale), "--open-loop": not args.lockstep,
              "--shards": args.shards != 1, "--no-surrogate": not args.surrogate,
              "--surrogate-param": bool(args.surrogate_param),
-             "--remote-shards": bool(args.remote_shards)}
+             "--remote-shards": bool(args.remote_shards),
+             "--unlabelled": bool(getattr(args, "unlabelled", False))}
     return [name for name, set_ in given.items() if set_]
 
 

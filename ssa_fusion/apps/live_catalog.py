@@ -18,6 +18,12 @@ their fits (made, refused, skipped for want of time) and the forecasts' error ag
 truth beside the filter's own coasting (its two-body + J2 model from the same pass end, the
 physics-only baseline) at the same epochs. ``catalog.json`` in the run directory holds the
 same numbers.
+
+With ``--unlabelled`` the radars report their detections without object ids (one filter
+shard associates them: `core.unlabelled`); the truth labels travel apart, on
+``/ssa/detection_truth``, and the summary adds the association's score from the bag
+(`evaluation.association`: accuracy, coverage, confirmed tracks) and scores each confirmed
+track's estimates against the SGP4 truth of its majority object.
 """
 
 from __future__ import annotations
@@ -43,15 +49,19 @@ from ssa_fusion.apps.args import discovery
 from ssa_fusion.apps.progress_lines import ProgressLines
 from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core import timescales
+from ssa_fusion.core.rows import MeasurementRows
 from ssa_fusion.core.types import UpdateSource
+from ssa_fusion.evaluation.association import detection_labels, score_association
 from ssa_fusion.nodes.defaults import CATALOG_FILTER, CATALOG_SURROGATE
-from ssa_fusion.nodes.diagnostics import Count
+from ssa_fusion.nodes.diagnostics import RECORDED, Count
 from ssa_fusion.nodes.progress import RECORDED_ESTIMATES, RECORDED_MEASUREMENTS
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.discovery import Discovery
 from ssa_fusion.ros.processes import Graph, ros_arguments
 from ssa_fusion.ros.topics import (
     CATALOG_QOS,
+    TOPIC_ASSOCIATED,
+    TOPIC_DETECTION_TRUTH,
     TOPIC_DIAGNOSTICS,
     TOPIC_ESTIMATE_BATCH,
     TOPIC_MEASUREMENT_BATCH,
@@ -87,6 +97,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "--static-peers; docs/MULTIHOST.md)")
     p.add_argument("--no-surrogate", dest="surrogate", action="store_false",
                    help="catalog: no catalog_surrogate (gap forecasts)")
+    p.add_argument("--unlabelled", action="store_true",
+                   help="catalog: the radars report detections without object ids; the "
+                        "filter associates them into tracks (needs --shards 1; "
+                        "docs/ASSOCIATION.md)")
     p.add_argument("--surrogate-param", action="append", default=[], metavar="NAME=VALUE",
                    help="catalog: a catalog_surrogate parameter (e.g. min_span=21600), "
                         "repeatable")
@@ -125,6 +139,9 @@ def args_problem(args: argparse.Namespace) -> str | None:
             return f"--start: {exc}"
     if not 1 <= args.shards <= 64:
         return "--shards must be in 1..64"
+    if getattr(args, "unlabelled", False) and args.shards != 1:
+        return ("--unlabelled: detections without object ids cannot be routed to shards by "
+                "object; one filter shard associates them all (--shards 1)")
     remote = getattr(args, "remote_shards", ())
     if remote and remote[-1] >= args.shards:
         return f"--remote-shards {remote[-1]}: there are shards 0..{args.shards - 1}"
@@ -210,11 +227,13 @@ def _count(status: dict[str, dict[str, str]], node: str, key: str) -> int:
     return int(v) if v.isdigit() else 0
 
 
-def unrecorded(status: dict[str, dict[str, str]], names: list[str], gaps: list[str]) -> int:
+def unrecorded(status: dict[str, dict[str, str]], names: list[str], gaps: list[str],
+               unlabelled: bool = False) -> int:
     """Return how many measurements and estimates are published but not yet recorded.
 
     As the nodes and the recorder report them (`status`: `_statuses`; `names`: the filter
-    shards, `gaps`: the surrogate shards).
+    shards, `gaps`: the surrogate shards); with `unlabelled`, the detections' truth and
+    the associated detections too.
     """
 
     def num(node: str, key: str) -> int:
@@ -223,8 +242,13 @@ def unrecorded(status: dict[str, dict[str, str]], names: list[str], gaps: list[s
     published = (num("sensor_sim", Count.PUBLISHED)
                  + sum(num(n, Count.PUBLISHED_SENSOR) for n in names)
                  + sum(num(g, Count.PUBLISHED_FORECAST) for g in gaps))
-    return published - num("recorder", RECORDED_MEASUREMENTS) \
-        - num("recorder", RECORDED_ESTIMATES)
+    recorded = num("recorder", RECORDED_MEASUREMENTS) + num("recorder", RECORDED_ESTIMATES)
+    if unlabelled:
+        published += num("sensor_sim", Count.PUBLISHED) \
+            + sum(num(n, Count.PUBLISHED_ASSOCIATED) for n in names)
+        recorded += num("recorder", RECORDED + TOPIC_DETECTION_TRUTH) \
+            + num("recorder", RECORDED + TOPIC_ASSOCIATED)
+    return published - recorded
 
 
 def _rss_kib(pid: int) -> int:
@@ -294,6 +318,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     s = catalog_scenario(args)
+    unlabelled = bool(getattr(args, "unlabelled", False))
     dirs = runs.run_dirs(args, f"catalog_{s.name}")
     if dirs is None:
         return 2
@@ -301,14 +326,16 @@ def run(args: argparse.Namespace) -> int:
     sim_s = args.duration * 3600.0 or s.duration_s
     specs = graphs.catalog_graph(s, args.catalog, args.objects, args.synthetic, sim_s,
                           args.time_scale, args.seed, args.shards, args.surrogate,
-                          catalog_surrogate_params(args), bag, args.start, args.lockstep)
+                          catalog_surrogate_params(args), bag, args.start, args.lockstep,
+                          unlabelled)
     names = [n.name for n in specs if n.executable == "catalog_filter"]
     gaps = [n.name for n in specs if n.executable == "catalog_surrogate"]
     remote = getattr(args, "remote_shards", ())
     graph = Graph(out / "logs", args.domain_id, discovery(args))
     radars = (f"radars of {s.sites_file} ({', '.join(r.station.name for r in s.radars)})"
               if s.sites_file else f"radars of {s.name}")
-    print(f"live: catalog {args.catalog} ({len(entries)} objects), {radars}, "
+    print(f"live: catalog {args.catalog} ({len(entries)} objects"
+          f"{', unlabelled detections' if unlabelled else ''}), {radars}, "
           f"{sim_s / 3600:g} h of sim time {pace(args)}, {args.shards} filter "
           f"shard(s){' with a surrogate each' if gaps else ''}; ROS domain {graph.domain_id}; "
           f"logs in {out}/logs", flush=True)
@@ -343,7 +370,8 @@ def run(args: argparse.Namespace) -> int:
                            "a last /diagnostics report of every shard")
             # and the recorder (last stopped, but stopped) has written all they published
             with contextlib.suppress(TimeoutError):  # the summary counts what it lacks
-                graph.wait_for(lambda: unrecorded(_statuses(diagnostics), names, gaps) == 0,
+                graph.wait_for(lambda: unrecorded(_statuses(diagnostics), names, gaps,
+                                                  unlabelled) == 0,
                                60.0, "the recorder to write every measurement and estimate")
             rss = {n: _rss_kib(started[n].popen.pid) for n in names + gaps if n in started}
     except TimeoutError as exc:  # its message holds every log's tail: the first line says what
@@ -363,11 +391,12 @@ def run(args: argparse.Namespace) -> int:
     wall = time.monotonic() - t_start
     sim_wall = runs.sensor_wall_times(out / "logs" / "sensor_sim.err")
     ran = None if sim_wall is None else (sim_wall[0], max(sim_wall[1], last_output))
-    summary = summarise(bag, entries, _statuses(diagnostics), names, rss, ran, sim_s, gaps)
+    summary = summarise(bag, entries, _statuses(diagnostics), names, rss, ran, sim_s, gaps,
+                        unlabelled)
     summary.update({"catalog": str(args.catalog), "objects": len(entries), "scenario": s.name,
                     "time_scale": args.time_scale if math.isfinite(args.time_scale) else "max",
                     "lockstep": args.lockstep,
-                    "shards": args.shards, "wall_s": wall,
+                    "shards": args.shards, "wall_s": wall, "unlabelled": unlabelled,
                     "remote_nodes": [n.name for n in specs if is_remote(n, remote)]})
     (out / "catalog.json").write_text(json.dumps(summary, indent=2))
     print(table(summary))
@@ -392,18 +421,24 @@ class ShardSummary(TypedDict):
 def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
               status: dict[str, dict[str, str]], names: list[str], rss: dict[str, int],
               sim_wall: tuple[float, float] | None, sim_s: float,
-              gap_nodes: list[str] | None = None) -> dict[str, Any]:
+              gap_nodes: list[str] | None = None, unlabelled: bool = False) -> dict[str, Any]:
     """Return the run's accounting (every measurement), speed, memory and accuracy.
 
     `sim_wall`: wall times (Unix s) of the first measurement published and of the last
-    estimate heard; `gap_nodes`: the catalog_surrogate processes.
+    estimate heard; `gap_nodes`: the catalog_surrogate processes; `unlabelled`: the
+    detections went without object ids (``association``: their score, `association`).
     """
     recorded: Counter[str] = Counter()  # rows
     estimates: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
     forecasts: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
-    for m in bagio.read_bag(bag, topics=[TOPIC_MEASUREMENT_BATCH, TOPIC_ESTIMATE_BATCH]):
+    labelled: dict[str, list[MeasurementRows]] = defaultdict(list)  # unlabelled runs
+    topics = [TOPIC_MEASUREMENT_BATCH, TOPIC_ESTIMATE_BATCH]
+    for m in bagio.read_bag(bag, topics=topics + ([TOPIC_DETECTION_TRUTH, TOPIC_ASSOCIATED]
+                                                  if unlabelled else [])):
         recorded[m.topic] += len(m.msg.object_id)
-        if m.topic == TOPIC_ESTIMATE_BATCH:
+        if m.topic in (TOPIC_DETECTION_TRUTH, TOPIC_ASSOCIATED):
+            labelled[m.topic].append(messages.measurement_batch_from_msg(m.msg))
+        elif m.topic == TOPIC_ESTIMATE_BATCH:
             e = messages.estimate_batch_from_msg(m.msg)
             into = forecasts if e.update_source == UpdateSource.FORECAST else estimates
             for oid, t, x in zip(e.object_id, e.t.tolist(), e.x, strict=True):
@@ -437,6 +472,18 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
     # every received measurement ends refused at the door, consumed by the bank, or dropped
     unaccounted = sum(p["received"] - p["refused"] - p["consumed"] for p in per_shard.values())
     fused = sum(p["estimates"] for p in per_shard.values())
+    score, lost_association = None, 0
+    if unlabelled:
+        score = association(labelled[TOPIC_DETECTION_TRUTH], labelled[TOPIC_ASSOCIATED],
+                            set(estimates))
+        associated = sum(num(n, Count.PUBLISHED_ASSOCIATED) for n in names)
+        lost_association = abs(published - recorded[TOPIC_DETECTION_TRUTH]) \
+            + abs(associated - recorded[TOPIC_ASSOCIATED])
+        score.update({"associated_published": associated,
+                      "associated_recorded": recorded[TOPIC_ASSOCIATED],
+                      "truth_recorded": recorded[TOPIC_DETECTION_TRUTH]})
+        estimates = by_owner(estimates, score["owner"])
+        forecasts = by_owner(forecasts, score["owner"])
     err = position_errors(entries, estimates)
     ran = None if sim_wall is None else sim_wall[1] - sim_wall[0]
     n = max(len(entries), 1)
@@ -462,7 +509,8 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
         "dropped": sum(p["dropped"] for p in per_shard.values()),
         "unaccounted": unaccounted,
         "lost_measurements": abs(published - recorded[TOPIC_MEASUREMENT_BATCH])
-        + abs(published - received) + abs(unaccounted),
+        + abs(published - received) + abs(unaccounted) + lost_association,
+        "association": score,
         "lost_estimates": max(fused - recorded[TOPIC_ESTIMATE_BATCH], 0),
         "objects_with_estimates": len(estimates),
         "sim_s": sim_s, "sim_wall_s": ran,
@@ -474,6 +522,35 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
                               "p95": float(np.percentile(err, 95)) if err.size else None,
                               "estimates": int(err.size)},
     }
+
+
+def association(truth: list[MeasurementRows], associated: list[MeasurementRows],
+                confirmed: set[str]) -> dict[str, Any]:
+    """Return the association's score (`evaluation.association`) of a bag's rows.
+
+    `truth`: the detections with their objects (``/ssa/detection_truth``); `associated`:
+    with their track ids (``/ssa/measurement_associated``); `confirmed`: the ids of the
+    tracks with estimates. ValueError for an associated detection the truth lacks.
+    """
+    if not truth:
+        return score_association([], [], confirmed).as_dict()
+    rows = MeasurementRows.concat(truth)
+    labels = detection_labels(rows, MeasurementRows.concat(associated)) if associated \
+        else [""] * len(rows)
+    return score_association(rows.object_id, labels, confirmed).as_dict()
+
+
+def by_owner(rows: dict[str, list[tuple[float, np.ndarray]]],
+             owner: dict[str, str]) -> dict[str, list[tuple[float, np.ndarray]]]:
+    """Return track id -> (t, x) list as object id -> (t, x) list by each track's object.
+
+    Tracks of no object (`owner` lacks them) are left out.
+    """
+    out: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
+    for track, values in rows.items():
+        if track in owner:
+            out[owner[track]] += values
+    return out
 
 
 def table(s: dict[str, Any]) -> str:
@@ -502,6 +579,16 @@ def table(s: dict[str, Any]) -> str:
         rows.append(f"{n}: {p['objects']} objects, {p['received']} received, "
                     f"{p['estimates']} estimates, {rss(n, p['rss_mib'])}, bank "
                     f"{p['bank_bytes_per_object']} B/object")
+    a = s.get("association")
+    if a:
+        rows.append(
+            f"association of {a['detections']} unlabelled detections: accuracy "
+            f"{a['accuracy']:.4f} (of the {a['in_confirmed']} in confirmed tracks, those of "
+            f"the track's majority object), coverage {a['coverage']:.4f}; "
+            f"{a['confirmed_tracks']} confirmed tracks for {a['objects_with_track']} of "
+            f"{a['objects']} objects, {a['duplicate_tracks']} duplicates; associated "
+            f"detections published {a['associated_published']}, recorded "
+            f"{a['associated_recorded']}; truth recorded {a['truth_recorded']}")
     pe = s["position_error_km"]
     if pe["median"] is not None:
         rows.append(f"position error against the SGP4 truth: median {pe['median']:.3f} km, "

@@ -23,6 +23,12 @@ Measurements whose ``shard_key`` lies in it. The other shards' measurements neve
 K processes with shard 0..K-1 cover every object exactly once, on one host or several in
 one ROS domain.
 
+Unlabelled detections (rows whose ``object_id`` is empty, a radar's scans) are associated
+with tracks (`nodes.unlabelled`, `core.unlabelled`): the confirmed tracks' estimates go out
+on ``/ssa/estimate_batch`` under their track ids, the associated detections on
+``/ssa/measurement_associated``. They need one shard (``shards`` 1): with several, they are
+refused (``rejected_unlabelled_sharded``).
+
     ros2 run ssa_fusion catalog_filter --ros-args -p use_sim_time:=true \
         -p station:=radar_network -p shards:=2 -p shard:=0 -r __node:=catalog_filter_0
 """
@@ -36,10 +42,11 @@ import numpy as np
 
 from ssa_fusion.core import validation
 from ssa_fusion.core.rows import EstimateRows, MeasurementRows
-from ssa_fusion.core.site_file import load_station_map
+from ssa_fusion.core.site_file import load_sites, load_station_map
 from ssa_fusion.core.stations import network_stations
 from ssa_fusion.core.track_bank import BankResult, TrackBank
 from ssa_fusion.core.types import Cause, Kind, Measurement, Source, UpdateSource
+from ssa_fusion.core.unlabelled import is_unlabelled
 from ssa_fusion.core.validation import id_problem, measurement_problem
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.base import SsaNode
@@ -70,6 +77,7 @@ from ssa_fusion.nodes.shards import (
     shard_range,
     shard_rows,
 )
+from ssa_fusion.nodes.unlabelled import UnlabelledRows, sharded_problem
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import EstimateBatch, MeasurementBatch, Message
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
@@ -127,6 +135,10 @@ class CatalogFilterNode(SsaNode):
         self.lo, self.hi = shard_range(self.shard, self.shards)
         self.diag.status["shard"] = f"{self.shard}/{self.shards} keys [{self.lo}, {self.hi}]"
         self.pub = self.create_publisher(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
+        sites = p.text("sites")
+        self.unlabelled = UnlabelledRows(self, self.diag, self.options, self.stations,
+                                         load_sites(sites) if sites else {},
+                                         (self.lo, self.hi))
         cft = content_filter(self.shard, self.shards)
         self.sub = self.subscribe(MeasurementMsg, TOPIC_MEASUREMENT, self.on_measurement,
                                   CATALOG_QOS, content_filter=cft)
@@ -169,6 +181,7 @@ class CatalogFilterNode(SsaNode):
     def reset(self) -> None:
         """Forget every track and what waits for the next batch."""
         self.bank = self.new_bank()
+        self.unlabelled.reset()
         self.diag.counts[Count.DROPPED] += len(self._pending) + sum(map(len, self._pending_rows))
         self._pending.clear()
         self._pending_rows.clear()
@@ -199,6 +212,8 @@ class CatalogFilterNode(SsaNode):
             self.diag.count(Cause(cause), reason)
             return False
         why = shard_problem(msg.shard_key, msg.object_id, self.shard, self.shards)
+        if not why and not msg.object_id and self.shards > 1:
+            why = (NodeCause.REJECTED_UNLABELLED_SHARDED, sharded_problem(self.shards))
         if why:
             other = why[0] == NodeCause.IGNORED_OTHER_SHARD
             self.diag.count(*why)
@@ -266,10 +281,12 @@ class CatalogFilterNode(SsaNode):
         bad_key, other = rows_shard_problems(rows.shard_key, rows.object_id, self.shard,
                                              self.shards)
         unknown = ~np.isin(np.asarray(rows.frame_id, dtype=object), list(self.stations))
+        unrouted = is_unlabelled(rows.object_id) & (self.shards > 1)
         for bad, why in ((rows.source != Source.SENSOR, Cause.REJECTED_SOURCE),
                          (problems == Cause.REJECTED_ID, Cause.REJECTED_ID),
                          (bad_key, NodeCause.REJECTED_SHARD_KEY),
                          (other, NodeCause.IGNORED_OTHER_SHARD),
+                         (unrouted, NodeCause.REJECTED_UNLABELLED_SHARDED),
                          (problems != "", problems),
                          (unknown, Cause.REJECTED_FRAME)):
             free = bad & (cause == "")
@@ -287,6 +304,8 @@ class CatalogFilterNode(SsaNode):
         if cause == Cause.REJECTED_SOURCE:
             return (f"source {rows.source[i]} on {TOPIC_MEASUREMENT_BATCH}, which carries only "
                     "sensor data")
+        if cause == NodeCause.REJECTED_UNLABELLED_SHARDED:
+            return sharded_problem(self.shards)
         if cause in (NodeCause.REJECTED_SHARD_KEY, NodeCause.IGNORED_OTHER_SHARD):
             why = shard_problem(key, oid, self.shard, self.shards)
             return why[1] if why else ""
@@ -337,6 +356,8 @@ class CatalogFilterNode(SsaNode):
         """
         self.replay_held()
         batch = self._pending_batch()
+        if batch is not None:
+            batch = self.unlabelled.take(batch, self.publish_estimates)
         if batch is None:
             return
         try:
@@ -350,14 +371,17 @@ class CatalogFilterNode(SsaNode):
         self.diag.counts[Count.EVICTED] = self.bank.evicted
         if res.fused.size:
             ids = batch.take(res.fused).object_id
-            rows = EstimateRows(batch.t[res.fused], ids, res.x, res.P, res.nis,
-                                UpdateSource.SENSOR, messages.shard_keys(ids))
-            most = self.params.integer("batch_rows")
-            for part in np.array_split(np.arange(len(rows)), -(-len(rows) // most)):
-                self.pub.publish(messages.estimate_batch_to_msg(rows.take(part),
-                                                                (self.lo, self.hi)))
+            self.publish_estimates(EstimateRows(batch.t[res.fused], ids, res.x, res.P,
+                                                res.nis, UpdateSource.SENSOR))
         self.diag.counts[Count.PUBLISHED_SENSOR] += int(res.fused.size)
         self._report(len(batch))
+
+    def publish_estimates(self, rows: EstimateRows) -> None:
+        """Publish `rows` (their keys set from their ids) in batches of ``batch_rows``."""
+        rows.shard_key = messages.shard_keys(rows.object_id)
+        most = self.params.integer("batch_rows")
+        for part in np.array_split(np.arange(len(rows)), -(-len(rows) // most)):
+            self.pub.publish(messages.estimate_batch_to_msg(rows.take(part), (self.lo, self.hi)))
 
     def _count_causes(self, res: BankResult, batch: MeasurementRows) -> None:
         """Count the bank's causes (``iod_pending`` silently), logging the first of each."""

@@ -81,6 +81,7 @@ class SensorSimDefaults:
     lockstep_step: float = 300.0
     lockstep_timeout: float = 30.0
     batch_rows: int = 20_000
+    unlabelled: bool = False
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,7 @@ class NodeCause(enum.StrEnum):
     REJECTED_OBJECT_ID = "rejected_object_id"
     IGNORED_NOT_SENSOR = "ignored_not_sensor"
     CONTENT_FILTER_UNAVAILABLE = "content_filter_unavailable"
+    REJECTED_UNLABELLED_SHARDED = "rejected_unlabelled_sharded"
 
 
 FINAL_REPORT_WAIT_S = 1.0
@@ -67,6 +68,7 @@ class Count(enum.StrEnum):
     SCENE_UPDATES = "scene_updates"
     LOCKSTEP_TIMEOUTS = "lockstep_timeouts"
     EVICTED = "evicted"
+    PUBLISHED_ASSOCIATED = "published_associated"
 
 
 PUBLISHED_BY_SOURCE = (Count.PUBLISHED_PREDICTION, Count.PUBLISHED_SENSOR,

@@ -7,6 +7,8 @@ Propagates the scenario's true orbit (two-body + J2, drag, or SGP4/SDP4), and pu
   (lockstep) or tick (open loop) one batch per shard key range of `shards`;
 * ``/ssa/withheld``: what they would have measured during a scheduled outage (evaluation
   only);
+* ``/ssa/detection_truth``: a catalog run with `unlabelled`: the detections with their true
+  object ids (evaluation only; the measurement batches carry none: `core.unlabelled`);
 * ``/ssa/truth`` (ssa_fusion_msgs/StateEstimate, zero covariance): the true state;
 * ``/clock``: sim time, UTC (Unix seconds), advancing `time_scale` sim s per wall s; for
   a catalog with ``lockstep`` consumers, by ``lockstep_step`` once they have taken the last
@@ -34,6 +36,7 @@ from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core import timescales, types
 from ssa_fusion.core.frames import Frame
 from ssa_fusion.core.rows import MeasurementRows
+from ssa_fusion.core.unlabelled import without_labels
 from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S
 from ssa_fusion.nodes import parameters
 from ssa_fusion.nodes.base import SsaNode
@@ -67,6 +70,7 @@ from ssa_fusion.ros.topics import (
     CATALOG_QOS,
     DATA_QOS,
     TOPIC_CLOCK,
+    TOPIC_DETECTION_TRUTH,
     TOPIC_MEASUREMENT,
     TOPIC_MEASUREMENT_BATCH,
     TOPIC_TRUTH,
@@ -192,6 +196,17 @@ def _step(value: ParamValue) -> str | None:
     return None if ok else f"must be in (0, {MAX_CLOCK_LEAD_S / 2:g}]"
 
 
+def _unlabelled_needs_a_catalog_of_one_shard(values: Values) -> str | None:
+    if not values["unlabelled"]:
+        return None
+    if not values["catalog"]:
+        return "unlabelled detections are a catalog's (`catalog`)"
+    if values["shards"] != 1:
+        return ("unlabelled detections carry no object id to route them by: one filter "
+                "shard takes them all (`shards` 1)")
+    return None
+
+
 def _lockstep_needs_a_catalog(values: Values) -> str | None:
     names = values["lockstep"]
     assert isinstance(names, list)
@@ -297,7 +312,12 @@ PARAMETERS = ParameterTable("sensor_sim", (
     Param("lockstep_timeout", SENSOR_SIM.lockstep_timeout,
           "lockstep: wall time a step waits for its consumers before it goes on without "
           "them (counted `lockstep_timeouts`, and logged)", unit="wall s", check=POSITIVE),
-), rules=(_needs_sky("catalog", "its radars observe the catalog"),
+    Param("unlabelled", SENSOR_SIM.unlabelled,
+          "catalog: publish each scan's detections as a radar reports them, without object "
+          "ids (`object_id` '', `shard_key` 0: `core.unlabelled`); their true ids go to "
+          "`/ssa/detection_truth` (evaluation only); needs `shards` 1"),
+), rules=(Rule(("unlabelled", "catalog", "shards"), _unlabelled_needs_a_catalog_of_one_shard),
+          _needs_sky("catalog", "its radars observe the catalog"),
           Rule(("lockstep", "catalog"), _lockstep_needs_a_catalog),
           _needs_sky("start", "a paper scenario keeps the paper's epoch"),
           _needs_sky("sites", "its object is what the sites observe"),
@@ -373,10 +393,15 @@ class SensorSim(SsaNode):
         self._next_wait_log = time.monotonic() + 5.0  # quiet while discovery runs
         self.wall0: float | None = None
         self.lockstep: Lockstep | None = None
+        self.unlabelled = p.flag("unlabelled")
+        self.pub_detection_truth = self.create_publisher(MeasurementBatch, TOPIC_DETECTION_TRUTH,
+                                                         CATALOG_QOS) if self.unlabelled else None
         if self.catalog is not None and any(p.texts("lockstep")):
-            keys = self.catalog_keys.astype(np.int64)
-            self.lockstep = Lockstep(self, [n for n in p.texts("lockstep") if n],
-                                     keys[self.catalog.obj], p.number("lockstep_timeout"))
+            keys = self.catalog_keys.astype(np.int64)[self.catalog.obj]
+            if self.unlabelled:  # what the batches carry: key 0
+                keys = np.zeros_like(keys)
+            self.lockstep = Lockstep(self, [n for n in p.texts("lockstep") if n], keys,
+                                     p.number("lockstep_timeout"))
         self.lockstep_step = p.number("lockstep_step")
         self.sim_now = float(self.times[0])  # lockstep: the end of the last step published
         self.clock_behind = False  # lockstep: its clock waits until its measurements are taken
@@ -483,7 +508,8 @@ class SensorSim(SsaNode):
         matched on /diagnostics.
         """
         own = {p.topic_name: p for p in (self.pub_clock, self.pub_meas, self.pub_withheld,
-                                         self.pub_truth, self.pub_batch)}
+                                         self.pub_truth, self.pub_batch,
+                                         self.pub_detection_truth) if p is not None}
         short = []
         for item in self.wait_for:
             if not item:
@@ -601,7 +627,8 @@ class SensorSim(SsaNode):
 
         Their epochs are at or before the clock published (open loop), or at most one
         `lockstep_step` after it (lockstep). A range with no measurement gets no batch; one
-        with more than ``batch_rows`` gets several, in epoch order.
+        with more than ``batch_rows`` gets several, in epoch order. With `unlabelled`, each
+        batch goes without its object ids, and with them on ``/ssa/detection_truth``.
         """
         obs = self.catalog
         if obs is None or stop <= start:
@@ -618,16 +645,21 @@ class SensorSim(SsaNode):
         for k in np.unique(shard).tolist():  # per shard, rows in epoch order, in batches
             mine = np.flatnonzero(shard == k)
             for part in np.array_split(mine, -(-mine.size // most)):
-                self.pub_batch.publish(messages.measurement_batch_to_msg(rows.take(part),
-                                                                         ranges[k]))
+                batch = rows.take(part)
+                if self.pub_detection_truth is not None:
+                    self.pub_detection_truth.publish(
+                        messages.measurement_batch_to_msg(batch, ranges[k]))
+                    batch = without_labels(batch)
+                self.pub_batch.publish(messages.measurement_batch_to_msg(batch, ranges[k]))
         self.diag.counts[Count.PUBLISHED] += stop - start
 
     def done(self) -> None:
         """End the run: wait for the readers' acknowledgements, report, exit 0."""
         self.finished = True
         for pub in (self.pub_meas, self.pub_batch, self.pub_withheld, self.pub_truth,
-                    self.pub_clock):
-            pub.wait_for_all_acked(Duration(seconds=5.0))
+                    self.pub_clock, self.pub_detection_truth):
+            if pub is not None:
+                pub.wait_for_all_acked(Duration(seconds=5.0))
         self.diag.publish_last()
         self.get_logger().info(
             f"schedule done: {self.diag.counts[Count.PUBLISHED]} measurements, "

@@ -34,6 +34,13 @@ TOPIC_MEASUREMENT_BATCH = "/ssa/measurement_batch"
 """A catalog's measurements as ssa_fusion_msgs/MeasurementBatch (many rows a message)."""
 TOPIC_ESTIMATE_BATCH = "/ssa/estimate_batch"
 """A catalog's estimates and forecasts as ssa_fusion_msgs/EstimateBatch."""
+TOPIC_DETECTION_TRUTH = "/ssa/detection_truth"
+"""For evaluation only, never fused: the simulator's unlabelled detections with their true
+object ids (MeasurementBatch; each batch the rows of one on `TOPIC_MEASUREMENT_BATCH`, in
+the same order)."""
+TOPIC_ASSOCIATED = "/ssa/measurement_associated"
+"""The unlabelled detections the catalog_filter placed in a track or tracklet, each row's
+``object_id`` the track's id (MeasurementBatch; `core.unlabelled`)."""
 TOPIC_FORECAST = "/ssa/forecast"
 TOPIC_ESTIMATE = "/ssa/estimate"
 TOPIC_SMOOTHED = "/ssa/estimate_smoothed"
