@@ -55,6 +55,7 @@ from ssa_fusion.evaluation.association import detection_labels, score_associatio
 from ssa_fusion.nodes.defaults import CATALOG_FILTER, CATALOG_SURROGATE
 from ssa_fusion.nodes.diagnostics import RECORDED, Count
 from ssa_fusion.nodes.progress import RECORDED_ESTIMATES, RECORDED_MEASUREMENTS
+from ssa_fusion.nodes.unlabelled import EVENT_PREFIX, FATE_PREFIX
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.discovery import Discovery
 from ssa_fusion.ros.processes import Graph, ros_arguments
@@ -416,6 +417,9 @@ class ShardSummary(TypedDict):
     rss_mib: float
     bank_bytes_per_object: str
     object_ids: list[str]
+    association_counts: dict[str, int]
+    """Unlabelled detections: ``detection_*``, ``association_*`` and
+    ``published_associated`` (`nodes.unlabelled`)."""
 
 
 def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
@@ -462,7 +466,11 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
                             "objects": int(st.get("objects", "0") or 0),
                             "rss_mib": rss.get(shard, 0) / 1024.0,
                             "bank_bytes_per_object": st.get("bank_bytes_per_object", ""),
-                            "object_ids": [x for x in st.get("object_ids", "").split(",") if x]}
+                            "object_ids": [x for x in st.get("object_ids", "").split(",") if x],
+                            "association_counts": {
+                                k: v for k, v in counts.items()
+                                if k.startswith((FATE_PREFIX, EVENT_PREFIX))
+                                or k == Count.PUBLISHED_ASSOCIATED}}
         for k, v in counts.items():
             if k.startswith(("rejected_", "iod_", "reinitialised", "internal_error")):
                 causes[k] += v

@@ -161,6 +161,8 @@ class RowAssociator:
         self._log = _FusionLog(self.associator.bank, dict(stations))
         self.associator.bank = self._log  # the same bank, which keeps what it fused
         self.masks = {name: float(masks_rad.get(name, 0.0)) for name in stations}
+        self._names = list(stations)
+        self._index = {name: i for i, name in enumerate(self._names)}
 
     def tracks(self, status: TrackStatus) -> int:
         """Return how many tracks have `status`."""
@@ -169,24 +171,22 @@ class RowAssociator:
     def process(self, rows: MeasurementRows) -> RowsOutcome:
         """Associate `rows` (every one unlabelled, of a station of the network), scan by scan.
 
-        Scans go in epoch order, a station's before the next's at one epoch (the order of
-        first appearance in `rows`).
+        Scans go in epoch order, at one epoch in the network's order of stations: the
+        same scans in any cut of the rows into calls give the same tracks. KeyError for a
+        station not of the network.
         """
         assoc, log = self.associator, self._log
         before = Counter(assoc.counts)
         out = RowsOutcome(_empty_estimates(), rows.take(np.zeros(0, np.int64)))
         if not len(rows):
             return out
-        names, station = np.unique(np.asarray(rows.frame_id, dtype=object),
-                                   return_inverse=True)
-        first = np.full(names.size, len(rows))
-        np.minimum.at(first, station, np.arange(len(rows)))
-        rank = np.argsort(np.argsort(first))[station]  # stations by first appearance
-        order = np.lexsort((rank, rows.t))
-        cut = np.flatnonzero((np.diff(rows.t[order]) != 0) | (np.diff(rank[order]) != 0)) + 1
+        station = np.array([self._index[f] for f in rows.frame_id], dtype=np.int64)
+        order = np.lexsort((station, rows.t))
+        cut = np.flatnonzero((np.diff(rows.t[order]) != 0)
+                             | (np.diff(station[order]) != 0)) + 1
         estimates, kept, ids = [], [], []
         for scan in np.split(order, cut):
-            name = str(names[station[scan[0]]])
+            name = self._names[station[scan[0]]]
             log.log.clear()
             res = assoc.process_scan(name, rows.t[scan], rows.z[scan], rows.R[scan],
                                      self.masks[name])
