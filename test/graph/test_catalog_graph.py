@@ -33,9 +33,10 @@ from ssa_fusion.ros import bagio, messages
 
 
 def _rows(bag: Path, topic: str) -> list:
-    """The rows of every batch of `topic` in `bag` (MeasurementRows or EstimateRows)."""
-    convert = {"/ssa/measurement_batch": messages.measurement_batch_from_msg,
-               "/ssa/estimate_batch": messages.estimate_batch_from_msg}[topic]
+    """The rows of every batch of `topic` in `bag` (EstimateRows of /ssa/estimate_batch,
+    MeasurementRows of the measurement batch topics)."""
+    convert = (messages.estimate_batch_from_msg if topic == "/ssa/estimate_batch"
+               else messages.measurement_batch_from_msg)
     return [convert(m.msg) for m in bagio.read_bag(bag, topics=[topic])]
 
 

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from ssa_fusion_msgs.msg import MeasurementBatch
+from test_catalog_graph import _rows
 from test_faults import Diag, publisher
 
 from ssa_fusion.apps import live_catalog
@@ -29,17 +30,11 @@ from ssa_fusion.core.stations import network_stations
 from ssa_fusion.core.unlabelled import RowAssociator, elevation_masks, without_labels
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
-from ssa_fusion.ros import bagio, messages
+from ssa_fusion.ros import messages
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"
 OBJECTS = 4
 STATIONS = "millstone,tira,altair"  # the radars of iss_network
-
-
-def _rows(bag: Path, topic: str) -> list:
-    convert = (messages.estimate_batch_from_msg if topic == "/ssa/estimate_batch"
-               else messages.measurement_batch_from_msg)
-    return [convert(m.msg) for m in bagio.read_bag(bag, topics=[topic])]
 
 
 @pytest.fixture(scope="module")
