@@ -418,6 +418,7 @@ class ShardSummary(TypedDict):
     bank_bytes_per_object: str
     object_ids: list[str]
     association_counts: dict[str, int]
+    confirmed_tracks: int
     """Unlabelled detections: ``detection_*``, ``association_*`` and
     ``published_associated`` (`nodes.unlabelled`)."""
 
@@ -470,7 +471,8 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
                             "association_counts": {
                                 k: v for k, v in counts.items()
                                 if k.startswith((FATE_PREFIX, EVENT_PREFIX))
-                                or k == Count.PUBLISHED_ASSOCIATED}}
+                                or k == Count.PUBLISHED_ASSOCIATED},
+                            "confirmed_tracks": int(st.get("confirmed_tracks", "0") or 0)}
         for k, v in counts.items():
             if k.startswith(("rejected_", "iod_", "reinitialised", "internal_error")):
                 causes[k] += v
@@ -584,9 +586,12 @@ def table(s: dict[str, Any]) -> str:
         return "RSS on its own host" if node in remote else f"RSS {mib:.0f} MiB"
 
     for n, p in s["per_shard"].items():
-        rows.append(f"{n}: {p['objects']} objects, {p['received']} received, "
-                    f"{p['estimates']} estimates, {rss(n, p['rss_mib'])}, bank "
-                    f"{p['bank_bytes_per_object']} B/object")
+        tracks = (f", {p['confirmed_tracks']} confirmed tracks of unlabelled detections"
+                  if p["association_counts"] else "")
+        bank = (f", bank {p['bank_bytes_per_object']} B/object"
+                if p["bank_bytes_per_object"] else "")
+        rows.append(f"{n}: {p['objects']} objects{tracks}, {p['received']} received, "
+                    f"{p['estimates']} estimates, {rss(n, p['rss_mib'])}{bank}")
     a = s.get("association")
     if a:
         rows.append(

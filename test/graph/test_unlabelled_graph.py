@@ -61,7 +61,7 @@ def test_nothing_is_lost_and_every_detection_is_accounted_for(run):
     assert sum(fates.values()) == s["published"] == c["association_detections"]
     assert c["detection_track"] == c["association_assigned"] > 0
     assert c["published_associated"] == s["published"] - c.get("detection_refused", 0)
-    assert c["association_track_confirmed"] == OBJECTS
+    assert c["association_track_confirmed"] == OBJECTS == shard["confirmed_tracks"]
     a = s["association"]
     assert a["associated_published"] == a["associated_recorded"] == c["published_associated"]
     assert a["truth_recorded"] == s["published"]
