@@ -3,6 +3,7 @@
     ros2 launch ssa_fusion catalog.launch.py [catalog:=FILE] [objects:=N] [synthetic:=N]
         [duration:=HOURS] [shards:=K] [surrogate:=true|false] [scenario:=NAME]
         [time_scale:=X] [lockstep:=true|false] [seed:=N] [bag:=DIR]
+        [unlabelled:=true|false]
 
 The same processes and parameters as ``ssa-fusion live --catalog`` (`apps.live_catalog.
 catalog_graph`): the recorder, ``shards`` catalog_filter processes each owning the objects of
@@ -44,6 +45,8 @@ ARGUMENTS = {
                 "lost on a loaded machine); false: open loop at time_scale",
     "seed": "measurement noise (and synthetic catalog) seed",
     "bag": "recorder output directory, must not exist (default: out/bags/ssa_<date>_<time>)",
+    "unlabelled": "true: the radars report detections without object ids and the filter "
+                  "associates them into tracks (needs shards:=1); false: labelled",
 }
 """The launch arguments and their descriptions."""
 
@@ -65,7 +68,7 @@ def graph(context: Any) -> list[Any]:
     scenario = catalog_scenario(args["scenario"])
     if args["sites"]:
         scenario = scenario.with_sites(args["sites"])  # SiteFileError: one line
-    for flag in ("surrogate", "lockstep"):
+    for flag in ("surrogate", "lockstep", "unlabelled"):
         if args[flag] not in ("true", "false"):
             raise ValueError(f"{flag}:={args[flag]!r}: true or false")
     hours = _number(args, "duration", float, 0.0)
@@ -74,7 +77,7 @@ def graph(context: Any) -> list[Any]:
         _number(args, "synthetic", int, 0), hours * 3600.0 or scenario.duration_s,
         _number(args, "time_scale", float, 1e-9), _number(args, "seed", int, 0),
         _number(args, "shards", int, 1), args["surrogate"] == "true", {}, Path(args["bag"]),
-        args["start"], args["lockstep"] == "true")
+        args["start"], args["lockstep"] == "true", args["unlabelled"] == "true")
     nodes = {s.name: Node(package="ssa_fusion", executable=s.executable, name=s.name,
                           output="screen", parameters=[s.params]) for s in specs}
     return [*nodes.values(),
@@ -98,5 +101,6 @@ def generate_launch_description() -> LaunchDescription:
         "lockstep": "true",
         "seed": "0",
         "bag": default_bag(),
+        "unlabelled": "false",
     }
     return launch_description(ARGUMENTS, defaults, graph)

@@ -177,10 +177,14 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     `unlabelled`, the measurements go without object ids (the truth on
     ``/ssa/detection_truth``) and the one filter shard associates them, publishing what it
     associated on ``/ssa/measurement_associated``: the recorder hears both. ValueError
-    with one line for a `start` that is not an epoch ssa_fusion represents.
+    with one line for a `start` that is not an epoch ssa_fusion represents, or for
+    `unlabelled` with several `shards` (detections without ids have no shard to go to).
     """
     if start:
         timescales.parse_utc(start)
+    if unlabelled and shards != 1:
+        raise ValueError(f"unlabelled detections need one filter shard, not {shards}: they "
+                         "carry no object id to route them by")
     names = node_names(shards)
     gaps = node_names(shards, "catalog_surrogate") if surrogate else []
     # surrogates that fit the measurements hear them from the first, as the shards do

@@ -84,6 +84,16 @@ def test_without_surrogates_only_the_filter_shards_run(launch):
     assert nodes["sensor_sim"].kwargs["parameters"][0]["wait_for"][1] == "/ssa/estimate_batch=1"
 
 
+def test_unlabelled_detections_and_their_truth_are_recorded(launch):
+    nodes, _ = run_graph(launch, unlabelled="true")
+    sensor = nodes["sensor_sim"].kwargs["parameters"][0]
+    assert sensor["unlabelled"] is True
+    assert {"recorder:/ssa/detection_truth", "recorder:/ssa/measurement_associated=1"} <= \
+        set(sensor["wait_for_readers"])
+    nodes, _ = run_graph(launch)
+    assert nodes["sensor_sim"].kwargs["parameters"][0]["unlabelled"] is False
+
+
 @pytest.mark.parametrize(("given", "message"), [
     ({"scenario": "iss_j2_rae"}, "scenario 'iss_j2_rae' is not a real-sky scenario"),
     ({"shards": "0"}, "shards:='0' must be >= 1"),
@@ -92,6 +102,8 @@ def test_without_surrogates_only_the_filter_shards_run(launch):
     ({"surrogate": "maybe"}, "surrogate:='maybe': true or false"),
     ({"start": "2040-01-01"}, "is outside the range ssa_fusion represents"),
     ({"sites": "/nope/sites.yaml"}, "/nope/sites.yaml"),
+    ({"unlabelled": "yes"}, "unlabelled:='yes': true or false"),
+    ({"unlabelled": "true", "shards": "2"}, "unlabelled detections need one filter shard"),
 ])
 def test_bad_arguments_are_named(launch, given, message):
     with pytest.raises(ValueError, match=re.escape(message)):
