@@ -170,7 +170,8 @@ class CatalogFilterNode(SsaNode):
         return {SHARD: f"{self.shard}/{self.shards}",
                 TAKEN: c[Count.REFUSED] + c[Count.CONSUMED] + c[Count.DROPPED],
                 Count.RECEIVED: c[Count.RECEIVED],
-                Count.PUBLISHED_SENSOR: c[Count.PUBLISHED_SENSOR]}
+                Count.PUBLISHED_SENSOR: c[Count.PUBLISHED_SENSOR],
+                Count.PUBLISHED_ASSOCIATED: c[Count.PUBLISHED_ASSOCIATED]}
 
     def new_bank(self) -> TrackBank:
         """Return an empty bank of this shard's settings."""

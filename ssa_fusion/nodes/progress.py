@@ -31,7 +31,12 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from ssa_fusion.nodes.diagnostics import RECORDED, Count, wall_timer
 from ssa_fusion.nodes.shards import shard_range
 from ssa_fusion.ros.interfaces import DiagnosticStatus, KeyValue
-from ssa_fusion.ros.topics import TOPIC_ESTIMATE_BATCH, TOPIC_MEASUREMENT_BATCH
+from ssa_fusion.ros.topics import (
+    TOPIC_ASSOCIATED,
+    TOPIC_DETECTION_TRUTH,
+    TOPIC_ESTIMATE_BATCH,
+    TOPIC_MEASUREMENT_BATCH,
+)
 
 TOPIC_PROGRESS = "/lockstep"
 """Consumers' progress (``diagnostic_msgs/DiagnosticStatus``, name = node name)."""
@@ -59,6 +64,12 @@ RECORDED_MEASUREMENTS = RECORDED + TOPIC_MEASUREMENT_BATCH
 """The recorder's rows of measurement batches recorded."""
 RECORDED_ESTIMATES = RECORDED + TOPIC_ESTIMATE_BATCH
 """The recorder's rows of estimate batches recorded."""
+RECORDED_TRUTH = RECORDED + TOPIC_DETECTION_TRUTH
+"""The recorder's rows of unlabelled detections' truth recorded (reported once it records
+the topic: a run of unlabelled detections)."""
+RECORDED_ASSOCIATED = RECORDED + TOPIC_ASSOCIATED
+"""The recorder's rows of associated detections recorded (reported once it records the
+topic)."""
 
 
 class ProgressReporter:
@@ -117,7 +128,9 @@ def waiting(reports: Mapping[str, Mapping[str, str]], nodes: Sequence[str], sent
         The consumers to wait for: catalog_filter shards (they report `TAKEN`, `SHARD` and
         ``published_sensor``), catalog_surrogate shards (`TAKEN_ESTIMATES`, `SHARD`, the
         filter shard's estimates they wait for, and ``published_forecast``) and the recorder
-        (`RECORDED_MEASUREMENTS` and `RECORDED_ESTIMATES`, always both).
+        (`RECORDED_MEASUREMENTS` and `RECORDED_ESTIMATES`, always both; `RECORDED_TRUTH`, as
+        many as the measurements, and `RECORDED_ASSOCIATED`, the filters'
+        ``published_associated``, where it reports them).
     sent : int
         Measurements published so far.
     sent_by_shard : callable
@@ -130,6 +143,7 @@ def waiting(reports: Mapping[str, Mapping[str, str]], nodes: Sequence[str], sent
     mine = [reports.get(n, {}) for n in nodes]
     published = sum(_num(r, Count.PUBLISHED_SENSOR) + _num(r, Count.PUBLISHED_FORECAST)
                     for r in mine)
+    associated = sum(_num(r, Count.PUBLISHED_ASSOCIATED) for r in mine)
     estimates = {r[SHARD]: _num(r, Count.PUBLISHED_SENSOR) for r in mine if TAKEN in r}
     for name in nodes:
         r = reports.get(name)
@@ -154,6 +168,12 @@ def waiting(reports: Mapping[str, Mapping[str, str]], nodes: Sequence[str], sent
             if _num(r, RECORDED_ESTIMATES) < published:
                 out.append(f"{name} (recorded {_num(r, RECORDED_ESTIMATES)} of {published} "
                            "estimates)")
+            if RECORDED_TRUTH in r and _num(r, RECORDED_TRUTH) < sent:
+                out.append(f"{name} (recorded {_num(r, RECORDED_TRUTH)} of {sent} "
+                           "detections' truth)")
+            if RECORDED_ASSOCIATED in r and _num(r, RECORDED_ASSOCIATED) < associated:
+                out.append(f"{name} (recorded {_num(r, RECORDED_ASSOCIATED)} of {associated} "
+                           "associated detections)")
     return out
 
 

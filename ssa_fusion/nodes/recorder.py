@@ -42,7 +42,13 @@ from ssa_fusion.nodes.parameters import (
     ParamValue,
 )
 from ssa_fusion.nodes.process import EXIT_FAILED, finish
-from ssa_fusion.nodes.progress import RECORDED_ESTIMATES, RECORDED_MEASUREMENTS, ProgressReporter
+from ssa_fusion.nodes.progress import (
+    RECORDED_ASSOCIATED,
+    RECORDED_ESTIMATES,
+    RECORDED_MEASUREMENTS,
+    RECORDED_TRUTH,
+    ProgressReporter,
+)
 from ssa_fusion.ros.bagio import BagFullError, BagWriter, qos_from_rclpy
 from ssa_fusion.ros.interfaces import Message
 from ssa_fusion.ros.topics import DATA_DEPTH
@@ -126,10 +132,20 @@ class Recorder(SsaNode):
         self.failed: OSError | None = None  # why the bag cannot be written (then: exit 1)
         self.wall_timer(p.number("discover_period"), self.discover)
         self.wall_timer(p.number("flush_period"), self.flush)
-        self.progress = ProgressReporter(self, lambda: {
-            k: self.diag.counts[k] for k in (RECORDED_MEASUREMENTS, RECORDED_ESTIMATES)})
+        self.progress = ProgressReporter(self, self.recorded)
         self.get_logger().info(f"recording to {bag}")
         self.discover()
+
+    def recorded(self) -> dict[str, int]:
+        """Return the lockstep progress: the batches' rows recorded (`nodes.progress`).
+
+        Measurements and estimates always; the unlabelled detections' truth and the
+        associated detections once their topic is recorded.
+        """
+        keys = [RECORDED_MEASUREMENTS, RECORDED_ESTIMATES,
+                *(k for k in (RECORDED_TRUTH, RECORDED_ASSOCIATED)
+                  if k.removeprefix(RECORDED) in self._subs)]
+        return {k: self.diag.counts[k] for k in keys}
 
     def wanted(self, topic: str) -> bool:
         """Return True when `topic` is to be recorded."""

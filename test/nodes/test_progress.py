@@ -5,8 +5,10 @@ import numpy as np
 
 from ssa_fusion.nodes.progress import (
     CLOCK,
+    RECORDED_ASSOCIATED,
     RECORDED_ESTIMATES,
     RECORDED_MEASUREMENTS,
+    RECORDED_TRUTH,
     SHARD,
     TAKEN,
     TAKEN_ESTIMATES,
@@ -48,6 +50,18 @@ def test_each_shortfall_is_named():
     got = waiting(_reports(recorded=(11, 11)), NODES, 12, _sent([5, 7]))
     assert got == ["recorder (recorded 11 of 12 measurements)",
                    "recorder (recorded 11 of 12 estimates)"]
+
+
+def test_unlabelled_detections_wait_for_their_truth_and_associations_to_be_recorded():
+    reports = _reports()
+    reports["catalog_filter_0"]["published_associated"] = "3"
+    assert waiting(reports, NODES, 12, _sent([5, 7])) == []  # the recorder reports neither
+    reports["recorder"].update({RECORDED_TRUTH: "11", RECORDED_ASSOCIATED: "2"})
+    assert waiting(reports, NODES, 12, _sent([5, 7])) == [
+        "recorder (recorded 11 of 12 detections' truth)",
+        "recorder (recorded 2 of 3 associated detections)"]
+    reports["recorder"].update({RECORDED_TRUTH: "12", RECORDED_ASSOCIATED: "3"})
+    assert waiting(reports, NODES, 12, _sent([5, 7])) == []
 
 
 def test_the_next_step_waits_until_every_consumer_acted_on_the_clock():
