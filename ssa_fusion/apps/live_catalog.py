@@ -487,9 +487,14 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
         score = association(labelled[TOPIC_DETECTION_TRUTH], labelled[TOPIC_ASSOCIATED],
                             set(estimates))
         associated = sum(num(n, Count.PUBLISHED_ASSOCIATED) for n in names)
+        # every unlabelled row the banks took has a fate (`nodes.unlabelled`)
+        no_fate = consumed - sum(v for p in per_shard.values()
+                                 for k, v in p["association_counts"].items()
+                                 if k.startswith(FATE_PREFIX))
         lost_association = abs(published - recorded[TOPIC_DETECTION_TRUTH]) \
-            + abs(associated - recorded[TOPIC_ASSOCIATED])
-        score.update({"associated_published": associated,
+            + abs(associated - recorded[TOPIC_ASSOCIATED]) + abs(no_fate)
+        score.update({"detections_without_fate": no_fate,
+                      "associated_published": associated,
                       "associated_recorded": recorded[TOPIC_ASSOCIATED],
                       "truth_recorded": recorded[TOPIC_DETECTION_TRUTH]})
         estimates = by_owner(estimates, score["owner"])
@@ -599,7 +604,8 @@ def table(s: dict[str, Any]) -> str:
             f"{a['accuracy']:.4f} (of the {a['in_confirmed']} in confirmed tracks, those of "
             f"the track's majority object), coverage {a['coverage']:.4f}; "
             f"{a['confirmed_tracks']} confirmed tracks for {a['objects_with_track']} of "
-            f"{a['objects']} objects, {a['duplicate_tracks']} duplicates; associated "
+            f"{a['objects']} objects, {a['duplicate_tracks']} duplicates; detections "
+            f"without a fate {a['detections_without_fate']}; associated "
             f"detections published {a['associated_published']}, recorded "
             f"{a['associated_recorded']}; truth recorded {a['truth_recorded']}")
     pe = s["position_error_km"]

@@ -64,7 +64,7 @@ def test_nothing_is_lost_and_every_detection_is_accounted_for(run):
     assert c["association_track_confirmed"] == OBJECTS == shard["confirmed_tracks"]
     a = s["association"]
     assert a["associated_published"] == a["associated_recorded"] == c["published_associated"]
-    assert a["truth_recorded"] == s["published"]
+    assert a["truth_recorded"] == s["published"] and a["detections_without_fate"] == 0
 
 
 def test_each_object_has_exactly_one_confirmed_track_and_accuracy_is_one(run):
