@@ -165,6 +165,15 @@ class TrackBank:
                         for k, h, tk in zip(i.tolist(), hit.tolist(), t.tolist(), strict=True)])
         return np.swapaxes(out, -1, -2)
 
+    def warm_up(self) -> None:
+        """Load the compiled code of `process` now rather than in the first batch.
+
+        The EKF cycle's (`batch_ekf.BatchEKF.warm_up`) and the IOD's motion model, on one
+        made-up object; nothing is kept.
+        """
+        self.ekf.warm_up()
+        self._placeholder(np.array([7000.0, 0.0, 0.0, 0.0, 7.5, 0.0]), 60.0, 0.0)
+
     def __len__(self) -> int:
         """Return the number of objects heard of."""
         return len(self.object_ids)

@@ -163,8 +163,10 @@ class CatalogFilterNode(SsaNode):
     def new_bank(self) -> TrackBank:
         """Return an empty bank of this shard's settings."""
         p = self.params
-        return TrackBank(self.options, self.stations, max_objects=p.integer("max_objects"),
+        bank = TrackBank(self.options, self.stations, max_objects=p.integer("max_objects"),
                          evict_after_s=p.number("evict_after"))
+        bank.warm_up()  # its compiled code loaded before the first batch, not in it
+        return bank
 
     def reset(self) -> None:
         """Forget every track and what waits for the next batch."""
