@@ -243,7 +243,7 @@ class TrackBank:
         R : array_like (M, 3, 3)
             Noise covariances, km^2, rad^2.
         """
-        tt = np.array(t, dtype=float)  # copies: IOD batches keep measurements for later
+        tt = np.array(t, dtype=float)  # copies: the caller's arrays may change later
         zz = np.array(z, dtype=float).reshape(-1, 3)
         RR = np.array(R, dtype=float).reshape(-1, 3, 3)
         m = tt.size
@@ -275,15 +275,24 @@ class TrackBank:
         rank = np.empty(m, dtype=np.int64)
         rank[order] = np.arange(m) - start
         rot: tuple[Array, NDArray[np.intp]] | None = None  # the batch's, at its first round
+
+        def measurement(i: int) -> Measurement:
+            """Return row `i` as a Measurement for an IOD batch.
+
+            With its own z and R: the batch may keep it for hours, and views would keep the
+            whole batch's arrays alive with it.
+            """
+            return Measurement(float(tt[i]), zz[i].copy(), RR[i].copy(),
+                               kind=Kind.RANGE_AZ_EL, object_id=object_ids[i],
+                               frame_id=frame_ids[i])
+
         for k in range(int(rank.max(initial=-1)) + 1):
             idx = np.flatnonzero((rank == k) & (station >= 0))
             if not idx.size:
                 continue
             tracked = self.tracking[rows[idx]]
             for i in idx[~tracked].tolist():  # initial orbit determination, per object
-                started = self._initiate(int(rows[i]), Measurement(
-                    float(tt[i]), zz[i], RR[i], kind=Kind.RANGE_AZ_EL,
-                    object_id=object_ids[i], frame_id=frame_ids[i]))
+                started = self._initiate(int(rows[i]), measurement(i))
                 if isinstance(started, str):
                     cause[i] = started
                 else:
@@ -319,9 +328,7 @@ class TrackBank:
             limit = self.config.iod.reinit_after
             if limit:
                 for i in idx[gate & (self.gate_misses[r] >= limit)].tolist():
-                    cause[i] = self._reinitialise(int(rows[i]), Measurement(
-                        float(tt[i]), zz[i], RR[i], kind=Kind.RANGE_AZ_EL,
-                        object_id=object_ids[i], frame_id=frame_ids[i]))
+                    cause[i] = self._reinitialise(int(rows[i]), measurement(i))
             r_ok = r[ok]
             self.x[r_ok] = res.x[ok]
             self.P[r_ok] = res.P[ok]
@@ -331,7 +338,7 @@ class TrackBank:
             out_x.append(res.x[ok])
             out_P.append(res.P[ok])
             out_nis.append(res.nis[ok])
-        self._batch_t, self._iod_rotations = tt[:0], None
+        self._batch_t, self._iod_rotations = np.zeros(0), None  # not a view: tt goes
         if out_i:
             return BankResult(cause, np.concatenate(out_i), np.concatenate(out_x),
                               np.concatenate(out_P), np.concatenate(out_nis))
