@@ -190,6 +190,10 @@ def covariances_ok(R: np.ndarray) -> np.ndarray:
     The same test, vectorised: relative to each matrix's scale, asymmetry <= 1e-9 and
     eigenvalues >= -1e-12 of the largest in magnitude; all zeros is a covariance, a
     non-finite entry is not.
+
+    A matrix whose diagonal dominates its rows (``S_ii >= sum_j!=i |S_ij|``, as a diagonal
+    noise covariance does) has no eigenvalue below 0 (Gershgorin's circles), so it passes
+    the eigenvalue test without being decomposed; the others are decomposed.
     """
     R = np.asarray(R, dtype=float)
     scale = np.abs(R).max(axis=(1, 2), initial=0.0)
@@ -197,8 +201,13 @@ def covariances_ok(R: np.ndarray) -> np.ndarray:
     safe = np.where(finite & (scale > 0.0), scale, 1.0)
     Rn = np.where(finite[:, None, None], R, 0.0) / safe[:, None, None]
     sym = np.abs(Rn - Rn.transpose(0, 2, 1)).max(axis=(1, 2), initial=0.0) <= 1e-9
-    eig = np.linalg.eigvalsh(0.5 * (Rn + Rn.transpose(0, 2, 1)))
-    psd = eig[:, 0] >= -1e-12 * np.abs(eig).max(axis=1, initial=0.0)
+    S = 0.5 * (Rn + Rn.transpose(0, 2, 1))
+    diag = np.diagonal(S, axis1=1, axis2=2)
+    psd = (2.0 * diag >= np.abs(S).sum(axis=2)).all(axis=1)  # Gershgorin: no eigenvalue < 0
+    rest = np.flatnonzero(~psd)
+    if rest.size:
+        eig = np.linalg.eigvalsh(S[rest])
+        psd[rest] = eig[:, 0] >= -1e-12 * np.abs(eig).max(axis=1, initial=0.0)
     ok: np.ndarray = finite & ((scale == 0.0) | (sym & psd))
     return ok
 
