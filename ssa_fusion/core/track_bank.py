@@ -39,7 +39,7 @@ from . import frames
 from .batch_ekf import REASONS, BatchEKF, Code
 from .filter_options import FilterOptions
 from .frames import Station
-from .initiation import InitialState, OrbitInitiator
+from .initiation import InitialState, OrbitInitiator, finish_razel
 from .measurement import StationModels
 from .timescales import DAY_S, UNIX_EPOCH_JD
 from .types import Cause, Kind, Measurement
@@ -185,6 +185,13 @@ class TrackBank:
                                       np.array([t0]))
         return x1[0], F[0]
 
+    def _placeholder_many(self, x: np.ndarray, dt: np.ndarray,
+                          t0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Move K states (K, 6) as `_placeholder` moves one: (x (K, 6), F (K, 6, 6))."""
+        x1, F, _ = self.ekf.propagate(np.asarray(x, dtype=float), np.asarray(dt, dtype=float),
+                                      np.asarray(t0, dtype=float))
+        return x1, F
+
     def row(self, object_id: str, t: float = -math.inf) -> int:
         """Return the row of `object_id`, added (without a track) when new.
 
@@ -291,8 +298,10 @@ class TrackBank:
             if not idx.size:
                 continue
             tracked = self.tracking[rows[idx]]
-            for i in idx[~tracked].tolist():  # initial orbit determination, per object
-                started = self._initiate(int(rows[i]), measurement(i))
+            waiting = idx[~tracked].tolist()  # initial orbit determination, solved at once
+            answers = self._initiate_many([int(rows[i]) for i in waiting],
+                                          [measurement(i) for i in waiting])
+            for i, started in zip(waiting, answers, strict=True):
                 if isinstance(started, str):
                     cause[i] = started
                 else:
@@ -357,16 +366,43 @@ class TrackBank:
 
     def _initiate(self, row: int, m: Measurement) -> InitialState | str:
         """Feed `m` to the row's initiator: the initial state once solved, else the cause."""
-        init = self._initiators.get(row)
-        if init is None:
-            init = self._initiators[row] = OrbitInitiator(
-                self._placeholder, self.models, 6, self._iod_to_gcrs)
+        return self._initiate_many([row], [m])[0]
+
+    def _initiate_many(self, rows: list[int], ms: list[Measurement]) -> list[InitialState | str]:
+        """`_initiate` of distinct rows: the batches they complete solved at once.
+
+        `initiation.finish_razel`: one vectorised solution and one propagation for all;
+        each row's answer as `_initiate` alone would give it.
+        """
         iod = self.config.iod
-        out = init.add(m, iod.iod_samples, iod.p0_sigma, iod.iod_max_span_s)
-        if isinstance(out, tuple):
-            return out[0]
-        del self._initiators[row]
-        self.x[row], self.P[row], self.t[row] = out.x, out.P, out.t
-        self.stations_at_t[row] = station_bit(np.array([self.ekf.index[m.frame_id]]))[0]
-        self.tracking[row] = True
-        return out
+        answers: list[InitialState | str] = [Cause.IOD_PENDING] * len(rows)
+        complete: list[int] = []
+        initiators: list[OrbitInitiator] = []
+        batches: list[list[Measurement]] = []
+        for k, (row, m) in enumerate(zip(rows, ms, strict=True)):
+            init = self._initiators.get(row)
+            if init is None:
+                init = self._initiators[row] = OrbitInitiator(
+                    self._placeholder, self.models, 6, self._iod_to_gcrs)
+            got = init.collect(m, iod.iod_samples, iod.iod_max_span_s)
+            if isinstance(got, tuple):
+                answers[k] = got[0]
+            else:
+                complete.append(k)
+                initiators.append(init)
+                batches.append(got)
+        if not complete:
+            return answers
+        solved = finish_razel(initiators, batches, iod.p0_sigma, self._placeholder_many,
+                              self._iod_to_gcrs)
+        for k, out in zip(complete, solved, strict=True):
+            if isinstance(out, tuple):
+                answers[k] = out[0]
+                continue
+            row = rows[k]
+            del self._initiators[row]
+            self.x[row], self.P[row], self.t[row] = out.x, out.P, out.t
+            self.stations_at_t[row] = station_bit(np.array([self.ekf.index[ms[k].frame_id]]))[0]
+            self.tracking[row] = True
+            answers[k] = out
+        return answers
