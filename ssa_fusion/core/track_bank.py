@@ -276,7 +276,7 @@ class TrackBank:
             cause[i] = Cause.REJECTED_NONFINITE
             station[i] = -1  # out of every round
         # rank of each measurement among its object's in this batch: its round
-        order = np.lexsort((np.arange(m), rows))
+        order = np.argsort(rows, kind="stable")  # by row, then in batch order
         first = np.r_[True, rows[order][1:] != rows[order][:-1]]
         start = np.maximum.accumulate(np.where(first, np.arange(m), 0))
         rank = np.empty(m, dtype=np.int64)
@@ -293,8 +293,12 @@ class TrackBank:
                                kind=Kind.RANGE_AZ_EL, object_id=object_ids[i],
                                frame_id=frame_ids[i])
 
-        for k in range(int(rank.max(initial=-1)) + 1):
-            idx = np.flatnonzero((rank == k) & (station >= 0))
+        # each round's measurements in batch order: the live ones sorted by round, once
+        live = np.flatnonzero(station >= 0)
+        by_round = live[np.argsort(rank[live], kind="stable")]
+        ends = np.searchsorted(rank[by_round], np.arange(int(rank.max(initial=-1)) + 2))
+        for k in range(ends.size - 1):
+            idx = by_round[ends[k]:ends[k + 1]]
             if not idx.size:
                 continue
             tracked = self.tracking[rows[idx]]
