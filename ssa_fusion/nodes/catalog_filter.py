@@ -281,7 +281,8 @@ class CatalogFilterNode(SsaNode):
         self.diag.counts[Count.REFUSED] += int((cause != "").sum()) - n_other
         for key, n in Counter(cause[cause != ""].tolist()).items():
             self.diag.count(key, self._reason(key, rows, int(np.argmax(cause == key))), n=n)
-        return rows.take(np.flatnonzero(cause == ""))
+        keep = np.flatnonzero(cause == "")
+        return rows if keep.size == m else rows.take(keep)  # no copy when all are kept
 
     def _reason(self, cause: str, rows: MeasurementRows, i: int) -> str:
         """Return the line logged for the first row of `rows` refused for `cause`: row `i`."""
