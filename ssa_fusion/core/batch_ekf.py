@@ -482,9 +482,16 @@ class BatchEKF:
         """
         if self._model == MotionModel.KEPLER:
             return kepler_stm(x, dt, self._params.get("mu", MU_EARTH))
+        t = np.asarray(t0, dtype=float)
         with np.errstate(all="ignore"):
-            pole = frames.pole_frame(np.nan_to_num(np.asarray(t0, dtype=float))
-                                     + self._unix0, self._eop)
+            if not np.isfinite(t).all():
+                t = np.nan_to_num(t)
+            t = t + self._unix0
+            hours = np.floor(t / frames.NODE_S)
+            if t.size and hours.min() == hours.max():  # one hour: its one node, for all
+                pole = frames.pole_frame(float(t.flat[0]), self._eop)
+            else:
+                pole = frames.pole_frame(t, self._eop)
         return integrate_stm(self._model, x, dt, self.config.motion.max_step_s,
                              pole_frame=pole, **self._params)
 
