@@ -8,7 +8,8 @@ tracker's options (`filter_options.FilterOptions`):
 
 * an object without a track collects its first measurements in its own
   `initiation.OrbitInitiator` (Herrick-Gibbs over one pass of one station, ``iod_samples``
-  measurements within ``iod_max_span_s``) until the batch is solved and its track starts;
+  measurements within ``iod_max_span_s``) until the batch is solved and its track starts
+  (the batches completed in one round solved together: `initiation.finish_razel`);
 * an object with a track predicts to each measurement and fuses it (`batch_ekf.BatchEKF`:
   one call per *round*, a round holding at most one measurement per object: the k-th
   measurement of every object in the batch goes in round k);
