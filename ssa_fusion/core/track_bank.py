@@ -343,15 +343,17 @@ class TrackBank:
             if limit:
                 for i in idx[gate & (self.gate_misses[r] >= limit)].tolist():
                     cause[i] = self._reinitialise(int(rows[i]), measurement(i))
-            r_ok = r[ok]
-            self.x[r_ok] = res.x[ok]
-            self.P[r_ok] = res.P[ok]
-            self.stations_at_t[r_ok] = np.where(dt[ok] == 0, self.stations_at_t[r_ok], 0) | bit[ok]
-            self.t[r_ok] = tt[idx[ok]]
-            out_i.append(idx[ok])
-            out_x.append(res.x[ok])
-            out_P.append(res.P[ok])
-            out_nis.append(res.nis[ok])
+            if not ok.all():  # as a rule every one is fused: no copies then
+                idx, r, dt, bit = idx[ok], r[ok], dt[ok], bit[ok]
+                res = res._replace(x=res.x[ok], P=res.P[ok], nis=res.nis[ok])
+            self.x[r] = res.x
+            self.P[r] = res.P
+            self.stations_at_t[r] = np.where(dt == 0, self.stations_at_t[r], 0) | bit
+            self.t[r] = tt[idx]
+            out_i.append(idx)
+            out_x.append(res.x)
+            out_P.append(res.P)
+            out_nis.append(res.nis)
         self._batch_t, self._iod_rotations = np.zeros(0), None  # not a view: tt goes
         if out_i:
             return BankResult(cause, np.concatenate(out_i), np.concatenate(out_x),
