@@ -17,6 +17,9 @@ it took. Twice, each time with a fresh node:
 
 Times run from the first publication to the last measurement taken (received, for the
 wire alone): taken includes the fusion (`TrackBank`: IOD and the J2 EKF), which bounds it.
+The node's CPU seconds over the same span are read from ``/proc`` (Linux): on a shared
+machine the wall rate follows the CPU the node was given, its measurements per CPU second
+much less.
 The single messages go through the wire alone too (``wire_per_message``). Prints each path's
 measurements, seconds and measurements/s, their ratio and whether one shard takes
 ``TARGET`` measurements/s; asserts that every measurement published was taken and
@@ -79,6 +82,12 @@ def measurements(objects: int, hours: float) -> MeasurementRows:
     return MeasurementRows(obs.t, oid, frames, obs.z, R, shard_key=messages.shard_keys(oid))
 
 
+def node_cpu_s(pid: int) -> float:
+    """Return the CPU seconds (user + system) process `pid` has used (Linux ``/proc``)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def feed(g: Graph, label: str, topic: str, total: int, window: int,
          publish_next: Callable[[], int], until: str = TAKEN,
          params: dict[str, object] | None = None) -> dict[str, float]:
@@ -96,19 +105,24 @@ def feed(g: Graph, label: str, topic: str, total: int, window: int,
         return int(watch.reports.get(NODE, {}).get(key, "0"))
 
     sent = 0
+    cpu0 = node_cpu_s(node.popen.pid)
     t0 = time.perf_counter()
     while done() < total:
         while sent < total and sent - done() < window:
             sent += publish_next()
         g.spin_once(0.001)
     seconds = time.perf_counter() - t0
+    cpu = node_cpu_s(node.popen.pid) - cpu0
+    per_cpu = round(total / cpu) if cpu > 0.0 else None  # None: less than a clock tick
     received = done(Count.RECEIVED)
     g.stop(node)
     rate = total / seconds
     print(f"{label}: {total} measurements published, {done()} {until}, {received} received, "
-          f"in {seconds:.2f} s = {rate:,.0f} measurements/s")
+          f"in {seconds:.2f} s = {rate:,.0f} measurements/s; the node's CPU {cpu:.2f} s = "
+          f"{per_cpu} measurements per CPU s")
     assert sent == total == done() == received, (sent, total, done(), received)
-    return {"measurements": total, "seconds": round(seconds, 3), "per_s": round(rate)}
+    return {"measurements": total, "seconds": round(seconds, 3), "per_s": round(rate),
+            "node_cpu_s": round(cpu, 3), "per_cpu_s": per_cpu}
 
 
 def main() -> None:

@@ -443,6 +443,21 @@ class BatchEKF:
         self._q, self._bound = float(config.noise.q), float(config.noise.sigma_bound)
 
     # ----------------------------------------------------------------------------------
+    def warm_up(self) -> None:
+        """Load the compiled code `step` runs now rather than at its first call.
+
+        One cycle of one made-up object (a circular orbit of 7,000 km radius, measured
+        60 s later from station 0); nothing is kept. Each kernel is loaded from numba's
+        cache (~0.2 s in all) or compiled (seconds) with the argument types `step` gives it,
+        so that the first batch a node fuses does not wait for it. Nothing to do without
+        stations.
+        """
+        if not self.stations:
+            return
+        self.step(np.array([[7000.0, 0.0, 0.0, 0.0, 7.5, 0.0]]), np.eye(6)[None],
+                  np.array([60.0]), np.array([[1000.0, 1.0, 0.5]]), np.eye(3)[None] * 1e-6,
+                  np.array([60.0]), np.zeros(1, dtype=np.intp))
+
     def rotations(self, t: Array) -> tuple[Array, NDArray[np.intp]]:
         """Return GCRF -> ITRF rotations at the distinct epochs of ``t`` (s after jd0).
 
@@ -467,9 +482,16 @@ class BatchEKF:
         """
         if self._model == MotionModel.KEPLER:
             return kepler_stm(x, dt, self._params.get("mu", MU_EARTH))
+        t = np.asarray(t0, dtype=float)
         with np.errstate(all="ignore"):
-            pole = frames.pole_frame(np.nan_to_num(np.asarray(t0, dtype=float))
-                                     + self._unix0, self._eop)
+            if not np.isfinite(t).all():
+                t = np.nan_to_num(t)
+            t = t + self._unix0
+            hours = np.floor(t / frames.NODE_S)
+            if t.size and hours.min() == hours.max():  # one hour: its one node, for all
+                pole = frames.pole_frame(float(t.flat[0]), self._eop)
+            else:
+                pole = frames.pole_frame(t, self._eop)
         return integrate_stm(self._model, x, dt, self.config.motion.max_step_s,
                              pole_frame=pole, **self._params)
 

@@ -27,7 +27,7 @@ to the batch being collected). The rules during IOD:
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import cast
 
@@ -35,6 +35,7 @@ import numpy as np
 
 from . import iod
 from .constants import MU_EARTH, R_EARTH
+from .frames import enu_matrix
 from .measurement import MeasurementModel, PositionModel, RadecModel, RazelModel, StationModels
 from .types import Cause, Measurement, Source
 
@@ -131,6 +132,18 @@ class OrbitInitiator:
             The initial state when `m` completed the batch and it was solved; otherwise
             ``(cause, detail)``: a `Cause` key and a sentence for the log.
         """
+        got = self.collect(m, samples, max_span_s)
+        if isinstance(got, tuple):
+            return got
+        return self.finish(got, p0_sigma)
+
+    def collect(self, m: Measurement, samples: int,
+                max_span_s: float = math.inf) -> list[Measurement] | tuple[str, str]:
+        """Collect `m` (`add`'s first half); return the batch once complete (emptied).
+
+        Else ``(cause, detail)`` as `add` gives it. The batch is then `finish`'s (or, for
+        many objects at once, `finish_razel`'s).
+        """
         if m.source == Source.FORECAST:
             return Cause.IGNORED_BEFORE_IOD, "forecast before IOD"
         if self.batch and m.t < self.batch[-1].t:
@@ -147,6 +160,11 @@ class OrbitInitiator:
         if len(self.batch) < max(2, samples):
             return Cause.IOD_PENDING, "collecting IOD measurements"
         batch, self.batch = self.batch, []
+        return batch
+
+    def finish(self, batch: list[Measurement],
+               p0_sigma: tuple[float, ...]) -> InitialState | tuple[str, str]:
+        """Solve a complete `batch` (`collect`'s) into a state (`add`'s second half)."""
         t_last = batch[-1].t
         try:
             with np.errstate(over="raise", invalid="raise", divide="raise"):
@@ -246,3 +264,95 @@ class OrbitInitiator:
                     J[:, c] = (X[q] - x0) / sig[c]
             P += J @ np.asarray(batch[j].R, dtype=float) @ J.T
         return t_init, x0, P
+
+
+PlaceholderMany = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+"""`Placeholder` for K states at once: ``f(x (K, n), dt (K,), t0 (K,)) -> (x_new, F)``, each
+state as `Placeholder` moves it alone (the same numbers)."""
+
+
+def finish_razel(initiators: Sequence[OrbitInitiator], batches: Sequence[list[Measurement]],
+                 p0_sigma: tuple[float, ...], f: PlaceholderMany,
+                 to_gcrs: Rotations) -> list[InitialState | tuple[str, str]]:
+    """`OrbitInitiator.finish` of K complete batches at once, vectorised over the batches.
+
+    Range/az/el batches (their initiators' models: `RazelModel`, or `StationModels` naming
+    one) are solved together: the Herrick-Gibbs solutions of every batch and of each of its
+    perturbations (`OrbitInitiator.solve`), the covariances, and one call of `f` moving every
+    state to its batch's last epoch; the same steps in the same order for each element, so
+    the states and covariances are `finish`'s to rounding. A batch of another kind, or one
+    whose numbers are not all finite, goes through its initiator's own `finish` (which
+    names the cause, e.g. a FloatingPointError). `to_gcrs`: the initiators' Earth
+    orientation. Returns one answer per batch, in order.
+    """
+    out: list[InitialState | tuple[str, str] | None] = [None] * len(batches)
+    pick: list[int] = []
+    models: list[RazelModel] = []
+    for k, (init, batch) in enumerate(zip(initiators, batches, strict=True)):
+        model = (init.model.get(batch[0].kind, batch[0].frame_id)
+                 if isinstance(init.model, StationModels) else init.model)
+        if isinstance(model, RazelModel) and init.n == 6 and len(batch) >= 3:
+            pick.append(k)
+            models.append(model)
+    if pick:
+        with np.errstate(all="ignore"):
+            done = _solve_razel([batches[k] for k in pick], models, p0_sigma, f, to_gcrs)
+        for k, state in zip(pick, done, strict=True):
+            out[k] = state
+    return [o if o is not None else init.finish(batch, p0_sigma)
+            for o, init, batch in zip(out, initiators, batches, strict=True)]
+
+
+def _solve_razel(batches: Sequence[list[Measurement]], models: Sequence[RazelModel],
+                 p0_sigma: tuple[float, ...], f: PlaceholderMany,
+                 to_gcrs: Rotations) -> list[InitialState | None]:
+    """Solve K range/az/el batches at once (`finish_razel`'s vectorised part).
+
+    None for a batch whose numbers are not all finite or whose state is no Earth orbit
+    (`earth_orbit_problem`): `OrbitInitiator.finish` names why.
+    """
+    n_b = len(batches)
+    i3 = np.array([[0, len(b) // 2, len(b) - 1] for b in batches])
+    t3 = np.array([[b[j].t for j in row] for b, row in zip(batches, i3.tolist(), strict=True)])
+    Z = np.array([[b[j].z for j in row] for b, row in zip(batches, i3.tolist(), strict=True)],
+                 dtype=float)  # (K, 3 samples, 3 channels)
+    R = np.array([[b[j].R for j in row] for b, row in zip(batches, i3.tolist(), strict=True)],
+                 dtype=float)  # (K, 3, 3, 3)
+    sig = np.sqrt(np.clip(np.diagonal(R, axis1=2, axis2=3), 0.0, None))  # (K, 3, 3)
+    # the batch (q = 0) and each channel c of each sample j moved by its sigma (q = 1 + 3j + c)
+    Zs = np.repeat(Z[:, None], 10, axis=1)
+    q = 1 + np.arange(9)
+    Zs[:, q, (q - 1) // 3, (q - 1) % 3] += sig.reshape(n_b, 9)
+    unix0 = np.array([m.unix0 for m in models])
+    rot = to_gcrs((unix0[:, None] + t3).reshape(-1)).reshape(n_b, 1, 3, 3, 3)
+    rng, az, el = Zs[..., 0], Zs[..., 1], Zs[..., 2]
+    ce = np.cos(el)
+    enu = np.stack([rng * ce * np.sin(az), rng * ce * np.cos(az), rng * np.sin(el)], -1)
+    to_itrs = np.array([enu_matrix(m.station.lat_rad, m.station.lon_rad) for m in models])
+    site = np.array([m.station.itrs for m in models])
+    r = np.einsum("...ij,...j->...i", rot,
+                  enu @ to_itrs[:, None] + site[:, None, None])  # (K, 10, 3, 3)
+    t1, t2, t3_ = (t3[:, j, None, None] for j in range(3))
+    v2 = iod.herrick_gibbs(r[:, :, 0], r[:, :, 1], r[:, :, 2], t1, t2, t3_)
+    X = np.concatenate([r[:, :, 1], v2], -1)  # (K, 10, 6)
+    x0 = X[:, 0]
+    used = sig != 0.0
+    J = np.where(used.reshape(n_b, 1, 9),
+                 (X[:, 1:] - x0[:, None]).transpose(0, 2, 1)
+                 / np.where(used, sig, 1.0).reshape(n_b, 1, 9), 0.0).reshape(n_b, 6, 3, 3)
+    P = np.zeros((n_b, 6, 6))
+    for j in range(3):
+        Jj = J[:, :, j]
+        P += Jj @ R[:, j] @ np.swapaxes(Jj, 1, 2)
+    P0 = P + np.diag(np.asarray(p0_sigma, dtype=float) ** 2)
+    t_init = t3[:, 1]
+    t_last = np.array([b[-1].t for b in batches])
+    x1, F = f(x0, t_last - t_init, t_init)
+    move = (t_last != t_init)[:, None, None]
+    P1 = np.where(move, F @ P0 @ np.swapaxes(F, 1, 2), P0)
+    x1 = np.where(move[:, :, 0], x1, x0)
+    good = (np.isfinite(X).all(axis=(1, 2)) & np.isfinite(x1).all(axis=1)
+            & np.isfinite(P1).all(axis=(1, 2)))
+    return [InitialState(float(tl), x, 0.5 * (p + p.T))
+            if ok and not earth_orbit_problem(x) else None
+            for tl, x, p, ok in zip(t_last.tolist(), x1, P1, good.tolist(), strict=True)]

@@ -37,14 +37,16 @@ def herrick_gibbs(
     r1: ArrayLike,
     r2: ArrayLike,
     r3: ArrayLike,
-    t1: float,
-    t2: float,
-    t3: float,
+    t1: float | Array,
+    t2: float | Array,
+    t3: float | Array,
     mu: float = MU_EARTH,
 ) -> Array:
     """Herrick-Gibbs: velocity (..., 3) km/s at ``r2`` from three closely spaced GCRF positions.
 
-    Positions (..., 3) km (many triples at the same three epochs at once), times in s.
+    Positions (..., 3) km (many triples at the same three epochs at once), times in s (or
+    arrays of them broadcasting against the positions' leading axes, with a trailing axis
+    of 1: triples at epochs of their own).
     Taylor-series method for small separations (Vallado, Algorithm 55).
     """
     r1, r2, r3 = (np.asarray(r, float) for r in (r1, r2, r3))

@@ -8,7 +8,8 @@ tracker's options (`filter_options.FilterOptions`):
 
 * an object without a track collects its first measurements in its own
   `initiation.OrbitInitiator` (Herrick-Gibbs over one pass of one station, ``iod_samples``
-  measurements within ``iod_max_span_s``) until the batch is solved and its track starts;
+  measurements within ``iod_max_span_s``) until the batch is solved and its track starts
+  (the batches completed in one round solved together: `initiation.finish_razel`);
 * an object with a track predicts to each measurement and fuses it (`batch_ekf.BatchEKF`:
   one call per *round*, a round holding at most one measurement per object: the k-th
   measurement of every object in the batch goes in round k);
@@ -39,7 +40,7 @@ from . import frames
 from .batch_ekf import REASONS, BatchEKF, Code
 from .filter_options import FilterOptions
 from .frames import Station
-from .initiation import InitialState, OrbitInitiator
+from .initiation import InitialState, OrbitInitiator, finish_razel
 from .measurement import StationModels
 from .timescales import DAY_S, UNIX_EPOCH_JD
 from .types import Cause, Kind, Measurement
@@ -165,6 +166,15 @@ class TrackBank:
                         for k, h, tk in zip(i.tolist(), hit.tolist(), t.tolist(), strict=True)])
         return np.swapaxes(out, -1, -2)
 
+    def warm_up(self) -> None:
+        """Load the compiled code of `process` now rather than in the first batch.
+
+        The EKF cycle's (`batch_ekf.BatchEKF.warm_up`) and the IOD's motion model, on one
+        made-up object; nothing is kept.
+        """
+        self.ekf.warm_up()
+        self._placeholder(np.array([7000.0, 0.0, 0.0, 0.0, 7.5, 0.0]), 60.0, 0.0)
+
     def __len__(self) -> int:
         """Return the number of objects heard of."""
         return len(self.object_ids)
@@ -175,6 +185,13 @@ class TrackBank:
         x1, F, _ = self.ekf.propagate(np.asarray(x, dtype=float)[None], np.array([dt]),
                                       np.array([t0]))
         return x1[0], F[0]
+
+    def _placeholder_many(self, x: np.ndarray, dt: np.ndarray,
+                          t0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Move K states (K, 6) as `_placeholder` moves one: (x (K, 6), F (K, 6, 6))."""
+        x1, F, _ = self.ekf.propagate(np.asarray(x, dtype=float), np.asarray(dt, dtype=float),
+                                      np.asarray(t0, dtype=float))
+        return x1, F
 
     def row(self, object_id: str, t: float = -math.inf) -> int:
         """Return the row of `object_id`, added (without a track) when new.
@@ -234,7 +251,7 @@ class TrackBank:
         R : array_like (M, 3, 3)
             Noise covariances, km^2, rad^2.
         """
-        tt = np.array(t, dtype=float)  # copies: IOD batches keep measurements for later
+        tt = np.array(t, dtype=float)  # copies: the caller's arrays may change later
         zz = np.array(z, dtype=float).reshape(-1, 3)
         RR = np.array(R, dtype=float).reshape(-1, 3, 3)
         m = tt.size
@@ -260,21 +277,36 @@ class TrackBank:
             cause[i] = Cause.REJECTED_NONFINITE
             station[i] = -1  # out of every round
         # rank of each measurement among its object's in this batch: its round
-        order = np.lexsort((np.arange(m), rows))
+        order = np.argsort(rows, kind="stable")  # by row, then in batch order
         first = np.r_[True, rows[order][1:] != rows[order][:-1]]
         start = np.maximum.accumulate(np.where(first, np.arange(m), 0))
         rank = np.empty(m, dtype=np.int64)
         rank[order] = np.arange(m) - start
         rot: tuple[Array, NDArray[np.intp]] | None = None  # the batch's, at its first round
-        for k in range(int(rank.max(initial=-1)) + 1):
-            idx = np.flatnonzero((rank == k) & (station >= 0))
+
+        def measurement(i: int) -> Measurement:
+            """Return row `i` as a Measurement for an IOD batch.
+
+            With its own z and R: the batch may keep it for hours, and views would keep the
+            whole batch's arrays alive with it.
+            """
+            return Measurement(float(tt[i]), zz[i].copy(), RR[i].copy(),
+                               kind=Kind.RANGE_AZ_EL, object_id=object_ids[i],
+                               frame_id=frame_ids[i])
+
+        # each round's measurements in batch order: the live ones sorted by round, once
+        live = np.flatnonzero(station >= 0)
+        by_round = live[np.argsort(rank[live], kind="stable")]
+        ends = np.searchsorted(rank[by_round], np.arange(int(rank.max(initial=-1)) + 2))
+        for k in range(ends.size - 1):
+            idx = by_round[ends[k]:ends[k + 1]]
             if not idx.size:
                 continue
             tracked = self.tracking[rows[idx]]
-            for i in idx[~tracked].tolist():  # initial orbit determination, per object
-                started = self._initiate(int(rows[i]), Measurement(
-                    float(tt[i]), zz[i], RR[i], kind=Kind.RANGE_AZ_EL,
-                    object_id=object_ids[i], frame_id=frame_ids[i]))
+            waiting = idx[~tracked].tolist()  # initial orbit determination, solved at once
+            answers = self._initiate_many([int(rows[i]) for i in waiting],
+                                          [measurement(i) for i in waiting])
+            for i, started in zip(waiting, answers, strict=True):
                 if isinstance(started, str):
                     cause[i] = started
                 else:
@@ -310,19 +342,19 @@ class TrackBank:
             limit = self.config.iod.reinit_after
             if limit:
                 for i in idx[gate & (self.gate_misses[r] >= limit)].tolist():
-                    cause[i] = self._reinitialise(int(rows[i]), Measurement(
-                        float(tt[i]), zz[i], RR[i], kind=Kind.RANGE_AZ_EL,
-                        object_id=object_ids[i], frame_id=frame_ids[i]))
-            r_ok = r[ok]
-            self.x[r_ok] = res.x[ok]
-            self.P[r_ok] = res.P[ok]
-            self.stations_at_t[r_ok] = np.where(dt[ok] == 0, self.stations_at_t[r_ok], 0) | bit[ok]
-            self.t[r_ok] = tt[idx[ok]]
-            out_i.append(idx[ok])
-            out_x.append(res.x[ok])
-            out_P.append(res.P[ok])
-            out_nis.append(res.nis[ok])
-        self._batch_t, self._iod_rotations = tt[:0], None
+                    cause[i] = self._reinitialise(int(rows[i]), measurement(i))
+            if not ok.all():  # as a rule every one is fused: no copies then
+                idx, r, dt, bit = idx[ok], r[ok], dt[ok], bit[ok]
+                res = res._replace(x=res.x[ok], P=res.P[ok], nis=res.nis[ok])
+            self.x[r] = res.x
+            self.P[r] = res.P
+            self.stations_at_t[r] = np.where(dt == 0, self.stations_at_t[r], 0) | bit
+            self.t[r] = tt[idx]
+            out_i.append(idx)
+            out_x.append(res.x)
+            out_P.append(res.P)
+            out_nis.append(res.nis)
+        self._batch_t, self._iod_rotations = np.zeros(0), None  # not a view: tt goes
         if out_i:
             return BankResult(cause, np.concatenate(out_i), np.concatenate(out_x),
                               np.concatenate(out_P), np.concatenate(out_nis))
@@ -341,16 +373,43 @@ class TrackBank:
 
     def _initiate(self, row: int, m: Measurement) -> InitialState | str:
         """Feed `m` to the row's initiator: the initial state once solved, else the cause."""
-        init = self._initiators.get(row)
-        if init is None:
-            init = self._initiators[row] = OrbitInitiator(
-                self._placeholder, self.models, 6, self._iod_to_gcrs)
+        return self._initiate_many([row], [m])[0]
+
+    def _initiate_many(self, rows: list[int], ms: list[Measurement]) -> list[InitialState | str]:
+        """`_initiate` of distinct rows: the batches they complete solved at once.
+
+        `initiation.finish_razel`: one vectorised solution and one propagation for all;
+        each row's answer as `_initiate` alone would give it.
+        """
         iod = self.config.iod
-        out = init.add(m, iod.iod_samples, iod.p0_sigma, iod.iod_max_span_s)
-        if isinstance(out, tuple):
-            return out[0]
-        del self._initiators[row]
-        self.x[row], self.P[row], self.t[row] = out.x, out.P, out.t
-        self.stations_at_t[row] = station_bit(np.array([self.ekf.index[m.frame_id]]))[0]
-        self.tracking[row] = True
-        return out
+        answers: list[InitialState | str] = [Cause.IOD_PENDING] * len(rows)
+        complete: list[int] = []
+        initiators: list[OrbitInitiator] = []
+        batches: list[list[Measurement]] = []
+        for k, (row, m) in enumerate(zip(rows, ms, strict=True)):
+            init = self._initiators.get(row)
+            if init is None:
+                init = self._initiators[row] = OrbitInitiator(
+                    self._placeholder, self.models, 6, self._iod_to_gcrs)
+            got = init.collect(m, iod.iod_samples, iod.iod_max_span_s)
+            if isinstance(got, tuple):
+                answers[k] = got[0]
+            else:
+                complete.append(k)
+                initiators.append(init)
+                batches.append(got)
+        if not complete:
+            return answers
+        solved = finish_razel(initiators, batches, iod.p0_sigma, self._placeholder_many,
+                              self._iod_to_gcrs)
+        for k, out in zip(complete, solved, strict=True):
+            if isinstance(out, tuple):
+                answers[k] = out[0]
+                continue
+            row = rows[k]
+            del self._initiators[row]
+            self.x[row], self.P[row], self.t[row] = out.x, out.P, out.t
+            self.stations_at_t[row] = station_bit(np.array([self.ekf.index[ms[k].frame_id]]))[0]
+            self.tracking[row] = True
+            answers[k] = out
+        return answers

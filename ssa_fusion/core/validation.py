@@ -190,15 +190,33 @@ def covariances_ok(R: np.ndarray) -> np.ndarray:
     The same test, vectorised: relative to each matrix's scale, asymmetry <= 1e-9 and
     eigenvalues >= -1e-12 of the largest in magnitude; all zeros is a covariance, a
     non-finite entry is not.
+
+    A matrix whose diagonal dominates its rows (``S_ii >= sum_j!=i |S_ij|``, as a diagonal
+    noise covariance does) has no eigenvalue below 0 (Gershgorin's circles), so it passes
+    the eigenvalue test without being decomposed; the others are decomposed.
     """
     R = np.asarray(R, dtype=float)
-    scale = np.abs(R).max(axis=(1, 2), initial=0.0)
+    m, n = R.shape[0], R.shape[-1]
+    # entry (i, j) of every matrix as plane i n + j: reductions over the entries of each
+    # matrix run along the long axis (numpy is slow over an axis of 9), the same numbers
+    planes = np.ascontiguousarray(R.reshape(m, n * n).T)
+    swap = np.arange(n * n).reshape(n, n).T.reshape(-1)  # plane of entry (j, i)
+    scale = np.abs(planes).max(axis=0, initial=0.0)
     finite = np.isfinite(scale)
     safe = np.where(finite & (scale > 0.0), scale, 1.0)
-    Rn = np.where(finite[:, None, None], R, 0.0) / safe[:, None, None]
-    sym = np.abs(Rn - Rn.transpose(0, 2, 1)).max(axis=(1, 2), initial=0.0) <= 1e-9
-    eig = np.linalg.eigvalsh(0.5 * (Rn + Rn.transpose(0, 2, 1)))
-    psd = eig[:, 0] >= -1e-12 * np.abs(eig).max(axis=1, initial=0.0)
+    Rn = np.where(finite, planes, 0.0) / safe
+    sym = np.abs(Rn - Rn[swap]).max(axis=0, initial=0.0) <= 1e-9
+    S = 0.5 * (Rn + Rn[swap])
+    A = np.abs(S).reshape(n, n, m)
+    row_sum = A[:, 0]
+    for j in range(1, n):
+        row_sum = row_sum + A[:, j]
+    diag = S[np.arange(n) * (n + 1)]
+    psd = (2.0 * diag >= row_sum).all(axis=0)  # Gershgorin: no eigenvalue < 0
+    rest = np.flatnonzero(~psd)
+    if rest.size:
+        eig = np.linalg.eigvalsh(S[:, rest].T.reshape(-1, n, n))
+        psd[rest] = eig[:, 0] >= -1e-12 * np.abs(eig).max(axis=1, initial=0.0)
     ok: np.ndarray = finite & ((scale == 0.0) | (sym & psd))
     return ok
 
@@ -213,9 +231,13 @@ def rows_problems(rows: MeasurementRows, kind: int) -> np.ndarray:
     """
     m = len(rows)
     cause = np.full(m, "", dtype=object)
+    free = np.ones(m, dtype=bool)  # no cause yet (kept beside `cause`: no string compares)
 
     def refuse(bad: np.ndarray, why: str) -> None:
-        cause[bad & (cause == "")] = why
+        hit = bad & free
+        if hit.any():
+            cause[hit] = why
+            free[hit] = False
 
     too_long = (np.fromiter(map(len, rows.object_id), np.int64, m) > MAX_ID_CHARS) | \
         (np.fromiter(map(len, rows.frame_id), np.int64, m) > MAX_ID_CHARS)
@@ -223,10 +245,14 @@ def rows_problems(rows: MeasurementRows, kind: int) -> np.ndarray:
     refuse(rows.kind != kind, Cause.REJECTED_KIND)
     # RA_DEC has two channels: its third, dropped by the per-message conversion, is not read
     radec = rows.kind == Kind.RA_DEC
-    third = np.array([False, False, True])
-    z = np.where(radec[:, None] & third, 0.0, rows.z)
-    R = np.where(radec[:, None, None] & (third[:, None] | third[None, :]), 0.0, rows.R)
-    finite = (np.isfinite(rows.t) & np.isfinite(z).all(axis=1) & np.isfinite(R).all(axis=(1, 2))
+    z, R = rows.z, rows.R
+    if radec.any():
+        third = np.array([False, False, True])
+        z = np.where(radec[:, None] & third, 0.0, z)
+        R = np.where(radec[:, None, None] & (third[:, None] | third[None, :]), 0.0, R)
+    zt = np.ascontiguousarray(z.T)  # per channel, per entry: reduced along the long axis
+    Rt = np.ascontiguousarray(R.reshape(m, -1).T)
+    finite = (np.isfinite(rows.t) & np.isfinite(zt).all(axis=0) & np.isfinite(Rt).all(axis=0)
               & np.isfinite(rows.horizon))
     refuse(~finite, Cause.REJECTED_NONFINITE)
     with np.errstate(invalid="ignore"):
@@ -237,8 +263,8 @@ def rows_problems(rows: MeasurementRows, kind: int) -> np.ndarray:
                         | (np.abs(z[:, 1]) > TWO_PI)), Cause.REJECTED_IMPLAUSIBLE)
         refuse(radec & ~(np.abs(z[:, 1]) <= HALF_PI), Cause.REJECTED_ELEVATION)
         refuse(radec & (np.abs(z[:, 0]) > TWO_PI), Cause.REJECTED_IMPLAUSIBLE)
-        refuse((np.abs(z).max(axis=1, initial=0.0) > MAX_ABS_VALUE)
-               | (np.abs(R).max(axis=(1, 2), initial=0.0) > MAX_VARIANCE),
+        refuse((np.abs(zt).max(axis=0, initial=0.0) > MAX_ABS_VALUE)
+               | (np.abs(Rt).max(axis=0, initial=0.0) > MAX_VARIANCE),
                Cause.REJECTED_IMPLAUSIBLE)
     refuse(~covariances_ok(R), Cause.REJECTED_COVARIANCE)
     return cause

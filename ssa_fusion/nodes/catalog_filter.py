@@ -176,8 +176,10 @@ class CatalogFilterNode(SsaNode):
     def new_bank(self) -> TrackBank:
         """Return an empty bank of this shard's settings."""
         p = self.params
-        return TrackBank(self.options, self.stations, max_objects=p.integer("max_objects"),
+        bank = TrackBank(self.options, self.stations, max_objects=p.integer("max_objects"),
                          evict_after_s=p.number("evict_after"))
+        bank.warm_up()  # its compiled code loaded before the first batch, not in it
+        return bank
 
     def reset(self) -> None:
         """Forget every track and what waits for the next batch."""
@@ -297,7 +299,8 @@ class CatalogFilterNode(SsaNode):
         self.diag.counts[Count.REFUSED] += int((cause != "").sum()) - n_other
         for key, n in Counter(cause[cause != ""].tolist()).items():
             self.diag.count(key, self._reason(key, rows, int(np.argmax(cause == key))), n=n)
-        return rows.take(np.flatnonzero(cause == ""))
+        keep = np.flatnonzero(cause == "")
+        return rows if keep.size == m else rows.take(keep)  # no copy when all are kept
 
     def _reason(self, cause: str, rows: MeasurementRows, i: int) -> str:
         """Return the line logged for the first row of `rows` refused for `cause`: row `i`."""

@@ -56,3 +56,20 @@ def test_covariances_ok_is_is_covariance_of_each():
     want = [validation.is_covariance(r) for r in R]
     assert validation.covariances_ok(R).tolist() == want
     assert any(want) and not all(want)
+
+
+def test_covariances_ok_without_decomposing_dominant_diagonals():
+    """Diagonally dominant matrices (no eigenvalue below 0) and their neighbours just outside
+    (a diagonal entry a hair below 0, an off-diagonal a hair too large) get `is_covariance`'s
+    answer whether decomposed or not."""
+    rng = np.random.default_rng(5)
+    d = rng.uniform(0.1, 10.0, size=(100, 3))
+    diagonal = np.stack([np.diag(v) for v in d])
+    singular = np.tile([[1.0, 1.0, 0.0], [1.0, 1.0, 0.0], [0.0, 0.0, 1.0]], (1, 1, 1))
+    tiny_negative = np.stack([np.diag([1.0, 1.0, -x]) for x in (1e-14, 1e-12, 1e-10, 1e-3)])
+    beyond = np.stack([[[1.0, e, 0.0], [e, 1.0, 0.0], [0.0, 0.0, 1.0]]
+                       for e in (1.0 + 1e-15, 1.0 + 1e-9, 1.5)])
+    R = np.concatenate([diagonal, singular, tiny_negative, beyond])
+    want = [validation.is_covariance(r) for r in R]
+    assert validation.covariances_ok(R).tolist() == want
+    assert want[:101] == [True] * 101 and not all(want)
