@@ -182,20 +182,27 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cases", default="train,crossing")
     ap.add_argument("--radars", default="1,2", help="1, 2 or 1,2")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--predictor-q", default=str(AssociationConfig().predictor_q),
+                    help="the long-arc predictor's q, km^2/s^3 (AssociationConfig."
+                         "predictor_q), comma-separated to compare; none: without one")
     args = ap.parse_args(argv)
-    config = AssociationConfig()
+    configs = [AssociationConfig(predictor_q=None if q.strip().lower() == "none"
+                                 else float(q)) for q in args.predictor_q.split(",")]
     results = []
     for case in args.cases.split(","):
         for radars in (int(r) for r in args.radars.split(",")):
-            t1 = time.perf_counter()
-            res = run(case, radars, args.hours, args.seed, config)
-            res["wall_s"] = round(time.perf_counter() - t1, 1)
-            results.append(res)
-            print(f"\n{case}, {radars} radar(s), {args.hours:g} h:")
-            for k, v in res.items():
-                print(f"  {k}: {v:.5g}" if isinstance(v, float) else f"  {k}: {v}")
-    print(json.dumps({"config": {k: getattr(config, k) for k in config.__dataclass_fields__},
-                      "runs": results}))
+            for config in configs:
+                t1 = time.perf_counter()
+                res = run(case, radars, args.hours, args.seed, config)
+                res["predictor_q"] = str(config.predictor_q)
+                res["wall_s"] = round(time.perf_counter() - t1, 1)
+                results.append(res)
+                print(f"\n{case}, {radars} radar(s), {args.hours:g} h, "
+                      f"predictor_q {config.predictor_q}:")
+                for k, v in res.items():
+                    print(f"  {k}: {v:.5g}" if isinstance(v, float) else f"  {k}: {v}")
+    print(json.dumps({"configs": [{k: getattr(c, k) for k in c.__dataclass_fields__}
+                                  for c in configs], "runs": results}))
     return 0
 
 

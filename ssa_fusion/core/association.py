@@ -87,6 +87,7 @@ __all__ = [
     "TrackStatus",
     "assign",
     "associate",
+    "gate_long_arc",
     "gate_scan",
     "predict_scan",
 ]
@@ -135,6 +136,12 @@ class AssociationConfig:
     tracklet_accel_sigma_km_s2 : float
         Standard deviation, km/s^2, of the acceleration left out of a tracklet's
         prediction (two-body gravity is in it), per axis.
+    predictor_q : float or None
+        Process-noise spectral density, km^2/s^3, of the association's own *long-arc
+        predictor* (`Associator`): a second filter of every track, fed the same detections,
+        whose predictions score the pairs; None: the tracks' filter scores them (its
+        ``q``). Chosen on the crowded cases' tuning seeds (`bench/bench_association.py`,
+        docs/ASSOCIATION.md).
     """
 
     gate_probability: float = 0.9999
@@ -146,6 +153,7 @@ class AssociationConfig:
     tracklet_max_gap_s: float = 60.0
     tracklet_speed_sigma_km_s: float = 0.3
     tracklet_accel_sigma_km_s2: float = 1e-4
+    predictor_q: float | None = 1e-17
 
     def __post_init__(self) -> None:
         """Check the settings (ValueError naming the field)."""
@@ -161,6 +169,8 @@ class AssociationConfig:
                      "tracklet_speed_sigma_km_s", "tracklet_accel_sigma_km_s2"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.predictor_q is not None and not self.predictor_q >= 0.0:
+            raise ValueError(f"predictor_q must be >= 0 or None, got {self.predictor_q}")
 
     @property
     def gate(self) -> float:
@@ -341,6 +351,35 @@ def assign(cost: ArrayLike, feasible: ArrayLike) -> IntArray:
     return out
 
 
+def gate_long_arc(wide: Gated, fine: Gated, which: IntArray) -> Gated:
+    """Rescore gated pairs by a long-arc predictor (`Associator`'s, `AssociationConfig`).
+
+    Parameters
+    ----------
+    wide : Gated
+        The N tracks' pairs scored by the tracks' own filter (`gate_scan`): its gate
+        decides which pairs are feasible (its process noise covers what its motion model
+        leaves out, so a detection it expects is never left out).
+    fine : Gated
+        The tracks ``which`` (rows of ``wide``) scored by the long-arc predictor (a filter
+        of the same tracks with small process noise: a sharp along-track prediction across
+        long gaps).
+    which : ndarray (K,) of int
+        The rows of ``wide`` that ``fine`` scores.
+
+    Returns
+    -------
+    Gated
+        ``wide``'s feasibility; ``d2`` and ``cost`` the long-arc predictor's where it
+        computed them, the tracks' filter's elsewhere.
+    """
+    d2, cost = wide.d2.copy(), wide.cost.copy()
+    sharp = np.isfinite(fine.cost)
+    d2[which] = np.where(sharp, fine.d2, wide.d2[which])
+    cost[which] = np.where(sharp, fine.cost, wide.cost[which])
+    return Gated(d2, cost, wide.feasible)
+
+
 def associate(ekf: BatchEKF, x: ArrayLike, P: ArrayLike, t_track: ArrayLike,
               t_scan: ArrayLike, z: ArrayLike, R: ArrayLike, station: int,
               config: AssociationConfig) -> ScanAssociation:
@@ -448,6 +487,10 @@ class Associator:
         self.config = AssociationConfig() if config is None else config
         options = filter_options.with_(reinit_after=0)
         self.bank = TrackBank(options, stations)
+        q = self.config.predictor_q
+        self.predictor = None if q is None else TrackBank(options.with_(q=q), stations)
+        """The long-arc predictor (`AssociationConfig.predictor_q`): the same tracks, fed the
+        same detections, whose predictions score the pairs; None without one."""
         self.stations = dict(stations)
         self.iod_samples = int(options.iod.iod_samples)
         self.counts: Counter[TrackEvent] = Counter()
@@ -462,6 +505,7 @@ class Associator:
         self._pass_open = np.zeros(0, dtype=bool)
         self._pass_hits = np.zeros(0, dtype=np.int64)
         self._missed = np.zeros(0, dtype=np.int64)
+        self._prow = np.zeros(0, dtype=np.int64)  # the row in `predictor`, -1: none
         # tracklets: one row each; their raw detections by id (for the IOD)
         self._tl_ids: list[str] = []
         self._tl_station = np.zeros(0, dtype=np.int64)
@@ -488,6 +532,7 @@ class Associator:
         self._pass_open = np.r_[self._pass_open, np.zeros(extra, bool)]
         self._pass_hits = np.r_[self._pass_hits, np.zeros(extra, np.int64)]
         self._missed = np.r_[self._missed, np.zeros(extra, np.int64)]
+        self._prow = np.r_[self._prow, np.full(extra, -1, np.int64)]
 
     def _delete(self, rows: IntArray, event: TrackEvent) -> None:
         self.status[rows] = TrackStatus.DELETED
@@ -550,7 +595,7 @@ class Associator:
                             tt if m else t_scan, st)
         track = np.zeros(0, dtype=np.int64)
         if m:
-            gated = gate_scan(pred, zz, RR, self._gate)
+            gated = self._gate_scan(rows, pred, st, tt, zz, RR)
             track = assign(gated.cost, gated.feasible)
         sigma = pred.sigma_pos.max(0)
         lost = rows[sigma > cfg.max_position_sigma_km]
@@ -563,6 +608,8 @@ class Associator:
         det = det[np.argsort(tt[det], kind="stable")]
         names = [bank.object_ids[r] for r in rows[track[det]]]
         res = bank.process(tt[det], names, [station] * det.size, zz[det], RR[det])
+        if self.predictor is not None and det.size:
+            self.predictor.process(tt[det], names, [station] * det.size, zz[det], RR[det])
         refused = np.array([c != "" for c in res.cause], dtype=bool)
         for j, name in zip(det.tolist(), names, strict=True):
             ids[j] = name
@@ -589,6 +636,30 @@ class Associator:
         self._delete(lost[self.status[lost] != TrackStatus.DELETED],
                      TrackEvent.DELETED_COVARIANCE)
         return np.flatnonzero(~got)
+
+    def _gate_scan(self, rows: IntArray, pred: ScanPrediction, st: int, tt: Array,
+                   zz: Array, RR: Array) -> Gated:
+        """Score the scan's pairs: `gate_scan`, rescored by the long-arc predictor.
+
+        ``pred`` is the tracks' filter's prediction of the bank rows ``rows``; only the
+        tracks with a feasible pair are predicted again by the long-arc predictor
+        (`gate_long_arc`), a track it does not hold (its IOD failed there) keeps the
+        tracks' filter's score.
+        """
+        wide = gate_scan(pred, zz, RR, self._gate)
+        pb = self.predictor
+        if pb is None:
+            return wide
+        which = np.flatnonzero(wide.feasible.any(1))
+        pr = self._prow[rows[which]]
+        which, pr = which[pr >= 0], pr[pr >= 0]
+        keep = pb.tracking[pr]
+        which, pr = which[keep], pr[keep]
+        if not which.size:
+            return wide
+        fine = gate_scan(predict_scan(pb.ekf, pb.x[pr], pb.P[pr], pb.t[pr], tt, st), zz, RR,
+                         self._gate)
+        return gate_long_arc(wide, fine, which)
 
     def _close_passes(self, t_scan: float) -> None:
         """Count the passes that ended before `t_scan` without a detection."""
@@ -684,6 +755,12 @@ class Associator:
         res = self.bank.process([d[0] for d in raw], [name] * len(raw), [station] * len(raw),
                                 [d[1] for d in raw], [d[2] for d in raw])
         ok = res.cause[-1] == "" and bool(self.bank.tracking[self.bank.rows[name]])
+        if ok and self.predictor is not None:
+            self.predictor.process([d[0] for d in raw], [name] * len(raw),
+                                   [station] * len(raw), [d[1] for d in raw],
+                                   [d[2] for d in raw])
+            self._grow()
+            self._prow[self.bank.rows[name]] = self.predictor.rows[name]
         self.counts[TrackEvent.TRACK_INITIATED if ok else TrackEvent.IOD_FAILED] += 1
         if not ok:
             self.bank.tracking[self.bank.rows[name]] = False
