@@ -46,7 +46,9 @@ import math
 import sys
 import time
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -66,6 +68,13 @@ from ssa_fusion.sim import survey
 T0 = 1_735_732_800.0
 """Start of every run: 2025-01-01T12:00:00Z."""
 RADARS = {1: ("columbus",), 2: ("columbus", "millstone")}
+VARIANTS: dict[str, dict[str, Any]] = {
+    "baseline": {"predictor_q": None, "register_groups": False},
+    "long-arc": {"register_groups": False},
+    "long-arc+register": {},
+}
+"""The association compared: GNN on the tracks' filter alone; with the long-arc predictor
+(`AssociationConfig.predictor_q`); with it and the groups' registration (the defaults)."""
 
 
 def _catalog(case: str, seed: int) -> list:
@@ -182,27 +191,33 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cases", default="train,crossing")
     ap.add_argument("--radars", default="1,2", help="1, 2 or 1,2")
     ap.add_argument("--seed", type=int, default=1)
-    ap.add_argument("--predictor-q", default=str(AssociationConfig().predictor_q),
-                    help="the long-arc predictor's q, km^2/s^3 (AssociationConfig."
-                         "predictor_q), comma-separated to compare; none: without one")
+    default = AssociationConfig()
+    ap.add_argument("--predictor-q", type=float, default=default.predictor_q,
+                    help="the long-arc predictor's q, km^2/s^3 (AssociationConfig.predictor_q)")
+    ap.add_argument("--variants", default=",".join(VARIANTS),
+                    help=f"comma-separated, of {', '.join(VARIANTS)}")
     args = ap.parse_args(argv)
-    configs = [AssociationConfig(predictor_q=None if q.strip().lower() == "none"
-                                 else float(q)) for q in args.predictor_q.split(",")]
+    names = args.variants.split(",")
+    configs = [replace(default, **VARIANTS[v]) for v in names]
+    configs = [replace(c, predictor_q=args.predictor_q) if c.predictor_q is not None else c
+               for c in configs]
     results = []
     for case in args.cases.split(","):
         for radars in (int(r) for r in args.radars.split(",")):
-            for config in configs:
+            for name, config in zip(names, configs, strict=True):
                 t1 = time.perf_counter()
                 res = run(case, radars, args.hours, args.seed, config)
+                res["variant"] = name
                 res["predictor_q"] = str(config.predictor_q)
+                res["register_groups"] = config.register_groups
                 res["wall_s"] = round(time.perf_counter() - t1, 1)
                 results.append(res)
-                print(f"\n{case}, {radars} radar(s), {args.hours:g} h, "
-                      f"predictor_q {config.predictor_q}:")
+                print(f"\n{case}, {radars} radar(s), {args.hours:g} h, {name}:")
                 for k, v in res.items():
                     print(f"  {k}: {v:.5g}" if isinstance(v, float) else f"  {k}: {v}")
-    print(json.dumps({"configs": [{k: getattr(c, k) for k in c.__dataclass_fields__}
-                                  for c in configs], "runs": results}))
+    print(json.dumps({"configs": {n: {k: getattr(c, k) for k in c.__dataclass_fields__}
+                                  for n, c in zip(names, configs, strict=True)},
+                      "runs": results}))
     return 0
 
 

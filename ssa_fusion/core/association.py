@@ -65,6 +65,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import linear_sum_assignment
+from scipy.sparse.csgraph import connected_components
 from scipy.stats import chi2
 
 from .batch_ekf import BatchEKF
@@ -90,6 +91,7 @@ __all__ = [
     "gate_long_arc",
     "gate_scan",
     "predict_scan",
+    "register",
 ]
 
 Array = NDArray[np.float64]
@@ -142,6 +144,11 @@ class AssociationConfig:
         whose predictions score the pairs; None: the tracks' filter scores them (its
         ``q``). Chosen on the crowded cases' tuning seeds (`bench/bench_association.py`,
         docs/ASSOCIATION.md).
+    register_groups : bool
+        With a long-arc predictor: before the assignment, shift each group of tracks that
+        share detections along track by the common time that best aligns it with the scan
+        (`register`; its prior from the tracks' filter's predicted position standard
+        deviation).
     """
 
     gate_probability: float = 0.9999
@@ -154,6 +161,7 @@ class AssociationConfig:
     tracklet_speed_sigma_km_s: float = 0.3
     tracklet_accel_sigma_km_s2: float = 1e-4
     predictor_q: float | None = 1e-17
+    register_groups: bool = True
 
     def __post_init__(self) -> None:
         """Check the settings (ValueError naming the field)."""
@@ -197,6 +205,13 @@ class ScanPrediction:
     sigma_pos : ndarray (K, N)
         Largest standard deviation of each predicted position, km (the square root of the
         largest eigenvalue of its 3 x 3 covariance).
+    zp_rate : ndarray (K, N, 3) or None
+        Rate of each predicted measurement with a shift of its track along its orbit,
+        [km/s, rad/s, rad/s] per s of shift (the track a time ``s`` ahead of its
+        prediction, measured at the same epoch: ``zp + zp_rate s`` to first order;
+        ``H v``, v the predicted GCRF velocity); None when not computed.
+    speed : ndarray (K, N) or None
+        Predicted speed of each track, km/s (GCRF); None when not computed.
     """
 
     epochs: Array
@@ -205,6 +220,8 @@ class ScanPrediction:
     HPHt: Array
     ok: BoolArray
     sigma_pos: Array
+    zp_rate: Array | None = None
+    speed: Array | None = None
 
 
 @dataclass(frozen=True)
@@ -277,9 +294,12 @@ def predict_scan(ekf: BatchEKF, x: ArrayLike, P: ArrayLike, t_track: ArrayLike,
     ok = pred.ok & np.isfinite(zp).all(-1) & np.isfinite(HPHt).all((-1, -2))
     Pr = np.where(ok[:, None, None], pred.P[:, :3, :3], 0.0)
     sigma = np.sqrt(np.clip(np.linalg.eigvalsh(Pr)[:, -1], 0.0, None))
+    v = pred.x[:, 3:]
+    rate = np.einsum("mij,mj->mi", H[:, :, :3], v)
     return ScanPrediction(epochs, index.reshape(-1).astype(np.int64),
                           zp.reshape(k, n, 3), HPHt.reshape(k, n, 3, 3), ok.reshape(k, n),
-                          np.where(ok, sigma, np.inf).reshape(k, n))
+                          np.where(ok, sigma, np.inf).reshape(k, n), rate.reshape(k, n, 3),
+                          np.linalg.norm(v, axis=-1).reshape(k, n))
 
 
 def gate_scan(prediction: ScanPrediction, z: ArrayLike, R: ArrayLike, gate: float) -> Gated:
@@ -296,6 +316,22 @@ def gate_scan(prediction: ScanPrediction, z: ArrayLike, R: ArrayLike, gate: floa
     gate : float
         Threshold on ``d^2`` (`AssociationConfig.gate`).
     """
+    w, _, ok, logdet = _whitened(prediction, z, R)
+    d2 = np.full(ok.shape, np.inf)
+    cost = np.full(ok.shape, np.inf)
+    d2[ok] = np.einsum("ij,ij->i", w, w)
+    cost[ok] = d2[ok] + logdet
+    return Gated(d2, cost, d2 <= gate)
+
+
+def _whitened(prediction: ScanPrediction, z: ArrayLike,
+              R: ArrayLike) -> tuple[Array, Array | None, BoolArray, Array]:
+    """Whitened innovations of every computable (track, detection) pair.
+
+    Returns ``w = L^-1 y`` (P, 3) and ``u = L^-1 zp_rate`` (P, 3) (None without
+    ``zp_rate``) for the P pairs where ``ok`` (N, M) holds (``L L^T = S``, angles of ``y``
+    wrapped to (-pi, pi]), and ``ln det S`` (P,).
+    """
     zz = np.asarray(z, dtype=float).reshape(-1, 3)
     m = zz.shape[0]
     RR = np.broadcast_to(np.asarray(R, dtype=float), (m, 3, 3))
@@ -307,14 +343,15 @@ def gate_scan(prediction: ScanPrediction, z: ArrayLike, R: ArrayLike, gate: floa
     ok = np.swapaxes(prediction.ok[e], 0, 1) & np.isfinite(y).all(-1) & np.isfinite(S).all(
         (-1, -2))
     S = np.where(ok[..., None, None], 0.5 * (S + np.swapaxes(S, -1, -2)), np.eye(3))
-    d2 = np.full(ok.shape, np.inf)
-    cost = np.full(ok.shape, np.inf)
-    if ok.any():
-        L = np.linalg.cholesky(S[ok])  # LinAlgError only for a non-positive S: below
-        w = np.linalg.solve(L, y[ok][..., None])[..., 0]
-        d2[ok] = np.einsum("ij,ij->i", w, w)
-        cost[ok] = d2[ok] + 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(-1)
-    return Gated(d2, cost, d2 <= gate)
+    if not ok.any():
+        return np.zeros((0, 3)), np.zeros((0, 3)), ok, np.zeros(0)
+    L = np.linalg.cholesky(S[ok])  # LinAlgError only for a non-positive S: below
+    w = np.linalg.solve(L, y[ok][..., None])[..., 0]
+    u = None
+    if prediction.zp_rate is not None:
+        rate = np.swapaxes(prediction.zp_rate[e], 0, 1)  # (N, M, 3)
+        u = np.linalg.solve(L, rate[ok][..., None])[..., 0]
+    return w, u, ok, 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(-1)
 
 
 def assign(cost: ArrayLike, feasible: ArrayLike) -> IntArray:
@@ -349,6 +386,108 @@ def assign(cost: ArrayLike, feasible: ArrayLike) -> IntArray:
     keep = fs[r, c]
     out[cols[c[keep]]] = rows[r[keep]]
     return out
+
+
+def register(prediction: ScanPrediction, z: ArrayLike, R: ArrayLike, feasible: ArrayLike,
+             gate: float, sigma_shift_s: ArrayLike, candidates: int = 4) -> Array:
+    """Return the common along-track shift of each group of tracks sharing detections (s).
+
+    Objects launched together (a train) share the error their motion model leaves out (drag,
+    the model's own error): after a long gap every member's prediction is off along track by
+    nearly the same time, which can exceed the members' spacing, and the assignment of the
+    shifted train (each track on its neighbour's detection) then costs about as little as
+    the true one. A *group* is a connected set of two or more tracks linked by feasible pairs
+    (two tracks sharing a detection they both gate); every group gets one shift ``s`` (its
+    tracks moved along their orbits by ``s`` seconds: ``zp + zp_rate s``, first order),
+    with a Gaussian prior N(0, sigma^2) (sigma: the median of its tracks'
+    ``sigma_shift_s``), that maximises the likelihood of its best assignment. Irregular
+    spacings make the true alignment unique.
+
+    The search: every feasible pair's own best shift (``s_ij``, where the pair's ``d^2(s)
+    = a - 2 b s + c s^2`` is least) and 0 are candidates, ranked by the sum over the
+    group's detections of their least ``d^2(s)`` (clipped at the gate) plus the prior's
+    ``s^2 / sigma^2``; the best ``candidates`` distinct ones are solved by `assign` and
+    refined in closed form on their assignment (``s = sum b / (sum c + 1 / sigma^2)``);
+    the least total cost (``d^2 + ln det S`` of the pairs plus the prior) wins.
+
+    Parameters
+    ----------
+    prediction : ScanPrediction
+        The N tracks predicted to the scan, with ``zp_rate`` (`predict_scan`).
+    z, R : array_like (M, 3), (M, 3, 3)
+        Detections and their noise (as `gate_scan`).
+    feasible : array_like (N, M) of bool
+        The pairs that may be assigned (the gate); the shift leaves them as they are.
+    gate : float
+        Threshold on ``d^2`` (`AssociationConfig.gate`): the most a detection adds to a
+        candidate's rank.
+    sigma_shift_s : array_like (N,)
+        Prior standard deviation of each track's along-track shift, s (its filter's
+        predicted position standard deviation over its speed).
+    candidates : int
+        How many of the ranked candidate shifts are solved by assignment.
+
+    Returns
+    -------
+    ndarray (N,)
+        Per track the shift of its group, s; 0 for a track in no group.
+    """
+    if prediction.zp_rate is None:
+        raise ValueError("register needs a prediction with zp_rate (predict_scan)")
+    F = np.asarray(feasible, dtype=bool)
+    n = F.shape[0]
+    shift = np.zeros(n)
+    w, u, ok, logdet = _whitened(prediction, z, R)
+    F = F & ok
+    if n < 2 or not F.any() or u is None:
+        return shift
+    a, b, c, ld = (np.full(ok.shape, np.nan) for _ in range(4))
+    a[ok], b[ok], c[ok] = (np.einsum("ij,ij->i", w, w), np.einsum("ij,ij->i", u, w),
+                           np.einsum("ij,ij->i", u, u))
+    ld[ok] = logdet
+    linked = (F.astype(np.int64) @ F.T.astype(np.int64)) > 0  # tracks sharing a detection
+    ngroups, group = connected_components(linked, directed=False)
+    sig = np.asarray(sigma_shift_s, dtype=float).reshape(-1)
+    for g in range(ngroups):  # over the groups, not the tracks
+        rows = np.flatnonzero(group == g)
+        cols = np.flatnonzero(F[rows].any(0))
+        if rows.size < 2:
+            continue
+        sigma = float(np.median(sig[rows]))
+        if not (math.isfinite(sigma) and sigma > 0.0):
+            continue
+        fs = F[np.ix_(rows, cols)]
+        A, B, C, LD = (x[np.ix_(rows, cols)] for x in (a, b, c, ld))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            own = np.where(fs & (C > 0), B / C, np.nan)
+        cand = np.unique(np.r_[0.0, own[np.isfinite(own)]])
+        d2 = A[None] - 2.0 * B[None] * cand[:, None, None] + C[None] * cand[:, None, None] ** 2
+        d2 = np.where(fs[None], d2, np.inf)
+        rank = np.minimum(d2.min(1), gate).sum(-1) + (cand / sigma) ** 2
+        order = np.argsort(rank, kind="stable")
+        picked: list[float] = []
+        best = (math.inf, 0.0)
+        for k in order.tolist():
+            s0 = float(cand[k])
+            if any(abs(s0 - p) < 1e-3 * sigma for p in picked):
+                continue
+            picked.append(s0)
+            for _ in range(2):  # solve at s0, refine on its assignment, solve again
+                cost = np.where(fs, A - 2.0 * B * s0 + C * s0**2 + LD, np.inf)
+                det_track = assign(cost, fs)
+                got = det_track >= 0
+                i, j = det_track[got], np.flatnonzero(got)
+                s0 = float(B[i, j].sum() / (C[i, j].sum() + sigma**-2))
+            cost = np.where(fs, A - 2.0 * B * s0 + C * s0**2 + LD, np.inf)
+            det_track = assign(cost, fs)
+            got = det_track >= 0
+            total = float(cost[det_track[got], np.flatnonzero(got)].sum()) + (s0 / sigma) ** 2
+            if total < best[0]:
+                best = (total, s0)
+            if len(picked) >= candidates:
+                break
+        shift[rows] = best[1]
+    return shift
 
 
 def gate_long_arc(wide: Gated, fine: Gated, which: IntArray) -> Gated:
@@ -657,9 +796,15 @@ class Associator:
         which, pr = which[keep], pr[keep]
         if not which.size:
             return wide
-        fine = gate_scan(predict_scan(pb.ekf, pb.x[pr], pb.P[pr], pb.t[pr], tt, st), zz, RR,
-                         self._gate)
-        return gate_long_arc(wide, fine, which)
+        t0 = pb.t[pr]
+        fine = predict_scan(pb.ekf, pb.x[pr], pb.P[pr], t0, tt, st)
+        if self.config.register_groups and which.size > 1:
+            assert fine.speed is not None
+            sigma_s = pred.sigma_pos[:, which].max(0) / fine.speed.min(0)
+            shift = register(fine, zz, RR, wide.feasible[which], self._gate, sigma_s)
+            if np.any(shift != 0.0):  # the shifted tracks predicted again, exactly
+                fine = predict_scan(pb.ekf, pb.x[pr], pb.P[pr], t0 - shift, tt, st)
+        return gate_long_arc(wide, gate_scan(fine, zz, RR, self._gate), which)
 
     def _close_passes(self, t_scan: float) -> None:
         """Count the passes that ended before `t_scan` without a detection."""
