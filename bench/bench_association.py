@@ -70,11 +70,13 @@ T0 = 1_735_732_800.0
 RADARS = {1: ("columbus",), 2: ("columbus", "millstone")}
 VARIANTS: dict[str, dict[str, Any]] = {
     "baseline": {"predictor_q": None, "register_groups": False},
+    "register": {"predictor_q": None},
     "long-arc": {"register_groups": False},
     "long-arc+register": {},
 }
-"""The association compared: GNN on the tracks' filter alone; with the long-arc predictor
-(`AssociationConfig.predictor_q`); with it and the groups' registration (the defaults)."""
+"""The association compared: GNN on the tracks' filter alone; with the groups' registration
+(`AssociationConfig.register_groups`) on it; with the long-arc predictor
+(`AssociationConfig.predictor_q`); with both (the defaults)."""
 
 
 def _catalog(case: str, seed: int) -> list:

@@ -145,7 +145,7 @@ class AssociationConfig:
         ``q``). Chosen on the crowded cases' tuning seeds (`bench/bench_association.py`,
         docs/ASSOCIATION.md).
     register_groups : bool
-        With a long-arc predictor: before the assignment, shift each group of tracks that
+        Before the assignment, shift each group of tracks that
         share detections along track by the common time that best aligns it with the scan
         (`register`; its prior from the tracks' filter's predicted position standard
         deviation).
@@ -781,29 +781,35 @@ class Associator:
         """Score the scan's pairs: `gate_scan`, rescored by the long-arc predictor.
 
         ``pred`` is the tracks' filter's prediction of the bank rows ``rows``; only the
-        tracks with a feasible pair are predicted again by the long-arc predictor
-        (`gate_long_arc`), a track it does not hold (its IOD failed there) keeps the
-        tracks' filter's score.
+        tracks with a feasible pair are predicted again, by the long-arc predictor
+        (`gate_long_arc`; a track it does not hold, its IOD failed there, keeps the tracks'
+        filter's score) and, with ``register_groups``, shifted along track by their
+        group's `register` shift (the tracks' filter's prediction when there is no
+        long-arc predictor).
         """
         wide = gate_scan(pred, zz, RR, self._gate)
-        pb = self.predictor
-        if pb is None:
-            return wide
         which = np.flatnonzero(wide.feasible.any(1))
-        pr = self._prow[rows[which]]
-        which, pr = which[pr >= 0], pr[pr >= 0]
-        keep = pb.tracking[pr]
-        which, pr = which[keep], pr[keep]
-        if not which.size:
-            return wide
-        t0 = pb.t[pr]
-        fine = predict_scan(pb.ekf, pb.x[pr], pb.P[pr], t0, tt, st)
-        if self.config.register_groups and which.size > 1:
+        register_groups = self.config.register_groups and which.size > 1
+        src = self.bank if self.predictor is None else self.predictor
+        if self.predictor is None:
+            if not register_groups:
+                return wide
+            pr = rows[which]
+        else:
+            pr = self._prow[rows[which]]
+            which, pr = which[pr >= 0], pr[pr >= 0]
+            keep = src.tracking[pr]
+            which, pr = which[keep], pr[keep]
+            if not which.size:
+                return wide
+        t0 = src.t[pr]
+        fine = predict_scan(src.ekf, src.x[pr], src.P[pr], t0, tt, st)
+        if register_groups and which.size > 1:
             assert fine.speed is not None
             sigma_s = pred.sigma_pos[:, which].max(0) / fine.speed.min(0)
             shift = register(fine, zz, RR, wide.feasible[which], self._gate, sigma_s)
             if np.any(shift != 0.0):  # the shifted tracks predicted again, exactly
-                fine = predict_scan(pb.ekf, pb.x[pr], pb.P[pr], t0 - shift, tt, st)
+                fine = predict_scan(src.ekf, src.x[pr], src.P[pr], t0 - shift, tt, st)
         return gate_long_arc(wide, gate_scan(fine, zz, RR, self._gate), which)
 
     def _close_passes(self, t_scan: float) -> None:
