@@ -483,13 +483,13 @@ def test_groups_get_their_own_shifts_and_a_lone_track_none():
     # the second train 0.5 rad away in azimuth; a lone track 1 rad away, no detection
     n_a, n_b = a.zp.shape[1], b.zp.shape[1]
     lone = np.array([[1000.0, 2.5, 0.5]])
-    zp = np.concatenate([a.zp[0], b.zp[0] + [0, -0.5, 0], lone])
+    zp = np.concatenate([a.zp[0], b.zp[0] + np.array([0.0, -0.5, 0.0]), lone])
     n = zp.shape[0]
     pred = ScanPrediction(a.epochs, np.zeros(za.shape[0] + zb.shape[0], np.int64), zp[None],
                           np.tile(a.HPHt[0, :1], (1, n, 1, 1)), np.ones((1, n), bool),
                           np.zeros((1, n)), np.tile(a.zp_rate[0, :1], (1, n, 1)),
                           np.full((1, n), 7.5))
-    z = np.concatenate([za, zb + [0, -0.5, 0]])
+    z = np.concatenate([za, zb + np.array([0.0, -0.5, 0.0])])
     R = np.concatenate([Ra, Rb])
     F = _wide_feasible(pred, z, R)
     assert not F[:n_a, za.shape[0]:].any() and not F[n_a:, :za.shape[0]].any()
