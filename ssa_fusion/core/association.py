@@ -437,22 +437,25 @@ def register(prediction: ScanPrediction, z: ArrayLike, R: ArrayLike, feasible: A
     F = np.asarray(feasible, dtype=bool)
     n = F.shape[0]
     shift = np.zeros(n)
-    w, u, ok, logdet = _whitened(prediction, z, R)
-    F = F & ok
-    if n < 2 or not F.any() or u is None:
+    if n < 2:
         return shift
+    linked = (F.astype(np.int64) @ F.T.astype(np.int64)) > 0  # tracks sharing a detection
+    ngroups, group = connected_components(linked, directed=False)
+    if ngroups == n:  # no group of two or more: nothing to register
+        return shift
+    w, u, ok, logdet = _whitened(prediction, z, R)
+    if u is None:
+        return shift
+    F = F & ok
     a, b, c, ld = (np.full(ok.shape, np.nan) for _ in range(4))
     a[ok], b[ok], c[ok] = (np.einsum("ij,ij->i", w, w), np.einsum("ij,ij->i", u, w),
                            np.einsum("ij,ij->i", u, u))
     ld[ok] = logdet
-    linked = (F.astype(np.int64) @ F.T.astype(np.int64)) > 0  # tracks sharing a detection
-    ngroups, group = connected_components(linked, directed=False)
     sig = np.asarray(sigma_shift_s, dtype=float).reshape(-1)
-    for g in range(ngroups):  # over the groups, not the tracks
+    sizes = np.bincount(group, minlength=ngroups)
+    for g in np.flatnonzero(sizes >= 2).tolist():  # over the groups, not the tracks
         rows = np.flatnonzero(group == g)
         cols = np.flatnonzero(F[rows].any(0))
-        if rows.size < 2:
-            continue
         sigma = float(np.median(sig[rows]))
         if not (math.isfinite(sigma) and sigma > 0.0):
             continue
