@@ -26,9 +26,15 @@ a time. Scored by the truth labels kept aside:
 * cost per scan: wall time of `Associator.process_scan` (association, fusion, tentative
   tracks), median and p95 in us, over the scans with detections.
 
+Each case runs once per variant (``--variants``, `VARIANTS`): GNN on the tracks' filter alone
+(``baseline``), with the groups' registration (``register``), with the long-arc predictor
+(``long-arc``), with both (``long-arc+register``, the defaults of `AssociationConfig`), in
+the same conditions, one after the other.
+
 Usage::
 
     nice -n 10 python bench/bench_association.py [--hours 24] [--cases train,crossing]
+        [--radars 1,2] [--seed 1] [--variants baseline,register,long-arc,long-arc+register]
 
 Prints ``key: value`` lines per run; the last line is one JSON object.
 """
@@ -159,6 +165,10 @@ def run(case: str, radars: int, hours: float, seed: int,
     seen = np.unique(truth).size
     assert len(scans) > 0 and m > 0, "no scan, no detection"
     assert seen == len(entries), f"only {seen} of {len(entries)} objects were seen"
+    assert (assoc.predictor is not None) == (config.predictor_q is not None)
+    registered = assoc.counts[TrackEvent.GROUP_REGISTERED]
+    assert registered > 0 if config.register_groups else registered == 0, (
+        f"register_groups {config.register_groups}, {registered} groups registered")
     costs = np.array(cost_us)
     counts = assoc.counts
     return {
@@ -180,6 +190,7 @@ def run(case: str, radars: int, hours: float, seed: int,
         "refused": counts[TrackEvent.REFUSED],
         "deleted_missed_passes": counts[TrackEvent.DELETED_MISSED_PASSES],
         "deleted_covariance": counts[TrackEvent.DELETED_COVARIANCE],
+        "groups_registered": counts[TrackEvent.GROUP_REGISTERED],
         "cost_us_median": float(np.median(costs)),
         "cost_us_p95": float(np.percentile(costs, 95)),
         "cost_us_max": float(costs.max()),
