@@ -169,6 +169,11 @@ class AssociationConfig:
         share detections along track by the common time that best aligns it with the scan
         (`register`; its prior from the tracks' filter's predicted position standard
         deviation).
+    group_link_km, group_link_speed_fraction : float
+        A group also spans tracks predicted within ``group_link_km`` km of each other whose
+        predicted velocities differ by at most this fraction of their speed (one orbit:
+        objects launched together), chained: twice the widest spacing (5 km) of the
+        crowded cases' trains, so that a whole train, not pieces of it, is registered.
     """
 
     gate_probability: float = 0.9999
@@ -182,6 +187,8 @@ class AssociationConfig:
     tracklet_accel_sigma_km_s2: float = 1e-4
     predictor_q: float | None = 1e-17
     register_groups: bool = True
+    group_link_km: float = 10.0
+    group_link_speed_fraction: float = 0.01
 
     def __post_init__(self) -> None:
         """Check the settings (ValueError naming the field)."""
@@ -194,7 +201,8 @@ class AssociationConfig:
             raise ValueError("delete_after_missed_passes must be >= 1, got "
                              f"{self.delete_after_missed_passes}")
         for name in ("pass_gap_s", "max_position_sigma_km", "tracklet_max_gap_s",
-                     "tracklet_speed_sigma_km_s", "tracklet_accel_sigma_km_s2"):
+                     "tracklet_speed_sigma_km_s", "tracklet_accel_sigma_km_s2",
+                     "group_link_km", "group_link_speed_fraction"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.predictor_q is not None and not self.predictor_q >= 0.0:
@@ -409,7 +417,8 @@ def assign(cost: ArrayLike, feasible: ArrayLike) -> IntArray:
 
 
 def register(prediction: ScanPrediction, z: ArrayLike, R: ArrayLike, feasible: ArrayLike,
-             gate: float, sigma_shift_s: ArrayLike, candidates: int = 4) -> Array:
+             gate: float, sigma_shift_s: ArrayLike, candidates: int = 4,
+             linked: ArrayLike | None = None) -> Array:
     """Return the common along-track shift of each group of tracks sharing detections (s).
 
     Objects launched together (a train) share the error their motion model leaves out (drag,
@@ -446,6 +455,10 @@ def register(prediction: ScanPrediction, z: ArrayLike, R: ArrayLike, feasible: A
         predicted position standard deviation over its speed).
     candidates : int
         How many of the ranked candidate shifts are solved by assignment.
+    linked : array_like (N, N) of bool, optional
+        More links between tracks (e.g. each track's prediction inside another's gate,
+        `Associator`): a group then spans them too, so that the end of a train with a single
+        detection is not registered alone (one detection aligns with any of its tracks).
 
     Returns
     -------
@@ -459,8 +472,10 @@ def register(prediction: ScanPrediction, z: ArrayLike, R: ArrayLike, feasible: A
     shift = np.zeros(n)
     if n < 2:
         return shift
-    linked = (F.astype(np.int64) @ F.T.astype(np.int64)) > 0  # tracks sharing a detection
-    ngroups, group = connected_components(linked, directed=False)
+    share = (F.astype(np.int64) @ F.T.astype(np.int64)) > 0  # tracks sharing a detection
+    if linked is not None:
+        share = share | np.asarray(linked, dtype=bool)
+    ngroups, group = connected_components(share, directed=False)
     if ngroups == n:  # no group of two or more: nothing to register
         return shift
     w, u, ok, logdet = _whitened(prediction, z, R)
@@ -833,11 +848,40 @@ class Associator:
         if register_groups and which.size > 1:
             assert fine.speed is not None
             sigma_s = pred.sigma_pos[:, which].max(0) / fine.speed.min(0)
-            shift = register(fine, zz, RR, wide.feasible[which], self._gate, sigma_s)
+            shift = register(fine, zz, RR, wide.feasible[which], self._gate, sigma_s,
+                             linked=self._close_tracks(pred, fine, which))
             self.counts[TrackEvent.GROUP_REGISTERED] += int(np.unique(shift[shift != 0.0]).size)
             if np.any(shift != 0.0):  # the shifted tracks predicted again, exactly
                 fine = predict_scan(src.ekf, src.x[pr], src.P[pr], t0 - shift, tt, st)
         return gate_long_arc(wide, gate_scan(fine, zz, RR, self._gate), which)
+
+    def _close_tracks(self, pred: ScanPrediction, fine: ScanPrediction,
+                      which: IntArray) -> BoolArray:
+        """Pairs of the tracks ``which`` on one orbit, close together (K, K) of bool.
+
+        At the scan's first epoch, from the long-arc prediction ``fine`` (positions and
+        velocities in the station's range/azimuth/elevation frame, km and km/s: ``[r,
+        r cos(el) az, r el]`` and the same of ``zp_rate``): two tracks are linked when
+        their predicted positions differ by at most ``group_link_km`` and their velocities
+        by at most ``group_link_speed_fraction`` of the speed (objects launched together;
+        crossing planes differ in velocity by a large fraction of it). ``pred`` (the
+        tracks' filter's) marks the predictions that are computable.
+        """
+        cfg = self.config
+        zp = fine.zp[0]
+        rate = fine.zp_rate[0] if fine.zp_rate is not None else np.zeros_like(zp)
+        r, el = zp[:, 0], zp[:, 2]
+        scale = np.stack([np.ones_like(r), r * np.cos(el), r], -1)  # km per unit
+        dz = zp[:, None, :] - zp[None, :, :]
+        dz[..., 1] = math.pi - np.mod(math.pi - dz[..., 1], 2.0 * math.pi)
+        dp = np.linalg.norm(dz * scale[:, None, :], axis=-1)
+        dv = np.linalg.norm((rate[:, None, :] - rate[None, :, :]) * scale[:, None, :], axis=-1)
+        speed = fine.speed[0] if fine.speed is not None else np.full(which.size, np.inf)
+        ok = pred.ok[0, which] & fine.ok[0]
+        out: BoolArray = ((dp <= cfg.group_link_km)
+                          & (dv <= cfg.group_link_speed_fraction * speed[:, None])
+                          & ok[:, None] & ok[None, :])
+        return out
 
     def _close_passes(self, t_scan: float) -> None:
         """Count the passes that ended before `t_scan` without a detection."""
