@@ -571,3 +571,39 @@ def test_a_train_after_a_long_gap_keeps_its_tracks(long_gap_train):
         assert len(assoc.track_ids(TrackStatus.CONFIRMED)) == 12
     assert runs["plain"] < 0.95  # the premise: GNN on the tracks' filter shifts the train
     assert runs["default"] == 1.0
+
+
+def test_a_train_registered_in_pieces_misplaces_its_end_and_linked_whole_does_not():
+    # predictions 1.5 km ahead of their objects; a 6 km gap splits the gates in two, and
+    # the tail has one detection (the rest not yet in view): alone, the tail aligns its
+    # detection with the nearest track (the next one back, 0.15 km off)
+    spacing = [1.4, 2.0, 6.0, 1.65, 3.4]
+    n = len(spacing) + 1
+    pred, z, R, truth = _train_scan(spacing, -0.2, missing=(4, 5))
+    F = _wide_feasible(pred, z, R, sigma_km=0.75)
+    assert not F[:3, 3].any() and not F[3:, :3].any()  # two pieces
+    sig = np.full(n, 2.0)
+    pieces = register(pred, z, R, F, GATE, sig)
+    g = gate_scan(_shifted(pred, pieces), z, R, GATE)
+    assert assign(g.cost, F)[3] == 4  # the premise: the tail's detection on the wrong track
+    whole = register(pred, z, R, F, GATE, sig, linked=np.ones((n, n), bool))
+    assert whole == pytest.approx(np.full(n, -0.2), abs=0.01)
+    g = gate_scan(_shifted(pred, whole), z, R, GATE)
+    assert assign(g.cost, F).tolist() == truth.tolist()
+
+
+def test_tracks_on_one_orbit_close_together_are_linked_crossing_or_far_ones_not():
+    # range 1000 km, elevation 0: 1 mrad of azimuth is 1 km; rates as km/s across
+    zp = np.array([[1000.0, 1.000, 0.0], [1000.0, 1.003, 0.0], [1000.0, 1.001, 0.0],
+                   [1000.0, 1.020, 0.0]])
+    rate = np.array([[0.0, 7.5e-3, 0.0], [0.0, 7.5e-3, 0.0], [0.0, 2.6e-3, 7.0e-3],
+                     [0.0, 7.5e-3, 0.0]])
+    n = zp.shape[0]
+    fine = ScanPrediction(np.array([T0]), np.zeros(0, np.int64), zp[None],
+                          np.tile(np.eye(3) * 1e-8, (1, n, 1, 1)), np.ones((1, n), bool),
+                          np.zeros((1, n)), rate[None], np.full((1, n), 7.5))
+    assoc = Associator(SKY_FILTER, NETWORK)
+    near = assoc._close_tracks(fine, fine, np.arange(n))
+    # 0-1: 3 km, one velocity; 0-2: 1 km but crossing (~70 deg); 0-3: 20 km
+    assert near.tolist() == [[True, True, False, False], [True, True, False, False],
+                             [False, False, True, False], [False, False, False, True]]
