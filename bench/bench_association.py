@@ -26,9 +26,15 @@ a time. Scored by the truth labels kept aside:
 * cost per scan: wall time of `Associator.process_scan` (association, fusion, tentative
   tracks), median and p95 in us, over the scans with detections.
 
+Each case runs once per variant (``--variants``, `VARIANTS`): GNN on the tracks' filter alone
+(``baseline``), with the groups' registration (``register``), with the long-arc predictor
+(``long-arc``), with both (``long-arc+register``, the defaults of `AssociationConfig`), in
+the same conditions, one after the other.
+
 Usage::
 
     nice -n 10 python bench/bench_association.py [--hours 24] [--cases train,crossing]
+        [--radars 1,2] [--seed 1] [--variants baseline,register,long-arc,long-arc+register]
 
 Prints ``key: value`` lines per run; the last line is one JSON object.
 """
@@ -46,7 +52,9 @@ import math
 import sys
 import time
 from collections import Counter
+from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -66,6 +74,15 @@ from ssa_fusion.sim import survey
 T0 = 1_735_732_800.0
 """Start of every run: 2025-01-01T12:00:00Z."""
 RADARS = {1: ("columbus",), 2: ("columbus", "millstone")}
+VARIANTS: dict[str, dict[str, Any]] = {
+    "baseline": {"predictor_q": None, "register_groups": False},
+    "register": {"predictor_q": None},
+    "long-arc": {"register_groups": False},
+    "long-arc+register": {},
+}
+"""The association compared: GNN on the tracks' filter alone; with the groups' registration
+(`AssociationConfig.register_groups`) on it; with the long-arc predictor
+(`AssociationConfig.predictor_q`); with both (the defaults)."""
 
 
 def _catalog(case: str, seed: int) -> list:
@@ -148,6 +165,10 @@ def run(case: str, radars: int, hours: float, seed: int,
     seen = np.unique(truth).size
     assert len(scans) > 0 and m > 0, "no scan, no detection"
     assert seen == len(entries), f"only {seen} of {len(entries)} objects were seen"
+    assert (assoc.predictor is not None) == (config.predictor_q is not None)
+    registered = assoc.counts[TrackEvent.GROUP_REGISTERED]
+    assert registered > 0 if config.register_groups else registered == 0, (
+        f"register_groups {config.register_groups}, {registered} groups registered")
     costs = np.array(cost_us)
     counts = assoc.counts
     return {
@@ -169,6 +190,7 @@ def run(case: str, radars: int, hours: float, seed: int,
         "refused": counts[TrackEvent.REFUSED],
         "deleted_missed_passes": counts[TrackEvent.DELETED_MISSED_PASSES],
         "deleted_covariance": counts[TrackEvent.DELETED_COVARIANCE],
+        "groups_registered": counts[TrackEvent.GROUP_REGISTERED],
         "cost_us_median": float(np.median(costs)),
         "cost_us_p95": float(np.percentile(costs, 95)),
         "cost_us_max": float(costs.max()),
@@ -182,19 +204,32 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cases", default="train,crossing")
     ap.add_argument("--radars", default="1,2", help="1, 2 or 1,2")
     ap.add_argument("--seed", type=int, default=1)
+    default = AssociationConfig()
+    ap.add_argument("--predictor-q", type=float, default=default.predictor_q,
+                    help="the long-arc predictor's q, km^2/s^3 (AssociationConfig.predictor_q)")
+    ap.add_argument("--variants", default=",".join(VARIANTS),
+                    help=f"comma-separated, of {', '.join(VARIANTS)}")
     args = ap.parse_args(argv)
-    config = AssociationConfig()
+    names = args.variants.split(",")
+    configs = [replace(default, **VARIANTS[v]) for v in names]
+    configs = [replace(c, predictor_q=args.predictor_q) if c.predictor_q is not None else c
+               for c in configs]
     results = []
     for case in args.cases.split(","):
         for radars in (int(r) for r in args.radars.split(",")):
-            t1 = time.perf_counter()
-            res = run(case, radars, args.hours, args.seed, config)
-            res["wall_s"] = round(time.perf_counter() - t1, 1)
-            results.append(res)
-            print(f"\n{case}, {radars} radar(s), {args.hours:g} h:")
-            for k, v in res.items():
-                print(f"  {k}: {v:.5g}" if isinstance(v, float) else f"  {k}: {v}")
-    print(json.dumps({"config": {k: getattr(config, k) for k in config.__dataclass_fields__},
+            for name, config in zip(names, configs, strict=True):
+                t1 = time.perf_counter()
+                res = run(case, radars, args.hours, args.seed, config)
+                res["variant"] = name
+                res["predictor_q"] = str(config.predictor_q)
+                res["register_groups"] = config.register_groups
+                res["wall_s"] = round(time.perf_counter() - t1, 1)
+                results.append(res)
+                print(f"\n{case}, {radars} radar(s), {args.hours:g} h, {name}:")
+                for k, v in res.items():
+                    print(f"  {k}: {v:.5g}" if isinstance(v, float) else f"  {k}: {v}")
+    print(json.dumps({"configs": {n: {k: getattr(c, k) for k in c.__dataclass_fields__}
+                                  for n, c in zip(names, configs, strict=True)},
                       "runs": results}))
     return 0
 

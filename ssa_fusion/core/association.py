@@ -26,6 +26,24 @@ Unix s; a `track_bank.TrackBank`'s arrays) in three vectorised steps:
 (N, M) arrays are computed at once (O(N M) memory: a scan of 50 detections against 10,000
 tracks is 5e5 pairs, ~40 MB).
 
+Crowded skies (objects launched together, a few km apart) need two more steps, both in
+`Associator` (docs/ASSOCIATION.md measures them):
+
+* a *long-arc predictor* (`AssociationConfig.predictor_q`): a second filter of every track,
+  of much smaller process noise, fed the same detections. The tracks' filter's process
+  noise (tuned for a consistent covariance under model error) makes it forget the mean
+  motion that earlier passes pinned: after a gap of half a day its along-track prediction
+  errs by independent km per track, more than the spacing of a train. The long-arc
+  predictor keeps it; its predictions rescore the pairs the tracks' filter gates
+  (`gate_long_arc`: the gate stays the tracks' filter's, so a detection it expects is
+  never left out because the long-arc predictor is too sure);
+* a *registration* (`register`, `AssociationConfig.register_groups`): what the long-arc
+  predictor still misses (drag, the motion model's own error) is nearly the same along-
+  track time for every member of a group. Tracks linked by detections they both gate form
+  a group; each group is shifted along track by the common time (Gaussian prior from the
+  tracks' filter's predicted position standard deviation) that best aligns it with the
+  scan, before the assignment.
+
 Track management (`Associator`): a catalog of unlabelled objects, scan by scan.
 
 * Every scan is first associated with the tracks (tentative and confirmed, the rows of a
@@ -65,6 +83,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import linear_sum_assignment
+from scipy.sparse.csgraph import connected_components
 from scipy.stats import chi2
 
 from .batch_ekf import BatchEKF
@@ -87,8 +106,10 @@ __all__ = [
     "TrackStatus",
     "assign",
     "associate",
+    "gate_long_arc",
     "gate_scan",
     "predict_scan",
+    "register",
 ]
 
 Array = NDArray[np.float64]
@@ -135,6 +156,24 @@ class AssociationConfig:
     tracklet_accel_sigma_km_s2 : float
         Standard deviation, km/s^2, of the acceleration left out of a tracklet's
         prediction (two-body gravity is in it), per axis.
+    predictor_q : float or None
+        Process-noise spectral density, km^2/s^3, of the association's own *long-arc
+        predictor* (module docstring): a second filter of every track, fed the same
+        detections, whose predictions rescore the pairs the tracks' filter gates
+        (`gate_long_arc`); None: the tracks' filter scores them. Chosen on the crowded
+        cases' tuning seeds 1-3 (`bench/bench_association.py`, docs/ASSOCIATION.md): the
+        largest of 1e-16, 1e-17, 1e-18 with which every tuning run kept 99.95 % of the
+        detections on the right track and no track swapped.
+    register_groups : bool
+        Before the assignment, shift each group of tracks that
+        share detections along track by the common time that best aligns it with the scan
+        (`register`; its prior from the tracks' filter's predicted position standard
+        deviation).
+    group_link_km, group_link_speed_fraction : float
+        A group also spans tracks predicted within ``group_link_km`` km of each other whose
+        predicted velocities differ by at most this fraction of their speed (one orbit:
+        objects launched together), chained: twice the widest spacing (5 km) of the
+        crowded cases' trains, so that a whole train, not pieces of it, is registered.
     """
 
     gate_probability: float = 0.9999
@@ -146,6 +185,10 @@ class AssociationConfig:
     tracklet_max_gap_s: float = 60.0
     tracklet_speed_sigma_km_s: float = 0.3
     tracklet_accel_sigma_km_s2: float = 1e-4
+    predictor_q: float | None = 1e-17
+    register_groups: bool = True
+    group_link_km: float = 10.0
+    group_link_speed_fraction: float = 0.01
 
     def __post_init__(self) -> None:
         """Check the settings (ValueError naming the field)."""
@@ -158,9 +201,12 @@ class AssociationConfig:
             raise ValueError("delete_after_missed_passes must be >= 1, got "
                              f"{self.delete_after_missed_passes}")
         for name in ("pass_gap_s", "max_position_sigma_km", "tracklet_max_gap_s",
-                     "tracklet_speed_sigma_km_s", "tracklet_accel_sigma_km_s2"):
+                     "tracklet_speed_sigma_km_s", "tracklet_accel_sigma_km_s2",
+                     "group_link_km", "group_link_speed_fraction"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.predictor_q is not None and not self.predictor_q >= 0.0:
+            raise ValueError(f"predictor_q must be >= 0 or None, got {self.predictor_q}")
 
     @property
     def gate(self) -> float:
@@ -187,6 +233,13 @@ class ScanPrediction:
     sigma_pos : ndarray (K, N)
         Largest standard deviation of each predicted position, km (the square root of the
         largest eigenvalue of its 3 x 3 covariance).
+    zp_rate : ndarray (K, N, 3) or None
+        Rate of each predicted measurement with a shift of its track along its orbit,
+        [km/s, rad/s, rad/s] per s of shift (the track a time ``s`` ahead of its
+        prediction, measured at the same epoch: ``zp + zp_rate s`` to first order;
+        ``H v``, v the predicted GCRF velocity); None when not computed.
+    speed : ndarray (K, N) or None
+        Predicted speed of each track, km/s (GCRF); None when not computed.
     """
 
     epochs: Array
@@ -195,6 +248,8 @@ class ScanPrediction:
     HPHt: Array
     ok: BoolArray
     sigma_pos: Array
+    zp_rate: Array | None = None
+    speed: Array | None = None
 
 
 @dataclass(frozen=True)
@@ -267,9 +322,12 @@ def predict_scan(ekf: BatchEKF, x: ArrayLike, P: ArrayLike, t_track: ArrayLike,
     ok = pred.ok & np.isfinite(zp).all(-1) & np.isfinite(HPHt).all((-1, -2))
     Pr = np.where(ok[:, None, None], pred.P[:, :3, :3], 0.0)
     sigma = np.sqrt(np.clip(np.linalg.eigvalsh(Pr)[:, -1], 0.0, None))
+    v = pred.x[:, 3:]
+    rate = np.einsum("mij,mj->mi", H[:, :, :3], v)
     return ScanPrediction(epochs, index.reshape(-1).astype(np.int64),
                           zp.reshape(k, n, 3), HPHt.reshape(k, n, 3, 3), ok.reshape(k, n),
-                          np.where(ok, sigma, np.inf).reshape(k, n))
+                          np.where(ok, sigma, np.inf).reshape(k, n), rate.reshape(k, n, 3),
+                          np.linalg.norm(v, axis=-1).reshape(k, n))
 
 
 def gate_scan(prediction: ScanPrediction, z: ArrayLike, R: ArrayLike, gate: float) -> Gated:
@@ -286,6 +344,22 @@ def gate_scan(prediction: ScanPrediction, z: ArrayLike, R: ArrayLike, gate: floa
     gate : float
         Threshold on ``d^2`` (`AssociationConfig.gate`).
     """
+    w, _, ok, logdet = _whitened(prediction, z, R)
+    d2 = np.full(ok.shape, np.inf)
+    cost = np.full(ok.shape, np.inf)
+    d2[ok] = np.einsum("ij,ij->i", w, w)
+    cost[ok] = d2[ok] + logdet
+    return Gated(d2, cost, d2 <= gate)
+
+
+def _whitened(prediction: ScanPrediction, z: ArrayLike,
+              R: ArrayLike) -> tuple[Array, Array | None, BoolArray, Array]:
+    """Whitened innovations of every computable (track, detection) pair.
+
+    Returns ``w = L^-1 y`` (P, 3) and ``u = L^-1 zp_rate`` (P, 3) (None without
+    ``zp_rate``) for the P pairs where ``ok`` (N, M) holds (``L L^T = S``, angles of ``y``
+    wrapped to (-pi, pi]), and ``ln det S`` (P,).
+    """
     zz = np.asarray(z, dtype=float).reshape(-1, 3)
     m = zz.shape[0]
     RR = np.broadcast_to(np.asarray(R, dtype=float), (m, 3, 3))
@@ -297,14 +371,15 @@ def gate_scan(prediction: ScanPrediction, z: ArrayLike, R: ArrayLike, gate: floa
     ok = np.swapaxes(prediction.ok[e], 0, 1) & np.isfinite(y).all(-1) & np.isfinite(S).all(
         (-1, -2))
     S = np.where(ok[..., None, None], 0.5 * (S + np.swapaxes(S, -1, -2)), np.eye(3))
-    d2 = np.full(ok.shape, np.inf)
-    cost = np.full(ok.shape, np.inf)
-    if ok.any():
-        L = np.linalg.cholesky(S[ok])  # LinAlgError only for a non-positive S: below
-        w = np.linalg.solve(L, y[ok][..., None])[..., 0]
-        d2[ok] = np.einsum("ij,ij->i", w, w)
-        cost[ok] = d2[ok] + 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(-1)
-    return Gated(d2, cost, d2 <= gate)
+    if not ok.any():
+        return np.zeros((0, 3)), np.zeros((0, 3)), ok, np.zeros(0)
+    L = np.linalg.cholesky(S[ok])  # LinAlgError only for a non-positive S: below
+    w = np.linalg.solve(L, y[ok][..., None])[..., 0]
+    u = None
+    if prediction.zp_rate is not None:
+        rate = np.swapaxes(prediction.zp_rate[e], 0, 1)  # (N, M, 3)
+        u = np.linalg.solve(L, rate[ok][..., None])[..., 0]
+    return w, u, ok, 2.0 * np.log(np.diagonal(L, axis1=-2, axis2=-1)).sum(-1)
 
 
 def assign(cost: ArrayLike, feasible: ArrayLike) -> IntArray:
@@ -339,6 +414,147 @@ def assign(cost: ArrayLike, feasible: ArrayLike) -> IntArray:
     keep = fs[r, c]
     out[cols[c[keep]]] = rows[r[keep]]
     return out
+
+
+def register(prediction: ScanPrediction, z: ArrayLike, R: ArrayLike, feasible: ArrayLike,
+             gate: float, sigma_shift_s: ArrayLike, candidates: int = 4,
+             linked: ArrayLike | None = None) -> Array:
+    """Return the common along-track shift of each group of tracks sharing detections (s).
+
+    Objects launched together (a train) share the error their motion model leaves out (drag,
+    the model's own error): after a long gap every member's prediction is off along track by
+    nearly the same time, which can exceed the members' spacing, and the assignment of the
+    shifted train (each track on its neighbour's detection) then costs about as little as
+    the true one. A *group* is a connected set of two or more tracks linked by feasible pairs
+    (two tracks sharing a detection they both gate); every group gets one shift ``s`` (its
+    tracks moved along their orbits by ``s`` seconds: ``zp + zp_rate s``, first order),
+    with a Gaussian prior N(0, sigma^2) (sigma: the median of its tracks'
+    ``sigma_shift_s``), that maximises the likelihood of its best assignment. Irregular
+    spacings make the true alignment unique.
+
+    The search: every feasible pair's own best shift (``s_ij``, where the pair's ``d^2(s)
+    = a - 2 b s + c s^2`` is least) and 0 are candidates, ranked by the sum over the
+    group's detections of their least ``d^2(s)`` (clipped at the gate) plus the prior's
+    ``s^2 / sigma^2``; the best ``candidates`` distinct ones are solved by `assign` and
+    refined in closed form on their assignment (``s = sum b / (sum c + 1 / sigma^2)``);
+    the least total cost (``d^2 + ln det S`` of the pairs plus the prior) wins.
+
+    Parameters
+    ----------
+    prediction : ScanPrediction
+        The N tracks predicted to the scan, with ``zp_rate`` (`predict_scan`).
+    z, R : array_like (M, 3), (M, 3, 3)
+        Detections and their noise (as `gate_scan`).
+    feasible : array_like (N, M) of bool
+        The pairs that may be assigned (the gate); the shift leaves them as they are.
+    gate : float
+        Threshold on ``d^2`` (`AssociationConfig.gate`): the most a detection adds to a
+        candidate's rank.
+    sigma_shift_s : array_like (N,)
+        Prior standard deviation of each track's along-track shift, s (its filter's
+        predicted position standard deviation over its speed).
+    candidates : int
+        How many of the ranked candidate shifts are solved by assignment.
+    linked : array_like (N, N) of bool, optional
+        More links between tracks (e.g. each track's prediction inside another's gate,
+        `Associator`): a group then spans them too, so that the end of a train with a single
+        detection is not registered alone (one detection aligns with any of its tracks).
+
+    Returns
+    -------
+    ndarray (N,)
+        Per track the shift of its group, s; 0 for a track in no group.
+    """
+    if prediction.zp_rate is None:
+        raise ValueError("register needs a prediction with zp_rate (predict_scan)")
+    F = np.asarray(feasible, dtype=bool)
+    n = F.shape[0]
+    shift = np.zeros(n)
+    if n < 2:
+        return shift
+    share = (F.astype(np.int64) @ F.T.astype(np.int64)) > 0  # tracks sharing a detection
+    if linked is not None:
+        share = share | np.asarray(linked, dtype=bool)
+    ngroups, group = connected_components(share, directed=False)
+    if ngroups == n:  # no group of two or more: nothing to register
+        return shift
+    w, u, ok, logdet = _whitened(prediction, z, R)
+    if u is None:
+        return shift
+    F = F & ok
+    a, b, c, ld = (np.full(ok.shape, np.nan) for _ in range(4))
+    a[ok], b[ok], c[ok] = (np.einsum("ij,ij->i", w, w), np.einsum("ij,ij->i", u, w),
+                           np.einsum("ij,ij->i", u, u))
+    ld[ok] = logdet
+    sig = np.asarray(sigma_shift_s, dtype=float).reshape(-1)
+    sizes = np.bincount(group, minlength=ngroups)
+    for g in np.flatnonzero(sizes >= 2).tolist():  # over the groups, not the tracks
+        rows = np.flatnonzero(group == g)
+        cols = np.flatnonzero(F[rows].any(0))
+        sigma = float(np.median(sig[rows]))
+        if not (math.isfinite(sigma) and sigma > 0.0):
+            continue
+        fs = F[np.ix_(rows, cols)]
+        A, B, C, LD = (x[np.ix_(rows, cols)] for x in (a, b, c, ld))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            own = np.where(fs & (C > 0), B / C, np.nan)
+        cand = np.unique(np.r_[0.0, own[np.isfinite(own)]])
+        d2 = A[None] - 2.0 * B[None] * cand[:, None, None] + C[None] * cand[:, None, None] ** 2
+        d2 = np.where(fs[None], d2, np.inf)
+        rank = np.minimum(d2.min(1), gate).sum(-1) + (cand / sigma) ** 2
+        order = np.argsort(rank, kind="stable")
+        picked: list[float] = []
+        best = (math.inf, 0.0)
+        for k in order.tolist():
+            s0 = float(cand[k])
+            if any(abs(s0 - p) < 1e-3 * sigma for p in picked):
+                continue
+            picked.append(s0)
+            for _ in range(2):  # solve at s0, refine on its assignment, solve again
+                cost = np.where(fs, A - 2.0 * B * s0 + C * s0**2 + LD, np.inf)
+                det_track = assign(cost, fs)
+                got = det_track >= 0
+                i, j = det_track[got], np.flatnonzero(got)
+                s0 = float(B[i, j].sum() / (C[i, j].sum() + sigma**-2))
+            cost = np.where(fs, A - 2.0 * B * s0 + C * s0**2 + LD, np.inf)
+            det_track = assign(cost, fs)
+            got = det_track >= 0
+            total = float(cost[det_track[got], np.flatnonzero(got)].sum()) + (s0 / sigma) ** 2
+            if total < best[0]:
+                best = (total, s0)
+            if len(picked) >= candidates:
+                break
+        shift[rows] = best[1]
+    return shift
+
+
+def gate_long_arc(wide: Gated, fine: Gated, which: IntArray) -> Gated:
+    """Rescore gated pairs by a long-arc predictor (`Associator`'s, `AssociationConfig`).
+
+    Parameters
+    ----------
+    wide : Gated
+        The N tracks' pairs scored by the tracks' own filter (`gate_scan`): its gate
+        decides which pairs are feasible (its process noise covers what its motion model
+        leaves out, so a detection it expects is never left out).
+    fine : Gated
+        The tracks ``which`` (rows of ``wide``) scored by the long-arc predictor (a filter
+        of the same tracks with small process noise: a sharp along-track prediction across
+        long gaps).
+    which : ndarray (K,) of int
+        The rows of ``wide`` that ``fine`` scores.
+
+    Returns
+    -------
+    Gated
+        ``wide``'s feasibility; ``d2`` and ``cost`` the long-arc predictor's where it
+        computed them, the tracks' filter's elsewhere.
+    """
+    d2, cost = wide.d2.copy(), wide.cost.copy()
+    sharp = np.isfinite(fine.cost)
+    d2[which] = np.where(sharp, fine.d2, wide.d2[which])
+    cost[which] = np.where(sharp, fine.cost, wide.cost[which])
+    return Gated(d2, cost, wide.feasible)
 
 
 def associate(ekf: BatchEKF, x: ArrayLike, P: ArrayLike, t_track: ArrayLike,
@@ -401,6 +617,9 @@ class TrackEvent(enum.StrEnum):
     """Tentative tracks deleted because they can no longer pass the M-of-N rule."""
     DELETED_MISSED_PASSES = "deleted_missed_passes"
     DELETED_COVARIANCE = "deleted_covariance"
+    GROUP_REGISTERED = "group_registered"
+    """Groups of tracks sharing detections shifted along track before an assignment
+    (`register`; one per group and scan)."""
 
 
 @dataclass(frozen=True)
@@ -448,6 +667,10 @@ class Associator:
         self.config = AssociationConfig() if config is None else config
         options = filter_options.with_(reinit_after=0)
         self.bank = TrackBank(options, stations)
+        q = self.config.predictor_q
+        self.predictor = None if q is None else TrackBank(options.with_(q=q), stations)
+        """The long-arc predictor (`AssociationConfig.predictor_q`): the same tracks, fed the
+        same detections, whose predictions score the pairs; None without one."""
         self.stations = dict(stations)
         self.iod_samples = int(options.iod.iod_samples)
         self.counts: Counter[TrackEvent] = Counter()
@@ -462,6 +685,7 @@ class Associator:
         self._pass_open = np.zeros(0, dtype=bool)
         self._pass_hits = np.zeros(0, dtype=np.int64)
         self._missed = np.zeros(0, dtype=np.int64)
+        self._prow = np.zeros(0, dtype=np.int64)  # the row in `predictor`, -1: none
         # tracklets: one row each; their raw detections by id (for the IOD)
         self._tl_ids: list[str] = []
         self._tl_station = np.zeros(0, dtype=np.int64)
@@ -488,6 +712,7 @@ class Associator:
         self._pass_open = np.r_[self._pass_open, np.zeros(extra, bool)]
         self._pass_hits = np.r_[self._pass_hits, np.zeros(extra, np.int64)]
         self._missed = np.r_[self._missed, np.zeros(extra, np.int64)]
+        self._prow = np.r_[self._prow, np.full(extra, -1, np.int64)]
 
     def _delete(self, rows: IntArray, event: TrackEvent) -> None:
         self.status[rows] = TrackStatus.DELETED
@@ -550,7 +775,7 @@ class Associator:
                             tt if m else t_scan, st)
         track = np.zeros(0, dtype=np.int64)
         if m:
-            gated = gate_scan(pred, zz, RR, self._gate)
+            gated = self._gate_scan(rows, pred, st, tt, zz, RR)
             track = assign(gated.cost, gated.feasible)
         sigma = pred.sigma_pos.max(0)
         lost = rows[sigma > cfg.max_position_sigma_km]
@@ -563,6 +788,8 @@ class Associator:
         det = det[np.argsort(tt[det], kind="stable")]
         names = [bank.object_ids[r] for r in rows[track[det]]]
         res = bank.process(tt[det], names, [station] * det.size, zz[det], RR[det])
+        if self.predictor is not None and det.size:
+            self.predictor.process(tt[det], names, [station] * det.size, zz[det], RR[det])
         refused = np.array([c != "" for c in res.cause], dtype=bool)
         for j, name in zip(det.tolist(), names, strict=True):
             ids[j] = name
@@ -589,6 +816,72 @@ class Associator:
         self._delete(lost[self.status[lost] != TrackStatus.DELETED],
                      TrackEvent.DELETED_COVARIANCE)
         return np.flatnonzero(~got)
+
+    def _gate_scan(self, rows: IntArray, pred: ScanPrediction, st: int, tt: Array,
+                   zz: Array, RR: Array) -> Gated:
+        """Score the scan's pairs: `gate_scan`, rescored by the long-arc predictor.
+
+        ``pred`` is the tracks' filter's prediction of the bank rows ``rows``; only the
+        tracks with a feasible pair are predicted again, by the long-arc predictor
+        (`gate_long_arc`; a track it does not hold, its IOD failed there, keeps the tracks'
+        filter's score) and, with ``register_groups``, shifted along track by their
+        group's `register` shift (the tracks' filter's prediction when there is no
+        long-arc predictor).
+        """
+        wide = gate_scan(pred, zz, RR, self._gate)
+        which = np.flatnonzero(wide.feasible.any(1))
+        register_groups = self.config.register_groups and which.size > 1
+        src = self.bank if self.predictor is None else self.predictor
+        if self.predictor is None:
+            if not register_groups:
+                return wide
+            pr = rows[which]
+        else:
+            pr = self._prow[rows[which]]
+            which, pr = which[pr >= 0], pr[pr >= 0]
+            keep = src.tracking[pr]
+            which, pr = which[keep], pr[keep]
+            if not which.size:
+                return wide
+        t0 = src.t[pr]
+        fine = predict_scan(src.ekf, src.x[pr], src.P[pr], t0, tt, st)
+        if register_groups and which.size > 1:
+            assert fine.speed is not None
+            sigma_s = pred.sigma_pos[:, which].max(0) / fine.speed.min(0)
+            shift = register(fine, zz, RR, wide.feasible[which], self._gate, sigma_s,
+                             linked=self._close_tracks(pred, fine, which))
+            self.counts[TrackEvent.GROUP_REGISTERED] += int(np.unique(shift[shift != 0.0]).size)
+            if np.any(shift != 0.0):  # the shifted tracks predicted again, exactly
+                fine = predict_scan(src.ekf, src.x[pr], src.P[pr], t0 - shift, tt, st)
+        return gate_long_arc(wide, gate_scan(fine, zz, RR, self._gate), which)
+
+    def _close_tracks(self, pred: ScanPrediction, fine: ScanPrediction,
+                      which: IntArray) -> BoolArray:
+        """Pairs of the tracks ``which`` on one orbit, close together (K, K) of bool.
+
+        At the scan's first epoch, from the long-arc prediction ``fine`` (positions and
+        velocities in the station's range/azimuth/elevation frame, km and km/s: ``[r,
+        r cos(el) az, r el]`` and the same of ``zp_rate``): two tracks are linked when
+        their predicted positions differ by at most ``group_link_km`` and their velocities
+        by at most ``group_link_speed_fraction`` of the speed (objects launched together;
+        crossing planes differ in velocity by a large fraction of it). ``pred`` (the
+        tracks' filter's) marks the predictions that are computable.
+        """
+        cfg = self.config
+        zp = fine.zp[0]
+        rate = fine.zp_rate[0] if fine.zp_rate is not None else np.zeros_like(zp)
+        r, el = zp[:, 0], zp[:, 2]
+        scale = np.stack([np.ones_like(r), r * np.cos(el), r], -1)  # km per unit
+        dz = zp[:, None, :] - zp[None, :, :]
+        dz[..., 1] = math.pi - np.mod(math.pi - dz[..., 1], 2.0 * math.pi)
+        dp = np.linalg.norm(dz * scale[:, None, :], axis=-1)
+        dv = np.linalg.norm((rate[:, None, :] - rate[None, :, :]) * scale[:, None, :], axis=-1)
+        speed = fine.speed[0] if fine.speed is not None else np.full(which.size, np.inf)
+        ok = pred.ok[0, which] & fine.ok[0]
+        out: BoolArray = ((dp <= cfg.group_link_km)
+                          & (dv <= cfg.group_link_speed_fraction * speed[:, None])
+                          & ok[:, None] & ok[None, :])
+        return out
 
     def _close_passes(self, t_scan: float) -> None:
         """Count the passes that ended before `t_scan` without a detection."""
@@ -684,6 +977,12 @@ class Associator:
         res = self.bank.process([d[0] for d in raw], [name] * len(raw), [station] * len(raw),
                                 [d[1] for d in raw], [d[2] for d in raw])
         ok = res.cause[-1] == "" and bool(self.bank.tracking[self.bank.rows[name]])
+        if ok and self.predictor is not None:
+            self.predictor.process([d[0] for d in raw], [name] * len(raw),
+                                   [station] * len(raw), [d[1] for d in raw],
+                                   [d[2] for d in raw])
+            self._grow()
+            self._prow[self.bank.rows[name]] = self.predictor.rows[name]
         self.counts[TrackEvent.TRACK_INITIATED if ok else TrackEvent.IOD_FAILED] += 1
         if not ok:
             self.bank.tracking[self.bank.rows[name]] = False

@@ -370,3 +370,240 @@ def test_a_tentative_track_that_stops_being_seen_is_dropped(train_obs):
     assert assoc.track_ids(TrackStatus.TENTATIVE) == []
     assert assoc.counts[TrackEvent.TENTATIVE_DROPPED] == 5
     assert assoc.counts[TrackEvent.TRACK_CONFIRMED] == 0
+
+
+# ------------------------------------------------------------------------------------------
+# Long-arc predictor and the groups' registration
+# ------------------------------------------------------------------------------------------
+from ssa_fusion.core.association import (  # noqa: E402
+    Gated,
+    gate_long_arc,
+    predict_scan,
+    register,
+)
+
+AZ_RATE = 7.5 / 1000.0  # rad/s: 7.5 km/s across the line of sight at 1000 km
+SIG_ALONG = 0.3 / 1000.0  # rad: a long-arc prediction's along-track 0.3 km at 1000 km
+R_DET = np.diag([4e-4, 1e-10, 1e-10])  # 20 m, 10 urad
+
+
+def _train_scan(spacing_km, shift_s: float, missing=()):
+    """A train in measurement space: tracks in a row along azimuth, their detections all
+    ``shift_s`` s ahead (a common along-track error), each with its own small noise.
+
+    Returns the prediction (with ``zp_rate``) and the detections (truth: detection j is
+    track ``truth[j]``)."""
+    rng = np.random.default_rng(7)
+    along = np.r_[0.0, np.cumsum(spacing_km)] / 1000.0  # rad behind the first
+    n = along.size
+    zp = np.stack([np.full(n, 1000.0), 1.0 - along, np.full(n, 0.5)], -1)
+    HPHt = np.tile(np.diag([1e-4, SIG_ALONG**2, 1e-9]), (n, 1, 1))
+    rate = np.tile([0.0, AZ_RATE, 0.0], (n, 1))
+    truth = np.array([i for i in range(n) if i not in missing])
+    z = zp[truth] + rate[truth] * shift_s + rng.normal(0, 1, (truth.size, 3)) * [
+        0.02, 1e-5, 1e-5]
+    pred = ScanPrediction(np.array([T0]), np.zeros(truth.size, np.int64), zp[None],
+                          HPHt[None], np.ones((1, n), bool), np.zeros((1, n)), rate[None],
+                          np.full((1, n), 7.5))
+    return pred, z, np.tile(R_DET, (truth.size, 1, 1)), truth
+
+
+def _wide_feasible(pred, z, R, sigma_km: float = 5.0):
+    """The tracks' filter's gate: the same predictions with an along-track sigma_km."""
+    wide = ScanPrediction(pred.epochs, pred.epoch_index, pred.zp,
+                          np.tile(np.diag([1e-4, (sigma_km / 1000.0) ** 2, 1e-9]),
+                                  (1, pred.zp.shape[1], 1, 1)),
+                          pred.ok, pred.sigma_pos)
+    return gate_scan(wide, z, R, GATE).feasible
+
+
+def _shifted(pred, shift):
+    """The prediction with each track moved by its shift (first order)."""
+    return ScanPrediction(pred.epochs, pred.epoch_index,
+                          pred.zp + pred.zp_rate * np.asarray(shift)[None, :, None], pred.HPHt,
+                          pred.ok, pred.sigma_pos)
+
+
+SPACING = [1.3, 4.1, 2.2, 3.7, 1.1, 2.9, 4.6, 1.8, 3.2]  # km, irregular
+
+
+def test_registration_recovers_a_shifted_train_that_plain_gnn_shifts_by_one():
+    # the head of the train not detected (at the edge of the view): as many pairs shifted
+    # by one member as aligned
+    shift = 0.45  # s: 3.4 km along track, more than most spacings
+    pred, z, R, truth = _train_scan(SPACING, shift, missing=(0,))
+    n = len(SPACING) + 1
+    F = _wide_feasible(pred, z, R)
+    assert F.sum() > 2 * truth.size  # the tracks' filter gates neighbours too
+    fine = gate_scan(pred, z, R, GATE)
+    plain = assign(fine.cost, F)
+    assert (plain != truth).sum() >= 5  # the premise: GNN takes the neighbours' detections
+    s = register(pred, z, R, F, GATE, np.full(n, 2.0))
+    assert s == pytest.approx(np.full(n, shift), abs=0.01)
+    g = gate_scan(_shifted(pred, s), z, R, GATE)
+    assert assign(g.cost, F).tolist() == truth.tolist()
+
+
+def test_registration_of_an_aligned_train_changes_nothing():
+    pred, z, R, truth = _train_scan(SPACING, 0.0, missing=(0, 6))
+    F = _wide_feasible(pred, z, R)
+    fine = gate_scan(pred, z, R, GATE)
+    before = assign(fine.cost, F)
+    assert before.tolist() == truth.tolist()
+    s = register(pred, z, R, F, GATE, np.full(len(SPACING) + 1, 2.0))
+    assert np.abs(s).max() < 0.005  # s: under 40 m
+    g = gate_scan(_shifted(pred, s), z, R, GATE)
+    assert assign(g.cost, F).tolist() == before.tolist()
+
+
+def _objective(pred, z, R, F, s: float, sigma: float) -> float:
+    """Least assignment cost of the train shifted by s, plus the prior: by brute force."""
+    g = gate_scan(_shifted(pred, np.full(pred.zp.shape[1], s)), z, R, GATE)
+    best = _brute_force(np.where(F, g.cost, np.inf), F)
+    return sum(g.cost[i, j] for j, i in enumerate(best) if i >= 0) + (s / sigma) ** 2
+
+
+def test_registration_shift_is_the_least_objective_on_a_grid():
+    # an independent search: the objective (best assignment's cost + prior) on a fine grid
+    spacing = [2.1, 3.9, 1.4, 4.4]
+    pred, z, R, _ = _train_scan(spacing, -0.33, missing=(2,))
+    F = _wide_feasible(pred, z, R)
+    sigma = 1.0
+    s = register(pred, z, R, F, GATE, np.full(len(spacing) + 1, sigma))
+    grid = np.arange(-1.0, 1.0, 0.002)
+    values = [_objective(pred, z, R, F, float(g), sigma) for g in grid]
+    best = float(grid[int(np.argmin(values))])
+    assert s[0] == pytest.approx(best, abs=0.004)
+    assert _objective(pred, z, R, F, float(s[0]), sigma) <= min(values) + 1e-6
+
+
+def test_groups_get_their_own_shifts_and_a_lone_track_none():
+    a, za, Ra, _ = _train_scan(SPACING[:4], 0.4)
+    b, zb, Rb, _ = _train_scan(SPACING[4:], -0.3)
+    # the second train 0.5 rad away in azimuth; a lone track 1 rad away, no detection
+    n_a, n_b = a.zp.shape[1], b.zp.shape[1]
+    lone = np.array([[1000.0, 2.5, 0.5]])
+    zp = np.concatenate([a.zp[0], b.zp[0] + np.array([0.0, -0.5, 0.0]), lone])
+    n = zp.shape[0]
+    pred = ScanPrediction(a.epochs, np.zeros(za.shape[0] + zb.shape[0], np.int64), zp[None],
+                          np.tile(a.HPHt[0, :1], (1, n, 1, 1)), np.ones((1, n), bool),
+                          np.zeros((1, n)), np.tile(a.zp_rate[0, :1], (1, n, 1)),
+                          np.full((1, n), 7.5))
+    z = np.concatenate([za, zb + np.array([0.0, -0.5, 0.0])])
+    R = np.concatenate([Ra, Rb])
+    F = _wide_feasible(pred, z, R)
+    assert not F[:n_a, za.shape[0]:].any() and not F[n_a:, :za.shape[0]].any()
+    s = register(pred, z, R, F, GATE, np.full(n, 2.0))
+    assert s[:n_a] == pytest.approx(np.full(n_a, 0.4), abs=0.01)
+    assert s[n_a:n_a + n_b] == pytest.approx(np.full(n_b, -0.3), abs=0.01)
+    assert s[-1] == 0.0
+
+
+def test_register_needs_the_rate():
+    pred = _prediction(np.array([[1000.0, 1.0, 0.5]] * 2), np.tile(R1, (2, 1, 1)))
+    with pytest.raises(ValueError, match="zp_rate"):
+        register(pred, np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros((2, 0), bool), GATE,
+                 np.ones(2))
+
+
+def test_predicted_measurement_rate_is_the_along_track_derivative():
+    # zp_rate against the exact prediction of the track a little further along its orbit
+    rng = np.random.default_rng(5)
+    ekf = BatchEKF(SKY_FILTER, [RADAR.station])
+    x = _visible_states(3, T0, rng)
+    P = np.tile(np.eye(6) * 1e-6, (3, 1, 1))
+    t = T0 + 30.0
+    pred = predict_scan(ekf, x, P, np.full(3, T0), t, 0)
+    h = 0.2  # s; central difference
+    ahead, behind = (predict_scan(ekf, x, P, np.full(3, T0 - d), t, 0) for d in (h, -h))
+    dz = ahead.zp[0] - behind.zp[0]
+    dz[:, 1:] = (dz[:, 1:] + math.pi) % (2 * math.pi) - math.pi
+    assert dz / (2 * h) == pytest.approx(pred.zp_rate[0], rel=1e-4, abs=1e-12)
+    assert pred.speed[0] == pytest.approx(np.linalg.norm(
+        ekf.predict(x, P, 30.0, T0).x[:, 3:], axis=-1), rel=1e-12)
+
+
+def test_long_arc_rescoring_keeps_the_wide_gate_and_takes_the_fine_cost():
+    inf = math.inf
+    wide = Gated(np.array([[1.0, 30.0], [2.0, 3.0]]), np.array([[5.0, 34.0], [6.0, 7.0]]),
+                 np.array([[True, False], [True, True]]))
+    fine = Gated(np.array([[50.0, inf]]), np.array([[52.0, inf]]), np.array([[False, False]]))
+    out = gate_long_arc(wide, fine, np.array([1]))
+    assert out.feasible.tolist() == wide.feasible.tolist()
+    assert out.cost.tolist() == [[5.0, 34.0], [52.0, 7.0]]
+    assert out.d2.tolist() == [[1.0, 30.0], [50.0, 3.0]]
+
+
+def test_config_refuses_a_negative_predictor_q():
+    with pytest.raises(ValueError, match="predictor_q"):
+        AssociationConfig(predictor_q=-1e-17)
+    assert AssociationConfig(predictor_q=None).predictor_q is None
+
+
+def _accuracy(scans, outs, assoc) -> float:
+    """Of the detections fused into confirmed tracks, the fraction of the track's object."""
+    confirmed = set(assoc.track_ids(TrackStatus.CONFIRMED))
+    pairs = [(i, o) for s, out in zip(scans, outs, strict=True)
+             for i, o, f in zip(out.ids, s.truth.tolist(), out.fate.tolist(), strict=True)
+             if i in confirmed and f == DetectionFate.TRACK]
+    owner = {i: max(set(v), key=v.count) for i in confirmed
+             if (v := [o for j, o in pairs if j == i])}
+    return sum(owner[i] == o for i, o in pairs) / len(pairs)
+
+
+@pytest.fixture(scope="module")
+def long_gap_train():
+    """A train of 12 objects 1-5 km apart over the radar for 24 h: six passes 1.5 h apart,
+    then one after a 14 h gap (the case docs/ASSOCIATION.md describes)."""
+    cat = survey.satellite_train(RADAR.station, T0 + 600.0, 12, seed=2)
+    return survey.observe_catalog(cat, [RADAR], T0, 24 * 3600.0, seed=2).scans(seed=2)
+
+
+def test_a_train_after_a_long_gap_keeps_its_tracks(long_gap_train):
+    scans = long_gap_train
+    gaps = np.diff([s.t for s in scans])
+    assert gaps.max() > 10 * 3600.0  # the case has its long gap
+    runs = {}
+    for name, cfg in (("plain", AssociationConfig(predictor_q=None, register_groups=False)),
+                      ("default", AssociationConfig())):
+        assoc = Associator(SKY_FILTER, NETWORK, cfg)
+        runs[name] = _accuracy(scans, _feed(assoc, scans), assoc)
+        assert len(assoc.track_ids(TrackStatus.CONFIRMED)) == 12
+    assert runs["plain"] < 0.95  # the premise: GNN on the tracks' filter shifts the train
+    assert runs["default"] == 1.0
+
+
+def test_a_train_registered_in_pieces_misplaces_its_end_and_linked_whole_does_not():
+    # predictions 1.5 km ahead of their objects; a 6 km gap splits the gates in two, and
+    # the tail has one detection (the rest not yet in view): alone, the tail aligns its
+    # detection with the nearest track (the next one back, 0.15 km off)
+    spacing = [1.4, 2.0, 6.0, 1.65, 3.4]
+    n = len(spacing) + 1
+    pred, z, R, truth = _train_scan(spacing, -0.2, missing=(4, 5))
+    F = _wide_feasible(pred, z, R, sigma_km=0.75)
+    assert not F[:3, 3].any() and not F[3:, :3].any()  # two pieces
+    sig = np.full(n, 2.0)
+    pieces = register(pred, z, R, F, GATE, sig)
+    g = gate_scan(_shifted(pred, pieces), z, R, GATE)
+    assert assign(g.cost, F)[3] == 4  # the premise: the tail's detection on the wrong track
+    whole = register(pred, z, R, F, GATE, sig, linked=np.ones((n, n), bool))
+    assert whole == pytest.approx(np.full(n, -0.2), abs=0.01)
+    g = gate_scan(_shifted(pred, whole), z, R, GATE)
+    assert assign(g.cost, F).tolist() == truth.tolist()
+
+
+def test_tracks_on_one_orbit_close_together_are_linked_crossing_or_far_ones_not():
+    # range 1000 km, elevation 0: 1 mrad of azimuth is 1 km; rates as km/s across
+    zp = np.array([[1000.0, 1.000, 0.0], [1000.0, 1.003, 0.0], [1000.0, 1.001, 0.0],
+                   [1000.0, 1.020, 0.0]])
+    rate = np.array([[0.0, 7.5e-3, 0.0], [0.0, 7.5e-3, 0.0], [0.0, 2.6e-3, 7.0e-3],
+                     [0.0, 7.5e-3, 0.0]])
+    n = zp.shape[0]
+    fine = ScanPrediction(np.array([T0]), np.zeros(0, np.int64), zp[None],
+                          np.tile(np.eye(3) * 1e-8, (1, n, 1, 1)), np.ones((1, n), bool),
+                          np.zeros((1, n)), rate[None], np.full((1, n), 7.5))
+    assoc = Associator(SKY_FILTER, NETWORK)
+    near = assoc._close_tracks(fine, fine, np.arange(n))
+    # 0-1: 3 km, one velocity; 0-2: 1 km but crossing (~70 deg); 0-3: 20 km
+    assert near.tolist() == [[True, True, False, False], [True, True, False, False],
+                             [False, False, True, False], [False, False, False, True]]
