@@ -14,7 +14,8 @@ epochs and over gaps > 12 h (`sky_study.fit_ratios`), and, last, one JSON line.
 
 Usage: .venv/bin/python bench/bench_sky.py [--quick] [--workers N] [--scenario NAME ...]
 
-``--tuning`` runs the tuning seeds (`TUNING_SEEDS` 1-3, every start epoch) instead: where
+``--tuning`` runs the tuning seeds (`TUNING_SEEDS` 1-3, every start epoch; ``--tuning-seeds
+N`` the first N of 1-10) instead: where
 the gap fit's process noise is chosen (``--gap-fit-snc`` / ``--gap-fit-snc-angles``
 km^2/s^3 replace `batch_gap.GAP_FIT_SNC` / `GAP_FIT_SNC_ANGLES` for the run,
 ``--gap-fit-accel`` km/s^2 `batch_gap.GAP_FIT_ACCEL_SIGMA`) and its window
@@ -90,6 +91,9 @@ def main() -> int:
     ap.add_argument("--scenario", nargs="*", default=list(sky.SKY_SCENARIOS))
     ap.add_argument("--tuning", action="store_true",
                     help="the tuning seeds 1-3 (every start epoch), not the evaluation seeds")
+    ap.add_argument("--tuning-seeds", type=int, default=3,
+                    help="with --tuning: how many of the tuning seeds (the first N of "
+                         "TUNING_SEEDS, 1-10)")
     ap.add_argument("--gap-fit-snc", type=float, default=None,
                     help="with --tuning: the gap fit's SNC for windows with ranges")
     ap.add_argument("--gap-fit-snc-angles", type=float, default=None,
@@ -116,6 +120,8 @@ def main() -> int:
     chosen = (args.gap_fit_snc, args.gap_fit_snc_angles, args.gap_fit_accel, *window.values())
     if any(v is not None for v in chosen) and not args.tuning:
         ap.error("--gap-fit-* options choose settings: --tuning only")
+    if not 1 <= args.tuning_seeds <= len(TUNING_SEEDS):
+        ap.error(f"--tuning-seeds: 1 to {len(TUNING_SEEDS)}")
     for name, value in window.items():
         if value is not None:
             setattr(batch_gap, name, value)
@@ -126,7 +132,7 @@ def main() -> int:
     if args.gap_fit_snc_angles is not None:
         batch_gap.GAP_FIT_ANGLES = replace(batch_gap.GAP_FIT_ANGLES,
                                            snc_psd=(args.gap_fit_snc_angles,) * 3)
-    seeds = (TUNING_SEEDS[:3] if args.tuning else
+    seeds = (TUNING_SEEDS[:args.tuning_seeds] if args.tuning else
              EVALUATION_SEEDS[:3] if args.quick else EVALUATION_SEEDS)
     offsets = (0.0,) if args.quick and not args.tuning else START_OFFSETS_H
     t0 = time.perf_counter()
