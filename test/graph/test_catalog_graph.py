@@ -54,13 +54,22 @@ SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.t
 OBJECTS = 12
 
 
+def catalog_args(out: Path, **changes: object) -> argparse.Namespace:
+    """`live --catalog`'s arguments for the sample catalog's first `OBJECTS` synthetic
+    objects, 6 h on iss_network's radars in lockstep, seed 4, written to `out`; `changes`
+    replace any of them."""
+    args = dict(catalog=SAMPLE, objects=0, synthetic=OBJECTS, duration=6.0, start="", shards=1,
+                scenario="iss_network", time_scale=20000.0, seed=4, out=out, bag=None,
+                domain_id=None, surrogate=False, surrogate_param=[], lockstep=True,
+                unlabelled=False)
+    return argparse.Namespace(**{**args, **changes})
+
+
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("catalog")
-    args = argparse.Namespace(
-        catalog=SAMPLE, objects=0, synthetic=OBJECTS, duration=6.0, start="", shards=2,
-        scenario="iss_network", time_scale=20000.0, seed=4, out=out, bag=None, domain_id=None,
-        surrogate=True, surrogate_param=["min_span=7200", "min_anchors=3"], lockstep=True)
+    args = catalog_args(out, shards=2, surrogate=True,
+                        surrogate_param=["min_span=7200", "min_anchors=3"])
     burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(2)]
     try:
         rc = live_catalog.run(args)

@@ -12,16 +12,14 @@ offline run of its bag gives.
 Also: a catalog_filter of a graph of two shards refuses unlabelled detections with a reason
 (they have no object key to be routed by)."""
 
-import argparse
 import json
 from collections import Counter
 from dataclasses import asdict
-from pathlib import Path
 
 import numpy as np
 import pytest
 from ssa_fusion_msgs.msg import MeasurementBatch
-from test_catalog_graph import _rows
+from test_catalog_graph import _rows, catalog_args
 from test_faults import Diag, publisher
 
 from ssa_fusion.apps import live_catalog
@@ -32,7 +30,6 @@ from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.ros import messages
 
-SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"
 OBJECTS = 4
 STATIONS = "millstone,tira,altair"  # the radars of iss_network
 
@@ -40,10 +37,7 @@ STATIONS = "millstone,tira,altair"  # the radars of iss_network
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("unlabelled")
-    args = argparse.Namespace(
-        catalog=SAMPLE, objects=0, synthetic=OBJECTS, duration=6.0, start="", shards=1,
-        scenario="iss_network", time_scale=20000.0, seed=4, out=out, bag=None, domain_id=None,
-        surrogate=False, surrogate_param=[], lockstep=True, unlabelled=True)
+    args = catalog_args(out, synthetic=OBJECTS, unlabelled=True)
     rc = live_catalog.run(args)
     return rc, out, json.loads((out / "catalog.json").read_text())
 
