@@ -39,8 +39,9 @@ Crowded skies (objects launched together, a few km apart) need two more steps, b
   never left out because the long-arc predictor is too sure);
 * a *registration* (`register`, `AssociationConfig.register_groups`): what the long-arc
   predictor still misses (drag, the motion model's own error) is nearly the same along-
-  track time for every member of a group. Tracks linked by detections they both gate form
-  a group; each group is shifted along track by the common time (Gaussian prior from the
+  track time for every member of a group. Tracks linked by detections they both gate, or
+  predicted on one orbit close together (`AssociationConfig.group_link_km`), form a group;
+  each group is shifted along track by the common time (Gaussian prior from the
   tracks' filter's predicted position standard deviation) that best aligns it with the
   scan, before the assignment.
 
