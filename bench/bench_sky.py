@@ -94,24 +94,18 @@ def main() -> int:
     ap.add_argument("--tuning-seeds", type=int, default=3,
                     help="with --tuning: how many of the tuning seeds (the first N of "
                          "TUNING_SEEDS, 1-10)")
-    ap.add_argument("--gap-fit-snc", type=float, default=None,
-                    help="with --tuning: the gap fit's SNC for windows with ranges")
-    ap.add_argument("--gap-fit-snc-angles", type=float, default=None,
-                    help="with --tuning: the gap fit's SNC for windows of angles")
-    ap.add_argument("--gap-fit-accel", type=float, default=None,
-                    help="with --tuning: the standard deviation (km/s^2) of the gap fit's "
-                         "considered R, T, N accelerations for windows with ranges")
-    ap.add_argument("--gap-fit-passes", type=int, default=None,
-                    help="with --tuning: the fewest passes of the gap fit's window")
-    ap.add_argument("--gap-fit-span-h", type=float, default=None,
-                    help="with --tuning: the span (h) of the gap fit's window")
-    ap.add_argument("--gap-fit-span-h-angles", type=float, default=None,
-                    help="with --tuning: the span (h) of the window of angles only")
-    ap.add_argument("--gap-fit-max-measurements", type=int, default=None,
-                    help="with --tuning: the most measurements of the gap fit's window")
-    ap.add_argument("--gap-fit-solve-t-span-h", type=float, default=None,
-                    help="with --tuning: the span (h) from which a ranged gap fit solves for "
-                         "the along-track acceleration")
+    for flag, kind, what in (
+            ("--gap-fit-snc", float, "the gap fit's SNC for windows with ranges"),
+            ("--gap-fit-snc-angles", float, "the gap fit's SNC for windows of angles"),
+            ("--gap-fit-accel", float, "the standard deviation (km/s^2) of the gap fit's "
+                                       "considered R, T, N accelerations for windows with ranges"),
+            ("--gap-fit-passes", int, "the fewest passes of the gap fit's window"),
+            ("--gap-fit-span-h", float, "the span (h) of the gap fit's window"),
+            ("--gap-fit-span-h-angles", float, "the span (h) of the window of angles only"),
+            ("--gap-fit-max-measurements", int, "the most measurements of the gap fit's window"),
+            ("--gap-fit-solve-t-span-h", float, "the span (h) from which a ranged gap fit "
+                                                "solves for the along-track acceleration")):
+        ap.add_argument(flag, type=kind, default=None, help=f"with --tuning: {what}")
     args = ap.parse_args()
     window = {"GAP_FIT_PASSES": args.gap_fit_passes, "GAP_FIT_SPAN_H": args.gap_fit_span_h,
               "GAP_FIT_SPAN_H_ANGLES": args.gap_fit_span_h_angles,
