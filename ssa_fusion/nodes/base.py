@@ -47,7 +47,7 @@ from ssa_fusion.nodes.clock_hold import ClockHold
 from ssa_fusion.nodes.diagnostics import Diagnostics, wall_timer
 from ssa_fusion.nodes.node_parameters import NodeParameters
 from ssa_fusion.nodes.parameters import ParameterTable, ParamValue
-from ssa_fusion.nodes.process import run
+from ssa_fusion.nodes.process import constructing, run
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Message, String, Time
 from ssa_fusion.ros.topics import CONFIG_QOS, TOPIC_CONFIG
@@ -71,6 +71,7 @@ class SsaNode(Node):
 
     def __init__(self) -> None:
         super().__init__(self.PARAMETERS.node)
+        constructing(self)  # destroyed in order by `run` if a parameter is refused below
         self.params = NodeParameters(self, self.PARAMETERS, self.on_parameters_set)
         self.params.reject_unknown()
         self.diag = Diagnostics(self, stamp=self.diagnostics_stamp)

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 import rclpy
 from rclpy.executors import Executor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from ssa_fusion.core.types import Cause
@@ -41,6 +42,16 @@ SLOW_STOP_S = 7.0
 
 _finish_code = [EXIT_OK]
 """The exit code a callback asked for with `finish` (one process runs one node)."""
+
+_constructed: list[Node] = []
+"""The node this process is building or runs, from the start of its ``__init__``
+(`constructing`): a node whose ``__init__`` refuses a parameter is destroyed by `run`, its
+publishers first, rather than left to the garbage collector with DDS still running."""
+
+
+def constructing(node: Node) -> None:
+    """Record `node`, whose ``__init__`` has just made its rclpy node (`SsaNode` calls it)."""
+    _constructed[:] = [node]
 
 
 def run(make_node: Callable[[], SsaNode], args: list[str] | None = None) -> int:
@@ -89,6 +100,8 @@ def run(make_node: Callable[[], SsaNode], args: list[str] | None = None) -> int:
                 node.diag.publish_last()
             node.close()
             node.destroy_node()
+        elif _constructed:  # refused while starting: destroyed in order, as rclpy does
+            _constructed.pop().destroy_node()
         executor.shutdown()
         rclpy.try_shutdown()
         # Python's finalization resets handlers it installed to SIG_DFL, so a late second
