@@ -54,7 +54,7 @@ from typing import Any
 
 import numpy as np
 
-from ssa_fusion.apps import evaluate
+from ssa_fusion.apps import evaluate, replay_catalog
 from ssa_fusion.apps.args import add_domain_id, add_settings, add_sites, positive_float
 from ssa_fusion.apps.partial import removed_if_unfinished
 from ssa_fusion.core import site_file, types
@@ -79,6 +79,7 @@ from ssa_fusion.ros.topics import (
     TOPIC_ESTIMATE,
     TOPIC_FORECAST,
     TOPIC_MEASUREMENT,
+    TOPIC_MEASUREMENT_BATCH,
     TOPIC_SMOOTHED,
     TOPIC_TRUTH,
     TOPIC_WITHHELD,
@@ -118,12 +119,18 @@ def run(args: argparse.Namespace) -> int:
         stream = list(bagio.read_records(args.bag, undecodable=undecodable, refused=refused))
         for line in bagio.left_out(undecodable, refused):
             print(f"replay: {line}")
-        check_topics(args.bag, stream)
-        sites = site_file.load_stations(args.sites) if args.sites else ()
-        chosen = settings(stream, args.scenario, args.params_file, sites)
+        batched = any(True for _ in bagio.read_bag(args.bag, topics=[TOPIC_MEASUREMENT_BATCH]))
+        catalog = replay_catalog.catalog_reason(stream, batched)
+        if catalog is None:
+            check_topics(args.bag, stream)
+        if catalog is None:
+            sites = site_file.load_stations(args.sites) if args.sites else ()
+            chosen = settings(stream, args.scenario, args.params_file, sites)
     except (bagio.BagError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if catalog is not None:
+        return replay_catalog.run(args, stream, catalog)
     s = chosen.estimator
     print(f"replay: estimator settings: {chosen.origin}")
     if s.surrogate.cadence_s == 0:

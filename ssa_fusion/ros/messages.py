@@ -175,6 +175,12 @@ _KEY_CACHE_MAX = 1_000_000
 _KEYS = _KeyCache()
 
 
+def shard_range(shard: int, shards: int) -> tuple[int, int]:
+    """Return the closed range [lo, hi] of shard keys shard `shard` of `shards` owns."""
+    lo = shard * KEY_SPACE // shards
+    return lo, (shard + 1) * KEY_SPACE // shards - 1
+
+
 def shard_keys(object_ids: list[str]) -> NDArray[np.uint32]:
     """Return the `shard_key` of every id of `object_ids` (M,), each id's computed once.
 
