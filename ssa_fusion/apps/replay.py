@@ -32,7 +32,10 @@ default's). An offline replay that produces no estimate says why (`why_no_estima
 
 A bag whose measurements are recorded as batches (``/ssa/measurement_batch``) is replayed, in
 both modes, as if recorded one message each: every row is the Measurement it means, at its
-batch's log time (`bagio.read_records`), and is played and written as one.
+batch's log time (`bagio.read_records`), and is played and written as one. A catalog's bag
+(measurements of several objects, unlabelled detections, or recorded catalog_filter
+settings: `replay_catalog.catalog_reason`) never goes into one object's filter: it is
+replayed through the catalog filter, one track per object (`replay_catalog`).
 
 A bag at another cadence than its settings' is replayed at its own: the surrogate infers the
 cadence from the stamps, as the node does with ``cadence`` 0.
@@ -130,7 +133,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     if catalog is not None:
-        return replay_catalog.run(args, stream, catalog)
+        out = (args.out or _sibling(args.bag, "_offline") if args.offline
+               else args.record or _sibling(args.bag, "_replay"))
+        return replay_catalog.run(args, stream, catalog, out)
     s = chosen.estimator
     print(f"replay: estimator settings: {chosen.origin}")
     if s.surrogate.cadence_s == 0:

@@ -1,4 +1,4 @@
-"""`ssa-fusion replay --offline` of a catalog's bag: its measurements through the catalog filter.
+"""`ssa-fusion replay` of a catalog's bag: its measurements through the catalog filter.
 
 A bag is a catalog's (`catalog_reason`) when a catalog_filter recorded its settings with it
 (``/ssa/config``, `nodes.settings.recorded_catalog`), when its measurements name more than
@@ -11,17 +11,21 @@ same core policy (`core.catalog_fusion.CatalogFusion`: a `TrackBank`, one track 
 * the settings are those the catalog_filter recorded (every shard's); a bag without them is
   replayed with the catalog_filter's defaults and, as ``station``, the stations its
   measurements name (as ``ssa-fusion live --catalog`` sets it), and says so;
-* every recorded measurement message (a batch, or one Measurement) is one fusion, at its log
+* offline, every recorded measurement message (a batch, or one Measurement) is one fusion,
+  at its log
   time, in log-time order: what the filter's lockstep run fuses at once (each step's batch
   is fused before the next is published). The rows are checked as the node checks them
   (`core.catalog_fusion.row_causes`; a row stamped more than ``max_clock_lead`` after its
   log time is refused ``rejected_future``, its log time standing for the node's clock) and
   go to the shard whose key range holds their ``shard_key``;
-* the output bag has the live layout: the inputs as recorded, the new estimates on
-  ``/ssa/estimate_batch`` (at most ``batch_rows`` rows a message, the shard's key range),
-  the detections the association kept on ``/ssa/measurement_associated``, and the settings
-  used on ``/ssa/config``. The catalog surrogates' gap forecasts (update source FORECAST on
-  ``/ssa/estimate_batch``) are not recomputed and not copied.
+* offline (``--offline``), the output bag has the live layout: the inputs as recorded, the
+  new estimates on ``/ssa/estimate_batch`` (at most ``batch_rows`` rows a message, the
+  shard's key range), the detections the association kept on
+  ``/ssa/measurement_associated``, and the settings used on ``/ssa/config``. The catalog
+  surrogates' gap forecasts (update source FORECAST on ``/ssa/estimate_batch``) are not
+  recomputed and not copied;
+* over ROS, the inputs are played at ``--rate`` into fresh catalog_filter processes (one a
+  shard, with the settings above) and recorded with them (`replay_live`).
 
 Per object, the estimates do not depend on how the rows are cut into fusions as long as
 each object's rows come in epoch order (`core.track_bank`), so a run whose batches the node
@@ -33,6 +37,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
+import time
 from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -54,6 +59,7 @@ from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import (
+    CATALOG_QOS,
     CONFIG_QOS,
     TOPIC_ASSOCIATED,
     TOPIC_CONFIG,
@@ -299,11 +305,6 @@ def write(out: Path, raw: list[bagio.BagMessage], result: CatalogResult,
 def refusal(args: argparse.Namespace, reason: str) -> str | None:
     """Return why `args` cannot replay a catalog bag (`reason`: why it is one), or None."""
     bag = args.bag
-    if not args.offline:
-        return (f"{bag} is a catalog's bag ({reason}); a replay over ROS plays one object "
-                f"into fresh surrogate + filter processes, which would put every object in "
-                f"one track. Replay it through the catalog filter offline: "
-                f"ssa-fusion replay {bag} --offline")
     if args.smooth:
         return (f"{bag} is a catalog's bag ({reason}); --smooth smooths one object's track: "
                 f"replay it without --smooth")
@@ -331,16 +332,19 @@ def unfusable(stream: list[bagio.BagMessage], reason: str) -> str | None:
             f"measurements at a time (a bag of each object's), or record range/az/el")
 
 
-def run(args: argparse.Namespace, stream: list[bagio.BagMessage], reason: str) -> int:
-    """Replay a catalog bag offline (`stream`: its records; `reason`: `catalog_reason`)."""
+def run(args: argparse.Namespace, stream: list[bagio.BagMessage], reason: str,
+        out: Path) -> int:
+    """Replay a catalog bag (`stream`: its records; `reason`: `catalog_reason`) into `out`.
+
+    Offline (``--offline``), else over ROS into catalog_filter processes (`replay_live`).
+    """
     why = refusal(args, reason) or unfusable(stream, reason)
     if why:
         print(f"error: {why}", file=sys.stderr)
         return 2
-    out = args.out or args.bag.with_name(
-        (args.bag.with_suffix("") if args.bag.suffix == ".mcap" else args.bag).name + "_offline")
     if out.exists():
-        print(f"error: {out} exists already; choose another --out", file=sys.stderr)
+        print(f"error: {out} exists already; choose another "
+              f"{'--out' if args.offline else '--record'}", file=sys.stderr)
         return 2
     try:
         chosen = catalog_settings(stream, args.sites)
@@ -352,6 +356,8 @@ def run(args: argparse.Namespace, stream: list[bagio.BagMessage], reason: str) -
     print(f"replay: {args.bag} is a catalog's bag ({reason}): each object its own track, "
           f"as the catalog filter gives it (core.catalog_fusion)")
     print(f"replay: catalog_filter settings: {chosen.origin}")
+    if not args.offline:
+        return replay_live(args, raw, chosen, out)
     result = replay(raw, shards)
     try:
         with removed_if_unfinished(out):
@@ -374,4 +380,77 @@ def run(args: argparse.Namespace, stream: list[bagio.BagMessage], reason: str) -
     if forecasts:
         print(f"replay: the bag's {forecasts} catalog-surrogate forecasts are not recomputed "
               f"offline (not in {out})")
+    return 0
+
+
+def node_params(p: Mapping[str, Any], sites: Path | None) -> dict[str, Any]:
+    """Return the parameters of a catalog_filter process of shard settings `p` (SI).
+
+    Its `settings.CATALOG_KEYS`, under sim time; `sites`: ``--sites``, as an absolute path
+    (the node's working directory may differ).
+    """
+    own = {"sites": str(sites.resolve())} if sites is not None else {}
+    return {"use_sim_time": True, **{k: p[k] for k in settings.CATALOG_KEYS}, **own}
+
+
+def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
+                chosen: CatalogSettings, record: Path) -> int:
+    """Play a catalog bag into fresh catalog_filter processes (one a shard) and record them.
+
+    The recorder and the shards of `chosen` start; the bag's measurement batches (and
+    single measurements, truth, withheld and the detections' truth) are played with a
+    ``/clock`` from their stamps at ``--rate`` (`ros.player.Player`) once every node has
+    matched its publishers; the run ends when the estimates stop. Each shard fuses what
+    arrived every ``batch_period`` wall s: per object the same estimates as the recorded
+    run (module docstring), whatever the rate.
+    """
+    from ssa_fusion.ros.interfaces import EstimateBatch
+    from ssa_fusion.ros.player import Player
+    from ssa_fusion.ros.processes import Graph
+    from ssa_fusion.ros.readiness import ReadyNodes
+
+    names = [f"catalog_filter_{int(p['shard'])}" for p in chosen.shards]
+    logs = record.with_name(record.name + "_logs")
+    try:
+        graph = Graph(logs, args.domain_id)
+    except OSError as exc:
+        print(f"error: cannot use {record}: {exc}", file=sys.stderr)
+        return 2
+    played = [m for m in raw if m.topic in INPUTS]
+    print(f"replay: {args.bag} at rate {args.rate:g} into {len(names)} catalog_filter "
+          f"process(es); ROS domain {graph.domain_id}; logs in {logs}", flush=True)
+    t0 = time.monotonic()
+    codes: dict[str, int] = {}
+    try:
+        procs = [graph.start_node("recorder", params={"use_sim_time": True,
+                                                      "bag": str(record)})]
+        procs += [graph.start_node("catalog_filter", "-r", f"__node:={n}", name=n,
+                                   params=node_params(p, args.sites))
+                  for n, p in zip(names, chosen.shards, strict=True)]
+        player = Player(graph.probe, played, args.rate)
+        rows: list[int] = []
+        graph.probe.create_subscription(EstimateBatch, TOPIC_ESTIMATE_BATCH,
+                                        lambda m: rows.append(len(m.object_id)), CATALOG_QOS)
+        filters = {TOPIC_MEASUREMENT_BATCH, TOPIC_MEASUREMENT}
+        graph.wait_for(player.subscribers_ready(
+            {t: 1 + len(names) * (t in filters) for t in player.pubs}),
+            30.0, "the catalog filter(s) and the recorder to subscribe")
+        needs = [f"recorder:{TOPIC_ESTIMATE_BATCH}={len(names)}",
+                 *(f"{who}:{t}" for t in sorted(filters & set(player.pubs))
+                   for who in ("recorder", *names))]
+        readers = ReadyNodes(graph.probe)
+        graph.wait_for(lambda: readers.ready(needs), 30.0,
+                       "the catalog filter(s) and the recorder to match their publishers")
+        player.start()
+        graph.wait_for(player.done, player.duration_s + 60.0, "playback to finish")
+        player.finish(graph.scaled(5.0))
+        graph.wait_quiet(lambda: sum(rows), quiet_s=1.0, limit_s=60.0)
+        codes = {p.name: graph.stop(p) for p in reversed(procs)}
+    finally:
+        problems = graph.close()
+    if problems or any(codes.values()):
+        print("error: node process(es) ended badly:\n" + "\n".join(problems), file=sys.stderr)
+        return 1
+    print(f"replayed {player.published} messages of {args.bag} at rate {args.rate:g} in "
+          f"{time.monotonic() - t0:.1f} s: {sum(rows)} estimates; recorded to {record}")
     return 0

@@ -304,6 +304,28 @@ def measurement_batch_to_msg(rows: MeasurementRows, key_range: tuple[int, int] =
         horizon=_column(rows.horizon.astype(float), "d", c))
 
 
+def measurement_batch_copy(msg: Message, classes: MsgClasses | None = None) -> Message:
+    """Return a MeasurementBatch (of any message classes) as one of `classes`, column by column.
+
+    The values as they are (SI, no conversion): a recorded batch played again is the batch
+    that was published, to the bit.
+    """
+    c = _default(classes)
+    h = msg.header
+    return c.measurement_batch(
+        header=c.header(stamp=c.time(sec=int(h.stamp.sec), nanosec=int(h.stamp.nanosec)),
+                        frame_id=str(h.frame_id)),
+        key_lo=int(msg.key_lo), key_hi=int(msg.key_hi), object_id=list(msg.object_id),
+        shard_key=_column(np.asarray(msg.shard_key, np.uint32), "I", c),
+        kind=_column(np.asarray(msg.kind, np.uint8), "B", c),
+        source=_column(np.asarray(msg.source, np.uint8), "B", c),
+        frame_id=list(msg.frame_id),
+        stamp_ns=_column(np.asarray(msg.stamp_ns, np.int64), "q", c),
+        z=_column(np.asarray(msg.z, np.float64), "d", c),
+        covariance=_column(np.asarray(msg.covariance, np.float64), "d", c),
+        horizon=_column(np.asarray(msg.horizon, np.float64), "d", c))
+
+
 def measurement_batch_from_msg(msg: Message) -> MeasurementRows:
     """Return an ssa_fusion_msgs/MeasurementBatch (SI) as `MeasurementRows` (core units).
 

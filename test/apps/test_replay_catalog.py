@@ -4,8 +4,9 @@ Offline, each object gets its own track: its estimates are those of its measurem
 in a `TrackBank` of the catalog_filter's settings (the reference never sees another
 object), whatever the other objects in the bag; unlabelled detections are associated as
 `core.unlabelled.RowAssociator` associates all of them at once. A bag of several objects
-the catalog filter cannot fuse, and a catalog bag over ROS, are refused (exit 2) with what
-to do instead. The replayed bag reads in `report` and `export`.
+the catalog filter cannot fuse, and the single-object replay's options (``--smooth``,
+``--scenario``) for a catalog bag, are refused (exit 2) with what to do instead. The
+replayed bag reads in `report` and `export`. (Over ROS: test/graph/test_catalog_replay_graph.py.)
 """
 
 from __future__ import annotations
@@ -182,14 +183,13 @@ def test_report_and_export_read_the_replayed_bag(rows, tmp_path):
     assert oem.read_text().count("OBJECT_ID") == OBJECTS
 
 
-def test_a_catalog_bag_over_ros_is_refused_pointing_to_offline(rows, tmp_path, capsys):
+def test_single_object_options_are_refused_for_a_catalog_bag(rows, tmp_path, capsys):
     bag = write_bag(tmp_path / "bag", rows)
-    assert cli.main(["replay", str(bag)]) == 2
-    err = capsys.readouterr().err
-    assert f"ssa-fusion replay {bag} --offline" in err and "one track" in err
-    assert not (tmp_path / "bag_replay").exists()
-    assert cli.main(["replay", str(bag), "--offline", "--smooth"]) == 2
-    assert "--smooth" in capsys.readouterr().err
+    for extra in (["--smooth"], ["--scenario", "iss_network"]):
+        assert cli.main(["replay", str(bag), "--offline", *extra]) == 2
+        err = capsys.readouterr().err
+        assert "catalog's bag" in err and extra[0] in err
+    assert not (tmp_path / "bag_offline").exists()
 
 
 def test_objects_the_catalog_filter_cannot_fuse_are_refused_not_mixed(tmp_path, capsys):
