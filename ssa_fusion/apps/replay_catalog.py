@@ -23,9 +23,10 @@ same core policy (`core.catalog_fusion.CatalogFusion`: a `TrackBank`, one track 
   shard's key range), the detections the association kept on
   ``/ssa/measurement_associated``, and the settings used on ``/ssa/config``. The catalog
   surrogates' gap forecasts (update source FORECAST on ``/ssa/estimate_batch``) are not
-  recomputed and not copied;
+  recomputed and not copied (said so);
 * over ROS, the inputs are played at ``--rate`` into fresh catalog_filter processes (one a
-  shard, with the settings above) and recorded with them (`replay_live`).
+  shard, with the settings above) and recorded with them (`replay_live`); no catalog
+  surrogate runs (its settings are not recorded).
 
 Per object, the estimates do not depend on how the rows are cut into fusions as long as
 each object's rows come in epoch order (`core.track_bank`), so a run whose batches the node
@@ -356,6 +357,12 @@ def run(args: argparse.Namespace, stream: list[bagio.BagMessage], reason: str,
     print(f"replay: {args.bag} is a catalog's bag ({reason}): each object its own track, "
           f"as the catalog filter gives it (core.catalog_fusion)")
     print(f"replay: catalog_filter settings: {chosen.origin}")
+    forecasts = sum(len(m.msg.object_id) for m in bagio.read_bag(args.bag,
+                                                                 topics=[TOPIC_ESTIMATE_BATCH])
+                    if m.msg.update_source == UpdateSource.FORECAST)
+    if forecasts:
+        print(f"replay: the bag's {forecasts} catalog-surrogate gap forecasts are not "
+              f"recomputed (no catalog surrogate runs in a replay); {out} will not hold them")
     if not args.offline:
         return replay_live(args, raw, chosen, out)
     result = replay(raw, shards)
@@ -374,12 +381,6 @@ def run(args: argparse.Namespace, stream: list[bagio.BagMessage], reason: str,
         print(f"replay: {sum(result.fates.values())} unlabelled detections associated: "
               + ", ".join(f"{f.name.lower()} {n}" for f, n in sorted(result.fates.items()))
               + f"; {sum(len(a) for _, a in result.associated)} kept (on {TOPIC_ASSOCIATED})")
-    forecasts = sum(len(m.msg.object_id) for m in bagio.read_bag(args.bag,
-                                                                 topics=[TOPIC_ESTIMATE_BATCH])
-                    if m.msg.update_source == UpdateSource.FORECAST)
-    if forecasts:
-        print(f"replay: the bag's {forecasts} catalog-surrogate forecasts are not recomputed "
-              f"offline (not in {out})")
     return 0
 
 

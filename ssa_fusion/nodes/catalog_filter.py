@@ -133,6 +133,8 @@ class CatalogFilterNode(SsaNode):
     def __init__(self) -> None:
         super().__init__()
         p = self.params
+        # first: its discovery is over long before the estimates' publisher exists
+        self.publish_settings(settings.catalog_config_message(p.values))
         self.shard, self.shards = p.integer("shard"), p.integer("shards")
         self.options = settings.filter_options(p.values)
         self.stations = network_stations(p.text("station"),
@@ -144,7 +146,6 @@ class CatalogFilterNode(SsaNode):
         self.diag.status["shard"] = f"{self.shard}/{self.shards} keys [{self.lo}, {self.hi}]"
         self.pub = self.create_publisher(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
         self.unlabelled = UnlabelledRows(self, self.diag)
-        self.publish_settings(settings.catalog_config_message(p.values))
         cft = content_filter(self.shard, self.shards)
         self.sub = self.subscribe(MeasurementMsg, TOPIC_MEASUREMENT, self.on_measurement,
                                   CATALOG_QOS, content_filter=cft)
