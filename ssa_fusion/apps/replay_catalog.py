@@ -89,9 +89,10 @@ def config_texts(stream: list[bagio.BagMessage]) -> list[str]:
 def catalog_reason(stream: list[bagio.BagMessage], batched: bool) -> str | None:
     """Return why a bag (its `bagio.read_records`) is a catalog's, or None for one object's.
 
-    `batched`: its measurements include ``/ssa/measurement_batch`` messages (whose rows
-    without an object id are unlabelled detections). ValueError on a malformed
-    ``/ssa/config``.
+    `batched`: its measurements include ``/ssa/measurement_batch`` messages. Measurements
+    without an object id are unlabelled detections in batches or beside an object's; alone
+    in single messages, they are one object's (a bag recorded before object ids).
+    ValueError on a malformed ``/ssa/config``.
     """
     if settings.recorded_catalog(config_texts(stream)):
         return f"its catalog_filter settings are recorded ({TOPIC_CONFIG})"
@@ -99,8 +100,9 @@ def catalog_reason(stream: list[bagio.BagMessage], batched: bool) -> str | None:
     labelled = sorted(ids - {""})
     if len(labelled) > 1:
         return f"its measurements are of {len(labelled)} objects ({shown_ids(labelled)})"
-    if batched and "" in ids:
-        return f"it holds unlabelled detections (rows of {TOPIC_MEASUREMENT_BATCH} without id)"
+    if "" in ids and (batched or labelled):
+        return "it holds unlabelled detections (measurements without object id" + (
+            f" beside those of {labelled[0]})" if labelled else f" in {TOPIC_MEASUREMENT_BATCH})")
     return None
 
 
