@@ -82,7 +82,6 @@ from ssa_fusion.ros.topics import (
     TOPIC_ESTIMATE,
     TOPIC_FORECAST,
     TOPIC_MEASUREMENT,
-    TOPIC_MEASUREMENT_BATCH,
     TOPIC_SMOOTHED,
     TOPIC_TRUTH,
     TOPIC_WITHHELD,
@@ -119,14 +118,18 @@ def run(args: argparse.Namespace) -> int:
     try:
         undecodable: Counter[str] = Counter()
         refused: Counter[tuple[str, str]] = Counter()
-        stream = list(bagio.read_records(args.bag, undecodable=undecodable, refused=refused))
+        # a catalog's bag is never read row by row as messages (millions of rows)
+        telling = list(bagio.read_bag(args.bag, topics=replay_catalog.TELLING,
+                                      undecodable=undecodable))
+        catalog = replay_catalog.catalog_reason(telling)
+        if catalog is None:
+            undecodable.clear()
+            stream = list(bagio.read_records(args.bag, undecodable=undecodable,
+                                             refused=refused))
         for line in bagio.left_out(undecodable, refused):
             print(f"replay: {line}")
-        batched = any(True for _ in bagio.read_bag(args.bag, topics=[TOPIC_MEASUREMENT_BATCH]))
-        catalog = replay_catalog.catalog_reason(stream, batched)
         if catalog is None:
             check_topics(args.bag, stream)
-        if catalog is None:
             sites = site_file.load_stations(args.sites) if args.sites else ()
             chosen = settings(stream, args.scenario, args.params_file, sites)
     except (bagio.BagError, ValueError) as exc:
@@ -135,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
     if catalog is not None:
         out = (args.out or _sibling(args.bag, "_offline") if args.offline
                else args.record or _sibling(args.bag, "_replay"))
-        return replay_catalog.run(args, stream, catalog, out)
+        return replay_catalog.run(args, telling, catalog, out)
     s = chosen.estimator
     print(f"replay: estimator settings: {chosen.origin}")
     if s.surrogate.cadence_s == 0:

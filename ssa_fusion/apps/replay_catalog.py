@@ -77,26 +77,46 @@ INPUTS = (TOPIC_MEASUREMENT_BATCH, TOPIC_MEASUREMENT, TOPIC_DETECTION_TRUTH, TOP
 """Topics copied from a catalog bag into its offline replay, as recorded."""
 MEASURED = (TOPIC_MEASUREMENT_BATCH, TOPIC_MEASUREMENT)
 """Topics whose messages the catalog filter fuses."""
+TELLING = (TOPIC_CONFIG, *MEASURED)
+"""Topics that tell a catalog's bag from one object's (`catalog_reason`)."""
 FILTER_SETTINGS = tuple(k for k in settings.CATALOG_KEYS if k != "shard")
 """The recorded parameters every shard of one graph shares."""
 
 
-def config_texts(stream: list[bagio.BagMessage]) -> list[str]:
-    """Return the ``/ssa/config`` JSON texts of a bag's records, in log-time order."""
-    return [str(m.msg.data) for m in stream if m.topic == TOPIC_CONFIG]
+def config_texts(raw: list[bagio.BagMessage]) -> list[str]:
+    """Return the ``/ssa/config`` JSON texts of a bag's messages, in log-time order."""
+    return [str(m.msg.data) for m in raw if m.topic == TOPIC_CONFIG]
 
 
-def catalog_reason(stream: list[bagio.BagMessage], batched: bool) -> str | None:
-    """Return why a bag (its `bagio.read_records`) is a catalog's, or None for one object's.
+def measured(raw: list[bagio.BagMessage]) -> MeasurementRows | None:
+    """Return every measurement of a bag's messages (batches and single ones) as rows.
 
-    `batched`: its measurements include ``/ssa/measurement_batch`` messages. Measurements
+    In log-time order, a batch's rows in its order; batches whose columns disagree left
+    out (the replay counts them). None without a measurement.
+    """
+    parts = []
+    for m in raw:
+        if m.topic in MEASURED:
+            try:
+                parts.append(measurement_rows(m))
+            except ValueError:
+                continue
+    return MeasurementRows.concat(parts) if parts else None
+
+
+def catalog_reason(raw: list[bagio.BagMessage]) -> str | None:
+    """Return why a bag is a catalog's, or None for one object's.
+
+    `raw`: its messages of `TELLING` (`bagio.read_bag`: batches as they are). Measurements
     without an object id are unlabelled detections in batches or beside an object's; alone
     in single messages, they are one object's (a bag recorded before object ids).
     ValueError on a malformed ``/ssa/config``.
     """
-    if settings.recorded_catalog(config_texts(stream)):
+    if settings.recorded_catalog(config_texts(raw)):
         return f"its catalog_filter settings are recorded ({TOPIC_CONFIG})"
-    ids = {str(m.msg.object_id) for m in stream if m.topic == TOPIC_MEASUREMENT}
+    rows = measured(raw)
+    ids = set(rows.object_id) if rows is not None else set()
+    batched = any(m.topic == TOPIC_MEASUREMENT_BATCH for m in raw)
     labelled = sorted(ids - {""})
     if len(labelled) > 1:
         return f"its measurements are of {len(labelled)} objects ({shown_ids(labelled)})"
@@ -122,14 +142,14 @@ class CatalogSettings:
     """Where they came from (printed)."""
 
 
-def catalog_settings(stream: list[bagio.BagMessage], sites: Path | None) -> CatalogSettings:
+def catalog_settings(raw: list[bagio.BagMessage], sites: Path | None) -> CatalogSettings:
     """Return the catalog_filter settings to replay a catalog bag with (module docstring).
 
     `sites`: a sites file (``--sites``) for stations of one's own, replacing the recorded
     one. ValueError when the recorded shards disagree on a setting, or when the bag records
     none and its measurements name no station.
     """
-    recorded = settings.recorded_catalog(config_texts(stream))
+    recorded = settings.recorded_catalog(config_texts(raw))
     own = {"sites": str(sites)} if sites is not None else {}
     if recorded:
         first = recorded[0]
@@ -144,8 +164,9 @@ def catalog_settings(stream: list[bagio.BagMessage], sites: Path | None) -> Cata
             recorded = [{**first, "shard": k} for k in range(shards)]
         return CatalogSettings([{**p, **own} for p in recorded],
                                f"recorded with the bag ({TOPIC_CONFIG}; {shards} shard(s))")
-    stations = sorted({str(m.msg.header.frame_id) for m in stream
-                       if m.topic == TOPIC_MEASUREMENT and m.msg.source == types.Source.SENSOR})
+    rows = measured(raw)
+    sensor = rows.source == types.Source.SENSOR if rows is not None else np.zeros(0, bool)
+    stations = sorted({rows.frame_id[i] for i in np.flatnonzero(sensor)} if rows else set())
     if not stations:
         raise ValueError("no sensor measurement names a station")
     d = dataclasses.asdict(CATALOG_FILTER)
@@ -318,13 +339,14 @@ def refusal(args: argparse.Namespace, reason: str) -> str | None:
     return None
 
 
-def unfusable(stream: list[bagio.BagMessage], reason: str) -> str | None:
+def unfusable(raw: list[bagio.BagMessage], reason: str) -> str | None:
     """Return why the catalog filter can fuse none of a catalog bag's measurements, or None.
 
     It fuses range/azimuth/elevation only; one object's filter would mix the objects.
     """
-    kinds = Counter(int(m.msg.kind) for m in stream if m.topic == TOPIC_MEASUREMENT
-                    and m.msg.source == types.Source.SENSOR)
+    rows = measured(raw)
+    kinds = Counter(rows.kind[rows.source == types.Source.SENSOR].tolist()
+                    if rows is not None else [])
     if kinds.get(Kind.RANGE_AZ_EL):
         return None
     names = ", ".join(KIND_NAMES.get(types.Kind(k), str(k)) if k in set(types.Kind) else str(k)
@@ -335,13 +357,14 @@ def unfusable(stream: list[bagio.BagMessage], reason: str) -> str | None:
             f"measurements at a time (a bag of each object's), or record range/az/el")
 
 
-def run(args: argparse.Namespace, stream: list[bagio.BagMessage], reason: str,
+def run(args: argparse.Namespace, telling: list[bagio.BagMessage], reason: str,
         out: Path) -> int:
-    """Replay a catalog bag (`stream`: its records; `reason`: `catalog_reason`) into `out`.
+    """Replay a catalog bag into `out`; return the exit code.
 
-    Offline (``--offline``), else over ROS into catalog_filter processes (`replay_live`).
+    `telling`: its `TELLING` messages; `reason`: `catalog_reason`'s. Offline
+    (``--offline``), else over ROS into catalog_filter processes (`replay_live`).
     """
-    why = refusal(args, reason) or unfusable(stream, reason)
+    why = refusal(args, reason) or unfusable(telling, reason)
     if why:
         print(f"error: {why}", file=sys.stderr)
         return 2
@@ -350,7 +373,7 @@ def run(args: argparse.Namespace, stream: list[bagio.BagMessage], reason: str,
               f"{'--out' if args.offline else '--record'}", file=sys.stderr)
         return 2
     try:
-        chosen = catalog_settings(stream, args.sites)
+        chosen = catalog_settings(telling, args.sites)
         shards = [Shard(p) for p in chosen.shards]
         raw = list(bagio.read_bag(args.bag, topics=INPUTS))
     except (bagio.BagError, ValueError, OSError) as exc:

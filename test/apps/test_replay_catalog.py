@@ -220,26 +220,29 @@ def test_the_catalog_filter_settings_round_trip_and_stay_apart():
     assert settings.recorded_estimator([text]) is None
 
 
-def _records(ids: list[str]) -> list[bagio.BagMessage]:
-    """Single Measurement records of `ids`, one each."""
-    out = []
-    for i, oid in enumerate(ids):
-        m = types.Measurement(1.7e9 + i, np.array([1000.0, 1.0, 0.5]), np.eye(3) * 1e-6,
-                              types.Kind.RANGE_AZ_EL, object_id=oid, frame_id="millstone")
-        out.append(bagio.BagMessage(TOPIC_MEASUREMENT, bagio.MEASUREMENT, i,
-                                    messages.measurement_to_msg(m, C)))
-    return out
+def _records(ids: list[str], batched: bool = False) -> list[bagio.BagMessage]:
+    """Measurements of `ids`, one a message, or all in one batch (`batched`)."""
+    ms = [types.Measurement(1.7e9 + i, np.array([1000.0, 1.0, 0.5]), np.eye(3) * 1e-6,
+                            types.Kind.RANGE_AZ_EL, object_id=oid, frame_id="millstone")
+          for i, oid in enumerate(ids)]
+    if batched:
+        rows = MeasurementRows(np.array([m.t for m in ms]), ids, ["millstone"] * len(ms),
+                               np.array([m.z for m in ms]), np.array([m.R for m in ms]))
+        return [bagio.BagMessage(TOPIC_MEASUREMENT_BATCH, bagio.MEASUREMENT_BATCH, 0,
+                                 messages.measurement_batch_to_msg(rows, classes=C))]
+    return [bagio.BagMessage(TOPIC_MEASUREMENT, bagio.MEASUREMENT, i,
+                             messages.measurement_to_msg(m, C)) for i, m in enumerate(ms)]
 
 
 def test_what_makes_a_catalog_bag():
     reason = replay_catalog.catalog_reason
-    assert reason(_records(["a", "a"]), batched=False) is None
-    assert reason(_records(["a", "a"]), batched=True) is None
-    assert reason(_records(["", ""]), batched=False) is None  # one object, before ids
-    assert "2 objects (a, b)" in reason(_records(["a", "b"]), batched=False)
-    assert "unlabelled" in reason(_records(["", ""]), batched=True)
-    assert "beside those of a" in reason(_records(["a", ""]), batched=False)
+    assert reason(_records(["a", "a"])) is None
+    assert reason(_records(["a", "a"], batched=True)) is None
+    assert reason(_records(["", ""])) is None  # one object, before ids
+    assert "2 objects (a, b)" in reason(_records(["a", "b"]))
+    assert "unlabelled" in reason(_records(["", ""], batched=True))
+    assert "beside those of a" in reason(_records(["a", ""]))
     text = settings.catalog_config_message(dataclasses.asdict(CATALOG_FILTER))
     config = [bagio.BagMessage(TOPIC_CONFIG, "std_msgs/msg/String", 0,
                                bagio.typestore().types["std_msgs/msg/String"](data=text))]
-    assert "settings are recorded" in reason(config + _records(["a"]), batched=False)
+    assert "settings are recorded" in reason(config + _records(["a"]))
