@@ -32,7 +32,10 @@ default's). An offline replay that produces no estimate says why (`why_no_estima
 
 A bag whose measurements are recorded as batches (``/ssa/measurement_batch``) is replayed, in
 both modes, as if recorded one message each: every row is the Measurement it means, at its
-batch's log time (`bagio.read_records`), and is played and written as one.
+batch's log time (`bagio.read_records`), and is played and written as one. A catalog's bag
+(measurements of several objects, unlabelled detections, or recorded catalog_filter
+settings: `replay_catalog.catalog_reason`) never goes into one object's filter: it is
+replayed through the catalog filter, one track per object (`replay_catalog`).
 
 A bag at another cadence than its settings' is replayed at its own: the surrogate infers the
 cadence from the stamps, as the node does with ``cadence`` 0.
@@ -54,7 +57,7 @@ from typing import Any
 
 import numpy as np
 
-from ssa_fusion.apps import evaluate
+from ssa_fusion.apps import evaluate, replay_catalog
 from ssa_fusion.apps.args import add_domain_id, add_settings, add_sites, positive_float
 from ssa_fusion.apps.partial import removed_if_unfinished
 from ssa_fusion.core import site_file, types
@@ -115,15 +118,27 @@ def run(args: argparse.Namespace) -> int:
     try:
         undecodable: Counter[str] = Counter()
         refused: Counter[tuple[str, str]] = Counter()
-        stream = list(bagio.read_records(args.bag, undecodable=undecodable, refused=refused))
+        # a catalog's bag is never read row by row as messages (millions of rows)
+        telling = list(bagio.read_bag(args.bag, topics=replay_catalog.TELLING,
+                                      undecodable=undecodable))
+        catalog = replay_catalog.catalog_reason(telling)
+        if catalog is None:
+            undecodable.clear()
+            stream = list(bagio.read_records(args.bag, undecodable=undecodable,
+                                             refused=refused))
         for line in bagio.left_out(undecodable, refused):
             print(f"replay: {line}")
-        check_topics(args.bag, stream)
-        sites = site_file.load_stations(args.sites) if args.sites else ()
-        chosen = settings(stream, args.scenario, args.params_file, sites)
+        if catalog is None:
+            check_topics(args.bag, stream)
+            sites = site_file.load_stations(args.sites) if args.sites else ()
+            chosen = settings(stream, args.scenario, args.params_file, sites)
     except (bagio.BagError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if catalog is not None:
+        out = (args.out or _sibling(args.bag, "_offline") if args.offline
+               else args.record or _sibling(args.bag, "_replay"))
+        return replay_catalog.run(args, telling, catalog, out)
     s = chosen.estimator
     print(f"replay: estimator settings: {chosen.origin}")
     if s.surrogate.cadence_s == 0:

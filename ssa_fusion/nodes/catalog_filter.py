@@ -41,12 +41,18 @@ from functools import partial
 import numpy as np
 
 from ssa_fusion.core import validation
+from ssa_fusion.core.catalog_fusion import (
+    CatalogFusion,
+    fused_estimates,
+    in_epoch_order,
+    row_causes,
+)
 from ssa_fusion.core.rows import EstimateRows, MeasurementRows
 from ssa_fusion.core.site_file import load_sites, load_station_map
 from ssa_fusion.core.stations import network_stations
 from ssa_fusion.core.track_bank import BankResult, TrackBank
-from ssa_fusion.core.types import Cause, Kind, Measurement, Source, UpdateSource
-from ssa_fusion.core.unlabelled import is_unlabelled
+from ssa_fusion.core.types import Cause, Kind, Measurement, Source
+from ssa_fusion.core.unlabelled import elevation_masks, is_unlabelled
 from ssa_fusion.core.validation import id_problem, measurement_problem
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.base import SsaNode
@@ -127,18 +133,19 @@ class CatalogFilterNode(SsaNode):
     def __init__(self) -> None:
         super().__init__()
         p = self.params
+        # first: its discovery is over long before the estimates' publisher exists
+        self.publish_settings(settings.catalog_config_message(p.values))
         self.shard, self.shards = p.integer("shard"), p.integer("shards")
         self.options = settings.filter_options(p.values)
         self.stations = network_stations(p.text("station"),
                                          load_station_map(p.text("sites")))  # valid: `SITES`
-        self.bank = self.new_bank()
+        sites = p.text("sites")
+        self.masks = elevation_masks(self.stations, load_sites(sites) if sites else {})
+        self.fusion = self.new_fusion()
         self.lo, self.hi = shard_range(self.shard, self.shards)
         self.diag.status["shard"] = f"{self.shard}/{self.shards} keys [{self.lo}, {self.hi}]"
         self.pub = self.create_publisher(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
-        sites = p.text("sites")
-        self.unlabelled = UnlabelledRows(self, self.diag, self.options, self.stations,
-                                         load_sites(sites) if sites else {},
-                                         (self.lo, self.hi))
+        self.unlabelled = UnlabelledRows(self, self.diag)
         cft = content_filter(self.shard, self.shards)
         self.sub = self.subscribe(MeasurementMsg, TOPIC_MEASUREMENT, self.on_measurement,
                                   CATALOG_QOS, content_filter=cft)
@@ -173,18 +180,23 @@ class CatalogFilterNode(SsaNode):
                 Count.PUBLISHED_SENSOR: c[Count.PUBLISHED_SENSOR],
                 Count.PUBLISHED_ASSOCIATED: c[Count.PUBLISHED_ASSOCIATED]}
 
-    def new_bank(self) -> TrackBank:
-        """Return an empty bank of this shard's settings."""
+    @property
+    def bank(self) -> TrackBank:
+        """The labelled objects' tracks."""
+        return self.fusion.bank
+
+    def new_fusion(self) -> CatalogFusion:
+        """Return the empty tracks of this shard's settings (`core.catalog_fusion`)."""
         p = self.params
-        bank = TrackBank(self.options, self.stations, max_objects=p.integer("max_objects"),
-                         evict_after_s=p.number("evict_after"))
-        bank.warm_up()  # its compiled code loaded before the first batch, not in it
-        return bank
+        fusion = CatalogFusion(self.options, self.stations, self.masks,
+                               max_objects=p.integer("max_objects"),
+                               evict_after_s=p.number("evict_after"))
+        fusion.bank.warm_up()  # its compiled code loaded before the first batch, not in it
+        return fusion
 
     def reset(self) -> None:
         """Forget every track and what waits for the next batch."""
-        self.bank = self.new_bank()
-        self.unlabelled.reset()
+        self.fusion = self.new_fusion()
         self.diag.counts[Count.DROPPED] += len(self._pending) + sum(map(len, self._pending_rows))
         self._pending.clear()
         self._pending_rows.clear()
@@ -279,19 +291,16 @@ class CatalogFilterNode(SsaNode):
         shard are counted ``ignored_other_shard`` only, not received.
         """
         m = len(rows)
-        cause = np.full(m, "", dtype=object)
-        problems = validation.rows_problems(rows, Kind.RANGE_AZ_EL)
+        own = row_causes(rows, self.stations)  # the filter's, before and after the shard's
+        first = (own == Cause.REJECTED_SOURCE) | (own == Cause.REJECTED_ID)
+        cause = np.where(first, own, "").astype(object)
         bad_key, other = rows_shard_problems(rows.shard_key, rows.object_id, self.shard,
                                              self.shards)
-        unknown = ~np.isin(np.asarray(rows.frame_id, dtype=object), list(self.stations))
         unrouted = is_unlabelled(rows.object_id) & (self.shards > 1)
-        for bad, why in ((rows.source != Source.SENSOR, Cause.REJECTED_SOURCE),
-                         (problems == Cause.REJECTED_ID, Cause.REJECTED_ID),
-                         (bad_key, NodeCause.REJECTED_SHARD_KEY),
+        for bad, why in ((bad_key, NodeCause.REJECTED_SHARD_KEY),
                          (other, NodeCause.IGNORED_OTHER_SHARD),
                          (unrouted, NodeCause.REJECTED_UNLABELLED_SHARDED),
-                         (problems != "", problems),
-                         (unknown, Cause.REJECTED_FRAME)):
+                         (own != "", own)):
             free = bad & (cause == "")
             cause[free] = why[free] if isinstance(why, np.ndarray) else why
         n_other = int((cause == NodeCause.IGNORED_OTHER_SHARD).sum())
@@ -338,7 +347,8 @@ class CatalogFilterNode(SsaNode):
     def _pending_batch(self) -> MeasurementRows | None:
         """Return what waits for the fusion as rows in epoch order, and forget it (None: none).
 
-        Stable: arrival order at a tie (a batch's rows, then the Measurements).
+        Stable: arrival order at a tie (a batch's rows, then the Measurements;
+        `core.catalog_fusion.in_epoch_order`).
         """
         parts = list(self._pending_rows)
         if self._pending:
@@ -348,25 +358,22 @@ class CatalogFilterNode(SsaNode):
                 [m.frame_id for m in ms], np.array([m.z for m in ms]),
                 np.array([m.R for m in ms])))
         self._pending, self._pending_rows = [], []
-        if not parts:
-            return None
-        rows = MeasurementRows.concat(parts)
-        return rows.take(np.argsort(rows.t, kind="stable"))
+        return in_epoch_order(parts)
 
     def fuse(self) -> None:
         """Fuse what arrived since the last batch (in epoch order) and publish the estimates.
 
-        With what waited for the clock to catch up, once it has.
+        With what waited for the clock to catch up, once it has. The unlabelled rows
+        first, then the labelled ones (`core.catalog_fusion.CatalogFusion`).
         """
         self.replay_held()
         batch = self._pending_batch()
         if batch is not None:
-            batch = self.unlabelled.take(batch, self.publish_estimates)
+            batch = self.unlabelled.take(self.fusion, batch, self.publish_estimates)
         if batch is None:
             return
         try:
-            res = self.bank.process(batch.t, batch.object_id, batch.frame_id, batch.z,
-                                    batch.R)
+            res = self.fusion.track(batch)
         except Exception:  # counted, then the guard logs the traceback as internal_error
             self.diag.counts[Count.DROPPED] += len(batch)
             raise
@@ -374,9 +381,7 @@ class CatalogFilterNode(SsaNode):
         self._count_causes(res, batch)
         self.diag.counts[Count.EVICTED] = self.bank.evicted
         if res.fused.size:
-            ids = batch.take(res.fused).object_id
-            self.publish_estimates(EstimateRows(batch.t[res.fused], ids, res.x, res.P,
-                                                res.nis, UpdateSource.SENSOR))
+            self.publish_estimates(fused_estimates(batch, res))
         self.diag.counts[Count.PUBLISHED_SENSOR] += int(res.fused.size)
         self._report(len(batch))
 

@@ -25,7 +25,7 @@ from ssa_fusion.core.site_file import load_stations
 from ssa_fusion.core.surrogate import LIVE_SURROGATE
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.types import KIND_NAMES, Kind, MotionModel
-from ssa_fusion.nodes.defaults import FILTER, KM, SURROGATE
+from ssa_fusion.nodes.defaults import CATALOG_FILTER, FILTER, KM, SURROGATE
 from ssa_fusion.nodes.parameters import ParameterTable
 
 FILTER_KEYS = ("kind", "station", "sites", "motion_model", "p0_sigma", "q", "gate", "iod_samples",
@@ -36,6 +36,13 @@ GAP_KEYS = ("predict_period", "gap_forecast")
 SURROGATE_KEYS = ("kind", "station", "sites", "buffer_length", "retrain_period", "delays", "rank",
                   "max_horizon", "grace", "cadence", "lift")
 """The surrogate's parameters that are estimator settings."""
+CATALOG_NODE = "catalog_filter"
+"""The ``node`` of the catalog filter's ``/ssa/config`` message (`catalog_config_message`)."""
+CATALOG_KEYS = ("station", "sites", "motion_model", "p0_sigma", "q", "gate", "iod_samples",
+                "iod_max_span", "reinit_after", "sigma_bound", "max_objects", "evict_after",
+                "batch_rows", "max_clock_lead", "shards", "shard")
+"""The catalog_filter's parameters it records: what its tracks and its estimates depend on
+(``batch_period``, the wall time between fusions, does not: `core.catalog_fusion`)."""
 NODE_MOTION_MODELS = (MotionModel.KEPLER, MotionModel.J2)
 """Motion models the filter node offers (Earth orbits on the Unix clock)."""
 
@@ -252,6 +259,36 @@ def config_message(node: str, c: EstimatorConfig,
     return json.dumps(msg, sort_keys=True)
 
 
+def catalog_config_message(values: Mapping[str, Any]) -> str:
+    """Return the JSON the catalog_filter publishes on ``/ssa/config``.
+
+    ``{"node": "catalog_filter", "parameters": ...}``: its `CATALOG_KEYS` parameters of
+    `values` (SI units, as declared), from which `catalog_parameters` gives them back.
+    """
+    params = {k: list(v) if isinstance(v, (tuple, list)) else v
+              for k, v in values.items() if k in CATALOG_KEYS}
+    return json.dumps({"node": CATALOG_NODE, "parameters": params}, sort_keys=True)
+
+
+def recorded_catalog(messages: Iterable[str]) -> list[dict[str, Any]]:
+    """Return the catalog_filter parameters recorded on ``/ssa/config``, one per shard.
+
+    From the `catalog_config_message` of each shard (the last of a shard), in shard order;
+    a missing parameter at its default (`defaults.CATALOG_FILTER`). Empty when no
+    catalog_filter recorded its settings. ValueError on a malformed message.
+    """
+    shards: dict[int, dict[str, Any]] = {}
+    for text in messages:
+        try:
+            msg = json.loads(text)
+            if msg["node"] == CATALOG_NODE:
+                params = {**dataclasses.asdict(CATALOG_FILTER), **dict(msg["parameters"])}
+                shards[int(params["shard"])] = params
+        except (ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"malformed /ssa/config message {text[:80]!r}: {exc}") from exc
+    return [shards[k] for k in sorted(shards)]
+
+
 def recorded_gaps(messages: Iterable[str]) -> dict[str, Any]:
     """Return the filter's `GAP_KEYS` parameters recorded on ``/ssa/config``.
 
@@ -285,6 +322,8 @@ def recorded_estimator(messages: Iterable[str]) -> EstimatorConfig | None:
     for text in messages:
         try:
             msg = json.loads(text)
+            if msg["node"] == CATALOG_NODE:  # the catalog's: `recorded_catalog`
+                continue
             last[str(msg["node"])] = dict(msg["estimator"])
         except (ValueError, KeyError, TypeError) as exc:
             raise ValueError(f"malformed /ssa/config message {text[:80]!r}: {exc}") from exc

@@ -18,16 +18,10 @@ from rclpy.subscription_content_filter_options import ContentFilterOptions
 from ssa_fusion.nodes.diagnostics import NodeCause
 from ssa_fusion.nodes.parameters import Param, Rule, Values, at_least
 from ssa_fusion.ros import messages
-from ssa_fusion.ros.messages import KEY_SPACE
+from ssa_fusion.ros.messages import shard_range
 
 LIST_OBJECTS = 200
 """Up to this many objects, a shard lists their ids on /diagnostics (``object_ids``)."""
-
-
-def shard_range(shard: int, shards: int) -> tuple[int, int]:
-    """Return the closed range [lo, hi] of shard keys shard `shard` of `shards` owns."""
-    lo = shard * KEY_SPACE // shards
-    return lo, (shard + 1) * KEY_SPACE // shards - 1
 
 
 def shard_problem(key: int, object_id: str, shard: int,

@@ -1,9 +1,10 @@
 """catalog_filter's unlabelled detections: rows without ``object_id`` into tracks.
 
 A row whose ``object_id`` is empty (`core.unlabelled.UNLABELLED`) is a radar's detection of
-an unknown object. `UnlabelledRows.take` sets those rows of a fusion's batch aside, hands
-them to a `core.unlabelled.RowAssociator` (gating and global nearest neighbour per scan,
-tracklets, IOD, M-of-N confirmation: `core.association`), and publishes:
+an unknown object. `UnlabelledRows.take` hands a fusion's batch to the filter's
+`core.catalog_fusion.CatalogFusion`, which sets those rows aside for its
+`core.unlabelled.RowAssociator` (gating and global nearest neighbour per scan, tracklets,
+IOD, M-of-N confirmation: `core.association`), and publishes:
 
 * on ``/ssa/estimate_batch`` (the labelled objects' EstimateBatch, update source SENSOR)
   the estimates of confirmed tracks, each named by its track id (``track-000001``, ...);
@@ -22,17 +23,14 @@ Unlabelled detections cannot be routed by object key: they need a single shard
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 
-import numpy as np
 from rclpy.node import Node
 
 from ssa_fusion.core.association import DetectionFate, TrackStatus
-from ssa_fusion.core.filter_options import FilterOptions
-from ssa_fusion.core.frames import Station
+from ssa_fusion.core.catalog_fusion import CatalogFusion
 from ssa_fusion.core.rows import EstimateRows, MeasurementRows
-from ssa_fusion.core.stations import Sensor
-from ssa_fusion.core.unlabelled import RowAssociator, elevation_masks, is_unlabelled
+from ssa_fusion.core.unlabelled import is_unlabelled
 from ssa_fusion.nodes.diagnostics import Count, Diagnostics
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import MeasurementBatch
@@ -70,46 +68,28 @@ class UnlabelledRows:
         The catalog_filter (publishers are created on it).
     diag : Diagnostics
         Its diagnostics (counts and status).
-    options, stations : FilterOptions, dict of str to Station
-        The filter's settings and network (as its labelled bank's).
-    sensors : mapping of str to Sensor
-        Sensors of a sites file by id (their masks; built-in stations use their presets').
-    key_range : tuple of int
-        The shard's key range, put on the estimate batches.
     """
 
-    def __init__(self, node: Node, diag: Diagnostics, options: FilterOptions,
-                 stations: dict[str, Station], sensors: Mapping[str, Sensor],
-                 key_range: tuple[int, int]) -> None:
+    def __init__(self, node: Node, diag: Diagnostics) -> None:
         self.diag = diag
-        self.options, self.stations = options, stations
-        self.masks = elevation_masks(stations, sensors)
-        self.key_range = key_range
-        self.associator = RowAssociator(options, stations, self.masks)
         self.pub = node.create_publisher(MeasurementBatch, TOPIC_ASSOCIATED, CATALOG_QOS)
 
-    def reset(self) -> None:
-        """Forget every track and tracklet (a backward clock jump)."""
-        self.associator = RowAssociator(self.options, self.stations, self.masks)
-
-    def take(self, batch: MeasurementRows,
+    def take(self, fusion: CatalogFusion, batch: MeasurementRows,
              publish_estimates: Callable[[EstimateRows], None]) -> MeasurementRows | None:
-        """Associate the unlabelled rows of `batch`; return the others (None: none left).
+        """Associate the unlabelled rows of `batch` in `fusion`; return the others.
 
-        `publish_estimates` publishes the confirmed tracks' estimates as the labelled
-        ones are.
+        None: no labelled row left. `publish_estimates` publishes the confirmed tracks'
+        estimates as the labelled ones are.
         """
-        mask = is_unlabelled(batch.object_id)
-        if not mask.any():
-            return batch
-        rows = batch.take(np.flatnonzero(mask))
         try:
-            out = self.associator.process(rows)
+            out, rest = fusion.associate(batch)
         except Exception:  # counted, then the guard logs the traceback as internal_error
-            self.diag.counts[Count.DROPPED] += len(rows)
+            self.diag.counts[Count.DROPPED] += int(is_unlabelled(batch.object_id).sum())
             raise
+        if out is None:
+            return rest
         c = self.diag.counts
-        c[Count.CONSUMED] += len(rows)
+        c[Count.CONSUMED] += sum(out.fates.values())
         for fate, n in out.fates.items():
             if fate == DetectionFate.REFUSED:
                 self.diag.count(fate_key(fate), f"refused by its track's filter or IOD: "
@@ -123,10 +103,9 @@ class UnlabelledRows:
         c[Count.PUBLISHED_SENSOR] += len(out.estimates)
         self._publish_associated(out.associated)
         status = self.diag.status
-        status["confirmed_tracks"] = str(self.associator.tracks(TrackStatus.CONFIRMED))
-        status["tentative_tracks"] = str(self.associator.tracks(TrackStatus.TENTATIVE))
-        rest = np.flatnonzero(~mask)
-        return batch.take(rest) if rest.size else None
+        status["confirmed_tracks"] = str(fusion.associator.tracks(TrackStatus.CONFIRMED))
+        status["tentative_tracks"] = str(fusion.associator.tracks(TrackStatus.TENTATIVE))
+        return rest
 
     def _publish_associated(self, rows: MeasurementRows) -> None:
         """Publish the associated detections (their keys set from their track ids)."""

@@ -175,6 +175,12 @@ _KEY_CACHE_MAX = 1_000_000
 _KEYS = _KeyCache()
 
 
+def shard_range(shard: int, shards: int) -> tuple[int, int]:
+    """Return the closed range [lo, hi] of shard keys shard `shard` of `shards` owns."""
+    lo = shard * KEY_SPACE // shards
+    return lo, (shard + 1) * KEY_SPACE // shards - 1
+
+
 def shard_keys(object_ids: list[str]) -> NDArray[np.uint32]:
     """Return the `shard_key` of every id of `object_ids` (M,), each id's computed once.
 
@@ -296,6 +302,28 @@ def measurement_batch_to_msg(rows: MeasurementRows, key_range: tuple[int, int] =
         z=_column(rows.z * s, "d", c),
         covariance=_column(rows.R * (s[:, :, None] * s[:, None, :]), "d", c),
         horizon=_column(rows.horizon.astype(float), "d", c))
+
+
+def measurement_batch_copy(msg: Message, classes: MsgClasses | None = None) -> Message:
+    """Return a MeasurementBatch (of any message classes) as one of `classes`, column by column.
+
+    The values as they are (SI, no conversion): a recorded batch played again is the batch
+    that was published, to the bit.
+    """
+    c = _default(classes)
+    h = msg.header
+    return c.measurement_batch(
+        header=c.header(stamp=c.time(sec=int(h.stamp.sec), nanosec=int(h.stamp.nanosec)),
+                        frame_id=str(h.frame_id)),
+        key_lo=int(msg.key_lo), key_hi=int(msg.key_hi), object_id=list(msg.object_id),
+        shard_key=_column(np.asarray(msg.shard_key, np.uint32), "I", c),
+        kind=_column(np.asarray(msg.kind, np.uint8), "B", c),
+        source=_column(np.asarray(msg.source, np.uint8), "B", c),
+        frame_id=list(msg.frame_id),
+        stamp_ns=_column(np.asarray(msg.stamp_ns, np.int64), "q", c),
+        z=_column(np.asarray(msg.z, np.float64), "d", c),
+        covariance=_column(np.asarray(msg.covariance, np.float64), "d", c),
+        horizon=_column(np.asarray(msg.horizon, np.float64), "d", c))
 
 
 def measurement_batch_from_msg(msg: Message) -> MeasurementRows:

@@ -1,7 +1,9 @@
 """Play bag messages into a ROS graph with a `/clock` derived from their stamps.
 
 As `ros2 bag play --clock` does: `rate` sim seconds per wall second, reliable publishers,
-start only when the caller says the subscribers are there.
+start only when the caller says the subscribers are there. Measurements and estimates one a
+message, and a catalog's MeasurementBatch (stamped with its last row's epoch, published with
+the catalog QoS and its recorded key range).
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from rclpy.timer import Timer
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.interfaces import Clock as ClockMsg
 from ssa_fusion.ros.interfaces import Message
-from ssa_fusion.ros.topics import DATA_QOS, TOPIC_CLOCK
+from ssa_fusion.ros.topics import CATALOG_QOS, DATA_QOS, TOPIC_CLOCK
 
 
 class Player:
@@ -37,9 +39,11 @@ class Player:
         self.pubs: dict[str, Publisher[Message]] = {}
         for topic in sorted({m.topic for m in stream}):
             msgtype = next(m.msgtype for m in stream if m.topic == topic)
-            cls = {"Measurement": self.classes.measurement,
-                   "StateEstimate": self.classes.estimate}[msgtype.rsplit("/", 1)[1]]
-            self.pubs[topic] = node.create_publisher(cls, topic, DATA_QOS)
+            cls = {bagio.MEASUREMENT: self.classes.measurement,
+                   bagio.STATE_ESTIMATE: self.classes.estimate,
+                   bagio.MEASUREMENT_BATCH: self.classes.measurement_batch}[msgtype]
+            qos = CATALOG_QOS if msgtype == bagio.MEASUREMENT_BATCH else DATA_QOS
+            self.pubs[topic] = node.create_publisher(cls, topic, qos)
         self.clock_pub = node.create_publisher(ClockMsg, TOPIC_CLOCK, DATA_QOS)
         self.next = 0
         self.published = 0
@@ -81,6 +85,8 @@ class Player:
 
     def _convert(self, m: bagio.BagMessage) -> Message:
         """Return the rclpy message of bag message `m`."""
+        if m.msgtype == bagio.MEASUREMENT_BATCH:
+            return messages.measurement_batch_copy(m.msg, self.classes)
         return messages.recode(m.msg, m.msgtype, self.classes)
 
     def done(self) -> bool:

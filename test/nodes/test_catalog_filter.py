@@ -2,8 +2,8 @@
 
 import itertools
 
-from ssa_fusion.nodes.shards import KEY_SPACE, shard_problem, shard_range
-from ssa_fusion.ros.messages import shard_key
+from ssa_fusion.nodes.shards import shard_problem, shard_range
+from ssa_fusion.ros.messages import KEY_SPACE, shard_key
 
 
 def test_the_shards_ranges_cover_every_key_once():
