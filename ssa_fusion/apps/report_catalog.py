@@ -43,10 +43,10 @@ import numpy as np
 
 from ssa_fusion.apps import live_catalog, replay_catalog
 from ssa_fusion.core.batch_ekf import BatchEKF
-from ssa_fusion.core.rows import MeasurementRows
+from ssa_fusion.core.rows import EstimateRows, MeasurementRows
 from ssa_fusion.core.site_file import load_station_map
 from ssa_fusion.core.stations import network_stations
-from ssa_fusion.core.types import Kind, Source, UpdateSource
+from ssa_fusion.core.types import Kind, Source, StateEstimate, UpdateSource
 from ssa_fusion.evaluation import catalog_scores as cs
 from ssa_fusion.nodes import settings
 from ssa_fusion.ros import bagio, messages
@@ -123,8 +123,10 @@ def _add_measurements(rows: MeasurementRows, codes: cs.Codes, ekf: BatchEKF,
 
 
 def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> CatalogReport:
-    """Read the catalog bag `bag` (`telling`: its `replay_catalog.TELLING` messages) and
-    score every object (module docstring). ValueError for settings it cannot use."""
+    """Read the catalog bag `bag` and score every object (module docstring).
+
+    `telling`: its `replay_catalog.TELLING` messages. ValueError for settings it cannot use.
+    """
     chosen = replay_catalog.catalog_settings(telling, sites)
     ekf = stations_of(chosen.shards[0])
     codes = cs.Codes()
@@ -166,7 +168,6 @@ def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> Cat
         if e.update_source == UpdateSource.SENSOR:
             fused.add(code=c, t=e.t, r=e.x[:, :3], nis=e.nis)
     est_code = est.get("code").astype(np.int64)
-    n = len(codes)
     score = None
     owner: dict[str, str] = {}
     if detections or associated:
@@ -190,7 +191,7 @@ def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> Cat
                                meas.get("z", (0, 3)), meas.get("sigma", (0, 3)))
     has_nis = f_nis > 0.0
     scores = cs.object_scores(codes.ids, m_code, est_code, err, f_code[has_nis],
-                              f_nis[has_nis], res, truth_object if has_truth else [""] * n)
+                              f_nis[has_nis], res, truth_object)
     summary = cs.summary(scores, err, f_nis[has_nis], res)
     worst, ranked_by = cs.worst(scores, WORST)
     notes = []
@@ -207,10 +208,8 @@ def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> Cat
                          score, unlabelled, forecasts, notes)
 
 
-def _one(e: Any) -> Any:
+def _one(e: StateEstimate) -> EstimateRows:
     """Return one core StateEstimate as `EstimateRows` of one row."""
-    from ssa_fusion.core.rows import EstimateRows
-
     return EstimateRows(np.array([e.t]), [e.object_id], e.x[None], e.P[None],
                         np.array([e.nis]), UpdateSource(e.update_source))
 

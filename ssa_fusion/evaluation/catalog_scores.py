@@ -109,8 +109,10 @@ class Matcher:
 
 
 def nees(err: Floats, P: Floats) -> Floats:
-    """Return eᵀ P⁻¹ e per row of `err` (M, 6) and `P` (M, 6, 6); NaN where P is not
-    positive definite (a zero covariance: no covariance published)."""
+    """Return eᵀ P⁻¹ e per row of `err` (M, 6) and `P` (M, 6, 6).
+
+    NaN where P is not positive definite (a zero covariance: no covariance published).
+    """
     out = np.full(len(err), np.nan)
     if not len(err):
         return out
