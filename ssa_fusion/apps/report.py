@@ -22,6 +22,7 @@ from ssa_fusion.apps import evaluate, replay_catalog
 from ssa_fusion.apps.args import add_settings, add_sites
 from ssa_fusion.core import config, metrics, site_file, types
 from ssa_fusion.ros import bagio
+from ssa_fusion.ros.topics import TOPIC_CONFIG
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -50,9 +51,13 @@ def run(args: argparse.Namespace) -> int:
     out = args.out or args.bag.with_name(args.bag.name + "_report")
     try:
         # a catalog's bag (`replay_catalog.catalog_reason`, as `replay` tells it) is scored
-        # object by object, never as one object's run
-        telling = list(bagio.read_bag(args.bag, topics=replay_catalog.TELLING))
+        # object by object, never as one object's run; its recorded catalog_filter
+        # settings tell it without holding its measurements
+        telling = list(bagio.read_bag(args.bag, topics=[TOPIC_CONFIG]))
         catalog = replay_catalog.catalog_reason(telling)
+        if catalog is None:
+            telling = list(bagio.read_bag(args.bag, topics=replay_catalog.TELLING))
+            catalog = replay_catalog.catalog_reason(telling)
     except (bagio.BagError, ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -41,13 +41,14 @@ from typing import Any
 
 import numpy as np
 
-from ssa_fusion.apps import live_catalog, replay_catalog
+from ssa_fusion.apps import replay_catalog
 from ssa_fusion.core.batch_ekf import BatchEKF
 from ssa_fusion.core.rows import EstimateRows, MeasurementRows
 from ssa_fusion.core.site_file import load_station_map
 from ssa_fusion.core.stations import network_stations
 from ssa_fusion.core.types import Kind, Source, StateEstimate, UpdateSource
 from ssa_fusion.evaluation import catalog_scores as cs
+from ssa_fusion.evaluation.association import detection_labels, score_association
 from ssa_fusion.nodes import settings
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import (
@@ -125,14 +126,23 @@ def _add_measurements(rows: MeasurementRows, codes: cs.Codes, ekf: BatchEKF,
 def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> CatalogReport:
     """Read the catalog bag `bag` and score every object (module docstring).
 
-    `telling`: its `replay_catalog.TELLING` messages. ValueError for settings it cannot use.
+    `telling`: the messages that told it a catalog's (`replay_catalog.catalog_reason`): its
+    ``/ssa/config`` and, when those record no catalog_filter settings, its measurements.
+    The bag is read twice, message by message (measurements, truth and associations, then
+    estimates), keeping per row only what the scores need. ValueError for settings it
+    cannot use.
     """
     chosen = replay_catalog.catalog_settings(telling, sites)
     ekf = stations_of(chosen.shards[0])
     codes = cs.Codes()
     meas = _Rows()
     unlabelled = 0
-    for m in telling:
+    truth_codes = cs.Codes()
+    truth = _Rows()
+    detections: list[MeasurementRows] = []
+    associated: list[MeasurementRows] = []
+    for m in bagio.read_bag(bag, topics=[*replay_catalog.MEASURED, TOPIC_TRUTH,
+                                         TOPIC_DETECTION_TRUTH, TOPIC_ASSOCIATED]):
         if m.topic in replay_catalog.MEASURED:
             try:
                 rows = replay_catalog.measurement_rows(m)
@@ -140,12 +150,7 @@ def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> Cat
                 continue
             unlabelled += int(np.count_nonzero(np.asarray(rows.object_id, dtype=str) == ""))
             _add_measurements(rows, codes, ekf, meas)
-    truth_codes = cs.Codes()
-    truth = _Rows()
-    detections: list[MeasurementRows] = []
-    associated: list[MeasurementRows] = []
-    for m in bagio.read_bag(bag, topics=[TOPIC_TRUTH, TOPIC_DETECTION_TRUTH, TOPIC_ASSOCIATED]):
-        if m.topic == TOPIC_TRUTH and m.msgtype in TRUTH_TYPES:
+        elif m.topic == TOPIC_TRUTH and m.msgtype in TRUTH_TYPES:
             e = (messages.estimate_batch_from_msg(m.msg) if m.msgtype == bagio.ESTIMATE_BATCH
                  else _one(messages.estimate_from_msg(m.msg)))
             truth.add(code=truth_codes.encode(e.object_id), t=e.t, x=e.x)
@@ -155,7 +160,11 @@ def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> Cat
             a = messages.measurement_batch_from_msg(m.msg)
             associated.append(a)
             _add_measurements(a, codes, ekf, meas)
+    labels = _Labels(detections, associated)
     has_truth = bool(truth.parts)
+    matcher = cs.Matcher(truth.get("code").astype(np.int64), truth.get("t"))
+    truth_x = truth.get("x", (0, 6))
+    truth_of: list[int] = []
     est, fused = _Rows(), _Rows()
     forecasts = 0
     for m in bagio.read_bag(bag, topics=[TOPIC_ESTIMATE_BATCH]):
@@ -164,25 +173,18 @@ def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> Cat
             forecasts += len(e)
             continue
         c = codes.encode(e.object_id)
-        est.add(code=c, t=e.t, **({"x": e.x, "P": e.P} if has_truth else {}))
+        truth_of += [truth_codes.find(labels.truth_object(i)) for i in codes.ids[len(truth_of):]]
+        err = (cs.truth_errors(matcher, truth_x, np.asarray(truth_of, np.int64)[c], e.t, e.x,
+                               e.P) if has_truth else None)
+        est.add(code=c, **({"err": err.position_km, "nees": err.nees} if err else {}))
         if e.update_source == UpdateSource.SENSOR:
             fused.add(code=c, t=e.t, r=e.x[:, :3], nis=e.nis)
     est_code = est.get("code").astype(np.int64)
-    score = None
-    owner: dict[str, str] = {}
-    if detections or associated:
-        confirmed = {codes.ids[c] for c in np.unique(est_code).tolist()}
-        score = live_catalog.association(detections, associated, confirmed)
-        owner = dict(score["owner"])
-    labelled = set(codes.ids) - set(owner)
-    truth_object = [owner.get(i, i if i in labelled else "") for i in codes.ids]
-    truth_of = np.array([truth_codes.find(o) if o else -1 for o in truth_object], np.int64)
-    if has_truth and len(est_code):
-        err = cs.truth_errors(cs.Matcher(truth.get("code").astype(np.int64), truth.get("t")),
-                              truth.get("x", (0, 6)), truth_of[est_code], est.get("t"),
-                              est.get("x", (0, 6)), est.get("P", (0, 6, 6)))
-    else:
-        err = cs.TruthErrors(np.full(len(est_code), np.nan), np.full(len(est_code), np.nan))
+    score = labels.score({codes.ids[c] for c in np.unique(est_code).tolist()})
+    truth_object = [labels.truth_object(i) for i in codes.ids]
+    nan = np.full(len(est_code), np.nan)
+    err = cs.TruthErrors(est.get("err") if has_truth else nan,
+                         est.get("nees") if has_truth else nan)
     f_code = fused.get("code").astype(np.int64)
     f_t, f_nis = fused.get("t"), fused.get("nis")
     m_code = meas.get("code").astype(np.int64)
@@ -206,6 +208,37 @@ def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> Cat
                      "counted, not scored")
     return CatalogReport(scores, summary, worst, ranked_by, chosen.origin, chosen.shards,
                          score, unlabelled, forecasts, notes)
+
+
+class _Labels:
+    """The unlabelled detections' truth and the tracks they were placed in."""
+
+    def __init__(self, detections: list[MeasurementRows],
+                 associated: list[MeasurementRows]) -> None:
+        self.tracks: set[str] = set()
+        self.objects: list[str] = []
+        self.labels: list[str] = []
+        self.owner: dict[str, str] = {}
+        if not (detections or associated):
+            return
+        self.tracks = {o for a in associated for o in a.object_id}
+        if detections:
+            rows = MeasurementRows.concat(detections)
+            self.objects = rows.object_id
+            self.labels = (detection_labels(rows, MeasurementRows.concat(associated))
+                           if associated else [""] * len(rows))
+        # a track's object: the majority of its detections, whichever tracks are confirmed
+        self.owner = score_association(self.objects, self.labels, self.tracks).owner
+
+    def truth_object(self, object_id: str) -> str:
+        """Return whose truth scores `object_id`: its own, a track's object ('' for none)."""
+        return self.owner.get(object_id, "") if object_id in self.tracks else object_id
+
+    def score(self, confirmed: set[str]) -> dict[str, Any] | None:
+        """Return the association's score for the `confirmed` tracks (None: no detections)."""
+        if not self.tracks and not self.objects:
+            return None
+        return score_association(self.objects, self.labels, confirmed & self.tracks).as_dict()
 
 
 def _one(e: StateEstimate) -> EstimateRows:
