@@ -53,6 +53,7 @@ from ssa_fusion.nodes import settings
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import (
     TOPIC_ASSOCIATED,
+    TOPIC_CONFIG,
     TOPIC_DETECTION_TRUTH,
     TOPIC_ESTIMATE_BATCH,
     TOPIC_TRUTH,
@@ -97,6 +98,8 @@ class CatalogReport:
     """Measurement rows without object id (detections)."""
     forecasts: int
     notes: list[str]
+    counts: dict[str, int]
+    """Messages read, by topic."""
 
 
 def stations_of(params: dict[str, Any]) -> BatchEKF:
@@ -141,8 +144,10 @@ def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> Cat
     truth = _Rows()
     detections: list[MeasurementRows] = []
     associated: list[MeasurementRows] = []
+    counts = Counter(m.topic for m in telling if m.topic == TOPIC_CONFIG)
     for m in bagio.read_bag(bag, topics=[*replay_catalog.MEASURED, TOPIC_TRUTH,
                                          TOPIC_DETECTION_TRUTH, TOPIC_ASSOCIATED]):
+        counts[m.topic] += 1
         if m.topic in replay_catalog.MEASURED:
             try:
                 rows = replay_catalog.measurement_rows(m)
@@ -168,6 +173,7 @@ def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> Cat
     est, fused = _Rows(), _Rows()
     forecasts = 0
     for m in bagio.read_bag(bag, topics=[TOPIC_ESTIMATE_BATCH]):
+        counts[m.topic] += 1
         e = messages.estimate_batch_from_msg(m.msg)
         if e.update_source == UpdateSource.FORECAST:
             forecasts += len(e)
@@ -207,7 +213,7 @@ def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> Cat
         notes.append(f"{forecasts} catalog-surrogate gap forecasts on {TOPIC_ESTIMATE_BATCH}: "
                      "counted, not scored")
     return CatalogReport(scores, summary, worst, ranked_by, chosen.origin, chosen.shards,
-                         score, unlabelled, forecasts, notes)
+                         score, unlabelled, forecasts, notes, dict(counts))
 
 
 class _Labels:
@@ -318,7 +324,7 @@ def table(rep: CatalogReport) -> str:
             + "\n".join(head + body))
 
 
-def summary_json(rep: CatalogReport, counts: dict[str, int]) -> dict[str, Any]:
+def summary_json(rep: CatalogReport) -> dict[str, Any]:
     """Return what report.json holds."""
     return {"catalog": True, "truth": rep.summary["objects_with_truth"] > 0,
             "summary": rep.summary,
@@ -328,13 +334,13 @@ def summary_json(rep: CatalogReport, counts: dict[str, int]) -> dict[str, Any]:
             "worst_ranked_by": rep.ranked_by,
             "worst": [cs.object_row(rep.scores, i) for i in rep.worst.tolist()],
             "settings": rep.origin, "catalog_filter": rep.parameters, "notes": rep.notes,
-            "message_counts": counts}
+            "message_counts": rep.counts}
 
 
-def write(rep: CatalogReport, out: Path, title: str, counts: dict[str, int]) -> None:
+def write(rep: CatalogReport, out: Path, title: str) -> None:
     """Write report.json, objects.csv (every object) and report.html into `out`."""
     out.mkdir(parents=True, exist_ok=True)
-    (out / "report.json").write_text(json.dumps(summary_json(rep, counts), indent=2))
+    (out / "report.json").write_text(json.dumps(summary_json(rep), indent=2))
     with (out / "objects.csv").open("w", newline="") as f:
         rows = [cs.object_row(rep.scores, i) for i in range(len(rep.scores.ids))]
         if rows:
@@ -366,8 +372,7 @@ def run(args: argparse.Namespace, telling: list[bagio.BagMessage], reason: str,
         return 2
     try:
         rep = build(args.bag, telling, args.sites)
-        counts = Counter(m.topic for m in telling)
-        write(rep, out, f"ssa_fusion catalog report: {out.name}", dict(counts))
+        write(rep, out, f"ssa_fusion catalog report: {out.name}")
     except (bagio.BagError, ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
