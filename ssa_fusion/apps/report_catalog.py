@@ -75,10 +75,12 @@ class _Rows:
     parts: dict[str, list[np.ndarray]] = field(default_factory=dict)
 
     def add(self, **cols: np.ndarray) -> None:
+        """Append one batch's columns (each of the batch's rows)."""
         for k, v in cols.items():
             self.parts.setdefault(k, []).append(v)
 
     def get(self, name: str, shape: tuple[int, ...] = (0,)) -> np.ndarray:
+        """Return column `name` of every batch, or an empty array of `shape`."""
         p = self.parts.get(name)
         return np.concatenate(p) if p else np.zeros(shape)
 
@@ -102,7 +104,7 @@ class CatalogReport:
     """Messages read, by topic."""
 
 
-def stations_of(params: dict[str, Any]) -> BatchEKF:
+def measurement_model(params: dict[str, Any]) -> BatchEKF:
     """Return the measurement model of a shard's settings (its stations: `BatchEKF`)."""
     sites = str(params.get("sites", ""))
     stations = network_stations(str(params["station"]), load_station_map(sites))
@@ -136,7 +138,7 @@ def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> Cat
     cannot use.
     """
     chosen = replay_catalog.catalog_settings(telling, sites)
-    ekf = stations_of(chosen.shards[0])
+    ekf = measurement_model(chosen.shards[0])
     codes = cs.Codes()
     meas = _Rows()
     unlabelled = 0
