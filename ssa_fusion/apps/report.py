@@ -18,10 +18,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ssa_fusion.apps import evaluate
+from ssa_fusion.apps import evaluate, replay_catalog
 from ssa_fusion.apps.args import add_settings, add_sites
 from ssa_fusion.core import config, metrics, site_file, types
 from ssa_fusion.ros import bagio
+from ssa_fusion.ros.topics import TOPIC_CONFIG
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -43,9 +44,28 @@ def run(args: argparse.Namespace) -> int:
     """Run `ssa-fusion report`; return the exit code (2 when the bag cannot be evaluated).
 
     A bag without simulated truth or outage (your own measurements, replayed) gets the
-    report of `report_own`: residuals, NIS, σ through the gaps, passes.
+    report of `report_own`: residuals, NIS, σ through the gaps, passes; a catalog's bag
+    (several objects, unlabelled detections, or the catalog_filter's settings) that of
+    `report_catalog`: each object scored on its own rows.
     """
     out = args.out or args.bag.with_name(args.bag.name + "_report")
+    try:
+        # a catalog's bag (`replay_catalog.catalog_reason`, as `replay` tells it) is scored
+        # object by object, never as one object's run; its recorded catalog_filter
+        # settings tell it without holding its measurements
+        telling = list(bagio.read_bag(args.bag, topics=[TOPIC_CONFIG]))
+        catalog = replay_catalog.catalog_reason(telling)
+        if catalog is None:
+            telling = list(bagio.read_bag(args.bag, topics=replay_catalog.TELLING))
+            catalog = replay_catalog.catalog_reason(telling)
+    except (bagio.BagError, ValueError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if catalog is not None:
+        from ssa_fusion.apps import report_catalog
+
+        return report_catalog.run(args, telling, catalog, out)
+    del telling
     try:
         data = evaluate.load(args.bag)
         ev = evaluate.evaluate(data, args.scenario, params_file=args.params_file)

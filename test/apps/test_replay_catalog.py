@@ -178,6 +178,14 @@ def test_report_and_export_read_the_replayed_bag(rows, tmp_path):
     out = tmp_path / "off"
     assert cli.main(["replay", str(bag), "--offline", "--out", str(out)]) == 0
     assert cli.main(["report", str(out), "--out", str(tmp_path / "report")]) == 0
+    rep = json.loads((tmp_path / "report" / "report.json").read_text())
+    assert rep["catalog"] and rep["summary"]["objects_with_estimates"] == OBJECTS
+    assert rep["settings"].startswith("recorded with the bag")
+    # the bag replayed: its objects' measurements, with the settings a replay assumes
+    assert cli.main(["report", str(bag), "--out", str(tmp_path / "report_in")]) == 0
+    rep = json.loads((tmp_path / "report_in" / "report.json").read_text())
+    assert rep["summary"]["objects"] == OBJECTS and rep["summary"]["estimates"] == 0
+    assert rep["settings"].startswith("assumed")
     oem = tmp_path / "x.oem"
     assert cli.main(["export", "oem", str(out), "--out", str(oem)]) == 0
     assert oem.read_text().count("OBJECT_ID") == OBJECTS
