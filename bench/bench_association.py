@@ -34,7 +34,8 @@ the same conditions, one after the other.
 Usage::
 
     nice -n 10 python bench/bench_association.py [--hours 24] [--cases train,crossing]
-        [--radars 1,2] [--seed 1] [--variants baseline,register,long-arc,long-arc+register]
+        [--radars 1,2] [--seed 1] [--variants baseline,...,long-arc+register+defer]
+        [--defer-margin 9.21]
 
 Prints ``key: value`` lines per run; the last line is one JSON object.
 """
@@ -212,12 +213,17 @@ def main(argv: list[str] | None = None) -> int:
     default = AssociationConfig()
     ap.add_argument("--predictor-q", type=float, default=default.predictor_q,
                     help="the long-arc predictor's q, km^2/s^3 (AssociationConfig.predictor_q)")
+    ap.add_argument("--defer-margin", type=float, default=default.defer_margin,
+                    help="the largest extra cost of a swap for a deferred decision "
+                         "(AssociationConfig.defer_margin)")
     ap.add_argument("--variants", default=",".join(VARIANTS),
                     help=f"comma-separated, of {', '.join(VARIANTS)}")
     args = ap.parse_args(argv)
     names = args.variants.split(",")
     configs = [replace(default, **VARIANTS[v]) for v in names]
     configs = [replace(c, predictor_q=args.predictor_q) if c.predictor_q is not None else c
+               for c in configs]
+    configs = [replace(c, defer_margin=args.defer_margin) if c.defer_passes else c
                for c in configs]
     results = []
     for case in args.cases.split(","):
