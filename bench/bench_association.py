@@ -21,6 +21,10 @@ a time. Scored by the truth labels kept aside:
   that made it included);
 * swapped: confirmed tracks whose object (majority per pass) differs from their first
   pass's in more than one pass; any_swap: in at least one;
+* these scores (`evaluation.association`: `score_association`, `pass_swaps`) are of the
+  labels as decided: a deferred decision (`AssociationConfig.defer_passes`) that changes
+  the track of detections of an earlier pass (`ScanOutcome.relabelled`) changes their
+  labels; ``*_as_emitted``: the same scores of the labels as each scan returned them;
 * confirmed tracks, objects with a confirmed track, duplicate tracks (a second confirmed
   track of an object), tracklets and tentative tracks dropped;
 * cost per scan: wall time of `Associator.process_scan` (association, fusion, tentative
@@ -28,8 +32,9 @@ a time. Scored by the truth labels kept aside:
 
 Each case runs once per variant (``--variants``, `VARIANTS`): GNN on the tracks' filter alone
 (``baseline``), with the groups' registration (``register``), with the long-arc predictor
-(``long-arc``), with both (``long-arc+register``, the defaults of `AssociationConfig`), in
-the same conditions, one after the other.
+(``long-arc``), with both (``long-arc+register``), with both and the decisions deferred
+over passes (``long-arc+register+defer``, the defaults of `AssociationConfig`), in the same
+conditions, one after the other.
 
 Usage::
 
