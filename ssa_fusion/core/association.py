@@ -198,6 +198,13 @@ class AssociationConfig:
         crowded cases' tuning seeds 1-3 (24 h, `bench/bench_association.py`) as the largest
         of 2 ln 10, 2 ln 100, 2 ln 1000 with which every tuning run kept 99.95 % of the
         detections on the right track and no track swapped.
+    defer_max_wait_s : float
+        A deferred decision whose pair is not seen again within this long after its pass,
+        s, is dropped (the scan-wise assignment stays): the decision compares the two
+        hypotheses' predictions by the long-arc predictor without the groups' registration,
+        sharp only across a short gap (across the half-day gaps a common along-track error
+        of km, `register`, would decide it). 3 h: about two orbits in low orbit, the next
+        pass or the one after, not the next day's.
     """
 
     gate_probability: float = 0.9999
@@ -215,6 +222,7 @@ class AssociationConfig:
     group_link_speed_fraction: float = 0.01
     defer_passes: int = 1
     defer_margin: float = 2.0 * math.log(1000.0)
+    defer_max_wait_s: float = 3.0 * 3600.0
 
     def __post_init__(self) -> None:
         """Check the settings (ValueError naming the field)."""
@@ -235,6 +243,8 @@ class AssociationConfig:
             raise ValueError(f"defer_passes must be >= 0, got {self.defer_passes}")
         if not self.defer_margin >= 0.0:
             raise ValueError(f"defer_margin must be >= 0, got {self.defer_margin}")
+        if not self.defer_max_wait_s > 0.0:
+            raise ValueError(f"defer_max_wait_s must be > 0, got {self.defer_max_wait_s}")
         if self.predictor_q is not None and not self.predictor_q >= 0.0:
             raise ValueError(f"predictor_q must be >= 0 or None, got {self.predictor_q}")
 
@@ -707,7 +717,8 @@ class TrackEvent(enum.StrEnum):
     DEFER_KEPT = "defer_kept"
     """Deferred decisions that kept the scan-wise assignment."""
     DEFER_DROPPED = "defer_dropped"
-    """Deferred decisions dropped undecided (a track of the pair was deleted)."""
+    """Deferred decisions dropped undecided (a track of the pair was deleted, or the pair
+    was not seen within `AssociationConfig.defer_max_wait_s` of its pass)."""
 
 
 @dataclass(frozen=True)
@@ -997,6 +1008,9 @@ class Associator:
                 fork.state = ForkState.PENDING
             if fork.state != ForkState.PENDING:
                 keep.append(fork)
+                continue
+            if t_scan - fork.t_last > self.config.defer_max_wait_s:
+                self.counts[TrackEvent.DEFER_DROPPED] += 1
                 continue
             h0, seen0 = pair_cost(src, srow[[fork.a, fork.b]], st, tt, zz, RR, self._gate)
             h1, seen1 = pair_cost(shadow, [shadow.rows[n] for n in fork.shadow], st, tt, zz,

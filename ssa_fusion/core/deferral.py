@@ -32,7 +32,10 @@ neighbour's second has the wrong mean motion, and predicts the third pass km off
   in the deferred pass changes label (`Relabel`): the tracks stay on the objects of their
   first pass. Then the scan is associated as usual.
 
-A fork whose track is deleted is dropped (H0 stays). Units: the core's (km, rad, s).
+A fork whose track is deleted, or whose pair is not seen again within
+``defer_max_wait_s`` of its pass (`association.AssociationConfig`: the next day's pass is
+predicted without the groups' registration here), is dropped (H0 stays). Units: the core's
+(km, rad, s).
 """
 
 from __future__ import annotations

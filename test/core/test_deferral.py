@@ -207,3 +207,20 @@ def test_deferred_decision_puts_the_swapped_pair_back(pair_scans):
         assert all(later[n] == first[n] for n in first)
     assert emitted[2] == decided[2]  # pass 3 was assigned after the decision: no relabel
     assert {r.scan for r in assoc.relabels} <= set(range(len(pair_scans)))
+
+
+def test_a_pair_not_seen_again_soon_enough_keeps_the_scan_wise_assignment(pair_scans):
+    # the third pass comes 1.5 h after the second: with a wait of 1 min the fork is dropped
+    assoc, emitted, decided = _run(pair_scans, AssociationConfig(defer_margin=LOOSE,
+                                                                 defer_max_wait_s=60.0))
+    assert assoc.counts[TrackEvent.DEFER_OPENED] >= 1
+    assert assoc.counts[TrackEvent.DEFER_DROPPED] == assoc.counts[TrackEvent.DEFER_OPENED]
+    assert assoc.counts[TrackEvent.DEFER_SWAPPED] == 0 and assoc.relabels == []
+    assert decided == emitted and any(emitted[2][n] != emitted[0][n] for n in emitted[0])
+
+
+@pytest.mark.parametrize("bad", [{"defer_passes": -1}, {"defer_margin": -1.0},
+                                 {"defer_max_wait_s": 0.0}])
+def test_config_refuses_nonsense_deferral_settings(bad):
+    with pytest.raises(ValueError, match=next(iter(bad))):
+        AssociationConfig(**bad)
