@@ -21,6 +21,10 @@ a time. Scored by the truth labels kept aside:
   that made it included);
 * swapped: confirmed tracks whose object (majority per pass) differs from their first
   pass's in more than one pass; any_swap: in at least one;
+* these scores (`evaluation.association`: `score_association`, `pass_swaps`) are of the
+  labels as decided: a deferred decision (`AssociationConfig.defer_passes`) that changes
+  the track of detections of an earlier pass (`ScanOutcome.relabelled`) changes their
+  labels; ``*_as_emitted``: the same scores of the labels as each scan returned them;
 * confirmed tracks, objects with a confirmed track, duplicate tracks (a second confirmed
   track of an object), tracklets and tentative tracks dropped;
 * cost per scan: wall time of `Associator.process_scan` (association, fusion, tentative
@@ -28,13 +32,15 @@ a time. Scored by the truth labels kept aside:
 
 Each case runs once per variant (``--variants``, `VARIANTS`): GNN on the tracks' filter alone
 (``baseline``), with the groups' registration (``register``), with the long-arc predictor
-(``long-arc``), with both (``long-arc+register``, the defaults of `AssociationConfig`), in
-the same conditions, one after the other.
+(``long-arc``), with both (``long-arc+register``), with both and the decisions deferred
+over passes (``long-arc+register+defer``, the defaults of `AssociationConfig`), in the same
+conditions, one after the other.
 
 Usage::
 
     nice -n 10 python bench/bench_association.py [--hours 24] [--cases train,crossing]
-        [--radars 1,2] [--seed 1] [--variants baseline,register,long-arc,long-arc+register]
+        [--radars 1,2] [--seed 1] [--variants baseline,...,long-arc+register+defer]
+        [--defer-margin 9.21]
 
 Prints ``key: value`` lines per run; the last line is one JSON object.
 """
@@ -51,7 +57,6 @@ import json
 import math
 import sys
 import time
-from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -67,22 +72,26 @@ from ssa_fusion.core.association import (
     TrackEvent,
     TrackStatus,
 )
+from ssa_fusion.core.deferral import Relabel
 from ssa_fusion.core.filter_options import SKY_FILTER
 from ssa_fusion.core.stations import SENSORS
+from ssa_fusion.evaluation.association import pass_swaps, score_association
 from ssa_fusion.sim import survey
 
 T0 = 1_735_732_800.0
 """Start of every run: 2025-01-01T12:00:00Z."""
 RADARS = {1: ("columbus",), 2: ("columbus", "millstone")}
 VARIANTS: dict[str, dict[str, Any]] = {
-    "baseline": {"predictor_q": None, "register_groups": False},
-    "register": {"predictor_q": None},
-    "long-arc": {"register_groups": False},
-    "long-arc+register": {},
+    "baseline": {"predictor_q": None, "register_groups": False, "defer_passes": 0},
+    "register": {"predictor_q": None, "defer_passes": 0},
+    "long-arc": {"register_groups": False, "defer_passes": 0},
+    "long-arc+register": {"defer_passes": 0},
+    "long-arc+register+defer": {},
 }
 """The association compared: GNN on the tracks' filter alone; with the groups' registration
 (`AssociationConfig.register_groups`) on it; with the long-arc predictor
-(`AssociationConfig.predictor_q`); with both (the defaults)."""
+(`AssociationConfig.predictor_q`); with both; with both and the decisions deferred over
+passes (`AssociationConfig.defer_passes`: the defaults)."""
 
 
 def _catalog(case: str, seed: int) -> list:
@@ -111,6 +120,24 @@ def _observe(entries: list, sensors: list, hours: float, seed: int) -> survey.Ob
                                parts[0].object_ids, tuple(sensors))
 
 
+def _score(obs: survey.Observations, label: np.ndarray, fate: np.ndarray,
+           confirmed: set[str], pass_gap_s: float) -> dict[str, float | int]:
+    """Accuracy, coverage, objects with a track, duplicates and swaps of the labels.
+
+    By `evaluation.association` (`score_association`, `pass_swaps`): a refused detection
+    is in no track; the accuracy is that of the detections fused into confirmed tracks.
+    """
+    labels = np.where(fate == DetectionFate.REFUSED, "", label).tolist()
+    objects = obs.obj.tolist()
+    s = score_association(objects, labels, confirmed, counted=fate == DetectionFate.TRACK)
+    everything = score_association(objects, labels, confirmed)
+    gt1, any_pass = pass_swaps(objects, labels, obs.t, set(s.owner), pass_gap_s)
+    return {"accuracy": s.accuracy, "accuracy_all_in_tracks": everything.accuracy,
+            "coverage": s.coverage, "objects_with_track": s.objects_with_track,
+            "duplicate_tracks": s.duplicate_tracks,
+            "swapped_gt1_pass": gt1, "swapped_any_pass": any_pass}
+
+
 def run(case: str, radars: int, hours: float, seed: int,
         config: AssociationConfig) -> dict[str, float | int | str]:
     """One case seen by 1 or 2 radars: the scores of the module docstring."""
@@ -124,6 +151,7 @@ def run(case: str, radars: int, hours: float, seed: int,
     fate = np.zeros(m, dtype=np.int8)
     ever_confirmed: set[str] = set()
     cost_us = []
+    relabels: list[Relabel] = []
     for scan in scans:
         s = sensors[scan.sensor]
         R = np.broadcast_to(s.R, (scan.z.shape[0], 3, 3))
@@ -133,35 +161,13 @@ def run(case: str, radars: int, hours: float, seed: int,
         cost_us.append((time.perf_counter() - t1) * 1e6)
         label[scan.index] = out.ids
         fate[scan.index] = out.fate
+        relabels += out.relabelled
         ever_confirmed.update(assoc.track_ids(TrackStatus.CONFIRMED))
+    emitted = _score(obs, label, fate, ever_confirmed, config.pass_gap_s)
+    for r in relabels:  # the deferred decisions' outcome: the labels as decided
+        label[scans[r.scan].index[r.detection]] = r.track
+    score = _score(obs, label, fate, ever_confirmed, config.pass_gap_s)
     truth = obs.obj
-    in_track = np.array([lab in ever_confirmed for lab in label]) & (
-        fate != DetectionFate.REFUSED)
-    owner: dict[str, int] = {}
-    share: dict[str, int] = {}
-    for tid in ever_confirmed:
-        objs = truth[in_track & (label == tid)]
-        if objs.size:
-            c = Counter(objs.tolist()).most_common(1)[0]
-            owner[tid], share[tid] = c
-    right = np.array([owner.get(lab, -1) == o for lab, o in zip(label, truth, strict=True)])
-    fused = in_track & (fate == DetectionFate.TRACK)
-    # objects and duplicates: the object's track is its confirmed track with most of it
-    by_object: dict[int, list[str]] = {}
-    for tid, o in owner.items():
-        by_object.setdefault(o, []).append(tid)
-    duplicates = sum(len(v) - 1 for v in by_object.values())
-    # swaps: per confirmed track, the majority object of each pass
-    swapped = any_swap = 0
-    for tid in owner:
-        idx = np.flatnonzero(in_track & (label == tid))
-        t = obs.t[idx]
-        cut = np.flatnonzero(np.diff(t) > config.pass_gap_s) + 1
-        per_pass = [Counter(truth[p].tolist()).most_common(1)[0][0]
-                    for p in np.split(idx, cut)]
-        other = sum(o != per_pass[0] for o in per_pass)
-        swapped += other > 1
-        any_swap += other > 0
     seen = np.unique(truth).size
     assert len(scans) > 0 and m > 0, "no scan, no detection"
     assert seen == len(entries), f"only {seen} of {len(entries)} objects were seen"
@@ -169,19 +175,19 @@ def run(case: str, radars: int, hours: float, seed: int,
     registered = assoc.counts[TrackEvent.GROUP_REGISTERED]
     assert registered > 0 if config.register_groups else registered == 0, (
         f"register_groups {config.register_groups}, {registered} groups registered")
+    assert (assoc.deferral is not None) == (config.defer_passes > 0)
+    assert len(relabels) == len(assoc.relabels)
     costs = np.array(cost_us)
     counts = assoc.counts
     return {
         "case": case, "radars": radars, "hours": hours, "seed": seed,
         "objects": len(entries), "objects_seen": int(seen),
         "scans": len(scans), "detections": m,
-        "accuracy": float(right[fused].mean()) if fused.any() else math.nan,
-        "accuracy_all_in_tracks": float(right[in_track].mean()) if in_track.any() else math.nan,
-        "coverage": float(in_track.mean()),
+        **score,
+        "accuracy_as_emitted": emitted["accuracy"],
+        "swapped_gt1_pass_as_emitted": emitted["swapped_gt1_pass"],
+        "swapped_any_pass_as_emitted": emitted["swapped_any_pass"],
         "confirmed_tracks": len(ever_confirmed),
-        "objects_with_track": len(by_object),
-        "duplicate_tracks": duplicates,
-        "swapped_gt1_pass": swapped, "swapped_any_pass": any_swap,
         "tentative_dropped": counts[TrackEvent.TENTATIVE_DROPPED],
         "tracklets_started": counts[TrackEvent.TRACKLET_STARTED],
         "tracklets_expired": counts[TrackEvent.TRACKLET_EXPIRED],
@@ -191,6 +197,11 @@ def run(case: str, radars: int, hours: float, seed: int,
         "deleted_missed_passes": counts[TrackEvent.DELETED_MISSED_PASSES],
         "deleted_covariance": counts[TrackEvent.DELETED_COVARIANCE],
         "groups_registered": counts[TrackEvent.GROUP_REGISTERED],
+        "defer_opened": counts[TrackEvent.DEFER_OPENED],
+        "defer_swapped": counts[TrackEvent.DEFER_SWAPPED],
+        "defer_kept": counts[TrackEvent.DEFER_KEPT],
+        "defer_dropped": counts[TrackEvent.DEFER_DROPPED],
+        "relabelled": len(relabels),
         "cost_us_median": float(np.median(costs)),
         "cost_us_p95": float(np.percentile(costs, 95)),
         "cost_us_max": float(costs.max()),
@@ -207,12 +218,17 @@ def main(argv: list[str] | None = None) -> int:
     default = AssociationConfig()
     ap.add_argument("--predictor-q", type=float, default=default.predictor_q,
                     help="the long-arc predictor's q, km^2/s^3 (AssociationConfig.predictor_q)")
+    ap.add_argument("--defer-margin", type=float, default=default.defer_margin,
+                    help="the largest extra cost of a swap for a deferred decision "
+                         "(AssociationConfig.defer_margin)")
     ap.add_argument("--variants", default=",".join(VARIANTS),
                     help=f"comma-separated, of {', '.join(VARIANTS)}")
     args = ap.parse_args(argv)
     names = args.variants.split(",")
     configs = [replace(default, **VARIANTS[v]) for v in names]
     configs = [replace(c, predictor_q=args.predictor_q) if c.predictor_q is not None else c
+               for c in configs]
+    configs = [replace(c, defer_margin=args.defer_margin) if c.defer_passes else c
                for c in configs]
     results = []
     for case in args.cases.split(","):

@@ -45,6 +45,16 @@ Crowded skies (objects launched together, a few km apart) need two more steps, b
   tracks' filter's predicted position standard deviation) that best aligns it with the
   scan, before the assignment.
 
+Young tracks need one more (`AssociationConfig.defer_passes`, `deferral.PairDeferral`): in
+its second pass a track's orbit comes from one pass, and two neighbours' predictions can
+be in each other's place. A pair of confirmed tracks whose swapped assignment in a scan
+costs little more than the chosen one (``defer_margin``) keeps both hypotheses: the chosen
+one in the tracks, the pair's detections exchanged for the rest of the pass in shadow
+copies. At the next pass that sees the pair, the hypothesis of least total cost (the
+deferred pass's and that scan's) wins: the tracks take the shadows' states when the swap
+wins, and the deferred pass's detections change track (`Associator.relabels`,
+`ScanOutcome.relabelled`).
+
 Track management (`Associator`): a catalog of unlabelled objects, scan by scan.
 
 * Every scan is first associated with the tracks (tentative and confirmed, the rows of a
@@ -89,6 +99,7 @@ from scipy.stats import chi2
 
 from .batch_ekf import BatchEKF
 from .constants import MU_EARTH
+from .deferral import ForkState, PairDeferral, Relabel, ambiguous_pairs, copy_track
 from .filter_options import FilterOptions
 from .frames import Station
 from .iod import razel_to_gcrs
@@ -109,6 +120,7 @@ __all__ = [
     "associate",
     "gate_long_arc",
     "gate_scan",
+    "pair_cost",
     "predict_scan",
     "register",
 ]
@@ -175,6 +187,24 @@ class AssociationConfig:
         predicted velocities differ by at most this fraction of their speed (one orbit:
         objects launched together), chained: twice the widest spacing (5 km) of the
         crowded cases' trains, so that a whole train, not pieces of it, is registered.
+    defer_passes : int
+        Decisions deferred over passes (`deferral.PairDeferral`): two confirmed tracks with
+        at least one and at most this many passes behind them (an orbit of one pass, for
+        1), ambiguous in a scan, keep both hypotheses until the next pass; 0: never.
+    defer_margin : float
+        The most the swapped assignment of two tracks may cost above the chosen one
+        (``d^2 + ln det S`` units: twice a log-likelihood ratio) for them to be ambiguous.
+        2 ln 1000 (a swap at least 1/1000 as likely as the chosen assignment): chosen on the
+        crowded cases' tuning seeds 1-3 (24 h, `bench/bench_association.py`) as the largest
+        of 2 ln 10, 2 ln 100, 2 ln 1000 with which every tuning run kept 99.95 % of the
+        detections on the right track and no track swapped.
+    defer_max_wait_s : float
+        A deferred decision whose pair is not seen again within this long after its pass,
+        s, is dropped (the scan-wise assignment stays): the decision compares the two
+        hypotheses' predictions by the long-arc predictor without the groups' registration,
+        sharp only across a short gap (across the half-day gaps a common along-track error
+        of km, `register`, would decide it). 3 h: about two orbits in low orbit, the next
+        pass or the one after, not the next day's.
     """
 
     gate_probability: float = 0.9999
@@ -190,6 +220,9 @@ class AssociationConfig:
     register_groups: bool = True
     group_link_km: float = 10.0
     group_link_speed_fraction: float = 0.01
+    defer_passes: int = 1
+    defer_margin: float = 2.0 * math.log(1000.0)
+    defer_max_wait_s: float = 3.0 * 3600.0
 
     def __post_init__(self) -> None:
         """Check the settings (ValueError naming the field)."""
@@ -206,6 +239,12 @@ class AssociationConfig:
                      "group_link_km", "group_link_speed_fraction"):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.defer_passes < 0:
+            raise ValueError(f"defer_passes must be >= 0, got {self.defer_passes}")
+        if not self.defer_margin >= 0.0:
+            raise ValueError(f"defer_margin must be >= 0, got {self.defer_margin}")
+        if not self.defer_max_wait_s > 0.0:
+            raise ValueError(f"defer_max_wait_s must be > 0, got {self.defer_max_wait_s}")
         if self.predictor_q is not None and not self.predictor_q >= 0.0:
             raise ValueError(f"predictor_q must be >= 0 or None, got {self.predictor_q}")
 
@@ -558,6 +597,56 @@ def gate_long_arc(wide: Gated, fine: Gated, which: IntArray) -> Gated:
     return Gated(d2, cost, wide.feasible)
 
 
+def pair_cost(bank: TrackBank, rows: ArrayLike, station: int, t: Array, z: Array, R: Array,
+              gate: float, dets: ArrayLike | None = None) -> tuple[float, bool]:
+    """Cost of K tracks of a bank on a scan's detections (a deferred decision's score).
+
+    Each track costs ``min(d^2, gate) + ln det S`` on its detection (the cost of
+    `gate_scan` with ``d^2`` clipped at the gate), or ``gate + ln det S`` (S at the scan's
+    first epoch) without one: a detection outside the gate counts as a miss.
+
+    Parameters
+    ----------
+    bank : TrackBank
+        Holds the tracks.
+    rows : array_like (K,) of int
+        Their rows in ``bank``.
+    station : int
+        Index of the scanning station in ``bank.ekf.stations``.
+    t, z, R : ndarray (M,), (M, 3), (M, 3, 3)
+        The scan's epochs (Unix s), detections and their noise (as `gate_scan`).
+    gate : float
+        Threshold on ``d^2`` (`AssociationConfig.gate`).
+    dets : array_like (K,) of int, optional
+        Each track's detection (-1: none); default: the tracks' own best assignment of the
+        scan (`assign` on their K x M costs).
+
+    Returns
+    -------
+    (float, bool)
+        The total cost, and whether any (track, detection) pair is inside the gate.
+    """
+    r = np.asarray(rows, dtype=np.int64)
+    pred = predict_scan(bank.ekf, bank.x[r], bank.P[r], bank.t[r], t, station)
+    g = gate_scan(pred, z, R, gate)
+    if dets is None:
+        det_track = assign(g.cost, g.feasible)
+        d = np.full(r.size, UNASSIGNED, dtype=np.int64)
+        got = np.flatnonzero(det_track >= 0)
+        d[det_track[got]] = got
+    else:
+        d = np.asarray(dets, dtype=np.int64)
+    S0 = pred.HPHt[0] + np.asarray(R, dtype=float).reshape(-1, 3, 3)[0]
+    sign, miss_logdet = np.linalg.slogdet(S0)
+    total = 0.0
+    for i, j in enumerate(d.tolist()):
+        if j >= 0 and math.isfinite(g.d2[i, j]):
+            total += min(float(g.d2[i, j]), gate) + float(g.cost[i, j] - g.d2[i, j])
+        else:
+            total += gate + (float(miss_logdet[i]) if sign[i] > 0 else 0.0)
+    return total, bool(g.feasible.any())
+
+
 def associate(ekf: BatchEKF, x: ArrayLike, P: ArrayLike, t_track: ArrayLike,
               t_scan: ArrayLike, z: ArrayLike, R: ArrayLike, station: int,
               config: AssociationConfig) -> ScanAssociation:
@@ -621,6 +710,15 @@ class TrackEvent(enum.StrEnum):
     GROUP_REGISTERED = "group_registered"
     """Groups of tracks sharing detections shifted along track before an assignment
     (`register`; one per group and scan)."""
+    DEFER_OPENED = "defer_opened"
+    """Ambiguous pairs of tracks whose decision was deferred (`deferral.PairDeferral`)."""
+    DEFER_SWAPPED = "defer_swapped"
+    """Deferred decisions that exchanged the pair's detections of the deferred pass."""
+    DEFER_KEPT = "defer_kept"
+    """Deferred decisions that kept the scan-wise assignment."""
+    DEFER_DROPPED = "defer_dropped"
+    """Deferred decisions dropped undecided (a track of the pair was deleted, or the pair
+    was not seen within `AssociationConfig.defer_max_wait_s` of its pass)."""
 
 
 @dataclass(frozen=True)
@@ -634,10 +732,15 @@ class ScanOutcome:
         id of the track its IOD starts).
     fate : ndarray (M,) of int8
         Per detection, its `DetectionFate`.
+    relabelled : tuple of Relabel
+        Detections of earlier scans (this one's included) whose track a deferred decision
+        taken in this scan changed (`deferral.Relabel`: the scan's serial number, from 0 for
+        the first `Associator.process_scan` call, and the detection's index in it).
     """
 
     ids: list[str]
     fate: NDArray[np.int8]
+    relabelled: tuple[Relabel, ...] = ()
 
 
 def _popcount(bits: IntArray, width: int) -> IntArray:
@@ -673,6 +776,12 @@ class Associator:
         """The long-arc predictor (`AssociationConfig.predictor_q`): the same tracks, fed the
         same detections, whose predictions score the pairs; None without one."""
         self.stations = dict(stations)
+        self.deferral = None if not self.config.defer_passes else PairDeferral(
+            options, None if q is None else options.with_(q=q), self.stations,
+            self.config.gate, self.config.pass_gap_s)
+        """The deferred decisions (`AssociationConfig.defer_passes`); None without them."""
+        self.relabels: list[Relabel] = []
+        """Every detection whose track a deferred decision changed (`ScanOutcome`)."""
         self.iod_samples = int(options.iod.iod_samples)
         self.counts: Counter[TrackEvent] = Counter()
         self._gate = self.config.gate
@@ -686,7 +795,9 @@ class Associator:
         self._pass_open = np.zeros(0, dtype=bool)
         self._pass_hits = np.zeros(0, dtype=np.int64)
         self._missed = np.zeros(0, dtype=np.int64)
+        self._passes = np.zeros(0, dtype=np.int64)  # passes ended with a detection
         self._prow = np.zeros(0, dtype=np.int64)  # the row in `predictor`, -1: none
+        self._scan = -1  # serial number of the scan being processed
         # tracklets: one row each; their raw detections by id (for the IOD)
         self._tl_ids: list[str] = []
         self._tl_station = np.zeros(0, dtype=np.int64)
@@ -713,6 +824,7 @@ class Associator:
         self._pass_open = np.r_[self._pass_open, np.zeros(extra, bool)]
         self._pass_hits = np.r_[self._pass_hits, np.zeros(extra, np.int64)]
         self._missed = np.r_[self._missed, np.zeros(extra, np.int64)]
+        self._passes = np.r_[self._passes, np.zeros(extra, np.int64)]
         self._prow = np.r_[self._prow, np.full(extra, -1, np.int64)]
 
     def _delete(self, rows: IntArray, event: TrackEvent) -> None:
@@ -748,14 +860,18 @@ class Associator:
         st = self.bank.ekf.index[station]
         self.counts[TrackEvent.SCANS] += 1
         self.counts[TrackEvent.DETECTIONS] += m
+        self._scan += 1
         ids = [""] * m
         fate = np.full(m, DetectionFate.NEW_TRACKLET, dtype=np.int8)
         self._grow()
         self._expire(t_scan)
+        done = len(self.relabels)
+        if self.deferral is not None and m:
+            self._decide(station, st, t_scan, tt, zz, RR)
         free = self._tracks(station, st, t_scan, tt, zz, RR, min_elevation_rad, ids, fate)
         self._tracklets(station, st, free, tt, zz, RR, ids, fate)
         self._grow()
-        return ScanOutcome(ids, fate)
+        return ScanOutcome(ids, fate, tuple(self.relabels[done:]))
 
     def _tracks(self, station: str, st: int, t_scan: float, tt: Array, zz: Array,
                 RR: Array, min_el: float, ids: list[str],
@@ -785,6 +901,8 @@ class Associator:
         hit[track[got]] = True
         expected = (pred.ok & (pred.zp[..., 2] >= min_el)).any(0) | hit
         # fuse what was assigned, in epoch order
+        if self.deferral is not None and m:
+            self._defer(rows, track, gated, station, st, t_scan, tt, zz, RR)
         det = np.flatnonzero(got)
         det = det[np.argsort(tt[det], kind="stable")]
         names = [bank.object_ids[r] for r in rows[track[det]]]
@@ -817,6 +935,99 @@ class Associator:
         self._delete(lost[self.status[lost] != TrackStatus.DELETED],
                      TrackEvent.DELETED_COVARIANCE)
         return np.flatnonzero(~got)
+
+    # --------------------------------------------------------------------------------------
+    def _scoring(self) -> tuple[TrackBank, IntArray]:
+        """Return the scoring filter of deferred decisions and each track's row in it.
+
+        The long-arc predictor if any, else the tracks' filter; per row of the tracks'
+        bank its row there (-1: none).
+        """
+        if self.predictor is None:
+            return self.bank, np.arange(len(self.bank), dtype=np.int64)
+        return self.predictor, self._prow
+
+    def _filters(self, a: int, b: int) -> list[tuple[TrackBank, int, int]]:
+        """Per filter (the tracks', the long-arc predictor's), its bank and rows of a, b."""
+        out = [(self.bank, a, b)]
+        if self.predictor is not None:
+            out.append((self.predictor, int(self._prow[a]), int(self._prow[b])))
+        return out
+
+    def _defer(self, rows: IntArray, track: IntArray, gated: Gated, station: str, st: int,
+               t_scan: float, tt: Array, zz: Array, RR: Array) -> None:
+        """Open forks on the scan's ambiguous pairs; fuse and score the open forks' H1.
+
+        Called after the assignment (``track``: per detection its index in ``rows``), before
+        the fusion: a new fork's shadows are the tracks' states before this scan.
+        """
+        deferral = self.deferral
+        assert deferral is not None
+        cfg = self.config
+        src, srow = self._scoring()
+        eligible = ((self.status[rows] == TrackStatus.CONFIRMED)
+                    & (self._passes[rows] >= 1) & (self._passes[rows] <= cfg.defer_passes)
+                    & (srow[rows] >= 0) & ~np.isin(rows, list(deferral.busy())))
+        for i, k in ambiguous_pairs(track, gated.cost, gated.feasible, cfg.defer_margin,
+                                    eligible):
+            a, b = int(rows[i]), int(rows[k])
+            deferral.open(a, b, t_scan, self._filters(a, b))
+            self.counts[TrackEvent.DEFER_OPENED] += 1
+        local = {int(r): i for i, r in enumerate(rows.tolist())}
+        shadow = deferral.scoring_shadow()
+        for fork in deferral.forks:
+            if fork.state != ForkState.OPEN or fork.a not in local or fork.b not in local:
+                continue
+            da, db = (int(np.flatnonzero(track == local[r])[0]) if (track == local[r]).any()
+                      else UNASSIGNED for r in (fork.a, fork.b))
+            if da == UNASSIGNED and db == UNASSIGNED:
+                continue
+            h0, _ = pair_cost(src, srow[[fork.a, fork.b]], st, tt, zz, RR, self._gate, [da, db])
+            h1, _ = pair_cost(shadow, [shadow.rows[n] for n in fork.shadow], st, tt, zz, RR,
+                              self._gate, [db, da])
+            fork.cost += (h0, h1)
+            names = self.bank.object_ids
+            fork.labels += [(self._scan, j, names[r]) for j, r in ((da, fork.b), (db, fork.a))
+                            if j != UNASSIGNED]
+            fork.t_last = t_scan
+            deferral.fuse_shadows(fork, tt, station, zz, RR, (da, db))
+
+    def _decide(self, station: str, st: int, t_scan: float, tt: Array, zz: Array,
+                RR: Array) -> None:
+        """Decide the forks whose pass ended, on this scan (`deferral` module docstring)."""
+        deferral = self.deferral
+        assert deferral is not None
+        src, srow = self._scoring()
+        shadow = deferral.scoring_shadow()
+        keep = []
+        for fork in deferral.forks:
+            if TrackStatus.DELETED in (self.status[fork.a], self.status[fork.b]):
+                self.counts[TrackEvent.DEFER_DROPPED] += 1
+                continue
+            if fork.state == ForkState.OPEN and t_scan - fork.t_last > deferral.pass_gap_s:
+                fork.state = ForkState.PENDING
+            if fork.state != ForkState.PENDING:
+                keep.append(fork)
+                continue
+            if t_scan - fork.t_last > self.config.defer_max_wait_s:
+                self.counts[TrackEvent.DEFER_DROPPED] += 1
+                continue
+            h0, seen0 = pair_cost(src, srow[[fork.a, fork.b]], st, tt, zz, RR, self._gate)
+            h1, seen1 = pair_cost(shadow, [shadow.rows[n] for n in fork.shadow], st, tt, zz,
+                                  RR, self._gate)
+            if not (seen0 or seen1):
+                keep.append(fork)
+                continue
+            if fork.cost[1] + h1 < fork.cost[0] + h0:
+                for (bank, ra, rb), dst in zip(self._filters(fork.a, fork.b),
+                                               deferral.banks(), strict=True):
+                    copy_track(dst, dst.rows[fork.shadow[0]], bank, ra)
+                    copy_track(dst, dst.rows[fork.shadow[1]], bank, rb)
+                self.relabels += [Relabel(*lab) for lab in fork.labels]
+                self.counts[TrackEvent.DEFER_SWAPPED] += 1
+            else:
+                self.counts[TrackEvent.DEFER_KEPT] += 1
+        deferral.forks = keep
 
     def _gate_scan(self, rows: IntArray, pred: ScanPrediction, st: int, tt: Array,
                    zz: Array, RR: Array) -> Gated:
@@ -890,6 +1101,7 @@ class Associator:
         self._pass_open[ended] = False
         miss = ended & (self._pass_hits == 0)
         self._missed[ended & ~miss] = 0
+        self._passes[ended & ~miss] += 1
         self._missed[miss] += 1
         gone = np.flatnonzero((self._missed >= self.config.delete_after_missed_passes)
                               & (self.status != TrackStatus.DELETED))

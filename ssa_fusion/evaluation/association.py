@@ -11,7 +11,9 @@ for the *confirmed* tracks (those with published estimates):
   track's object (the object of the majority of its detections);
 * coverage: the fraction of all detections in confirmed tracks;
 * confirmed tracks, objects detected, objects with a confirmed track (one whose majority
-  object they are), and duplicate tracks (a second confirmed track of one object).
+  object they are), and duplicate tracks (a second confirmed track of one object);
+* `pass_swaps`: confirmed tracks whose object (the majority of each pass) differs from
+  their first pass's, in more than one pass and in any pass.
 """
 
 from __future__ import annotations
@@ -19,11 +21,14 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Collection, Sequence
 from dataclasses import asdict, dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ssa_fusion.core.rows import MeasurementRows
+
+_T = TypeVar("_T")
 
 
 def detection_labels(truth: MeasurementRows, associated: MeasurementRows) -> list[str]:
@@ -82,11 +87,15 @@ class AssociationScore:
 
 
 def score_association(objects: Sequence[str], labels: Sequence[str],
-                      confirmed: Collection[str]) -> AssociationScore:
+                      confirmed: Collection[str],
+                      counted: ArrayLike | None = None) -> AssociationScore:
     """Score per-detection `labels` (track ids, '' = none) against their true `objects`.
 
     `confirmed`: the ids of the confirmed tracks (labels of other tracks or tracklets are
-    not in a confirmed track).
+    not in a confirmed track). `counted` (bool per detection, optional): the accuracy is
+    that of the detections in confirmed tracks that it marks (e.g. those fused into their
+    track, not those of the tracklet that started it); the tracks' objects are still the
+    majority of all their detections.
     """
     truth = np.asarray(objects, dtype=object)
     label = np.asarray(labels, dtype=object)
@@ -94,19 +103,56 @@ def score_association(objects: Sequence[str], labels: Sequence[str],
         raise ValueError(f"{truth.size} true objects for {label.size} labels")
     keep = np.isin(label, np.asarray(list(confirmed), dtype=object)) if confirmed else \
         np.zeros(truth.size, bool)
-    pairs = Counter(zip(label[keep].tolist(), truth[keep].tolist(), strict=True))
-    owner: dict[str, str] = {}
-    best: dict[str, int] = {}
-    for (track, obj), n in sorted(pairs.items()):
-        if n > best.get(track, 0):
-            owner[track], best[track] = obj, n
-    right = sum(best.values())
+    by_track: dict[str, list[str]] = {}
+    for track, obj in zip(label[keep].tolist(), truth[keep].tolist(), strict=True):
+        by_track.setdefault(track, []).append(obj)
+    owner = {track: _majority(objs) for track, objs in sorted(by_track.items())}
     n_in = int(keep.sum())
+    scored = keep if counted is None else keep & np.asarray(counted, dtype=bool)
+    right = sum(owner[lab] == obj for lab, obj in zip(label[scored].tolist(),
+                                                        truth[scored].tolist(), strict=True))
+    n_scored = int(scored.sum())
     tracks_of = Counter(owner.values())
     return AssociationScore(
         detections=int(truth.size), in_confirmed=n_in,
-        accuracy=right / n_in if n_in else float("nan"),
+        accuracy=right / n_scored if n_scored else float("nan"),
         coverage=n_in / truth.size if truth.size else float("nan"),
         confirmed_tracks=len(set(confirmed)), objects=len(set(truth.tolist())),
         objects_with_track=len(tracks_of),
         duplicate_tracks=sum(n - 1 for n in tracks_of.values()), owner=owner)
+
+
+def _majority(objects: Sequence[_T]) -> _T:
+    """Return the most frequent of `objects` (on a tie, the first seen)."""
+    return Counter(objects).most_common(1)[0][0]
+
+
+def pass_swaps(objects: Sequence[object], labels: Sequence[str], t: ArrayLike,
+               tracks: Collection[str], pass_gap_s: float) -> tuple[int, int]:
+    """Count the tracks whose object changed from one pass to another.
+
+    A track's detections (`labels` == its id, in epoch order) are cut into passes where two
+    in a row are more than `pass_gap_s` apart (epochs `t`, s); each pass's object is the
+    majority of its detections' true `objects`.
+
+    Returns
+    -------
+    (int, int)
+        Of `tracks`, those whose object differs from their first pass's in more than one
+        pass, and in at least one.
+    """
+    truth = np.asarray(objects, dtype=object)
+    label = np.asarray(labels, dtype=object)
+    tt = np.asarray(t, dtype=float)
+    gt1 = any_pass = 0
+    for track in tracks:
+        idx = np.flatnonzero(label == track)
+        if not idx.size:
+            continue
+        idx = idx[np.argsort(tt[idx], kind="stable")]
+        cut = np.flatnonzero(np.diff(tt[idx]) > pass_gap_s) + 1
+        per_pass = [_majority(truth[p].tolist()) for p in np.split(idx, cut)]
+        other = sum(o != per_pass[0] for o in per_pass)
+        gt1 += other > 1
+        any_pass += other > 0
+    return gt1, any_pass

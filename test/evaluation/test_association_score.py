@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.evaluation.association import detection_labels, score_association
+from ssa_fusion.evaluation.association import detection_labels, pass_swaps, score_association
 
 
 def _rows(t, frames, z, ids) -> MeasurementRows:
@@ -46,3 +46,25 @@ def test_no_confirmed_track_scores_nothing():
     assert s.in_confirmed == 0 and math.isnan(s.accuracy) and s.coverage == 0.0
     with pytest.raises(ValueError, match="2 true objects for 1 labels"):
         score_association(["a", "b"], ["T1"], {"T1"})
+
+
+def test_pass_swaps_count_tracks_whose_object_changes_between_passes():
+    # T1: a, then b for one pass, then a again (swapped in one pass); T2: b, a, a (two);
+    # T3: c throughout; passes 1000 s apart, detections 10 s apart within a pass
+    t = [0, 10, 1000, 1010, 2000, 2010] * 3
+    objects = ["a", "a", "b", "b", "a", "a",
+               "b", "b", "a", "a", "a", "a",
+               "c", "c", "c", "c", "c", "c"]
+    labels = ["T1"] * 6 + ["T2"] * 6 + ["T3"] * 6
+    assert pass_swaps(objects, labels, t, {"T1", "T2", "T3"}, 600.0) == (1, 2)
+    assert pass_swaps(objects, labels, t, {"T1", "T3"}, 600.0) == (0, 1)
+    # one pass when the gap is longer than the passes' spacing: no swap to see
+    assert pass_swaps(objects, labels, t, {"T1", "T2", "T3"}, 5000.0) == (0, 0)
+
+
+def test_accuracy_of_the_counted_detections_with_the_owner_of_all():
+    objects = ["a", "a", "a", "b", "b"]
+    labels = ["T1"] * 5  # owner a (3 of 5)
+    s = score_association(objects, labels, {"T1"}, counted=[False, False, True, True, True])
+    assert s.owner == {"T1": "a"} and s.accuracy == pytest.approx(1 / 3)
+    assert score_association(objects, labels, {"T1"}).accuracy == pytest.approx(3 / 5)
