@@ -32,7 +32,7 @@ from ssa_fusion.core.gap_forecaster import PLACEHOLDER_TRAJECTORY
 from ssa_fusion.core.gap_publisher import GapFill
 from ssa_fusion.core.measurement import StationModels
 from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
 from ssa_fusion.core.track_bank import TrackBank
 from ssa_fusion.core.types import Kind, MotionModel, Source
 from ssa_fusion.sim import survey
@@ -103,6 +103,31 @@ def gap_errors(entries: list[catalog_io.CatalogEntry], estimates: Rows, forecast
                                "p95": float(np.percentile(coast_all, 95))},
             "coast_over_forecast": med_coast / med_fc if med_fc > 0 else None,
             "gaps_forecast_better": better / pick.size}
+
+
+def gap_coverage(estimates: Rows, forecasts: Rows, t_start: float, t_end: float,
+                 pass_break_s: float, after_s: float = DAY_S) -> dict[str, Any]:
+    """Count the gaps after the first `after_s` of a run and those with a forecast.
+
+    A gap: an object's estimate (epoch t_e, s) followed by `pass_break_s` or more without
+    one (up to its next estimate, or to `t_end`, the run's last sim epoch), with t_e at
+    least `after_s` after `t_start` (the run's first sim epoch). It has a forecast when one
+    of the object's `forecasts` lies in (t_e, next estimate or `t_end`]. Returns ``gaps``,
+    ``with_forecast`` and ``after_s``.
+    """
+    gaps = covered = 0
+    for oid, rows in estimates.items():
+        te = np.unique(np.array([r[0] for r in rows], float))
+        nxt = np.append(te[1:], t_end)
+        is_gap = (nxt - te >= pass_break_s) & (te >= t_start + after_s)
+        gaps += int(is_gap.sum())
+        tf = np.sort(np.array([r[0] for r in forecasts.get(oid, [])], float))
+        if tf.size and is_gap.any():
+            first_after = np.searchsorted(tf, te[is_gap], side="right")  # first forecast > t_e
+            hit = (first_after < tf.size) & (tf[np.minimum(first_after, tf.size - 1)]
+                                             <= nxt[is_gap])
+            covered += int(hit.sum())
+    return {"gaps": gaps, "with_forecast": covered, "after_s": after_s}
 
 
 class _FrozenWall:
