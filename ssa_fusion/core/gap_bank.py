@@ -440,7 +440,18 @@ class GapBank:
         return g.table if g is not None else self._tables.get(r, {})
 
     def _release(self, r: int, until: float) -> Iterator[GapForecast]:
-        """Yield object `r`'s tabulated forecasts after the last released, up to `until`."""
+        """Yield object `r`'s tabulated forecasts after the last released, up to `until`.
+
+        A residual forecaster tabulates up to `until` first (`GapForecaster.extend`; its
+        wall time counts as fitting, `fit_seconds`).
+        """
+        g = self._gaps[r]
+        if g is not None and g.pending:
+            start = self.wall()
+            g.extend(until)  # tabulating the fit's forecast is fitting: the budget's
+            spent = self.wall() - start
+            self.fit_seconds += spent
+            self._allowance -= spent
         table = self._table(r)
         start = self._last[r] + self.config.pass_break_s
         for t in [t for t in table if self._released[r] < t <= until]:
@@ -449,6 +460,6 @@ class GapBank:
             if t >= start:
                 self.counts["forecasts"] += 1
                 yield GapForecast(self._ids[r], t, x, P)
-        if not table:
+        if not table and not (g is not None and g.pending):
             self._active.discard(r)
             self._tables.pop(r, None)

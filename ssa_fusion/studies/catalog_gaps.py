@@ -18,9 +18,10 @@ from __future__ import annotations
 import math
 import time
 from collections import defaultdict
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -140,6 +141,58 @@ class _FrozenWall:
         return self.now
 
 
+class EstimateStep(NamedTuple):
+    """One batch of `estimate_batches`: the measurements of a batch and what they gave.
+
+    `now`: sim s (Unix) at the batch's end; `rows`: its measurements (None: none);
+    `fused`: (object id, epoch s) of each estimate, epoch order within an object; `x`
+    (k, 6) GCRF km, km/s and `P` (k, 6, 6) the estimates; `filter_wall_s`: the filter's
+    wall s on the batch.
+    """
+
+    now: float
+    rows: MeasurementRows | None
+    fused: list[tuple[str, float]]
+    x: np.ndarray
+    P: np.ndarray
+    filter_wall_s: float
+
+
+def estimate_batches(entries: list[catalog_io.CatalogEntry], s: SkyScenario, hours: float,
+                     seed: int, batch_s: float = 60.0) -> Iterator[EstimateStep]:
+    """Yield a catalog's measurements and the batched filter's estimates, batch by batch.
+
+    `entries` measured by the radars of `s` for `hours` from their `survey.catalog_start`
+    (noise by `seed`), fused by a `track_bank.TrackBank` every `batch_s` sim s.
+    """
+    radars = s.radars
+    t0 = survey.catalog_start(entries)
+    obs = survey.observe_catalog(entries, radars, t0, hours * 3600.0, seed=seed)
+    names = [r.station.name for r in radars]
+    bank = TrackBank(bank_config(s), {r.station.name: r.station for r in radars})
+    R = np.array([r.R for r in radars])
+    edges = np.searchsorted(obs.t, t0 + batch_s * np.arange(
+        1, math.ceil(hours * 3600.0 / batch_s) + 2))
+    first = 0
+    for k, last in enumerate(edges):
+        now = t0 + batch_s * (k + 1)
+        if last <= first:
+            yield EstimateStep(now, None, [], np.zeros((0, 6)), np.zeros((0, 6, 6)), 0.0)
+            continue
+        sl = slice(first, int(last))
+        ids = [obs.object_ids[i] for i in obs.obj[sl]]
+        frames = [names[i] for i in obs.sensor[sl]]
+        c = time.perf_counter()
+        res = bank.process(obs.t[sl], ids, frames, obs.z[sl], R[obs.sensor[sl]])
+        spent = time.perf_counter() - c
+        rows = MeasurementRows(obs.t[sl], ids, frames, obs.z[sl], R[obs.sensor[sl]],
+                               kind=np.full(len(ids), Kind.RANGE_AZ_EL, np.uint8),
+                               source=np.full(len(ids), Source.SENSOR, np.uint8))
+        fused = [(ids[i], float(obs.t[sl][i])) for i in res.fused.tolist()]
+        first = int(last)
+        yield EstimateStep(now, rows, fused, res.x, res.P, spent)
+
+
 def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_network",
                 batch_s: float = 60.0, gap_config: GapBankConfig | None = None,
                 max_gaps: int = GAPS_SCORED,
@@ -159,12 +212,7 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
     """
     s = SKY_SCENARIOS[scenario]
     entries = survey.synthetic_catalog(catalog_io.read_catalog(SAMPLE)[0], objects, seed=seed)
-    radars = s.radars
-    t0 = survey.catalog_start(entries)
-    obs = survey.observe_catalog(entries, radars, t0, hours * 3600.0, seed=seed)
-    names = [r.station.name for r in radars]
-    stations = {r.station.name: r.station for r in radars}
-    bank = TrackBank(bank_config(s), stations)
+    stations = {r.station.name: r.station for r in s.radars}
     wall = _FrozenWall()
     base = gap_config or GapBankConfig(motion_model=MotionModel(s.motion_model))
     model = StationModels(stations, UNIX_EPOCH_JD)
@@ -172,38 +220,26 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
             for f in gap_forecasts}
     estimates: Rows = defaultdict(list)
     forecasts: dict[GapFill, Rows] = {f: defaultdict(list) for f in arms}
-    R = np.array([r.R for r in radars])
     c_fit = dict.fromkeys(arms, 0.0)
     c_filter = 0.0
-    edges = np.searchsorted(obs.t, t0 + batch_s * np.arange(
-        1, math.ceil(hours * 3600.0 / batch_s) + 2))
-    first = 0
-    for k, last in enumerate(edges):
-        if last > first:
-            sl = slice(first, int(last))
-            ids = [obs.object_ids[i] for i in obs.obj[sl]]
-            frames = [names[i] for i in obs.sensor[sl]]
+    measurements = 0
+    for step in estimate_batches(entries, s, hours, seed, batch_s):
+        c_filter += step.filter_wall_s
+        measurements += len(step.rows) if step.rows is not None else 0
+        for j, (oid, t) in enumerate(step.fused):
+            estimates[oid].append((t, step.x[j]))
+        for f, gaps in arms.items():
             c = time.perf_counter()
-            res = bank.process(obs.t[sl], ids, frames, obs.z[sl], R[obs.sensor[sl]])
-            c_filter += time.perf_counter() - c
-            rows = MeasurementRows(obs.t[sl], ids, frames, obs.z[sl], R[obs.sensor[sl]],
-                                   kind=np.full(len(ids), Kind.RANGE_AZ_EL, np.uint8),
-                                   source=np.full(len(ids), Source.SENSOR, np.uint8))
-            fused = [(ids[i], float(obs.t[sl][i])) for i in res.fused.tolist()]
-            for j, (oid, t) in enumerate(fused):
-                estimates[oid].append((t, res.x[j]))
-            for f, gaps in arms.items():
-                c = time.perf_counter()
-                gaps.on_measurements(rows)
-                for j, (oid, t) in enumerate(fused):
-                    for g in gaps.on_estimate(oid, t, res.x[j], res.P[j]):
-                        forecasts[f][g.object_id].append((g.t, g.x))
-                c_fit[f] += time.perf_counter() - c
-            first = int(last)
+            if step.rows is not None:
+                gaps.on_measurements(step.rows)
+            for j, (oid, t) in enumerate(step.fused):
+                for g in gaps.on_estimate(oid, t, step.x[j], step.P[j]):
+                    forecasts[f][g.object_id].append((g.t, g.x))
+            c_fit[f] += time.perf_counter() - c
         wall.now += 1.0
         for f, gaps in arms.items():
             c = time.perf_counter()
-            for g in gaps.step(t0 + batch_s * (k + 1)):
+            for g in gaps.step(step.now):
                 forecasts[f][g.object_id].append((g.t, g.x))
             c_fit[f] += time.perf_counter() - c
     for by_arm in forecasts.values():
@@ -226,7 +262,7 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
                                   for o, rows in forecasts[f].items()},
                                  s.motion_model, max_gaps) for f in arms}
     out = dict(scores[str(next(iter(arms)))])
-    out.update({"seed": seed, "objects": objects, "hours": hours, "measurements": len(obs),
+    out.update({"seed": seed, "objects": objects, "hours": hours, "measurements": measurements,
                 "estimates": sum(len(v) for v in estimates.values()),
                 "filter_wall_s_per_object": c_filter / objects,
                 "arms": scores, "common": common})

@@ -295,3 +295,27 @@ def test_forecasts_with_the_smaller_generator_equal_the_per_block_ones(monkeypat
         if a is not None:
             assert np.linalg.norm(a[0][:3] - b[0][:3]) < 1e-5  # km
             assert np.abs(a[1] - b[1]).max() < 1e-4 * np.abs(b[1]).max()
+
+
+def test_the_forecast_tabulated_as_asked_equals_the_whole_grid_at_once():
+    # the forecaster tabulates the first hours, then doubles as later epochs are asked
+    # for: the same numbers as the fit's prediction on the whole grid, in any order asked
+    t = _passes(np.random.default_rng(5), 2.5)
+    x = _truth(2e-9, t)
+    g = gap_forecaster.GapForecaster.for_model("kepler", 600.0, residual.LIVE_RESIDUAL)
+    P = np.diag([1e-6] * 3 + [1e-12] * 3)
+    for ti, xi in zip(t, x, strict=True):
+        g.on_estimate(float(ti), xi, P)
+    first = 600.0 * (math.floor(t[-1] / 600.0) + 2)
+    assert g.forecast(first) is not None
+    assert 0 < g.tabulated < g.grid.size and g.pending  # not the whole day yet
+    assert g.fit is not None
+    xs, Ps = g.fit.predict(g.grid)
+    asked = np.random.default_rng(6).permutation(g.grid.size)
+    asked = asked[g.grid[asked] >= t[-1] + g.pass_break_s]  # a gap's epochs
+    for i in asked:
+        got = g.forecast(float(g.grid[i]))
+        assert got is not None
+        np.testing.assert_array_equal(got[0], xs[i])
+        np.testing.assert_array_equal(got[1], Ps[i])
+    assert g.tabulated == g.grid.size and not g.pending
