@@ -5,8 +5,9 @@ Each object's gaps are forecast as its `GapFill` says (``gap_forecast`` of the c
 
 * `GapFill.RESIDUAL`: one `gap_forecaster.GapForecaster` per object takes that object's
   estimates (those that fused a real measurement) and learns the residual of the motion
-  model at its pass ends (`residual.ResidualSurrogate`, about 0.3-0.6 s of one core a fit
-  with a J2 placeholder);
+  model at its pass ends (`residual.ResidualSurrogate`; with a J2 placeholder about 10 ms
+  of one core per fit made on a catalog of every regime, the refused ones included:
+  ``bench/bench_gap_fits.py``);
 * `GapFill.BATCH_FIT`: the object's real measurements (`on_measurements`) of its last
   passes are kept (`measurement_windows.MeasurementWindows`, arrays) and fitted by batch
   least squares from its newest estimate by `batch_gap.BatchGapForecaster` (the
