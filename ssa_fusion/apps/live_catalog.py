@@ -637,7 +637,9 @@ def table(s: dict[str, Any]) -> str:
     if gc:
         made = sum(int(g["fits_made"]) for g in s.get("surrogates", {}).values())
         rows.append(f"gaps after the first {gc['after_s'] / 3600:g} h: {gc['gaps']}, "
-                    f"{gc['with_forecast']} with a forecast; fits made {made}")
+                    f"{gc['with_forecast']} with a forecast; fits made {made}; "
+                    f"{gc['object_gaps']} gaps as long after the object's first gap, "
+                    f"{gc['object_with_forecast']} with a forecast")
     ge = s.get("gap_errors")
     if ge and ge.get("gaps_scored"):
         rows.append(

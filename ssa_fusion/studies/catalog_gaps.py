@@ -114,21 +114,28 @@ def gap_coverage(estimates: Rows, forecasts: Rows, t_start: float, t_end: float,
     one (up to its next estimate, or to `t_end`, the run's last sim epoch), with t_e at
     least `after_s` after `t_start` (the run's first sim epoch). It has a forecast when one
     of the object's `forecasts` lies in (t_e, next estimate or `t_end`]. Returns ``gaps``,
-    ``with_forecast`` and ``after_s``.
+    ``with_forecast`` and ``after_s``; and the same for the gaps at least `after_s` after
+    the object's own first gap (``object_gaps``, ``object_with_forecast``: where the
+    residual's pass ends can span a day, ``min_span_s``, whenever the object's first pass
+    ends).
     """
-    gaps = covered = 0
+    gaps = covered = own = own_covered = 0
     for oid, rows in estimates.items():
         te = np.unique(np.array([r[0] for r in rows], float))
         nxt = np.append(te[1:], t_end)
-        is_gap = (nxt - te >= pass_break_s) & (te >= t_start + after_s)
-        gaps += int(is_gap.sum())
+        is_gap = nxt - te >= pass_break_s
+        if not is_gap.any():
+            continue
         tf = np.sort(np.array([r[0] for r in forecasts.get(oid, [])], float))
-        if tf.size and is_gap.any():
-            first_after = np.searchsorted(tf, te[is_gap], side="right")  # first forecast > t_e
-            hit = (first_after < tf.size) & (tf[np.minimum(first_after, tf.size - 1)]
-                                             <= nxt[is_gap])
-            covered += int(hit.sum())
-    return {"gaps": gaps, "with_forecast": covered, "after_s": after_s}
+        first_after = np.searchsorted(tf, te, side="right")  # each t_e's first forecast after
+        hit = (first_after < tf.size) & (tf[np.minimum(first_after, max(tf.size - 1, 0))]
+                                         <= nxt) if tf.size else np.zeros(te.size, bool)
+        late = is_gap & (te >= t_start + after_s)
+        mine = is_gap & (te >= te[is_gap][0] + after_s)
+        gaps, covered = gaps + int(late.sum()), covered + int((late & hit).sum())
+        own, own_covered = own + int(mine.sum()), own_covered + int((mine & hit).sum())
+    return {"gaps": gaps, "with_forecast": covered, "after_s": after_s,
+            "object_gaps": own, "object_with_forecast": own_covered}
 
 
 class _FrozenWall:
