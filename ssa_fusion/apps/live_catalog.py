@@ -68,7 +68,7 @@ from ssa_fusion.ros.topics import (
     TOPIC_MEASUREMENT_BATCH,
 )
 from ssa_fusion.sim import sky, survey
-from ssa_fusion.studies.catalog_gaps import gap_errors
+from ssa_fusion.studies.catalog_gaps import gap_coverage, gap_errors
 
 if TYPE_CHECKING:
     from ssa_fusion.ros.interfaces import Message
@@ -211,6 +211,11 @@ def catalog_surrogate_params(args: argparse.Namespace) -> dict[str, Any]:
             value = float(value)  # 10800 for a parameter of seconds: a float parameter
         out[name] = value
     return out
+
+
+def _pass_break(args: argparse.Namespace) -> float:
+    """Return the surrogates' ``pass_break`` (s): ``--surrogate-param``'s, or the default."""
+    return float(catalog_surrogate_params(args).get("pass_break", CATALOG_SURROGATE.pass_break))
 
 
 def _statuses(diagnostics: Sequence[Message]) -> dict[str, dict[str, str]]:
@@ -393,7 +398,7 @@ def run(args: argparse.Namespace) -> int:
     sim_wall = runs.sensor_wall_times(out / "logs" / "sensor_sim.err")
     ran = None if sim_wall is None else (sim_wall[0], max(sim_wall[1], last_output))
     summary = summarise(bag, entries, _statuses(diagnostics), names, rss, ran, sim_s, gaps,
-                        unlabelled)
+                        unlabelled, t0, _pass_break(args))
     summary.update({"catalog": str(args.catalog), "objects": len(entries), "scenario": s.name,
                     "time_scale": args.time_scale if math.isfinite(args.time_scale) else "max",
                     "lockstep": args.lockstep,
@@ -426,12 +431,17 @@ class ShardSummary(TypedDict):
 def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
               status: dict[str, dict[str, str]], names: list[str], rss: dict[str, int],
               sim_wall: tuple[float, float] | None, sim_s: float,
-              gap_nodes: list[str] | None = None, unlabelled: bool = False) -> dict[str, Any]:
+              gap_nodes: list[str] | None = None, unlabelled: bool = False,
+              t0: float | None = None,
+              pass_break_s: float = CATALOG_SURROGATE.pass_break) -> dict[str, Any]:
     """Return the run's accounting (every measurement), speed, memory and accuracy.
 
     `sim_wall`: wall times (Unix s) of the first measurement published and of the last
     estimate heard; `gap_nodes`: the catalog_surrogate processes; `unlabelled`: the
     detections went without object ids (``association``: their score, `association`).
+    `t0`: the sim epoch the run started at (Unix s; None: its first estimate's); with
+    `gap_nodes`, ``gap_coverage`` counts the gaps (`pass_break_s`, s) after its first day
+    and those the surrogates forecast (`studies.catalog_gaps.gap_coverage`).
     """
     recorded: Counter[str] = Counter()  # rows
     estimates: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
@@ -512,6 +522,8 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
         surrogates[g]["object_ids"] = [x for x in st.get("object_ids", "").split(",") if x]
         surrogates[g]["rss_mib"] = rss.get(g, 0) / 1024.0
     n_forecasts = sum(len(v) for v in forecasts.values())
+    start = t0 if t0 is not None else min((t for r in estimates.values() for t, _ in r),
+                                         default=0.0)
     return {
         "published": published, "recorded_measurements": recorded[TOPIC_MEASUREMENT_BATCH],
         "received_by_shards": received, "consumed_by_banks": consumed,
@@ -519,6 +531,8 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
         "estimates_recorded": recorded[TOPIC_ESTIMATE_BATCH] - n_forecasts,
         "surrogates": surrogates, "forecasts_recorded": n_forecasts,
         "gap_errors": gap_errors(entries, estimates, forecasts, CATALOG_FILTER.motion_model)
+        if surrogates else None,
+        "gap_coverage": gap_coverage(estimates, forecasts, start, start + sim_s, pass_break_s)
         if surrogates else None,
         "rejected_and_pending": dict(causes), "refused_at_door": door,
         "dropped": sum(p["dropped"] for p in per_shard.values()),
@@ -619,6 +633,13 @@ def table(s: dict[str, Any]) -> str:
                     f"{g['fit_seconds']:.0f} s of fitting; {g['published_forecast']} "
                     f"forecasts ({g['forecasts_overtaken']} overtaken by a measurement); "
                     f"{rss(n, g['rss_mib'])}")
+    gc = s.get("gap_coverage")
+    if gc:
+        made = sum(int(g["fits_made"]) for g in s.get("surrogates", {}).values())
+        rows.append(f"gaps after the first {gc['after_s'] / 3600:g} h: {gc['gaps']}, "
+                    f"{gc['with_forecast']} with a forecast; fits made {made}; "
+                    f"{gc['object_gaps']} gaps as long after the object's first gap, "
+                    f"{gc['object_with_forecast']} with a forecast")
     ge = s.get("gap_errors")
     if ge and ge.get("gaps_scored"):
         rows.append(

@@ -5,8 +5,9 @@ Each object's gaps are forecast as its `GapFill` says (``gap_forecast`` of the c
 
 * `GapFill.RESIDUAL`: one `gap_forecaster.GapForecaster` per object takes that object's
   estimates (those that fused a real measurement) and learns the residual of the motion
-  model at its pass ends (`residual.ResidualSurrogate`, about 0.3-0.6 s of one core a fit
-  with a J2 placeholder);
+  model at its pass ends (`residual.ResidualSurrogate`; with a J2 placeholder about 10 ms
+  of one core per fit made on a catalog of every regime, the refused ones included:
+  ``bench/bench_gap_fits.py``);
 * `GapFill.BATCH_FIT`: the object's real measurements (`on_measurements`) of its last
   passes are kept (`measurement_windows.MeasurementWindows`, arrays) and fitted by batch
   least squares from its newest estimate by `batch_gap.BatchGapForecaster` (the
@@ -440,7 +441,18 @@ class GapBank:
         return g.table if g is not None else self._tables.get(r, {})
 
     def _release(self, r: int, until: float) -> Iterator[GapForecast]:
-        """Yield object `r`'s tabulated forecasts after the last released, up to `until`."""
+        """Yield object `r`'s tabulated forecasts after the last released, up to `until`.
+
+        A residual forecaster tabulates up to `until` first (`GapForecaster.extend`; its
+        wall time counts as fitting, `fit_seconds`).
+        """
+        g = self._gaps[r]
+        if g is not None and g.pending:
+            start = self.wall()
+            g.extend(until)  # tabulating the fit's forecast is fitting: the budget's
+            spent = self.wall() - start
+            self.fit_seconds += spent
+            self._allowance -= spent
         table = self._table(r)
         start = self._last[r] + self.config.pass_break_s
         for t in [t for t in table if self._released[r] < t <= until]:
@@ -449,6 +461,6 @@ class GapBank:
             if t >= start:
                 self.counts["forecasts"] += 1
                 yield GapForecast(self._ids[r], t, x, P)
-        if not table:
+        if not table and not (g is not None and g.pending):
             self._active.discard(r)
             self._tables.pop(r, None)

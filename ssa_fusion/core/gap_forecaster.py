@@ -17,16 +17,26 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .residual import LIVE_RESIDUAL, ResidualConfig, ResidualSurrogate, orbit_propagator
+from .residual import (
+    LIVE_RESIDUAL,
+    ResidualConfig,
+    ResidualFit,
+    ResidualSurrogate,
+    orbit_propagator,
+)
 from .types import Measurement, MotionModel
 
-__all__ = ["PLACEHOLDER_TRAJECTORY", "GapForecaster"]
+__all__ = ["PLACEHOLDER_TRAJECTORY", "TABULATE_FIRST_S", "GapForecaster"]
 
 Array = NDArray[np.float64]
 
 PLACEHOLDER_TRAJECTORY = {MotionModel.KEPLER: MotionModel.TWO_BODY, MotionModel.J2: MotionModel.J2}
 """The trajectory (a `residual.orbit_propagator` model) of each filter motion model a gap
 forecaster serves."""
+
+TABULATE_FIRST_S = 3 * 3600.0
+"""Sim s after a pass end a fit's forecast is tabulated at first (`GapForecaster.extend`):
+most gaps of a low orbit on a network end within it."""
 
 
 @dataclass
@@ -36,11 +46,15 @@ class GapForecaster:
     `on_estimate` takes every estimate that fused a real measurement (epoch order). Once a
     prediction epoch lies `pass_break_s` or more after the newest of them, that estimate is
     a pass end: it becomes an anchor (`ResidualSurrogate.add_anchor`), the surrogate fits at
-    it, and the fit's forecast is computed once on the grid of multiples of `period_s` up to
-    ``max_horizon_s`` after it (one integration). `forecast(t)` returns that forecast at a
-    grid epoch t of the gap (state km, km/s GCRF; covariance), or None: no fit (too few
-    anchors, refused), t before `pass_break_s` after the pass or beyond the horizon. A real
-    measurement always wins: the filter's own state is not touched.
+    it, and the fit's forecast is tabulated on the grid of multiples of `period_s` up to
+    ``max_horizon_s`` after it, as far as it is asked for (`extend`): the first
+    `TABULATE_FIRST_S`, then twice as many grid epochs each time the asked epoch lies
+    beyond (each time from the pass end, the same integration and design: the same numbers
+    as the whole grid at once; a gap a pass ends early skips the rest). `forecast(t)`
+    returns that forecast at a grid epoch t of the gap (state km, km/s GCRF; covariance),
+    or None: no fit (too few anchors, refused), t before `pass_break_s` after the pass or
+    beyond the horizon. A real measurement always wins: the filter's own state is not
+    touched.
     """
 
     surrogate: ResidualSurrogate
@@ -50,6 +64,9 @@ class GapForecaster:
     anchored_t: float = -math.inf
     fitted_t: float = -math.inf
     table: dict[float, tuple[Array, Array]] = field(default_factory=dict)
+    fit: ResidualFit | None = None
+    grid: Array = field(default_factory=lambda: np.zeros(0))
+    tabulated: int = 0
 
     @classmethod
     def for_model(cls, motion_model: MotionModel | str, period_s: float,
@@ -94,16 +111,41 @@ class GapForecaster:
         self._anchor()
         if self.fitted_t != t_end:  # a pass ended: fit once, tabulate the forecast
             self.fitted_t = t_end
-            self.table = {}
+            self.table, self.fit, self.tabulated = {}, None, 0
             k0 = math.floor(t_end / self.period_s) + 1
             k1 = math.floor((t_end + self.surrogate.cfg.max_horizon_s) / self.period_s)
-            grid = self.period_s * np.arange(k0, k1 + 1, dtype=float)
-            try:  # a fit or propagation that fails leaves the gap to the EKF's coasting
-                fit = self.surrogate.fit()
-                if fit is not None and grid.size:
-                    xs, Ps = fit.predict(grid)
-                    self.table = {float(g): (xs[i], Ps[i]) for i, g in enumerate(grid)
-                                  if np.isfinite(xs[i]).all() and np.isfinite(Ps[i]).all()}
+            self.grid = self.period_s * np.arange(k0, k1 + 1, dtype=float)
+            try:  # a fit that fails leaves the gap to the EKF's coasting
+                self.fit = self.surrogate.fit()
             except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError):
-                self.table = {}
+                self.fit = None
+            self.extend(t_end + TABULATE_FIRST_S)
+        self.extend(float(t))
         return self.table.get(float(t))
+
+    @property
+    def pending(self) -> bool:
+        """Return whether grid epochs of the fit are left to tabulate (`extend`)."""
+        return self.fit is not None and self.tabulated < self.grid.size
+
+    def extend(self, until: float) -> None:
+        """Tabulate the fit's forecast at every grid epoch up to `until` (s), if not yet.
+
+        At least twice the grid epochs tabulated so far (from the first, one prediction:
+        the same numbers as the whole grid's); those whose state or covariance is not
+        finite are left out. A prediction that fails ends the tabulation there.
+        """
+        need = int(np.searchsorted(self.grid, until, side="right"))
+        if not self.pending or need <= self.tabulated:
+            return
+        assert self.fit is not None
+        n = min(max(need, 2 * self.tabulated), self.grid.size)
+        try:  # a propagation that fails leaves the rest of the gap to the EKF's coasting
+            xs, Ps = self.fit.predict(self.grid[:n])
+        except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError):
+            self.fit = None
+            return
+        for i in range(self.tabulated, n):
+            if np.isfinite(xs[i]).all() and np.isfinite(Ps[i]).all():
+                self.table[float(self.grid[i])] = (xs[i], Ps[i])
+        self.tabulated = n

@@ -186,6 +186,119 @@ def _gravity_stm_kernel(x: Array, dt: Array, max_step: float, mu: float, j2: flo
         ok[i] = nf == 0.0
 
 
+@jit
+def _gravity_chain_kernel(x0: Array, dt: Array, max_step: float, mu: float, j2: float,
+                          re: float, pole: Array, A: Array, B: Array, out: Array,
+                          ok: BoolArray) -> None:
+    """Fixed-step DOP853 of two-body + J2, the states alone, of n objects along a chain.
+
+    Object i starts at ``x0[i]`` and takes the steps ``dt[i, 0], dt[i, 1], ...`` (s) one
+    after the other, ``out[i, k]`` the state after step k; each step as
+    `_gravity_stm_kernel`'s (``ceil(|dt| / max_step)`` equal DOP853 steps, J2 about
+    ``pole[i]``, the same stage sums in the same order) on the state only, which does not
+    depend on the STM: the same numbers as that kernel's x1 taken step by step. A step
+    whose input is not finite is not taken and ends the chain: ok[i] False, the rest of
+    ``out[i]`` not written; ok[i] is also False when a state comes out not finite.
+    """
+    ns = B.shape[0]
+    m = x0.shape[1]  # 6, read from the arguments as in `_gravity_stm_kernel`
+    y = np.empty(m)
+    ys = np.empty(m)
+    K = np.empty((ns, m))
+    for i in range(x0.shape[0]):
+        for c in range(m):
+            y[c] = x0[i, c]
+        ok[i] = True
+        px, py, pz = pole[i, 0], pole[i, 1], pole[i, 2]
+        for k in range(dt.shape[1]):
+            nf = dt[i, k] - dt[i, k]
+            for c in range(m):
+                nf += y[c] - y[c]
+            if nf != 0.0:
+                ok[i] = False
+                break
+            steps = math.ceil(abs(dt[i, k]) / max_step)
+            h = dt[i, k] / max(steps, 1)
+            for _ in range(steps):
+                for s in range(ns):
+                    if s == 0:
+                        _gravity_state_rhs(y, mu, j2, re, px, py, pz, K, 0)
+                        continue
+                    a0 = A[s, 0]
+                    for c in range(m):
+                        ys[c] = a0 * K[0, c]
+                    for j in range(1, s):
+                        a = A[s, j]
+                        if a == 0.0:
+                            continue
+                        for c in range(m):
+                            ys[c] += a * K[j, c]
+                    for c in range(m):
+                        ys[c] = y[c] + h * ys[c]
+                    _gravity_state_rhs(ys, mu, j2, re, px, py, pz, K, s)
+                b0 = B[0]
+                for c in range(m):
+                    ys[c] = b0 * K[0, c]
+                for j in range(1, ns):
+                    b = B[j]
+                    if b == 0.0:
+                        continue
+                    for c in range(m):
+                        ys[c] += b * K[j, c]
+                for c in range(m):
+                    y[c] = y[c] + h * ys[c]
+            for c in range(m):
+                out[i, k, c] = y[c]
+                nf += y[c] - y[c]
+            if nf != 0.0:
+                ok[i] = False
+                break
+
+
+@jit
+def _gravity_state_rhs(y: Array, mu: float, j2: float, re: float, px: float, py: float,
+                       pz: float, out: Array, s: int) -> None:
+    """``out[s, :6] = dx/dt`` of the state ``y[:6]``: `_gravity_rhs`'s state rows."""
+    ax, ay, az, _, _, _, _, _, _ = j2_gravity(y[0], y[1], y[2], mu, j2, re, px, py, pz)
+    out[s, 0], out[s, 1], out[s, 2] = y[3], y[4], y[5]
+    out[s, 3], out[s, 4], out[s, 5] = ax, ay, az
+
+
+def integrate_chain(model: MotionModel | str, x0: ArrayLike, dt: ArrayLike,
+                    max_step_s: float = 60.0, pole_frame: ArrayLike | None = None
+                    ) -> tuple[Array, BoolArray]:
+    """Integrate N states along chains of steps, the states alone, fixed-step DOP853.
+
+    State i takes the steps ``dt[i, 0], dt[i, 1], ...`` (s, any sign) one after the other,
+    each as `integrate_stm` takes one (the same numbers as its x1, step by step; "two_body"
+    and "j2" in one compiled call, `_gravity_chain_kernel`; "drag" by `integrate_stm` step
+    by step). x0 (N, 6) GCRF km, km/s; dt (N, K); `pole_frame` (3, 3) or (N, 3, 3) as
+    `integrate_stm`'s. Returns (states (N, K, 6) after each step, ok (N,)): ok False where
+    an input or a state is not finite (the chain's states from there on are undefined).
+    """
+    model = _integrated(model)
+    X = f64(np.atleast_2d(np.asarray(x0, dtype=float)))
+    n = X.shape[0]
+    D = f64(np.asarray(dt, dtype=float).reshape(n, -1))
+    gp = _gravity_params(model, {})
+    if gp is None or not (max_step_s > 0.0 and math.isfinite(max_step_s)):
+        out = np.empty((n, D.shape[1], 6))
+        ok = np.ones(n, dtype=np.bool_)
+        x = X
+        for k in range(D.shape[1]):
+            x, _, good = integrate_stm(model, x, D[:, k], max_step_s, pole_frame)
+            ok &= good
+            out[:, k] = x
+        return out, ok
+    pole = (np.broadcast_to(_Z_AXIS, (n, 3)) if pole_frame is None else
+            np.broadcast_to(np.asarray(pole_frame, dtype=float)[..., 2, :], (n, 3)))
+    A, B = _tableau()
+    out = np.zeros((n, D.shape[1], 6))
+    ok = np.empty(n, dtype=np.bool_)
+    _gravity_chain_kernel(X, D, float(max_step_s), *gp, f64(pole), A, B, out, ok)
+    return out, ok
+
+
 def _variational(fun: Callable[..., Array], params: dict[str, float]) -> Callable[[Array], Array]:
     """Right-hand side of the stacked state + STM system, y (m, 42) -> dy/dt (m, 42)."""
     eye_h = 1j * _COMPLEX_STEP * np.eye(6)

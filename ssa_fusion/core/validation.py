@@ -169,6 +169,29 @@ def state_problem(x: np.ndarray, P: np.ndarray) -> Problem:
     return OK
 
 
+def states_problems(x: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Return the cause `state_problem` gives each estimate, vectorised over the rows.
+
+    States x (k, 6) and covariances P (k, 6, 6), km and km/s: an object array (k,) of
+    `Cause` values, "" where the row has none, the same checks in the same order
+    (`covariances_ok` for the covariance test). `state_problem` of a row gives its reason.
+    """
+    x = np.asarray(x, dtype=float).reshape(-1, 6)
+    P = np.asarray(P, dtype=float).reshape(-1, 6, 6)
+    k = x.shape[0]
+    cause = np.full(k, "", dtype=object)
+    Pt = np.ascontiguousarray(P.reshape(k, 36).T)  # reduced along the long axis
+    finite = np.isfinite(np.ascontiguousarray(x.T)).all(axis=0) & np.isfinite(Pt).all(axis=0)
+    cause[~finite] = Cause.REJECTED_NONFINITE
+    free = finite.copy()
+    bad = free & ~covariances_ok(P)
+    cause[bad] = Cause.REJECTED_COVARIANCE
+    free &= ~bad
+    bad = free & (np.abs(np.where(finite, Pt, 0.0)).max(axis=0, initial=0.0) > MAX_VARIANCE)
+    cause[bad] = Cause.REJECTED_IMPLAUSIBLE
+    return cause
+
+
 def ahead_of_clock(t: float, now: float, max_lead_s: float) -> Problem:
     """Refuse a stamp `t` more than `max_lead_s` after the clock time `now` (all s).
 

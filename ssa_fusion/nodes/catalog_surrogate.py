@@ -47,7 +47,14 @@ from ssa_fusion.core.site_file import load_station_map
 from ssa_fusion.core.stations import network_stations
 from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.types import Cause, Kind, MotionModel, UpdateSource
-from ssa_fusion.core.validation import MAX_ID_CHARS, id_problem, rows_problems, state_problem
+from ssa_fusion.core.validation import (
+    MAX_ID_CHARS,
+    OK,
+    id_problem,
+    rows_problems,
+    state_problem,
+    states_problems,
+)
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import CATALOG_SURROGATE
 from ssa_fusion.nodes.diagnostics import Count, NodeCause
@@ -244,21 +251,31 @@ class CatalogSurrogateNode(SsaNode):
         return rows.take(np.flatnonzero(cause == ""))
 
     def _take_rows(self, rows: EstimateRows) -> None:
-        """Give each row to the bank, in order, and publish the forecasts they release."""
+        """Give each row to the bank, in order, and publish the forecasts they release.
+
+        The states and covariances are checked for the whole batch at once
+        (`validation.states_problems`), the rest row by row.
+        """
         out: list[GapForecast] = []
+        problems = states_problems(rows.x, rows.P)
         for i, oid in enumerate(rows.object_id):  # per object: the bank's is a dict of them
             t = float(rows.t[i])
             if not self.ahead_of_clock(t):
-                out += self._take_one(oid, t, rows.x[i], rows.P[i])
+                out += self._take_one(oid, t, rows.x[i], rows.P[i], bool(problems[i]))
         self.publish(out)
 
-    def _take_one(self, oid: str, t: float, x: np.ndarray, P: np.ndarray) -> list[GapForecast]:
-        """Give one estimate (km, km/s) to the bank; return what it releases ([]: refused)."""
+    def _take_one(self, oid: str, t: float, x: np.ndarray, P: np.ndarray,
+                  unsound: bool = True) -> list[GapForecast]:
+        """Give one estimate (km, km/s) to the bank; return what it releases ([]: refused).
+
+        `unsound` False: its state and covariance passed `validation.states_problems`
+        (True: `validation.state_problem` checks them here).
+        """
         if not oid:
             self.diag.count(NodeCause.REJECTED_OBJECT_ID,
                             "an estimate without object_id: whose it is cannot be known")
             return []
-        cause, reason = state_problem(x, P)
+        cause, reason = state_problem(x, P) if unsound else OK
         if cause:
             self.diag.count(Cause(cause), f"object {oid!r} at t={t}: {reason}")
             return []

@@ -18,9 +18,10 @@ from __future__ import annotations
 import math
 import time
 from collections import defaultdict
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -32,7 +33,7 @@ from ssa_fusion.core.gap_forecaster import PLACEHOLDER_TRAJECTORY
 from ssa_fusion.core.gap_publisher import GapFill
 from ssa_fusion.core.measurement import StationModels
 from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
 from ssa_fusion.core.track_bank import TrackBank
 from ssa_fusion.core.types import Kind, MotionModel, Source
 from ssa_fusion.sim import survey
@@ -105,6 +106,38 @@ def gap_errors(entries: list[catalog_io.CatalogEntry], estimates: Rows, forecast
             "gaps_forecast_better": better / pick.size}
 
 
+def gap_coverage(estimates: Rows, forecasts: Rows, t_start: float, t_end: float,
+                 pass_break_s: float, after_s: float = DAY_S) -> dict[str, Any]:
+    """Count the gaps after the first `after_s` of a run and those with a forecast.
+
+    A gap: an object's estimate (epoch t_e, s) followed by `pass_break_s` or more without
+    one (up to its next estimate, or to `t_end`, the run's last sim epoch), with t_e at
+    least `after_s` after `t_start` (the run's first sim epoch). It has a forecast when one
+    of the object's `forecasts` lies in (t_e, next estimate or `t_end`]. Returns ``gaps``,
+    ``with_forecast`` and ``after_s``; and the same for the gaps at least `after_s` after
+    the object's own first gap (``object_gaps``, ``object_with_forecast``: where the
+    residual's pass ends can span a day, ``min_span_s``, whenever the object's first pass
+    ends).
+    """
+    gaps = covered = own = own_covered = 0
+    for oid, rows in estimates.items():
+        te = np.unique(np.array([r[0] for r in rows], float))
+        nxt = np.append(te[1:], t_end)
+        is_gap = nxt - te >= pass_break_s
+        if not is_gap.any():
+            continue
+        tf = np.sort(np.array([r[0] for r in forecasts.get(oid, [])], float))
+        first_after = np.searchsorted(tf, te, side="right")  # each t_e's first forecast after
+        hit = (first_after < tf.size) & (tf[np.minimum(first_after, max(tf.size - 1, 0))]
+                                         <= nxt) if tf.size else np.zeros(te.size, bool)
+        late = is_gap & (te >= t_start + after_s)
+        mine = is_gap & (te >= te[is_gap][0] + after_s)
+        gaps, covered = gaps + int(late.sum()), covered + int((late & hit).sum())
+        own, own_covered = own + int(mine.sum()), own_covered + int((mine & hit).sum())
+    return {"gaps": gaps, "with_forecast": covered, "after_s": after_s,
+            "object_gaps": own, "object_with_forecast": own_covered}
+
+
 class _FrozenWall:
     """A wall clock that moves only between rounds: every fit costs nothing of the budget."""
 
@@ -113,6 +146,58 @@ class _FrozenWall:
 
     def __call__(self) -> float:
         return self.now
+
+
+class EstimateStep(NamedTuple):
+    """One batch of `estimate_batches`: the measurements of a batch and what they gave.
+
+    `now`: sim s (Unix) at the batch's end; `rows`: its measurements (None: none);
+    `fused`: (object id, epoch s) of each estimate, epoch order within an object; `x`
+    (k, 6) GCRF km, km/s and `P` (k, 6, 6) the estimates; `filter_wall_s`: the filter's
+    wall s on the batch.
+    """
+
+    now: float
+    rows: MeasurementRows | None
+    fused: list[tuple[str, float]]
+    x: np.ndarray
+    P: np.ndarray
+    filter_wall_s: float
+
+
+def estimate_batches(entries: list[catalog_io.CatalogEntry], s: SkyScenario, hours: float,
+                     seed: int, batch_s: float = 60.0) -> Iterator[EstimateStep]:
+    """Yield a catalog's measurements and the batched filter's estimates, batch by batch.
+
+    `entries` measured by the radars of `s` for `hours` from their `survey.catalog_start`
+    (noise by `seed`), fused by a `track_bank.TrackBank` every `batch_s` sim s.
+    """
+    radars = s.radars
+    t0 = survey.catalog_start(entries)
+    obs = survey.observe_catalog(entries, radars, t0, hours * 3600.0, seed=seed)
+    names = [r.station.name for r in radars]
+    bank = TrackBank(bank_config(s), {r.station.name: r.station for r in radars})
+    R = np.array([r.R for r in radars])
+    edges = np.searchsorted(obs.t, t0 + batch_s * np.arange(
+        1, math.ceil(hours * 3600.0 / batch_s) + 2))
+    first = 0
+    for k, last in enumerate(edges):
+        now = t0 + batch_s * (k + 1)
+        if last <= first:
+            yield EstimateStep(now, None, [], np.zeros((0, 6)), np.zeros((0, 6, 6)), 0.0)
+            continue
+        sl = slice(first, int(last))
+        ids = [obs.object_ids[i] for i in obs.obj[sl]]
+        frames = [names[i] for i in obs.sensor[sl]]
+        c = time.perf_counter()
+        res = bank.process(obs.t[sl], ids, frames, obs.z[sl], R[obs.sensor[sl]])
+        spent = time.perf_counter() - c
+        rows = MeasurementRows(obs.t[sl], ids, frames, obs.z[sl], R[obs.sensor[sl]],
+                               kind=np.full(len(ids), Kind.RANGE_AZ_EL, np.uint8),
+                               source=np.full(len(ids), Source.SENSOR, np.uint8))
+        fused = [(ids[i], float(obs.t[sl][i])) for i in res.fused.tolist()]
+        first = int(last)
+        yield EstimateStep(now, rows, fused, res.x, res.P, spent)
 
 
 def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_network",
@@ -134,12 +219,7 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
     """
     s = SKY_SCENARIOS[scenario]
     entries = survey.synthetic_catalog(catalog_io.read_catalog(SAMPLE)[0], objects, seed=seed)
-    radars = s.radars
-    t0 = survey.catalog_start(entries)
-    obs = survey.observe_catalog(entries, radars, t0, hours * 3600.0, seed=seed)
-    names = [r.station.name for r in radars]
-    stations = {r.station.name: r.station for r in radars}
-    bank = TrackBank(bank_config(s), stations)
+    stations = {r.station.name: r.station for r in s.radars}
     wall = _FrozenWall()
     base = gap_config or GapBankConfig(motion_model=MotionModel(s.motion_model))
     model = StationModels(stations, UNIX_EPOCH_JD)
@@ -147,38 +227,26 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
             for f in gap_forecasts}
     estimates: Rows = defaultdict(list)
     forecasts: dict[GapFill, Rows] = {f: defaultdict(list) for f in arms}
-    R = np.array([r.R for r in radars])
     c_fit = dict.fromkeys(arms, 0.0)
     c_filter = 0.0
-    edges = np.searchsorted(obs.t, t0 + batch_s * np.arange(
-        1, math.ceil(hours * 3600.0 / batch_s) + 2))
-    first = 0
-    for k, last in enumerate(edges):
-        if last > first:
-            sl = slice(first, int(last))
-            ids = [obs.object_ids[i] for i in obs.obj[sl]]
-            frames = [names[i] for i in obs.sensor[sl]]
+    measurements = 0
+    for step in estimate_batches(entries, s, hours, seed, batch_s):
+        c_filter += step.filter_wall_s
+        measurements += len(step.rows) if step.rows is not None else 0
+        for j, (oid, t) in enumerate(step.fused):
+            estimates[oid].append((t, step.x[j]))
+        for f, gaps in arms.items():
             c = time.perf_counter()
-            res = bank.process(obs.t[sl], ids, frames, obs.z[sl], R[obs.sensor[sl]])
-            c_filter += time.perf_counter() - c
-            rows = MeasurementRows(obs.t[sl], ids, frames, obs.z[sl], R[obs.sensor[sl]],
-                                   kind=np.full(len(ids), Kind.RANGE_AZ_EL, np.uint8),
-                                   source=np.full(len(ids), Source.SENSOR, np.uint8))
-            fused = [(ids[i], float(obs.t[sl][i])) for i in res.fused.tolist()]
-            for j, (oid, t) in enumerate(fused):
-                estimates[oid].append((t, res.x[j]))
-            for f, gaps in arms.items():
-                c = time.perf_counter()
-                gaps.on_measurements(rows)
-                for j, (oid, t) in enumerate(fused):
-                    for g in gaps.on_estimate(oid, t, res.x[j], res.P[j]):
-                        forecasts[f][g.object_id].append((g.t, g.x))
-                c_fit[f] += time.perf_counter() - c
-            first = int(last)
+            if step.rows is not None:
+                gaps.on_measurements(step.rows)
+            for j, (oid, t) in enumerate(step.fused):
+                for g in gaps.on_estimate(oid, t, step.x[j], step.P[j]):
+                    forecasts[f][g.object_id].append((g.t, g.x))
+            c_fit[f] += time.perf_counter() - c
         wall.now += 1.0
         for f, gaps in arms.items():
             c = time.perf_counter()
-            for g in gaps.step(t0 + batch_s * (k + 1)):
+            for g in gaps.step(step.now):
                 forecasts[f][g.object_id].append((g.t, g.x))
             c_fit[f] += time.perf_counter() - c
     for by_arm in forecasts.values():
@@ -201,7 +269,7 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
                                   for o, rows in forecasts[f].items()},
                                  s.motion_model, max_gaps) for f in arms}
     out = dict(scores[str(next(iter(arms)))])
-    out.update({"seed": seed, "objects": objects, "hours": hours, "measurements": len(obs),
+    out.update({"seed": seed, "objects": objects, "hours": hours, "measurements": measurements,
                 "estimates": sum(len(v) for v in estimates.values()),
                 "filter_wall_s_per_object": c_filter / objects,
                 "arms": scores, "common": common})

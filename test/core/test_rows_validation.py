@@ -73,3 +73,22 @@ def test_covariances_ok_without_decomposing_dominant_diagonals():
     want = [validation.is_covariance(r) for r in R]
     assert validation.covariances_ok(R).tolist() == want
     assert want[:101] == [True] * 101 and not all(want)
+
+
+def test_states_problems_is_state_problem_of_each():
+    # healthy, singular, asymmetric, indefinite, enormous, zero, non-finite state or
+    # covariance, and an enormous indefinite one (the covariance cause comes first)
+    rng = np.random.default_rng(4)
+    A = rng.normal(size=(60, 6, 6))
+    good = A @ A.transpose(0, 2, 1)
+    singular = good.copy()
+    singular[:, 0, :] = singular[:, :, 0] = 0.0
+    asym = good + np.triu(np.full((6, 6), 1e-3), 1)
+    P = np.concatenate([good, singular, asym, -good, good * 1e13, np.zeros((3, 6, 6)),
+                        good[:3], np.where(np.eye(6) > 0, np.nan, good[:3]), -good[:3] * 1e13])
+    x = rng.normal(size=(len(P), 6)) * 7000.0
+    x[len(P) - 12] = np.inf  # a non-finite state with a sound covariance
+    got = validation.states_problems(x, P)
+    want = [validation.state_problem(x[i], P[i])[0] for i in range(len(P))]
+    assert got.tolist() == want
+    assert len(set(want)) == 4  # "", nonfinite, covariance, implausible: each exercised
