@@ -23,9 +23,10 @@ ip netns del "$probe"
 log=$(mktemp -d)
 trap 'rm -rf "$log"' EXIT
 # The graphs' group writes to a log, printed when it ends; the rest shows its progress live.
-# Two graph test files run in the rest's group, so that the groups take about as long
+# Three graph test files run in the rest's group, so that the groups take about as long
 # (on an idle 2-core machine the graph tests took ~370 s and the rest ~240 s side by side).
-IN_REST=(test/graph/test_live_signals.py test/graph/test_multihost_graph.py)
+IN_REST=(test/graph/test_live_signals.py test/graph/test_multihost_graph.py
+         test/graph/test_unlabelled_graph.py)
 GRAPHS=()
 for f in test/graph/test_*.py; do
   [[ " ${IN_REST[*]} " == *" $f "* ]] || GRAPHS+=("$f")
