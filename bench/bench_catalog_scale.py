@@ -28,6 +28,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -71,6 +72,80 @@ def write_catalog(path: Path, objects: int, seed: int) -> dict[str, int]:
     return counts
 
 
+def _children() -> dict[int, list[int]]:
+    """Return every process's children (Linux ``/proc``): parent pid -> child pids."""
+    kids: dict[int, list[int]] = {}
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            ppid = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
+        except (OSError, IndexError, ValueError):
+            continue
+        kids.setdefault(ppid, []).append(int(d.name))
+    return kids
+
+
+def filter_rss_kib(root: int) -> dict[str, int]:
+    """Return the resident memory (KiB) of each catalog_filter process under pid `root`.
+
+    Keyed by its node name (``__node:=`` of its command line), from ``/proc`` (Linux).
+    """
+    kids, out, todo = _children(), {}, [root]
+    while todo:
+        pid = todo.pop()
+        todo += kids.get(pid, [])
+        try:
+            argv = (Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
+                    .split("\0"))
+            status = Path(f"/proc/{pid}/status").read_text()
+        except OSError:
+            continue
+        name = next((a.split(":=", 1)[1] for a in argv if a.startswith("__node:=")), "")
+        if not name.startswith("catalog_filter") or not any(
+                a.endswith("catalog_filter") for a in argv[:3]):
+            continue
+        for line in status.splitlines():
+            if line.startswith("VmRSS:"):
+                out[name] = int(line.split()[1])
+    return out
+
+
+class RssSampler(threading.Thread):
+    """Samples the filter shards' resident memory every `period_s` wall s while a run goes.
+
+    ``samples``: (wall s since the start, {node name: KiB}) of each sample that found one.
+    """
+
+    def __init__(self, root: int, period_s: float) -> None:
+        super().__init__(daemon=True)
+        self.root, self.period_s = root, period_s
+        self.samples: list[tuple[float, dict[str, int]]] = []
+        self._done = threading.Event()
+        self._t0 = time.perf_counter()
+
+    def run(self) -> None:
+        """Sample until `stop`."""
+        while not self._done.wait(self.period_s):
+            rss = filter_rss_kib(self.root)
+            if rss:
+                self.samples.append((time.perf_counter() - self._t0, rss))
+
+    def stop(self) -> None:
+        """End the sampling (joins the thread)."""
+        self._done.set()
+        self.join()
+
+    def table(self) -> str:
+        """Return the samples as lines: wall s, each shard's MiB and their sum."""
+        lines = [f"filter shards' resident memory every {self.period_s:g} wall s "
+                 "(MiB; the sum):"]
+        for t, rss in self.samples:
+            each = " ".join(f"{n}={v / 1024:.0f}" for n, v in sorted(rss.items()))
+            lines.append(f"  {t:7.0f} s  {each}  sum={sum(rss.values()) / 1024:.0f}")
+        return "\n".join(lines)
+
+
 def main() -> None:
     """Build the catalog, run it, print the summary and the JSON line."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -78,6 +153,8 @@ def main() -> None:
     ap.add_argument("--hours", type=float, default=24.0)
     ap.add_argument("--shards", type=int, default=2)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--rss-period", type=float, default=60.0,
+                    help="wall s between two samples of the shards' resident memory")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
@@ -91,10 +168,16 @@ def main() -> None:
                "--time-scale", "max", "--no-surrogate", "--out", str(root / "run")]
         print("$ " + " ".join(cmd[1:]), flush=True)
         t = time.perf_counter()
-        done = subprocess.run(cmd, env={**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE":
-                                        "LOCALHOST"}, capture_output=True, text=True,
-                              check=False)
+        with subprocess.Popen(cmd, env={**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE":
+                                        "LOCALHOST"}, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) as proc:
+            sampler = RssSampler(proc.pid, args.rss_period)
+            sampler.start()
+            out, err = proc.communicate()
+            sampler.stop()
+        done = subprocess.CompletedProcess(cmd, proc.returncode, out, err)
         wall = time.perf_counter() - t
+        print(sampler.table())
         print("\n".join(done.stdout.strip().splitlines()[-12:]))
         assert (root / "run" / "catalog.json").exists(), done.stderr[-3000:]
         s = json.loads((root / "run" / "catalog.json").read_text())
