@@ -114,7 +114,8 @@ def filter_rss_kib(root: int) -> dict[str, int]:
 class RssSampler(threading.Thread):
     """Samples the filter shards' resident memory every `period_s` wall s while a run goes.
 
-    ``samples``: (wall s since the start, {node name: KiB}) of each sample that found one.
+    ``samples``: (wall s since the start, {node name: KiB}) of each sample that found one;
+    each is printed as it is taken (`line`).
     """
 
     def __init__(self, root: int, period_s: float) -> None:
@@ -130,20 +131,18 @@ class RssSampler(threading.Thread):
             rss = filter_rss_kib(self.root)
             if rss:
                 self.samples.append((time.perf_counter() - self._t0, rss))
+                print(self.line(*self.samples[-1]), flush=True)
 
     def stop(self) -> None:
         """End the sampling (joins the thread)."""
         self._done.set()
         self.join()
 
-    def table(self) -> str:
-        """Return the samples as lines: wall s, each shard's MiB and their sum."""
-        lines = [f"filter shards' resident memory every {self.period_s:g} wall s "
-                 "(MiB; the sum):"]
-        for t, rss in self.samples:
-            each = " ".join(f"{n}={v / 1024:.0f}" for n, v in sorted(rss.items()))
-            lines.append(f"  {t:7.0f} s  {each}  sum={sum(rss.values()) / 1024:.0f}")
-        return "\n".join(lines)
+    @staticmethod
+    def line(t: float, rss: dict[str, int]) -> str:
+        """Return one sample as a line: wall s, each shard's MiB and their sum."""
+        each = " ".join(f"{n}={v / 1024:.0f}" for n, v in sorted(rss.items()))
+        return f"  rss at {t:6.0f} s: {each} sum={sum(rss.values()) / 1024:.0f} MiB"
 
 
 def main() -> None:
@@ -171,13 +170,14 @@ def main() -> None:
         with subprocess.Popen(cmd, env={**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE":
                                         "LOCALHOST"}, stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True) as proc:
+            print(f"filter shards' resident memory every {args.rss_period:g} wall s:",
+                  flush=True)
             sampler = RssSampler(proc.pid, args.rss_period)
             sampler.start()
             out, err = proc.communicate()
             sampler.stop()
         done = subprocess.CompletedProcess(cmd, proc.returncode, out, err)
         wall = time.perf_counter() - t
-        print(sampler.table())
         print("\n".join(done.stdout.strip().splitlines()[-12:]))
         assert (root / "run" / "catalog.json").exists(), done.stderr[-3000:]
         s = json.loads((root / "run" / "catalog.json").read_text())
