@@ -13,7 +13,9 @@ fused); ``consumed`` counts every measurement the bank took (fused, pending in a
 or rejected by it), so that published = consumed + refused at the door (in rows).
 Once a second it gives the C heap the fusions freed back to the system
 (`memory.release_free_heap`), so that its resident memory follows what it holds rather than
-its largest batch.
+its largest batch; and it waits for its estimate readers' acknowledgements whenever
+`UNACKED_ESTIMATE_MESSAGES` full messages are out (`memory.AckedPublisher`), so that the
+publisher's history keeps that many message slots, not as many as its largest burst.
 
 Sharding: with ``shards`` = K > 1 the node owns the objects whose ``shard_key`` (CRC-32 of
 ``object_id``) lies in the ``shard``-th of K equal ranges, and subscribes with a DDS content
@@ -52,7 +54,7 @@ from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.nodes.diagnostics import Count, NodeCause
-from ssa_fusion.nodes.memory import release_free_heap
+from ssa_fusion.nodes.memory import AckedPublisher, release_free_heap
 from ssa_fusion.nodes.parameters import (
     POSITIVE,
     STATION_IDS,
@@ -118,6 +120,15 @@ RELEASE_HEAP_PERIOD_S = 1.0
 """Wall s between two returns of the freed C heap to the system (`memory.release_free_heap`):
 the batches' arrays and messages are freed, their pages stay resident until then."""
 
+UNACKED_ESTIMATE_MESSAGES = 4
+"""Full EstimateBatch messages (``batch_rows`` rows each) out before the node waits for its
+readers' acknowledgements (`memory.AckedPublisher`): what bounds the estimate publisher's
+history memory, which would otherwise keep as many message slots as the largest burst ever
+left unacknowledged (~2 MB each at 5,000 rows)."""
+ACK_WAIT_S = 5.0
+"""Longest wait for the acknowledgements (wall s; Fast DDS's readers acknowledge at the latest
+when its writer's heartbeat, every 3 s, asks them to); then the estimates go out anyway."""
+
 
 class CatalogFilterNode(SsaNode):
     """The catalog filter node: measurements in, batches into a `TrackBank`, estimates out."""
@@ -135,6 +146,8 @@ class CatalogFilterNode(SsaNode):
         self.lo, self.hi = shard_range(self.shard, self.shards)
         self.diag.status["shard"] = f"{self.shard}/{self.shards} keys [{self.lo}, {self.hi}]"
         self.pub = self.create_publisher(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
+        self.acked = AckedPublisher(self.pub, UNACKED_ESTIMATE_MESSAGES * p.integer("batch_rows"),
+                                    ACK_WAIT_S)
         sites = p.text("sites")
         self.unlabelled = UnlabelledRows(self, self.diag, self.options, self.stations,
                                          load_sites(sites) if sites else {},
@@ -385,7 +398,8 @@ class CatalogFilterNode(SsaNode):
         rows.shard_key = messages.shard_keys(rows.object_id)
         most = self.params.integer("batch_rows")
         for part in np.array_split(np.arange(len(rows)), -(-len(rows) // most)):
-            self.pub.publish(messages.estimate_batch_to_msg(rows.take(part), (self.lo, self.hi)))
+            self.acked.publish(messages.estimate_batch_to_msg(rows.take(part), (self.lo, self.hi)),
+                               part.size)
 
     def _count_causes(self, res: BankResult, batch: MeasurementRows) -> None:
         """Count the bank's causes (``iod_pending`` silently), logging the first of each."""
@@ -406,8 +420,10 @@ class CatalogFilterNode(SsaNode):
             status["object_ids"] = ",".join(bank.object_ids)
         status["tracks"] = str(int(bank.tracking.sum()))
         n = max(len(bank), 1)
-        arrays = bank.x.nbytes + bank.P.nbytes + bank.t.nbytes + bank.tracking.nbytes
-        status["bank_bytes_per_object"] = f"{arrays / n:.0f}"
+        status["bank_bytes_per_object"] = f"{bank.nbytes / n:.0f}"
+        status["iod_pending_measurements"] = str(bank.pending_iod)
+        status["estimate_ack_waits"] = f"{self.acked.waits} ({self.acked.waited_s:.1f} s)"
+        status["estimate_ack_timeouts"] = str(self.acked.timeouts)
         status["max_batch"] = str(max(int(status.get("max_batch", 0)), batch))
 
 
