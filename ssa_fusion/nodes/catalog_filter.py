@@ -421,7 +421,7 @@ class CatalogFilterNode(SsaNode):
         status["tracks"] = str(int(bank.tracking.sum()))
         n = max(len(bank), 1)
         status["bank_bytes_per_object"] = f"{bank.nbytes / n:.0f}"
-        status["iod_pending_measurements"] = str(bank.pending_iod)
+        status["measurements_in_iod_batches"] = str(bank.pending_iod)
         status["estimate_ack_waits"] = f"{self.acked.waits} ({self.acked.waited_s:.1f} s)"
         status["estimate_ack_timeouts"] = str(self.acked.timeouts)
         status["max_batch"] = str(max(int(status.get("max_batch", 0)), batch))
