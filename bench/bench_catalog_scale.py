@@ -10,7 +10,9 @@ anomaly drawn uniformly), written as a TLE file (`sgp4.exporter`). Then
 
 (lockstep, as fast as the nodes go; the radar network of iss_network), and its summary
 (``catalog.json``): measurements published, received and lost, sim time over wall time,
-each filter shard's resident memory at the end over the objects it holds.
+each filter shard's resident memory at the end over the objects it holds. While it runs,
+the filter shards' resident memory is printed every ``--rss-period`` wall s (``/proc``): how
+it grows over the day.
 
     nice -n 10 python bench/bench_catalog_scale.py [--objects 30000] [--hours 24]
 
