@@ -1,4 +1,7 @@
-"""Giving a node's freed C heap back to the operating system: `release_free_heap`.
+"""A node's memory kept to what it holds: `release_free_heap`, `AckedPublisher`.
+
+The freed C heap given back to the operating system, a reliable publisher's unacknowledged
+messages bounded.
 
 A catalog node allocates and frees a batch's arrays (and DDS its messages) many times a
 second. glibc's malloc keeps the pages of freed blocks inside its heap resident until the
