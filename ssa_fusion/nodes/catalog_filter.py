@@ -13,9 +13,10 @@ fused); ``consumed`` counts every measurement the bank took (fused, pending in a
 or rejected by it), so that published = consumed + refused at the door (in rows).
 Once a second it gives the C heap the fusions freed back to the system
 (`memory.release_free_heap`), so that its resident memory follows what it holds rather than
-its largest batch; and it waits for its estimate readers' acknowledgements whenever
-`UNACKED_ESTIMATE_MESSAGES` full messages are out (`memory.AckedPublisher`), so that the
-publisher's history keeps that many message slots, not as many as its largest burst.
+its largest batch. With ``max_unacked_rows`` it waits for its estimate readers'
+acknowledgements whenever that many rows are out (`memory.AckedPublisher`), so that the
+publisher's history keeps a few message slots, not as many as its largest burst left
+unacknowledged (at the cost of the waits).
 
 Sharding: with ``shards`` = K > 1 the node owns the objects whose ``shard_key`` (CRC-32 of
 ``object_id``) lies in the ``shard``-th of K equal ranges, and subscribes with a DDS content
@@ -37,6 +38,7 @@ refused (``rejected_unlabelled_sharded``).
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from functools import partial
 
@@ -110,6 +112,13 @@ PARAMETERS = ParameterTable("catalog_filter", (
           "a fusion's estimates go in EstimateBatch messages of at most this many rows "
           "(~0.4 kB each; DDS keeps buffers as large as the largest message)",
           check=at_least(1)),
+    Param("max_unacked_rows", CATALOG_FILTER.max_unacked_rows,
+          "estimate rows published before the node waits (at most 5 wall s) for its readers' "
+          "acknowledgements: bounds the memory of the estimate publisher's history, which "
+          "otherwise keeps as many message slots as it ever had unacknowledged messages "
+          "(~2 MB each at 5,000 rows); each wait lasts until the readers acknowledge (Fast "
+          "DDS: up to its 3 s heartbeat), so a catalog runs slower; 0 = never wait",
+          check=at_least(0)),
     clock_lead(CATALOG_FILTER.max_clock_lead),
     max_objects_row(CATALOG_FILTER.max_objects, "tracks (~2 kB each: 180 MiB for 100,000)",
                     "a measurement"),
@@ -120,11 +129,6 @@ RELEASE_HEAP_PERIOD_S = 1.0
 """Wall s between two returns of the freed C heap to the system (`memory.release_free_heap`):
 the batches' arrays and messages are freed, their pages stay resident until then."""
 
-UNACKED_ESTIMATE_MESSAGES = 4
-"""Full EstimateBatch messages (``batch_rows`` rows each) out before the node waits for its
-readers' acknowledgements (`memory.AckedPublisher`): what bounds the estimate publisher's
-history memory, which would otherwise keep as many message slots as the largest burst ever
-left unacknowledged (~2 MB each at 5,000 rows)."""
 ACK_WAIT_S = 5.0
 """Longest wait for the acknowledgements (wall s; Fast DDS's readers acknowledge at the latest
 when its writer's heartbeat, every 3 s, asks them to); then the estimates go out anyway."""
@@ -146,8 +150,8 @@ class CatalogFilterNode(SsaNode):
         self.lo, self.hi = shard_range(self.shard, self.shards)
         self.diag.status["shard"] = f"{self.shard}/{self.shards} keys [{self.lo}, {self.hi}]"
         self.pub = self.create_publisher(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
-        self.acked = AckedPublisher(self.pub, UNACKED_ESTIMATE_MESSAGES * p.integer("batch_rows"),
-                                    ACK_WAIT_S)
+        unacked = p.integer("max_unacked_rows")
+        self.acked = AckedPublisher(self.pub, unacked if unacked > 0 else math.inf, ACK_WAIT_S)
         sites = p.text("sites")
         self.unlabelled = UnlabelledRows(self, self.diag, self.options, self.stations,
                                          load_sites(sites) if sites else {},

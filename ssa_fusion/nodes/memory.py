@@ -93,16 +93,17 @@ class AckedPublisher(Generic[MsgT]):
     ----------
     pub : ReliablePublisher
         An rclpy Publisher, reliable (a best-effort one never waits).
-    max_unacked_rows : int
-        Rows published between two waits (one message of more goes out alone).
+    max_unacked_rows : float
+        Rows published between two waits (one message of more goes out alone; inf: never
+        wait).
     timeout_s : float
         Longest wait, wall s.
     """
 
-    def __init__(self, pub: ReliablePublisher[MsgT], max_unacked_rows: int,
+    def __init__(self, pub: ReliablePublisher[MsgT], max_unacked_rows: float,
                  timeout_s: float = 1.0) -> None:
         self.pub = pub
-        self.max_unacked_rows = int(max_unacked_rows)
+        self.max_unacked_rows = max_unacked_rows
         self.timeout = Duration(nanoseconds=int(timeout_s * 1e9))
         self.unacked_rows = 0
         """Rows published since the last wait."""

@@ -3,6 +3,7 @@
 AckedPublisher: at most its bound of rows unacknowledged before it waits for the readers."""
 
 import ctypes.util
+import math
 from pathlib import Path
 
 import numpy as np
@@ -75,3 +76,11 @@ def test_acked_publisher_counts_a_wait_no_reader_answers_and_publishes_anyway():
         acked.publish(k, 1)
     assert [c[1] for c in pub.calls if c[0] == "publish"] == [0, 1, 2]
     assert (acked.waits, acked.timeouts) == (2, 2)
+
+
+def test_acked_publisher_without_a_bound_never_waits():
+    pub = _Publisher()
+    acked = AckedPublisher(pub, max_unacked_rows=math.inf)
+    for k in range(100):
+        acked.publish(k, 5_000)
+    assert [c[0] for c in pub.calls] == ["publish"] * 100 and acked.waits == 0
