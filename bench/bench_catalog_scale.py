@@ -10,7 +10,9 @@ anomaly drawn uniformly), written as a TLE file (`sgp4.exporter`). Then
 
 (lockstep, as fast as the nodes go; the radar network of iss_network), and its summary
 (``catalog.json``): measurements published, received and lost, sim time over wall time,
-each filter shard's resident memory at the end over the objects it holds.
+each filter shard's resident memory at the end over the objects it holds. While it runs,
+the filter shards' resident memory is printed every ``--rss-period`` wall s (``/proc``): how
+it grows over the day.
 
     nice -n 10 python bench/bench_catalog_scale.py [--objects 30000] [--hours 24]
 
@@ -37,6 +39,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -83,6 +86,79 @@ def write_catalog(path: Path, objects: int, seed: int) -> dict[str, int]:
     return counts
 
 
+def _children() -> dict[int, list[int]]:
+    """Return every process's children (Linux ``/proc``): parent pid -> child pids."""
+    kids: dict[int, list[int]] = {}
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            ppid = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
+        except (OSError, IndexError, ValueError):
+            continue
+        kids.setdefault(ppid, []).append(int(d.name))
+    return kids
+
+
+def filter_rss_kib(root: int) -> dict[str, int]:
+    """Return the resident memory (KiB) of each catalog_filter process under pid `root`.
+
+    Keyed by its node name (``__node:=`` of its command line), from ``/proc`` (Linux).
+    """
+    kids, out, todo = _children(), {}, [root]
+    while todo:
+        pid = todo.pop()
+        todo += kids.get(pid, [])
+        try:
+            argv = (Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
+                    .split("\0"))
+            status = Path(f"/proc/{pid}/status").read_text()
+        except OSError:
+            continue
+        name = next((a.split(":=", 1)[1] for a in argv if a.startswith("__node:=")), "")
+        if not name.startswith("catalog_filter") or not any(
+                a.endswith("catalog_filter") for a in argv[:3]):
+            continue
+        for line in status.splitlines():
+            if line.startswith("VmRSS:"):
+                out[name] = int(line.split()[1])
+    return out
+
+
+class RssSampler(threading.Thread):
+    """Samples the filter shards' resident memory every `period_s` wall s while a run goes.
+
+    ``samples``: (wall s since the start, {node name: KiB}) of each sample that found one;
+    each is printed as it is taken (`line`).
+    """
+
+    def __init__(self, root: int, period_s: float) -> None:
+        super().__init__(daemon=True)
+        self.root, self.period_s = root, period_s
+        self.samples: list[tuple[float, dict[str, int]]] = []
+        self._done = threading.Event()
+        self._t0 = time.perf_counter()
+
+    def run(self) -> None:
+        """Sample until `stop`."""
+        while not self._done.wait(self.period_s):
+            rss = filter_rss_kib(self.root)
+            if rss:
+                self.samples.append((time.perf_counter() - self._t0, rss))
+                print(self.line(*self.samples[-1]), flush=True)
+
+    def stop(self) -> None:
+        """End the sampling (joins the thread)."""
+        self._done.set()
+        self.join()
+
+    @staticmethod
+    def line(t: float, rss: dict[str, int]) -> str:
+        """Return one sample as a line: wall s, each shard's MiB and their sum."""
+        each = " ".join(f"{n}={v / 1024:.0f}" for n, v in sorted(rss.items()))
+        return f"  rss at {t:6.0f} s: {each} sum={sum(rss.values()) / 1024:.0f} MiB"
+
+
 def main() -> None:
     """Build the catalog, run it, print the summary and the JSON line."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -92,6 +168,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--surrogate", action="store_true",
                     help="run a catalog_surrogate beside each filter shard")
+    ap.add_argument("--rss-period", type=float, default=60.0,
+                    help="wall s between two samples of the shards' resident memory")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
@@ -106,9 +184,16 @@ def main() -> None:
                "--out", str(root / "run")]
         print("$ " + " ".join(cmd[1:]), flush=True)
         t = time.perf_counter()
-        done = subprocess.run(cmd, env={**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE":
-                                        "LOCALHOST"}, capture_output=True, text=True,
-                              check=False)
+        with subprocess.Popen(cmd, env={**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE":
+                                        "LOCALHOST"}, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) as proc:
+            print(f"filter shards' resident memory every {args.rss_period:g} wall s:",
+                  flush=True)
+            sampler = RssSampler(proc.pid, args.rss_period)
+            sampler.start()
+            out, err = proc.communicate()
+            sampler.stop()
+        done = subprocess.CompletedProcess(cmd, proc.returncode, out, err)
         wall = time.perf_counter() - t
         print("\n".join(done.stdout.strip().splitlines()[-12:]))
         assert (root / "run" / "catalog.json").exists(), done.stderr[-3000:]

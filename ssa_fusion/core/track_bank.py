@@ -29,6 +29,7 @@ rollback, light time, kinds other than range/az/el.
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from itertools import repeat
@@ -178,6 +179,25 @@ class TrackBank:
     def __len__(self) -> int:
         """Return the number of objects heard of."""
         return len(self.object_ids)
+
+    @property
+    def pending_iod(self) -> int:
+        """Return the number of measurements waiting in IOD batches (objects without a track)."""
+        return sum(len(init.batch) for init in self._initiators.values())
+
+    @property
+    def nbytes(self) -> int:
+        """Return the bytes of what the bank holds per object (B).
+
+        Its per-object arrays (all rows of their capacity) and the measurements waiting in
+        IOD batches (each its object, z and R: `sys.getsizeof`); not the dictionaries of
+        ids and rows, nor the shared models.
+        """
+        arrays = (self.x, self.P, self.t, self.tracking, self.gate_misses, self.stations_at_t,
+                  self.seen)
+        pending = sum(sys.getsizeof(m) + sys.getsizeof(m.__dict__) + m.z.nbytes + m.R.nbytes
+                      for init in self._initiators.values() for m in init.batch)
+        return sum(a.nbytes for a in arrays) + pending
 
     def _placeholder(self, x: np.ndarray, dt: float,
                      t0: float) -> tuple[np.ndarray, np.ndarray]:

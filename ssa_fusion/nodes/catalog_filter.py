@@ -13,7 +13,10 @@ fused); ``consumed`` counts every measurement the bank took (fused, pending in a
 or rejected by it), so that published = consumed + refused at the door (in rows).
 Once a second it gives the C heap the fusions freed back to the system
 (`memory.release_free_heap`), so that its resident memory follows what it holds rather than
-its largest batch.
+its largest batch. With ``max_unacked_rows`` it waits for its estimate readers'
+acknowledgements whenever that many rows are out (`memory.AckedPublisher`), so that the
+publisher's history keeps a few message slots, not as many as its largest burst left
+unacknowledged (at the cost of the waits).
 
 Sharding: with ``shards`` = K > 1 the node owns the objects whose ``shard_key`` (CRC-32 of
 ``object_id``) lies in the ``shard``-th of K equal ranges, and subscribes with a DDS content
@@ -35,6 +38,7 @@ refused (``rejected_unlabelled_sharded``).
 
 from __future__ import annotations
 
+import math
 from collections import Counter
 from functools import partial
 
@@ -58,7 +62,7 @@ from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.nodes.diagnostics import Count, NodeCause
-from ssa_fusion.nodes.memory import release_free_heap
+from ssa_fusion.nodes.memory import AckedPublisher, release_free_heap
 from ssa_fusion.nodes.parameters import (
     POSITIVE,
     STATION_IDS,
@@ -114,6 +118,13 @@ PARAMETERS = ParameterTable("catalog_filter", (
           "a fusion's estimates go in EstimateBatch messages of at most this many rows "
           "(~0.4 kB each; DDS keeps buffers as large as the largest message)",
           check=at_least(1)),
+    Param("max_unacked_rows", CATALOG_FILTER.max_unacked_rows,
+          "estimate rows published before the node waits (at most 5 wall s) for its readers' "
+          "acknowledgements: bounds the memory of the estimate publisher's history, which "
+          "otherwise keeps as many message slots as it ever had unacknowledged messages "
+          "(~2 MB each at 5,000 rows); each wait lasts until the readers acknowledge (Fast "
+          "DDS: up to its 3 s heartbeat), so a catalog runs slower; 0 = never wait",
+          check=at_least(0)),
     clock_lead(CATALOG_FILTER.max_clock_lead),
     max_objects_row(CATALOG_FILTER.max_objects, "tracks (~2 kB each: 180 MiB for 100,000)",
                     "a measurement"),
@@ -123,6 +134,10 @@ PARAMETERS = ParameterTable("catalog_filter", (
 RELEASE_HEAP_PERIOD_S = 1.0
 """Wall s between two returns of the freed C heap to the system (`memory.release_free_heap`):
 the batches' arrays and messages are freed, their pages stay resident until then."""
+
+ACK_WAIT_S = 5.0
+"""Longest wait for the acknowledgements (wall s; Fast DDS's readers acknowledge at the latest
+when its writer's heartbeat, every 3 s, asks them to); then the estimates go out anyway."""
 
 
 class CatalogFilterNode(SsaNode):
@@ -145,6 +160,8 @@ class CatalogFilterNode(SsaNode):
         self.lo, self.hi = shard_range(self.shard, self.shards)
         self.diag.status["shard"] = f"{self.shard}/{self.shards} keys [{self.lo}, {self.hi}]"
         self.pub = self.create_publisher(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
+        unacked = p.integer("max_unacked_rows")
+        self.acked = AckedPublisher(self.pub, unacked if unacked > 0 else math.inf, ACK_WAIT_S)
         self.unlabelled = UnlabelledRows(self, self.diag)
         cft = content_filter(self.shard, self.shards)
         self.sub = self.subscribe(MeasurementMsg, TOPIC_MEASUREMENT, self.on_measurement,
@@ -390,7 +407,8 @@ class CatalogFilterNode(SsaNode):
         rows.shard_key = messages.shard_keys(rows.object_id)
         most = self.params.integer("batch_rows")
         for part in np.array_split(np.arange(len(rows)), -(-len(rows) // most)):
-            self.pub.publish(messages.estimate_batch_to_msg(rows.take(part), (self.lo, self.hi)))
+            self.acked.publish(messages.estimate_batch_to_msg(rows.take(part), (self.lo, self.hi)),
+                               part.size)
 
     def _count_causes(self, res: BankResult, batch: MeasurementRows) -> None:
         """Count the bank's causes (``iod_pending`` silently), logging the first of each."""
@@ -411,8 +429,10 @@ class CatalogFilterNode(SsaNode):
             status["object_ids"] = ",".join(bank.object_ids)
         status["tracks"] = str(int(bank.tracking.sum()))
         n = max(len(bank), 1)
-        arrays = bank.x.nbytes + bank.P.nbytes + bank.t.nbytes + bank.tracking.nbytes
-        status["bank_bytes_per_object"] = f"{arrays / n:.0f}"
+        status["bank_bytes_per_object"] = f"{bank.nbytes / n:.0f}"
+        status["measurements_in_iod_batches"] = str(bank.pending_iod)
+        status["estimate_ack_waits"] = f"{self.acked.waits} ({self.acked.waited_s:.1f} s)"
+        status["estimate_ack_timeouts"] = str(self.acked.timeouts)
         status["max_batch"] = str(max(int(status.get("max_batch", 0)), batch))
 
 

@@ -160,6 +160,7 @@ class CatalogFilterDefaults:
     max_objects: int = MAX_OBJECTS
     evict_after: float = 7 * 86400.0
     batch_rows: int = 5_000
+    max_unacked_rows: int = 0
 
 
 @dataclass(frozen=True)
