@@ -463,7 +463,7 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
                 c: EstimatorConfig) -> int:
     """Play the bag into surrogate + filter processes (estimator `c`) and record the run."""
     from ssa_fusion.ros.player import Player
-    from ssa_fusion.ros.processes import Graph
+    from ssa_fusion.ros.processes import Graph, ended_badly
     from ssa_fusion.ros.readiness import ReadyNodes, readers_of
 
     record = args.record or _sibling(args.bag, "_replay")
@@ -490,8 +490,8 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
           f"{graph.domain_id}; logs in {logs}", flush=True)
     t0 = time.monotonic()
     try:
-        procs = [graph.start_node(n, params=params[n]) for n in ("recorder", "surrogate",
-                                                                 "filter")]
+        for n in ("recorder", "surrogate", "filter"):  # the recorder first: it hears all
+            graph.start_node(n, params=params[n])
         player = Player(graph.probe, [m for m in stream if m.topic in PLAYED], args.rate)
         # recorder + surrogate + filter on measurements; recorder on the evaluation topics;
         # filter + recorder on forecasts, recorder on estimates
@@ -504,21 +504,16 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
         published = {*player.pubs, TOPIC_CLOCK, TOPIC_FORECAST, TOPIC_ESTIMATE}
         needs = readers_of(published)
         readers = ReadyNodes(graph.probe)
-        graph.wait_for(lambda: readers.ready(needs), 30.0,
-                       "surrogate, filter and recorder to match their publishers")
-        player.start()
-        graph.wait_for(player.done, player.duration_s + 60.0, "playback to finish")
-        player.finish(graph.scaled(5.0))
+        graph.play(player, lambda: readers.ready(needs),
+                   "surrogate, filter and recorder to match their publishers")
         from ssa_fusion.ros.interfaces import Measurement, StateEstimate
 
         seen = [graph.collect(StateEstimate, TOPIC_ESTIMATE),
                 graph.collect(Measurement, TOPIC_FORECAST)]
         graph.wait_quiet(lambda: tuple(len(x) for x in seen), quiet_s=1.0, limit_s=30.0)
-        codes = {p.name: graph.stop(p) for p in reversed(procs)}
     finally:
-        problems = graph.close()
-    if problems or any(codes.values()):
-        print("error: node process(es) ended badly:\n" + "\n".join(problems), file=sys.stderr)
+        problems = graph.close()  # each stopped in turn, newest first
+    if ended_badly(problems):
         return 1
     print(f"replayed {player.published} messages of {args.bag} at rate {args.rate:g} in "
           f"{time.monotonic() - t0:.1f} s; recorded to {record}")

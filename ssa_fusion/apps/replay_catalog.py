@@ -432,7 +432,7 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
     """
     from ssa_fusion.ros.interfaces import EstimateBatch
     from ssa_fusion.ros.player import Player
-    from ssa_fusion.ros.processes import Graph
+    from ssa_fusion.ros.processes import Graph, ended_badly
     from ssa_fusion.ros.readiness import ReadyNodes
 
     names = [f"catalog_filter_{int(p['shard'])}" for p in chosen.shards]
@@ -446,13 +446,11 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
     print(f"replay: {args.bag} at rate {args.rate:g} into {len(names)} catalog_filter "
           f"process(es); ROS domain {graph.domain_id}; logs in {logs}", flush=True)
     t0 = time.monotonic()
-    codes: dict[str, int] = {}
     try:
-        procs = [graph.start_node("recorder", params={"use_sim_time": True,
-                                                      "bag": str(record)})]
-        procs += [graph.start_node("catalog_filter", "-r", f"__node:={n}", name=n,
-                                   params=node_params(p, args.sites))
-                  for n, p in zip(names, chosen.shards, strict=True)]
+        graph.start_node("recorder", params={"use_sim_time": True, "bag": str(record)})
+        for n, p in zip(names, chosen.shards, strict=True):
+            graph.start_node("catalog_filter", "-r", f"__node:={n}", name=n,
+                             params=node_params(p, args.sites))
         player = Player(graph.probe, played, args.rate)
         rows: list[int] = []
         graph.probe.create_subscription(EstimateBatch, TOPIC_ESTIMATE_BATCH,
@@ -465,17 +463,12 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
                  *(f"{who}:{t}" for t in sorted(filters & set(player.pubs))
                    for who in ("recorder", *names))]
         readers = ReadyNodes(graph.probe)
-        graph.wait_for(lambda: readers.ready(needs), 30.0,
-                       "the catalog filter(s) and the recorder to match their publishers")
-        player.start()
-        graph.wait_for(player.done, player.duration_s + 60.0, "playback to finish")
-        player.finish(graph.scaled(5.0))
+        graph.play(player, lambda: readers.ready(needs),
+                   "the catalog filter(s) and the recorder to match their publishers")
         graph.wait_quiet(lambda: sum(rows), quiet_s=1.0, limit_s=60.0)
-        codes = {p.name: graph.stop(p) for p in reversed(procs)}
     finally:
-        problems = graph.close()
-    if problems or any(codes.values()):
-        print("error: node process(es) ended badly:\n" + "\n".join(problems), file=sys.stderr)
+        problems = graph.close()  # each stopped in turn, newest first
+    if ended_badly(problems):
         return 1
     print(f"replayed {player.published} messages of {args.bag} at rate {args.rate:g} in "
           f"{time.monotonic() - t0:.1f} s: {sum(rows)} estimates; recorded to {record}")

@@ -31,6 +31,7 @@ from rclpy.qos import QoSProfile
 from ssa_fusion.ros.discovery import LOOPBACK, Discovery
 from ssa_fusion.ros.executors import make_executor
 from ssa_fusion.ros.interfaces import Message
+from ssa_fusion.ros.player import Player
 from ssa_fusion.ros.topics import DATA_QOS
 
 NODE_BIN = Path(sys.prefix) / "lib" / "ssa_fusion"
@@ -235,6 +236,17 @@ class Graph:
         """Return every process's description (`Proc.describe`)."""
         return "\n".join(p.describe() for p in self.procs)
 
+    def play(self, player: Player, readers_ready: Callable[[], bool], readers: str) -> None:
+        """Play `player`'s messages to the end once its `readers` matched its publishers.
+
+        Waits for `readers_ready()` first, and at the end for the messages to be
+        acknowledged (as ``ros2 bag play --wait-for-all-acked``).
+        """
+        self.wait_for(readers_ready, 30.0, readers)
+        player.start()
+        self.wait_for(player.done, player.duration_s + 60.0, "playback to finish")
+        player.finish(self.scaled(5.0))
+
     # teardown ----------------------------------------------------------------------------
     def close(self, together: bool = False) -> list[str]:
         """Stop every process still running (newest first); describe unexpected exits.
@@ -261,6 +273,13 @@ class Graph:
         self.probe.destroy_node()
         self.context.try_shutdown()
         return problems
+
+
+def ended_badly(problems: list[str]) -> bool:
+    """Say on stderr which node processes ended badly (`Graph.close`'s `problems`); True if any."""
+    if problems:
+        print("error: node process(es) ended badly:\n" + "\n".join(problems), file=sys.stderr)
+    return bool(problems)
 
 
 def ros_arguments(params: dict[str, Any] | None = None,
