@@ -22,7 +22,7 @@ from ssa_fusion.core.catalog import Progress
 from ssa_fusion.core.gap_publisher import GapFill
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import BAG_PATTERN
-from ssa_fusion.ros.readiness import READERS
+from ssa_fusion.ros.readiness import OUTPUT, READERS
 from ssa_fusion.ros.topics import (
     TOPIC_ASSOCIATED,
     TOPIC_DETECTION_TRUTH,
@@ -192,9 +192,12 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     # the recorder hears every estimate publisher (shards and surrogates) from the first
     readers = ["recorder:" + TOPIC_MEASUREMENT_BATCH,
                f"recorder:{TOPIC_ESTIMATE_BATCH}={len(names) + len(gaps)}",
-               *(f"{n}:{TOPIC_MEASUREMENT_BATCH}" for n in [*names, *fitting])]
+               *(f"{n}:{TOPIC_MEASUREMENT_BATCH}" for n in [*names, *fitting]),
+               # and their side of it: the recorder and every surrogate hear each of them
+               *(f"{n}:{OUTPUT}{TOPIC_ESTIMATE_BATCH}={1 + len(gaps)}" for n in [*names, *gaps])]
     if unlabelled:
-        readers += [f"recorder:{TOPIC_DETECTION_TRUTH}", f"recorder:{TOPIC_ASSOCIATED}={shards}"]
+        readers += [f"recorder:{TOPIC_DETECTION_TRUTH}", f"recorder:{TOPIC_ASSOCIATED}={shards}",
+                    *(f"{n}:{OUTPUT}{TOPIC_ASSOCIATED}" for n in names)]
     recorder: dict[str, Any] = {"use_sim_time": True}
     if bag is not None:
         recorder["bag"] = str(bag)

@@ -433,7 +433,7 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
     from ssa_fusion.ros.interfaces import EstimateBatch
     from ssa_fusion.ros.player import Player
     from ssa_fusion.ros.processes import Graph, ended_badly
-    from ssa_fusion.ros.readiness import ReadyNodes
+    from ssa_fusion.ros.readiness import OUTPUT, ReadyNodes
 
     names = [f"catalog_filter_{int(p['shard'])}" for p in chosen.shards]
     logs = record.with_name(record.name + "_logs")
@@ -460,6 +460,7 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
             {t: 1 + len(names) * (t in filters) for t in player.pubs}),
             30.0, "the catalog filter(s) and the recorder to subscribe")
         needs = [f"recorder:{TOPIC_ESTIMATE_BATCH}={len(names)}",
+                 *(f"{n}:{OUTPUT}{TOPIC_ESTIMATE_BATCH}" for n in names),
                  *(f"{who}:{t}" for t in sorted(filters & set(player.pubs))
                    for who in ("recorder", *names))]
         readers = ReadyNodes(graph.probe)

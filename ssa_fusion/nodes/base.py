@@ -121,6 +121,11 @@ class SsaNode(Node):
         """Subscribe to an input: see `Diagnostics.subscribe`."""
         return self.diag.subscribe(msg_type, topic, callback, qos, raw, content_filter)
 
+    def advertise(self, msg_type: type[Message], topic: str,
+                  qos: QoSProfile) -> Publisher[Message]:
+        """Create an output publisher, its matches reported: see `Diagnostics.advertise`."""
+        return self.diag.advertise(msg_type, topic, qos)
+
     def measurement_in(self, msg: Message, again: Callable[[], None],
                        object_id: str) -> Measurement | None:
         """Return the core measurement of Measurement message `msg`, or None.

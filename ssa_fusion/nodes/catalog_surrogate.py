@@ -162,7 +162,7 @@ class CatalogSurrogateNode(SsaNode):
         self.bank = self.new_bank()
         self.diag.status["shard"] = f"{self.shard}/{self.shards}"
         self.key_range = shard_range(self.shard, self.shards)
-        self.pub = self.create_publisher(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
+        self.pub = self.advertise(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
         cft = content_filter(self.shard, self.shards, "update_source = %0",
                              (str(UpdateSource.SENSOR.value),), batches=True)
         self.sub = self.subscribe(EstimateBatch, TOPIC_ESTIMATE_BATCH, self.on_message,

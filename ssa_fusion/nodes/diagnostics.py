@@ -1,4 +1,4 @@
-"""What a node reports on ``/diagnostics``: counts by key, status values, matched inputs.
+"""What a node reports on ``/diagnostics``: counts by key, status values, matched endpoints.
 
 The keys are enums: `core.types.Cause` for why the core refused or set aside an input,
 `NodeCause` for causes only a node meets (shards, DDS), `Count` for what a node did. Their
@@ -15,8 +15,9 @@ from collections.abc import Callable
 
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
-from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
@@ -25,7 +26,7 @@ from rclpy.timer import Timer
 
 from ssa_fusion.core.types import Cause
 from ssa_fusion.ros.interfaces import DiagnosticArray, DiagnosticStatus, KeyValue, Message, Time
-from ssa_fusion.ros.readiness import MATCHED_KEY
+from ssa_fusion.ros.readiness import MATCHED_KEY, MATCHED_READERS_KEY
 from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
 
 
@@ -117,6 +118,7 @@ class Diagnostics:
         """Messages received on the inputs (`subscribe`); a node drains until it stands."""
         self._logged: set[str] = set()
         self._watched: list[Subscription[Message]] = []
+        self._outputs: list[Publisher[Message]] = []
         self._pub = node.create_publisher(DiagnosticArray, TOPIC_DIAGNOSTICS, QoSProfile(depth=10))
         wall_timer(node, period_s, self.publish)  # sim time may stand still (no /clock)
 
@@ -174,6 +176,21 @@ class Diagnostics:
         self._watched.append(sub)
         return sub
 
+    def advertise(self, msg_type: type[Message], topic: str,
+                  qos: QoSProfile) -> Publisher[Message]:
+        """Create an output publisher whose matched-subscriber count is reported.
+
+        On /diagnostics (key ``MATCHED_READERS_KEY + topic``), at once when it changes: a
+        sender can then wait until this writer has matched its readers (its side of the
+        match), as it waits for the readers' side (`subscribe`); what the writer sends
+        before its side exists never reaches them.
+        """
+        pub = self.node.create_publisher(
+            msg_type, topic, qos,
+            event_callbacks=PublisherEventCallbacks(matched=lambda _info: self.publish()))
+        self._outputs.append(pub)
+        return pub
+
     @property
     def has_inputs(self) -> bool:
         """Return True when the node subscribed to an input (`subscribe`)."""
@@ -199,7 +216,7 @@ class Diagnostics:
         return guarded
 
     def publish(self) -> None:
-        """Publish the counts, status and matched-publisher counts now."""
+        """Publish the counts, status and the inputs' and outputs' matched counts now."""
         msg = DiagnosticArray()
         msg.header.stamp = self._stamp()
         st = DiagnosticStatus()
@@ -212,6 +229,8 @@ class Diagnostics:
         st.values += [KeyValue(key=k, value=v) for k, v in sorted(self.status.items())]
         st.values += [KeyValue(key=MATCHED_KEY + sub.topic_name,
                                value=str(sub.get_publisher_count())) for sub in self._watched]
+        st.values += [KeyValue(key=MATCHED_READERS_KEY + pub.topic_name,
+                               value=str(pub.get_subscription_count())) for pub in self._outputs]
         msg.status = [st]
         self._pub.publish(msg)
 

@@ -114,7 +114,7 @@ class FilterNode(SsaNode):
         self.gaps = GapPublisher.of(self.tracker, self.params.number("predict_period"),
                                     GapFill(self.params.text("gap_forecast")), self.estimator)
         self.publish_config()
-        self.pub = self.create_publisher(StateEstimateMsg, TOPIC_ESTIMATE, DATA_QOS)
+        self.pub = self.advertise(StateEstimateMsg, TOPIC_ESTIMATE, DATA_QOS)
         for topic, source in ((TOPIC_MEASUREMENT, Source.SENSOR),
                               (TOPIC_FORECAST, Source.FORECAST)):
             self.subscribe(MeasurementMsg, topic,

@@ -274,8 +274,9 @@ PARAMETERS = ParameterTable("sensor_sim", (
     Param("wait_for_readers", SENSOR_SIM.wait_for_readers,
           "start only when each `node:/topic` reports a matched publisher on `/diagnostics` "
           "(e.g. `filter:/ssa/measurement`), or `node:/topic=count` that many: the readers' "
-          "side of the match exists too; `[\"\"]` = none",
-          check=Check("`node:/topic[=count]` entries", _readers)),
+          "side of the match exists too; `node:>/topic[=count]`: that node's output on the "
+          "topic has matched that many subscribers (its writer's side); `[\"\"]` = none",
+          check=Check("`node:[>]/topic[=count]` entries", _readers)),
     Param("tick", SENSOR_SIM.tick, "period of the publication timer", unit="wall s",
           check=POSITIVE),
     Param("catalog", SENSOR_SIM.catalog,
@@ -504,8 +505,8 @@ class SensorSim(SsaNode):
         """Return what start-up still waits for.
 
         '/topic=count' entries whose subscriber count is short (matched by this node's own
-        publishers where it publishes the topic), then 'node:/topic' entries not reported as
-        matched on /diagnostics.
+        publishers where it publishes the topic), then 'node:[>]/topic' entries not reported
+        as matched on /diagnostics.
         """
         own = {p.topic_name: p for p in (self.pub_clock, self.pub_meas, self.pub_withheld,
                                          self.pub_truth, self.pub_batch,

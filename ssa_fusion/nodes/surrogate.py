@@ -104,7 +104,7 @@ class SurrogateNode(SsaNode):
         self.estimator = self._estimator()
         self.core = make_surrogate(self.estimator)
         self.publish_config()
-        self.pub = self.create_publisher(MeasurementMsg, TOPIC_FORECAST, DATA_QOS)
+        self.pub = self.advertise(MeasurementMsg, TOPIC_FORECAST, DATA_QOS)
         self.subscribe(MeasurementMsg, TOPIC_MEASUREMENT, self.on_measurement, DATA_QOS)
         self.wall_timer(self.params.number("check_period"), self.publish_missed)
         self.reset_on_backward_jump(self.core.reset, "buffer emptied")

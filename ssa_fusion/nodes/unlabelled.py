@@ -72,7 +72,7 @@ class UnlabelledRows:
 
     def __init__(self, node: Node, diag: Diagnostics) -> None:
         self.diag = diag
-        self.pub = node.create_publisher(MeasurementBatch, TOPIC_ASSOCIATED, CATALOG_QOS)
+        self.pub = diag.advertise(MeasurementBatch, TOPIC_ASSOCIATED, CATALOG_QOS)
 
     def take(self, fusion: CatalogFusion, batch: MeasurementRows,
              publish_estimates: Callable[[EstimateRows], None]) -> MeasurementRows | None:

@@ -1,12 +1,16 @@
 """Waiting until subscribers are really ready to receive.
 
-A publisher's matched-subscription count rises when *its* side of the DDS match exists; what
-it sends before the subscriber's side exists is lost to a volatile reader. ssa_fusion nodes
-report each input subscription's matched-publisher count on /diagnostics (see
-`nodes.diagnostics.Diagnostics.subscribe`); `ReadyNodes` reads those reports so that a sender
-(the sensor simulator, replay's player) starts only when each named node has matched a
-publisher on each named topic ('node:/topic'), or as many publishers as it names
-('node:/topic=count': a recorder that must hear every shard from its first message).
+A DDS match has two sides, made in two processes at their own pace: the writer's (its
+matched-subscription count) and the reader's (its matched-publisher count). What a writer
+sends before both exist is lost to a volatile reader. ssa_fusion nodes report each input
+subscription's matched-publisher count and each output publisher's matched-subscription
+count on /diagnostics (`nodes.diagnostics.Diagnostics.subscribe` and `.advertise`);
+`ReadyNodes` reads those reports so that a sender (the sensor simulator, replay's player)
+starts only when each named node has matched a publisher on each named topic
+('node:/topic'), or as many publishers as it names ('node:/topic=count': a recorder that
+must hear every shard from its first message), and each named node's output has matched as
+many readers as it names ('node:>/topic=count': a shard's estimates reach the recorder from
+its first batch).
 """
 
 from __future__ import annotations
@@ -27,13 +31,20 @@ from ssa_fusion.ros.topics import (
 
 MATCHED_KEY = "matched_publishers "
 """Diagnostics key prefix; the rest of the key is the subscribed topic."""
+MATCHED_READERS_KEY = "matched_subscribers "
+"""Diagnostics key prefix; the rest of the key is the published topic."""
+OUTPUT = ">"
+"""Marks a need on a node's output: 'node:>/topic' (its publisher's matched readers)."""
 
 READERS = [f"{node}:{topic}" for node, topics in (
     ("surrogate", (TOPIC_MEASUREMENT,)),
     ("filter", (TOPIC_MEASUREMENT, TOPIC_FORECAST)),
     ("recorder", (TOPIC_MEASUREMENT, TOPIC_TRUTH, TOPIC_WITHHELD, TOPIC_FORECAST,
                   TOPIC_ESTIMATE, TOPIC_CLOCK)),
-) for topic in topics]
+) for topic in topics] + [
+    f"filter:{OUTPUT}{TOPIC_ESTIMATE}",  # the recorder
+    f"surrogate:{OUTPUT}{TOPIC_FORECAST}=2",  # the filter and the recorder
+]
 """What the ssa_fusion graph's nodes must have matched (their side) before measurements flow."""
 
 
@@ -43,7 +54,7 @@ def readers_of(topics: set[str] | tuple[str, ...]) -> list[str]:
     Those with a publisher in a graph that lacks some topics (e.g. a bag without
     /ssa/withheld).
     """
-    return [r for r in READERS if r.split(":", 1)[1] in topics]
+    return [r for r in READERS if split_need(r)[1].removeprefix(OUTPUT) in topics]
 
 
 class ReadyNodes:
@@ -62,14 +73,17 @@ class ReadyNodes:
         for st in msg.status:
             counts = {kv.key[len(MATCHED_KEY):]: int(kv.value)
                       for kv in st.values if kv.key.startswith(MATCHED_KEY)}
+            counts.update({OUTPUT + kv.key[len(MATCHED_READERS_KEY):]: int(kv.value)
+                           for kv in st.values if kv.key.startswith(MATCHED_READERS_KEY)})
             if counts:
                 self.reports[st.name] = counts
 
     def unmatched(self, needs: list[str]) -> list[str]:
-        """Return the entries of `needs` ('node:/topic[=count]') not matched yet.
+        """Return the entries of `needs` ('node:[>]/topic[=count]') not matched yet.
 
         Those whose node has not reported `count` (default 1) matched publishers on that
-        topic yet.
+        input topic ('node:/topic'), or matched subscribers on that output topic
+        ('node:>/topic'), yet.
         """
         missing = []
         for need in needs:
@@ -84,9 +98,10 @@ class ReadyNodes:
 
 
 def split_need(need: str) -> tuple[str, str, int]:
-    """Return the node, topic and publisher count (default 1) of 'node:/topic[=count]'.
+    """Return the node, topic and count (default 1) of 'node:[>]/topic[=count]'.
 
-    A malformed count reads as 1 (`check_needs` says why it is malformed).
+    The topic keeps its `OUTPUT` mark ('>/topic'). A malformed count reads as 1
+    (`check_needs` says why it is malformed).
     """
     name, _, rest = need.partition(":")
     topic, _, count = rest.partition("=")
@@ -94,12 +109,14 @@ def split_need(need: str) -> tuple[str, str, int]:
 
 
 def check_needs(needs: list[str]) -> str | None:
-    """Return why a list of 'node:/topic[=count]' entries is malformed, or None."""
+    """Return why a list of 'node:[>]/topic[=count]' entries is malformed, or None."""
     for need in needs:
         name, topic, _ = split_need(need)
         count = need.partition(":")[2].partition("=")[2]
-        if (not name or "/" in name or not topic.startswith("/")
+        if (not name or "/" in name or not topic.removeprefix(OUTPUT).startswith("/")
                 or ("=" in need and not (count.isdigit() and int(count) >= 1))):
-            return (f"{need!r} is not 'node:/topic' or 'node:/topic=count' (node: the node's "
-                    f"name, no namespace; count: publishers to match, at least 1)")
+            return (f"{need!r} is not 'node:/topic', 'node:>/topic' or either with '=count' "
+                    f"(node: the node's name, no namespace; '/topic': publishers it has "
+                    f"matched on that input, '>/topic': subscribers its output on that topic "
+                    f"has matched; count: how many, at least 1)")
     return None

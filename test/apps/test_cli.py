@@ -88,10 +88,10 @@ def test_reader_entries_name_a_node_and_a_topic():
     assert check_needs(READERS) is None
     assert "no namespace" in check_needs(["/ns/filter:/ssa/measurement"])
     assert "is not 'node:/topic'" in check_needs(["filter"])
-    assert check_needs(["recorder:/ssa/estimate=4"]) is None
+    assert check_needs(["recorder:/ssa/estimate=4", "filter:>/ssa/estimate=2"]) is None
     for bad in ("recorder:/ssa/estimate=0", "recorder:/ssa/estimate=two",
-                "recorder:/ssa/estimate="):
-        assert "count: publishers to match" in check_needs([bad])
+                "recorder:/ssa/estimate=", "filter:>ssa/estimate", "filter:>/ssa/estimate=0"):
+        assert "count: how many, at least 1" in check_needs([bad]), bad
 
 
 def test_a_reader_with_a_count_waits_for_that_many_publishers():
@@ -114,6 +114,31 @@ def test_a_reader_with_a_count_waits_for_that_many_publishers():
     assert ready.unmatched(needs) == ["recorder:/ssa/estimate=3"]
     report(3)
     assert ready.ready(needs)
+
+
+def test_an_output_need_waits_for_the_writers_side_of_the_match():
+    """'node:>/topic=n' reads the node's publisher-side count, not its subscription's."""
+    from types import SimpleNamespace
+
+    from ssa_fusion.ros.readiness import MATCHED_KEY, MATCHED_READERS_KEY, ReadyNodes
+
+    class _Node:
+        def create_subscription(self, *_args):
+            return None
+
+    ready = ReadyNodes(_Node())
+
+    def report(readers: int, publishers: int) -> None:
+        kvs = [SimpleNamespace(key=MATCHED_READERS_KEY + "/ssa/estimate", value=str(readers)),
+               SimpleNamespace(key=MATCHED_KEY + "/ssa/estimate", value=str(publishers))]
+        ready._on(SimpleNamespace(status=[SimpleNamespace(name="filter", values=kvs)]))
+
+    needs = ["filter:>/ssa/estimate=2"]
+    report(readers=1, publishers=5)  # its input's count does not stand in for its output's
+    assert ready.unmatched(needs) == needs
+    assert ready.ready(["filter:/ssa/estimate=5"])
+    report(readers=2, publishers=0)
+    assert ready.ready(needs) and not ready.ready(["filter:/ssa/estimate"])
 
 
 class _FakeGraph:
