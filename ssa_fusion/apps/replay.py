@@ -463,8 +463,8 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
                 c: EstimatorConfig) -> int:
     """Play the bag into surrogate + filter processes (estimator `c`) and record the run."""
     from ssa_fusion.ros.player import Player
-    from ssa_fusion.ros.processes import Graph, ended_badly
-    from ssa_fusion.ros.readiness import ReadyNodes, readers_of
+    from ssa_fusion.ros.processes import Graph, ended_badly, recorded_short
+    from ssa_fusion.ros.readiness import OUTPUT, ReadyNodes, readers_of
 
     record = args.record or _sibling(args.bag, "_replay")
     if record.exists():
@@ -493,27 +493,30 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
         for n in ("recorder", "surrogate", "filter"):  # the recorder first: it hears all
             graph.start_node(n, params=params[n])
         player = Player(graph.probe, [m for m in stream if m.topic in PLAYED], args.rate)
+        from ssa_fusion.ros.interfaces import Measurement, StateEstimate
+
+        # what the graph publishes, heard from the first to check the recording against
+        seen = [graph.collect(StateEstimate, TOPIC_ESTIMATE),
+                graph.collect(Measurement, TOPIC_FORECAST)]
         # recorder + surrogate + filter on measurements; recorder on the evaluation topics;
-        # filter + recorder on forecasts, recorder on estimates
+        # filter + recorder (+ this probe) on forecasts, recorder (+ probe) on estimates
         graph.wait_for(player.subscribers_ready({TOPIC_MEASUREMENT: 3, TOPIC_TRUTH: 1,
                                                  TOPIC_WITHHELD: 1}),
                        30.0, "surrogate, filter and recorder to subscribe")
-        graph.wait_for_subscriber(TOPIC_FORECAST, 2, timeout=30.0)
-        graph.wait_for_subscriber(TOPIC_ESTIMATE, 1, timeout=30.0)
+        graph.wait_for_subscriber(TOPIC_FORECAST, 3, timeout=30.0)
+        graph.wait_for_subscriber(TOPIC_ESTIMATE, 2, timeout=30.0)
         # only topics with a publisher here: a bag need not hold /ssa/truth or /ssa/withheld
         published = {*player.pubs, TOPIC_CLOCK, TOPIC_FORECAST, TOPIC_ESTIMATE}
-        needs = readers_of(published)
+        needs = [*readers_of(published),
+                 f"filter:{OUTPUT}{TOPIC_ESTIMATE}=2", f"surrogate:{OUTPUT}{TOPIC_FORECAST}=3"]
         readers = ReadyNodes(graph.probe)
         graph.play(player, lambda: readers.ready(needs),
                    "surrogate, filter and recorder to match their publishers")
-        from ssa_fusion.ros.interfaces import Measurement, StateEstimate
-
-        seen = [graph.collect(StateEstimate, TOPIC_ESTIMATE),
-                graph.collect(Measurement, TOPIC_FORECAST)]
         graph.wait_quiet(lambda: tuple(len(x) for x in seen), quiet_s=1.0, limit_s=30.0)
     finally:
         problems = graph.close()  # each stopped in turn, newest first
-    if ended_badly(problems):
+    if ended_badly(problems) or recorded_short(
+            record, {TOPIC_ESTIMATE: len(seen[0]), TOPIC_FORECAST: len(seen[1])}):
         return 1
     print(f"replayed {player.published} messages of {args.bag} at rate {args.rate:g} in "
           f"{time.monotonic() - t0:.1f} s; recorded to {record}")

@@ -432,7 +432,7 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
     """
     from ssa_fusion.ros.interfaces import EstimateBatch
     from ssa_fusion.ros.player import Player
-    from ssa_fusion.ros.processes import Graph, ended_badly
+    from ssa_fusion.ros.processes import Graph, ended_badly, recorded_short
     from ssa_fusion.ros.readiness import OUTPUT, ReadyNodes
 
     names = [f"catalog_filter_{int(p['shard'])}" for p in chosen.shards]
@@ -469,7 +469,8 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
         graph.wait_quiet(lambda: sum(rows), quiet_s=1.0, limit_s=60.0)
     finally:
         problems = graph.close()  # each stopped in turn, newest first
-    if ended_badly(problems):
+    if ended_badly(problems) or recorded_short(
+            record, {TOPIC_ESTIMATE_BATCH: sum(rows)}, lambda m: len(m.object_id)):
         return 1
     print(f"replayed {player.published} messages of {args.bag} at rate {args.rate:g} in "
           f"{time.monotonic() - t0:.1f} s: {sum(rows)} estimates; recorded to {record}")

@@ -282,6 +282,27 @@ def ended_badly(problems: list[str]) -> bool:
     return bool(problems)
 
 
+def recorded_short(record: Path, heard: dict[str, int],
+                   rows: Callable[[Message], int] = lambda _m: 1) -> bool:
+    """Say on stderr which topics the bag at `record` holds fewer of than were heard; True if any.
+
+    `heard`: per topic, what a probe of the run received (messages, or `rows` of each
+    message, e.g. an EstimateBatch's rows). A recorder that missed what the graph published
+    must not pass as a complete replay.
+    """
+    from ssa_fusion.ros import bagio
+
+    have = dict.fromkeys(heard, 0)
+    for m in bagio.read_bag(record, list(heard)):
+        have[m.topic] += rows(m.msg)
+    short = [f"{t}: {have[t]} recorded of {n} published" for t, n in heard.items()
+             if have[t] < n]
+    if short:
+        print(f"error: {record} misses what the graph published: " + "; ".join(short),
+              file=sys.stderr)
+    return bool(short)
+
+
 def ros_arguments(params: dict[str, Any] | None = None,
                   params_file: Path | None = None) -> list[str]:
     """Return ``--ros-args`` with `params_file` and `params` (``-p key:=value`` each)."""

@@ -64,3 +64,24 @@ def test_a_disk_too_full_for_the_next_message_leaves_a_whole_bag(tmp_path, monke
         assert [ts for _, ts, _ in reader.messages()] == [
             1_000_000_000 * (k + 1) for k in range(written)]
     assert sum(1 for _ in bagio.read_bag(bag)) == written
+
+
+def test_a_recording_short_of_what_was_heard_is_an_error(tmp_path, capsys):
+    """`ros.processes.recorded_short` counts the bag's messages per topic against a probe's."""
+    from ssa_fusion.ros.processes import recorded_short
+
+    bag = tmp_path / "bag"
+    writer = bagio.BagWriter(bag)
+    writer.add_topic("/ssa/raw", "std_msgs/msg/String")
+    text = bagio.typestore().types["std_msgs/msg/String"]
+    for k in range(3):
+        writer.write_msg("/ssa/raw", 1_000_000_000 * (k + 1), text(data="ab" * k))
+    writer.close()
+    assert not recorded_short(bag, {"/ssa/raw": 3})
+    assert not recorded_short(bag, {"/ssa/raw": 2})  # a probe that joined late
+    assert capsys.readouterr().err == ""
+    assert recorded_short(bag, {"/ssa/raw": 4})
+    assert "/ssa/raw: 3 recorded of 4 published" in capsys.readouterr().err
+    assert not recorded_short(bag, {"/ssa/raw": 6}, rows=lambda m: len(m.data))  # 0+2+4 rows
+    assert recorded_short(bag, {"/ssa/raw": 7}, rows=lambda m: len(m.data))
+    assert "6 recorded of 7" in capsys.readouterr().err
