@@ -20,8 +20,14 @@ import signal
 from collections.abc import Callable
 from typing import Any
 
+from rclpy.qos import QoSProfile
+from rclpy.subscription import Subscription
+
+from ssa_fusion.ros.interfaces import DiagnosticArray, DiagnosticStatus, KeyValue
 from ssa_fusion.ros.processes import Graph as RosGraph
 from ssa_fusion.ros.processes import Proc as NodeProcess
+from ssa_fusion.ros.readiness import MATCHED_KEY
+from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
 
 
 def _timeout_factor() -> float:
@@ -66,4 +72,26 @@ def run_object_graph(g: RosGraph, params: dict[str, dict[str, Any]], sensor_time
     return {"sensor_code": sensor_code, "codes": codes, "report": g.report()}
 
 
-__all__ = ["OBJECT_NODES", "TIMEOUT_FACTOR", "NodeProcess", "RosGraph", "run_object_graph"]
+def report_probe_matches(g: RosGraph, subs: list[Subscription[Any]],
+                         name: str = "test_probe") -> list[str]:
+    """Have `g`'s probe report its subscriptions' matches on /diagnostics, as a node does.
+
+    Every 0.2 s while the probe spins (each wait of `g` spins it): ``MATCHED_KEY + topic``
+    = the publishers each of `subs` has matched. Returns the 'name:/topic' entries that make
+    sensor_sim (``wait_for_readers``) wait for the probe's side of its matches as well, so
+    that the probe hears the run from its first message.
+    """
+    pub = g.probe.create_publisher(DiagnosticArray, TOPIC_DIAGNOSTICS, QoSProfile(depth=10))
+
+    def report() -> None:
+        st = DiagnosticStatus(name=name, values=[
+            KeyValue(key=MATCHED_KEY + sub.topic_name, value=str(sub.get_publisher_count()))
+            for sub in subs])
+        pub.publish(DiagnosticArray(status=[st]))
+
+    g.probe.create_timer(0.2, report)
+    return [f"{name}:{sub.topic_name}" for sub in subs]
+
+
+__all__ = ["OBJECT_NODES", "TIMEOUT_FACTOR", "NodeProcess", "RosGraph", "report_probe_matches",
+           "run_object_graph"]

@@ -33,6 +33,7 @@ from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically
 from rclpy.qos import QoSProfile
+from ros_graph import report_probe_matches
 from rosgraph_msgs.msg import Clock
 from ssa_fusion_msgs.msg import Measurement, StateEstimate
 
@@ -219,7 +220,7 @@ def test_bad_input_is_never_fused_and_counted_by_cause(ros_graph):
 
 
 def test_nodes_report_when_their_subscriptions_have_matched(ros_graph):
-    """The readers' side of a DDS match, which senders wait for (`ssa_fusion.ros.readiness`)."""
+    """Both sides of a DDS match, which senders wait for (`ssa_fusion.ros.readiness`)."""
     g = ros_graph
     ready = ReadyNodes(g.probe)
     g.start_node("filter", params=filter_params())
@@ -227,8 +228,13 @@ def test_nodes_report_when_their_subscriptions_have_matched(ros_graph):
     assert ready.unmatched(["filter:/ssa/measurement"]) == ["filter:/ssa/measurement"]
     g.probe.create_publisher(Measurement, "/ssa/measurement", DATA_QOS)
     g.wait_for(lambda: ready.ready(["filter:/ssa/measurement"]), 20.0, "filter matched")
-    # nothing publishes forecasts: that input is reported, and unmatched
-    assert ready.reports["filter"] == {"/ssa/measurement": 1, "/ssa/forecast": 0}
+    # nothing publishes forecasts: that input is reported, and unmatched; nothing reads
+    # its estimates: its output ('>') is reported, and unmatched, until the probe does
+    assert ready.reports["filter"] == {"/ssa/measurement": 1, "/ssa/forecast": 0,
+                                       ">/ssa/estimate": 0}
+    g.probe.create_subscription(StateEstimate, "/ssa/estimate", lambda _m: None, DATA_QOS)
+    g.wait_for(lambda: ready.ready(["filter:>/ssa/estimate"]), 20.0, "filter's output matched")
+    assert ready.reports["filter"][">/ssa/estimate"] == 1
 
 
 def test_a_real_measurement_beats_a_forecast_for_the_same_epoch(ros_graph):
@@ -682,14 +688,17 @@ def start_graph(g, bag: Path, time_scale: float, wait_for: list[str], stamped=Fa
     """Recorder, surrogate, filter, then sensor_sim; the probe collects every topic."""
     params = node_parameters(RUN, time_scale=time_scale, seed=2, bag=bag)
     received: dict[str, list] = {}
+    subs = []
     for topic, t in TOPICS.items():
         lst = received.setdefault(topic, [])
         cb = (lambda m, lst=lst: lst.append(time.monotonic())) if stamped else lst.append
-        g.probe.create_subscription(t, topic, cb, DATA_QOS)
+        subs.append(g.probe.create_subscription(t, topic, cb, DATA_QOS))
+    probe_needs = report_probe_matches(g, subs)  # the probe hears the run from the first
     nodes = {n: g.start_node(n, params=params[n]) for n in ("recorder", "surrogate", "filter")}
     g.wait_for_subscriber("/ssa/forecast", 3)  # filter, recorder, probe
     nodes["sensor_sim"] = g.start_node("sensor_sim", params=sensor_params(
-        time_scale, wait_for=wait_for))
+        time_scale, wait_for=wait_for,
+        wait_for_readers=[*params["sensor_sim"]["wait_for_readers"], *probe_needs]))
     return nodes, received
 
 
