@@ -72,6 +72,9 @@ class DiscoveryRange(StrEnum):
     """Announce to participants of this host only (no multicast): the default."""
     SUBNET = "SUBNET"
     """Announce by multicast on the host's networks: nodes on other hosts of the subnet."""
+    OFF = "OFF"
+    """Announce to no other participant: a process on its own (one that must not take part
+    in a graph's discovery, e.g. one started only to check its parameters)."""
 
 
 @dataclass(frozen=True)

@@ -117,11 +117,15 @@ class Graph:
         self.executor.add_node(self.probe)
 
     # processes ---------------------------------------------------------------------------
-    def start(self, name: str, cmd: list[str], expect_returncode: int | None = 0) -> Proc:
-        """Start `cmd` in this graph's domain; output goes to workdir/<name>.{out,err}."""
+    def start(self, name: str, cmd: list[str], expect_returncode: int | None = 0,
+              env: dict[str, str] | None = None) -> Proc:
+        """Start `cmd` in this graph's domain; output goes to workdir/<name>.{out,err}.
+
+        `env`: variables set for this process on top of the graph's.
+        """
         out = self.workdir / f"{name}.out"
         err = self.workdir / f"{name}.err"
-        popen = subprocess.Popen(cmd, env=self.env, stdout=out.open("wb"),
+        popen = subprocess.Popen(cmd, env={**self.env, **(env or {})}, stdout=out.open("wb"),
                                  stderr=err.open("wb"), stdin=subprocess.DEVNULL,
                                  start_new_session=True)
         proc = Proc(name, popen, out, err, expect_returncode)
@@ -130,10 +134,13 @@ class Graph:
 
     def start_node(self, executable: str, *ros_args: str, params: dict[str, Any] | None = None,
                    params_file: Path | None = None, name: str | None = None,
-                   expect_returncode: int | None = 0) -> Proc:
-        """Start an ssa_fusion node executable with parameters (`-p key:=value`)."""
+                   expect_returncode: int | None = 0, env: dict[str, str] | None = None) -> Proc:
+        """Start an ssa_fusion node executable with parameters (`-p key:=value`).
+
+        `env`: as `start`'s.
+        """
         cmd = [*node_command(executable), *ros_arguments(params, params_file)]
-        return self.start(name or executable, cmd + list(ros_args), expect_returncode)
+        return self.start(name or executable, cmd + list(ros_args), expect_returncode, env)
 
     def start_python(self, script: Path | str, *args: str, name: str,
                      expect_returncode: int | None = 0) -> Proc:

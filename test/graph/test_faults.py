@@ -46,6 +46,7 @@ from ssa_fusion.core.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.tracker import Tracker
 from ssa_fusion.graphs import node_parameters
 from ssa_fusion.ros import bagio, messages
+from ssa_fusion.ros.discovery import RANGE_VAR, DiscoveryRange
 from ssa_fusion.ros.readiness import ReadyNodes
 from ssa_fusion.ros.topics import DATA_QOS
 from ssa_fusion.sim import scenarios
@@ -536,8 +537,12 @@ def test_invalid_parameters_refuse_to_start(ros_graph, tmp_path):
         "fit_budget": ("catalog_surrogate", {"fit_budget": 2.0}),
         "shards": ("catalog_surrogate", {"shards": 0}),
     }
+    # each on its own (no discovery): ~25 participants starting and leaving at once can
+    # deadlock a Fast DDS participant that is still being created (eProsima/Fast-DDS#6502:
+    # a writer proxy stopped under the PDP lock while the event thread waits for it)
+    alone = {RANGE_VAR: DiscoveryRange.OFF.value}
     procs = {label: g.start_node(node, params=p, name=f"{node}_{label.replace('/', '_')}",
-                                 expect_returncode=2)
+                                 expect_returncode=2, env=alone)
              for label, (node, p) in cases.items()}
     for label, proc in procs.items():
         name = label.split("/")[0]  # the parameter the error must name
