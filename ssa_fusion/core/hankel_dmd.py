@@ -117,6 +117,16 @@ def psd_part(c: FloatArray) -> FloatArray:
     return out
 
 
+def warm_up() -> None:
+    """Import what a fit uses (scipy.linalg, ~0.3 s), so that the first fit does not.
+
+    The fits import it on first use so that importing this module stays cheap; a process
+    that will fit (the surrogate node) calls this at start, before measurements arrive, so
+    its first forecast is not late by the import.
+    """
+    import scipy.linalg  # noqa: F401
+
+
 def _hankel(z: FloatArray, delays: int) -> FloatArray:
     """Time-delay matrix, PyDMD ordering: column j = [z_j; z_{j+1}; ...; z_{j+d-1}].
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 from dataclasses import replace
 from functools import partial
 
+from ssa_fusion.core import hankel_dmd
 from ssa_fusion.core.config import EstimatorConfig, Lift, make_surrogate
 from ssa_fusion.core.types import Cause, Measurement
 from ssa_fusion.nodes import settings
@@ -103,6 +104,7 @@ class SurrogateNode(SsaNode):
         super().__init__()
         self.estimator = self._estimator()
         self.core = make_surrogate(self.estimator)
+        hankel_dmd.warm_up()  # the first fit, in the first gap, not late by an import
         self.publish_config()
         self.pub = self.advertise(MeasurementMsg, TOPIC_FORECAST, DATA_QOS)
         self.subscribe(MeasurementMsg, TOPIC_MEASUREMENT, self.on_measurement, DATA_QOS)

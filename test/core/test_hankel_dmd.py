@@ -265,3 +265,15 @@ def test_input_validation() -> None:
     dmd = HankelDMD(10).fit(sinusoids(np.arange(100)))
     assert dmd.forecast(0).shape == (2, 0)
     assert dmd.forecast_covariance(0).shape == (0, 2, 2)
+
+
+def test_warm_up_imports_what_a_fit_uses():
+    """`warm_up` leaves scipy.linalg imported (in a fresh interpreter, where it was not)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, ssa_fusion.core.hankel_dmd as h; a = 'scipy.linalg' in sys.modules; "
+            "h.warm_up(); print(a, 'scipy.linalg' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split()
+    assert out == ["False", "True"]
