@@ -41,6 +41,8 @@ predicted without the groups' registration here), is dropped (H0 stays). Units: 
 from __future__ import annotations
 
 import enum
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -50,7 +52,8 @@ from .filter_options import FilterOptions
 from .frames import Station
 from .track_bank import TrackBank
 
-__all__ = ["Fork", "ForkState", "PairDeferral", "Relabel", "ambiguous_pairs", "copy_track"]
+__all__ = ["Fork", "ForkState", "PairDeferral", "Relabel", "ambiguous_pairs", "copy_track",
+           "shadows_in"]
 
 Array = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -155,6 +158,10 @@ def ambiguous_pairs(track: IntArray, cost: Array, feasible: BoolArray, margin: f
     return out
 
 
+_TRACK_FIELDS = ("x", "P", "t", "tracking", "gate_misses", "stations_at_t", "seen")
+"""The per-row arrays of a `TrackBank` that hold one track's filter state."""
+
+
 def copy_track(src: TrackBank, row: int, dst: TrackBank, dst_row: int) -> None:
     """Copy one track's state, covariance, epoch and fusion marks between banks."""
     dst.x[dst_row], dst.P[dst_row], dst.t[dst_row] = src.x[row], src.P[row], src.t[row]
@@ -162,6 +169,29 @@ def copy_track(src: TrackBank, row: int, dst: TrackBank, dst_row: int) -> None:
     dst.gate_misses[dst_row] = 0
     dst.stations_at_t[dst_row] = src.stations_at_t[row]
     dst.seen[dst_row] = src.seen[row]
+
+
+@contextmanager
+def shadows_in(fork: Fork, filters: list[tuple[TrackBank, int, int]],
+               shadows: list[TrackBank]) -> Iterator[None]:
+    """Within the block, the tracks of ``fork`` hold H1's states; restored after it.
+
+    ``filters``: per filter (the tracks', then the long-arc predictor's), the bank and the
+    rows of ``fork.a`` and ``fork.b`` in it; ``shadows``: the shadow banks in the same
+    order (`PairDeferral.banks`). Row ``a`` takes shadow 0 (a's state with b's
+    detections), row ``b`` shadow 1.
+    """
+    saved = []
+    for (bank, ra, rb), dst in zip(filters, shadows, strict=True):
+        for r, name in ((ra, fork.shadow[0]), (rb, fork.shadow[1])):
+            saved.append((bank, r, [getattr(bank, f)[r].copy() for f in _TRACK_FIELDS]))
+            copy_track(dst, dst.rows[name], bank, r)
+    try:
+        yield
+    finally:
+        for bank, r, values in saved:
+            for f, v in zip(_TRACK_FIELDS, values, strict=True):
+                getattr(bank, f)[r] = v
 
 
 class PairDeferral:
