@@ -207,11 +207,11 @@ class AssociationConfig:
         detections on the right track and no track swapped.
     defer_max_wait_s : float
         A deferred decision whose pair is not seen again within this long after its pass,
-        s, is dropped (the scan-wise assignment stays): the decision compares the two
-        hypotheses' predictions by the long-arc predictor without the groups' registration,
-        sharp only across a short gap (across the half-day gaps a common along-track error
-        of km, `register`, would decide it). 3 h: about two orbits in low orbit, the next
-        pass or the one after, not the next day's.
+        s, is dropped (the scan-wise assignment stays). Each hypothesis is scored on the
+        whole scan as the association makes it (the long-arc predictor and the groups'
+        registration, `Associator._scan_cost`), so a decision across the half-day gap of a
+        station's passes is as sharp as one at the next pass; 1 day: a low orbit comes
+        back into a mid-latitude station's view within a day (not fitted).
     """
 
     gate_probability: float = 0.9999
@@ -229,7 +229,7 @@ class AssociationConfig:
     group_link_speed_fraction: float = 0.01
     defer_passes: int = 1
     defer_margin: float = 2.0 * math.log(1000.0)
-    defer_max_wait_s: float = 3.0 * 3600.0
+    defer_max_wait_s: float = 86400.0
 
     def __post_init__(self) -> None:
         """Check the settings (ValueError naming the field)."""
@@ -1026,10 +1026,16 @@ class Associator:
             ready.append(fork)
         rows = self._active_rows()
         local = {int(r): i for i, r in enumerate(rows.tolist())}
-        h0: tuple[float, IntArray] | None = None
+        h0: tuple[float, IntArray, Array] | None = None
         for fork in ready:
             if fork.a not in local or fork.b not in local:
                 self.counts[TrackEvent.DEFER_DROPPED] += 1
+                continue
+            shadow = deferral.shadow
+            if not (pair_cost(self.bank, [fork.a, fork.b], st, tt, zz, RR, self._gate)[1]
+                    or pair_cost(shadow, [shadow.rows[n] for n in fork.shadow], st, tt, zz,
+                                 RR, self._gate)[1]):
+                keep.append(fork)  # the pair is not in this scan's gates
                 continue
             if h0 is None:  # H0 of every fork: the tracks as they are
                 h0 = self._scan_cost(rows, st, tt, zz, RR)
@@ -1037,8 +1043,8 @@ class Associator:
             with shadows_in(fork, filters, deferral.banks()):
                 h1 = self._scan_cost(rows, st, tt, zz, RR)
             pair = [local[fork.a], local[fork.b]]
-            if not (np.isin(pair, h0[1]).any() or np.isin(pair, h1[1]).any()):
-                keep.append(fork)  # neither hypothesis gave the pair a detection
+            if not any((h[2][pair] <= self._gate).all() for h in (h0, h1)):
+                keep.append(fork)  # no hypothesis has both tracks in the scan yet
                 continue
             if fork.cost[1] + h1[0] < fork.cost[0] + h0[0]:
                 for (bank, ra, rb), dst in zip(filters, deferral.banks(), strict=True):
@@ -1057,14 +1063,15 @@ class Associator:
         return np.flatnonzero(self.bank.tracking[:n] & (self.status[:n] != TrackStatus.DELETED))
 
     def _scan_cost(self, rows: IntArray, st: int, tt: Array, zz: Array,
-                   RR: Array) -> tuple[float, IntArray]:
+                   RR: Array) -> tuple[float, IntArray, Array]:
         """Associate the scan with the tracks ``rows`` as `_tracks` does; return its cost.
 
         Returns the total over the tracks of ``min(d^2, gate) + ln det S`` on the detection
         the assignment gave each (the scores of `_gate_scan`: the long-arc predictor's,
         registered), ``gate + ln det S`` (S at the scan's first detection) for a track
-        without one (as `pair_cost`), and per detection its index in ``rows`` or
-        `UNASSIGNED`. Nothing is fused or counted.
+        without one (as `pair_cost`), per detection its index in ``rows`` or
+        `UNASSIGNED`, and per track the ``d^2`` of its detection (inf without one). Nothing
+        is fused or counted.
         """
         bank = self.bank
         pred = predict_scan(bank.ekf, bank.x[rows], bank.P[rows], bank.t[rows], tt, st)
@@ -1075,8 +1082,10 @@ class Associator:
         miss = np.where(np.isfinite(logdet[:, 0]), logdet[:, 0], 0.0) + self._gate
         got = np.flatnonzero(track >= 0)
         i = track[got]
-        hit = np.minimum(gated.d2[i, got], self._gate) + logdet[i, got]
-        return float(miss.sum() + (hit - miss[i]).sum()), track
+        d2 = np.full(rows.size, np.inf)
+        d2[i] = gated.d2[i, got]
+        hit = np.minimum(d2[i], self._gate) + logdet[i, got]
+        return float(miss.sum() + (hit - miss[i]).sum()), track, d2
 
     def _gate_scan(self, rows: IntArray, pred: ScanPrediction, st: int, tt: Array,
                    zz: Array, RR: Array, count: bool = True) -> Gated:

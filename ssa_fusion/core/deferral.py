@@ -25,17 +25,23 @@ neighbour's second has the wrong mean motion, and predicts the third pass km off
   there is one, else the tracks' filter), ``min(d^2, gate) + ln det S`` per track (a track
   without a detection, or with one outside its gate, costs the gate: a miss);
 * *decision*: at the first scan after the pass (``pass_gap_s`` without a detection of the
-  pair) where either hypothesis has a detection inside a gate, each hypothesis's two tracks
-  are assigned that scan's detections on their own (`association.assign` on the 2 x M
-  costs) and scored the same way; the hypothesis of least total cost wins. When it is H1,
-  the shadows' states replace the tracks' (both filters) and every detection of the pair
-  in the deferred pass changes label (`Relabel`): the tracks stay on the objects of their
-  first pass. Then the scan is associated as usual.
+  pair) in which both tracks of the pair, in either hypothesis, get a detection inside the
+  gate, each hypothesis is scored on that whole scan as the association would make it
+  with the pair's tracks in its states (`association.Associator._scan_cost`: every
+  track's prediction, the long-arc rescoring, the groups' registration, the assignment;
+  ``min(d^2, gate) + ln det S`` per track, the gate for a track without a detection).
+  Across a long gap the pair's own predictions share an along-track error of km with
+  their group, which the registration takes out; a track of the wrong hypothesis (an
+  orbit fitted to one object's first pass and its neighbour's second) is then km off its
+  group, and pushes its neighbours off theirs in the assignment. The hypothesis of least
+  total cost (the deferred pass's and that scan's) wins. When it is H1, the shadows'
+  states replace the tracks' (both filters) and every detection of the pair in the
+  deferred pass changes label (`Relabel`): the tracks stay on the objects of their first
+  pass. Then the scan is associated as usual.
 
 A fork whose track is deleted, or whose pair is not seen again within
-``defer_max_wait_s`` of its pass (`association.AssociationConfig`: the next day's pass is
-predicted without the groups' registration here), is dropped (H0 stays). Units: the core's
-(km, rad, s).
+``defer_max_wait_s`` of its pass (`association.AssociationConfig`), is dropped (H0 stays).
+Units: the core's (km, rad, s).
 """
 
 from __future__ import annotations
