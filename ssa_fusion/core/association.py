@@ -815,6 +815,11 @@ class Associator:
         self._tl_raw: dict[str, list[tuple[float, Array, Array]]] = {}
 
     # --------------------------------------------------------------------------------------
+    @property
+    def scan_serial(self) -> int:
+        """Serial number of the last scan processed (0 for the first; -1 before it)."""
+        return self._scan
+
     def track_ids(self, status: TrackStatus) -> list[str]:
         """Return the ids of the tracks of a status."""
         return [self.bank.object_ids[r] for r in np.flatnonzero(self.status == status)]

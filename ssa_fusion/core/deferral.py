@@ -231,6 +231,10 @@ class PairDeferral:
         """Return the bank rows in an open or pending fork."""
         return {r for f in self.forks for r in (f.a, f.b)}
 
+    def scans_held(self) -> set[int]:
+        """Return the serial numbers of the scans whose detections a fork may relabel."""
+        return {lab[0] for f in self.forks for lab in f.labels}
+
     def open(self, a: int, b: int, t_scan: float, banks: list[tuple[TrackBank, int, int]]
              ) -> Fork:
         """Start a fork for rows ``a``, ``b``: shadows of their states before this scan.
