@@ -24,7 +24,9 @@ a time. Scored by the truth labels kept aside:
 * these scores (`evaluation.association`: `score_association`, `pass_swaps`) are of the
   labels as decided: a deferred decision (`AssociationConfig.defer_passes`) that changes
   the track of detections of an earlier pass (`ScanOutcome.relabelled`) changes their
-  labels; ``*_as_emitted``: the same scores of the labels as each scan returned them;
+  labels; ``*_as_emitted``: the same scores of the labels as each scan returned them (the
+  node graph publishes the moved detections again, `core.unlabelled.RowsOutcome.relabelled`,
+  so a live run scores the labels as decided);
 * confirmed tracks, objects with a confirmed track, duplicate tracks (a second confirmed
   track of an object), tracklets and tentative tracks dropped;
 * cost per scan: wall time of `Associator.process_scan` (association, fusion, tentative

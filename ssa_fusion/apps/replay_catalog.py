@@ -201,6 +201,9 @@ class CatalogResult:
     estimates: list[tuple[int, tuple[int, int], EstimateRows]] = field(default_factory=list)
     """(log time, shard key range, rows), in publication order."""
     associated: list[tuple[int, MeasurementRows]] = field(default_factory=list)
+    """(log time, rows) on ``/ssa/measurement_associated``, in publication order: each
+    fusion's associated detections, then those a deferred decision moved to another track
+    (`core.unlabelled.RowsOutcome.relabelled`)."""
     causes: Counter[str] = field(default_factory=Counter)
     """Rows refused or pending, by cause (the node's /diagnostics counts)."""
     fates: Counter[DetectionFate] = field(default_factory=Counter)
@@ -251,8 +254,10 @@ def replay(raw: list[bagio.BagMessage], shards: list[Shard]) -> CatalogResult:
                 result.fates.update(fused.unlabelled.fates)
             for e in fused.estimates():
                 result.estimates.append((msg.t_ns, shard.key_range, e))
-            if fused.unlabelled is not None and len(fused.unlabelled.associated):
-                result.associated.append((msg.t_ns, fused.unlabelled.associated))
+            if fused.unlabelled is not None:  # the associated, then the relabelled
+                result.associated += [(msg.t_ns, a) for a in (fused.unlabelled.associated,
+                                                              fused.unlabelled.relabelled)
+                                      if len(a)]
     return result
 
 
@@ -405,7 +410,8 @@ def run(args: argparse.Namespace, telling: list[bagio.BagMessage], reason: str,
     if result.fates:
         print(f"replay: {sum(result.fates.values())} unlabelled detections associated: "
               + ", ".join(f"{f.name.lower()} {n}" for f, n in sorted(result.fates.items()))
-              + f"; {sum(len(a) for _, a in result.associated)} kept (on {TOPIC_ASSOCIATED})")
+              + f"; {sum(len(a) for _, a in result.associated)} rows on {TOPIC_ASSOCIATED} "
+              "(a detection a deferred decision moved again)")
     return 0
 
 

@@ -99,7 +99,14 @@ from scipy.stats import chi2
 
 from .batch_ekf import BatchEKF
 from .constants import MU_EARTH
-from .deferral import ForkState, PairDeferral, Relabel, ambiguous_pairs, copy_track
+from .deferral import (
+    ForkState,
+    PairDeferral,
+    Relabel,
+    ambiguous_pairs,
+    copy_track,
+    shadows_in,
+)
 from .filter_options import FilterOptions
 from .frames import Station
 from .iod import razel_to_gcrs
@@ -200,11 +207,11 @@ class AssociationConfig:
         detections on the right track and no track swapped.
     defer_max_wait_s : float
         A deferred decision whose pair is not seen again within this long after its pass,
-        s, is dropped (the scan-wise assignment stays): the decision compares the two
-        hypotheses' predictions by the long-arc predictor without the groups' registration,
-        sharp only across a short gap (across the half-day gaps a common along-track error
-        of km, `register`, would decide it). 3 h: about two orbits in low orbit, the next
-        pass or the one after, not the next day's.
+        s, is dropped (the scan-wise assignment stays). Each hypothesis is scored on the
+        whole scan as the association makes it (the long-arc predictor and the groups'
+        registration, `Associator._scan_cost`), so a decision across the half-day gap of a
+        station's passes is as sharp as one at the next pass; 1 day: a low orbit comes
+        back into a mid-latitude station's view within a day (not fitted).
     """
 
     gate_probability: float = 0.9999
@@ -222,7 +229,7 @@ class AssociationConfig:
     group_link_speed_fraction: float = 0.01
     defer_passes: int = 1
     defer_margin: float = 2.0 * math.log(1000.0)
-    defer_max_wait_s: float = 3.0 * 3600.0
+    defer_max_wait_s: float = 86400.0
 
     def __post_init__(self) -> None:
         """Check the settings (ValueError naming the field)."""
@@ -808,6 +815,11 @@ class Associator:
         self._tl_raw: dict[str, list[tuple[float, Array, Array]]] = {}
 
     # --------------------------------------------------------------------------------------
+    @property
+    def scan_serial(self) -> int:
+        """Serial number of the last scan processed (0 for the first; -1 before it)."""
+        return self._scan
+
     def track_ids(self, status: TrackStatus) -> list[str]:
         """Return the ids of the tracks of a status."""
         return [self.bank.object_ids[r] for r in np.flatnonzero(self.status == status)]
@@ -882,8 +894,7 @@ class Associator:
         expected as missed.
         """
         m = zz.shape[0]
-        n = len(self.bank)
-        rows = np.flatnonzero(self.bank.tracking[:n] & (self.status != TrackStatus.DELETED))
+        rows = self._active_rows()
         if not rows.size:
             return np.arange(m)
         cfg = self.config
@@ -994,12 +1005,17 @@ class Associator:
 
     def _decide(self, station: str, st: int, t_scan: float, tt: Array, zz: Array,
                 RR: Array) -> None:
-        """Decide the forks whose pass ended, on this scan (`deferral` module docstring)."""
+        """Decide the forks whose pass ended, on this scan (`deferral` module docstring).
+
+        Each hypothesis is scored on the whole scan as `_tracks` would associate it
+        (`_scan_cost`: every track's prediction, the long-arc rescoring, the groups'
+        registration and the assignment), with the pair's tracks in H0's states (the
+        tracks') or H1's (the shadows'): after a long gap the pair's own predictions share
+        an along-track error of km with their group, which the registration takes out.
+        """
         deferral = self.deferral
         assert deferral is not None
-        src, srow = self._scoring()
-        shadow = deferral.scoring_shadow()
-        keep = []
+        keep, ready = [], []
         for fork in deferral.forks:
             if TrackStatus.DELETED in (self.status[fork.a], self.status[fork.b]):
                 self.counts[TrackEvent.DEFER_DROPPED] += 1
@@ -1012,25 +1028,72 @@ class Associator:
             if t_scan - fork.t_last > self.config.defer_max_wait_s:
                 self.counts[TrackEvent.DEFER_DROPPED] += 1
                 continue
-            h0, seen0 = pair_cost(src, srow[[fork.a, fork.b]], st, tt, zz, RR, self._gate)
-            h1, seen1 = pair_cost(shadow, [shadow.rows[n] for n in fork.shadow], st, tt, zz,
-                                  RR, self._gate)
-            if not (seen0 or seen1):
-                keep.append(fork)
+            ready.append(fork)
+        rows = self._active_rows()
+        local = {int(r): i for i, r in enumerate(rows.tolist())}
+        h0: tuple[float, IntArray, Array] | None = None
+        for fork in ready:
+            if fork.a not in local or fork.b not in local:
+                self.counts[TrackEvent.DEFER_DROPPED] += 1
                 continue
-            if fork.cost[1] + h1 < fork.cost[0] + h0:
-                for (bank, ra, rb), dst in zip(self._filters(fork.a, fork.b),
-                                               deferral.banks(), strict=True):
+            shadow = deferral.shadow
+            if not (pair_cost(self.bank, [fork.a, fork.b], st, tt, zz, RR, self._gate)[1]
+                    or pair_cost(shadow, [shadow.rows[n] for n in fork.shadow], st, tt, zz,
+                                 RR, self._gate)[1]):
+                keep.append(fork)  # the pair is not in this scan's gates
+                continue
+            if h0 is None:  # H0 of every fork: the tracks as they are
+                h0 = self._scan_cost(rows, st, tt, zz, RR)
+            filters = self._filters(fork.a, fork.b)
+            with shadows_in(fork, filters, deferral.banks()):
+                h1 = self._scan_cost(rows, st, tt, zz, RR)
+            pair = [local[fork.a], local[fork.b]]
+            if not any((h[2][pair] <= self._gate).all() for h in (h0, h1)):
+                keep.append(fork)  # no hypothesis has both tracks in the scan yet
+                continue
+            if fork.cost[1] + h1[0] < fork.cost[0] + h0[0]:
+                for (bank, ra, rb), dst in zip(filters, deferral.banks(), strict=True):
                     copy_track(dst, dst.rows[fork.shadow[0]], bank, ra)
                     copy_track(dst, dst.rows[fork.shadow[1]], bank, rb)
                 self.relabels += [Relabel(*lab) for lab in fork.labels]
                 self.counts[TrackEvent.DEFER_SWAPPED] += 1
+                h0 = None  # the tracks changed
             else:
                 self.counts[TrackEvent.DEFER_KEPT] += 1
         deferral.forks = keep
 
+    def _active_rows(self) -> IntArray:
+        """Return the bank rows of the tracks associated with a scan (tracked, not deleted)."""
+        n = len(self.bank)
+        return np.flatnonzero(self.bank.tracking[:n] & (self.status[:n] != TrackStatus.DELETED))
+
+    def _scan_cost(self, rows: IntArray, st: int, tt: Array, zz: Array,
+                   RR: Array) -> tuple[float, IntArray, Array]:
+        """Associate the scan with the tracks ``rows`` as `_tracks` does; return its cost.
+
+        Returns the total over the tracks of ``min(d^2, gate) + ln det S`` on the detection
+        the assignment gave each (the scores of `_gate_scan`: the long-arc predictor's,
+        registered), ``gate + ln det S`` (S at the scan's first detection) for a track
+        without one (as `pair_cost`), per detection its index in ``rows`` or
+        `UNASSIGNED`, and per track the ``d^2`` of its detection (inf without one). Nothing
+        is fused or counted.
+        """
+        bank = self.bank
+        pred = predict_scan(bank.ekf, bank.x[rows], bank.P[rows], bank.t[rows], tt, st)
+        gated = self._gate_scan(rows, pred, st, tt, zz, RR, count=False)
+        track = assign(gated.cost, gated.feasible)
+        with np.errstate(invalid="ignore"):
+            logdet = gated.cost - gated.d2  # ln det S where computable, else nan
+        miss = np.where(np.isfinite(logdet[:, 0]), logdet[:, 0], 0.0) + self._gate
+        got = np.flatnonzero(track >= 0)
+        i = track[got]
+        d2 = np.full(rows.size, np.inf)
+        d2[i] = gated.d2[i, got]
+        hit = np.minimum(d2[i], self._gate) + logdet[i, got]
+        return float(miss.sum() + (hit - miss[i]).sum()), track, d2
+
     def _gate_scan(self, rows: IntArray, pred: ScanPrediction, st: int, tt: Array,
-                   zz: Array, RR: Array) -> Gated:
+                   zz: Array, RR: Array, count: bool = True) -> Gated:
         """Score the scan's pairs: `gate_scan`, rescored by the long-arc predictor.
 
         ``pred`` is the tracks' filter's prediction of the bank rows ``rows``; only the
@@ -1038,7 +1101,7 @@ class Associator:
         (`gate_long_arc`; a track it does not hold, its IOD failed there, keeps the tracks'
         filter's score) and, with ``register_groups``, shifted along track by their
         group's `register` shift (the tracks' filter's prediction when there is no
-        long-arc predictor).
+        long-arc predictor). ``count``: add the groups registered to `counts`.
         """
         wide = gate_scan(pred, zz, RR, self._gate)
         which = np.flatnonzero(wide.feasible.any(1))
@@ -1062,7 +1125,9 @@ class Associator:
             sigma_s = pred.sigma_pos[:, which].max(0) / fine.speed.min(0)
             shift = register(fine, zz, RR, wide.feasible[which], self._gate, sigma_s,
                              linked=self._close_tracks(pred, fine, which))
-            self.counts[TrackEvent.GROUP_REGISTERED] += int(np.unique(shift[shift != 0.0]).size)
+            if count:
+                self.counts[TrackEvent.GROUP_REGISTERED] += int(
+                    np.unique(shift[shift != 0.0]).size)
             if np.any(shift != 0.0):  # the shifted tracks predicted again, exactly
                 fine = predict_scan(src.ekf, src.x[pr], src.P[pr], t0 - shift, tt, st)
         return gate_long_arc(wide, gate_scan(fine, zz, RR, self._gate), which)

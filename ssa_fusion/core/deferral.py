@@ -25,22 +25,30 @@ neighbour's second has the wrong mean motion, and predicts the third pass km off
   there is one, else the tracks' filter), ``min(d^2, gate) + ln det S`` per track (a track
   without a detection, or with one outside its gate, costs the gate: a miss);
 * *decision*: at the first scan after the pass (``pass_gap_s`` without a detection of the
-  pair) where either hypothesis has a detection inside a gate, each hypothesis's two tracks
-  are assigned that scan's detections on their own (`association.assign` on the 2 x M
-  costs) and scored the same way; the hypothesis of least total cost wins. When it is H1,
-  the shadows' states replace the tracks' (both filters) and every detection of the pair
-  in the deferred pass changes label (`Relabel`): the tracks stay on the objects of their
-  first pass. Then the scan is associated as usual.
+  pair) in which both tracks of the pair, in either hypothesis, get a detection inside the
+  gate, each hypothesis is scored on that whole scan as the association would make it
+  with the pair's tracks in its states (`association.Associator._scan_cost`: every
+  track's prediction, the long-arc rescoring, the groups' registration, the assignment;
+  ``min(d^2, gate) + ln det S`` per track, the gate for a track without a detection).
+  Across a long gap the pair's own predictions share an along-track error of km with
+  their group, which the registration takes out; a track of the wrong hypothesis (an
+  orbit fitted to one object's first pass and its neighbour's second) is then km off its
+  group, and pushes its neighbours off theirs in the assignment. The hypothesis of least
+  total cost (the deferred pass's and that scan's) wins. When it is H1, the shadows'
+  states replace the tracks' (both filters) and every detection of the pair in the
+  deferred pass changes label (`Relabel`): the tracks stay on the objects of their first
+  pass. Then the scan is associated as usual.
 
 A fork whose track is deleted, or whose pair is not seen again within
-``defer_max_wait_s`` of its pass (`association.AssociationConfig`: the next day's pass is
-predicted without the groups' registration here), is dropped (H0 stays). Units: the core's
-(km, rad, s).
+``defer_max_wait_s`` of its pass (`association.AssociationConfig`), is dropped (H0 stays).
+Units: the core's (km, rad, s).
 """
 
 from __future__ import annotations
 
 import enum
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -50,7 +58,8 @@ from .filter_options import FilterOptions
 from .frames import Station
 from .track_bank import TrackBank
 
-__all__ = ["Fork", "ForkState", "PairDeferral", "Relabel", "ambiguous_pairs", "copy_track"]
+__all__ = ["Fork", "ForkState", "PairDeferral", "Relabel", "ambiguous_pairs", "copy_track",
+           "shadows_in"]
 
 Array = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -155,6 +164,10 @@ def ambiguous_pairs(track: IntArray, cost: Array, feasible: BoolArray, margin: f
     return out
 
 
+_TRACK_FIELDS = ("x", "P", "t", "tracking", "gate_misses", "stations_at_t", "seen")
+"""The per-row arrays of a `TrackBank` that hold one track's filter state."""
+
+
 def copy_track(src: TrackBank, row: int, dst: TrackBank, dst_row: int) -> None:
     """Copy one track's state, covariance, epoch and fusion marks between banks."""
     dst.x[dst_row], dst.P[dst_row], dst.t[dst_row] = src.x[row], src.P[row], src.t[row]
@@ -162,6 +175,29 @@ def copy_track(src: TrackBank, row: int, dst: TrackBank, dst_row: int) -> None:
     dst.gate_misses[dst_row] = 0
     dst.stations_at_t[dst_row] = src.stations_at_t[row]
     dst.seen[dst_row] = src.seen[row]
+
+
+@contextmanager
+def shadows_in(fork: Fork, filters: list[tuple[TrackBank, int, int]],
+               shadows: list[TrackBank]) -> Iterator[None]:
+    """Within the block, the tracks of ``fork`` hold H1's states; restored after it.
+
+    ``filters``: per filter (the tracks', then the long-arc predictor's), the bank and the
+    rows of ``fork.a`` and ``fork.b`` in it; ``shadows``: the shadow banks in the same
+    order (`PairDeferral.banks`). Row ``a`` takes shadow 0 (a's state with b's
+    detections), row ``b`` shadow 1.
+    """
+    saved = []
+    for (bank, ra, rb), dst in zip(filters, shadows, strict=True):
+        for r, name in ((ra, fork.shadow[0]), (rb, fork.shadow[1])):
+            saved.append((bank, r, [getattr(bank, f)[r].copy() for f in _TRACK_FIELDS]))
+            copy_track(dst, dst.rows[name], bank, r)
+    try:
+        yield
+    finally:
+        for bank, r, values in saved:
+            for f, v in zip(_TRACK_FIELDS, values, strict=True):
+                getattr(bank, f)[r] = v
 
 
 class PairDeferral:
@@ -194,6 +230,10 @@ class PairDeferral:
     def busy(self) -> set[int]:
         """Return the bank rows in an open or pending fork."""
         return {r for f in self.forks for r in (f.a, f.b)}
+
+    def scans_held(self) -> set[int]:
+        """Return the serial numbers of the scans whose detections a fork may relabel."""
+        return {lab[0] for f in self.forks for lab in f.labels}
 
     def open(self, a: int, b: int, t_scan: float, banks: list[tuple[TrackBank, int, int]]
              ) -> Fork:

@@ -14,6 +14,11 @@ nearest neighbour, tracklets, IOD, M-of-N confirmation, deletion), and returns p
 * the detections the association kept, relabelled with the id of the track or tracklet
   they went to (a tracklet's id is that of the track its IOD starts): rows a labelled
   consumer can read;
+* the detections of earlier scans whose track a deferred decision changed
+  (`association.AssociationConfig.defer_passes`, `deferral.Relabel`), again, with the id
+  of the track they now belong to: a detection given out twice belongs to the track of
+  its last publication (`evaluation.association.detection_labels` reads them so). The
+  rows of a scan are kept while an open deferred decision may relabel them;
 * what became of every detection (`association.DetectionFate` counts: to a track, to a
   tracklet, a new tracklet, refused) and the association's events (`TrackEvent` counts),
   for ``/diagnostics``.
@@ -40,6 +45,7 @@ from .association import (
     TrackEvent,
     TrackStatus,
 )
+from .deferral import Relabel
 from .filter_options import FilterOptions
 from .frames import Station
 from .rows import EstimateRows, MeasurementRows
@@ -121,6 +127,10 @@ class RowsOutcome:
     associated : MeasurementRows
         The detections placed in a track or a tracklet, ``object_id`` = its `track_name`
         (``shard_key`` its CRC-32 is the caller's to set), in processing order.
+    relabelled : MeasurementRows
+        Detections of earlier calls or this one that a deferred decision moved to another
+        track, ``object_id`` = that track's `track_name` (after `associated` in time: they
+        supersede what was given out for them before), in decision order.
     fates : Counter of DetectionFate
         Every detection's fate: they sum to M.
     events : Counter of TrackEvent
@@ -131,6 +141,7 @@ class RowsOutcome:
 
     estimates: EstimateRows
     associated: MeasurementRows
+    relabelled: MeasurementRows
     fates: Counter[DetectionFate] = field(default_factory=Counter)
     events: Counter[TrackEvent] = field(default_factory=Counter)
     refusals: list[str] = field(default_factory=list)
@@ -163,6 +174,8 @@ class RowAssociator:
         self.masks = {name: float(masks_rad.get(name, 0.0)) for name in stations}
         self._names = list(stations)
         self._index = {name: i for i, name in enumerate(self._names)}
+        self._held: dict[int, MeasurementRows] = {}
+        """The rows of each scan (by serial number) that a deferred decision may relabel."""
 
     def tracks(self, status: TrackStatus) -> int:
         """Return how many tracks have `status`."""
@@ -177,14 +190,15 @@ class RowAssociator:
         """
         assoc, log = self.associator, self._log
         before = Counter(assoc.counts)
-        out = RowsOutcome(_empty_estimates(), rows.take(np.zeros(0, np.int64)))
+        none = rows.take(np.zeros(0, np.int64))
+        out = RowsOutcome(_empty_estimates(), none, none)
         if not len(rows):
             return out
         station = np.array([self._index[f] for f in rows.frame_id], dtype=np.int64)
         order = np.lexsort((station, rows.t))
         cut = np.flatnonzero((np.diff(rows.t[order]) != 0)
                              | (np.diff(station[order]) != 0)) + 1
-        estimates, kept, ids = [], [], []
+        estimates, kept, ids, moved = [], [], [], [none]
         for scan in np.split(order, cut):
             name = self._names[station[scan[0]]]
             log.log.clear()
@@ -199,9 +213,11 @@ class RowAssociator:
                              for i, j, k in zip(res.ids, scan.tolist(), keep.tolist(),
                                                 strict=True) if not k]
             estimates += self._confirmed(log.log)
+            moved += self._relabelled(rows.take(scan), res.relabelled)
         idx = np.concatenate(kept)
         out.associated = rows.take(idx)
         out.associated.object_id = ids
+        out.relabelled = MeasurementRows.concat(moved)
         if estimates:
             out.estimates = EstimateRows(
                 np.concatenate([e.t for e in estimates]),
@@ -211,6 +227,27 @@ class RowAssociator:
                 np.concatenate([e.nis for e in estimates]), UpdateSource.SENSOR)
         out.events = Counter({k: v - before[k] for k, v in assoc.counts.items()
                               if v != before[k]})
+        return out
+
+    def _relabelled(self, scan: MeasurementRows, relabels: Sequence[Relabel]
+                    ) -> list[MeasurementRows]:
+        """Hold the rows of the scan just associated; return those `relabels` moved.
+
+        Each moved detection (`Relabel`: scan serial and index in it) comes back as its row
+        of the scan it was in, ``object_id`` its new track's `track_name`. Only the scans
+        an open deferred decision may relabel stay held.
+        """
+        assoc = self.associator
+        if assoc.deferral is None:
+            return []
+        self._held[assoc.scan_serial] = scan
+        out = []
+        for r in relabels:
+            row = self._held[r.scan].take(np.array([r.detection], dtype=np.int64))
+            row.object_id = [track_name(r.track)]
+            out.append(row)
+        held = assoc.deferral.scans_held()
+        self._held = {k: v for k, v in self._held.items() if k in held}
         return out
 
     def _confirmed(self, log: list[tuple[list[str], NDArray[np.float64], BankResult]]

@@ -70,6 +70,7 @@ class Count(enum.StrEnum):
     LOCKSTEP_TIMEOUTS = "lockstep_timeouts"
     EVICTED = "evicted"
     PUBLISHED_ASSOCIATED = "published_associated"
+    PUBLISHED_RELABELLED = "published_relabelled"
 
 
 PUBLISHED_BY_SOURCE = (Count.PUBLISHED_PREDICTION, Count.PUBLISHED_SENSOR,

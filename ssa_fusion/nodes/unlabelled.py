@@ -9,7 +9,10 @@ IOD, M-of-N confirmation: `core.association`), and publishes:
 * on ``/ssa/estimate_batch`` (the labelled objects' EstimateBatch, update source SENSOR)
   the estimates of confirmed tracks, each named by its track id (``track-000001``, ...);
 * on ``/ssa/measurement_associated`` (MeasurementBatch) the detections placed in a track or
-  tracklet, each row's ``object_id`` the track's id (``shard_key`` its CRC-32).
+  tracklet, each row's ``object_id`` the track's id (``shard_key`` its CRC-32); after them
+  the detections of earlier scans that a deferred decision moved to another track
+  (`core.unlabelled.RowsOutcome.relabelled`), again, under that track's id: a detection
+  published twice belongs to the track of its last publication.
 
 Every detection is counted on ``/diagnostics`` by its fate (``detection_track``,
 ``detection_tracklet``, ``detection_new_tracklet``, ``detection_refused``: they sum to the
@@ -102,13 +105,15 @@ class UnlabelledRows:
             publish_estimates(out.estimates)
         c[Count.PUBLISHED_SENSOR] += len(out.estimates)
         self._publish_associated(out.associated)
+        self._publish_associated(out.relabelled)
+        c[Count.PUBLISHED_RELABELLED] += len(out.relabelled)
         status = self.diag.status
         status["confirmed_tracks"] = str(fusion.associator.tracks(TrackStatus.CONFIRMED))
         status["tentative_tracks"] = str(fusion.associator.tracks(TrackStatus.TENTATIVE))
         return rest
 
     def _publish_associated(self, rows: MeasurementRows) -> None:
-        """Publish the associated detections (their keys set from their track ids)."""
+        """Publish associated detections (their keys set from their track ids), counted."""
         if not len(rows):
             return
         rows.shard_key = messages.shard_keys(rows.object_id)

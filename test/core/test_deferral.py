@@ -1,7 +1,9 @@
 """Decisions deferred over passes (`core.deferral`, `Associator` with ``defer_passes``):
 the ambiguous pairs of a scan against analytic costs, the pair's cost against its
 definition, and two objects of a train whose tracks the scan-wise assignment swaps in their
-second pass and the deferred decision puts back (truth labels as the reference)."""
+second pass and the deferred decision puts back (truth labels as the reference): at the
+next pass, after a half-day gap with a common along-track error (the groups' registration
+takes it out), and through a catalog node's rows (the moved detections given out again)."""
 
 from __future__ import annotations
 
@@ -19,10 +21,13 @@ from ssa_fusion.core.association import (
     pair_cost,
     predict_scan,
 )
-from ssa_fusion.core.deferral import ambiguous_pairs
+from ssa_fusion.core.deferral import Fork, ambiguous_pairs, shadows_in
 from ssa_fusion.core.filter_options import SKY_FILTER
+from ssa_fusion.core.rows import MeasurementRows
 from ssa_fusion.core.stations import SENSORS
 from ssa_fusion.core.track_bank import TrackBank
+from ssa_fusion.core.unlabelled import UNLABELLED, RowAssociator, track_name
+from ssa_fusion.evaluation.association import detection_labels
 from ssa_fusion.sim import survey
 
 RADAR = SENSORS["columbus"]
@@ -93,6 +98,24 @@ def test_pair_cost_is_the_clipped_distance_plus_log_det_and_a_miss_the_gate():
     assert miss == pytest.approx(sum(GATE + math.log(np.linalg.det(s)) for s in S), rel=1e-9)
 
 
+def test_shadows_in_lends_the_tracks_h1_states_and_gives_theirs_back():
+    bank, shadow = TrackBank(SKY_FILTER, NETWORK), TrackBank(SKY_FILTER, NETWORK)
+    rng = np.random.default_rng(0)
+    for b, names in ((bank, ("a", "b", "c")), (shadow, ("b~1", "a~1"))):
+        for n in names:
+            r = b.row(n)
+            b.x[r], b.P[r], b.t[r] = rng.normal(size=6), np.eye(6) * rng.uniform(1, 2), r
+            b.tracking[r], b.gate_misses[r] = True, 2
+    before = {f: getattr(bank, f).copy() for f in ("x", "P", "t", "tracking", "gate_misses")}
+    fork = Fork(bank.rows["a"], bank.rows["b"], ("b~1", "a~1"), 0.0)
+    with shadows_in(fork, [(bank, fork.a, fork.b)], [shadow]):
+        np.testing.assert_array_equal(bank.x[fork.a], shadow.x[shadow.rows["b~1"]])
+        np.testing.assert_array_equal(bank.P[fork.b], shadow.P[shadow.rows["a~1"]])
+        np.testing.assert_array_equal(bank.x[bank.rows["c"]], before["x"][bank.rows["c"]])
+    for f, v in before.items():
+        np.testing.assert_array_equal(getattr(bank, f), v)
+
+
 # ------------------------------------------------------------------------------------------
 # Two objects of a train, swapped in their second pass
 # ------------------------------------------------------------------------------------------
@@ -121,6 +144,11 @@ def _bend(assoc: Associator, name: str, t_to: float, along_km: float) -> None:
     time, and the filter's covariance relates it to the velocity.
     """
     banks = [assoc.bank] + ([assoc.predictor] if assoc.predictor is not None else [])
+    _bend_banks(banks, name, t_to, along_km)
+
+
+def _bend_banks(banks: list[TrackBank], name: str, t_to: float, along_km: float) -> None:
+    """`_bend` on the track `name` of each of `banks`."""
     for bank in banks:
         r = bank.rows[name]
         x, P, t = bank.x[r], bank.P[r], bank.t[r]
@@ -133,17 +161,22 @@ def _bend(assoc: Associator, name: str, t_to: float, along_km: float) -> None:
         bank.x[r, 3:] = x[3:] + along_km / per_eps * u
 
 
-def _run(pair_scans, config: AssociationConfig):
+def _run(pair_scans, config: AssociationConfig, later: int = 2, common_km: float = 0.0,
+         assoc: Associator | None = None):
     """Track pass 1, give each track a mean-motion error that inverts their predicted order
-    at pass 2 (each 0.6 of the spacing towards the other), track passes 2 and 3.
+    at pass 2 (each 0.6 of the spacing towards the other), track passes 2 and `later`.
 
-    Returns the associator, per pass the object of each confirmed track's detections as
-    emitted, and the same after the relabels.
+    `common_km`: before pass `later`, every copy of both tracks (the tracks' and the
+    deferred decision's shadows, both filters) is bent that far ahead at its start, the
+    common along-track error a long gap leaves. Returns the associator, per pass the
+    object of each confirmed track's detections as emitted, and the same after the
+    relabels.
     """
     scans = pair_scans
     passes = _passes(scans)
-    assert len(passes) >= 3
-    assoc = Associator(SKY_FILTER, NETWORK, config)
+    assert len(passes) > later >= 2
+    passes = [passes[0], passes[1], passes[later]]
+    assoc = Associator(SKY_FILTER, NETWORK, config) if assoc is None else assoc
     outs = _feed(assoc, [scans[i] for i in passes[0]])
     names = assoc.track_ids(TrackStatus.CONFIRMED)
     assert len(names) == 2
@@ -156,8 +189,19 @@ def _run(pair_scans, config: AssociationConfig):
     assert 1.0 < abs(sep) < 4.0  # the two objects, 2 km apart, predicted about so
     _bend(assoc, a, t2, 0.6 * sep)
     _bend(assoc, b, t2, -0.6 * sep)
-    outs += _feed(assoc, [scans[i] for i in np.concatenate(passes[1:3])])
-    used = [scans[i] for i in np.concatenate(passes[:3])]
+    outs += _feed(assoc, [scans[i] for i in passes[1]])
+    if common_km:
+        banks = [assoc.bank] + ([assoc.predictor] if assoc.predictor is not None else [])
+        shadows = [] if assoc.deferral is None else assoc.deferral.banks()
+        forks = [] if assoc.deferral is None else assoc.deferral.forks
+        t3 = scans[passes[2][0]].t
+        for name in names:
+            _bend_banks(banks, name, t3, common_km)
+        for fork in forks:
+            for name in fork.shadow:
+                _bend_banks(shadows, name, t3, common_km)
+    outs += _feed(assoc, [scans[i] for i in passes[2]])
+    used = [scans[i] for i in np.concatenate(passes)]
     labels = [list(o.ids) for o in outs]
     emitted = _objects(used, labels, names, passes)
     for rel in assoc.relabels:
@@ -224,3 +268,101 @@ def test_a_pair_not_seen_again_soon_enough_keeps_the_scan_wise_assignment(pair_s
 def test_config_refuses_nonsense_deferral_settings(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):
         AssociationConfig(**bad)
+
+
+# ------------------------------------------------------------------------------------------
+# A pair swapped in its last pass before a long gap
+# ------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def gap_scans():
+    """The pair of `pair_scans` over the radar for 24 h: its passes and the half-day gap."""
+    cat = survey.satellite_train(RADAR.station, T0 + 600.0, 2, spacing_km=(2.0, 2.0), seed=1)
+    return survey.observe_catalog(cat, [RADAR], T0, 24 * 3600.0, seed=1).scans(seed=1)
+
+
+def _after_gap(scans, hours: float = 12.0) -> int:
+    """Index of the first pass that starts `hours` or more after the end of pass 1."""
+    passes = _passes(scans)
+    end = scans[passes[1][-1]].t
+    return next(k for k, p in enumerate(passes) if scans[p[0]].t - end >= hours * 3600.0)
+
+
+COMMON_KM = 3.0
+"""A common along-track error of both tracks after the gap: many times the long-arc
+predictor's position sigma there, well inside the tracks' filter's."""
+
+
+def test_a_pair_swapped_before_a_long_gap_is_put_back_on_the_registered_scan(gap_scans):
+    later = _after_gap(gap_scans)
+    gap = gap_scans[_passes(gap_scans)[later][0]].t - gap_scans[_passes(gap_scans)[1][-1]].t
+    assert 12 * 3600.0 < gap < AssociationConfig().defer_max_wait_s
+    assoc, emitted, decided = _run(gap_scans, AssociationConfig(defer_margin=LOOSE),
+                                   later=later, common_km=COMMON_KM)
+    assert assoc.counts[TrackEvent.DEFER_SWAPPED] == 1
+    first = decided[0]
+    assert all(len(v) == 1 for v in first.values())
+    assert any(emitted[1][n] != first[n] for n in first)  # pass 2 went swapped
+    for after in decided[1:]:  # the decision put it back, and the pass after the gap
+        assert all(after[n] == first[n] for n in first)
+
+
+def test_without_the_registration_the_common_error_hides_the_swap(gap_scans):
+    # the pair's long-arc predictions both miss by the common error: no hypothesis has both
+    # tracks in its gates until the tracks' filter, fused as assigned, follows H0's objects
+    assoc, emitted, decided = _run(gap_scans, AssociationConfig(defer_margin=LOOSE,
+                                                                register_groups=False),
+                                   later=_after_gap(gap_scans), common_km=COMMON_KM)
+    assert assoc.counts[TrackEvent.DEFER_OPENED] >= 1
+    assert assoc.counts[TrackEvent.DEFER_SWAPPED] == 0 and assoc.relabels == []
+    assert decided == emitted and any(emitted[2][n] != emitted[0][n] for n in emitted[0])
+
+
+# ------------------------------------------------------------------------------------------
+# Through a catalog node's rows: the moved detections given out again
+# ------------------------------------------------------------------------------------------
+def _rows(scans, truth: bool = False) -> MeasurementRows:
+    """The detections of `scans` as rows: unlabelled, or labelled by their true object."""
+    t = np.concatenate([np.full(s.z.shape[0], s.t) for s in scans])
+    ids = [str(o) if truth else UNLABELLED for s in scans for o in s.truth.tolist()]
+    return MeasurementRows(t, ids, [RADAR.station.name] * t.size,
+                           np.concatenate([s.z for s in scans]),
+                           np.broadcast_to(RADAR.R, (t.size, 3, 3)).copy())
+
+
+def test_row_associator_gives_out_the_moved_detections_again(pair_scans):
+    rows = RowAssociator(SKY_FILTER, NETWORK, {RADAR.station.name: MASK},
+                         AssociationConfig(defer_margin=LOOSE))
+    passes = _passes(pair_scans)
+    given: list[MeasurementRows] = []  # what a node publishes, in order
+    moved: list[MeasurementRows] = []
+    for k, p in enumerate(passes[:3]):
+        if k == 1:  # the swap of `_run`, on the associator under the rows
+            names = rows.associator.track_ids(TrackStatus.CONFIRMED)
+            assert len(names) == 2
+            t2 = pair_scans[p[0]].t
+            bank = rows.associator.bank
+            r = [bank.rows[n] for n in names]
+            x = bank.ekf.predict(bank.x[r], bank.P[r], t2 - bank.t[r], bank.t[r]).x
+            sep = float((x[1, :3] - x[0, :3]) @ (x[0, 3:] / np.linalg.norm(x[0, 3:])))
+            _bend(rows.associator, names[0], t2, 0.6 * sep)
+            _bend(rows.associator, names[1], t2, -0.6 * sep)
+        for s in p.tolist():  # a call per scan, as a node's batches may come
+            out = rows.process(_rows([pair_scans[s]]))
+            given += [out.associated, out.relabelled]
+            moved.append(out.relabelled)
+    assert rows.associator.counts[TrackEvent.DEFER_SWAPPED] == 1
+    n_moved = sum(len(m) for m in moved)
+    assert n_moved == len(rows.associator.relabels) > 0
+    assert not rows._held  # no open fork: no scan held
+    truth = _rows([pair_scans[i] for i in np.concatenate(passes[:3])], truth=True)
+    tracks = {track_name(n) for n in rows.associator.track_ids(TrackStatus.CONFIRMED)}
+    label = np.array(detection_labels(truth, MeasurementRows.concat(given)), dtype=object)
+    emitted = np.array(detection_labels(truth, MeasurementRows.concat(given[::2])),
+                       dtype=object)
+    obj = np.array(truth.object_id, dtype=object)
+    # the last publication of each detection: every track holds one object
+    assert all(len(set(obj[label == n])) == 1 for n in tracks)
+    # as first given out, a track held both objects (its deferred pass swapped)
+    assert any(len(set(obj[emitted == n])) == 2 for n in tracks)
+    # a moved row is a detection of the truth, under a confirmed track's name
+    assert {o for m in moved for o in m.object_id} <= tracks
