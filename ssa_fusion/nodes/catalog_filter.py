@@ -162,7 +162,7 @@ class CatalogFilterNode(SsaNode):
         self.pub = self.advertise(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
         unacked = p.integer("max_unacked_rows")
         self.acked = AckedPublisher(self.pub, unacked if unacked > 0 else math.inf, ACK_WAIT_S)
-        self.unlabelled = UnlabelledRows(self, self.diag)
+        self.unlabelled = UnlabelledRows(self.diag)
         cft = content_filter(self.shard, self.shards)
         self.sub = self.subscribe(MeasurementMsg, TOPIC_MEASUREMENT, self.on_measurement,
                                   CATALOG_QOS, content_filter=cft)

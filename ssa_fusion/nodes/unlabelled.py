@@ -28,8 +28,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from rclpy.node import Node
-
 from ssa_fusion.core.association import DetectionFate, TrackStatus
 from ssa_fusion.core.catalog_fusion import CatalogFusion
 from ssa_fusion.core.rows import EstimateRows, MeasurementRows
@@ -67,13 +65,12 @@ class UnlabelledRows:
 
     Parameters
     ----------
-    node : rclpy Node
-        The catalog_filter (publishers are created on it).
     diag : Diagnostics
-        Its diagnostics (counts and status).
+        The catalog_filter's diagnostics (counts and status; its output publisher is
+        created through them, its matches reported: `Diagnostics.advertise`).
     """
 
-    def __init__(self, node: Node, diag: Diagnostics) -> None:
+    def __init__(self, diag: Diagnostics) -> None:
         self.diag = diag
         self.pub = diag.advertise(MeasurementBatch, TOPIC_ASSOCIATED, CATALOG_QOS)
 

@@ -17,11 +17,16 @@ from ssa_fusion.ros import messages
 from ssa_fusion.ros.topics import TOPIC_ASSOCIATED
 
 
-class _Node:
+class _Diagnostics:
+    """Stands in for `nodes.diagnostics.Diagnostics`: counts, and the output it advertises."""
+
     def __init__(self) -> None:
         self.sent: list = []
+        self.counts: Counter = Counter()
+        self.status: dict = {}
+        self.count = None
 
-    def create_publisher(self, _type, topic, _qos):
+    def advertise(self, _type, topic, _qos):
         assert topic == TOPIC_ASSOCIATED
         return SimpleNamespace(publish=self.sent.append)
 
@@ -43,10 +48,9 @@ def test_the_moved_detections_go_out_after_the_associated_and_their_last_label_h
                       fates=Counter({DetectionFate.TRACK: 4}))
     fusion = SimpleNamespace(associate=lambda batch: (out, None),
                              associator=SimpleNamespace(tracks=lambda status: 2))
-    node = _Node()
-    diag = SimpleNamespace(counts=Counter(), status={}, count=None)
-    assert UnlabelledRows(node, diag).take(fusion, truth, lambda e: None) is None
-    got = [messages.measurement_batch_from_msg(m) for m in node.sent]
+    diag = _Diagnostics()
+    assert UnlabelledRows(diag).take(fusion, truth, lambda e: None) is None
+    got = [messages.measurement_batch_from_msg(m) for m in diag.sent]
     assert [r.object_id for r in got] == [associated.object_id, moved.object_id]
     assert diag.counts[Count.PUBLISHED_ASSOCIATED] == 6
     assert diag.counts[Count.PUBLISHED_RELABELLED] == 2
