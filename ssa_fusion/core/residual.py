@@ -369,11 +369,14 @@ def hill_design(tau: ArrayLike, n: float, u0: float, harmonics: int,
     coupling, is within 5e-8, at ~50 times the flops). On a uniform grid (steps equal to
     1 us) it is taken as exp(M h) times the previous epoch's, taken afresh every
     `REEXPONENTIATE` epochs: over a day of 60 s steps the response to a constant push is
-    within 5e-13 of its closed form (relative to its largest value).
+    within 5e-13 of its closed form (relative to its largest value). Without harmonics (a
+    constant push per axis) it is the closed form itself (`hill_design_constant`).
     """
     from scipy.linalg import expm
 
     tau = np.atleast_1d(np.asarray(tau, float))
+    if harmonics == 0:
+        return hill_design_constant(tau, n, components)
     coupling = n * n
     M = _hill_generator(n, u0, harmonics, components, coupling)
     out = np.zeros((len(tau), 6, M.shape[0]))
@@ -392,6 +395,44 @@ def hill_design(tau: ArrayLike, n: float, u0: float, harmonics: int,
             prev, h_prev = float(tau[k]), h
             out[k] = E[:6]
     out[:, :, 6:] /= coupling
+    return out
+
+
+def hill_design_constant(tau: ArrayLike, n: float,
+                         components: tuple[bool, bool, bool] = (True, True, True)) -> Array:
+    """Return `hill_design` without harmonics in closed form.
+
+    Design (k, 6, 6 + m) at times tau (s from the anchor), any sign: Hill's (Clohessy-
+    Wiltshire) state transition of the residual [radial x, along-track y, cross-track z,
+    their rates] about a circular orbit of mean motion n (rad/s), then the response from rest
+    to a unit constant acceleration (km/s^2) along each axis `components` keeps (m of them):
+    radial x = (1 - c) / n^2, y = 2 (s - n t) / n^2; along-track x = 2 (n t - s) / n^2,
+    y = (4 (1 - c) - 3/2 n^2 t^2) / n^2; cross-track z = (1 - c) / n^2 (c = cos n t,
+    s = sin n t), rates their derivatives.
+    """
+    t = np.atleast_1d(np.asarray(tau, float))
+    nt = n * t
+    c, s = np.cos(nt), np.sin(nt)
+    out = np.zeros((len(t), 6, 6 + sum(components)))
+    x, y, z, vx, vy, vz = range(6)
+    out[:, x, x], out[:, x, vx], out[:, x, vy] = 4 - 3 * c, s / n, 2 * (1 - c) / n
+    out[:, y, x], out[:, y, y] = 6 * (s - nt), 1.0
+    out[:, y, vx], out[:, y, vy] = -2 * (1 - c) / n, 4 * s / n - 3 * t
+    out[:, z, z], out[:, z, vz] = c, s / n
+    out[:, vx, x], out[:, vx, vx], out[:, vx, vy] = 3 * n * s, c, 2 * s
+    out[:, vy, x], out[:, vy, vx], out[:, vy, vy] = -6 * n * (1 - c), -2 * s, 4 * c - 3
+    out[:, vz, z], out[:, vz, vz] = -n * s, c
+    push = {0: ((x, (1 - c) / n ** 2), (y, 2 * (s - nt) / n ** 2), (vx, s / n),
+                (vy, 2 * (c - 1) / n)),
+            1: ((x, 2 * (nt - s) / n ** 2), (y, (4 * (1 - c) - 1.5 * nt ** 2) / n ** 2),
+                (vx, 2 * (1 - c) / n), (vy, (4 * s - 3 * nt) / n)),
+            2: ((z, (1 - c) / n ** 2), (vz, s / n))}
+    col = 6
+    for axis in range(3):
+        if components[axis]:
+            for row, v in push[axis]:
+                out[:, row, col] = v
+            col += 1
     return out
 
 
