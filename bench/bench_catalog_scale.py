@@ -23,7 +23,8 @@ is JSON. The targets it reports against (not asserted): >= 100x real time, 0 los
 
 ``--surrogate``: the same with a catalog_surrogate beside each filter shard (every gap
 fitted: lockstep waits for the fits), ``--hours`` more than a day (the residual fits once
-an object's pass ends span a day). Reports the fits made, refused and skipped, the
+an object's pass ends span a day). Reports the fits made (of the learned residual and physics-only,
+`core.gap_bank.GapBankConfig.physics`), refused and skipped, the
 surrogates' fitting wall time and memory, and the gaps after the first day (an object's
 estimate followed by ``pass_break`` or more without one) with the fraction that got a
 forecast (`studies.catalog_gaps.gap_coverage`; also counted from each object's own first
@@ -233,14 +234,17 @@ def surrogate_summary(s: dict[str, Any]) -> dict[str, Any]:
     """
     g = s["surrogates"]
     total = {k: sum(int(v[k]) for v in g.values()) for k in (
-        "fits_made", "fits_refused", "fits_skipped", "waiting_for_fit", "published_forecast")}
+        "fits_made", "fits_physics", "fits_refused", "fits_skipped", "waiting_for_fit",
+        "published_forecast")}
     fit_s = sum(float(v["fit_seconds"]) for v in g.values())
     rss = sum(float(v["rss_mib"]) for v in g.values())
     gc = s["gap_coverage"]
     assert total["fits_made"] > 0 and total["published_forecast"] > 0, \
         f"no fits or no forecasts: {total}"
     covered = gc["with_forecast"] / gc["gaps"] if gc["gaps"] else float("nan")
-    print(f"surrogate shards: fits made {total['fits_made']}, refused {total['fits_refused']}, "
+    learned = total["fits_made"] - total["fits_physics"]
+    print(f"surrogate shards: fits made {total['fits_made']} ({learned} of the learned "
+          f"residual, {total['fits_physics']} physics-only), refused {total['fits_refused']}, "
           f"skipped {total['fits_skipped']}, waiting {total['waiting_for_fit']}; "
           f"{fit_s:.1f} s of fitting ({1e3 * fit_s / total['fits_made']:.1f} ms per fit "
           f"made); {total['published_forecast']} forecasts; {rss:.0f} MiB resident")
@@ -252,7 +256,7 @@ def surrogate_summary(s: dict[str, Any]) -> dict[str, Any]:
     print(f"gaps {gc['after_s'] / 3600:g} h or more after the object's own first gap (when "
           f"its pass ends can span min_span): {gc['object_gaps']}, "
           f"{gc['object_with_forecast']} with a forecast ({100 * own:.1f} %)")
-    return {**total, "fit_seconds": round(fit_s, 1),
+    return {**total, "fits_learned": learned, "fit_seconds": round(fit_s, 1),
             "object_gaps": gc["object_gaps"], "object_gaps_covered": round(own, 4),
             "ms_per_fit": round(1e3 * fit_s / total["fits_made"], 2),
             "surrogate_rss_mib": round(rss, 1), "gaps_after_first_day": gc["gaps"],

@@ -516,8 +516,8 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
     for g in gap_nodes or []:
         st = status.get(g, {})
         surrogates[g] = {k: num(g, k) for k in (
-            "received", "fits_made", "fits_refused", "fits_skipped", "published_forecast",
-            "forecasts_overtaken", "waiting_for_fit", "objects")}
+            "received", "fits_made", "fits_physics", "fits_refused", "fits_skipped",
+            "published_forecast", "forecasts_overtaken", "waiting_for_fit", "objects")}
         surrogates[g]["fit_seconds"] = float(st.get("fit_seconds", "0") or 0)
         surrogates[g]["object_ids"] = [x for x in st.get("object_ids", "").split(",") if x]
         surrogates[g]["rss_mib"] = rss.get(g, 0) / 1024.0
@@ -627,7 +627,8 @@ def table(s: dict[str, Any]) -> str:
         rows.append(f"position error against the SGP4 truth: median {pe['median']:.3f} km, "
                     f"95 % {pe['p95']:.3f} km over {pe['estimates']} estimates")
     for n, g in s.get("surrogates", {}).items():
-        rows.append(f"{n}: {g['objects']} objects; fits made {g['fits_made']}, refused "
+        rows.append(f"{n}: {g['objects']} objects; fits made {g['fits_made']} "
+                    f"({g.get('fits_physics', 0)} physics-only), refused "
                     f"{g['fits_refused']}, skipped (gap over before its turn) "
                     f"{g['fits_skipped']}, waiting {g['waiting_for_fit']}; "
                     f"{g['fit_seconds']:.0f} s of fitting; {g['published_forecast']} "

@@ -7,7 +7,10 @@ Each object's gaps are forecast as its `GapFill` says (``gap_forecast`` of the c
   estimates (those that fused a real measurement) and learns the residual of the motion
   model at its pass ends (`residual.ResidualSurrogate`; with a J2 placeholder about 10 ms
   of one core per fit made on a catalog of every regime, the refused ones included:
-  ``bench/bench_gap_fits.py``);
+  ``bench/bench_gap_fits.py``); until its pass ends span a day (`residual.ResidualConfig`
+  ``min_span_s``, ``min_anchors``), or when its fit is refused, a gap gets the physics-only
+  forecast from its pass end instead (`GapBankConfig.physics`, `residual.PHYSICS_RESIDUAL`:
+  from the object's first pass end on), counted as ``fitted_physics``;
 * `GapFill.BATCH_FIT`: the object's real measurements (`on_measurements`) of its last
   passes are kept (`measurement_windows.MeasurementWindows`, arrays) and fitted by batch
   least squares from its newest estimate by `batch_gap.BatchGapForecaster` (the
@@ -54,7 +57,7 @@ from .gap_publisher import GapFill
 from .measurement import MeasurementModel
 from .measurement_windows import MAX_WINDOW_ROWS, MeasurementWindows
 from .pass_windows import PASS_BREAK_S
-from .residual import LIVE_RESIDUAL, ResidualConfig
+from .residual import LIVE_RESIDUAL, PHYSICS_RESIDUAL, ResidualConfig
 from .rows import MeasurementRows
 from .types import MotionModel, Source
 from .validation import MAX_OBJECTS
@@ -106,6 +109,9 @@ class GapBankConfig:
     residual : ResidualConfig
         The residual model: the live filter's (`residual.LIVE_RESIDUAL`), each fit scored
         held-out only where its gap ends (``heldout_fits`` 1: one propagation per fit).
+    physics : ResidualConfig or None
+        The physics-only fit of a gap the residual has no fit for
+        (`residual.PHYSICS_RESIDUAL`; None: such a gap gets no forecast).
     gap_forecast : GapFill
         Every object's gap forecast unless chosen per object (`GAP_FORECASTS`).
     fit_passes : int
@@ -120,6 +126,7 @@ class GapBankConfig:
     hold_s: float = 120.0
     fit_budget: float = 0.5
     residual: ResidualConfig = field(default_factory=lambda: CATALOG_RESIDUAL)
+    physics: ResidualConfig | None = field(default_factory=lambda: PHYSICS_RESIDUAL)
     gap_forecast: GapFill = GapFill.RESIDUAL
     fit_passes: int = GAP_FIT_PASSES
     max_window_rows: int = MAX_WINDOW_ROWS
@@ -156,6 +163,8 @@ class GapForecast:
     t: float
     x: Array
     P: Array
+    physics: bool = False
+    """Of the physics-only fit (`GapBankConfig.physics`), not the learned residual's."""
 
 
 class GapBank:
@@ -188,7 +197,8 @@ class GapBank:
         self.model = model
         self.clock_unix0 = float(clock_unix0)
         self.counts: Counter[str] = Counter()
-        """``fitted`` (a fit with a forecast; ``fitted_batch_fit`` those of a batch fit),
+        """``fitted`` (a fit with a forecast; ``fitted_batch_fit`` those of a batch fit,
+        ``fitted_physics`` those of the physics-only fit, `GapBankConfig.physics`),
         ``refused`` (too few anchors, or the fit refused or failed), ``skipped`` (the gap
         ended before its turn), ``forecasts``, ``overtaken``, ``measurements`` (kept in a
         batch-fit window)."""
@@ -264,7 +274,7 @@ class GapBank:
 
     def _forecaster(self) -> GapForecaster:
         c = self.config
-        g = GapForecaster.for_model(c.motion_model, c.period_s, c.residual)
+        g = GapForecaster.for_model(c.motion_model, c.period_s, c.residual, c.physics)
         g.pass_break_s = c.pass_break_s
         return g
 
@@ -409,6 +419,8 @@ class GapBank:
             self.counts["fitted"] += 1
             if g is None:
                 self.counts["fitted_batch_fit"] += 1
+            elif g.physics_fit:
+                self.counts["fitted_physics"] += 1
             self._released[r] = end
             self._active.add(r)
         else:
@@ -455,12 +467,13 @@ class GapBank:
             self._allowance -= spent
         table = self._table(r)
         start = self._last[r] + self.config.pass_break_s
+        physics = g is not None and g.physics_fit
         for t in [t for t in table if self._released[r] < t <= until]:
             x, P = table.pop(t)
             self._released[r] = t
             if t >= start:
                 self.counts["forecasts"] += 1
-                yield GapForecast(self._ids[r], t, x, P)
+                yield GapForecast(self._ids[r], t, x, P, physics)
         if not table and not (g is not None and g.pending):
             self._active.discard(r)
             self._tables.pop(r, None)

@@ -55,6 +55,12 @@ class GapForecaster:
     or None: no fit (too few anchors, refused), t before `pass_break_s` after the pass or
     beyond the horizon. A real measurement always wins: the filter's own state is not
     touched.
+
+    With a `physics` surrogate (`residual.PHYSICS_RESIDUAL`: the placeholder from the pass
+    end, constant accelerations under a prior in its covariance, from the first pass end
+    on) it takes the same anchors, and a gap the learned residual has no fit for (too
+    few pass ends or too short a span yet, or refused) gets the physics fit's forecast
+    instead; ``physics_fit`` says which the current fit is.
     """
 
     surrogate: ResidualSurrogate
@@ -67,13 +73,21 @@ class GapForecaster:
     fit: ResidualFit | None = None
     grid: Array = field(default_factory=lambda: np.zeros(0))
     tabulated: int = 0
+    physics: ResidualSurrogate | None = None
+    physics_fit: bool = False
 
     @classmethod
     def for_model(cls, motion_model: MotionModel | str, period_s: float,
-                  cfg: ResidualConfig = LIVE_RESIDUAL) -> GapForecaster:
-        """Build the forecaster of a filter with `motion_model` ("kepler" or "j2")."""
+                  cfg: ResidualConfig = LIVE_RESIDUAL,
+                  physics: ResidualConfig | None = None) -> GapForecaster:
+        """Build the forecaster of a filter with `motion_model` ("kepler" or "j2").
+
+        `physics`: the fit of the gaps the learned residual (`cfg`) has none for (None:
+        none, those gaps get no forecast).
+        """
         prop = orbit_propagator(PLACEHOLDER_TRAJECTORY[MotionModel(motion_model)])
-        return cls(ResidualSurrogate(cfg, prop), float(period_s))
+        return cls(ResidualSurrogate(cfg, prop), float(period_s),
+                   physics=None if physics is None else ResidualSurrogate(physics, prop))
 
     def on_estimate(self, t: float, x: ArrayLike, P: ArrayLike) -> None:
         """Take the filter's estimate (epoch t s) after it fused a real measurement.
@@ -99,6 +113,8 @@ class GapForecaster:
         self.anchored_t = t_end
         try:
             self.surrogate.add_anchor(t_end, x, P)
+            if self.physics is not None:
+                self.physics.add_anchor(t_end, x, P)
         except ValueError:
             return False
         return True
@@ -111,14 +127,14 @@ class GapForecaster:
         self._anchor()
         if self.fitted_t != t_end:  # a pass ended: fit once, tabulate the forecast
             self.fitted_t = t_end
-            self.table, self.fit, self.tabulated = {}, None, 0
+            self.table, self.fit, self.tabulated, self.physics_fit = {}, None, 0, False
             k0 = math.floor(t_end / self.period_s) + 1
             k1 = math.floor((t_end + self.surrogate.cfg.max_horizon_s) / self.period_s)
             self.grid = self.period_s * np.arange(k0, k1 + 1, dtype=float)
-            try:  # a fit that fails leaves the gap to the EKF's coasting
-                self.fit = self.surrogate.fit()
-            except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError):
-                self.fit = None
+            self.fit = _fit(self.surrogate)
+            if self.fit is None and self.physics is not None:
+                self.fit = _fit(self.physics)
+                self.physics_fit = self.fit is not None
             self.extend(t_end + TABULATE_FIRST_S)
         self.extend(float(t))
         return self.table.get(float(t))
@@ -149,3 +165,14 @@ class GapForecaster:
             if np.isfinite(xs[i]).all() and np.isfinite(Ps[i]).all():
                 self.table[float(self.grid[i])] = (xs[i], Ps[i])
         self.tabulated = n
+
+
+def _fit(surrogate: ResidualSurrogate) -> ResidualFit | None:
+    """Return `surrogate`'s fit at its newest anchor; None: none, or it failed.
+
+    A fit that fails leaves the gap to the EKF's coasting (or to the next fit tried).
+    """
+    try:
+        return surrogate.fit()
+    except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError):
+        return None

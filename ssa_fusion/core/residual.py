@@ -267,6 +267,11 @@ class ResidualConfig:
         (`test_residual`), doubled; not tuned on gaps.
     sigma_floor : tuple of float
         Floor of an anchor's standard deviations (km, km/s) in the fit's weights.
+    accel_sigma : float
+        Hill model: a priori standard deviation (km/s^2) of each empirical acceleration
+        coefficient (a zero-mean Gaussian prior in the fit; 0: none, only `ridge`). With it
+        a window of few anchors, even one, gives a fit whose covariance carries what the
+        placeholder may leave out, grown through the gap (`PHYSICS_RESIDUAL`).
     """
 
     model: str = "hill"
@@ -287,6 +292,14 @@ class ResidualConfig:
     sigma_floor: tuple[float, float] = (1e-3, 1e-6)
     horizon_scale: bool = False
     model_error: float = 0.01
+    accel_sigma: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Check `accel_sigma` (ValueError): finite, >= 0, and only for the Hill model."""
+        if not (math.isfinite(self.accel_sigma) and self.accel_sigma >= 0.0):
+            raise ValueError(f"accel_sigma must be a finite number >= 0, got {self.accel_sigma}")
+        if self.accel_sigma and self.model != "hill":
+            raise ValueError("accel_sigma is a prior of the Hill model's accelerations")
 
 
 def basis(tau: ArrayLike, u: ArrayLike, udot: ArrayLike, degree: int, harmonics: int,
@@ -356,11 +369,14 @@ def hill_design(tau: ArrayLike, n: float, u0: float, harmonics: int,
     coupling, is within 5e-8, at ~50 times the flops). On a uniform grid (steps equal to
     1 us) it is taken as exp(M h) times the previous epoch's, taken afresh every
     `REEXPONENTIATE` epochs: over a day of 60 s steps the response to a constant push is
-    within 5e-13 of its closed form (relative to its largest value).
+    within 5e-13 of its closed form (relative to its largest value). Without harmonics (a
+    constant push per axis) it is the closed form itself (`hill_design_constant`).
     """
     from scipy.linalg import expm
 
     tau = np.atleast_1d(np.asarray(tau, float))
+    if harmonics == 0:
+        return hill_design_constant(tau, n, components)
     coupling = n * n
     M = _hill_generator(n, u0, harmonics, components, coupling)
     out = np.zeros((len(tau), 6, M.shape[0]))
@@ -379,6 +395,44 @@ def hill_design(tau: ArrayLike, n: float, u0: float, harmonics: int,
             prev, h_prev = float(tau[k]), h
             out[k] = E[:6]
     out[:, :, 6:] /= coupling
+    return out
+
+
+def hill_design_constant(tau: ArrayLike, n: float,
+                         components: tuple[bool, bool, bool] = (True, True, True)) -> Array:
+    """Return `hill_design` without harmonics in closed form.
+
+    Design (k, 6, 6 + m) at times tau (s from the anchor), any sign: Hill's (Clohessy-
+    Wiltshire) state transition of the residual [radial x, along-track y, cross-track z,
+    their rates] about a circular orbit of mean motion n (rad/s), then the response from rest
+    to a unit constant acceleration (km/s^2) along each axis `components` keeps (m of them):
+    radial x = (1 - c) / n^2, y = 2 (s - n t) / n^2; along-track x = 2 (n t - s) / n^2,
+    y = (4 (1 - c) - 3/2 n^2 t^2) / n^2; cross-track z = (1 - c) / n^2 (c = cos n t,
+    s = sin n t), rates their derivatives.
+    """
+    t = np.atleast_1d(np.asarray(tau, float))
+    nt = n * t
+    c, s = np.cos(nt), np.sin(nt)
+    out = np.zeros((len(t), 6, 6 + sum(components)))
+    x, y, z, vx, vy, vz = range(6)
+    out[:, x, x], out[:, x, vx], out[:, x, vy] = 4 - 3 * c, s / n, 2 * (1 - c) / n
+    out[:, y, x], out[:, y, y] = 6 * (s - nt), 1.0
+    out[:, y, vx], out[:, y, vy] = -2 * (1 - c) / n, 4 * s / n - 3 * t
+    out[:, z, z], out[:, z, vz] = c, s / n
+    out[:, vx, x], out[:, vx, vx], out[:, vx, vy] = 3 * n * s, c, 2 * s
+    out[:, vy, x], out[:, vy, vx], out[:, vy, vy] = -6 * n * (1 - c), -2 * s, 4 * c - 3
+    out[:, vz, z], out[:, vz, vz] = -n * s, c
+    push = {0: ((x, (1 - c) / n ** 2), (y, 2 * (s - nt) / n ** 2), (vx, s / n),
+                (vy, 2 * (c - 1) / n)),
+            1: ((x, 2 * (nt - s) / n ** 2), (y, (4 * (1 - c) - 1.5 * nt ** 2) / n ** 2),
+                (vx, 2 * (1 - c) / n), (vy, (4 * s - 3 * nt) / n)),
+            2: ((z, (1 - c) / n ** 2), (vz, s / n))}
+    col = 6
+    for axis in range(3):
+        if components[axis]:
+            for row, v in push[axis]:
+                out[:, row, col] = v
+            col += 1
     return out
 
 
@@ -625,9 +679,12 @@ def fit_residual(cfg: ResidualConfig, propagate: Propagator, t: ArrayLike, x: Ar
     norm = np.linalg.norm(A, axis=0)
     norm[norm == 0.0] = 1.0
     An = A / norm
-    Gi = np.linalg.inv(An.T @ An + cfg.ridge * np.eye(A.shape[1]))
+    prior = np.zeros(A.shape[1])  # information of each normalised coefficient's prior
+    if cfg.accel_sigma:  # the accelerations (columns after the 6 of the anchor's residual)
+        prior[6:] = 1.0 / (cfg.accel_sigma * norm[6:]) ** 2
+    Gi = np.linalg.inv(An.T @ An + np.diag(prior + cfg.ridge))
     c = Gi @ (An.T @ y)
-    dof = A.shape[0] - A.shape[1]
+    dof = A.shape[0] - int(np.count_nonzero(prior == 0.0))  # a prior determines its own
     chi2 = float(np.sum((An @ c - y) ** 2))
     inflate = max(1.0, chi2 / dof) if dof > 0 else 1.0
     return ResidualFit(cfg, propagate, t0, x[-1].copy(), c / norm,
@@ -719,3 +776,29 @@ LIVE_RESIDUAL = ResidualConfig(model="hill", harmonics=1, model_error=0.2)
 constant + once per revolution, 2-day window, relative model error 0.2), chosen on the
 tuning seeds 1-3 by `studies.gap_study.tune` (docs/HISTORY.md, 2026-11-25: a surrogate
 through the gaps between passes)."""
+
+PHYSICS_ACCEL_SIGMA = 1e-8
+"""A priori standard deviation (km/s^2) of the constant radial, along- and cross-track
+accelerations of `PHYSICS_RESIDUAL`: what the placeholder may leave out (drag, J3 and
+beyond), grown through the gap (as t^2 along track). The smallest of {1e-8, 3e-8} whose
+forecasts' position NEES lies within chi2(3)'s 95 % bound at >= 90 % of them against the SGP4
+truth on each of the tuning seeds 1-3 (`bench/bench_physics_fit.py --tuning --window-h 0`:
+20 LEO objects of the radar network, 30 h): 90.1 / 90.2 / 91.1 %, median NEES 1.92 / 2.22 /
+2.01, median error 365 / 384 / 358 m (3e-8: 95.5 / 95.5 / 95.9 %, median NEES 1.24 / 1.39 /
+1.25). The forecast's state does not depend on it."""
+
+PHYSICS_RESIDUAL = ResidualConfig(model="hill", harmonics=0, window_s=0.0, min_anchors=1,
+                                  min_span_s=0.0, model_error=0.2, heldout_fits=1,
+                                  prior_scale=1.0, accel_sigma=PHYSICS_ACCEL_SIGMA)
+"""The physics-only forecast of a gap before the learned residual has its day of pass ends
+(or when it refuses its fit): the placeholder (two-body + J2) from the pass-end estimate
+alone (``window_s`` 0: from the object's first pass end on), with constant R, T, N
+accelerations under the Gaussian prior `PHYSICS_ACCEL_SIGMA` (no harmonics) in its
+covariance, which grows through the gap with what the placeholder leaves out; scaled by its
+own held-out NEES once there are `min_calibration` of them (1 before: the prior carries the
+model error). A window of pass ends is no better: on tuning seed 1 a 6 h window (the same
+fit of the placeholder and the constant accelerations to every pass end in it) erred less,
+200 m median against 365, but its covariance was overconfident: 50.3 % within the bound at
+1e-8 km/s^2, 55.1 % at 3e-8 (24 h: 48.5 %, seed 1, 30 objects); what the constant
+accelerations leave out of the pass ends (once per revolution, J3) is not in its formal
+covariance."""

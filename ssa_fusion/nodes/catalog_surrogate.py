@@ -3,7 +3,8 @@ r"""catalog_surrogate: residual forecasts through the gaps of every object of a 
 Subscribes to ``/ssa/estimate_batch`` (ssa_fusion_msgs/EstimateBatch) for the estimates the
 catalog_filter made from real measurements (update source SENSOR; a DDS content filter
 keeps the others away), learns per object what the filter's motion model gets wrong from
-its pass-end estimates (`core.residual`), and publishes on ``/ssa/estimate_batch`` the
+its pass-end estimates (`core.residual`; until they span a day, `min_span`, the physics-only
+forecast from the pass end, `physics_fit`), and publishes on ``/ssa/estimate_batch`` the
 object's forecast through each gap between passes (update source FORECAST, ``object_id``
 set; one batch per round) on the grid of multiples of `predict_period`, once `pass_break`
 sim s have passed without an estimate. The fits
@@ -42,6 +43,7 @@ from ssa_fusion.core.gap_bank import (
 )
 from ssa_fusion.core.gap_publisher import GapFill
 from ssa_fusion.core.measurement import StationModels
+from ssa_fusion.core.residual import PHYSICS_RESIDUAL
 from ssa_fusion.core.rows import EstimateRows
 from ssa_fusion.core.site_file import load_station_map
 from ssa_fusion.core.stations import network_stations
@@ -94,7 +96,8 @@ TICK_S = 0.01
 """Wall s between two rounds of fits and releases (in lockstep the simulator's next step
 waits for the round at its clock: `nodes.progress.CLOCK`)."""
 
-COUNTERS = {"fitted": Count.FITS_MADE, "refused": Count.FITS_REFUSED,
+COUNTERS = {"fitted": Count.FITS_MADE, "fitted_physics": Count.FITS_PHYSICS,
+            "refused": Count.FITS_REFUSED,
             "skipped": Count.FITS_SKIPPED, "overtaken": Count.FORECASTS_OVERTAKEN}
 """/diagnostics counters of the bank's counts (`GapBank.counts`)."""
 
@@ -123,6 +126,12 @@ PARAMETERS = ParameterTable("catalog_surrogate", (
           check=at_least(2)),
     Param("min_span", CATALOG_SURROGATE.min_span,
           "the pass ends of a fit must span at least this", unit="s", check=NON_NEGATIVE),
+    Param("physics_fit", CATALOG_SURROGATE.physics_fit,
+          "residual: a gap the learned residual has no fit for yet (fewer than min_anchors "
+          "pass ends, or a span below min_span) or refuses gets the physics-only forecast "
+          "from the object's pass end (the motion model, with constant accelerations under "
+          "a prior in its covariance: core.residual.PHYSICS_RESIDUAL), from its first pass "
+          "end on; counted in fits_made and fits_physics"),
     Param("gap_forecast", CATALOG_SURROGATE.gap_forecast,
           "each gap's forecast: residual (the motion model plus its residual learned from "
           "pass ends) or batch_fit (a batch least-squares fit of the object's measurements "
@@ -155,6 +164,7 @@ class CatalogSurrogateNode(SsaNode):
                                     pass_break_s=p.number("pass_break"),
                                     hold_s=p.number("hold"), fit_budget=p.number("fit_budget"),
                                     residual=residual,
+                                    physics=PHYSICS_RESIDUAL if p.flag("physics_fit") else None,
                                     gap_forecast=GapFill(p.text("gap_forecast")))
         batch = self.config.gap_forecast == GapFill.BATCH_FIT
         self.model = StationModels(network_stations(

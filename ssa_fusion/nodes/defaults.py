@@ -178,6 +178,7 @@ class CatalogSurrogateDefaults:
     fit_budget: float = 0.5
     min_anchors: int = 5
     min_span: float = DAY_S
+    physics_fit: bool = True
     gap_forecast: str = "residual"
     station: str = "radar_network"
     sites: str = ""

@@ -60,6 +60,7 @@ class Count(enum.StrEnum):
     PUBLISHED_SENSOR = "published_sensor"
     PUBLISHED_FORECAST = "published_forecast"
     FITS_MADE = "fits_made"
+    FITS_PHYSICS = "fits_physics"
     FITS_REFUSED = "fits_refused"
     FITS_SKIPPED = "fits_skipped"
     FORECASTS_OVERTAKEN = "forecasts_overtaken"

@@ -24,11 +24,12 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
+from scipy.stats import chi2
 
 from ssa_fusion.core import catalog as catalog_io
 from ssa_fusion.core import residual
 from ssa_fusion.core.filter_options import FilterOptions
-from ssa_fusion.core.gap_bank import GapBank, GapBankConfig
+from ssa_fusion.core.gap_bank import GapBank, GapBankConfig, GapForecast
 from ssa_fusion.core.gap_forecaster import PLACEHOLDER_TRAJECTORY
 from ssa_fusion.core.gap_publisher import GapFill
 from ssa_fusion.core.measurement import StationModels
@@ -104,6 +105,38 @@ def gap_errors(entries: list[catalog_io.CatalogEntry], estimates: Rows, forecast
                                "p95": float(np.percentile(coast_all, 95))},
             "coast_over_forecast": med_coast / med_fc if med_fc > 0 else None,
             "gaps_forecast_better": better / pick.size}
+
+
+def forecast_nees(entries: list[catalog_io.CatalogEntry],
+                  forecasts: list[GapForecast]) -> dict[str, Any]:
+    """Score forecasts' covariances against the SGP4 truth of `entries`, by fit.
+
+    Position NEES (3 dof) of each forecast: its share within chi2(3)'s 95 % bound
+    (``in_bound``, the gap fits' criterion, `core.batch_gap.GAP_FIT_SNC`), median NEES and
+    median position error (km); for all forecasts, those of the physics-only fit
+    (``physics``) and of the learned residual (``learned``).
+    """
+    by_id = {e.object_id: e for e in entries}
+    nees, err, phys = [], [], []
+    groups: dict[str, list[GapForecast]] = defaultdict(list)
+    for f in forecasts:
+        groups[f.object_id].append(f)
+    for oid, fs in groups.items():
+        truth = catalog_io.catalog_states([by_id[oid]], np.array([f.t for f in fs])).x[0]
+        for f, xt in zip(fs, truth, strict=True):
+            e = f.x[:3] - xt[:3]
+            nees.append(float(e @ np.linalg.solve(f.P[:3, :3], e)))
+            err.append(float(np.linalg.norm(e)))
+            phys.append(f.physics)
+    bound = float(chi2.ppf(0.95, 3))
+    a, b, p = np.array(nees), np.array(err), np.array(phys, bool)
+    out: dict[str, Any] = {"bound": bound}
+    for name, m in (("all", np.ones(a.size, bool)), ("physics", p), ("learned", ~p)):
+        out[name] = ({"forecasts": int(m.sum()), "in_bound": float(np.mean(a[m] <= bound)),
+                      "nees_median": float(np.median(a[m])),
+                      "error_km_median": float(np.median(b[m]))}
+                     if m.any() else {"forecasts": 0})
+    return out
 
 
 def gap_coverage(estimates: Rows, forecasts: Rows, t_start: float, t_end: float,
@@ -211,14 +244,18 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
     `GapBank` per arm of `gap_forecasts` (`gap_bank.GAP_FORECASTS`; `gap_config` with its
     ``gap_forecast`` replaced) takes the same estimates (and, for the batch fit, every
     measurement of the object, as the catalog_surrogate does) and fits every gap (no
-    budget). Returns the first arm's scores (`gap_errors`) with its fits' counts, their
-    mean wall time and the surrogate's wall time per object (fits, scoring and keeping the
-    windows), the filter's wall time per object; under ``arms`` the same for every arm, and
+    budget). Returns the first arm's scores (`gap_errors`) with its fits' counts
+    (``fits_physics``: of the physics-only fit, `GapBankConfig.physics`), its forecasts'
+    covariances against the truth (``nees``, `forecast_nees`), its gaps after the first day
+    with a forecast (``coverage``, `gap_coverage`), the fits' mean wall time and the
+    surrogate's wall time per object (fits, scoring and keeping the windows), the filter's
+    wall time per object; under ``arms`` the same for every arm, and
     under ``common`` every arm's scores at the epochs of the gaps every arm forecast (the
     same gaps: a paired comparison).
     """
     s = SKY_SCENARIOS[scenario]
     entries = survey.synthetic_catalog(catalog_io.read_catalog(SAMPLE)[0], objects, seed=seed)
+    t_first = survey.catalog_start(entries)
     stations = {r.station.name: r.station for r in s.radars}
     wall = _FrozenWall()
     base = gap_config or GapBankConfig(motion_model=MotionModel(s.motion_model))
@@ -227,6 +264,7 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
             for f in gap_forecasts}
     estimates: Rows = defaultdict(list)
     forecasts: dict[GapFill, Rows] = {f: defaultdict(list) for f in arms}
+    made: dict[GapFill, list[GapForecast]] = {f: [] for f in arms}
     c_fit = dict.fromkeys(arms, 0.0)
     c_filter = 0.0
     measurements = 0
@@ -242,12 +280,14 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
             for j, (oid, t) in enumerate(step.fused):
                 for g in gaps.on_estimate(oid, t, step.x[j], step.P[j]):
                     forecasts[f][g.object_id].append((g.t, g.x))
+                    made[f].append(g)
             c_fit[f] += time.perf_counter() - c
         wall.now += 1.0
         for f, gaps in arms.items():
             c = time.perf_counter()
             for g in gaps.step(step.now):
                 forecasts[f][g.object_id].append((g.t, g.x))
+                made[f].append(g)
             c_fit[f] += time.perf_counter() - c
     for by_arm in forecasts.values():
         for r in by_arm.values():
@@ -256,13 +296,17 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
                                 for by_arm in forecasts.values()))
     scores = {}
     for f, gaps in arms.items():
-        made = gaps.counts["fitted"]
+        n_fits = gaps.counts["fitted"]
         one = gap_errors(entries, estimates, forecasts[f], s.motion_model, max_gaps)
-        one.update({"gap_forecast": str(f), "fits_made": made,
+        one.update({"gap_forecast": str(f), "fits_made": n_fits,
+                    "fits_physics": gaps.counts["fitted_physics"],
                     "fits_refused": gaps.counts["refused"], "surrogate_wall_s": c_fit[f],
                     "surrogate_wall_s_per_object": c_fit[f] / objects,
                     "window_bytes_per_object": gaps.windows.nbytes() / objects,
-                    "wall_s_per_fit": c_fit[f] / made if made else None})
+                    "wall_s_per_fit": c_fit[f] / n_fits if n_fits else None,
+                    "nees": forecast_nees(entries, made[f]) if made[f] else None,
+                    "coverage": gap_coverage(estimates, forecasts[f], t_first,
+                                             t_first + 3600.0 * hours, base.pass_break_s)})
         scores[str(f)] = one
     common = {str(f): gap_errors(entries, estimates,
                                  {o: [r for r in rows if (o, r[0]) in shared]

@@ -18,7 +18,8 @@ P = np.diag([1e-6] * 3 + [1e-12] * 3)  # 1 m, 1 mm/s
 CFG = GapBankConfig(
     motion_model="kepler", period_s=60.0, pass_break_s=600.0, hold_s=0.0, fit_budget=1.0,
     residual=replace(LIVE_RESIDUAL, min_anchors=3, min_span_s=3 * 3600.0,
-                     window_s=12 * 3600.0, max_horizon_s=6 * 3600.0, heldout_fits=1))
+                     window_s=12 * 3600.0, max_horizon_s=6 * 3600.0, heldout_fits=1),
+    physics=None)  # the learned residual alone (the physics-only fit: test_physics_fit)
 
 
 def _stream(x0: np.ndarray, offset_s: float, hours: float) -> tuple[np.ndarray, np.ndarray]:

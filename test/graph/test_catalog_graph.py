@@ -124,6 +124,8 @@ def test_each_shards_surrogate_forecasts_its_objects_gaps_only(run):
     made = sum(g["fits_made"] for g in gaps)
     published = sum(g["published_forecast"] for g in gaps)
     assert made >= 4 and published > 20
+    # the gaps before an object's pass ends span min_span: the physics-only forecast
+    assert 0 < sum(g["fits_physics"] for g in gaps) < made
     assert s["forecasts_recorded"] == published
     sensor, forecast = {}, {}
     for source, oid, t, _, _ in _estimates(out / "bag"):

@@ -81,7 +81,8 @@ def test_bad_estimates_are_refused_and_the_gap_forecast_equals_the_core(ros_grap
     span = 3 * 5820.0  # first to last pass end: only the last one may fit
     params = {"use_sim_time": True, "shards": 2, "shard": 0, "hold": 0.0,
               "predict_period": PERIOD, "min_anchors": 3, "min_span": span - 1.0,
-              "fit_budget": 1.0, "max_objects": 1}
+              "fit_budget": 1.0, "max_objects": 1,
+              "physics_fit": False}  # the learned residual alone: the earlier gaps get none
     node = g.start_node("catalog_surrogate", params=params)
     diag = Diag(g)
     forecasts = forecast_sink(g)
