@@ -19,8 +19,10 @@ buffers of the largest message's size as their history ever held at once (a burs
 readers acknowledged late), tens of MiB a process. rmw_fastrtps applies an XML profile's
 history memory only with ``RMW_FASTRTPS_USE_QOS_FROM_XML=1`` (`QOS_FROM_XML_VAR`), and
 then takes the publication mode and data sharing from the profile too: it sets them as
-rmw_fastrtps does by default (synchronous publication, no data sharing). The ROS QoS
-given in code (history depth, reliability, durability ...) still apply on top.
+rmw_fastrtps does by default (synchronous publication, no data sharing). Those three are
+all the variable changes (rmw_fastrtps 9, Kilted: its create_publisher and
+create_subscription): the ROS QoS given in code (history, depth, reliability, durability
+...) are applied on top of the profile either way.
 """
 
 from __future__ import annotations
