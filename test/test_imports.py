@@ -112,3 +112,17 @@ def test_node_executables_prepare_the_process_before_numpy_is_imported():
     assert result["threads"], "no BLAS library found"
     assert all(n == 1 for _, n in result["threads"]), result["threads"]
     assert result["handler"] == "_on_signal"
+
+
+def test_a_catalog_filter_imports_neither_scipy_stats_nor_scipy_optimize():
+    """Every catalog_filter process imports the association (`core.association`); of scipy
+    it needs only scipy.special until an unlabelled detection arrives: scipy.stats and
+    scipy.optimize would add ~45 MiB to each process (`core.association` docstring)."""
+    result = _run(textwrap.dedent("""
+        import json, sys
+        import ssa_fusion.nodes.catalog_filter
+        print(json.dumps(sorted(m for m in sys.modules if m.startswith("scipy."))))
+    """))
+    assert "scipy.special" in result
+    heavy = [m for m in result if m.split(".")[1] in ("stats", "optimize", "sparse")]
+    assert heavy == [], heavy

@@ -82,6 +82,12 @@ Track management (`Associator`): a catalog of unlabelled objects, scan by scan.
 
 Deleted tracks keep their bank rows (never reused): a bank holds at most
 ``max_objects`` rows (`validation.MAX_OBJECTS`) over its life.
+
+Imports: every catalog_filter process imports this module (`catalog_fusion`), and most never
+see an unlabelled detection. So of scipy it imports only ``scipy.special`` (the chi-square
+quantile, `chi2_quantile`, ~9 MiB); ``scipy.optimize`` (`assign`) and ``scipy.sparse``
+(`register`) are imported by the functions that use them, at their first call:
+``scipy.stats`` and ``scipy.optimize`` would add ~45 MiB to every process's resident memory.
 """
 
 from __future__ import annotations
@@ -93,9 +99,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import linear_sum_assignment
-from scipy.sparse.csgraph import connected_components
-from scipy.stats import chi2
+from scipy.special import gammaincinv
 
 from .batch_ekf import BatchEKF
 from .constants import MU_EARTH
@@ -141,6 +145,15 @@ UNASSIGNED = -1
 
 MEASUREMENT_DOF = 3
 """Degrees of freedom of a range/az/el innovation (the chi-square gate's)."""
+
+
+def chi2_quantile(p: float, dof: int) -> float:
+    """Return the `p` quantile of a chi-square law of `dof` degrees of freedom.
+
+    ``2 gammaincinv(dof / 2, p)``, the expression ``scipy.stats.chi2.ppf(p, dof)`` evaluates
+    (the same float, bit for bit), without importing ``scipy.stats`` (module docstring).
+    """
+    return float(2 * gammaincinv(dof / 2, p))
 
 
 @dataclass(frozen=True)
@@ -258,7 +271,7 @@ class AssociationConfig:
     @property
     def gate(self) -> float:
         """Threshold on the squared Mahalanobis distance (chi-square quantile, 3 dof)."""
-        return float(chi2.ppf(self.gate_probability, MEASUREMENT_DOF))
+        return chi2_quantile(self.gate_probability, MEASUREMENT_DOF)
 
 
 @dataclass(frozen=True)
@@ -457,6 +470,8 @@ def assign(cost: ArrayLike, feasible: ArrayLike) -> IntArray:
     # feasible pairs first, then the least cost
     big = (float((sub[fs] - low).max()) + 1.0) * (min(fs.shape) + 1)
     work = np.where(fs, sub - low, big)
+    from scipy.optimize import linear_sum_assignment  # here: module docstring, imports
+
     r, c = linear_sum_assignment(work)
     keep = fs[r, c]
     out[cols[c[keep]]] = rows[r[keep]]
@@ -522,6 +537,8 @@ def register(prediction: ScanPrediction, z: ArrayLike, R: ArrayLike, feasible: A
     share = (F.astype(np.int64) @ F.T.astype(np.int64)) > 0  # tracks sharing a detection
     if linked is not None:
         share = share | np.asarray(linked, dtype=bool)
+    from scipy.sparse.csgraph import connected_components  # here: module docstring, imports
+
     ngroups, group = connected_components(share, directed=False)
     if ngroups == n:  # no group of two or more: nothing to register
         return shift
@@ -792,7 +809,7 @@ class Associator:
         self.iod_samples = int(options.iod.iod_samples)
         self.counts: Counter[TrackEvent] = Counter()
         self._gate = self.config.gate
-        self._gate1 = float(chi2.ppf(self.config.gate_probability, 1))
+        self._gate1 = chi2_quantile(self.config.gate_probability, 1)
         self._next_id = 1
         # per bank row (grown with the bank)
         self.status = np.zeros(0, dtype=np.int8)

@@ -16,7 +16,8 @@ Once a second it gives the C heap the fusions freed back to the system
 its largest batch. With ``max_unacked_rows`` it waits for its estimate readers'
 acknowledgements whenever that many rows are out (`memory.AckedPublisher`), so that the
 publisher's history keeps a few message slots, not as many as its largest burst left
-unacknowledged (at the cost of the waits).
+unacknowledged (at the cost of the waits; with rmw_fastrtps's default history memory: the
+graphs ssa_fusion starts free a slot's buffer with its message, `ros.discovery`).
 
 Sharding: with ``shards`` = K > 1 the node owns the objects whose ``shard_key`` (CRC-32 of
 ``object_id``) lies in the ``shard``-th of K equal ranges, and subscribes with a DDS content

@@ -18,7 +18,10 @@ largest message) never frees a history slot once made: a node that publishes a b
 messages faster than its readers acknowledge them keeps, for the rest of its life, as many
 slots of the largest message's size as it ever had unacknowledged messages, and that count
 only grows as bursts do. `AckedPublisher` bounds it: it waits for the readers'
-acknowledgements once `max_unacked_rows` rows are out.
+acknowledgements once `max_unacked_rows` rows are out. The graphs ssa_fusion starts give
+their nodes Fast DDS's dynamic history memory instead (`ros.discovery.ENDPOINT_PROFILES`):
+a slot's buffer is freed once its message is acknowledged, so the history holds only what
+is unacknowledged at the time, and the bound matters for nodes started without that profile.
 """
 
 from __future__ import annotations

@@ -9,6 +9,20 @@ listens on every address of the host (measured in docs/MULTIHOST.md). So a graph
 on this host also gets a Fast DDS profile (`LOOPBACK_PROFILE`, `Discovery.bind`) that
 listens on loopback only: a participant elsewhere that knows this host's address cannot
 reach it either.
+
+The same profile gives every reader and writer of the graph's processes Fast DDS's dynamic
+history memory (`ENDPOINT_PROFILES`): a message's buffer is allocated when the message
+enters a history and freed when it leaves. rmw_fastrtps otherwise configures
+``PREALLOCATED_WITH_REALLOC`` memory, whose buffers are never freed: a catalog node's
+estimate writer (and its measurement readers) keep, for the rest of their life, as many
+buffers of the largest message's size as their history ever held at once (a burst that
+readers acknowledged late), tens of MiB a process. rmw_fastrtps applies an XML profile's
+history memory only with ``RMW_FASTRTPS_USE_QOS_FROM_XML=1`` (`QOS_FROM_XML_VAR`), and
+then takes the publication mode and data sharing from the profile too: it sets them as
+rmw_fastrtps does by default (synchronous publication, no data sharing). Those three are
+all the variable changes (rmw_fastrtps 9, Kilted: its create_publisher and
+create_subscription): the ROS QoS given in code (history, depth, reliability, durability
+...) are applied on top of the profile either way.
 """
 
 from __future__ import annotations
@@ -26,9 +40,30 @@ PEERS_VAR = "ROS_STATIC_PEERS"
 """The environment variable of the static peers (';'-separated addresses)."""
 PROFILE_VAR = "FASTDDS_DEFAULT_PROFILES_FILE"
 """The environment variable naming the Fast DDS XML profiles file a process loads."""
+QOS_FROM_XML_VAR = "RMW_FASTRTPS_USE_QOS_FROM_XML"
+"""The environment variable that makes rmw_fastrtps take the history memory policy,
+publication mode and data sharing from the XML profiles (``1``) rather than its own."""
 PROFILE_NAME = "fastdds_loopback.xml"
 """The file name `Discovery.bind` writes `LOOPBACK_PROFILE` to."""
-LOOPBACK_PROFILE = """\
+ENDPOINT_PROFILES = """\
+    <data_writer profile_name="ssa_fusion_writer" is_default_profile="true">
+      <qos>
+        <publishMode><kind>SYNCHRONOUS</kind></publishMode>
+        <data_sharing><kind>OFF</kind></data_sharing>
+      </qos>
+      <historyMemoryPolicy>DYNAMIC</historyMemoryPolicy>
+    </data_writer>
+    <data_reader profile_name="ssa_fusion_reader" is_default_profile="true">
+      <qos>
+        <data_sharing><kind>OFF</kind></data_sharing>
+      </qos>
+      <historyMemoryPolicy>DYNAMIC</historyMemoryPolicy>
+    </data_reader>
+"""
+"""Every writer's and reader's defaults: dynamic history memory (``DYNAMIC``, Fast DDS's
+``DYNAMIC_RESERVE_MEMORY_MODE``: buffers freed with their messages; module docstring), and
+what rmw_fastrtps sets by default otherwise (synchronous publication, data sharing off)."""
+LOOPBACK_PROFILE = f"""\
 <?xml version="1.0" encoding="UTF-8"?>
 <!-- ssa_fusion: every participant listens on loopback only (UDPv4 on lo, and shared memory) -->
 <dds xmlns="http://www.eprosima.com">
@@ -57,10 +92,11 @@ LOOPBACK_PROFILE = """\
         <useBuiltinTransports>false</useBuiltinTransports>
       </rtps>
     </participant>
-  </profiles>
+{ENDPOINT_PROFILES}  </profiles>
 </dds>
 """
-"""Fast DDS's default transports (shared memory, UDPv4) with UDP on the loopback interface."""
+"""Fast DDS's default transports (shared memory, UDPv4) with UDP on the loopback interface,
+and `ENDPOINT_PROFILES`."""
 _HOSTNAME = re.compile(r"^(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]*[A-Za-z0-9])?"
                        r"(\.[A-Za-z0-9]([A-Za-z0-9-]*[A-Za-z0-9])?)*$")
 
@@ -101,21 +137,25 @@ class Discovery:
     def bind(self, env: MutableMapping[str, str], directory: Path) -> None:
         """Make the processes of `env` listen on loopback only, unless they reach other hosts.
 
-        Writes `LOOPBACK_PROFILE` to `directory` and names it in `env` (`PROFILE_VAR`); a
-        profiles file the user named there already is kept (theirs decides). Reaching other
-        hosts, any loopback profile of an earlier graph is taken out of `env`.
+        Writes `LOOPBACK_PROFILE` to `directory` and names it in `env` (`PROFILE_VAR`), with
+        `QOS_FROM_XML_VAR` set to ``1`` (its history memory applies: module docstring); a
+        profiles file the user named there already is kept (theirs decides, and so does
+        their `QOS_FROM_XML_VAR`). Reaching other hosts, any loopback profile of an earlier
+        graph is taken out of `env`, with the `QOS_FROM_XML_VAR` it came with.
         """
         current = env.get(PROFILE_VAR, "")
         ours = Path(current).name == PROFILE_NAME
         if self.reaches_other_hosts:
             if ours:
                 del env[PROFILE_VAR]
+                env.pop(QOS_FROM_XML_VAR, None)
             return
         if current and not ours:
             return
         path = Path(directory) / PROFILE_NAME
         path.write_text(LOOPBACK_PROFILE)
         env[PROFILE_VAR] = str(path)
+        env[QOS_FROM_XML_VAR] = "1"
 
     def exports(self) -> list[str]:
         """Return the ``NAME=value`` assignments of `apply` (for a shell command line)."""

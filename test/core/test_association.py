@@ -607,3 +607,19 @@ def test_tracks_on_one_orbit_close_together_are_linked_crossing_or_far_ones_not(
     # 0-1: 3 km, one velocity; 0-2: 1 km but crossing (~70 deg); 0-3: 20 km
     assert near.tolist() == [[True, True, False, False], [True, True, False, False],
                              [False, False, True, False], [False, False, False, True]]
+
+
+def test_chi2_quantile_is_scipy_stats_chi2_ppf_bit_for_bit_and_analytic_at_two_dof():
+    """`chi2_quantile` (scipy.special only) against scipy.stats' own chi-square quantile,
+    float for float, and at 2 degrees of freedom against the closed form -2 ln(1 - p)."""
+    from scipy.stats import chi2
+
+    from ssa_fusion.core.association import MEASUREMENT_DOF, chi2_quantile
+
+    probabilities = (1e-9, 0.01, 0.5, 0.9, 0.95, 0.99, 0.9973, 0.9999, 1 - 1e-9)
+    for dof in (1, 2, MEASUREMENT_DOF, 6):
+        for p in probabilities:
+            assert chi2_quantile(p, dof) == float(chi2.ppf(p, dof)), (p, dof)
+    for p in probabilities:
+        assert chi2_quantile(p, 2) == pytest.approx(-2.0 * math.log1p(-p), rel=1e-12)
+    assert chi2_quantile(AssociationConfig().gate_probability, MEASUREMENT_DOF) == GATE

@@ -1,10 +1,16 @@
 """Discovery settings of a graph: loopback by default (range, no peers, a loopback-only
-Fast DDS profile), other hosts only when asked, and the command a remote shard's host runs."""
+Fast DDS profile with dynamic history memory that rmw_fastrtps applies), other hosts only
+when asked, and the command a remote shard's host runs."""
 
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
+import subprocess
+import sys
+import textwrap
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
@@ -17,6 +23,7 @@ from ssa_fusion.ros.discovery import (
     PEERS_VAR,
     PROFILE_NAME,
     PROFILE_VAR,
+    QOS_FROM_XML_VAR,
     RANGE_VAR,
     Discovery,
     DiscoveryRange,
@@ -36,6 +43,58 @@ def test_the_default_stays_on_this_host_whatever_the_shell_exports(tmp_path):
     text = profile.read_text()
     assert '<interface name="lo"/>' in text and "<useBuiltinTransports>false" in text
     assert not LOOPBACK.reaches_other_hosts
+    assert env[QOS_FROM_XML_VAR] == "1"  # else rmw_fastrtps overrides the history memory
+
+
+def test_every_writer_and_reader_defaults_to_dynamic_history_memory(tmp_path):
+    """The profile's default writer and reader: DYNAMIC history memory, and rmw_fastrtps's
+    own defaults otherwise (synchronous publication, no data sharing)."""
+    env: dict[str, str] = {}
+    LOOPBACK.bind(env, tmp_path)
+    ns = {"dds": "http://www.eprosima.com"}
+    profiles = ET.parse(env[PROFILE_VAR]).getroot().find("dds:profiles", ns)
+    assert profiles is not None
+    for tag in ("data_writer", "data_reader"):
+        found = [e for e in profiles.findall(f"dds:{tag}", ns)
+                 if e.get("is_default_profile") == "true"]
+        assert len(found) == 1, tag
+        assert found[0].findtext("dds:historyMemoryPolicy", namespaces=ns) == "DYNAMIC"
+        assert found[0].findtext("dds:qos/dds:data_sharing/dds:kind", namespaces=ns) == "OFF"
+    writer = profiles.find("dds:data_writer", ns)
+    assert writer is not None
+    assert writer.findtext("dds:qos/dds:publishMode/dds:kind", namespaces=ns) == "SYNCHRONOUS"
+
+
+PUB_SUB = textwrap.dedent("""
+    import rclpy
+    from std_msgs.msg import String
+    rclpy.init()
+    node = rclpy.create_node("profile_check")
+    node.create_publisher(String, "/profile_check", 10)
+    node.create_subscription(String, "/profile_check", lambda m: None, 10)
+    node.destroy_node()
+    rclpy.shutdown()
+""")
+
+
+def _fast_dds_output(env: dict[str, str]) -> str:
+    """Run a publisher and a subscription in a process of `env`; return what it printed."""
+    done = subprocess.run([sys.executable, "-c", PUB_SUB], env=env, capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return done.stdout + done.stderr
+
+
+def test_fast_dds_parses_the_profile_without_an_error(tmp_path):
+    """Fast DDS loads the profile the graph's processes get: no XML parser error, where a
+    profile with a history memory policy Fast DDS does not know gets one."""
+    env = dict(os.environ)
+    LOOPBACK.apply(env)
+    LOOPBACK.bind(env, tmp_path)
+    assert "XMLPARSER" not in _fast_dds_output(env)
+    bad = tmp_path / "bad.xml"
+    bad.write_text(Path(env[PROFILE_VAR]).read_text().replace(">DYNAMIC<", ">DYNAMIC_NONE<"))
+    assert "XMLPARSER" in _fast_dds_output({**env, PROFILE_VAR: str(bad)})
 
 
 def test_other_hosts_drop_the_loopback_profile_and_keep_a_users_own(tmp_path):
