@@ -193,6 +193,8 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     readers = ["recorder:" + TOPIC_MEASUREMENT_BATCH,
                f"recorder:{TOPIC_ESTIMATE_BATCH}={len(names) + len(gaps)}",
                *(f"{n}:{TOPIC_MEASUREMENT_BATCH}" for n in [*names, *fitting]),
+               # every surrogate hears every estimate publisher (its own too) from the first
+               *(f"{n}:{TOPIC_ESTIMATE_BATCH}={len(names) + len(gaps)}" for n in gaps),
                # and their side of it: the recorder and every surrogate hear each of them
                *(f"{n}:{OUTPUT}{TOPIC_ESTIMATE_BATCH}={1 + len(gaps)}" for n in [*names, *gaps])]
     if unlabelled:
