@@ -47,7 +47,7 @@ from ssa_fusion.nodes.clock_hold import ClockHold
 from ssa_fusion.nodes.diagnostics import Diagnostics, wall_timer
 from ssa_fusion.nodes.node_parameters import NodeParameters
 from ssa_fusion.nodes.parameters import ParameterTable, ParamValue
-from ssa_fusion.nodes.process import constructing, run
+from ssa_fusion.nodes.process import constructing, run, start_watchdog
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Message, String, Time
 from ssa_fusion.ros.topics import CONFIG_QOS, TOPIC_CONFIG
@@ -70,11 +70,12 @@ class SsaNode(Node):
     PARAMETERS: ClassVar[ParameterTable]
 
     def __init__(self) -> None:
-        super().__init__(self.PARAMETERS.node)
-        constructing(self)  # destroyed in order by `run` if a parameter is refused below
-        self.params = NodeParameters(self, self.PARAMETERS, self.on_parameters_set)
-        self.params.reject_unknown()
-        self.diag = Diagnostics(self, stamp=self.diagnostics_stamp)
+        with start_watchdog():  # DDS can deadlock here: exit rather than hang (process.py)
+            super().__init__(self.PARAMETERS.node)
+            constructing(self)  # destroyed in order by `run` if a parameter is refused below
+            self.params = NodeParameters(self, self.PARAMETERS, self.on_parameters_set)
+            self.params.reject_unknown()
+            self.diag = Diagnostics(self, stamp=self.diagnostics_stamp)
         self.clock_hold = ClockHold(self, self.diag)
         self._jump_handles: list[object] = []
         self._settings_pub: Publisher[String] | None = None

@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import contextlib
 import faulthandler
+import math
+import os
 import signal
 import sys
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING
 
 import rclpy
@@ -40,6 +42,18 @@ SLOW_STOP_S = 7.0
 """Wall s after a stop began when a node still stopping dumps its threads' stacks to stderr
 (it drains for at most 3 s; a supervisor such as the test graphs' kills it at 10 s)."""
 
+START_TIMEOUT_S = 120.0
+"""Wall s the DDS part of a node's start (rclpy's context, the node's participant, its
+parameter services and /diagnostics) may take before the process writes "Timeout" and every
+thread's stack to stderr and exits 1 (`start_watchdog`). A participant made while others
+leave can deadlock inside Fast DDS (eProsima/Fast-DDS#6502), and a process stuck there
+ignores SIGINT and SIGTERM; exiting lets its supervisor (``ros2 launch``'s respawn,
+``ssa-fusion live``) see it. That part takes about a second; a node's own work at start (the
+simulator's schedule) is not counted. `START_TIMEOUT_ENV` sets it (0: none)."""
+
+START_TIMEOUT_ENV = "SSA_FUSION_START_TIMEOUT_S"
+"""Environment variable that sets `START_TIMEOUT_S` (wall s; 0 turns the watchdog off)."""
+
 _finish_code = [EXIT_OK]
 """The exit code a callback asked for with `finish` (one process runs one node)."""
 
@@ -47,6 +61,41 @@ _constructed: list[Node] = []
 """The node this process is building or runs, from the start of its ``__init__``
 (`constructing`): a node whose ``__init__`` refuses a parameter is destroyed by `run`, its
 publishers first, rather than left to the garbage collector with DDS still running."""
+
+
+def start_timeout_s() -> float:
+    """Return the start watchdog's timeout, wall s (`START_TIMEOUT_ENV`, else the default).
+
+    ValueError naming the variable when it is not a finite number >= 0.
+    """
+    text = os.environ.get(START_TIMEOUT_ENV, "")
+    if not text:
+        return START_TIMEOUT_S
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0.0):
+        raise ValueError(f"{START_TIMEOUT_ENV} must be a number of seconds >= 0 (0: no "
+                         f"watchdog), got {text!r}")
+    return value
+
+
+@contextlib.contextmanager
+def start_watchdog() -> Iterator[None]:
+    """Exit the process (1, every thread's stack on stderr) if the block outlasts the timeout.
+
+    `start_timeout_s`; faulthandler's own thread does it, so it works while the main thread
+    is blocked inside DDS holding the GIL, where no Python signal handler or thread can run.
+    """
+    timeout = start_timeout_s()
+    if timeout > 0.0:
+        faulthandler.dump_traceback_later(timeout, exit=True, file=sys.stderr)
+    try:
+        yield
+    finally:
+        if timeout > 0.0:
+            faulthandler.cancel_dump_traceback_later()
 
 
 def constructing(node: Node) -> None:
@@ -68,7 +117,13 @@ def run(make_node: Callable[[], SsaNode], args: list[str] | None = None) -> int:
         print(f"error: cannot start: {problem}", file=sys.stderr)
         return EXIT_BAD_PARAMETERS
     try:
-        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        start_timeout_s()
+    except ValueError as exc:
+        print(f"error: cannot start: {exc}", file=sys.stderr)
+        return EXIT_BAD_PARAMETERS
+    try:
+        with start_watchdog():
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except _rclpy.RCLError as exc:  # rcl could not parse the arguments: a -p rule, a params file
         print(f"error: cannot start: {_first_line(str(exc))} (check the --ros-args: "
               "-p name:=value rules need a value, lists one type; params files valid YAML)",
