@@ -52,6 +52,7 @@ from ssa_fusion.core import timescales
 from ssa_fusion.core.rows import MeasurementRows
 from ssa_fusion.core.types import UpdateSource
 from ssa_fusion.evaluation.association import detection_labels, score_association
+from ssa_fusion.evaluation.object_states import ObjectStates, States, StatesByObject, merge
 from ssa_fusion.nodes.defaults import CATALOG_FILTER, CATALOG_SURROGATE
 from ssa_fusion.nodes.diagnostics import RECORDED, Count
 from ssa_fusion.nodes.progress import RECORDED_ESTIMATES, RECORDED_MEASUREMENTS
@@ -268,19 +269,16 @@ def _rss_kib(pid: int) -> int:
     return 0
 
 
-def position_errors(entries: list[catalog_io.CatalogEntry],
-                    estimates: dict[str, list[tuple[float, np.ndarray]]]) -> np.ndarray:
-    """|r_estimate - r_SGP4| (km) of every estimate (object id -> (t, x) list)."""
+def position_errors(entries: list[catalog_io.CatalogEntry], estimates: States) -> np.ndarray:
+    """|r_estimate - r_SGP4| (km) of every estimate of an object of `entries`."""
     by_id = {e.object_id: e for e in entries}
     errs = []
-    for oid, rows in estimates.items():
+    for oid, est in estimates.items():
         entry = by_id.get(oid)
-        if entry is None or not rows:
+        if entry is None or not est.t.size:
             continue
-        t = np.array([r[0] for r in rows])
-        x = catalog_io.catalog_states([entry], t).x[0]
-        r = np.array([r[1][:3] for r in rows])
-        errs.append(np.linalg.norm(r - x[:, :3], axis=1))
+        x = catalog_io.catalog_states([entry], est.t).x[0]
+        errs.append(np.linalg.norm(est.x[:, :3] - x[:, :3], axis=1))
     return np.concatenate(errs) if errs else np.zeros(0)
 
 
@@ -444,8 +442,7 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
     and those the surrogates forecast (`studies.catalog_gaps.gap_coverage`).
     """
     recorded: Counter[str] = Counter()  # rows
-    estimates: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
-    forecasts: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
+    gather = {UpdateSource.SENSOR: StatesByObject(), UpdateSource.FORECAST: StatesByObject()}
     labelled: dict[str, list[MeasurementRows]] = defaultdict(list)  # unlabelled runs
     topics = [TOPIC_MEASUREMENT_BATCH, TOPIC_ESTIMATE_BATCH]
     for m in bagio.read_bag(bag, topics=topics + ([TOPIC_DETECTION_TRUTH, TOPIC_ASSOCIATED]
@@ -455,9 +452,12 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
             labelled[m.topic].append(messages.measurement_batch_from_msg(m.msg))
         elif m.topic == TOPIC_ESTIMATE_BATCH:
             e = messages.estimate_batch_from_msg(m.msg)
-            into = forecasts if e.update_source == UpdateSource.FORECAST else estimates
-            for oid, t, x in zip(e.object_id, e.t.tolist(), e.x, strict=True):
-                into[oid].append((t, x))
+            forecast = e.update_source == UpdateSource.FORECAST
+            gather[UpdateSource.FORECAST if forecast else UpdateSource.SENSOR].add(
+                e.object_id, e.t, e.x)
+    n_forecasts = gather[UpdateSource.FORECAST].rows
+    estimates = gather[UpdateSource.SENSOR].done()
+    forecasts = gather[UpdateSource.FORECAST].done()
 
     def num(node: str, key: str) -> int:
         return _count(status, node, key)
@@ -521,8 +521,7 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
         surrogates[g]["fit_seconds"] = float(st.get("fit_seconds", "0") or 0)
         surrogates[g]["object_ids"] = [x for x in st.get("object_ids", "").split(",") if x]
         surrogates[g]["rss_mib"] = rss.get(g, 0) / 1024.0
-    n_forecasts = sum(len(v) for v in forecasts.values())
-    start = t0 if t0 is not None else min((t for r in estimates.values() for t, _ in r),
+    start = t0 if t0 is not None else min((float(r.t[0]) for r in estimates.values()),
                                          default=0.0)
     return {
         "published": published, "recorded_measurements": recorded[TOPIC_MEASUREMENT_BATCH],
@@ -569,17 +568,16 @@ def association(truth: list[MeasurementRows], associated: list[MeasurementRows],
     return score_association(rows.object_id, labels, confirmed).as_dict()
 
 
-def by_owner(rows: dict[str, list[tuple[float, np.ndarray]]],
-             owner: dict[str, str]) -> dict[str, list[tuple[float, np.ndarray]]]:
-    """Return track id -> (t, x) list as object id -> (t, x) list by each track's object.
+def by_owner(rows: States, owner: dict[str, str]) -> States:
+    """Return each track's states as its object's (every track of one object merged).
 
     Tracks of no object (`owner` lacks them) are left out.
     """
-    out: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
-    for track, values in rows.items():
+    parts: dict[str, list[ObjectStates]] = defaultdict(list)
+    for track, states in rows.items():
         if track in owner:
-            out[owner[track]] += values
-    return out
+            parts[owner[track]].append(states)
+    return {oid: merge(p) for oid, p in parts.items()}
 
 
 def table(s: dict[str, Any]) -> str:

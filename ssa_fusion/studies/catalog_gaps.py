@@ -37,6 +37,7 @@ from ssa_fusion.core.rows import MeasurementRows
 from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
 from ssa_fusion.core.track_bank import TrackBank
 from ssa_fusion.core.types import Kind, MotionModel, Source
+from ssa_fusion.evaluation.object_states import States, states_of
 from ssa_fusion.sim import survey
 from ssa_fusion.sim.sky import SKY_SCENARIOS, SkyScenario
 
@@ -47,10 +48,6 @@ EVALUATION_SEEDS = tuple(range(101, 106))
 GAPS_SCORED = 200
 """Most gaps whose forecasts are scored against the coasting filter (evenly chosen)."""
 
-Rows = dict[str, list[tuple[float, np.ndarray]]]
-"""Per object id, (epoch s, state (6,) km, km/s GCRF) in epoch order."""
-
-
 def bank_config(s: SkyScenario) -> FilterOptions:
     """Return the batched filter's settings of scenario `s`.
 
@@ -60,7 +57,7 @@ def bank_config(s: SkyScenario) -> FilterOptions:
     return s.filter_options()
 
 
-def gap_errors(entries: list[catalog_io.CatalogEntry], estimates: Rows, forecasts: Rows,
+def gap_errors(entries: list[catalog_io.CatalogEntry], estimates: States, forecasts: States,
                motion_model: str = "j2", max_gaps: int = GAPS_SCORED) -> dict[str, Any]:
     """Score forecasts against the SGP4 truth of `entries`, beside coasting.
 
@@ -69,18 +66,14 @@ def gap_errors(entries: list[catalog_io.CatalogEntry], estimates: Rows, forecast
     over up to `max_gaps` gaps evenly chosen (a gap: the forecasts after one estimate).
     """
     gaps = []  # (object, pass end t, x, forecast epochs, forecast positions)
-    for oid, rows in sorted(forecasts.items()):
-        est = sorted(estimates.get(oid, []), key=lambda r: r[0])
-        fc = sorted(rows, key=lambda r: r[0])  # bag order: a forecast may be published twice
-        if not est:
+    for oid, fc in sorted(forecasts.items()):
+        est = estimates.get(oid)
+        if est is None or not est.t.size:
             continue
-        te = np.array([r[0] for r in est])
-        tf = np.array([r[0] for r in fc])
-        rf = np.array([r[1][:3] for r in fc])
-        end = np.searchsorted(te, tf) - 1  # the estimate each forecast follows
+        end = np.searchsorted(est.t, fc.t) - 1  # the estimate each forecast follows
         for j in np.unique(end[end >= 0]):
             at = end == j
-            gaps.append((oid, te[j], est[j][1], tf[at], rf[at]))
+            gaps.append((oid, est.t[j], est.x[j], fc.t[at], fc.x[at, :3]))
     if not gaps:
         return {"gaps": 0, "forecasts": 0}
     pick = np.unique(np.linspace(0, len(gaps) - 1, min(max_gaps, len(gaps))).astype(int))
@@ -139,7 +132,7 @@ def forecast_nees(entries: list[catalog_io.CatalogEntry],
     return out
 
 
-def gap_coverage(estimates: Rows, forecasts: Rows, t_start: float, t_end: float,
+def gap_coverage(estimates: States, forecasts: States, t_start: float, t_end: float,
                  pass_break_s: float, after_s: float = DAY_S) -> dict[str, Any]:
     """Count the gaps after the first `after_s` of a run and those with a forecast.
 
@@ -153,13 +146,14 @@ def gap_coverage(estimates: Rows, forecasts: Rows, t_start: float, t_end: float,
     ends).
     """
     gaps = covered = own = own_covered = 0
-    for oid, rows in estimates.items():
-        te = np.unique(np.array([r[0] for r in rows], float))
+    for oid, est in estimates.items():
+        te = np.unique(est.t)
         nxt = np.append(te[1:], t_end)
         is_gap = nxt - te >= pass_break_s
         if not is_gap.any():
             continue
-        tf = np.sort(np.array([r[0] for r in forecasts.get(oid, [])], float))
+        fc = forecasts.get(oid)
+        tf = np.zeros(0) if fc is None else fc.t
         first_after = np.searchsorted(tf, te, side="right")  # each t_e's first forecast after
         hit = (first_after < tf.size) & (tf[np.minimum(first_after, max(tf.size - 1, 0))]
                                          <= nxt) if tf.size else np.zeros(te.size, bool)
@@ -262,8 +256,9 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
     model = StationModels(stations, UNIX_EPOCH_JD)
     arms = {GapFill(f): GapBank(replace(base, gap_forecast=GapFill(f)), wall=wall, model=model)
             for f in gap_forecasts}
-    estimates: Rows = defaultdict(list)
-    forecasts: dict[GapFill, Rows] = {f: defaultdict(list) for f in arms}
+    estimates: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
+    forecasts: dict[GapFill, dict[str, list[tuple[float, np.ndarray]]]] = {
+        f: defaultdict(list) for f in arms}
     made: dict[GapFill, list[GapForecast]] = {f: [] for f in arms}
     c_fit = dict.fromkeys(arms, 0.0)
     c_filter = 0.0
@@ -289,15 +284,14 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
                 forecasts[f][g.object_id].append((g.t, g.x))
                 made[f].append(g)
             c_fit[f] += time.perf_counter() - c
-    for by_arm in forecasts.values():
-        for r in by_arm.values():
-            r.sort(key=lambda r: r[0])
     shared = set.intersection(*({(o, t) for o, r in by_arm.items() for t, _ in r}
                                 for by_arm in forecasts.values()))
+    est = states_of(estimates)
     scores = {}
     for f, gaps in arms.items():
         n_fits = gaps.counts["fitted"]
-        one = gap_errors(entries, estimates, forecasts[f], s.motion_model, max_gaps)
+        fc = states_of(forecasts[f])
+        one = gap_errors(entries, est, fc, s.motion_model, max_gaps)
         one.update({"gap_forecast": str(f), "fits_made": n_fits,
                     "fits_physics": gaps.counts["fitted_physics"],
                     "fits_refused": gaps.counts["refused"], "surrogate_wall_s": c_fit[f],
@@ -305,12 +299,12 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
                     "window_bytes_per_object": gaps.windows.nbytes() / objects,
                     "wall_s_per_fit": c_fit[f] / n_fits if n_fits else None,
                     "nees": forecast_nees(entries, made[f]) if made[f] else None,
-                    "coverage": gap_coverage(estimates, forecasts[f], t_first,
-                                             t_first + 3600.0 * hours, base.pass_break_s)})
+                    "coverage": gap_coverage(est, fc, t_first, t_first + 3600.0 * hours,
+                                             base.pass_break_s)})
         scores[str(f)] = one
-    common = {str(f): gap_errors(entries, estimates,
-                                 {o: [r for r in rows if (o, r[0]) in shared]
-                                  for o, rows in forecasts[f].items()},
+    common = {str(f): gap_errors(entries, est,
+                                 states_of({o: [r for r in rows if (o, r[0]) in shared]
+                                            for o, rows in forecasts[f].items()}),
                                  s.motion_model, max_gaps) for f in arms}
     out = dict(scores[str(next(iter(arms)))])
     out.update({"seed": seed, "objects": objects, "hours": hours, "measurements": measurements,
