@@ -442,7 +442,7 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
     and those the surrogates forecast (`studies.catalog_gaps.gap_coverage`).
     """
     recorded: Counter[str] = Counter()  # rows
-    gather = {UpdateSource.SENSOR: StatesByObject(), UpdateSource.FORECAST: StatesByObject()}
+    sensor, forecast = StatesByObject(), StatesByObject()  # the estimates, the forecasts
     labelled: dict[str, list[MeasurementRows]] = defaultdict(list)  # unlabelled runs
     topics = [TOPIC_MEASUREMENT_BATCH, TOPIC_ESTIMATE_BATCH]
     for m in bagio.read_bag(bag, topics=topics + ([TOPIC_DETECTION_TRUTH, TOPIC_ASSOCIATED]
@@ -452,12 +452,10 @@ def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
             labelled[m.topic].append(messages.measurement_batch_from_msg(m.msg))
         elif m.topic == TOPIC_ESTIMATE_BATCH:
             e = messages.estimate_batch_from_msg(m.msg)
-            forecast = e.update_source == UpdateSource.FORECAST
-            gather[UpdateSource.FORECAST if forecast else UpdateSource.SENSOR].add(
-                e.object_id, e.t, e.x)
-    n_forecasts = gather[UpdateSource.FORECAST].rows
-    estimates = gather[UpdateSource.SENSOR].done()
-    forecasts = gather[UpdateSource.FORECAST].done()
+            into = forecast if e.update_source == UpdateSource.FORECAST else sensor
+            into.add(e.object_id, e.t, e.x)
+    n_forecasts = forecast.rows
+    estimates, forecasts = sensor.done(), forecast.done()
 
     def num(node: str, key: str) -> int:
         return _count(status, node, key)
