@@ -57,7 +57,7 @@ from ssa_fusion.ros.interfaces import MeasurementBatch
 from ssa_fusion.ros.processes import Graph
 from ssa_fusion.ros.readiness import ReadyNodes
 from ssa_fusion.ros.topics import (
-    CATALOG_QOS,
+    CATALOG_WRITER_QOS,
     TOPIC_MEASUREMENT,
     TOPIC_MEASUREMENT_BATCH,
 )
@@ -151,8 +151,9 @@ def main() -> None:
         g = Graph(Path(tmp) / "logs")
         try:
             pub_b = g.probe.create_publisher(MeasurementBatch, TOPIC_MEASUREMENT_BATCH,
-                                             CATALOG_QOS)
-            pub_m = g.probe.create_publisher(MeasurementMsg, TOPIC_MEASUREMENT, CATALOG_QOS)
+                                             CATALOG_WRITER_QOS)
+            pub_m = g.probe.create_publisher(MeasurementMsg, TOPIC_MEASUREMENT,
+                                             CATALOG_WRITER_QOS)
 
             def batch_feeder() -> Callable[[], int]:
                 it_b = iter(batches)

@@ -95,6 +95,7 @@ from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
 from ssa_fusion.ros.topics import (
     CATALOG_DEPTH,
     CATALOG_QOS,
+    CATALOG_WRITER_QOS,
     TOPIC_ESTIMATE_BATCH,
     TOPIC_MEASUREMENT,
     TOPIC_MEASUREMENT_BATCH,
@@ -160,7 +161,7 @@ class CatalogFilterNode(SsaNode):
         self.fusion = self.new_fusion()
         self.lo, self.hi = shard_range(self.shard, self.shards)
         self.diag.status["shard"] = f"{self.shard}/{self.shards} keys [{self.lo}, {self.hi}]"
-        self.pub = self.advertise(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
+        self.pub = self.advertise(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_WRITER_QOS)
         unacked = p.integer("max_unacked_rows")
         self.acked = AckedPublisher(self.pub, unacked if unacked > 0 else math.inf, ACK_WAIT_S)
         self.unlabelled = UnlabelledRows(self.diag)

@@ -90,7 +90,12 @@ from ssa_fusion.nodes.shards import (
 )
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import EstimateBatch, MeasurementBatch, Message
-from ssa_fusion.ros.topics import CATALOG_QOS, TOPIC_ESTIMATE_BATCH, TOPIC_MEASUREMENT_BATCH
+from ssa_fusion.ros.topics import (
+    CATALOG_QOS,
+    CATALOG_WRITER_QOS,
+    TOPIC_ESTIMATE_BATCH,
+    TOPIC_MEASUREMENT_BATCH,
+)
 
 TICK_S = 0.01
 """Wall s between two rounds of fits and releases (in lockstep the simulator's next step
@@ -172,7 +177,7 @@ class CatalogSurrogateNode(SsaNode):
         self.bank = self.new_bank()
         self.diag.status["shard"] = f"{self.shard}/{self.shards}"
         self.key_range = shard_range(self.shard, self.shards)
-        self.pub = self.advertise(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_QOS)
+        self.pub = self.advertise(EstimateBatch, TOPIC_ESTIMATE_BATCH, CATALOG_WRITER_QOS)
         cft = content_filter(self.shard, self.shards, "update_source = %0",
                              (str(UpdateSource.SENSOR.value),), batches=True)
         self.sub = self.subscribe(EstimateBatch, TOPIC_ESTIMATE_BATCH, self.on_message,

@@ -42,7 +42,13 @@ from ssa_fusion.nodes.parameters import (
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
 from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
-from ssa_fusion.ros.topics import DATA_QOS, TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_MEASUREMENT
+from ssa_fusion.ros.topics import (
+    DATA_QOS,
+    DATA_WRITER_QOS,
+    TOPIC_ESTIMATE,
+    TOPIC_FORECAST,
+    TOPIC_MEASUREMENT,
+)
 
 TICK_S = 0.1
 """Wall s between two publications of the predictions due (at most 100 each)."""
@@ -114,7 +120,7 @@ class FilterNode(SsaNode):
         self.gaps = GapPublisher.of(self.tracker, self.params.number("predict_period"),
                                     GapFill(self.params.text("gap_forecast")), self.estimator)
         self.publish_config()
-        self.pub = self.advertise(StateEstimateMsg, TOPIC_ESTIMATE, DATA_QOS)
+        self.pub = self.advertise(StateEstimateMsg, TOPIC_ESTIMATE, DATA_WRITER_QOS)
         for topic, source in ((TOPIC_MEASUREMENT, Source.SENSOR),
                               (TOPIC_FORECAST, Source.FORECAST)):
             self.subscribe(MeasurementMsg, topic,

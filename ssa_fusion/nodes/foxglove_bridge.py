@@ -69,6 +69,7 @@ from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
 from ssa_fusion.ros.topics import (
     CATALOG_QOS,
     DATA_QOS,
+    DATA_WRITER_QOS,
     TOPIC_ESTIMATE,
     TOPIC_ESTIMATE_BATCH,
     TOPIC_FORECAST,
@@ -155,8 +156,8 @@ class FoxgloveBridgeNode(SsaNode):
         if p.flag("ros_topics"):
             self.ros_pubs = {
                 visual_msgs.MARKERS_TOPIC: self.create_publisher(
-                    MarkerArray, visual_msgs.MARKERS_TOPIC, DATA_QOS),
-                **{topic: self.create_publisher(NavSatFix, topic, DATA_QOS)
+                    MarkerArray, visual_msgs.MARKERS_TOPIC, DATA_WRITER_QOS),
+                **{topic: self.create_publisher(NavSatFix, topic, DATA_WRITER_QOS)
                    for topic in (visual_msgs.TRACK_TOPIC, visual_msgs.TRUTH_TRACK_TOPIC)},
             }
 

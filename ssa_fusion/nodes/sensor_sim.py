@@ -67,8 +67,9 @@ from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
 from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
 from ssa_fusion.ros.readiness import ReadyNodes, check_needs
 from ssa_fusion.ros.topics import (
-    CATALOG_QOS,
+    CATALOG_WRITER_QOS,
     DATA_QOS,
+    DATA_WRITER_QOS,
     TOPIC_CLOCK,
     TOPIC_DETECTION_TRUTH,
     TOPIC_MEASUREMENT,
@@ -284,7 +285,7 @@ PARAMETERS = ParameterTable("sensor_sim", (
           "scenario's one object; needs a real-sky `scenario`, whose radars observe every "
           "object (`sim.survey`: SGP4/SDP4 truth, masks, noise); no `/ssa/truth` (the truth "
           "is SGP4 of the catalog); measurements on `/ssa/measurement_batch` "
-          "(MeasurementBatch, keep-last depth 1e6: `CATALOG_QOS`); one `/clock` per tick; "
+          "(MeasurementBatch, keep-last depth 1e6: `CATALOG_WRITER_QOS`); one `/clock` per tick; "
           "'' = off"),
     Param("objects", SENSOR_SIM.objects, "catalog: only the first N objects (0 = all)",
           check=at_least(0)),
@@ -383,20 +384,21 @@ class SensorSim(SsaNode):
                 f"scenario {name!r}: nothing to publish (no measurement and no truth epoch)")
 
         self.pub_clock = self.create_publisher(Clock, TOPIC_CLOCK, DATA_QOS)
-        self.pub_meas = self.create_publisher(MeasurementMsg, TOPIC_MEASUREMENT, DATA_QOS)
+        self.pub_meas = self.create_publisher(MeasurementMsg, TOPIC_MEASUREMENT, DATA_WRITER_QOS)
         self.pub_batch = self.create_publisher(MeasurementBatch, TOPIC_MEASUREMENT_BATCH,
-                                               CATALOG_QOS)
+                                               CATALOG_WRITER_QOS)
         self.shards = p.integer("shards")
-        self.pub_withheld = self.create_publisher(MeasurementMsg, TOPIC_WITHHELD, DATA_QOS)
-        self.pub_truth = self.create_publisher(StateEstimateMsg, TOPIC_TRUTH, DATA_QOS)
+        self.pub_withheld = self.create_publisher(MeasurementMsg, TOPIC_WITHHELD, DATA_WRITER_QOS)
+        self.pub_truth = self.create_publisher(StateEstimateMsg, TOPIC_TRUTH, DATA_WRITER_QOS)
         self.next = 0
         self.finished = False
         self._next_wait_log = time.monotonic() + 5.0  # quiet while discovery runs
         self.wall0: float | None = None
         self.lockstep: Lockstep | None = None
         self.unlabelled = p.flag("unlabelled")
-        self.pub_detection_truth = self.create_publisher(MeasurementBatch, TOPIC_DETECTION_TRUTH,
-                                                         CATALOG_QOS) if self.unlabelled else None
+        self.pub_detection_truth = self.create_publisher(
+            MeasurementBatch, TOPIC_DETECTION_TRUTH, CATALOG_WRITER_QOS
+        ) if self.unlabelled else None
         if self.catalog is not None and any(p.texts("lockstep")):
             keys = self.catalog_keys.astype(np.int64)[self.catalog.obj]
             if self.unlabelled:  # what the batches carry: key 0

@@ -42,7 +42,7 @@ from ssa_fusion.nodes.parameters import (
 )
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
-from ssa_fusion.ros.topics import DATA_QOS, TOPIC_FORECAST, TOPIC_MEASUREMENT
+from ssa_fusion.ros.topics import DATA_QOS, DATA_WRITER_QOS, TOPIC_FORECAST, TOPIC_MEASUREMENT
 
 MAX_DELAYS = 10_000
 """Most Hankel-DMD delays (a Hankel matrix of 10^4 x channels rows; with `cadence` 0 the
@@ -106,7 +106,7 @@ class SurrogateNode(SsaNode):
         self.core = make_surrogate(self.estimator)
         hankel_dmd.warm_up()  # the first fit, in the first gap, not late by an import
         self.publish_config()
-        self.pub = self.advertise(MeasurementMsg, TOPIC_FORECAST, DATA_QOS)
+        self.pub = self.advertise(MeasurementMsg, TOPIC_FORECAST, DATA_WRITER_QOS)
         self.subscribe(MeasurementMsg, TOPIC_MEASUREMENT, self.on_measurement, DATA_QOS)
         self.wall_timer(self.params.number("check_period"), self.publish_missed)
         self.reset_on_backward_jump(self.core.reset, "buffer emptied")

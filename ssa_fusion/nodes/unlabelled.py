@@ -35,7 +35,7 @@ from ssa_fusion.core.unlabelled import is_unlabelled
 from ssa_fusion.nodes.diagnostics import Count, Diagnostics
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import MeasurementBatch
-from ssa_fusion.ros.topics import CATALOG_QOS, TOPIC_ASSOCIATED
+from ssa_fusion.ros.topics import CATALOG_WRITER_QOS, TOPIC_ASSOCIATED
 
 FATE_PREFIX = "detection_"
 """/diagnostics key of an unlabelled detection's fate: this + the `DetectionFate` name."""
@@ -72,7 +72,7 @@ class UnlabelledRows:
 
     def __init__(self, diag: Diagnostics) -> None:
         self.diag = diag
-        self.pub = diag.advertise(MeasurementBatch, TOPIC_ASSOCIATED, CATALOG_QOS)
+        self.pub = diag.advertise(MeasurementBatch, TOPIC_ASSOCIATED, CATALOG_WRITER_QOS)
 
     def take(self, fusion: CatalogFusion, batch: MeasurementRows,
              publish_estimates: Callable[[EstimateRows], None]) -> MeasurementRows | None:

@@ -20,7 +20,7 @@ from rclpy.timer import Timer
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.interfaces import Clock as ClockMsg
 from ssa_fusion.ros.interfaces import Message
-from ssa_fusion.ros.topics import CATALOG_QOS, DATA_QOS, TOPIC_CLOCK
+from ssa_fusion.ros.topics import CATALOG_WRITER_QOS, DATA_QOS, DATA_WRITER_QOS, TOPIC_CLOCK
 
 
 class Player:
@@ -42,7 +42,8 @@ class Player:
             cls = {bagio.MEASUREMENT: self.classes.measurement,
                    bagio.STATE_ESTIMATE: self.classes.estimate,
                    bagio.MEASUREMENT_BATCH: self.classes.measurement_batch}[msgtype]
-            qos = CATALOG_QOS if msgtype == bagio.MEASUREMENT_BATCH else DATA_QOS
+            qos = (CATALOG_WRITER_QOS if msgtype == bagio.MEASUREMENT_BATCH
+                   else DATA_WRITER_QOS)
             self.pubs[topic] = node.create_publisher(cls, topic, qos)
         self.clock_pub = node.create_publisher(ClockMsg, TOPIC_CLOCK, DATA_QOS)
         self.next = 0
