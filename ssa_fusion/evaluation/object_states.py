@@ -1,9 +1,10 @@
 """Many objects' states, gathered from batches into one array per column: `StatesByObject`.
 
-A catalog run's summary scores tens of millions of estimate rows (a 30,000-object day: 45
-million). Kept as a Python tuple per row they took ~14 GB; here they are kept as the
-batches' columns (integer object codes, `catalog_scores.Codes`; epochs; states) and split
-per object once, at the end (`StatesByObject.done`): about 60 bytes a row.
+A catalog run's summary scores tens of millions of estimate rows (30,000 objects for 30 h:
+60 million). Kept as a Python tuple per row they took 250 bytes a row (17,787 MiB for those
+60 million); here they are kept as the batches' columns (integer object codes,
+`catalog_scores.Codes`; epochs; states) and split per object once, at the end
+(`StatesByObject.done`): 63 bytes a row held, 122 at the peak (2,000,000 rows).
 
 Units: epochs s (Unix, or any sim time), states GCRF km, km/s.
 """
