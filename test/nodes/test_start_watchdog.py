@@ -17,6 +17,7 @@ import time
 import pytest
 
 from ssa_fusion.nodes.process import START_TIMEOUT_ENV
+from ssa_fusion.ros.processes import fresh_domain_id
 
 SCRIPT = textwrap.dedent("""
     import sys
@@ -51,8 +52,8 @@ SCRIPT = textwrap.dedent("""
 
 
 def run_node(where: str, timeout_s: str) -> tuple[subprocess.CompletedProcess[str], float]:
-    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST", "ROS_DOMAIN_ID": "98",
-           START_TIMEOUT_ENV: timeout_s}
+    env = {**os.environ, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+           "ROS_DOMAIN_ID": str(fresh_domain_id()), START_TIMEOUT_ENV: timeout_s}
     start = time.monotonic()
     r = subprocess.run([sys.executable, "-c", SCRIPT, where], capture_output=True, text=True,
                        timeout=120, env=env)
