@@ -11,7 +11,7 @@ Each is seen by one radar (Columbus, 10 deg mask) and by two (Columbus and Mills
 its scans 5 s after Columbus's), with the tracking-radar noise of the scenarios
 (`stations.RADAR_SIGMA`: 20 m, 0.02 deg; 10 s cadence), truth by SGP4
 (`survey.observe_catalog`). The scans come without object ids (`survey.Observations.scans`,
-shuffled within each scan) into `core.association.Associator` (the real-sky filter
+shuffled within each scan) into `core.catalog.association.Associator` (the real-sky filter
 `filter_options.SKY_FILTER`: two-body + J2, IOD from 7 detections of a pass), one scan at
 a time. Scored by the truth labels kept aside:
 
@@ -25,7 +25,7 @@ a time. Scored by the truth labels kept aside:
   labels as decided: a deferred decision (`AssociationConfig.defer_passes`) that changes
   the track of detections of an earlier pass (`ScanOutcome.relabelled`) changes their
   labels; ``*_as_emitted``: the same scores of the labels as each scan returned them (the
-  node graph publishes the moved detections again, `core.unlabelled.RowsOutcome.relabelled`,
+  node graph publishes the moved detections again, `core.catalog.unlabelled.RowsOutcome.relabelled`,
   so a live run scores the labels as decided);
 * confirmed tracks, objects with a confirmed track, duplicate tracks (a second confirmed
   track of an object), tracklets and tentative tracks dropped;
@@ -67,16 +67,16 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a source checkout
 
-from ssa_fusion.core.association import (
+from ssa_fusion.core.catalog.association import (
     AssociationConfig,
     Associator,
     DetectionFate,
     TrackEvent,
     TrackStatus,
 )
-from ssa_fusion.core.deferral import Relabel
-from ssa_fusion.core.filter_options import SKY_FILTER
-from ssa_fusion.core.stations import SENSORS
+from ssa_fusion.core.catalog.deferral import Relabel
+from ssa_fusion.core.earth.stations import SENSORS
+from ssa_fusion.core.filter.options import SKY_FILTER
 from ssa_fusion.evaluation.association import pass_swaps, score_association
 from ssa_fusion.sim import survey
 

@@ -37,8 +37,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from ssa_fusion.apps import cli, evaluate  # noqa: E402
-from ssa_fusion.core.rows import MeasurementRows  # noqa: E402
-from ssa_fusion.core.types import Kind  # noqa: E402
+from ssa_fusion.core.base.rows import MeasurementRows  # noqa: E402
+from ssa_fusion.core.base.types import Kind  # noqa: E402
 from ssa_fusion.ros import bagio, messages  # noqa: E402
 
 T0 = 1_767_225_600.0  # 2026-01-01 UTC

@@ -2,7 +2,7 @@
 
 The window is three consecutive passes of the ``iss_radar_columbus`` radar (range/az/el,
 20 m and 0.02 deg, light time, ~70-100 measurements over ~3 h; truth SGP4 with drag), fitted
-by `ssa_fusion.core.batch_ls.fit` from the per-object filter's estimate at the window's last
+by `ssa_fusion.core.od.batch_ls.fit` from the per-object filter's estimate at the window's last
 measurement (what a live re-fit after a pass starts from), with
 
 * ``j2+drag``: two-body + J2 + drag, the state and the drag factor (the model before J3 and
@@ -46,9 +46,10 @@ from scipy.stats import chi2
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a source checkout
 
-from ssa_fusion.core import batch_ls, config
-from ssa_fusion.core.force_model import ForceModel
-from ssa_fusion.core.pass_windows import fit_window
+from ssa_fusion.core.gaps import estimator as config
+from ssa_fusion.core.measure.pass_windows import fit_window
+from ssa_fusion.core.motion.force_model import ForceModel
+from ssa_fusion.core.od import batch_ls
 from ssa_fusion.evaluation.passes import passes
 from ssa_fusion.sim import sky
 

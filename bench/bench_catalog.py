@@ -4,11 +4,11 @@ One EKF cycle per object = Keplerian predict with the state transition matrix + 
 range/azimuth/elevation update from a radar station (Joseph form, angle residuals wrapped,
 NIS gate), timed for
 
-* the batched filter (:class:`ssa_fusion.core.batch_ekf.BatchEKF`, numba-compiled loops over
-  the objects; its first call compiles them or loads them from numba's cache: timed apart),
-* this project's current per-object EKF (:class:`ssa_fusion.core.ekf.ExtendedKalmanFilter`
-  with :func:`ssa_fusion.core.kepler.propagate` and :class:`~ssa_fusion.core.measurement.
-  RazelModel`, the cycle `Tracker._step` runs), looped over the objects,
+* the batched filter (`core.catalog.batch_ekf.BatchEKF`, numba-compiled loops over the
+  objects; its first call compiles them or loads them from numba's cache: timed apart),
+* this project's current per-object EKF (`core.filter.ekf.ExtendedKalmanFilter` with
+  `core.motion.kepler.propagate` and `core.measure.measurement.RazelModel`, the cycle
+  `Tracker._step` runs), looped over the objects,
 * FilterPy's ``ExtendedKalmanFilter`` doing the same work, looped,
 
 at N = 1, 10, 100, 1000, 10000 (the looped filters time at most ``--loop-max`` objects and
@@ -53,17 +53,17 @@ from filterpy.kalman import ExtendedKalmanFilter as FilterpyEKF
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a source checkout
 
-from ssa_fusion.core.batch_ekf import REASONS, BatchEKF, Code
-from ssa_fusion.core.config import EstimatorConfig, make_tracker
-from ssa_fusion.core.constants import R_EARTH
-from ssa_fusion.core.dynamics import elements_to_state
-from ssa_fusion.core.ekf import ExtendedKalmanFilter, process_noise
-from ssa_fusion.core.filter_options import FilterOptions
-from ssa_fusion.core.frames import razel_gcrs, wrap_angle
-from ssa_fusion.core.kepler import kepler_state, propagate
-from ssa_fusion.core.measurement import RazelModel
-from ssa_fusion.core.stations import NETWORKS, SENSORS
-from ssa_fusion.core.types import Kind, Measurement
+from ssa_fusion.core.base.constants import R_EARTH
+from ssa_fusion.core.base.types import Kind, Measurement
+from ssa_fusion.core.catalog.batch_ekf import REASONS, BatchEKF, Code
+from ssa_fusion.core.earth.frames import razel_gcrs, wrap_angle
+from ssa_fusion.core.earth.stations import NETWORKS, SENSORS
+from ssa_fusion.core.filter.ekf import ExtendedKalmanFilter, process_noise
+from ssa_fusion.core.filter.options import FilterOptions
+from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker
+from ssa_fusion.core.measure.measurement import RazelModel
+from ssa_fusion.core.motion.dynamics import elements_to_state
+from ssa_fusion.core.motion.kepler import kepler_state, propagate
 
 JD0 = 2460000.5
 UNIX0 = (JD0 - 2440587.5) * 86400.0
@@ -312,7 +312,7 @@ def same_estimates(a: Path, b: Path, forecasts: bool = False) -> tuple[int, int,
     """(estimates in both bags, bit-identical ones, largest relative difference of x or P).
 
     The filters' estimates, or (`forecasts`) the surrogates' gap forecasts."""
-    from ssa_fusion.core.types import UpdateSource
+    from ssa_fusion.core.base.types import UpdateSource
     from ssa_fusion.ros import bagio, messages
 
     wanted = UpdateSource.FORECAST if forecasts else UpdateSource.SENSOR

@@ -6,7 +6,7 @@
    batched J2 filter, every gap forecast by each arm: ``residual``, the residual surrogate
    after a day of pass ends (the live setting chosen on the ISS gap study's tuning seeds),
    and ``batch_fit``, the batch fit of the last three passes at every pass end (the
-   single-object filter's `core.batch_gap`, tuned on the real-sky tuning runs). Scored
+   single-object filter's `core.gaps.batch_gap`, tuned on the real-sky tuning runs). Scored
    against the SGP4 truth beside the filter coasting on its J2 model from the same pass end
    (the physics-only baseline), at the same epochs: each arm on all its gaps, and both on
    the gaps both forecast (paired). Cost per object: the filter's and each arm's wall time
@@ -42,11 +42,11 @@ limit_blas_threads()
 
 import numpy as np  # noqa: E402
 
-from ssa_fusion.core.gap_publisher import GapFill  # noqa: E402
+from ssa_fusion.core.gaps.publisher import GapFill  # noqa: E402
 from ssa_fusion.studies.catalog_gaps import EVALUATION_SEEDS, SAMPLE, offline_run  # noqa: E402
 
 ARMS = (GapFill.RESIDUAL, GapFill.BATCH_FIT)
-"""The gap forecasts compared (`core.gap_bank.GAP_FORECASTS`)."""
+"""The gap forecasts compared (`core.catalog.gap_bank.GAP_FORECASTS`)."""
 
 
 def _offline(job: tuple[int, int, float]) -> dict:

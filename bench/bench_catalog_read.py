@@ -1,4 +1,4 @@
-"""Benchmark of reading large catalogs (`core.catalog.read_catalog`): time and memory.
+"""Benchmark of reading large catalogs (`formats.element_sets.read_catalog`): time and memory.
 
 Four generated files: a TLE of `--objects` objects (two lines each, 100,000: 14 MB), an OMM
 CSV and an OMM XML of as many, and a 3LE of 340,000 objects (every NORAD number, Alpha-5
@@ -139,16 +139,17 @@ def status_kib(key: str) -> int:
 def child(reader: str, path: Path, baseline: str) -> None:
     """Read `path` with `reader` (new or old); print one JSON line of numbers."""
     if reader == "new":
-        from ssa_fusion.core import catalog as module
+        from ssa_fusion.formats import element_sets as module
     else:  # the revision's module, imported under another name beside this tree's core
-        source = subprocess.run(["git", "show", f"{baseline}:ssa_fusion/core/catalog.py"],
+        source = subprocess.run(["git", "show", f"{baseline}:ssa_fusion/formats/element_sets.py"],
                                 cwd=ROOT, check=True, capture_output=True, text=True).stdout
         name = "ssa_fusion.core._catalog_baseline"
         spec = importlib.util.spec_from_loader(name, loader=None)
         assert spec is not None
         module = importlib.util.module_from_spec(spec)
         sys.modules[name] = module
-        exec(compile(source, f"{baseline}:ssa_fusion/core/catalog.py", "exec"), module.__dict__)
+        exec(compile(source, f"{baseline}:ssa_fusion/formats/element_sets.py", "exec"),
+             module.__dict__)
     calls: list[tuple[int, int, int]] = []
     before = status_kib("VmRSS")
     t0 = time.perf_counter()
@@ -185,7 +186,7 @@ def run_child(reader: str, path: Path, baseline: str) -> dict[str, object]:
 
 def has_revision(rev: str) -> bool:
     """Whether the repository has `rev`'s catalog reader."""
-    return subprocess.run(["git", "cat-file", "-e", f"{rev}:ssa_fusion/core/catalog.py"],
+    return subprocess.run(["git", "cat-file", "-e", f"{rev}:ssa_fusion/formats/element_sets.py"],
                           cwd=ROOT, capture_output=True).returncode == 0
 
 

@@ -36,10 +36,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from ssa_fusion.core import catalog  # noqa: E402
-from ssa_fusion.core.rows import EstimateRows, MeasurementRows  # noqa: E402
-from ssa_fusion.core.stations import NETWORKS, SENSORS  # noqa: E402
-from ssa_fusion.core.types import UpdateSource  # noqa: E402
+from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows  # noqa: E402
+from ssa_fusion.core.base.types import UpdateSource  # noqa: E402
+from ssa_fusion.core.earth.stations import NETWORKS, SENSORS  # noqa: E402
+from ssa_fusion.core.motion.element_sets import catalog_states  # noqa: E402
+from ssa_fusion.formats import element_sets as catalog  # noqa: E402
 from ssa_fusion.nodes import settings  # noqa: E402
 from ssa_fusion.nodes.defaults import CATALOG_FILTER  # noqa: E402
 from ssa_fusion.ros import bagio, messages  # noqa: E402
@@ -94,7 +95,7 @@ def write_bag(bag: Path, objects: int, hours: float, batch_s: float) -> tuple[in
         pairs = np.unique(np.stack([obs.obj[part].astype(float), obs.t[part]]), axis=1)
         obj, t = pairs[0].astype(np.int64), pairs[1]
         epochs = np.unique(t)
-        truth = catalog.catalog_states(entries, epochs).x[obj, np.searchsorted(epochs, t)]
+        truth = catalog_states(entries, epochs).x[obj, np.searchsorted(epochs, t)]
         x = truth.copy()
         x[:, :3] += rng.normal(scale=SIGMA_KM, size=(len(t), 3))
         oid = ids[obj].tolist()
@@ -119,7 +120,7 @@ def run_child(bag: Path, out: Path) -> int:
     """Run ``ssa-fusion report BAG --out OUT`` here, timed after its imports; print JSON."""
     t0 = time.perf_counter()
     from ssa_fusion.apps import cli, report_catalog  # noqa: F401  (what the report imports)
-    from ssa_fusion.core import batch_ekf  # noqa: F401
+    from ssa_fusion.core.catalog import batch_ekf  # noqa: F401
 
     imported, imported_mib = time.perf_counter() - t0, _rss_mib()
     t0 = time.perf_counter()

@@ -24,7 +24,7 @@ is JSON. The targets it reports against (not asserted): >= 100x real time, 0 los
 ``--surrogate``: the same with a catalog_surrogate beside each filter shard (every gap
 fitted: lockstep waits for the fits), ``--hours`` more than a day (the residual fits once
 an object's pass ends span a day). Reports the fits made (of the learned residual and physics-only,
-`core.gap_bank.GapBankConfig.physics`), refused and skipped, the
+`core.catalog.gap_bank.GapBankConfig.physics`), refused and skipped, the
 surrogates' fitting wall time and memory, and the gaps after the first day (an object's
 estimate followed by ``pass_break`` or more without one) with the fraction that got a
 forecast (`studies.catalog_gaps.gap_coverage`; also counted from each object's own first
@@ -47,7 +47,8 @@ from typing import Any
 
 from sgp4.exporter import export_tle
 
-from ssa_fusion.core import catalog as catalog_io
+from ssa_fusion.core.motion.element_sets import CatalogEntry
+from ssa_fusion.formats import element_sets as catalog_io
 from ssa_fusion.sim import survey
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -58,7 +59,7 @@ TARGET_SPEED_SURROGATE = 20.0  # x real time, filter and surrogate shards
 TARGET_COVERED = 0.9  # of the gaps after the first day, with a forecast
 
 
-def regime(entry: catalog_io.CatalogEntry) -> str:
+def regime(entry: CatalogEntry) -> str:
     """LEO, MEO, GEO or HEO, from the element set's mean motion and eccentricity."""
     revs_per_day = entry.satrec.no_kozai * 1440.0 / (2.0 * 3.141592653589793)
     if entry.satrec.ecco > 0.25:

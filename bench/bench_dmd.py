@@ -15,8 +15,8 @@ import warnings
 import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-from ssa_fusion.core.dynamics import elements_to_state, propagate
-from ssa_fusion.core.hankel_dmd import HankelDMD
+from ssa_fusion.core.gaps.hankel_dmd import HankelDMD
+from ssa_fusion.core.motion.dynamics import elements_to_state, propagate
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
 N_TRAIN, N_FC, DELAYS, DT, REPEATS = 720, 200, 120, 30.0, 41

@@ -1,8 +1,8 @@
 """Benchmark: EKF cycles per second (not a test).
 
 One cycle = Keplerian predict of the ISS orbit with its analytic STM
-(:func:`ssa_fusion.core.kepler.propagate`) + one range/azimuth/elevation update from the
-Columbus station (:class:`ssa_fusion.core.measurement.RazelModel`), Joseph form, angle
+(:func:`ssa_fusion.core.motion.kepler.propagate`) + one range/azimuth/elevation update from the
+Columbus station (:class:`ssa_fusion.core.measure.measurement.RazelModel`), Joseph form, angle
 residuals wrapped.  The same cycle is run through :class:`filterpy.kalman.ExtendedKalmanFilter`
 (predict_x/F from our Kepler propagator, update with HJacobian/Hx and a wrapping residual)
 for comparison.  Measurements are generated beforehand, only the filter loop is timed.
@@ -30,11 +30,11 @@ from filterpy.kalman import ExtendedKalmanFilter as FilterpyEKF
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a source checkout
 
-from ssa_fusion.core.dynamics import elements_to_state
-from ssa_fusion.core.ekf import ExtendedKalmanFilter, process_noise
-from ssa_fusion.core.frames import COLUMBUS, wrap_angle
-from ssa_fusion.core.kepler import propagate
-from ssa_fusion.core.measurement import RazelModel
+from ssa_fusion.core.earth.frames import COLUMBUS, wrap_angle
+from ssa_fusion.core.filter.ekf import ExtendedKalmanFilter, process_noise
+from ssa_fusion.core.measure.measurement import RazelModel
+from ssa_fusion.core.motion.dynamics import elements_to_state
+from ssa_fusion.core.motion.kepler import propagate
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
 JD0 = 2460000.5

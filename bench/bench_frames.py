@@ -1,4 +1,4 @@
-"""Benchmark of the frame transformations (not a test): `ssa_fusion.core.frames` against astropy
+"""Benchmark of the frame transformations (not a test): `core.earth.frames` against astropy
 and skyfield in the same run, on the same IERS finals2000A table (astropy-iers-data, offline).
 
 Two shapes of work, as a catalog and a filter meet them:
@@ -68,9 +68,10 @@ from skyfield.framelib import itrs as sky_itrs  # noqa: E402
 from skyfield.positionlib import ICRF  # noqa: E402
 from skyfield.sgp4lib import TEME as SKY_TEME  # noqa: E402
 
-from ssa_fusion.core import catalog, frames, timescales  # noqa: E402
-from ssa_fusion.core.constants import ARCSEC  # noqa: E402
-from ssa_fusion.core.stations import SENSORS  # noqa: E402
+from ssa_fusion.core.base.constants import ARCSEC  # noqa: E402
+from ssa_fusion.core.earth import frames, timescales  # noqa: E402
+from ssa_fusion.core.earth.stations import SENSORS  # noqa: E402
+from ssa_fusion.formats import element_sets as catalog  # noqa: E402
 
 Array = NDArray[np.float64]
 CATALOG = references.ACTIVE

@@ -4,7 +4,7 @@ estimates: wall time per fit and how far the forecasts moved.
 The catalog is `bench_catalog_scale`'s (``--objects`` spread over the 306 real objects of
 LEO, MEO, GEO and HEO), measured by iss_network's radars for ``--hours`` and fused by the
 batched filter every 60 s (`studies.catalog_gaps.estimate_batches`). The estimates are
-kept, then replayed into a `core.gap_bank.GapBank` with the catalog_surrogate's defaults
+kept, then replayed into a `core.catalog.gap_bank.GapBank` with the catalog_surrogate's defaults
 (no budget: every pass end fitted, as in lockstep) by this tree's code and by the code of
 ``--before`` (``git archive`` of that revision, each replay a process of its own with
 OPENBLAS_NUM_THREADS=1, as the nodes run), alternately ``--repeats`` times each, so that
@@ -46,7 +46,7 @@ def record(objects: int, hours: float, seed: int, out: Path) -> int:
     sys.path.insert(0, str(ROOT / "bench"))
     from bench_catalog_scale import write_catalog
 
-    from ssa_fusion.core import catalog as catalog_io
+    from ssa_fusion.formats import element_sets as catalog_io
     from ssa_fusion.sim.sky import SKY_SCENARIOS
     from ssa_fusion.studies.catalog_gaps import estimate_batches
 
@@ -62,8 +62,8 @@ def record(objects: int, hours: float, seed: int, out: Path) -> int:
 
 def replay(stream: Path, out: Path) -> None:
     """Replay the estimates of `stream` into a GapBank of the imported tree; pickle results."""
-    from ssa_fusion.core.gap_bank import GapBank, GapBankConfig
-    from ssa_fusion.core.types import MotionModel
+    from ssa_fusion.core.base.types import MotionModel
+    from ssa_fusion.core.catalog.gap_bank import GapBank, GapBankConfig
     from ssa_fusion.nodes.defaults import CATALOG_SURROGATE as D
 
     steps = pickle.loads(stream.read_bytes())

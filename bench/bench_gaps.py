@@ -34,7 +34,7 @@ from ssa_fusion import limit_blas_threads
 
 limit_blas_threads()
 
-from ssa_fusion.core.metrics import chi2_bounds  # noqa: E402
+from ssa_fusion.core.base.metrics import chi2_bounds  # noqa: E402
 from ssa_fusion.sim import sky  # noqa: E402
 from ssa_fusion.studies import gap_study  # noqa: E402
 from ssa_fusion.studies.distributions import EVALUATION_SEEDS, START_OFFSETS_H  # noqa: E402

@@ -28,7 +28,7 @@ limit_blas_threads()
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from ssa_fusion_msgs.msg import Measurement, StateEstimate  # noqa: E402
 
-from ssa_fusion.core import types  # noqa: E402
+from ssa_fusion.core.base import types  # noqa: E402
 from ssa_fusion.graphs import node_parameters  # noqa: E402
 from ssa_fusion.ros import bagio, messages  # noqa: E402
 from ssa_fusion.ros.processes import Graph  # noqa: E402

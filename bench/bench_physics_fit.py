@@ -2,9 +2,9 @@
 
 Per seed (``--tuning``: the tuning seeds `studies.distributions.TUNING_SEEDS`, the first
 ``--seeds``; else the catalog's evaluation seeds `studies.catalog_gaps.EVALUATION_SEEDS`), a
-synthetic LEO catalog through survey, batched filter and `core.gap_bank.GapBank`
+synthetic LEO catalog through survey, batched filter and `core.catalog.gap_bank.GapBank`
 (`studies.catalog_gaps.offline_run`, every gap fitted), once per ``--accel-sigma`` of the
-physics-only fit (`core.residual.PHYSICS_RESIDUAL`). Prints, for the forecasts of the
+physics-only fit (`core.gaps.residual.PHYSICS_RESIDUAL`). Prints, for the forecasts of the
 physics-only fit and of the learned residual apart, the share whose position NEES lies
 within chi2(3)'s 95 % bound (target >= 90 %), the median NEES and position error against
 the SGP4 truth, the fits of each, and the gaps after the first day with a forecast.
@@ -27,9 +27,9 @@ from ssa_fusion import limit_blas_threads
 
 limit_blas_threads()
 
-from ssa_fusion.core.gap_bank import GapBankConfig  # noqa: E402
-from ssa_fusion.core.residual import PHYSICS_ACCEL_SIGMA, PHYSICS_RESIDUAL  # noqa: E402
-from ssa_fusion.core.types import MotionModel  # noqa: E402
+from ssa_fusion.core.base.types import MotionModel  # noqa: E402
+from ssa_fusion.core.catalog.gap_bank import GapBankConfig  # noqa: E402
+from ssa_fusion.core.gaps.residual import PHYSICS_ACCEL_SIGMA, PHYSICS_RESIDUAL  # noqa: E402
 from ssa_fusion.studies.catalog_gaps import EVALUATION_SEEDS, offline_run  # noqa: E402
 from ssa_fusion.studies.distributions import TUNING_SEEDS  # noqa: E402
 

@@ -30,7 +30,7 @@ from ssa_fusion import limit_blas_threads
 limit_blas_threads()
 
 from ssa_fusion.apps import replay  # noqa: E402
-from ssa_fusion.core import types  # noqa: E402
+from ssa_fusion.core.base import types  # noqa: E402
 from ssa_fusion.ros import bagio, messages  # noqa: E402
 from ssa_fusion.ros.topics import TOPIC_MEASUREMENT, TOPIC_TRUTH, TOPIC_WITHHELD  # noqa: E402
 from ssa_fusion.sim import scenarios, simulate  # noqa: E402

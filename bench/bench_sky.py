@@ -41,7 +41,7 @@ from ssa_fusion import limit_blas_threads
 
 limit_blas_threads()
 
-from ssa_fusion.core import batch_gap  # noqa: E402
+from ssa_fusion.core.gaps import batch_gap  # noqa: E402
 from ssa_fusion.sim import sky  # noqa: E402
 from ssa_fusion.studies import sky_study  # noqa: E402
 from ssa_fusion.studies.distributions import (  # noqa: E402

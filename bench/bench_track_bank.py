@@ -31,9 +31,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_wire import measurements
 
-from ssa_fusion.core.site_file import load_station_map
-from ssa_fusion.core.stations import network_stations
-from ssa_fusion.core.track_bank import TrackBank
+from ssa_fusion.core.catalog.track_bank import TrackBank
+from ssa_fusion.core.earth.stations import network_stations
+from ssa_fusion.formats.sites import load_station_map
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 

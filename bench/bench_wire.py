@@ -46,9 +46,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a source checkout
 
-from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.core.types import Kind, Measurement
+from ssa_fusion.core.base.rows import MeasurementRows
+from ssa_fusion.core.base.types import Kind, Measurement
+from ssa_fusion.formats import element_sets as catalog_io
 from ssa_fusion.nodes.diagnostics import Count
 from ssa_fusion.nodes.progress import TAKEN, ProgressWatch
 from ssa_fusion.ros import messages

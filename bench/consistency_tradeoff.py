@@ -35,7 +35,7 @@ limit_blas_threads()  # before numpy: the nodes' round-off
 
 import numpy as np  # noqa: E402
 
-from ssa_fusion.core.metrics import chi2_bounds  # noqa: E402
+from ssa_fusion.core.base.metrics import chi2_bounds  # noqa: E402
 from ssa_fusion.evaluation.arms import ArmName  # noqa: E402
 from ssa_fusion.sim import scenarios  # noqa: E402
 from ssa_fusion.sim.simulate import simulate  # noqa: E402

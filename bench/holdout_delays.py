@@ -31,8 +31,8 @@ limit_blas_threads()  # before numpy: the nodes' round-off
 
 import numpy as np  # noqa: E402
 
-from ssa_fusion.core.hankel_dmd import HankelDMD  # noqa: E402
-from ssa_fusion.core.surrogate import EciLift  # noqa: E402
+from ssa_fusion.core.gaps.hankel_dmd import HankelDMD  # noqa: E402
+from ssa_fusion.core.gaps.surrogate import EciLift  # noqa: E402
 from ssa_fusion.sim import scenarios  # noqa: E402
 from ssa_fusion.sim.simulate import simulate  # noqa: E402
 

@@ -649,7 +649,7 @@ def cli_option_probes(large: bool = False) -> Iterator[Probe]:
             from sgp4.exporter import export_tle
 
             sys.path.insert(0, str(ROOT))
-            from ssa_fusion.core import catalog as catalog_io
+            from ssa_fusion.formats import element_sets as catalog_io
             from ssa_fusion.sim import survey
 
             base = catalog_io.read_catalog(SAMPLE_TLE)[0]
@@ -1102,7 +1102,8 @@ def listen_probe() -> Iterator[Probe]:
 CACHE_CHECK = """
 import os, sys
 from pathlib import Path
-from ssa_fusion.core import jit, kepler
+from ssa_fusion.core.base import jit
+from ssa_fusion.core.motion import kepler
 d = jit.cache_directory(kepler._solve_chi.py_func)
 root = Path(sys.argv[1])
 if os.environ.get('NUMBA_CACHE_DIR'):

@@ -17,9 +17,9 @@ import time
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from ssa_fusion.core import timescales
-from ssa_fusion.core.catalog import Progress
-from ssa_fusion.core.gap_publisher import GapFill
+from ssa_fusion.core.earth import timescales
+from ssa_fusion.core.gaps.publisher import GapFill
+from ssa_fusion.formats.element_sets import Progress
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import BAG_PATTERN
 from ssa_fusion.ros.readiness import OUTPUT, READERS
@@ -97,7 +97,7 @@ def live_scenario(name: str, start: str = "", duration_h: float = 0.0, sites: st
     `sites`: a sites file whose sites observe a real-sky scenario's object instead of its
     sensors ('' = its own; `sky.SkyScenario.with_sites`). `elements`: an element set file
     whose first object they observe instead ('' = the scenario's; `with_elements`: from
-    its epoch unless `start`; `progress`: of reading it, `core.catalog.read_catalog`'s).
+    its epoch unless `start`; `progress`: of reading it, `formats.element_sets.read_catalog`'s).
 
     `start`: ISO 8601 UTC ('' = the scenario's epoch); a real-sky scenario's object starts
     from its initial GCRF state at it (`sky.SkyScenario.t0`). `duration_h`: hours of sim
@@ -204,7 +204,7 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     if bag is not None:
         recorder["bag"] = str(bag)
     station = ",".join(st.station.name for st in scenario.radars)
-    # lockstep waits for the fits: every gap fitted, whatever the machine (`core.gap_bank`)
+    # lockstep waits for the fits: every gap fitted, whatever the machine (`core.catalog.gap_bank`)
     budget = {"fit_budget": 0.0} if lockstep else {}
     own = {"sites": scenario.sites_file} if scenario.sites_file else {}  # radars of a file
     return [

@@ -2,7 +2,7 @@
 
 astropy (its own IERS 2010 CIO-based chain) and skyfield (equinox based, IAU 2006/2000A, its
 own WGS-84 and polar motion), both on the IERS finals2000A table the project uses
-(astropy-iers-data, `core.eop.bundled`), offline; Vallado's SGP4 verification set; and the
+(astropy-iers-data, `core.earth.eop.bundled`), offline; Vallado's SGP4 verification set; and the
 comparisons of topocentric geometry against them. Imported by test/core/test_frames.py,
 test/core/test_real_earth.py (the test directory is on pytest's path) and
 bench/bench_frames.py (which puts it on its own). Units km, km/s, rad; epochs Unix seconds
@@ -43,9 +43,9 @@ from skyfield.timelib import Time as SkyTime
 from skyfield.timelib import Timescale
 from skyfield.toposlib import GeographicPosition
 
-from ssa_fusion.core import eop, timescales
-from ssa_fusion.core.constants import ARCSEC
-from ssa_fusion.core.frames import Station, wrap_pi
+from ssa_fusion.core.base.constants import ARCSEC
+from ssa_fusion.core.earth import eop, timescales
+from ssa_fusion.core.earth.frames import Station, wrap_pi
 
 Array = NDArray[np.float64]
 
@@ -68,7 +68,7 @@ def unix(year: int, month: int, day: int, hour: int = 0, minute: int = 0,
 def leap_second_day(t_unix: Array) -> NDArray[np.bool_]:
     """True for stamps on a UTC day that ends with a leap second (e.g. 2016-12-31).
 
-    `core.timescales` smears TAI - UTC over such a day (test_frames.test_leap_second_day_*),
+    `core.earth.timescales` smears TAI - UTC over such a day (test_frames.test_leap_second_day_*),
     so comparisons leave those stamps out.
     """
     day = np.floor(np.asarray(t_unix, dtype=float) / 86400.0) * 86400.0
@@ -261,7 +261,7 @@ J3_J4 = (-2.5324105e-6, -1.6198976e-6)
 def scipy_orbit(x0: Array, t: Array, j2: bool = True, j3_j4: bool = False,
                 rtn_accel: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Array:
     """Two-body (+ J2, + J3 and J4, about the pole at t[0]) by scipy, independently of
-    core.dynamics.
+    core.motion.dynamics.
 
     `x0` (6,) km, km/s at t[0]; `t` (K,) increasing Unix s; returns (K, 6). J3 and J4 by
     the textbook component formulas (Vallado 8-31) in a frame whose z axis is the pole.

@@ -115,9 +115,9 @@ def test_node_executables_prepare_the_process_before_numpy_is_imported():
 
 
 def test_a_catalog_filter_imports_neither_scipy_stats_nor_scipy_optimize():
-    """Every catalog_filter process imports the association (`core.association`); of scipy
+    """Every catalog_filter process imports the association (`core.catalog.association`); of scipy
     it needs only scipy.special until an unlabelled detection arrives: scipy.stats and
-    scipy.optimize would add ~45 MiB to each process (`core.association` docstring)."""
+    scipy.optimize would add ~45 MiB to each process (`core.catalog.association` docstring)."""
     result = _run(textwrap.dedent("""
         import json, sys
         import ssa_fusion.nodes.catalog_filter

@@ -1,15 +1,21 @@
-"""Imports point down the floors (DESIGN.md and README "Layout"):
+"""Imports point down the floors (DESIGN.md and docs/LAYOUT.md), and down the core's rooms:
 
-    apps -> graphs -> nodes -> ros -> core
-    studies -> sim, evaluation -> core       (launch files -> graphs, ros.launch_events)
+    apps -> graphs -> nodes -> ros, params -> formats -> core
+    studies -> sim, evaluation -> formats -> core   (launch files -> graphs, ros.launch_events)
+    core: conjunction -> catalog -> gaps -> od -> filter -> measure -> motion -> earth -> base
 
-* core imports nothing of the package, and no ROS package;
-* sim and evaluation import only the core (and no ROS package);
-* studies import core, sim, evaluation (and ros, to read bags), never nodes, graphs or apps;
-* ros imports nothing from nodes, graphs, apps, sim, evaluation, studies;
-* nodes import ros and core, never apps, graphs, studies or evaluation; sim only in
-  nodes/sensor_sim.py (the simulator runs the simulated world);
-* graphs (what runs together) imports nodes, ros, sim and core, never apps or studies;
+* core imports nothing of the package, and no ROS package; a room of the core imports only
+  its own room and the rooms below it (`CORE_ROOMS`), and every module of the core is in one;
+* formats (the field's files) import only the core; params (the nodes' parameter tables,
+  without ROS) only the core and formats; neither imports a ROS package;
+* sim and evaluation import only core and formats (and no ROS package);
+* studies import core, formats, sim, evaluation (and ros, to read bags), never params, nodes,
+  graphs or apps;
+* ros imports nothing from params, nodes, graphs, apps, sim, evaluation, studies;
+* nodes import ros, params, formats and core, never apps, graphs, studies or evaluation; sim
+  only in nodes/sensor_sim.py (the simulator runs the simulated world);
+* graphs (what runs together) imports nodes, params, ros, sim, formats and core, never apps
+  or studies;
 * the launch files import graphs and ros.launch_events only of the package;
 * the top-level package imports no floor (every module imports it).
 
@@ -32,7 +38,8 @@ ROS = ("rclpy", "rcl_interfaces", "rosidl_runtime_py", "builtin_interfaces", "st
        "launch", "launch_ros", "ament_index_python")
 """ROS packages (and ROS bag libraries): none in core, sim or evaluation."""
 
-FLOORS = ("core", "sim", "evaluation", "studies", "ros", "nodes", "graphs", "apps")
+FLOORS = ("core", "formats", "params", "sim", "evaluation", "studies", "ros", "nodes", "graphs",
+          "apps")
 
 
 def _floors(*names: str) -> tuple[str, ...]:
@@ -40,11 +47,13 @@ def _floors(*names: str) -> tuple[str, ...]:
 
 
 FORBIDDEN: dict[str, tuple[str, ...]] = {
-    "core": (*_floors("sim", "evaluation", "studies", "ros", "nodes", "graphs", "apps"), *ROS),
-    "sim": (*_floors("evaluation", "studies", "ros", "nodes", "graphs", "apps"), *ROS),
-    "evaluation": (*_floors("sim", "studies", "ros", "nodes", "graphs", "apps"), *ROS),
-    "studies": _floors("nodes", "graphs", "apps"),
-    "ros": _floors("nodes", "graphs", "apps", "sim", "evaluation", "studies"),
+    "core": (*_floors(*(f for f in FLOORS if f != "core")), *ROS),
+    "formats": (*_floors(*(f for f in FLOORS if f not in ("core", "formats"))), *ROS),
+    "params": (*_floors(*(f for f in FLOORS if f not in ("core", "formats", "params"))), *ROS),
+    "sim": (*_floors("params", "evaluation", "studies", "ros", "nodes", "graphs", "apps"), *ROS),
+    "evaluation": (*_floors("params", "sim", "studies", "ros", "nodes", "graphs", "apps"), *ROS),
+    "studies": _floors("params", "nodes", "graphs", "apps"),
+    "ros": _floors("params", "nodes", "graphs", "apps", "sim", "evaluation", "studies"),
     "nodes": _floors("apps", "graphs", "studies", "evaluation", "sim"),
     "graphs": _floors("apps", "studies", "evaluation"),
     "": _floors(*FLOORS),
@@ -57,6 +66,11 @@ ALLOWED: dict[str, tuple[str, ...]] = {"ssa_fusion.nodes.sensor_sim": ("ssa_fusi
 LAUNCH = Path(__file__).resolve().parents[1] / "launch_scripts"
 LAUNCH_MAY_IMPORT = ("ssa_fusion.graphs", "ssa_fusion.ros.launch_events")
 """What of the package a launch file may import."""
+
+
+CORE_ROOMS = ("base", "earth", "motion", "measure", "filter", "od", "gaps", "catalog",
+              "conjunction")
+"""The core's rooms, bottom up: a room may import its own modules and those of rooms before it."""
 
 
 def module_name(path: Path) -> str:
@@ -130,6 +144,66 @@ def test_imports_point_down():
     assert not found, "imports against the floors:\n" + "\n".join(found)
 
 
+def room_of(module: str) -> str:
+    """The core room of `module` ("" for the core's own package, "?" outside every room)."""
+    parts = module.split(".")
+    if parts[:2] != ["ssa_fusion", "core"]:
+        raise ValueError(f"{module} is not in the core")
+    if len(parts) == 2:
+        return ""
+    return parts[2] if parts[2] in CORE_ROOMS else "?"
+
+
+def room_violations(module: str, imported: set[str]) -> list[str]:
+    """The imports of core module `module` that reach a room above its own."""
+    room = room_of(module)
+    rank = CORE_ROOMS.index(room) if room in CORE_ROOMS else -1
+    bad = []
+    for name in imported:
+        if not _under(name, "ssa_fusion.core") or name == "ssa_fusion.core":
+            continue
+        target = room_of(name)
+        if target == "?" or CORE_ROOMS.index(target) > rank:
+            bad.append(f"{module} imports {name}")
+    return sorted(bad)
+
+
+def test_every_core_module_is_in_a_room():
+    outside = [m for m in all_modules()
+               if floor_of(m) == "core" and m != "ssa_fusion.core" and room_of(m) == "?"]
+    assert not outside, f"core modules outside the rooms {CORE_ROOMS}: {outside}"
+    rooms = {room_of(m) for m in all_modules() if floor_of(m) == "core"} - {""}
+    assert rooms == set(CORE_ROOMS)
+
+
+def test_the_core_rooms_import_down():
+    found = []
+    for module, (source, is_package) in all_modules().items():
+        if floor_of(module) == "core":
+            found += room_violations(module, imports_of(source, module, is_package))
+    assert not found, "imports against the core's rooms:\n" + "\n".join(found)
+
+
+@pytest.mark.parametrize(("module", "source"), [
+    ("ssa_fusion.core.base.types", "from ssa_fusion.core.earth import frames"),
+    ("ssa_fusion.core.earth.frames", "from ..motion.kepler import propagate"),
+    ("ssa_fusion.core.filter.ekf", "from ssa_fusion.core.gaps.residual import rtn_axes"),
+    ("ssa_fusion.core.catalog.deferral", "import ssa_fusion.core.conjunction.pc"),
+    ("ssa_fusion.core.motion.dynamics", "from ssa_fusion.core import flat_module"),
+])
+def test_room_checker_finds_an_import_up(module, source):
+    assert room_violations(module, imports_of(source, module))
+
+
+@pytest.mark.parametrize(("module", "source"), [
+    ("ssa_fusion.core.catalog.deferral", "from ssa_fusion.core.filter import options"),
+    ("ssa_fusion.core.earth.frames", "from . import eop\nfrom ..base.constants import R_EARTH"),
+    ("ssa_fusion.core.base.types", "import numpy"),
+])
+def test_room_checker_lets_imports_down_pass(module, source):
+    assert not room_violations(module, imports_of(source, module))
+
+
 def test_only_sensor_sim_among_the_nodes_uses_the_simulated_world():
     users = [m for m, (src, pkg) in all_modules().items()
              if floor_of(m) == "nodes"
@@ -171,9 +245,16 @@ BAD = [
                                "importlib.import_module(f'ssa_fusion.apps.{name}')"),
     ("ssa_fusion.nodes.sensor_sim", "from ssa_fusion.apps import live"),
     ("ssa_fusion", "from ssa_fusion.core import types"),
+    ("ssa_fusion.formats.x", "from ssa_fusion.ros import messages"),
+    ("ssa_fusion.formats.x", "import yaml\nfrom ssa_fusion.params import tables"),
+    ("ssa_fusion.params.x", "import rclpy"),
+    ("ssa_fusion.params.x", "from ssa_fusion.nodes import filter"),
+    ("ssa_fusion.sim.x", "from ssa_fusion.params import defaults"),
 ]
 GOOD = [
     ("ssa_fusion.core.x", "from .frames import COLUMBUS\nimport numpy"),
+    ("ssa_fusion.formats.x", "import lxml\nfrom ssa_fusion.core.earth import timescales"),
+    ("ssa_fusion.params.x", "from ssa_fusion.formats import sites"),
     ("ssa_fusion.sim.x", "from ssa_fusion.core import dynamics"),
     ("ssa_fusion.evaluation.x", "from ssa_fusion.core import metrics"),
     ("ssa_fusion.studies.x", "from ssa_fusion.sim import sky\nfrom ssa_fusion.ros import bagio"),

@@ -94,9 +94,9 @@ IMPORT_KEYS = {
     "plotly": "python3-plotly-pip",  # report.html (apps/report_html.py)
     "foxglove": "python3-foxglove-sdk-pip",  # foxglove-sdk: the foxglove_bridge node
     "ccsds_ndm": "python3-ccsds-ndm-pip",  # CCSDS OEM/TDM (apps/ccsds*.py)
-    "lxml": "python3-lxml",  # a TDM read as a stream (apps/ccsds_tdm_read.py)
-    "numba": "python3-numba-pip",  # the batched EKF's compiled kernels (core/batch_ekf.py)
-    "erfa": "python3-pyerfa-pip",  # frames and time scales (core/frames.py, timescales.py)
+    "lxml": "python3-lxml",  # a TDM read as a stream (formats/ccsds/tdm_reader.py)
+    "numba": "python3-numba-pip",  # the batched EKF's compiled kernels (core/catalog/batch_ekf.py)
+    "erfa": "python3-pyerfa-pip",  # frames and time scales (core/earth/frames.py, timescales.py)
     "astropy_iers_data": "python3-astropy-iers-data-pip",  # IERS EOP and leap seconds
     "threadpoolctl": None,  # optional: used when installed (ssa_fusion.limit_blas_threads)
     "pydmd": None,  # optional: the BOP-DMD variant of the gap study (studies.bopdmd)

@@ -97,7 +97,7 @@ def discovery(args: argparse.Namespace) -> Discovery:
 
 
 def add_sites(p: argparse.ArgumentParser, what: str) -> None:
-    """Add ``--sites FILE`` (a sites file, `core.site_file`; `what` it gives) to `p`."""
+    """Add ``--sites FILE`` (a sites file, `formats.sites`; `what` it gives) to `p`."""
     p.add_argument("--sites", type=Path, default=None, metavar="SITES.yaml",
                    help=f"sites file (YAML, docs/SITES.md): {what}")
 

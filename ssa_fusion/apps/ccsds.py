@@ -28,7 +28,7 @@ docs/CCSDS.md.
 TDM carries no measurement noise. The noise of imported measurements is, in this order,
 ``--sigma`` (AZEL) / ``--sigma-radec`` (RADEC), the metadata comment ``ssa_fusion sigma:``
 that `export tdm` writes, else the station's sensor: of the sites file ``--sites`` (stations
-of one's own, `core.site_file`, which PARTICIPANTs may then name), else the built-in preset
+of one's own, `formats.sites`, which PARTICIPANTs may then name), else the built-in preset
 (`stations.SENSORS`).
 
 `cli` registers this module under two commands, ``export`` and ``import``; the parser's
@@ -48,7 +48,11 @@ from pathlib import Path
 from typing import TextIO
 
 from ssa_fusion.apps.args import add_sites
-from ssa_fusion.apps.ccsds_format import (
+from ssa_fusion.apps.partial import removed_if_unfinished
+from ssa_fusion.apps.progress_lines import ProgressLines
+from ssa_fusion.core.base import types
+from ssa_fusion.core.earth.frames import Frame
+from ssa_fusion.formats.ccsds.common import (
     LAYOUTS,
     SIGMA_COMMENT,
     TDM_EXPORT_FRAMES,
@@ -57,14 +61,10 @@ from ssa_fusion.apps.ccsds_format import (
     OemFrame,
     write_ndm,
 )
-from ssa_fusion.apps.ccsds_oem import ephemerides, oem_document
-from ssa_fusion.apps.ccsds_tdm_in import read_tdm
-from ssa_fusion.apps.ccsds_tdm_out import tdm_document
-from ssa_fusion.apps.partial import removed_if_unfinished
-from ssa_fusion.apps.progress_lines import ProgressLines
-from ssa_fusion.core import types
-from ssa_fusion.core.frames import Frame
-from ssa_fusion.core.site_file import SiteFileError, load_sites
+from ssa_fusion.formats.ccsds.oem import ephemerides, oem_document
+from ssa_fusion.formats.ccsds.tdm_in import read_tdm
+from ssa_fusion.formats.ccsds.tdm_out import tdm_document
+from ssa_fusion.formats.sites import SiteFileError, load_sites
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_MEASUREMENT, TOPIC_TRUTH
 

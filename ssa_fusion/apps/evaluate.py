@@ -21,10 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ssa_fusion.core import config, metrics, types
-from ssa_fusion.core.config import EstimatorConfig
-from ssa_fusion.core.frames import Frame, Station
-from ssa_fusion.core.stations import find_station
+from ssa_fusion.core.base import metrics, types
+from ssa_fusion.core.earth.frames import Frame, Station
+from ssa_fusion.core.earth.stations import find_station
+from ssa_fusion.core.gaps import estimator as config
+from ssa_fusion.core.gaps.estimator import EstimatorConfig
 from ssa_fusion.evaluation import passes as passes_
 from ssa_fusion.evaluation.arms import ArmName, GapEvaluation, evaluate_gap
 from ssa_fusion.evaluation.gap_scores import GapScores, score_gaps

@@ -32,8 +32,8 @@ from ssa_fusion import graphs
 from ssa_fusion.apps import evaluate, report, runs
 from ssa_fusion.apps.args import add_discovery, add_domain_id, discovery, time_scale
 from ssa_fusion.apps.progress_lines import ProgressLines
-from ssa_fusion.core.gap_publisher import GapFill
-from ssa_fusion.core.types import UpdateSource
+from ssa_fusion.core.base.types import UpdateSource
+from ssa_fusion.core.gaps.publisher import GapFill
 from ssa_fusion.ros import visual_msgs
 from ssa_fusion.ros.processes import Graph
 from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS

@@ -5,7 +5,7 @@ else ``iss_network``'s radars) measuring every object of the catalog (SGP4/SDP4 
 `sim.survey`); `--shards` K ``catalog_filter`` processes each track the objects of their
 shard (DDS content filter on ``Measurement.shard_key``), and as many ``catalog_surrogate``
 processes forecast through the gaps between passes of the same shards' objects
-(`core.gap_bank`, residual fits under a wall-time budget; ``--no-surrogate`` leaves them
+(`core.catalog.gap_bank`, residual fits under a wall-time budget; ``--no-surrogate`` leaves them
 out); the recorder records everything.
 
 Measurements and estimates travel as batches (``/ssa/measurement_batch``,
@@ -20,7 +20,7 @@ physics-only baseline) at the same epochs. ``catalog.json`` in the run directory
 same numbers.
 
 With ``--unlabelled`` the radars report their detections without object ids (one filter
-shard associates them: `core.unlabelled`); the truth labels travel apart, on
+shard associates them: `core.catalog.unlabelled`); the truth labels travel apart, on
 ``/ssa/detection_truth``, and the summary adds the association's score from the bag
 (`evaluation.association`: accuracy, coverage, confirmed tracks) and scores each confirmed
 track's estimates against the SGP4 truth of its majority object.
@@ -47,12 +47,13 @@ from ssa_fusion import graphs
 from ssa_fusion.apps import runs
 from ssa_fusion.apps.args import discovery
 from ssa_fusion.apps.progress_lines import ProgressLines
-from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core import timescales
-from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.core.types import UpdateSource
+from ssa_fusion.core.base.rows import MeasurementRows
+from ssa_fusion.core.base.types import UpdateSource
+from ssa_fusion.core.earth import timescales
+from ssa_fusion.core.motion.element_sets import CatalogEntry, catalog_states
 from ssa_fusion.evaluation.association import detection_labels, score_association
 from ssa_fusion.evaluation.object_states import ObjectStates, States, StatesByObject, merge
+from ssa_fusion.formats import element_sets as catalog_io
 from ssa_fusion.nodes.defaults import CATALOG_FILTER, CATALOG_SURROGATE
 from ssa_fusion.nodes.diagnostics import RECORDED, Count
 from ssa_fusion.nodes.progress import RECORDED_ESTIMATES, RECORDED_MEASUREMENTS
@@ -177,7 +178,7 @@ def catalog_scenario(args: argparse.Namespace) -> sky.SkyScenario:
 
 
 def entries_of(args: argparse.Namespace,
-               progress: catalog_io.Progress | None = None) -> list[catalog_io.CatalogEntry]:
+               progress: catalog_io.Progress | None = None) -> list[CatalogEntry]:
     """Return the objects the run simulates (as sensor_sim builds them from the options).
 
     ValueError (one line naming the file and line) for a catalog that cannot be read;
@@ -269,7 +270,7 @@ def _rss_kib(pid: int) -> int:
     return 0
 
 
-def position_errors(entries: list[catalog_io.CatalogEntry], estimates: States) -> np.ndarray:
+def position_errors(entries: list[CatalogEntry], estimates: States) -> np.ndarray:
     """|r_estimate - r_SGP4| (km) of every estimate of an object of `entries`."""
     by_id = {e.object_id: e for e in entries}
     errs = []
@@ -277,7 +278,7 @@ def position_errors(entries: list[catalog_io.CatalogEntry], estimates: States) -
         entry = by_id.get(oid)
         if entry is None or not est.t.size:
             continue
-        x = catalog_io.catalog_states([entry], est.t).x[0]
+        x = catalog_states([entry], est.t).x[0]
         errs.append(np.linalg.norm(est.x[:, :3] - x[:, :3], axis=1))
     return np.concatenate(errs) if errs else np.zeros(0)
 
@@ -426,7 +427,7 @@ class ShardSummary(TypedDict):
     ``published_associated`` (`nodes.unlabelled`)."""
 
 
-def summarise(bag: Path, entries: list[catalog_io.CatalogEntry],
+def summarise(bag: Path, entries: list[CatalogEntry],
               status: dict[str, dict[str, str]], names: list[str], rss: dict[str, int],
               sim_wall: tuple[float, float] | None, sim_s: float,
               gap_nodes: list[str] | None = None, unlabelled: bool = False,

@@ -9,25 +9,25 @@ records the new run with the recorder.
 written as a bag of the same layout. Live and offline runs can differ only in the order in
 which the filter sees a forecast and a real measurement (two topics, no ordering between
 them). The design removes that difference: forecast *values* depend only on the
-measurements (see `core.surrogate`), the filter's rules are order-independent for real
+measurements (see `core.gaps.surrogate`), the filter's rules are order-independent for real
 measurements, and the offline replay fuses forecasts at the positions the recorder saw them
 in the bag's log-time order. A bag without recorded forecasts gets them when the clock
 (the measurement stamps) passes each missed epoch by the live grace, and those still owed
 when the measurement ending a gap arrives with it, as the surrogate node publishes them.
 What the filter publishes besides its updates, the predictions through a gap, follows the
-filter node's own policy (`core.gap_publisher.GapPublisher`, with the ``predict_period`` and
+filter node's own policy (`core.gaps.publisher.GapPublisher`, with the ``predict_period`` and
 ``gap_forecast`` the bag records), driven by the bag's /clock.
 
 ``--offline --smooth`` adds the definitive orbit: the filter's fused estimates smoothed
-backwards (Rauch-Tung-Striebel, `core.smoother`; never across a re-initialisation), written
+backwards (Rauch-Tung-Striebel, `core.filter.smoother`; never across a re-initialisation), written
 on ``/ssa/estimate_smoothed`` after the bag's last message; with truth in the bag, the
 smoothed and the filtered position errors at the fused epochs the truth has are printed.
 
 The estimator settings are those recorded with the bag (``/ssa/config``) unless
 ``--params-file`` or ``--scenario`` says otherwise (`settings`). With ``--sites`` (a sites
-file, `core.site_file`), or for a bag without recorded settings, the filter takes the
-stations the bag's measurements name (`core.config.for_stations`; the real-sky filter,
-`core.config.station_estimator`, for a bag without settings whose stations are not the
+file, `formats.sites`), or for a bag without recorded settings, the filter takes the
+stations the bag's measurements name (`core.gaps.estimator.for_stations`; the real-sky filter,
+`core.gaps.estimator.station_estimator`, for a bag without settings whose stations are not the
 default's). An offline replay that produces no estimate says why (`why_no_estimate`).
 
 A bag whose measurements are recorded as batches (``/ssa/measurement_batch``) is replayed, in
@@ -60,19 +60,20 @@ import numpy as np
 from ssa_fusion.apps import evaluate, replay_catalog
 from ssa_fusion.apps.args import add_domain_id, add_settings, add_sites, positive_float
 from ssa_fusion.apps.partial import removed_if_unfinished
-from ssa_fusion.core import site_file, types
-from ssa_fusion.core.config import (
+from ssa_fusion.core.base import types
+from ssa_fusion.core.base.types import KIND_NAMES, Cause
+from ssa_fusion.core.earth.frames import Frame, Station
+from ssa_fusion.core.earth.stations import find_station
+from ssa_fusion.core.filter.smoother import TrackerRecorder
+from ssa_fusion.core.gaps.estimator import (
     EstimatorConfig,
     make_surrogate,
     make_tracker,
     uncovered_stations,
 )
-from ssa_fusion.core.frames import Frame, Station
-from ssa_fusion.core.gap_publisher import GapFill, GapPublisher, Published
-from ssa_fusion.core.smoother import TrackerRecorder
-from ssa_fusion.core.stations import find_station
-from ssa_fusion.core.types import KIND_NAMES, Cause
-from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S, ahead_of_clock
+from ssa_fusion.core.gaps.publisher import GapFill, GapPublisher, Published
+from ssa_fusion.core.measure.validation import MAX_CLOCK_LEAD_S, ahead_of_clock
+from ssa_fusion.formats import sites as site_file
 from ssa_fusion.nodes import settings as node_settings
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import (
@@ -318,11 +319,11 @@ def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig,
     """Run surrogate + filter of estimator `c` through the core over the bag's messages.
 
     The messages are taken in log-time order. The filter publishes what the filter node
-    publishes (`core.gap_publisher.GapPublisher`): the estimate of every fused measurement
+    publishes (`core.gaps.publisher.GapPublisher`): the estimate of every fused measurement
     and, through a gap, predictions (or residual forecasts) on the grid of the filter's
     `gaps` parameters (``predict_period``, ``gap_forecast``; default: those recorded with
     the bag), as the bag's /clock passes them, the rest once the bag ends. With `smooth`,
-    also the fused estimates smoothed (`core.smoother.TrackerRecorder`).
+    also the fused estimates smoothed (`core.filter.smoother.TrackerRecorder`).
     """
     g = gaps if gaps is not None else recorded_gaps(stream)
     publisher = GapPublisher.of(make_tracker(c), float(g["predict_period"]),

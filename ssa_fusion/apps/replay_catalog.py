@@ -5,7 +5,7 @@ A bag is a catalog's (`catalog_reason`) when a catalog_filter recorded its setti
 one object, or when it holds unlabelled detections (rows of ``/ssa/measurement_batch``
 without an object id). One object's filter would put every object's measurements in one
 track; this replay gives each object its own, as the catalog_filter node does, through the
-same core policy (`core.catalog_fusion.CatalogFusion`: a `TrackBank`, one track per
+same core policy (`core.catalog.fusion.CatalogFusion`: a `TrackBank`, one track per
 ``object_id``, and the association of unlabelled detections):
 
 * the settings are those the catalog_filter recorded (every shard's); a bag without them is
@@ -15,7 +15,7 @@ same core policy (`core.catalog_fusion.CatalogFusion`: a `TrackBank`, one track 
   at its log
   time, in log-time order: what the filter's lockstep run fuses at once (each step's batch
   is fused before the next is published). The rows are checked as the node checks them
-  (`core.catalog_fusion.row_causes`; a row stamped more than ``max_clock_lead`` after its
+  (`core.catalog.fusion.row_causes`; a row stamped more than ``max_clock_lead`` after its
   log time is refused ``rejected_future``, its log time standing for the node's clock) and
   go to the shard whose key range holds their ``shard_key``;
 * offline (``--offline``), the output bag has the live layout: the inputs as recorded, the
@@ -29,7 +29,7 @@ same core policy (`core.catalog_fusion.CatalogFusion`: a `TrackBank`, one track 
   surrogate runs (its settings are not recorded).
 
 Per object, the estimates do not depend on how the rows are cut into fusions as long as
-each object's rows come in epoch order (`core.track_bank`), so a run whose batches the node
+each object's rows come in epoch order (`core.catalog.track_bank`), so a run whose batches the node
 fused otherwise (open loop, two messages in one ``batch_period``) gives the same estimates.
 """
 
@@ -48,14 +48,14 @@ from typing import Any
 import numpy as np
 
 from ssa_fusion.apps.partial import removed_if_unfinished
-from ssa_fusion.core import types
-from ssa_fusion.core.association import DetectionFate
-from ssa_fusion.core.catalog_fusion import CatalogFusion, Fused, in_epoch_order, row_causes
-from ssa_fusion.core.rows import EstimateRows, MeasurementRows
-from ssa_fusion.core.site_file import load_sites, load_station_map
-from ssa_fusion.core.stations import network_stations
-from ssa_fusion.core.types import KIND_NAMES, Cause, Kind, UpdateSource
-from ssa_fusion.core.unlabelled import elevation_masks, is_unlabelled
+from ssa_fusion.core.base import types
+from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
+from ssa_fusion.core.base.types import KIND_NAMES, Cause, Kind, UpdateSource
+from ssa_fusion.core.catalog.association import DetectionFate
+from ssa_fusion.core.catalog.fusion import CatalogFusion, Fused, in_epoch_order, row_causes
+from ssa_fusion.core.catalog.unlabelled import elevation_masks, is_unlabelled
+from ssa_fusion.core.earth.stations import network_stations
+from ssa_fusion.formats.sites import load_sites, load_station_map
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.ros import bagio, messages
@@ -203,11 +203,11 @@ class CatalogResult:
     associated: list[tuple[int, MeasurementRows]] = field(default_factory=list)
     """(log time, rows) on ``/ssa/measurement_associated``, in publication order: each
     fusion's associated detections, then those a deferred decision moved to another track
-    (`core.unlabelled.RowsOutcome.relabelled`)."""
+    (`core.catalog.unlabelled.RowsOutcome.relabelled`)."""
     causes: Counter[str] = field(default_factory=Counter)
     """Rows refused or pending, by cause (the node's /diagnostics counts)."""
     fates: Counter[DetectionFate] = field(default_factory=Counter)
-    """The unlabelled detections' fates (`core.association.DetectionFate`)."""
+    """The unlabelled detections' fates (`core.catalog.association.DetectionFate`)."""
     rows: int = 0
     """Measurement rows read."""
 
@@ -385,7 +385,7 @@ def run(args: argparse.Namespace, telling: list[bagio.BagMessage], reason: str,
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(f"replay: {args.bag} is a catalog's bag ({reason}): each object its own track, "
-          f"as the catalog filter gives it (core.catalog_fusion)")
+          f"as the catalog filter gives it (core.catalog.fusion)")
     print(f"replay: catalog_filter settings: {chosen.origin}")
     forecasts = sum(len(m.msg.object_id) for m in bagio.read_bag(args.bag,
                                                                  topics=[TOPIC_ESTIMATE_BATCH])

@@ -20,7 +20,9 @@ import numpy as np
 
 from ssa_fusion.apps import evaluate, replay_catalog
 from ssa_fusion.apps.args import add_settings, add_sites
-from ssa_fusion.core import config, metrics, site_file, types
+from ssa_fusion.core.base import metrics, types
+from ssa_fusion.core.gaps import estimator as config
+from ssa_fusion.formats import sites as site_file
 from ssa_fusion.ros import bagio
 from ssa_fusion.ros.topics import TOPIC_CONFIG
 

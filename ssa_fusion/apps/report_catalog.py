@@ -42,13 +42,13 @@ from typing import Any
 import numpy as np
 
 from ssa_fusion.apps import replay_catalog
-from ssa_fusion.core.batch_ekf import BatchEKF
-from ssa_fusion.core.rows import EstimateRows, MeasurementRows
-from ssa_fusion.core.site_file import load_station_map
-from ssa_fusion.core.stations import network_stations
-from ssa_fusion.core.types import Kind, Source, StateEstimate, UpdateSource
+from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
+from ssa_fusion.core.base.types import Kind, Source, StateEstimate, UpdateSource
+from ssa_fusion.core.catalog.batch_ekf import BatchEKF
+from ssa_fusion.core.earth.stations import network_stations
 from ssa_fusion.evaluation import catalog_scores as cs
 from ssa_fusion.evaluation.association import detection_labels, score_association
+from ssa_fusion.formats.sites import load_station_map
 from ssa_fusion.nodes import settings
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import (

@@ -22,11 +22,11 @@ import plotly.graph_objects as go
 from plotly.subplots import make_subplots
 
 from ssa_fusion.apps import evaluate
-from ssa_fusion.core import metrics, types
-from ssa_fusion.core.config import EstimatorConfig
-from ssa_fusion.core.constants import R_EARTH
-from ssa_fusion.core.frames import Station
-from ssa_fusion.core.stations import NETWORKS, SENSORS, STATIONS
+from ssa_fusion.core.base import metrics, types
+from ssa_fusion.core.base.constants import R_EARTH
+from ssa_fusion.core.earth.frames import Station
+from ssa_fusion.core.earth.stations import NETWORKS, SENSORS, STATIONS
+from ssa_fusion.core.gaps.estimator import EstimatorConfig
 from ssa_fusion.evaluation.arms import ArmName
 from ssa_fusion.evaluation.passes import PassReport
 from ssa_fusion.ros import foxglove_scene

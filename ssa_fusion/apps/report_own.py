@@ -32,11 +32,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ssa_fusion.apps import ccsds_format, evaluate, report
-from ssa_fusion.core import types
-from ssa_fusion.core.config import uncovered_stations
+from ssa_fusion.apps import evaluate, report
+from ssa_fusion.core.base import types
+from ssa_fusion.core.gaps.estimator import uncovered_stations
 from ssa_fusion.evaluation import residuals as res_
 from ssa_fusion.evaluation.residuals import PASS_BREAK_S
+from ssa_fusion.formats.ccsds import common as ccsds_format
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes

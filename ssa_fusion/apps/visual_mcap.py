@@ -28,8 +28,8 @@ from pathlib import Path
 from typing import Any
 
 from ssa_fusion.apps import evaluate
-from ssa_fusion.core.frames import Station
-from ssa_fusion.core.types import Source
+from ssa_fusion.core.base.types import Source
+from ssa_fusion.core.earth.frames import Station
 from ssa_fusion.ros import foxglove_scene as scene
 
 SCENE_PERIOD_S = 300.0

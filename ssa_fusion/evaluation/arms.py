@@ -18,7 +18,7 @@ the position error and the NEES.
 * ``batch_fit`` -- the best physics-only estimate, what a flight-dynamics engineer would
   fit by hand: batch least squares over the real measurements of the last passes before
   the gap, two-body + J2, from the filter's estimate at the last of them, predicted through
-  the gap with its realistic covariance (`core.batch_gap`: `gap_window`, `GAP_FIT`; the
+  the gap with its realistic covariance (`core.gaps.batch_gap`: `gap_window`, `GAP_FIT`; the
   fit the filter publishes in gaps with ``gap_forecast: batch_fit``); Earth orbits only;
 * ``dmd_ekf`` -- the filter's estimates at the gap epochs, fusing the surrogate's forecasts;
   at an epoch without one (no forecast, or one refused) its prediction from the last estimate
@@ -38,18 +38,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ssa_fusion.core import frames
-from ssa_fusion.core.batch_gap import fit_passes, gap_window
-from ssa_fusion.core.config import ORBIT_MODELS, EstimatorConfig, make_tracker, measurement_model
-from ssa_fusion.core.metrics import epsilon, nees
-from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
-from ssa_fusion.core.types import (
+from ssa_fusion.core.base.metrics import epsilon, nees
+from ssa_fusion.core.base.types import (
     Measurement,
     MotionModel,
     Source,
     StateEstimate,
     UpdateSource,
     same_epoch,
+)
+from ssa_fusion.core.earth import frames
+from ssa_fusion.core.earth.timescales import DAY_S, UNIX_EPOCH_JD
+from ssa_fusion.core.gaps.batch_gap import fit_passes, gap_window
+from ssa_fusion.core.gaps.estimator import (
+    ORBIT_MODELS,
+    EstimatorConfig,
+    make_tracker,
+    measurement_model,
 )
 from ssa_fusion.evaluation.montecarlo import N_PARTICLES, placeholder_ensemble
 

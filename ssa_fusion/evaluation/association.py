@@ -1,6 +1,6 @@
 """Scoring the association of unlabelled detections against their truth labels.
 
-A run of unlabelled detections (`core.unlabelled`) leaves two sets of rows: every
+A run of unlabelled detections (`core.catalog.unlabelled`) leaves two sets of rows: every
 detection with its true object (the simulator's ``/ssa/detection_truth``) and the
 detections the association placed in a track or tracklet, labelled with its id (the
 filter's ``/ssa/measurement_associated``). `detection_labels` pairs them (the same
@@ -26,7 +26,7 @@ from typing import Any, TypeVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ssa_fusion.core.rows import MeasurementRows
+from ssa_fusion.core.base.rows import MeasurementRows
 
 _T = TypeVar("_T")
 

@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ssa_fusion.core.batch_ekf import BatchEKF
-from ssa_fusion.core.metrics import chi2_bounds
+from ssa_fusion.core.base.metrics import chi2_bounds
+from ssa_fusion.core.catalog.batch_ekf import BatchEKF
 
 Floats = NDArray[np.float64]
 Ints = NDArray[np.int64]

@@ -1,6 +1,6 @@
 """What a filter publishes between passes, scored: the error and the covariance's truth.
 
-`published` runs the filter's publication policy (`core.gap_publisher.GapPublisher`, the
+`published` runs the filter's publication policy (`core.gaps.publisher.GapPublisher`, the
 filter node's and `replay --offline`'s) over a run's real measurements with its clock on
 the truth's epochs, so the estimates are those a live run would record. `score_gaps`
 scores them at the truth epochs that fall between two passes:
@@ -25,11 +25,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import chi2
 
-from ssa_fusion.core.config import EstimatorConfig, make_tracker
-from ssa_fusion.core.gap_publisher import GapFill, GapPublisher
-from ssa_fusion.core.metrics import nees
-from ssa_fusion.core.pass_windows import passes
-from ssa_fusion.core.types import Measurement, StateEstimate
+from ssa_fusion.core.base.metrics import nees
+from ssa_fusion.core.base.types import Measurement, StateEstimate
+from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker
+from ssa_fusion.core.gaps.publisher import GapFill, GapPublisher
+from ssa_fusion.core.measure.pass_windows import passes
 
 LONG_GAP_S = 12 * 3600.0
 """Gaps longer than this (s) are scored on their own too."""

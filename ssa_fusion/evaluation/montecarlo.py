@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ssa_fusion.core import dynamics
+from ssa_fusion.core.motion import dynamics
 
 N_PARTICLES = 200
 

@@ -15,10 +15,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ssa_fusion.core.config import EstimatorConfig
-from ssa_fusion.core.metrics import chi2_bounds, nees
-from ssa_fusion.core.pass_windows import PASS_BREAK_S, passes
-from ssa_fusion.core.types import Measurement, StateEstimate
+from ssa_fusion.core.base.metrics import chi2_bounds, nees
+from ssa_fusion.core.base.types import Measurement, StateEstimate
+from ssa_fusion.core.gaps.estimator import EstimatorConfig
+from ssa_fusion.core.measure.pass_windows import PASS_BREAK_S, passes
 from ssa_fusion.evaluation import arms
 
 __all__ = ["PASS_BREAK_S", "PassReport", "estimates_at", "outage_epochs", "pass_report", "passes"]

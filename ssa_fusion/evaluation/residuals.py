@@ -27,13 +27,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ssa_fusion.core.config import EstimatorConfig, make_tracker
-from ssa_fusion.core.frames import wrap_angle
-from ssa_fusion.core.measurement import StationModels
-from ssa_fusion.core.metrics import chi2_bounds
-from ssa_fusion.core.pass_windows import PASS_BREAK_S, passes
-from ssa_fusion.core.types import Kind, Measurement, Source, StateEstimate, UpdateSource
-from ssa_fusion.core.validation import OK, measurement_problem
+from ssa_fusion.core.base.metrics import chi2_bounds
+from ssa_fusion.core.base.types import Kind, Measurement, Source, StateEstimate, UpdateSource
+from ssa_fusion.core.earth.frames import wrap_angle
+from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker
+from ssa_fusion.core.measure.measurement import StationModels
+from ssa_fusion.core.measure.pass_windows import PASS_BREAK_S, passes
+from ssa_fusion.core.measure.validation import OK, measurement_problem
 
 __all__ = [
     "PASS_BREAK_S",

@@ -40,8 +40,8 @@ from rclpy.subscription import Subscription
 from rclpy.subscription_content_filter_options import ContentFilterOptions
 from rclpy.timer import Timer
 
-from ssa_fusion.core.types import Cause, Measurement
-from ssa_fusion.core.validation import ahead_of_clock
+from ssa_fusion.core.base.types import Cause, Measurement
+from ssa_fusion.core.measure.validation import ahead_of_clock
 from ssa_fusion.nodes import start_process
 from ssa_fusion.nodes.clock_hold import ClockHold
 from ssa_fusion.nodes.diagnostics import Diagnostics, wall_timer

@@ -4,7 +4,7 @@ Subscribes to ``/ssa/measurement_batch`` (ssa_fusion_msgs/MeasurementBatch: many
 message, range/az/el of any object from the stations of `station`) and to
 ``/ssa/measurement`` (one Measurement a message, for publishers that send them so),
 checks what arrives (a batch's rows at once, vectorised: `validation.rows_problems`),
-and every `batch_period` wall s fuses it all at once in a `core.track_bank.TrackBank` (one
+and every `batch_period` wall s fuses it all at once in a `core.catalog.track_bank.TrackBank` (one
 track per ``object_id``, vectorised over objects). Publishes ``/ssa/estimate_batch``
 (ssa_fusion_msgs/EstimateBatch, update source SENSOR): one batch per fusion, a row for
 every fused measurement and for every track an IOD starts. Refused input is counted by
@@ -28,7 +28,7 @@ K processes with shard 0..K-1 cover every object exactly once, on one host or se
 one ROS domain.
 
 Unlabelled detections (rows whose ``object_id`` is empty, a radar's scans) are associated
-with tracks (`nodes.unlabelled`, `core.unlabelled`): the confirmed tracks' estimates go out
+with tracks (`nodes.unlabelled`, `core.catalog.unlabelled`): the confirmed tracks' estimates go out
 on ``/ssa/estimate_batch`` under their track ids, the associated detections on
 ``/ssa/measurement_associated``. They need one shard (``shards`` 1): with several, they are
 refused (``rejected_unlabelled_sharded``).
@@ -45,20 +45,20 @@ from functools import partial
 
 import numpy as np
 
-from ssa_fusion.core import validation
-from ssa_fusion.core.catalog_fusion import (
+from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
+from ssa_fusion.core.base.types import Cause, Kind, Measurement, Source
+from ssa_fusion.core.catalog.fusion import (
     CatalogFusion,
     fused_estimates,
     in_epoch_order,
     row_causes,
 )
-from ssa_fusion.core.rows import EstimateRows, MeasurementRows
-from ssa_fusion.core.site_file import load_sites, load_station_map
-from ssa_fusion.core.stations import network_stations
-from ssa_fusion.core.track_bank import BankResult, TrackBank
-from ssa_fusion.core.types import Cause, Kind, Measurement, Source
-from ssa_fusion.core.unlabelled import elevation_masks, is_unlabelled
-from ssa_fusion.core.validation import id_problem, measurement_problem
+from ssa_fusion.core.catalog.track_bank import BankResult, TrackBank
+from ssa_fusion.core.catalog.unlabelled import elevation_masks, is_unlabelled
+from ssa_fusion.core.earth.stations import network_stations
+from ssa_fusion.core.measure import validation
+from ssa_fusion.core.measure.validation import id_problem, measurement_problem
+from ssa_fusion.formats.sites import load_sites, load_station_map
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
@@ -205,7 +205,7 @@ class CatalogFilterNode(SsaNode):
         return self.fusion.bank
 
     def new_fusion(self) -> CatalogFusion:
-        """Return the empty tracks of this shard's settings (`core.catalog_fusion`)."""
+        """Return the empty tracks of this shard's settings (`core.catalog.fusion`)."""
         p = self.params
         fusion = CatalogFusion(self.options, self.stations, self.masks,
                                max_objects=p.integer("max_objects"),
@@ -367,7 +367,7 @@ class CatalogFilterNode(SsaNode):
         """Return what waits for the fusion as rows in epoch order, and forget it (None: none).
 
         Stable: arrival order at a tie (a batch's rows, then the Measurements;
-        `core.catalog_fusion.in_epoch_order`).
+        `core.catalog.fusion.in_epoch_order`).
         """
         parts = list(self._pending_rows)
         if self._pending:
@@ -383,7 +383,7 @@ class CatalogFilterNode(SsaNode):
         """Fuse what arrived since the last batch (in epoch order) and publish the estimates.
 
         With what waited for the clock to catch up, once it has. The unlabelled rows
-        first, then the labelled ones (`core.catalog_fusion.CatalogFusion`).
+        first, then the labelled ones (`core.catalog.fusion.CatalogFusion`).
         """
         self.replay_held()
         batch = self._pending_batch()

@@ -3,18 +3,18 @@ r"""catalog_surrogate: residual forecasts through the gaps of every object of a 
 Subscribes to ``/ssa/estimate_batch`` (ssa_fusion_msgs/EstimateBatch) for the estimates the
 catalog_filter made from real measurements (update source SENSOR; a DDS content filter
 keeps the others away), learns per object what the filter's motion model gets wrong from
-its pass-end estimates (`core.residual`; until they span a day, `min_span`, the physics-only
+its pass-end estimates (`core.gaps.residual`; until they span a day, `min_span`, the physics-only
 forecast from the pass end, `physics_fit`), and publishes on ``/ssa/estimate_batch`` the
 object's forecast through each gap between passes (update source FORECAST, ``object_id``
 set; one batch per round) on the grid of multiples of `predict_period`, once `pass_break`
 sim s have passed without an estimate. The fits
-(`core.gap_bank.GapBank`) take at most `fit_budget` of the wall time on average: a gap that
+(`core.catalog.gap_bank.GapBank`) take at most `fit_budget` of the wall time on average: a gap that
 ends before its turn is left to the filter's coasting and counted as ``skipped`` on
 ``/diagnostics``.
 
 With `gap_forecast` ``batch_fit`` the forecast of each gap is instead the batch
 least-squares fit of the object's measurements of its last passes (the single-object
-filter's `core.batch_gap`, with the radars of `station`): the node also subscribes to
+filter's `core.gaps.batch_gap`, with the radars of `station`): the node also subscribes to
 ``/ssa/measurement_batch`` (its shard's rows, as the catalog_filter) for them, and schedules
 and publishes these fits as the residual's.
 
@@ -34,22 +34,21 @@ from functools import partial
 
 import numpy as np
 
-from ssa_fusion.core.gap_bank import (
+from ssa_fusion.core.base.rows import EstimateRows
+from ssa_fusion.core.base.types import Cause, Kind, MotionModel, UpdateSource
+from ssa_fusion.core.catalog.gap_bank import (
     CATALOG_RESIDUAL,
     GAP_FORECASTS,
     GapBank,
     GapBankConfig,
     GapForecast,
 )
-from ssa_fusion.core.gap_publisher import GapFill
-from ssa_fusion.core.measurement import StationModels
-from ssa_fusion.core.residual import PHYSICS_RESIDUAL
-from ssa_fusion.core.rows import EstimateRows
-from ssa_fusion.core.site_file import load_station_map
-from ssa_fusion.core.stations import network_stations
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.types import Cause, Kind, MotionModel, UpdateSource
-from ssa_fusion.core.validation import (
+from ssa_fusion.core.earth.stations import network_stations
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.gaps.publisher import GapFill
+from ssa_fusion.core.gaps.residual import PHYSICS_RESIDUAL
+from ssa_fusion.core.measure.measurement import StationModels
+from ssa_fusion.core.measure.validation import (
     MAX_ID_CHARS,
     OK,
     id_problem,
@@ -57,6 +56,7 @@ from ssa_fusion.core.validation import (
     state_problem,
     states_problems,
 )
+from ssa_fusion.formats.sites import load_station_map
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import CATALOG_SURROGATE
 from ssa_fusion.nodes.diagnostics import Count, NodeCause
@@ -135,7 +135,7 @@ PARAMETERS = ParameterTable("catalog_surrogate", (
           "residual: a gap the learned residual has no fit for yet (fewer than min_anchors "
           "pass ends, or a span below min_span) or refuses gets the physics-only forecast "
           "from the object's pass end (the motion model, with constant accelerations under "
-          "a prior in its covariance: core.residual.PHYSICS_RESIDUAL), from its first pass "
+          "a prior in its covariance: core.gaps.residual.PHYSICS_RESIDUAL), from its first pass "
           "end on; counted in fits_made and fits_physics"),
     Param("gap_forecast", CATALOG_SURROGATE.gap_forecast,
           "each gap's forecast: residual (the motion model plus its residual learned from "

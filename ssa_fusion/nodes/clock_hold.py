@@ -13,7 +13,7 @@ from collections.abc import Callable
 
 from rclpy.node import Node
 
-from ssa_fusion.core.types import Cause
+from ssa_fusion.core.base.types import Cause
 from ssa_fusion.nodes.diagnostics import Diagnostics
 from ssa_fusion.ros.topics import DATA_DEPTH
 

@@ -23,9 +23,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ssa_fusion.core.filter_options import DEFAULT_GATE, SKY_FILTER
-from ssa_fusion.core.timescales import DAY_S
-from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S, MAX_OBJECTS
+from ssa_fusion.core.earth.timescales import DAY_S
+from ssa_fusion.core.filter.options import DEFAULT_GATE, SKY_FILTER
+from ssa_fusion.core.measure.validation import MAX_CLOCK_LEAD_S, MAX_OBJECTS
 
 KM = 1000.0
 """m per km: the parameters' SI against the core's km (`nodes.settings` converts with it)."""
@@ -42,9 +42,9 @@ def _si(value: float) -> float:
 KIND = "range_az_el"
 """Measurement kind filter and surrogate expect (``position`` | ``range_az_el`` | ``ra_dec``)."""
 STATION = "columbus"
-"""Station (a `core.stations.STATIONS` id) of their range/az/el measurements, or a network.
+"""Station (a `core.earth.stations.STATIONS` id) of their range/az/el measurements, or a network.
 
-``sites`` (a sites file, `core.site_file`) adds stations of one's own; '' = none."""
+``sites`` (a sites file, `formats.sites`) adds stations of one's own; '' = none."""
 
 
 @dataclass(frozen=True)
@@ -165,10 +165,10 @@ class CatalogFilterDefaults:
 
 @dataclass(frozen=True)
 class CatalogSurrogateDefaults:
-    """catalog_surrogate's defaults: residual gap forecasts of a catalog (`core.gap_bank`).
+    """catalog_surrogate's defaults: residual gap forecasts of a catalog (`core.catalog.gap_bank`).
 
     For the catalog_filter's two-body + J2 tracks; the residual model is the live filter's
-    (`core.residual.LIVE_RESIDUAL`: 5 pass ends over a day at least, in a 2-day window).
+    (`core.gaps.residual.LIVE_RESIDUAL`: 5 pass ends over a day at least, in a 2-day window).
     """
 
     motion_model: str = "j2"

@@ -1,6 +1,6 @@
 """What a node reports on ``/diagnostics``: counts by key, status values, matched endpoints.
 
-The keys are enums: `core.types.Cause` for why the core refused or set aside an input,
+The keys are enums: `core.base.types.Cause` for why the core refused or set aside an input,
 `NodeCause` for causes only a node meets (shards, DDS), `Count` for what a node did. Their
 values are the ``/diagnostics`` keys docs/NODES.md lists; they must not change.
 """
@@ -24,7 +24,7 @@ from rclpy.subscription import Subscription
 from rclpy.subscription_content_filter_options import ContentFilterOptions
 from rclpy.timer import Timer
 
-from ssa_fusion.core.types import Cause
+from ssa_fusion.core.base.types import Cause
 from ssa_fusion.ros.interfaces import DiagnosticArray, DiagnosticStatus, KeyValue, Message, Time
 from ssa_fusion.ros.readiness import MATCHED_KEY, MATCHED_READERS_KEY
 from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS

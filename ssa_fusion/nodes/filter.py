@@ -5,11 +5,11 @@ differences for position), then fuses real measurements from ``/ssa/measurement`
 for epochs without one, forecasts from ``/ssa/forecast``. Publishes ``/ssa/estimate``
 (state + full 6x6 covariance, stamped with the measurement epoch) for every fused epoch,
 and through a gap predictions or residual forecasts on the grid of multiples of
-`predict_period`: what it publishes is `core.gap_publisher.GapPublisher`'s policy, which
+`predict_period`: what it publishes is `core.gaps.publisher.GapPublisher`'s policy, which
 the offline replay (`ssa-fusion replay --offline`) follows too. Rejected input is counted by
 cause on ``/diagnostics``. The settings in effect are published (latched) on
 ``/ssa/config``, so every bag records them. ``station`` names built-in stations
-(`core.stations`) or those of the ``sites`` file (`core.site_file`).
+(`core.earth.stations`) or those of the ``sites`` file (`formats.sites`).
 
     ros2 run ssa_fusion filter --ros-args -p use_sim_time:=true -p kind:=range_az_el
 """
@@ -18,9 +18,9 @@ from __future__ import annotations
 
 from functools import partial
 
-from ssa_fusion.core.config import EstimatorConfig, make_tracker
-from ssa_fusion.core.gap_publisher import GapFill, GapPublisher, Published
-from ssa_fusion.core.types import Cause, Source
+from ssa_fusion.core.base.types import Cause, Source
+from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker
+from ssa_fusion.core.gaps.publisher import GapFill, GapPublisher, Published
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import FILTER
@@ -62,7 +62,7 @@ PARAMETERS = ParameterTable("filter", (
           "11–39 m meanwhile)"),
     Param("refraction", FILTER.refraction,
           "radar elevations as the standard atmosphere refracts them (Saemundsson's "
-          "formula, `core.refraction`; 5.4′ at 10°); off: geometric"),
+          "formula, `core.earth.refraction`; 5.4′ at 10°); off: geometric"),
     object_filter(FILTER.object_id, "track"),
     Param("predict_period", FILTER.predict_period,
           "without an update for this long, predictions are published at every multiple of "
@@ -77,7 +77,7 @@ PARAMETERS = ParameterTable("filter", (
           "what the predictions in a gap between passes are: `none` (the EKF coasting), "
           "`residual`: once a prediction epoch is 600 s after the last estimate that fused a "
           "real measurement, that estimate becomes an anchor of "
-          "`core.gap_forecaster.GapForecaster` (the motion model plus its residual — Hill "
+          "`core.gaps.forecaster.GapForecaster` (the motion model plus its residual — Hill "
           "equations forced by empirical accelerations, constant + once per revolution — "
           "fitted to the pass ends of the last 2 days, covariance scaled by held-out "
           "errors); from 5 anchors spanning a day on, the gap's predictions are its "
@@ -86,18 +86,18 @@ PARAMETERS = ParameterTable("filter", (
           "`batch_fit`: from 600 s after the last estimate that fused a real measurement, "
           "a J2-J4 batch least-squares fit (with a drag factor where there are ranges) of "
           "the real measurements fused in the passes that start within 24 h of the last "
-          "one, at least 3 (angles only: the last 3; `core.batch_gap`, realistic covariance "
+          "one, at least 3 (angles only: the last 3; `core.gaps.batch_gap`, realistic covariance "
           "with considered "
           "accelerations and state-noise compensation), up to 1 day after the pass, tagged "
           "FORECAST; or `batch_init`: `batch_fit`, and at the first real measurement of the "
           "next pass (more than 600 s after the last one fused, up to 1 day after it) the "
           "EKF starts its sequential update from the fit's prediction there (state and "
           "realistic covariance) instead of its own coasted state "
-          "(`core.tracker.Tracker.restart_from`), once the fit spans 3 passes; or "
+          "(`core.filter.tracker.Tracker.restart_from`), once the fit spans 3 passes; or "
           "`fit_residual`: `batch_init` with the fit's predictions (and the EKF's prior) "
           "corrected by the residual surrogate learnt against the fit -- the fits' states "
           "at the pass ends of the last 2 days against the newest fit's trajectory "
-          "(`core.fit_residual.FitResidualForecaster`), the fit's own until it has 5 "
+          "(`core.gaps.fit_residual.FitResidualForecaster`), the fit's own until it has 5 "
           "spanning a day. "
           "`ssa-fusion live` sets each real-sky scenario's `gap_fill` (leo_optical: "
           "`fit_residual`, the others `batch_init`)",

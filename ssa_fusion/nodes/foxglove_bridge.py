@@ -39,8 +39,8 @@ from typing import Any
 import numpy as np
 from rclpy.publisher import Publisher
 
-from ssa_fusion.core.stations import network_stations
-from ssa_fusion.core.types import Cause, Source
+from ssa_fusion.core.base.types import Cause, Source
+from ssa_fusion.core.earth.stations import network_stations
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import STATION
 from ssa_fusion.nodes.diagnostics import Count

@@ -19,9 +19,9 @@ import math
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 
-from ssa_fusion.core.site_file import load_station_map, load_stations
-from ssa_fusion.core.stations import network_stations, station_ids
-from ssa_fusion.core.types import KIND_NAMES
+from ssa_fusion.core.base.types import KIND_NAMES
+from ssa_fusion.core.earth.stations import network_stations, station_ids
+from ssa_fusion.formats.sites import load_station_map, load_stations
 from ssa_fusion.nodes.defaults import CatalogFilterDefaults, FilterDefaults
 
 ParamValue = bool | int | float | str | list[bool] | list[int] | list[float] | list[str]
@@ -145,7 +145,7 @@ def read_by(read: Callable[[str], object],
 
 STATIONS = Check("a station id, a network id, or station ids separated by commas",
                  read_by(network_stations))
-"""Stations (`core.stations.network_stations`): a station, a network, or ids with commas."""
+"""Stations (`core.earth.stations.network_stations`): a station, a network, or ids with commas."""
 
 
 def _station_ids(value: ParamValue) -> str | None:
@@ -160,7 +160,7 @@ STATION_IDS = Check("a station id (built in, or of `sites`), a network id, or st
 
 
 SITES = Check("'' or a readable, valid sites file", read_by(load_stations))
-"""A sites file (`core.site_file`), or '' for the built-in stations only."""
+"""A sites file (`formats.sites`), or '' for the built-in stations only."""
 
 
 def sites_problem(values: Values) -> str | None:
@@ -309,7 +309,7 @@ def measurement_stream(kind: str, station: str, sites: str,
                   check=one_of(*KINDS)),
             Param("station", station,
                   "station (frame_id) of range/az/el or ra/dec measurements "
-                  "(`ssa_fusion.core.stations.STATIONS`, or a site of `sites`), or a "
+                  "(`ssa_fusion.core.earth.stations.STATIONS`, or a site of `sites`), or a "
                   "network: a `NETWORKS` id or station ids separated by commas (`columbus,` "
                   "for a network of one), whose radar and optical measurements it takes, "
                   "each with its station's model; ignored for position (frame `gcrf`)",

@@ -23,7 +23,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from ssa_fusion.core.types import Cause
+from ssa_fusion.core.base.types import Cause
 from ssa_fusion.nodes import STOP
 from ssa_fusion.nodes.parameters import ParameterError
 from ssa_fusion.ros.executors import make_executor

@@ -28,7 +28,7 @@ from pathlib import Path
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
-from ssa_fusion.core.types import Cause
+from ssa_fusion.core.base.types import Cause
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import BAG_PATTERN, RECORDER
 from ssa_fusion.nodes.diagnostics import RECORDED

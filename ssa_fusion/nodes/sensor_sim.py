@@ -8,7 +8,7 @@ Propagates the scenario's true orbit (two-body + J2, drag, or SGP4/SDP4), and pu
 * ``/ssa/withheld``: what they would have measured during a scheduled outage (evaluation
   only);
 * ``/ssa/detection_truth``: a catalog run with `unlabelled`: the detections with their true
-  object ids (evaluation only; the measurement batches carry none: `core.unlabelled`);
+  object ids (evaluation only; the measurement batches carry none: `core.catalog.unlabelled`);
 * ``/ssa/truth`` (ssa_fusion_msgs/StateEstimate, zero covariance): the true state;
 * ``/clock``: sim time, UTC (Unix seconds), advancing `time_scale` sim s per wall s; for
   a catalog with ``lockstep`` consumers, by ``lockstep_step`` once they have taken the last
@@ -32,12 +32,13 @@ import time
 import numpy as np
 from rclpy.duration import Duration
 
-from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core import timescales, types
-from ssa_fusion.core.frames import Frame
-from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.core.unlabelled import without_labels
-from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S
+from ssa_fusion.core.base import types
+from ssa_fusion.core.base.rows import MeasurementRows
+from ssa_fusion.core.catalog.unlabelled import without_labels
+from ssa_fusion.core.earth import timescales
+from ssa_fusion.core.earth.frames import Frame
+from ssa_fusion.core.measure.validation import MAX_CLOCK_LEAD_S
+from ssa_fusion.formats import element_sets as catalog_io
 from ssa_fusion.nodes import parameters
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import SENSOR_SIM
@@ -316,7 +317,7 @@ PARAMETERS = ParameterTable("sensor_sim", (
           "them (counted `lockstep_timeouts`, and logged)", unit="wall s", check=POSITIVE),
     Param("unlabelled", SENSOR_SIM.unlabelled,
           "catalog: publish each scan's detections as a radar reports them, without object "
-          "ids (`object_id` '', `shard_key` 0: `core.unlabelled`); their true ids go to "
+          "ids (`object_id` '', `shard_key` 0: `core.catalog.unlabelled`); their true ids go to "
           "`/ssa/detection_truth` (evaluation only); needs `shards` 1"),
 ), rules=(Rule(("unlabelled", "catalog", "shards"), _unlabelled_needs_a_catalog_of_one_shard),
           _needs_sky("catalog", "its radars observe the catalog"),

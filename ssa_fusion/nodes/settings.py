@@ -1,6 +1,7 @@
 """The estimator settings of the filter and surrogate nodes as ROS parameters, and back.
 
-ROS parameters are in SI units (m, m/s, rad, s; docs/NODES.md); `core.config.EstimatorConfig`
+ROS parameters are in SI units (m, m/s, rad, s; docs/NODES.md);
+`core.gaps.estimator.EstimatorConfig`
 is in the core's (km, km/s). This module is the one translation between the two, used by
 the nodes (their declared parameters), by `ssa-fusion live` (the parameters that run a
 scenario), by `replay`/`report --params-file` (a ROS params YAML) and for the settings the
@@ -17,14 +18,14 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from ssa_fusion.core import config
-from ssa_fusion.core.config import EstimatorConfig, Lift
-from ssa_fusion.core.filter_options import FilterOptions
-from ssa_fusion.core.quoting import one_line, quote, shown
-from ssa_fusion.core.site_file import load_stations
-from ssa_fusion.core.surrogate import LIVE_SURROGATE
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.types import KIND_NAMES, Kind, MotionModel
+from ssa_fusion.core.base.quoting import one_line, quote, shown
+from ssa_fusion.core.base.types import KIND_NAMES, Kind, MotionModel
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.filter.options import FilterOptions
+from ssa_fusion.core.gaps import estimator as config
+from ssa_fusion.core.gaps.estimator import EstimatorConfig, Lift
+from ssa_fusion.core.gaps.surrogate import LIVE_SURROGATE
+from ssa_fusion.formats.sites import load_stations
 from ssa_fusion.nodes.defaults import CATALOG_FILTER, FILTER, KM, SURROGATE
 from ssa_fusion.nodes.parameters import ParameterTable
 
@@ -32,7 +33,7 @@ FILTER_KEYS = ("kind", "station", "sites", "motion_model", "p0_sigma", "q", "gat
                "iod_max_span", "reinit_after", "sigma_bound", "light_time", "refraction")
 """The filter's parameters that are estimator settings."""
 GAP_KEYS = ("predict_period", "gap_forecast")
-"""The filter's parameters that say what it publishes in a gap (`core.gap_publisher`)."""
+"""The filter's parameters that say what it publishes in a gap (`core.gaps.publisher`)."""
 SURROGATE_KEYS = ("kind", "station", "sites", "buffer_length", "retrain_period", "delays", "rank",
                   "max_horizon", "grace", "cadence", "lift")
 """The surrogate's parameters that are estimator settings."""
@@ -42,7 +43,7 @@ CATALOG_KEYS = ("station", "sites", "motion_model", "p0_sigma", "q", "gate", "io
                 "iod_max_span", "reinit_after", "sigma_bound", "max_objects", "evict_after",
                 "batch_rows", "max_clock_lead", "shards", "shard")
 """The catalog_filter's parameters it records: what its tracks and its estimates depend on
-(``batch_period``, the wall time between fusions, does not: `core.catalog_fusion`)."""
+(``batch_period``, the wall time between fusions, does not: `core.catalog.fusion`)."""
 NODE_MOTION_MODELS = (MotionModel.KEPLER, MotionModel.J2)
 """Motion models the filter node offers (Earth orbits on the Unix clock)."""
 
@@ -99,7 +100,7 @@ def estimator_from(filt: Mapping[str, Any], surr: Mapping[str, Any]) -> Estimato
 
     A missing parameter takes the node's default (`defaults`), except that `lift` defaults
     to eci only for range/az/el (none for positions and right ascension/declination).
-    ``sites`` is a sites file's path (`core.site_file`; '' = none), read here. ValueError
+    ``sites`` is a sites file's path (`formats.sites`; '' = none), read here. ValueError
     names a bad value.
     """
     f = {**dataclasses.asdict(FILTER), **filt}

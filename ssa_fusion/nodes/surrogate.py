@@ -17,9 +17,9 @@ from __future__ import annotations
 from dataclasses import replace
 from functools import partial
 
-from ssa_fusion.core import hankel_dmd
-from ssa_fusion.core.config import EstimatorConfig, Lift, make_surrogate
-from ssa_fusion.core.types import Cause, Measurement
+from ssa_fusion.core.base.types import Cause, Measurement
+from ssa_fusion.core.gaps import hankel_dmd
+from ssa_fusion.core.gaps.estimator import EstimatorConfig, Lift, make_surrogate
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.base import SsaNode
 from ssa_fusion.nodes.defaults import SURROGATE
@@ -96,7 +96,7 @@ PARAMETERS = ParameterTable("surrogate", (
 
 
 class SurrogateNode(SsaNode):
-    """The surrogate node: measurements in, `core.surrogate.Surrogate`, forecasts out."""
+    """The surrogate node: measurements in, `core.gaps.surrogate.Surrogate`, forecasts out."""
 
     PARAMETERS = PARAMETERS
 

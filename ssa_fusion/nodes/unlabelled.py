@@ -1,23 +1,23 @@
 """catalog_filter's unlabelled detections: rows without ``object_id`` into tracks.
 
-A row whose ``object_id`` is empty (`core.unlabelled.UNLABELLED`) is a radar's detection of
+A row whose ``object_id`` is empty (`core.catalog.unlabelled.UNLABELLED`) is a radar's detection of
 an unknown object. `UnlabelledRows.take` hands a fusion's batch to the filter's
-`core.catalog_fusion.CatalogFusion`, which sets those rows aside for its
-`core.unlabelled.RowAssociator` (gating and global nearest neighbour per scan, tracklets,
-IOD, M-of-N confirmation: `core.association`), and publishes:
+`core.catalog.fusion.CatalogFusion`, which sets those rows aside for its
+`core.catalog.unlabelled.RowAssociator` (gating and global nearest neighbour per scan, tracklets,
+IOD, M-of-N confirmation: `core.catalog.association`), and publishes:
 
 * on ``/ssa/estimate_batch`` (the labelled objects' EstimateBatch, update source SENSOR)
   the estimates of confirmed tracks, each named by its track id (``track-000001``, ...);
 * on ``/ssa/measurement_associated`` (MeasurementBatch) the detections placed in a track or
   tracklet, each row's ``object_id`` the track's id (``shard_key`` its CRC-32); after them
   the detections of earlier scans that a deferred decision moved to another track
-  (`core.unlabelled.RowsOutcome.relabelled`), again, under that track's id: a detection
+  (`core.catalog.unlabelled.RowsOutcome.relabelled`), again, under that track's id: a detection
   published twice belongs to the track of its last publication.
 
 Every detection is counted on ``/diagnostics`` by its fate (``detection_track``,
 ``detection_tracklet``, ``detection_new_tracklet``, ``detection_refused``: they sum to the
 unlabelled rows consumed) and the association's events as ``association_<event>``
-(`core.association.TrackEvent`: scans, assigned, track_confirmed, ...); the status gives
+(`core.catalog.association.TrackEvent`: scans, assigned, track_confirmed, ...); the status gives
 ``confirmed_tracks`` and ``tentative_tracks``.
 
 Unlabelled detections cannot be routed by object key: they need a single shard
@@ -28,10 +28,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from ssa_fusion.core.association import DetectionFate, TrackStatus
-from ssa_fusion.core.catalog_fusion import CatalogFusion
-from ssa_fusion.core.rows import EstimateRows, MeasurementRows
-from ssa_fusion.core.unlabelled import is_unlabelled
+from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
+from ssa_fusion.core.catalog.association import DetectionFate, TrackStatus
+from ssa_fusion.core.catalog.fusion import CatalogFusion
+from ssa_fusion.core.catalog.unlabelled import is_unlabelled
 from ssa_fusion.nodes.diagnostics import Count, Diagnostics
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import MeasurementBatch

@@ -33,8 +33,8 @@ from rosbags.rosbag2.storage_mcap import McapWriter
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-from ssa_fusion.core.timescales import EPOCH_MAX
-from ssa_fusion.core.types import Cause, Kind
+from ssa_fusion.core.base.types import Cause, Kind
+from ssa_fusion.core.earth.timescales import EPOCH_MAX
 
 if TYPE_CHECKING:
     from rclpy.duration import Duration

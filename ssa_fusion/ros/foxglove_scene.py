@@ -4,7 +4,7 @@ The 3D scene's entities (the Earth, truth, estimate, trails, 3σ ellipsoid, stat
 forecasts, measurements), ground tracks and metrics, from the geometry of `scene_geometry`.
 No rclpy here (testable with numpy alone); `foxglove` (foxglove-sdk) is imported only by the
 functions that build its messages. Units and frames: positions in km in the GCRF
-(`core.frames`); the 3D scene is drawn in frame ``gcrf`` with one scene unit = 1 km; ground
+(`core.earth.frames`); the 3D scene is drawn in frame ``gcrf`` with one scene unit = 1 km; ground
 tracks are WGS-84 geodetic of the ITRF position; times are Unix seconds (UTC, sim time);
 angles rad, except the ground track's latitude/longitude, which `foxglove.LocationFix` takes
 in degrees.
@@ -21,9 +21,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ssa_fusion.core.constants import R_EARTH, WGS84_F
-from ssa_fusion.core.frames import Frame, Station, site_gcrs
-from ssa_fusion.core.types import Cause
+from ssa_fusion.core.base.constants import R_EARTH, WGS84_F
+from ssa_fusion.core.base.types import Cause
+from ssa_fusion.core.earth.frames import Frame, Station, site_gcrs
 from ssa_fusion.ros.scene_geometry import (
     covariance_ellipsoid,
     gcrs_to_geodetic,

@@ -18,10 +18,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ssa_fusion.core import types
-from ssa_fusion.core.frames import Frame
-from ssa_fusion.core.rows import EstimateRows, MeasurementRows
-from ssa_fusion.core.timescales import EPOCH_MAX, iso
+from ssa_fusion.core.base import types
+from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
+from ssa_fusion.core.earth import timescales
+from ssa_fusion.core.earth.frames import Frame
+from ssa_fusion.core.earth.timescales import EPOCH_MAX, iso
 
 if TYPE_CHECKING:  # the message packages are imported when first needed (`rclpy_classes`)
     from ssa_fusion.ros.interfaces import Message
@@ -96,8 +97,8 @@ def _default(classes: MsgClasses | None) -> MsgClasses:
 
 
 def stamp_to_seconds(stamp: Message) -> float:
-    """Return a builtin_interfaces/Time in float seconds."""
-    return float(stamp.sec) + float(stamp.nanosec) * 1e-9
+    """Return a builtin_interfaces/Time in float seconds (`timescales.stamp_seconds`)."""
+    return timescales.stamp_seconds(stamp.sec, stamp.nanosec)
 
 
 def seconds_to_stamp(t: float, classes: MsgClasses | None = None) -> Message:

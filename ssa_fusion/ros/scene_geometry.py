@@ -13,10 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ssa_fusion.core.constants import R_EARTH, WGS84_F
-from ssa_fusion.core.frames import Station, gcrs_to_itrs, itrs_to_gcrs
-from ssa_fusion.core.iod import razel_to_gcrs
-from ssa_fusion.core.types import Kind
+from ssa_fusion.core.base.constants import R_EARTH, WGS84_F
+from ssa_fusion.core.base.types import Kind
+from ssa_fusion.core.earth.frames import Station, gcrs_to_itrs, itrs_to_gcrs
+from ssa_fusion.core.measure.iod import razel_to_gcrs
 
 _E2 = WGS84_F * (2.0 - WGS84_F)
 
@@ -25,7 +25,7 @@ def itrs_to_geodetic(r_itrs_km: ArrayLike) -> tuple[float, float, float]:
     """Return the WGS-84 geodetic coordinates of an ITRF position (3,) km.
 
     Latitude rad, longitude rad in (-π, π], ellipsoidal height km; the inverse of
-    `core.frames.site_itrs` (fixed-point iteration on the latitude, converged to ~1e-12 rad).
+    `core.earth.frames.site_itrs` (fixed-point iteration on the latitude, converged to ~1e-12 rad).
     """
     x, y, z = (float(v) for v in np.asarray(r_itrs_km, dtype=float)[:3])
     lon = math.atan2(y, x)
@@ -53,7 +53,7 @@ def gcrs_to_geodetic(r_gcrs_km: ArrayLike, t_unix: float) -> tuple[float, float,
     """Return the geodetic coordinates of the point below a GCRF position (3,) km.
 
     At Unix time `t_unix` (s): latitude rad, longitude rad, height km of its sub-satellite
-    point, via `core.frames`.
+    point, via `core.earth.frames`.
     """
     r = np.asarray(r_gcrs_km, dtype=float)[:3]
     return itrs_to_geodetic(gcrs_to_itrs(r, t_unix))

@@ -70,7 +70,7 @@ object ids (MeasurementBatch; each batch the rows of one on `TOPIC_MEASUREMENT_B
 the same order)."""
 TOPIC_ASSOCIATED = "/ssa/measurement_associated"
 """The unlabelled detections the catalog_filter placed in a track or tracklet, each row's
-``object_id`` the track's id (MeasurementBatch; `core.unlabelled`)."""
+``object_id`` the track's id (MeasurementBatch; `core.catalog.unlabelled`)."""
 TOPIC_FORECAST = "/ssa/forecast"
 TOPIC_ESTIMATE = "/ssa/estimate"
 TOPIC_SMOOTHED = "/ssa/estimate_smoothed"

@@ -18,15 +18,17 @@ from typing import Any
 
 import numpy as np
 
-from ssa_fusion.core import config, dynamics, frames
-from ssa_fusion.core.config import EstimatorConfig, Lift
-from ssa_fusion.core.filter_options import FilterOptions
-from ssa_fusion.core.frames import Station
-from ssa_fusion.core.measurement import PositionModel, RadecModel, RazelModel, StationModels
-from ssa_fusion.core.stations import STATIONS
-from ssa_fusion.core.surrogate import LIVE_SURROGATE
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.types import Kind
+from ssa_fusion.core.base.types import Kind
+from ssa_fusion.core.earth import frames
+from ssa_fusion.core.earth.frames import Station
+from ssa_fusion.core.earth.stations import STATIONS
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.filter.options import FilterOptions
+from ssa_fusion.core.gaps import estimator as config
+from ssa_fusion.core.gaps.estimator import EstimatorConfig, Lift
+from ssa_fusion.core.gaps.surrogate import LIVE_SURROGATE
+from ssa_fusion.core.measure.measurement import PositionModel, RadecModel, RazelModel, StationModels
+from ssa_fusion.core.motion import dynamics
 
 ISS_ELEMENTS: dict[str, float] = {
     "a_km": 6796.9,

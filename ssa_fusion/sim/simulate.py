@@ -9,8 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ssa_fusion.core.frames import wrap_2pi
-from ssa_fusion.core.types import Kind
+from ssa_fusion.core.base.types import Kind
+from ssa_fusion.core.earth.frames import wrap_2pi
 from ssa_fusion.sim.scenarios import Scenario, measurement_model, truth_states
 
 

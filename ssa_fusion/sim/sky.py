@@ -1,6 +1,6 @@
 """The real sky: scenarios where stations see an object only above their masks.
 
-A `SkyScenario` puts a network of sensors (`core.stations.SENSORS`: radars measuring range,
+A `SkyScenario` puts a network of sensors (`core.earth.stations.SENSORS`: radars measuring range,
 azimuth and elevation; optical sites measuring right ascension and declination at night, of
 a sunlit object) under an object whose truth is SGP4 with the drag term of a real element
 set. The natural gaps are those between passes (hours, in low orbit); on top of them a
@@ -30,23 +30,18 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ssa_fusion.core import (
-    catalog,
-    dynamics,
-    frames,
-    lighttime,
-    refraction,
-    site_file,
-    timescales,
-    visibility,
-)
-from ssa_fusion.core.config import EstimatorConfig
-from ssa_fusion.core.filter_options import SKY_FILTER, FilterOptions
-from ssa_fusion.core.gap_publisher import GapFill
-from ssa_fusion.core.stations import SENSORS, Sensor, SensorType
-from ssa_fusion.core.surrogate import LIVE_SURROGATE
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.types import Measurement
+from ssa_fusion.core.base.types import Measurement
+from ssa_fusion.core.earth import frames, lighttime, refraction, timescales, visibility
+from ssa_fusion.core.earth.stations import SENSORS, Sensor, SensorType
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.filter.options import SKY_FILTER, FilterOptions
+from ssa_fusion.core.gaps.estimator import EstimatorConfig
+from ssa_fusion.core.gaps.publisher import GapFill
+from ssa_fusion.core.gaps.surrogate import LIVE_SURROGATE
+from ssa_fusion.core.motion import dynamics
+from ssa_fusion.core.motion.element_sets import CatalogEntry, catalog_states
+from ssa_fusion.formats import element_sets as catalog
+from ssa_fusion.formats import sites as site_file
 from ssa_fusion.sim.scenarios import ISS_BSTAR, ISS_ELEMENTS, ORBIT_EPOCH_UNIX
 
 SKY_Q = SKY_FILTER.noise.q
@@ -106,7 +101,7 @@ class SkyScenario:
         deviations relative to |r| and |v| (`ekf.bound_covariance`), light-time correction
         (in the simulated measurements too).
     refraction
-        Radar elevations refracted by the standard atmosphere (`core.refraction`), in the
+        Radar elevations refracted by the standard atmosphere (`core.earth.refraction`), in the
         simulated measurements and in the filter's model alike.
     gap_fill
         What the live filter publishes in the gaps between passes (its ``gap_forecast``
@@ -156,7 +151,7 @@ class SkyScenario:
     finding: str = ""
     own_sensors: tuple[Sensor, ...] = ()
     sites_file: str = ""
-    element_set: catalog.CatalogEntry | None = None
+    element_set: CatalogEntry | None = None
     elements_file: str = ""
     standard_magnitude: float = ISS_STANDARD_MAGNITUDE
     site_pool: tuple[str, ...] = ()
@@ -190,7 +185,7 @@ class SkyScenario:
     def with_sites(self, path: str) -> SkyScenario:
         """Return this scenario observed by the sites of the sites file `path` instead.
 
-        Every site of the file (`core.site_file`), in its order (and no `site_pool`: a
+        Every site of the file (`formats.sites`), in its order (and no `site_pool`: a
         study case keeps them); an outage of one of the scenario's stations becomes an
         outage of the whole network at the same time.
         SiteFileError (a ValueError) with one line when the file is wrong.
@@ -204,7 +199,7 @@ class SkyScenario:
                       progress: catalog.Progress | None = None) -> SkyScenario:
         """Return this scenario's sensors observing the object of the element set file `path`.
 
-        Its first object (TLE, 3LE, OMM XML/CSV: `core.catalog.read_catalog`, which says its
+        Its first object (TLE, 3LE, OMM XML/CSV: `formats.element_sets.read_catalog`, which says its
         `progress`; ValueError naming the file and line when it is wrong); the truth is its
         SGP4/SDP4, from the first whole minute at or after its epoch (as a catalog run
         starts).
@@ -384,7 +379,7 @@ def truth(s: SkyScenario, t: np.ndarray) -> np.ndarray:
     element set to an epoch (a decayed object).
     """
     if s.element_set is not None:
-        x: np.ndarray = catalog.catalog_states([s.element_set], np.asarray(t, float)).x[0]
+        x: np.ndarray = catalog_states([s.element_set], np.asarray(t, float)).x[0]
         if not np.isfinite(x).all():
             bad = float(np.asarray(t, float)[~np.isfinite(x).all(axis=1)][0])
             raise ValueError(f"{s.element_set.source or s.element_set.object_id}: SGP4 cannot "

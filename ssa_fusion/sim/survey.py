@@ -23,11 +23,11 @@ import numpy as np
 from numpy.typing import NDArray
 from sgp4.api import WGS72, Satrec
 
-from ssa_fusion.core.catalog import CatalogEntry, catalog_states
-from ssa_fusion.core.constants import MU_EARTH, R_EARTH
-from ssa_fusion.core.frames import Station, razel_gcrs, site_gcrs
-from ssa_fusion.core.stations import Sensor, SensorType
-from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
+from ssa_fusion.core.base.constants import MU_EARTH, R_EARTH
+from ssa_fusion.core.earth.frames import Station, razel_gcrs, site_gcrs
+from ssa_fusion.core.earth.stations import Sensor, SensorType
+from ssa_fusion.core.earth.timescales import DAY_S, UNIX_EPOCH_JD
+from ssa_fusion.core.motion.element_sets import CatalogEntry, catalog_states
 
 SGP4_EPOCH_JD = 2433281.5
 """Julian date of SGP4's epoch origin (1949 December 31 00:00 UTC), for `Satrec.sgp4init`."""

@@ -1,11 +1,11 @@
 """BOP-DMD on the irregular residual series: the variant of the gap surrogate that lost.
 
 Optimized DMD with bagging (PyDMD's `BOPDMD`, which accepts any time vector) fitted on the
-residual series of `core.residual` (the same window and frame), forecast through the gap with
+residual series of `core.gaps.residual` (the same window and frame), forecast through the gap with
 the bagging's variance. `studies.gap_study` compares it with the residual fit of the core;
 docs/RESULTS.md ("Between passes") has the numbers. PyDMD is a test/study dependency only.
 
-Frames and units: GCRF km, km/s; times s; residual coordinates as `core.residual`.
+Frames and units: GCRF km, km/s; times s; residual coordinates as `core.gaps.residual`.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ssa_fusion.core.residual import (
+from ssa_fusion.core.gaps.residual import (
     Propagator,
     ResidualConfig,
     apply_residual,

@@ -1,14 +1,14 @@
 """Gap forecasts over a catalog: the residual surrogate against the filter coasting.
 
-`gap_errors` scores the forecasts a catalog run made (`core.gap_bank`, the
+`gap_errors` scores the forecasts a catalog run made (`core.catalog.gap_bank`, the
 ``catalog_surrogate`` node) against the SGP4 truth of its catalog, beside the filter coasting
 on its own motion model (two-body + J2: the physics-only filter) from the same pass end, at
 the same epochs. `offline_run` runs the same pipeline without ROS: a synthetic LEO catalog
 measured by a scenario's radars (`sim.survey`), fused by the batched filter
-(`core.track_bank`) and forecast by a `GapBank` that fits every gap (no wall-time budget), so
-the accuracy of the method is measured apart from the time the live node has for it.
+(`core.catalog.track_bank`) and forecast by a `GapBank` that fits every gap (no wall-time
+budget), so the accuracy of the method is measured apart from the time the live node has for it.
 
-The residual setting is the live filter's (`core.residual.LIVE_RESIDUAL`, chosen on the
+The residual setting is the live filter's (`core.gaps.residual.LIVE_RESIDUAL`, chosen on the
 ISS gap study's tuning seeds 1-3): nothing here is tuned, and the catalog seeds
 (`EVALUATION_SEEDS`) are used for nothing else.
 """
@@ -26,18 +26,19 @@ from typing import Any, NamedTuple
 import numpy as np
 from scipy.stats import chi2
 
-from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core import residual
-from ssa_fusion.core.filter_options import FilterOptions
-from ssa_fusion.core.gap_bank import GapBank, GapBankConfig, GapForecast
-from ssa_fusion.core.gap_forecaster import PLACEHOLDER_TRAJECTORY
-from ssa_fusion.core.gap_publisher import GapFill
-from ssa_fusion.core.measurement import StationModels
-from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
-from ssa_fusion.core.track_bank import TrackBank
-from ssa_fusion.core.types import Kind, MotionModel, Source
+from ssa_fusion.core.base.rows import MeasurementRows
+from ssa_fusion.core.base.types import Kind, MotionModel, Source
+from ssa_fusion.core.catalog.gap_bank import GapBank, GapBankConfig, GapForecast
+from ssa_fusion.core.catalog.track_bank import TrackBank
+from ssa_fusion.core.earth.timescales import DAY_S, UNIX_EPOCH_JD
+from ssa_fusion.core.filter.options import FilterOptions
+from ssa_fusion.core.gaps import residual
+from ssa_fusion.core.gaps.forecaster import PLACEHOLDER_TRAJECTORY
+from ssa_fusion.core.gaps.publisher import GapFill
+from ssa_fusion.core.measure.measurement import StationModels
+from ssa_fusion.core.motion.element_sets import CatalogEntry, catalog_states
 from ssa_fusion.evaluation.object_states import States, states_of
+from ssa_fusion.formats import element_sets as catalog_io
 from ssa_fusion.sim import survey
 from ssa_fusion.sim.sky import SKY_SCENARIOS, SkyScenario
 
@@ -57,7 +58,7 @@ def bank_config(s: SkyScenario) -> FilterOptions:
     return s.filter_options()
 
 
-def gap_errors(entries: list[catalog_io.CatalogEntry], estimates: States, forecasts: States,
+def gap_errors(entries: list[CatalogEntry], estimates: States, forecasts: States,
                motion_model: str = "j2", max_gaps: int = GAPS_SCORED) -> dict[str, Any]:
     """Score forecasts against the SGP4 truth of `entries`, beside coasting.
 
@@ -82,7 +83,7 @@ def gap_errors(entries: list[catalog_io.CatalogEntry], estimates: States, foreca
     e_fc, e_coast, better = [], [], 0
     for i in pick.tolist():
         oid, t0, x0, tf, rf = gaps[i]
-        truth = catalog_io.catalog_states([by_id[oid]], tf).x[0][:, :3]
+        truth = catalog_states([by_id[oid]], tf).x[0][:, :3]
         a = np.linalg.norm(rf - truth, axis=1)
         b = np.linalg.norm(coast(x0, float(t0), tf)[:, :3] - truth, axis=1)
         e_fc.append(a)
@@ -100,12 +101,12 @@ def gap_errors(entries: list[catalog_io.CatalogEntry], estimates: States, foreca
             "gaps_forecast_better": better / pick.size}
 
 
-def forecast_nees(entries: list[catalog_io.CatalogEntry],
+def forecast_nees(entries: list[CatalogEntry],
                   forecasts: list[GapForecast]) -> dict[str, Any]:
     """Score forecasts' covariances against the SGP4 truth of `entries`, by fit.
 
     Position NEES (3 dof) of each forecast: its share within chi2(3)'s 95 % bound
-    (``in_bound``, the gap fits' criterion, `core.batch_gap.GAP_FIT_SNC`), median NEES and
+    (``in_bound``, the gap fits' criterion, `core.gaps.batch_gap.GAP_FIT_SNC`), median NEES and
     median position error (km); for all forecasts, those of the physics-only fit
     (``physics``) and of the learned residual (``learned``).
     """
@@ -115,7 +116,7 @@ def forecast_nees(entries: list[catalog_io.CatalogEntry],
     for f in forecasts:
         groups[f.object_id].append(f)
     for oid, fs in groups.items():
-        truth = catalog_io.catalog_states([by_id[oid]], np.array([f.t for f in fs])).x[0]
+        truth = catalog_states([by_id[oid]], np.array([f.t for f in fs])).x[0]
         for f, xt in zip(fs, truth, strict=True):
             e = f.x[:3] - xt[:3]
             nees.append(float(e @ np.linalg.solve(f.P[:3, :3], e)))
@@ -192,7 +193,7 @@ class EstimateStep(NamedTuple):
     filter_wall_s: float
 
 
-def estimate_batches(entries: list[catalog_io.CatalogEntry], s: SkyScenario, hours: float,
+def estimate_batches(entries: list[CatalogEntry], s: SkyScenario, hours: float,
                      seed: int, batch_s: float = 60.0) -> Iterator[EstimateStep]:
     """Yield a catalog's measurements and the batched filter's estimates, batch by batch.
 

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from ssa_fusion.core.types import Kind
+from ssa_fusion.core.base.types import Kind
 from ssa_fusion.evaluation.arms import ArmName
 from ssa_fusion.sim.scenarios import Scenario
 from ssa_fusion.sim.simulate import simulate

@@ -21,13 +21,13 @@ from typing import Any
 
 import numpy as np
 
-from ssa_fusion.core import config
-from ssa_fusion.core.config import EstimatorConfig
-from ssa_fusion.core.frames import Frame, wrap_pi
-from ssa_fusion.core.metrics import chi2_bounds, nees
-from ssa_fusion.core.surrogate import Surrogate
-from ssa_fusion.core.tracker import Tracker
-from ssa_fusion.core.types import Measurement, StateEstimate
+from ssa_fusion.core.base.metrics import chi2_bounds, nees
+from ssa_fusion.core.base.types import Measurement, StateEstimate
+from ssa_fusion.core.earth.frames import Frame, wrap_pi
+from ssa_fusion.core.filter.tracker import Tracker
+from ssa_fusion.core.gaps import estimator as config
+from ssa_fusion.core.gaps.estimator import EstimatorConfig
+from ssa_fusion.core.gaps.surrogate import Surrogate
 from ssa_fusion.evaluation.arms import (
     ArmName,
     ArmScore,

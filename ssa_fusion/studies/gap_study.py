@@ -16,7 +16,7 @@ it (`sky_runs.run_dmd_ekf`). Every inter-pass gap is then scored at the truth ep
   a J2 batch least-squares fit of the last passes, from the pass-end estimate; coasting
   where it failed);
 * one arm per residual setting (e.g. ``hill_h1``) --
-  `core.residual.ResidualSurrogate`: the placeholder from the pass-end estimate plus the
+  `core.gaps.residual.ResidualSurrogate`: the placeholder from the pass-end estimate plus the
   learned residual, with the held-out calibrated covariance (the filter's motion model
   corrected; coasting where it did not forecast);
 * ``bopdmd`` -- `studies.bopdmd.bopdmd_residual_forecast`: BOP-DMD on the same
@@ -43,12 +43,12 @@ from typing import Any
 
 import numpy as np
 
-from ssa_fusion.core import residual
-from ssa_fusion.core.batch_gap import fit_passes, gap_window
-from ssa_fusion.core.config import measurement_model
-from ssa_fusion.core.metrics import chi2_bounds
-from ssa_fusion.core.timescales import DAY_S, UNIX_EPOCH_JD
-from ssa_fusion.core.types import Measurement, Source, StateEstimate, UpdateSource
+from ssa_fusion.core.base.metrics import chi2_bounds
+from ssa_fusion.core.base.types import Measurement, Source, StateEstimate, UpdateSource
+from ssa_fusion.core.earth.timescales import DAY_S, UNIX_EPOCH_JD
+from ssa_fusion.core.gaps import residual
+from ssa_fusion.core.gaps.batch_gap import fit_passes, gap_window
+from ssa_fusion.core.gaps.estimator import measurement_model
 from ssa_fusion.evaluation import arms, passes
 from ssa_fusion.sim import sky
 from ssa_fusion.studies import bopdmd, sky_runs, sky_study

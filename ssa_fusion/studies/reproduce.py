@@ -20,8 +20,8 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from ssa_fusion.core.hankel_dmd import HankelDMD
-from ssa_fusion.core.iod import razel_to_gcrs
+from ssa_fusion.core.gaps.hankel_dmd import HankelDMD
+from ssa_fusion.core.measure.iod import razel_to_gcrs
 from ssa_fusion.sim import scenarios, sky
 from ssa_fusion.sim.simulate import Simulation, simulate
 from ssa_fusion.studies import distributions, experiments, sky_study

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ssa_fusion.core.config import make_surrogate, make_tracker
-from ssa_fusion.core.types import Measurement, StateEstimate
+from ssa_fusion.core.base.types import Measurement, StateEstimate
+from ssa_fusion.core.gaps.estimator import make_surrogate, make_tracker
 from ssa_fusion.evaluation import arms
 from ssa_fusion.evaluation.passes import PassReport, outage_epochs, pass_report
 from ssa_fusion.sim.sky import SkySimulation

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from ssa_fusion.core.gap_publisher import GapFill
+from ssa_fusion.core.gaps.publisher import GapFill
 from ssa_fusion.evaluation import arms, gap_scores, passes
 from ssa_fusion.sim import sky
 from ssa_fusion.studies import sky_runs

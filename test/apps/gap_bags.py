@@ -7,7 +7,8 @@ from collections.abc import Iterator
 import numpy as np
 
 from ssa_fusion.apps import evaluate
-from ssa_fusion.core import kepler, types
+from ssa_fusion.core.base import types
+from ssa_fusion.core.motion import kepler
 from ssa_fusion.sim import scenarios
 
 T0, CADENCE = 1000.0, 120.0

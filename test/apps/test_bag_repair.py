@@ -15,7 +15,7 @@ from mcap.reader import make_reader
 from rosbags.rosbag2 import Reader
 
 from ssa_fusion.apps import cli
-from ssa_fusion.core import types
+from ssa_fusion.core.base import types
 from ssa_fusion.ros import bagio, bagrepair, messages
 
 CHUNKS, PER_CHUNK = 6, 90

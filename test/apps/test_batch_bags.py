@@ -17,11 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ssa_fusion.apps import ccsds_oem, ccsds_tdm_out, cli, evaluate, report, visual_mcap
-from ssa_fusion.core import types
-from ssa_fusion.core.rows import EstimateRows, MeasurementRows
-from ssa_fusion.core.stations import network_stations
-from ssa_fusion.core.types import Cause
+from ssa_fusion.apps import cli, evaluate, report, visual_mcap
+from ssa_fusion.core.base import types
+from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
+from ssa_fusion.core.base.types import Cause
+from ssa_fusion.core.earth.stations import network_stations
+from ssa_fusion.formats.ccsds import oem as ccsds_oem
+from ssa_fusion.formats.ccsds import tdm_out as ccsds_tdm_out
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import (
     TOPIC_ESTIMATE,

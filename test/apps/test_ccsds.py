@@ -29,11 +29,14 @@ from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_master_4_0 as master
 from ccsds_ndm.models.ndmxml4 import ndmxml_4_0_0_tdm_2_0 as tdm
 from ccsds_ndm.ndm_io import NdmIo
 
-from ssa_fusion.apps import ccsds, ccsds_format, ccsds_oem, cli, evaluate
-from ssa_fusion.core import frames, types
-from ssa_fusion.core.constants import ARCSEC
-from ssa_fusion.core.frames import Frame
-from ssa_fusion.core.stations import SENSORS, STATIONS
+from ssa_fusion.apps import ccsds, cli, evaluate
+from ssa_fusion.core.base import types
+from ssa_fusion.core.base.constants import ARCSEC
+from ssa_fusion.core.earth import frames
+from ssa_fusion.core.earth.frames import Frame
+from ssa_fusion.core.earth.stations import SENSORS, STATIONS
+from ssa_fusion.formats.ccsds import common as ccsds_format
+from ssa_fusion.formats.ccsds import oem as ccsds_oem
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_MEASUREMENT
 
@@ -44,7 +47,7 @@ MAS = ARCSEC / 1000.0
 
 @pytest.fixture(scope="module", autouse=True)
 def astropy_offline():
-    """astropy with the IERS-A table of astropy-iers-data: the EOP `core.eop` uses."""
+    """astropy with the IERS-A table of astropy-iers-data: the EOP `core.earth.eop` uses."""
     iers.conf.auto_download = False
     iers.conf.auto_max_age = None
     iers.earth_orientation_table.set(iers.IERS_A.open(iers.IERS_A_FILE))

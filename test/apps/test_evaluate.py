@@ -5,8 +5,9 @@ import pytest
 from gap_bags import around_a_gap
 
 from ssa_fusion.apps import evaluate
-from ssa_fusion.core import kepler, metrics, types
-from ssa_fusion.core.ekf import process_noise
+from ssa_fusion.core.base import metrics, types
+from ssa_fusion.core.filter.ekf import process_noise
+from ssa_fusion.core.motion import kepler
 from ssa_fusion.evaluation.arms import ArmName
 from ssa_fusion.nodes import settings
 from ssa_fusion.sim import scenarios

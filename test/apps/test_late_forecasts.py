@@ -12,7 +12,7 @@ import pytest
 from gap_bags import CADENCE, T0, around_a_gap
 
 from ssa_fusion.apps import cli, evaluate, live, runs
-from ssa_fusion.core import types
+from ssa_fusion.core.base import types
 
 TRACK, GAP, AFTER = 30, 20, 5  # epochs
 FUSED = 12  # the filter fused the forecasts of the gap's first 12 epochs, predicted the rest

@@ -4,7 +4,7 @@
 The TDM is written by hand here: range/azimuth/elevation of a fictional radar (not built in)
 over its passes of a known SGP4 orbit, computed independently of ssa_fusion's frames and
 measurement models: the `sgp4` library for the orbit (TEME), astropy (the IERS table
-`core.eop` uses too) for TEME -> GCRS/ITRS and for the WGS-84 site, the topocentric
+`core.earth.eop` uses too) for TEME -> GCRS/ITRS and for the WGS-84 site, the topocentric
 geometry written out here with light time, Gaussian noise of the site's sigmas added.
 """
 
@@ -32,8 +32,9 @@ from astropy.time import Time
 from astropy.utils import iers
 from sgp4.api import WGS72, Satrec
 
-from ssa_fusion.apps import ccsds_format, cli, evaluate
-from ssa_fusion.core import types
+from ssa_fusion.apps import cli, evaluate
+from ssa_fusion.core.base import types
+from ssa_fusion.formats.ccsds import common as ccsds_format
 from ssa_fusion.ros import bagio
 
 T0 = 1736035200.0  # 2025-01-05T00:00:00 UTC
@@ -59,7 +60,7 @@ sites:
 
 @pytest.fixture(scope="module", autouse=True)
 def astropy_offline():
-    """astropy with the IERS-A table of astropy-iers-data: the EOP `core.eop` uses."""
+    """astropy with the IERS-A table of astropy-iers-data: the EOP `core.earth.eop` uses."""
     iers.conf.auto_download = False
     iers.conf.auto_max_age = None
     iers.earth_orientation_table.set(iers.IERS_A.open(iers.IERS_A_FILE))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from ssa_fusion.apps import cli, evaluate, replay
-from ssa_fusion.core import types
+from ssa_fusion.core.base import types
 from ssa_fusion.ros import bagio, messages
 
 SAMPLE = Path(__file__).resolve().parents[2] / "bags" / "sample_iss_j2_rae"

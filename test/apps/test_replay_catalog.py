@@ -3,7 +3,7 @@
 Offline, each object gets its own track: its estimates are those of its measurements alone
 in a `TrackBank` of the catalog_filter's settings (the reference never sees another
 object), whatever the other objects in the bag; unlabelled detections are associated as
-`core.unlabelled.RowAssociator` associates all of them at once. A bag of several objects
+`core.catalog.unlabelled.RowAssociator` associates all of them at once. A bag of several objects
 the catalog filter cannot fuse, and the single-object replay's options (``--smooth``,
 ``--scenario``) for a catalog bag, are refused (exit 2) with what to do instead. The
 replayed bag reads in `report` and `export`. (Over ROS: test/graph/test_catalog_replay_graph.py.)
@@ -20,11 +20,12 @@ import numpy as np
 import pytest
 
 from ssa_fusion.apps import cli, replay_catalog
-from ssa_fusion.core import catalog, types
-from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.core.stations import NETWORKS, SENSORS, network_stations
-from ssa_fusion.core.track_bank import TrackBank
-from ssa_fusion.core.unlabelled import RowAssociator, elevation_masks, without_labels
+from ssa_fusion.core.base import types
+from ssa_fusion.core.base.rows import MeasurementRows
+from ssa_fusion.core.catalog.track_bank import TrackBank
+from ssa_fusion.core.catalog.unlabelled import RowAssociator, elevation_masks, without_labels
+from ssa_fusion.core.earth.stations import NETWORKS, SENSORS, network_stations
+from ssa_fusion.formats import element_sets as catalog
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.ros import bagio, messages

@@ -19,15 +19,16 @@ import numpy as np
 import pytest
 
 from ssa_fusion.apps import cli
-from ssa_fusion.core import catalog
-from ssa_fusion.core.frames import wrap_angle
-from ssa_fusion.core.measurement import RazelModel
-from ssa_fusion.core.metrics import chi2_bounds
-from ssa_fusion.core.rows import EstimateRows, MeasurementRows
-from ssa_fusion.core.stations import NETWORKS, SENSORS
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.types import StateEstimate, UpdateSource
+from ssa_fusion.core.base.metrics import chi2_bounds
+from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
+from ssa_fusion.core.base.types import StateEstimate, UpdateSource
+from ssa_fusion.core.earth.frames import wrap_angle
+from ssa_fusion.core.earth.stations import NETWORKS, SENSORS
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.measure.measurement import RazelModel
+from ssa_fusion.core.motion.element_sets import catalog_states
 from ssa_fusion.evaluation.association import detection_labels, score_association
+from ssa_fusion.formats import element_sets as catalog
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.ros import bagio, messages
@@ -73,7 +74,7 @@ def run() -> Run:
     pairs = np.unique(np.stack([obs.obj.astype(float), obs.t]), axis=1)
     obj, t = pairs[0].astype(int), pairs[1]
     epochs = np.unique(t)
-    states = catalog.catalog_states(entries, epochs).x
+    states = catalog_states(entries, epochs).x
     truth = states[obj, np.searchsorted(epochs, t)]
     rng = np.random.default_rng(7)
     sig = np.asarray(SIGMA_KM)[obj]

@@ -179,8 +179,8 @@ def test_a_position_bag_without_forecasts_gets_the_other_figures():
 
 
 def test_the_visibility_circle_is_at_the_masks_central_angle_from_the_station():
-    from ssa_fusion.core.constants import R_EARTH
-    from ssa_fusion.core.frames import COLUMBUS
+    from ssa_fusion.core.base.constants import R_EARTH
+    from ssa_fusion.core.earth.frames import COLUMBUS
 
     h, el = 420.0, np.radians(10.0)
     lam = report_html.visibility_central_angle(h, el)

@@ -19,10 +19,11 @@ from fuzz_text import error_of, mutated
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from ssa_fusion.apps import ccsds, ccsds_tdm_read, cli, evaluate
-from ssa_fusion.apps.ccsds_format import CcsdsError
-from ssa_fusion.apps.ccsds_tdm_in import read_tdm
-from ssa_fusion.core.quoting import MAX_MESSAGE
+from ssa_fusion.apps import ccsds, cli, evaluate
+from ssa_fusion.core.base.quoting import MAX_MESSAGE
+from ssa_fusion.formats.ccsds import tdm_reader as ccsds_tdm_read
+from ssa_fusion.formats.ccsds.common import CcsdsError
+from ssa_fusion.formats.ccsds.tdm_in import read_tdm
 
 META = ["TIME_SYSTEM = UTC", "PARTICIPANT_1 = millstone", "PARTICIPANT_2 = OBJ-1",
         "MODE = SEQUENTIAL", "PATH = 1,2,1", "ANGLE_TYPE = AZEL", "RANGE_UNITS = km"]

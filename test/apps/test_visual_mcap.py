@@ -13,7 +13,7 @@ import pytest
 from mcap.reader import make_reader
 
 from ssa_fusion.apps import evaluate, visual_mcap
-from ssa_fusion.core.frames import COLUMBUS
+from ssa_fusion.core.earth.frames import COLUMBUS
 from ssa_fusion.ros import foxglove_scene as scene
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -145,7 +145,7 @@ def test_a_location_fix_agrees_with_a_direct_computation(written):
     # table's UT1 - UTC and polar motion), then the geodetic latitude by fixed point
     import erfa
 
-    from ssa_fusion.core import eop, timescales
+    from ssa_fusion.core.earth import eop, timescales
 
     v = eop.default().at(np.array([e.t]))
     jd1, jd2 = 2440587.5, e.t / 86400.0

@@ -30,7 +30,7 @@ def probe() -> None:
 
 def cases() -> dict[str, tuple[np.ndarray, int, int | None, int]]:
     """name -> (training data (channels, samples), delays, rank, forecast steps)."""
-    from ssa_fusion.core.dynamics import elements_to_state, propagate
+    from ssa_fusion.core.motion.dynamics import elements_to_state, propagate
     from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
     x0 = elements_to_state(**ISS_ELEMENTS)
@@ -49,7 +49,7 @@ def cases() -> dict[str, tuple[np.ndarray, int, int | None, int]]:
 
 
 def forecast(out: str) -> None:
-    from ssa_fusion.core.hankel_dmd import HankelDMD
+    from ssa_fusion.core.gaps.hankel_dmd import HankelDMD
 
     res = {}
     for name, (z, d, rank, n) in cases().items():

@@ -1,4 +1,4 @@
-"""Association of unlabelled detections (`core.association`): gating and global nearest
+"""Association of unlabelled detections (`core.catalog.association`): gating and global nearest
 neighbour against Stone Soup's GNN (`GNNWith2DAssignment`, `DistanceHypothesiser`,
 Mahalanobis), brute-force enumeration of every assignment, scipy's Mahalanobis distance,
 the per-object measurement model, and analytic cases."""
@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 from scipy.spatial.distance import mahalanobis
 
-from ssa_fusion.core.association import (
+from ssa_fusion.core.base.constants import MU_EARTH
+from ssa_fusion.core.catalog.association import (
     UNASSIGNED,
     AssociationConfig,
     ScanPrediction,
@@ -21,13 +22,12 @@ from ssa_fusion.core.association import (
     associate,
     gate_scan,
 )
-from ssa_fusion.core.batch_ekf import BatchEKF
-from ssa_fusion.core.constants import MU_EARTH
-from ssa_fusion.core.filter_options import FilterOptions
-from ssa_fusion.core.frames import razel_gcrs, site_gcrs
-from ssa_fusion.core.measurement import RazelModel
-from ssa_fusion.core.stations import SENSORS
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.catalog.batch_ekf import BatchEKF
+from ssa_fusion.core.earth.frames import razel_gcrs, site_gcrs
+from ssa_fusion.core.earth.stations import SENSORS
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.filter.options import FilterOptions
+from ssa_fusion.core.measure.measurement import RazelModel
 
 RADAR = SENSORS["columbus"]
 T0 = 1_735_732_800.0  # 2025-01-01T12:00:00Z
@@ -262,13 +262,13 @@ def test_gating_and_assignment_equal_stone_soup_gnn(seed):
 # ------------------------------------------------------------------------------------------
 # Track management on a simulated train (unlabelled scans, truth kept aside)
 # ------------------------------------------------------------------------------------------
-from ssa_fusion.core.association import (  # noqa: E402
+from ssa_fusion.core.catalog.association import (  # noqa: E402
     Associator,
     DetectionFate,
     TrackEvent,
     TrackStatus,
 )
-from ssa_fusion.core.filter_options import SKY_FILTER  # noqa: E402
+from ssa_fusion.core.filter.options import SKY_FILTER  # noqa: E402
 from ssa_fusion.sim import survey  # noqa: E402
 
 MASK = math.radians(RADAR.min_elevation_deg)
@@ -375,7 +375,7 @@ def test_a_tentative_track_that_stops_being_seen_is_dropped(train_obs):
 # ------------------------------------------------------------------------------------------
 # Long-arc predictor and the groups' registration
 # ------------------------------------------------------------------------------------------
-from ssa_fusion.core.association import (  # noqa: E402
+from ssa_fusion.core.catalog.association import (  # noqa: E402
     Gated,
     gate_long_arc,
     predict_scan,
@@ -614,7 +614,7 @@ def test_chi2_quantile_is_scipy_stats_chi2_ppf_bit_for_bit_and_analytic_at_two_d
     float for float, and at 2 degrees of freedom against the closed form -2 ln(1 - p)."""
     from scipy.stats import chi2
 
-    from ssa_fusion.core.association import MEASUREMENT_DOF, chi2_quantile
+    from ssa_fusion.core.catalog.association import MEASUREMENT_DOF, chi2_quantile
 
     probabilities = (1e-9, 0.01, 0.5, 0.9, 0.95, 0.99, 0.9973, 0.9999, 1 - 1e-9)
     for dof in (1, 2, MEASUREMENT_DOF, 6):

@@ -1,4 +1,4 @@
-"""The batched EKF (`core.batch_ekf`) equals the per-object filter object by object.
+"""The batched EKF (`core.catalog.batch_ekf`) equals the per-object filter object by object.
 
 Twenty objects on different orbits (LEO at several inclinations, high-drag-altitude LEO, MEO,
 GEO, Molniya), each with its own time step (1 s to 50 min) and station, go through one cycle
@@ -14,19 +14,19 @@ import math
 import numpy as np
 import pytest
 
-from ssa_fusion.core import dynamics, kepler, propagation
-from ssa_fusion.core.batch_ekf import REASONS, BatchEKF, Code
-from ssa_fusion.core.config import EstimatorConfig, make_tracker
-from ssa_fusion.core.dynamics import elements_to_state
-from ssa_fusion.core.ekf import ExtendedKalmanFilter, bound_covariance, process_noise
-from ssa_fusion.core.filter_options import FilterOptions
-from ssa_fusion.core.frames import razel_gcrs, wrap_angle
-from ssa_fusion.core.kepler import kepler_state, kepler_stm
-from ssa_fusion.core.measurement import RazelModel
-from ssa_fusion.core.propagation import integrate_stm
-from ssa_fusion.core.stations import RADAR_SIGMA, STATIONS
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.types import Cause, Kind, Measurement
+from ssa_fusion.core.base.types import Cause, Kind, Measurement
+from ssa_fusion.core.catalog.batch_ekf import REASONS, BatchEKF, Code
+from ssa_fusion.core.earth.frames import razel_gcrs, wrap_angle
+from ssa_fusion.core.earth.stations import RADAR_SIGMA, STATIONS
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.filter.ekf import ExtendedKalmanFilter, bound_covariance, process_noise
+from ssa_fusion.core.filter.options import FilterOptions
+from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker
+from ssa_fusion.core.measure.measurement import RazelModel
+from ssa_fusion.core.motion import dynamics, kepler, propagation
+from ssa_fusion.core.motion.dynamics import elements_to_state
+from ssa_fusion.core.motion.kepler import kepler_state, kepler_stm
+from ssa_fusion.core.motion.propagation import integrate_stm
 
 NAMES = ("millstone", "tira", "altair", "columbus")
 STATION_LIST = [STATIONS[s] for s in NAMES]
@@ -261,7 +261,7 @@ def test_compiled_integration_equals_numpy(model: str, params: dict[str, float])
     the model's parameters as given (not its defaults); a non-finite input gives what the
     numpy path gives (no step: x1 = x, Phi = I, not ok).
     """
-    from ssa_fusion.core.propagation import _integrate_stm_numpy
+    from ssa_fusion.core.motion.propagation import _integrate_stm_numpy
 
     o = _objects(n=24, seed=11)
     x = o["x"].copy()
@@ -285,7 +285,7 @@ def test_compiled_integration_equals_numpy(model: str, params: dict[str, float])
 
 def test_numpy_integration_kept_where_not_compiled() -> None:
     """"drag" (and a parameter the model does not take) go through the numpy path as before."""
-    from ssa_fusion.core.propagation import _integrate_stm_numpy
+    from ssa_fusion.core.motion.propagation import _integrate_stm_numpy
 
     o = _objects(n=6)
     a = integrate_stm("drag", o["x"], o["dt"], bc=50.0)
@@ -303,7 +303,7 @@ def test_j2_acts_about_the_earths_pole_in_the_gcrf() -> None:
     day while the one along the GCRF z axis (0.14 deg away in 2025) drifts; and the compiled
     J2 about the pole equals turning the states to the pole's axes by hand (and the numpy
     path, which does that)."""
-    from ssa_fusion.core import frames
+    from ssa_fusion.core.earth import frames
 
     t0 = 1.7355e9
     x0 = elements_to_state(6778.0, 0.001, math.radians(51.6), 1.0, 0.5, 0.2)[None]

@@ -9,10 +9,10 @@ from dataclasses import asdict
 import numpy as np
 import pytest
 
-from ssa_fusion.core import frames
-from ssa_fusion.core.batch_ekf import BatchEKF
-from ssa_fusion.core.propagation import integrate_stm
-from ssa_fusion.core.stations import NETWORKS, SENSORS
+from ssa_fusion.core.catalog.batch_ekf import BatchEKF
+from ssa_fusion.core.earth import frames
+from ssa_fusion.core.earth.stations import NETWORKS, SENSORS
+from ssa_fusion.core.motion.propagation import integrate_stm
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 

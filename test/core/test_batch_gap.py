@@ -1,12 +1,12 @@
-"""`core.batch_gap`: the window of the gap fit (passes or hours) and its options."""
+"""`core.gaps.batch_gap`: the window of the gap fit (passes or hours) and its options."""
 
 import numpy as np
 import pytest
 
-from ssa_fusion.core import batch_gap
-from ssa_fusion.core.batch_gap import BatchGapForecaster, GapWindow
-from ssa_fusion.core.pass_windows import PASS_BREAK_S, fit_window, passes
-from ssa_fusion.core.types import Kind, Measurement
+from ssa_fusion.core.base.types import Kind, Measurement
+from ssa_fusion.core.gaps import batch_gap
+from ssa_fusion.core.gaps.batch_gap import BatchGapForecaster, GapWindow
+from ssa_fusion.core.measure.pass_windows import PASS_BREAK_S, fit_window, passes
 
 H = 3600.0
 

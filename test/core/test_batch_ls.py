@@ -1,4 +1,4 @@
-"""Tests for ssa_fusion.core.batch_ls: batch least squares over a window of radar passes.
+"""Tests for ssa_fusion.core.od.batch_ls: batch least squares over a window of radar passes.
 
 References: the closed-form weighted least squares and the Kalman filter (information
 form: with no process noise its final estimate is the batch estimate with the same prior)
@@ -17,16 +17,16 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from ssa_fusion.core import batch_ls as bl
-from ssa_fusion.core import force_model as fm
-from ssa_fusion.core import frames
-from ssa_fusion.core.dynamics import elements_to_state
-from ssa_fusion.core.ekf import ExtendedKalmanFilter
-from ssa_fusion.core.frames import COLUMBUS
-from ssa_fusion.core.measurement import StationModels
-from ssa_fusion.core.process_noise import snc
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.types import Kind, Measurement
+from ssa_fusion.core.base.types import Kind, Measurement
+from ssa_fusion.core.earth import frames
+from ssa_fusion.core.earth.frames import COLUMBUS
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.filter.ekf import ExtendedKalmanFilter
+from ssa_fusion.core.filter.process_noise import snc
+from ssa_fusion.core.measure.measurement import StationModels
+from ssa_fusion.core.motion import force_model as fm
+from ssa_fusion.core.motion.dynamics import elements_to_state
+from ssa_fusion.core.od import batch_ls as bl
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS, ORBIT_EPOCH_UNIX
 
 SIGMA = np.array([0.02, math.radians(0.02), math.radians(0.02)])  # the columbus radar's

@@ -1,4 +1,4 @@
-"""Catalog input (TLE/3LE, OMM XML/CSV) and its vectorised SGP4 truth (core.catalog)."""
+"""Catalog input (TLE/3LE, OMM XML/CSV) and its vectorised SGP4 truth (formats.element_sets)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 from sgp4.api import Satrec, SatrecArray, jday
 
-from ssa_fusion.core import catalog, frames, timescales
+from ssa_fusion.core.earth import frames, timescales
+from ssa_fusion.core.motion.element_sets import catalog_states
+from ssa_fusion.formats import element_sets as catalog
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "config" / "catalogs" / "sample.tle"
@@ -44,7 +46,7 @@ def test_catalog_truth_equals_sgp4_vectorised_and_per_object():
     entries = catalog.read_catalog(SAMPLE)
     start = dt.datetime(2006, 6, 27, 0, 0, 0, tzinfo=dt.UTC)
     t = start.timestamp() + np.arange(0.0, 2 * 86400.0, 300.0)
-    states = catalog.catalog_states(entries, t)
+    states = catalog_states(entries, t)
     assert states.x.shape == (6, t.size, 6) and states.object_ids[1] == "6251"
     assert np.array_equal(states.t, t) and not states.error.any()
 
@@ -84,8 +86,8 @@ def test_omm_sample_reads_as_the_same_element_set(path):
     (tle,) = [e for e in catalog.read_catalog(SAMPLE) if e.object_id == "28057"]
     assert (entry.object_id, entry.name) == ("28057", "CBERS 2")
     t = tle.epoch_unix + np.linspace(0.0, 86400.0, 7)
-    x_omm = catalog.catalog_states([entry], t).x
-    x_tle = catalog.catalog_states([tle], t).x
+    x_omm = catalog_states([entry], t).x
+    x_tle = catalog_states([tle], t).x
     np.testing.assert_allclose(x_omm, x_tle, rtol=0, atol=1e-3)  # OMM epoch to the us
 
 
@@ -94,7 +96,7 @@ def test_decayed_object_gives_nan_and_its_error_code():
     text = ("1 28872U 05037B   05333.02012661  .25992681  00000-0  24476-3 0  1534\n"
             "2 28872  96.4736 157.9986 0303955 244.0492 110.6523 16.46015938 10708\n")
     (entry,) = catalog.parse_tle(text)
-    states = catalog.catalog_states([entry], entry.epoch_unix + np.array([0.0, 86400.0]))
+    states = catalog_states([entry], entry.epoch_unix + np.array([0.0, 86400.0]))
     assert states.error[0, 0] == 0 and np.isfinite(states.x[0, 0]).all()
     assert states.error[0, 1] != 0 and np.isnan(states.x[0, 1]).all()
 

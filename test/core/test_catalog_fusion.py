@@ -1,4 +1,4 @@
-"""core.catalog_fusion: the catalog filter's policy for one fusion.
+"""core.catalog.fusion: the catalog filter's policy for one fusion.
 
 Which rows it refuses and why (first cause that applies), the epoch order of what waits
 for a fusion (stable at a tie), and a fusion of labelled and unlabelled rows at once
@@ -13,13 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ssa_fusion.core import catalog
-from ssa_fusion.core.catalog_fusion import CatalogFusion, in_epoch_order, row_causes
-from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.core.stations import NETWORKS, SENSORS, network_stations
-from ssa_fusion.core.track_bank import TrackBank
-from ssa_fusion.core.types import Cause, Kind, Source
-from ssa_fusion.core.unlabelled import RowAssociator, elevation_masks, without_labels
+from ssa_fusion.core.base.rows import MeasurementRows
+from ssa_fusion.core.base.types import Cause, Kind, Source
+from ssa_fusion.core.catalog.fusion import CatalogFusion, in_epoch_order, row_causes
+from ssa_fusion.core.catalog.track_bank import TrackBank
+from ssa_fusion.core.catalog.unlabelled import RowAssociator, elevation_masks, without_labels
+from ssa_fusion.core.earth.stations import NETWORKS, SENSORS, network_stations
+from ssa_fusion.formats import element_sets as catalog
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.sim import survey

@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from sgp4.io import compute_checksum
 
-from ssa_fusion.core import catalog
+from ssa_fusion.formats import element_sets as catalog
 
 L1 = "1 25544U 98067A   19366.82137887  .00016717  00000-0  10270-3 0  9129"
 L2 = "2 25544  51.6392  96.6358 0005156  88.7140 271.4601 15.49497216  6061"

@@ -1,4 +1,4 @@
-"""Catalogs read as a stream (core.catalog.read_catalog): the same entries and errors as the
+"""Catalogs read as a stream (formats.element_sets.read_catalog): the same entries and errors as the
 whole text parsed at once, a progress callback, memory that does not grow with the file.
 
 The references are the readers that parsed the whole text at once (`whole_read`, with
@@ -28,7 +28,8 @@ from sgp4 import omm
 from sgp4.api import Satrec
 from sgp4.io import compute_checksum
 
-from ssa_fusion.core import catalog
+from ssa_fusion.core.motion.element_sets import CatalogEntry
+from ssa_fusion.formats import element_sets as catalog
 
 ROOT = Path(__file__).resolve().parents[2]
 CATALOGS = sorted((ROOT / "config" / "catalogs").iterdir())
@@ -47,7 +48,7 @@ SATREC = ("satnum", "jdsatepoch", "jdsatepochF", "no_kozai", "ecco", "inclo", "n
 # ------------------------------------------------------------------------------------------
 # the readers that parsed the whole text at once
 # ------------------------------------------------------------------------------------------
-def whole_read(path: Path) -> list[catalog.CatalogEntry]:
+def whole_read(path: Path) -> list[CatalogEntry]:
     """`read_catalog` as it read a file: its whole text at once."""
     try:
         text = path.read_text()
@@ -69,7 +70,7 @@ def whole_read(path: Path) -> list[catalog.CatalogEntry]:
     return entries
 
 
-def whole_xml(text: str, source: str) -> list[catalog.CatalogEntry]:
+def whole_xml(text: str, source: str) -> list[CatalogEntry]:
     """`parse_omm_xml` as it was: `sgp4.omm.parse_xml` of the whole document, then each."""
     try:
         segments = list(omm.parse_xml(io.StringIO(text)))
@@ -88,7 +89,7 @@ def whole_xml(text: str, source: str) -> list[catalog.CatalogEntry]:
     return out
 
 
-def whole_csv(text: str, source: str) -> list[catalog.CatalogEntry]:
+def whole_csv(text: str, source: str) -> list[CatalogEntry]:
     """`parse_omm_csv` as it was: every line in a list, then csv over them."""
     numbered = list(catalog._numbered(text.splitlines()))
     rows = csv.DictReader(line for _, line in numbered)
@@ -112,12 +113,12 @@ def whole_csv(text: str, source: str) -> list[catalog.CatalogEntry]:
 # ------------------------------------------------------------------------------------------
 # comparing
 # ------------------------------------------------------------------------------------------
-def key(e: catalog.CatalogEntry) -> tuple[object, ...]:
+def key(e: CatalogEntry) -> tuple[object, ...]:
     """What makes an entry: id, name, where it was read and its element set, exactly."""
     return (e.object_id, e.name, e.source, *(getattr(e.satrec, a) for a in SATREC))
 
 
-def outcome(read: Callable[[], list[catalog.CatalogEntry]]) -> tuple[str, object]:
+def outcome(read: Callable[[], list[CatalogEntry]]) -> tuple[str, object]:
     """("entries", their keys) or ("error", its message) of `read()`.
 
     XML that is not well formed is said without its line and column: the stream is read by
@@ -477,7 +478,7 @@ def test_the_layout_pattern_says_what_the_columns_one_by_one_say(which, edits, c
 PEAK = """
 import sys
 from pathlib import Path
-from ssa_fusion.core import catalog
+from ssa_fusion.formats import element_sets as catalog
 def kib(key):
     line = next(s for s in Path("/proc/self/status").read_text().splitlines()
                 if s.startswith(key))

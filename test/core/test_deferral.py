@@ -1,4 +1,4 @@
-"""Decisions deferred over passes (`core.deferral`, `Associator` with ``defer_passes``):
+"""Decisions deferred over passes (`core.catalog.deferral`, `Associator` with ``defer_passes``):
 the ambiguous pairs of a scan against analytic costs, the pair's cost against its
 definition, and two objects of a train whose tracks the scan-wise assignment swaps in their
 second pass and the deferred decision puts back (truth labels as the reference): at the
@@ -12,7 +12,8 @@ import math
 import numpy as np
 import pytest
 
-from ssa_fusion.core.association import (
+from ssa_fusion.core.base.rows import MeasurementRows
+from ssa_fusion.core.catalog.association import (
     UNASSIGNED,
     AssociationConfig,
     Associator,
@@ -21,12 +22,11 @@ from ssa_fusion.core.association import (
     pair_cost,
     predict_scan,
 )
-from ssa_fusion.core.deferral import Fork, ambiguous_pairs, shadows_in
-from ssa_fusion.core.filter_options import SKY_FILTER
-from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.core.stations import SENSORS
-from ssa_fusion.core.track_bank import TrackBank
-from ssa_fusion.core.unlabelled import UNLABELLED, RowAssociator, track_name
+from ssa_fusion.core.catalog.deferral import Fork, ambiguous_pairs, shadows_in
+from ssa_fusion.core.catalog.track_bank import TrackBank
+from ssa_fusion.core.catalog.unlabelled import UNLABELLED, RowAssociator, track_name
+from ssa_fusion.core.earth.stations import SENSORS
+from ssa_fusion.core.filter.options import SKY_FILTER
 from ssa_fusion.evaluation.association import detection_labels
 from ssa_fusion.sim import survey
 

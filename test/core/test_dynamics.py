@@ -1,4 +1,4 @@
-"""Tests for ssa_fusion.core.dynamics: analytic results, invariants, textbooks, SGP4 outputs."""
+"""Tests for core.motion.dynamics: analytic results, invariants, textbooks, SGP4 outputs."""
 
 import math
 from pathlib import Path
@@ -8,8 +8,8 @@ import pytest
 import sgp4
 from sgp4.api import WGS72, Satrec
 
-from ssa_fusion.core.constants import G0, J2, MU_EARTH, MU_EARTH_MOON, OMEGA_EARTH, R_EARTH
-from ssa_fusion.core.dynamics import (
+from ssa_fusion.core.base.constants import G0, J2, MU_EARTH, MU_EARTH_MOON, OMEGA_EARTH, R_EARTH
+from ssa_fusion.core.motion.dynamics import (
     elements_to_state,
     fit_sgp4_mean_elements,
     propagate,
@@ -240,7 +240,7 @@ def test_sgp4_ephemeris_in_the_gcrf_is_sgp4s_teme_turned():
     """`sgp4_ephemeris` takes and gives GCRF: its first state is the one given (the fit is
     made in TEME, < 1 m), and later states are the TEME ephemeris turned by
     `frames.teme_to_gcrs` (0.3-0.4 deg from TEME's axes in 2025: ~40 km at the ISS)."""
-    from ssa_fusion.core import frames
+    from ssa_fusion.core.earth import frames
 
     t0 = 1735689600.0
     x0 = elements_to_state(**ISS_ELEMENTS)

@@ -1,4 +1,4 @@
-"""Tests for ssa_fusion.core.ekf.
+"""Tests for ssa_fusion.core.filter.ekf.
 
 References: filterpy's KalmanFilter / ExtendedKalmanFilter (both Joseph-form updates),
 filterpy's Q_continuous_white_noise, and the chi-square distribution of the NIS of a
@@ -16,9 +16,9 @@ from filterpy.kalman import ExtendedKalmanFilter as FpEKF
 from filterpy.kalman import KalmanFilter
 from scipy.stats import chi2
 
-from ssa_fusion.core.ekf import ExtendedKalmanFilter, UpdateResult, process_noise
-from ssa_fusion.core.frames import wrap_angle
-from ssa_fusion.core.kepler import propagate
+from ssa_fusion.core.earth.frames import wrap_angle
+from ssa_fusion.core.filter.ekf import ExtendedKalmanFilter, UpdateResult, process_noise
+from ssa_fusion.core.motion.kepler import propagate
 
 DT = 0.5
 F_CV = np.block([[np.eye(2), DT * np.eye(2)], [np.zeros((2, 2)), np.eye(2)]])  # [px py vx vy]
@@ -260,7 +260,7 @@ def test_constructor_validates() -> None:
 
 
 def test_bound_covariance_limits_sigmas_and_keeps_correlations():
-    from ssa_fusion.core.ekf import bound_covariance
+    from ssa_fusion.core.filter.ekf import bound_covariance
 
     x = np.array([7000.0, 0.0, 0.0, 0.0, 7.5, 0.0])  # km, km/s
     A = np.random.default_rng(1).standard_normal((6, 6))

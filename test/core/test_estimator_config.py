@@ -1,4 +1,4 @@
-"""`core.config`: one EstimatorConfig, its builders and its JSON form."""
+"""`core.gaps.estimator`: one EstimatorConfig, its builders and its JSON form."""
 
 import json
 import math
@@ -6,11 +6,12 @@ import math
 import numpy as np
 import pytest
 
-from ssa_fusion.core import config, kepler
-from ssa_fusion.core.config import EstimatorConfig, Lift
-from ssa_fusion.core.filter_options import FilterOptions
-from ssa_fusion.core.surrogate import EciLift, SurrogateConfig
-from ssa_fusion.core.types import Kind, MotionModel
+from ssa_fusion.core.base.types import Kind, MotionModel
+from ssa_fusion.core.filter.options import FilterOptions
+from ssa_fusion.core.gaps import estimator as config
+from ssa_fusion.core.gaps.estimator import EstimatorConfig, Lift
+from ssa_fusion.core.gaps.surrogate import EciLift, SurrogateConfig
+from ssa_fusion.core.motion import kepler
 
 X0 = np.array([6778.0, 0.0, 0.0, 0.0, 5.0, 5.8])
 

@@ -1,4 +1,4 @@
-"""`core.fit_residual.FitResidualForecaster`: the gap fit corrected by what it leaves out.
+"""`core.gaps.fit_residual.FitResidualForecaster`: the gap fit corrected by what it leaves out.
 
 The truth is scipy's (`references.scipy_orbit`: two-body + J2-J4, optionally a constant
 along-track acceleration that the fit's model, J2-J4 + drag, lacks), at 800 km where the
@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 from references import scipy_orbit
 
-from ssa_fusion.core.batch_gap import BatchGapForecaster
-from ssa_fusion.core.config import EstimatorConfig, make_tracker, measurement_model
-from ssa_fusion.core.constants import MU_EARTH
-from ssa_fusion.core.fit_residual import FitResidualForecaster
-from ssa_fusion.core.gap_publisher import GapFill, GapPublisher
-from ssa_fusion.core.types import Kind, Measurement
+from ssa_fusion.core.base.constants import MU_EARTH
+from ssa_fusion.core.base.types import Kind, Measurement
+from ssa_fusion.core.gaps.batch_gap import BatchGapForecaster
+from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker, measurement_model
+from ssa_fusion.core.gaps.fit_residual import FitResidualForecaster
+from ssa_fusion.core.gaps.publisher import GapFill, GapPublisher
 
 T0 = 1.7e9 - (1.7e9 % 600.0)  # Unix s, on the forecast grid
 PERIOD = 600.0  # s, the forecast grid

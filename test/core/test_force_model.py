@@ -1,4 +1,4 @@
-"""Tests for ssa_fusion.core.force_model: the batch fit's force model and its sensitivities.
+"""Tests for ssa_fusion.core.motion.force_model: the batch fit's force model and its sensitivities.
 
 References: `propagation.integrate_stm` (the compiled two-body + J2 integrator with its STM,
 and its numpy path for two-body + drag), `dynamics`' right-hand sides, the gradient of the
@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 from numpy.polynomial import legendre
 
-from ssa_fusion.core import dynamics, frames
-from ssa_fusion.core import force_model as fm
-from ssa_fusion.core.constants import J3, J4, MU_EARTH, R_EARTH
-from ssa_fusion.core.propagation import integrate_stm
+from ssa_fusion.core.base.constants import J3, J4, MU_EARTH, R_EARTH
+from ssa_fusion.core.earth import frames
+from ssa_fusion.core.motion import dynamics
+from ssa_fusion.core.motion import force_model as fm
+from ssa_fusion.core.motion.propagation import integrate_stm
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS, ORBIT_EPOCH_UNIX
 
 X0 = dynamics.elements_to_state(**ISS_ELEMENTS)

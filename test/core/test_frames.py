@@ -1,4 +1,4 @@
-"""Tests of ssa_fusion.core.frames, timescales and eop against independent references.
+"""Tests of ssa_fusion.core.earth.frames, timescales and eop against independent references.
 
 References: astropy (its own IERS 2010 CIO-based chain and TEME per Vallado 2006, given the
 same IERS finals2000A table as ours), skyfield (equinox-based IAU 2006/2000A, its own WGS-84
@@ -52,9 +52,9 @@ from references import (
 from skyfield.api import EarthSatellite
 from skyfield.timelib import Timescale
 
-from ssa_fusion.core import catalog, eop, frames, timescales
-from ssa_fusion.core.constants import ARCSEC, R_EARTH
-from ssa_fusion.core.frames import (
+from ssa_fusion.core.base.constants import ARCSEC, R_EARTH
+from ssa_fusion.core.earth import eop, frames, timescales
+from ssa_fusion.core.earth.frames import (
     COLUMBUS,
     ERA_RATE,
     Station,
@@ -74,7 +74,9 @@ from ssa_fusion.core.frames import (
     wrap_angle,
     wrap_pi,
 )
-from ssa_fusion.core.stations import SENSORS
+from ssa_fusion.core.earth.stations import SENSORS
+from ssa_fusion.core.motion.element_sets import catalog_states
+from ssa_fusion.formats import element_sets as catalog
 
 POS_TOL_KM = 0.05e-3
 """Position agreement with astropy, km (5 cm). Measured <= 1.6 cm, growing with distance and
@@ -240,7 +242,7 @@ def test_topocentric_razel_and_radec_match_skyfield_and_astropy(
         site, loc = topos(station), location(station)
         for ent in entries:
             t = ent.epoch_unix + np.arange(0.0, 86400.0, 900.0)
-            x = catalog.catalog_states([ent], t).x[0]
+            x = catalog_states([ent], t).x[0]
             z = razel_gcrs(x, t, station)
             geo = (EarthSatellite.from_satrec(ent.satrec, skyfield_ts) - site).at(
                 sky_time(skyfield_ts, t))
@@ -534,7 +536,7 @@ def test_velocity_transform_matches_finite_differences_of_positions() -> None:
     # velocity gcrs_to_itrs gives, up to the neglected slow rotation of Q and W (the frames
     # docstring: < 1e-11 rad/s, i.e. < 1e-11 |r| km/s; measured 0.26 mm/s at GEO).
     entries = catalog.read_catalog(SAMPLE)
-    x = catalog.catalog_states(entries, entries[0].epoch_unix + 3600.0).x[:, 0]
+    x = catalog_states(entries, entries[0].epoch_unix + 3600.0).x[:, 0]
     t = np.random.default_rng(7).uniform(unix(2001, 1, 1), unix(2027, 1, 1), 40)
     h = 1.0  # s
     for xi in x:
@@ -583,7 +585,7 @@ def test_cip_matches_erfa_xys06a_of_astropy_tt() -> None:
 def test_razel_jacobian_matches_central_differences() -> None:
     entries = catalog.read_catalog(SAMPLE)
     t = entries[0].epoch_unix + np.arange(0.0, 86400.0, 60.0)
-    x = catalog.catalog_states(entries[:1], t).x[0]
+    x = catalog_states(entries[:1], t).x[0]
     station = SITES["millstone"]
     z = razel_gcrs(x, t, station)
     k = int(np.argmax(np.where(z[:, 2] < math.radians(80.0), z[:, 2], -1.0)))

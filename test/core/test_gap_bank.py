@@ -1,4 +1,4 @@
-"""Tests for ssa_fusion.core.gap_bank: the catalog's gap forecasts equal each object's own
+"""Tests for ssa_fusion.core.catalog.gap_bank: the catalog's gap forecasts equal each object's own
 `gap_forecaster.GapForecaster`, beat coasting on the motion model against a J2 truth, and the fits
 keep to their wall-time budget (newest pass end first, a gap that ends first skipped)."""
 
@@ -7,10 +7,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from ssa_fusion.core import dynamics
-from ssa_fusion.core.gap_bank import GapBank, GapBankConfig
-from ssa_fusion.core.gap_forecaster import GapForecaster
-from ssa_fusion.core.residual import LIVE_RESIDUAL
+from ssa_fusion.core.catalog.gap_bank import GapBank, GapBankConfig
+from ssa_fusion.core.gaps.forecaster import GapForecaster
+from ssa_fusion.core.gaps.residual import LIVE_RESIDUAL
+from ssa_fusion.core.motion import dynamics
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
 X0 = np.array(dynamics.elements_to_state(**ISS_ELEMENTS))

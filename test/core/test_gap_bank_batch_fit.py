@@ -1,5 +1,5 @@
-"""Tests for the batch fit of a catalog's gaps (`core.gap_bank` with `GapFill.BATCH_FIT`,
-`core.measurement_windows`): an object's forecasts equal the single-object filter's
+"""Tests for the batch fit of a catalog's gaps (`core.catalog.gap_bank` with `GapFill.BATCH_FIT`,
+`core.gaps.measurement_windows`): an object's forecasts equal the single-object filter's
 `batch_gap.BatchGapForecaster` given the same measurements and estimates; the fits keep to
 the wall-time budget like the residual's (newest pass end first, a gap that ends first
 skipped); an object's window keeps its last passes and no more than its bound of rows."""
@@ -10,14 +10,15 @@ import numpy as np
 import pytest
 from test_gap_bank import FakeWall
 
-from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core.gap_bank import GapBank, GapBankConfig, last_passes_forecaster
-from ssa_fusion.core.gap_publisher import GapFill
-from ssa_fusion.core.measurement import StationModels
-from ssa_fusion.core.measurement_windows import ROW, MeasurementWindows
-from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.types import Kind, Measurement, Source
+from ssa_fusion.core.base.rows import MeasurementRows
+from ssa_fusion.core.base.types import Kind, Measurement, Source
+from ssa_fusion.core.catalog.gap_bank import GapBank, GapBankConfig, last_passes_forecaster
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.gaps.measurement_windows import ROW, MeasurementWindows
+from ssa_fusion.core.gaps.publisher import GapFill
+from ssa_fusion.core.measure.measurement import StationModels
+from ssa_fusion.core.motion.element_sets import catalog_states
+from ssa_fusion.formats import element_sets as catalog_io
 from ssa_fusion.sim import survey
 from ssa_fusion.sim.sky import SKY_SCENARIOS
 from ssa_fusion.studies.catalog_gaps import SAMPLE
@@ -47,7 +48,7 @@ def sky():
     est = {}
     for k, e in enumerate(entries):
         t = np.unique(obs.t[obs.obj == k])
-        est[obs.object_ids[k]] = (t, catalog_io.catalog_states([e], t).x[0] + off)
+        est[obs.object_ids[k]] = (t, catalog_states([e], t).x[0] + off)
     return rows, model, est, t0
 
 

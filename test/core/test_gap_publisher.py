@@ -1,4 +1,4 @@
-"""`core.gap_publisher.GapPublisher`: what a filter publishes, live and offline alike."""
+"""`core.gaps.publisher.GapPublisher`: what a filter publishes, live and offline alike."""
 
 import math
 
@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from references import scipy_orbit
 
-from ssa_fusion.core.config import EstimatorConfig, make_tracker
-from ssa_fusion.core.constants import MU_EARTH
-from ssa_fusion.core.filter_options import FilterOptions
-from ssa_fusion.core.gap_publisher import GapFill, GapPublisher
-from ssa_fusion.core.types import Kind, Measurement, Source, UpdateSource
+from ssa_fusion.core.base.constants import MU_EARTH
+from ssa_fusion.core.base.types import Kind, Measurement, Source, UpdateSource
+from ssa_fusion.core.filter.options import FilterOptions
+from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker
+from ssa_fusion.core.gaps.publisher import GapFill, GapPublisher
 
 R_KM = 7000.0
 T0 = 1.7e9  # Unix s
@@ -154,7 +154,7 @@ def test_a_batch_fit_publisher_fills_the_gap_with_the_fit_of_the_last_passes():
 def test_the_gap_fit_of_angles_only_has_its_own_process_noise():
     """A window of RA/Dec alone gets `GAP_FIT_SNC_ANGLES` (chosen on leo_optical's tuning
     runs), one with any range `GAP_FIT_SNC` (chosen on the ranged scenarios' tuning runs)."""
-    from ssa_fusion.core import batch_gap
+    from ssa_fusion.core.gaps import batch_gap
 
     def m(kind: Kind) -> Measurement:
         return Measurement(T0, np.zeros(3), np.eye(3), kind=kind, frame_id="maui")

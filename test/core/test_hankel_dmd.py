@@ -1,4 +1,4 @@
-"""Tests of ssa_fusion.core.hankel_dmd against analytic signals and PyDMD."""
+"""Tests of ssa_fusion.core.gaps.hankel_dmd against analytic signals and PyDMD."""
 
 from __future__ import annotations
 
@@ -8,8 +8,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from ssa_fusion.core.dynamics import elements_to_state, propagate
-from ssa_fusion.core.hankel_dmd import (
+from ssa_fusion.core.gaps.hankel_dmd import (
     HankelDMD,
     _gram_subspace,
     _hankel,
@@ -17,6 +16,7 @@ from ssa_fusion.core.hankel_dmd import (
     resolvable_rank,
     svht_rank,
 )
+from ssa_fusion.core.motion.dynamics import elements_to_state, propagate
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
 FREQS = (0.011, 0.037, 0.071)  # cycles per sample
@@ -272,7 +272,7 @@ def test_warm_up_imports_what_a_fit_uses():
     import subprocess
     import sys
 
-    code = ("import sys, ssa_fusion.core.hankel_dmd as h; a = 'scipy.linalg' in sys.modules; "
+    code = ("import sys, ssa_fusion.core.gaps.hankel_dmd as h; a = 'scipy.linalg' in sys.modules; "
             "h.warm_up(); print(a, 'scipy.linalg' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.split()

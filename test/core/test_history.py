@@ -1,4 +1,4 @@
-"""Tests for ssa_fusion.core.history (the log of fused steps and rollback) and the filter's
+"""Tests for ssa_fusion.core.filter.history (the log of fused steps and rollback) and the filter's
 snapshot/restore it goes through, on their own.
 
 The references are the test's own copies of the filter's x, P taken before every step (not
@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ssa_fusion.core.ekf import ExtendedKalmanFilter, process_noise
-from ssa_fusion.core.history import HISTORY_REAL, FusedHistory, FusedStep, Snapshot
-from ssa_fusion.core.types import Kind, Measurement, Source
+from ssa_fusion.core.base.types import Kind, Measurement, Source
+from ssa_fusion.core.filter.ekf import ExtendedKalmanFilter, process_noise
+from ssa_fusion.core.filter.history import HISTORY_REAL, FusedHistory, FusedStep, Snapshot
 
 H = np.hstack([np.eye(3), np.zeros((3, 3))])
 

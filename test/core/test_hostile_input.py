@@ -7,9 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ssa_fusion.core import validation
-from ssa_fusion.core.config import EstimatorConfig, make_tracker
-from ssa_fusion.core.types import Cause, Kind, Measurement
+from ssa_fusion.core.base.types import Cause, Kind, Measurement
+from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker
+from ssa_fusion.core.measure import validation
 
 T0 = 1.7e9
 R = np.diag([1.0, 1e-4, 1e-4])
@@ -71,7 +71,7 @@ def test_an_outlier_range_in_the_iod_batch_is_not_fused_into_the_initial_orbit()
     was once fused into the initial orbit, and the filter then refused every
     later good measurement at its gate. The IOD of that batch is no bound Earth orbit: it
     fails and the next batch, of good measurements, starts the filter."""
-    from ssa_fusion.core.initiation import earth_orbit_problem
+    from ssa_fusion.core.filter.initiation import earth_orbit_problem
     from ssa_fusion.sim import scenarios
     from ssa_fusion.sim.simulate import simulate
 

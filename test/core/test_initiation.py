@@ -1,4 +1,4 @@
-"""Tests for ssa_fusion.core.initiation: the IOD batch on its own, against references that do
+"""Tests for ssa_fusion.core.filter.initiation: the IOD batch on its own, against references that do
 not use it.
 
 * Positions: finite differences are linear in the measurements, so the covariance the
@@ -18,11 +18,12 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from ssa_fusion.core import frames, kepler
-from ssa_fusion.core.constants import MU_EARTH
-from ssa_fusion.core.initiation import InitialState, OrbitInitiator
-from ssa_fusion.core.measurement import PositionModel, RazelModel
-from ssa_fusion.core.types import Cause, Kind, Measurement, Source
+from ssa_fusion.core.base.constants import MU_EARTH
+from ssa_fusion.core.base.types import Cause, Kind, Measurement, Source
+from ssa_fusion.core.earth import frames
+from ssa_fusion.core.filter.initiation import InitialState, OrbitInitiator
+from ssa_fusion.core.measure.measurement import PositionModel, RazelModel
+from ssa_fusion.core.motion import kepler
 
 JD0 = 2460000.5
 T0_UNIX = (JD0 - 2440587.5) * 86400.0

@@ -9,13 +9,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ssa_fusion.core import catalog, iod
-from ssa_fusion.core.batch_ekf import BatchEKF
-from ssa_fusion.core.initiation import InitialState, OrbitInitiator, finish_razel
-from ssa_fusion.core.measurement import PositionModel, StationModels
-from ssa_fusion.core.stations import NETWORKS, SENSORS
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.types import Cause, Kind, Measurement
+from ssa_fusion.core.base.types import Cause, Kind, Measurement
+from ssa_fusion.core.catalog.batch_ekf import BatchEKF
+from ssa_fusion.core.earth.stations import NETWORKS, SENSORS
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.filter.initiation import InitialState, OrbitInitiator, finish_razel
+from ssa_fusion.core.measure import iod
+from ssa_fusion.core.measure.measurement import PositionModel, StationModels
+from ssa_fusion.formats import element_sets as catalog
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.sim import survey

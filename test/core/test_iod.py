@@ -1,17 +1,17 @@
-"""Tests for ssa_fusion.core.iod against textbook examples and Kepler-propagated truth."""
+"""Tests for ssa_fusion.core.measure.iod against textbook examples and Kepler-propagated truth."""
 
 import numpy as np
 import pytest
 
-from ssa_fusion.core.dynamics import elements_to_state, propagate
-from ssa_fusion.core.frames import COLUMBUS, razel_gcrs
-from ssa_fusion.core.iod import (
+from ssa_fusion.core.earth.frames import COLUMBUS, razel_gcrs
+from ssa_fusion.core.measure.iod import (
     finite_difference_state,
     gibbs,
     herrick_gibbs,
     itrs_to_gcrs_at,
     razel_to_gcrs,
 )
+from ssa_fusion.core.motion.dynamics import elements_to_state, propagate
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS, MOLNIYA_ELEMENTS
 
 

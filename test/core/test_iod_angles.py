@@ -7,11 +7,11 @@ import math
 
 import numpy as np
 
-from ssa_fusion.core import iod
-from ssa_fusion.core.kepler import propagate
-from ssa_fusion.core.measurement import RadecModel
-from ssa_fusion.core.stations import STATIONS
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.earth.stations import STATIONS
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.measure import iod
+from ssa_fusion.core.measure.measurement import RadecModel
+from ssa_fusion.core.motion.kepler import propagate
 
 
 def curtis_site(lat_deg: float, alt_km: float, lst_deg: float) -> np.ndarray:

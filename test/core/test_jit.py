@@ -1,4 +1,4 @@
-"""`core.jit`: the compiled kernels' cache lives outside the source tree, in a directory
+"""`core.base.jit`: the compiled kernels' cache lives outside the source tree, in a directory
 private to the user, named by a digest of the sources (callees in other modules included)
 that nobody keeps by hand."""
 
@@ -12,12 +12,14 @@ from pathlib import Path
 
 import pytest
 
-from ssa_fusion.core import batch_ekf, jit, kepler, propagation
+from ssa_fusion.core.base import jit
+from ssa_fusion.core.catalog import batch_ekf
+from ssa_fusion.core.motion import kepler, propagation
 
 PACKAGE = Path(jit.__file__).resolve().parents[1]
 
 CALLEE = '''
-from ssa_fusion.core.jit import jit
+from ssa_fusion.core.base.jit import jit
 
 SCALE = {scale}
 
@@ -28,7 +30,7 @@ def twice(x: float) -> float:
 '''
 
 CALLER = '''
-from ssa_fusion.core.jit import jit
+from ssa_fusion.core.base.jit import jit
 from {callee} import twice
 
 

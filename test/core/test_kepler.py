@@ -1,4 +1,4 @@
-"""Tests for ssa_fusion.core.kepler (analytic two-body propagation + STM).
+"""Tests for ssa_fusion.core.motion.kepler (analytic two-body propagation + STM).
 
 References: numerical integration of the two-body ODE (scipy DOP853, tight tolerances),
 central finite differences of the propagator, and the structural properties of any
@@ -17,8 +17,8 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
-from ssa_fusion.core.constants import MU_EARTH
-from ssa_fusion.core.kepler import propagate, stumpff
+from ssa_fusion.core.base.constants import MU_EARTH
+from ssa_fusion.core.motion.kepler import propagate, stumpff
 
 
 def _state(a: float, e: float, i: float, raan: float, argp: float, nu: float) -> np.ndarray:

@@ -1,12 +1,12 @@
-"""Tests for ssa_fusion.core.measurement."""
+"""Tests for ssa_fusion.core.measure.measurement."""
 
 import numpy as np
 import pytest
 
-from ssa_fusion.core.frames import COLUMBUS, radec_gcrs, razel_gcrs, wrap_angle
-from ssa_fusion.core.measurement import PositionModel, RadecModel, RazelModel
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.types import Kind
+from ssa_fusion.core.base.types import Kind
+from ssa_fusion.core.earth.frames import COLUMBUS, radec_gcrs, razel_gcrs, wrap_angle
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.measure.measurement import PositionModel, RadecModel, RazelModel
 
 
 def test_position_model_orbit_and_pendulum():
@@ -78,7 +78,7 @@ def test_refraction_inverts_bennetts_formula_and_its_jacobian_is_exact():
     (Meeus, Astronomical Algorithms, eq. 16.3): el + R(el) seen through Bennett gives R back
     within 0.1' from the horizon to the zenith; the radar model adds it to the elevation with
     the matching Jacobian."""
-    from ssa_fusion.core.refraction import refraction
+    from ssa_fusion.core.earth.refraction import refraction
 
     el = np.radians(np.linspace(0.0, 90.0, 91))
     r = refraction(el)

@@ -1,10 +1,10 @@
-"""Tests for ssa_fusion.core.metrics against hand computations and scipy."""
+"""Tests for ssa_fusion.core.base.metrics against hand computations and scipy."""
 
 import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from ssa_fusion.core.metrics import chi2_bounds, epsilon, nees, nis
+from ssa_fusion.core.base.metrics import chi2_bounds, epsilon, nees, nis
 
 
 def test_epsilon_hand_computation():

@@ -1,16 +1,16 @@
-"""`core.pass_windows`: passes cut at the break, the window of the last n before an epoch."""
+"""`core.measure.pass_windows`: passes cut at the break, the last n before an epoch."""
 
 import numpy as np
 import pytest
 
-from ssa_fusion.core.pass_windows import (
+from ssa_fusion.core.base.types import Kind, Measurement
+from ssa_fusion.core.measure.pass_windows import (
     PASS_BREAK_S,
     fit_window,
     last_passes,
     passes,
     window_start,
 )
-from ssa_fusion.core.types import Kind, Measurement
 
 
 def stream(t):

@@ -11,11 +11,12 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.stats import chi2
 
-from ssa_fusion.core import dynamics, residual
-from ssa_fusion.core.constants import MU_EARTH
-from ssa_fusion.core.gap_bank import GapBank, GapBankConfig
-from ssa_fusion.core.gap_forecaster import GapForecaster
-from ssa_fusion.core.residual import LIVE_RESIDUAL, PHYSICS_RESIDUAL
+from ssa_fusion.core.base.constants import MU_EARTH
+from ssa_fusion.core.catalog.gap_bank import GapBank, GapBankConfig
+from ssa_fusion.core.gaps import residual
+from ssa_fusion.core.gaps.forecaster import GapForecaster
+from ssa_fusion.core.gaps.residual import LIVE_RESIDUAL, PHYSICS_RESIDUAL
+from ssa_fusion.core.motion import dynamics
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
 X0 = np.array(dynamics.elements_to_state(**ISS_ELEMENTS))

@@ -1,4 +1,4 @@
-"""Tests for ssa_fusion.core.process_noise: SNC and DMC in the orbit's RTN axes.
+"""Tests for ssa_fusion.core.filter.process_noise: SNC and DMC in the orbit's RTN axes.
 
 References: `ekf.process_noise` (isotropic white noise, filterpy's Q_continuous_white_noise),
 Van Loan's matrix exponential for the discrete Gauss-Markov transition and noise (scipy's
@@ -14,8 +14,8 @@ from scipy.integrate import dblquad
 from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
-from ssa_fusion.core import process_noise as pn
-from ssa_fusion.core.ekf import process_noise
+from ssa_fusion.core.filter import process_noise as pn
+from ssa_fusion.core.filter.ekf import process_noise
 
 X = np.array([6000.0, 2500.0, 1200.0, -2.5, 6.0, 3.5])
 

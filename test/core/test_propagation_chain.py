@@ -1,12 +1,13 @@
-"""Tests for ssa_fusion.core.propagation.integrate_chain: each step's state equals
+"""Tests for ssa_fusion.core.motion.propagation.integrate_chain: each step's state equals
 `integrate_stm`'s taken step by step (the same numbers), for every model, both directions,
 and a non-finite input or result ends the chain with ok False."""
 
 import numpy as np
 import pytest
 
-from ssa_fusion.core import dynamics, frames
-from ssa_fusion.core.propagation import integrate_chain, integrate_stm
+from ssa_fusion.core.earth import frames
+from ssa_fusion.core.motion import dynamics
+from ssa_fusion.core.motion.propagation import integrate_chain, integrate_stm
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
 X0 = np.array(dynamics.elements_to_state(**ISS_ELEMENTS))

@@ -6,7 +6,7 @@ project's real sites (`stations.SENSORS`), against skyfield: its own SGP4 of the
 set, its own TEME -> GCRS (equinox based, IAU 2006/2000A), its own WGS-84 sites and polar
 motion, on the same IERS finals2000A table as ours. Skyfield's ``(sat - topos).at(t)`` is
 geometric; the light time (one way, the station where it is at reception, as
-`core.lighttime` defines it) is iterated here on the emission epoch from skyfield's own
+`core.earth.lighttime` defines it) is iterated here on the emission epoch from skyfield's own
 positions.
 
 The agreement asked for is the sensors' noise (20 m and 0.02 deg for a radar, 1.5" for a
@@ -45,11 +45,14 @@ from skyfield.constants import DAY_S
 from skyfield.timelib import Timescale
 from skyfield.toposlib import GeographicPosition
 
-from ssa_fusion.core import catalog, dynamics, frames, lighttime, timescales
-from ssa_fusion.core.constants import ARCSEC, C_KM_S
-from ssa_fusion.core.frames import Station, wrap_pi
-from ssa_fusion.core.measurement import RadecModel, RazelModel
-from ssa_fusion.core.stations import OPTICAL_SIGMA, RADAR_SIGMA, SENSORS, SensorType
+from ssa_fusion.core.base.constants import ARCSEC, C_KM_S
+from ssa_fusion.core.earth import frames, lighttime, timescales
+from ssa_fusion.core.earth.frames import Station, wrap_pi
+from ssa_fusion.core.earth.stations import OPTICAL_SIGMA, RADAR_SIGMA, SENSORS, SensorType
+from ssa_fusion.core.measure.measurement import RadecModel, RazelModel
+from ssa_fusion.core.motion import dynamics
+from ssa_fusion.core.motion.element_sets import CatalogEntry, catalog_states
+from ssa_fusion.formats import element_sets as catalog
 from ssa_fusion.sim import sky
 
 RANGE_TOL_KM = 1e-3
@@ -159,8 +162,8 @@ def test_measurement_models_with_light_time_match_skyfield_for_the_sample_catalo
         t_all = ent.epoch_unix + np.arange(0.0, 86400.0, 120.0)
         sat = EarthSatellite.from_satrec(ent.satrec, skyfield_ts)
 
-        def states(t: Array, ent: catalog.CatalogEntry = ent) -> Array:
-            out: Array = catalog.catalog_states([ent], t).x[0]
+        def states(t: Array, ent: CatalogEntry = ent) -> Array:
+            out: Array = catalog_states([ent], t).x[0]
             return out
 
         x_all = states(t_all)
@@ -215,7 +218,7 @@ def test_celestrak_active_catalog_geometry_matches_skyfield(skyfield_ts: Timesca
     assert ((period_min > 200) & (period_min < 1000) & (ecc < 0.25)).sum() >= 5  # MEO
     t0 = float(np.median([e.epoch_unix for e in entries]))
     t = t0 + np.array([0.0, 1800.0, 7200.0, 21600.0])
-    cs = catalog.catalog_states(entries, t)
+    cs = catalog_states(entries, t)
     assert not cs.error.any()
     n_obj, n_t = cs.x.shape[:2]
     tt = sky_time(skyfield_ts, t)

@@ -1,4 +1,4 @@
-"""Tests for ssa_fusion.core.residual: fits on irregular samples against analytic signals,
+"""Tests for ssa_fusion.core.gaps.residual: fits on irregular samples against analytic signals,
 recovery of an injected acceleration, and the held-out covariance calibration."""
 
 import math
@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from ssa_fusion.core import dynamics, gap_forecaster, residual
-from ssa_fusion.core.constants import MU_EARTH
+from ssa_fusion.core.base.constants import MU_EARTH
+from ssa_fusion.core.gaps import forecaster as gap_forecaster
+from ssa_fusion.core.gaps import residual
+from ssa_fusion.core.motion import dynamics
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
 X0 = np.array(dynamics.elements_to_state(**ISS_ELEMENTS))

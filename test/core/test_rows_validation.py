@@ -5,9 +5,9 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ssa_fusion.core import validation
-from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.core.types import Kind
+from ssa_fusion.core.base.rows import MeasurementRows
+from ssa_fusion.core.base.types import Kind
+from ssa_fusion.core.measure import validation
 
 VALUES = st.sampled_from([0.0, 0.5, -0.5, 1.0, 3.0, 7.0, 7000.0, -7000.0, 2e7, 1e13, np.nan,
                           np.inf, 1e-13])

@@ -1,4 +1,4 @@
-"""`core.site_file`: the example sites file loads as written, sites land where astropy puts
+"""`formats.sites`: the example sites file loads as written, sites land where astropy puts
 them, and every bad input is refused with one line naming the file, the site and the field:
 bounded, whatever the file holds (an alias bomb, a 3 MB line, an integer of 5000 digits),
 and nothing but that error for mutated and random text (hypothesis)."""
@@ -18,12 +18,13 @@ from fuzz_text import error_of, mutated
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from ssa_fusion.core import config, frames
-from ssa_fusion.core.constants import ARCSEC
-from ssa_fusion.core.quoting import MAX_MESSAGE
-from ssa_fusion.core.site_file import SiteFileError, load_sites, load_stations, parse_sites
-from ssa_fusion.core.stations import SensorType, network_stations
-from ssa_fusion.core.types import Kind
+from ssa_fusion.core.base.constants import ARCSEC
+from ssa_fusion.core.base.quoting import MAX_MESSAGE
+from ssa_fusion.core.base.types import Kind
+from ssa_fusion.core.earth import frames
+from ssa_fusion.core.earth.stations import SensorType, network_stations
+from ssa_fusion.core.gaps import estimator as config
+from ssa_fusion.formats.sites import SiteFileError, load_sites, load_stations, parse_sites
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "config" / "sites" / "example.yaml"
 RADAR = {"id": "my_radar", "latitude_deg": 47.25, "longitude_deg": -122.5, "height_m": 120.0,

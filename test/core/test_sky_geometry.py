@@ -8,10 +8,10 @@ import math
 import numpy as np
 import pytest
 
-from ssa_fusion.core import frames, lighttime, sun, visibility
-from ssa_fusion.core.constants import R_EARTH
-from ssa_fusion.core.stations import STATIONS
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.base.constants import R_EARTH
+from ssa_fusion.core.earth import frames, lighttime, sun, visibility
+from ssa_fusion.core.earth.stations import STATIONS
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
 
 # ISS (ZARYA), NORAD 25544, epoch 2019-12-31 19:42 UTC (the sgp4 package's test suite)
 ISS_TLE = ("1 25544U 98067A   19366.82137887  .00016717  00000-0  10270-3 0  9129",

@@ -1,4 +1,4 @@
-"""Tests for ssa_fusion.core.smoother: RTS smoothing of a filter's recorded estimates.
+"""Tests for ssa_fusion.core.filter.smoother: RTS smoothing of a filter's recorded estimates.
 
 References: FilterPy's ``rts_smoother`` on a linear problem (equal to 1e-10); on an orbit (the
 real-sky ISS over Columbus, SGP4 truth), the smoothed estimates against the truth beside
@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 from filterpy.kalman import rts_smoother
 
-from ssa_fusion.core import config, smoother
-from ssa_fusion.core.ekf import ExtendedKalmanFilter, process_noise
-from ssa_fusion.core.tracker import Tracker
-from ssa_fusion.core.types import Measurement, Source, StateEstimate
+from ssa_fusion.core.base.types import Measurement, Source, StateEstimate
+from ssa_fusion.core.filter import smoother
+from ssa_fusion.core.filter.ekf import ExtendedKalmanFilter, process_noise
+from ssa_fusion.core.filter.tracker import Tracker
+from ssa_fusion.core.gaps import estimator as config
 from ssa_fusion.sim import sky
 
 DT = 1.0

@@ -8,15 +8,16 @@ import math
 import numpy as np
 import pytest
 
-from ssa_fusion.core import dynamics, frames
-from ssa_fusion.core.config import EstimatorConfig, make_tracker
-from ssa_fusion.core.constants import C_KM_S
-from ssa_fusion.core.filter_options import FilterOptions
-from ssa_fusion.core.measurement import RadecModel, RazelModel, StationModels
-from ssa_fusion.core.metrics import chi2_bounds, nees
-from ssa_fusion.core.stations import SENSORS, STATIONS, network_stations
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.types import Cause, Kind, Measurement
+from ssa_fusion.core.base.constants import C_KM_S
+from ssa_fusion.core.base.metrics import chi2_bounds, nees
+from ssa_fusion.core.base.types import Cause, Kind, Measurement
+from ssa_fusion.core.earth import frames
+from ssa_fusion.core.earth.stations import SENSORS, STATIONS, network_stations
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.filter.options import FilterOptions
+from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker
+from ssa_fusion.core.measure.measurement import RadecModel, RazelModel, StationModels
+from ssa_fusion.core.motion import dynamics
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
 T0 = 1735689600.0  # 2025-01-01T00:00:00Z

@@ -1,4 +1,4 @@
-"""Tests for ssa_fusion.core.surrogate: which epochs get a forecast, when, with what value and
+"""Tests for ssa_fusion.core.gaps.surrogate: which epochs get a forecast, when, with what value and
 covariance -- through the public behaviour only (Hankel-DMD internals may change).
 
 Data: the iss_j2_pos / iss_j2_rae scenarios shortened to 360 training samples (3 h at 30 s)
@@ -15,8 +15,8 @@ import math
 import numpy as np
 import pytest
 
-from ssa_fusion.core.surrogate import EciLift, Surrogate, SurrogateConfig
-from ssa_fusion.core.types import Kind, Measurement, Source
+from ssa_fusion.core.base.types import Kind, Measurement, Source
+from ssa_fusion.core.gaps.surrogate import EciLift, Surrogate, SurrogateConfig
 from ssa_fusion.sim import scenarios as sc
 from ssa_fusion.sim.simulate import Simulation, simulate
 

@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from ssa_fusion.core.surrogate import Surrogate, SurrogateConfig
-from ssa_fusion.core.types import Cause, Kind, Measurement
+from ssa_fusion.core.base.types import Cause, Kind, Measurement
+from ssa_fusion.core.gaps.surrogate import Surrogate, SurrogateConfig
 
 R = np.diag([1e-6, 1e-8, 1e-8])
 

@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ssa_fusion.core import catalog
-from ssa_fusion.core.config import EstimatorConfig, make_tracker
-from ssa_fusion.core.filter_options import FilterOptions
-from ssa_fusion.core.stations import NETWORKS, SENSORS
-from ssa_fusion.core.track_bank import TrackBank, station_bit
-from ssa_fusion.core.types import Cause, Kind, Measurement
+from ssa_fusion.core.base.types import Cause, Kind, Measurement
+from ssa_fusion.core.catalog.track_bank import TrackBank, station_bit
+from ssa_fusion.core.earth.stations import NETWORKS, SENSORS
+from ssa_fusion.core.filter.options import FilterOptions
+from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker
+from ssa_fusion.formats import element_sets as catalog
 from ssa_fusion.sim import survey
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"

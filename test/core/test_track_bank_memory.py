@@ -11,9 +11,9 @@ from dataclasses import asdict
 
 import numpy as np
 
-from ssa_fusion.core.stations import NETWORKS, SENSORS
-from ssa_fusion.core.track_bank import TrackBank
-from ssa_fusion.core.types import Cause
+from ssa_fusion.core.base.types import Cause
+from ssa_fusion.core.catalog.track_bank import TrackBank
+from ssa_fusion.core.earth.stations import NETWORKS, SENSORS
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 

@@ -21,9 +21,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ssa_fusion.core import catalog, frames, iod
-from ssa_fusion.core.stations import NETWORKS, SENSORS
-from ssa_fusion.core.track_bank import TrackBank
+from ssa_fusion.core.catalog.track_bank import TrackBank
+from ssa_fusion.core.earth import frames
+from ssa_fusion.core.earth.stations import NETWORKS, SENSORS
+from ssa_fusion.core.measure import iod
+from ssa_fusion.formats import element_sets as catalog
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.sim import survey

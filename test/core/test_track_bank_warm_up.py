@@ -17,9 +17,12 @@ SCRIPT = r"""
 import json, sys
 from dataclasses import asdict
 from numba.core.dispatcher import Dispatcher
-from ssa_fusion.core import batch_ekf, kepler, propagation, catalog
-from ssa_fusion.core.stations import NETWORKS, SENSORS
-from ssa_fusion.core.track_bank import TrackBank
+from ssa_fusion.core.catalog import batch_ekf
+from ssa_fusion.core.motion import kepler
+from ssa_fusion.core.motion import propagation
+from ssa_fusion.formats import element_sets as catalog
+from ssa_fusion.core.earth.stations import NETWORKS, SENSORS
+from ssa_fusion.core.catalog.track_bank import TrackBank
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.sim import survey

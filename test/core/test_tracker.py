@@ -1,4 +1,4 @@
-"""Tests for ssa_fusion.core.tracker: IOD + EKF with the input rules of DESIGN.md
+"""Tests for ssa_fusion.core.filter.tracker: IOD + EKF with the input rules of DESIGN.md
 ("Behaviour users rely on").
 
 Data come from the project's own scenarios (ISS, two-body + J2 truth, or two-body truth for
@@ -32,10 +32,10 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 from scipy.stats import chi2
 
-from ssa_fusion.core import iod
-from ssa_fusion.core.filter_options import FilterOptions
-from ssa_fusion.core.tracker import HISTORY_REAL, Outcome, Tracker
-from ssa_fusion.core.types import Kind, Measurement, Source, UpdateSource
+from ssa_fusion.core.base.types import Kind, Measurement, Source, UpdateSource
+from ssa_fusion.core.filter.options import FilterOptions
+from ssa_fusion.core.filter.tracker import HISTORY_REAL, Outcome, Tracker
+from ssa_fusion.core.measure import iod
 from ssa_fusion.sim import scenarios as sc
 from ssa_fusion.sim.simulate import Simulation, simulate
 
@@ -779,7 +779,7 @@ def test_herrick_gibbs_first_estimate_is_consistent():
 
 
 def test_prediction_epochs_are_the_multiples_of_the_period_after_the_last_update():
-    from ssa_fusion.core.tracker import prediction_epochs
+    from ssa_fusion.core.filter.tracker import prediction_epochs
 
     assert prediction_epochs(100.0, 250.0, 60.0, 10) == ([120.0, 180.0, 240.0], 0)
     assert prediction_epochs(120.0, 179.9, 60.0, 10) == ([], 0)  # 120 itself was updated

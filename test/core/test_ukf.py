@@ -1,4 +1,4 @@
-"""Tests for ssa_fusion.core.ukf: the unscented filter option.
+"""Tests for ssa_fusion.core.filter.ukf: the unscented filter option.
 
 References: FilterPy's ``UnscentedKalmanFilter`` with ``MerweScaledSigmaPoints`` (same
 alpha, beta, kappa; the same angle-aware measurement mean and residual given to it) on an
@@ -13,11 +13,11 @@ import pytest
 from filterpy.kalman import MerweScaledSigmaPoints
 from filterpy.kalman import UnscentedKalmanFilter as FpUKF
 
-from ssa_fusion.core import config
-from ssa_fusion.core.ekf import ExtendedKalmanFilter, process_noise
-from ssa_fusion.core.frames import wrap_angle
-from ssa_fusion.core.types import Measurement
-from ssa_fusion.core.ukf import UnscentedKalmanFilter, merwe_weights, sigma_points
+from ssa_fusion.core.base.types import Measurement
+from ssa_fusion.core.earth.frames import wrap_angle
+from ssa_fusion.core.filter.ekf import ExtendedKalmanFilter, process_noise
+from ssa_fusion.core.filter.ukf import UnscentedKalmanFilter, merwe_weights, sigma_points
+from ssa_fusion.core.gaps import estimator as config
 from ssa_fusion.sim import sky
 
 ANGLES = np.array([False, True, True])

@@ -1,4 +1,4 @@
-"""core.unlabelled: a catalog node's unlabelled rows through the Associator.
+"""core.catalog.unlabelled: a catalog node's unlabelled rows through the Associator.
 
 On four well-separated objects seen by the radars of iss_network for 6 h (SGP4 truth,
 radar noise): every detection has a fate, those kept come back relabelled with their
@@ -13,11 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core.association import DetectionFate, TrackEvent, TrackStatus
-from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.core.stations import SENSORS, Sensor, SensorType, network_stations
-from ssa_fusion.core.unlabelled import (
+from ssa_fusion.core.base.rows import MeasurementRows
+from ssa_fusion.core.catalog.association import DetectionFate, TrackEvent, TrackStatus
+from ssa_fusion.core.catalog.unlabelled import (
     UNLABELLED,
     RowAssociator,
     elevation_masks,
@@ -25,6 +23,8 @@ from ssa_fusion.core.unlabelled import (
     track_name,
     without_labels,
 )
+from ssa_fusion.core.earth.stations import SENSORS, Sensor, SensorType, network_stations
+from ssa_fusion.formats import element_sets as catalog_io
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.sim import sky, survey

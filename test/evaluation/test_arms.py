@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 from references import scipy_orbit as orbit
 
-from ssa_fusion.core import batch_gap, kepler
-from ssa_fusion.core.config import EstimatorConfig
-from ssa_fusion.core.filter_options import FilterOptions
-from ssa_fusion.core.types import Kind, Measurement, MotionModel, StateEstimate, UpdateSource
+from ssa_fusion.core.base.types import Kind, Measurement, MotionModel, StateEstimate, UpdateSource
+from ssa_fusion.core.filter.options import FilterOptions
+from ssa_fusion.core.gaps import batch_gap
+from ssa_fusion.core.gaps.estimator import EstimatorConfig
+from ssa_fusion.core.motion import kepler
 from ssa_fusion.evaluation import arms
 
 X0 = np.array([6778.0, 0.0, 0.0, 0.0, 4.8, 5.9])

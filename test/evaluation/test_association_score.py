@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from ssa_fusion.core.rows import MeasurementRows
+from ssa_fusion.core.base.rows import MeasurementRows
 from ssa_fusion.evaluation.association import detection_labels, pass_swaps, score_association
 
 

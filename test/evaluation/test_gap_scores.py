@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from ssa_fusion.core.types import Kind, Measurement, StateEstimate, UpdateSource
+from ssa_fusion.core.base.types import Kind, Measurement, StateEstimate, UpdateSource
 from ssa_fusion.evaluation.gap_scores import LONG_GAP_S, NEES3_95, score_gaps
 
 T = 60.0 * np.arange(0, 1500)  # 25 h of truth on a 60 s grid

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from ssa_fusion.core import kepler
-from ssa_fusion.core.ekf import process_noise
-from ssa_fusion.core.types import Kind, Measurement, StateEstimate, UpdateSource
+from ssa_fusion.core.base.types import Kind, Measurement, StateEstimate, UpdateSource
+from ssa_fusion.core.filter.ekf import process_noise
+from ssa_fusion.core.motion import kepler
 from ssa_fusion.evaluation import residuals as rs
 from ssa_fusion.sim import scenarios
 

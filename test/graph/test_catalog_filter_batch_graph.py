@@ -12,10 +12,10 @@ import numpy as np
 from ssa_fusion_msgs.msg import EstimateBatch, MeasurementBatch
 from test_faults import Diag, publisher
 
-from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.core.stations import network_stations
-from ssa_fusion.core.track_bank import TrackBank
+from ssa_fusion.core.base.rows import MeasurementRows
+from ssa_fusion.core.catalog.track_bank import TrackBank
+from ssa_fusion.core.earth.stations import network_stations
+from ssa_fusion.formats import element_sets as catalog_io
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.nodes.shards import shard_range

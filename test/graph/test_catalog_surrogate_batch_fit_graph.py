@@ -1,7 +1,7 @@
 """Graph test of the catalog_surrogate with ``gap_forecast`` batch_fit: the test process
 drives sim time on /clock and publishes one object's radar measurements (MeasurementBatch)
 and the filter's estimates of it (EstimateBatch) over a few passes; the forecasts the node
-publishes through the gaps equal the single-object filter's `core.batch_gap.
+publishes through the gaps equal the single-object filter's `core.gaps.batch_gap.
 BatchGapForecaster` fed the same measurements and estimates (through the same messages)."""
 
 from __future__ import annotations
@@ -12,12 +12,13 @@ from ssa_fusion_msgs.msg import EstimateBatch, MeasurementBatch
 from test_catalog_surrogate_graph import forecast_sink
 from test_faults import Diag, publisher
 
-from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core import types
-from ssa_fusion.core.gap_bank import last_passes_forecaster
-from ssa_fusion.core.measurement import StationModels
-from ssa_fusion.core.rows import EstimateRows, MeasurementRows
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.base import types
+from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
+from ssa_fusion.core.catalog.gap_bank import last_passes_forecaster
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.measure.measurement import StationModels
+from ssa_fusion.core.motion.element_sets import catalog_states
+from ssa_fusion.formats import element_sets as catalog_io
 from ssa_fusion.nodes.progress import CLOCK, PROGRESS_QOS, TAKEN_ESTIMATES, TOPIC_PROGRESS
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import DiagnosticStatus
@@ -41,7 +42,7 @@ def _stream():
     oid = obs.object_ids[0]
     names = [r.station.name for r in radars]
     meas, est = [], []
-    x = catalog_io.catalog_states(entry, obs.t).x[0] + np.r_[0.1, 0.0, 0.0, 0.0, 0.0, 0.0]
+    x = catalog_states(entry, obs.t).x[0] + np.r_[0.1, 0.0, 0.0, 0.0, 0.0, 0.0]
     for i in range(obs.t.size):
         rows = MeasurementRows(obs.t[i:i + 1], [oid], [names[obs.sensor[i]]], obs.z[i:i + 1],
                                radars[obs.sensor[i]].R[None],

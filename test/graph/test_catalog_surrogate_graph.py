@@ -4,7 +4,7 @@ bad ones (non-finite,
 negative or enormous covariances, an object beyond `max_objects`). Every bad
 estimate is refused by cause on /diagnostics (or never delivered: the content filter), the
 node lives on, and the forecast it publishes through the gap that follows equals the
-in-process `core.gap_forecaster.GapForecaster` fed the same estimates (through the same messages).
+in-process `core.gaps.forecaster.GapForecaster` fed the same estimates (through the same messages).
 """
 
 from __future__ import annotations
@@ -16,10 +16,11 @@ from rosgraph_msgs.msg import Clock
 from ssa_fusion_msgs.msg import EstimateBatch
 from test_faults import Diag, publisher
 
-from ssa_fusion.core import dynamics, types
-from ssa_fusion.core.gap_bank import CATALOG_RESIDUAL
-from ssa_fusion.core.gap_forecaster import GapForecaster
-from ssa_fusion.core.rows import EstimateRows
+from ssa_fusion.core.base import types
+from ssa_fusion.core.base.rows import EstimateRows
+from ssa_fusion.core.catalog.gap_bank import CATALOG_RESIDUAL
+from ssa_fusion.core.gaps.forecaster import GapForecaster
+from ssa_fusion.core.motion import dynamics
 from ssa_fusion.nodes.progress import PROGRESS_QOS, TAKEN_ESTIMATES, TOPIC_PROGRESS
 from ssa_fusion.nodes.shards import shard_problem, shard_range
 from ssa_fusion.ros import messages

@@ -37,13 +37,13 @@ from ros_graph import report_probe_matches
 from rosgraph_msgs.msg import Clock
 from ssa_fusion_msgs.msg import Measurement, StateEstimate
 
-from ssa_fusion.core import types
-from ssa_fusion.core.config import EstimatorConfig
-from ssa_fusion.core.config import motion as config_motion
-from ssa_fusion.core.filter_options import DEFAULT_GATE, FilterOptions
-from ssa_fusion.core.measurement import RazelModel
-from ssa_fusion.core.timescales import UNIX_EPOCH_JD
-from ssa_fusion.core.tracker import Tracker
+from ssa_fusion.core.base import types
+from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
+from ssa_fusion.core.filter.options import DEFAULT_GATE, FilterOptions
+from ssa_fusion.core.filter.tracker import Tracker
+from ssa_fusion.core.gaps.estimator import EstimatorConfig
+from ssa_fusion.core.gaps.estimator import motion as config_motion
+from ssa_fusion.core.measure.measurement import RazelModel
 from ssa_fusion.graphs import node_parameters
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.discovery import RANGE_VAR, DiscoveryRange

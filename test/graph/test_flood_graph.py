@@ -19,8 +19,8 @@ from ssa_fusion_msgs.msg import MeasurementBatch
 from test_catalog_filter_batch_graph import STATIONS, _pass_of_shard_0
 from test_faults import Diag, publisher
 
-from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.core.validation import MAX_ID_CHARS
+from ssa_fusion.core.base.rows import MeasurementRows
+from ssa_fusion.core.measure.validation import MAX_ID_CHARS
 from ssa_fusion.ros import messages
 
 FLOOD = 100_000

@@ -21,8 +21,8 @@ from sensor_msgs.msg import NavSatFix
 from ssa_fusion_msgs.msg import EstimateBatch, StateEstimate
 from visualization_msgs.msg import Marker, MarkerArray
 
-from ssa_fusion.core import types
-from ssa_fusion.core.rows import EstimateRows
+from ssa_fusion.core.base import types
+from ssa_fusion.core.base.rows import EstimateRows
 from ssa_fusion.ros import bagio, messages, visual_msgs
 from ssa_fusion.ros import foxglove_scene as scene
 from ssa_fusion.ros.topics import CATALOG_QOS, DATA_QOS, TOPIC_ESTIMATE_BATCH

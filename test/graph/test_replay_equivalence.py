@@ -3,7 +3,7 @@
 A graph of node processes over DDS (sensor_sim, surrogate, filter, recorder) runs a short
 default scenario with a gap three `predict_period`s long, the surrogate set to forecast
 nothing (`max_horizon` 1 s): through the gap the filter publishes its own predictions, as
-`core.gap_publisher.GapPublisher` decides. `ssa-fusion replay --offline` of the recorded bag
+`core.gaps.publisher.GapPublisher` decides. `ssa-fusion replay --offline` of the recorded bag
 must publish the same estimates: every update and every prediction, in the same order, with
 the same state and covariance.
 """
@@ -15,7 +15,7 @@ import pytest
 from ssa_fusion_msgs.msg import StateEstimate
 
 from ssa_fusion.apps import cli
-from ssa_fusion.core import types
+from ssa_fusion.core.base import types
 from ssa_fusion.graphs import node_parameters
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.sim import scenarios

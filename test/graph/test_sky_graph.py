@@ -13,9 +13,9 @@ from ros_graph import run_object_graph
 from ssa_fusion_msgs.msg import StateEstimate
 
 from ssa_fusion.apps import evaluate
-from ssa_fusion.core import frames
-from ssa_fusion.core.stations import SENSORS
-from ssa_fusion.core.types import Kind, UpdateSource
+from ssa_fusion.core.base.types import Kind, UpdateSource
+from ssa_fusion.core.earth import frames
+from ssa_fusion.core.earth.stations import SENSORS
 from ssa_fusion.evaluation.passes import passes
 from ssa_fusion.graphs import node_parameters
 from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_MEASUREMENT, TOPIC_WITHHELD

@@ -6,7 +6,7 @@ confirmed track is of the track's object, every detection is accounted for on /d
 nothing is lost between simulator, bag and filter, and the bag holds what the evaluation
 needs (the detections without ids, their truth apart, the associated detections, the
 tracks' estimates), readable. The estimates equal those of the recorded detections
-associated in this process (`core.unlabelled.RowAssociator`): the live graph gives what an
+associated in this process (`core.catalog.unlabelled.RowAssociator`): the live graph gives what an
 offline run of its bag gives.
 
 Also: a catalog_filter of a graph of two shards refuses unlabelled detections with a reason
@@ -23,9 +23,9 @@ from test_catalog_graph import _rows, catalog_args
 from test_faults import Diag, publisher
 
 from ssa_fusion.apps import live_catalog
-from ssa_fusion.core.rows import MeasurementRows
-from ssa_fusion.core.stations import network_stations
-from ssa_fusion.core.unlabelled import RowAssociator, elevation_masks, without_labels
+from ssa_fusion.core.base.rows import MeasurementRows
+from ssa_fusion.core.catalog.unlabelled import RowAssociator, elevation_masks, without_labels
+from ssa_fusion.core.earth.stations import network_stations
 from ssa_fusion.nodes import settings
 from ssa_fusion.nodes.defaults import CATALOG_FILTER
 from ssa_fusion.ros import messages

@@ -17,9 +17,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from ssa_fusion.core.filter_options import DEFAULT_GATE
-from ssa_fusion.core.surrogate import LIVE_SURROGATE
-from ssa_fusion.core.validation import MAX_CLOCK_LEAD_S
+from ssa_fusion.core.filter.options import DEFAULT_GATE
+from ssa_fusion.core.gaps.surrogate import LIVE_SURROGATE
+from ssa_fusion.core.measure.validation import MAX_CLOCK_LEAD_S
 from ssa_fusion.graphs import node_parameters
 from ssa_fusion.nodes import defaults
 from ssa_fusion.ros.processes import fresh_domain_id

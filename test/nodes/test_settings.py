@@ -13,8 +13,8 @@ from hypothesis import HealthCheck, given
 from hypothesis import settings as settings_
 from hypothesis import strategies as st
 
-from ssa_fusion.core import config
-from ssa_fusion.core.quoting import MAX_MESSAGE
+from ssa_fusion.core.base.quoting import MAX_MESSAGE
+from ssa_fusion.core.gaps import estimator as config
 from ssa_fusion.nodes import parameters, settings
 from ssa_fusion.sim import scenarios
 
@@ -88,8 +88,8 @@ def test_recorded_settings_merge_both_nodes_last_message():
 def test_a_filter_of_ra_dec_alone_gets_no_eci_lift():
     """`ros2 run ssa_fusion filter -p kind:=ra_dec` (no surrogate parameters): the surrogate's
     default lift (eci, for range/az/el) must not apply to angles-only measurements."""
-    from ssa_fusion.core.config import Lift
-    from ssa_fusion.core.types import Kind
+    from ssa_fusion.core.base.types import Kind
+    from ssa_fusion.core.gaps.estimator import Lift
 
     c = settings.estimator_from({"kind": "ra_dec", "station": "socorro"}, {})
     assert c.kind == Kind.RA_DEC and c.lift == Lift.NONE

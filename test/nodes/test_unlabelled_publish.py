@@ -7,9 +7,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ssa_fusion.core.association import DetectionFate
-from ssa_fusion.core.rows import EstimateRows, MeasurementRows
-from ssa_fusion.core.unlabelled import RowsOutcome
+from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
+from ssa_fusion.core.catalog.association import DetectionFate
+from ssa_fusion.core.catalog.unlabelled import RowsOutcome
 from ssa_fusion.evaluation.association import detection_labels
 from ssa_fusion.nodes.diagnostics import Count
 from ssa_fusion.nodes.unlabelled import UnlabelledRows

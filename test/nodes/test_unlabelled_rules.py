@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from ssa_fusion.apps import live_catalog
-from ssa_fusion.core.association import DetectionFate
+from ssa_fusion.core.catalog.association import DetectionFate
 from ssa_fusion.nodes.sensor_sim import PARAMETERS as SENSOR_SIM
 from ssa_fusion.nodes.unlabelled import fate_key, sharded_problem
 

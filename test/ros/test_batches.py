@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from ssa_fusion.core import types
-from ssa_fusion.core.rows import EstimateRows, MeasurementRows
+from ssa_fusion.core.base import types
+from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
 from ssa_fusion.ros import bagio, messages
 
 EPOCH = st.floats(0.0, 2.1e9)

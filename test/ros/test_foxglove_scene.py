@@ -1,4 +1,4 @@
-"""ssa_fusion.ros.foxglove_scene against analytic results and core.frames: covariance
+"""ssa_fusion.ros.foxglove_scene against analytic results and core.earth.frames: covariance
 ellipsoids (diagonal, rotated, degenerate), quaternions, GCRF -> geodetic (against astropy),
 range/az/el -> GCRF, and the foxglove messages it builds."""
 
@@ -15,8 +15,9 @@ from scipy.spatial.transform import Rotation
 from ssa_fusion_msgs.msg import StateEstimate as StateEstimateMsg
 from visualization_msgs.msg import Marker
 
-from ssa_fusion.core.constants import R_EARTH, WGS84_F
-from ssa_fusion.core.frames import (
+from ssa_fusion.core.base.constants import R_EARTH, WGS84_F
+from ssa_fusion.core.base.types import Kind
+from ssa_fusion.core.earth.frames import (
     COLUMBUS,
     ERA_RATE,
     Frame,
@@ -27,8 +28,7 @@ from ssa_fusion.core.frames import (
     site_itrs,
     wrap_pi,
 )
-from ssa_fusion.core.stations import network_stations
-from ssa_fusion.core.types import Kind
+from ssa_fusion.core.earth.stations import network_stations
 from ssa_fusion.ros import foxglove_scene as fs
 from ssa_fusion.ros import scene_geometry as geo
 from ssa_fusion.ros import visual_msgs as vm
@@ -111,7 +111,7 @@ def test_geodetic_of_the_pole():
                          [(39.9612, -82.9988, 0.275), (-33.9, 151.2, 420.0), (0.0, 180.0, 0.0),
                           (85.0, 10.0, 35786.0), (-89.9, -45.0, 1.0), (51.6, 0.0, 400.0)])
 def test_geodetic_inverts_core_frames(lat_deg, lon_deg, alt_km):
-    """core.frames builds the GCRF point of a geodetic site (site_itrs, itrs_to_gcrs);
+    """core.earth.frames builds the GCRF point of a geodetic site (site_itrs, itrs_to_gcrs);
     gcrs_to_geodetic gets the site back at the same epoch."""
     lat, lon = math.radians(lat_deg), math.radians(lon_deg)
     r_gcrs = itrs_to_gcrs(site_itrs(lat, lon, alt_km), T)

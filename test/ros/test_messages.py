@@ -4,7 +4,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ssa_fusion.core import types
+from ssa_fusion.core.base import types
 from ssa_fusion.ros import bagio, messages
 
 

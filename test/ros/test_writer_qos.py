@@ -26,8 +26,8 @@ SCRIPT = textwrap.dedent("""
     import numpy as np
     import rclpy
     from rclpy.node import Node
-    from ssa_fusion.core.rows import EstimateRows
-    from ssa_fusion.core.types import UpdateSource
+    from ssa_fusion.core.base.rows import EstimateRows
+    from ssa_fusion.core.base.types import UpdateSource
     from ssa_fusion.nodes.shards import content_filter, shard_range
     from ssa_fusion.ros import messages
     from ssa_fusion.ros.interfaces import EstimateBatch

@@ -13,9 +13,9 @@ import math
 import numpy as np
 import pytest
 
-from ssa_fusion.core import frames, sun
-from ssa_fusion.core.stations import SENSORS
-from ssa_fusion.core.types import Kind
+from ssa_fusion.core.base.types import Kind
+from ssa_fusion.core.earth import frames, sun
+from ssa_fusion.core.earth.stations import SENSORS
 from ssa_fusion.evaluation.passes import passes
 from ssa_fusion.sim import sky
 from ssa_fusion.studies.sky_runs import evaluate_sky
@@ -248,7 +248,7 @@ def test_an_evaluation_case_turns_the_orbit_but_keeps_its_shape():
     """`with_geometry` (the real-sky study's cases, `sky_study.case_geometry`): the node
     moves by the shift asked, the phase along the orbit by its own; inclination, energy and
     angular momentum's size stay (checked on the state, not on the rotation code)."""
-    from ssa_fusion.core.constants import MU_EARTH
+    from ssa_fusion.core.base.constants import MU_EARTH
     from ssa_fusion.studies.sky_study import RAAN_SPREAD_DEG, case_geometry
 
     def elements(x: np.ndarray) -> tuple[float, float, float, float]:
@@ -313,7 +313,7 @@ def test_an_optical_site_sees_only_what_is_brighter_than_its_limiting_magnitude(
     measures without one, and every epoch it keeps has the object at most that faint (the
     magnitude recomputed from the truth); `iss_network_april`'s orbit over two days, an
     object of standard magnitude 4 (the ISS, -1.3, is brighter than 0 at every pass)."""
-    from ssa_fusion.core import visibility
+    from ssa_fusion.core.earth import visibility
 
     path = tmp_path / "scopes.yaml"
     path.write_text("sites:" + SCOPE_AT.format(id="any") + SCOPE_AT.format(id="faint")
@@ -334,7 +334,7 @@ def test_an_optical_site_sees_only_what_is_brighter_than_its_limiting_magnitude(
 def test_a_site_that_waits_for_a_darker_sky_sees_less(tmp_path):
     """`dark_below_deg`: -18 (astronomical night) keeps a subset of what -12 (nautical
     twilight's end, the default) sees, each kept epoch with the Sun below -18 deg there."""
-    from ssa_fusion.core import sun
+    from ssa_fusion.core.earth import sun
 
     path = tmp_path / "scopes.yaml"
     path.write_text("sites:" + SCOPE_AT.format(id="nautical") + SCOPE_AT.format(id="night")

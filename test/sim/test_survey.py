@@ -10,9 +10,10 @@ import pytest
 from sgp4.api import jday
 from sgp4.exporter import export_tle
 
-from ssa_fusion.core import catalog
-from ssa_fusion.core.frames import razel_gcrs, teme_to_gcrs
-from ssa_fusion.core.stations import NETWORKS, SENSORS
+from ssa_fusion.core.earth.frames import razel_gcrs, teme_to_gcrs
+from ssa_fusion.core.earth.stations import NETWORKS, SENSORS
+from ssa_fusion.core.motion.element_sets import catalog_states
+from ssa_fusion.formats import element_sets as catalog
 from ssa_fusion.sim import survey
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"
@@ -89,8 +90,8 @@ def test_synthetic_catalog_keeps_the_regime_and_survives_a_tle_round_trip(cat):
     text = "\n".join(f"{e.name}\n" + "\n".join(export_tle(e.satrec)) for e in cat)
     back = catalog.parse_tle(text)
     t = BASE.epoch_unix + np.array([0.0, 3600.0])
-    x0 = catalog.catalog_states(cat, t).x
-    x1 = catalog.catalog_states(back, t).x
+    x0 = catalog_states(cat, t).x
+    x1 = catalog_states(back, t).x
     assert [e.object_id for e in back] == [e.object_id for e in cat]
     assert np.abs(x1 - x0)[..., :3].max() < 0.05  # km: TLE columns round the elements
 

@@ -3,8 +3,9 @@ against the SGP4 truth, by fit, on forecasts made from the truth with known erro
 
 import numpy as np
 
-from ssa_fusion.core import catalog as catalog_io
-from ssa_fusion.core.gap_bank import GapForecast
+from ssa_fusion.core.catalog.gap_bank import GapForecast
+from ssa_fusion.core.motion.element_sets import catalog_states
+from ssa_fusion.formats import element_sets as catalog_io
 from ssa_fusion.studies.catalog_gaps import SAMPLE, forecast_nees
 
 
@@ -12,7 +13,7 @@ def test_nees_of_known_errors_split_by_fit():
     entry = catalog_io.read_catalog(SAMPLE)[0]
     t0 = float(entry.satrec.jdsatepoch - 2440587.5 + entry.satrec.jdsatepochF) * 86400.0
     t = t0 + 600.0 * np.arange(1, 5)
-    truth = catalog_io.catalog_states([entry], t).x[0]
+    truth = catalog_states([entry], t).x[0]
     P = np.diag([0.01] * 3 + [1e-6] * 3)  # 100 m sigma
     # position errors of 0.1, 0.2, 0.3 and 0.5 km along x: NEES 1, 4, 9, 25
     errs = [0.1, 0.2, 0.3, 0.5]

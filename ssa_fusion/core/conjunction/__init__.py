@@ -1,0 +1,4 @@
+"""Close approaches: screening pairs, times of closest approach, collision probability.
+
+Imports the rooms below it (`base` to `catalog`).
+"""
