@@ -56,12 +56,13 @@ from ssa_fusion.core.earth.stations import (
     Sensor,
     SensorType,
 )
+from ssa_fusion.core.measure.validation import MAX_ID_CHARS
 
 RESERVED_IDS = frozenset({*STATIONS, *SENSORS, *NETWORKS, "gcrf"})
 """Ids a site may not take: the built-in stations, sensor presets, networks, and ``gcrf``
 (the frame_id of positions)."""
 
-ID_PATTERN = re.compile(r"[a-z0-9][a-z0-9_-]*")
+ID_PATTERN = re.compile(rf"[a-z0-9][a-z0-9_-]{{0,{MAX_ID_CHARS - 1}}}")
 """What a site id looks like: a TDM participant name in lowercase (participants are matched
 case-insensitively), without commas (which separate the ids of a network)."""
 
@@ -91,11 +92,29 @@ class SiteFileError(ValueError):
     """
 
 
+DECIMAL_INT = re.compile(r"[-+]?(0|[1-9][0-9_]*)")
+"""An integer as a sites file may write it: decimal, no leading zero."""
+
+
 def _loader() -> type:
-    """Return a `yaml.SafeLoader` that refuses a mapping giving a key twice."""
+    """Return a `yaml.SafeLoader` that refuses a key given twice and ambiguous integers.
+
+    YAML 1.1, which PyYAML speaks, reads ``0110`` as octal 72, ``1:30`` as 90 (base 60),
+    ``0x1f`` and ``0b101`` as hexadecimal and binary: a height or a cadence written so would
+    be taken silently as another number. Only decimal integers are taken; the others raise.
+    """
     import yaml
 
     class Loader(yaml.SafeLoader):
+        def construct_yaml_int(self, node: Any) -> int:  # noqa: ANN401
+            text = str(self.construct_scalar(node))
+            if not DECIMAL_INT.fullmatch(text):
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"integer {quote(text)} is not decimal (YAML 1.1 reads a "
+                    "leading 0 as octal, 0x as hexadecimal, a colon as base 60): write it "
+                    "in decimal, without a leading zero", node.start_mark)
+            return int(text.replace("_", ""))
+
         def construct_mapping(self, node: Any, deep: bool = False) -> Any:  # noqa: ANN401
             seen: set[object] = set()
             for key_node, _ in node.value:
@@ -111,6 +130,7 @@ def _loader() -> type:
                 seen.add(key)
             return super().construct_mapping(node, deep=deep)
 
+    Loader.add_constructor("tag:yaml.org,2002:int", Loader.construct_yaml_int)
     return Loader
 
 
@@ -164,8 +184,8 @@ class _Site:
                 self.fail(key, "missing")
         site_id = raw["id"]
         if not isinstance(site_id, str) or not ID_PATTERN.fullmatch(site_id):
-            self.fail("id", f"must be lowercase letters, digits, '_' or '-' (starting with a "
-                            f"letter or digit), got {quote(site_id)}")
+            self.fail("id", f"must be at most {MAX_ID_CHARS} lowercase letters, digits, '_' or "
+                            f"'-' (starting with a letter or digit), got {quote(site_id)}")
         if site_id in RESERVED_IDS:
             self.fail("id", "is a built-in station, sensor or network id "
                             f"({', '.join(sorted(RESERVED_IDS))}); choose another")

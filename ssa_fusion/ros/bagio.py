@@ -35,6 +35,8 @@ from rosbags.typesys.store import Typestore
 
 from ssa_fusion.core.base.types import Cause, Kind
 from ssa_fusion.core.earth.timescales import EPOCH_MAX
+from ssa_fusion.ros.mcap_salvage import MAGIC as MCAP_MAGIC
+from ssa_fusion.ros.mcap_salvage import salvage
 
 if TYPE_CHECKING:
     from rclpy.duration import Duration
@@ -354,7 +356,6 @@ def _read_mcap_file(path: Path, wanted: set[str] | None,
         raise BagError(f"{path}: cannot read MCAP file: {exc}") from exc
 
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
 def _check_mcap_magic(path: Path) -> None:
@@ -383,42 +384,25 @@ def _recover_mcap_file(path: Path, wanted: set[str] | None,
                        undecodable: Counter[str] | None = None) -> Iterator[BagMessage]:
     """Return the messages of an MCAP file its writer never closed, in log-time order.
 
-    No summary, no footer, maybe a torn last record: read record by record up to the last
-    complete one. Everything the recorder flushed (a whole chunk per `flush_period`) is
-    there.
+    No summary, no footer, maybe a torn last record or a damaged part: every intact record
+    is read (`mcap_salvage.salvage`). Everything the recorder flushed (a whole chunk per
+    `flush_period`) is there.
     """
-    import struct
-
-    from mcap.exceptions import McapError
-    from mcap.records import Channel, Schema
-    from mcap.records import Message as McapRecord
-    from mcap.stream_reader import StreamReader
-
     store = typestore()
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
+    found = salvage(path)
     out: list[BagMessage] = []
-    with path.open("rb") as f:
-        try:
-            for record in StreamReader(f, validate_crcs=True).records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, McapRecord):
-                    channel = channels.get(record.channel_id)
-                    if channel is None or (wanted is not None and channel.topic not in wanted):
-                        continue
-                    schema = schemas.get(channel.schema_id)
-                    if schema is None or schema.name not in store.fielddefs:
-                        name = schema.name if schema else "(no schema)"
-                        raise BagError(f"{path}: topic {channel.topic} has unknown type {name}")
-                    msg = _decode(store.deserialize_cdr, record.data, schema.name,
-                                  channel.topic, undecodable)
-                    if msg is not None:
-                        out.append(BagMessage(channel.topic, schema.name, record.log_time, msg))
-        except (McapError, EOFError, ValueError, struct.error):
-            pass  # the torn end of an unfinished file: keep what came before
+    for record in found.messages:
+        channel = found.channels.get(record.channel_id)
+        if channel is None or (wanted is not None and channel.topic not in wanted):
+            continue
+        schema = found.schemas.get(channel.schema_id)
+        if schema is None or schema.name not in store.fielddefs:
+            name = schema.name if schema else "(no schema)"
+            raise BagError(f"{path}: topic {channel.topic} has unknown type {name}")
+        msg = _decode(store.deserialize_cdr, record.data, schema.name, channel.topic,
+                      undecodable)
+        if msg is not None:
+            out.append(BagMessage(channel.topic, schema.name, record.log_time, msg))
     out.sort(key=lambda m: m.t_ns)
     yield from out
 

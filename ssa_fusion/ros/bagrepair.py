@@ -5,8 +5,11 @@ torn last record, so plain readers (``rosbags.rosbag2.Reader``, ``ros2 bag``) re
 `repair` reads every complete record of its ``.mcap`` file(s) (`bagio.read_bag` recovers
 the same messages) and writes a new, closed rosbag2 v9 MCAP bag: the same topics, message
 types, message definitions, QoS profiles and CDR bytes, each message at its original log
-time (ns). Only the last, incomplete chunk is lost. The bytes are copied, never decoded, so
-any ROS 2 message type is kept, not only those this project knows.
+time (ns). A damaged file (a flipped byte, a block of garbage in the middle) loses only the
+damaged chunk (`mcap_salvage`: every intact chunk before and after it is kept, and the
+messages of the damaged chunk's readable start); the result says which byte and time ranges
+were lost. The bytes are copied, never decoded, so any ROS 2 message type is kept, not only
+those this project knows.
 """
 
 from __future__ import annotations
@@ -14,7 +17,6 @@ from __future__ import annotations
 import contextlib
 import re
 import shutil
-import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -22,7 +24,9 @@ from typing import TYPE_CHECKING, Any
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 
-from ssa_fusion.ros.bagio import MCAP_MAGIC, ROS_DISTRO, BagError, set_ros_distro, typestore
+from ssa_fusion.core.earth.timescales import iso
+from ssa_fusion.ros.bagio import ROS_DISTRO, BagError, set_ros_distro, typestore
+from ssa_fusion.ros.mcap_salvage import LostRange, salvage
 
 if TYPE_CHECKING:
     from mcap.records import Channel, Schema
@@ -48,8 +52,10 @@ class _Scan:
     topics: dict[tuple[str, str], _Topic] = field(default_factory=dict)
     messages: list[tuple[int, int, tuple[str, str], bytes]] = field(default_factory=list)
     """(log time ns, order read, (topic, type), CDR bytes)."""
-    discarded_bytes: int = 0
-    """Bytes after the last complete record (the torn end), over all files."""
+    lost: list[tuple[Path, LostRange]] = field(default_factory=list)
+    """The damaged parts of each file (a torn end included)."""
+    orphans: int = 0
+    """Messages on a channel whose definition was lost with a damaged part."""
     complete: bool = True
     """Every file ended with its footer and magic (its writer closed it)."""
 
@@ -64,20 +70,44 @@ class RepairResult:
     """Messages written per topic."""
     sources: list[Path]
     """The ``.mcap`` files read."""
-    discarded_bytes: int
-    """Bytes at the end of the input that held no complete record (the lost tail)."""
+    lost: list[tuple[Path, LostRange]]
+    """The damaged parts of the input, by file (a torn end included)."""
+    orphans: int
+    """Messages not kept: their channel's definition was lost with a damaged part."""
     complete: bool
-    """The input had been closed properly (nothing needed repair; it was copied)."""
+    """The input had been closed properly and nothing in it was damaged."""
+
+    @property
+    def discarded_bytes(self) -> int:
+        """Bytes of the input in damaged parts."""
+        return sum(r.end - r.start for _, r in self.lost)
 
     def line(self, bag: Path) -> str:
-        """One line for the user: where, and how many messages per topic."""
+        """One line for the user: where, how many messages per topic, what was lost."""
         per_topic = ", ".join(f"{t} {n}" for t, n in sorted(self.counts.items()))
         total = sum(self.counts.values())
-        tail = ("the input was complete already" if self.complete else
-                f"dropped an incomplete tail of {self.discarded_bytes} bytes"
-                if self.discarded_bytes else "no torn record at the end")
         return (f"repaired {bag} -> {self.out}: recovered {total} messages ({per_topic}); "
-                f"{tail}")
+                f"{self.losses()}")
+
+    def losses(self) -> str:
+        """Return what was lost, in words: nothing, a torn end, or damaged parts and times."""
+        if self.complete and not self.lost:
+            return "the input was complete already"
+        if not self.lost:
+            return "no torn record at the end"
+        parts = [_lost_words(r) for _, r in self.lost]
+        orphans = (f"; {self.orphans} messages dropped with their channel's definition"
+                   if self.orphans else "")
+        return f"lost {self.discarded_bytes} bytes in {len(parts)} part(s): " + "; ".join(
+            parts) + orphans
+
+
+def _lost_words(r: LostRange) -> str:
+    """One damaged part in words: bytes, why, and the messages' time range when known."""
+    when = (f", messages {iso(r.t_start_ns * 1e-9)} .. {iso(r.t_end_ns * 1e-9)}"
+            if r.t_start_ns is not None and r.t_end_ns is not None else "")
+    kept = f", {r.messages_kept} of its messages kept" if r.messages_kept else ""
+    return f"bytes {r.start}..{r.end} ({r.why}{when}{kept})"
 
 
 def repaired_path(bag: Path) -> Path:
@@ -124,57 +154,30 @@ def repair(bag: Path | str, out: Path | str | None = None) -> RepairResult:
         raise BagError(f"{bag}: no complete message to recover")
     scan.messages.sort(key=lambda m: (m[0], m[1]))
     counts = _write(target, scan, _ros_distro(bag))
-    return RepairResult(target, counts, files, scan.discarded_bytes, scan.complete)
+    return RepairResult(target, counts, files, scan.lost, scan.orphans,
+                        scan.complete and not scan.lost)
 
 
 def _scan_file(path: Path, scan: _Scan) -> None:
-    """Add the schemas, channels and messages of the complete records of `path` to `scan`."""
-    from mcap.exceptions import McapError
-    from mcap.records import Channel, Footer, Message, Schema
-    from mcap.stream_reader import StreamReader
-
+    """Add the schemas, channels and messages of the intact records of `path` to `scan`."""
     try:
-        f = path.open("rb")
+        found = salvage(path)
     except OSError as exc:
         raise BagError(f"{path}: cannot read: {exc.strerror or exc}") from exc
-    with f:
-        try:
-            head = f.read(len(MCAP_MAGIC))
-        except OSError as exc:
-            raise BagError(f"{path}: cannot read: {exc.strerror or exc}") from exc
-        if head != MCAP_MAGIC:
-            raise BagError(f"{path}: not an MCAP file (no MCAP magic at its start)")
-        f.seek(0)
-        size = path.stat().st_size
-        schemas: dict[int, Schema] = {}
-        channels: dict[int, _Topic | None] = {}
-        good_end = len(MCAP_MAGIC)
-        footer = False
-        try:
-            for record in StreamReader(f, validate_crcs=True).records:
-                if isinstance(record, Schema):
-                    schemas[record.id] = record
-                elif isinstance(record, Channel):
-                    channels[record.id] = _topic(path, record, schemas.get(record.schema_id))
-                elif isinstance(record, Message):
-                    conn = channels.get(record.channel_id)
-                    if conn is None:
-                        continue  # a channel without schema or type: nothing to write it as
-                    key = (conn.topic, conn.msgtype)
-                    scan.topics.setdefault(key, conn)
-                    scan.messages.append((record.log_time, len(scan.messages), key,
-                                          bytes(record.data)))
-                elif isinstance(record, Footer):
-                    footer = True
-                good_end = f.tell()
-        except (McapError, EOFError, ValueError, struct.error):
-            pass  # the torn end of an unfinished file: keep what came before
-        except OSError as exc:
-            raise BagError(f"{path}: cannot read: {exc.strerror or exc}") from exc
-    if footer:  # after the footer comes the closing magic only
-        good_end = size
-    scan.discarded_bytes += max(0, size - good_end)
-    scan.complete = scan.complete and footer
+    except ValueError as exc:
+        raise BagError(str(exc)) from exc
+    conns = {cid: _topic(path, ch, found.schemas.get(ch.schema_id))
+             for cid, ch in found.channels.items()}
+    for record in found.messages:
+        conn = conns.get(record.channel_id)
+        if conn is None:
+            scan.orphans += 1  # its channel (or schema) was lost: nothing to write it as
+            continue
+        key = (conn.topic, conn.msgtype)
+        scan.topics.setdefault(key, conn)
+        scan.messages.append((record.log_time, len(scan.messages), key, bytes(record.data)))
+    scan.lost.extend((path, r) for r in found.lost)
+    scan.complete = scan.complete and found.footer
 
 
 def _topic(path: Path, channel: Channel, schema: Schema | None) -> _Topic | None:

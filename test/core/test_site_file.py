@@ -149,8 +149,8 @@ BAD = [
      "site 'my_radar': mask_by_azimuth[1]: azimuth 10 deg given twice"),
     (edited(RADAR, id="tira"), "site 'tira': id: is a built-in station, sensor or network id"),
     (edited(RADAR, id="radar_network"), "site 'radar_network': id: is a built-in station"),
-    (edited(RADAR, id="My Radar"), "site 'My Radar': id: must be lowercase letters"),
-    (edited(RADAR, id="a,b"), "site 'a,b': id: must be lowercase letters"),
+    (edited(RADAR, id="My Radar"), "site 'My Radar': id: must be at most 128 lowercase letters"),
+    (edited(RADAR, id="a,b"), "site 'a,b': id: must be at most 128 lowercase letters"),
 ]
 
 
@@ -229,6 +229,15 @@ def radar(mask: str = "[[0, 1]]") -> str:
     ("dict_key.yaml", "? {a: 1}\n: 0\n", "not valid YAML: found unhashable key"),
     # PyYAML's float constructor indexes the empty string (IndexError)
     ("empty_float.yaml", "!!float", "not a sites file PyYAML can load: IndexError"),
+    # YAML 1.1 integers that are not what they look like: 0110 was taken as 72 m
+    ("octal.yaml", radar().replace("height_m: 1", "height_m: 0110"),
+     "integer '0110' is not decimal"),
+    ("base60.yaml", radar().replace("cadence_s: 1", "cadence_s: 1:30"),
+     "integer '1:30' is not decimal"),
+    ("hex.yaml", radar().replace("height_m: 1", "height_m: 0x1f"), "integer '0x1f'"),
+    # a 100 kB site id was taken
+    ("long_id.yaml", radar().replace("id: x", "id: " + "x" * 100_000),
+     "id: must be at most 128 lowercase"),
 ])
 def test_a_hostile_sites_file_is_refused_in_one_bounded_line(tmp_path, name, text, says):
     t0 = time.perf_counter()
