@@ -45,6 +45,7 @@ T. S. Kelso, "Revisiting Spacetrack Report #3", AIAA 2006-6753 (2006).
 
 from __future__ import annotations
 
+import calendar
 import codecs
 import csv
 import io
@@ -52,6 +53,7 @@ import locale
 import math
 import os
 import re
+import unicodedata
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from types import TracebackType
@@ -76,7 +78,7 @@ MAX_MEAN_MOTION_REV_DAY = 18.0
 """The largest mean motion taken, rev/day: 17 rev/day is an orbit at the Earth's surface."""
 MAX_BSTAR = 1.0
 """The largest |B*| taken, 1/Earth radii (decaying debris reach ~0.1; 1 is implausible)."""
-OMM_INTEGER_RANGES = {"NORAD_CAT_ID": (0, 339999), "ELEMENT_SET_NO": (0, 9999),
+OMM_INTEGER_RANGES = {"NORAD_CAT_ID": (1, 339999), "ELEMENT_SET_NO": (0, 9999),
                       "REV_AT_EPOCH": (0, 99999), "EPHEMERIS_TYPE": (0, 9)}
 """Integer OMM fields and the ranges a TLE can carry (NORAD numbers: Alpha-5)."""
 _ALPHA5 = "ABCDEFGHJKLMNPQRSTUVWXYZ"
@@ -87,6 +89,9 @@ CHUNK_BYTES = 1 << 18
 """Bytes of a catalog file read at a time."""
 _LINE_BREAKS = frozenset("\n\r\v\f\x1c\x1d\x1e\x85\u2028\u2029")
 """The characters `str.splitlines` ends a line at."""
+
+NESTED = "<nested XML elements>"
+"""What an OMM/XML field holding elements instead of text reads as (refused by identity)."""
 
 Progress = Callable[[int, int, int], None]
 """``progress(bytes read, file size, objects so far)`` of `read_catalog`."""
@@ -286,10 +291,17 @@ def _tle_entries(lines: Iterator[tuple[int, str]], source: str) -> Iterator[Cata
 
 
 def _check_name(name: str, where: str) -> None:
-    """Refuse an object name longer than `MAX_NAME` characters (ValueError naming `where`)."""
+    """Refuse an object name longer than `MAX_NAME` characters or with control characters.
+
+    NUL, escape (terminal control sequences) and the other C0/C1 controls would be stored in
+    bags and echoed raw to a user's terminal (ValueError naming `where`).
+    """
     if len(name) > MAX_NAME:
         raise ValueError(f"{where}: an object name of {len(name)} characters (at most "
                          f"{MAX_NAME}): {_quote(name)}")
+    if any(unicodedata.category(c) == "Cc" for c in name):
+        raise ValueError(f"{where}: an object name with control characters (NUL, escape, "
+                         f"...): {_quote(name)}")
 
 
 def _numbered(lines: Iterable[str]) -> Iterator[tuple[int, str]]:
@@ -379,12 +391,13 @@ def _tle_entry(line1: str, line2: str, name: str, where: str, where2: str) -> Ca
 def _check_epoch_day(line1: str, where: str) -> None:
     """ValueError unless line 1's epoch (columns 19-32, YYDDD.DDDDDDDD) has a day in 1-366.
 
-    SGP4 reads day 999 or 000 of a year as days past or before it without a word. Day 366
-    of a common year (the next 1 January) is taken, as SGP4 takes it.
+    SGP4 reads day 999 or 000 of a year as days past or before it without a word, and day
+    366 of a common year as the next 1 January: each is refused (days 1-365 of a common
+    year, 1-366 of a leap year).
     """
     yy = int(line1[18:20])
     year = 1900 + yy if yy >= 57 else 2000 + yy  # the TLE convention
-    days = 366
+    days = 366 if calendar.isleap(year) else 365
     try:
         day = float(line1[20:32])
     except ValueError:
@@ -403,6 +416,9 @@ def _check_satrec(sat: Satrec, where: str) -> None:
     if sat.error:
         raise ValueError(f"{where}: SGP4 refuses the element set: "
                          f"{SGP4_ERRORS.get(sat.error, f'error {sat.error}')}")
+    if sat.satnum < 1:
+        raise ValueError(f"{where}: catalogue number 0 is no object's (NORAD catalogue "
+                         f"numbers start at 1)")
     fields = {"inclination": sat.inclo, "right ascension of the node": sat.nodeo,
               "argument of perigee": sat.argpo, "mean anomaly": sat.mo,
               "eccentricity": sat.ecco, "mean motion": sat.no_kozai, "B*": sat.bstar,
@@ -548,7 +564,8 @@ def _segment_fields(segment: etree._Element) -> dict[str, str | None] | None:
     for block in blocks:
         if block is None:
             return None
-        fields.update((field.tag, field.text) for field in block)
+        fields.update((field.tag, field.text if len(field) == 0 else NESTED)
+                      for field in block)
     return fields
 
 
@@ -599,9 +616,18 @@ def _omm_csv_entries(lines: Iterator[tuple[int, str]], source: str) -> Iterator[
 
 def _omm_entry(fields: dict[str, Any], where: str) -> CatalogEntry:
     """Entry of one OMM (a dict of keyword -> text), or ValueError naming `where`."""
+    nested = [k for k in (*_OMM_FIELDS, *_OMM_EXPECTED, "OBJECT_NAME", "MEAN_ELEMENT_THEORY")
+              if fields.get(k) is NESTED]
+    if nested:
+        raise ValueError(f"{where}: OMM {nested[0]} holds XML elements (an XInclude or a "
+                         f"nested element), not a value")
     missing = [k for k in _OMM_FIELDS if not (fields.get(k) or "").strip()]
     if missing:
         raise ValueError(f"{where}: OMM lacks {', '.join(missing)}")
+    foreign = [k for k in _OMM_FIELDS if not str(fields[k]).isascii()]
+    if foreign:
+        raise ValueError(f"{where}: OMM {foreign[0]} {_quote(fields[foreign[0]])} is not "
+                         f"ASCII (numbers are written in ASCII digits)")
     for key, want in _OMM_EXPECTED.items():
         got = (fields.get(key) or want).strip().upper()
         if got != want:
@@ -616,7 +642,7 @@ def _omm_entry(fields: dict[str, Any], where: str) -> CatalogEntry:
                          f"{_quote(clean['CLASSIFICATION_TYPE'])} is not one letter (U, C, S)")
     for key, (lo, hi) in OMM_INTEGER_RANGES.items():
         text = clean.get(key, "0") or "0"
-        if not (text.isdigit() and lo <= int(text) <= hi):
+        if not (text.isascii() and text.isdigit() and lo <= int(text) <= hi):
             raise ValueError(f"{where}: OMM {key} {_quote(text)} is not an integer in "
                              f"{lo}..{hi}")
     if "." not in clean["EPOCH"]:  # whole seconds: sgp4.omm wants a fraction

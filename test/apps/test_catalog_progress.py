@@ -15,7 +15,7 @@ from ssa_fusion.apps import ccsds, live_catalog
 from ssa_fusion.apps.progress_lines import ProgressLines
 
 ROOT = Path(__file__).resolve().parents[2]
-L1 = "1 25544U 98067A   19366.82137887  .00016717  00000-0  10270-3 0  912"
+L1 = "1 25544U 98067A   20001.82137887  .00016717  00000-0  10270-3 0  912"
 L2 = "2 25544  51.6392  96.6358 0005156  88.7140 271.4601 15.49497216  606"
 
 

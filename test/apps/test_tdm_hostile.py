@@ -130,6 +130,21 @@ def test_the_reference_files_are_read(tmp_path):
      "ndm_no_tdm.xml: no TDM <segment> in the file"),
     ("empty.tdm", "", ":1: empty: not a CCSDS TDM"),
     ("no_segment.tdm", "CCSDS_TDM_VERS = 2.0\n", "no segment (META_START"),
+    # silent accepts: full-width digits, escape codes in an object id, a one-way PATH taken
+    # as two-way, an epoch years outside START_TIME .. STOP_TIME, two values in one XML
+    # observation (the last was kept)
+    ("fullwidth.tdm", kvn(data=[*data_lines()[:-1], f"ANGLE_2 = {EPOCHS[2]} ２０"]),
+     "is not a number"),
+    ("escape.tdm", kvn(meta=[m.replace("OBJ-1", "OBJ\x1b[2J") for m in META]),
+     "an object id with control characters"),
+    ("oneway.tdm", kvn(meta=[m.replace("1,2,1", "1,2") for m in META]),
+     "PATH = 1,2: RANGE is imported as a two-way"),
+    ("span.tdm", kvn(meta=[*META, "START_TIME = 2030-01-01T00:00:00",
+                           "STOP_TIME = 2030-01-02T00:00:00"]),
+     "is outside the segment's START_TIME .. STOP_TIME"),
+    ("xml_two.xml", xml(obs_xml=f"<observation><EPOCH>{EPOCHS[0]}</EPOCH><RANGE>1200</RANGE>"
+                                "<RANGE>1300</RANGE></observation>"),
+     "<observation> with a second data keyword <RANGE>"),
 ])
 def test_a_hostile_file_is_refused_in_one_bounded_line(tmp_path, name, text, expected):
     said = refused(tmp_path / name, text)

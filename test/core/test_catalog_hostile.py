@@ -19,13 +19,25 @@ from sgp4.io import compute_checksum
 
 from ssa_fusion.formats import element_sets as catalog
 
-L1 = "1 25544U 98067A   19366.82137887  .00016717  00000-0  10270-3 0  9129"
+L1 = "1 25544U 98067A   20001.82137887  .00016717  00000-0  10270-3 0  9127"
 L2 = "2 25544  51.6392  96.6358 0005156  88.7140 271.4601 15.49497216  6061"
 HEADER = ("OBJECT_NAME,OBJECT_ID,EPOCH,MEAN_MOTION,ECCENTRICITY,INCLINATION,RA_OF_ASC_NODE,"
           "ARG_OF_PERICENTER,MEAN_ANOMALY,EPHEMERIS_TYPE,CLASSIFICATION_TYPE,NORAD_CAT_ID,"
           "ELEMENT_SET_NO,REV_AT_EPOCH,BSTAR,MEAN_MOTION_DOT,MEAN_MOTION_DDOT")
 ROW = ("ISS,1998-067A,2019-12-31T19:42:47.134368,15.49497216,.0005156,51.6392,96.6358,"
        "88.7140,271.4601,0,U,25544,912,606,.1027e-3,.00016717,0")
+OMM_XML = ("<ndm><omm><body><segment><metadata><OBJECT_NAME>ISS</OBJECT_NAME>"
+           "<OBJECT_ID>1998-067A</OBJECT_ID><CENTER_NAME>EARTH</CENTER_NAME><REF_FRAME>TEME"
+           "</REF_FRAME><TIME_SYSTEM>UTC</TIME_SYSTEM></metadata><data><meanElements>"
+           "<EPOCH>2019-12-31T19:42:47.134368</EPOCH><MEAN_MOTION>15.49497216</MEAN_MOTION>"
+           "<ECCENTRICITY>.0005156</ECCENTRICITY><INCLINATION>51.6392</INCLINATION>"
+           "<RA_OF_ASC_NODE>96.6358</RA_OF_ASC_NODE><ARG_OF_PERICENTER>88.7140"
+           "</ARG_OF_PERICENTER><MEAN_ANOMALY>271.4601</MEAN_ANOMALY></meanElements>"
+           "<tleParameters><EPHEMERIS_TYPE>0</EPHEMERIS_TYPE><CLASSIFICATION_TYPE>U"
+           "</CLASSIFICATION_TYPE><NORAD_CAT_ID>25544</NORAD_CAT_ID><ELEMENT_SET_NO>912"
+           "</ELEMENT_SET_NO><REV_AT_EPOCH>606</REV_AT_EPOCH><BSTAR>.1027e-3</BSTAR>"
+           "<MEAN_MOTION_DOT>.00016717</MEAN_MOTION_DOT><MEAN_MOTION_DDOT>0</MEAN_MOTION_DDOT>"
+           "</tleParameters></data></segment></body></omm></ndm>\n")
 MAX_MESSAGE = 400
 """Longest error message allowed (one line a user can read)."""
 
@@ -62,8 +74,8 @@ def refused(tmp_path: Path, name: str, text: str) -> str:
      "inclination 999 deg outside [0, 180]"),
     ("bstar.tle", tle(L1[:53] + " 10000+9" + L1[61:]), "B* 1e+08"),
     # SGP4 reads day 999 of 2019 as a day in 2022 and day 000 as 31 December 2018
-    ("day999.tle", tle(L1[:20] + "999" + L1[23:]), "day 999.821 of 2019 is not in 1-366"),
-    ("day000.tle", tle(L1[:20] + "000" + L1[23:]), "day 0.821379 of 2019 is not in 1-366"),
+    ("day999.tle", tle(L1[:20] + "999" + L1[23:]), "day 999.821 of 2020 is not in 1-366"),
+    ("day000.tle", tle(L1[:20] + "000" + L1[23:]), "day 0.821379 of 2020 is not in 1-366"),
     ("nan.csv", csv_of(ROW.replace("51.6392", "nan")), "inclination not finite"),
     ("inf.csv", csv_of(ROW.replace("15.49497216", "inf")), "mean motion"),
     ("fast.csv", csv_of(ROW.replace("15.49497216", "25.0")), "decayed"),  # SGP4's own
@@ -85,6 +97,24 @@ def refused(tmp_path: Path, name: str, text: str) -> str:
      ":2: OMM OBJECT_NAME: an object name of 100000 characters"),
     ("empty.xml", '<?xml version="1.0"?><ndm><omm><body><segment><metadata></metadata>'
                   "<data></data></segment></body></omm></ndm>", "lacks (or has empty)"),
+    # SGP4 reads day 366 of a common year as the next 1 January
+    ("day366.tle", tle(L1[:18] + "19366" + L1[23:]), "day 366.821 of 2019 is not in 1-365"),
+    # control characters in names were stored in bags and echoed raw to terminals
+    ("nul.tle", "ISS\x00 (ZARYA)\n" + tle(), ":1: name line: an object name with control"),
+    ("escape.csv", csv_of(ROW.replace("ISS", "ISS\x1b[31mRED")), "with control characters"),
+    # catalogue number 00000 became object "0"
+    ("zero.tle", tle(L1.replace("25544", "00000"), L2.replace("25544", "00000")),
+     "catalogue number 0 is no object's"),
+    ("zero.csv", csv_of(ROW.replace(",25544,", ",0,")), "NORAD_CAT_ID '0' is not an integer"),
+    # full-width digits are digits to Python's int() and float()
+    ("fullwidth.csv", csv_of(ROW.replace(",25544,", ",２５５４４,")), "NORAD_CAT_ID"),
+    ("fullwidth_mm.csv", csv_of(ROW.replace("15.49497216", "１５.49497216")),
+     "MEAN_MOTION '１５.49497216' is not ASCII"),
+    # an XInclude (never processed) in OBJECT_NAME gave an empty name
+    ("xinclude.xml", OMM_XML.replace("<OBJECT_NAME>ISS</OBJECT_NAME>",
+                                     '<OBJECT_NAME><xi:include xmlns:xi="http://www.w3.org/2001/'
+                                     'XInclude" href="/etc/hostname"/></OBJECT_NAME>'),
+     "OMM OBJECT_NAME holds XML elements"),
 ])
 def test_a_field_outside_its_domain_is_refused_in_one_line(tmp_path, name, text, expected):
     assert expected in refused(tmp_path, name, text)
@@ -98,6 +128,10 @@ def test_the_same_element_sets_within_their_domains_are_read(tmp_path):
     assert [e.object_id for e in catalog.read_catalog(tmp_path / "ok.tle")] == ["25544"]
     assert [e.object_id for e in catalog.read_catalog(tmp_path / "ok.csv")] == ["25544"]
     assert [e.object_id for e in catalog.read_catalog(tmp_path / "alpha5.tle")] == ["100001"]
+    (tmp_path / "ok.xml").write_text(OMM_XML)
+    (tmp_path / "leap.tle").write_text(tle(L1[:18] + "20366" + L1[23:]))  # 2020 is a leap year
+    assert [e.name for e in catalog.read_catalog(tmp_path / "ok.xml")] == ["ISS"]
+    assert len(catalog.read_catalog(tmp_path / "leap.tle")) == 1
 
 
 def _only_value_errors(parse, text: str) -> None:

@@ -33,7 +33,7 @@ from ssa_fusion.formats import element_sets as catalog
 
 ROOT = Path(__file__).resolve().parents[2]
 CATALOGS = sorted((ROOT / "config" / "catalogs").iterdir())
-L1 = "1 25544U 98067A   19366.82137887  .00016717  00000-0  10270-3 0  9129"
+L1 = "1 25544U 98067A   20001.82137887  .00016717  00000-0  10270-3 0  9127"
 L2 = "2 25544  51.6392  96.6358 0005156  88.7140 271.4601 15.49497216  6061"
 HEADER = ("OBJECT_NAME,OBJECT_ID,EPOCH,MEAN_MOTION,ECCENTRICITY,INCLINATION,RA_OF_ASC_NODE,"
           "ARG_OF_PERICENTER,MEAN_ANOMALY,EPHEMERIS_TYPE,CLASSIFICATION_TYPE,NORAD_CAT_ID,"
@@ -159,7 +159,7 @@ def tle_lines(i: int) -> tuple[str, str]:
 def three_le(n: int, newline: str = "\n") -> str:
     """A 3LE of `n` objects (names with a character of two UTF-8 bytes), comments between."""
     out = ["# generated", ""]
-    for i in range(n):
+    for i in range(1, n + 1):
         a, b = tle_lines(i)
         out += [f"OBJECT {i} Ω", a, b] + (["# a comment", ""] if i % 7 == 3 else [])
     return newline.join(out) + newline
@@ -170,7 +170,7 @@ def csv_rows(n: int) -> str:
     rows = [f"OBJECT {i} Ω,1998-067A,2019-12-31T19:42:47.134368,15.49497216,.0005156,"
             f"51.6392,{(96.6358 + 0.37 * i) % 360.0:.4f},88.7140,"
             f"{(271.4601 + 7.1 * i) % 360.0:.4f},0,U,{i},912,606,.1027e-3,.00016717,0"
-            for i in range(n)]
+            for i in range(1, n + 1)]
     return "\n".join(["# generated", HEADER, *rows]) + "\n"
 
 
@@ -195,7 +195,7 @@ def segment(i: int) -> str:
 def xml_doc(n: int) -> str:
     """An OMM XML (NDM) of `n` objects."""
     return ('<?xml version="1.0" encoding="UTF-8"?>\n<ndm><omm><header><ORIGINATOR>test'
-            '</ORIGINATOR></header><body>\n' + "".join(segment(i) for i in range(n)) +
+            '</ORIGINATOR></header><body>\n' + "".join(segment(i) for i in range(1, n + 1)) +
             "</body></omm></ndm>\n")
 
 
@@ -259,7 +259,7 @@ def test_generated_catalogs_read_as_a_stream_give_the_entries_of_the_whole_text(
     want = sgp4_reference(path)
     assert [k[3:] for k in got[1]] == [  # type: ignore[union-attr]
         tuple(getattr(sat, a) for a in SATREC) for _, _, sat in want]
-    assert {k[1] for k in got[1]} == {f"OBJECT {i} Ω" for i in range(3000)}  # type: ignore
+    assert {k[1] for k in got[1]} == {f"OBJECT {i} Ω" for i in range(1, 3001)}  # type: ignore
 
 
 FUZZ = settings(max_examples=200, deadline=None, derandomize=True,
@@ -299,10 +299,10 @@ def doc(*segments: str, tail: str = "") -> str:
     return "<ndm><omm><body>\n" + "".join(segments) + "</body></omm></ndm>\n" + tail
 
 
-BAD_ID = segment(0).replace("<NORAD_CAT_ID>0<", "<NORAD_CAT_ID>x<")
+BAD_ID = segment(7).replace("<NORAD_CAT_ID>7<", "<NORAD_CAT_ID>x<")
 LACKING = segment(1).replace("meanElements>", "x>")
-NESTED = segment(0).replace("<metadata>", "<metadata>" + segment(5), 1)
-"""Object 0, whose metadata holds a segment of object 5."""
+NESTED = segment(7).replace("<metadata>", "<metadata>" + segment(5), 1)
+"""Object 7, whose metadata holds a segment of object 5."""
 
 
 @pytest.mark.parametrize("text,match", [
@@ -325,7 +325,7 @@ def test_xml_errors_come_in_the_order_of_the_whole_document(text, match):
 def test_a_segment_inside_another_is_counted_in_document_order():
     entries = catalog.parse_omm_xml(doc(segment(2), NESTED, segment(1)), "f")
     assert [(e.object_id, e.source) for e in entries] == [
-        ("2", "f:segment 1"), ("0", "f:segment 2"), ("5", "f:segment 3"), ("1", "f:segment 4")]
+        ("2", "f:segment 1"), ("7", "f:segment 2"), ("5", "f:segment 3"), ("1", "f:segment 4")]
 
 
 @pytest.mark.parametrize("at", [0, 100, 70_000, 200_000])
@@ -368,13 +368,13 @@ def test_progress_is_called_with_monotone_bytes_ending_at_the_file_size(tmp_path
 
 @pytest.mark.parametrize("kind", ["3le", "csv"])
 def test_an_error_in_object_50000_of_a_big_file_names_its_line(tmp_path, kind):
-    n, bad = 50_001, 50_000  # object 50,000: index 49,999
+    n, bad = 50_001, 50_000  # object 50,000 (objects are numbered from 1)
     text = GENERATED[kind](n)
     if kind == "3le":
-        good = tle_lines(bad - 1)[1]
+        good = tle_lines(bad)[1]
         wrong, what = good[:10] + "x" + good[11:], "TLE line 2, column 11"
     else:
-        good = next(r for r in text.splitlines() if f",U,{bad - 1}," in r)
+        good = next(r for r in text.splitlines() if f",U,{bad}," in r)
         wrong, what = good.replace(",U,", ",UU,"), "OMM CLASSIFICATION_TYPE 'UU'"
     text = text.replace(good, wrong)
     line = text.splitlines().index(wrong) + 1

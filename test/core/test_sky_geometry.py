@@ -14,7 +14,7 @@ from ssa_fusion.core.earth.stations import STATIONS
 from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
 
 # ISS (ZARYA), NORAD 25544, epoch 2019-12-31 19:42 UTC (the sgp4 package's test suite)
-ISS_TLE = ("1 25544U 98067A   19366.82137887  .00016717  00000-0  10270-3 0  9129",
+ISS_TLE = ("1 25544U 98067A   20001.82137887  .00016717  00000-0  10270-3 0  9127",
            "2 25544  51.6392  96.6358 0005156  88.7140 271.4601 15.49497216  6061")
 
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 import enum
 import math
 import re
+import unicodedata
 from array import array
 from collections import Counter
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -63,9 +64,10 @@ _CHUNK = 8192
 """Measurements made Python objects at a time by `Imported.measurements`."""
 
 _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?(?:inf|infinity|nan)",
-                     re.IGNORECASE)
-"""A value a TDM gives: a decimal number (xsd:double's forms; ``NaN``, ``INF`` read as the
-non-finite values that are then left out and counted)."""
+                     re.IGNORECASE | re.ASCII)
+"""A value a TDM gives: a decimal number of ASCII digits (xsd:double's forms; ``NaN``,
+``INF`` read as the non-finite values that are then left out and counted). Python's float()
+also takes other scripts' digits (full-width ``１２３``): a TDM's are ASCII."""
 _UNITS = {RANGE: "KM", "angle_1": "DEG", "angle_2": "DEG"}
 """The unit a data keyword read here may name (``[unit]``, ``units=``), in capitals."""
 
@@ -246,11 +248,48 @@ def _participants(meta: SegmentMeta, source: str, sites: Mapping[str, Sensor]
             f"{', '.join(shown(p, 40) for p in names) or 'none'}: need one known station "
             f"({', '.join(sorted(STATIONS))}{own}) and one object")
     oid = others[0]
+    if any(unicodedata.category(c) == "Cc" for c in oid):  # NUL, escape: stored and echoed
+        key = keys[names.index(oid)]
+        raise CcsdsError(f"{_where(source, meta, key)}: {key}: an object id with control "
+                         f"characters (NUL, escape, ...): {quote(oid)}")
     if len(oid) > MAX_ID_CHARS:  # every measurement of it would be refused (`validation`)
         key = keys[names.index(oid)]
         raise CcsdsError(f"{_where(source, meta, key)}: {key}: an object id of {len(oid)} "
                          f"characters (at most {MAX_ID_CHARS}): {quote(oid)}")
     return stations[0].lower(), oid
+
+
+def _check_path(meta: SegmentMeta, layout: Layout, source: str) -> None:
+    """Refuse a ``PATH`` that is not what the segment's measurements are.
+
+    RANGE of an AZEL segment is a round trip (``PATH = 1,2,1``: from a participant and back
+    to it); a one-way path (``1,2``) would be a different measurement (a one-way range,
+    half the light time) imported as a two-way one. Angles (RADEC) take any path.
+    """
+    path = meta.get("PATH")
+    if path is None or layout is not AZEL:
+        return
+    legs = [p.strip() for p in path.split(",")]
+    if not (len(legs) == 3 and legs[0] == legs[2] and legs[0] != legs[1]
+            and all(p.isascii() and p.isdigit() for p in legs)):
+        raise CcsdsError(f"{_where(source, meta, 'PATH')}: PATH = {shown(path)}: RANGE is "
+                         f"imported as a two-way (round-trip) range: PATH = 1,2,1 (or 2,1,2)")
+
+
+def _time_span(meta: SegmentMeta, time_system: TimeSystem, source: str
+               ) -> tuple[float, float]:
+    """Return the segment's ``START_TIME`` .. ``STOP_TIME`` (UTC stamps; +-inf if absent)."""
+    span = []
+    for key, default in (("START_TIME", -math.inf), ("STOP_TIME", math.inf)):
+        text = meta.get(key)
+        try:
+            span.append(default if text is None else parse_epoch(text, time_system))
+        except CcsdsError as exc:
+            raise CcsdsError(f"{_where(source, meta, key)}: {key}: {exc}") from None
+    if span[0] > span[1]:
+        raise CcsdsError(f"{_where(source, meta, 'STOP_TIME')}: STOP_TIME is before "
+                         f"START_TIME")
+    return span[0], span[1]
 
 
 def _segment_sigma(meta: SegmentMeta, station: str, layout: Layout,
@@ -331,6 +370,7 @@ class _Reading:
         self.pending: dict[float, list[float | None]] = {}
         self.epoch_text = ""
         self.stamp = 0.0
+        self.span = (-math.inf, math.inf)
 
     def start(self, meta: SegmentMeta) -> None:
         """Begin a segment: judge its metadata (CcsdsError naming what is not supported)."""
@@ -338,6 +378,8 @@ class _Reading:
         src = self.source
         self.time_system = _choice(meta, "TIME_SYSTEM", TimeSystem, src)
         self.layout, to_gcrf = _segment_layout(meta, src)
+        _check_path(meta, self.layout, src)
+        self.span = _time_span(meta, self.time_system, src)
         station, oid = _participants(meta, src, self.sites)
         R = np.diag(_segment_sigma(meta, station, self.layout,
                                    self.sigma.get(self.layout.kind), src, self.sites)**2)
@@ -369,6 +411,10 @@ class _Reading:
                 timescales.check_epochs([t], "epoch")
             except ValueError as exc:
                 raise self.fail(ob, "EPOCH", str(exc)) from None
+        if not self.span[0] <= t <= self.span[1]:
+            raise self.fail(ob, "EPOCH", f"{ob.epoch} is outside the segment's START_TIME .. "
+                                         f"STOP_TIME ({timescales.iso(self.span[0])} .. "
+                                         f"{timescales.iso(self.span[1])})")
         self.epoch_text, self.stamp = ob.epoch, t
         return t
 

@@ -434,6 +434,10 @@ class TdmReader:
             if name == "EPOCH":
                 epoch = self._xml_text(child, "EPOCH")
             elif name in DATA_KEYWORDS:
+                if items:  # TDM/XML: one data keyword an observation
+                    self.fail(n, f"segment {seg.number}: <observation> with a second data "
+                                 f"keyword <{cut(name)}> (after <{items[0][0]}>): TDM/XML "
+                                 f"gives one per observation")
                 items.append((name, self._xml_text(child, name), child.get("units") or "", n))
             elif name != "COMMENT":
                 self.fail(n, f"segment {seg.number}: <{cut(name)}>: not a TDM data keyword")
