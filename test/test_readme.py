@@ -1,14 +1,17 @@
-"""README.md against the tree and the command line, without running anything.
+"""The docs against the tree and the command line, without running anything.
 
-* Layout: the first code block of README's "## Layout" section names every module file of
-  the package (``__init__.py`` aside) under its floor, and every module it names exists
-  there. A floor's entry starts with a line ``ssa_fusion/<floor>/`` (or, for a module of the
-  top-level package, ``ssa_fusion/<name>.py``) at the start of the line and goes on over the
-  indented lines below it; a module is named by its file name (``tracker.py``). The other
-  entries (``msg_defs/``, ``config/``, ...) must name paths that exist.
+* Layout: the first code block of docs/LAYOUT.md's "## The tree" section names every module
+  file of the package (``__init__.py`` aside) and every module it names exists. An entry starts
+  with an unindented line ``ssa_fusion/<path>/`` (a package: a floor such as ``core/``, a
+  room such as ``core/earth/``, or deeper, ``formats/ccsds/``) or ``ssa_fusion/<name>.py`` (a
+  module of the top-level package), and goes on over the indented lines below it. A module is
+  named by its path from the entry's package: ``frames.py`` in the entry of
+  ``ssa_fusion/core/earth/``, or ``earth/frames.py`` in that of ``ssa_fusion/core/``. Every
+  package of the tree (every directory with an ``__init__.py``) has an entry of its own, and
+  the other entries (``msg_defs/``, ``config/``, ...) must name paths that exist.
 * Commands: every ``ssa-fusion ...`` (or ``.venv/bin/ssa-fusion ...``) line of the code blocks
-  of README.md, docs/CCSDS.md and docs/MULTIHOST.md names an existing subcommand and only
-  options its parser knows: each is parsed by `ssa_fusion.apps.cli.build_parser`, never run.
+  of README.md and of every page in docs/ names an existing subcommand and only options its
+  parser knows: each is parsed by `ssa_fusion.apps.cli.build_parser`, never run.
 """
 
 from __future__ import annotations
@@ -27,9 +30,8 @@ from ssa_fusion.apps.cli import build_parser
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "ssa_fusion"
 README = ROOT / "README.md"
-COMMAND_DOCS = (README, ROOT / "docs" / "CCSDS.md", ROOT / "docs" / "MULTIHOST.md")
-FLOORS = ("core", "sim", "evaluation", "studies", "ros", "nodes", "apps")
-"""The package's subpackages (test_layers.py's floors but the top-level graphs.py)."""
+LAYOUT = ROOT / "docs" / "LAYOUT.md"
+COMMAND_DOCS = (README, *sorted((ROOT / "docs").glob("*.md")))
 
 PLACEHOLDERS = {"BAG", "FILE", "OUT", "DIR"}
 """Path placeholders of the docs' command lines, parsed as a dummy path."""
@@ -40,12 +42,12 @@ def code_blocks(text: str) -> list[str]:
     return re.findall(r"^```[^\n]*\n(.*?)^```", text, flags=re.M | re.S)
 
 
-def layout_block(readme: str) -> str:
-    """The first code block of the "## Layout" section of a README's text."""
-    start = readme.index("\n## Layout\n")
-    end = readme.find("\n## ", start + 1)
-    blocks = code_blocks(readme[start:] if end == -1 else readme[start:end])
-    assert blocks, "README's Layout section has no code block"
+def layout_block(doc: str) -> str:
+    """The first code block of the "## The tree" section of a markdown text."""
+    start = doc.index("\n## The tree\n")
+    end = doc.find("\n## ", start + 1)
+    blocks = code_blocks(doc[start:] if end == -1 else doc[start:end])
+    assert blocks, "the layout's section has no code block"
     return blocks[0]
 
 
@@ -67,87 +69,93 @@ def layout_entries(block: str) -> dict[str, str]:
     return entries
 
 
-def listed_modules(entries: dict[str, str]) -> dict[str, set[str]]:
-    """{floor: the module files its entry names}; a top-level module is its own floor."""
-    listed: dict[str, set[str]] = {}
+def listed_modules(entries: dict[str, str]) -> set[str]:
+    """The module files the entries name, as paths from the package (``core/earth/frames.py``,
+    ``graphs.py``)."""
+    listed: set[str] = set()
     for key, text in entries.items():
-        floor = re.fullmatch(r"ssa_fusion/(\w+)/", key)
-        if floor:
+        package = re.fullmatch(r"ssa_fusion/([\w/]+/)", key)
+        if package:
             body = text[len(key):]
-            listed[floor.group(1)] = set(re.findall(r"(?<![\w./-])([\w/]+\.py)\b", body))
+            listed |= {package.group(1) + name
+                       for name in re.findall(r"(?<![\w./-])([\w/]+\.py)\b", body)}
         elif re.fullmatch(r"ssa_fusion/\w+\.py", key):
-            name = key.removeprefix("ssa_fusion/")
-            listed[name] = {name}
+            listed.add(key.removeprefix("ssa_fusion/"))
     return listed
 
 
-def tree_modules(package: Path) -> dict[str, set[str]]:
-    """{floor: the module files under it} of the package on disk."""
-    tree: dict[str, set[str]] = {}
-    for path in sorted(package.rglob("*.py")):
-        if path.name == "__init__.py":
-            continue
-        parts = path.relative_to(package).parts
-        if len(parts) == 1:
-            tree[path.name] = {path.name}
-        else:
-            tree.setdefault(parts[0], set()).add("/".join(parts[1:]))
-    return tree
+def listed_packages(entries: dict[str, str]) -> set[str]:
+    """The packages that have an entry of their own, as paths from the package
+    (``core/earth``)."""
+    return {m.group(1) for key in entries if (m := re.fullmatch(r"ssa_fusion/([\w/]+)/", key))}
 
 
-def _paths(modules: dict[str, set[str]]) -> list[str]:
-    return sorted(f"ssa_fusion/{name}" if floor == name else f"ssa_fusion/{floor}/{name}"
-                  for floor, names in modules.items() for name in names)
+def tree_modules(package: Path) -> set[str]:
+    """The module files of the package on disk, as paths from it."""
+    return {path.relative_to(package).as_posix() for path in package.rglob("*.py")
+            if path.name != "__init__.py" and "__pycache__" not in path.parts}
 
 
-def differences(tree: dict[str, set[str]],
-                listed: dict[str, set[str]]) -> tuple[list[str], list[str]]:
-    """(modules the tree has and the layout does not name under their floor,
-    modules the layout names that its floor does not have)."""
-    missing = {floor: names - listed.get(floor, set()) for floor, names in tree.items()}
-    ghosts = {floor: names - tree.get(floor, set()) for floor, names in listed.items()}
-    return _paths(missing), _paths(ghosts)
+def tree_packages(package: Path) -> set[str]:
+    """The packages under the package on disk (directories with an ``__init__.py``)."""
+    return {path.parent.relative_to(package).as_posix()
+            for path in package.rglob("__init__.py") if path.parent != package}
 
 
-def readme_layout() -> dict[str, str]:
-    return layout_entries(layout_block(README.read_text(encoding="utf-8")))
+def differences(tree: set[str], listed: set[str]) -> tuple[list[str], list[str]]:
+    """(modules the tree has and the layout does not name where they are,
+    modules the layout names that the tree does not have there)."""
+    return ([f"ssa_fusion/{name}" for name in sorted(tree - listed)],
+            [f"ssa_fusion/{name}" for name in sorted(listed - tree)])
 
 
-def test_the_layout_names_every_module_under_its_floor() -> None:
-    missing, _ = differences(tree_modules(PACKAGE), listed_modules(readme_layout()))
-    assert not missing, f"README's Layout does not name, under their floor: {missing}"
+def doc_layout() -> dict[str, str]:
+    return layout_entries(layout_block(LAYOUT.read_text(encoding="utf-8")))
+
+
+def test_the_layout_names_every_module_where_it_is() -> None:
+    missing, _ = differences(tree_modules(PACKAGE), listed_modules(doc_layout()))
+    assert not missing, f"docs/LAYOUT.md does not name, where they are: {missing}"
 
 
 def test_every_module_the_layout_names_exists() -> None:
-    _, ghosts = differences(tree_modules(PACKAGE), listed_modules(readme_layout()))
-    assert not ghosts, f"README's Layout names modules the tree does not have: {ghosts}"
+    _, ghosts = differences(tree_modules(PACKAGE), listed_modules(doc_layout()))
+    assert not ghosts, f"docs/LAYOUT.md names modules the tree does not have: {ghosts}"
 
 
-def test_the_layout_has_every_floor_and_only_paths_that_exist() -> None:
-    entries = readme_layout()
-    for floor in FLOORS:
-        assert f"ssa_fusion/{floor}/" in entries, f"README's Layout has no ssa_fusion/{floor}/"
+def test_every_package_has_its_entry_and_every_entry_exists() -> None:
+    entries = doc_layout()
+    without = sorted(tree_packages(PACKAGE) - listed_packages(entries))
+    assert not without, f"docs/LAYOUT.md has no entry for the packages {without}"
     assert "ssa_fusion/graphs.py" in entries
     absent = [key for key in entries if not (ROOT / key).exists()]
-    assert not absent, f"README's Layout names paths that do not exist: {absent}"
+    assert not absent, f"docs/LAYOUT.md names paths that do not exist: {absent}"
 
 
 def test_the_layout_comparison_finds_a_missing_a_misplaced_and_an_invented_module(
         tmp_path: Path) -> None:
     package = tmp_path / "ssa_fusion"
     for name in ("__init__.py", "graphs.py", "core/__init__.py", "core/a.py", "core/b.py",
+                 "core/earth/__init__.py", "core/earth/frames.py", "core/earth/sun.py",
+                 "core/base/__init__.py", "core/base/types.py", "nodes/__init__.py",
                  "nodes/base.py"):
         (package / name).parent.mkdir(parents=True, exist_ok=True)
         (package / name).write_text("")
-    block = ("ssa_fusion/core/   the library: a.py,\n"
+    block = ("ssa_fusion/core/   the library: a.py, earth/frames.py,\n"
              "                   c.py (a note, not.a module)\n"
+             "ssa_fusion/core/earth/  the Earth: sun.py, types.py\n"
              "ssa_fusion/nodes/  nodes: b.py, base.py\n"
              "msg_defs/          messages: x.py is not a package module\n")
-    listed = listed_modules(layout_entries(block))
-    assert listed == {"core": {"a.py", "c.py"}, "nodes": {"b.py", "base.py"}}
+    entries = layout_entries(block)
+    listed = listed_modules(entries)
+    assert listed == {"core/a.py", "core/c.py", "core/earth/frames.py", "core/earth/sun.py",
+                      "core/earth/types.py", "nodes/b.py", "nodes/base.py"}
     missing, ghosts = differences(tree_modules(package), listed)
-    assert missing == ["ssa_fusion/core/b.py", "ssa_fusion/graphs.py"]
-    assert ghosts == ["ssa_fusion/core/c.py", "ssa_fusion/nodes/b.py"]
+    assert missing == ["ssa_fusion/core/b.py", "ssa_fusion/core/base/types.py",
+                       "ssa_fusion/graphs.py"]
+    assert ghosts == ["ssa_fusion/core/c.py", "ssa_fusion/core/earth/types.py",
+                      "ssa_fusion/nodes/b.py"]
+    assert tree_packages(package) - listed_packages(entries) == {"core/base"}
 
 
 def command_lines(doc: Path) -> list[str]:
@@ -189,8 +197,9 @@ def _parses(parser: argparse.ArgumentParser, args: list[str]) -> str:
 
 
 def test_the_docs_show_command_lines() -> None:
-    assert len(command_lines(README)) >= 10
+    assert len(command_lines(README)) >= 5
     assert len(command_lines(ROOT / "docs" / "CCSDS.md")) >= 5
+    assert len(_docs_command_lines()) >= 60
 
 
 @pytest.mark.parametrize(("doc", "line"), _docs_command_lines())
