@@ -18,6 +18,7 @@ its maximum). Covariances are remediated as CARA does: eigenvalues below
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from functools import cache
 
@@ -146,8 +147,10 @@ def _log_adaptive(r: float, mu: Array, s1: float, s2: float) -> float:
 
     pts = [float(grid[max(peak - 1, 0)]), float(grid[peak]), float(grid[min(peak + 1,
                                                                            len(grid) - 1)])]
-    val, _ = integrate.quad(scaled, -0.5 * np.pi, 0.5 * np.pi, points=pts, limit=500,
-                            epsabs=0.0, epsrel=1e-11)
+    with warnings.catch_warnings():  # round-off at 1e-11 is below what is asked of it
+        warnings.simplefilter("ignore", integrate.IntegrationWarning)
+        val, _ = integrate.quad(scaled, -0.5 * np.pi, 0.5 * np.pi, points=pts, limit=500,
+                                epsabs=0.0, epsrel=1e-11)
     return top + math.log(val) if val > 0 else -math.inf
 
 
