@@ -7,8 +7,9 @@
   indented lines below it; a module is named by its file name (``tracker.py``). The other
   entries (``msg_defs/``, ``config/``, ...) must name paths that exist.
 * Commands: every ``ssa-fusion ...`` (or ``.venv/bin/ssa-fusion ...``) line of the code blocks
-  of README.md, docs/CCSDS.md and docs/MULTIHOST.md names an existing subcommand and only
-  options its parser knows: each is parsed by `ssa_fusion.apps.cli.build_parser`, never run.
+  of README.md, docs/CCSDS.md, docs/MULTIHOST.md and docs/CONJUNCTIONS.md names an existing
+  subcommand and only options its parser knows: each is parsed by
+  `ssa_fusion.apps.cli.build_parser`, never run.
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ from ssa_fusion.apps.cli import build_parser
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "ssa_fusion"
 README = ROOT / "README.md"
-COMMAND_DOCS = (README, ROOT / "docs" / "CCSDS.md", ROOT / "docs" / "MULTIHOST.md")
+COMMAND_DOCS = (README, ROOT / "docs" / "CCSDS.md", ROOT / "docs" / "MULTIHOST.md",
+                ROOT / "docs" / "CONJUNCTIONS.md")
 FLOORS = ("core", "sim", "evaluation", "studies", "ros", "nodes", "apps")
 """The package's subpackages (test_layers.py's floors but the top-level graphs.py)."""
 

@@ -125,8 +125,11 @@ def _log_gl(n: int, r: Array, mu: Array, s1: Array, s2: Array) -> Array:
     """Return ln Pc (n_conj,) with the n-node Gauss-Legendre rule."""
     theta, logw = _rule(n)
     f = _log_integrand(np.broadcast_to(theta, (len(r), n)), r, mu, s1, s2) + logw
-    with np.errstate(invalid="ignore"):
-        out: Array = special.logsumexp(f, axis=1)
+    top = np.max(f, axis=1)
+    safe = np.where(np.isfinite(top), top, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out: Array = np.where(np.isfinite(top), safe + np.log(np.sum(np.exp(f - safe[:, None]),
+                                                                     axis=1)), top)
     return out
 
 
