@@ -10,31 +10,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 from cara_cases import cara_cdm_dir
+from cdm_cases import own_conjunction
 from fuzz_text import error_of, mutated
 from hypothesis import HealthCheck, given, settings
 
 from ssa_fusion.core.base.quoting import MAX_MESSAGE
-from ssa_fusion.core.conjunction.encounter import rtn_to_inertial
 from ssa_fusion.core.conjunction.probability import collision_probability
 from ssa_fusion.core.conjunction.result import PcMethod, PcWarning
 from ssa_fusion.formats.ccsds.cdm import COV_KEYWORDS, parse_cdm, read_cdm
-from ssa_fusion.formats.ccsds.cdm_out import Conjunction, cdm_text, write_cdm
+from ssa_fusion.formats.ccsds.cdm_out import cdm_text, write_cdm
 from ssa_fusion.formats.ccsds.common import CcsdsError, frame_bias
 
 CARA = cara_cdm_dir()
 needs_cara = pytest.mark.skipif(CARA is None, reason="shared CARA CDMs not present")
-
-
-def _conjunction(p2: np.ndarray | None = None) -> Conjunction:
-    """A LEO conjunction of our own (GCRF states, inertial covariances) and its Pc."""
-    x1 = np.array([6878.0, 10.0, -3.0, 0.01, 7.6127, 0.02])
-    x2 = np.array([6878.01, 10.0, -2.97, -0.02, 5.3830, 5.3830])
-    p1 = rtn_to_inertial(x1, np.diag([1e-4, 4e-3, 4e-4, 1e-10, 1e-9, 1e-10]) + 1e-12)[0]
-    cov2 = rtn_to_inertial(x2, np.diag([4e-4, 1e-2, 1e-3, 1e-9, 1e-9, 1e-9]))[0] \
-        if p2 is None else p2
-    res = collision_probability(x1, p1, x2, cov2, 0.015)
-    return Conjunction(1.7e9 + 0.25, x1, x2, p1, cov2, 0.015, res, ("40001", "40002"),
-                       ("SAT A", "DEBRIS B"))
 
 
 # ------------------------------------------------------------------------------------------
@@ -83,7 +71,7 @@ def test_xml_of_another_writer_reads_as_the_kvn() -> None:
 # ------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("fmt", ["kvn", "xml"])
 def test_written_cdm_reads_back(tmp_path: Path, fmt: str) -> None:
-    c = _conjunction()
+    c = own_conjunction()
     path = write_cdm(c, tmp_path / f"c.{fmt}", fmt)
     back = read_cdm(path)
     x1, p1, x2, p2 = back.inputs()
@@ -106,7 +94,7 @@ def test_written_cdm_reads_back(tmp_path: Path, fmt: str) -> None:
 def test_written_cdm_is_read_by_ccsds_ndm(tmp_path: Path, fmt: str) -> None:
     from ccsds_ndm.ndm_io import NdmIo
 
-    c = _conjunction()
+    c = own_conjunction()
     doc = NdmIo().from_path(str(write_cdm(c, tmp_path / f"c.{fmt}", fmt)))
     rel = doc.body.relative_metadata_data
     assert rel.collision_probability == pytest.approx(c.result.pc, rel=1e-6)
@@ -117,7 +105,7 @@ def test_written_cdm_is_read_by_ccsds_ndm(tmp_path: Path, fmt: str) -> None:
 
 
 def test_missing_covariance_is_read_and_gives_an_upper_bound(tmp_path: Path) -> None:
-    c = _conjunction()
+    c = own_conjunction()
     text = cdm_text(c)
     seg2 = text.index("OBJECT                               = OBJECT2")
     cut = text[:seg2] + re.sub(r"^C[A-Z]+_[A-Z]+ .*\n", "", text[seg2:], flags=re.M)
@@ -130,11 +118,11 @@ def test_missing_covariance_is_read_and_gives_an_upper_bound(tmp_path: Path) -> 
 
 
 def test_non_positive_definite_covariance_is_flagged() -> None:
-    c = _conjunction()
+    c = own_conjunction()
     bad = c.p2.copy() if c.p2 is not None else None
     assert bad is not None
     bad[0, 1] = bad[1, 0] = 2 * math.sqrt(bad[0, 0] * bad[1, 1])  # correlation 2
-    cdm = parse_cdm(cdm_text(_conjunction(bad)).encode())
+    cdm = parse_cdm(cdm_text(own_conjunction(bad)).encode())
     res = collision_probability(*cdm.inputs(), cdm.hbr_km or 0.0)
     assert PcWarning.NPD_SECONDARY in res.warnings and 0.0 <= res.pc <= 1.0
 
@@ -148,7 +136,7 @@ def _sub(text: str, pattern: str, new: str) -> str:
     return out
 
 
-GOOD = cdm_text(_conjunction())
+GOOD = cdm_text(own_conjunction())
 HOSTILE = {  # name: (text, what the one line says)
     "unit": (_sub(GOOD, r"(CR_R +=.*)\[m\*\*2\]", r"\1[km**2]"), "CR_R in [km**2], not [m**2]"),
     "state unit": (_sub(GOOD, r"^(X +=.*)\[km\]", r"\1[m]"), "X in [m], not [km]"),

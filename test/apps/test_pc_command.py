@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from cara_cases import cara_cdm_dir
-from test_cdm import _conjunction
+from cdm_cases import own_conjunction
 
 from ssa_fusion.apps import cli
 from ssa_fusion.formats.ccsds.cdm_out import write_cdm
@@ -17,7 +17,7 @@ from ssa_fusion.formats.ccsds.cdm_out import write_cdm
 
 def test_json_one_object_per_message_and_bad_files_one_line_each(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    c = _conjunction()
+    c = own_conjunction()
     good = [write_cdm(c, tmp_path / "a.cdm"), write_cdm(c, tmp_path / "b.xml", "xml")]
     bad = tmp_path / "bad.cdm"
     bad.write_text("CCSDS_CDM_VERS = 1.0\nTCA = soon\n")
@@ -38,7 +38,7 @@ def test_json_one_object_per_message_and_bad_files_one_line_each(
 
 
 def test_table_and_hbr_override(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    c = _conjunction()
+    c = own_conjunction()
     path = write_cdm(c, tmp_path / "a.cdm")
     assert cli.main(["pc", str(path)]) == 0
     table = capsys.readouterr().out.splitlines()
@@ -50,7 +50,7 @@ def test_table_and_hbr_override(tmp_path: Path, capsys: pytest.CaptureFixture[st
 
 
 def test_monte_carlo_method(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    c = _conjunction()
+    c = own_conjunction()
     path = write_cdm(c, tmp_path / "a.cdm")
     assert cli.main(["pc", "--json", "--method", "mc", "--samples", "20000", str(path)]) == 0
     row = json.loads(capsys.readouterr().out)
