@@ -23,6 +23,8 @@ _COMMANDS = {
                                         "ra/dec)"),
     "import": ("ssa_fusion.apps.ccsds", "CCSDS into a bag: `import tdm FILE --bag OUT` "
                                         "(range/az/el and ra/dec that `replay` runs)"),
+    "pc": ("ssa_fusion.apps.pc", "collision probability of CCSDS CDMs, beside the message's "
+                                 "own"),
 }
 
 
