@@ -22,7 +22,14 @@ Classes of probes (a class number is the finding it re-creates):
 10. large inputs: a 100 MB one-line catalog, catalog options without `--catalog`
     (`--large`: also a 100 MB TDM import);
 11. where the compiled kernels' cache is (the user's own, never one others may write), and
-    (`--listen`) what sockets a `live` run's nodes bind beyond loopback.
+    (`--listen`) what sockets a `live` run's nodes bind beyond loopback;
+12. silent accepts: input a reader used to take as something else (a YAML ``0110`` height
+    read as octal 72, a 100 kB site id, escape codes in a TDM object id, a TDM epoch outside
+    its segment's START/STOP, a one-way ``PATH`` imported as two-way, full-width digits, two
+    values in one TDM/XML observation, day 366 of a common year in a TLE, NUL in a name,
+    catalogue number 00000, an XInclude in an OMM field, ``q: true`` in a params file);
+13. damaged bags: one flipped byte in a chunk, 4 kB of garbage inserted or written over at
+    one third: `bag repair` keeps every intact chunk and says what it lost.
 
 Each probe runs with a wall timeout; its outcome is one of ``clean`` (the expected exit
 code; where an error is expected, a bounded error line; no traceback in any output or node
@@ -609,6 +616,103 @@ def param_probes() -> Iterator[Probe]:
             yield cli_probe("8", f"{cmd[0]} --params-file {what}",
                             [*cmd, "--params-file", "{D}/p.yaml"], refused(), {"p.yaml": data},
                             timeout=120.0)
+
+
+def _tdm_meta(old: str, new: str) -> str:
+    """The good KVN TDM with `old` in its metadata replaced by `new`."""
+    text = tdm_kvn(GOOD_ROWS)
+    assert old in text
+    return text.replace(old, new, 1)
+
+
+def _sites(height: str = "110", site_id: str = "probe_radar") -> str:
+    """A sites file of one radar (`height` and `site_id` as written in the YAML)."""
+    return ("sites:\n  - {id: " + site_id + ", latitude_deg: 40.0, longitude_deg: -83.0, "
+            "height_m: " + height + ", type: radar,\n     noise: {range_m: 20, azimuth_deg: "
+            "0.02, elevation_deg: 0.02}, cadence_s: 10, min_elevation_deg: 5}\n")
+
+
+def _tle_3le(name: str = "PROBE", day: str | None = None, number: str | None = None) -> str:
+    """The sample's first 3LE object with its name, epoch day (YYDDD) or number replaced."""
+    _, l1, l2 = tle_objects()[0]
+    if day is not None:
+        l1 = l1[:18] + day + l1[23:]
+    if number is not None:
+        l1, l2 = l1[:2] + number + l1[7:], l2[:2] + number + l2[7:]
+    return f"{name}\n{tle_checksum(l1[:68])}\n{tle_checksum(l2[:68])}\n"
+
+
+def silent_accept_probes() -> Iterator[Probe]:
+    """Class 12: inputs once taken silently as something else, each refused in one line."""
+    good = tdm_kvn(GOOD_ROWS)
+    for what, sites in (("height_m: 0110 (octal 72)", _sites(height="0110")),
+                        ("height_m: 1:50 (base 60)", _sites(height="1:50")),
+                        ("a 100 kB site id", _sites(site_id="x" * 100_000))):
+        yield cli_probe("12", f"sites file {what}",
+                        ["import", "tdm", "{D}/in.tdm", "--sites", "{D}/sites.yaml", "--bag",
+                         "{D}/bag"], refused(), {"in.tdm": good, "sites.yaml": sites})
+    yield tdm_probe("12", "tdm object id with escape codes",
+                    _tdm_meta("probe_object", "probe\x1b[2J\x1b[31mobject"), refused())
+    yield tdm_probe("12", "tdm epoch 5 years outside START/STOP",
+                    _tdm_meta("META_STOP", "START_TIME = 2030-01-01T00:00:00\n"
+                              "STOP_TIME = 2030-01-02T00:00:00\nMETA_STOP"), refused())
+    yield tdm_probe("12", "tdm one-way PATH = 1,2 for a range", _tdm_meta("PATH = 1,2,1",
+                                                                          "PATH = 1,2"),
+                    refused())
+    yield tdm_probe("12", "tdm full-width digits", tdm_kvn(with_row(3, rng="９４６８.２")),
+                    refused())
+    two = tdm_xml(GOOD_ROWS).replace("<RANGE>", "<RANGE>9000</RANGE><RANGE>", 1)
+    yield tdm_probe("12", "tdm xml observation with two RANGE", two, refused(),
+                    suffix=".xml")
+    for what, text in (("day 366 of a common year", _tle_3le(day="19366")),
+                       ("NUL in a name", _tle_3le(name="PROBE\x00NAME")),
+                       ("escape codes in a name", _tle_3le(name="PROBE\x1b[31mRED")),
+                       ("catalogue number 00000", _tle_3le(number="00000"))):
+        yield catalog_probe("12", f"tle {what}", text, refused_or_counted())
+    xinclude = SAMPLE_OMM_XML.read_text().replace(
+        "<OBJECT_NAME>", '<OBJECT_NAME><xi:include xmlns:xi="http://www.w3.org/2001/XInclude" '
+        'href="/etc/hostname"/>', 1)
+    yield catalog_probe("12", "omm xml XInclude in OBJECT_NAME", xinclude,
+                        refused_or_counted(), suffix=".xml")
+    for cmd in (["report", str(SAMPLE_BAG), "--out", "{D}/rep"],
+                ["replay", str(SAMPLE_BAG), "--offline", "--out", "{D}/rep"]):
+        yield cli_probe("12", f"{cmd[0]} --params-file q: true",
+                        [*cmd, "--params-file", "{D}/p.yaml"], refused(),
+                        {"p.yaml": "filter:\n  ros__parameters:\n    q: true\n"},
+                        timeout=120.0)
+
+
+def _damaged_bag(damage: Callable[[bytearray], bytes]) -> Callable[[Path], None]:
+    """Write the sample bag, with `damage` done to its .mcap, at the given path."""
+
+    def make(path: Path) -> None:
+        shutil.copytree(SAMPLE_BAG, path)
+        mcap = next(path.glob("*.mcap"))
+        mcap.write_bytes(damage(bytearray(mcap.read_bytes())))
+
+    return make
+
+
+def _flip_middle(data: bytearray) -> bytes:
+    data[len(data) // 2] ^= 0x01
+    return bytes(data)
+
+
+def _garbage(data: bytearray, insert: bool) -> bytes:
+    at = len(data) // 3
+    junk = bytes((i * 7919) % 251 for i in range(4096))
+    return bytes(data[:at] + junk + data[at + (0 if insert else 4096):])
+
+
+def damaged_bag_probes() -> Iterator[Probe]:
+    """Class 13: `bag repair` of the sample bag damaged in its middle keeps what is intact."""
+    for what, damage in (("one flipped byte in the middle", _flip_middle),
+                         ("4 kB of garbage inserted at one third",
+                          lambda d: _garbage(d, True)),
+                         ("4 kB written over at one third", lambda d: _garbage(d, False))):
+        yield cli_probe("13", f"bag repair: {what}",
+                        ["bag", "repair", "{D}/bag", "--out", "{D}/fixed"],
+                        accepted(r"recovered \d+ messages"), {"bag": _damaged_bag(damage)})
 
 
 def cli_option_probes(large: bool = False) -> Iterator[Probe]:
@@ -1207,7 +1311,8 @@ def can_mount_tmpfs(where: Path) -> bool:
 def all_probes(args: argparse.Namespace, can_mount: bool) -> list[Probe]:
     """Return the probes the options select."""
     probes = [*tdm_probes(args.large), *catalog_probes(), *param_probes(),
-              *cli_option_probes(args.large), *cache_probes()]
+              *cli_option_probes(args.large), *cache_probes(), *silent_accept_probes(),
+              *damaged_bag_probes()]
     if not args.no_graph:
         probes += [*graph_probes(), *flood_probes(), *disk_probes(can_mount)]
         if args.listen:
