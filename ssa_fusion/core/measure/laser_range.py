@@ -45,6 +45,11 @@ Array = NDArray[np.float64]
 
 LAGEOS_COM_KM = 0.251e-3
 """Centre-of-mass offset of LAGEOS-1 and -2 (retro-reflector array to centre), km."""
+COM_OFFSETS_KM = {7603901: 0.251e-3, 9207002: 0.251e-3, 8606101: 1.010e-3,
+                  7501001: 0.075e-3, 9306102: 0.075e-3, 8900103: 0.576e-3, 8903903: 0.576e-3,
+                  1200601: 0.133e-3}
+"""The ILRS's standard centre-of-mass offsets of the spherical geodetic satellites, km, by
+ILRS id: LAGEOS-1 and -2, Ajisai, Starlette, Stella, Etalon-1 and -2, LARES."""
 SHAPIRO_KM = 2.0 * MU_EARTH / C_KM_S**2
 """(1 + gamma) GM_Earth / c^2 with gamma = 1, km (8.87 mm)."""
 ITERATIONS = 6
