@@ -72,7 +72,7 @@ class RecordLines:
     def fail(self, line: int, what: str) -> NoReturn:
         """Raise the one-line `RecordError` of `what` at `line` (0: of the whole file)."""
         where = shown(str(self.path), 200) + (f":{line}" if line > 0 else "")
-        raise RecordError(one_line(f"{where}: {what}", 600))
+        raise RecordError(one_line(f"{where}: {what}"))
 
     def __iter__(self) -> Iterator[tuple[int, str]]:
         """Yield (line number, text) of every non-blank line, each checked."""

@@ -72,21 +72,19 @@ def water_vapour_hpa(temperature_k: ArrayLike, humidity_pct: ArrayLike) -> Array
     return out
 
 
-def zenith_delay_km(pressure_hpa: ArrayLike, temperature_k: ArrayLike,
-                    humidity_pct: ArrayLike, wavelength_um: ArrayLike, lat_rad: ArrayLike,
-                    height_km: ArrayLike) -> Array:
+def zenith_delay_km(pressure_hpa: ArrayLike, vapour_hpa: ArrayLike, wavelength_um: ArrayLike,
+                    lat_rad: ArrayLike, height_km: ArrayLike) -> Array:
     """Return the Mendes-Pavlis zenith delay (km) at a site (module docstring).
 
-    Surface pressure in hPa, temperature in K, relative humidity in %, the laser's
+    Surface pressure and water vapour pressure in hPa (`water_vapour_hpa`), the laser's
     wavelength in um, the site's geodetic latitude (rad) and height (km). About 2.4 m at
     sea level.
     """
     f_h, f_nh = dispersion(wavelength_um)
     h_m = np.asarray(height_km, dtype=float) * 1000.0
     f_s = 1.0 - 0.00266 * np.cos(2.0 * np.asarray(lat_rad, dtype=float)) - 0.28e-6 * h_m
-    e = water_vapour_hpa(temperature_k, humidity_pct)
     d_m = (0.002416579 * f_h * np.asarray(pressure_hpa, dtype=float)
-           + 1e-4 * (5.316 * f_nh - 3.759 * f_h) * e) / f_s
+           + 1e-4 * (5.316 * f_nh - 3.759 * f_h) * np.asarray(vapour_hpa, dtype=float)) / f_s
     out: Array = d_m / 1000.0
     return out
 
@@ -111,9 +109,9 @@ def slant_delay_km(elevation_rad: ArrayLike, pressure_hpa: ArrayLike,
                    temperature_k: ArrayLike, humidity_pct: ArrayLike,
                    wavelength_um: ArrayLike, lat_rad: ArrayLike, height_km: ArrayLike) -> Array:
     """Return the one-way delay (km) of laser light at an elevation: zenith x mapping."""
-    out: Array = zenith_delay_km(pressure_hpa, temperature_k, humidity_pct, wavelength_um,
-                                 lat_rad, height_km) * mapping(elevation_rad, temperature_k,
-                                                               lat_rad, height_km)
+    e = water_vapour_hpa(temperature_k, humidity_pct)
+    out: Array = zenith_delay_km(pressure_hpa, e, wavelength_um, lat_rad, height_km) * \
+        mapping(elevation_rad, temperature_k, lat_rad, height_km)
     return out
 
 
