@@ -74,7 +74,7 @@ def test_the_normal_points_fit_the_cpf_to_a_decimetre(fit):
             per_station[sid] = (len(r), float(r.mean()), _rms(r - r.mean()))
     print("per station (n, bias m, RMS after bias m):", per_station)
     assert set(per_station) == {"7090", "7119", "7941"}
-    for n, bias, after in per_station.values():
+    for _, bias, after in per_station.values():
         assert after <= 0.08  # SOURCE.md: 3-5 cm
         assert abs(bias) <= 0.3
 
