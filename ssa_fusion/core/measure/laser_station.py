@@ -18,7 +18,6 @@ above the WGS-84 ellipsoid.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import erfa
@@ -95,23 +94,3 @@ def geodetic_of(position_km: ArrayLike) -> tuple[Array, Array, Array]:
     """Return (latitude rad, longitude rad, height km) of ITRF positions (..., 3) km."""
     lon, lat, h = erfa.gc2gd(1, np.asarray(position_km, dtype=float) * 1000.0)
     return np.asarray(lat, float), np.asarray(lon, float), np.asarray(h, float) / 1000.0
-
-
-def elevation_itrs(site_km: ArrayLike, target_km: ArrayLike) -> Array:
-    """Return the elevation (rad) of ITRF targets (..., 3) above sites' horizons (..., 3).
-
-    Above the ellipsoid normal at each site's geodetic latitude (geometric: no
-    refraction).
-    """
-    s = np.asarray(site_km, dtype=float)
-    lat, lon, _ = geodetic_of(s)
-    up = np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], -1)
-    d = np.asarray(target_km, dtype=float) - s
-    out: Array = np.arcsin(np.clip(np.sum(d * up, -1) / np.linalg.norm(d, axis=-1), -1, 1))
-    return out
-
-
-def is_plausible_site(position_km: ArrayLike) -> bool:
-    """Return whether an ITRF position (km) is at the Earth's surface (6350 .. 6400 km)."""
-    r = float(np.linalg.norm(np.asarray(position_km, dtype=float)))
-    return math.isfinite(r) and 6350.0 <= r <= 6400.0
