@@ -222,8 +222,10 @@ def _add_export_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]
 
 
 def _add_import(p: argparse.ArgumentParser) -> None:
-    """Add `import tdm` to `p`."""
-    sub = p.add_subparsers(dest="ccsds_command", required=True, metavar="{tdm}")
+    """Add `import tdm` and `import crd` (`crd_import`) to `p`."""
+    from ssa_fusion.apps.crd_import import add_import_crd
+
+    sub = p.add_subparsers(dest="ccsds_command", required=True, metavar="{tdm,crd}")
     t = sub.add_parser("tdm", help="a CCSDS TDM (range, az/el or ra/dec) into a bag `replay` "
                                    "runs",
                        description="Read a CCSDS Tracking Data Message (KVN or XML; UTC, TAI, "
@@ -243,6 +245,7 @@ def _add_import(p: argparse.ArgumentParser) -> None:
                             f"measurement (default: the TDM's '{SIGMA_COMMENT}' comment, "
                             f"else the station's sensor preset)")
     t.set_defaults(_ccsds_run=run_import_tdm)
+    add_import_crd(sub)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -21,8 +21,10 @@ _COMMANDS = {
     "export": ("ssa_fusion.apps.ccsds", "CCSDS out of a bag: `export oem` (estimates with "
                                         "covariance, GCRF), `export tdm` (range/az/el, "
                                         "ra/dec)"),
-    "import": ("ssa_fusion.apps.ccsds", "CCSDS into a bag: `import tdm FILE --bag OUT` "
-                                        "(range/az/el and ra/dec that `replay` runs)"),
+    "import": ("ssa_fusion.apps.ccsds", "measurements into a bag: `import tdm FILE --bag "
+                                        "OUT` (CCSDS range/az/el and ra/dec that `replay` "
+                                        "runs), `import crd FILE... --stations SINEX --bag "
+                                        "OUT` (ILRS laser ranging)"),
     "pc": ("ssa_fusion.apps.pc", "collision probability of CCSDS CDMs, beside the message's "
                                  "own"),
 }

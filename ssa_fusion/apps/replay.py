@@ -83,6 +83,8 @@ from ssa_fusion.ros.topics import (
     TOPIC_ESTIMATE,
     TOPIC_FORECAST,
     TOPIC_MEASUREMENT,
+    TOPIC_METEO,
+    TOPIC_REFERENCE,
     TOPIC_SMOOTHED,
     TOPIC_TRUTH,
     TOPIC_WITHHELD,
@@ -91,7 +93,7 @@ from ssa_fusion.ros.topics import (
 PLAYED = (TOPIC_MEASUREMENT, TOPIC_TRUTH, TOPIC_WITHHELD)
 """Topics a replay plays back (estimates and forecasts are what it recomputes)."""
 KNOWN = (*PLAYED, TOPIC_ESTIMATE, TOPIC_SMOOTHED, TOPIC_FORECAST, TOPIC_CLOCK, TOPIC_CONFIG,
-         "/diagnostics", "/rosout", "/parameter_events")
+         TOPIC_METEO, TOPIC_REFERENCE, "/diagnostics", "/rosout", "/parameter_events")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -196,6 +198,10 @@ def check_topics(path: Path, stream: list[bagio.BagMessage]) -> None:
                          f"{', '.join(PLAYED)}")
     if not any(m.topic == TOPIC_MEASUREMENT for m in stream):
         raise ValueError(f"{path}: no {TOPIC_MEASUREMENT} messages to replay")
+    if any(m.topic == TOPIC_MEASUREMENT and m.msg.kind == types.Kind.LASER_RANGE
+           for m in stream):
+        raise ValueError(f"{path}: laser ranges (LASER_RANGE, `import crd`): the filter does "
+                         f"not fuse them yet")
     legacy = sorted({m.msg.header.frame_id for m in stream
                      if m.topic in (TOPIC_TRUTH, TOPIC_ESTIMATE)} - {Frame.GCRF})
     if legacy:

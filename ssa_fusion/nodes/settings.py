@@ -323,8 +323,8 @@ def recorded_estimator(messages: Iterable[str]) -> EstimatorConfig | None:
     for text in messages:
         try:
             msg = json.loads(text)
-            if msg["node"] == CATALOG_NODE:  # the catalog's: `recorded_catalog`
-                continue
+            if msg["node"] == CATALOG_NODE or "estimator" not in msg:
+                continue  # the catalog's (`recorded_catalog`), an importer's (no estimator)
             last[str(msg["node"])] = dict(msg["estimator"])
         except (ValueError, KeyError, TypeError) as exc:
             raise ValueError(f"malformed /ssa/config message {text[:80]!r}: {exc}") from exc

@@ -47,11 +47,12 @@ if TYPE_CHECKING:
 
 ROS_DISTRO = "kilted"
 MSG_PACKAGE = "ssa_fusion_msgs"
-MSG_TYPES = ("Measurement", "StateEstimate", "MeasurementBatch", "EstimateBatch")
+MSG_TYPES = ("Measurement", "StateEstimate", "MeasurementBatch", "EstimateBatch", "Meteo")
 MEASUREMENT = f"{MSG_PACKAGE}/msg/Measurement"
 STATE_ESTIMATE = f"{MSG_PACKAGE}/msg/StateEstimate"
 MEASUREMENT_BATCH = f"{MSG_PACKAGE}/msg/MeasurementBatch"
 ESTIMATE_BATCH = f"{MSG_PACKAGE}/msg/EstimateBatch"
+METEO = f"{MSG_PACKAGE}/msg/Meteo"
 
 
 class BagError(RuntimeError):
@@ -113,7 +114,8 @@ def rosbags_classes() -> MsgClasses:
     return MsgClasses(t["builtin_interfaces/msg/Time"], t["std_msgs/msg/Header"],
                       t[f"{MSG_PACKAGE}/msg/Measurement"], t[f"{MSG_PACKAGE}/msg/StateEstimate"],
                       t[f"{MSG_PACKAGE}/msg/MeasurementBatch"],
-                      t[f"{MSG_PACKAGE}/msg/EstimateBatch"], numpy_arrays=True)
+                      t[f"{MSG_PACKAGE}/msg/EstimateBatch"], numpy_arrays=True,
+                      meteo=t[f"{MSG_PACKAGE}/msg/Meteo"])
 
 
 class BagFullError(OSError):

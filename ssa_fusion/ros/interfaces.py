@@ -27,6 +27,7 @@ from ssa_fusion_msgs.msg import (  # type: ignore[import-untyped]
     EstimateBatch,
     Measurement,
     MeasurementBatch,
+    Meteo,
     StateEstimate,
 )
 from std_msgs.msg import ColorRGBA, Header, String  # type: ignore[import-untyped]
@@ -37,6 +38,6 @@ Message: TypeAlias = Any
 
 __all__ = ["Clock", "ColorRGBA", "DiagnosticArray", "DiagnosticStatus", "EstimateBatch",
            "Header", "KeyValue", "Marker", "MarkerArray", "Measurement", "MeasurementBatch",
-           "Message", "NavSatFix", "NavSatStatus",
+           "Message", "Meteo", "NavSatFix", "NavSatStatus",
            "ParameterDescriptor", "Point", "SetParametersResult", "StateEstimate", "String",
            "Time"]

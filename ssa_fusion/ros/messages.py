@@ -23,18 +23,22 @@ from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
 from ssa_fusion.core.earth import timescales
 from ssa_fusion.core.earth.frames import Frame
 from ssa_fusion.core.earth.timescales import EPOCH_MAX, iso
+from ssa_fusion.core.measure.troposphere import MeteoSample
 
 if TYPE_CHECKING:  # the message packages are imported when first needed (`rclpy_classes`)
     from ssa_fusion.ros.interfaces import Message
 
 KM = 1000.0
 """m per km."""
+HPA = 100.0
+"""Pa per hPa (mbar)."""
 
 # Per-component scale from core units to SI for each measurement kind.
 _Z_SCALE = {
     types.Kind.POSITION: np.array([KM, KM, KM]),
     types.Kind.RANGE_AZ_EL: np.array([KM, 1.0, 1.0]),
     types.Kind.RA_DEC: np.array([1.0, 1.0]),
+    types.Kind.LASER_RANGE: np.array([KM]),
 }
 _X_SCALE = np.full(6, KM)
 # The same per row of a batch: row k is the scale of kind k (a kind unknown to the core
@@ -66,6 +70,7 @@ class MsgClasses:
     measurement_batch: type[Message]
     estimate_batch: type[Message]
     numpy_arrays: bool = False
+    meteo: type[Message] | None = None
 
 
 def rclpy_classes() -> MsgClasses:
@@ -75,12 +80,13 @@ def rclpy_classes() -> MsgClasses:
         Header,
         Measurement,
         MeasurementBatch,
+        Meteo,
         StateEstimate,
         Time,
     )
 
     return MsgClasses(Time, Header, Measurement, StateEstimate, MeasurementBatch,
-                      EstimateBatch)
+                      EstimateBatch, meteo=Meteo)
 
 
 _RCLPY: MsgClasses | None = None
@@ -217,6 +223,25 @@ def measurement_from_msg(msg: Message) -> types.Measurement:
         frame_id=msg.header.frame_id,
         horizon=float(msg.horizon),
     )
+
+
+def meteo_to_msg(m: MeteoSample, classes: MsgClasses | None = None) -> Message:
+    """Return core `MeteoSample` `m` (hPa, K, %) as an ssa_fusion_msgs/Meteo (Pa, K, 0..1)."""
+    c = _default(classes)
+    if c.meteo is None:
+        raise ValueError("these message classes have no ssa_fusion_msgs/Meteo")
+    return c.meteo(header=c.header(stamp=seconds_to_stamp(m.t, c), frame_id=m.station),
+                   pressure=float(m.pressure_hpa) * HPA,
+                   temperature=float(m.temperature_k),
+                   relative_humidity=float(m.humidity_pct) / 100.0)
+
+
+def meteo_from_msg(msg: Message) -> MeteoSample:
+    """Return a Meteo message (Pa, K, 0..1) as a core `MeteoSample` (hPa, K, %)."""
+    return MeteoSample(t=stamp_to_seconds(msg.header.stamp), station=str(msg.header.frame_id),
+                       pressure_hpa=float(msg.pressure) / HPA,
+                       temperature_k=float(msg.temperature),
+                       humidity_pct=float(msg.relative_humidity) * 100.0)
 
 
 def estimate_to_msg(e: types.StateEstimate, classes: MsgClasses | None = None) -> Message:

@@ -78,6 +78,12 @@ TOPIC_SMOOTHED = "/ssa/estimate_smoothed"
 TOPIC_TRUTH = "/ssa/truth"
 TOPIC_WITHHELD = "/ssa/withheld"
 TOPIC_CLOCK = "/clock"
+TOPIC_METEO = "/ssa/meteo"
+"""Surface meteorological data of the stations (ssa_fusion_msgs/Meteo): the troposphere of
+their laser ranges (`ssa-fusion import crd`)."""
+TOPIC_REFERENCE = "/ssa/reference"
+"""For evaluation only, never fused: an independent orbit of the object (StateEstimate,
+GCRF, zero covariance), e.g. a CPF prediction (`ssa-fusion import crd --reference`)."""
 TOPIC_DIAGNOSTICS = "/diagnostics"
 TOPIC_CONFIG = "/ssa/config"
 """The estimator settings in effect (std_msgs/String, JSON of `nodes.settings.config_message`),

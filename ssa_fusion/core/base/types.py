@@ -23,6 +23,11 @@ class Kind(enum.IntEnum):
     RA_DEC = 2
     """[right ascension rad in [0, 2pi), declination rad in [-pi/2, pi/2]]: topocentric, in
     the GCRF frame (an optical sensor; two channels, the message's third is 0)."""
+    LASER_RANGE = 3
+    """[range km]: a two-way laser range, c x the time of flight / 2 (the ILRS's one-way
+    range), stamped at its transmit epoch at the station (one channel, the message's second
+    and third are 0; `core.measure.laser_range` models it). Not yet a kind the filter and
+    surrogate stream (`KIND_NAMES`)."""
 
 
 class Source(enum.IntEnum):
@@ -89,6 +94,7 @@ class Cause(enum.StrEnum):
 
 
 KIND_NAMES = {Kind.POSITION: "position", Kind.RANGE_AZ_EL: "range_az_el", Kind.RA_DEC: "ra_dec"}
+"""The kinds the filter and surrogate stream, by the name of their ``kind`` parameter."""
 
 
 class MotionModel(enum.StrEnum):
