@@ -427,7 +427,7 @@ class TdmReader:
                          ) -> Iterator[Observation]:
         """Yield the data keywords of an ``<observation>``."""
         epoch = None
-        items = []
+        items: list[tuple[str, str, str, int]] = []
         for child in elem:
             name = _local(child.tag)
             n = _line(child, _line(elem, 0))
