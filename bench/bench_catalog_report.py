@@ -41,8 +41,8 @@ from ssa_fusion.core.base.types import UpdateSource  # noqa: E402
 from ssa_fusion.core.earth.stations import NETWORKS, SENSORS  # noqa: E402
 from ssa_fusion.core.motion.element_sets import catalog_states  # noqa: E402
 from ssa_fusion.formats import element_sets as catalog  # noqa: E402
-from ssa_fusion.nodes import settings  # noqa: E402
-from ssa_fusion.nodes.defaults import CATALOG_FILTER  # noqa: E402
+from ssa_fusion.params import settings  # noqa: E402
+from ssa_fusion.params.defaults import CATALOG_FILTER  # noqa: E402
 from ssa_fusion.ros import bagio, messages  # noqa: E402
 from ssa_fusion.ros.topics import (  # noqa: E402
     TOPIC_CONFIG,

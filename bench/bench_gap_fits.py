@@ -64,7 +64,7 @@ def replay(stream: Path, out: Path) -> None:
     """Replay the estimates of `stream` into a GapBank of the imported tree; pickle results."""
     from ssa_fusion.core.base.types import MotionModel
     from ssa_fusion.core.catalog.gap_bank import GapBank, GapBankConfig
-    from ssa_fusion.nodes.defaults import CATALOG_SURROGATE as D
+    from ssa_fusion.params.defaults import CATALOG_SURROGATE as D
 
     steps = pickle.loads(stream.read_bytes())
     bank = GapBank(GapBankConfig(motion_model=MotionModel(D.motion_model),

@@ -34,8 +34,8 @@ from bench_wire import measurements
 from ssa_fusion.core.catalog.track_bank import TrackBank
 from ssa_fusion.core.earth.stations import network_stations
 from ssa_fusion.formats.sites import load_station_map
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.defaults import CATALOG_FILTER
+from ssa_fusion.params import settings
+from ssa_fusion.params.defaults import CATALOG_FILTER
 
 STATIONS = "millstone,tira,altair"
 """The radars of iss_network, as bench_wire's node has them."""

@@ -49,8 +49,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a sourc
 from ssa_fusion.core.base.rows import MeasurementRows
 from ssa_fusion.core.base.types import Kind, Measurement
 from ssa_fusion.formats import element_sets as catalog_io
-from ssa_fusion.nodes.diagnostics import Count
-from ssa_fusion.nodes.progress import TAKEN, ProgressWatch
+from ssa_fusion.nodes.kit.diagnostics import Count
+from ssa_fusion.nodes.kit.progress import TAKEN, ProgressWatch
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
 from ssa_fusion.ros.interfaces import MeasurementBatch

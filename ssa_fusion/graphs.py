@@ -4,7 +4,7 @@ One place for the processes `ssa-fusion live` starts and the launch files start 
 launch ssa_fusion ssa_fusion.launch.py`, `catalog.launch.py`): the single-object graph of a
 scenario (`node_parameters`: sensor_sim, surrogate, filter, recorder) and a catalog's graph
 (`catalog_graph`: recorder, filter and surrogate shards, sensor_sim). Parameters are in SI
-units, as the nodes declare them (`nodes.settings` translates the estimator's settings).
+units, as the nodes declare them (`params.settings` translates the estimator's settings).
 
 It knows the simulated world (`sim`) for the scenarios' settings and the nodes' settings;
 the apps and the launch files import it, nothing below them does.
@@ -20,8 +20,8 @@ from typing import Any, NamedTuple
 from ssa_fusion.core.earth import timescales
 from ssa_fusion.core.gaps.publisher import GapFill
 from ssa_fusion.formats.element_sets import Progress
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.defaults import BAG_PATTERN
+from ssa_fusion.params import settings
+from ssa_fusion.params.defaults import BAG_PATTERN
 from ssa_fusion.ros.readiness import OUTPUT, READERS
 from ssa_fusion.ros.topics import (
     TOPIC_ASSOCIATED,
@@ -168,7 +168,7 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     as many catalog_surrogate (`surrogate_extra` over their defaults), and sensor_sim
     simulating `scenario`'s radars measuring the catalog for `sim_s` from `start` (ISO 8601
     UTC; '' = the catalog's first epoch) (last: it waits for the others), in lockstep with
-    the shards and the recorder (`nodes.progress`; `time_scale` a ceiling) unless
+    the shards and the recorder (`nodes.kit.progress`; `time_scale` a ceiling) unless
     `lockstep` is False (open loop: sim time follows the wall clock). Measurements and
     estimates go as batches (``/ssa/measurement_batch``, ``/ssa/estimate_batch``), one
     measurement batch per shard per step. In lockstep the surrogates fit every gap

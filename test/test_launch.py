@@ -28,7 +28,7 @@ from typing import Any
 import pytest
 
 from ssa_fusion.graphs import WAIT_FOR, node_parameters
-from ssa_fusion.nodes.defaults import BAG_PATTERN
+from ssa_fusion.params.defaults import BAG_PATTERN
 from ssa_fusion.ros.readiness import READERS
 from ssa_fusion.sim import scenarios
 

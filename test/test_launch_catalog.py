@@ -14,7 +14,7 @@ import pytest
 from test_launch import declared, kind, load_launch_file, run_graph, shutdowns
 
 from ssa_fusion.graphs import catalog_graph
-from ssa_fusion.nodes.shards import shard_range
+from ssa_fusion.nodes.kit.shards import shard_range
 from ssa_fusion.sim import sky
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -261,7 +261,7 @@ GOOD = [
     ("ssa_fusion.ros.x", "import rclpy\nfrom ssa_fusion.core import types"),
     ("ssa_fusion.nodes.sensor_sim", "from ssa_fusion.sim import scenarios"),
     ("ssa_fusion.nodes.filter", "from ssa_fusion.ros import messages\nimport rclpy"),
-    ("ssa_fusion.graphs", "from ssa_fusion.sim import sky\nfrom ssa_fusion.nodes import settings"),
+    ("ssa_fusion.graphs", "from ssa_fusion.sim import sky\nfrom ssa_fusion.params import settings"),
     ("ssa_fusion.apps.x", "from ssa_fusion.studies import reproduce\nfrom ssa_fusion import nodes"),
 ]
 

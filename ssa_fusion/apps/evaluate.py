@@ -29,7 +29,8 @@ from ssa_fusion.core.gaps.estimator import EstimatorConfig
 from ssa_fusion.evaluation import passes as passes_
 from ssa_fusion.evaluation.arms import ArmName, GapEvaluation, evaluate_gap
 from ssa_fusion.evaluation.gap_scores import GapScores, score_gaps
-from ssa_fusion.nodes import settings
+from ssa_fusion.params import settings
+from ssa_fusion.params.params_file import load_params_file
 from ssa_fusion.ros import bagio, topics
 from ssa_fusion.ros.messages import estimate_from_msg, measurement_from_msg
 from ssa_fusion.sim import scenarios, sky
@@ -143,7 +144,7 @@ def _settings_for_bag(recorded: list[str], kind: int, scenario: str,
                       params_file: Path | None) -> tuple[Settings, bool]:
     """Return the settings by the module docstring's order; True if the kind's default."""
     if params_file is not None:
-        return Settings(settings.load_params_file(params_file),
+        return Settings(load_params_file(params_file),
                         f"params file {params_file}"), False
     if scenario in sky.SKY_SCENARIOS:
         return Settings(sky.SKY_SCENARIOS[scenario].estimator(), f"scenario {scenario}"), False

@@ -54,10 +54,10 @@ from ssa_fusion.core.motion.element_sets import CatalogEntry, catalog_states
 from ssa_fusion.evaluation.association import detection_labels, score_association
 from ssa_fusion.evaluation.object_states import ObjectStates, States, StatesByObject, merge
 from ssa_fusion.formats import element_sets as catalog_io
-from ssa_fusion.nodes.defaults import CATALOG_FILTER, CATALOG_SURROGATE
-from ssa_fusion.nodes.diagnostics import RECORDED, Count
-from ssa_fusion.nodes.progress import RECORDED_ESTIMATES, RECORDED_MEASUREMENTS
-from ssa_fusion.nodes.unlabelled import EVENT_PREFIX, FATE_PREFIX
+from ssa_fusion.nodes.kit.diagnostics import RECORDED, Count
+from ssa_fusion.nodes.kit.progress import RECORDED_ESTIMATES, RECORDED_MEASUREMENTS
+from ssa_fusion.nodes.kit.unlabelled import EVENT_PREFIX, FATE_PREFIX
+from ssa_fusion.params.defaults import CATALOG_FILTER, CATALOG_SURROGATE
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.discovery import Discovery
 from ssa_fusion.ros.processes import Graph, ros_arguments
@@ -91,7 +91,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "of its shard (default 1)")
     p.add_argument("--open-loop", dest="lockstep", action="store_false",
                    help="catalog: sim time follows the wall clock at --time-scale whatever "
-                        "the nodes keep up with (default: lockstep, `nodes.progress`: each "
+                        "the nodes keep up with (default: lockstep, `nodes.kit.progress`: each "
                         "step waits until the shards and the recorder took the last)")
     p.add_argument("--remote-shards", type=shard_list, default=(), metavar="K[,K...]",
                    help="catalog: shards (filter and surrogate) that run on other hosts: not "
@@ -424,7 +424,7 @@ class ShardSummary(TypedDict):
     association_counts: dict[str, int]
     confirmed_tracks: int
     """Unlabelled detections: ``detection_*``, ``association_*`` and
-    ``published_associated`` (`nodes.unlabelled`)."""
+    ``published_associated`` (`nodes.kit.unlabelled`)."""
 
 
 def summarise(bag: Path, entries: list[CatalogEntry],
@@ -496,7 +496,7 @@ def summarise(bag: Path, entries: list[CatalogEntry],
         score = association(labelled[TOPIC_DETECTION_TRUTH], labelled[TOPIC_ASSOCIATED],
                             set(estimates))
         associated = sum(num(n, Count.PUBLISHED_ASSOCIATED) for n in names)
-        # every unlabelled row the banks took has a fate (`nodes.unlabelled`)
+        # every unlabelled row the banks took has a fate (`nodes.kit.unlabelled`)
         no_fate = consumed - sum(v for p in per_shard.values()
                                  for k, v in p["association_counts"].items()
                                  if k.startswith(FATE_PREFIX))

@@ -74,7 +74,7 @@ from ssa_fusion.core.gaps.estimator import (
 from ssa_fusion.core.gaps.publisher import GapFill, GapPublisher, Published
 from ssa_fusion.core.measure.validation import MAX_CLOCK_LEAD_S, ahead_of_clock
 from ssa_fusion.formats import sites as site_file
-from ssa_fusion.nodes import settings as node_settings
+from ssa_fusion.params import settings as node_settings
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import (
     CONFIG_QOS,

@@ -1,7 +1,7 @@
 """`ssa-fusion replay` of a catalog's bag: its measurements through the catalog filter.
 
 A bag is a catalog's (`catalog_reason`) when a catalog_filter recorded its settings with it
-(``/ssa/config``, `nodes.settings.recorded_catalog`), when its measurements name more than
+(``/ssa/config``, `params.settings.recorded_catalog`), when its measurements name more than
 one object, or when it holds unlabelled detections (rows of ``/ssa/measurement_batch``
 without an object id). One object's filter would put every object's measurements in one
 track; this replay gives each object its own, as the catalog_filter node does, through the
@@ -56,8 +56,8 @@ from ssa_fusion.core.catalog.fusion import CatalogFusion, Fused, in_epoch_order,
 from ssa_fusion.core.catalog.unlabelled import elevation_masks, is_unlabelled
 from ssa_fusion.core.earth.stations import network_stations
 from ssa_fusion.formats.sites import load_sites, load_station_map
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.defaults import CATALOG_FILTER
+from ssa_fusion.params import settings
+from ssa_fusion.params.defaults import CATALOG_FILTER
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import (
     CATALOG_QOS,

@@ -49,7 +49,7 @@ from ssa_fusion.core.earth.stations import network_stations
 from ssa_fusion.evaluation import catalog_scores as cs
 from ssa_fusion.evaluation.association import detection_labels, score_association
 from ssa_fusion.formats.sites import load_station_map
-from ssa_fusion.nodes import settings
+from ssa_fusion.params import settings
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import (
     TOPIC_ASSOCIATED,

@@ -1,4 +1,10 @@
-"""rclpy nodes of ssa_fusion, one per module, each with `main()` for `ros2 run`.
+"""The seven rclpy nodes of ssa_fusion, one per module, each with `main()` for `ros2 run`.
+
+sensor_sim, surrogate, filter, recorder, foxglove_bridge, catalog_filter and
+catalog_surrogate are thin adapters on one base class (`kit.base.SsaNode`): messages in and
+out, their parameter table (`ssa_fusion.params.tables`), timers; the maths is the core's,
+the simulated world `sim`'s. `kit` holds their shared machinery, `entry` the executables.
+They import `ros`, `params`, `formats` and `core` (sensor_sim also `sim`).
 
 Importing this package (or a node module) changes nothing in the process. What a node
 process needs before it starts, `start_process()` does: the node's `main()` calls it, and

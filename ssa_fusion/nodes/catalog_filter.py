@@ -28,8 +28,8 @@ K processes with shard 0..K-1 cover every object exactly once, on one host or se
 one ROS domain.
 
 Unlabelled detections (rows whose ``object_id`` is empty, a radar's scans) are associated
-with tracks (`nodes.unlabelled`, `core.catalog.unlabelled`): the confirmed tracks' estimates go out
-on ``/ssa/estimate_batch`` under their track ids, the associated detections on
+with tracks (`nodes.kit.unlabelled`, `core.catalog.unlabelled`): the confirmed tracks'
+estimates go out on ``/ssa/estimate_batch`` under their track ids, the associated detections on
 ``/ssa/measurement_associated``. They need one shard (``shards`` 1): with several, they are
 refused (``rejected_unlabelled_sharded``).
 
@@ -59,36 +59,20 @@ from ssa_fusion.core.earth.stations import network_stations
 from ssa_fusion.core.measure import validation
 from ssa_fusion.core.measure.validation import id_problem, measurement_problem
 from ssa_fusion.formats.sites import load_sites, load_station_map
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.base import SsaNode
-from ssa_fusion.nodes.defaults import CATALOG_FILTER
-from ssa_fusion.nodes.diagnostics import Count, NodeCause
-from ssa_fusion.nodes.memory import AckedPublisher, release_free_heap
-from ssa_fusion.nodes.parameters import (
-    POSITIVE,
-    STATION_IDS,
-    STATION_RULE_NAMES,
-    Param,
-    ParameterTable,
-    Rule,
-    at_least,
-    clock_lead,
-    filter_rows,
-    sites_problem,
-    sites_row,
-)
-from ssa_fusion.nodes.progress import SHARD, TAKEN, ProgressReporter
-from ssa_fusion.nodes.shards import (
+from ssa_fusion.nodes.kit.base import SsaNode
+from ssa_fusion.nodes.kit.diagnostics import Count, NodeCause
+from ssa_fusion.nodes.kit.memory import AckedPublisher, release_free_heap
+from ssa_fusion.nodes.kit.progress import SHARD, TAKEN, ProgressReporter
+from ssa_fusion.nodes.kit.shards import (
     LIST_OBJECTS,
-    SHARD_RULE,
     content_filter,
-    max_objects_row,
     rows_shard_problems,
     shard_problem,
     shard_range,
-    shard_rows,
 )
-from ssa_fusion.nodes.unlabelled import UnlabelledRows, sharded_problem
+from ssa_fusion.nodes.kit.unlabelled import UnlabelledRows, sharded_problem
+from ssa_fusion.params import settings
+from ssa_fusion.params.tables.catalog_filter import PARAMETERS
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import EstimateBatch, MeasurementBatch, Message
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
@@ -100,38 +84,6 @@ from ssa_fusion.ros.topics import (
     TOPIC_MEASUREMENT,
     TOPIC_MEASUREMENT_BATCH,
 )
-
-PARAMETERS = ParameterTable("catalog_filter", (
-    Param("station", CATALOG_FILTER.station,
-          "radar stations of the measurements: a network id, or station ids (built in, or "
-          "sites of `sites`) separated by commas", check=STATION_IDS),
-    sites_row(CATALOG_FILTER.sites),
-    *filter_rows(CATALOG_FILTER, runtime=False, unlimited_span=False),
-    *shard_rows(CATALOG_FILTER.shards, CATALOG_FILTER.shard),
-    Param("batch_period", CATALOG_FILTER.batch_period,
-          "time between batches: what arrived meanwhile is fused at once", unit="wall s",
-          check=POSITIVE),
-    Param("evict_after", CATALOG_FILTER.evict_after,
-          "when the shard holds max_objects, the object measured longest ago gives its row "
-          "to a new one if silent this long (counted `evicted`); objects measured since are "
-          "never evicted, so a flood of new ids is refused instead", unit="s",
-          check=POSITIVE),
-    Param("batch_rows", CATALOG_FILTER.batch_rows,
-          "a fusion's estimates go in EstimateBatch messages of at most this many rows "
-          "(~0.4 kB each; DDS keeps buffers as large as the largest message)",
-          check=at_least(1)),
-    Param("max_unacked_rows", CATALOG_FILTER.max_unacked_rows,
-          "estimate rows published before the node waits (at most 5 wall s) for its readers' "
-          "acknowledgements: bounds the memory of the estimate publisher's history, which "
-          "otherwise keeps as many message slots as it ever had unacknowledged messages "
-          "(~2 MB each at 5,000 rows); each wait lasts until the readers acknowledge (Fast "
-          "DDS: up to its 3 s heartbeat), so a catalog runs slower; 0 = never wait",
-          check=at_least(0)),
-    clock_lead(CATALOG_FILTER.max_clock_lead),
-    max_objects_row(CATALOG_FILTER.max_objects, "tracks (~2 kB each: 180 MiB for 100,000)",
-                    "a measurement"),
-), rules=(SHARD_RULE, Rule(STATION_RULE_NAMES, sites_problem)))
-"""The catalog_filter's parameters."""
 
 RELEASE_HEAP_PERIOD_S = 1.0
 """Wall s between two returns of the freed C heap to the system (`memory.release_free_heap`):

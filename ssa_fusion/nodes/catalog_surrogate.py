@@ -38,7 +38,6 @@ from ssa_fusion.core.base.rows import EstimateRows
 from ssa_fusion.core.base.types import Cause, Kind, MotionModel, UpdateSource
 from ssa_fusion.core.catalog.gap_bank import (
     CATALOG_RESIDUAL,
-    GAP_FORECASTS,
     GapBank,
     GapBankConfig,
     GapForecast,
@@ -57,37 +56,17 @@ from ssa_fusion.core.measure.validation import (
     states_problems,
 )
 from ssa_fusion.formats.sites import load_station_map
-from ssa_fusion.nodes.base import SsaNode
-from ssa_fusion.nodes.defaults import CATALOG_SURROGATE
-from ssa_fusion.nodes.diagnostics import Count, NodeCause
-from ssa_fusion.nodes.parameters import (
-    MOTION_MODELS,
-    NON_NEGATIVE,
-    POSITIVE,
-    STATION_IDS,
-    STATION_RULE_NAMES,
-    Check,
-    Param,
-    ParameterTable,
-    ParamValue,
-    Rule,
-    at_least,
-    clock_lead,
-    one_of,
-    sites_problem,
-    sites_row,
-)
-from ssa_fusion.nodes.progress import SHARD, TAKEN_ESTIMATES, ProgressReporter
-from ssa_fusion.nodes.shards import (
+from ssa_fusion.nodes.kit.base import SsaNode
+from ssa_fusion.nodes.kit.diagnostics import Count, NodeCause
+from ssa_fusion.nodes.kit.progress import SHARD, TAKEN_ESTIMATES, ProgressReporter
+from ssa_fusion.nodes.kit.shards import (
     LIST_OBJECTS,
-    SHARD_RULE,
     content_filter,
-    max_objects_row,
     rows_shard_problems,
     shard_problem,
     shard_range,
-    shard_rows,
 )
+from ssa_fusion.params.tables.catalog_surrogate import PARAMETERS
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import EstimateBatch, MeasurementBatch, Message
 from ssa_fusion.ros.topics import (
@@ -99,58 +78,12 @@ from ssa_fusion.ros.topics import (
 
 TICK_S = 0.01
 """Wall s between two rounds of fits and releases (in lockstep the simulator's next step
-waits for the round at its clock: `nodes.progress.CLOCK`)."""
+waits for the round at its clock: `nodes.kit.progress.CLOCK`)."""
 
 COUNTERS = {"fitted": Count.FITS_MADE, "fitted_physics": Count.FITS_PHYSICS,
             "refused": Count.FITS_REFUSED,
             "skipped": Count.FITS_SKIPPED, "overtaken": Count.FORECASTS_OVERTAKEN}
 """/diagnostics counters of the bank's counts (`GapBank.counts`)."""
-
-
-def _fraction(v: ParamValue) -> str | None:
-    return None if isinstance(v, float) and 0.0 <= v <= 1.0 else "must be in [0, 1]"
-
-
-PARAMETERS = ParameterTable("catalog_surrogate", (
-    Param("motion_model", CATALOG_SURROGATE.motion_model,
-          "the catalog_filter's motion model, which the residual is learned against",
-          check=MOTION_MODELS),
-    Param("predict_period", CATALOG_SURROGATE.predict_period,
-          "forecasts at its multiples in a gap", unit="s", check=POSITIVE),
-    Param("pass_break", CATALOG_SURROGATE.pass_break,
-          "sim time without an estimate after which a pass has ended", unit="s",
-          check=POSITIVE),
-    Param("hold", CATALOG_SURROGATE.hold,
-          "forecasts only for epochs at least this long before the clock (the filter's "
-          "estimates arrive after the clock)", unit="s", check=NON_NEGATIVE),
-    Param("fit_budget", CATALOG_SURROGATE.fit_budget,
-          "fraction of wall time the fits may take on average; 0 = no budget: every pass "
-          "end is fitted when found, whatever the machine (a lockstep run's, which waits "
-          "for the fits)", check=Check("in [0, 1]", _fraction)),
-    Param("min_anchors", CATALOG_SURROGATE.min_anchors, "pass ends a fit needs",
-          check=at_least(2)),
-    Param("min_span", CATALOG_SURROGATE.min_span,
-          "the pass ends of a fit must span at least this", unit="s", check=NON_NEGATIVE),
-    Param("physics_fit", CATALOG_SURROGATE.physics_fit,
-          "residual: a gap the learned residual has no fit for yet (fewer than min_anchors "
-          "pass ends, or a span below min_span) or refuses gets the physics-only forecast "
-          "from the object's pass end (the motion model, with constant accelerations under "
-          "a prior in its covariance: core.gaps.residual.PHYSICS_RESIDUAL), from its first pass "
-          "end on; counted in fits_made and fits_physics"),
-    Param("gap_forecast", CATALOG_SURROGATE.gap_forecast,
-          "each gap's forecast: residual (the motion model plus its residual learned from "
-          "pass ends) or batch_fit (a batch least-squares fit of the object's measurements "
-          "of its last passes, which the node then subscribes to)",
-          check=one_of(*(str(f) for f in GAP_FORECASTS))),
-    Param("station", CATALOG_SURROGATE.station,
-          "batch_fit: radar stations of the measurements, as the catalog_filter's "
-          "`station`", check=STATION_IDS),
-    sites_row(CATALOG_SURROGATE.sites),
-    *shard_rows(CATALOG_SURROGATE.shards, CATALOG_SURROGATE.shard),
-    clock_lead(CATALOG_SURROGATE.max_clock_lead),
-    max_objects_row(CATALOG_SURROGATE.max_objects, "holds", "an estimate"),
-), rules=(SHARD_RULE, Rule(STATION_RULE_NAMES, sites_problem)))
-"""The catalog_surrogate's parameters."""
 
 
 class CatalogSurrogateNode(SsaNode):

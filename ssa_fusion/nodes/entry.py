@@ -16,9 +16,7 @@ import sys
 from collections.abc import Callable
 
 from ssa_fusion.nodes import start_process
-
-NODES = ("sensor_sim", "surrogate", "filter", "recorder", "foxglove_bridge", "catalog_filter",
-         "catalog_surrogate")
+from ssa_fusion.params.tables import NODES
 
 
 def run_node(name: str, args: list[str] | None = None) -> int:

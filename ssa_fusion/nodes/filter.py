@@ -21,24 +21,11 @@ from functools import partial
 from ssa_fusion.core.base.types import Cause, Source
 from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker
 from ssa_fusion.core.gaps.publisher import GapFill, GapPublisher, Published
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.base import SsaNode
-from ssa_fusion.nodes.defaults import FILTER
-from ssa_fusion.nodes.diagnostics import PUBLISHED_BY_SOURCE
-from ssa_fusion.nodes.parameters import (
-    NON_NEGATIVE,
-    STATION_RULE_NAMES,
-    Param,
-    ParameterTable,
-    ParamValue,
-    Rule,
-    clock_lead,
-    filter_rows,
-    measurement_stream,
-    object_filter,
-    one_of,
-    sites_problem,
-)
+from ssa_fusion.nodes.kit.base import SsaNode
+from ssa_fusion.nodes.kit.diagnostics import PUBLISHED_BY_SOURCE
+from ssa_fusion.params import settings
+from ssa_fusion.params.checks import ParamValue
+from ssa_fusion.params.tables.filter import PARAMETERS
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
 from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
@@ -52,60 +39,6 @@ from ssa_fusion.ros.topics import (
 
 TICK_S = 0.1
 """Wall s between two publications of the predictions due (at most 100 each)."""
-
-
-PARAMETERS = ParameterTable("filter", (
-    *measurement_stream(FILTER.kind, FILTER.station, FILTER.sites, "fuses"),
-    *filter_rows(FILTER, runtime=True, unlimited_span=True),
-    Param("light_time", FILTER.light_time,
-          "station models see the object where it was range / c earlier (the ISS moves "
-          "11–39 m meanwhile)"),
-    Param("refraction", FILTER.refraction,
-          "radar elevations as the standard atmosphere refracts them (Saemundsson's "
-          "formula, `core.earth.refraction`; 5.4′ at 10°); off: geometric"),
-    object_filter(FILTER.object_id, "track"),
-    Param("predict_period", FILTER.predict_period,
-          "without an update for this long, predictions are published at every multiple of "
-          "`predict_period` of sim time (a grid: the truth's epochs when the cadences "
-          "agree; each predicted on from the previous; at most 100 per 0.1 s wall, a larger "
-          "backlog is worked off over the next ticks, and all that are due before a real "
-          "measurement are published before it is fused; when more than 1000 are due at "
-          "once (10000 before a measurement) the earliest are skipped and counted as "
-          "`predictions_skipped`); 0 = never", unit="sim s", check=NON_NEGATIVE,
-          runtime=True),
-    Param("gap_forecast", FILTER.gap_forecast,
-          "what the predictions in a gap between passes are: `none` (the EKF coasting), "
-          "`residual`: once a prediction epoch is 600 s after the last estimate that fused a "
-          "real measurement, that estimate becomes an anchor of "
-          "`core.gaps.forecaster.GapForecaster` (the motion model plus its residual — Hill "
-          "equations forced by empirical accelerations, constant + once per revolution — "
-          "fitted to the pass ends of the last 2 days, covariance scaled by held-out "
-          "errors); from 5 anchors spanning a day on, the gap's predictions are its "
-          "forecast, tagged update source FORECAST, up to 1 day after the pass. The EKF "
-          "itself coasts on: the next real measurement updates its own prediction; or "
-          "`batch_fit`: from 600 s after the last estimate that fused a real measurement, "
-          "a J2-J4 batch least-squares fit (with a drag factor where there are ranges) of "
-          "the real measurements fused in the passes that start within 24 h of the last "
-          "one, at least 3 (angles only: the last 3; `core.gaps.batch_gap`, realistic covariance "
-          "with considered "
-          "accelerations and state-noise compensation), up to 1 day after the pass, tagged "
-          "FORECAST; or `batch_init`: `batch_fit`, and at the first real measurement of the "
-          "next pass (more than 600 s after the last one fused, up to 1 day after it) the "
-          "EKF starts its sequential update from the fit's prediction there (state and "
-          "realistic covariance) instead of its own coasted state "
-          "(`core.filter.tracker.Tracker.restart_from`), once the fit spans 3 passes; or "
-          "`fit_residual`: `batch_init` with the fit's predictions (and the EKF's prior) "
-          "corrected by the residual surrogate learnt against the fit -- the fits' states "
-          "at the pass ends of the last 2 days against the newest fit's trajectory "
-          "(`core.gaps.fit_residual.FitResidualForecaster`), the fit's own until it has 5 "
-          "spanning a day. "
-          "`ssa-fusion live` sets each real-sky scenario's `gap_fill` (leo_optical: "
-          "`fit_residual`, the others `batch_init`)",
-          check=one_of(*GapFill)),
-    clock_lead(FILTER.max_clock_lead),
-), rules=(Rule(STATION_RULE_NAMES, sites_problem),
-          Rule(settings.FILTER_KEYS, partial(settings.estimator_problem, "filter"))))
-"""The filter's parameters."""
 
 
 class FilterNode(SsaNode):

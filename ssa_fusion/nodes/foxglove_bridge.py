@@ -41,20 +41,10 @@ from rclpy.publisher import Publisher
 
 from ssa_fusion.core.base.types import Cause, Source
 from ssa_fusion.core.earth.stations import network_stations
-from ssa_fusion.nodes.base import SsaNode
-from ssa_fusion.nodes.defaults import STATION
-from ssa_fusion.nodes.diagnostics import Count
-from ssa_fusion.nodes.parameters import (
-    POSITIVE,
-    STATIONS,
-    Check,
-    Param,
-    ParameterError,
-    ParameterTable,
-    ParamValue,
-    at_least,
-    object_filter,
-)
+from ssa_fusion.nodes.kit.base import SsaNode
+from ssa_fusion.nodes.kit.diagnostics import Count
+from ssa_fusion.params.rows import ParameterError
+from ssa_fusion.params.tables.foxglove_bridge import PARAMETERS
 from ssa_fusion.ros import bagio, messages, visual_msgs
 from ssa_fusion.ros import foxglove_scene as scene
 from ssa_fusion.ros.interfaces import (
@@ -77,45 +67,6 @@ from ssa_fusion.ros.topics import (
     TOPIC_MEASUREMENT_BATCH,
     TOPIC_TRUTH,
 )
-
-DEFAULT_HOST = "127.0.0.1"
-"""Loopback: nothing is served beyond this machine unless `host` says so."""
-DEFAULT_PORT = 8765
-"""Foxglove's usual WebSocket port."""
-
-
-def _port(value: ParamValue) -> str | None:
-    ok = isinstance(value, int) and 0 <= value <= 65535
-    return None if ok else "must be an integer in 0..65535 (0 = any free port)"
-
-
-def _host(value: ParamValue) -> str | None:
-    return None if isinstance(value, str) and value.strip() else "must be a host name or address"
-
-
-def _stations(value: ParamValue) -> str | None:
-    return None if value == "" else STATIONS(value)
-
-
-PARAMETERS = ParameterTable("foxglove_bridge", (
-    Param("host", DEFAULT_HOST, "address the WebSocket server binds to (loopback by default)",
-          check=Check("a host name or address", _host)),
-    Param("port", DEFAULT_PORT, "TCP port of the WebSocket server (0 = any free port; the log "
-          "says which)", check=Check("0..65535", _port)),
-    Param("station", STATION, "stations drawn in the scene ('' = none); range/az/el from them "
-          "are drawn as points", check=Check(STATIONS.text + ", or ''", _stations)),
-    Param("scene_period", 0.2, "time between scene updates", unit="wall s", check=POSITIVE),
-    Param("trail_length", 600, "positions kept per trail", check=at_least(1)),
-    Param("points", 300, "forecast and measurement points kept in the scene",
-          check=at_least(1)),
-    Param("marker_size", 150.0, "diameter of the position markers in the scene", unit="km",
-          check=POSITIVE),
-    object_filter("", "show"),
-    Param("ros_topics", True, "also publish the scene and ground tracks as ROS messages "
-          "(`/ssa/visual/*`: MarkerArray, NavSatFix), so that the recorder puts the picture "
-          "in the bag"),
-))
-"""The foxglove_bridge's parameters."""
 
 
 class FoxgloveBridgeNode(SsaNode):

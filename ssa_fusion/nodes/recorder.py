@@ -20,35 +20,25 @@ flushed before readable (`ssa-fusion bag repair`).
 from __future__ import annotations
 
 import importlib
-import time
 from collections.abc import Callable
 from functools import partial
-from pathlib import Path
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 
 from ssa_fusion.core.base.types import Cause
-from ssa_fusion.nodes.base import SsaNode
-from ssa_fusion.nodes.defaults import BAG_PATTERN, RECORDER
-from ssa_fusion.nodes.diagnostics import RECORDED
-from ssa_fusion.nodes.parameters import (
-    POSITIVE,
-    Check,
-    Computed,
-    Param,
-    ParameterError,
-    ParameterTable,
-    ParamValue,
-)
-from ssa_fusion.nodes.process import EXIT_FAILED, finish
-from ssa_fusion.nodes.progress import (
+from ssa_fusion.nodes.kit.base import SsaNode
+from ssa_fusion.nodes.kit.diagnostics import RECORDED
+from ssa_fusion.nodes.kit.process import EXIT_FAILED, finish
+from ssa_fusion.nodes.kit.progress import (
     RECORDED_ASSOCIATED,
     RECORDED_ESTIMATES,
     RECORDED_MEASUREMENTS,
     RECORDED_TRUTH,
     ProgressReporter,
 )
+from ssa_fusion.params.rows import ParameterError
+from ssa_fusion.params.tables.recorder import PARAMETERS
 from ssa_fusion.ros.bagio import BagFullError, BagWriter, qos_from_rclpy
 from ssa_fusion.ros.interfaces import Message
 from ssa_fusion.ros.topics import DATA_DEPTH
@@ -89,27 +79,6 @@ def row_counter(type_name: str, msg_class: type[Message]) -> Callable[[bytes], i
     return rows
 
 
-def _new_bag(value: ParamValue) -> str | None:
-    if not value:
-        return "must be a directory path"
-    return "exists already, not overwriting" if Path(str(value)).exists() else None
-
-
-PARAMETERS = ParameterTable("recorder", (
-    Param("bag", Computed(lambda _: time.strftime(BAG_PATTERN),
-                          "`out/bags/ssa_<YYYYmmdd_HHMMSS>` (start time; not in the yaml: the "
-                          "launch file's `bag:=`)", "out/bags/ssa_20260101_120000"),
-          "output bag directory", check=Check("must not exist", _new_bag)),
-    Param("topics", RECORDER.topics, "topics recorded besides every topic under `prefix`"),
-    Param("prefix", RECORDER.prefix, "record every topic whose name starts with this"),
-    Param("flush_period", RECORDER.flush_period, "time between flushes of the bag to disk",
-          unit="wall s", check=POSITIVE),
-    Param("discover_period", RECORDER.discover_period, "time between topic discovery scans",
-          unit="wall s", check=POSITIVE),
-))
-"""The recorder's parameters."""
-
-
 class Recorder(SsaNode):
     """The recorder node: raw subscriptions to every topic wanted, into a `BagWriter`."""
 
@@ -137,7 +106,7 @@ class Recorder(SsaNode):
         self.discover()
 
     def recorded(self) -> dict[str, int]:
-        """Return the lockstep progress: the batches' rows recorded (`nodes.progress`).
+        """Return the lockstep progress: the batches' rows recorded (`nodes.kit.progress`).
 
         Measurements and estimates always; the unlabelled detections' truth and the
         associated detections once their topic is recorded.

@@ -1,14 +1,14 @@
 """Default parameter values of the nodes, one dataclass per node.
 
-In the parameters' units (SI: m, m/s, rad, s; each node's parameter table in its module, and
-docs/NODES.md, say what each means). Every field is named like the ROS parameter it is the
-default of, and the nodes declare their parameters with these values;
-``config/default.yaml`` holds the same values (a few differ on purpose, for the default
-*run*: test/nodes/test_config.py lists them and keeps the rest equal). The estimator
-defaults are those of the default live scenario (the ISS, two-body + J2, range/az/el from
-Columbus every 30 s, ten orbits of tracking): the same numbers `ssa-fusion live` derives
-from that scenario (the same test checks it), written out here so that the nodes need
-nothing from the simulated world (`ssa_fusion.sim`).
+In the parameters' units (SI: m, m/s, rad, s; each node's parameter table in
+`ssa_fusion.params.tables`, and docs/NODES.md, say what each means). Every field is named
+like the ROS parameter it is the default of, and the nodes declare their parameters with
+these values; ``config/default.yaml`` holds the same values (a few differ on purpose, for
+the default *run*: test/nodes/test_config.py lists them and keeps the rest equal). The
+estimator defaults are those of the default live scenario (the ISS, two-body + J2,
+range/az/el from Columbus every 30 s, ten orbits of tracking): the same numbers `ssa-fusion
+live` derives from that scenario (the same test checks it), written out here so that the
+parameters need nothing from the simulated world (`ssa_fusion.sim`).
 
 A field whose default is ``None`` is computed when the node starts (said per field).
 Plain values, and the core's where the core has them in a module this one may import
@@ -28,7 +28,7 @@ from ssa_fusion.core.filter.options import DEFAULT_GATE, SKY_FILTER
 from ssa_fusion.core.measure.validation import MAX_CLOCK_LEAD_S, MAX_OBJECTS
 
 KM = 1000.0
-"""m per km: the parameters' SI against the core's km (`nodes.settings` converts with it)."""
+"""m per km: the parameters' SI against the core's km (the scale of their rows: `units`)."""
 
 
 def _si(value: float) -> float:
@@ -207,12 +207,28 @@ class RecorderDefaults:
     discover_period: float = 0.1
 
 
+@dataclass(frozen=True)
+class FoxgloveBridgeDefaults:
+    """foxglove_bridge's defaults: a scene on the loopback at Foxglove's usual port."""
+
+    host: str = "127.0.0.1"
+    port: int = 8765
+    station: str = STATION
+    scene_period: float = 0.2
+    trail_length: int = 600
+    points: int = 300
+    marker_size: float = 150.0
+    object_id: str = ""
+    ros_topics: bool = True
+
+
 SENSOR_SIM = SensorSimDefaults()
 SURROGATE = SurrogateDefaults()
 FILTER = FilterDefaults()
 RECORDER = RecorderDefaults()
 CATALOG_FILTER = CatalogFilterDefaults()
 CATALOG_SURROGATE = CatalogSurrogateDefaults()
+FOXGLOVE_BRIDGE = FoxgloveBridgeDefaults()
 
 NODES = {"sensor_sim": SENSOR_SIM, "surrogate": SURROGATE, "filter": FILTER,
          "recorder": RECORDER}

@@ -2,22 +2,21 @@
 
 Each node's section of docs/NODES.md holds its parameters between two markers::
 
-    <!-- parameters filter: generated from ssa_fusion/nodes/filter.py; do not edit -->
+    <!-- parameters filter: generated from ssa_fusion/params/tables/filter.py; do not edit -->
     | name | type | default | unit | range | run time | meaning |
     ...
     <!-- end of parameters filter -->
 
-`render` rewrites what stands between them from the node's `PARAMETERS` (and notes where
-config/default.yaml sets another value than the default); ``test/nodes/test_parameter_doc.py``
-fails when the doc and the tables differ. After changing a table::
+`render` rewrites what stands between them from the node's table (`tables`), noting where
+config/default.yaml sets another value than the default; ``test/params/test_doc.py`` fails
+when the doc and the tables differ. After changing a table::
 
-    python -m ssa_fusion.nodes.parameter_doc docs/NODES.md
+    python -m ssa_fusion.params.doc docs/NODES.md
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import re
 import sys
 from collections.abc import Mapping
@@ -26,8 +25,8 @@ from typing import Any
 
 import yaml
 
-from ssa_fusion.nodes.entry import NODES
-from ssa_fusion.nodes.parameters import Computed, Default, ParameterTable
+from ssa_fusion.params.rows import Computed, Default, ParameterTable
+from ssa_fusion.params.tables import NODES, table_of
 
 HEADER = ("| name | type | default | unit | range | run time | meaning |\n"
           "|---|---|---|---|---|---|---|\n")
@@ -38,18 +37,13 @@ _REGION = re.compile(r"(<!-- parameters (\w+): [^\n]*-->\n)(.*?)(<!-- end of par
 
 def begin_marker(node: str) -> str:
     """Return the line that opens `node`'s generated table."""
-    return f"<!-- parameters {node}: generated from ssa_fusion/nodes/{node}.py; do not edit -->"
+    return (f"<!-- parameters {node}: generated from ssa_fusion/params/tables/{node}.py; "
+            "do not edit -->")
 
 
 def end_marker(node: str) -> str:
     """Return the line that closes `node`'s generated table."""
     return f"<!-- end of parameters {node} -->"
-
-
-def table_of(node: str) -> ParameterTable:
-    """Return the parameter table of node `node` (its module's ``PARAMETERS``)."""
-    table: ParameterTable = importlib.import_module(f"ssa_fusion.nodes.{node}").PARAMETERS
-    return table
 
 
 def _type(value: Default) -> str:
@@ -131,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.check:
         problems = [f"no table of {', '.join(missing)}"] if missing else []
         if new != text:
-            problems.append("out of date: run python -m ssa_fusion.nodes.parameter_doc")
+            problems.append("out of date: run python -m ssa_fusion.params.doc")
         for problem in problems:
             print(f"{args.doc}: {problem}", file=sys.stderr)
         return 1 if problems else 0

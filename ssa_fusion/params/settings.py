@@ -1,10 +1,10 @@
 """The estimator settings of the filter and surrogate nodes as ROS parameters, and back.
 
 ROS parameters are in SI units (m, m/s, rad, s; docs/NODES.md);
-`core.gaps.estimator.EstimatorConfig`
-is in the core's (km, km/s). This module is the one translation between the two, used by
-the nodes (their declared parameters), by `ssa-fusion live` (the parameters that run a
-scenario), by `replay`/`report --params-file` (a ROS params YAML) and for the settings the
+`core.gaps.estimator.EstimatorConfig` is in the core's (km, km/s). This module is the one
+translation between the two (its units by the rows' scales: `units.convert`), used by the
+nodes (their declared parameters), by `ssa-fusion live` (the parameters that run a
+scenario), by `replay`/`report --params-file` (`params_file`) and for the settings the
 nodes record with every bag on ``/ssa/config`` (`config_message`, `recorded_estimator`).
 No rclpy here: the apps read params files and bags without ROS.
 """
@@ -15,10 +15,8 @@ import dataclasses
 import json
 import math
 from collections.abc import Iterable, Mapping
-from pathlib import Path
 from typing import Any
 
-from ssa_fusion.core.base.quoting import one_line, quote, shown
 from ssa_fusion.core.base.types import KIND_NAMES, Kind, MotionModel
 from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.filter.options import FilterOptions
@@ -26,8 +24,9 @@ from ssa_fusion.core.gaps import estimator as config
 from ssa_fusion.core.gaps.estimator import EstimatorConfig, Lift
 from ssa_fusion.core.gaps.surrogate import LIVE_SURROGATE
 from ssa_fusion.formats.sites import load_stations
-from ssa_fusion.nodes.defaults import CATALOG_FILTER, FILTER, KM, SURROGATE
-from ssa_fusion.nodes.parameters import ParameterTable
+from ssa_fusion.params.defaults import CATALOG_FILTER, FILTER, SURROGATE
+from ssa_fusion.params.shared import filter_rows
+from ssa_fusion.params.units import Units, convert
 
 FILTER_KEYS = ("kind", "station", "sites", "motion_model", "p0_sigma", "q", "gate", "iod_samples",
                "iod_max_span", "reinit_after", "sigma_bound", "light_time", "refraction")
@@ -46,18 +45,21 @@ CATALOG_KEYS = ("station", "sites", "motion_model", "p0_sigma", "q", "gate", "io
 (``batch_period``, the wall time between fusions, does not: `core.catalog.fusion`)."""
 NODE_MOTION_MODELS = (MotionModel.KEPLER, MotionModel.J2)
 """Motion models the filter node offers (Earth orbits on the Unix clock)."""
+FILTER_ROWS = filter_rows(FILTER, runtime=True, unlimited_span=True)
+"""The rows of a filter's settings (the object filter's and the catalog's scale alike)."""
 
 
 def filter_params(c: EstimatorConfig) -> dict[str, Any]:
     """Return the filter's parameters (SI) for estimator `c`."""
     noise, iod = c.filter.noise, c.filter.iod
-    return {"kind": KIND_NAMES[c.kind], "station": c.station,
+    core = {"kind": KIND_NAMES[c.kind], "station": c.station,
             "motion_model": str(c.filter.motion.motion_model),
-            "p0_sigma": [v * KM for v in iod.p0_sigma], "q": noise.q * KM * KM,
+            "p0_sigma": list(iod.p0_sigma), "q": noise.q,
             "gate": noise.gate or 0.0, "iod_samples": iod.iod_samples,
             "iod_max_span": 0.0 if math.isinf(iod.iod_max_span_s) else iod.iod_max_span_s,
             "reinit_after": iod.reinit_after, "sigma_bound": noise.sigma_bound,
             "light_time": c.light_time, "refraction": c.refraction}
+    return convert(FILTER_ROWS, core, Units.SI)
 
 
 def surrogate_params(c: EstimatorConfig) -> dict[str, Any]:
@@ -82,8 +84,8 @@ def filter_settings(f: Mapping[str, Any]) -> dict[str, Any]:
     By the names of `FilterOptions`' fields (its ``with_``); the object filter's and the
     catalog filter's parameters alike (``gate`` 0 and ``iod_max_span`` 0 mean none).
     """
-    return {"p0_sigma": tuple(float(v) / KM for v in f["p0_sigma"]),
-            "q": float(f["q"]) / (KM * KM), "gate": float(f["gate"]) or None,
+    c = convert(FILTER_ROWS, {k: f[k] for k in ("p0_sigma", "q")}, Units.CORE)
+    return {"p0_sigma": tuple(c["p0_sigma"]), "q": c["q"], "gate": float(f["gate"]) or None,
             "iod_samples": int(f["iod_samples"]),
             "iod_max_span_s": float(f["iod_max_span"]) or math.inf,
             "reinit_after": int(f["reinit_after"]), "sigma_bound": float(f["sigma_bound"])}
@@ -154,88 +156,6 @@ def estimator_problem(node: str, values: Mapping[str, Any]) -> str | None:
     except ValueError as exc:
         return str(exc)
     return None
-
-
-def node_section(params_file: Mapping[str, Any], node: str) -> dict[str, Any]:
-    """Return the ``ros__parameters`` of `node` in a loaded ROS params file.
-
-    Wildcard sections (``/**``, ``**``, ``/*``, ``*``) first, then the node's own
-    (``node`` or ``/node``), as rcl applies them.
-    """
-    out: dict[str, Any] = {}
-    for key in ("/**", "**", "/*", "*", node, f"/{node}"):
-        section = params_file.get(key)
-        if isinstance(section, Mapping):
-            out.update(section.get("ros__parameters") or {})
-    return out
-
-
-PARAMS_FILE_MAX_BYTES = 1_000_000
-"""Largest params file read offline (a node's own settings are a few hundred bytes)."""
-
-ROS_OWN_PARAMETERS = ("use_sim_time", "qos_overrides", "start_type_description_service")
-"""Parameters rclpy declares on every node itself (not in the nodes' tables)."""
-
-
-def section_problem(section: Mapping[str, Any], table: ParameterTable) -> str | None:
-    """Return why a node's ``ros__parameters`` `section` would not start the node, or None.
-
-    As the node judges them at start-up: a name it does not declare, a value its row refuses
-    (`Param.reason`) or of another type. (Rules across parameters are the node's own.)
-    """
-    for key, value in section.items():
-        if key in ROS_OWN_PARAMETERS:
-            continue
-        if key not in table.names:
-            return f"{quote(key)} is not a parameter of {table.node} (docs/NODES.md)"
-        try:
-            reason = table[key].reason(value)
-        except (TypeError, ValueError, AttributeError, ArithmeticError):
-            reason = f"of the wrong type ({type(value).__name__})"
-        if reason:
-            return f"parameter '{key}' = {quote(value)}: {one_line(reason, 200)}"
-    return None
-
-
-def load_params_file(path: Path | str) -> EstimatorConfig:
-    """Return the estimator a ROS params YAML gives the filter and the surrogate.
-
-    The YAML of ``--ros-args --params-file``. ValueError (naming the file) if it cannot be
-    read or holds a bad value; parameters that are not estimator settings are ignored.
-    """
-    import yaml
-
-    try:
-        with Path(path).open("rb") as f:
-            raw = f.read(PARAMS_FILE_MAX_BYTES + 1)
-        if len(raw) > PARAMS_FILE_MAX_BYTES:
-            raise ValueError(f"params file {path}: larger than {PARAMS_FILE_MAX_BYTES} bytes; "
-                             "a params file holds a few settings per node")
-        loaded = yaml.safe_load(raw.decode("utf-8"))
-    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise ValueError(f"cannot read params file {shown(str(path), 200)}: "
-                         f"{one_line(exc, 240)}") from None
-    except (RecursionError, MemoryError):
-        raise ValueError(f"params file {path}: nested too deeply or too large to read") from None
-    except Exception as exc:  # PyYAML's own on odd input: ValueError (an int of over 4300
-        # digits), IndexError ('!!float' of nothing), ...
-        raise ValueError(f"params file {path}: not YAML PyYAML can load: "
-                         f"{type(exc).__name__}: {one_line(exc, 120)}") from None
-    if not isinstance(loaded, Mapping):
-        raise ValueError(f"params file {path}: not a mapping of node names to ros__parameters")
-    from ssa_fusion.nodes.filter import PARAMETERS as FILTER_TABLE
-    from ssa_fusion.nodes.surrogate import PARAMETERS as SURROGATE_TABLE
-
-    for node, table in (("filter", FILTER_TABLE), ("surrogate", SURROGATE_TABLE)):
-        problem = section_problem(node_section(loaded, node), table)
-        if problem:
-            raise ValueError(f"params file {path}: {node}: {problem}")
-    filt = {k: v for k, v in node_section(loaded, "filter").items() if k in FILTER_KEYS}
-    surr = {k: v for k, v in node_section(loaded, "surrogate").items() if k in SURROGATE_KEYS}
-    try:
-        return estimator_from(filt, surr)
-    except (ValueError, TypeError, KeyError, ArithmeticError) as exc:
-        raise ValueError(f"params file {path}: {one_line(exc, 300)}") from None
 
 
 _OWN = {"filter": ("tracker", "motion_model", "motion_params"), "surrogate": ("surrogate", "lift")}

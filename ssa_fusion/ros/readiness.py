@@ -4,7 +4,7 @@ A DDS match has two sides, made in two processes at their own pace: the writer's
 matched-subscription count) and the reader's (its matched-publisher count). What a writer
 sends before both exist is lost to a volatile reader. ssa_fusion nodes report each input
 subscription's matched-publisher count and each output publisher's matched-subscription
-count on /diagnostics (`nodes.diagnostics.Diagnostics.subscribe` and `.advertise`);
+count on /diagnostics (`nodes.kit.diagnostics.Diagnostics.subscribe` and `.advertise`);
 `ReadyNodes` reads those reports so that a sender (the sensor simulator, replay's player)
 starts only when each named node has matched a publisher on each named topic
 ('node:/topic'), or as many publishers as it names ('node:/topic=count': a recorder that
@@ -101,22 +101,8 @@ def split_need(need: str) -> tuple[str, str, int]:
     """Return the node, topic and count (default 1) of 'node:[>]/topic[=count]'.
 
     The topic keeps its `OUTPUT` mark ('>/topic'). A malformed count reads as 1
-    (`check_needs` says why it is malformed).
+    (`params.checks.check_needs` says why it is malformed).
     """
     name, _, rest = need.partition(":")
     topic, _, count = rest.partition("=")
     return name, topic, int(count) if count.isdigit() else 1
-
-
-def check_needs(needs: list[str]) -> str | None:
-    """Return why a list of 'node:[>]/topic[=count]' entries is malformed, or None."""
-    for need in needs:
-        name, topic, _ = split_need(need)
-        count = need.partition(":")[2].partition("=")[2]
-        if (not name or "/" in name or not topic.removeprefix(OUTPUT).startswith("/")
-                or ("=" in need and not (count.isdigit() and int(count) >= 1))):
-            return (f"{need!r} is not 'node:/topic', 'node:>/topic' or either with '=count' "
-                    f"(node: the node's name, no namespace; '/topic': publishers it has "
-                    f"matched on that input, '>/topic': subscribers its output on that topic "
-                    f"has matched; count: how many, at least 1)")
-    return None

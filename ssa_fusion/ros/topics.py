@@ -86,7 +86,7 @@ TOPIC_REFERENCE = "/ssa/reference"
 GCRF, zero covariance), e.g. a CPF prediction (`ssa-fusion import crd --reference`)."""
 TOPIC_DIAGNOSTICS = "/diagnostics"
 TOPIC_CONFIG = "/ssa/config"
-"""The estimator settings in effect (std_msgs/String, JSON of `nodes.settings.config_message`),
+"""The estimator settings in effect (std_msgs/String, JSON of `params.settings.config_message`),
 one latched message per filter/surrogate node, re-sent when a parameter changes."""
 
 CONFIG_QOS = QoSProfile(

@@ -83,7 +83,11 @@ def test_outputs_under_a_file_are_refused(tmp_path, capsys):
 
 
 def test_reader_entries_name_a_node_and_a_topic():
-    from ssa_fusion.ros.readiness import READERS, check_needs
+    from ssa_fusion.params.checks import OUTPUT, check_needs
+    from ssa_fusion.ros.readiness import OUTPUT as READINESS_OUTPUT
+    from ssa_fusion.ros.readiness import READERS
+
+    assert OUTPUT == READINESS_OUTPUT
 
     assert check_needs(READERS) is None
     assert "no namespace" in check_needs(["/ns/filter:/ssa/measurement"])

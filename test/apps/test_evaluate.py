@@ -9,7 +9,7 @@ from ssa_fusion.core.base import metrics, types
 from ssa_fusion.core.filter.ekf import process_noise
 from ssa_fusion.core.motion import kepler
 from ssa_fusion.evaluation.arms import ArmName
-from ssa_fusion.nodes import settings
+from ssa_fusion.params import settings
 from ssa_fusion.sim import scenarios
 
 TRACK, GAP, COVERED, AFTER = 40, 40, 10, 5  # epochs; estimates cover the gap's first 10

@@ -26,8 +26,8 @@ from ssa_fusion.core.catalog.track_bank import TrackBank
 from ssa_fusion.core.catalog.unlabelled import RowAssociator, elevation_masks, without_labels
 from ssa_fusion.core.earth.stations import NETWORKS, SENSORS, network_stations
 from ssa_fusion.formats import element_sets as catalog
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.defaults import CATALOG_FILTER
+from ssa_fusion.params import settings
+from ssa_fusion.params.defaults import CATALOG_FILTER
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import (
     TOPIC_ASSOCIATED,

@@ -29,8 +29,8 @@ from ssa_fusion.core.measure.measurement import RazelModel
 from ssa_fusion.core.motion.element_sets import catalog_states
 from ssa_fusion.evaluation.association import detection_labels, score_association
 from ssa_fusion.formats import element_sets as catalog
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.defaults import CATALOG_FILTER
+from ssa_fusion.params import settings
+from ssa_fusion.params.defaults import CATALOG_FILTER
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import (
     TOPIC_ASSOCIATED,

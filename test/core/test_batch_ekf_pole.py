@@ -13,8 +13,8 @@ from ssa_fusion.core.catalog.batch_ekf import BatchEKF
 from ssa_fusion.core.earth import frames
 from ssa_fusion.core.earth.stations import NETWORKS, SENSORS
 from ssa_fusion.core.motion.propagation import integrate_stm
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.defaults import CATALOG_FILTER
+from ssa_fusion.params import settings
+from ssa_fusion.params.defaults import CATALOG_FILTER
 
 RADARS = [SENSORS[s] for s in NETWORKS["radar_network"]]
 NETWORK = {s.station.name: s.station for s in RADARS}

@@ -20,8 +20,8 @@ from ssa_fusion.core.catalog.track_bank import TrackBank
 from ssa_fusion.core.catalog.unlabelled import RowAssociator, elevation_masks, without_labels
 from ssa_fusion.core.earth.stations import NETWORKS, SENSORS, network_stations
 from ssa_fusion.formats import element_sets as catalog
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.defaults import CATALOG_FILTER
+from ssa_fusion.params import settings
+from ssa_fusion.params.defaults import CATALOG_FILTER
 from ssa_fusion.sim import survey
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"

@@ -17,8 +17,8 @@ from ssa_fusion.core.filter.initiation import InitialState, OrbitInitiator, fini
 from ssa_fusion.core.measure import iod
 from ssa_fusion.core.measure.measurement import PositionModel, StationModels
 from ssa_fusion.formats import element_sets as catalog
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.defaults import CATALOG_FILTER
+from ssa_fusion.params import settings
+from ssa_fusion.params.defaults import CATALOG_FILTER
 from ssa_fusion.sim import survey
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"

@@ -14,8 +14,8 @@ import numpy as np
 from ssa_fusion.core.base.types import Cause
 from ssa_fusion.core.catalog.track_bank import TrackBank
 from ssa_fusion.core.earth.stations import NETWORKS, SENSORS
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.defaults import CATALOG_FILTER
+from ssa_fusion.params import settings
+from ssa_fusion.params.defaults import CATALOG_FILTER
 
 RADARS = [SENSORS[s] for s in NETWORKS["radar_network"]]
 NETWORK = {s.station.name: s.station for s in RADARS}

@@ -26,8 +26,8 @@ from ssa_fusion.core.earth import frames
 from ssa_fusion.core.earth.stations import NETWORKS, SENSORS
 from ssa_fusion.core.measure import iod
 from ssa_fusion.formats import element_sets as catalog
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.defaults import CATALOG_FILTER
+from ssa_fusion.params import settings
+from ssa_fusion.params.defaults import CATALOG_FILTER
 from ssa_fusion.sim import survey
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -23,8 +23,8 @@ from ssa_fusion.core.motion import propagation
 from ssa_fusion.formats import element_sets as catalog
 from ssa_fusion.core.earth.stations import NETWORKS, SENSORS
 from ssa_fusion.core.catalog.track_bank import TrackBank
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.defaults import CATALOG_FILTER
+from ssa_fusion.params import settings
+from ssa_fusion.params.defaults import CATALOG_FILTER
 from ssa_fusion.sim import survey
 
 def signatures():

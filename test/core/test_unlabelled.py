@@ -25,8 +25,8 @@ from ssa_fusion.core.catalog.unlabelled import (
 )
 from ssa_fusion.core.earth.stations import SENSORS, Sensor, SensorType, network_stations
 from ssa_fusion.formats import element_sets as catalog_io
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.defaults import CATALOG_FILTER
+from ssa_fusion.params import settings
+from ssa_fusion.params.defaults import CATALOG_FILTER
 from ssa_fusion.sim import sky, survey
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"

@@ -16,9 +16,9 @@ from ssa_fusion.core.base.rows import MeasurementRows
 from ssa_fusion.core.catalog.track_bank import TrackBank
 from ssa_fusion.core.earth.stations import network_stations
 from ssa_fusion.formats import element_sets as catalog_io
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.defaults import CATALOG_FILTER
-from ssa_fusion.nodes.shards import shard_range
+from ssa_fusion.nodes.kit.shards import shard_range
+from ssa_fusion.params import settings
+from ssa_fusion.params.defaults import CATALOG_FILTER
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.topics import CATALOG_QOS
 from ssa_fusion.sim import sky, survey

@@ -26,9 +26,9 @@ from ssa_fusion.apps import live_catalog
 from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
 from ssa_fusion.core.catalog.track_bank import TrackBank
 from ssa_fusion.core.earth.stations import network_stations
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.defaults import CATALOG_FILTER
-from ssa_fusion.nodes.shards import shard_range
+from ssa_fusion.nodes.kit.shards import shard_range
+from ssa_fusion.params import settings
+from ssa_fusion.params.defaults import CATALOG_FILTER
 from ssa_fusion.ros import bagio, messages
 
 

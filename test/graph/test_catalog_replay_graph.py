@@ -18,7 +18,7 @@ from test_catalog_graph import _rows, catalog_args
 
 from ssa_fusion.apps import cli, live_catalog
 from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
-from ssa_fusion.nodes import settings
+from ssa_fusion.params import settings
 from ssa_fusion.ros import bagio
 
 OBJECTS = 3

@@ -19,7 +19,7 @@ from ssa_fusion.core.earth.timescales import UNIX_EPOCH_JD
 from ssa_fusion.core.measure.measurement import StationModels
 from ssa_fusion.core.motion.element_sets import catalog_states
 from ssa_fusion.formats import element_sets as catalog_io
-from ssa_fusion.nodes.progress import CLOCK, PROGRESS_QOS, TAKEN_ESTIMATES, TOPIC_PROGRESS
+from ssa_fusion.nodes.kit.progress import CLOCK, PROGRESS_QOS, TAKEN_ESTIMATES, TOPIC_PROGRESS
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import DiagnosticStatus
 from ssa_fusion.sim import survey

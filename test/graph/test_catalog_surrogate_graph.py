@@ -21,8 +21,8 @@ from ssa_fusion.core.base.rows import EstimateRows
 from ssa_fusion.core.catalog.gap_bank import CATALOG_RESIDUAL
 from ssa_fusion.core.gaps.forecaster import GapForecaster
 from ssa_fusion.core.motion import dynamics
-from ssa_fusion.nodes.progress import PROGRESS_QOS, TAKEN_ESTIMATES, TOPIC_PROGRESS
-from ssa_fusion.nodes.shards import shard_problem, shard_range
+from ssa_fusion.nodes.kit.progress import PROGRESS_QOS, TAKEN_ESTIMATES, TOPIC_PROGRESS
+from ssa_fusion.nodes.kit.shards import shard_problem, shard_range
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import DiagnosticStatus
 from ssa_fusion.ros.topics import CATALOG_QOS

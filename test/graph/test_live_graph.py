@@ -160,7 +160,7 @@ def test_the_bag_records_the_estimator_settings_in_effect(run):
     """Both estimator nodes publish their settings (latched) on /ssa/config; the recorder,
     started first, still gets them, and they read back as the estimator the run's
     parameters define: what replay and report then use."""
-    from ssa_fusion.nodes import settings
+    from ssa_fusion.params import settings
 
     data = evaluate.load(run["bag"])
     assert data.counts["/ssa/config"] == 2

@@ -28,7 +28,7 @@ from pathlib import Path
 import pytest
 from ros_graph import TIMEOUT_FACTOR
 
-from ssa_fusion.nodes.shards import shard_range
+from ssa_fusion.nodes.kit.shards import shard_range
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.discovery import PROFILE_VAR, Discovery
 from ssa_fusion.ros.processes import fresh_domain_id, node_command

@@ -26,8 +26,8 @@ from ssa_fusion.apps import live_catalog
 from ssa_fusion.core.base.rows import MeasurementRows
 from ssa_fusion.core.catalog.unlabelled import RowAssociator, elevation_masks, without_labels
 from ssa_fusion.core.earth.stations import network_stations
-from ssa_fusion.nodes import settings
-from ssa_fusion.nodes.defaults import CATALOG_FILTER
+from ssa_fusion.params import settings
+from ssa_fusion.params.defaults import CATALOG_FILTER
 from ssa_fusion.ros import messages
 
 OBJECTS = 4

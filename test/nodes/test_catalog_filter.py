@@ -2,7 +2,7 @@
 
 import itertools
 
-from ssa_fusion.nodes.shards import shard_problem, shard_range
+from ssa_fusion.nodes.kit.shards import shard_problem, shard_range
 from ssa_fusion.ros.messages import KEY_SPACE, shard_key
 
 

@@ -1,6 +1,6 @@
 """The nodes' defaults in three places that must agree:
 
-* `ssa_fusion.nodes.defaults` (what the nodes declare: checked by constructing each node),
+* `ssa_fusion.params.defaults` (what the nodes declare: checked by constructing each node),
 * config/default.yaml (launch file, --params-file): every parameter, at its default, except
   the few the default *run* sets otherwise (`RUN_SETTINGS`, each with its reason),
 * `ssa-fusion live` on the default scenario: every parameter it sets, the yaml sets to the
@@ -21,7 +21,7 @@ from ssa_fusion.core.filter.options import DEFAULT_GATE
 from ssa_fusion.core.gaps.surrogate import LIVE_SURROGATE
 from ssa_fusion.core.measure.validation import MAX_CLOCK_LEAD_S
 from ssa_fusion.graphs import node_parameters
-from ssa_fusion.nodes import defaults
+from ssa_fusion.params import defaults
 from ssa_fusion.ros.processes import fresh_domain_id
 from ssa_fusion.sim import scenarios
 

@@ -1,5 +1,5 @@
 """A node whose ``__init__`` refuses a parameter after it made publishers is destroyed by
-`nodes.process.run` (its publishers first, as `Node.destroy_node` does), not left to the
+`nodes.kit.process.run` (its publishers first, as `Node.destroy_node` does), not left to the
 garbage collector while DDS still runs. Left so, the half-built node is kept alive by a
 reference cycle until a collection frees it in no set order (a sensor_sim refusing its
 scenario once died of a segmentation fault, exit -11, instead of exiting 2); here a
@@ -18,9 +18,9 @@ SCRIPT = textwrap.dedent("""
     import rclpy
     from std_msgs.msg import String
 
-    from ssa_fusion.nodes import process
-    from ssa_fusion.nodes.base import SsaNode
-    from ssa_fusion.nodes.parameters import ParameterError, ParameterTable
+    from ssa_fusion.nodes.kit import process
+    from ssa_fusion.nodes.kit.base import SsaNode
+    from ssa_fusion.params.rows import ParameterError, ParameterTable
 
     def collecting_shutdown(*args, **kwargs):
         # garbage collected just before rclpy shuts down, as Python may do at any time

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from rclpy.duration import Duration
 
-from ssa_fusion.nodes.memory import AckedPublisher, release_free_heap
+from ssa_fusion.nodes.kit.memory import AckedPublisher, release_free_heap
 
 
 def _rss_kib() -> int:

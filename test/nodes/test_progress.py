@@ -1,9 +1,9 @@
-"""Lockstep bookkeeping (`nodes.progress`): what the simulator still waits for, from the
+"""Lockstep bookkeeping (`nodes.kit.progress`): what the simulator still waits for, from the
 consumers' latest reports, and the measurements sent to each shard."""
 
 import numpy as np
 
-from ssa_fusion.nodes.progress import (
+from ssa_fusion.nodes.kit.progress import (
     CLOCK,
     RECORDED_ASSOCIATED,
     RECORDED_ESTIMATES,
@@ -15,7 +15,7 @@ from ssa_fusion.nodes.progress import (
     Lockstep,
     waiting,
 )
-from ssa_fusion.nodes.shards import shard_range
+from ssa_fusion.nodes.kit.shards import shard_range
 from ssa_fusion.ros import messages
 
 NODES = ["catalog_filter_0", "catalog_filter_1", "catalog_surrogate_0", "recorder"]

@@ -16,7 +16,7 @@ import time
 
 import pytest
 
-from ssa_fusion.nodes.process import START_TIMEOUT_ENV
+from ssa_fusion.nodes.kit.process import START_TIMEOUT_ENV
 from ssa_fusion.ros.processes import fresh_domain_id
 
 SCRIPT = textwrap.dedent("""
@@ -25,8 +25,8 @@ SCRIPT = textwrap.dedent("""
 
     from rclpy.node import Node
 
-    from ssa_fusion.nodes.base import SsaNode
-    from ssa_fusion.nodes.parameters import ParameterTable
+    from ssa_fusion.nodes.kit.base import SsaNode
+    from ssa_fusion.params.rows import ParameterTable
 
     where = sys.argv[1]
     rclpy_init = Node.__init__

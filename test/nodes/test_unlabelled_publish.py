@@ -1,5 +1,5 @@
 """catalog_filter's unlabelled rows published: the associated detections, then those a
-deferred decision moved, again under their new track (`nodes.unlabelled.UnlabelledRows`,
+deferred decision moved, again under their new track (`nodes.kit.unlabelled.UnlabelledRows`,
 on stand-ins for the node, its diagnostics and the fusion; the messages decoded back)."""
 
 from collections import Counter
@@ -11,14 +11,14 @@ from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
 from ssa_fusion.core.catalog.association import DetectionFate
 from ssa_fusion.core.catalog.unlabelled import RowsOutcome
 from ssa_fusion.evaluation.association import detection_labels
-from ssa_fusion.nodes.diagnostics import Count
-from ssa_fusion.nodes.unlabelled import UnlabelledRows
+from ssa_fusion.nodes.kit.diagnostics import Count
+from ssa_fusion.nodes.kit.unlabelled import UnlabelledRows
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.topics import TOPIC_ASSOCIATED
 
 
 class _Diagnostics:
-    """Stands in for `nodes.diagnostics.Diagnostics`: counts, and the output it advertises."""
+    """Stands in for `nodes.kit.diagnostics.Diagnostics`: counts, and the output it advertises."""
 
     def __init__(self) -> None:
         self.sent: list = []

@@ -7,8 +7,8 @@ from pathlib import Path
 
 from ssa_fusion.apps import live_catalog
 from ssa_fusion.core.catalog.association import DetectionFate
+from ssa_fusion.nodes.kit.unlabelled import fate_key, sharded_problem
 from ssa_fusion.nodes.sensor_sim import PARAMETERS as SENSOR_SIM
-from ssa_fusion.nodes.unlabelled import fate_key, sharded_problem
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"
 

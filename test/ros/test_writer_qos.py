@@ -28,7 +28,7 @@ SCRIPT = textwrap.dedent("""
     from rclpy.node import Node
     from ssa_fusion.core.base.rows import EstimateRows
     from ssa_fusion.core.base.types import UpdateSource
-    from ssa_fusion.nodes.shards import content_filter, shard_range
+    from ssa_fusion.nodes.kit.shards import content_filter, shard_range
     from ssa_fusion.ros import messages
     from ssa_fusion.ros.interfaces import EstimateBatch
     from ssa_fusion.ros.topics import CATALOG_QOS, CATALOG_WRITER_QOS

@@ -180,7 +180,7 @@ SKY_FILTER = FilterOptions(
     iod=IodOptions(iod_samples=7, iod_max_span_s=300.0, reinit_after=10),
     motion=MotionOptions(motion_model=MotionModel.J2))
 """The filter of the real sky: the real-sky scenarios' (`sim.sky`) and, in SI, the catalog
-filter node's defaults (`nodes.defaults`).
+filter node's defaults (`params.defaults`).
 
 Two-body + J2; q 1e-13 km^2/s^3 (tuned on the real sky: `sim.sky.SKY_Q`); IOD from 7
 measurements within 300 s (one pass of one station), initialised again after 10 real

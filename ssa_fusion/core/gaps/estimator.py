@@ -1,6 +1,6 @@
 """One object's estimator settings in one place: `EstimatorConfig`.
 
-The live nodes build it from their ROS parameters (`ssa_fusion.nodes.settings`), the paper's
+The live nodes build it from their ROS parameters (`ssa_fusion.params.settings`), the paper's
 study from a scenario (`ssa_fusion.sim.scenarios.Scenario.estimator`), and ``replay`` /
 ``report`` from a ROS params file or from the settings the nodes recorded with the bag
 (``/ssa/config``, the JSON of `to_dict`). Everything then goes through the same builders

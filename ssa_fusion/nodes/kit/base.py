@@ -3,7 +3,7 @@
 It owns what every node does alike, so that a node only translates messages to and from
 core types, holds its parameters and timers, and calls the core:
 
-* its parameters, declared from the node's table (`PARAMETERS`, `nodes.parameters`),
+* its parameters, declared from the node's table (`PARAMETERS`, `params.rows`),
   checked at start-up and on every run-time set, their values in `params`;
 * its ``/diagnostics`` (`diag`: counts by cause, logged once, matched inputs);
 * input subscriptions whose callbacks cannot kill the node (`subscribe`), and wall timers
@@ -13,7 +13,7 @@ core types, holds its parameters and timers, and calls the core:
   learnt (`reset_on_backward_jump`);
 * the settings in effect, published latched on ``/ssa/config`` (`publish_settings`);
 * its process: `main` runs it until SIGINT/SIGTERM or `finish`, exit 0, or 2 with a message
-  for an invalid parameter (`nodes.process`).
+  for an invalid parameter (`nodes.kit.process`).
 
 As rclpy's demos, a node subclasses it and sets its publishers, subscriptions and timers up
 in ``__init__``::
@@ -43,11 +43,12 @@ from rclpy.timer import Timer
 from ssa_fusion.core.base.types import Cause, Measurement
 from ssa_fusion.core.measure.validation import ahead_of_clock
 from ssa_fusion.nodes import start_process
-from ssa_fusion.nodes.clock_hold import ClockHold
-from ssa_fusion.nodes.diagnostics import Diagnostics, wall_timer
-from ssa_fusion.nodes.node_parameters import NodeParameters
-from ssa_fusion.nodes.parameters import ParameterTable, ParamValue
-from ssa_fusion.nodes.process import constructing, run, start_watchdog
+from ssa_fusion.nodes.kit.clock_hold import ClockHold
+from ssa_fusion.nodes.kit.diagnostics import Diagnostics, wall_timer
+from ssa_fusion.nodes.kit.node_parameters import NodeParameters
+from ssa_fusion.nodes.kit.process import constructing, run, start_watchdog
+from ssa_fusion.params.checks import ParamValue
+from ssa_fusion.params.rows import ParameterTable
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Message, String, Time
 from ssa_fusion.ros.topics import CONFIG_QOS, TOPIC_CONFIG
@@ -181,7 +182,7 @@ class SsaNode(Node):
     def publish_settings(self, text: str) -> None:
         """Publish the settings in effect on /ssa/config, latched (every bag records them).
 
-        `text` is `nodes.settings.config_message`'s; the publisher is created at the first.
+        `text` is `params.settings.config_message`'s; the publisher is created at the first.
         """
         if self._settings_pub is None:
             self._settings_pub = self.create_publisher(String, TOPIC_CONFIG, CONFIG_QOS)

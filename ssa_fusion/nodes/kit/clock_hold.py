@@ -14,7 +14,7 @@ from collections.abc import Callable
 from rclpy.node import Node
 
 from ssa_fusion.core.base.types import Cause
-from ssa_fusion.nodes.diagnostics import Diagnostics
+from ssa_fusion.nodes.kit.diagnostics import Diagnostics
 from ssa_fusion.ros.topics import DATA_DEPTH
 
 _Ahead = tuple[float, float, float, Callable[[], None]]

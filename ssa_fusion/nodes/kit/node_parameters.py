@@ -9,14 +9,8 @@ from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ssa_fusion.nodes.parameters import (
-    Computed,
-    Default,
-    Param,
-    ParameterError,
-    ParameterTable,
-    ParamValue,
-)
+from ssa_fusion.params.checks import ParamValue
+from ssa_fusion.params.rows import Computed, Default, Param, ParameterError, ParameterTable
 from ssa_fusion.ros.interfaces import ParameterDescriptor, SetParametersResult
 
 

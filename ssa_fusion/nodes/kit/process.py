@@ -25,11 +25,11 @@ from rclpy.signals import SignalHandlerOptions
 
 from ssa_fusion.core.base.types import Cause
 from ssa_fusion.nodes import STOP
-from ssa_fusion.nodes.parameters import ParameterError
+from ssa_fusion.params.rows import ParameterError
 from ssa_fusion.ros.executors import make_executor
 
 if TYPE_CHECKING:
-    from ssa_fusion.nodes.base import SsaNode
+    from ssa_fusion.nodes.kit.base import SsaNode
 
 EXIT_OK = 0
 """The node ended: its job was done, or SIGINT/SIGTERM stopped it."""
@@ -176,11 +176,11 @@ hour and ignore SIGTERM meanwhile); a node's settings are a few dozen lines."""
 def params_file_problem(args: list[str]) -> str | None:
     """Return why a ``--params-file`` among the ROS arguments `args` is refused, or None.
 
-    Checked before rcl reads it: a file larger than `settings.PARAMS_FILE_MAX_BYTES` or with
+    Checked before rcl reads it: a file larger than `params_file.PARAMS_FILE_MAX_BYTES` or with
     more than `PARAMS_FILE_MAX_LINES` lines. (A file that cannot be read is left to rcl,
     whose error names it.)
     """
-    from ssa_fusion.nodes.settings import PARAMS_FILE_MAX_BYTES
+    from ssa_fusion.params.params_file import PARAMS_FILE_MAX_BYTES
 
     ros = False
     for k, arg in enumerate(args):

@@ -28,8 +28,8 @@ from numpy.typing import NDArray
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ssa_fusion.nodes.diagnostics import RECORDED, Count, wall_timer
-from ssa_fusion.nodes.shards import shard_range
+from ssa_fusion.nodes.kit.diagnostics import RECORDED, Count, wall_timer
+from ssa_fusion.nodes.kit.shards import shard_range
 from ssa_fusion.ros.interfaces import DiagnosticStatus, KeyValue
 from ssa_fusion.ros.topics import (
     TOPIC_ASSOCIATED,

@@ -15,8 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 from rclpy.subscription_content_filter_options import ContentFilterOptions
 
-from ssa_fusion.nodes.diagnostics import NodeCause
-from ssa_fusion.nodes.parameters import Param, Rule, Values, at_least
+from ssa_fusion.nodes.kit.diagnostics import NodeCause
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.messages import shard_range
 
@@ -62,35 +61,6 @@ def rows_shard_problems(keys: NDArray[np.uint32], object_ids: list[str], shard: 
     bad = keys != messages.shard_keys(object_ids)
     lo, hi = shard_range(shard, shards)
     return bad, ~bad & ((keys < lo) | (keys > hi))
-
-
-def shard_rows(shards: int, shard: int) -> tuple[Param, Param]:
-    """Return the rows of ``shards`` and ``shard`` (their defaults given); see `SHARD_RULE`."""
-    return (Param("shards", shards, "number of shards", check=at_least(1)),
-            Param("shard", shard, "this node's shard, 0..shards−1 (checked against `shards` "
-                  "at start and on set)", check=at_least(0)))
-
-
-def max_objects_row(default: int, holds: str, what: str) -> Param:
-    """Return the ``max_objects`` row of a catalog node's parameters.
-
-    The most objects the shard `holds` (a phrase: "tracks (~2 kB each)"); `what` of one
-    more is refused.
-    """
-    return Param("max_objects", default,
-                 f"the most objects the shard {holds}; {what} of one more is refused "
-                 "(`rejected_bank_full`): a flood of new object ids cannot take the machine's "
-                 "memory", check=at_least(1))
-
-
-def _shard_in_range(v: Values) -> str | None:
-    shard, shards = v["shard"], v["shards"]
-    assert isinstance(shard, int) and isinstance(shards, int)
-    return None if shard < shards else f"must be < shards ({shards})"
-
-
-SHARD_RULE = Rule(("shard", "shards"), _shard_in_range)
-"""``shard`` must be below ``shards``."""
 
 
 def content_filter(shard: int, shards: int, condition: str = "",

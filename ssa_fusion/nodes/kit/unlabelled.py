@@ -32,7 +32,7 @@ from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
 from ssa_fusion.core.catalog.association import DetectionFate, TrackStatus
 from ssa_fusion.core.catalog.fusion import CatalogFusion
 from ssa_fusion.core.catalog.unlabelled import is_unlabelled
-from ssa_fusion.nodes.diagnostics import Count, Diagnostics
+from ssa_fusion.nodes.kit.diagnostics import Count, Diagnostics
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import MeasurementBatch
 from ssa_fusion.ros.topics import CATALOG_WRITER_QOS, TOPIC_ASSOCIATED

@@ -1,7 +1,6 @@
-"""`nodes.settings`: the one translation between ROS parameters (SI) and EstimatorConfig; a
-params file read offline is refused in one bounded line naming it, whatever it holds (an
-alias bomb, an integer of 5000 digits), and mutated and random text give nothing but that
-ValueError (hypothesis)."""
+"""`params.params_file`: a params file read offline gives the default scenario's estimator or
+is refused in one bounded line naming it, whatever it holds (an alias bomb, an integer of
+5000 digits), and mutated and random text give nothing but that ValueError (hypothesis)."""
 
 import json
 import re
@@ -15,7 +14,7 @@ from hypothesis import strategies as st
 
 from ssa_fusion.core.base.quoting import MAX_MESSAGE
 from ssa_fusion.core.gaps import estimator as config
-from ssa_fusion.nodes import parameters, settings
+from ssa_fusion.params.params_file import load_params_file
 from ssa_fusion.sim import scenarios
 
 CONFIG = Path(__file__).resolve().parents[2] / "config" / "default.yaml"
@@ -30,32 +29,24 @@ def same(a, b) -> bool:
     return rounded(a) == rounded(b)
 
 
-def test_params_round_trip_in_si_units():
-    c = scenarios.DEFAULT_LIVE.estimator()
-    f, s = settings.filter_params(c), settings.surrogate_params(c)
-    assert f["p0_sigma"][0] == pytest.approx(1000.0) and f["q"] == pytest.approx(0.1)  # m, m^2/s^3
-    assert s["retrain_period"] == 0.0  # never = 0 as a parameter
-    assert same(settings.estimator_from(f, s), c)
-
-
 def test_default_yaml_is_the_default_live_scenario():
     """config/default.yaml, read as a ROS params file, is the default scenario's estimator
     (what `ssa-fusion live` runs)."""
-    assert same(settings.load_params_file(CONFIG), scenarios.DEFAULT_LIVE.estimator())
+    assert same(load_params_file(CONFIG), scenarios.DEFAULT_LIVE.estimator())
 
 
 def test_params_file_errors_name_the_file_and_value(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("filter:\n  ros__parameters:\n    motion_model: sgp4\n")
     with pytest.raises(ValueError, match=r"bad\.yaml.*motion_model' = 'sgp4'"):
-        settings.load_params_file(bad)
+        load_params_file(bad)
     mixed = tmp_path / "mixed.yaml"
     mixed.write_text("filter:\n  ros__parameters:\n    kind: position\n"
                      "surrogate:\n  ros__parameters:\n    kind: range_az_el\n")
     with pytest.raises(ValueError, match="disagree on 'kind'"):
-        settings.load_params_file(mixed)
+        load_params_file(mixed)
     with pytest.raises(ValueError, match="cannot read params file"):
-        settings.load_params_file(tmp_path / "missing.yaml")
+        load_params_file(tmp_path / "missing.yaml")
 
 
 @pytest.mark.parametrize(("text", "says"), [
@@ -71,49 +62,7 @@ def test_a_params_file_offline_gets_the_nodes_checks(tmp_path, text, says):
     path = tmp_path / "p.yaml"
     path.write_text(text)
     with pytest.raises(ValueError, match=re.escape(says)):
-        settings.load_params_file(path)
-
-
-def test_recorded_settings_merge_both_nodes_last_message():
-    c = scenarios.DEFAULT_LIVE.estimator()
-    changed = c.with_(filter=c.filter.with_(q=7e-8))
-    msgs = [settings.config_message("filter", c), settings.config_message("surrogate", c),
-            settings.config_message("filter", changed)]  # a `ros2 param set` during the run
-    assert settings.recorded_estimator(msgs) == changed
-    assert settings.recorded_estimator([]) is None
-    with pytest.raises(ValueError, match="malformed /ssa/config"):
-        settings.recorded_estimator(["{not json"])
-
-
-def test_a_filter_of_ra_dec_alone_gets_no_eci_lift():
-    """`ros2 run ssa_fusion filter -p kind:=ra_dec` (no surrogate parameters): the surrogate's
-    default lift (eci, for range/az/el) must not apply to angles-only measurements."""
-    from ssa_fusion.core.base.types import Kind
-    from ssa_fusion.core.gaps.estimator import Lift
-
-    c = settings.estimator_from({"kind": "ra_dec", "station": "socorro"}, {})
-    assert c.kind == Kind.RA_DEC and c.lift == Lift.NONE
-    assert settings.estimator_from({"kind": "range_az_el"}, {}).lift == Lift.ECI
-
-
-def test_station_and_sites_parameters(tmp_path):
-    """The filter's and surrogate's `station` may name a site of their `sites` file; the
-    rule over both names what is wrong, and so does the check of `sites`."""
-    example = str(CONFIG.parent / "sites" / "example.yaml")
-    c = settings.estimator_from({"station": "nordlys", "sites": example}, {})
-    assert c.station == "nordlys" and [s.name for s in c.sites] == ["nordlys", "kestrel",
-                                                                    "pampa-obs"]
-    assert settings.estimator_problem("filter", {**settings.filter_params(c),
-                                                 "sites": ""}) is not None
-    assert parameters.sites_problem({"station": "nordlys,tira,", "sites": example}) is None
-    said = parameters.sites_problem({"station": "nordlys", "sites": ""})
-    assert said is not None and "station 'nordlys' unknown" in said
-    bad = tmp_path / "bad.yaml"
-    bad.write_text("sites:\n  - {id: x, latitude_deg: 91}\n")
-    said = parameters.SITES(str(bad))
-    assert said is not None and "site 'x': longitude_deg: missing" in said
-    assert parameters.SITES("") is None
-    assert parameters.STATION_IDS("nordlys") is None and parameters.STATION_IDS(",") is not None
+        load_params_file(path)
 
 
 # ------------------------------------------------------------------------------------------
@@ -150,7 +99,7 @@ def test_a_hostile_params_file_is_refused_in_one_bounded_line(tmp_path, text, sa
     path.write_bytes(text if isinstance(text, bytes) else text.encode())
     t0 = time.perf_counter()
     with pytest.raises(ValueError) as exc:
-        settings.load_params_file(path)
+        load_params_file(path)
     said = str(exc.value)
     assert time.perf_counter() - t0 < 5.0
     assert "\n" not in said and len(said) <= MAX_MESSAGE and str(path) in said, said[:300]
@@ -174,7 +123,7 @@ def _only_value_errors(path: Path, text: str) -> None:
     """`load_params_file` gives an estimator or a bounded ValueError naming the file."""
     path.write_text(text, encoding="utf-8", errors="surrogatepass")
     try:
-        settings.load_params_file(path)
+        load_params_file(path)
     except ValueError as exc:
         said = str(exc)
         assert "\n" not in said and len(said) <= MAX_MESSAGE and str(path) in said, said[:300]

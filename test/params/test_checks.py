@@ -1,4 +1,4 @@
-"""Tests of the nodes' parameter checks (the functions only: no ROS graph, no node).
+"""Tests of the nodes' parameter checks (`params.checks`, the functions only: no ROS).
 
 Every numeric check refuses inf and NaN (max_horizon = inf made the surrogate raise, q = inf
 rejected every update, a NaN in p0_sigma kept the filter from ever initialising), and a
@@ -9,9 +9,9 @@ import math
 
 import pytest
 
-from ssa_fusion.nodes.filter import PARAMETERS as FILTER
-from ssa_fusion.nodes.parameters import NON_NEGATIVE, POSITIVE
-from ssa_fusion.nodes.sensor_sim import PARAMETERS as SENSOR_SIM
+from ssa_fusion.params.checks import NON_NEGATIVE, POSITIVE
+from ssa_fusion.params.tables.filter import PARAMETERS as FILTER
+from ssa_fusion.params.tables.sensor_sim import PARAMETERS as SENSOR_SIM
 
 non_negative, positive = NON_NEGATIVE, POSITIVE
 _p0_check = FILTER["p0_sigma"].reason

@@ -1,0 +1,40 @@
+"""The filter's parameters (docs/NODES.md, "filter", says more of each)."""
+
+from __future__ import annotations
+
+from functools import partial
+
+from ssa_fusion.core.gaps.publisher import GapFill
+from ssa_fusion.params import settings
+from ssa_fusion.params.checks import NON_NEGATIVE, one_of
+from ssa_fusion.params.defaults import FILTER
+from ssa_fusion.params.rows import Param, ParameterTable, Rule
+from ssa_fusion.params.shared import (
+    STATION_RULE,
+    clock_lead,
+    filter_rows,
+    measurement_stream,
+    object_filter,
+)
+
+PARAMETERS = ParameterTable("filter", (
+    *measurement_stream(FILTER.kind, FILTER.station, FILTER.sites, "fuses"),
+    *filter_rows(FILTER, runtime=True, unlimited_span=True),
+    Param("light_time", FILTER.light_time,
+          "station models see the object where it was range / c earlier (the ISS moves "
+          "11–39 m meanwhile)"),
+    Param("refraction", FILTER.refraction,
+          "radar elevations as the standard atmosphere refracts them (Saemundsson's "
+          "formula, `core.earth.refraction`; 5.4′ at 10°); off: geometric"),
+    object_filter(FILTER.object_id, "track"),
+    Param("predict_period", FILTER.predict_period,
+          "without an update for this long, predictions are published at every multiple of "
+          "`predict_period` of sim time; 0 = never", unit="sim s", check=NON_NEGATIVE,
+          runtime=True),
+    Param("gap_forecast", FILTER.gap_forecast,
+          "what the predictions in a gap between passes are: the EKF coasting (`none`), or "
+          "a forecast of the residual, of a batch fit, or of both", check=one_of(*GapFill)),
+    clock_lead(FILTER.max_clock_lead),
+), rules=(STATION_RULE,
+          Rule(settings.FILTER_KEYS, partial(settings.estimator_problem, "filter"))))
+"""The filter's parameters."""

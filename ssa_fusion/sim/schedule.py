@@ -1,0 +1,342 @@
+"""What the simulator node publishes, and when: a run's schedule and its pace, without ROS.
+
+`plan` turns sensor_sim's settings (`SimSettings`, named as its parameters) into a `Plan`:
+
+* a paper scenario (`sim.scenarios`): one idealised sensor measuring at every epoch of its
+  cadence, the epochs of the scheduled outages withheld, and the truth at each epoch;
+* a real-sky scenario (`sim.sky`): the truth on its cadence and what its stations measured
+  (above their masks, optical ones only at night, of a sunlit object), in epoch order;
+* a catalog: every object's measurements by the scenario's radars (`sim.survey`), published
+  as rows (`CatalogRun.rows`), without a truth topic.
+
+`Pace` says which scheduled epochs are due: in the open loop those up to the clock (sim time
+following the wall clock), in lockstep one step at a time. Settings that give no run raise
+`ScheduleError`, whose message names the parameters (the node reports it as a parameter
+error). Units: s (sim time is Unix s UTC for orbits), the core's km and rad.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ssa_fusion.core.base import types
+from ssa_fusion.core.base.rows import MeasurementRows
+from ssa_fusion.core.earth import timescales
+from ssa_fusion.core.earth.frames import Frame
+from ssa_fusion.formats import element_sets
+from ssa_fusion.sim import scenarios, sky, survey
+from ssa_fusion.sim.simulate import Simulation, simulate
+
+
+class Event(enum.IntEnum):
+    """What a scheduled publication is."""
+
+    TRUTH = 0
+    MEASUREMENT = 1
+    WITHHELD = 2
+
+
+Schedule = list[tuple[float, Event, types.Measurement | types.StateEstimate]]
+"""Publications in epoch order: (epoch s, what, the message's content)."""
+
+
+class ScheduleError(ValueError):
+    """The settings give no run; the message names the parameters and says why."""
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    """What to simulate, as sensor_sim's parameters of the same names say.
+
+    Attributes
+    ----------
+    object_id : str
+        The object id of a scenario's messages.
+    cadence : float
+        Time between measurements (real sky: between truth samples), s.
+    duration : float
+        Real sky and catalogs: sim time to run, s (0: the scenario's).
+    start : float or None
+        Real sky and catalogs: the first epoch, Unix s (None: the scenario's or catalog's).
+    gap_start, gap_length, after_gap : float
+        A paper scenario's tracking before its one gap, the gap, tracking after it, s.
+    gaps : tuple of float
+        Outages as pairs (start s, length s) after the first epoch; (0.0,) = the one gap of
+        `gap_start` and `gap_length` (a real-sky scenario: its own outages).
+    noise_sigma : tuple of float or None
+        A paper scenario's noise standard deviation per channel in the core's units (km,
+        rad); None: the scenario's.
+    seed : int
+        Noise random seed.
+    catalog : str
+        Element sets of the objects to simulate instead of one ('' = none).
+    objects, synthetic : int
+        Catalog: only the first `objects` (0 = all); its first element set spread into
+        `synthetic` objects (0 = the catalog's own).
+    """
+
+    object_id: str
+    cadence: float
+    duration: float = 0.0
+    start: float | None = None
+    gap_start: float = 0.0
+    gap_length: float = 0.0
+    gaps: tuple[float, ...] = (0.0,)
+    after_gap: float = 0.0
+    noise_sigma: tuple[float, ...] | None = None
+    seed: int = 0
+    catalog: str = ""
+    objects: int = 0
+    synthetic: int = 0
+
+
+@dataclass(frozen=True)
+class CatalogRun:
+    """A catalog's measurements, and what their rows carry per object and per sensor.
+
+    Attributes
+    ----------
+    observations : survey.Observations
+        Every measurement, in epoch order.
+    object_ids : ndarray (N,) of str
+        Each object's id (index: a measurement's ``obj``).
+    frames : ndarray (S,) of str
+        Each sensor's station (frame_id; index: a measurement's ``sensor``).
+    R : ndarray (S, 3, 3)
+        Each sensor's measurement noise covariance, km², rad².
+    """
+
+    observations: survey.Observations
+    object_ids: NDArray[np.object_]
+    frames: NDArray[np.object_]
+    R: NDArray[np.float64]
+
+    def rows(self, start: int, stop: int, keys: NDArray[np.uint32]) -> MeasurementRows:
+        """Return measurements `start`..`stop`-1 as rows; `keys`: each object's shard key."""
+        obs, sl = self.observations, slice(start, stop)
+        return MeasurementRows(
+            t=obs.t[sl], object_id=self.object_ids[obs.obj[sl]].tolist(),
+            frame_id=self.frames[obs.sensor[sl]].tolist(), z=obs.z[sl],
+            R=self.R[obs.sensor[sl]], shard_key=keys[obs.obj[sl]])
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A run: its schedule (or catalog), the epochs to publish, and a line for the log.
+
+    `times` are the epochs in publication order, s: the schedule's, or the catalog's
+    measurements'.
+    """
+
+    schedule: Schedule
+    catalog: CatalogRun | None
+    times: NDArray[np.float64]
+    summary: str
+
+
+def resolve(name: str, sites: str = "",
+            elements: str = "") -> tuple[scenarios.Scenario, sky.SkyScenario | None]:
+    """Return the paper scenario of scenario `name`, and the real-sky one or None.
+
+    For a real-sky scenario the paper scenario is the default live one, and the real-sky
+    one observes with the sites of the file `sites` and the first object of the element
+    set file `elements` when given ('' = the scenario's own). ValueError names an unknown
+    scenario or an unreadable file.
+    """
+    real_sky = sky.SKY_SCENARIOS.get(name)
+    if real_sky is None:
+        return scenarios.get(name), None
+    if sites:
+        real_sky = real_sky.with_sites(sites)
+    if elements:
+        real_sky = real_sky.with_elements(elements)
+    return scenarios.DEFAULT_LIVE, real_sky
+
+
+def paper_schedule(sim: Simulation, in_gap: NDArray[np.bool_], object_id: str) -> Schedule:
+    """Return a measurement (or a withheld one) and the truth per epoch of a paper scenario."""
+    s = sim.scenario
+    out: Schedule = []
+    for i, t in enumerate(sim.t.tolist()):
+        m = types.Measurement(t=t, z=sim.z[i], R=sim.R, kind=s.kind, object_id=object_id,
+                              frame_id=s.station or Frame.GCRF)
+        out.append((t, Event.WITHHELD if in_gap[i] else Event.MEASUREMENT, m))
+        out.append((t, Event.TRUTH, types.StateEstimate(t=t, x=sim.x[i], object_id=object_id)))
+    return out
+
+
+def sky_schedule(sim: sky.SkySimulation, object_id: str) -> Schedule:
+    """Return the truth on its cadence and the stations' measurements in epoch order."""
+    out: Schedule = [(t, Event.TRUTH, types.StateEstimate(t=t, x=x, object_id=object_id))
+                     for t, x in zip(sim.t.tolist(), sim.x, strict=True)]
+    for m, w in zip(sim.measurements, sim.withheld, strict=True):
+        m.object_id = object_id
+        out.append((m.t, Event.WITHHELD if w else Event.MEASUREMENT, m))
+    out.sort(key=lambda e: (e[0], -e[1]))  # at one epoch: measurements before the truth
+    return out
+
+
+def check_window(t0: float, span: float) -> None:
+    """Refuse a run whose start `t0` or end `t0` + `span` (Unix s) cannot be represented.
+
+    `ScheduleError` naming ``start`` and ``duration``, from `timescales.check_window`.
+    """
+    try:
+        timescales.check_window(t0, span)
+    except ValueError as exc:
+        raise ScheduleError(f"parameters 'start', 'duration': {exc}") from exc
+
+
+def _gap_pairs(s: SimSettings) -> list[float]:
+    """Return the outages as [start, length, ...] s after the first epoch: `gaps`, or one gap."""
+    return list(s.gaps) if list(s.gaps) != [0.0] else [s.gap_start, s.gap_length]
+
+
+def paper_plan(base: scenarios.Scenario, s: SimSettings) -> Plan:
+    """Return the run of paper scenario `base` with the settings' cadence, gaps and noise."""
+    pairs = _gap_pairs(s)
+    windows = [(pairs[i], pairs[i] + pairs[i + 1]) for i in range(0, len(pairs), 2)]
+    last_end = max(end for _, end in windows)
+    scenario = base.with_(cadence_s=s.cadence, track_s=pairs[0], gap_s=pairs[1],
+                          after_s=max(0.0, last_end + s.after_gap - pairs[0] - pairs[1]))
+    if s.noise_sigma is not None:
+        scenario = scenario.with_(noise_sigma=s.noise_sigma, noise_rel=0.0)
+    try:
+        sim = simulate(scenario, seed=s.seed)
+    except ValueError as exc:
+        raise ScheduleError(f"cannot simulate scenario {base.name!r}: {exc}") from exc
+    rel = sim.t - scenario.t0
+    in_gap = np.zeros(len(rel), dtype=bool)
+    for start, end in windows:
+        in_gap |= (rel >= start) & (rel < end)
+    schedule = paper_schedule(sim, in_gap, s.object_id)
+    return Plan(schedule, None, np.array([e[0] for e in schedule]),
+                f"{len(sim.t)} epochs every {s.cadence} s, gaps {windows} s")
+
+
+def sky_plan(real_sky: sky.SkyScenario, s: SimSettings) -> Plan:
+    """Return the run of real-sky scenario `real_sky` (the settings' `gaps`: outages)."""
+    t0 = real_sky.t0 if s.start is None else s.start
+    span = s.duration or real_sky.duration_s
+    check_window(t0, span)  # what with_window would refuse, as a parameter error
+    run = real_sky.with_window(t0, span).with_(truth_cadence_s=s.cadence)
+    if list(s.gaps) != [0.0]:
+        run = run.with_(outages=tuple((sky.ALL_STATIONS, s.gaps[i], s.gaps[i + 1])
+                                      for i in range(0, len(s.gaps), 2)))
+    sim = sky.simulate_sky(run, seed=s.seed, object_id=s.object_id)
+    schedule = sky_schedule(sim, s.object_id)
+    return Plan(schedule, None, np.array([e[0] for e in schedule]),
+                f"{len(sim.measurements)} measurements ({int(sim.withheld.sum())} withheld) "
+                f"from {', '.join(run.sensors)} from {timescales.iso(run.t0)} over "
+                f"{run.duration_s / 3600:g} h, truth every "
+                f"{s.cadence} s, outages {list(run.outages)}")
+
+
+def catalog_plan(real_sky: sky.SkyScenario, s: SimSettings) -> Plan:
+    """Return the run of the settings' catalog, observed by `real_sky`'s radars.
+
+    Over ``duration`` (0: the scenario's) from ``start`` (None: the catalog's first element
+    set epoch). No truth in the schedule: the truth is SGP4 of the catalog, recomputed by
+    whoever scores the run.
+    """
+    try:
+        entries = element_sets.read_catalog(s.catalog)
+    except ValueError as exc:
+        raise ScheduleError(f"parameter 'catalog' = {s.catalog!r}: {exc}") from exc
+    if s.synthetic:
+        entries = survey.synthetic_catalog(entries[0], s.synthetic, seed=s.seed)
+    if s.objects:
+        entries = entries[:s.objects]
+    radars = real_sky.radars
+    if not radars:
+        raise ScheduleError(f"scenario {real_sky.name!r} has no radar to observe a catalog")
+    t0 = survey.catalog_start(entries) if s.start is None else s.start
+    span = s.duration or real_sky.duration_s
+    check_window(t0, span)
+    obs = survey.observe_catalog(entries, radars, t0, span, seed=s.seed)
+    run = CatalogRun(obs, np.asarray(list(obs.object_ids), dtype=object),
+                     np.asarray([x.station.name for x in obs.sensors], dtype=object),
+                     np.array([r.R for r in radars], dtype=float))
+    return Plan([], run, obs.t,
+                f"catalog {s.catalog}: {len(entries)} objects, {len(obs)} measurements from "
+                f"{', '.join(r.station.name for r in radars)} over {span / 3600:g} h "
+                f"from {timescales.iso(t0)}")
+
+
+def plan(name: str, base: scenarios.Scenario, real_sky: sky.SkyScenario | None,
+         s: SimSettings) -> Plan:
+    """Return the run of scenario `name` (`resolve`'s `base` and `real_sky`) and settings `s`.
+
+    A catalog needs a real-sky scenario. `ScheduleError` when the settings give nothing to
+    publish.
+    """
+    if s.catalog:
+        if real_sky is None:
+            raise ScheduleError(f"scenario {name!r}: a catalog needs a real-sky scenario")
+        out = catalog_plan(real_sky, s)
+    elif real_sky is None:
+        out = paper_plan(base, s)
+    else:
+        out = sky_plan(real_sky, s)
+    if not out.times.size:
+        raise ScheduleError(
+            f"scenario {name!r}: nothing to publish (no measurement and no truth epoch)")
+    return out
+
+
+@dataclass
+class Pace:
+    """Which of a run's epochs are due, in the open loop or in lockstep.
+
+    Attributes
+    ----------
+    times : ndarray (N,)
+        The epochs in publication order, s.
+    step_s : float
+        Lockstep: sim time per step, s.
+    next : int
+        The first epoch not published yet.
+    sim_now : float
+        Lockstep: the end of the last step published, s (at first: the first epoch).
+    clock_behind : bool
+        Lockstep: the last step's measurements are out and its clock not yet.
+    """
+
+    times: NDArray[np.float64]
+    step_s: float = math.inf
+    next: int = 0
+    sim_now: float = field(init=False)
+    clock_behind: bool = False
+
+    def __post_init__(self) -> None:
+        """Start at the first epoch."""
+        self.sim_now = float(self.times[0])
+
+    @property
+    def done(self) -> bool:
+        """Return True once every epoch is published."""
+        return self.next >= len(self.times)
+
+    def due(self, now: float) -> range:
+        """Return the epochs not published yet up to sim time `now` (s), now published."""
+        stop = int(np.searchsorted(self.times, now, side="right"))
+        out = range(self.next, stop)
+        self.next = max(self.next, stop)
+        return out
+
+    def step(self, ceiling: float) -> range | None:
+        """Return the next lockstep step's epochs, now published (its clock then behind).
+
+        None while its end would pass `ceiling` (s: the time scale's limit).
+        """
+        target = self.sim_now + self.step_s
+        if target > ceiling:
+            return None
+        self.sim_now = target
+        self.clock_behind = True
+        return self.due(target)
