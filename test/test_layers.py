@@ -12,8 +12,9 @@
 * studies import core, formats, sim, evaluation (and ros, to read bags), never params, nodes,
   graphs or apps;
 * ros imports nothing from params, nodes, graphs, apps, sim, evaluation, studies;
-* nodes import ros, params, formats and core, never apps, graphs, studies or evaluation; sim
-  only in nodes/sensor_sim.py (the simulator runs the simulated world);
+* nodes (the seven node modules, entry.py and nodes/kit/, their machinery) import ros,
+  params, formats and core, never apps, graphs, studies or evaluation; sim only in
+  nodes/sensor_sim.py (the simulator runs the simulated world: `sim.schedule`);
 * graphs (what runs together) imports nodes, params, ros, sim, formats and core, never apps
   or studies;
 * the launch files import graphs and ros.launch_events only of the package;
@@ -250,11 +251,23 @@ BAD = [
     ("ssa_fusion.params.x", "import rclpy"),
     ("ssa_fusion.params.x", "from ssa_fusion.nodes import filter"),
     ("ssa_fusion.sim.x", "from ssa_fusion.params import defaults"),
+    ("ssa_fusion.params.tables.sensor_sim", "from ssa_fusion.sim import scenarios"),
+    ("ssa_fusion.params.checks", "from ssa_fusion.ros.readiness import split_need"),
+    ("ssa_fusion.params.settings", "from ..nodes.kit import base"),
+    ("ssa_fusion.nodes.kit.base", "from ssa_fusion.sim.schedule import Pace"),
+    ("ssa_fusion.nodes.kit.progress", "from ssa_fusion.graphs import catalog_graph"),
+    ("ssa_fusion.sim.schedule", "from ssa_fusion.params.tables import sensor_sim"),
 ]
 GOOD = [
     ("ssa_fusion.core.x", "from .frames import COLUMBUS\nimport numpy"),
     ("ssa_fusion.formats.x", "import lxml\nfrom ssa_fusion.core.earth import timescales"),
     ("ssa_fusion.params.x", "from ssa_fusion.formats import sites"),
+    ("ssa_fusion.params.tables.filter", "from ..settings import FILTER_KEYS\n"
+                                        "from ssa_fusion.core.gaps.publisher import GapFill"),
+    ("ssa_fusion.nodes.filter", "from ssa_fusion.params.tables.filter import PARAMETERS\n"
+                                "from ssa_fusion.nodes.kit.base import SsaNode"),
+    ("ssa_fusion.nodes.kit.shards", "import rclpy\n"
+                                    "from ssa_fusion.ros.messages import shard_range"),
     ("ssa_fusion.sim.x", "from ssa_fusion.core import dynamics"),
     ("ssa_fusion.evaluation.x", "from ssa_fusion.core import metrics"),
     ("ssa_fusion.studies.x", "from ssa_fusion.sim import sky\nfrom ssa_fusion.ros import bagio"),

@@ -8,7 +8,7 @@ from pathlib import Path
 from ssa_fusion.apps import live_catalog
 from ssa_fusion.core.catalog.association import DetectionFate
 from ssa_fusion.nodes.kit.unlabelled import fate_key, sharded_problem
-from ssa_fusion.nodes.sensor_sim import PARAMETERS as SENSOR_SIM
+from ssa_fusion.params.tables.sensor_sim import PARAMETERS as SENSOR_SIM
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"
 

@@ -1,0 +1,113 @@
+"""`sim.schedule`: what the simulator node publishes when, without ROS. The epochs withheld
+are those of the outages, computed here by hand; the pace publishes each epoch once, in
+order, and lockstep steps by `step_s` under the ceiling."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ssa_fusion.core.base import types
+from ssa_fusion.sim import scenarios, sky
+from ssa_fusion.sim.schedule import (
+    Event,
+    Pace,
+    ScheduleError,
+    SimSettings,
+    check_window,
+    plan,
+    resolve,
+)
+
+SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"
+
+
+def _paper(**kw):
+    base, real_sky = resolve("iss_j2_rae")
+    settings = SimSettings(object_id="sat", cadence=30.0, gap_start=600.0, gap_length=300.0,
+                           after_gap=300.0, noise_sigma=(0.0, 0.0, 0.0), **kw)
+    return plan("iss_j2_rae", base, real_sky, settings)
+
+
+def test_resolve_gives_the_paper_scenario_and_the_real_sky_one():
+    assert resolve("molniya_sdp4_pos") == (scenarios.get("molniya_sdp4_pos"), None)
+    base, real_sky = resolve("iss_network")
+    assert base is scenarios.DEFAULT_LIVE and real_sky is sky.SKY_SCENARIOS["iss_network"]
+    with pytest.raises(ValueError, match="unknown scenario"):
+        resolve("no_such_scenario")
+
+
+def test_a_paper_run_withholds_the_epochs_of_its_gap_and_has_the_truth_at_each():
+    run = _paper()
+    epochs = sorted({t for t, _, _ in run.schedule})
+    t0 = epochs[0]
+    assert np.allclose(np.diff(epochs), 30.0) and epochs[-1] - t0 == pytest.approx(1200.0)
+    withheld = [t - t0 for t, what, _ in run.schedule if what == Event.WITHHELD]
+    assert withheld == pytest.approx([600.0 + 30.0 * k for k in range(10)])  # [600, 900)
+    truths = [t for t, what, _ in run.schedule if what == Event.TRUTH]
+    assert truths == epochs
+    for t, what, content in run.schedule:
+        assert content.object_id == "sat" and content.t == t
+        if what != Event.TRUTH:
+            assert isinstance(content, types.Measurement) and content.frame_id == "columbus"
+            assert not np.asarray(content.R).any()  # the noise given: none
+    assert run.catalog is None and list(run.times) == [t for t, _, _ in run.schedule]
+    assert run.summary == "41 epochs every 30.0 s, gaps [(600.0, 900.0)] s"
+
+
+def test_a_paper_run_with_two_gaps_ends_after_the_last_one():
+    run = _paper(gaps=(120.0, 60.0, 600.0, 90.0))
+    t0 = run.times[0]
+    withheld = [t - t0 for t, what, _ in run.schedule if what == Event.WITHHELD]
+    assert withheld == pytest.approx([120.0, 150.0, 600.0, 630.0, 660.0])
+    assert run.times[-1] - t0 == pytest.approx(690.0 + 300.0)
+
+
+def test_a_catalog_run_gives_rows_of_its_measurements():
+    base, real_sky = resolve("iss_radar_columbus")
+    settings = SimSettings(object_id="", cadence=60.0, duration=6 * 3600.0, catalog=str(SAMPLE),
+                           objects=3, seed=1)
+    run = plan("iss_radar_columbus", base, real_sky, settings)
+    obs = run.catalog.observations
+    assert run.schedule == [] and run.times is obs.t and len(obs) > 0
+    keys = np.arange(len(obs.object_ids), dtype=np.uint32) + 7
+    rows = run.catalog.rows(1, len(obs), keys)
+    assert rows.object_id == [obs.object_ids[k] for k in obs.obj[1:]]
+    assert set(rows.frame_id) == {"columbus"} and (rows.shard_key == obs.obj[1:] + 7).all()
+    assert np.array_equal(rows.t, obs.t[1:]) and rows.R.shape == (len(obs) - 1, 3, 3)
+
+
+def test_settings_that_give_no_run_are_schedule_errors_naming_the_parameters():
+    base, real_sky = resolve("leo_optical")
+    with pytest.raises(ScheduleError, match="has no radar to observe a catalog"):
+        plan("leo_optical", base, real_sky,
+             SimSettings(object_id="", cadence=60.0, catalog=str(SAMPLE)))
+    base, real_sky = resolve("iss_radar_columbus")
+    with pytest.raises(ScheduleError, match="nothing to publish"):
+        plan("iss_radar_columbus", base, real_sky,
+             SimSettings(object_id="", cadence=60.0, duration=1.0, catalog=str(SAMPLE),
+                         objects=1))
+    with pytest.raises(ScheduleError, match="parameter 'catalog' = "):
+        plan("iss_radar_columbus", base, real_sky,
+             SimSettings(object_id="", cadence=60.0, catalog=str(SAMPLE.parent)))
+    with pytest.raises(ScheduleError, match="parameters 'start', 'duration'"):
+        check_window(4.0e9, 86400.0)
+
+
+def test_the_open_loop_publishes_each_epoch_once_in_order():
+    pace = Pace(np.array([0.0, 10.0, 20.0, 20.0, 30.0]))
+    assert list(pace.due(-5.0)) == [] and list(pace.due(10.0)) == [0, 1]
+    assert list(pace.due(5.0)) == []  # the clock never takes back what went out
+    assert list(pace.due(25.0)) == [2, 3] and not pace.done
+    assert list(pace.due(1e9)) == [4] and pace.done
+
+
+def test_lockstep_steps_by_its_step_under_the_ceiling():
+    pace = Pace(np.array([100.0, 110.0, 120.0, 130.0, 140.0]), step_s=15.0)
+    assert pace.sim_now == 100.0 and not pace.clock_behind
+    assert list(pace.step(ceiling=200.0)) == [0, 1] and pace.sim_now == 115.0
+    assert pace.clock_behind
+    pace.clock_behind = False  # the node published the step's clock
+    assert pace.step(ceiling=120.0) is None and pace.sim_now == 115.0  # held by the ceiling
+    assert list(pace.step(ceiling=200.0)) == [2, 3]
+    assert list(pace.step(ceiling=200.0)) == [4] and pace.done
