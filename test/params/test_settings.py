@@ -1,5 +1,6 @@
-"""`params.settings`: the one translation between ROS parameters (SI) and EstimatorConfig
-(a params file read offline: test_params_file.py)."""
+"""`params.settings`: the one translation between ROS parameters (SI) and EstimatorConfig;
+config/default.yaml read offline is the default scenario's estimator (bad params files:
+test_params_file.py)."""
 
 import json
 from pathlib import Path
@@ -8,6 +9,7 @@ import pytest
 
 from ssa_fusion.core.gaps import estimator as config
 from ssa_fusion.params import checks, settings
+from ssa_fusion.params.params_file import load_params_file
 from ssa_fusion.sim import scenarios
 
 CONFIG = Path(__file__).resolve().parents[2] / "config" / "default.yaml"
@@ -28,6 +30,12 @@ def test_params_round_trip_in_si_units():
     assert f["p0_sigma"][0] == pytest.approx(1000.0) and f["q"] == pytest.approx(0.1)  # m, m^2/s^3
     assert s["retrain_period"] == 0.0  # never = 0 as a parameter
     assert same(settings.estimator_from(f, s), c)
+
+
+def test_default_yaml_is_the_default_live_scenario():
+    """config/default.yaml, read as a ROS params file, is the default scenario's estimator
+    (what `ssa-fusion live` runs)."""
+    assert same(load_params_file(CONFIG), scenarios.DEFAULT_LIVE.estimator())
 
 
 def test_recorded_settings_merge_both_nodes_last_message():
