@@ -6,7 +6,8 @@ of ``object_id``) of its messages.
 Shard k of K owns the keys of the k-th of K equal ranges of the uint32 key space, and
 subscribes with a DDS content filter on that range, so it never receives the others'
 traffic; K processes with shard 0..K-1 cover every object exactly once, on one host or
-several in one ROS domain.
+several in one ROS domain. (The ``shards`` and ``shard`` parameters and their rule:
+`ssa_fusion.params.shared`.)
 """
 
 from __future__ import annotations
