@@ -90,6 +90,8 @@ IMPORT_KEYS = {
     "yaml": "python3-yaml",
     "rosbags": "python3-rosbags-pip",
     "mcap": "mcap-ros2-support",  # the pip key of mcap-ros2-support, which installs mcap
+    "zstandard": "mcap-ros2-support",  # mcap's own dependencies: its chunks' compressions
+    "lz4": "mcap-ros2-support",  # (ros/mcap_salvage.py decompresses chunks itself)
     "sgp4": "python3-sgp4-pip",
     "plotly": "python3-plotly-pip",  # report.html (apps/report_html.py)
     "foxglove": "python3-foxglove-sdk-pip",  # foxglove-sdk: the foxglove_bridge node
