@@ -32,8 +32,8 @@ from ssa_fusion.core.base import types  # noqa: E402
 from ssa_fusion.graphs import node_parameters  # noqa: E402
 from ssa_fusion.ros import bagio, messages  # noqa: E402
 from ssa_fusion.ros.processes import Graph  # noqa: E402
+from ssa_fusion.ros.qos import DATA_QOS  # noqa: E402
 from ssa_fusion.ros.readiness import ReadyNodes, readers_of  # noqa: E402
-from ssa_fusion.ros.topics import DATA_QOS  # noqa: E402
 from ssa_fusion.sim import scenarios, simulate  # noqa: E402
 
 

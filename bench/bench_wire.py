@@ -55,12 +55,9 @@ from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
 from ssa_fusion.ros.interfaces import MeasurementBatch
 from ssa_fusion.ros.processes import Graph
+from ssa_fusion.ros.qos import CATALOG_WRITER_QOS
 from ssa_fusion.ros.readiness import ReadyNodes
-from ssa_fusion.ros.topics import (
-    CATALOG_WRITER_QOS,
-    TOPIC_MEASUREMENT,
-    TOPIC_MEASUREMENT_BATCH,
-)
+from ssa_fusion.ros.topics import TOPIC_MEASUREMENT, TOPIC_MEASUREMENT_BATCH
 from ssa_fusion.sim import sky, survey
 
 TARGET = 100_000

@@ -30,26 +30,39 @@ _COMMANDS = {
 }
 
 
-def _available() -> dict[str, tuple[ModuleType, str]]:
-    found = {}
-    for name, (module, help_text) in _COMMANDS.items():
-        try:
-            found[name] = (importlib.import_module(module), help_text)
-        except ModuleNotFoundError as exc:
-            if exc.name != module:
-                raise
-    return found
+def _module(name: str) -> ModuleType | None:
+    """Return the module of command `name`, or None when it cannot be imported here."""
+    module = _COMMANDS[name][0]
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError as exc:
+        if exc.name != module:
+            raise
+    return None
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Return the `ssa-fusion` parser, one subcommand per command whose module imports."""
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """Return the `ssa-fusion` parser, one subcommand per command whose module imports.
+
+    `only`: the command about to run; only its module is imported (each command imports
+    what it needs: an offline command never loads ROS because `live` does).
+    """
     parser = argparse.ArgumentParser(prog="ssa-fusion", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
-    for name, (module, help_text) in _available().items():
+    for name, (_, help_text) in _COMMANDS.items():
+        module = _module(name) if only in (None, name) else None
+        if module is None and only in (None, name):
+            continue
         p = sub.add_parser(name, help=help_text, description=help_text)
-        module.add_arguments(p)
-        p.set_defaults(_run=module.run)
+        if module is not None:
+            module.add_arguments(p)
+            p.set_defaults(_run=module.run)
     return parser
+
+
+def _command_in(argv: list[str]) -> str | None:
+    """Return the subcommand `argv` starts with, else None (``--help``: every command)."""
+    return argv[0] if argv and argv[0] in _COMMANDS else None
 
 
 class Interrupted(BaseException):
@@ -84,7 +97,8 @@ def main(argv: list[str] | None = None) -> int:
     previous = {sig: signal.signal(sig, _interrupt) for sig in _STOP_SIGNALS}
     command = "ssa-fusion"
     try:
-        args = build_parser().parse_args(argv)
+        words = sys.argv[1:] if argv is None else argv
+        args = build_parser(_command_in(words)).parse_args(words)
         command = f"ssa-fusion {args.command}"
         return int(args._run(args) or 0)
     except Interrupted as exc:

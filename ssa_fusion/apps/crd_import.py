@@ -48,13 +48,7 @@ from ssa_fusion.formats.records import RecordError
 from ssa_fusion.formats.reference_orbit import ReferenceOrbit, read_reference
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.laser_config import LaserConfig, laser_config_message
-from ssa_fusion.ros.topics import (
-    CONFIG_QOS,
-    TOPIC_CONFIG,
-    TOPIC_MEASUREMENT,
-    TOPIC_METEO,
-    TOPIC_REFERENCE,
-)
+from ssa_fusion.ros.topics import TOPIC_CONFIG, TOPIC_MEASUREMENT, TOPIC_METEO, TOPIC_REFERENCE
 
 SIGMA_M = 0.05
 """Default noise of a normal point, m (1 sigma): what is left of a LAGEOS normal point
@@ -242,7 +236,7 @@ def _write_bag(out: Path, ranges: LaserRanges, config: LaserConfig,
         writer = bagio.BagWriter(out)
         try:
             writer.add_topic(TOPIC_CONFIG, "std_msgs/msg/String",
-                             [bagio.qos_from_rclpy(CONFIG_QOS)])
+                             [bagio.LATCHED_QOS])
             for topic, name in ((TOPIC_MEASUREMENT, "Measurement"), (TOPIC_METEO, "Meteo"),
                                 (TOPIC_REFERENCE, "StateEstimate")):
                 writer.add_topic(topic, f"{bagio.MSG_PACKAGE}/msg/{name}")

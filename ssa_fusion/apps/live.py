@@ -34,9 +34,8 @@ from ssa_fusion.apps.args import add_discovery, add_domain_id, discovery, time_s
 from ssa_fusion.apps.progress_lines import ProgressLines
 from ssa_fusion.core.base.types import UpdateSource
 from ssa_fusion.core.gaps.publisher import GapFill
-from ssa_fusion.ros import visual_msgs
 from ssa_fusion.ros.processes import Graph
-from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
+from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS, VISUAL_TOPICS
 from ssa_fusion.sim import scenarios, sky
 
 if TYPE_CHECKING:
@@ -104,7 +103,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 FOXGLOVE_PORT = 8765
 """Default port of `--foxglove`'s WebSocket server (Foxglove's usual one)."""
 FOXGLOVE_READERS = [*(f"foxglove_bridge:{t}" for t in ("/ssa/measurement", "/ssa/truth")),
-                    *(f"recorder:{t}" for t in visual_msgs.TOPICS)]
+                    *(f"recorder:{t}" for t in VISUAL_TOPICS)]
 """What the bridge must have matched before measurements flow (with `--foxglove`), and the
 recorder of the bridge's ROS visual topics (so the bag holds the picture from the start)."""
 _FOXGLOVE_URL = re.compile(r"Foxglove WebSocket server on (ws://\S+)")

@@ -61,8 +61,8 @@ from ssa_fusion.params.defaults import CATALOG_FILTER, CATALOG_SURROGATE
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.discovery import Discovery
 from ssa_fusion.ros.processes import Graph, ros_arguments
+from ssa_fusion.ros.qos import CATALOG_QOS
 from ssa_fusion.ros.topics import (
-    CATALOG_QOS,
     TOPIC_ASSOCIATED,
     TOPIC_DETECTION_TRUTH,
     TOPIC_DIAGNOSTICS,

@@ -77,7 +77,6 @@ from ssa_fusion.formats import sites as site_file
 from ssa_fusion.params import settings as node_settings
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import (
-    CONFIG_QOS,
     TOPIC_CLOCK,
     TOPIC_CONFIG,
     TOPIC_ESTIMATE,
@@ -441,7 +440,7 @@ def write_offline(out: Path, stream: list[bagio.BagMessage], result: OfflineResu
     try:
         if settings_used:
             writer.add_topic(TOPIC_CONFIG, "std_msgs/msg/String",
-                             [bagio.qos_from_rclpy(CONFIG_QOS)])
+                             [bagio.LATCHED_QOS])
             first_ns = min((m.t_ns for m in stream), default=0)
             text = bagio.typestore().types["std_msgs/msg/String"]
             for data in settings_used:

@@ -60,8 +60,6 @@ from ssa_fusion.params import settings
 from ssa_fusion.params.defaults import CATALOG_FILTER
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import (
-    CATALOG_QOS,
-    CONFIG_QOS,
     TOPIC_ASSOCIATED,
     TOPIC_CONFIG,
     TOPIC_DETECTION_TRUTH,
@@ -299,7 +297,7 @@ def write(out: Path, raw: list[bagio.BagMessage], result: CatalogResult,
     writer = bagio.BagWriter(out)
     try:
         first_ns = min((m.t_ns for m in raw), default=0)
-        writer.add_topic(TOPIC_CONFIG, "std_msgs/msg/String", [bagio.qos_from_rclpy(CONFIG_QOS)])
+        writer.add_topic(TOPIC_CONFIG, "std_msgs/msg/String", [bagio.LATCHED_QOS])
         text = bagio.typestore().types["std_msgs/msg/String"]
         for p in used:
             writer.write_msg(TOPIC_CONFIG, first_ns,
@@ -436,6 +434,7 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
     arrived every ``batch_period`` wall s: per object the same estimates as the recorded
     run (module docstring), whatever the rate.
     """
+    from ssa_fusion.ros import qos
     from ssa_fusion.ros.interfaces import EstimateBatch
     from ssa_fusion.ros.player import Player
     from ssa_fusion.ros.processes import Graph, ended_badly, recorded_short
@@ -460,7 +459,8 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
         player = Player(graph.probe, played, args.rate)
         rows: list[int] = []
         graph.probe.create_subscription(EstimateBatch, TOPIC_ESTIMATE_BATCH,
-                                        lambda m: rows.append(len(m.object_id)), CATALOG_QOS)
+                                        lambda m: rows.append(len(m.object_id)),
+                                        qos.CATALOG_QOS)
         filters = {TOPIC_MEASUREMENT_BATCH, TOPIC_MEASUREMENT}
         graph.wait_for(player.subscribers_ready(
             {t: 1 + len(names) * (t in filters) for t in player.pubs}),

@@ -76,10 +76,9 @@ from ssa_fusion.params.tables.catalog_filter import PARAMETERS
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import EstimateBatch, MeasurementBatch, Message
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
+from ssa_fusion.ros.qos import CATALOG_QOS, CATALOG_WRITER_QOS
 from ssa_fusion.ros.topics import (
     CATALOG_DEPTH,
-    CATALOG_QOS,
-    CATALOG_WRITER_QOS,
     TOPIC_ESTIMATE_BATCH,
     TOPIC_MEASUREMENT,
     TOPIC_MEASUREMENT_BATCH,

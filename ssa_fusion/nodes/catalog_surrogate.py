@@ -69,12 +69,8 @@ from ssa_fusion.nodes.kit.shards import (
 from ssa_fusion.params.tables.catalog_surrogate import PARAMETERS
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import EstimateBatch, MeasurementBatch, Message
-from ssa_fusion.ros.topics import (
-    CATALOG_QOS,
-    CATALOG_WRITER_QOS,
-    TOPIC_ESTIMATE_BATCH,
-    TOPIC_MEASUREMENT_BATCH,
-)
+from ssa_fusion.ros.qos import CATALOG_QOS, CATALOG_WRITER_QOS
+from ssa_fusion.ros.topics import TOPIC_ESTIMATE_BATCH, TOPIC_MEASUREMENT_BATCH
 
 TICK_S = 0.01
 """Wall s between two rounds of fits and releases (in lockstep the simulator's next step

@@ -29,13 +29,8 @@ from ssa_fusion.params.tables.filter import PARAMETERS
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
 from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
-from ssa_fusion.ros.topics import (
-    DATA_QOS,
-    DATA_WRITER_QOS,
-    TOPIC_ESTIMATE,
-    TOPIC_FORECAST,
-    TOPIC_MEASUREMENT,
-)
+from ssa_fusion.ros.qos import DATA_QOS, DATA_WRITER_QOS
+from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_MEASUREMENT
 
 TICK_S = 0.1
 """Wall s between two publications of the predictions due (at most 100 each)."""

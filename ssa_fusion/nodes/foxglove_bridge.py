@@ -45,7 +45,7 @@ from ssa_fusion.nodes.kit.base import SsaNode
 from ssa_fusion.nodes.kit.diagnostics import Count
 from ssa_fusion.params.rows import ParameterError
 from ssa_fusion.params.tables.foxglove_bridge import PARAMETERS
-from ssa_fusion.ros import bagio, messages, visual_msgs
+from ssa_fusion.ros import bagio, messages, topics, visual_msgs
 from ssa_fusion.ros import foxglove_scene as scene
 from ssa_fusion.ros.interfaces import (
     EstimateBatch,
@@ -56,10 +56,8 @@ from ssa_fusion.ros.interfaces import (
 )
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
 from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
+from ssa_fusion.ros.qos import CATALOG_QOS, DATA_QOS, DATA_WRITER_QOS
 from ssa_fusion.ros.topics import (
-    CATALOG_QOS,
-    DATA_QOS,
-    DATA_WRITER_QOS,
     TOPIC_ESTIMATE,
     TOPIC_ESTIMATE_BATCH,
     TOPIC_FORECAST,
@@ -106,10 +104,10 @@ class FoxgloveBridgeNode(SsaNode):
         self.ros_pubs: dict[str, Publisher[Message]] = {}
         if p.flag("ros_topics"):
             self.ros_pubs = {
-                visual_msgs.MARKERS_TOPIC: self.create_publisher(
-                    MarkerArray, visual_msgs.MARKERS_TOPIC, DATA_WRITER_QOS),
+                topics.MARKERS_TOPIC: self.create_publisher(
+                    MarkerArray, topics.MARKERS_TOPIC, DATA_WRITER_QOS),
                 **{topic: self.create_publisher(NavSatFix, topic, DATA_WRITER_QOS)
-                   for topic in (visual_msgs.TRACK_TOPIC, visual_msgs.TRUTH_TRACK_TOPIC)},
+                   for topic in (topics.TRACK_TOPIC, topics.TRUTH_TRACK_TOPIC)},
             }
 
         subs: tuple[tuple[type[MeasurementMsg], str, Callable[[MeasurementMsg], None]], ...] = (
@@ -156,7 +154,7 @@ class FoxgloveBridgeNode(SsaNode):
             return
         e = messages.estimate_from_msg(msg)
         if self._show(lambda: self.visual.truth(e.t, e.x), Count.TRUTH):
-            self._publish_fix(visual_msgs.TRUTH_TRACK_TOPIC, e.t, e.x, "truth")
+            self._publish_fix(topics.TRUTH_TRACK_TOPIC, e.t, e.x, "truth")
 
     def on_estimate(self, msg: StateEstimateMsg) -> None:
         """Show an estimate (and its ground track)."""
@@ -165,7 +163,7 @@ class FoxgloveBridgeNode(SsaNode):
         e = messages.estimate_from_msg(msg)
         if self._show(lambda: self.visual.estimate(e.t, e.x, e.P, e.update_source, e.nis),
                       Count.ESTIMATES):  # the ground track only of what the scene shows
-            self._publish_fix(visual_msgs.TRACK_TOPIC, e.t, e.x, "estimate")
+            self._publish_fix(topics.TRACK_TOPIC, e.t, e.x, "estimate")
 
     def _publish_fix(self, topic: str, t: float, x: np.ndarray, frame_id: str) -> None:
         """Publish the ground-track NavSatFix of a state the scene showed."""
@@ -206,7 +204,7 @@ class FoxgloveBridgeNode(SsaNode):
             return
         logged = self.visual.scene()
         self._log([logged])
-        pub = self.ros_pubs.get(visual_msgs.MARKERS_TOPIC)
+        pub = self.ros_pubs.get(topics.MARKERS_TOPIC)
         if pub is not None:
             pub.publish(visual_msgs.marker_array(self.visual.shapes, self.visual.state.t or 0.0))
         self.diag.counts[Count.SCENE_UPDATES] += 1

@@ -45,11 +45,9 @@ from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Clock, MeasurementBatch, Time
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
 from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
+from ssa_fusion.ros.qos import CATALOG_WRITER_QOS, DATA_QOS, DATA_WRITER_QOS
 from ssa_fusion.ros.readiness import ReadyNodes
 from ssa_fusion.ros.topics import (
-    CATALOG_WRITER_QOS,
-    DATA_QOS,
-    DATA_WRITER_QOS,
     TOPIC_CLOCK,
     TOPIC_DETECTION_TRUTH,
     TOPIC_MEASUREMENT,

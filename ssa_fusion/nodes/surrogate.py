@@ -27,7 +27,8 @@ from ssa_fusion.params.checks import ParamValue
 from ssa_fusion.params.tables.surrogate import PARAMETERS
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
-from ssa_fusion.ros.topics import DATA_QOS, DATA_WRITER_QOS, TOPIC_FORECAST, TOPIC_MEASUREMENT
+from ssa_fusion.ros.qos import DATA_QOS, DATA_WRITER_QOS
+from ssa_fusion.ros.topics import TOPIC_FORECAST, TOPIC_MEASUREMENT
 
 
 class SurrogateNode(SsaNode):

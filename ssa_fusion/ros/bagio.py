@@ -86,6 +86,15 @@ def typestore() -> Typestore:
     return _TYPESTORE
 
 
+LATCHED_QOS = Qos(history=QosHistory.KEEP_LAST, depth=1, reliability=QosReliability.RELIABLE,
+                  durability=QosDurability.TRANSIENT_LOCAL, deadline=QosTime(0, 0),
+                  lifespan=QosTime(0, 0), liveliness=QosLiveliness.SYSTEM_DEFAULT,
+                  liveliness_lease_duration=QosTime(0, 0),
+                  avoid_ros_namespace_conventions=False)
+"""`ros.qos.CONFIG_QOS` as a bag records it (latched: the settings topic), without rclpy:
+what offline writers (replay, import) offer for ``/ssa/config``."""
+
+
 def qos_from_rclpy(profile: QoSProfile) -> Qos:
     """Return an rclpy QoSProfile as a rosbags Qos (metadata.yaml offered_qos_profiles)."""
 

@@ -20,7 +20,8 @@ from rclpy.timer import Timer
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.interfaces import Clock as ClockMsg
 from ssa_fusion.ros.interfaces import Message
-from ssa_fusion.ros.topics import CATALOG_WRITER_QOS, DATA_QOS, DATA_WRITER_QOS, TOPIC_CLOCK
+from ssa_fusion.ros.qos import CATALOG_WRITER_QOS, DATA_QOS, DATA_WRITER_QOS
+from ssa_fusion.ros.topics import TOPIC_CLOCK
 
 
 class Player:

@@ -32,7 +32,7 @@ from ssa_fusion.ros.discovery import LOOPBACK, Discovery
 from ssa_fusion.ros.executors import make_executor
 from ssa_fusion.ros.interfaces import Message
 from ssa_fusion.ros.player import Player
-from ssa_fusion.ros.topics import DATA_QOS
+from ssa_fusion.ros.qos import DATA_QOS
 
 NODE_BIN = Path(sys.prefix) / "lib" / "ssa_fusion"
 """Where the bootstrap places node executables (as `ros2 run ssa_fusion <node>` finds them)."""

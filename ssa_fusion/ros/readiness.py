@@ -15,10 +15,8 @@ its first batch).
 
 from __future__ import annotations
 
-from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from typing import TYPE_CHECKING
 
-from ssa_fusion.ros.interfaces import DiagnosticArray
 from ssa_fusion.ros.topics import (
     TOPIC_CLOCK,
     TOPIC_DIAGNOSTICS,
@@ -28,6 +26,11 @@ from ssa_fusion.ros.topics import (
     TOPIC_TRUTH,
     TOPIC_WITHHELD,
 )
+
+if TYPE_CHECKING:  # rclpy when a node reads the reports: graphs.py imports this module's names
+    from rclpy.node import Node
+
+    from ssa_fusion.ros.interfaces import Message
 
 MATCHED_KEY = "matched_publishers "
 """Diagnostics key prefix; the rest of the key is the subscribed topic."""
@@ -65,10 +68,14 @@ class ReadyNodes:
 
     def __init__(self, node: Node) -> None:
         self.reports: dict[str, dict[str, int]] = {}
+        from rclpy.qos import QoSProfile
+
+        from ssa_fusion.ros.interfaces import DiagnosticArray
+
         self._sub = node.create_subscription(DiagnosticArray, TOPIC_DIAGNOSTICS, self._on,
                                              QoSProfile(depth=100))
 
-    def _on(self, msg: DiagnosticArray) -> None:
+    def _on(self, msg: Message) -> None:
         """Take one /diagnostics report."""
         for st in msg.status:
             counts = {kv.key[len(MATCHED_KEY):]: int(kv.value)

@@ -40,14 +40,6 @@ from ssa_fusion.ros.interfaces import (
     Time,
 )
 
-MARKERS_TOPIC = "/ssa/visual/markers"
-"""visualization_msgs/MarkerArray: the 3D scene (GCRF, km)."""
-TRACK_TOPIC = "/ssa/visual/ground_track"
-"""sensor_msgs/NavSatFix: the estimate's sub-satellite point."""
-TRUTH_TRACK_TOPIC = "/ssa/visual/ground_track_truth"
-"""sensor_msgs/NavSatFix: the truth's sub-satellite point."""
-TOPICS = (MARKERS_TOPIC, TRACK_TOPIC, TRUTH_TRACK_TOPIC)
-
 LINE_WIDTH_KM = 25.0
 """Width of trails in the scene, km (ROS markers have no screen-space widths)."""
 LABEL_HEIGHT_KM = 400.0

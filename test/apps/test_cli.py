@@ -231,6 +231,9 @@ def test_a_stop_signal_runs_the_commands_cleanup_and_exits_128_plus_its_number(
             cleaned.append(True)
 
     class Parser:  # a command line that runs `command`
+        def __init__(self, _only: str | None = None) -> None:
+            pass
+
         def parse_args(self, _argv) -> argparse.Namespace:
             return argparse.Namespace(command="report", _run=command)
 

@@ -10,7 +10,7 @@ from msg_samples import N_SAMPLES, as_dict
 from ssa_fusion_msgs.msg import Measurement, StateEstimate
 from std_msgs.msg import Empty
 
-from ssa_fusion.ros.topics import CONFIG_QOS, DATA_QOS
+from ssa_fusion.ros.qos import CONFIG_QOS, DATA_QOS
 
 
 def main() -> None:

@@ -20,7 +20,7 @@ from ssa_fusion.nodes.kit.shards import shard_range
 from ssa_fusion.params import settings
 from ssa_fusion.params.defaults import CATALOG_FILTER
 from ssa_fusion.ros import messages
-from ssa_fusion.ros.topics import CATALOG_QOS
+from ssa_fusion.ros.qos import CATALOG_QOS
 from ssa_fusion.sim import sky, survey
 
 SAMPLE = Path(__file__).resolve().parents[2] / "config" / "catalogs" / "sample.tle"

@@ -25,7 +25,7 @@ from ssa_fusion.nodes.kit.progress import PROGRESS_QOS, TAKEN_ESTIMATES, TOPIC_P
 from ssa_fusion.nodes.kit.shards import shard_problem, shard_range
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import DiagnosticStatus
-from ssa_fusion.ros.topics import CATALOG_QOS
+from ssa_fusion.ros.qos import CATALOG_QOS
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
 T0 = 1.7e9  # Unix s

@@ -47,8 +47,8 @@ from ssa_fusion.core.measure.measurement import RazelModel
 from ssa_fusion.graphs import node_parameters
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.discovery import RANGE_VAR, DiscoveryRange
+from ssa_fusion.ros.qos import DATA_QOS
 from ssa_fusion.ros.readiness import ReadyNodes
-from ssa_fusion.ros.topics import DATA_QOS
 from ssa_fusion.sim import scenarios
 from ssa_fusion.sim.simulate import simulate
 

@@ -23,9 +23,10 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ssa_fusion.core.base import types
 from ssa_fusion.core.base.rows import EstimateRows
-from ssa_fusion.ros import bagio, messages, visual_msgs
+from ssa_fusion.ros import bagio, messages, topics
 from ssa_fusion.ros import foxglove_scene as scene
-from ssa_fusion.ros.topics import CATALOG_QOS, DATA_QOS, TOPIC_ESTIMATE_BATCH
+from ssa_fusion.ros.qos import CATALOG_QOS, DATA_QOS
+from ssa_fusion.ros.topics import TOPIC_ESTIMATE_BATCH
 
 SUBPROTOCOLS = ("foxglove.sdk.v1", "foxglove.websocket.v1")
 T0 = 1_718_000_000.0  # Unix s
@@ -133,16 +134,16 @@ def test_bridge_serves_scene_track_and_metrics_and_records_them_in_the_bag(ros_g
     bag = tmp_path / "bag"
     markers: list[MarkerArray] = []
     fixes: list[NavSatFix] = []
-    g.probe.create_subscription(MarkerArray, visual_msgs.MARKERS_TOPIC, markers.append,
+    g.probe.create_subscription(MarkerArray, topics.MARKERS_TOPIC, markers.append,
                                 DATA_QOS)
-    g.probe.create_subscription(NavSatFix, visual_msgs.TRACK_TOPIC, fixes.append, DATA_QOS)
+    g.probe.create_subscription(NavSatFix, topics.TRACK_TOPIC, fixes.append, DATA_QOS)
     try:
         rec = g.start_node("recorder", params={"bag": str(bag), "discover_period": 0.2})
         proc = g.start_node("foxglove_bridge", params={"port": 0, "station": "network",
                                                        "scene_period": 0.05})
-        g.wait_for_subscriber(visual_msgs.MARKERS_TOPIC, 2)  # the probe and the recorder
-        g.wait_for_subscriber(visual_msgs.TRACK_TOPIC, 2)
-        g.wait_for_subscriber(visual_msgs.TRUTH_TRACK_TOPIC, 1)  # the recorder
+        g.wait_for_subscriber(topics.MARKERS_TOPIC, 2)  # the probe and the recorder
+        g.wait_for_subscriber(topics.TRACK_TOPIC, 2)
+        g.wait_for_subscriber(topics.TRUTH_TRACK_TOPIC, 1)  # the recorder
         url = re.compile(r"ws://127\.0\.0\.1:(\d+)")
         g.wait_for(lambda: url.search(proc.stderr()) is not None or proc.returncode is not None,
                    20, "the bridge to report its WebSocket address")
@@ -233,9 +234,9 @@ def test_bridge_serves_scene_track_and_metrics_and_records_them_in_the_bag(ros_g
         assert abs(fix.longitude - np.degrees(lon)) < 1e-9
         # ... and the recorder put them in the bag, readable with their ROS types
         in_bag = Counter((m.topic, m.msgtype) for m in bagio.read_bag(bag))
-        assert in_bag[(visual_msgs.MARKERS_TOPIC, "visualization_msgs/msg/MarkerArray")] > 0
-        assert in_bag[(visual_msgs.TRACK_TOPIC, "sensor_msgs/msg/NavSatFix")] > 0
-        assert in_bag[(visual_msgs.TRUTH_TRACK_TOPIC, "sensor_msgs/msg/NavSatFix")] > 0
+        assert in_bag[(topics.MARKERS_TOPIC, "visualization_msgs/msg/MarkerArray")] > 0
+        assert in_bag[(topics.TRACK_TOPIC, "sensor_msgs/msg/NavSatFix")] > 0
+        assert in_bag[(topics.TRUTH_TRACK_TOPIC, "sensor_msgs/msg/NavSatFix")] > 0
     finally:
         if client is not None:
             client.close()

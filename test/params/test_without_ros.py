@@ -57,3 +57,18 @@ def test_every_table_the_settings_and_the_doc_generator_import_no_ros():
     """))
     assert int(out) > 100  # every row of every table was built
     assert not loaded & set(ROS), loaded & set(ROS)
+
+
+def test_replay_offline_and_report_with_a_params_file_load_no_ros(tmp_path):
+    """The whole commands, as a user runs them on the sample bag (issue: they started ROS)."""
+    bag = CONFIG.parents[1] / "bags" / "sample_iss_j2_rae"
+    for argv in (["replay", str(bag), "--offline", "--out", str(tmp_path / "replayed"),
+                  "--params-file", str(CONFIG)],
+                 ["report", str(bag), "--out", str(tmp_path / "report"),
+                  "--params-file", str(CONFIG)]):
+        loaded, out = _modules_after(textwrap.dedent(f"""
+            from ssa_fusion.apps import cli
+            print("exit", cli.main({argv!r}))
+        """))
+        assert out.splitlines()[-1] == "exit 0", out[-500:]
+        assert not loaded & set(ROS), (argv[0], loaded & set(ROS))

@@ -3,7 +3,7 @@
 A shard's batches reach the other shard's readers too, whose content filter refuses them.
 Fast DDS filters in the writer when its liveliness lease is infinite, and then keeps every
 refused sample in a reliable volatile history (`topics.CATALOG_DEPTH` deep): the filter
-shards of a 30,000-object run grew by hundreds of MiB. `topics.writer_qos` gives writers a
+shards of a 30,000-object run grew by hundreds of MiB. `qos.writer_qos` gives writers a
 finite lease, so the readers filter. Real processes over DDS (loopback, a domain of their
 own): a publisher of 300 batches of 1,000 rows (about 75 MB) to a reader that takes them
 all and one that refuses them all; its resident memory before and after."""
@@ -31,7 +31,7 @@ SCRIPT = textwrap.dedent("""
     from ssa_fusion.nodes.kit.shards import content_filter, shard_range
     from ssa_fusion.ros import messages
     from ssa_fusion.ros.interfaces import EstimateBatch
-    from ssa_fusion.ros.topics import CATALOG_QOS, CATALOG_WRITER_QOS
+    from ssa_fusion.ros.qos import CATALOG_QOS, CATALOG_WRITER_QOS
 
     role, qos_name, batches, rows_n = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
     topic = "/test/estimate_batch"

@@ -51,7 +51,8 @@ from ssa_fusion.params.checks import ParamValue
 from ssa_fusion.params.rows import ParameterTable
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Message, String, Time
-from ssa_fusion.ros.topics import CONFIG_QOS, TOPIC_CONFIG
+from ssa_fusion.ros.qos import CONFIG_QOS
+from ssa_fusion.ros.topics import TOPIC_CONFIG
 
 
 class SsaNode(Node):

@@ -35,7 +35,8 @@ from ssa_fusion.core.catalog.unlabelled import is_unlabelled
 from ssa_fusion.nodes.kit.diagnostics import Count, Diagnostics
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import MeasurementBatch
-from ssa_fusion.ros.topics import CATALOG_WRITER_QOS, TOPIC_ASSOCIATED
+from ssa_fusion.ros.qos import CATALOG_WRITER_QOS
+from ssa_fusion.ros.topics import TOPIC_ASSOCIATED
 
 FATE_PREFIX = "detection_"
 """/diagnostics key of an unlabelled detection's fate: this + the `DetectionFate` name."""
