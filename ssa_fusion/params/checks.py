@@ -41,9 +41,14 @@ class Check:
 
 
 def _finite(value: object) -> float | None:
-    """Return an int or a finite float as a float, anything else as None."""
+    """Return an int or a finite float as a float, anything else as None.
+
+    A bool is not a number here (Python's True is 1; a params file's ``q: true`` is a typo or
+    a wrong key, never 1.0, and ROS refuses a bool for a double parameter too).
+    """
     try:
-        if isinstance(value, int | float) and math.isfinite(value):
+        if isinstance(value, int | float) and not isinstance(value, bool) and \
+                math.isfinite(value):
             return float(value)
     except OverflowError:  # an int beyond a float's range (a params file's YAML)
         pass
@@ -77,7 +82,8 @@ def all_non_negative(values: ParamValue) -> bool:
 def at_least(low: int) -> Check:
     """Return the check of an integer >= `low`."""
     def test(v: ParamValue) -> str | None:
-        return None if isinstance(v, int) and v >= low else f"must be an integer >= {low}"
+        ok = isinstance(v, int) and not isinstance(v, bool) and v >= low
+        return None if ok else f"must be an integer >= {low}"
 
     return Check(f"integer ≥ {low}", test)
 
@@ -85,7 +91,7 @@ def at_least(low: int) -> Check:
 def integer_in(low: int, high: int) -> Check:
     """Return the check of an integer in `low`..`high`."""
     def test(v: ParamValue) -> str | None:
-        ok = isinstance(v, int) and low <= v <= high
+        ok = isinstance(v, int) and not isinstance(v, bool) and low <= v <= high
         return None if ok else f"must be an integer in {low}..{high}"
 
     return Check(f"{low}..{high}", test)

@@ -36,6 +36,9 @@ def test_params_file_errors_name_the_file_and_value(tmp_path):
     ("filter:\n  ros__parameters:\n    q: .nan\n", "filter: parameter 'q' = nan: must be"),
     ("filter:\n  ros__parameters:\n    q: [1, 2]\n", "filter: parameter 'q' = [1, 2]"),
     ("filter:\n  ros__parameters:\n    qq: 1.0\n", "filter: 'qq' is not a parameter of filter"),
+    # a bool is no number (Python's True is 1: q: true was taken as 1.0)
+    ("filter:\n  ros__parameters:\n    q: true\n", "filter: parameter 'q' = True: must be"),
+    ("surrogate:\n  ros__parameters:\n    delays: true\n", "parameter 'delays' = True"),
     ("surrogate:\n  ros__parameters:\n    delays: -3\n", "surrogate: parameter 'delays' = -3"),
     ("[" * 50000 + "]" * 50000, "nested too deeply or too large to read"),
 ])
