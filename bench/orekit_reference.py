@@ -1,0 +1,152 @@
+"""Orekit's propagation of the force-model benchmark's cases (run by bench_force_model.py).
+
+Runs in a separate virtual environment with ``orekit-jpype``, ``jplephem`` and ``de421``
+(never a dependency of ssa_fusion; bench_force_model.py says how to create it)::
+
+    OREKIT_VENV/bin/python bench/orekit_reference.py JOB.json OUT.json
+
+JOB.json (written by bench_force_model.py): ``data_dir`` (a directory Orekit reads: the
+IERS ``finals2000A.all`` and ``Leap_Second.dat`` the product uses, the EGM96 ``.gfc`` file),
+``gravity_file``, ``tdb_minus_tt`` s, ``earth_share``, ``gm_sun``/``gm_moon`` m^3/s^2 and
+``cases``: each an epoch (UTC ISO), a GCRF state (m, m/s), the forces and the output
+offsets (s). Orekit propagates each with its own numerical propagator (adaptive
+Dormand-Prince 8(5,3), 0.1 mm tolerance, the case's longest step, Cartesian), HolmesFeatherstone on its ITRF (IERS
+2010, EOP without tidal corrections), its ThirdBodyAttraction, SolarRadiationPressure
+(conical shadow of a spherical Earth, with its own eclipse detection) and DragForce in a
+SimpleExponentialAtmosphere. The Sun and the Moon are DE421 evaluated by jplephem here (the
+``de421`` package Orekit cannot read), given to Orekit as ExtendedPositionProviders. Writes
+the positions (m, GCRF) at the offsets to OUT.json.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import de421
+import orekit_jpype as orekit
+from jplephem.ephem import Ephemeris
+
+orekit.initVM()
+
+from jpype import JImplements, JOverride  # noqa: E402
+from orekit_jpype.pyhelpers import setup_orekit_data  # noqa: E402
+
+EPH = Ephemeris(de421)
+
+
+def _classes() -> dict:
+    from org.hipparchus.geometry.euclidean.threed import Vector3D
+    from org.hipparchus.ode.nonstiff import DormandPrince853Integrator
+    from org.orekit.bodies import OneAxisEllipsoid
+    from org.orekit.forces.drag import DragForce, IsotropicDrag
+    from org.orekit.forces.gravity import HolmesFeatherstoneAttractionModel, ThirdBodyAttraction
+    from org.orekit.forces.gravity.potential import GravityFieldFactory, ICGEMFormatReader
+    from org.orekit.forces.radiation import (IsotropicRadiationSingleCoefficient,
+                                             SolarRadiationPressure)
+    from org.orekit.frames import FramesFactory
+    from org.orekit.models.earth.atmosphere import SimpleExponentialAtmosphere
+    from org.orekit.orbits import CartesianOrbit, OrbitType
+    from org.orekit.propagation import SpacecraftState
+    from org.orekit.propagation.numerical import NumericalPropagator
+    from org.orekit.time import AbsoluteDate, TimeScalesFactory
+    from org.orekit.utils import IERSConventions, PVCoordinates, TimeStampedPVCoordinates
+    return dict(locals())
+
+
+def main(job_path: str, out_path: str) -> None:
+    job = json.load(open(job_path))
+    setup_orekit_data(filenames=job["data_dir"], from_pip_library=False)
+    k = _classes()
+    k["GravityFieldFactory"].addPotentialCoefficientsReader(
+        k["ICGEMFormatReader"](job["gravity_file"], False))
+    gcrf = k["FramesFactory"].getGCRF()
+    itrf = k["FramesFactory"].getITRF(k["IERSConventions"].IERS_2010, True)
+    tt = k["TimeScalesFactory"].getTT()
+    j2000 = k["AbsoluteDate"].J2000_EPOCH
+    V = k["Vector3D"]
+
+    def body_gcrf(date: object, which: str) -> list[float]:
+        d = (date.durationFrom(j2000) + job["tdb_minus_tt"]) / 86400.0  # TT -> TDB days
+        moon = EPH.position("moon", 2451545.0, d).ravel()
+        if which == "moon":
+            return [1e3 * float(v) for v in moon]
+        sun = (EPH.position("sun", 2451545.0, d)
+               - EPH.position("earthmoon", 2451545.0, d)).ravel()
+        return [1e3 * float(s + job["earth_share"] * m) for s, m in zip(sun, moon)]
+
+    @JImplements("org.orekit.utils.ExtendedPositionProvider")
+    class Body:
+        def __init__(self, which: str) -> None:
+            self.which = which
+
+        @JOverride
+        def getPosition(self, date: object, frame: object) -> object:
+            p = V(*body_gcrf(date, self.which))
+            return gcrf.getTransformTo(frame, date).transformPosition(p)
+
+        @JOverride
+        def getPVCoordinates(self, date: object, frame: object) -> object:
+            h = 1.0
+            p0 = V(*body_gcrf(date.shiftedBy(-h), self.which))
+            p1 = V(*body_gcrf(date.shiftedBy(h), self.which))
+            pv = k["TimeStampedPVCoordinates"](
+                date, V(*body_gcrf(date, self.which)),
+                V(0.5 / h, p1.subtract(p0)))
+            return gcrf.getTransformTo(frame, date).transformPVCoordinates(pv)
+
+    out = {}
+    for case in job["cases"]:
+        out[case["name"]] = _propagate(case, k, gcrf, itrf, tt, Body, job)
+    json.dump(out, open(out_path, "w"))
+
+
+def _forces(case: dict, k: dict, itrf: object, Body: type, job: dict) -> tuple[list, float]:
+    f = case["forces"]
+    provider = k["GravityFieldFactory"].getNormalizedProvider(f["degree"], f["order"])
+    mu = provider.getMu()
+    forces = []
+    if f["degree"] >= 2:
+        forces.append(k["HolmesFeatherstoneAttractionModel"](itrf, provider))
+    if f["sun"]:
+        forces.append(k["ThirdBodyAttraction"](Body("sun"), "Sun", job["gm_sun"]))
+    if f["moon"]:
+        forces.append(k["ThirdBodyAttraction"](Body("moon"), "Moon", job["gm_moon"]))
+    sphere = k["OneAxisEllipsoid"](job["earth_radius"], 0.0, itrf)
+    mass = case["mass"]
+    if f["srp"]:
+        sc = k["IsotropicRadiationSingleCoefficient"](f["area_to_mass"] * mass, f["cr"])
+        forces.append(k["SolarRadiationPressure"](job["au"], job["solar_pressure"],
+                                                  Body("sun"), sphere, sc))
+    if f["drag"]:
+        atm = k["SimpleExponentialAtmosphere"](sphere, f["rho0"], f["h0"], f["scale_height"])
+        cd = 2.0
+        forces.append(k["DragForce"](atm, k["IsotropicDrag"](mass / (cd * f["bc"]), cd)))
+    return forces, mu
+
+
+def _propagate(case: dict, k: dict, gcrf: object, itrf: object, tt: object, Body: type,
+               job: dict) -> list[list[float]]:
+    forces, mu = _forces(case, k, itrf, Body, job)
+    date = k["AbsoluteDate"](case["epoch"], k["TimeScalesFactory"].getUTC())
+    x = case["x0"]
+    pv = k["PVCoordinates"](k["Vector3D"](*x[:3]), k["Vector3D"](*x[3:]))
+    orbit = k["CartesianOrbit"](pv, gcrf, date, mu)
+    tol = k["NumericalPropagator"].tolerances(1e-4, orbit, k["OrbitType"].CARTESIAN)
+    integ = k["DormandPrince853Integrator"](1e-3, case["max_step"], tol[0], tol[1])
+    prop = k["NumericalPropagator"](integ)
+    prop.setOrbitType(k["OrbitType"].CARTESIAN)
+    prop.setInitialState(k["SpacecraftState"](orbit, case["mass"]))
+    for fm in forces:
+        prop.addForceModel(fm)
+    out = []
+    for dt in case["offsets"]:
+        p = prop.propagate(date.shiftedBy(float(dt))).getPVCoordinates(gcrf).getPosition()
+        out.append([p.getX(), p.getY(), p.getZ()])
+    return out
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 3:
+        sys.exit("usage: orekit_reference.py JOB.json OUT.json")
+    main(sys.argv[1], sys.argv[2])
