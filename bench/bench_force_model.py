@@ -4,8 +4,8 @@ Two orbits from 2016-02-13 00:00 UTC: LAGEOS-2 (a = 12,270 km, e = 0.0135, i = 5
 A/m = 7e-4 m^2/kg, Cr = 1.13) and a LEO (700 km, i = 98.2 deg, A/m = 0.01 m^2/kg, Cr = 1.3,
 drag with a ballistic coefficient of 100 kg/m^2 in the exponential atmosphere), each
 propagated over 24 h by `ssa_fusion.core.motion.high_fidelity.propagate` (fixed-step DOP853,
-60 s) and by Orekit (adaptive DOP853, 1e-4 m tolerance, steps of at most `OREKIT_MAX_STEP_S`)
-with the same forces, switched on one at a time and all together: the
+60 s) and by Orekit (adaptive DOP853, the step and tolerance of `OREKIT_SETTINGS`) with the
+same forces, switched on one at a time and all together: the
 EGM96 geopotential 20 x 20 (the central term alone with every other force), the Sun, the
 Moon, solar radiation pressure (conical shadow), drag (the LEO). Printed: the largest
 position difference over the day (positions every 5 min), per case; target <= 1 cm.
@@ -67,9 +67,11 @@ STEP_S = 60.0
 OFFSETS = np.arange(0.0, DAY_S + 1.0, 300.0)
 MASS_KG = 1000.0
 TARGET_M = 0.01
-OREKIT_MAX_STEP_S = {"lageos2": 300.0, "leo700": 60.0}
-"""Orekit's longest step: its error control at a 1e-4 m tolerance alone lets LEO steps grow
-until its position is 7 cm (20 x 20) to 37 cm (SRP) off after a day."""
+OREKIT_SETTINGS = {"lageos2": (300.0, 1e-4), "leo700": (10.0, 1e-6)}
+"""Orekit's longest step (s) and position tolerance (m) per orbit. Measured in LEO: with
+1e-4 m and steps up to 300 s Orekit's own result moves by 7 cm (20 x 20) to 37 cm (SRP)
+after a day when asked for its positions every 60 s instead of 300 s; with SRP it needs
+steps of 10 s and 1e-6 m to settle (0.1 mm from ssa_fusion; 5 cm at 60 s and 1e-4 m)."""
 
 
 def _kepler_state(a: float, e: float, i: float, raan: float, argp: float,
@@ -123,7 +125,8 @@ def _job_case(name: str, x0: np.ndarray, spec: ForceSpec) -> dict:
         f.update(bc=d.bc, rho0=d.rho0, h0=d.h0 * 1e3, scale_height=d.scale_height * 1e3)
     return {"name": name, "epoch": EPOCH, "x0": (x0 * 1e3).tolist(), "forces": f,
             "mass": MASS_KG, "offsets": OFFSETS.tolist(),
-            "max_step": OREKIT_MAX_STEP_S[name.split()[0]]}
+            "max_step": OREKIT_SETTINGS[name.split()[0]][0],
+            "tolerance": OREKIT_SETTINGS[name.split()[0]][1]}
 
 
 def _data_dir(root: Path) -> Path:

@@ -10,7 +10,7 @@ IERS ``finals2000A.all`` and ``Leap_Second.dat`` the product uses, the EGM96 ``.
 ``gravity_file``, ``tdb_minus_tt`` s, ``earth_share``, ``gm_sun``/``gm_moon`` m^3/s^2 and
 ``cases``: each an epoch (UTC ISO), a GCRF state (m, m/s), the forces and the output
 offsets (s). Orekit propagates each with its own numerical propagator (adaptive
-Dormand-Prince 8(5,3), 0.1 mm tolerance, the case's longest step, Cartesian), HolmesFeatherstone on its ITRF (IERS
+Dormand-Prince 8(5,3), the case's tolerance and longest step, Cartesian), HolmesFeatherstone on its ITRF (IERS
 2010, EOP without tidal corrections), its ThirdBodyAttraction, SolarRadiationPressure
 (conical shadow of a spherical Earth, with its own eclipse detection) and DragForce in a
 SimpleExponentialAtmosphere. The Sun and the Moon are DE421 evaluated by jplephem here (the
@@ -132,7 +132,7 @@ def _propagate(case: dict, k: dict, gcrf: object, itrf: object, tt: object, Body
     x = case["x0"]
     pv = k["PVCoordinates"](k["Vector3D"](*x[:3]), k["Vector3D"](*x[3:]))
     orbit = k["CartesianOrbit"](pv, gcrf, date, mu)
-    tol = k["NumericalPropagator"].tolerances(1e-4, orbit, k["OrbitType"].CARTESIAN)
+    tol = k["NumericalPropagator"].tolerances(case.get("tolerance", 1e-4), orbit, k["OrbitType"].CARTESIAN)
     integ = k["DormandPrince853Integrator"](1e-3, case["max_step"], tol[0], tol[1])
     prop = k["NumericalPropagator"](integ)
     prop.setOrbitType(k["OrbitType"].CARTESIAN)
