@@ -6,13 +6,14 @@ Runs in a separate virtual environment with ``orekit-jpype``, ``jplephem`` and `
     OREKIT_VENV/bin/python bench/orekit_reference.py JOB.json OUT.json
 
 JOB.json (written by bench_force_model.py): ``data_dir`` (a directory Orekit reads: the
-IERS ``finals2000A.all`` and ``Leap_Second.dat`` the product uses, the EGM96 ``.gfc`` file),
-``gravity_file``, ``tdb_minus_tt`` s, ``earth_share``, ``gm_sun``/``gm_moon`` m^3/s^2 and
+IERS ``finals2000A.all`` and leap seconds the product uses, the EGM96 ``.gfc`` file),
+``gravity_file``, ``epoch`` (UTC) with ``tdb_minus_tt`` s there and its rate ``tdb_rate``,
+``earth_share``, ``gm_sun``/``gm_moon`` m^3/s^2 and
 ``cases``: each an epoch (UTC ISO), a GCRF state (m, m/s), the forces and the output
 offsets (s). Orekit propagates each with its own numerical propagator (adaptive
-Dormand-Prince 8(5,3), the case's tolerance and longest step, Cartesian), HolmesFeatherstone on its ITRF (IERS
-2010, EOP without tidal corrections), its ThirdBodyAttraction, SolarRadiationPressure
-(conical shadow of a spherical Earth, with its own eclipse detection) and DragForce in a
+Dormand-Prince 8(5,3), the case's tolerance and longest step, Cartesian),
+HolmesFeatherstone on its ITRF (IERS 2010, EOP without tidal corrections), its
+ThirdBodyAttraction, SolarRadiationPressure (conical shadow of a spherical Earth, with its own eclipse detection) and DragForce in a
 SimpleExponentialAtmosphere. The Sun and the Moon are DE421 evaluated by jplephem here (the
 ``de421`` package Orekit cannot read), given to Orekit as ExtendedPositionProviders. Writes
 the positions (m, GCRF) at the offsets to OUT.json.
@@ -29,33 +30,41 @@ from jplephem.ephem import Ephemeris
 
 orekit.initVM()
 
-from jpype import JImplements, JOverride  # noqa: E402
+from jpype import JClass, JImplements, JOverride  # noqa: E402
 from orekit_jpype.pyhelpers import setup_orekit_data  # noqa: E402
 
 EPH = Ephemeris(de421)
 
 
+CLASSES = (
+    "org.hipparchus.geometry.euclidean.threed.Vector3D",
+    "org.hipparchus.ode.nonstiff.DormandPrince853Integrator",
+    "org.orekit.bodies.OneAxisEllipsoid",
+    "org.orekit.forces.drag.DragForce", "org.orekit.forces.drag.IsotropicDrag",
+    "org.orekit.forces.gravity.HolmesFeatherstoneAttractionModel",
+    "org.orekit.forces.gravity.ThirdBodyAttraction",
+    "org.orekit.forces.gravity.potential.GravityFieldFactory",
+    "org.orekit.forces.gravity.potential.ICGEMFormatReader",
+    "org.orekit.forces.radiation.IsotropicRadiationSingleCoefficient",
+    "org.orekit.forces.radiation.SolarRadiationPressure",
+    "org.orekit.frames.FramesFactory",
+    "org.orekit.models.earth.atmosphere.SimpleExponentialAtmosphere",
+    "org.orekit.orbits.CartesianOrbit", "org.orekit.orbits.OrbitType",
+    "org.orekit.propagation.SpacecraftState",
+    "org.orekit.propagation.numerical.NumericalPropagator",
+    "org.orekit.time.AbsoluteDate", "org.orekit.time.TimeScalesFactory",
+    "org.orekit.utils.IERSConventions", "org.orekit.utils.PVCoordinates",
+    "org.orekit.utils.TimeStampedPVCoordinates",
+)
+
+
 def _classes() -> dict:
-    from org.hipparchus.geometry.euclidean.threed import Vector3D
-    from org.hipparchus.ode.nonstiff import DormandPrince853Integrator
-    from org.orekit.bodies import OneAxisEllipsoid
-    from org.orekit.forces.drag import DragForce, IsotropicDrag
-    from org.orekit.forces.gravity import HolmesFeatherstoneAttractionModel, ThirdBodyAttraction
-    from org.orekit.forces.gravity.potential import GravityFieldFactory, ICGEMFormatReader
-    from org.orekit.forces.radiation import (IsotropicRadiationSingleCoefficient,
-                                             SolarRadiationPressure)
-    from org.orekit.frames import FramesFactory
-    from org.orekit.models.earth.atmosphere import SimpleExponentialAtmosphere
-    from org.orekit.orbits import CartesianOrbit, OrbitType
-    from org.orekit.propagation import SpacecraftState
-    from org.orekit.propagation.numerical import NumericalPropagator
-    from org.orekit.time import AbsoluteDate, TimeScalesFactory
-    from org.orekit.utils import IERSConventions, PVCoordinates, TimeStampedPVCoordinates
-    return dict(locals())
+    return {name.rsplit(".", 1)[1]: JClass(name) for name in CLASSES}
 
 
 def main(job_path: str, out_path: str) -> None:
-    job = json.load(open(job_path))
+    with open(job_path) as f:
+        job = json.load(f)
     setup_orekit_data(filenames=job["data_dir"], from_pip_library=False)
     k = _classes()
     k["GravityFieldFactory"].addPotentialCoefficientsReader(
@@ -64,16 +73,18 @@ def main(job_path: str, out_path: str) -> None:
     itrf = k["FramesFactory"].getITRF(k["IERSConventions"].IERS_2010, True)
     tt = k["TimeScalesFactory"].getTT()
     j2000 = k["AbsoluteDate"].J2000_EPOCH
+    origin = k["AbsoluteDate"](job["epoch"], k["TimeScalesFactory"].getUTC()).durationFrom(j2000)
     V = k["Vector3D"]
 
     def body_gcrf(date: object, which: str) -> list[float]:
-        d = (date.durationFrom(j2000) + job["tdb_minus_tt"]) / 86400.0  # TT -> TDB days
+        tt_s = date.durationFrom(j2000)
+        d = (tt_s + job["tdb_minus_tt"] + job["tdb_rate"] * (tt_s - origin)) / 86400.0
         moon = EPH.position("moon", 2451545.0, d).ravel()
         if which == "moon":
             return [1e3 * float(v) for v in moon]
         sun = (EPH.position("sun", 2451545.0, d)
                - EPH.position("earthmoon", 2451545.0, d)).ravel()
-        return [1e3 * float(s + job["earth_share"] * m) for s, m in zip(sun, moon)]
+        return [1e3 * float(s + job["earth_share"] * m) for s, m in zip(sun, moon, strict=True)]
 
     @JImplements("org.orekit.utils.ExtendedPositionProvider")
     class Body:
@@ -98,7 +109,8 @@ def main(job_path: str, out_path: str) -> None:
     out = {}
     for case in job["cases"]:
         out[case["name"]] = _propagate(case, k, gcrf, itrf, tt, Body, job)
-    json.dump(out, open(out_path, "w"))
+    with open(out_path, "w") as f:
+        json.dump(out, f)
 
 
 def _forces(case: dict, k: dict, itrf: object, Body: type, job: dict) -> tuple[list, float]:
@@ -132,7 +144,8 @@ def _propagate(case: dict, k: dict, gcrf: object, itrf: object, tt: object, Body
     x = case["x0"]
     pv = k["PVCoordinates"](k["Vector3D"](*x[:3]), k["Vector3D"](*x[3:]))
     orbit = k["CartesianOrbit"](pv, gcrf, date, mu)
-    tol = k["NumericalPropagator"].tolerances(case.get("tolerance", 1e-4), orbit, k["OrbitType"].CARTESIAN)
+    tol = k["NumericalPropagator"].tolerances(case.get("tolerance", 1e-4), orbit,
+                                              k["OrbitType"].CARTESIAN)
     integ = k["DormandPrince853Integrator"](1e-3, case["max_step"], tol[0], tol[1])
     prop = k["NumericalPropagator"](integ)
     prop.setOrbitType(k["OrbitType"].CARTESIAN)

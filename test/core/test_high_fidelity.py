@@ -22,8 +22,13 @@ from ssa_fusion.core.earth.ephemeris import sun_moon_positions
 from ssa_fusion.core.earth.timescales import parse_utc
 from ssa_fusion.core.motion import force_model
 from ssa_fusion.core.motion import high_fidelity as hf
-from ssa_fusion.core.motion.force_spec import (SUN_RADIUS_KM, DragSpec, ForceSpec, SrpSpec,
-                                               parameter_index)
+from ssa_fusion.core.motion.force_spec import (
+    SUN_RADIUS_KM,
+    DragSpec,
+    ForceSpec,
+    SrpSpec,
+    parameter_index,
+)
 from ssa_fusion.core.motion.srp import shadow_fraction
 from ssa_fusion.formats.icgem import egm96
 

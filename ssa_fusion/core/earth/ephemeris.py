@@ -20,8 +20,8 @@ evaluates the JPL ephemeris itself at every step with no Python call (~0.3 us).
 Time: the series' argument is TDB; the origin's TDB is its TT plus `erfa.dtdb` there, and
 TDB - TT is continued linearly from there with its rate over the next day (the rate is up to
 3.3e-10: 28 us a day, 3 cm of the Moon's motion, if it were left out; the curvature left
-is ~2 us over three days, 2 mm of the Moon). The gravitational parameters are DE421's: GM_sun = GMS and
-GM_moon = GMB / (1 + EMRAT), converted with its AU to km^3/s^2.
+is ~2 us over three days, 2 mm of the Moon). The gravitational parameters are DE421's:
+GM_sun = GMS and GM_moon = GMB / (1 + EMRAT), converted with its AU to km^3/s^2.
 
 Units: km, s; GCRF; epochs Unix s UTC.
 """

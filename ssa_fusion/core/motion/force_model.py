@@ -51,6 +51,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -58,6 +59,9 @@ from numpy.typing import ArrayLike, NDArray
 from ssa_fusion.core.base.constants import J2, J3, J4, MU_EARTH, OMEGA_EARTH, R_EARTH
 from ssa_fusion.core.base.jit import f64, jit
 from ssa_fusion.core.motion.propagation import _tableau, j2_gravity
+
+if TYPE_CHECKING:
+    from ssa_fusion.core.motion.force_spec import ForceSpec
 
 __all__ = ["NOMINAL", "PARAMETERS", "ForceModel", "Trajectory", "acceleration",
            "parameter_index", "trajectory"]
@@ -370,7 +374,7 @@ class Trajectory:
     ok: BoolArray
 
 
-def trajectory(force: ForceModel, x0: ArrayLike, t0: float, t: ArrayLike,
+def trajectory(force: ForceModel | ForceSpec, x0: ArrayLike, t0: float, t: ArrayLike,
                params: ArrayLike = NOMINAL, which: Sequence[int] = (),
                max_step_s: float = 60.0, pole: ArrayLike | None = None) -> Trajectory:
     """Integrate ``x0`` (at ``t0``) to the epochs ``t`` with Phi and the sensitivities.
@@ -381,8 +385,10 @@ def trajectory(force: ForceModel, x0: ArrayLike, t0: float, t: ArrayLike,
 
     Parameters
     ----------
-    force : ForceModel
-        The force model.
+    force : ForceModel or force_spec.ForceSpec
+        The force model. A `force_spec.ForceSpec` (geopotential, Sun, Moon, SRP...) is
+        integrated by `high_fidelity.propagate` with the parameters given here (k_R = 1):
+        its epochs must then be Unix s UTC, and ``pole`` is not used.
     x0 : array_like (6,)
         GCRF state at ``t0``, km, km/s.
     t0 : float
@@ -402,6 +408,10 @@ def trajectory(force: ForceModel, x0: ArrayLike, t0: float, t: ArrayLike,
     -------
     Trajectory
     """
+    if not isinstance(force, ForceModel):
+        from ssa_fusion.core.motion import high_fidelity
+
+        return high_fidelity.propagate(force, x0, t0, t, params, which, max_step_s)
     tt = np.atleast_1d(np.asarray(t, dtype=float))
     x = f64(np.asarray(x0, dtype=float).reshape(6).copy())
     c = f64(force.constants(pole))

@@ -169,14 +169,18 @@ def _shadow_crossed(y: Array, yn: Array, t: float, h: float, model: Model) -> bo
     if c[fk.C_SRP] == 0.0:
         return False
     sun, emb, moon, starts, lengths = eph
-    nu = np.empty(2)
+    nu0 = nu1 = 0.0
     for i in range(2):
         b = work[30:36]
         sun_moon_position(sun, emb, moon, starts, lengths, c[fk.C_EARTH_SHARE], t + i * h, b)
         z = y if i == 0 else yn
-        nu[i] = shadow_fraction(z[0], z[1], z[2], b[0], b[1], b[2], c[fk.C_SUN_RADIUS],
-                                c[fk.C_SHADOW_RADIUS])
-    return nu[0] != nu[1] or 0.0 < nu[0] < 1.0 or 0.0 < nu[1] < 1.0
+        nu = shadow_fraction(z[0], z[1], z[2], b[0], b[1], b[2], c[fk.C_SUN_RADIUS],
+                             c[fk.C_SHADOW_RADIUS])
+        if i == 0:
+            nu0 = nu
+        else:
+            nu1 = nu
+    return nu0 != nu1 or 0.0 < nu0 < 1.0 or 0.0 < nu1 < 1.0
 
 
 @jit

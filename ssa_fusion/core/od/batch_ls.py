@@ -101,6 +101,7 @@ from ssa_fusion.core.motion.force_model import (
     parameter_index,
     trajectory,
 )
+from ssa_fusion.core.motion.force_spec import ForceSpec
 from ssa_fusion.core.od.gauss_newton import (
     FitStatus,
     Linearization,
@@ -126,8 +127,10 @@ class BatchOptions:
 
     Attributes
     ----------
-    force : ForceModel
-        Gravity (two-body + J2) and optional drag (`force_model`).
+    force : ForceModel or ForceSpec
+        Gravity (two-body + J2) and optional drag (`force_model`), or the high-fidelity
+        model (`force_spec.ForceSpec`: geopotential, Sun, Moon, SRP; the measurements'
+        clock must then be Unix s UTC, ``clock_unix0`` 0).
     solve_for : tuple of str
         Parameters estimated with the state (`force_model.PARAMETERS`): ``drag_scale``
         (needs ``force.drag``), ``accel_r``, ``accel_t``, ``accel_n``.
@@ -153,7 +156,7 @@ class BatchOptions:
         Iterations, editing and convergence.
     """
 
-    force: ForceModel = field(default_factory=ForceModel)
+    force: ForceModel | ForceSpec = field(default_factory=ForceModel)
     solve_for: tuple[str, ...] = ()
     consider: tuple[str, ...] = ()
     param_sigma: tuple[float, float, float, float] = (1.0, 1e-8, 1e-8, 1e-8)
