@@ -14,9 +14,9 @@ offsets (s). Orekit propagates each with its own numerical propagator (adaptive
 Dormand-Prince 8(5,3), the case's tolerance and longest step, Cartesian),
 HolmesFeatherstone on its ITRF (IERS 2010, EOP without tidal corrections), its
 ThirdBodyAttraction, SolarRadiationPressure (conical shadow of a spherical Earth, with its
-own eclipse detection) and DragForce in a SimpleExponentialAtmosphere. The Sun and the Moon are DE421 evaluated by jplephem here (the
-``de421`` package Orekit cannot read), given to Orekit as ExtendedPositionProviders. Writes
-the positions (m, GCRF) at the offsets to OUT.json.
+own eclipse detection) and DragForce in a SimpleExponentialAtmosphere. The Sun and the Moon
+are DE421 evaluated by jplephem here (the ``de421`` package Orekit cannot read), given to
+Orekit as ExtendedPositionProviders. Writes the positions (m, GCRF) at the offsets to OUT.json.
 """
 
 from __future__ import annotations
