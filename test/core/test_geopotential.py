@@ -56,7 +56,7 @@ def _kernel(field: gp.GravityField, r: np.ndarray, degree: int, order: int | Non
             gradient: bool = True) -> tuple[np.ndarray, np.ndarray]:
     mo = degree if order is None else order
     t = gp.kernel_tables(field, degree, mo)
-    v, w, out = np.zeros((degree + 3, mo + 3)), np.zeros((degree + 3, mo + 3)), np.zeros(9)
+    v, w, out = np.zeros((degree + 3, mo + 3)), np.zeros((degree + 3, mo + 3)), np.zeros(19)
     gp.geopotential_acceleration(float(r[0]), float(r[1]), float(r[2]), field.radius, degree,
                                  mo, t.rec, t.weights, gradient, v, w, out)
     g = np.array([[out[3], out[4], out[5]], [out[4], out[6], out[7]],

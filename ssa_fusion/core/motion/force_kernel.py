@@ -49,7 +49,7 @@ C_DRAG, C_DRAG_K, C_RHO0, C_H0, C_SCALE_H, C_OMEGA, C_POLE, C_DRAG_RE = 6, 7, 8,
 C_RADIUS, C_DEGREE, C_ORDER, C_EARTH_SHARE, C_GM_SUN, C_GM_MOON = 16, 17, 18, 19, 20, 21
 """Indices of the constants array (`force_spec.ForceSpec.constants` and the propagator's)."""
 
-WORK = 40
+WORK = 48
 """Length of the scratch array of `full_rhs`."""
 
 
@@ -59,7 +59,7 @@ def _gravity(t: float, x: float, y: float, z: float, c: Array, rec: Array, wt: A
              gradient: bool) -> tuple[float, float, float]:
     """Geopotential acceleration (GCRF) at t; with ``gradient``, its gradient added to ``ar``."""
     m = work[0:9]
-    g = work[9:18]
+    g = work[9:28]
     gcrs_to_itrs_at(grid, t, m)
     px = m[0] * x + m[1] * y + m[2] * z
     py = m[3] * x + m[4] * y + m[5] * z
@@ -71,7 +71,7 @@ def _gravity(t: float, x: float, y: float, z: float, c: Array, rec: Array, wt: A
     az = m[2] * g[0] + m[5] * g[1] + m[8] * g[2]
     if gradient:
         ge = ((g[3], g[4], g[5]), (g[4], g[6], g[7]), (g[5], g[7], g[8]))
-        gm = work[18:27]  # G_ITRF M
+        gm = work[28:37]  # G_ITRF M
         for i in range(3):
             for j in range(3):
                 gm[3 * i + j] = ge[i][0] * m[j] + ge[i][1] * m[3 + j] + ge[i][2] * m[6 + j]
@@ -173,7 +173,7 @@ def _accelerations(t: float, y: Array, c: Array, rec: Array, wt: Array, grid: Ar
     x, yy, zz = y[0], y[1], y[2]
     ax, ay, az = _gravity(t, x, yy, zz, c, rec, wt, grid, v, w, work, ar, gradient)
     if c[C_SUN] != 0.0 or c[C_MOON] != 0.0 or c[C_SRP] != 0.0:
-        bodies = work[30:36]
+        bodies = work[40:46]
         sun, emb, moon, starts, lengths = eph
         sun_moon_position(sun, emb, moon, starts, lengths, c[C_EARTH_SHARE], t, bodies)
         if c[C_SUN] != 0.0:

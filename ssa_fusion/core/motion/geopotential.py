@@ -100,8 +100,8 @@ class KernelTables:
     rec : ndarray (3, N + 3, M + 3)
         The recursion's factors: ``rec[0, m, m]`` the sectoral one, ``rec[1, n, m]`` and
         ``rec[2, n, m]`` those of ``Z_n-1,m`` and ``Z_n-2,m``.
-    weights : ndarray (5, 4, N + 3, M + 3)
-        For each quantity (`_WEIGHTS`), the weights (Re a, Im a, Re b, Im b) of
+    weights : ndarray (N + 3, M + 3, 5, 4)
+        For each (n, m) and quantity (`_WEIGHTS`), the weights (Re a, Im a, Re b, Im b) of
         ``sum a V_nm + b W_nm`` (the factors ``GM / R^2`` and ``GM / R^3`` included).
     """
 
@@ -214,7 +214,7 @@ def kernel_tables(field: GravityField, degree: int, order: int | None = None) ->
         wa, wb = (p + q) * scale[i], 1j * (p - q) * scale[i]
         w[i] = np.stack([wa.real, wa.imag, wb.real, wb.imag])
     return KernelTables(degree, mo, field.gm, field.radius, np.ascontiguousarray(
-        _recursion(nn, mm)), np.ascontiguousarray(w))
+        _recursion(nn, mm)), np.ascontiguousarray(w.transpose(2, 3, 0, 1)))
 
 
 @jit
@@ -244,16 +244,19 @@ def _harmonics(x: float, y: float, z: float, radius: float, nn: int, mm: int, re
 
 
 @jit
-def _weighted_sum(wt: Array, q: int, nn: int, mm: int, v: Array,
-                  w: Array) -> tuple[float, float]:
-    """``sum a V + b W`` of quantity ``q`` over n <= nn, m <= min(n, mm): (real, imaginary)."""
-    re = im = 0.0
+def _sums(wt: Array, nq: int, nn: int, mm: int, v: Array, w: Array, out: Array) -> None:
+    """``out[2 q], out[2 q + 1]`` = Re, Im of ``sum a V + b W`` of the quantities q < nq.
+
+    Over n <= nn, m <= min(n, mm), the harmonics read once (``wt``: `KernelTables.weights`).
+    """
+    for q in range(2 * nq):
+        out[q] = 0.0
     for n in range(nn + 1):
         for m in range(min(n, mm) + 1):
             vv, ww = v[n, m], w[n, m]
-            re += wt[q, 0, n, m] * vv + wt[q, 2, n, m] * ww
-            im += wt[q, 1, n, m] * vv + wt[q, 3, n, m] * ww
-    return re, im
+            for q in range(nq):
+                out[2 * q] += wt[n, m, q, 0] * vv + wt[n, m, q, 2] * ww
+                out[2 * q + 1] += wt[n, m, q, 1] * vv + wt[n, m, q, 3] * ww
 
 
 @jit
@@ -263,19 +266,17 @@ def geopotential_acceleration(x: float, y: float, z: float, radius: float, degre
     """Acceleration and gravity gradient of the field at the ITRF point (x, y, z) km.
 
     ``out[0:3]`` the acceleration km/s^2; with ``gradient``, ``out[3:9]`` the gradient's
-    upper triangle (xx, xy, xz, yy, yz, zz) 1/s^2. ``rec``, ``wt``: `KernelTables`;
-    ``v``, ``w``: scratch arrays of at least (degree + 3, order + 3).
+    upper triangle (xx, xy, xz, yy, yz, zz) 1/s^2, and ``out[9:19]`` scratch. ``rec``,
+    ``wt``: `KernelTables`; ``v``, ``w``: scratch arrays of at least (degree + 3, order + 3).
     """
     nn = degree + 2 if gradient else degree + 1
     mm = min(order + 2 if gradient else order + 1, nn)
     _harmonics(x, y, z, radius, nn, mm, rec, v, w)
-    dpr, dpi = _weighted_sum(wt, 0, degree + 1, order + 1, v, w)
-    uz, _ = _weighted_sum(wt, 1, degree + 1, order + 1, v, w)
-    out[0], out[1], out[2] = dpr, dpi, uz
+    s = out[9:19]
+    _sums(wt, _WEIGHTS if gradient else 2, nn, mm, v, w, s)
+    out[0], out[1], out[2] = s[0], s[1], s[2]
     if gradient:
-        d2r, d2i = _weighted_sum(wt, 2, nn, mm, v, w)
-        dzr, dzi = _weighted_sum(wt, 3, nn, mm, v, w)
-        uzz, _ = _weighted_sum(wt, 4, nn, mm, v, w)
+        d2r, d2i, dzr, dzi, uzz = s[4], s[5], s[6], s[7], s[8]
         out[3] = 0.5 * (d2r - uzz)
         out[4] = 0.5 * d2i
         out[5] = dzr

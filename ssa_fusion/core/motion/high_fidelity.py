@@ -171,7 +171,7 @@ def _shadow_crossed(y: Array, yn: Array, t: float, h: float, model: Model) -> bo
     sun, emb, moon, starts, lengths = eph
     nu0 = nu1 = 0.0
     for i in range(2):
-        b = work[30:36]
+        b = work[40:46]
         sun_moon_position(sun, emb, moon, starts, lengths, c[fk.C_EARTH_SHARE], t + i * h, b)
         z = y if i == 0 else yn
         nu = shadow_fraction(z[0], z[1], z[2], b[0], b[1], b[2], c[fk.C_SUN_RADIUS],
