@@ -120,6 +120,11 @@ def test_context_reuse_and_spans() -> None:
     assert np.abs(a.x - b.x).max() < 1e-9
     with pytest.raises(ValueError, match="does not cover"):
         hf.propagate(ctx, LEO, T0, [T0 + 86400.0])
+    c = hf.propagate(ctx, LEO, T0 + 60.0, [T0 + 1800.0, math.nan])
+    assert c.ok.tolist() == [True, False] and np.isnan(c.x[1]).all()
+    assert np.array_equal(c.x[0], a.x[0])
+    bad = hf.propagate(ctx, np.full(6, math.nan), T0, [T0 + 600.0])
+    assert not bad.ok.any()
 
 
 def test_shadow_fraction_analytic_cases() -> None:

@@ -259,7 +259,8 @@ def propagate(spec: ForceSpec | Context, x0: ArrayLike, t0_unix: float, t_unix: 
     t0_unix : float
         Its epoch, Unix s UTC.
     t_unix : array_like (K,)
-        Output epochs, Unix s UTC (any order, either side of ``t0_unix``).
+        Output epochs, Unix s UTC (any order, either side of ``t0_unix``; a non-finite one
+        gets NaN and ``ok`` False).
     params : array_like (5,) or (4,), optional
         The parameters (`force_spec.PARAMETERS`; 4: `force_model.PARAMETERS`, k_R = 1).
     which : sequence of int
@@ -277,10 +278,11 @@ def propagate(spec: ForceSpec | Context, x0: ArrayLike, t0_unix: float, t_unix: 
     """
     tt = np.atleast_1d(np.asarray(t_unix, dtype=float))
     dt = tt - float(t0_unix)
+    fin = np.isfinite(dt)  # a non-finite epoch is not integrated: ok False there
     ctx = spec if isinstance(spec, Context) else setup(
-        spec, float(t0_unix), float(min(dt.min(initial=0.0), 0.0)),
-        float(max(dt.max(initial=0.0), 0.0)), eop)
-    if not ctx.covers(tt) or not ctx.covers([t0_unix]):
+        spec, float(t0_unix), float(dt[fin].min(initial=0.0)), float(dt[fin].max(initial=0.0)),
+        eop)
+    if not ctx.covers(tt[fin]) or not ctx.covers([t0_unix]):
         raise ValueError("the context does not cover the epochs: build it with setup()")
     x = f64(np.asarray(x0, dtype=float).reshape(6).copy())
     wh = np.ascontiguousarray(np.asarray(which, dtype=np.int64).reshape(-1))
@@ -289,7 +291,7 @@ def propagate(spec: ForceSpec | Context, x0: ArrayLike, t0_unix: float, t_unix: 
     xs, ys = np.full((tt.size, 6), np.nan), np.full((tt.size, 6, ncol), np.nan)
     ok = np.zeros(tt.size, dtype=np.bool_)
     shift = float(t0_unix) - ctx.t0_unix
-    for side in (dt >= 0.0, dt < 0.0):
+    for side in (fin & (dt >= 0.0), fin & (dt < 0.0)):
         idx = np.flatnonzero(side)
         if not idx.size:
             continue
