@@ -26,8 +26,8 @@ with a message, and the timing part still runs.
 Timing: microseconds (CPU time) per derivative call with the STM (6 x 6 + the Cr
 sensitivity) inside a day's integration (the day's time divided by its 1440 x 12 stage
 calls), 20 x 20 + Sun/Moon + SRP, beside the catalog's two-body + J2 kernel with its STM
-(`propagation.integrate_stm`); and the CPU time of one three-day LAGEOS-2 arc with the STM (what one iteration of an orbit
-fit over the real data integrates).
+(`propagation.integrate_stm`); and the CPU time of one three-day LAGEOS-2 arc with the STM
+(what one iteration of an orbit fit over the real data integrates).
 
 Usage::
 
