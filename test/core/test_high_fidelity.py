@@ -5,7 +5,8 @@
 * the STM and the sensitivities of a propagation against finite differences of propagations;
 * a degree-2 zonal field without EOP against `force_model.trajectory`'s two-body + J2 about
   the same pole (another kernel): millimetres over two hours;
-* the conical shadow function against analytic cases.
+* the conical shadow function against analytic cases;
+* `batch_ls.fit` with the full model (a `ForceSpec`) on positions it simulated.
 """
 
 from __future__ import annotations
@@ -155,3 +156,25 @@ def test_shadow_fraction_analytic_cases() -> None:
     nu = shadow_fraction(-r, 0.0, 0.0, *sun, SUN_RADIUS_KM, small)
     bb, aa = math.asin(small / r), math.asin(SUN_RADIUS_KM / (1.496e8 + r))
     assert nu == pytest.approx(1.0 - bb * bb / (aa * aa), rel=1e-9)
+
+
+def test_batch_fit_with_the_full_model_recovers_the_orbit() -> None:
+    from ssa_fusion.core.base.types import Kind, Measurement
+    from ssa_fusion.core.measure.measurement import PositionModel
+    from ssa_fusion.core.od.batch_ls import BatchOptions, fit
+
+    spec = ForceSpec(egm96(), 12, sun=True, moon=True, srp=SrpSpec(0.02, 1.3),
+                     drag=DragSpec(bc=50.0))
+    t = T0 + np.arange(0.0, 3 * 3600.0 + 1.0, 120.0)
+    truth = hf.propagate(spec, LEO, T0, t, params=[1.4, 0.0, 0.0, 0.0, 1.0], stm=False).x
+    rng = np.random.default_rng(3)
+    R = np.eye(3) * 0.01 ** 2  # 10 m
+    meas = [Measurement(float(ti), xi[:3] + rng.normal(0.0, 0.01, 3), R, Kind.POSITION)
+            for ti, xi in zip(t, truth, strict=True)]
+    guess = truth[-1] + np.array([1.0, -1.0, 0.5, 1e-3, -1e-3, 5e-4])
+    out = fit(meas, PositionModel(), guess, float(t[-1]),
+              BatchOptions(force=spec, solve_for=("drag_scale",)))
+    assert out.converged, out.reason
+    assert np.linalg.norm(out.x[:3] - truth[-1, :3]) < 0.01  # km, from 1.2 km off
+    assert out.params["drag_scale"] == pytest.approx(1.4, abs=0.3)
+    assert 0.7 < out.rms < 1.3
