@@ -164,17 +164,23 @@ def test_batch_fit_with_the_full_model_recovers_the_orbit() -> None:
     from ssa_fusion.core.od.batch_ls import BatchOptions, fit
 
     spec = ForceSpec(egm96(), 12, sun=True, moon=True, srp=SrpSpec(0.02, 1.3),
-                     drag=DragSpec(bc=50.0))
+                     drag=DragSpec(bc=50.0, h0=700.0))  # the density of 400 km at 700 km
     t = T0 + np.arange(0.0, 3 * 3600.0 + 1.0, 120.0)
     truth = hf.propagate(spec, LEO, T0, t, params=[1.4, 0.0, 0.0, 0.0, 1.0], stm=False).x
     rng = np.random.default_rng(3)
-    R = np.eye(3) * 0.01 ** 2  # 10 m
-    meas = [Measurement(float(ti), xi[:3] + rng.normal(0.0, 0.01, 3), R, Kind.POSITION)
+    R = np.eye(3) * 0.001 ** 2  # 1 m
+    meas = [Measurement(float(ti), xi[:3] + rng.normal(0.0, 0.001, 3), R, Kind.POSITION)
             for ti, xi in zip(t, truth, strict=True)]
     guess = truth[-1] + np.array([1.0, -1.0, 0.5, 1e-3, -1e-3, 5e-4])
     out = fit(meas, PositionModel(), guess, float(t[-1]),
-              BatchOptions(force=spec, solve_for=("drag_scale",)))
+              BatchOptions(force=spec, solve_for=("drag_scale", "srp_scale")))
     assert out.converged, out.reason
-    assert np.linalg.norm(out.x[:3] - truth[-1, :3]) < 0.01  # km, from 1.2 km off
-    assert out.params["drag_scale"] == pytest.approx(1.4, abs=0.3)
+    assert np.linalg.norm(out.x[:3] - truth[-1, :3]) < 0.002  # km, from 1.2 km off
+    sd = np.sqrt(np.diag(out.P))[6:]  # drag_scale, srp_scale
+    assert abs(out.params["drag_scale"] - 1.4) < 3 * sd[0] and sd[0] < 0.01
+    assert abs(out.params["srp_scale"] - 1.0) < 3 * sd[1] and sd[1] < 0.5  # 3 h: weakly seen
     assert 0.7 < out.rms < 1.3
+    with pytest.raises(ValueError, match="srp_scale needs"):
+        BatchOptions(solve_for=("srp_scale",))
+    with pytest.raises(ValueError, match="param_sigma has 4 values"):
+        BatchOptions(force=spec, solve_for=("srp_scale",), param_sigma=(1.0, 1e-8, 1e-8, 1e-8))

@@ -21,7 +21,8 @@ altitude ``|r| - re`` over a spherical Earth, ``v_rel = v - omega p x r`` with `
 pole); ``R = r/|r|``, ``N = (r x v)/|r x v|``, ``T = N x R``. The four parameters
 (`PARAMETERS`: ``drag_scale`` k_D, dimensionless, nominal 1; ``accel_r``, ``accel_t``,
 ``accel_n`` km/s^2, nominal 0) enter the state's motion and are what a fit can solve for or
-consider.
+consider; the fifth, ``srp_scale`` (nominal 1), is the high-fidelity model's factor on Cr
+(`force_spec`), which this model has no solar radiation pressure for.
 
 `trajectory` integrates one state with the augmented variational equations: the state
 transition matrix ``Phi = d x(t) / d x(t0)`` and the parameter sensitivities
@@ -70,11 +71,12 @@ Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
 
-PARAMETERS = ("drag_scale", "accel_r", "accel_t", "accel_n")
+PARAMETERS = ("drag_scale", "accel_r", "accel_t", "accel_n", "srp_scale")
 """The parameters of the force model a fit can solve for or consider, in this order:
-drag factor k_D (dimensionless) and constant RTN empirical accelerations (km/s^2)."""
+drag factor k_D (dimensionless), constant RTN empirical accelerations (km/s^2) and the factor
+k_R on Cr of the high-fidelity model's solar radiation pressure (`force_spec`; none here)."""
 
-NOMINAL = (1.0, 0.0, 0.0, 0.0)
+NOMINAL = (1.0, 0.0, 0.0, 0.0, 1.0)
 """The parameters' nominal values (`PARAMETERS` order)."""
 
 _N_CONST = 14
@@ -395,8 +397,8 @@ def trajectory(force: ForceModel | ForceSpec, x0: ArrayLike, t0: float, t: Array
         Its epoch, s.
     t : array_like (K,)
         Output epochs, s (any order, repeats allowed).
-    params : array_like (4,)
-        The parameters (`PARAMETERS` order; `NOMINAL` by default).
+    params : array_like (5,) or (4,)
+        The parameters (`PARAMETERS` order; `NOMINAL` by default; ``srp_scale`` unused).
     which : sequence of int
         Indices in `PARAMETERS` of the parameters whose sensitivities are wanted.
     max_step_s : float
@@ -415,8 +417,10 @@ def trajectory(force: ForceModel | ForceSpec, x0: ArrayLike, t0: float, t: Array
     tt = np.atleast_1d(np.asarray(t, dtype=float))
     x = f64(np.asarray(x0, dtype=float).reshape(6).copy())
     c = f64(force.constants(pole))
-    prm = f64(np.asarray(params, dtype=float).reshape(4).copy())
+    prm = f64(np.asarray(params, dtype=float).reshape(-1)[:4].copy())
     wh = np.ascontiguousarray(np.asarray(which, dtype=np.int64).reshape(-1))
+    if np.any(wh >= 4):
+        raise ValueError("srp_scale needs the high-fidelity model with SRP (force_spec)")
     A, B = _tableau()
     k = tt.shape[0]
     ncol = 6 + wh.shape[0]
@@ -447,7 +451,7 @@ def acceleration(force: ForceModel, x: ArrayLike, params: ArrayLike = NOMINAL,
         The force model.
     x : array_like (6,)
         GCRF state, km, km/s.
-    params : array_like (4,)
+    params : array_like (5,) or (4,)
         The parameters (`PARAMETERS` order).
     pole : array_like (3,), optional
         The Earth's pole (GCRF unit vector).
@@ -460,7 +464,7 @@ def acceleration(force: ForceModel, x: ArrayLike, params: ArrayLike = NOMINAL,
     y[:6] = np.asarray(x, dtype=float).reshape(6)
     out = np.empty((1, 42))
     _force_rhs(y, 6, f64(force.constants(pole)),
-               f64(np.asarray(params, dtype=float).reshape(4).copy()),
+               f64(np.asarray(params, dtype=float).reshape(-1)[:4].copy()),
                np.zeros(0, dtype=np.int64), out, 0)
     acc: Array = out[0, 3:6].copy()
     return acc

@@ -11,9 +11,9 @@ A `ForceSpec` says, per object, which forces `high_fidelity.propagate` integrate
 * drag in the co-rotating exponential atmosphere of `force_model` (`DragSpec`);
 * constant empirical accelerations in R, T, N (the parameters ``accel_r/t/n``).
 
-The solve-for parameters are `PARAMETERS`: those of `force_model` (``drag_scale`` k_D,
-``accel_r``, ``accel_t``, ``accel_n`` km/s^2) and ``srp_scale`` k_R, a factor on Cr
-(nominal 1: the solved Cr is ``k_R SrpSpec.cr``). `ForceSpec.constants` packs the spec
+The solve-for parameters are `force_model.PARAMETERS` (`PARAMETERS` here too):
+``drag_scale`` k_D, ``accel_r``, ``accel_t``, ``accel_n`` km/s^2 and ``srp_scale`` k_R, a factor
+on Cr (nominal 1: the solved Cr is ``k_R SrpSpec.cr``). `ForceSpec.constants` packs the spec
 for the compiled kernel (`force_kernel`). The catalog's fast J2 model stays
 `force_model.ForceModel`; this spec is for the objects that need metres over days.
 
@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ssa_fusion.core.base.constants import MU_EARTH, OMEGA_EARTH, R_EARTH
-from ssa_fusion.core.motion.force_model import PARAMETERS as J2_PARAMETERS
+from ssa_fusion.core.motion.force_model import NOMINAL, PARAMETERS
 from ssa_fusion.core.motion.geopotential import GravityField
 
 __all__ = [
@@ -43,12 +43,6 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
-
-PARAMETERS = (*J2_PARAMETERS, "srp_scale")
-"""The solve-for parameters (module docstring), in this order."""
-
-NOMINAL = (1.0, 0.0, 0.0, 0.0, 1.0)
-"""Their nominal values."""
 
 SOLAR_PRESSURE = 4.56e-6
 """Solar radiation pressure at `AU_KM` from the Sun, N/m^2 (IERS Conventions; Orekit's)."""

@@ -133,13 +133,15 @@ class BatchOptions:
         clock must then be Unix s UTC, ``clock_unix0`` 0).
     solve_for : tuple of str
         Parameters estimated with the state (`force_model.PARAMETERS`): ``drag_scale``
-        (needs ``force.drag``), ``accel_r``, ``accel_t``, ``accel_n``.
+        (needs ``force.drag``), ``accel_r``, ``accel_t``, ``accel_n``, ``srp_scale`` (a
+        factor on Cr: needs a `ForceSpec` with ``srp``).
     consider : tuple of str
         Parameters not estimated whose uncertainty goes into the realistic covariance.
-    param_sigma : tuple of 4 float
+    param_sigma : tuple of float
         A-priori standard deviations of the parameters (`PARAMETERS` order:
-        dimensionless, km/s^2 x 3): the prior of the solved ones (inf: none), the
-        uncertainty of the considered ones.
+        dimensionless, km/s^2 x 3, dimensionless): the prior of the solved ones (inf:
+        none), the uncertainty of the considered ones (the first four suffice without
+        ``srp_scale``).
     snc_psd : tuple of 3 float
         State-noise compensation PSDs along R, T, N, km^2/s^3, of the realistic covariance
         (through the window and the predictions); 0: none.
@@ -159,7 +161,7 @@ class BatchOptions:
     force: ForceModel | ForceSpec = field(default_factory=ForceModel)
     solve_for: tuple[str, ...] = ()
     consider: tuple[str, ...] = ()
-    param_sigma: tuple[float, float, float, float] = (1.0, 1e-8, 1e-8, 1e-8)
+    param_sigma: tuple[float, ...] = (1.0, 1e-8, 1e-8, 1e-8, 1.0)
     snc_psd: tuple[float, float, float] = (0.0, 0.0, 0.0)
     scale_by_rms: bool = False
     max_step_s: float = 60.0
@@ -174,8 +176,14 @@ class BatchOptions:
         if set(self.solve_for) & set(self.consider):
             raise ValueError("a parameter cannot be both solved for and considered: "
                              f"{sorted(set(self.solve_for) & set(self.consider))}")
-        if "drag_scale" in (*self.solve_for, *self.consider) and not self.force.drag:
+        used = (*self.solve_for, *self.consider)
+        if "drag_scale" in used and not self.force.drag:
             raise ValueError("drag_scale needs a force model with drag (ForceModel.drag)")
+        if "srp_scale" in used and getattr(self.force, "srp", None) is None:
+            raise ValueError("srp_scale needs the high-fidelity model with SRP (ForceSpec.srp)")
+        if any(PARAMETERS.index(p) >= len(self.param_sigma) for p in used):
+            raise ValueError(f"param_sigma has {len(self.param_sigma)} values: "
+                             f"{len(PARAMETERS)} needed ({', '.join(PARAMETERS)})")
 
 
 @dataclass
