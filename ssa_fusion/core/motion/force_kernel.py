@@ -13,6 +13,15 @@ for the forces of a `force_spec.ForceSpec`:
       a = GM ((r_b - r) / |r_b - r|^3 - r_b / |r_b|^3),   G = GM (3 d d^T / |d|^5 - I / |d|^3)
 
   (``d = r - r_b``);
+* solid Earth tides of degree 2 raised by the Sun and the Moon (`force_spec.ForceSpec`'s
+  ``solid_tides``): the potential ``k2 GM_b R^5 / (r_b^3 r^3) P2(u)`` of the deformed Earth
+  (u the cosine between r and the body, k2 one Love number for every order: IERS
+  Conventions 2010 section 6.2, step 1, frequency-independent), whose gradient is::
+
+      a = 3 k2 GM_b R^5 / (r_b^3 r^4) (u r_b / |r_b| + (1/2 - 5/2 u^2) r / |r|)
+
+  frame-free (the bulge points at the body), so evaluated in the GCRF; its own gradient is
+  left out of the variational equations (~1e-8 of the central term's);
 * solar radiation pressure (`srp`), its sensitivity to ``srp_scale`` the acceleration itself;
 * drag in the co-rotating exponential atmosphere, the formula and analytic partials of
   `force_model` (drag factor k_D);
@@ -47,6 +56,7 @@ IntArray = NDArray[np.int64]
 C_SUN, C_MOON, C_SRP, C_SRP_K, C_SUN_RADIUS, C_SHADOW_RADIUS = 0, 1, 2, 3, 4, 5
 C_DRAG, C_DRAG_K, C_RHO0, C_H0, C_SCALE_H, C_OMEGA, C_POLE, C_DRAG_RE = 6, 7, 8, 9, 10, 11, 12, 15
 C_RADIUS, C_DEGREE, C_ORDER, C_EARTH_SHARE, C_GM_SUN, C_GM_MOON = 16, 17, 18, 19, 20, 21
+C_TIDE_K2 = 22
 """Indices of the constants array (`force_spec.ForceSpec.constants` and the propagator's)."""
 
 WORK = 48
@@ -99,6 +109,19 @@ def _point_mass(gm: float, bx: float, by: float, bz: float, x: float, y: float, 
             for j in range(3):
                 ar[i, j] += k5 * dv[i] * dv[j]
     return -kd * dx - kb * bx, -kd * dy - kb * by, -kd * dz - kb * bz
+
+
+@jit
+def _tide(k2: float, gm: float, re: float, bx: float, by: float, bz: float, x: float,
+          y: float, z: float) -> tuple[float, float, float]:
+    """Acceleration of the solid tide of degree 2 raised by a body at (bx, by, bz) (above)."""
+    rb = math.sqrt(bx * bx + by * by + bz * bz)
+    r = math.sqrt(x * x + y * y + z * z)
+    u = (x * bx + y * by + z * bz) / (r * rb)
+    k = 3.0 * k2 * gm * re**5 / (rb**3 * r**4)
+    kr = k * (0.5 - 2.5 * u * u) / r
+    kb = k * u / rb
+    return kr * x + kb * bx, kr * y + kb * by, kr * z + kb * bz
 
 
 @jit
@@ -172,7 +195,7 @@ def _accelerations(t: float, y: Array, c: Array, rec: Array, wt: Array, grid: Ar
     """Total acceleration; ``sens[p]`` the partial of each parameter p (`force_spec` order)."""
     x, yy, zz = y[0], y[1], y[2]
     ax, ay, az = _gravity(t, x, yy, zz, c, rec, wt, grid, v, w, work, ar, gradient)
-    if c[C_SUN] != 0.0 or c[C_MOON] != 0.0 or c[C_SRP] != 0.0:
+    if c[C_SUN] != 0.0 or c[C_MOON] != 0.0 or c[C_SRP] != 0.0 or c[C_TIDE_K2] != 0.0:
         bodies = work[40:46]
         sun, emb, moon, starts, lengths = eph
         sun_moon_position(sun, emb, moon, starts, lengths, c[C_EARTH_SHARE], t, bodies)
@@ -184,6 +207,12 @@ def _accelerations(t: float, y: Array, c: Array, rec: Array, wt: Array, grid: Ar
             bx, by, bz = _point_mass(c[C_GM_MOON], bodies[3], bodies[4], bodies[5], x, yy,
                                      zz, ar, gradient)
             ax, ay, az = ax + bx, ay + by, az + bz
+        if c[C_TIDE_K2] != 0.0:
+            for b in range(2):
+                bx, by, bz = _tide(c[C_TIDE_K2], c[C_GM_SUN] if b == 0 else c[C_GM_MOON],
+                                   c[C_RADIUS], bodies[3 * b], bodies[3 * b + 1],
+                                   bodies[3 * b + 2], x, yy, zz)
+                ax, ay, az = ax + bx, ay + by, az + bz
         if c[C_SRP] != 0.0:
             bx, by, bz = _srp(x, yy, zz, bodies[0], bodies[1], bodies[2], c, prm[4], ar,
                               gradient)

@@ -6,6 +6,9 @@ A `ForceSpec` says, per object, which forces `high_fidelity.propagate` integrate
   ICGEM file) truncated to ``degree`` x ``order`` (default 20 x 20), in the ITRF turned to
   the GCRF with the Earth's orientation of `frames` (IAU 2006/2000A + EOP);
 * the Sun and the Moon as point masses (DE421, `earth.ephemeris`), with the indirect term;
+* the solid Earth tides of degree 2 the Sun and the Moon raise (``solid_tides``: Love number
+  `LOVE_K2` for every order; with a tide-free field such as EGM96 the pair holds the
+  permanent tide too), `force_kernel`'s closed form;
 * solar radiation pressure on a cannonball (`SrpSpec`: area-to-mass ratio, Cr), with the
   Earth's conical shadow (umbra and penumbra, `srp`);
 * drag in the co-rotating exponential atmosphere of `force_model` (`DragSpec`);
@@ -48,6 +51,10 @@ SOLAR_PRESSURE = 4.56e-6
 """Solar radiation pressure at `AU_KM` from the Sun, N/m^2 (IERS Conventions; Orekit's)."""
 AU_KM = 149597870.7
 """Astronomical unit, km (IAU 2012)."""
+LOVE_K2 = 0.30
+"""The degree-2 Love number of the solid tides (IERS Conventions 2010, section 6.2.1: the
+nominal k20, k21, k22 are 0.29525, 0.29470, 0.29801 elastic, 0.30190, 0.29830, 0.30102 with
+the mantle's anelasticity; one value for all orders, frequency-independent)."""
 SUN_RADIUS_KM = 695700.0
 """The Sun's radius, km (IAU 2015 nominal), for the penumbra."""
 
@@ -115,6 +122,10 @@ class ForceSpec:
         Solar radiation pressure (None: none).
     drag : DragSpec or None
         Drag (None: none).
+    solid_tides : bool
+        The solid Earth tides of degree 2 raised by the Sun and the Moon (Love number
+        `LOVE_K2`): metres a day on LAGEOS (its orbit's plane turns ~1 m a day further
+        without them).
     """
 
     gravity: GravityField = field(default_factory=point_mass)
@@ -124,6 +135,7 @@ class ForceSpec:
     moon: bool = True
     srp: SrpSpec | None = None
     drag: DragSpec | None = None
+    solid_tides: bool = False
 
     def __post_init__(self) -> None:
         """Check the truncation (ValueError naming the problem)."""
@@ -164,6 +176,7 @@ class ForceSpec:
         c[11] = OMEGA_EARTH
         c[12:15] = p
         c[15] = R_EARTH
+        c[22] = LOVE_K2 if self.solid_tides else 0.0
         return c
 
 
