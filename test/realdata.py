@@ -39,7 +39,7 @@ STATIONS = "SLRF2014_POS+VEL_2030.0_200428.snx"
 ECCENTRICITIES = "ecc_une.snx"
 
 
-def lageos_inputs(sigma_km: float = 2e-5):
+def lageos_inputs(sigma_km: float = 5e-6):
     """Return (measurements, network, meteo, reference) of the LAGEOS-2 files, as
     `import crd` makes them (stations and eccentricities at each station's first point,
     the objects' centre-of-mass offset, range-bias priors of 1 m, noise `sigma_km`)."""

@@ -50,9 +50,11 @@ from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.laser_config import LaserConfig, laser_config_message
 from ssa_fusion.ros.topics import TOPIC_CONFIG, TOPIC_MEASUREMENT, TOPIC_METEO, TOPIC_REFERENCE
 
-SIGMA_M = 0.05
-"""Default noise of a normal point, m (1 sigma): what is left of a LAGEOS normal point
-after the model's terms, per station, is 3-6 cm."""
+SIGMA_M = 0.005
+"""Default noise of a normal point, m (1 sigma): its precision (the RMS of its bin over the
+square root of its ranges: 1-4 mm one-way for LAGEOS), the target's signature (1-2 mm) and
+the model's short-period errors; what is left after a fit and a bias per station (1-2 cm on
+LAGEOS) drifts through a pass, not white (`core.od.laser_od`)."""
 BIAS_SIGMA_M = 1.0
 """Default prior sigma of a station's range bias, m."""
 WAVELENGTH_TOLERANCE_NM = 1.0

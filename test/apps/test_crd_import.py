@@ -55,7 +55,7 @@ def test_the_real_data_into_a_bag(tmp_path, capsys):
     assert y.t == pytest.approx(1455321600 + 49382.4005626, abs=1e-6)
     assert y.z[0] == pytest.approx(0.5 * C_KM_S * 0.039237325685, abs=1e-12)
     assert got[TOPIC_MEASUREMENT][0].msg.z[1:].tolist() == [0.0, 0.0]  # one channel, in m:
-    assert got[TOPIC_MEASUREMENT][0].msg.covariance[0] == pytest.approx(0.05**2)
+    assert got[TOPIC_MEASUREMENT][0].msg.covariance[0] == pytest.approx(0.005**2)
     w = messages.meteo_from_msg(next(m.msg for m in got[TOPIC_METEO]
                                      if m.msg.header.frame_id == "7090"))
     assert (w.pressure_hpa, w.temperature_k, w.humidity_pct) == pytest.approx((983.7, 301.4, 24))

@@ -40,14 +40,15 @@ Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
 
-FitModel = MeasurementModel | LaserModels
-"""What a fit predicts its measurements with."""
+FitModel = MeasurementModel
+"""What a fit predicts its measurements with (a laser network's `LaserModels` included)."""
 _OneModel = PositionModel | RazelModel | RadecModel
 """The model of one measurement (a station network's picked per measurement)."""
 
 
 def _model_for(model: MeasurementModel, m: Measurement) -> _OneModel:
     """Return the model that predicts ``m`` (its station's; ValueError if none)."""
+    assert not isinstance(model, LaserModels)  # the window takes them whole
     if isinstance(model, StationModels):
         got = model.get(m.kind, m.frame_id)
         if got is None:

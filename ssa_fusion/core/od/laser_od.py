@@ -22,7 +22,13 @@ laser network's model (`laser_model.LaserModels`). The choices, each from physic
   the CPF no better);
 * **integration**: fixed-step DOP853 of at most `MAX_STEP_S` (120 s: 0.03 mm from 20 s
   steps over 3 days of LAGEOS; 45 s per ~100 steps of an orbit of 3.8 h);
-* **noise**: each normal point's own R (`import crd --sigma`).
+* **noise**: each normal point's own R (`import crd --sigma`, 5 mm: the normal points'
+  precision, 1-4 mm one-way in these files (their bins' RMS over the square root of their
+  ranges), with the target's signature and the model's short-period errors). What a fit
+  leaves (1.6 cm RMS on LAGEOS-2 over 3 days) is mostly not white: drifts of 1-3 cm
+  through a pass, the orbit's and the model's errors correlated over minutes; so the
+  realistic covariance is the formal one scaled by the weighted RMS squared (the
+  a-posteriori variance factor, ~10).
 
 `first_guess` takes a reference orbit's state (a CPF prediction: what the stations point
 with) as the start of the iterations; the fit has no prior on the state, so where it
@@ -47,8 +53,19 @@ from ssa_fusion.core.motion.geopotential import GravityField
 from ssa_fusion.core.od import batch_ls
 from ssa_fusion.core.od.batch_ls import BatchFit, BatchOptions
 
-__all__ = ["CR_SIGMA", "DEGREE", "LAGEOS_AREA_TO_MASS", "LAGEOS_CR", "MAX_STEP_S",
-           "first_guess", "fit", "fit_options", "laser_force"]
+__all__ = [
+    "CR_SIGMA",
+    "DEGREE",
+    "FILTER_Q",
+    "LAGEOS_AREA_TO_MASS",
+    "LAGEOS_CR",
+    "MAX_STEP_S",
+    "PRIOR_SIGMA",
+    "first_guess",
+    "fit",
+    "fit_options",
+    "laser_force",
+]
 
 Array = NDArray[np.float64]
 
@@ -64,6 +81,16 @@ LAGEOS_CR = 1.13
 """LAGEOS's radiation pressure coefficient (its 426 retro-reflectors and aluminium shell)."""
 ACCELERATION_SIGMA = 1e-11
 """Prior sigma of the constant RTN accelerations when solved for, km/s^2 (1e-8 m/s^2)."""
+FILTER_Q = 4e-21
+"""The sequential filter's white-noise acceleration PSD, km^2/s^3: what the force model
+leaves out (ocean tides, albedo and infrared, thermal forces: ~1e-9 m/s^2 together on
+LAGEOS) correlated over about a quarter of an orbit (1 h): q ~ a^2 tau =
+(1e-12 km/s^2)^2 3600 s; 0.2 m of position sigma after a 12 h gap."""
+PRIOR_SIGMA = (1e-2, 1e-5)
+"""The filter's a-priori sigma of position (km) and velocity (km/s) about its a-priori orbit:
+10 m and 1 cm/s, ten times what a CPF prediction is off on its day (~1 m, and the velocity
+an orbit off by 1 m has: n x 1 m ~ 0.5 mm/s), for the day or two it is carried back or on
+to the first normal point."""
 
 
 def laser_force(gravity: GravityField, area_to_mass: float = LAGEOS_AREA_TO_MASS,
@@ -82,7 +109,7 @@ def fit_options(force: ForceSpec, accelerations: bool = False) -> BatchOptions:
     acc = ("accel_r", "accel_t", "accel_n") if accelerations else ()
     return BatchOptions(force=force, solve_for=("srp_scale", *acc),
                         param_sigma=(1.0, *(ACCELERATION_SIGMA,) * 3, CR_SIGMA),
-                        max_step_s=MAX_STEP_S)
+                        scale_by_rms=True, max_step_s=MAX_STEP_S)
 
 
 def first_guess(t_ref: ArrayLike, x_ref: ArrayLike, t: float) -> StateEstimate:
