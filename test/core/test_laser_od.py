@@ -19,6 +19,7 @@ from realdata import lageos_inputs, needs_lageos
 from ssa_fusion.core.earth.frames import rtn_axes
 from ssa_fusion.core.measure.laser_model import LaserModels, bias_name
 from ssa_fusion.core.motion import high_fidelity as hf
+from ssa_fusion.core.motion.force_model import PARAMETERS
 from ssa_fusion.core.od import laser_od
 from ssa_fusion.formats.icgem import egm96
 
@@ -45,7 +46,7 @@ def _rms(a) -> float:
 
 def _against(ref, fit, force):
     """Return the fitted orbit minus the reference over the reference's day (K, 3) km, RTN."""
-    x = hf.propagate(force, fit.x, fit.t, ref.t, [fit.params[p] for p in fit.options.parameters],
+    x = hf.propagate(force, fit.x, fit.t, ref.t, [fit.params[p] for p in PARAMETERS],
                      stm=False, max_step_s=laser_od.MAX_STEP_S).x
     return np.einsum("kij,kj->ki", rtn_axes(ref.x), x[:, :3] - ref.x[:, :3])
 
