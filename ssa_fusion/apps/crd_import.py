@@ -57,6 +57,10 @@ the model's short-period errors; what is left after a fit and a bias per station
 LAGEOS) drifts through a pass, not white (`core.od.laser_od`)."""
 BIAS_SIGMA_M = 1.0
 """Default prior sigma of a station's range bias, m."""
+METEO_LEAD_S = 1e-3
+"""A meteorological record is logged this long before its epoch: CRD gives its epoch to the
+millisecond, rounded, so the record a station writes with a normal point may carry an epoch
+up to 0.5 ms after the point's; logged first, it is known when the point is fused."""
 WAVELENGTH_TOLERANCE_NM = 1.0
 """Wavelengths of one station's sessions that differ by more are refused."""
 
@@ -201,7 +205,7 @@ def _rows(ranges: LaserRanges, reference: ReferenceOrbit | None, sigma_km: float
     """Yield (log time ns, topic, message) of every message but the config, in time order."""
     rows: list[tuple[float, int, int]] = []  # (t, topic, index) sorted once
     rows += [(t, 0, i) for i, t in enumerate(ranges.t.tolist())]
-    rows += [(m.t, 1, i) for i, m in enumerate(ranges.meteo)]
+    rows += [(m.t - METEO_LEAD_S, 1, i) for i, m in enumerate(ranges.meteo)]
     if reference is not None:
         rows += [(t, 2, i) for i, t in enumerate(reference.t.tolist())]
     rows.sort()
@@ -231,7 +235,7 @@ def _write_bag(out: Path, ranges: LaserRanges, config: LaserConfig,
     written: Counter[str] = Counter()
     first_ns = round(float(ranges.t.min()) * 1e9)
     if ranges.meteo:
-        first_ns = min(first_ns, round(min(m.t for m in ranges.meteo) * 1e9))
+        first_ns = min(first_ns, round((min(m.t for m in ranges.meteo) - METEO_LEAD_S) * 1e9))
     if reference is not None:
         first_ns = min(first_ns, round(float(reference.t.min()) * 1e9))
     with removed_if_unfinished(out):

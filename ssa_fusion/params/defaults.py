@@ -132,6 +132,8 @@ class FilterDefaults:
     predict_period: float = 300.0
     max_clock_lead: float = MAX_CLOCK_LEAD_S
     gap_forecast: str = "none"
+    laser: str = ""
+    apriori: tuple[float, ...] = (0.0,) * 7
 
 
 @dataclass(frozen=True)

@@ -165,6 +165,8 @@ def recode(msg: Message, msgtype: str, classes: MsgClasses | None = None) -> Mes
         return measurement_to_msg(measurement_from_msg(msg), classes)
     if msgtype == "ssa_fusion_msgs/msg/StateEstimate":
         return estimate_to_msg(estimate_from_msg(msg), classes)
+    if msgtype == "ssa_fusion_msgs/msg/Meteo":
+        return meteo_to_msg(meteo_from_msg(msg), classes)
     return msg
 
 
@@ -245,13 +247,17 @@ def meteo_from_msg(msg: Message) -> MeteoSample:
 
 
 def estimate_to_msg(e: types.StateEstimate, classes: MsgClasses | None = None) -> Message:
-    """Return core StateEstimate `e` (km, km/s) as an ssa_fusion_msgs/StateEstimate (m, m/s)."""
+    """Return core StateEstimate `e` (km, km/s) as an ssa_fusion_msgs/StateEstimate (m, m/s).
+
+    The message holds the orbit: a filter's further states (a laser filter's range biases
+    and k_R after ``[r, v]``) stay out of it.
+    """
     c = _default(classes)
     return c.estimate(
         header=c.header(stamp=seconds_to_stamp(e.t, c), frame_id=Frame.GCRF),
         object_id=e.object_id,
-        state=np.asarray(e.x, dtype=float) * _X_SCALE,
-        covariance=(np.asarray(e.P, dtype=float) * KM * KM).ravel(),
+        state=np.asarray(e.x, dtype=float)[:6] * _X_SCALE,
+        covariance=(np.asarray(e.P, dtype=float)[:6, :6] * KM * KM).ravel(),
         update_source=int(e.update_source),
         nis=float(e.nis),
         shard_key=shard_key(e.object_id),

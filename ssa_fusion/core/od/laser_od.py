@@ -17,9 +17,10 @@ laser network's model (`laser_model.LaserModels`). The choices, each from physic
 * **solve-for**: the epoch state without a prior (the data alone), k_R (a factor on Cr,
   prior `CR_SIGMA`: a cannonball's Cr is known to ~20 % before a fit), each station's range
   bias (its prior from the network: `import crd --bias-sigma`); constant RTN accelerations
-  only on request (``accelerations``: over 3 days they absorb what the tides' absence
-  leaves, not what is left with them: the fit's residuals 1.6 -> 1.4 cm, the orbit against
-  the CPF no better);
+  only on request (``accelerations``: on LAGEOS-2's 3 days they come out at 3.7e-8 m/s^2
+  radial and -2.0e-8 normal, 7-8 sigma and ten times any force left out: they absorb, they
+  do not model; the residuals halve (1.6 -> 0.8 cm), the orbit against the CPF stays as it
+  is, 0.28 m);
 * **integration**: fixed-step DOP853 of at most `MAX_STEP_S` (120 s: 0.03 mm from 20 s
   steps over 3 days of LAGEOS; 45 s per ~100 steps of an orbit of 3.8 h);
 * **noise**: each normal point's own R (`import crd --sigma`, 5 mm: the normal points'
@@ -28,7 +29,11 @@ laser network's model (`laser_model.LaserModels`). The choices, each from physic
   leaves (1.6 cm RMS on LAGEOS-2 over 3 days) is mostly not white: drifts of 1-3 cm
   through a pass, the orbit's and the model's errors correlated over minutes; so the
   realistic covariance is the formal one scaled by the weighted RMS squared (the
-  a-posteriori variance factor, ~10).
+  a-posteriori variance factor, ~10). It is optimistic for predictions (LAGEOS-2, 12 h on:
+  residuals 2.7 times its sigma RMS, the stations new to the fit's biases not in it); the
+  state-noise compensation of the filter's `FILTER_Q` would make it 27 times too wide
+  instead (white accelerations grow as t^1.5 over a window of days, the forces left out
+  are periodic): not used.
 
 `first_guess` takes a reference orbit's state (a CPF prediction: what the stations point
 with) as the start of the iterations; the fit has no prior on the state, so where it
@@ -105,9 +110,10 @@ def laser_force(gravity: GravityField, area_to_mass: float = LAGEOS_AREA_TO_MASS
 
 
 def fit_options(force: ForceSpec, accelerations: bool = False) -> BatchOptions:
-    """Return the batch fit's options (module docstring): k_R, and the RTN accelerations."""
+    """Return the batch fit's options (module docstring): k_R (with SRP), the RTN accelerations."""
     acc = ("accel_r", "accel_t", "accel_n") if accelerations else ()
-    return BatchOptions(force=force, solve_for=("srp_scale", *acc),
+    cr = ("srp_scale",) if force.srp is not None else ()
+    return BatchOptions(force=force, solve_for=(*cr, *acc),
                         param_sigma=(1.0, *(ACCELERATION_SIGMA,) * 3, CR_SIGMA),
                         scale_by_rms=True, max_step_s=MAX_STEP_S)
 

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import json
 from functools import partial
 
 from ssa_fusion.core.gaps.publisher import GapFill
 from ssa_fusion.params import settings
-from ssa_fusion.params.checks import NON_NEGATIVE, one_of
+from ssa_fusion.params.checks import NON_NEGATIVE, Check, finite_numbers, one_of, read_by
 from ssa_fusion.params.defaults import FILTER
 from ssa_fusion.params.rows import Param, ParameterTable, Rule
 from ssa_fusion.params.shared import (
@@ -16,6 +17,13 @@ from ssa_fusion.params.shared import (
     measurement_stream,
     object_filter,
 )
+
+
+def _json_object(text: str) -> None:
+    """Read ``text`` as a JSON object (ValueError otherwise)."""
+    if not isinstance(json.loads(text), dict):
+        raise ValueError("must be a JSON object")
+
 
 PARAMETERS = ParameterTable("filter", (
     *measurement_stream(FILTER.kind, FILTER.station, FILTER.sites, "fuses"),
@@ -35,6 +43,18 @@ PARAMETERS = ParameterTable("filter", (
           "what the predictions in a gap between passes are: the EKF coasting (`none`), or "
           "a forecast of the residual, of a batch fit, or of both", check=one_of(*GapFill)),
     clock_lead(FILTER.max_clock_lead),
+    Param("laser", FILTER.laser,
+          "with `kind` laser_range: the laser stations and the object, the `/ssa/config` "
+          "message of `ssa-fusion import crd` (JSON, as its bag records it); the filter is "
+          "then the laser filter (high-fidelity forces of the object, the stations' range "
+          "biases and Cr as states; `p0_sigma`, `q`, `motion_model` do not apply) and takes "
+          "the stations' meteorological records on `/ssa/meteo`; `\"\"` = none",
+          check=Check("'' or a JSON object", read_by(_json_object, empty_ok=True))),
+    Param("apriori", list(FILTER.apriori),
+          "with `kind` laser_range: the a-priori orbit the filter starts from (ranges alone "
+          "give none): its epoch (Unix s, UTC) and GCRF state (m, m/s), e.g. a CPF "
+          "prediction's state", unit="s, m, m/s",
+          check=finite_numbers(7, "needs 7 finite numbers: epoch, x, y, z, vx, vy, vz")),
 ), rules=(STATION_RULE,
           Rule(settings.FILTER_KEYS, partial(settings.estimator_problem, "filter"))))
 """The filter's parameters."""
