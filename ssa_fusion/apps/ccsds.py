@@ -4,7 +4,8 @@
   segment per object (all objects, or ``--object ID``), state and covariance per epoch, UTC,
   in ``GCRF``, ``EME2000`` or ``TEME`` (``--frame``). A bag whose estimates say another
   frame than ``gcrf`` (``eci``: recorded before the frames were the real Earth's) is
-  refused.
+  refused. With ``--predict-until UTC`` (a laser bag's): the fitted orbit propagated beyond
+  the data with its covariance instead (`predict_oem`).
 * **TDM** out of a bag (`ccsds_tdm_out`): its real range/azimuth/elevation (``AZEL``) and
   right ascension/declination (``RADEC``, ``ICRF`` or ``EME2000``) measurements
   (``/ssa/measurement``, SENSOR), UTC.
@@ -218,6 +219,13 @@ def _add_export_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]
     q.add_argument("--out", type=Path, default=None,
                    help=f"file to write; must not exist (default: BAG.{name})")
     _add_format(q)
+    if name == "oem":
+        q.add_argument("--predict-until", default=None, metavar="UTC",
+                       help="instead of the estimates: the fitted orbit of the bag's laser "
+                            "ranges propagated from its epoch (the last range) to this epoch "
+                            "(ISO 8601, UTC), with its covariance")
+        q.add_argument("--step", type=float, default=60.0, metavar="S",
+                       help="with --predict-until: seconds between states (default 60)")
     q.set_defaults(_ccsds_run=run_it, _suffix=f".{name}")
 
 
@@ -275,13 +283,21 @@ def _measurements_said(counts: Mapping[int, int]) -> str:
 def run_export_oem(args: argparse.Namespace) -> int:
     """Run `export oem`: write the bag's estimates as an OEM; return 0."""
     out, fmt, contents = _export(args)
-    require_gcrf(args.bag, contents, (TOPIC_ESTIMATE,), "estimates")
-    ephem = ephemerides(contents.estimates, args.object)
+    said = ""
+    if args.predict_until is not None:
+        from ssa_fusion.apps.predict_oem import predicted
+
+        states, said = predicted(args.bag, args.predict_until, args.step)
+        ephem = ephemerides(states, args.object)
+    else:
+        require_gcrf(args.bag, contents, (TOPIC_ESTIMATE,), "estimates")
+        ephem = ephemerides(contents.estimates, args.object)
     with removed_if_unfinished(out):
         write_ndm(oem_document(ephem, OemFrame(args.frame)), out, fmt)
     n = sum(len(v) for v in ephem.values())
     print(f"export oem: {n} states with covariance of {len(ephem)} object(s) "
-          f"({', '.join(ephem)}) in {args.frame}, UTC -> {out} ({fmt.upper()})")
+          f"({', '.join(ephem)}) in {args.frame}, UTC" + (f": {said}" if said else "")
+          + f" -> {out} ({fmt.upper()})")
     return 0
 
 

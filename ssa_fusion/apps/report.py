@@ -24,6 +24,7 @@ from ssa_fusion.core.base import metrics, types
 from ssa_fusion.core.gaps import estimator as config
 from ssa_fusion.formats import sites as site_file
 from ssa_fusion.ros import bagio
+from ssa_fusion.ros.laser_bag import is_laser
 from ssa_fusion.ros.topics import TOPIC_CONFIG
 
 if TYPE_CHECKING:
@@ -48,7 +49,8 @@ def run(args: argparse.Namespace) -> int:
     A bag without simulated truth or outage (your own measurements, replayed) gets the
     report of `report_own`: residuals, NIS, σ through the gaps, passes; a catalog's bag
     (several objects, unlabelled detections, or the catalog_filter's settings) that of
-    `report_catalog`: each object scored on its own rows.
+    `report_catalog`: each object scored on its own rows; a laser-ranging bag that of
+    `report_laser`: the fit's residuals per station and pass, biases, NIS, the reference.
     """
     out = args.out or args.bag.with_name(args.bag.name + "_report")
     try:
@@ -67,6 +69,10 @@ def run(args: argparse.Namespace) -> int:
         from ssa_fusion.apps import report_catalog
 
         return report_catalog.run(args, telling, catalog, out)
+    if is_laser(telling):
+        from ssa_fusion.apps import report_laser
+
+        return report_laser.run(args, list(bagio.read_records(args.bag)), out)
     del telling
     try:
         data = evaluate.load(args.bag)

@@ -44,16 +44,12 @@ PARAMETERS = ParameterTable("filter", (
           "a forecast of the residual, of a batch fit, or of both", check=one_of(*GapFill)),
     clock_lead(FILTER.max_clock_lead),
     Param("laser", FILTER.laser,
-          "with `kind` laser_range: the laser stations and the object, the `/ssa/config` "
-          "message of `ssa-fusion import crd` (JSON, as its bag records it); the filter is "
-          "then the laser filter (high-fidelity forces of the object, the stations' range "
-          "biases and Cr as states; `p0_sigma`, `q`, `motion_model` do not apply) and takes "
-          "the stations' meteorological records on `/ssa/meteo`; `\"\"` = none",
+          "with `kind` laser_range: the stations and the object, `import crd`'s /ssa/config "
+          "message (JSON); the filter is then the laser filter; `\"\"` = none",
           check=Check("'' or a JSON object", read_by(_json_object, empty_ok=True))),
-    Param("apriori", list(FILTER.apriori),
-          "with `kind` laser_range: the a-priori orbit the filter starts from (ranges alone "
-          "give none): its epoch (Unix s, UTC) and GCRF state (m, m/s), e.g. a CPF "
-          "prediction's state", unit="s, m, m/s",
+    Param("apriori", FILTER.apriori,
+          "with `kind` laser_range: the a-priori orbit it starts from, epoch (Unix s) and GCRF "
+          "state (m, m/s)", unit="s, m, m/s",
           check=finite_numbers(7, "needs 7 finite numbers: epoch, x, y, z, vx, vy, vz")),
 ), rules=(STATION_RULE,
           Rule(settings.FILTER_KEYS, partial(settings.estimator_problem, "filter"))))
