@@ -26,6 +26,7 @@ standard atmosphere (counted in the summary line).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from collections import Counter
 from collections.abc import Iterator
@@ -58,9 +59,10 @@ LAGEOS) drifts through a pass, not white (`core.od.laser_od`)."""
 BIAS_SIGMA_M = 1.0
 """Default prior sigma of a station's range bias, m."""
 METEO_LEAD_S = 1e-3
-"""A meteorological record is logged this long before its epoch: CRD gives its epoch to the
-millisecond, rounded, so the record a station writes with a normal point may carry an epoch
-up to 0.5 ms after the point's; logged first, it is known when the point is fused."""
+"""A meteorological record is stamped and logged this long before its epoch: CRD gives its
+epoch to the millisecond, rounded, so the record a station writes with a normal point may
+carry an epoch up to 0.5 ms after the point's; a millisecond earlier (below the record's
+resolution), it is known when the point is fused, offline and live alike."""
 WAVELENGTH_TOLERANCE_NM = 1.0
 """Wavelengths of one station's sessions that differ by more are refused."""
 
@@ -220,7 +222,8 @@ def _rows(ranges: LaserRanges, reference: ReferenceOrbit | None, sigma_km: float
                                   frame_id=ids[ranges.station[i]])
             yield ns, TOPIC_MEASUREMENT, messages.measurement_to_msg(m, classes)
         elif topic == 1:
-            yield ns, TOPIC_METEO, messages.meteo_to_msg(ranges.meteo[i], classes)
+            early = dataclasses.replace(ranges.meteo[i], t=t)
+            yield ns, TOPIC_METEO, messages.meteo_to_msg(early, classes)
         else:
             assert reference is not None
             e = types.StateEstimate(t=t, x=reference.x[i], object_id=oids[0])

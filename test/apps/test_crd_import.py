@@ -59,6 +59,8 @@ def test_the_real_data_into_a_bag(tmp_path, capsys):
     w = messages.meteo_from_msg(next(m.msg for m in got[TOPIC_METEO]
                                      if m.msg.header.frame_id == "7090"))
     assert (w.pressure_hpa, w.temperature_k, w.humidity_pct) == pytest.approx((983.7, 301.4, 24))
+    # "20 49382.401 ...", written with the point at 49382.4005626: stamped 1 ms earlier, first
+    assert w.t == pytest.approx(1455321600 + 49382.401 - 0.001, abs=1e-6) and w.t < y.t
     assert next(m.msg for m in got[TOPIC_METEO]).pressure == pytest.approx(92750.0)  # Pa
     config = recorded_laser([got[TOPIC_CONFIG][0].msg.data])
     st = config.stations["7090"]
