@@ -151,8 +151,11 @@ def _judge(bag: LaserBag, force: ForceSpec, accelerations: bool) -> dict[str, An
     d3, rtn = _against_reference(bag, full)
     pred, norm, n = _predicted(bag, part, models)
     res = np.array([r[0] for r in full.residuals]) * M
+    # a fit that stopped on a step it could not take keeps its last linearisation's RMS
+    sigma_m = math.sqrt(bag.measurements[0].R[0, 0]) * M
+    rms = _rms(res) if np.isfinite(res).all() else full.rms * sigma_m
     return {"status": str(full.status), "reason": full.reason,
-            "residual_rms_m": _rms(res), "cpf_3d_rms_m": d3,
+            "residual_rms_m": rms, "cpf_3d_rms_m": d3,
             "cpf_rtn_rms_m": rtn, "predicted_rms_m": pred, "predicted_over_sigma": norm,
             "predicted_points": n, "edited": int(np.sum(~full.accepted)),
             "biases_m": {k: v * M for k, v in full.measurement_params.items()},
