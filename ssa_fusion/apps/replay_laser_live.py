@@ -109,6 +109,6 @@ def run(args: argparse.Namespace, stream: list[bagio.BagMessage], bag: LaserBag,
 def _publish_setup(node: Any, text: str) -> None:  # noqa: ANN401 (an rclpy node)
     """Publish the ``import crd`` set-up on /ssa/config, latched, from ``node``."""
     from ssa_fusion.ros.interfaces import String
-    from ssa_fusion.ros.topics import CONFIG_QOS
+    from ssa_fusion.ros.qos import CONFIG_QOS
 
     node.create_publisher(String, TOPIC_CONFIG, CONFIG_QOS).publish(String(data=text))
