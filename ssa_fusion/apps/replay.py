@@ -338,6 +338,21 @@ class _NoForecasts:
         """Nothing to forget."""
 
 
+def _offline_parts(stream: list[bagio.BagMessage], c: EstimatorConfig,
+                   gaps: Mapping[str, Any] | None, smooth: bool, tracker: Tracker | None
+                   ) -> tuple[GapPublisher, TrackerRecorder | None, Surrogate | _NoForecasts]:
+    """Return `replay_offline`'s publisher (its tracker inside), recorder and surrogate."""
+    g = gaps if gaps is not None else recorded_gaps(stream)
+    publisher = GapPublisher.of(tracker or make_tracker(c), float(g["predict_period"]),
+                                GapFill(g["gap_forecast"]), c)
+    recorder = TrackerRecorder(publisher.tracker) if smooth else None
+    # Forecasts always come from a fit on the buffer up to the last real measurement, so the
+    # live node's optional periodic refits (retrain_period) would change nothing here.
+    surrogate = _NoForecasts() if c.kind == types.Kind.LASER_RANGE else make_surrogate(
+        c.with_(surrogate=replace(c.surrogate, retrain_period_s=math.inf)))
+    return publisher, recorder, surrogate
+
+
 def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig,
                    gaps: Mapping[str, Any] | None = None, smooth: bool = False,
                    tracker: Tracker | None = None) -> OfflineResult:
@@ -347,21 +362,12 @@ def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig,
     publishes (`core.gaps.publisher.GapPublisher`): the estimate of every fused measurement
     and, through a gap, predictions (or residual forecasts) on the grid of the filter's
     `gaps` parameters (``predict_period``, ``gap_forecast``; default: those recorded with
-    the bag), as the bag's /clock passes them, the rest once the bag ends. With `smooth`,
-    also the fused estimates smoothed (`core.filter.smoother.TrackerRecorder`). `tracker`:
-    the filter to run (default `make_tracker(c)`); a laser filter's model takes the bag's
-    meteorological records as they come, and no surrogate forecasts laser ranges.
+    the bag), as the bag's /clock passes them, the rest once the bag ends; with `smooth`
+    also smoothed (`TrackerRecorder`). `tracker` (default `make_tracker(c)`): a laser
+    filter takes the bag's meteorological records as they come; nothing forecasts ranges.
     """
-    g = gaps if gaps is not None else recorded_gaps(stream)
-    publisher = GapPublisher.of(tracker or make_tracker(c), float(g["predict_period"]),
-                                GapFill(g["gap_forecast"]), c)
-    recorder = TrackerRecorder(publisher.tracker) if smooth else None
-    # Forecasts always come from a fit on the buffer up to the last real measurement, so the
-    # live node's optional periodic refits (retrain_period) would change nothing here.
-    surrogate = _NoForecasts() if c.kind == types.Kind.LASER_RANGE else make_surrogate(
-        c.with_(surrogate=replace(c.surrogate, retrain_period_s=math.inf)))
-    model = publisher.tracker.model
-    result = OfflineResult()
+    publisher, recorder, surrogate = _offline_parts(stream, c, gaps, smooth, tracker)
+    model, result = publisher.tracker.model, OfflineResult()
     recorded = {messages.stamp_to_seconds(m.msg.header.stamp)
                 for m in stream if m.topic == TOPIC_FORECAST}
     pool: dict[float, types.Measurement] = {}

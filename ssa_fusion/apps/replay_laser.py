@@ -26,9 +26,9 @@ import numpy as np
 from ssa_fusion.apps import laser_run, replay, replay_laser_live
 from ssa_fusion.apps.partial import removed_if_unfinished
 from ssa_fusion.core.base import types
-from ssa_fusion.core.base.metrics import chi2_bounds
 from ssa_fusion.core.earth.timescales import iso
 from ssa_fusion.core.od.batch_ls import BatchFit
+from ssa_fusion.evaluation.laser_scores import nis_coverage
 from ssa_fusion.params import settings as node_settings
 from ssa_fusion.ros import bagio
 from ssa_fusion.ros.laser_bag import laser_bag
@@ -77,12 +77,9 @@ def run(args: argparse.Namespace, stream: list[bagio.BagMessage]) -> int:
 
 def nis_line(estimates: list[types.StateEstimate]) -> str:
     """Return the NIS of the fused ranges against the two-sided 95 % band of chi2(1)."""
-    nis = np.array([e.nis for e in estimates if e.update_source == types.UpdateSource.SENSOR])
-    lo, hi = chi2_bounds(1)
-    inside = float(np.mean((nis >= lo) & (nis <= hi))) if nis.size else float("nan")
-    return (f"filter: {nis.size} ranges fused, NIS inside its 95 % band [{lo:.4f}, {hi:.2f}]: "
-            f"{100 * inside:.1f} % ({int(np.sum(nis < lo))} below, {int(np.sum(nis > hi))} "
-            f"above)")
+    c = nis_coverage([e.nis for e in estimates if e.update_source == types.UpdateSource.SENSOR])
+    return (f"filter: {c.count} ranges fused, NIS inside its 95 % band [{c.band[0]:.4f}, "
+            f"{c.band[1]:.2f}]: {100 * c.inside:.1f} % ({c.below} below, {c.above} above)")
 
 
 def fit_line(fit: BatchFit, cr_nominal: float) -> str:
