@@ -188,6 +188,10 @@ def test_covariances_are_carried_to_tca_and_decayed_objects_are_skipped():
     # position variance along track grows with the velocity variance over 3000 s
     assert np.trace(found.p1[0, :3, :3]) > 3e-2
     np.testing.assert_allclose(found.p1[0], found.p1[0].T, atol=1e-12)
+    # a head-on miss of ~0 with sigmas ~0.3 km and a 10 m circle: Pc ~ r^2 / (2 s1 s2)
+    pc = 10 ** found.log10_pc(0.01)[0]
+    s = np.sqrt(np.linalg.eigvalsh(found.p1[0, :3, :3] + found.p2[0, :3, :3]))
+    assert 1e-4 / (2 * s[-1] * s[-1]) < pc < 1e-4 / (2 * s[0] * s[1])
 
 
 def test_interpolation_error_bounds_hold_on_real_element_sets():

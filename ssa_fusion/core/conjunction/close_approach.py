@@ -19,7 +19,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ssa_fusion.core.earth.frames import rtn_axes
+from ssa_fusion.core.conjunction.encounter import relative_state_rtn
+from ssa_fusion.core.conjunction.probability import pc2d_batch
 
 __all__ = ["CloseApproaches"]
 
@@ -82,14 +83,23 @@ class CloseApproaches:
     def relative_rtn(self) -> Array:
         """Return the secondary's state relative to the primary in the primary's RTN (M, 6).
 
-        Position km, velocity km/s, both rotated by the primary's RTN axes at TCA.
+        Position km, velocity km/s, both rotated by the primary's RTN axes at TCA
+        (`encounter.relative_state_rtn`).
         """
         if not len(self):
             return np.zeros((0, 6))
-        rot = rtn_axes(self.x1)
-        d = self.x2 - self.x1
-        return np.concatenate([np.einsum("nij,nj->ni", rot, d[:, :3]),
-                               np.einsum("nij,nj->ni", rot, d[:, 3:])], axis=1)
+        return relative_state_rtn(self.x1, self.x2)
+
+    def log10_pc(self, hbr_km: float) -> Array:
+        """Return each approach's 2D Pc (Foster) as its log10 (M,), NaN without covariances.
+
+        ``hbr_km``: the combined hard-body radius, km (`probability.pc2d_batch`).
+        """
+        if self.p1 is None or self.p2 is None or not len(self):
+            return np.full(len(self), np.nan)
+        _, integral = pc2d_batch(self.x1, self.p1, self.x2, self.p2, hbr_km)
+        out: Array = np.asarray(integral.log10_pc, dtype=float)
+        return out
 
     def take(self, rows: ArrayLike) -> CloseApproaches:
         """Return the approaches ``rows`` (indices or a boolean mask)."""
