@@ -10,7 +10,7 @@ chunks of time (memory bounded by the chunk, not the window):
    from two-body + J2 (`hermite.node_table`); each object's interpolation error bounds,
    measured on the nodes (`hermite.interpolation_pad`), its radial band, largest speed and
    acceleration (`apsides.radial_bands`: the apogee/perigee filter, with ``band_pad_km``);
-2. at fine epochs ``fine_step_s`` apart (10 s) every object is interpolated and binned in a
+2. at fine epochs ``fine_step_s`` apart (20 s) every object is interpolated and binned in a
    spatial grid; the pairs near each other pass a test that cannot miss an approach within
    the screening distance (`sieve`: no loop over pairs, compiled);
 3. near each hit, the local minima of the interpolated distance (`tca.hit_roots`: Brent on
@@ -76,7 +76,7 @@ class ScreeningConfig:
 
     distance_km: float = 10.0
     node_step_s: float = 300.0
-    fine_steps: int = 30
+    fine_steps: int = 15
     chunk_nodes: int = 24
     band_pad_km: float = 2.0
     newton_iterations: int = 3
@@ -165,7 +165,7 @@ def screen(eph: Ephemeris, t_start: float, t_end: float,
         shrinking at an end of the window is not an approach).
     config : ScreeningConfig, optional
         Screening distance and sampling (defaults: 10 km, nodes every 300 s, fine epochs
-        every 10 s, chunks of 2 h).
+        every 20 s, chunks of 2 h).
     primaries : array_like of int or bool, optional
         Screen only the pairs with one of these objects (indices into ``eph.object_ids``,
         or a mask); None: every pair.
