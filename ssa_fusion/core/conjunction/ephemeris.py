@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ssa_fusion.core.base.types import MotionModel
-from ssa_fusion.core.earth.frames import pole_frame, teme_to_gcrs
+from ssa_fusion.core.earth.frames import pole_frame, teme_to_gcrs_matrix
 from ssa_fusion.core.earth.timescales import jd_utc
 from ssa_fusion.core.motion.element_sets import CatalogEntry, catalog_states
 from ssa_fusion.core.motion.propagation import integrate_chain, integrate_stm
@@ -32,6 +32,9 @@ __all__ = ["ElementSetEphemeris", "Ephemeris", "StateEphemeris"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+
+ROTATION_STEP_S = 10.0
+"""`ElementSetEphemeris.exact` takes the TEME -> GCRF rotation at epochs rounded to this, s."""
 
 
 class Ephemeris(Protocol):
@@ -43,6 +46,14 @@ class Ephemeris(Protocol):
     @property
     def object_ids(self) -> tuple[str, ...]:
         """The objects' ids, in index order."""
+        ...
+
+    @property
+    def local_exact(self) -> bool:
+        """Whether `exact` is cheap only near the epochs of the last `sample`.
+
+        A screening then asks for its states chunk by chunk, else once at the end.
+        """
         ...
 
     def sample(self, t: ArrayLike) -> Array:
@@ -75,6 +86,11 @@ class ElementSetEphemeris:
         """The objects' NORAD ids, in index order."""
         return self._ids
 
+    @property
+    def local_exact(self) -> bool:
+        """False: SGP4 is as cheap at any epoch."""
+        return False
+
     def sample(self, t: ArrayLike) -> Array:
         """SGP4 states (N, T, 6) at Unix epochs ``t``, GCRF km, km/s; NaN where SGP4 fails."""
         return catalog_states(self.entries, np.asarray(t, dtype=float)).x
@@ -82,7 +98,9 @@ class ElementSetEphemeris:
     def exact(self, index: ArrayLike, t: ArrayLike) -> Array:
         """SGP4 states (M, 6) of objects ``index`` at epochs ``t``, GCRF km, km/s.
 
-        NaN where SGP4 reports an error.
+        NaN where SGP4 reports an error. TEME is turned to the GCRF by the rotation at the
+        nearest multiple of `ROTATION_STEP_S` (it turns by < 1e-10 rad in that time: < 1 mm
+        at GEO), the same for every object at one epoch.
         """
         idx = np.asarray(index, dtype=np.int64).ravel()
         tt = np.broadcast_to(np.asarray(t, dtype=float).ravel(), idx.shape)
@@ -97,8 +115,14 @@ class ElementSetEphemeris:
             teme = np.concatenate([r, v], axis=1)
             teme[err != 0] = np.nan
             out[rows] = teme
-        good = np.isfinite(out).all(axis=1)
-        out[good] = teme_to_gcrs(out[good], tt[good])
+        good = np.flatnonzero(np.isfinite(out).all(axis=1))
+        step = ROTATION_STEP_S
+        node, where = np.unique(np.round(tt[good] / step), return_inverse=True)
+        m = teme_to_gcrs_matrix(node * step)
+        for a in range(0, good.size, 1 << 18):  # the rotations of 2^18 rows at a time
+            rows, mm = good[a:a + (1 << 18)], m[where[a:a + (1 << 18)]]
+            out[rows] = np.concatenate([np.einsum("nij,nj->ni", mm, out[rows, :3]),
+                                        np.einsum("nij,nj->ni", mm, out[rows, 3:])], axis=1)
         return out
 
 
@@ -138,6 +162,11 @@ class StateEphemeris:
     def object_ids(self) -> tuple[str, ...]:
         """The objects' ids, in index order."""
         return self._ids
+
+    @property
+    def local_exact(self) -> bool:
+        """True: `exact` integrates from the last sampled epochs when they are nearer."""
+        return True
 
     def sample(self, t: ArrayLike) -> Array:
         """Propagated states (N, T, 6) at Unix epochs ``t`` (increasing), GCRF km, km/s.

@@ -108,12 +108,12 @@ def _limits(x: Array, table: hermite.NodeTable, pad_km: float,
     return sieve.PairLimits(bands.lo, bands.hi, bands.vmax, amax, eps, eps_v, primary)
 
 
-def _chunk(eph: Ephemeris, nodes_x: Array, t_nodes: Array, config: ScreeningConfig,
-           window: tuple[float, float], n_steps: int, primary: BoolArray) -> CloseApproaches:
-    """Screen one chunk: nodes ``t_nodes`` (one before its first fine epoch); its approaches.
+def _chunk(nodes_x: Array, t_nodes: Array, config: ScreeningConfig,
+           window: tuple[float, float], n_steps: int, primary: BoolArray) -> tca.Roots:
+    """Screen one chunk: nodes ``t_nodes`` (one before its first fine epoch); its roots.
 
-    The fine epochs are ``t_nodes[1] + s h`` for s < ``n_steps``; the approaches are not
-    sorted, and one may be found twice (from two hits).
+    The fine epochs are ``t_nodes[1] + s h`` for s < ``n_steps``: the local minima of the
+    interpolated distances near them (`tca.hit_roots`), before Newton.
     """
     h, m = config.fine_step_s, config.fine_steps
     table = hermite.node_table(nodes_x, float(t_nodes[0]), config.node_step_s,
@@ -121,8 +121,17 @@ def _chunk(eph: Ephemeris, nodes_x: Array, t_nodes: Array, config: ScreeningConf
     limits = _limits(nodes_x, table, config.band_pad_km, primary)
     hits = sieve.sieve(table, m, m, n_steps, config.distance_km, limits, config.workers)
     limit = config.distance_km + limits.eps[hits.i] + limits.eps[hits.j]
-    roots = tca.hit_roots(table, hits, float(t_nodes[1]), h, window, limit)
-    t, xi, xj = tca.newton_tca(eph, roots, h, config.newton_iterations)
+    return tca.hit_roots(table, hits, float(t_nodes[1]), h, window, limit)
+
+
+def _polish(eph: Ephemeris, roots: tca.Roots, config: ScreeningConfig,
+            window: tuple[float, float]) -> CloseApproaches:
+    """Return the roots moved to the ephemeris's trajectories that are approaches.
+
+    In the window and within the screening distance; not sorted, one approach perhaps
+    twice (from two hits).
+    """
+    t, xi, xj = tca.newton_tca(eph, roots, config.fine_step_s, config.newton_iterations)
     miss = np.linalg.norm(xj[:, :3] - xi[:, :3], axis=1)
     with np.errstate(invalid="ignore"):
         keep = (t >= window[0]) & (t <= window[1]) & (miss <= config.distance_km)
@@ -183,7 +192,9 @@ def screen(eph: Ephemeris, t_start: float, t_end: float,
     primary = _primaries(len(eph.object_ids), primaries)
     big_h, m, c = cfg.node_step_s, cfg.fine_steps, cfg.chunk_nodes
     n_fine = math.ceil((t_end - t_start) / cfg.fine_step_s) + 1  # the last >= t_end
+    window = (t_start, t_end)
     parts = [CloseApproaches.empty(eph.object_ids)]
+    waiting: list[tca.Roots] = []
     kept_t: Array = np.zeros(0)
     kept_x: Array = np.zeros((len(eph.object_ids), 0, 6))
     for first in range(0, n_fine, c * m):
@@ -195,8 +206,14 @@ def screen(eph: Ephemeris, t_start: float, t_end: float,
         x = np.concatenate([kept_x[:, kept_x.shape[1] - old:], eph.sample(t_nodes[old:])],
                            axis=1)
         kept_t, kept_x = np.asarray(t_nodes[-3:], dtype=float), x[:, -3:]
-        parts.append(_chunk(eph, np.ascontiguousarray(x), t_nodes, cfg, (t_start, t_end),
-                            steps, primary))
+        roots = _chunk(np.ascontiguousarray(x), t_nodes, cfg, window, steps, primary)
+        if eph.local_exact:
+            parts.append(_polish(eph, roots, cfg, window))
+        else:
+            waiting.append(roots)
+    if waiting:
+        parts.append(_polish(eph, tca.Roots(*(np.concatenate(a) for a in zip(
+            *((r.i, r.j, r.t) for r in waiting), strict=True))), cfg, window))
     found = _unique(CloseApproaches.concat(parts))
     if isinstance(eph, StateEphemeris) and eph.p0 is not None:
         found = replace(found, p1=eph.covariance(found.primary, found.tca),
