@@ -47,6 +47,9 @@ BoolArray = NDArray[np.bool_]
 ACCEL_MARGIN = 1.01
 """Largest acceleration over the two-body one at the smallest radius (J2 adds < 0.5 %)."""
 
+POLISH_BATCH = 1 << 20
+"""Roots moved to the ephemeris's trajectories at a time (`_polish`)."""
+
 SAME_APPROACH_S = 1e-3
 """Two roots of one pair closer than this in time are one approach, s."""
 
@@ -79,7 +82,7 @@ class ScreeningConfig:
     fine_steps: int = 15
     chunk_nodes: int = 24
     band_pad_km: float = 2.0
-    newton_iterations: int = 3
+    newton_iterations: int = 2
     workers: int = 1
 
     @property
@@ -129,14 +132,18 @@ def _polish(eph: Ephemeris, roots: tca.Roots, config: ScreeningConfig,
     """Return the roots moved to the ephemeris's trajectories that are approaches.
 
     In the window and within the screening distance; not sorted, one approach perhaps
-    twice (from two hits).
+    twice (from two hits). `POLISH_BATCH` roots at a time (memory ~1 kB a root).
     """
-    t, xi, xj = tca.newton_tca(eph, roots, config.fine_step_s, config.newton_iterations)
-    miss = np.linalg.norm(xj[:, :3] - xi[:, :3], axis=1)
-    with np.errstate(invalid="ignore"):
-        keep = (t >= window[0]) & (t <= window[1]) & (miss <= config.distance_km)
-    return CloseApproaches(eph.object_ids, roots.i[keep], roots.j[keep], t[keep], miss[keep],
-                           xi[keep], xj[keep])
+    parts = [CloseApproaches.empty(eph.object_ids)]
+    for a in range(0, roots.t.size, POLISH_BATCH):
+        part = roots.take(slice(a, a + POLISH_BATCH))
+        t, xi, xj = tca.newton_tca(eph, part, config.fine_step_s, config.newton_iterations)
+        miss = np.linalg.norm(xj[:, :3] - xi[:, :3], axis=1)
+        with np.errstate(invalid="ignore"):
+            keep = (t >= window[0]) & (t <= window[1]) & (miss <= config.distance_km)
+        parts.append(CloseApproaches(eph.object_ids, part.i[keep], part.j[keep], t[keep],
+                                     miss[keep], xi[keep], xj[keep]))
+    return CloseApproaches.concat(parts)
 
 
 def _primaries(n: int, primaries: ArrayLike | None) -> BoolArray:
@@ -212,8 +219,7 @@ def screen(eph: Ephemeris, t_start: float, t_end: float,
         else:
             waiting.append(roots)
     if waiting:
-        parts.append(_polish(eph, tca.Roots(*(np.concatenate(a) for a in zip(
-            *((r.i, r.j, r.t) for r in waiting), strict=True))), cfg, window))
+        parts.append(_polish(eph, tca.Roots.concat(waiting), cfg, window))
     found = _unique(CloseApproaches.concat(parts))
     if isinstance(eph, StateEphemeris) and eph.p0 is not None:
         found = replace(found, p1=eph.covariance(found.primary, found.tca),

@@ -43,6 +43,17 @@ class Roots:
     j: IntArray
     t: Array
 
+    def take(self, rows: slice | IntArray) -> Roots:
+        """Return the roots ``rows``."""
+        return Roots(self.i[rows], self.j[rows], self.t[rows])
+
+    @classmethod
+    def concat(cls, parts: list[Roots]) -> Roots:
+        """Return the roots of ``parts`` one after the other."""
+        return cls(np.concatenate([np.zeros(0, np.int64)] + [p.i for p in parts]),
+                   np.concatenate([np.zeros(0, np.int64)] + [p.j for p in parts]),
+                   np.concatenate([np.zeros(0)] + [p.t for p in parts]))
+
 
 @jit
 def _range_rate(nodes: Array, t_first: float, big_h: float, i: int, j: int, t: float,
@@ -173,7 +184,7 @@ def _two_body_accel(r: Array) -> Array:
 
 
 def newton_tca(eph: Ephemeris, roots: Roots, max_shift_s: float,
-               iterations: int = 3) -> tuple[Array, Array, Array]:
+               iterations: int = 2) -> tuple[Array, Array, Array]:
     """Move roots to the zeros of the range rate of the ephemeris's own trajectories.
 
     Newton steps on ``f = dr . dv`` with ``f' = |dv|² + dr . da`` (two-body da), each
