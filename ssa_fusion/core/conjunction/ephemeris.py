@@ -212,9 +212,11 @@ class StateEphemeris:
         if not idx.size:
             return np.zeros((0, 6))
         x, ts = self._start(idx, tt)
-        x1, _, ok = integrate_stm(self.model, x, tt - ts, self.max_step_s, self._pole[idx])
-        x1[~ok] = np.nan
-        return x1
+        x1, ok = integrate_chain(self.model, x, (tt - ts)[:, None], self.max_step_s,
+                                 self._pole[idx])
+        out = x1[:, 0]
+        out[~ok] = np.nan
+        return out
 
     def covariance(self, index: ArrayLike, t: ArrayLike) -> Array:
         """Covariances (M, 6, 6) of objects ``index`` carried to epochs ``t`` by the STM.
