@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 import pytest
+from planted_conjunctions import T0, planted
 
 from ssa_fusion.core.base.constants import MU_EARTH, R_EARTH
 from ssa_fusion.core.conjunction import apsides
@@ -23,7 +24,6 @@ from ssa_fusion.evaluation.screening_reference import brute_force_approaches, ma
 from ssa_fusion.formats.element_sets import read_catalog
 from ssa_fusion.sim import survey
 
-T0 = 1.7536e9  # 2025-07-28
 REAL = "config/catalogs/celestrak_active_2025-07.tle"
 
 
@@ -101,35 +101,9 @@ def test_radial_bands_hold_the_osculating_apsides():
     assert meet.tolist() == [True, False]
 
 
-def _planted(seed: int, n_background: int, n_pairs: int, span_s: float) -> StateEphemeris:
-    """A LEO catalog with pairs planted to pass within ~0-14 km of each other (J2)."""
-    rng = np.random.default_rng(seed)
-    states, epochs = [], []
-    for _ in range(n_background):
-        states.append(elements_to_state(R_EARTH + rng.uniform(400, 900), rng.uniform(0, 0.01),
-                                        rng.uniform(0, math.pi), *rng.uniform(0, 2 * math.pi, 3)))
-        epochs.append(T0)
-    for _ in range(n_pairs):
-        tc = T0 + rng.uniform(0.05, 0.95) * span_s
-        a = elements_to_state(R_EARTH + rng.uniform(400, 900), rng.uniform(0, 0.01),
-                              rng.uniform(0, math.pi), *rng.uniform(0, 2 * math.pi, 3))
-        r_hat = a[:3] / np.linalg.norm(a[:3])
-        th = math.radians(rng.choice([rng.uniform(0.5, 5.0), rng.uniform(5.0, 175.0)]))
-        v = a[3:] * math.cos(th) + np.cross(r_hat, a[3:]) * math.sin(th)  # turned about r
-        offset = rng.normal(size=3)
-        b = np.r_[a[:3] + offset / np.linalg.norm(offset) * rng.uniform(0.0, 14.0),
-                  v * (1 + rng.uniform(-0.01, 0.01))]
-        states += [a, b]
-        epochs += [tc, tc]
-    ids = [str(k) for k in range(len(states))]
-    back = StateEphemeris(ids, states, epochs, model="j2")
-    x0 = back.exact(np.arange(len(ids)), np.full(len(ids), T0))
-    return StateEphemeris(ids, x0, np.full(len(ids), T0), model="j2")
-
-
 def test_recall_is_complete_against_brute_force_on_a_planted_catalog():
     span, d = 86400.0, 10.0
-    eph = _planted(seed=3, n_background=120, n_pairs=40, span_s=span)
+    eph = planted(seed=3, n_background=120, n_pairs=40, span_s=span)
     ref = brute_force_approaches(eph, T0, T0 + span, d, step_s=10.0)
     found = screen(eph, T0, T0 + span, ScreeningConfig(distance_km=d))
     m = match(found, ref)
@@ -159,7 +133,7 @@ def test_recall_is_complete_on_sgp4_element_sets_in_crowded_shells():
 
 def test_primaries_chunks_and_threads_give_the_same_approaches():
     span, d = 43200.0, 10.0
-    eph = _planted(seed=5, n_background=60, n_pairs=25, span_s=span)
+    eph = planted(seed=5, n_background=60, n_pairs=25, span_s=span)
     full = screen(eph, T0, T0 + span, ScreeningConfig(distance_km=d))
     assert len(full) >= 10
     other = screen(eph, T0, T0 + span, ScreeningConfig(distance_km=d, chunk_nodes=5,

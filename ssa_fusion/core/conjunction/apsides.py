@@ -23,7 +23,8 @@ from numpy.typing import ArrayLike, NDArray
 from ssa_fusion.core.base.constants import MU_EARTH
 from ssa_fusion.core.base.jit import jit
 
-__all__ = ["RadialBands", "bands_meet", "meet", "osculating_apsides", "radial_bands"]
+__all__ = ["RadialBands", "bands_meet", "meet", "meets_any", "osculating_apsides",
+           "radial_bands"]
 
 Array = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -114,4 +115,23 @@ def bands_meet(b1: tuple[ArrayLike, ArrayLike], b2: tuple[ArrayLike, ArrayLike],
     lo1, hi1 = (np.asarray(a, dtype=float) for a in b1)
     lo2, hi2 = (np.asarray(a, dtype=float) for a in b2)
     out: BoolArray = (lo2 <= hi1 + distance_km) & (lo1 <= hi2 + distance_km)
+    return out
+
+
+def meets_any(lo: ArrayLike, hi: ArrayLike, of: ArrayLike, distance_km: float) -> BoolArray:
+    """Return which bands ``[lo, hi]`` (N,) come within d km of one of the bands ``of`` (mask).
+
+    Sorted by their lower ends, the bands ``of`` that start low enough for a band are a
+    prefix: the band meets one of them when the highest upper end of that prefix reaches
+    it. O(N log N). NaN bands meet nothing.
+    """
+    lo_, hi_ = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    sel = np.asarray(of, dtype=np.bool_) & np.isfinite(lo_) & np.isfinite(hi_)
+    order = np.argsort(lo_[sel])
+    starts = lo_[sel][order]
+    top = np.maximum.accumulate(hi_[sel][order]) if starts.size else np.zeros(0)
+    with np.errstate(invalid="ignore"):
+        k = np.searchsorted(starts, hi_ + distance_km, side="right")
+        reach = np.where(k > 0, top[np.maximum(k - 1, 0)] if top.size else -np.inf, -np.inf)
+        out: BoolArray = reach >= lo_ - distance_km
     return out

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ssa_fusion.core.base.jit import f64, jit, jit_nogil
-from ssa_fusion.core.conjunction.apsides import meet
+from ssa_fusion.core.conjunction.apsides import meet, meets_any
 from ssa_fusion.core.conjunction.hermite import (
     NodeTable,
     Weights,
@@ -328,18 +328,14 @@ def _sieve_kernel(nodes: Array, q0: int, m: int, s0: int, s1: int, h: float, cel
 def near_primaries(limits: PairLimits, distance_km: float) -> BoolArray:
     """Return which objects have a state and a radial band meeting some primary's (N,).
 
-    Within ``distance_km``: the objects a re-screening of the primaries must bin (the
-    others cannot pass the test with any of them).
+    Within ``distance_km`` (`apsides.meets_any`): the objects a re-screening of the
+    primaries must bin (the others cannot pass the test with any of them).
     """
     live: BoolArray = np.isfinite(limits.lo) & (limits.hi >= limits.lo)
     p = live & limits.primary
-    if p.all() or not p.any():
-        return live & p.any()
-    order = np.argsort(limits.lo[p])
-    plo, phi = limits.lo[p][order], np.maximum.accumulate(limits.hi[p][order])
-    k = np.searchsorted(plo, limits.hi + distance_km, side="right")  # primaries low enough
-    reach = np.where(k > 0, phi[np.maximum(k - 1, 0)], -np.inf)
-    out: BoolArray = live & (reach >= limits.lo - distance_km)
+    if p.all():
+        return live
+    out: BoolArray = live & meets_any(limits.lo, limits.hi, p, distance_km)
     return out
 
 
