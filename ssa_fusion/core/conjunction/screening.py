@@ -43,6 +43,7 @@ __all__ = ["ScreeningConfig", "screen"]
 
 Array = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+IntArray = NDArray[np.int64]
 
 ACCEL_MARGIN = 1.01
 """Largest acceleration over the two-body one at the smallest radius (J2 adds < 0.5 %)."""
@@ -158,13 +159,24 @@ def _primaries(n: int, primaries: ArrayLike | None) -> BoolArray:
     return mask
 
 
+def _once(i: IntArray, j: IntArray, t: Array) -> IntArray:
+    """Return the rows of pairs' epochs without repeats (one pair within `SAME_APPROACH_S`).
+
+    By pair, then epoch.
+    """
+    order = np.lexsort((t, j, i))
+    i, j, t = i[order], j[order], t[order]
+    keep = np.ones(order.size, dtype=np.bool_)
+    keep[1:] = (i[1:] != i[:-1]) | (j[1:] != j[:-1]) | (np.diff(t) > SAME_APPROACH_S)
+    out: IntArray = order[keep]
+    return out
+
+
 def _unique(found: CloseApproaches) -> CloseApproaches:
-    """Return the approaches once each (one pair within `SAME_APPROACH_S`), by TCA."""
-    f = found.take(np.lexsort((found.tca, found.secondary, found.primary)))
-    keep = np.ones(len(f), dtype=np.bool_)
-    keep[1:] = ((f.primary[1:] != f.primary[:-1]) | (f.secondary[1:] != f.secondary[:-1])
-                | (np.diff(f.tca) > SAME_APPROACH_S))
-    return f.take(keep).sorted()
+    """Return the approaches once each (`_once`), by TCA (one copy of the rows)."""
+    rows = _once(found.primary, found.secondary, found.tca)
+    by_tca = np.lexsort((found.secondary[rows], found.primary[rows], found.tca[rows]))
+    return found.take(rows[by_tca])
 
 
 def screen(eph: Ephemeris, t_start: float, t_end: float,
@@ -214,13 +226,16 @@ def screen(eph: Ephemeris, t_start: float, t_end: float,
                            axis=1)
         kept_t, kept_x = np.asarray(t_nodes[-3:], dtype=float), x[:, -3:]
         roots = _chunk(np.ascontiguousarray(x), t_nodes, cfg, window, steps, primary)
+        roots = roots.take(_once(roots.i, roots.j, roots.t))  # a root from two hits once
         if eph.local_exact:
             parts.append(_polish(eph, roots, cfg, window))
         else:
             waiting.append(roots)
     if waiting:
         parts.append(_polish(eph, tca.Roots.concat(waiting), cfg, window))
-    found = _unique(CloseApproaches.concat(parts))
+    found = CloseApproaches.concat(parts)
+    parts.clear()  # one copy of the rows at a time
+    found = _unique(found)
     if isinstance(eph, StateEphemeris) and eph.p0 is not None:
         found = replace(found, p1=eph.covariance(found.primary, found.tca),
                         p2=eph.covariance(found.secondary, found.tca))
