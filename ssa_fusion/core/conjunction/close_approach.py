@@ -22,11 +22,14 @@ from numpy.typing import ArrayLike, NDArray
 from ssa_fusion.core.conjunction.encounter import relative_state_rtn
 from ssa_fusion.core.conjunction.probability import pc2d_batch
 
-__all__ = ["CloseApproaches"]
+__all__ = ["SAME_APPROACH_S", "ApproachBuffer", "CloseApproaches", "once"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
+
+SAME_APPROACH_S = 1e-3
+"""Two approaches of one pair closer than this in time are one, s."""
 
 
 @dataclass(frozen=True)
@@ -116,21 +119,71 @@ class CloseApproaches:
         return cls(tuple(object_ids), np.zeros(0, np.int64), np.zeros(0, np.int64),
                    np.zeros(0), np.zeros(0), np.zeros((0, 6)), np.zeros((0, 6)), cov, cov)
 
-    @classmethod
-    def concat(cls, parts: Sequence[CloseApproaches]) -> CloseApproaches:
-        """Return the rows of ``parts`` (same catalog) one after the other."""
-        if not parts:
-            raise ValueError("nothing to concatenate")
-        first = parts[0]
-        covs = all(p.p1 is not None and p.p2 is not None for p in parts)
 
-        def cat(name: str) -> NDArray[Any]:
-            return np.concatenate([getattr(p, name) for p in parts])
+def once(i: IntArray, j: IntArray, t: Array) -> IntArray:
+    """Return the rows of pairs' epochs without repeats (one pair within `SAME_APPROACH_S`).
 
-        return cls(first.object_ids, cat("primary"), cat("secondary"), cat("tca"),
-                   cat("miss_km"), cat("x1"), cat("x2"), cat("p1") if covs else None,
-                   cat("p2") if covs else None)
+    By pair, then epoch.
+    """
+    order = np.lexsort((t, j, i))
+    i, j, t = i[order], j[order], t[order]
+    keep = np.ones(order.size, dtype=np.bool_)
+    keep[1:] = (i[1:] != i[:-1]) | (j[1:] != j[:-1]) | (np.diff(t) > SAME_APPROACH_S)
+    out: IntArray = order[keep]
+    return out
 
-    def sorted(self) -> CloseApproaches:
-        """Return the approaches by TCA (ties: by primary, then secondary)."""
-        return self.take(np.lexsort((self.secondary, self.primary, self.tca)))
+
+class ApproachBuffer:
+    """Approaches gathered batch by batch with one copy of them in memory.
+
+    The rows are appended to arrays reserved ahead (`reserve`) or doubled when full;
+    `result` removes repeats (`once`) and sorts by TCA field by field (one field's
+    temporary at a time): ~144 B a row, 1.5 times that while a doubling copies.
+    """
+
+    _FIELDS = ("primary", "secondary", "tca", "miss_km", "x1", "x2")
+
+    def __init__(self, object_ids: Sequence[str]) -> None:
+        """Gather approaches of the catalog ``object_ids``."""
+        self.object_ids = tuple(object_ids)
+        self.n = 0
+        self._a: dict[str, NDArray[Any]] = {
+            "primary": np.zeros(0, np.int64), "secondary": np.zeros(0, np.int64),
+            "tca": np.zeros(0), "miss_km": np.zeros(0), "x1": np.zeros((0, 6)),
+            "x2": np.zeros((0, 6))}
+
+    def reserve(self, rows: int) -> None:
+        """Make room for ``rows`` rows in all (no copy when there is room already)."""
+        if rows > self._a["tca"].shape[0]:
+            for name, a in self._a.items():
+                grown = np.empty((rows, *a.shape[1:]), dtype=a.dtype)
+                grown[:self.n] = a[:self.n]
+                self._a[name] = grown
+
+    def add(self, i: IntArray, j: IntArray, tca: Array, miss_km: Array, x1: Array,
+            x2: Array) -> None:
+        """Append rows (M,) each (states (M, 6))."""
+        m = int(tca.size)
+        if self.n + m > self._a["tca"].shape[0]:
+            self.reserve(max(self.n + m, 2 * self._a["tca"].shape[0]))
+        for name, v in zip(self._FIELDS, (i, j, tca, miss_km, x1, x2), strict=True):
+            self._a[name][self.n:self.n + m] = v
+        self.n += m
+
+    def result(self) -> CloseApproaches:
+        """Return the approaches once each, by TCA (ties: primary, secondary).
+
+        The buffer is emptied.
+        """
+        a = {k: v[:self.n] for k, v in self._a.items()}
+        rows = once(a["primary"], a["secondary"], a["tca"])
+        order = rows[np.lexsort((a["secondary"][rows], a["primary"][rows], a["tca"][rows]))]
+        if order.size != self.n or np.any(np.diff(order) < 0):
+            for name in self._FIELDS:  # one field's temporary at a time
+                a[name] = a[name][order]
+                self._a[name] = np.zeros((0, *a[name].shape[1:]), a[name].dtype)
+        self.n = 0
+        out = CloseApproaches(self.object_ids, a["primary"], a["secondary"], a["tca"],
+                              a["miss_km"], a["x1"], a["x2"])
+        self._a = {k: np.zeros((0, *v.shape[1:]), v.dtype) for k, v in self._a.items()}
+        return out

@@ -35,7 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ssa_fusion.core.base.constants import MU_EARTH
 from ssa_fusion.core.conjunction import apsides, hermite, sieve, tca
-from ssa_fusion.core.conjunction.close_approach import CloseApproaches
+from ssa_fusion.core.conjunction.close_approach import ApproachBuffer, CloseApproaches, once
 from ssa_fusion.core.conjunction.ephemeris import Ephemeris, StateEphemeris
 from ssa_fusion.core.earth.frames import cip_gcrs
 
@@ -51,8 +51,6 @@ ACCEL_MARGIN = 1.01
 POLISH_BATCH = 1 << 20
 """Roots moved to the ephemeris's trajectories at a time (`_polish`)."""
 
-SAME_APPROACH_S = 1e-3
-"""Two roots of one pair closer than this in time are one approach, s."""
 
 
 @dataclass(frozen=True)
@@ -129,22 +127,20 @@ def _chunk(nodes_x: Array, t_nodes: Array, config: ScreeningConfig,
 
 
 def _polish(eph: Ephemeris, roots: tca.Roots, config: ScreeningConfig,
-            window: tuple[float, float]) -> CloseApproaches:
-    """Return the roots moved to the ephemeris's trajectories that are approaches.
+            window: tuple[float, float], out: ApproachBuffer) -> None:
+    """Move roots to the ephemeris's trajectories; add those that are approaches to ``out``.
 
-    In the window and within the screening distance; not sorted, one approach perhaps
-    twice (from two hits). `POLISH_BATCH` roots at a time (memory ~1 kB a root).
+    In the window and within the screening distance. `POLISH_BATCH` roots at a time
+    (memory ~1 kB a root).
     """
-    parts = [CloseApproaches.empty(eph.object_ids)]
+    out.reserve(out.n + roots.t.size)
     for a in range(0, roots.t.size, POLISH_BATCH):
         part = roots.take(slice(a, a + POLISH_BATCH))
         t, xi, xj = tca.newton_tca(eph, part, config.fine_step_s, config.newton_iterations)
         miss = np.linalg.norm(xj[:, :3] - xi[:, :3], axis=1)
         with np.errstate(invalid="ignore"):
             keep = (t >= window[0]) & (t <= window[1]) & (miss <= config.distance_km)
-        parts.append(CloseApproaches(eph.object_ids, part.i[keep], part.j[keep], t[keep],
-                                     miss[keep], xi[keep], xj[keep]))
-    return CloseApproaches.concat(parts)
+        out.add(part.i[keep], part.j[keep], t[keep], miss[keep], xi[keep], xj[keep])
 
 
 def _primaries(n: int, primaries: ArrayLike | None) -> BoolArray:
@@ -157,26 +153,6 @@ def _primaries(n: int, primaries: ArrayLike | None) -> BoolArray:
     mask = np.zeros(n, dtype=np.bool_)
     mask[p.astype(np.int64)] = True
     return mask
-
-
-def _once(i: IntArray, j: IntArray, t: Array) -> IntArray:
-    """Return the rows of pairs' epochs without repeats (one pair within `SAME_APPROACH_S`).
-
-    By pair, then epoch.
-    """
-    order = np.lexsort((t, j, i))
-    i, j, t = i[order], j[order], t[order]
-    keep = np.ones(order.size, dtype=np.bool_)
-    keep[1:] = (i[1:] != i[:-1]) | (j[1:] != j[:-1]) | (np.diff(t) > SAME_APPROACH_S)
-    out: IntArray = order[keep]
-    return out
-
-
-def _unique(found: CloseApproaches) -> CloseApproaches:
-    """Return the approaches once each (`_once`), by TCA (one copy of the rows)."""
-    rows = _once(found.primary, found.secondary, found.tca)
-    by_tca = np.lexsort((found.secondary[rows], found.primary[rows], found.tca[rows]))
-    return found.take(rows[by_tca])
 
 
 def screen(eph: Ephemeris, t_start: float, t_end: float,
@@ -212,7 +188,7 @@ def screen(eph: Ephemeris, t_start: float, t_end: float,
     big_h, m, c = cfg.node_step_s, cfg.fine_steps, cfg.chunk_nodes
     n_fine = math.ceil((t_end - t_start) / cfg.fine_step_s) + 1  # the last >= t_end
     window = (t_start, t_end)
-    parts = [CloseApproaches.empty(eph.object_ids)]
+    found = ApproachBuffer(eph.object_ids)
     waiting: list[tca.Roots] = []
     kept_t: Array = np.zeros(0)
     kept_x: Array = np.zeros((len(eph.object_ids), 0, 6))
@@ -226,17 +202,15 @@ def screen(eph: Ephemeris, t_start: float, t_end: float,
                            axis=1)
         kept_t, kept_x = np.asarray(t_nodes[-3:], dtype=float), x[:, -3:]
         roots = _chunk(np.ascontiguousarray(x), t_nodes, cfg, window, steps, primary)
-        roots = roots.take(_once(roots.i, roots.j, roots.t))  # a root from two hits once
+        roots = roots.take(once(roots.i, roots.j, roots.t))  # a root from two hits once
         if eph.local_exact:
-            parts.append(_polish(eph, roots, cfg, window))
+            _polish(eph, roots, cfg, window, found)
         else:
             waiting.append(roots)
     if waiting:
-        parts.append(_polish(eph, tca.Roots.concat(waiting), cfg, window))
-    found = CloseApproaches.concat(parts)
-    parts.clear()  # one copy of the rows at a time
-    found = _unique(found)
+        _polish(eph, tca.Roots.concat(waiting), cfg, window, found)
+    out = found.result()
     if isinstance(eph, StateEphemeris) and eph.p0 is not None:
-        found = replace(found, p1=eph.covariance(found.primary, found.tca),
-                        p2=eph.covariance(found.secondary, found.tca))
-    return found
+        out = replace(out, p1=eph.covariance(out.primary, out.tca),
+                      p2=eph.covariance(out.secondary, out.tca))
+    return out
