@@ -39,6 +39,7 @@ setup(
             "foxglove_bridge = ssa_fusion.nodes.entry:foxglove_bridge",
             "catalog_filter = ssa_fusion.nodes.entry:catalog_filter",
             "catalog_surrogate = ssa_fusion.nodes.entry:catalog_surrogate",
+            "conjunction = ssa_fusion.nodes.entry:conjunction",
         ],
     },
 )

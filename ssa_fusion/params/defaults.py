@@ -190,6 +190,25 @@ class CatalogSurrogateDefaults:
     max_objects: int = MAX_OBJECTS
 
 
+@dataclass(frozen=True)
+class ConjunctionDefaults:
+    """conjunction's defaults: the catalog's estimates re-screened (`core.conjunction.watch`).
+
+    Approaches within 5 km over the next day, re-screened every 10 sim min for the objects
+    whose estimates changed; a 20 m combined hard-body radius (CARA's default); CDMs of the
+    approaches with Pc >= 1e-7 when ``cdm_dir`` names a directory.
+    """
+
+    distance: float = 5000.0
+    horizon: float = DAY_S
+    rescreen_period: float = 600.0
+    hard_body_radius: float = 20.0
+    motion_model: str = "j2"
+    cdm_dir: str = ""
+    cdm_min_pc: float = 1e-7
+    max_clock_lead: float = MAX_CLOCK_LEAD_S
+
+
 BAG_PATTERN = "out/bags/ssa_%Y%m%d_%H%M%S"
 """`time.strftime` pattern of the recorder's default bag directory (start time), under the
 working directory's ``out/`` (never the repository's tracked ``bags/``)."""
@@ -230,6 +249,7 @@ FILTER = FilterDefaults()
 RECORDER = RecorderDefaults()
 CATALOG_FILTER = CatalogFilterDefaults()
 CATALOG_SURROGATE = CatalogSurrogateDefaults()
+CONJUNCTION = ConjunctionDefaults()
 FOXGLOVE_BRIDGE = FoxgloveBridgeDefaults()
 
 NODES = {"sensor_sim": SENSOR_SIM, "surrogate": SURROGATE, "filter": FILTER,

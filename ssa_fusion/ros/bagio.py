@@ -47,12 +47,14 @@ if TYPE_CHECKING:
 
 ROS_DISTRO = "kilted"
 MSG_PACKAGE = "ssa_fusion_msgs"
-MSG_TYPES = ("Measurement", "StateEstimate", "MeasurementBatch", "EstimateBatch", "Meteo")
+MSG_TYPES = ("Measurement", "StateEstimate", "MeasurementBatch", "EstimateBatch", "Meteo",
+             "ConjunctionBatch")
 MEASUREMENT = f"{MSG_PACKAGE}/msg/Measurement"
 STATE_ESTIMATE = f"{MSG_PACKAGE}/msg/StateEstimate"
 MEASUREMENT_BATCH = f"{MSG_PACKAGE}/msg/MeasurementBatch"
 ESTIMATE_BATCH = f"{MSG_PACKAGE}/msg/EstimateBatch"
 METEO = f"{MSG_PACKAGE}/msg/Meteo"
+CONJUNCTION_BATCH = f"{MSG_PACKAGE}/msg/ConjunctionBatch"
 
 
 class BagError(RuntimeError):
@@ -124,7 +126,8 @@ def rosbags_classes() -> MsgClasses:
                       t[f"{MSG_PACKAGE}/msg/Measurement"], t[f"{MSG_PACKAGE}/msg/StateEstimate"],
                       t[f"{MSG_PACKAGE}/msg/MeasurementBatch"],
                       t[f"{MSG_PACKAGE}/msg/EstimateBatch"], numpy_arrays=True,
-                      meteo=t[f"{MSG_PACKAGE}/msg/Meteo"])
+                      meteo=t[f"{MSG_PACKAGE}/msg/Meteo"],
+                      conjunction_batch=t[CONJUNCTION_BATCH])
 
 
 class BagFullError(OSError):

@@ -37,6 +37,9 @@ their laser ranges (`ssa-fusion import crd`)."""
 TOPIC_REFERENCE = "/ssa/reference"
 """For evaluation only, never fused: an independent orbit of the object (StateEstimate,
 GCRF, zero covariance), e.g. a CPF prediction (`ssa-fusion import crd --reference`)."""
+TOPIC_CONJUNCTIONS = "/ssa/conjunctions"
+"""Close approaches of a catalog (ssa_fusion_msgs/ConjunctionBatch): each re-screening of
+the objects whose estimates changed (the conjunction node)."""
 TOPIC_DIAGNOSTICS = "/diagnostics"
 TOPIC_CONFIG = "/ssa/config"
 """The estimator settings in effect (std_msgs/String, JSON of `params.settings.config_message`),

@@ -74,12 +74,18 @@ class WatchUpdate:
         The 2D Pc of each, as its log10.
     window : (float, float)
         The window screened, Unix s.
+    distance_km : float
+        The screening distance, km.
+    hbr_km : float
+        The combined hard-body radius of the Pc, km.
     """
 
     screened: list[str]
     approaches: CloseApproaches
     log10_pc: Array
     window: tuple[float, float]
+    distance_km: float
+    hbr_km: float
 
 
 class ConjunctionWatch:
@@ -158,12 +164,13 @@ class ConjunctionWatch:
         changed = np.zeros(n, dtype=np.bool_)
         changed[list(self._changed)] = True
         self._changed.clear()
+        d, hbr = self.config.screening.distance_km, self.config.hbr_km
         if not changed.any():
             return WatchUpdate([], CloseApproaches.empty(ids, covariances=True), np.zeros(0),
-                               window)
+                               window, d, hbr)
         use = np.flatnonzero(self._near(changed))
         eph = StateEphemeris([ids[k] for k in use], self._x[use], self._t[use],
                              self.config.model, covariance=self._p[use])
         found = screen(eph, *window, self.config.screening, primaries=changed[use])
         return WatchUpdate([ids[k] for k in np.flatnonzero(changed)], found,
-                           found.log10_pc(self.config.hbr_km), window)
+                           found.log10_pc(hbr), window, d, hbr)

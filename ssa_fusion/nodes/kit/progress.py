@@ -56,6 +56,8 @@ TAKEN = "taken"
 """A filter shard's measurements with a final fate: fused, refused or dropped."""
 TAKEN_ESTIMATES = "taken estimates"
 """A surrogate shard's filter estimates taken (used or refused)."""
+TAKEN_ALL_ESTIMATES = "taken all estimates"
+"""The conjunction node's estimates taken, of every filter shard (used or refused)."""
 SHARD = "shard"
 """A filter or surrogate shard's place, ``k/K``."""
 CLOCK = "clock ns"
@@ -127,7 +129,8 @@ def waiting(reports: Mapping[str, Mapping[str, str]], nodes: Sequence[str], sent
     nodes : sequence of str
         The consumers to wait for: catalog_filter shards (they report `TAKEN`, `SHARD` and
         ``published_sensor``), catalog_surrogate shards (`TAKEN_ESTIMATES`, `SHARD`, the
-        filter shard's estimates they wait for, and ``published_forecast``) and the recorder
+        filter shard's estimates they wait for, and ``published_forecast``), the conjunction
+        node (`TAKEN_ALL_ESTIMATES`: every filter shard's estimates) and the recorder
         (`RECORDED_MEASUREMENTS` and `RECORDED_ESTIMATES`, always both; `RECORDED_TRUTH`, as
         many as the measurements, and `RECORDED_ASSOCIATED`, the filters'
         ``published_associated``, where it reports them).
@@ -161,6 +164,9 @@ def waiting(reports: Mapping[str, Mapping[str, str]], nodes: Sequence[str], sent
             want = estimates.get(r[SHARD], 0)
             if _num(r, TAKEN_ESTIMATES) < want:
                 out.append(f"{name} (taken {_num(r, TAKEN_ESTIMATES)} of {want} estimates)")
+        if TAKEN_ALL_ESTIMATES in r and _num(r, TAKEN_ALL_ESTIMATES) < sum(estimates.values()):
+            out.append(f"{name} (taken {_num(r, TAKEN_ALL_ESTIMATES)} of "
+                       f"{sum(estimates.values())} estimates)")
         if RECORDED_MEASUREMENTS in r or RECORDED_ESTIMATES in r:
             if _num(r, RECORDED_MEASUREMENTS) < sent:
                 out.append(f"{name} (recorded {_num(r, RECORDED_MEASUREMENTS)} of {sent} "
