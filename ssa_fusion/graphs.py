@@ -25,6 +25,7 @@ from ssa_fusion.params.defaults import BAG_PATTERN
 from ssa_fusion.ros.readiness import OUTPUT, READERS
 from ssa_fusion.ros.topics import (
     TOPIC_ASSOCIATED,
+    TOPIC_CONJUNCTIONS,
     TOPIC_DETECTION_TRUTH,
     TOPIC_ESTIMATE_BATCH,
     TOPIC_MEASUREMENT_BATCH,
@@ -161,7 +162,8 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
                   sim_s: float, time_scale: float, seed: int, shards: int, surrogate: bool,
                   surrogate_extra: dict[str, Any], bag: Path | None,
                   start: str = "", lockstep: bool = True,
-                  unlabelled: bool = False) -> list[NodeSpec]:
+                  unlabelled: bool = False,
+                  conjunctions: Path | None = None) -> list[NodeSpec]:
     """Return the processes of a catalog run, in start order.
 
     The recorder (`bag`, None: its default), `shards` catalog_filter and, with `surrogate`,
@@ -179,6 +181,8 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     associated on ``/ssa/measurement_associated``: the recorder hears both. ValueError
     with one line for a `start` that is not an epoch ssa_fusion represents, or for
     `unlabelled` with several `shards` (detections without ids have no shard to go to).
+    With `conjunctions` (a directory: its CDMs), the conjunction node re-screens the
+    shards' estimates (in the lockstep; the recorder hears its ``/ssa/conjunctions``).
     """
     if start:
         timescales.parse_utc(start)
@@ -197,6 +201,9 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
                *(f"{n}:{TOPIC_ESTIMATE_BATCH}={len(names) + len(gaps)}" for n in gaps),
                # and their side of it: the recorder and every surrogate hear each of them
                *(f"{n}:{OUTPUT}{TOPIC_ESTIMATE_BATCH}={1 + len(gaps)}" for n in [*names, *gaps])]
+    watch = ["conjunction"] if conjunctions is not None else []
+    readers += [*(f"{n}:{TOPIC_ESTIMATE_BATCH}={len(names) + len(gaps)}" for n in watch),
+                *(f"{n}:{OUTPUT}{TOPIC_CONJUNCTIONS}" for n in watch)]
     if unlabelled:
         readers += [f"recorder:{TOPIC_DETECTION_TRUTH}", f"recorder:{TOPIC_ASSOCIATED}={shards}",
                     *(f"{n}:{OUTPUT}{TOPIC_ASSOCIATED}" for n in names)]
@@ -216,12 +223,14 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
                                             **surrogate_extra, "use_sim_time": True,
                                             "shards": shards, "shard": k})
           for k, n in enumerate(gaps)),
+        *(NodeSpec("conjunction", n, {"use_sim_time": True, "cdm_dir": str(conjunctions)})
+          for n in watch),
         NodeSpec("sensor_sim", "sensor_sim", {
             "scenario": scenario.name, "catalog": str(Path(catalog).resolve()),
             "objects": objects, "synthetic": synthetic, "duration": float(sim_s),
             "time_scale": min(float(time_scale), MAX_TIME_SCALE), "seed": seed,
             "start": start, **own, "shards": shards, "unlabelled": unlabelled,
-            "lockstep": [*names, *gaps, "recorder"] if lockstep else [""],
+            "lockstep": [*names, *gaps, *watch, "recorder"] if lockstep else [""],
             "wait_for": [f"{TOPIC_MEASUREMENT_BATCH}={shards + 1}",
                          f"{TOPIC_ESTIMATE_BATCH}={len(gaps) + 1}"],
             "wait_for_readers": readers}),

@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING, Any, TypedDict
 import numpy as np
 
 from ssa_fusion import graphs
-from ssa_fusion.apps import runs
+from ssa_fusion.apps import conjunction_table, runs
 from ssa_fusion.apps.args import discovery
 from ssa_fusion.apps.progress_lines import ProgressLines
 from ssa_fusion.core.base.rows import MeasurementRows
@@ -104,6 +104,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="catalog: the radars report detections without object ids; the "
                         "filter associates them into tracks (needs --shards 1; "
                         "docs/ASSOCIATION.md)")
+    p.add_argument("--conjunctions", action="store_true",
+                   help="catalog: a conjunction node re-screens the estimates for close "
+                        "approaches (/ssa/conjunctions; CDMs in the run's conjunctions/; "
+                        "docs/CONJUNCTIONS.md)")
     p.add_argument("--surrogate-param", action="append", default=[], metavar="NAME=VALUE",
                    help="catalog: a catalog_surrogate parameter (e.g. min_span=21600), "
                         "repeatable")
@@ -329,10 +333,11 @@ def run(args: argparse.Namespace) -> int:
         return 2
     out, bag = dirs
     sim_s = args.duration * 3600.0 or s.duration_s
+    conj = out / "conjunctions" if getattr(args, "conjunctions", False) else None
     specs = graphs.catalog_graph(s, args.catalog, args.objects, args.synthetic, sim_s,
                           args.time_scale, args.seed, args.shards, args.surrogate,
                           catalog_surrogate_params(args), bag, args.start, args.lockstep,
-                          unlabelled)
+                          unlabelled, conj)
     names = [n.name for n in specs if n.executable == "catalog_filter"]
     gaps = [n.name for n in specs if n.executable == "catalog_surrogate"]
     remote = getattr(args, "remote_shards", ())
@@ -403,9 +408,25 @@ def run(args: argparse.Namespace) -> int:
                     "lockstep": args.lockstep,
                     "shards": args.shards, "wall_s": wall, "unlabelled": unlabelled,
                     "remote_nodes": [n.name for n in specs if is_remote(n, remote)]})
+    if conj is not None:
+        summary["conjunctions"] = conjunction_summary(bag, _statuses(diagnostics), conj)
     (out / "catalog.json").write_text(json.dumps(summary, indent=2))
     print(table(summary))
+    if conj is not None:
+        print(conjunction_table.table(conjunction_table.latest(bag)))
     return 0 if summary["lost_measurements"] == 0 else 1
+
+
+def conjunction_summary(bag: Path, status: dict[str, dict[str, str]],
+                        cdm_dir: Path) -> dict[str, Any]:
+    """Return the conjunction node's accounting: its counters, the bag's batches, the CDMs."""
+    mine = status.get("conjunction", {})
+    standing = conjunction_table.latest(bag)
+    return {"received": int(mine.get("received", 0)),
+            "rescreenings": int(mine.get("rescreenings", 0)),
+            "approaches_published": int(mine.get("approaches", 0)),
+            "batches_recorded": standing.batches, "approaches_standing": len(standing.rows),
+            "cdms": len(list(cdm_dir.glob("*.cdm"))), "cdm_dir": str(cdm_dir)}
 
 
 class ShardSummary(TypedDict):

@@ -24,7 +24,9 @@ measurements against one track; this one never mixes objects
 Written: ``report.json`` (summary, settings, association, the worst objects),
 ``objects.csv`` (every object, one line each) and ``report.html`` (the summary and the worst
 objects as tables: bounded whatever the catalog's size). The catalog surrogates' gap
-forecasts (update source FORECAST) are counted, not scored.
+forecasts (update source FORECAST) are counted, not scored. A run with the conjunction node
+also gets its table of close approaches (`conjunction_table`: the most likely printed,
+every one in ``conjunctions.csv``).
 """
 
 from __future__ import annotations
@@ -41,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from ssa_fusion.apps import replay_catalog
+from ssa_fusion.apps import conjunction_table, replay_catalog
 from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
 from ssa_fusion.core.base.types import Kind, Source, StateEstimate, UpdateSource
 from ssa_fusion.core.catalog.batch_ekf import BatchEKF
@@ -381,4 +383,9 @@ def run(args: argparse.Namespace, telling: list[bagio.BagMessage], reason: str,
     print(f"{args.bag} is a catalog's bag ({reason}): each object scored on its own rows\n")
     print(table(rep))
     print(f"\nwrote {out}/report.json, {out}/objects.csv (every object) and {out}/report.html")
+    conj = conjunction_table.latest(args.bag)
+    if conj.batches:  # a run with the conjunction node
+        conjunction_table.write_csv(conj, out / "conjunctions.csv")
+        print("\n" + conjunction_table.table(conj)
+              + f"\nwrote {out}/conjunctions.csv (every approach)")
     return 0
