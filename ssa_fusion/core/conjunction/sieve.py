@@ -1,11 +1,14 @@
 """Which pairs of a catalog may come close, epoch by epoch: a spatial grid, compiled.
 
 At each epoch ``t_s`` of a fine grid (spacing h) every object's state is interpolated
-(`hermite`) and binned in a grid of cubic cells; a pair is tested only when one object lies
-in one of the 8 cells nearest the other (the cells are twice the largest distance a pair can
-be apart at ``t_s`` and still pass the test below: then the other object is in one of
-those 8). The test, per pair (i, j) at ``t_s``, with ``dr``, ``dv`` the interpolated
-relative position and velocity::
+(`hermite`) and binned in a grid of cubic cells as large as the farthest two objects can be
+apart at ``t_s`` and still pass the test below, so that a pair that may pass lies in one
+cell or two neighbouring ones: each object looks at its own cell and its 13 "forward"
+neighbours (all 27 when only some objects are primaries). Cells are hashed into buckets
+(each index modulo a power of 2, packed: neighbours land in nearby buckets), the objects
+sorted by bucket with their states in float32 for the first checks, a bitmap of used
+buckets looked at first. The test, per pair (i, j) at ``t_s``, with ``dr``, ``dv`` the
+interpolated relative position and velocity::
 
     min over |tau| <= h/2 of |dr + dv tau|  <=  D + e_i + e_j + (ev_i + ev_j) h/2
                                                  + (h²/8) (a_i + a_j)
