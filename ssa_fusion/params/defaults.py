@@ -194,14 +194,14 @@ class CatalogSurrogateDefaults:
 class ConjunctionDefaults:
     """conjunction's defaults: the catalog's estimates re-screened (`core.conjunction.watch`).
 
-    Approaches within 5 km over the next day, re-screened every 10 sim min for the objects
+    Approaches within 5 km over the next day, re-screened every sim hour for the objects
     whose estimates changed; a 20 m combined hard-body radius (CARA's default); CDMs of the
     approaches with Pc >= 1e-7 when ``cdm_dir`` names a directory.
     """
 
     distance: float = 5000.0
     horizon: float = DAY_S
-    rescreen_period: float = 600.0
+    rescreen_period: float = 3600.0
     hard_body_radius: float = 20.0
     motion_model: str = "j2"
     cdm_dir: str = ""
