@@ -12,8 +12,10 @@ their approaches closer than `distance`: TCA, miss, RTN relative state, both sta
 covariances, the 2D Pc of Foster with `hard_body_radius`). With `cdm_dir` it writes a CCSDS
 CDM (KVN) of every approach whose Pc is at least `cdm_min_pc` (`formats.ccsds.cdm_out`).
 
-In lockstep it reports on ``/lockstep`` the estimates it took (`TAKEN_ALL_ESTIMATES`) and the
-sim time it last acted on: the simulator's next step waits for its re-screenings.
+A re-screening runs in a thread of its own: the node keeps taking estimates and ends at a
+signal meanwhile. In lockstep it reports on ``/lockstep`` the estimates it took
+(`TAKEN_ALL_ESTIMATES`) and the sim time it last acted on (a re-screening's start until it is
+published): the simulator's next step waits for its re-screenings.
 
     ros2 run ssa_fusion conjunction --ros-args -p use_sim_time:=true -p cdm_dir:=out/cdm
 """
@@ -21,6 +23,7 @@ sim time it last acted on: the simulator's next step waits for its re-screenings
 from __future__ import annotations
 
 import math
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +31,12 @@ import numpy as np
 from ssa_fusion.core.base.types import Cause, MotionModel, UpdateSource
 from ssa_fusion.core.conjunction.probability import collision_probability
 from ssa_fusion.core.conjunction.screening import ScreeningConfig
-from ssa_fusion.core.conjunction.watch import ConjunctionWatch, WatchConfig, WatchUpdate
+from ssa_fusion.core.conjunction.watch import (
+    ConjunctionWatch,
+    Rescreening,
+    WatchConfig,
+    WatchUpdate,
+)
 from ssa_fusion.core.earth.timescales import iso
 from ssa_fusion.core.measure.validation import states_problems
 from ssa_fusion.formats.ccsds.cdm_out import Conjunction, write_cdm
@@ -86,16 +94,20 @@ class ConjunctionNode(SsaNode):
             self.diag.count(NodeCause.CONTENT_FILTER_UNAVAILABLE,
                             "the DDS implementation does not filter by content: every "
                             "estimate arrives and the forecasts are ignored here")
+        self.job: threading.Thread | None = None  # the re-screening running
+        self.done: tuple[WatchUpdate, float] | None = None  # its result, not yet published
+        self.cdms = 0  # CDMs written (by the re-screening's thread)
         self.taken = 0  # SENSOR estimate rows arrived (used or refused): lockstep progress
         self.next_s = -math.inf  # sim time of the next re-screening
         self.stepped_ns = 0  # the sim time (ns) acted on last: lockstep
         self.wall_timer(TICK_S, self.tick)
         self.progress = ProgressReporter(self, lambda: {TAKEN_ALL_ESTIMATES: self.taken},
                                          clock=lambda: self.stepped_ns)
+        self.diag.counts[CDMS] = 0
         self.reset_on_backward_jump(self.reset, "every estimate and approach forgotten")
 
     def reset(self) -> None:
-        """Forget every estimate."""
+        """Forget every estimate (a re-screening running is published when it ends)."""
         self.watch = ConjunctionWatch(self.config)
         self.next_s = -math.inf
 
@@ -124,26 +136,54 @@ class ConjunctionNode(SsaNode):
         self.watch.update([rows.object_id[k] for k in ok], rows.t[ok], rows.x[ok], rows.P[ok])
 
     def tick(self) -> None:
-        """Re-screen what changed when one is due at the clock; then report the clock."""
+        """Start the re-screening due at the clock; publish a finished one; report the clock.
+
+        A re-screening runs in a thread of its own (the node keeps taking estimates and
+        answering signals meanwhile); the clock reported for lockstep stays at the epoch it
+        started from until it is published.
+        """
         now_ns = int(self.get_clock().now().nanoseconds)
-        now = now_ns * 1e-9
-        if now_ns and now >= self.next_s and self.watch.pending:  # once /clock runs
-            self.publish(self.watch.rescreen(now), now)
+        if self.job is not None:
+            if self.job.is_alive():
+                return
+            self.job = None
+            if self.done is not None:
+                update, at = self.done
+                self.done = None
+                self.publish(update, at)
+        elif now_ns and now_ns * 1e-9 >= self.next_s and self.watch.pending:  # /clock runs
+            now = now_ns * 1e-9
             self.next_s = now + self.params.number("rescreen_period")
+            self.start(self.watch.snapshot(now), now)
+            self.stepped_ns = now_ns
+            return
         self.stepped_ns = now_ns
         self.diag.status["objects"] = str(self.watch.objects)
         self.diag.status["pending"] = str(self.watch.pending)
 
+    def start(self, job: Rescreening, now: float) -> None:
+        """Run `job` and its CDMs in a daemon thread (the process may end while it runs)."""
+        def work() -> None:
+            update = job.run()
+            self.write_cdms(update)
+            self.done = (update, now)
+
+        self.job = threading.Thread(target=self.diag.guard(work), name="rescreening",
+                                    daemon=True)
+        self.job.start()
+
     def publish(self, update: WatchUpdate, now: float) -> None:
-        """Publish a re-screening and write the CDMs of its likely approaches."""
+        """Publish a re-screening."""
         self.pub.publish(messages.conjunction_batch_to_msg(update, now))
         self.diag.counts[RESCREENINGS] += 1
         self.diag.counts[APPROACHES] += len(update.approaches)
-        if self.cdm_dir is not None:
-            self.write_cdms(update)
+        self.diag.counts[CDMS] = self.cdms
 
     def write_cdms(self, update: WatchUpdate) -> None:
-        """Write a CDM of every approach of `update` whose Pc is at least ``cdm_min_pc``."""
+        """Write a CDM of every approach of `update` whose Pc is at least ``cdm_min_pc``.
+
+        Nothing without ``cdm_dir``.
+        """
         a = update.approaches
         floor = self.params.number("cdm_min_pc")
         if a.p1 is None or a.p2 is None or self.cdm_dir is None:
@@ -156,7 +196,7 @@ class ConjunctionNode(SsaNode):
             write_cdm(Conjunction(float(a.tca[k]), a.x1[k], a.x2[k], a.p1[k], a.p2[k],
                                   update.hbr_km, result, ids, message_id=message_id),
                       self.cdm_dir / f"{message_id}.cdm")
-            self.diag.counts[CDMS] += 1
+            self.cdms += 1
 
 
 def main(args: list[str] | None = None) -> int:

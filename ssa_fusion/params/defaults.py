@@ -196,7 +196,7 @@ class ConjunctionDefaults:
 
     Approaches within 5 km over the next day, re-screened every sim hour for the objects
     whose estimates changed; a 20 m combined hard-body radius (CARA's default); CDMs of the
-    approaches with Pc >= 1e-7 when ``cdm_dir`` names a directory.
+    approaches with Pc >= 1e-5 when ``cdm_dir`` names a directory.
     """
 
     distance: float = 5000.0
@@ -205,7 +205,7 @@ class ConjunctionDefaults:
     hard_body_radius: float = 20.0
     motion_model: str = "j2"
     cdm_dir: str = ""
-    cdm_min_pc: float = 1e-7
+    cdm_min_pc: float = 1e-5
     max_clock_lead: float = MAX_CLOCK_LEAD_S
 
 

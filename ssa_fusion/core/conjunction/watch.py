@@ -28,7 +28,7 @@ from ssa_fusion.core.conjunction.close_approach import CloseApproaches
 from ssa_fusion.core.conjunction.ephemeris import StateEphemeris
 from ssa_fusion.core.conjunction.screening import ScreeningConfig, screen
 
-__all__ = ["ConjunctionWatch", "WatchConfig", "WatchUpdate"]
+__all__ = ["ConjunctionWatch", "Rescreening", "WatchConfig", "WatchUpdate"]
 
 Array = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -151,26 +151,61 @@ class ConjunctionWatch:
                                     self.config.screening.distance_km) | primary
         return near
 
-    def rescreen(self, now: float | None = None) -> WatchUpdate:
-        """Screen the changed objects against all over ``[now, now + horizon_s]``.
+    def snapshot(self, now: float | None = None) -> Rescreening:
+        """Take the re-screening of the changed objects over ``[now, now + horizon_s]``.
 
-        ``now`` defaults to the newest estimate's epoch. The changed set is emptied.
+        ``now`` defaults to the newest estimate's epoch. The changed set is emptied; the
+        estimates it needs are copied (`Rescreening.run` may go on in another thread while
+        this watch takes new ones).
         """
         n = self.objects
         ids = list(self._index)
         newest = float(np.max(self._t[:n])) if n else 0.0
         start = newest if now is None else float(now)
-        window = (start, start + self.config.horizon_s)
         changed = np.zeros(n, dtype=np.bool_)
         changed[list(self._changed)] = True
         self._changed.clear()
+        use = np.flatnonzero(self._near(changed)) if changed.any() else np.zeros(0, np.int64)
+        return Rescreening([ids[k] for k in use], self._x[use], self._t[use], self._p[use],
+                           changed[use], (start, start + self.config.horizon_s), self.config)
+
+    def rescreen(self, now: float | None = None) -> WatchUpdate:
+        """Screen the changed objects against all (`snapshot`, then `Rescreening.run`)."""
+        return self.snapshot(now).run()
+
+
+@dataclass(frozen=True)
+class Rescreening:
+    """One re-screening, with copies of the estimates it needs (`ConjunctionWatch.snapshot`).
+
+    Attributes
+    ----------
+    ids : list of str
+        The objects flown: the changed ones and those whose band meets theirs.
+    x, t, p : ndarray
+        Their estimates: states (M, 6), epochs (M,), covariances (M, 6, 6).
+    changed : ndarray (M,) of bool
+        The changed ones (the primaries).
+    window : (float, float)
+        Unix s.
+    config : WatchConfig
+    """
+
+    ids: list[str]
+    x: Array
+    t: Array
+    p: Array
+    changed: BoolArray
+    window: tuple[float, float]
+    config: WatchConfig
+
+    def run(self) -> WatchUpdate:
+        """Screen (`screening.screen`); return the approaches with their Pc."""
         d, hbr = self.config.screening.distance_km, self.config.hbr_km
-        if not changed.any():
-            return WatchUpdate([], CloseApproaches.empty(ids, covariances=True), np.zeros(0),
-                               window, d, hbr)
-        use = np.flatnonzero(self._near(changed))
-        eph = StateEphemeris([ids[k] for k in use], self._x[use], self._t[use],
-                             self.config.model, covariance=self._p[use])
-        found = screen(eph, *window, self.config.screening, primaries=changed[use])
-        return WatchUpdate([ids[k] for k in np.flatnonzero(changed)], found,
-                           found.log10_pc(hbr), window, d, hbr)
+        screened = [self.ids[k] for k in np.flatnonzero(self.changed)]
+        if not screened:
+            return WatchUpdate([], CloseApproaches.empty(self.ids, covariances=True),
+                               np.zeros(0), self.window, d, hbr)
+        eph = StateEphemeris(self.ids, self.x, self.t, self.config.model, covariance=self.p)
+        found = screen(eph, *self.window, self.config.screening, primaries=self.changed)
+        return WatchUpdate(screened, found, found.log10_pc(hbr), self.window, d, hbr)
