@@ -153,6 +153,10 @@ class NodeSpec(NamedTuple):
     params: dict[str, Any]
 
 
+CONJUNCTION_LOCKSTEP_S = 1800.0
+"""Wall s the simulator waits for a step's consumers when the conjunction node is one (its
+first re-screening screens the whole catalog)."""
+
 MAX_TIME_SCALE = 1e9
 """The time scale of ``--time-scale max`` (a catalog in lockstep as fast as its slowest
 consumer): sim time a billion times faster than the wall clock is no ceiling at all."""
@@ -231,6 +235,8 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
             "time_scale": min(float(time_scale), MAX_TIME_SCALE), "seed": seed,
             "start": start, **own, "shards": shards, "unlabelled": unlabelled,
             "lockstep": [*names, *gaps, *watch, "recorder"] if lockstep else [""],
+            # a re-screening of a whole catalog (its first) may take minutes
+            **({"lockstep_timeout": CONJUNCTION_LOCKSTEP_S} if watch else {}),
             "wait_for": [f"{TOPIC_MEASUREMENT_BATCH}={shards + 1}",
                          f"{TOPIC_ESTIMATE_BATCH}={len(gaps) + 1}"],
             "wait_for_readers": readers}),
