@@ -85,7 +85,7 @@ class HonestyConfig:
     """
 
     pairs: int = 4000
-    lead_s: float = 3 * 3600.0
+    lead_s: float = 1800.0
     miss_disk_km: float = 0.1
     hbr_km: float = 0.03
     sigma_pos_km: tuple[float, float, float] = (0.01, 0.02, 0.01)
