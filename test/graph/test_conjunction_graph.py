@@ -1,9 +1,9 @@
 """Graph test of the conjunction node alone, over DDS: the test process drives sim time on
 /clock and publishes a catalog's estimates (EstimateBatch, SENSOR) with planted close
 approaches, plus a forecast and a non-finite row. The node refuses the bad row by cause,
-never takes the forecast (content filter), and publishes on /ssa/conjunctions exactly the approaches the
-in-process screening of the same estimates finds (same pairs, TCAs, misses, Pc), with both
-covariances; it writes a CDM of each likely approach that reads back with the same Pc. A
+never takes the forecast (content filter), and publishes on /ssa/conjunctions exactly the
+approaches the in-process screening of the same estimates finds (same pairs, TCAs, misses,
+Pc), with both covariances; it writes a CDM of each approach that reads back with its Pc. A
 later estimate of one object re-screens that object alone.
 """
 
