@@ -20,6 +20,7 @@ Units: km, km/s, s; states GCRF.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -244,15 +245,17 @@ _FAILED = (FitStatus.DIVERGED, FitStatus.UNDERDETERMINED)
 
 
 def fit_passes(window: list[Measurement], model: MeasurementModel, x_guess: ArrayLike,
-               t_guess: float, clock_unix0: float = 0.0) -> BatchFit | None:
-    """Fit `gap_fit_options(window)` to `window`; None if it fails.
+               t_guess: float, clock_unix0: float = 0.0,
+               options: BatchOptions | None = None) -> BatchFit | None:
+    """Fit `gap_fit_options(window)` (or ``options``) to `window`; None if it fails.
 
     It fails when it diverges, is underdetermined or has no model for a measurement.
     `clock_unix0`: Unix time (s) of t = 0 of the measurements' clock.
     """
     if not window:
         return None
-    opts = replace(gap_fit_options(window), clock_unix0=float(clock_unix0))
+    opts = replace(gap_fit_options(window) if options is None else options,
+                   clock_unix0=float(clock_unix0))
     try:
         fit = batch_ls.fit(window, model, np.asarray(x_guess, float)[:6], t_guess, opts)
     except ValueError:  # a measurement the fit has no model for
@@ -268,7 +271,9 @@ class BatchGapForecaster:
     `on_estimate` the filter's estimate after it. `forecast(t)` returns the fit's state and
     covariance at a grid epoch t of the gap, or None: t less than `pass_break_s` after the
     last estimate, beyond ``max_horizon_s``, or no fit (it failed); `prior(t)` the same at
-    any epoch t, the first measurement of the next pass.
+    any epoch t, the first measurement of the next pass. ``options``: the fit's (None:
+    `gap_fit_options` of each window); ``cpu_s``: the process CPU time its fits and their
+    tabulations took, s.
     """
 
     model: MeasurementModel
@@ -286,6 +291,8 @@ class BatchGapForecaster:
     fitted_t: float = -math.inf
     fit: BatchFit | None = None
     table: dict[float, tuple[Array, Array]] = field(default_factory=dict)
+    options: BatchOptions | None = None
+    cpu_s: float = 0.0
 
     @property
     def rule(self) -> GapWindow:
@@ -343,10 +350,12 @@ class BatchGapForecaster:
         assert self.last is not None
         t_end, x_end = self.last
         if self.fitted_t != t_end:  # a pass ended: fit once, tabulate the prediction
+            cpu = time.process_time()
             self.fitted_t = t_end
             self.table = {}
             window = self.window[self.rule.start(self.window, self.pass_break_s):]
-            self.fit = fit_passes(window, self.model, x_end, t_end, self.clock_unix0)
+            self.fit = fit_passes(window, self.model, x_end, t_end, self.clock_unix0,
+                                  self.options)
             k0 = math.floor(t_end / self.period_s) + 1
             k1 = math.floor((t_end + self.max_horizon_s) / self.period_s)
             grid = self.period_s * np.arange(k0, k1 + 1, dtype=float)
@@ -357,3 +366,4 @@ class BatchGapForecaster:
                     xs, Ps = np.full((grid.size, 6), np.nan), np.full((grid.size, 6, 6), np.nan)
                 self.table = {float(g): (xs[i], Ps[i]) for i, g in enumerate(grid)
                               if np.isfinite(xs[i]).all() and np.isfinite(Ps[i]).all()}
+            self.cpu_s += time.process_time() - cpu

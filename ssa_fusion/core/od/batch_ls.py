@@ -104,7 +104,7 @@ from ssa_fusion.core.od.gauss_newton import (
 )
 
 __all__ = ["BatchFit", "BatchOptions", "FitStatus", "Linearization", "Solution",
-           "SolverOptions", "fit", "gauss_newton", "grid"]
+           "SolverOptions", "fit", "gauss_newton", "grid", "whitened_residuals"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -384,6 +384,21 @@ def _accumulated_noise(t0: float, t: Array, x: Array, phi: Array, psd: Array) ->
         c = np.cumsum(_noise_increments(t0, t, x, phi, psd, idx), axis=0)
         p = phi[idx]
         out[idx] = p @ c @ np.swapaxes(p, 1, 2)
+    return out
+
+
+def whitened_residuals(measurements: Sequence[Measurement], model: FitModel,
+                       x: ArrayLike) -> Array:
+    """Return each measurement's squared whitened residual against the states ``x`` (N, 6).
+
+    ``(z - h(x))^T R^-1 (z - h(x))`` per measurement (angles wrapped), ``x`` GCRF states at
+    the measurements' epochs: chi2 with len(z) degrees of freedom for a right state.
+    ValueError for a measurement the model cannot predict.
+    """
+    w = FitWindow(measurements, model)
+    r, _, _ = w.residuals(np.asarray(x, dtype=float).reshape(-1, 6),
+                          np.zeros((len(w.m), 6, 1)))  # no unknowns: one zero column
+    out: Array = np.asarray(np.bincount(w.rows(), weights=r * r, minlength=len(w.m)), float)
     return out
 
 
