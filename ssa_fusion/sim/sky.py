@@ -379,6 +379,44 @@ class SkySimulation:
         return [m for m, w in zip(self.measurements, self.withheld, strict=True) if w]
 
 
+RAAN_SPREAD_DEG = 15.0
+"""How far (deg, either way) a seeded case turns its orbit's plane about the pole: far
+enough that the passes and the gaps differ from seed to seed, near enough that a scenario
+keeps its character (leo_optical's plane near the terminator, where optical sites see it)."""
+
+
+def case_geometry(seed: int) -> tuple[float, float]:
+    """Return the orbit turn of case `seed`: (node shift, phase shift), rad.
+
+    The node shift uniform in +-`RAAN_SPREAD_DEG`, the phase uniform in [0, 360) deg, from a
+    generator of its own (the measurement noise of `seed` is not disturbed).
+    """
+    rng = np.random.default_rng([seed, 7])
+    return (math.radians(rng.uniform(-RAAN_SPREAD_DEG, RAAN_SPREAD_DEG)),
+            rng.uniform(0.0, 2.0 * math.pi))
+
+
+def case_start_offset_s(seed: int) -> float:
+    """Return the start offset of live case `seed`: whole minutes uniform in [0, 24) h, s.
+
+    From a generator of its own (neither the noise nor the turn of `seed` is disturbed).
+    """
+    return 60.0 * float(np.random.default_rng([seed, 29]).integers(0, 24 * 60))
+
+
+def seeded_case(s: SkyScenario, seed: int) -> SkyScenario:
+    """Return scenario `s` from a start and with an orbit of its own for seed `seed`.
+
+    Its start `case_start_offset_s` later, its orbit turned (`case_geometry`), the world's
+    space weather drawn from `seed`: what `ssa-fusion live --seed` runs unless
+    ``--same-geometry``. An element set's object keeps its orbit (ValueError from
+    `SkyScenario.with_geometry`).
+    """
+    moved = s.with_window(s.t0 + case_start_offset_s(seed), s.duration_s)
+    return moved.with_geometry(*case_geometry(seed)).with_(
+        world=s.world.with_(weather_seed=seed))
+
+
 def _rotation(axis: np.ndarray, angle_rad: float) -> np.ndarray:
     """Return the 3x3 rotation by `angle_rad` about the unit vector `axis` (Rodrigues)."""
     k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],

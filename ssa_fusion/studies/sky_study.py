@@ -51,21 +51,9 @@ from ssa_fusion.studies.distributions import EVALUATION_SEEDS, TUNING_SEEDS
 ARMS = [str(a) for a in arms.ArmName]
 
 
-RAAN_SPREAD_DEG = 15.0
-"""How far (deg, either way) an evaluation case turns its orbit's plane about the pole: far
-enough that the passes and the gaps differ from seed to seed, near enough that a scenario
-keeps its character (leo_optical's plane near the terminator, where optical sites see it)."""
-
-
-def case_geometry(seed: int) -> tuple[float, float]:
-    """Return the orbit turn of evaluation case `seed`: (node shift, phase shift), rad.
-
-    The node shift uniform in +-`RAAN_SPREAD_DEG`, the phase uniform in [0, 360) deg, from a
-    generator of its own (the measurement noise of `seed` is not disturbed).
-    """
-    rng = np.random.default_rng([seed, 7])
-    return (math.radians(rng.uniform(-RAAN_SPREAD_DEG, RAAN_SPREAD_DEG)),
-            rng.uniform(0.0, 2.0 * math.pi))
+RAAN_SPREAD_DEG = sky.RAAN_SPREAD_DEG
+case_geometry = sky.case_geometry
+"""A case's orbit turn (`sim.sky.case_geometry`, which `ssa-fusion live --seed` shares)."""
 
 
 CASE_SEEDS = (*TUNING_SEEDS, *EVALUATION_SEEDS)
