@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ssa_fusion.core.base.types import Kind, Measurement
 from ssa_fusion.core.earth.timescales import DAY_S
+from ssa_fusion.core.gaps.calibration import CovarianceScale
 from ssa_fusion.core.measure.measurement import MeasurementModel
 from ssa_fusion.core.measure.pass_windows import PASS_BREAK_S, passes, window_start
 from ssa_fusion.core.motion.force_model import ForceModel
@@ -273,7 +274,8 @@ class BatchGapForecaster:
     last estimate, beyond ``max_horizon_s``, or no fit (it failed); `prior(t)` the same at
     any epoch t, the first measurement of the next pass. ``options``: the fit's (None:
     `gap_fit_options` of each window); ``cpu_s``: the process CPU time its fits and their
-    tabulations took, s.
+    tabulations took, s. With ``calibrate`` the covariances published are the fit's times
+    ``scale``'s factor, measured on the object's own last passes (`calibration`).
     """
 
     model: MeasurementModel
@@ -293,6 +295,8 @@ class BatchGapForecaster:
     table: dict[float, tuple[Array, Array]] = field(default_factory=dict)
     options: BatchOptions | None = None
     cpu_s: float = 0.0
+    calibrate: bool = True
+    scale: CovarianceScale = field(default_factory=CovarianceScale)
 
     @property
     def rule(self) -> GapWindow:
@@ -343,14 +347,20 @@ class BatchGapForecaster:
             return None
         if not (np.isfinite(xs).all() and np.isfinite(Ps).all()):
             return None
-        return xs[0], Ps[0]
+        return xs[0], Ps[0] * float(self.scale.factor(float(t) - self.last[0])[0])
 
     def _refit(self) -> None:
-        """Fit the window once after each pass (at its last estimate) and tabulate the gap."""
+        """Fit the window once after each pass (at its last estimate) and tabulate the gap.
+
+        Before, the forecast published for the pass just ended is scored on its
+        measurements (`calibration.CovarianceScale`); the table's covariances are scaled
+        by the factor.
+        """
         assert self.last is not None
         t_end, x_end = self.last
         if self.fitted_t != t_end:  # a pass ended: fit once, tabulate the prediction
             cpu = time.process_time()
+            self._calibrate(self.fitted_t, t_end)
             self.fitted_t = t_end
             self.table = {}
             window = self.window[self.rule.start(self.window, self.pass_break_s):]
@@ -364,6 +374,28 @@ class BatchGapForecaster:
                     xs, Ps = self.fit.predict(grid)
                 except (ValueError, ArithmeticError, np.linalg.LinAlgError):
                     xs, Ps = np.full((grid.size, 6), np.nan), np.full((grid.size, 6, 6), np.nan)
+                Ps = Ps * self.scale.factor(grid - t_end)[:, None, None]
                 self.table = {float(g): (xs[i], Ps[i]) for i, g in enumerate(grid)
                               if np.isfinite(xs[i]).all() and np.isfinite(Ps[i]).all()}
             self.cpu_s += time.process_time() - cpu
+
+    def _published_prediction(self, t: Array) -> tuple[Array, Array] | None:
+        """Return the last fit's unscaled forecast at epochs ``t`` (None: no fit)."""
+        if self.fit is None:
+            return None
+        return self.fit.predict(t)
+
+    def _calibrate(self, before: float, t_end: float) -> None:
+        """Score the forecast published at ``before`` on the pass that ended at ``t_end``."""
+        if not self.calibrate:
+            return
+        ms = [m for m in self.window if before < m.t <= t_end]
+        if not ms:
+            return
+        try:
+            got = self._published_prediction(np.array([m.t for m in ms]))
+        except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError):
+            return
+        if got is not None:
+            self.scale.update(ms, self.model, *got,
+                              horizon_s=float(np.mean([m.t for m in ms])) - before)

@@ -117,7 +117,9 @@ class FitResidualForecaster(BatchGapForecaster):
     `surrogate` once it can fit and where `step` finds the correction earned its place.
     `learned`: the surrogate's fit at the last pass end (None: none); `residual`: the same
     when it is published (None: the fit's own forecast is). `cpu_s` counts the
-    correction's work too.
+    correction's work too. The plain fit's covariance is calibrated as the gap fit's
+    (`calibration`, on the plain fit's own predictions); the corrected one keeps the
+    surrogate's (its held-out scale, `residual`).
     """
 
     residual_cfg: ResidualConfig = FIT_RESIDUAL
