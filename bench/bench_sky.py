@@ -138,6 +138,10 @@ def learned_table(result: dict) -> list[str]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="3 seeds, one start epoch")
+    ap.add_argument("--eval-seeds", type=int, default=0,
+                    help="only the first N evaluation seeds (0: all 20, 101-120)")
+    ap.add_argument("--offsets", type=float, nargs="*", default=None,
+                    help="start offsets, h (default 0 8 16; --quick 0)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--scenario", nargs="*", default=list(sky.SKY_SCENARIOS))
     ap.add_argument("--truth", choices=[str(t) for t in TruthModel],
@@ -181,8 +185,10 @@ def main() -> int:
         batch_gap.GAP_FIT_ANGLES = replace(batch_gap.GAP_FIT_ANGLES,
                                            snc_psd=(args.gap_fit_snc_angles,) * 3)
     seeds = (TUNING_SEEDS[:args.tuning_seeds] if args.tuning else
-             EVALUATION_SEEDS[:3] if args.quick else EVALUATION_SEEDS)
-    offsets = (0.0,) if args.quick and not args.tuning else START_OFFSETS_H
+             EVALUATION_SEEDS[:3] if args.quick else
+             EVALUATION_SEEDS[:args.eval_seeds] if args.eval_seeds else EVALUATION_SEEDS)
+    offsets = (tuple(args.offsets) if args.offsets is not None else
+               (0.0,) if args.quick and not args.tuning else START_OFFSETS_H)
     t0 = time.perf_counter()
     truth = TruthModel(args.truth)
     text, result = sky_study.run_sky_study(args.scenario, seeds, offsets, args.workers,

@@ -84,8 +84,10 @@ def test_covariance_scale_is_the_median_of_the_last_passes_at_one_horizon():
 def test_covariance_scale_follows_a_power_of_the_horizon():
     """Estimates k = 2 (h / 1 h)^1.5 at 1.5, 3, 12 and 16 h: the factor is that law at any
     horizon (an error growing faster through a gap than the covariance)."""
-    c = CovarianceScale(passes=6)
+    c = CovarianceScale(passes=6, power_law=True)
     for h in (1.5, 3.0, 12.0, 16.0):
         _update(c, 2.0 * h**1.5, 3600.0 * h)
     got = c.factor(3600.0 * np.array([1.0, 6.0, 24.0]))
     assert got == pytest.approx(2.0 * np.array([1.0, 6.0, 24.0]) ** 1.5, rel=1e-6)
+    c.power_law = False  # the default: the median of the estimates at every horizon
+    assert c.factor([3600.0, 86400.0]) == pytest.approx([2.0 * 6.0**1.5] * 2, rel=1e-6)  # 3, 12 h
