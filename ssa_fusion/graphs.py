@@ -47,14 +47,19 @@ def sim_seconds(s: scenarios.Scenario | sky.SkyScenario) -> float:
 
 
 def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, seed: int,
-                    bag: Path) -> dict[str, dict[str, Any]]:
-    """Per-node parameters (SI units) that run scenario `s` live."""
+                    bag: Path, geometry_seed: int = -1) -> dict[str, dict[str, Any]]:
+    """Per-node parameters (SI units) that run scenario `s` live.
+
+    `geometry_seed`: a real-sky object's orbit turned as that case's (`sky.case_geometry`;
+    -1: its own).
+    """
     sensor: dict[str, Any] = {"scenario": s.name, "object_id": s.name,
                               "time_scale": time_scale, "seed": seed, "wait_for": WAIT_FOR,
                               "wait_for_readers": READERS}
     if isinstance(s, sky.SkyScenario):  # the truth's cadence; the filter publishes at it
         sensor.update({"cadence": s.truth_cadence_s, "start": timescales.iso(s.t0),
-                       "duration": s.duration_s})
+                       "duration": s.duration_s, "truth": str(s.truth),
+                       "geometry_seed": geometry_seed})
         extra = {"predict_period": s.truth_cadence_s, "gap_forecast": str(s.gap_fill)}
     else:
         sensor.update({"cadence": s.cadence_s, "gap_start": s.track_s, "gap_length": s.gap_s,

@@ -33,10 +33,12 @@ from ssa_fusion.apps import evaluate, report, runs
 from ssa_fusion.apps.args import add_discovery, add_domain_id, discovery, time_scale
 from ssa_fusion.apps.progress_lines import ProgressLines
 from ssa_fusion.core.base.types import UpdateSource
+from ssa_fusion.core.earth import timescales
 from ssa_fusion.core.gaps.publisher import GapFill
 from ssa_fusion.ros.processes import Graph
 from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS, VISUAL_TOPICS
 from ssa_fusion.sim import scenarios, sky
+from ssa_fusion.sim.world import TruthModel
 
 if TYPE_CHECKING:
     from ssa_fusion.ros.interfaces import Message
@@ -63,7 +65,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=None,
                    help=f"output directory (default: {LIVE_ROOT}/<scenario>_<date-time>, "
                         f"also linked as {LIVE_ROOT}/latest)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0,
+                   help="noise seed; a real-sky scenario's object also starts later and on an "
+                        "orbit of its own for each seed (plane, phase, start epoch, as the "
+                        "benchmarks' cases: `sky.seeded_case`) unless --same-geometry, and a "
+                        "high-fidelity truth's space weather is drawn from it")
+    p.add_argument("--same-geometry", action="store_true",
+                   help="a real-sky scenario keeps its own orbit and start whatever --seed")
+    p.add_argument("--truth", choices=[str(t) for t in TruthModel],
+                   default=str(TruthModel.SGP4),
+                   help="a real-sky object's truth: sgp4 (default) or high_fidelity "
+                        "(sim/world.py: EGM96 20x20, Sun, Moon, SRP, NRLMSISE-00 drag)")
     p.add_argument("--start", default="", metavar="UTC",
                    help="first epoch, ISO 8601 UTC (e.g. 2025-06-01T00:00:00Z) of a real-sky "
                         "scenario (its object starts from the scenario's initial GCRF state "
@@ -230,6 +242,25 @@ def _drain(graph: Graph) -> float:
     return last_output
 
 
+def _case(s: scenarios.Scenario | sky.SkyScenario, args: argparse.Namespace
+          ) -> tuple[scenarios.Scenario | sky.SkyScenario, int]:
+    """Return the run's scenario and its geometry seed (-1: its own orbit).
+
+    A real-sky scenario gets the truth of ``--truth``, and, unless ``--same-geometry`` or
+    an element set's object (whose orbit is its own), the orbit of case ``--seed``
+    (`sky.case_geometry`) from the case's start (`sky.case_start_offset_s` after the
+    scenario's, unless ``--start``).
+    """
+    if not isinstance(s, sky.SkyScenario):
+        return s, -1
+    s = s.with_(truth=TruthModel(args.truth))
+    if args.same_geometry or s.element_set is not None:
+        return s, -1
+    if not args.start:
+        s = s.with_window(s.t0 + sky.case_start_offset_s(args.seed), s.duration_s)
+    return s, args.seed
+
+
 def run(args: argparse.Namespace) -> int:
     """Run `ssa-fusion live` (or, with ``--catalog``, `live_catalog.run`); return the exit code."""
     if getattr(args, "catalog", None) is not None:
@@ -259,16 +290,22 @@ def run(args: argparse.Namespace) -> int:
                   f"({', '.join(sky.SKY_SCENARIOS)})", file=sys.stderr)
             return 2
         s = s.with_(gap_fill=GapFill(args.gap_forecast))
+    s, geometry_seed = _case(s, args)
     dirs = runs.run_dirs(args, s.name)
     if dirs is None:
         return 2
     out, bag = dirs
-    params = graphs.node_parameters(s, args.time_scale, args.seed, bag)
+    params = graphs.node_parameters(s, args.time_scale, args.seed, bag, geometry_seed)
     sim_s = graphs.sim_seconds(s)
     graph = Graph(out / "logs", args.domain_id, discovery(args))
     print(f"live: {s.name}, {sim_s / 3600:.1f} h of sim time at {args.time_scale:g}x "
           f"(~{sim_s / args.time_scale:.0f} s of simulation after start-up); ROS domain "
           f"{graph.domain_id}; logs in {out}/logs", flush=True)
+    if isinstance(s, sky.SkyScenario):
+        print(f"live: {s.truth} truth from {timescales.iso(s.t0)}, "
+              + ("the scenario's own orbit" if geometry_seed < 0 else
+                 f"the orbit of case {geometry_seed} (--same-geometry: the scenario's own)"),
+              flush=True)
     t_start = time.monotonic()
     last_output = 0.0  # wall time (Unix s) the probe last saw an estimate or forecast arrive
     try:

@@ -24,7 +24,9 @@ from __future__ import annotations
 from functools import partial
 
 from ssa_fusion.core.base.types import Cause, Kind, Source
+from ssa_fusion.core.gaps.batch_gap import BatchGapForecaster
 from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker
+from ssa_fusion.core.gaps.fit_residual import FitResidualForecaster
 from ssa_fusion.core.gaps.publisher import GapFill, GapPublisher, Published
 from ssa_fusion.nodes.kit import laser
 from ssa_fusion.nodes.kit.base import SsaNode
@@ -127,6 +129,12 @@ class FilterNode(SsaNode):
         for e in out.estimates:
             self.pub.publish(messages.estimate_to_msg(e))
             self.diag.counts[PUBLISHED_BY_SOURCE[e.update_source]] += 1
+        f = self.gaps.forecaster
+        if isinstance(f, BatchGapForecaster):
+            self.diag.status["gap_covariance_factor"] = f"{f.scale.factor(0.0)[0]:.3g}"
+        if isinstance(f, FitResidualForecaster):
+            for choice, n in f.choices.items():
+                self.diag.status[f"gap_{choice}"] = str(n)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -67,6 +67,8 @@ class SensorSimDefaults:
     start: str = ""
     sites: str = ""
     elements: str = ""
+    truth: str = "sgp4"
+    geometry_seed: int = -1
     noise_sigma: tuple[float, ...] = (-1.0,)
     time_scale: float = 100.0
     seed: int = 0

@@ -24,7 +24,9 @@ for the forces of a `force_spec.ForceSpec`:
   left out of the variational equations (~1e-8 of the central term's);
 * solar radiation pressure (`srp`), its sensitivity to ``srp_scale`` the acceleration itself;
 * drag in the co-rotating exponential atmosphere, the formula and analytic partials of
-  `force_model` (drag factor k_D);
+  `force_model` (drag factor k_D), its density times a factor tabulated in time when one is
+  given (`density_factor`: a real atmosphere's density along an orbit over the exponential
+  one's, the same at every position at one time, so the partials keep their form);
 * RTN empirical accelerations (their axes' dependence on the state left out, as in
   `force_model`).
 
@@ -48,7 +50,7 @@ from ssa_fusion.core.earth.rotation_grid import gcrs_to_itrs_at
 from ssa_fusion.core.motion.geopotential import geopotential_acceleration
 from ssa_fusion.core.motion.srp import shadow_fraction
 
-__all__ = ["full_rhs"]
+__all__ = ["NO_DENSITY_TABLE", "density_factor", "full_rhs"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -61,6 +63,30 @@ C_TIDE_K2 = 22
 
 WORK = 48
 """Length of the scratch array of `full_rhs`."""
+
+NO_DENSITY_TABLE = np.zeros(2)
+"""The density table of no table: the factor is 1 at every time."""
+
+
+@jit
+def density_factor(table: Array, t: float) -> float:
+    """Return the density factor at ``t`` (s from the origin) of ``table``, linear in time.
+
+    ``table = [t_first, step, f_0, ..., f_{n-1}]`` (s, s, dimensionless), the factor at
+    ``t_first + k step``; held at its end values outside; 1 for a table of no node
+    (`NO_DENSITY_TABLE`).
+    """
+    n = table.shape[0] - 2
+    if n < 1:
+        return 1.0
+    u = (t - table[0]) / table[1]
+    if u <= 0.0:
+        return float(table[2])
+    if u >= n - 1:
+        return float(table[n + 1])
+    k = int(u)
+    f = u - k
+    return float((1.0 - f) * table[2 + k] + f * table[3 + k])
 
 
 @jit
@@ -146,8 +172,12 @@ def _srp(x: float, y: float, z: float, sx: float, sy: float, sz: float, c: Array
 
 @jit
 def _drag(x: float, y: float, z: float, vx: float, vy: float, vz: float, c: Array,
-          kd: float, ar: Array, av: Array, gradient: bool) -> tuple[float, float, float]:
-    """Drag per unit k_D (`force_model`'s formula); its partials times ``kd`` into ar, av."""
+          kd: float, factor: float, ar: Array, av: Array,
+          gradient: bool) -> tuple[float, float, float]:
+    """Drag per unit k_D (`force_model`'s formula, density times ``factor``); partials into ar, av.
+
+    The partials are those of ``kd`` times the drag.
+    """
     om = c[C_OMEGA]
     wx, wy, wz = om * c[C_POLE], om * c[C_POLE + 1], om * c[C_POLE + 2]
     ux = vx - (wy * z - wz * y)
@@ -155,7 +185,7 @@ def _drag(x: float, y: float, z: float, vx: float, vy: float, vz: float, c: Arra
     uz = vz - (wx * y - wy * x)
     un = math.sqrt(ux * ux + uy * uy + uz * uz)
     r = math.sqrt(x * x + y * y + z * z)
-    rho = c[C_RHO0] * math.exp(-(r - c[C_DRAG_RE] - c[C_H0]) / c[C_SCALE_H])
+    rho = factor * c[C_RHO0] * math.exp(-(r - c[C_DRAG_RE] - c[C_H0]) / c[C_SCALE_H])
     cr = c[C_DRAG_K] * rho
     if gradient:
         u = (ux, uy, uz)
@@ -189,8 +219,8 @@ def _rtn(y: Array) -> tuple[float, float, float, float, float, float, float, flo
 
 @jit
 def _accelerations(t: float, y: Array, c: Array, rec: Array, wt: Array, grid: Array,
-                   eph: tuple[Array, Array, Array, Array, Array], prm: Array, v: Array,
-                   w: Array, work: Array, ar: Array, av: Array, sens: Array,
+                   eph: tuple[Array, Array, Array, Array, Array], prm: Array, dens: Array,
+                   v: Array, w: Array, work: Array, ar: Array, av: Array, sens: Array,
                    gradient: bool) -> tuple[float, float, float]:
     """Total acceleration; ``sens[p]`` the partial of each parameter p (`force_spec` order)."""
     x, yy, zz = y[0], y[1], y[2]
@@ -219,7 +249,8 @@ def _accelerations(t: float, y: Array, c: Array, rec: Array, wt: Array, grid: Ar
             sens[4, 0], sens[4, 1], sens[4, 2] = bx, by, bz
             ax, ay, az = ax + prm[4] * bx, ay + prm[4] * by, az + prm[4] * bz
     if c[C_DRAG] != 0.0:
-        bx, by, bz = _drag(x, yy, zz, y[3], y[4], y[5], c, prm[0], ar, av, gradient)
+        bx, by, bz = _drag(x, yy, zz, y[3], y[4], y[5], c, prm[0], density_factor(dens, t),
+                           ar, av, gradient)
         sens[0, 0], sens[0, 1], sens[0, 2] = bx, by, bz
         ax, ay, az = ax + prm[0] * bx, ay + prm[0] * by, az + prm[0] * bz
     e = _rtn(y)
@@ -234,20 +265,21 @@ def _accelerations(t: float, y: Array, c: Array, rec: Array, wt: Array, grid: Ar
 @jit
 def full_rhs(t: float, y: Array, ncol: int, c: Array, rec: Array, wt: Array, grid: Array,
              eph: tuple[Array, Array, Array, Array, Array], prm: Array, which: IntArray,
-             v: Array, w: Array, work: Array, out: Array, s: int) -> None:
+             dens: Array, v: Array, w: Array, work: Array, out: Array, s: int) -> None:
     """``out[s] = dy/dt`` of the state + [Phi | S] system ``y`` (6 + 6 ncol,) at ``t``.
 
     ``c``: the constants (`C_*`); ``rec``, ``wt``: `geopotential.KernelTables`; ``grid``:
     `rotation_grid.RotationGrid.packed`; ``eph``: the `ephemeris.SunMoonSpan` series and
     their starts and lengths; ``prm`` (5,): the parameters (`force_spec.PARAMETERS`);
-    ``which``: the parameters of the columns 6.. of [Phi | S]; ``v``, ``w``: the harmonics'
-    scratch arrays; ``work`` (`WORK`,) scratch. ``ncol`` 0: the state alone.
+    ``which``: the parameters of the columns 6.. of [Phi | S]; ``dens``: the density factor's
+    table (`density_factor`); ``v``, ``w``: the harmonics' scratch arrays; ``work``
+    (`WORK`,) scratch. ``ncol`` 0: the state alone.
     """
     ar = np.zeros((3, 3))
     av = np.zeros((3, 3))
     sens = np.zeros((5, 3))
-    ax, ay, az = _accelerations(t, y, c, rec, wt, grid, eph, prm, v, w, work, ar, av, sens,
-                                ncol > 0)
+    ax, ay, az = _accelerations(t, y, c, rec, wt, grid, eph, prm, dens, v, w, work, ar, av,
+                                sens, ncol > 0)
     out[s, 0], out[s, 1], out[s, 2] = y[3], y[4], y[5]
     out[s, 3], out[s, 4], out[s, 5] = ax, ay, az
     for j in range(ncol):

@@ -15,6 +15,9 @@ truncation error is ~1e-10 relative a day in LEO. A step across a shadow boundar
 solar radiation pressure switches off within ~10 s, not smoothly) is taken again as
 `SHADOW_SUBSTEPS` shorter ones.
 
+Drag's density is the exponential atmosphere's of the spec, or that times a factor tabulated in
+time (`DensityTable`: a real atmosphere's density along the orbit over the exponential one's).
+
 `setup` precomputes what the kernel reads for one spec and span (`Context`); `propagate`
 builds it, or takes one given (many fits over the same span). `derivatives` returns the
 acceleration, ``A = d xdot / d x`` and ``B = d xdot / d p`` at one state (tests, the
@@ -29,7 +32,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -46,7 +49,7 @@ from ssa_fusion.core.motion.geopotential import GravityField, KernelTables, kern
 from ssa_fusion.core.motion.propagation import _tableau
 from ssa_fusion.core.motion.srp import shadow_fraction
 
-__all__ = ["Context", "derivatives", "propagate", "setup"]
+__all__ = ["Context", "DensityTable", "derivatives", "propagate", "setup"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -61,9 +64,40 @@ penumbra, whose solar radiation pressure is not smooth: 1.6 cm a day in LEO at 6
 uncut, 0.1 mm at 5 s)."""
 
 Model = tuple[Array, Array, Array, Array, tuple[Array, Array, Array, Array, Array], Array,
-              IntArray, Array, Array, Array]
+              IntArray, Array, Array, Array, Array]
 """The kernel's model arguments: constants, recursion, weights, rotation grid, ephemeris,
-parameters, sensitivity columns, harmonics' scratch (2), work."""
+parameters, sensitivity columns, harmonics' scratch (2), work, density factor table."""
+
+
+@dataclass(frozen=True)
+class DensityTable:
+    """The drag's density as a factor on the exponential atmosphere's, tabulated in time.
+
+    A real atmosphere's density along an orbit (NRLMSISE-00's, say) over the exponential
+    model's at the same radius (`force_spec.DragSpec`), at ``t0_unix + k step_s``; linear
+    between the nodes, held at the ends (`force_kernel.density_factor`). The factor depends
+    on time alone: evaluated along the orbit it is propagated on, it is that atmosphere's
+    density there, as long as the orbit moves little against the one it was evaluated on
+    (a truth propagated again on the table of its own previous propagation converges).
+
+    Attributes
+    ----------
+    t0_unix : float
+        The first node, Unix s UTC.
+    step_s : float
+        Between nodes, s.
+    factor : ndarray (n,)
+        The factors (dimensionless, > 0).
+    """
+
+    t0_unix: float
+    step_s: float
+    factor: Array
+
+    def packed(self, origin_unix: float) -> Array:
+        """Return the kernel's table (`force_kernel.density_factor`), times from ``origin_unix``."""
+        return f64(np.concatenate([[self.t0_unix - origin_unix, self.step_s],
+                                   np.asarray(self.factor, dtype=float)]))
 
 
 @dataclass(frozen=True)
@@ -86,6 +120,9 @@ class Context:
         `rotation_grid.RotationGrid.packed`.
     eph : tuple of 5 ndarrays
         The DE421 series of the Sun, barycentre and Moon, their starts and lengths.
+    density : ndarray
+        The density factor's table, times from the origin (`DensityTable.packed`;
+        `force_kernel.NO_DENSITY_TABLE`: none).
     """
 
     spec: ForceSpec
@@ -95,6 +132,7 @@ class Context:
     tables: KernelTables
     grid: Array
     eph: tuple[Array, Array, Array, Array, Array]
+    density: Array = field(default_factory=lambda: fk.NO_DENSITY_TABLE)
 
     def covers(self, t_unix: ArrayLike) -> bool:
         """Return True when every epoch (Unix s) is inside the context's span."""
@@ -108,11 +146,13 @@ def _tables(gravity: GravityField, degree: int, order: int) -> KernelTables:
 
 
 def setup(spec: ForceSpec, t0_unix: float, t_min_s: float = 0.0, t_max_s: float = 0.0,
-          eop: eop_.EarthOrientation | None = None) -> Context:
+          eop: eop_.EarthOrientation | None = None,
+          density: DensityTable | None = None) -> Context:
     """Return the kernel's context for ``spec`` over ``t0_unix + [t_min_s, t_max_s]``.
 
     The span is widened by `MARGIN_S` each side. The atmosphere co-rotates about the
-    Earth's pole at ``t0_unix`` (`frames.pole_frame`).
+    Earth's pole at ``t0_unix`` (`frames.pole_frame`); its density is the exponential
+    model's times ``density``'s factor (None: 1).
     """
     lo, hi = float(t_min_s) - MARGIN_S, float(t_max_s) + MARGIN_S
     deg, order = spec.truncation
@@ -125,8 +165,9 @@ def setup(spec: ForceSpec, t0_unix: float, t_min_s: float = 0.0, t_max_s: float 
                                                             span.gm_moon)
     grid = rotation_grid(float(t0_unix), lo, hi, eop).packed()
     eph = (*span.coefficients, f64(span.starts), f64(span.lengths))
+    dens = fk.NO_DENSITY_TABLE if density is None else density.packed(float(t0_unix))
     return Context(spec, float(t0_unix), (lo, hi), f64(c), tables, grid,
-                   (eph[0], eph[1], eph[2], eph[3], eph[4]))
+                   (eph[0], eph[1], eph[2], eph[3], eph[4]), dens)
 
 
 @jit
@@ -149,11 +190,11 @@ def _stage_sum(y: Array, K: Array, A: Array, s: int, h: float, out: Array) -> No
 def _step(y: Array, t: float, h: float, ncol: int, A: Array, B: Array, C: Array, K: Array,
           yt: Array, yn: Array, model: Model) -> None:
     """One DOP853 step of length ``h`` from ``y`` at ``t``: ``yn`` the state after it."""
-    c, rec, wt, grid, eph, prm, which, v, w, work = model
+    c, rec, wt, grid, eph, prm, which, v, w, work, dens = model
     for s in range(B.shape[0]):
         _stage_sum(y, K, A, s, h, yt)
-        fk.full_rhs(t + C[s] * h, yt, ncol, c, rec, wt, grid, eph, prm, which, v, w, work,
-                    K, s)
+        fk.full_rhs(t + C[s] * h, yt, ncol, c, rec, wt, grid, eph, prm, which, dens, v, w,
+                    work, K, s)
     yn[:] = y
     for j in range(B.shape[0]):
         b = B[j] * h
@@ -303,8 +344,11 @@ def propagate(spec: ForceSpec | Context, x0: ArrayLike, t0_unix: float, t_unix: 
         grid = _shifted(ctx.grid, shift)
         eph = (*ctx.eph[:3], f64(ctx.eph[3] - shift), ctx.eph[4])
         nn, mm = ctx.tables.degree + 3, ctx.tables.order + 3
+        dens = ctx.density.copy()
+        if dens.size > 2:
+            dens[0] -= shift
         model = (c, ctx.tables.rec, ctx.tables.weights, grid, eph, _params(params), wh,
-                 np.zeros((nn, mm)), np.zeros((nn, mm)), np.zeros(fk.WORK))
+                 np.zeros((nn, mm)), np.zeros((nn, mm)), np.zeros(fk.WORK), f64(dens))
         _kernel(x, steps, float(max_step_s), model, A, B, C, xo, yo, oko)
         xs[order], ok[order] = xo, oko
         if stm:
@@ -340,7 +384,7 @@ def derivatives(spec: ForceSpec | Context, x: ArrayLike, t_unix: float,
     out = np.zeros((1, y.size))
     nn, mm = ctx.tables.degree + 3, ctx.tables.order + 3
     fk.full_rhs(float(t_unix) - ctx.t0_unix, y, ncol, ctx.c, ctx.tables.rec,
-                ctx.tables.weights, ctx.grid, ctx.eph, _params(params), wh, np.zeros((nn, mm)),
-                np.zeros((nn, mm)), np.zeros(fk.WORK), out, 0)
+                ctx.tables.weights, ctx.grid, ctx.eph, _params(params), wh, ctx.density,
+                np.zeros((nn, mm)), np.zeros((nn, mm)), np.zeros(fk.WORK), out, 0)
     m = out[0, 6:].reshape(6, ncol)
     return out[0, :6].copy(), m[:, :6].copy(), m[:, 6:].copy()

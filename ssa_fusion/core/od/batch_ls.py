@@ -104,7 +104,8 @@ from ssa_fusion.core.od.gauss_newton import (
 )
 
 __all__ = ["BatchFit", "BatchOptions", "FitStatus", "Linearization", "Solution",
-           "SolverOptions", "fit", "gauss_newton", "grid"]
+           "SolverOptions", "fit", "gauss_newton", "grid", "whitened_predictions",
+           "whitened_residuals"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -385,6 +386,49 @@ def _accumulated_noise(t0: float, t: Array, x: Array, phi: Array, psd: Array) ->
         p = phi[idx]
         out[idx] = p @ c @ np.swapaxes(p, 1, 2)
     return out
+
+
+def whitened_residuals(measurements: Sequence[Measurement], model: FitModel,
+                       x: ArrayLike) -> Array:
+    """Return each measurement's squared whitened residual against the states ``x`` (N, 6).
+
+    ``(z - h(x))^T R^-1 (z - h(x))`` per measurement (angles wrapped), ``x`` GCRF states at
+    the measurements' epochs: chi2 with len(z) degrees of freedom for a right state.
+    ValueError for a measurement the model cannot predict.
+    """
+    w = FitWindow(measurements, model)
+    r, _, _ = w.residuals(np.asarray(x, dtype=float).reshape(-1, 6),
+                          np.zeros((len(w.m), 6, 1)))  # no unknowns: one zero column
+    out: Array = np.asarray(np.bincount(w.rows(), weights=r * r, minlength=len(w.m)), float)
+    return out
+
+
+def whitened_predictions(measurements: Sequence[Measurement], model: FitModel,
+                         x: ArrayLike, P: ArrayLike) -> tuple[Array, Array]:
+    """Return the predicted measurements' misfit in the whitened eigenbasis of their covariance.
+
+    For each measurement, with ``W`` the inverse Cholesky factor of its R: the whitened
+    residual ``r = W (z - h(x))`` and the whitened predicted covariance ``S = W H P H^T W^T``
+    (``x`` (N, 6), ``P`` (N, 6, 6) GCRF states and covariances at their epochs). Returned
+    flat over every measurement's channels: ``lam`` the eigenvalues of its ``S`` and ``q2``
+    the squared components of ``r`` along their eigenvectors, so that the NIS with the
+    prediction's covariance scaled by k is ``sum(q2 / (k lam + 1))``.
+    ValueError for a measurement the model cannot predict.
+    """
+    w = FitWindow(measurements, model)
+    cov = np.asarray(P, dtype=float).reshape(-1, 6, 6)
+    vals, vecs = np.linalg.eigh(0.5 * (cov + np.swapaxes(cov, 1, 2)))
+    root = vecs * np.sqrt(np.maximum(vals, 0.0))[:, None, :]  # root root^T = P
+    r, J, _ = w.residuals(np.asarray(x, dtype=float).reshape(-1, 6), root)
+    J = J[:, :6]  # the state's columns (no measurement parameter here)
+    rows = w.rows()
+    lam, q2 = [], []
+    for i in range(len(w.m)):
+        mine = rows == i
+        e, v = np.linalg.eigh(J[mine] @ J[mine].T)
+        lam.append(np.maximum(e, 0.0))
+        q2.append((v.T @ r[mine]) ** 2)
+    return np.concatenate(lam), np.concatenate(q2)
 
 
 def fit(measurements: Sequence[Measurement], model: FitModel, x_guess: ArrayLike,
