@@ -25,6 +25,7 @@ the simulated world (`ssa_fusion.sim`).
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -55,7 +56,17 @@ from ssa_fusion.ros.topics import (
     TOPIC_TRUTH,
     TOPIC_WITHHELD,
 )
-from ssa_fusion.sim.schedule import Event, Pace, Plan, ScheduleError, SimSettings, plan, resolve
+from ssa_fusion.sim.schedule import (
+    CatalogPace,
+    Event,
+    Pace,
+    Plan,
+    ScheduleError,
+    SimSettings,
+    plan,
+    resolve,
+)
+from ssa_fusion.sim.survey import Observations
 
 
 def plan_of(p: NodeParameters) -> Plan:
@@ -95,7 +106,10 @@ class SensorSim(SsaNode):
         p = self.params
         run = plan_of(p)
         self.schedule, self.catalog, self.times = run.schedule, run.catalog, run.times
-        self.pace = Pace(self.times, p.number("lockstep_step"))
+        self.lockstep_on = self.catalog is not None and any(p.texts("lockstep"))
+        step = p.number("lockstep_step")
+        self.pace: Pace | CatalogPace = Pace(self.times, step) if self.catalog is None else \
+            CatalogPace(self.catalog, step if self.lockstep_on else math.inf)
         self.catalog_keys = (messages.shard_keys(list(self.catalog.object_ids))
                              if self.catalog is not None else None)
         self.time_scale = p.number("time_scale")
@@ -128,9 +142,9 @@ class SensorSim(SsaNode):
     def _lockstep(self) -> Lockstep | None:
         """Return the lockstep of a catalog's consumers (``lockstep``), or None: open loop."""
         p = self.params
-        if self.catalog is None or self.catalog_keys is None or not any(p.texts("lockstep")):
+        if self.catalog_keys is None or not self.lockstep_on:
             return None
-        keys = self.catalog_keys.astype(np.int64)[self.catalog.observations.obj]
+        keys = self.catalog_keys.astype(np.int64)
         if self.unlabelled:  # what the batches carry: key 0
             keys = np.zeros_like(keys)
         return Lockstep(self, [n for n in p.texts("lockstep") if n], keys,
@@ -185,7 +199,7 @@ class SensorSim(SsaNode):
         if self.lockstep is not None:
             self.step_lockstep(now)
             return
-        if self.catalog is not None:  # one clock per tick, ahead of the tick's measurements
+        if isinstance(self.pace, CatalogPace):  # one clock per tick, ahead of its measurements
             self.publish_clock(min(now, times[-1]))
             self.publish_catalog(self.pace.due(now))
         else:
@@ -205,7 +219,7 @@ class SensorSim(SsaNode):
         acted on T (`progress.CLOCK`), so nothing after T is seen at T.
         """
         lockstep, pace = self.lockstep, self.pace
-        assert lockstep is not None and self.catalog is not None
+        assert lockstep is not None and isinstance(pace, CatalogPace)
         go, missing = lockstep.go_on(time.monotonic())
         if not go:
             if time.monotonic() >= self._next_wait_log:
@@ -230,7 +244,6 @@ class SensorSim(SsaNode):
         if due is None:
             return
         self.publish_catalog(due)
-        lockstep.sent = pace.next
 
     def publish_clock(self, t: float) -> None:
         """Publish sim time `t` (s) on /clock."""
@@ -255,17 +268,17 @@ class SensorSim(SsaNode):
             self.pub_meas.publish(messages.measurement_to_msg(content))
             self.diag.counts[Count.PUBLISHED] += 1
 
-    def publish_catalog(self, due: range) -> None:
-        """Publish catalog measurements `due` in batches per shard key range.
+    def publish_catalog(self, due: Observations) -> None:
+        """Publish catalog measurements `due` (a window of the stream) in batches per shard.
 
         Their epochs are at or before the clock published (open loop), or at most one
         `lockstep_step` after it (lockstep). A range with no measurement gets no batch; one
         with more than ``batch_rows`` gets several, in epoch order. With `unlabelled`, each
         batch goes without its object ids, and with them on ``/ssa/detection_truth``.
         """
-        if self.catalog is None or self.catalog_keys is None or due.stop <= due.start:
+        if self.catalog is None or self.catalog_keys is None or not len(due):
             return
-        rows = self.catalog.rows(due.start, due.stop, self.catalog_keys)
+        rows = self.catalog.rows(due, self.catalog_keys)
         ranges = [shard_range(k, self.shards) for k in range(self.shards)]
         shard = np.searchsorted(np.array([hi for _, hi in ranges]), rows.shard_key)
         most = self.params.integer("batch_rows")
@@ -278,11 +291,23 @@ class SensorSim(SsaNode):
                         messages.measurement_batch_to_msg(batch, ranges[k]))
                     batch = without_labels(batch)
                 self.pub_batch.publish(messages.measurement_batch_to_msg(batch, ranges[k]))
-        self.diag.counts[Count.PUBLISHED] += due.stop - due.start
+        if not self.diag.counts[Count.PUBLISHED]:
+            self.get_logger().info("first measurements published")
+        self.diag.counts[Count.PUBLISHED] += len(due)
+        if self.lockstep is not None:
+            self.lockstep.published(due.obj)
+
+    def close(self) -> None:
+        """Stop the catalog's window thread (a node stopped before its schedule is done)."""
+        if isinstance(self.pace, CatalogPace):
+            self.pace.close()
+        super().close()
 
     def done(self) -> None:
         """End the run: wait for the readers' acknowledgements, report, exit 0."""
         self.finished = True
+        if isinstance(self.pace, CatalogPace):
+            self.pace.close()
         for pub in (self.pub_meas, self.pub_batch, self.pub_withheld, self.pub_truth,
                     self.pub_clock, self.pub_detection_truth):
             if pub is not None:

@@ -93,21 +93,24 @@ class _Node:
 
 
 def test_measurements_sent_per_shard_follow_the_shard_keys():
+    """Each object's measurements count for the shard of its key, as they are published."""
     ids = [f"{k:05d}" for k in range(300)]
     keys = np.array([messages.shard_key(o) for o in ids], dtype=np.int64)
     lock = Lockstep(_Node(), NODES, keys, 30.0)
-    for sent in (0, 17, 300):  # grows as the simulator publishes
-        lock.sent = sent
+    objects = np.random.default_rng(3).integers(0, 300, 900)  # a measurement's object
+    for sent in (0, 17, 900):  # grows as the simulator publishes
+        lock.published(objects[lock.sent:sent])
+        assert lock.sent == sent
         for shards in (1, 2, 3):
-            want = [sum(shard_range(k, shards)[0] <= key <= shard_range(k, shards)[1]
-                        for key in keys[:sent]) for k in range(shards)]
+            want = [sum(shard_range(k, shards)[0] <= keys[o] <= shard_range(k, shards)[1]
+                        for o in objects[:sent]) for k in range(shards)]
             assert lock.sent_by_shard(shards).tolist() == want
 
 
 def test_a_consumer_that_does_not_answer_is_left_after_the_timeout():
     """For the rest of the run: a shard on a host that never started does not cost every
     step the timeout."""
-    lock = Lockstep(_Node(), ["recorder", "catalog_filter_1"], np.zeros(0, dtype=np.int64),
+    lock = Lockstep(_Node(), ["recorder", "catalog_filter_1"], np.zeros(1, dtype=np.int64),
                     30.0)
     lock.watch.reports["recorder"] = {RECORDED_MEASUREMENTS: "0", RECORDED_ESTIMATES: "0"}
     assert lock.go_on(100.0) == (False, ["catalog_filter_1 (no report yet)"])
@@ -115,5 +118,5 @@ def test_a_consumer_that_does_not_answer_is_left_after_the_timeout():
     assert lock.go_on(131.0) == (True, ["catalog_filter_1 (no report yet)"])
     assert lock.nodes == ["recorder"]
     assert lock.go_on(132.0) == (True, [])
-    lock.sent = 5  # the recorder is still waited for
+    lock.published(np.zeros(5, dtype=np.int64))  # the recorder is still waited for
     assert lock.go_on(133.0) == (False, ["recorder (recorded 0 of 5 measurements)"])

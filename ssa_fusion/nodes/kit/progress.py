@@ -192,8 +192,9 @@ class Lockstep:
         The simulator (it subscribes to `TOPIC_PROGRESS`).
     nodes : sequence of str
         The consumers to wait for (see `waiting`).
-    keys : ndarray of int (M,)
-        The ``shard_key`` of each measurement of the schedule, in publication order.
+    keys : ndarray of int (N,)
+        The ``shard_key`` of each object of the catalog (what its measurements carry);
+        `published` counts the measurements of each as they go out.
     timeout_s : float
         Wall s the simulator waits for a step's consumers before it goes on without the
         late ones, for the rest of the run (a stopped or never started consumer must not
@@ -207,19 +208,26 @@ class Lockstep:
         self.keys = keys
         self.timeout_s = timeout_s
         self.sent = 0
-        """Measurements published so far (the simulator sets it)."""
+        """Measurements published so far (`published`)."""
         self.clock_ns = 0
         """The sim time last published on /clock, ns (the simulator sets it)."""
+        self._per_object = np.zeros(len(keys), dtype=np.int64)
         self._by_shard: dict[int, tuple[int, NDArray[np.int64]]] = {}
         self._since: float | None = None
 
+    def published(self, objects: NDArray[np.int64]) -> None:
+        """Count measurements just published, of the objects `objects` (indices in `keys`)."""
+        self._per_object += np.bincount(objects, minlength=len(self.keys))
+        self.sent += len(objects)
+
     def sent_by_shard(self, shards: int) -> NDArray[np.int64]:
         """Return the measurements published so far to each of `shards` shards (shards,)."""
-        n, counts = self._by_shard.get(shards, (0, np.zeros(shards, dtype=np.int64)))
-        if n < self.sent:
+        n, counts = self._by_shard.get(shards, (-1, np.zeros(shards, dtype=np.int64)))
+        if n != self.sent:
             his = np.array([shard_range(k, shards)[1] for k in range(shards)])
-            shard = np.searchsorted(his, self.keys[n:self.sent])  # first range ending at/after
-            counts = counts + np.bincount(shard, minlength=shards)
+            shard = np.searchsorted(his, self.keys)  # the first range ending at/after the key
+            counts = np.bincount(shard, weights=self._per_object,
+                                 minlength=shards).astype(np.int64)
             self._by_shard[shards] = (self.sent, counts)
         return counts
 
