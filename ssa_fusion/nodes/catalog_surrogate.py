@@ -120,7 +120,7 @@ class CatalogSurrogateNode(SsaNode):
             self.diag.count(NodeCause.CONTENT_FILTER_UNAVAILABLE,
                             "the DDS implementation does not filter by content: every "
                             "estimate arrives and those not taken are ignored here")
-        self.wall_timer(TICK_S, self.tick)
+        self.wakeup(TICK_S, self.tick)
         self.stepped_ns = 0  # the sim time (ns) the bank was last stepped at: lockstep
         self.progress = ProgressReporter(self, lambda: {
             SHARD: f"{self.shard}/{self.shards}", TAKEN_ESTIMATES: self.taken,
@@ -231,11 +231,17 @@ class CatalogSurrogateNode(SsaNode):
         self.diag.counts[Count.RECEIVED] += 1
         return self.bank.on_estimate(oid, t, x, P)
 
-    def tick(self) -> None:
-        """Take what waited for the clock; fit what the budget allows; publish what is due."""
+    def tick(self) -> bool:
+        """Take what waited for the clock; fit what the budget allows; publish what is due.
+
+        Return whether there was anything to do (`SsaNode.wakeup`): a new clock, forecasts
+        published, or fits still waiting for the budget.
+        """
         self.replay_held()
         now_ns = int(self.get_clock().now().nanoseconds)
-        self.publish(self.bank.step(now_ns * 1e-9))
+        out = self.bank.step(now_ns * 1e-9)
+        self.publish(out)
+        moved = now_ns != self.stepped_ns
         self.stepped_ns = now_ns
         b, status = self.bank, self.diag.status
         for key, name in COUNTERS.items():
@@ -245,6 +251,7 @@ class CatalogSurrogateNode(SsaNode):
             status["object_ids"] = ",".join(b.object_ids)
         status["waiting_for_fit"] = str(b.waiting)
         status["fit_seconds"] = f"{b.fit_seconds:.1f}"
+        return moved or bool(out) or b.waiting > 0
 
     def publish(self, forecasts: list[GapForecast]) -> None:
         """Publish `forecasts` as one EstimateBatch (update source FORECAST), if any."""

@@ -100,7 +100,7 @@ class ConjunctionNode(SsaNode):
         self.taken = 0  # SENSOR estimate rows arrived (used or refused): lockstep progress
         self.next_s = -math.inf  # sim time of the next re-screening
         self.stepped_ns = 0  # the sim time (ns) acted on last: lockstep
-        self.wall_timer(TICK_S, self.tick)
+        self.wakeup(TICK_S, self.tick)
         self.progress = ProgressReporter(self, lambda: {TAKEN_ALL_ESTIMATES: self.taken},
                                          clock=lambda: self.stepped_ns)
         self.diag.counts[CDMS] = 0
@@ -135,17 +135,19 @@ class ConjunctionNode(SsaNode):
         self.diag.counts[Count.RECEIVED] += ok.size
         self.watch.update([rows.object_id[k] for k in ok], rows.t[ok], rows.x[ok], rows.P[ok])
 
-    def tick(self) -> None:
+    def tick(self) -> bool:
         """Start the re-screening due at the clock; publish a finished one; report the clock.
 
         A re-screening runs in a thread of its own (the node keeps taking estimates and
         answering signals meanwhile); the clock reported for lockstep stays at the epoch it
-        started from until it is published.
+        started from until it is published. Return whether there is work (`SsaNode.wakeup`):
+        a re-screening running, or a new clock.
         """
         now_ns = int(self.get_clock().now().nanoseconds)
+        before = self.stepped_ns
         if self.job is not None:
             if self.job.is_alive():
-                return
+                return True
             self.job = None
             if self.done is not None:
                 update, at = self.done
@@ -156,10 +158,11 @@ class ConjunctionNode(SsaNode):
             self.next_s = now + self.params.number("rescreen_period")
             self.start(self.watch.snapshot(now), now)
             self.stepped_ns = now_ns
-            return
+            return True
         self.stepped_ns = now_ns
         self.diag.status["objects"] = str(self.watch.objects)
         self.diag.status["pending"] = str(self.watch.pending)
+        return self.stepped_ns != before
 
     def start(self, job: Rescreening, now: float) -> None:
         """Run `job` and its CDMs in a daemon thread (the process may end while it runs)."""

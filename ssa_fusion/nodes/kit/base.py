@@ -47,6 +47,7 @@ from ssa_fusion.nodes.kit.clock_hold import ClockHold
 from ssa_fusion.nodes.kit.diagnostics import Diagnostics, wall_timer
 from ssa_fusion.nodes.kit.node_parameters import NodeParameters
 from ssa_fusion.nodes.kit.process import constructing, run, start_watchdog
+from ssa_fusion.nodes.kit.wakeup import Wakeup
 from ssa_fusion.params.checks import ParamValue
 from ssa_fusion.params.rows import ParameterTable
 from ssa_fusion.ros import messages
@@ -81,6 +82,7 @@ class SsaNode(Node):
         self.clock_hold = ClockHold(self, self.diag)
         self._jump_handles: list[object] = []
         self._settings_pub: Publisher[String] | None = None
+        self._wakeups: list[Wakeup] = []
 
     # parameters ------------------------------------------------------------------------
     def on_parameters_set(self, changed: dict[str, ParamValue]) -> None:
@@ -102,6 +104,28 @@ class SsaNode(Node):
     def wall_timer(self, period_s: float, callback: Callable[[], None]) -> Timer:
         """Create a guarded timer on the steady (wall) clock (sim time may stand still)."""
         return wall_timer(self, period_s, self.diag.guard(callback))
+
+    def wakeup(self, period_s: float, work: Callable[[], bool | None]) -> Wakeup:
+        """Run `work` every `period_s` wall s while it has work (`nodes.kit.wakeup`).
+
+        `work` returns whether it did something (an exception is counted, as `wall_timer`'s,
+        and counts as nothing). Once idle, it runs again after an input message, a change of
+        the node's clock, or work done by another of the node's wakeups.
+        """
+        if not self._wakeups:
+            self.diag.on_input.append(self.arm_wakeups)
+            self._jump_handles.append(self.get_clock().create_jump_callback(
+                JumpThreshold(min_forward=Duration(nanoseconds=1),
+                              min_backward=Duration(nanoseconds=-1), on_clock_change=True),
+                post_callback=lambda _jump: self.arm_wakeups()))
+        w = Wakeup(self, period_s, self.diag.guard(work), after=self.arm_wakeups)
+        self._wakeups.append(w)
+        return w
+
+    def arm_wakeups(self) -> None:
+        """Arm every wakeup of the node (`wakeup`): something happened that may give work."""
+        for w in self._wakeups:
+            w.arm()
 
     def reset_on_backward_jump(self, reset: Callable[[], None], what: str) -> None:
         """Call `reset` when sim time jumps backwards (a bag loops), and count it.

@@ -12,6 +12,7 @@ import inspect
 import traceback
 from collections import Counter
 from collections.abc import Callable
+from typing import TypeVar
 
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
@@ -28,6 +29,8 @@ from ssa_fusion.core.base.types import Cause
 from ssa_fusion.ros.interfaces import DiagnosticArray, DiagnosticStatus, KeyValue, Message, Time
 from ssa_fusion.ros.readiness import MATCHED_KEY, MATCHED_READERS_KEY
 from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
+
+T = TypeVar("T")
 
 
 class NodeCause(enum.StrEnum):
@@ -118,6 +121,8 @@ class Diagnostics:
         self.status: dict[str, str] = {}
         self.activity = 0
         """Messages received on the inputs (`subscribe`); a node drains until it stands."""
+        self.on_input: list[Callable[[], None]] = []
+        """Called after each message received on an input (`subscribe`)."""
         self._logged: set[str] = set()
         self._watched: list[Subscription[Message]] = []
         self._outputs: list[Publisher[Message]] = []
@@ -158,6 +163,8 @@ class Diagnostics:
 
         def take(data: bytes) -> None:
             self.activity += 1
+            for hook in self.on_input:
+                hook()
             if raw:
                 guarded(data)
                 return
@@ -198,22 +205,24 @@ class Diagnostics:
         """Return True when the node subscribed to an input (`subscribe`)."""
         return bool(self._watched)
 
-    def guard(self, callback: Callable[..., None]) -> Callable[..., None]:
+    def guard(self, callback: Callable[..., T]) -> Callable[..., T | None]:
         """Wrap a subscription or timer callback: an exception is counted, not fatal.
 
         An unexpected exception is counted as ``internal_error`` (traceback logged once)
-        instead of killing the node. Executors may pass extra arguments (TimerInfo): only
-        those `callback` takes are passed on.
+        instead of killing the node (the wrapper then returns None; else what `callback`
+        returned). Executors may pass extra arguments (TimerInfo): only those `callback`
+        takes are passed on.
         """
         n_args = len(inspect.signature(callback).parameters)
 
-        def guarded(*args: object) -> None:
+        def guarded(*args: object) -> T | None:
             try:
-                callback(*args[:n_args])
+                return callback(*args[:n_args])
             except Exception as exc:
                 self.count(
                     Cause.INTERNAL_ERROR, f"{type(exc).__name__}: {exc}\n" + traceback.format_exc()
                 )
+                return None
 
         return guarded
 

@@ -22,13 +22,14 @@ the bag (whose content must not depend on the machine).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ssa_fusion.nodes.kit.diagnostics import RECORDED, Count, wall_timer
+from ssa_fusion.nodes.kit.diagnostics import RECORDED, Count
 from ssa_fusion.nodes.kit.shards import shard_range
 from ssa_fusion.ros.interfaces import DiagnosticStatus, KeyValue
 from ssa_fusion.ros.topics import (
@@ -37,6 +38,9 @@ from ssa_fusion.ros.topics import (
     TOPIC_ESTIMATE_BATCH,
     TOPIC_MEASUREMENT_BATCH,
 )
+
+if TYPE_CHECKING:
+    from ssa_fusion.nodes.kit.base import SsaNode
 
 TOPIC_PROGRESS = "/lockstep"
 """Consumers' progress (``diagnostic_msgs/DiagnosticStatus``, name = node name)."""
@@ -77,28 +81,31 @@ topic)."""
 class ProgressReporter:
     """Publish a node's progress counters (`counters()`: name -> value) when they change.
 
-    With them `CLOCK`: `clock()` (ns), by default the node's clock (sim time).
+    With them `CLOCK`: `clock()` (ns), by default the node's clock (sim time). Checked every
+    `REPORT_PERIOD_S` while the node has work, not while it waits (`SsaNode.wakeup`: its
+    inputs, its clock and its other work wake the check up).
     """
 
-    def __init__(self, node: Node, counters: Callable[[], Mapping[str, str | int]],
+    def __init__(self, node: SsaNode, counters: Callable[[], Mapping[str, str | int]],
                  clock: Callable[[], int] | None = None) -> None:
         self.node = node
         self.counters = counters
         self.clock = clock or (lambda: int(node.get_clock().now().nanoseconds))
         self.pub = node.create_publisher(DiagnosticStatus, TOPIC_PROGRESS, PROGRESS_QOS)
         self._sent: dict[str, str] = {}
-        self.timer = wall_timer(node, REPORT_PERIOD_S, self.report)
+        self.timer = node.wakeup(REPORT_PERIOD_S, self.report)
 
-    def report(self) -> None:
-        """Publish the counters if any changed since the last report."""
+    def report(self) -> bool:
+        """Publish the counters if any changed since the last report; return whether."""
         now = {k: str(v) for k, v in self.counters().items()}
         now[CLOCK] = str(self.clock())
         if now == self._sent:
-            return
+            return False
         self._sent = now
         self.pub.publish(DiagnosticStatus(
             name=self.node.get_name(),
             values=[KeyValue(key=k, value=v) for k, v in now.items()]))
+        return True
 
 
 class ProgressWatch:
