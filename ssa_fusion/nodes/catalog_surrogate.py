@@ -49,7 +49,7 @@ from ssa_fusion.core.gaps.residual import PHYSICS_RESIDUAL
 from ssa_fusion.core.measure.measurement import StationModels
 from ssa_fusion.core.measure.validation import (
     MAX_ID_CHARS,
-    OK,
+    ahead_of_clock,
     id_problem,
     rows_problems,
     state_problem,
@@ -195,41 +195,43 @@ class CatalogSurrogateNode(SsaNode):
         return rows.take(np.flatnonzero(cause == ""))
 
     def _take_rows(self, rows: EstimateRows) -> None:
-        """Give each row to the bank, in order, and publish the forecasts they release.
+        """Give the rows to the bank, in order, and publish the forecasts they release.
 
-        The states and covariances are checked for the whole batch at once
-        (`validation.states_problems`), the rest row by row.
+        Checked for the whole batch at once, in this order, each refusal counted by cause:
+        stamped beyond ``max_clock_lead`` of the clock, without an object id, a state or
+        covariance the filter would refuse (`validation.states_problems`), an object beyond
+        ``max_objects``. The rest go to `GapBank.on_estimates`.
         """
-        out: list[GapForecast] = []
+        ids = np.asarray(rows.object_id, dtype=object)
+        now, lead = self.now_s(), self.max_clock_lead()
+        ahead = (rows.t > now + lead) if now > 0.0 else np.zeros(len(rows), dtype=bool)
+        if ahead.any():
+            i = int(np.argmax(ahead))
+            self.diag.count(Cause.REJECTED_FUTURE,
+                            ahead_of_clock(float(rows.t[i]), now, lead)[1], n=int(ahead.sum()))
+        no_id = ~ahead & (ids == "")
+        self.diag.count(NodeCause.REJECTED_OBJECT_ID,
+                        "an estimate without object_id: whose it is cannot be known",
+                        n=int(no_id.sum()))
         problems = states_problems(rows.x, rows.P)
-        for i, oid in enumerate(rows.object_id):  # per object: the bank's is a dict of them
-            t = float(rows.t[i])
-            if not self.ahead_of_clock(t):
-                out += self._take_one(oid, t, rows.x[i], rows.P[i], bool(problems[i]))
-        self.publish(out)
-
-    def _take_one(self, oid: str, t: float, x: np.ndarray, P: np.ndarray,
-                  unsound: bool = True) -> list[GapForecast]:
-        """Give one estimate (km, km/s) to the bank; return what it releases ([]: refused).
-
-        `unsound` False: its state and covariance passed `validation.states_problems`
-        (True: `validation.state_problem` checks them here).
-        """
-        if not oid:
-            self.diag.count(NodeCause.REJECTED_OBJECT_ID,
-                            "an estimate without object_id: whose it is cannot be known")
-            return []
-        cause, reason = state_problem(x, P) if unsound else OK
-        if cause:
-            self.diag.count(Cause(cause), f"object {oid!r} at t={t}: {reason}")
-            return []
-        if not self.bank.admits(oid):
+        unsound = ~ahead & ~no_id & (problems != "")
+        for cause in np.unique(problems[unsound]).tolist():
+            i = int(np.argmax(unsound & (problems == cause)))
+            self.diag.count(Cause(cause), f"object {ids[i]!r} at t={float(rows.t[i])}: "
+                            f"{state_problem(rows.x[i], rows.P[i])[1]}",
+                            n=int((unsound & (problems == cause)).sum()))
+        sound = np.flatnonzero(~ahead & ~no_id & ~unsound)
+        admitted = self.bank.admitted(ids[sound].tolist())
+        if not admitted.all():
+            oid = ids[sound[int(np.argmin(admitted))]]
             self.diag.count(Cause.REJECTED_BANK_FULL,
                             f"object {oid!r}: the bank holds max_objects "
-                            f"({self.bank.max_objects}) objects already")
-            return []
-        self.diag.counts[Count.RECEIVED] += 1
-        return self.bank.on_estimate(oid, t, x, P)
+                            f"({self.bank.max_objects}) objects already",
+                            n=int((~admitted).sum()))
+        take = sound[admitted]
+        self.diag.counts[Count.RECEIVED] += take.size
+        self.publish(self.bank.on_estimates(ids[take].tolist(), rows.t[take], rows.x[take],
+                                            rows.P[take]))
 
     def tick(self) -> bool:
         """Take what waited for the clock; fit what the budget allows; publish what is due.

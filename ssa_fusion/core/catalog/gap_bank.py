@@ -45,7 +45,7 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -337,6 +337,50 @@ class GapBank:
                 kept += self.windows.add(r, float(rows.t[i]), rows.z[i], rows.R[i],
                                          int(rows.kind[i]), rows.frame_id[i])
         self.counts["measurements"] += kept
+
+    def admitted(self, object_ids: Sequence[str]) -> NDArray[np.bool_]:
+        """Return which of `object_ids` (rows in order) `admits`, as they would come one by one.
+
+        Those held, and new ones in order of first appearance while there is room.
+        """
+        if not len(object_ids):
+            return np.zeros(0, dtype=bool)
+        uniq, first, inverse = np.unique(np.asarray(object_ids, dtype=object),
+                                         return_index=True, return_inverse=True)
+        held = np.fromiter((u in self._rows for u in uniq.tolist()), bool, uniq.size)
+        new = np.flatnonzero(~held)
+        room = max(self.max_objects - len(self._ids), 0)
+        ok = held.copy()
+        ok[new[np.argsort(first[new], kind="stable")[:room]]] = True
+        out: NDArray[np.bool_] = ok[inverse.ravel()]
+        return out
+
+    def on_estimates(self, object_ids: Sequence[str], t: NDArray[np.float64],
+                     x: NDArray[np.float64], P: NDArray[np.float64]) -> list[GapForecast]:
+        """Take a batch of estimates (rows in order, as `on_estimate` takes them one by one).
+
+        Epochs t (M,) s, states x (M, 6) km, km/s GCRF, covariances P (M, 6, 6). Only the rows
+        that change what the bank ends with are handed to `on_estimate`: of each object in
+        the batch its first and its last, those `pass_break_s` or more from the one before
+        or after (a gap's end, a pass end) and those out of epoch order; the rows between
+        are each replaced by the next (the newest estimate of a pass is what is kept). Return
+        the forecasts released. The caller checks `admitted` first.
+        """
+        if not len(object_ids):
+            return []
+        codes = np.unique(np.asarray(object_ids, dtype=object), return_inverse=True)[1].ravel()
+        order = np.lexsort((np.arange(codes.size), codes))
+        c, tt = codes[order], np.asarray(t, dtype=float)[order]
+        same = c[1:] == c[:-1]
+        gap = np.where(same, np.diff(tt), np.inf)
+        odd = ~((gap >= 0.0) & (gap < self.config.pass_break_s))  # breaks, disorder, NaN
+        need = np.ones(codes.size, dtype=bool)
+        need[1:-1] = odd[:-1] | odd[1:]
+        keep = np.sort(order[need])
+        out: list[GapForecast] = []
+        for i in keep.tolist():
+            out += self.on_estimate(object_ids[i], float(t[i]), x[i], P[i])
+        return out
 
     def on_estimate(self, object_id: str, t: float, x: ArrayLike,
                     P: ArrayLike) -> list[GapForecast]:

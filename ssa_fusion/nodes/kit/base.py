@@ -109,8 +109,10 @@ class SsaNode(Node):
         """Run `work` every `period_s` wall s while it has work (`nodes.kit.wakeup`).
 
         `work` returns whether it did something (an exception is counted, as `wall_timer`'s,
-        and counts as nothing). Once idle, it runs again after an input message, a change of
-        the node's clock, or work done by another of the node's wakeups.
+        and counts as nothing); it runs on while messages wait for the clock (`clock_hold`:
+        they are handed back, or refused, after a wall-time wait). Once idle, it runs again
+        after an input message, a change of the node's clock, or work done by another of the
+        node's wakeups.
         """
         if not self._wakeups:
             self.diag.on_input.append(self.arm_wakeups)
@@ -118,7 +120,9 @@ class SsaNode(Node):
                 JumpThreshold(min_forward=Duration(nanoseconds=1),
                               min_backward=Duration(nanoseconds=-1), on_clock_change=True),
                 post_callback=lambda _jump: self.arm_wakeups()))
-        w = Wakeup(self, period_s, self.diag.guard(work), after=self.arm_wakeups)
+        guarded = self.diag.guard(work)
+        w = Wakeup(self, period_s, lambda: bool(guarded()) or self.clock_hold.holding,
+                   after=self.arm_wakeups)
         self._wakeups.append(w)
         return w
 
