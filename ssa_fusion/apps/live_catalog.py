@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING, Any, TypedDict
 import numpy as np
 
 from ssa_fusion import graphs
-from ssa_fusion.apps import conjunction_table, runs
+from ssa_fusion.apps import conjunction_table, run_costs, runs
 from ssa_fusion.apps.args import discovery
 from ssa_fusion.apps.progress_lines import ProgressLines
 from ssa_fusion.core.base.rows import MeasurementRows
@@ -54,6 +54,7 @@ from ssa_fusion.core.motion.element_sets import CatalogEntry, catalog_states
 from ssa_fusion.evaluation.association import detection_labels, score_association
 from ssa_fusion.evaluation.object_states import ObjectStates, States, StatesByObject, merge
 from ssa_fusion.formats import element_sets as catalog_io
+from ssa_fusion.formats.skipped import Skipped
 from ssa_fusion.nodes.kit.diagnostics import RECORDED, Count
 from ssa_fusion.nodes.kit.progress import RECORDED_ESTIMATES, RECORDED_MEASUREMENTS
 from ssa_fusion.nodes.kit.unlabelled import EVENT_PREFIX, FATE_PREFIX
@@ -108,6 +109,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="catalog: a conjunction node re-screens the estimates for close "
                         "approaches (/ssa/conjunctions; CDMs in the run's conjunctions/; "
                         "docs/CONJUNCTIONS.md)")
+    p.add_argument("--strict", action="store_true",
+                   help="catalog: refuse the whole file at its first bad element set (default: "
+                        "leave bad sets out, each named on stderr with its file, line, object "
+                        "and reason, and counted in the summary)")
     p.add_argument("--surrogate-param", action="append", default=[], metavar="NAME=VALUE",
                    help="catalog: a catalog_surrogate parameter (e.g. min_span=21600), "
                         "repeatable")
@@ -181,14 +186,15 @@ def catalog_scenario(args: argparse.Namespace) -> sky.SkyScenario:
     return s.with_sites(sites) if sites else s
 
 
-def entries_of(args: argparse.Namespace,
-               progress: catalog_io.Progress | None = None) -> list[CatalogEntry]:
+def entries_of(args: argparse.Namespace, progress: catalog_io.Progress | None = None,
+               skip: Skipped | None = None) -> list[CatalogEntry]:
     """Return the objects the run simulates (as sensor_sim builds them from the options).
 
     ValueError (one line naming the file and line) for a catalog that cannot be read;
-    `progress`: `catalog_io.read_catalog`'s.
+    `progress`: `catalog_io.read_catalog`'s; `skip`: its bad element sets are left out and
+    counted there (as sensor_sim leaves them out), else the first refuses the file.
     """
-    entries = catalog_io.read_catalog(args.catalog, progress)
+    entries = catalog_io.read_catalog(args.catalog, progress, skip)
     if args.synthetic:
         entries = survey.synthetic_catalog(entries[0], args.synthetic, seed=args.seed)
     return entries[: args.objects] if args.objects else entries
@@ -318,9 +324,10 @@ def run(args: argparse.Namespace) -> int:
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         return 2
+    skipped = None if getattr(args, "strict", False) else Skipped()
     try:
         entries = entries_of(args, ProgressLines(f"live: catalog {args.catalog}",
-                                                 "objects").reading)
+                                                 "objects").reading, skipped)
         t0 = timescales.parse_utc(args.start) if args.start else survey.catalog_start(entries)
         timescales.check_window(t0, args.duration * 3600.0)
     except ValueError as exc:
@@ -344,15 +351,19 @@ def run(args: argparse.Namespace) -> int:
     graph = Graph(out / "logs", args.domain_id, discovery(args))
     radars = (f"radars of {s.sites_file} ({', '.join(r.station.name for r in s.radars)})"
               if s.sites_file else f"radars of {s.name}")
-    print(f"live: catalog {args.catalog} ({len(entries)} objects"
+    if skipped is not None and skipped.count:
+        print(skipped.summary(), file=sys.stderr)
+    left_out = f", {skipped.count} bad element sets left out" if skipped and skipped.count else ""
+    print(f"live: catalog {args.catalog} ({len(entries)} objects{left_out}"
           f"{', unlabelled detections' if unlabelled else ''}), {radars}, "
           f"{sim_s / 3600:g} h of sim time {pace(args)}, {args.shards} filter "
           f"shard(s){' with a surrogate each' if gaps else ''}; ROS domain {graph.domain_id}; "
           f"logs in {out}/logs", flush=True)
     for k, command in remote_commands(specs, remote, graph.domain_id, graph.discovery):
         print(f"  on shard {k}'s host: {command}", flush=True)
-    t_start = time.monotonic()
+    t_start, command_start = time.monotonic(), time.time()
     rss: dict[str, int] = {}
+    cpu: dict[str, float] = {}
     last_output = time.time()
     try:
         from ssa_fusion.ros.interfaces import DiagnosticArray, EstimateBatch
@@ -373,25 +384,27 @@ def run(args: argparse.Namespace) -> int:
             # the filters are done when their estimates stop (surrogates may still be fitting)
             graph.wait_quiet(lambda: seen[UpdateSource.SENSOR], quiet_s=1.0, limit_s=600.0)
             last_output = time.time() - 1.0  # wall time (Unix s) the last estimate arrived
-            # then one more report of every shard, counting all it did
+            # then one more report of every shard, counting all it did (a shard still busy
+            # gives its last when it is stopped: the summary comes either way)
             since = len(diagnostics)
-            graph.wait_for(lambda: set(names + gaps) <= {st.name for d in diagnostics[since:]
-                                                         for st in d.status}, 10.0,
-                           "a last /diagnostics report of every shard")
+            with contextlib.suppress(TimeoutError):
+                graph.wait_for(lambda: set(names + gaps) <= {
+                    st.name for d in diagnostics[since:] for st in d.status}, 10.0,
+                    "a last /diagnostics report of every shard")
             # and the recorder (last stopped, but stopped) has written all they published
             with contextlib.suppress(TimeoutError):  # the summary counts what it lacks
                 graph.wait_for(lambda: unrecorded(_statuses(diagnostics), names, gaps,
                                                   unlabelled) == 0,
                                60.0, "the recorder to write every measurement and estimate")
             rss = {n: _rss_kib(started[n].popen.pid) for n in names + gaps if n in started}
+            cpu = {n: run_costs.cpu_s(p.popen.pid) for n, p in started.items()}
     except TimeoutError as exc:  # its message holds every log's tail: the first line says what
         timed_out = str(exc).splitlines()[0]
     else:
         timed_out = ""
     finally:
         problems = graph.close()
-    if runs.ended_badly(problems):
-        return 1
+    ended_badly = runs.ended_badly(problems)  # the summary still says what was done
     if timed_out:
         elsewhere = (f"; shard(s) {','.join(map(str, remote))} run on other hosts: were they "
                      "started there with the commands above, and can the hosts reach each "
@@ -401,20 +414,48 @@ def run(args: argparse.Namespace) -> int:
     wall = time.monotonic() - t_start
     sim_wall = runs.sensor_wall_times(out / "logs" / "sensor_sim.err")
     ran = None if sim_wall is None else (sim_wall[0], max(sim_wall[1], last_output))
-    summary = summarise(bag, entries, _statuses(diagnostics), names, rss, ran, sim_s, gaps,
-                        unlabelled, t0, _pass_break(args))
+    try:
+        summary = summarise(bag, entries, _statuses(diagnostics), names, rss, ran, sim_s,
+                            gaps, unlabelled, t0, _pass_break(args))
+    except (OSError, ValueError) as exc:  # a recorder killed mid-write: no bag to sum up
+        print(f"error: no summary: cannot read {bag}: {exc} (`ssa-fusion bag repair`)",
+              file=sys.stderr)
+        return 1
+    summary.update(costs(out / "logs" / "sensor_sim.err", cpu, command_start, ran,
+                         summary["published"]))
     summary.update({"catalog": str(args.catalog), "objects": len(entries), "scenario": s.name,
                     "time_scale": args.time_scale if math.isfinite(args.time_scale) else "max",
                     "lockstep": args.lockstep,
                     "shards": args.shards, "wall_s": wall, "unlabelled": unlabelled,
-                    "remote_nodes": [n.name for n in specs if is_remote(n, remote)]})
+                    "remote_nodes": [n.name for n in specs if is_remote(n, remote)],
+                    "element_sets_skipped": skipped.count if skipped else 0,
+                    "element_sets_skipped_lines": skipped.lines if skipped else [],
+                    "processes_ended_badly": [p.splitlines()[0] for p in problems],
+                    "summary_s": None if ran is None else time.time() - ran[1]})
     if conj is not None:
         summary["conjunctions"] = conjunction_summary(bag, _statuses(diagnostics), conj)
     (out / "catalog.json").write_text(json.dumps(summary, indent=2))
     print(table(summary))
     if conj is not None:
         print(conjunction_table.table(conjunction_table.latest(bag)))
-    return 0 if summary["lost_measurements"] == 0 else 1
+    return 0 if summary["lost_measurements"] == 0 and not ended_badly else 1
+
+
+def costs(sensor_log: Path, cpu: dict[str, float], command_start: float,
+          ran: tuple[float, float] | None, published: int) -> dict[str, Any]:
+    """Return the run's phases (start-up, running) and each node's CPU time (`run_costs`).
+
+    `cpu`: CPU s of each node process still running at the end (the simulator's from its
+    log); per measurement published, in microseconds.
+    """
+    cpu = dict(cpu)
+    sim = run_costs.sensor_costs(sensor_log)
+    if sim is not None:
+        cpu["sensor_sim"] = sim[0]
+    per = {n: round(1e6 * v / published, 2) if published else None for n, v in cpu.items()}
+    return {**run_costs.phases(command_start, run_costs.first_measurement(sensor_log), ran),
+            "cpu_s": cpu, "cpu_us_per_measurement": per,
+            "simulator_peak_rss_mib": None if sim is None else sim[1]}
 
 
 def conjunction_summary(bag: Path, status: dict[str, dict[str, str]],
@@ -536,7 +577,7 @@ def summarise(bag: Path, entries: list[CatalogEntry],
     for g in gap_nodes or []:
         st = status.get(g, {})
         surrogates[g] = {k: num(g, k) for k in (
-            "received", "fits_made", "fits_physics", "fits_refused", "fits_skipped",
+            "received", "fits_made", "fits_physics", "fits_refused", "fits_skipped", "fits_cut",
             "published_forecast", "forecasts_overtaken", "waiting_for_fit", "objects")}
         surrogates[g]["fit_seconds"] = float(st.get("fit_seconds", "0") or 0)
         surrogates[g]["object_ids"] = [x for x in st.get("object_ids", "").split(",") if x]
@@ -673,4 +714,32 @@ def table(s: dict[str, Any]) -> str:
     elif ge is not None:
         rows.append("gaps: no forecasts recorded (fits need pass ends over "
                     "min_span; see the surrogates' counts)")
-    return "\n".join(rows)
+    return "\n".join(rows + run_rows(s))
+
+
+def run_rows(s: dict[str, Any]) -> list[str]:
+    """Return the lines of what the run cost and what it left out or cut (`costs`)."""
+    rows = []
+    if s.get("element_sets_skipped"):
+        rows.append(f"element sets left out of the catalog: {s['element_sets_skipped']} "
+                    "(each named on stderr at the start)")
+    if s.get("startup_s") is not None or s.get("running_s") is not None:
+        def sec(v: float | None) -> str:
+            return "?" if v is None else f"{v:.1f} s"
+        rows.append(f"wall time: start-up (command to the first measurement) "
+                    f"{sec(s.get('startup_s'))}, running {sec(s.get('running_s'))}, summary "
+                    f"{sec(s.get('summary_s'))}")
+    if s.get("cpu_s"):
+        each = ", ".join(f"{n} {v:.1f} s ({s['cpu_us_per_measurement'][n]} us)"
+                         for n, v in s["cpu_s"].items())
+        rows.append(f"CPU per node (per measurement published): {each}")
+    if s.get("simulator_peak_rss_mib") is not None:
+        rows.append(f"sensor_sim peak RSS {s['simulator_peak_rss_mib']:.0f} MiB")
+    cut = {n: g.get("fits_cut", 0) for n, g in s.get("surrogates", {}).items()}
+    if any(cut.values()):
+        rows.append("fits cut by the stop (their gaps left to the filter's coasting): "
+                    + ", ".join(f"{n} {v}" for n, v in cut.items()))
+    for line in s.get("processes_ended_badly", []):
+        rows.append(f"ended badly: {line}")
+    return rows
+

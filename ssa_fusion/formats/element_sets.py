@@ -65,6 +65,7 @@ from sgp4.io import LINE1, LINE2
 
 from ssa_fusion.core.earth.timescales import DAY_S, UNIX_EPOCH_JD, check_epochs
 from ssa_fusion.core.motion.element_sets import CatalogEntry
+from ssa_fusion.formats.skipped import Skipped, skip_or_raise
 
 if TYPE_CHECKING:
     from lxml import etree
@@ -113,7 +114,8 @@ _OMM_EXPECTED = {"REF_FRAME": "TEME", "TIME_SYSTEM": "UTC", "CENTER_NAME": "EART
 """OMM metadata an SGP4 element set must have, when the file gives it."""
 
 
-def read_catalog(path: Path | str, progress: Progress | None = None) -> list[CatalogEntry]:
+def read_catalog(path: Path | str, progress: Progress | None = None,
+                 skip: Skipped | None = None) -> list[CatalogEntry]:
     """Element sets of a TLE, 3LE, OMM/XML or OMM/CSV file (told from its content).
 
     The file is read as a stream (module docstring), as text in the locale's encoding (as
@@ -124,7 +126,10 @@ def read_catalog(path: Path | str, progress: Progress | None = None) -> list[Cat
     ValueError, naming the file and line: unreadable file, unknown or unsupported format
     (OMM/KVN), malformed line or field, an element set SGP4 refuses, an object id twice,
     no element set at all. Bytes that are not text in the encoding are said first, wherever
-    they are in the file (their position counted in bytes from its start).
+    they are in the file (their position counted in bytes from its start). With `skip`
+    (`formats.skipped`), a malformed or refused element set, or an object's second one, is
+    left out and counted there instead, and the read goes on; the file is still refused
+    when it has no element set left.
     """
     path = Path(path)
     source = str(path)
@@ -134,17 +139,18 @@ def read_catalog(path: Path | str, progress: Progress | None = None) -> list[Cat
         text = f.chunks()  # from the start again
         try:
             if head.startswith("<"):
-                entries = _omm_xml_entries(text, source)
+                entries = _omm_xml_entries(text, source, skip)
             elif head.startswith("CCSDS_OMM_VERS"):
                 raise ValueError(f"{path}: OMM in KVN is not supported (sgp4 reads OMM as XML "
                                  f"or CSV); convert it to one of those")
             elif "NORAD_CAT_ID" in head.split(","):
-                entries = _omm_csv_entries(_numbered(_lines(text)), source)
+                entries = _omm_csv_entries(_numbered(_lines(text)), source, skip)
             else:
-                entries = _tle_entries(_numbered(_lines(text)), source)
+                entries = _tle_entries(_numbered(_lines(text)), source, skip)
             out = _collected(entries, f, progress)
             if not out:
-                raise ValueError(f"{path}: no element sets in the file")
+                left = f" ({skip.count} left out: {skip.lines[0]})" if skip and skip.count else ""
+                raise ValueError(f"{path}: no element sets in the file{left}")
         except ValueError:
             for _ in text:  # the rest of the file: bytes that are not text say so first
                 pass
@@ -259,35 +265,67 @@ def _lines(chunks: Iterable[str]) -> Iterator[str]:
         yield "".join(cut)
 
 
-def parse_tle(text: str, source: str = "<string>") -> list[CatalogEntry]:
-    """Entries of TLE/3LE `text` (see the module docstring); `source` names it in errors."""
-    return list(_tle_entries(_numbered(text.splitlines()), source))
+def parse_tle(text: str, source: str = "<string>",
+              skip: Skipped | None = None) -> list[CatalogEntry]:
+    """Entries of TLE/3LE `text` (see the module docstring); `source` names it in errors.
+
+    `skip`: leave bad element sets out and count them there (`formats.skipped`).
+    """
+    return list(_tle_entries(_numbered(text.splitlines()), source, skip))
 
 
-def _tle_entries(lines: Iterator[tuple[int, str]], source: str) -> Iterator[CatalogEntry]:
-    """Yield the entries of TLE/3LE `lines` (numbered, as `_numbered` yields them)."""
+def _tle_entries(lines: Iterator[tuple[int, str]], source: str,
+                 skip: Skipped | None = None) -> Iterator[CatalogEntry]:
+    """Yield the entries of TLE/3LE `lines` (numbered, as `_numbered` yields them).
+
+    A bad element set (its name line, its two lines, or a line out of place) raises, or
+    with `skip` is counted there and left out: the read goes on at the next line that can
+    start a set.
+    """
     seen: dict[str, str] = {}
-    name, name_no = "", 0
-    for no, line in lines:
+    name, name_no, bad_name = "", 0, None
+    back: list[tuple[int, str]] = []  # a line read ahead, to be read again
+    while (item := back.pop() if back else next(lines, None)) is not None:
+        no, line = item
+        where = f"{source}:{no}"
         if line.startswith("1 "):
             nxt = next(lines, None)
-            if nxt is None or not nxt[1].startswith("2 "):
-                raise ValueError(f"{source}:{no}: TLE line 1 is not followed by its line 2")
-            entry = _tle_entry(line, nxt[1], name, f"{source}:{no}", f"{source}:{nxt[0]}")
-            _check_new(entry, seen)
-            yield entry
-            name, name_no = "", 0
+            try:
+                if nxt is None or not nxt[1].startswith("2 "):
+                    if nxt is not None:
+                        back.append(nxt)
+                    raise ValueError(f"{where}: TLE line 1 is not followed by its line 2")
+                if bad_name is not None:
+                    raise bad_name
+                entry = _tle_entry(line, nxt[1], name, where, f"{source}:{nxt[0]}")
+                _check_new(entry, seen)
+            except ValueError as exc:
+                skip_or_raise(skip, exc, where if bad_name is None else f"{source}:{name_no}",
+                              line[2:7].strip(), name)
+            else:
+                yield entry
+            name, name_no, bad_name = "", 0, None
         elif line.startswith("2 "):
-            raise ValueError(f"{source}:{no}: TLE line 2 without a line 1 before it")
-        elif name:
-            raise ValueError(f"{source}:{name_no}: name line {_quote(name)} is not followed "
-                             f"by TLE lines (line {no} is neither)")
+            skip_or_raise(skip, ValueError(f"{where}: TLE line 2 without a line 1 before it"),
+                          where, line[2:7].strip())
+        elif name or bad_name is not None:
+            skip_or_raise(skip, bad_name or ValueError(
+                f"{source}:{name_no}: name line {_quote(name)} is not followed by TLE lines "
+                f"(line {no} is neither)"), f"{source}:{name_no}", "", name)
+            name, name_no, bad_name = "", 0, None
+            back.append(item)
         else:
             name, name_no = (line[2:] if line.startswith("0 ") else line).strip(), no
-            _check_name(name, f"{source}:{no}: name line")
-    if name:
-        raise ValueError(f"{source}:{name_no}: name line {_quote(name)} at the end of the "
-                         f"file without TLE lines")
+            try:
+                _check_name(name, f"{where}: name line")
+            except ValueError as exc:
+                if skip is None:
+                    raise
+                bad_name, name = exc, ""  # not echoed: its own error quotes it, bounded
+    if name or bad_name is not None:
+        skip_or_raise(skip, bad_name or ValueError(
+            f"{source}:{name_no}: name line {_quote(name)} at the end of the file without "
+            f"TLE lines"), f"{source}:{name_no}", "", name)
 
 
 def _check_name(name: str, where: str) -> None:
@@ -446,7 +484,8 @@ def parse_omm_xml(text: str, source: str = "<string>") -> list[CatalogEntry]:
     return list(_omm_xml_entries(chunks, source))
 
 
-def _omm_xml_entries(chunks: Iterable[str], source: str) -> Iterator[CatalogEntry]:
+def _omm_xml_entries(chunks: Iterable[str], source: str,
+                     skip: Skipped | None = None) -> Iterator[CatalogEntry]:
     """Yield the entries of the OMM XML text that `chunks` make, read as a stream.
 
     lxml's pull parser (no network, no DTD loaded, its limits on text size and depth held;
@@ -456,11 +495,12 @@ def _omm_xml_entries(chunks: Iterable[str], source: str) -> Iterator[CatalogEntr
     segments still open, is dropped. Errors are raised as a parse of the whole document
     raised them: XML that is not well formed anywhere first, then a segment lacking a
     block, then the first segment whose element set is wrong (the segments after it are
-    only parsed).
+    only parsed). With `skip`, a segment lacking a block or whose element set is wrong is
+    counted there and left out (XML that is not well formed still refuses the file).
     """
     from lxml import etree
 
-    reader = _OmmXml(source)
+    reader = _OmmXml(source, skip)
     parser = etree.XMLPullParser(events=("start", "end"), tag="segment", remove_comments=True,
                                  remove_pis=True, no_network=True, load_dtd=False,
                                  huge_tree=False)
@@ -482,8 +522,9 @@ def _omm_xml_entries(chunks: Iterable[str], source: str) -> Iterator[CatalogEntr
 class _OmmXml:
     """The segments of an OMM XML document, from its parser's events (`_omm_xml_entries`)."""
 
-    def __init__(self, source: str) -> None:
+    def __init__(self, source: str, skip: Skipped | None = None) -> None:
         self.source = source
+        self.skip = skip
         self.root: etree._Element | None = None
         self.open: list[tuple[int, etree._Element]] = []
         """The segments started and not yet ended: (number from 1 in document order, it)."""
@@ -535,17 +576,25 @@ class _OmmXml:
             fields = self.ended.pop(self.judged)
             if self.lacking:
                 continue
+            where = f"{self.source}:segment {self.judged}"
             if fields is None:
+                lacks = ValueError(f"{self.source}: an OMM segment lacks (or has empty) "
+                                   f"metadata, data, meanElements or tleParameters")
+                if self.skip is not None:
+                    skip_or_raise(self.skip, lacks, where, "")
+                    continue
                 self.lacking = True
-                self.failure = ValueError(
-                    f"{self.source}: an OMM segment lacks (or has empty) metadata, data, "
-                    f"meanElements or tleParameters")
+                self.failure = lacks
             elif self.failure is None:
                 try:
-                    entry = _omm_entry(fields, f"{self.source}:segment {self.judged}")
+                    entry = _omm_entry(fields, where)
                     _check_new(entry, self.seen)
                 except ValueError as exc:
-                    self.failure = exc
+                    if self.skip is None:
+                        self.failure = exc
+                    else:
+                        skip_or_raise(self.skip, exc, where, _omm_id(fields),
+                                      _omm_name(fields))
                 else:
                     yield entry
 
@@ -578,11 +627,13 @@ def parse_omm_csv(text: str, source: str = "<string>") -> list[CatalogEntry]:
     return list(_omm_csv_entries(_numbered(text.splitlines()), source))
 
 
-def _omm_csv_entries(lines: Iterator[tuple[int, str]], source: str) -> Iterator[CatalogEntry]:
+def _omm_csv_entries(lines: Iterator[tuple[int, str]], source: str,
+                     skip: Skipped | None = None) -> Iterator[CatalogEntry]:
     """Yield the entries of OMM CSV `lines` (numbered, as `_numbered` yields them).
 
     Row k is named by the number of the (k+1)-th line (the header being the first); a row
-    csv cannot read by that of the line after the last row read.
+    csv cannot read by that of the line after the last row read. With `skip`, a row whose
+    element set is bad is counted there and left out.
     """
     numbers: list[int] = []  # of the lines read, from the `first`-th (from 0) on
     first = 0
@@ -605,13 +656,31 @@ def _omm_csv_entries(lines: Iterator[tuple[int, str]], source: str) -> Iterator[
             del numbers[:k - first]
             first = k
             where = f"{source}:{numbers[0]}"
-            if None in fields:
-                raise ValueError(f"{where}: more values than the header has columns")
-            entry = _omm_entry(dict(fields), where)
-            _check_new(entry, seen)
-            yield entry
+            try:
+                if None in fields:
+                    raise ValueError(f"{where}: more values than the header has columns")
+                entry = _omm_entry(dict(fields), where)
+                _check_new(entry, seen)
+            except ValueError as exc:
+                skip_or_raise(skip, exc, where, _omm_id(fields), _omm_name(fields))
+            else:
+                yield entry
     except csv.Error as exc:  # e.g. a field beyond csv's size limit (131,072 characters)
         raise ValueError(f"{source}:{number(k + 1)}: unreadable CSV row: {exc}") from None
+
+
+def _omm_id(fields: dict[str, Any]) -> str:
+    """Return an OMM's NORAD_CAT_ID as given (stripped, bounded), for a line about it."""
+    value = fields.get("NORAD_CAT_ID")
+    return _quote(value.strip())[1:-1] if isinstance(value, str) else ""
+
+
+def _omm_name(fields: dict[str, Any]) -> str:
+    """Return an OMM's OBJECT_NAME for a line about it ('' unless plain printable text)."""
+    value = fields.get("OBJECT_NAME")
+    if not isinstance(value, str) or len(value) > MAX_NAME or not value.isprintable():
+        return ""
+    return value.strip()
 
 
 def _omm_entry(fields: dict[str, Any], where: str) -> CatalogEntry:

@@ -7,7 +7,8 @@ its pass-end estimates (`core.gaps.residual`; until they span a day, `min_span`,
 forecast from the pass end, `physics_fit`), and publishes on ``/ssa/estimate_batch`` the
 object's forecast through each gap between passes (update source FORECAST, ``object_id``
 set; one batch per round) on the grid of multiples of `predict_period`, once `pass_break`
-sim s have passed without an estimate. The fits
+sim s have passed without an estimate. A stop (SIGINT, SIGTERM) cuts the fits still queued
+(counted ``fits_cut``): the node ends within a fit's time, with its last report. The fits
 (`core.catalog.gap_bank.GapBank`) take at most `fit_budget` of the wall time on average: a gap that
 ends before its turn is left to the filter's coasting and counted as ``skipped`` on
 ``/diagnostics``.
@@ -56,6 +57,7 @@ from ssa_fusion.core.measure.validation import (
     states_problems,
 )
 from ssa_fusion.formats.sites import load_station_map
+from ssa_fusion.nodes import STOP
 from ssa_fusion.nodes.kit.base import SsaNode
 from ssa_fusion.nodes.kit.diagnostics import Count, NodeCause
 from ssa_fusion.nodes.kit.progress import SHARD, TAKEN_ESTIMATES, ProgressReporter
@@ -77,8 +79,8 @@ TICK_S = 0.01
 waits for the round at its clock: `nodes.kit.progress.CLOCK`)."""
 
 COUNTERS = {"fitted": Count.FITS_MADE, "fitted_physics": Count.FITS_PHYSICS,
-            "refused": Count.FITS_REFUSED,
-            "skipped": Count.FITS_SKIPPED, "overtaken": Count.FORECASTS_OVERTAKEN}
+            "refused": Count.FITS_REFUSED, "skipped": Count.FITS_SKIPPED,
+            "cut": Count.FITS_CUT, "overtaken": Count.FORECASTS_OVERTAKEN}
 """/diagnostics counters of the bank's counts (`GapBank.counts`)."""
 
 
@@ -241,7 +243,7 @@ class CatalogSurrogateNode(SsaNode):
         """
         self.replay_held()
         now_ns = int(self.get_clock().now().nanoseconds)
-        out = self.bank.step(now_ns * 1e-9)
+        out = self.bank.step(now_ns * 1e-9, stop=STOP.is_set)  # a stop cuts the fits left
         self.publish(out)
         moved = now_ns != self.stepped_ns
         self.stepped_ns = now_ns

@@ -26,6 +26,7 @@ the simulated world (`ssa_fusion.sim`).
 from __future__ import annotations
 
 import math
+import resource
 import time
 
 import numpy as np
@@ -313,9 +314,11 @@ class SensorSim(SsaNode):
             if pub is not None:
                 pub.wait_for_all_acked(Duration(seconds=5.0))
         self.diag.publish_last()
+        use = resource.getrusage(resource.RUSAGE_SELF)
         self.get_logger().info(
             f"schedule done: {self.diag.counts[Count.PUBLISHED]} measurements, "
-            f"{self.diag.counts[Count.WITHHELD]} withheld"
+            f"{self.diag.counts[Count.WITHHELD]} withheld; CPU "
+            f"{use.ru_utime + use.ru_stime:.1f} s, peak RSS {use.ru_maxrss / 1024:.0f} MiB"
         )
         finish()
 

@@ -202,8 +202,8 @@ class GapBank:
         """``fitted`` (a fit with a forecast; ``fitted_batch_fit`` those of a batch fit,
         ``fitted_physics`` those of the physics-only fit, `GapBankConfig.physics`),
         ``refused`` (too few anchors, or the fit refused or failed), ``skipped`` (the gap
-        ended before its turn), ``forecasts``, ``overtaken``, ``measurements`` (kept in a
-        batch-fit window)."""
+        ended before its turn), ``cut`` (queued when the node stopped: `step`),
+        ``forecasts``, ``overtaken``, ``measurements`` (kept in a batch-fit window)."""
         self.fit_seconds = 0.0
         """Wall s spent fitting and scoring fits, in all (what the budget covers)."""
         self.windows = MeasurementWindows(config.fit_passes, config.pass_break_s,
@@ -419,12 +419,14 @@ class GapBank:
         self._last[r] = t
         return out
 
-    def step(self, now: float) -> list[GapForecast]:
+    def step(self, now: float, stop: Callable[[], bool] | None = None) -> list[GapForecast]:
         """Queue, fit and release at sim time `now` (s).
 
         Move the measurements up to `now` into the windows, queue the objects whose pass
         just ended, fit as many as the budget allows (newest pass end first), and return
-        every forecast now due.
+        every forecast now due. Once `stop()` is True (the node is stopping) the fits still
+        queued are cut: counted as ``cut``, their gaps left to the filter's coasting, never
+        queued again.
         """
         c = self.config
         self._admit_measurements(now)
@@ -438,6 +440,12 @@ class GapBank:
                                   c.fit_budget)  # no more than one wall second saved up
         self._wall_last = wall
         while (self._allowance > 0.0 or not c.fit_budget) and self._queued[:n].any():
+            if stop is not None and stop():
+                cut = np.flatnonzero(self._queued[:n])
+                self.counts["cut"] += cut.size
+                self._queued[cut] = False
+                self._fitted[cut] = last[cut]
+                break
             r = int(np.flatnonzero(self._queued[:n])[np.argmax(last[self._queued[:n]])])
             self._queued[r] = False
             spent = self._fit(r)  # the fit's own wall time accrues at the next step

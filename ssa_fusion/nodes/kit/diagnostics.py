@@ -66,6 +66,7 @@ class Count(enum.StrEnum):
     FITS_PHYSICS = "fits_physics"
     FITS_REFUSED = "fits_refused"
     FITS_SKIPPED = "fits_skipped"
+    FITS_CUT = "fits_cut"
     FORECASTS_OVERTAKEN = "forecasts_overtaken"
     TRUTH = "truth"
     ESTIMATES = "estimates"
