@@ -99,7 +99,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "fit_residual; default: the scenario's)")
     p.add_argument("--strict", action="store_true",
                    help="exit 1 when forecasts for gap epochs never went into the filter "
-                        "(they arrived late or were dropped, e.g. at too high a time scale)")
+                        "(they arrived late or were dropped, e.g. at too high a time scale); "
+                        "with --catalog: refuse the file at its first bad element set "
+                        "(default: each is left out, named on stderr with its file, line, "
+                        "object and reason, and counted in the summary)")
     p.add_argument("--foxglove", action="store_true",
                    help="also serve the graph live to Foxglove (foxglove_bridge node, "
                         "WebSocket on 127.0.0.1; layout: config/foxglove_layout.json)")

@@ -109,10 +109,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="catalog: a conjunction node re-screens the estimates for close "
                         "approaches (/ssa/conjunctions; CDMs in the run's conjunctions/; "
                         "docs/CONJUNCTIONS.md)")
-    p.add_argument("--strict", action="store_true",
-                   help="catalog: refuse the whole file at its first bad element set (default: "
-                        "leave bad sets out, each named on stderr with its file, line, object "
-                        "and reason, and counted in the summary)")
     p.add_argument("--surrogate-param", action="append", default=[], metavar="NAME=VALUE",
                    help="catalog: a catalog_surrogate parameter (e.g. min_span=21600), "
                         "repeatable")

@@ -478,10 +478,14 @@ def _check_satrec(sat: Satrec, where: str) -> None:
     check_epochs(epoch, f"{where}: epoch")
 
 
-def parse_omm_xml(text: str, source: str = "<string>") -> list[CatalogEntry]:
-    """Entries of CCSDS OMM XML `text` (one per ``segment``, as `sgp4.omm.parse_xml` reads)."""
+def parse_omm_xml(text: str, source: str = "<string>",
+                  skip: Skipped | None = None) -> list[CatalogEntry]:
+    """Entries of CCSDS OMM XML `text` (one per ``segment``, as `sgp4.omm.parse_xml` reads).
+
+    `skip`: leave bad segments out and count them there (`formats.skipped`).
+    """
     chunks = (text[i:i + CHUNK_BYTES] for i in range(0, len(text), CHUNK_BYTES))
-    return list(_omm_xml_entries(chunks, source))
+    return list(_omm_xml_entries(chunks, source, skip))
 
 
 def _omm_xml_entries(chunks: Iterable[str], source: str,
@@ -618,13 +622,14 @@ def _segment_fields(segment: etree._Element) -> dict[str, str | None] | None:
     return fields
 
 
-def parse_omm_csv(text: str, source: str = "<string>") -> list[CatalogEntry]:
+def parse_omm_csv(text: str, source: str = "<string>",
+                  skip: Skipped | None = None) -> list[CatalogEntry]:
     """Entries of CCSDS OMM CSV `text`.
 
     A header row of OMM keywords, then one row per object; lines starting with ``#`` are
-    comments.
+    comments. `skip`: leave bad rows out and count them there (`formats.skipped`).
     """
-    return list(_omm_csv_entries(_numbered(text.splitlines()), source))
+    return list(_omm_csv_entries(_numbered(text.splitlines()), source, skip))
 
 
 def _omm_csv_entries(lines: Iterator[tuple[int, str]], source: str,

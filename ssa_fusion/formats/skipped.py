@@ -50,10 +50,16 @@ def skip_or_raise(skip: Skipped | None, exc: ValueError, where: str, object_id: 
                   name: str = "") -> None:
     """Raise `exc` when `skip` is None (strict); else count its set as left out there.
 
-    `exc`'s message is ``where: reason`` (the readers' errors): the reason is what follows.
+    `exc`'s message is ``file:line: reason`` (the readers' errors): the reason is what
+    follows, and the line the one it names (a set's line 2, say) where it names one of the
+    file `where` names.
     """
     if skip is None:
         raise exc
     text = str(exc)
-    reason = text[len(where) + 2:] if text.startswith(f"{where}: ") else text
-    skip.add(where, object_id, name, reason)
+    source = where.rsplit(":", 1)[0]
+    at, _, reason = text[len(source) + 1:].partition(": ")
+    if text.startswith(f"{source}:") and reason and (at.isdigit() or at.startswith("segment ")):
+        skip.add(f"{source}:{at}", object_id, name, reason)
+    else:
+        skip.add(where, object_id, name, text.removeprefix(f"{source}: "))

@@ -127,6 +127,11 @@ class SensorSim(SsaNode):
         self.create_timer(p.number("tick"), self.step)
         self.get_logger().info(f"{p.text('scenario')}: {run.summary}, "
                                f"time scale {self.time_scale}x")
+        if self.catalog is not None and self.catalog.skipped.count:
+            skipped = self.catalog.skipped
+            self.diag.count(Count.ELEMENT_SETS_SKIPPED, skipped.lines[0], n=skipped.count)
+            for line in skipped.lines[1:]:
+                self.get_logger().warning(line)
 
     def _advertise(self) -> None:
         """Create the publishers (the detections' truth only for unlabelled detections)."""

@@ -30,6 +30,7 @@ from ssa_fusion.core.base.rows import MeasurementRows
 from ssa_fusion.core.earth import timescales
 from ssa_fusion.core.earth.frames import Frame
 from ssa_fusion.formats import element_sets
+from ssa_fusion.formats.skipped import Skipped
 from ssa_fusion.sim import scenarios, sky, survey
 from ssa_fusion.sim.simulate import Simulation, simulate
 from ssa_fusion.sim.world import TruthModel
@@ -118,12 +119,15 @@ class CatalogRun:
         Each sensor's station (frame_id; index: a measurement's ``sensor``).
     R : ndarray (S, 3, 3)
         Each sensor's measurement noise covariance, km², rad².
+    skipped : Skipped
+        The bad element sets of the file, left out (`formats.skipped`).
     """
 
     stream: survey.ObservationStream
     object_ids: NDArray[np.object_]
     frames: NDArray[np.object_]
     R: NDArray[np.float64]
+    skipped: Skipped = field(default_factory=Skipped)
 
     def rows(self, obs: survey.Observations, keys: NDArray[np.uint32]) -> MeasurementRows:
         """Return measurements `obs` (a window of `stream`) as rows.
@@ -265,8 +269,9 @@ def catalog_plan(real_sky: sky.SkyScenario, s: SimSettings) -> Plan:
     set epoch). No truth in the schedule: the truth is SGP4 of the catalog, recomputed by
     whoever scores the run.
     """
+    skipped = Skipped()
     try:
-        entries = element_sets.read_catalog(s.catalog)
+        entries = element_sets.read_catalog(s.catalog, skip=skipped)
     except ValueError as exc:
         raise ScheduleError(f"parameter 'catalog' = {s.catalog!r}: {exc}") from exc
     if s.synthetic:
@@ -282,9 +287,10 @@ def catalog_plan(real_sky: sky.SkyScenario, s: SimSettings) -> Plan:
     stream = survey.ObservationStream(entries, radars, t0, span, seed=s.seed)
     run = CatalogRun(stream, np.asarray(list(stream.object_ids), dtype=object),
                      np.asarray([x.station.name for x in radars], dtype=object),
-                     np.array([r.R for r in radars], dtype=float))
+                     np.array([r.R for r in radars], dtype=float), skipped)
+    left_out = f" ({skipped.count} bad element sets left out)" if skipped.count else ""
     return Plan([], run, np.array([stream.start, stream.end]),
-                f"catalog {s.catalog}: {len(entries)} objects measured by "
+                f"catalog {s.catalog}{left_out}: {len(entries)} objects measured by "
                 f"{', '.join(r.station.name for r in radars)} over {span / 3600:g} h "
                 f"from {timescales.iso(t0)}, a window at a time")
 

@@ -73,6 +73,7 @@ class Count(enum.StrEnum):
     MEASUREMENTS = "measurements"
     SCENE_UPDATES = "scene_updates"
     LOCKSTEP_TIMEOUTS = "lockstep_timeouts"
+    ELEMENT_SETS_SKIPPED = "element_sets_skipped"
     EVICTED = "evicted"
     PUBLISHED_ASSOCIATED = "published_associated"
     PUBLISHED_RELABELLED = "published_relabelled"
