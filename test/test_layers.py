@@ -189,7 +189,7 @@ def test_the_core_rooms_import_down():
     ("ssa_fusion.core.base.types", "from ssa_fusion.core.earth import frames"),
     ("ssa_fusion.core.earth.frames", "from ..motion.kepler import propagate"),
     ("ssa_fusion.core.filter.ekf", "from ssa_fusion.core.gaps.residual import rtn_axes"),
-    ("ssa_fusion.core.catalog.deferral", "import ssa_fusion.core.conjunction.pc"),
+    ("ssa_fusion.core.catalog.association.deferral", "import ssa_fusion.core.conjunction.pc"),
     ("ssa_fusion.core.motion.dynamics", "from ssa_fusion.core import flat_module"),
 ])
 def test_room_checker_finds_an_import_up(module, source):
@@ -197,7 +197,7 @@ def test_room_checker_finds_an_import_up(module, source):
 
 
 @pytest.mark.parametrize(("module", "source"), [
-    ("ssa_fusion.core.catalog.deferral", "from ssa_fusion.core.filter import options"),
+    ("ssa_fusion.core.catalog.association.deferral", "from ssa_fusion.core.filter import options"),
     ("ssa_fusion.core.earth.frames", "from . import eop\nfrom ..base.constants import R_EARTH"),
     ("ssa_fusion.core.base.types", "import numpy"),
 ])
