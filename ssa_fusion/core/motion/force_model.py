@@ -173,6 +173,107 @@ def _zonal34(x: float, yy: float, zz: float, mu: float, re: float, j3: float, j4
 
 
 @jit
+def _zonal34_gradient(ar: Array, x: float, yy: float, zz: float, mu: float, re: float,
+                      j3: float, j4: float, px: float, py: float, pz: float) -> None:
+    """Add the J3 + J4 gravity gradient (central differences of `_zonal34`, 1/s^2) to ``ar``."""
+    h = ZONAL_STEP_KM
+    for j in range(3):
+        ex = h if j == 0 else 0.0
+        ey = h if j == 1 else 0.0
+        ez = h if j == 2 else 0.0
+        f0, f1, f2 = _zonal34(x + ex, yy + ey, zz + ez, mu, re, j3, j4, px, py, pz)
+        m0, m1, m2 = _zonal34(x - ex, yy - ey, zz - ez, mu, re, j3, j4, px, py, pz)
+        ar[0, j] += (f0 - m0) / (2.0 * h)
+        ar[1, j] += (f1 - m1) / (2.0 * h)
+        ar[2, j] += (f2 - m2) / (2.0 * h)
+
+
+@jit
+def _drag(y: Array, r: float, kd: float, c: Array, ar: Array,
+          av: Array) -> tuple[float, float, float]:
+    """Return the drag acceleration with ``k_D = 1`` (km/s^2) at the state ``y``.
+
+    Its partials times ``kd`` are written into ``av`` (velocity) and added to ``ar``
+    (position); ``c``: `ForceModel.constants`; ``r``: the radius, km.
+    """
+    x, yy, zz = y[0], y[1], y[2]
+    om = c[11]
+    px, py, pz = c[3], c[4], c[5]
+    wx, wy, wz = om * px, om * py, om * pz
+    ux = y[3] - (wy * zz - wz * yy)
+    uy = y[4] - (wz * x - wx * zz)
+    uz = y[5] - (wx * yy - wy * x)
+    un = math.sqrt(ux * ux + uy * uy + uz * uz)
+    rho = c[8] * math.exp(-(r - c[2] - c[9]) / c[10])
+    cr = c[7] * rho  # km/s^2 per (km/s)^2
+    u = (ux, uy, uz)
+    wv = (wx, wy, wz)
+    for i in range(3):
+        for j in range(3):
+            dv = -kd * cr * ((un if i == j else 0.0) + u[i] * u[j] / un)
+            av[i, j] = dv
+    rr = (x, yy, zz)
+    kr = kd * cr * un / (c[10] * r)
+    for i in range(3):
+        # - D_v [w x]: column j of [w x] is w x e_j
+        d0 = av[i, 1] * wv[2] - av[i, 2] * wv[1]
+        d1 = av[i, 2] * wv[0] - av[i, 0] * wv[2]
+        d2 = av[i, 0] * wv[1] - av[i, 1] * wv[0]
+        ar[i, 0] += kr * u[i] * rr[0] - d0
+        ar[i, 1] += kr * u[i] * rr[1] - d1
+        ar[i, 2] += kr * u[i] * rr[2] - d2
+    return -cr * un * ux, -cr * un * uy, -cr * un * uz
+
+
+@jit
+def _rtn_axes(y: Array, r: float) -> tuple[tuple[float, float, float],
+                                          tuple[float, float, float],
+                                          tuple[float, float, float]]:
+    """Return the radial, transverse and normal unit vectors (GCRF) of the state ``y``."""
+    x, yy, zz = y[0], y[1], y[2]
+    vx, vy, vz = y[3], y[4], y[5]
+    hx, hy, hz = yy * vz - zz * vy, zz * vx - x * vz, x * vy - yy * vx
+    hn = math.sqrt(hx * hx + hy * hy + hz * hz)
+    rh = (x / r, yy / r, zz / r)
+    nh = (hx / hn, hy / hn, hz / hn)
+    th = (nh[1] * rh[2] - nh[2] * rh[1], nh[2] * rh[0] - nh[0] * rh[2],
+          nh[0] * rh[1] - nh[1] * rh[0])
+    return rh, th, nh
+
+
+@jit
+def _variational(y: Array, ncol: int, ar: Array, av: Array, which: IntArray,
+                 axes: tuple[tuple[float, float, float], tuple[float, float, float],
+                             tuple[float, float, float], tuple[float, float, float]],
+                 out: Array, s: int) -> None:
+    """``out[s, 6:]``: the derivative of [Phi | S] (the state's rows 6..).
+
+    ``ar``, ``av`` (3, 3): the acceleration's partials by position and velocity; ``axes``:
+    the drag acceleration with k_D = 1 and the radial, transverse, normal unit vectors
+    (the sensitivities to the parameters ``which``, `PARAMETERS`).
+    """
+    for j in range(ncol):
+        p0 = y[6 + j]
+        p1 = y[6 + ncol + j]
+        p2 = y[6 + 2 * ncol + j]
+        q0 = y[6 + 3 * ncol + j]
+        q1 = y[6 + 4 * ncol + j]
+        q2 = y[6 + 5 * ncol + j]
+        out[s, 6 + j] = q0
+        out[s, 6 + ncol + j] = q1
+        out[s, 6 + 2 * ncol + j] = q2
+        b0 = b1 = b2 = 0.0
+        if j >= 6:
+            b0, b1, b2 = axes[which[j - 6]]
+        out[s, 6 + 3 * ncol + j] = (ar[0, 0] * p0 + ar[0, 1] * p1 + ar[0, 2] * p2
+                                    + av[0, 0] * q0 + av[0, 1] * q1 + av[0, 2] * q2 + b0)
+        out[s, 6 + 4 * ncol + j] = (ar[1, 0] * p0 + ar[1, 1] * p1 + ar[1, 2] * p2
+                                    + av[1, 0] * q0 + av[1, 1] * q1 + av[1, 2] * q2 + b1)
+        out[s, 6 + 5 * ncol + j] = (ar[2, 0] * p0 + ar[2, 1] * p1 + ar[2, 2] * p2
+                                    + av[2, 0] * q0 + av[2, 1] * q1 + av[2, 2] * q2 + b2)
+
+
+@jit
 def _force_rhs(y: Array, ncol: int, c: Array, prm: Array, which: IntArray,
                out: Array, s: int) -> None:
     """``out[s] = dy/dt`` of the state + [Phi | S] system ``y`` (6 + 6 ncol,).
@@ -183,7 +284,6 @@ def _force_rhs(y: Array, ncol: int, c: Array, prm: Array, which: IntArray,
     mu, j2, re = c[0], c[1], c[2]
     px, py, pz = c[3], c[4], c[5]
     x, yy, zz = y[0], y[1], y[2]
-    vx, vy, vz = y[3], y[4], y[5]
     r = math.sqrt(x * x + yy * yy + zz * zz)
     ax, ay, az, g00, g01, g02, g11, g12, g22 = j2_gravity(x, yy, zz, mu, j2, re, px, py, pz)
     # gravity gradient (symmetric), row-major in a 3x3 array of the position partials
@@ -200,54 +300,15 @@ def _force_rhs(y: Array, ncol: int, c: Array, prm: Array, which: IntArray,
         ay += by
         az += bz
         if ncol:
-            h = ZONAL_STEP_KM
-            for j in range(3):
-                ex = h if j == 0 else 0.0
-                ey = h if j == 1 else 0.0
-                ez = h if j == 2 else 0.0
-                f0, f1, f2 = _zonal34(x + ex, yy + ey, zz + ez, mu, re, j3, j4, px, py, pz)
-                m0, m1, m2 = _zonal34(x - ex, yy - ey, zz - ez, mu, re, j3, j4, px, py, pz)
-                ar[0, j] += (f0 - m0) / (2.0 * h)
-                ar[1, j] += (f1 - m1) / (2.0 * h)
-                ar[2, j] += (f2 - m2) / (2.0 * h)
+            _zonal34_gradient(ar, x, yy, zz, mu, re, j3, j4, px, py, pz)
     anx = any_ = anz = 0.0  # the drag acceleration with k_D = 1
     if c[6] != 0.0:
-        om = c[11]
-        wx, wy, wz = om * px, om * py, om * pz
-        ux = vx - (wy * zz - wz * yy)
-        uy = vy - (wz * x - wx * zz)
-        uz = vz - (wx * yy - wy * x)
-        un = math.sqrt(ux * ux + uy * uy + uz * uz)
-        rho = c[8] * math.exp(-(r - re - c[9]) / c[10])
-        cr = c[7] * rho  # km/s^2 per (km/s)^2
-        anx, any_, anz = -cr * un * ux, -cr * un * uy, -cr * un * uz
         kd = prm[0]
+        anx, any_, anz = _drag(y, r, kd, c, ar, av)
         ax += kd * anx
         ay += kd * any_
         az += kd * anz
-        u = (ux, uy, uz)
-        wv = (wx, wy, wz)
-        for i in range(3):
-            for j in range(3):
-                dv = -kd * cr * ((un if i == j else 0.0) + u[i] * u[j] / un)
-                av[i, j] = dv
-        rr = (x, yy, zz)
-        kr = kd * cr * un / (c[10] * r)
-        for i in range(3):
-            # - D_v [w x]: column j of [w x] is w x e_j
-            d0 = av[i, 1] * wv[2] - av[i, 2] * wv[1]
-            d1 = av[i, 2] * wv[0] - av[i, 0] * wv[2]
-            d2 = av[i, 0] * wv[1] - av[i, 1] * wv[0]
-            ar[i, 0] += kr * u[i] * rr[0] - d0
-            ar[i, 1] += kr * u[i] * rr[1] - d1
-            ar[i, 2] += kr * u[i] * rr[2] - d2
-    # the RTN axes
-    hx, hy, hz = yy * vz - zz * vy, zz * vx - x * vz, x * vy - yy * vx
-    hn = math.sqrt(hx * hx + hy * hy + hz * hz)
-    rh = (x / r, yy / r, zz / r)
-    nh = (hx / hn, hy / hn, hz / hn)
-    th = (nh[1] * rh[2] - nh[2] * rh[1], nh[2] * rh[0] - nh[0] * rh[2],
-          nh[0] * rh[1] - nh[1] * rh[0])
+    rh, th, nh = _rtn_axes(y, r)
     for i in range(3):
         ax_i = prm[1] * rh[i] + prm[2] * th[i] + prm[3] * nh[i]
         if i == 0:
@@ -256,36 +317,9 @@ def _force_rhs(y: Array, ncol: int, c: Array, prm: Array, which: IntArray,
             ay += ax_i
         else:
             az += ax_i
-    out[s, 0], out[s, 1], out[s, 2] = vx, vy, vz
+    out[s, 0], out[s, 1], out[s, 2] = y[3], y[4], y[5]
     out[s, 3], out[s, 4], out[s, 5] = ax, ay, az
-    an = (anx, any_, anz)
-    for j in range(ncol):
-        p0 = y[6 + j]
-        p1 = y[6 + ncol + j]
-        p2 = y[6 + 2 * ncol + j]
-        q0 = y[6 + 3 * ncol + j]
-        q1 = y[6 + 4 * ncol + j]
-        q2 = y[6 + 5 * ncol + j]
-        out[s, 6 + j] = q0
-        out[s, 6 + ncol + j] = q1
-        out[s, 6 + 2 * ncol + j] = q2
-        b0 = b1 = b2 = 0.0
-        if j >= 6:
-            p = which[j - 6]
-            if p == 0:
-                b0, b1, b2 = an[0], an[1], an[2]
-            elif p == 1:
-                b0, b1, b2 = rh[0], rh[1], rh[2]
-            elif p == 2:
-                b0, b1, b2 = th[0], th[1], th[2]
-            else:
-                b0, b1, b2 = nh[0], nh[1], nh[2]
-        out[s, 6 + 3 * ncol + j] = (ar[0, 0] * p0 + ar[0, 1] * p1 + ar[0, 2] * p2
-                                    + av[0, 0] * q0 + av[0, 1] * q1 + av[0, 2] * q2 + b0)
-        out[s, 6 + 4 * ncol + j] = (ar[1, 0] * p0 + ar[1, 1] * p1 + ar[1, 2] * p2
-                                    + av[1, 0] * q0 + av[1, 1] * q1 + av[1, 2] * q2 + b1)
-        out[s, 6 + 5 * ncol + j] = (ar[2, 0] * p0 + ar[2, 1] * p1 + ar[2, 2] * p2
-                                    + av[2, 0] * q0 + av[2, 1] * q1 + av[2, 2] * q2 + b2)
+    _variational(y, ncol, ar, av, which, ((anx, any_, anz), rh, th, nh), out, s)
 
 
 @jit
