@@ -32,7 +32,7 @@ from ssa_fusion.core.catalog.gap_bank import GapBank, GapBankConfig, GapForecast
 from ssa_fusion.core.catalog.track_bank import TrackBank
 from ssa_fusion.core.earth.timescales import DAY_S, UNIX_EPOCH_JD
 from ssa_fusion.core.filter.options import FilterOptions
-from ssa_fusion.core.gaps import residual
+from ssa_fusion.core.gaps import residual_frame
 from ssa_fusion.core.gaps.forecaster import PLACEHOLDER_TRAJECTORY
 from ssa_fusion.core.gaps.publisher import GapFill
 from ssa_fusion.core.measure.measurement import StationModels
@@ -79,7 +79,7 @@ def gap_errors(entries: list[CatalogEntry], estimates: States, forecasts: States
         return {"gaps": 0, "forecasts": 0}
     pick = np.unique(np.linspace(0, len(gaps) - 1, min(max_gaps, len(gaps))).astype(int))
     by_id = {e.object_id: e for e in entries}
-    coast = residual.orbit_propagator(PLACEHOLDER_TRAJECTORY[MotionModel(motion_model)])
+    coast = residual_frame.orbit_propagator(PLACEHOLDER_TRAJECTORY[MotionModel(motion_model)])
     e_fc, e_coast, better = [], [], 0
     for i in pick.tolist():
         oid, t0, x0, tf, rf = gaps[i]
