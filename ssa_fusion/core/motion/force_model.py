@@ -59,7 +59,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ssa_fusion.core.base.constants import J2, J3, J4, MU_EARTH, OMEGA_EARTH, R_EARTH
 from ssa_fusion.core.base.jit import f64, jit
-from ssa_fusion.core.motion.propagation import _tableau, j2_gravity
+from ssa_fusion.core.motion.propagation import _tableau, j2_gravity, rk_advance, rk_stage
 
 if TYPE_CHECKING:
     from ssa_fusion.core.motion.force_spec import ForceSpec
@@ -348,29 +348,11 @@ def _trajectory_kernel(x0: Array, dts: Array, max_step: float, c: Array, prm: Ar
         steps = math.ceil(abs(dt) / max_step) if good and dt - dt == 0.0 else 0
         h = dt / max(steps, 1)
         for _ in range(steps):
-            for s in range(ns):
-                if s == 0:
-                    _force_rhs(y, ncol, c, prm, which, K, 0)
-                    continue
-                a0 = A[s, 0]
-                for q in range(ny):
-                    yt[q] = a0 * K[0, q]
-                for j in range(1, s):
-                    a = A[s, j]
-                    for q in range(ny):
-                        yt[q] += a * K[j, q]
-                for q in range(ny):
-                    yt[q] = y[q] + h * yt[q]
+            _force_rhs(y, ncol, c, prm, which, K, 0)
+            for s in range(1, ns):
+                rk_stage(y, h, A, K, s, ny, yt, False)
                 _force_rhs(yt, ncol, c, prm, which, K, s)
-            b0 = B[0]
-            for q in range(ny):
-                yt[q] = b0 * K[0, q]
-            for j in range(1, ns):
-                b = B[j]
-                for q in range(ny):
-                    yt[q] += b * K[j, q]
-            for q in range(ny):
-                y[q] = y[q] + h * yt[q]
+            rk_advance(y, h, B, K, ny, yt, False)
         nf = 0.0 if good and dt - dt == 0.0 else math.nan
         for q in range(6):
             xs[kk, q] = y[q]
