@@ -112,23 +112,32 @@ def _gravity_rhs(y: Array, mu: float, j2: float, re: float, px: float, py: float
 
 
 @jit
+def _combine(w: Array, K: Array, n: int, m: int, out: Array, skip_zeros: bool) -> None:
+    """``out[:m] = sum_j w[j] K[j, :m]`` over j < n, in the order of j.
+
+    With ``skip_zeros`` a zero coefficient's term is left out (``0 K`` adds nothing to a
+    finite sum).
+    """
+    w0 = w[0]
+    for c in range(m):
+        out[c] = w0 * K[0, c]
+    for j in range(1, n):
+        a = w[j]
+        if skip_zeros and a == 0.0:
+            continue
+        for c in range(m):
+            out[c] += a * K[j, c]
+
+
+@jit
 def rk_stage(y: Array, h: float, A: Array, K: Array, s: int, m: int, ys: Array,
              skip_zeros: bool) -> None:
     """``ys = y + h sum_j A[s, j] K[j]`` (j < s) over the first ``m`` elements.
 
     The explicit Runge-Kutta stage state (tableau ``A``, stage derivatives ``K`` (stages,
-    m)): the sum taken in the order of j; with ``skip_zeros`` a zero coefficient's term is
-    left out (``0 K`` adds nothing to a finite sum).
+    m)), the sum as `_combine` takes it.
     """
-    a0 = A[s, 0]
-    for c in range(m):
-        ys[c] = a0 * K[0, c]
-    for j in range(1, s):
-        a = A[s, j]
-        if skip_zeros and a == 0.0:
-            continue
-        for c in range(m):
-            ys[c] += a * K[j, c]
+    _combine(A[s], K, s, m, ys, skip_zeros)
     for c in range(m):
         ys[c] = y[c] + h * ys[c]
 
@@ -136,19 +145,8 @@ def rk_stage(y: Array, h: float, A: Array, K: Array, s: int, m: int, ys: Array,
 @jit
 def rk_advance(y: Array, h: float, B: Array, K: Array, m: int, ys: Array,
                skip_zeros: bool) -> None:
-    """``y += h sum_j B[j] K[j]``: one Runge-Kutta step's end (``ys`` holds the sum).
-
-    The sum taken in the order of j, as `rk_stage`'s (``skip_zeros`` likewise).
-    """
-    b0 = B[0]
-    for c in range(m):
-        ys[c] = b0 * K[0, c]
-    for j in range(1, B.shape[0]):
-        b = B[j]
-        if skip_zeros and b == 0.0:
-            continue
-        for c in range(m):
-            ys[c] += b * K[j, c]
+    """``y += h sum_j B[j] K[j]``: one Runge-Kutta step's end (``ys`` holds the sum)."""
+    _combine(B, K, B.shape[0], m, ys, skip_zeros)
     for c in range(m):
         y[c] = y[c] + h * ys[c]
 
