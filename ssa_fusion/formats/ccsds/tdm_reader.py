@@ -23,7 +23,7 @@ What it checks, each a `CcsdsError` of one line naming the file, the line and th
   per segment; a KVN data line is ``KEYWORD = EPOCH VALUE``, an optional ``[unit]`` after
   the value.
 
-Values are not interpreted here: `ccsds_tdm_in` parses the epochs and numbers and judges
+Values are not interpreted here: `tdm_in` parses the epochs and numbers and judges
 what a segment says.
 """
 
