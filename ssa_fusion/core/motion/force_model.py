@@ -65,7 +65,7 @@ if TYPE_CHECKING:
     from ssa_fusion.core.motion.force_spec import ForceSpec
 
 __all__ = ["NOMINAL", "PARAMETERS", "ForceModel", "Trajectory", "acceleration",
-           "parameter_index", "trajectory"]
+           "drag_terms", "output_steps", "parameter_index", "store_output", "trajectory"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -189,39 +189,40 @@ def _zonal34_gradient(ar: Array, x: float, yy: float, zz: float, mu: float, re: 
 
 
 @jit
-def _drag(y: Array, r: float, kd: float, c: Array, ar: Array,
-          av: Array) -> tuple[float, float, float]:
-    """Return the drag acceleration with ``k_D = 1`` (km/s^2) at the state ``y``.
+def drag_terms(x: float, y: float, z: float, vx: float, vy: float, vz: float, wx: float,
+               wy: float, wz: float, rho0: float, re: float, h0: float, scale_h: float,
+               k: float, kd: float, ar: Array, av: Array,
+               gradient: bool) -> tuple[float, float, float]:
+    """Return the drag acceleration with ``k_D = 1`` (km/s^2) at a GCRF state (km, km/s).
 
-    Its partials times ``kd`` are written into ``av`` (velocity) and added to ``ar``
-    (position); ``c``: `ForceModel.constants`; ``r``: the radius, km.
+    The co-rotating exponential atmosphere (module docstring): rotation ``w`` (rad/s, GCRF),
+    density ``rho0 exp(-(|r| - re - h0) / scale_h)`` (kg/m^3; km), ``k`` km/s^2 per
+    (km/s)^2 per kg/m^3 (the ballistic coefficient's). With ``gradient`` its partials times
+    ``kd`` are added to ``av`` (velocity) and ``ar`` (position).
     """
-    x, yy, zz = y[0], y[1], y[2]
-    om = c[11]
-    px, py, pz = c[3], c[4], c[5]
-    wx, wy, wz = om * px, om * py, om * pz
-    ux = y[3] - (wy * zz - wz * yy)
-    uy = y[4] - (wz * x - wx * zz)
-    uz = y[5] - (wx * yy - wy * x)
+    ux = vx - (wy * z - wz * y)
+    uy = vy - (wz * x - wx * z)
+    uz = vz - (wx * y - wy * x)
     un = math.sqrt(ux * ux + uy * uy + uz * uz)
-    rho = c[8] * math.exp(-(r - c[2] - c[9]) / c[10])
-    cr = c[7] * rho  # km/s^2 per (km/s)^2
-    u = (ux, uy, uz)
-    wv = (wx, wy, wz)
-    for i in range(3):
-        for j in range(3):
-            dv = -kd * cr * ((un if i == j else 0.0) + u[i] * u[j] / un)
-            av[i, j] = dv
-    rr = (x, yy, zz)
-    kr = kd * cr * un / (c[10] * r)
-    for i in range(3):
-        # - D_v [w x]: column j of [w x] is w x e_j
-        d0 = av[i, 1] * wv[2] - av[i, 2] * wv[1]
-        d1 = av[i, 2] * wv[0] - av[i, 0] * wv[2]
-        d2 = av[i, 0] * wv[1] - av[i, 1] * wv[0]
-        ar[i, 0] += kr * u[i] * rr[0] - d0
-        ar[i, 1] += kr * u[i] * rr[1] - d1
-        ar[i, 2] += kr * u[i] * rr[2] - d2
+    r = math.sqrt(x * x + y * y + z * z)
+    rho = rho0 * math.exp(-(r - re - h0) / scale_h)
+    cr = k * rho  # km/s^2 per (km/s)^2
+    if gradient:
+        u = (ux, uy, uz)
+        wv = (wx, wy, wz)
+        rr = (x, y, z)
+        for i in range(3):
+            for j in range(3):
+                av[i, j] += -kd * cr * ((un if i == j else 0.0) + u[i] * u[j] / un)
+        kr = kd * cr * un / (scale_h * r)
+        for i in range(3):
+            # - D_v [w x]: column j of [w x] is w x e_j
+            d0 = av[i, 1] * wv[2] - av[i, 2] * wv[1]
+            d1 = av[i, 2] * wv[0] - av[i, 0] * wv[2]
+            d2 = av[i, 0] * wv[1] - av[i, 1] * wv[0]
+            ar[i, 0] += kr * u[i] * rr[0] - d0
+            ar[i, 1] += kr * u[i] * rr[1] - d1
+            ar[i, 2] += kr * u[i] * rr[2] - d2
     return -cr * un * ux, -cr * un * uy, -cr * un * uz
 
 
@@ -304,7 +305,9 @@ def _force_rhs(y: Array, ncol: int, c: Array, prm: Array, which: IntArray,
     anx = any_ = anz = 0.0  # the drag acceleration with k_D = 1
     if c[6] != 0.0:
         kd = prm[0]
-        anx, any_, anz = _drag(y, r, kd, c, ar, av)
+        om = c[11]
+        anx, any_, anz = drag_terms(x, yy, zz, y[3], y[4], y[5], om * px, om * py, om * pz,
+                                    c[8], c[2], c[9], c[10], c[7], kd, ar, av, True)
         ax += kd * anx
         ay += kd * any_
         az += kd * anz
@@ -345,25 +348,46 @@ def _trajectory_kernel(x0: Array, dts: Array, max_step: float, c: Array, prm: Ar
     good = True
     for kk in range(dts.shape[0]):
         dt = dts[kk]
-        steps = math.ceil(abs(dt) / max_step) if good and dt - dt == 0.0 else 0
-        h = dt / max(steps, 1)
+        steps, h = output_steps(dt, max_step, good)
         for _ in range(steps):
             _force_rhs(y, ncol, c, prm, which, K, 0)
             for s in range(1, ns):
                 rk_stage(y, h, A, K, s, ny, yt, False)
                 _force_rhs(yt, ncol, c, prm, which, K, s)
             rk_advance(y, h, B, K, ny, yt, False)
-        nf = 0.0 if good and dt - dt == 0.0 else math.nan
-        for q in range(6):
-            xs[kk, q] = y[q]
-            nf += y[q] - y[q]
-        for i in range(6):
-            for j in range(ncol):
-                v = y[6 + i * ncol + j]
-                ys[kk, i, j] = v
-                nf += v - v
-        good = nf == 0.0
+        good = store_output(y, ncol, dt, good, kk, xs, ys)
         ok[kk] = good
+
+
+@jit
+def output_steps(dt: float, max_step: float, good: bool) -> tuple[int, float]:
+    """Return the equal steps (how many, their length, s) to the next output ``dt`` s on.
+
+    ``ceil(|dt| / max_step)`` of them; none once the trajectory is no longer ``good`` or
+    ``dt`` is not finite.
+    """
+    steps = math.ceil(abs(dt) / max_step) if good and dt - dt == 0.0 else 0
+    return steps, dt / max(steps, 1)
+
+
+@jit
+def store_output(y: Array, ncol: int, dt: float, good: bool, kk: int, xs: Array,
+                 ys: Array) -> bool:
+    """Store output ``kk``: the state ``y[:6]`` in ``xs[kk]``, [Phi | S] (6, ncol) in ``ys[kk]``.
+
+    Returns whether the trajectory is still good: it was, ``dt`` is finite and so is
+    everything stored.
+    """
+    nf = 0.0 if good and dt - dt == 0.0 else math.nan
+    for q in range(6):
+        xs[kk, q] = y[q]
+        nf += y[q] - y[q]
+    for i in range(6 if ncol else 0):
+        for j in range(ncol):
+            v = y[6 + i * ncol + j]
+            ys[kk, i, j] = v
+            nf += v - v
+    return nf == 0.0
 
 
 @dataclass
