@@ -57,7 +57,7 @@ from typing import Any
 
 import numpy as np
 
-from ssa_fusion.apps import evaluate, replay_catalog
+from ssa_fusion.apps import evaluate, replay_catalog, runs
 from ssa_fusion.apps.args import add_domain_id, add_settings, add_sites, positive_float
 from ssa_fusion.apps.partial import removed_if_unfinished
 from ssa_fusion.core.base import types
@@ -505,7 +505,7 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
                 c: EstimatorConfig) -> int:
     """Play the bag into surrogate + filter processes (estimator `c`) and record the run."""
     from ssa_fusion.ros.player import Player
-    from ssa_fusion.ros.processes import Graph, ended_badly, recorded_short
+    from ssa_fusion.ros.processes import ended_badly, recorded_short
     from ssa_fusion.ros.readiness import OUTPUT, ReadyNodes, readers_of
 
     record = args.record or sibling(args.bag, "_replay")
@@ -522,12 +522,10 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
               "surrogate": {"use_sim_time": True, **node_settings.surrogate_params(c), **own},
               "filter": {"use_sim_time": True, **node_settings.filter_params(c),
                          **recorded_gaps(stream), **own}}
-    logs = record.with_name(record.name + "_logs")
-    try:
-        graph = Graph(logs, args.domain_id)
-    except OSError as exc:
-        print(f"error: cannot use {record}: {exc}", file=sys.stderr)
+    opened = runs.replay_graph(record, args.domain_id)
+    if opened is None:
         return 2
+    graph, logs = opened
     print(f"replay: {args.bag} at rate {args.rate:g} into surrogate + filter; ROS domain "
           f"{graph.domain_id}; logs in {logs}", flush=True)
     t0 = time.monotonic()
