@@ -7,6 +7,7 @@ collected packages" and a CMake build do); every line on stderr is timed as it a
 
 from __future__ import annotations
 
+import itertools
 import os
 import re
 import shutil
@@ -92,7 +93,7 @@ def test_a_line_at_least_every_tick_through_pip_and_the_build(tmp_path):
     text = "\n".join(f"{t:5.1f} {line}" for t, line in lines)
     assert code == 0, text
     times = [0.0] + [t for t, _ in lines]
-    gaps = [b - a for a, b in zip(times, times[1:], strict=False)]
+    gaps = [b - a for a, b in itertools.pairwise(times)]
     assert max(gaps) <= TICK_S + SLACK_S, text
     # the heartbeat quotes pip's and the build's latest progress
     assert any(re.search(r"bootstrap:   pip: \d+ s \.\.\. Collecting rclpy", line)

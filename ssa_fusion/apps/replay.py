@@ -59,6 +59,8 @@ import numpy as np
 
 from ssa_fusion.apps import evaluate, replay_catalog
 from ssa_fusion.apps.args import add_domain_id, add_settings, add_sites, positive_float
+from ssa_fusion.apps.filter_setup import DataMix, FilterSetup, data_setup
+from ssa_fusion.apps.heartbeat import working
 from ssa_fusion.apps.partial import removed_if_unfinished
 from ssa_fusion.core.base import types
 from ssa_fusion.core.base.types import KIND_NAMES, Cause
@@ -143,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
 
                 return replay_laser.run(args, stream)
             sites = site_file.load_stations(args.sites) if args.sites else ()
-            chosen = settings(stream, args.scenario, args.params_file, sites)
+            chosen = settings(stream, args.scenario, args.params_file, sites, args.setup)
     except (bagio.BagError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -182,11 +184,43 @@ def run(args: argparse.Namespace) -> int:
               f"{len(result.forecasts)} forecasts"
               + (f", {len(result.smoothed)} smoothed" if args.smooth else "") + f" -> {out}")
         if not result.estimates:
-            print(f"replay: no estimate: {why_no_estimate(stream, result, s)}")
+            print(f"error: no estimate: {why_no_estimate(stream, result, s)}", file=sys.stderr)
+            return 1
         if args.smooth:
             print(smoothing_summary(stream, result))
         return 0
     return replay_live(args, stream, s)
+
+
+OFFLINE_START_S = 5.0
+"""Wall s an offline replay takes before its first measurement (imports, the bag read)."""
+OFFLINE_PER_S = 500.0
+"""Measurements an offline replay estimates per wall s, smoothing included (5357 radar
+measurements of 10 days took 11 s on a busy 2-core machine: 700/s after its start)."""
+
+
+def offline_seconds(measurements: int) -> float:
+    """Return about how long (wall s) an offline replay of `measurements` takes."""
+    return OFFLINE_START_S + measurements / OFFLINE_PER_S
+
+
+def said_seconds(s: float) -> str:
+    """Return a duration in words: "40 s", "3.5 min", "12.3 h"."""
+    if s < 120.0:
+        return f"{s:.0f} s"
+    return f"{s / 60.0:.1f} min" if s < 7200.0 else f"{s / 3600.0:.1f} h"
+
+
+def suggestion(bag: Path, measurements: int, span_s: float, sites: Path | None) -> str:
+    """Return the replay to run next on a bag of `measurements` over `span_s` (s) of data.
+
+    The offline one (the same estimates as over ROS, by design: module docstring) with its
+    expected duration, beside what a ROS replay at rate 1 would take.
+    """
+    with_sites = f" --sites {sites}" if sites else ""
+    return (f"next: `ssa-fusion replay {bag} --offline --smooth{with_sites}` (about "
+            f"{said_seconds(offline_seconds(measurements))}; a replay over ROS gives the same "
+            f"estimates in the data's own time, {said_seconds(span_s)} at --rate 1)")
 
 
 def sibling(bag: Path, suffix: str) -> Path:
@@ -230,13 +264,14 @@ def drop_ahead_of_clock(stream: list[bagio.BagMessage]) -> tuple[list[bagio.BagM
 
 
 def settings(stream: list[bagio.BagMessage], scenario: str = "",
-             params_file: Path | None = None,
-             sites: tuple[Station, ...] = ()) -> evaluate.Settings:
+             params_file: Path | None = None, sites: tuple[Station, ...] = (),
+             setup: FilterSetup | None = None) -> evaluate.Settings:
     """Return the estimator settings to replay `stream` with.
 
-    As `evaluate.settings_for_bag` chooses them: params file, scenario, those recorded with the
-    bag, else the measurement kind's default; with `sites` (stations of one's own), or
-    without recorded settings, the filter takes the stations the measurements name.
+    As `evaluate.settings_for_bag` chooses them: params file, scenario, filter set-up
+    (`setup`), those recorded with the bag, else the set-up its measurements call for
+    (`filter_setup`); with `sites` (stations of one's own) the filter takes the stations
+    the measurements name.
 
     The bag's own cadence wins: if its measurements come at another interval than the
     settings' cadence (beyond the surrogate's jitter tolerance), the cadence is set to 0 and
@@ -244,10 +279,10 @@ def settings(stream: list[bagio.BagMessage], scenario: str = "",
     fixed 30 s cadence against 10 s data would find every interval off its grid and never
     fit). Data at the settings' cadence keep it, so a replay reproduces the live run.
     """
-    first = next(m for m in stream if m.topic == TOPIC_MEASUREMENT)
     recorded = [m.msg.data for m in stream if m.topic == TOPIC_CONFIG]
-    chosen = evaluate.settings_for_bag(recorded, first.msg.kind, scenario, params_file,
-                                       stations=bag_stations(stream), sites=sites)
+    mix = DataMix.of(messages.measurement_from_msg(m.msg) for m in stream
+                     if m.topic == TOPIC_MEASUREMENT)
+    chosen = evaluate.settings_for_bag(recorded, mix, scenario, params_file, sites, setup)
     c = chosen.estimator
     dt, cadence = bag_cadence(stream), c.surrogate.cadence_s
     if not math.isnan(dt) and cadence > 0 and abs(dt - cadence) > c.surrogate.jitter * cadence:
@@ -286,8 +321,11 @@ def why_no_estimate(stream: list[bagio.BagMessage], result: OfflineResult,
                        f"filter does not take ({', '.join(ids) or 'see the bag'}; its station "
                        f"setting is {c.station!r}): {hint}")
     if got.get(Cause.REJECTED_KIND):
+        mix = DataMix.of(messages.measurement_from_msg(m.msg) for m in stream
+                         if m.topic == TOPIC_MEASUREMENT)
         reasons.append(f"{got.pop(Cause.REJECTED_KIND)} measurement(s) of another kind than "
-                       f"the settings' {KIND_NAMES[c.kind]}")
+                       f"the settings' {KIND_NAMES[c.kind]} (the bag has {mix.said()}): "
+                       f"replay with --filter {data_setup(mix)}")
     pending, failed = got.pop(Cause.IOD_PENDING, 0), got.pop(Cause.IOD_FAILED, 0)
     if pending or failed:
         iod = c.filter.iod
@@ -295,9 +333,14 @@ def why_no_estimate(stream: list[bagio.BagMessage], result: OfflineResult,
                 else f" within {iod.iod_max_span_s:g} s (one pass)")
         reasons.append(f"the initial orbit determination never converged ({pending} "
                        f"measurement(s) waited for it, {failed} attempt(s) failed; it needs "
-                       f"{iod.iod_samples} real measurements of one station{span})")
+                       f"{iod.iod_samples} real measurements of one station{span}): a pass "
+                       f"of the data too short or too sparse for it; a --params-file with a "
+                       f"smaller iod_samples or a longer iod_max_span starts it")
     reasons += [f"{k} {v}" for k, v in sorted(got.items()) if v]
-    return "; ".join(reasons) or f"the filter took none of the {n} measurement(s)"
+    return "; ".join(reasons) or (f"the filter took none of the {n} measurement(s): see its "
+                                  f"causes with `ssa-fusion replay BAG` over ROS "
+                                  f"(/diagnostics), or choose other settings (--filter, "
+                                  f"--params-file)")
 
 
 def bag_cadence(stream: list[bagio.BagMessage]) -> float:
@@ -528,13 +571,18 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
     except OSError as exc:
         print(f"error: cannot use {record}: {exc}", file=sys.stderr)
         return 2
-    print(f"replay: {args.bag} at rate {args.rate:g} into surrogate + filter; ROS domain "
-          f"{graph.domain_id}; logs in {logs}", flush=True)
+    played = [m for m in stream if m.topic in PLAYED]
+    span = (played[-1].t_ns - played[0].t_ns) * 1e-9 if played else 0.0
+    n_meas = sum(1 for m in played if m.topic == TOPIC_MEASUREMENT)
+    print(f"replay: {args.bag} at rate {args.rate:g} into surrogate + filter: "
+          f"{said_seconds(span)} of data, about {said_seconds(span / args.rate)} of wall time "
+          f"(--offline gives the same estimates in about {said_seconds(offline_seconds(n_meas))}); "
+          f"ROS domain {graph.domain_id}; logs in {logs}", flush=True)
     t0 = time.monotonic()
     try:
         for n in ("recorder", "surrogate", "filter"):  # the recorder first: it hears all
             graph.start_node(n, params=params[n])
-        player = Player(graph.probe, [m for m in stream if m.topic in PLAYED], args.rate)
+        player = Player(graph.probe, played, args.rate)
         from ssa_fusion.ros.interfaces import Measurement, StateEstimate
 
         # what the graph publishes, heard from the first to check the recording against
@@ -552,8 +600,14 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
         needs = [*readers_of(published),
                  f"filter:{OUTPUT}{TOPIC_ESTIMATE}=2", f"surrogate:{OUTPUT}{TOPIC_FORECAST}=3"]
         readers = ReadyNodes(graph.probe)
-        graph.play(player, lambda: readers.ready(needs),
-                   "surrogate, filter and recorder to match their publishers")
+
+        def how_far() -> str:
+            return (f"played {player.published} of {len(played)} messages, "
+                    f"{len(seen[0])} estimates")
+
+        with working("replay", "playing the bag", how_far):
+            graph.play(player, lambda: readers.ready(needs),
+                       "surrogate, filter and recorder to match their publishers")
         graph.wait_quiet(lambda: tuple(len(x) for x in seen), quiet_s=1.0, limit_s=30.0)
     finally:
         problems = graph.close()  # each stopped in turn, newest first

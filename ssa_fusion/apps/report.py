@@ -20,6 +20,7 @@ import numpy as np
 
 from ssa_fusion.apps import evaluate, replay_catalog
 from ssa_fusion.apps.args import add_settings, add_sites
+from ssa_fusion.apps.filter_setup import DataMix
 from ssa_fusion.core.base import metrics, types
 from ssa_fusion.core.gaps import estimator as config
 from ssa_fusion.formats import sites as site_file
@@ -76,7 +77,8 @@ def run(args: argparse.Namespace) -> int:
     del telling
     try:
         data = evaluate.load(args.bag)
-        ev = evaluate.evaluate(data, args.scenario, params_file=args.params_file)
+        ev = evaluate.evaluate(data, args.scenario, params_file=args.params_file,
+                               setup=args.setup)
         write(data, ev, out)
     except evaluate.NoTruthError as exc:
         return run_own(args, data, out, str(exc))
@@ -106,17 +108,18 @@ def run_own(args: argparse.Namespace, data: evaluate.BagData, out: Path, why: st
         return 2
     try:
         sites = site_file.load_stations(args.sites) if args.sites else ()
-        real = [m for m in data.measurements if m.source == types.Source.SENSOR]
-        kind = real[0].kind if real else types.Kind.POSITION
-        chosen = evaluate.settings_for_bag(data.config, kind, args.scenario, args.params_file,
-                                           stations={m.frame_id for m in real}, sites=sites)
+        chosen = evaluate.settings_for_bag(data.config, DataMix.of(data.measurements),
+                                           args.scenario, args.params_file, sites,
+                                           getattr(args, "setup", None))
         rep = report_own.build(data, chosen)
         report_own.write(data, rep, out, title=f"ssa_fusion report: {out.name}")
     except (ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(f"{args.bag}: no simulated truth ({why}): the filter judged by its residuals, NIS "
-          f"and covariance\n")
+    judged = (f"judged against its /ssa/truth ({len(data.truth)} states) and by its residuals, "
+              f"NIS and covariance" if rep.after_passes is not None else
+              "no /ssa/truth: the filter judged by its residuals, NIS and covariance")
+    print(f"{args.bag}: {why}; {judged}\n")
     print(report_own.table(rep))
     drawn = [name for name in report_own.PLOTS if (out / name).exists()]
     print(f"\nwrote {out}/report.json, {out}/report.html"
