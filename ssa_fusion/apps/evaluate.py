@@ -19,6 +19,7 @@ import sys
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -231,6 +232,26 @@ def truth_scores(data: BagData, c: EstimatorConfig
     real = [m for m in data.measurements if m.source == types.Source.SENSOR]
     return (passes_.pass_report(c, live, real, t_all, x_all),
             score_gaps({e.t: e for e in data.estimates}, real, t_all, x_all))
+
+
+def position_error(passes: passes_.PassReport | None, between: GapScores | None,
+                   truth_states: int) -> dict[str, Any] | None:
+    """Return what report.json holds of the position error against the truth (None: none).
+
+    From `truth_scores`: its mean and largest over the truth epochs, its median after the
+    passes and between them, the fraction of NEES in the 95 % band.
+    """
+    if passes is None:
+        return None
+    err = passes.pos_err_km
+    after = [row[3] for row in passes.passes]
+    return {"truth_states": truth_states, "epochs": len(err),
+            "mean_km": float(np.mean(err)) if len(err) else None,
+            "max_km": float(np.max(err)) if len(err) else None,
+            "after_pass_median_km": float(np.median(after)) if after else None,
+            "between_passes_median_km": (None if between is None or not between.gap_epochs
+                                         else between.err_median_km),
+            "nees_in_band": passes.nees_in_band if len(passes.nees) else None}
 
 
 def between_line(b: GapScores) -> str:

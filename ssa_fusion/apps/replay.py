@@ -186,6 +186,7 @@ def run(args: argparse.Namespace) -> int:
         if not result.estimates:
             print(f"error: no estimate: {why_no_estimate(stream, result, s)}", file=sys.stderr)
             return 1
+        print(judged(stream, result, s, out))
         if args.smooth:
             print(smoothing_summary(stream, result))
         return 0
@@ -476,6 +477,31 @@ def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig,
         object_id = publisher.last_object
         result.smoothed = [e for seg in recorder.smooth() for e in seg.estimates(object_id)]
     return result
+
+
+def judged(stream: list[bagio.BagMessage], result: OfflineResult, c: EstimatorConfig,
+           out: Path) -> str:
+    """Return what the replay's estimates were judged against, in one line.
+
+    The bag's /ssa/truth where it has one (`evaluate.truth_scores`: after each pass, between
+    the passes), else what `report` judges them by.
+    """
+    truth = [messages.estimate_from_msg(m.msg) for m in stream if m.topic == TOPIC_TRUTH]
+    if not truth:
+        return (f"no {TOPIC_TRUTH} in the bag: `ssa-fusion report {out}` judges the "
+                f"estimates by their residuals, NIS and covariance")
+    data = evaluate.BagData(truth=truth, estimates=[e for _, e in result.estimates],
+                            measurements=[messages.measurement_from_msg(m.msg) for m in stream
+                                          if m.topic == TOPIC_MEASUREMENT])
+    error = evaluate.position_error(*evaluate.truth_scores(data, c), len(truth))
+    if error is None:
+        return f"against the bag's {TOPIC_TRUTH}: no fused estimate to judge"
+    after, between = error["after_pass_median_km"], error["between_passes_median_km"]
+    return (f"against the bag's {TOPIC_TRUTH} ({len(truth)} states): position error mean "
+            f"{error['mean_km']:.3g} km, largest {error['max_km']:.3g} km over "
+            f"{error['epochs']} truth epochs"
+            + (f"; median {after:.3g} km after a pass" if after is not None else "")
+            + (f", {between:.3g} km between passes" if between is not None else ""))
 
 
 def smoothing_summary(stream: list[bagio.BagMessage], result: OfflineResult) -> str:

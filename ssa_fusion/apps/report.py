@@ -21,6 +21,7 @@ import numpy as np
 from ssa_fusion.apps import evaluate, replay_catalog
 from ssa_fusion.apps.args import add_settings, add_sites
 from ssa_fusion.apps.filter_setup import DataMix
+from ssa_fusion.apps.heartbeat import working
 from ssa_fusion.core.base import metrics, types
 from ssa_fusion.core.gaps import estimator as config
 from ssa_fusion.formats import sites as site_file
@@ -77,8 +78,9 @@ def run(args: argparse.Namespace) -> int:
     del telling
     try:
         data = evaluate.load(args.bag)
-        ev = evaluate.evaluate(data, args.scenario, params_file=args.params_file,
-                               setup=args.setup)
+        with working("report", "scoring the arms over the outage"):
+            ev = evaluate.evaluate(data, args.scenario, params_file=args.params_file,
+                                   setup=args.setup)
         write(data, ev, out)
     except evaluate.NoTruthError as exc:
         return run_own(args, data, out, str(exc))
@@ -111,8 +113,10 @@ def run_own(args: argparse.Namespace, data: evaluate.BagData, out: Path, why: st
         chosen = evaluate.settings_for_bag(data.config, DataMix.of(data.measurements),
                                            args.scenario, args.params_file, sites,
                                            getattr(args, "setup", None))
-        rep = report_own.build(data, chosen)
-        report_own.write(data, rep, out, title=f"ssa_fusion report: {out.name}")
+        with working(getattr(args, "command", "report"),
+                     "judging the estimates and drawing the plots"):
+            rep = report_own.build(data, chosen)
+            report_own.write(data, rep, out, title=f"ssa_fusion report: {out.name}")
     except (ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -138,27 +142,35 @@ def summary(data: evaluate.BagData, ev: evaluate.Evaluation) -> dict[str, Any]:
         "gap_epochs": len(g.t),
         "dmd_ekf_coverage": g.coverage,
         "dmd_ekf_propagated_epochs": g.predicted,
+        "position_error": evaluate.position_error(ev.passes, ev.between, len(data.truth)),
         "settings": ev.settings.origin,
         "estimator": config.to_dict(ev.settings.estimator),
         "message_counts": data.counts,
     }
 
 
-def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
-    """Write report.json, the PNG plots, report.html and visual.mcap (Foxglove) into `out`."""
+def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path,
+          command: str = "report") -> None:
+    """Write report.json, the PNG plots, report.html and visual.mcap (Foxglove) into `out`.
+
+    Each of the three steps says itself on stderr (`heartbeat.working`), as `command`.
+    """
     out.mkdir(parents=True, exist_ok=True)
     (out / "report.json").write_text(json.dumps(summary(data, ev), indent=2))
-    plot_arms(ev, out / "arms.png")
-    plot_sigma(data, out / "estimate_3sigma.png")
-    plot_forecasts(data, out / "forecast_vs_withheld.png")
-    plot_nis(data, out / "nis.png")
+    with working(command, "drawing the plots"):
+        plot_arms(ev, out / "arms.png")
+        plot_sigma(data, out / "estimate_3sigma.png")
+        plot_forecasts(data, out / "forecast_vs_withheld.png")
+        plot_nis(data, out / "nis.png")
     from ssa_fusion.apps import report_html  # plotly: imported on first use, like the plots
 
-    report_html.write(data, ev, out / "report.html", title=f"ssa_fusion report: {out.name}")
+    with working(command, "writing report.html"):
+        report_html.write(data, ev, out / "report.html", title=f"ssa_fusion report: {out.name}")
     from ssa_fusion.apps import visual_mcap  # foxglove-sdk, likewise
 
     stations = {s.name: s for s, _ in report_html.run_stations(ev.settings.estimator)}
-    visual_mcap.write(data, out / "visual.mcap", stations)
+    with working(command, "writing visual.mcap (the Foxglove file)"):
+        visual_mcap.write(data, out / "visual.mcap", stations)
 
 
 def _plt() -> ModuleType:

@@ -92,18 +92,7 @@ class OwnReport:
 
     def position_error(self) -> dict[str, Any] | None:
         """Return report.json's position error against the truth (None without one)."""
-        p = self.after_passes
-        if p is None:
-            return None
-        after = [row[3] for row in p.passes]
-        b = self.between
-        return {"truth_states": self.truth, "epochs": len(p.pos_err_km),
-                "mean_km": float(np.mean(p.pos_err_km)) if len(p.pos_err_km) else None,
-                "max_km": float(np.max(p.pos_err_km)) if len(p.pos_err_km) else None,
-                "after_pass_median_km": float(np.median(after)) if after else None,
-                "between_passes_median_km": (None if b is None or not b.gap_epochs
-                                             else b.err_median_km),
-                "nees_in_band": p.nees_in_band if len(p.nees) else None}
+        return evaluate.position_error(self.after_passes, self.between, self.truth)
 
 
 def build(data: evaluate.BagData, settings: evaluate.Settings) -> OwnReport:
