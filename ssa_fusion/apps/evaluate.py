@@ -185,14 +185,19 @@ class Evaluation:
     between: GapScores | None = None
 
 
-def evaluate(data: BagData, scenario: str = "", seed: int = 0,
-             params_file: Path | None = None, setup: FilterSetup | None = None) -> Evaluation:
-    """Every arm over the bag's gap (see the module docstring)."""
+def require_outage(data: BagData) -> None:
+    """Raise NoTruthError (or NoOutageError) when `data` lacks a truth (or an outage)."""
     if not data.truth:
         raise NoTruthError("the bag has no /ssa/truth messages: nothing to compare against")
     if not data.withheld:
         raise NoOutageError("the bag has no /ssa/withheld messages: no outage to score the "
                             "arms over")
+
+
+def evaluate(data: BagData, scenario: str = "", seed: int = 0,
+             params_file: Path | None = None, setup: FilterSetup | None = None) -> Evaluation:
+    """Every arm over the bag's gap (see the module docstring)."""
+    require_outage(data)
     chosen = settings_for_bag(data.config, DataMix.of(data.measurements), scenario, params_file,
                               setup=setup)
     truth = {e.t: e.x for e in data.truth}

@@ -9,7 +9,9 @@ overridable (``--filter NAME``, or ``--params-file``/``--scenario``):
 * ``network``: both, every station its own kind;
 * ``position``: GCRF positions (the paper's position filter, scenario iss_j2_pos).
 
-Radar, optical and network run the real sky's filter (`estimator.station_estimator`:
+Data of the paper's radar alone (columbus) get the paper's filter (scenario iss_j2_rae), so
+that a TDM of a run of it replays to the run's estimates; other radar, optical and network
+data run the real sky's filter (`estimator.station_estimator`:
 two-body + J2, initial orbit from one pass, light time) over the stations the data name that
 are known (built in, or in the sites file ``--sites``); the others are said and left out.
 """
@@ -114,6 +116,10 @@ def chosen_estimator(mix: DataMix, setup: FilterSetup | None,
         return scenarios.get(POSITION_SCENARIO).estimator(), \
             f"{how}: the paper's position filter (scenario {POSITION_SCENARIO})"
     ids = mix.stations(kinds)
+    paper = scenarios.settings_for("", kinds[0])
+    if len(kinds) == 1 and paper.kind == kinds[0] and ids == [paper.station]:
+        return paper.estimator(), (f"{how}: the paper's filter of its station {paper.station} "
+                                   f"(scenario {paper.name})")
     own = {s.name: s for s in sites}
     known = [i for i in ids if find_station(i, own) is not None]
     unknown = [i for i in ids if i not in known]

@@ -354,6 +354,7 @@ def run(args: argparse.Namespace) -> int:
     with working("live", "reading the bag"):
         data = evaluate.load(bag)
     try:
+        evaluate.require_outage(data)
         with working("live", "scoring the arms over the outage"):
             ev = evaluate.evaluate(data, seed=args.seed)  # with the settings the bag recorded
     except ValueError as exc:  # e.g. a real-sky seed whose outage fell where no pass was

@@ -78,6 +78,7 @@ def run(args: argparse.Namespace) -> int:
     del telling
     try:
         data = evaluate.load(args.bag)
+        evaluate.require_outage(data)
         with working("report", "scoring the arms over the outage"):
             ev = evaluate.evaluate(data, args.scenario, params_file=args.params_file,
                                    setup=args.setup)
