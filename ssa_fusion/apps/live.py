@@ -25,6 +25,7 @@ import re
 import sys
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -285,33 +286,16 @@ def _case(s: scenarios.Scenario | sky.SkyScenario, args: argparse.Namespace
 def run(args: argparse.Namespace) -> int:
     """Run `ssa-fusion live` (or, with ``--catalog``, `live_catalog.run`); return the exit code."""
     if getattr(args, "catalog", None) is not None:
-        from ssa_fusion.apps import live_catalog
-
-        if getattr(args, "gap_forecast", ""):
-            print("error: --gap-forecast applies to a real-sky scenario; a catalog's gaps: "
-                  "--surrogate-param gap_forecast=residual|batch_fit", file=sys.stderr)
-            return 2
-
-        return live_catalog.run(args)
+        return _run_catalog(args)
     catalog_only = catalog_options_given(args)
     if catalog_only:
         print(f"error: {', '.join(catalog_only)} apply to a catalog run (--catalog FILE)",
               file=sys.stderr)
         return 2
-    try:
-        s = graphs.live_scenario(args.scenario, args.start, args.duration, args.sites,
-                                 args.elements, ProgressLines(f"live: elements {args.elements}",
-                                                              "objects").reading)
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    chosen = _scenario(args)
+    if chosen is None:
         return 2
-    if args.gap_forecast:
-        if not isinstance(s, sky.SkyScenario):
-            print(f"error: --gap-forecast applies to the real-sky scenarios "
-                  f"({', '.join(sky.SKY_SCENARIOS)})", file=sys.stderr)
-            return 2
-        s = s.with_(gap_fill=GapFill(args.gap_forecast))
-    s, geometry_seed = _case(s, args)
+    s, geometry_seed = _case(chosen, args)
     dirs = runs.run_dirs(args, s.name)
     if dirs is None:
         return 2
@@ -328,29 +312,81 @@ def run(args: argparse.Namespace) -> int:
                  f"the orbit of case {geometry_seed} (--same-geometry: the scenario's own)")
         print(f"live: {s.truth} truth from {timescales.iso(s.t0)}, {orbit}", flush=True)
     t_start = time.monotonic()
-    last_output = 0.0  # wall time (Unix s) the probe last saw an estimate or forecast arrive
+    heard = _Heard()
     try:
-        from ssa_fusion.ros.interfaces import DiagnosticArray
-
-        diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
-        if getattr(args, "foxglove", False):
-            start_foxglove(graph, params, args.foxglove_port, lambda text: print(text, flush=True))
-            params["sensor_sim"]["wait_for_readers"] = [
-                *params["sensor_sim"]["wait_for_readers"], *FOXGLOVE_READERS]
-        with working("live", "running the graph", how_far(graph, sim_s)):
-            for name in ("recorder", "surrogate", "filter"):
-                graph.start_node(name, params=params[name])
-            sensor = graph.start_node("sensor_sim", params=params["sensor_sim"])
-            # a node that ends early (a recorder that cannot write its bag) ends the run at
-            # once: graph.close says which and why
-            if graph.wait_done_or_broken(sensor, timeout=60.0 + 3.0 * sim_s / args.time_scale):
-                last_output = _drain(graph)
+        _run_graph(graph, params, args, sim_s, heard)
     finally:
         with working("live", "stopping the nodes"):
             problems = graph.close()
     if runs.ended_badly(problems):
         return 1
-    wall = time.monotonic() - t_start
+    return _report(args, s.name, out, bag, time.monotonic() - t_start, sim_s, heard)
+
+
+def _run_catalog(args: argparse.Namespace) -> int:
+    """Run `live_catalog.run` (a ``--gap-forecast`` is a real-sky scenario's: exit code 2)."""
+    from ssa_fusion.apps import live_catalog
+
+    if getattr(args, "gap_forecast", ""):
+        print("error: --gap-forecast applies to a real-sky scenario; a catalog's gaps: "
+              "--surrogate-param gap_forecast=residual|batch_fit", file=sys.stderr)
+        return 2
+    return live_catalog.run(args)
+
+
+def _scenario(args: argparse.Namespace) -> scenarios.Scenario | sky.SkyScenario | None:
+    """Return the scenario the arguments name (None: said why on stderr)."""
+    try:
+        s = graphs.live_scenario(args.scenario, args.start, args.duration, args.sites,
+                                 args.elements, ProgressLines(f"live: elements {args.elements}",
+                                                              "objects").reading)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return None
+    if args.gap_forecast:
+        if not isinstance(s, sky.SkyScenario):
+            print(f"error: --gap-forecast applies to the real-sky scenarios "
+                  f"({', '.join(sky.SKY_SCENARIOS)})", file=sys.stderr)
+            return None
+        s = s.with_(gap_fill=GapFill(args.gap_forecast))
+    return s
+
+
+@dataclass
+class _Heard:
+    """What the probe heard during a run.
+
+    The /diagnostics messages and the wall time (Unix s) it last saw an estimate or forecast
+    arrive (0: none).
+    """
+
+    diagnostics: Sequence[Message] = ()
+    last_output: float = 0.0
+
+
+def _run_graph(graph: Graph, params: dict[str, dict[str, Any]], args: argparse.Namespace,
+               sim_s: float, heard: _Heard) -> None:
+    """Start the graph's nodes (and Foxglove's bridge), wait for the simulator to end."""
+    from ssa_fusion.ros.interfaces import DiagnosticArray
+
+    heard.diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
+    if getattr(args, "foxglove", False):
+        start_foxglove(graph, params, args.foxglove_port, lambda text: print(text, flush=True))
+        params["sensor_sim"]["wait_for_readers"] = [
+            *params["sensor_sim"]["wait_for_readers"], *FOXGLOVE_READERS]
+    with working("live", "running the graph", how_far(graph, sim_s)):
+        for name in ("recorder", "surrogate", "filter"):
+            graph.start_node(name, params=params[name])
+        sensor = graph.start_node("sensor_sim", params=params["sensor_sim"])
+        # a node that ends early (a recorder that cannot write its bag) ends the run at
+        # once: graph.close says which and why
+        if graph.wait_done_or_broken(sensor, timeout=60.0 + 3.0 * sim_s / args.time_scale):
+            heard.last_output = _drain(graph)
+
+
+def _report(args: argparse.Namespace, name: str, out: Path, bag: Path, wall: float,
+            sim_s: float, heard: _Heard) -> int:
+    """Evaluate the recorded run, write its report and live.json, print its table."""
     with working("live", "reading the bag"):
         data = evaluate.load(bag)
     try:
@@ -371,11 +407,11 @@ def run(args: argparse.Namespace) -> int:
         return 1
     report.write(data, ev, out, "live")
     late = evaluate.unfused_forecasts(data, ev.gap.t)
-    counters = filter_counters(diagnostics)
+    counters = filter_counters(heard.diagnostics)
     sim_wall = runs.sensor_wall_times(out / "logs" / "sensor_sim.err")
     # the simulation, and the estimation behind it until its last output reached the probe
-    ran = None if sim_wall is None else max(sim_wall[1], last_output) - sim_wall[0]
-    summary = {"scenario": s.name, "time_scale": args.time_scale, "wall_s": wall,
+    ran = None if sim_wall is None else max(sim_wall[1], heard.last_output) - sim_wall[0]
+    summary = {"scenario": name, "time_scale": args.time_scale, "wall_s": wall,
                "sim_wall_s": ran, "bag": str(bag), **report.summary(data, ev),
                "late_forecast_epochs": late.epochs, "forecast_epochs": late.forecast_epochs,
                "filter_counters": counters}

@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from ssa_fusion.apps import runs
 from ssa_fusion.apps.partial import removed_if_unfinished
 from ssa_fusion.core.base import types
 from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
@@ -437,16 +438,14 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
     from ssa_fusion.ros import qos
     from ssa_fusion.ros.interfaces import EstimateBatch
     from ssa_fusion.ros.player import Player
-    from ssa_fusion.ros.processes import Graph, ended_badly, recorded_short
+    from ssa_fusion.ros.processes import ended_badly, recorded_short
     from ssa_fusion.ros.readiness import OUTPUT, ReadyNodes
 
     names = [f"catalog_filter_{int(p['shard'])}" for p in chosen.shards]
-    logs = record.with_name(record.name + "_logs")
-    try:
-        graph = Graph(logs, args.domain_id)
-    except OSError as exc:
-        print(f"error: cannot use {record}: {exc}", file=sys.stderr)
+    opened = runs.replay_graph(record, args.domain_id)
+    if opened is None:
         return 2
+    graph, logs = opened
     played = [m for m in raw if m.topic in INPUTS]
     print(f"replay: {args.bag} at rate {args.rate:g} into {len(names)} catalog_filter "
           f"process(es); ROS domain {graph.domain_id}; logs in {logs}", flush=True)

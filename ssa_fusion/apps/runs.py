@@ -2,8 +2,9 @@
 
 `default_out` names a new directory (`out/live/<scenario>_<date-time>`), `link_latest`
 points `out/live/latest` at it, `run_dirs` makes it and picks the bag inside, and
-`sensor_wall_times` reads from sensor_sim's log when the simulation started and ended, and
-`ended_badly` says which node processes of a run did not end well.
+`sensor_wall_times` reads from sensor_sim's log when the simulation started and ended,
+`ended_badly` says which node processes of a run did not end well, and `replay_graph` opens
+the graph of a replay beside the bag it records.
 """
 
 from __future__ import annotations
@@ -14,6 +15,10 @@ import re
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ssa_fusion.ros.processes import Graph
 
 LIVE_ROOT = Path("out/live")
 """Where runs go by default, one directory each."""
@@ -95,3 +100,19 @@ def run_dirs(args: argparse.Namespace, name: str) -> tuple[Path, Path] | None:
         print(f"error: cannot use {out}: {exc}", file=sys.stderr)
         return None
     return out, bag
+
+
+def replay_graph(record: Path, domain_id: int | None) -> tuple[Graph, Path] | None:
+    """Return the graph of a replay recording to `record`, and its logs directory.
+
+    The logs go beside the bag (its name + ``_logs``); None when that directory cannot be
+    used (said on stderr).
+    """
+    from ssa_fusion.ros.processes import Graph
+
+    logs = record.with_name(record.name + "_logs")
+    try:
+        return Graph(logs, domain_id), logs
+    except OSError as exc:
+        print(f"error: cannot use {record}: {exc}", file=sys.stderr)
+        return None

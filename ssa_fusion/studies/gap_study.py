@@ -46,7 +46,7 @@ import numpy as np
 from ssa_fusion.core.base.metrics import chi2_bounds
 from ssa_fusion.core.base.types import Measurement, Source, StateEstimate, UpdateSource
 from ssa_fusion.core.earth.timescales import DAY_S, UNIX_EPOCH_JD
-from ssa_fusion.core.gaps import residual
+from ssa_fusion.core.gaps import residual, residual_frame
 from ssa_fusion.core.gaps.batch_gap import fit_passes, gap_window
 from ssa_fusion.core.gaps.estimator import measurement_model
 from ssa_fusion.evaluation import arms, passes
@@ -163,7 +163,7 @@ def run_placeholder(sim: sky.SkySimulation, placeholder: str,
     c = s.estimator()
     run = sky_runs.run_dmd_ekf(replace(sim, scenario=s))
     est = run.estimates if not run.forecasts else arms.run_filter(c, sim.real)
-    prop = residual.orbit_propagator(dyn)
+    prop = residual_frame.orbit_propagator(dyn)
     surrogates = {n: residual.ResidualSurrogate(cfg, prop) for n, cfg in case.variants}
     fit_anchored = ({f"{n}{FIT_SUFFIX}": residual.ResidualSurrogate(cfg, prop)
                      for n, cfg in case.variants} if case.fit_anchors else {})

@@ -47,11 +47,11 @@ from numpy.typing import NDArray
 from ssa_fusion.core.gaps.batch_gap import BatchGapForecaster
 from ssa_fusion.core.gaps.residual import (
     LIVE_RESIDUAL,
-    Propagator,
     ResidualConfig,
     ResidualFit,
     ResidualSurrogate,
 )
+from ssa_fusion.core.gaps.residual_frame import Propagator
 from ssa_fusion.core.gaps.step_aside import Choice, StepAside
 from ssa_fusion.core.motion.force_model import PARAMETERS, trajectory
 from ssa_fusion.core.od.batch_ls import BatchFit
@@ -82,7 +82,7 @@ has not fitted yet), never chosen on an evaluation seed."""
 
 
 def fit_propagator(fit: BatchFit) -> Propagator:
-    """Return the trajectory of `fit`'s model as a `residual.Propagator`.
+    """Return the trajectory of `fit`'s model as a `residual_frame.Propagator`.
 
     Its force model (`BatchOptions.force`), its parameters (the fitted drag factor; the
     others nominal), its Earth's pole and integration step, from any state x0 (GCRF km,

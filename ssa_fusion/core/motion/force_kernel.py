@@ -47,6 +47,7 @@ from numpy.typing import NDArray
 from ssa_fusion.core.base.jit import jit
 from ssa_fusion.core.earth.ephemeris import sun_moon_position
 from ssa_fusion.core.earth.rotation_grid import gcrs_to_itrs_at
+from ssa_fusion.core.motion.force_model import drag_terms
 from ssa_fusion.core.motion.geopotential import geopotential_acceleration
 from ssa_fusion.core.motion.srp import shadow_fraction
 
@@ -171,41 +172,6 @@ def _srp(x: float, y: float, z: float, sx: float, sy: float, sz: float, c: Array
 
 
 @jit
-def _drag(x: float, y: float, z: float, vx: float, vy: float, vz: float, c: Array,
-          kd: float, factor: float, ar: Array, av: Array,
-          gradient: bool) -> tuple[float, float, float]:
-    """Drag per unit k_D (`force_model`'s formula, density times ``factor``); partials into ar, av.
-
-    The partials are those of ``kd`` times the drag.
-    """
-    om = c[C_OMEGA]
-    wx, wy, wz = om * c[C_POLE], om * c[C_POLE + 1], om * c[C_POLE + 2]
-    ux = vx - (wy * z - wz * y)
-    uy = vy - (wz * x - wx * z)
-    uz = vz - (wx * y - wy * x)
-    un = math.sqrt(ux * ux + uy * uy + uz * uz)
-    r = math.sqrt(x * x + y * y + z * z)
-    rho = factor * c[C_RHO0] * math.exp(-(r - c[C_DRAG_RE] - c[C_H0]) / c[C_SCALE_H])
-    cr = c[C_DRAG_K] * rho
-    if gradient:
-        u = (ux, uy, uz)
-        wv = (wx, wy, wz)
-        rr = (x, y, z)
-        for i in range(3):
-            for j in range(3):
-                av[i, j] += -kd * cr * ((un if i == j else 0.0) + u[i] * u[j] / un)
-        kr = kd * cr * un / (c[C_SCALE_H] * r)
-        for i in range(3):
-            d0 = av[i, 1] * wv[2] - av[i, 2] * wv[1]
-            d1 = av[i, 2] * wv[0] - av[i, 0] * wv[2]
-            d2 = av[i, 0] * wv[1] - av[i, 1] * wv[0]
-            ar[i, 0] += kr * u[i] * rr[0] - d0
-            ar[i, 1] += kr * u[i] * rr[1] - d1
-            ar[i, 2] += kr * u[i] * rr[2] - d2
-    return -cr * un * ux, -cr * un * uy, -cr * un * uz
-
-
-@jit
 def _rtn(y: Array) -> tuple[float, float, float, float, float, float, float, float, float]:
     """Return the unit R, T, N axes of the state ``y[:6]``, nine floats."""
     x, yy, zz, vx, vy, vz = y[0], y[1], y[2], y[3], y[4], y[5]
@@ -249,8 +215,11 @@ def _accelerations(t: float, y: Array, c: Array, rec: Array, wt: Array, grid: Ar
             sens[4, 0], sens[4, 1], sens[4, 2] = bx, by, bz
             ax, ay, az = ax + prm[4] * bx, ay + prm[4] * by, az + prm[4] * bz
     if c[C_DRAG] != 0.0:
-        bx, by, bz = _drag(x, yy, zz, y[3], y[4], y[5], c, prm[0], density_factor(dens, t),
-                           ar, av, gradient)
+        om = c[C_OMEGA]
+        bx, by, bz = drag_terms(x, yy, zz, y[3], y[4], y[5], om * c[C_POLE],
+                                om * c[C_POLE + 1], om * c[C_POLE + 2],
+                                density_factor(dens, t) * c[C_RHO0], c[C_DRAG_RE], c[C_H0],
+                                c[C_SCALE_H], c[C_DRAG_K], prm[0], ar, av, gradient)
         sens[0, 0], sens[0, 1], sens[0, 2] = bx, by, bz
         ax, ay, az = ax + prm[0] * bx, ay + prm[0] * by, az + prm[0] * bz
     e = _rtn(y)

@@ -30,7 +30,6 @@ across a leap second is read as if none were there).
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -43,7 +42,7 @@ from ssa_fusion.core.earth import frames
 from ssa_fusion.core.earth.ephemeris import sun_moon_position, sun_moon_span
 from ssa_fusion.core.earth.rotation_grid import rotation_grid
 from ssa_fusion.core.motion import force_kernel as fk
-from ssa_fusion.core.motion.force_model import Trajectory
+from ssa_fusion.core.motion.force_model import Trajectory, output_steps, store_output
 from ssa_fusion.core.motion.force_spec import NOMINAL, PARAMETERS, ForceSpec
 from ssa_fusion.core.motion.geopotential import GravityField, KernelTables, kernel_tables
 from ssa_fusion.core.motion.propagation import _tableau
@@ -243,8 +242,7 @@ def _kernel(x0: Array, dts: Array, max_step: float, model: Model, A: Array, B: A
     good = True
     for kk in range(dts.shape[0]):
         dt = dts[kk]
-        steps = math.ceil(abs(dt) / max_step) if good and dt - dt == 0.0 else 0
-        h = dt / max(steps, 1)
+        steps, h = output_steps(dt, max_step, good)
         for _ in range(steps):
             _step(y, t, h, ncol, A, B, C, K, yt, yn, model)
             if _shadow_crossed(y, yn, t, h, model):
@@ -255,15 +253,7 @@ def _kernel(x0: Array, dts: Array, max_step: float, model: Model, A: Array, B: A
             else:
                 y[:] = yn
             t += h
-        nf = 0.0 if good and dt - dt == 0.0 else math.nan
-        for q in range(6):
-            xs[kk, q] = y[q]
-            nf += y[q] - y[q]
-        for i in range(6 if ncol else 0):
-            for j in range(ncol):
-                ys[kk, i, j] = y[6 + i * ncol + j]
-                nf += y[6 + i * ncol + j] - y[6 + i * ncol + j]
-        good = nf == 0.0
+        good = store_output(y, ncol, dt, good, kk, xs, ys)
         ok[kk] = good
 
 

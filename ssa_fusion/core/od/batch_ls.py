@@ -57,7 +57,8 @@ Covariances
       ``C`` the noise accumulated from the epoch outwards in epoch coordinates, and give the
       estimate ``P (J^T C_e J) P``; through a prediction the same noise accumulates from
       the epoch on (independent of the window's, for predictions after the epoch; into the
-      window, the epoch's covariance mapped back plus that noise: conservative);
+      window, the epoch's covariance mapped back plus that noise: conservative;
+      `window_noise`);
     * optionally (``scale_by_rms``) the formal part scaled by the weighted RMS squared when
       it exceeds 1 (the a-posteriori variance factor).
 
@@ -85,7 +86,6 @@ from numpy.typing import ArrayLike, NDArray
 from ssa_fusion.core.base.types import Measurement, StateEstimate
 from ssa_fusion.core.earth import frames
 from ssa_fusion.core.filter.initiation import earth_orbit_problem
-from ssa_fusion.core.filter.process_noise import snc_batch
 from ssa_fusion.core.motion.force_model import (
     NOMINAL,
     PARAMETERS,
@@ -102,6 +102,7 @@ from ssa_fusion.core.od.gauss_newton import (
     SolverOptions,
     gauss_newton,
 )
+from ssa_fusion.core.od.window_noise import accumulated_noise, window_noise, with_grid
 
 __all__ = ["BatchFit", "BatchOptions", "FitStatus", "Linearization", "Solution",
            "SolverOptions", "fit", "gauss_newton", "grid", "whitened_predictions",
@@ -294,7 +295,7 @@ class BatchFit:
         tt = np.atleast_1d(np.asarray(t, dtype=float))
         psd = np.asarray(o.snc_psd, dtype=float)
         noise = realistic and bool(np.any(psd > 0.0))
-        epochs = _with_grid(self.t, tt, o.noise_step_s) if noise else tt
+        epochs = with_grid(self.t, tt, o.noise_step_s) if noise else tt
         cons = list(o.consider) if realistic else []
         which = parameter_index((*self.solve_for, *cons))
         prm = np.array([self.params[p] for p in PARAMETERS])
@@ -310,7 +311,7 @@ class BatchFit:
             sc = _consider_sigma(o)
             P += (m * sc * sc) @ np.swapaxes(m, 1, 2)
         if noise:
-            P += _accumulated_noise(self.t, epochs, tr.x, tr.phi, psd)
+            P += accumulated_noise(self.t, epochs, tr.x, tr.phi, psd)
         pos = np.searchsorted(epochs, tt) if noise else np.arange(tt.size)
         x_out: Array = tr.x[pos]
         P_out = P[pos]
@@ -337,55 +338,9 @@ def grid(t_from: float, t_to: float, step_s: float = 60.0) -> Array:
     return out
 
 
-def _with_grid(t0: float, t: Array, step: float) -> Array:
-    """Sorted union of the epochs ``t`` and the grid of ``step`` from t0 out to them."""
-    parts = [t, np.array([t0])]
-    for sign in (1.0, -1.0):
-        reach = float(np.max(sign * (t - t0), initial=0.0))
-        if reach > 0.0:
-            parts.append(t0 + sign * np.arange(1, math.ceil(reach / step)) * step)
-    return np.unique(np.concatenate(parts))
-
-
 def _consider_sigma(o: BatchOptions) -> Array:
     """Return the consider parameters' standard deviations (in the order of ``o.consider``)."""
     return o.sigma(o.consider)
-
-
-def _outward(t0: float, t: Array) -> list[IntArray]:
-    """Return the indices of ``t`` after and before ``t0`` (not at it), ordered outwards."""
-    out = []
-    for side in (t > t0, t < t0):
-        idx = np.flatnonzero(side)
-        out.append(idx[np.argsort(np.abs(t[idx] - t0), kind="stable")])
-    return out
-
-
-def _noise_increments(t0: float, t: Array, x: Array, phi: Array, psd: Array,
-                      idx: IntArray) -> Array:
-    """Process noise of each step outwards along ``idx``, in epoch coordinates (L, 6, 6).
-
-    Step l runs from the previous node (or t0) to node ``idx[l]``: SNC (`process_noise.snc`)
-    with the axes of that node's state, mapped to the epoch by ``Phi_l^-1``.
-    """
-    tl = t[idx]
-    dts = np.diff(tl, prepend=t0)
-    q = snc_batch(x[idx], dts, psd)
-    inv = np.linalg.inv(phi[idx])
-    out: Array = inv @ q @ np.swapaxes(inv, 1, 2)
-    return out
-
-
-def _accumulated_noise(t0: float, t: Array, x: Array, phi: Array, psd: Array) -> Array:
-    """Process noise accumulated from t0 to each epoch (K, 6, 6), GCRF (module docstring)."""
-    out = np.zeros((t.size, 6, 6))
-    for idx in _outward(t0, t):
-        if not idx.size:
-            continue
-        c = np.cumsum(_noise_increments(t0, t, x, phi, psd, idx), axis=0)
-        p = phi[idx]
-        out[idx] = p @ c @ np.swapaxes(p, 1, 2)
-    return out
 
 
 def whitened_residuals(measurements: Sequence[Measurement], model: FitModel,
@@ -564,7 +519,10 @@ def _realistic(out: BatchFit, win: FitWindow, J_full: Array, sol: Solution, n: i
     base = scale * P
     psd = np.asarray(o.snc_psd, dtype=float)
     if np.any(psd > 0.0):
-        base = base + P @ _window_noise(out, win, J[:, :n], sol.lin.group[rows], psd) @ P
+        prm = np.array([out.params[p] for p in PARAMETERS])
+        base = base + P @ window_noise(o.force, out.x, out.t, prm, o.max_step_s, out.pole,
+                                       o.noise_step_s, win.t, J[:, :n], sol.lin.group[rows],
+                                       psd) @ P
     out._P_base = 0.5 * (base + base.T)
     real = out._P_base.copy()
     if o.consider:
@@ -575,32 +533,3 @@ def _realistic(out: BatchFit, win: FitWindow, J_full: Array, sol: Solution, n: i
     out.P_realistic = 0.5 * (real + real.T)
 
 
-def _window_noise(out: BatchFit, win: FitWindow, J: Array, group: IntArray,
-                  psd: Array) -> Array:
-    """``J^T C_e J`` (n, n) of the process noise between the measurements and the epoch.
-
-    ``J`` (rows, n) the accepted whitened partials (the state's columns first), ``group``
-    their measurements (module docstring).
-    """
-    o = out.options
-    t0 = out.t
-    epochs = _with_grid(t0, win.t, o.noise_step_s)
-    prm = np.array([out.params[p] for p in PARAMETERS])
-    tr = trajectory(o.force, out.x, t0, epochs, prm, (), o.max_step_s, out.pole)
-    n = J.shape[1]
-    a = np.zeros((len(win.m), 6, n))  # a_i = U_i^T J_i, U_i = the state columns of J_i
-    np.add.at(a, group, J[:, :6, None] * J[:, None, :])
-    node = np.searchsorted(epochs, win.t)
-    K = np.zeros((n, n))
-    for idx in _outward(t0, epochs):
-        if not idx.size:
-            continue
-        qbar = _noise_increments(t0, epochs, tr.x, tr.phi, psd, idx)
-        pos = np.empty(epochs.size, dtype=np.int64)
-        pos[idx] = np.arange(idx.size)
-        side = (win.t > t0) if epochs[idx[0]] > t0 else (win.t < t0)
-        a_node = np.zeros((idx.size, 6, n))
-        np.add.at(a_node, pos[node[side]], a[side])
-        A = np.cumsum(a_node[::-1], axis=0)[::-1]  # measurements at or beyond each node
-        K += np.einsum("lia,lij,ljb->ab", A, qbar, A)
-    return 0.5 * (K + K.T)
