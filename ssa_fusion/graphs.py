@@ -46,6 +46,18 @@ def sim_seconds(s: scenarios.Scenario | sky.SkyScenario) -> float:
     return s.track_s + s.gap_s + s.after_s
 
 
+def object_name(s: scenarios.Scenario | sky.SkyScenario) -> str:
+    """Return the ``object_id`` of the scenario's object: its own name where it has one.
+
+    An element set's object is named by its name line or ``OBJECT_NAME`` (its catalogue
+    number without one); a scenario's own object by the scenario's name.
+    """
+    entry = s.element_set if isinstance(s, sky.SkyScenario) else None
+    if entry is None:
+        return s.name
+    return entry.name.strip() or entry.object_id
+
+
 def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, seed: int,
                     bag: Path, geometry_seed: int = -1) -> dict[str, dict[str, Any]]:
     """Per-node parameters (SI units) that run scenario `s` live.
@@ -53,7 +65,7 @@ def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, 
     `geometry_seed`: a real-sky object's orbit turned as that case's (`sky.case_geometry`;
     -1: its own).
     """
-    sensor: dict[str, Any] = {"scenario": s.name, "object_id": s.name,
+    sensor: dict[str, Any] = {"scenario": s.name, "object_id": object_name(s),
                               "time_scale": time_scale, "seed": seed, "wait_for": WAIT_FOR,
                               "wait_for_readers": READERS}
     if isinstance(s, sky.SkyScenario):  # the truth's cadence; the filter publishes at it

@@ -19,6 +19,8 @@ import numpy as np
 
 from ssa_fusion.apps import evaluate, replay_catalog, report_figures
 from ssa_fusion.apps.args import add_settings, add_sites
+from ssa_fusion.apps.filter_setup import DataMix
+from ssa_fusion.apps.heartbeat import working
 from ssa_fusion.apps.report_figures import broken_line
 from ssa_fusion.core.base import metrics, types
 from ssa_fusion.core.gaps import estimator as config
@@ -75,7 +77,10 @@ def run(args: argparse.Namespace) -> int:
     del telling
     try:
         data = evaluate.load(args.bag)
-        ev = evaluate.evaluate(data, args.scenario, params_file=args.params_file)
+        evaluate.require_outage(data)
+        with working("report", "scoring the arms over the outage"):
+            ev = evaluate.evaluate(data, args.scenario, params_file=args.params_file,
+                                   setup=args.setup)
         write(data, ev, out)
     except evaluate.NoTruthError as exc:
         return run_own(args, data, out, str(exc))
@@ -105,17 +110,20 @@ def run_own(args: argparse.Namespace, data: evaluate.BagData, out: Path, why: st
         return 2
     try:
         sites = site_file.load_stations(args.sites) if args.sites else ()
-        real = [m for m in data.measurements if m.source == types.Source.SENSOR]
-        kind = real[0].kind if real else types.Kind.POSITION
-        chosen = evaluate.settings_for_bag(data.config, kind, args.scenario, args.params_file,
-                                           stations={m.frame_id for m in real}, sites=sites)
-        rep = report_own.build(data, chosen)
-        report_own.write(data, rep, out, title=f"ssa_fusion report: {out.name}")
+        chosen = evaluate.settings_for_bag(data.config, DataMix.of(data.measurements),
+                                           args.scenario, args.params_file, sites,
+                                           getattr(args, "setup", None))
+        with working(getattr(args, "command", "report"),
+                     "judging the estimates and drawing the plots"):
+            rep = report_own.build(data, chosen)
+            report_own.write(data, rep, out, title=f"ssa_fusion report: {out.name}")
     except (ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(f"{args.bag}: no simulated truth ({why}): the filter judged by its residuals, NIS "
-          f"and covariance\n")
+    judged = (f"judged against its /ssa/truth ({len(data.truth)} states) and by its residuals, "
+              f"NIS and covariance" if rep.after_passes is not None else
+              "no /ssa/truth: the filter judged by its residuals, NIS and covariance")
+    print(f"{args.bag}: {why}; {judged}\n")
     print(report_own.table(rep))
     drawn = [name for name in report_own.PLOTS if (out / name).exists()]
     print(f"\nwrote {out}/report.json, {out}/report.html"
@@ -134,27 +142,35 @@ def summary(data: evaluate.BagData, ev: evaluate.Evaluation) -> dict[str, Any]:
         "gap_epochs": len(g.t),
         "dmd_ekf_coverage": g.coverage,
         "dmd_ekf_propagated_epochs": g.predicted,
+        "position_error": evaluate.position_error(ev.passes, ev.between, len(data.truth)),
         "settings": ev.settings.origin,
         "estimator": config.to_dict(ev.settings.estimator),
         "message_counts": data.counts,
     }
 
 
-def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
-    """Write report.json, the PNG plots, report.html and visual.mcap (Foxglove) into `out`."""
+def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path,
+          command: str = "report") -> None:
+    """Write report.json, the PNG plots, report.html and visual.mcap (Foxglove) into `out`.
+
+    Each of the three steps says itself on stderr (`heartbeat.working`), as `command`.
+    """
     out.mkdir(parents=True, exist_ok=True)
     (out / "report.json").write_text(json.dumps(summary(data, ev), indent=2))
-    plot_arms(ev, out / "arms.png")
-    plot_sigma(data, out / "estimate_3sigma.png")
-    plot_forecasts(data, out / "forecast_vs_withheld.png")
-    plot_nis(data, out / "nis.png")
+    with working(command, "drawing the plots"):
+        plot_arms(ev, out / "arms.png")
+        plot_sigma(data, out / "estimate_3sigma.png")
+        plot_forecasts(data, out / "forecast_vs_withheld.png")
+        plot_nis(data, out / "nis.png")
     from ssa_fusion.apps import report_html  # plotly: imported on first use, like the plots
 
-    report_html.write(data, ev, out / "report.html", title=f"ssa_fusion report: {out.name}")
+    with working(command, "writing report.html"):
+        report_html.write(data, ev, out / "report.html", title=f"ssa_fusion report: {out.name}")
     from ssa_fusion.apps import visual_mcap  # foxglove-sdk, likewise
 
     stations = {s.name: s for s, _ in report_html.run_stations(ev.settings.estimator)}
-    visual_mcap.write(data, out / "visual.mcap", stations)
+    with working(command, "writing visual.mcap (the Foxglove file)"):
+        visual_mcap.write(data, out / "visual.mcap", stations)
 
 
 GAP_BREAK_S = 1800.0

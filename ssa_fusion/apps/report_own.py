@@ -1,8 +1,8 @@
-"""`ssa-fusion report BAG` for a bag without simulated truth: your own measurements.
+"""`ssa-fusion report BAG` for a bag without an outage to score arms over: your own data.
 
 A TDM imported with `import tdm` and estimated with `replay --offline [--smooth]` has no truth
-and no outage to score against. What is checked instead (the numbers from
-`evaluation.residuals`):
+and no outage to score against; a simulation whose outage fell where no pass was has its
+truth but no outage. What is checked (the numbers from `evaluation.residuals`):
 
 * ``residuals.png``: per channel, the pre-fit residual (measurement minus the filter's
   predicted measurement before the update) in the channel's units (range m, angles arcsec,
@@ -15,7 +15,10 @@ and no outage to score against. What is checked instead (the numbers from
   estimates when the bag holds ``/ssa/estimate_smoothed``; the gaps between passes shaded;
 * the passes table (per station pass: UTC span, measurements fused and not, largest
   elevation, RMS of the normalised residuals), printed and in ``report.html`` (the plots
-  and tables in one self-contained page) and ``report.json``.
+  and tables in one self-contained page) and ``report.json``;
+* with a truth on ``/ssa/truth`` (a simulation's bag): the position error after each pass
+  and between the passes (`evaluate.truth_scores`), printed and in ``report.json``
+  (``position_error``).
 
 No line is drawn between samples further apart than `residuals.PASS_BREAK_S` (a pass break).
 """
@@ -36,7 +39,9 @@ from ssa_fusion.apps import evaluate, report_figures
 from ssa_fusion.apps.report_figures import broken_line, hours
 from ssa_fusion.core.base import types
 from ssa_fusion.core.gaps.estimator import uncovered_stations
+from ssa_fusion.evaluation import passes as passes_
 from ssa_fusion.evaluation import residuals as res_
+from ssa_fusion.evaluation.gap_scores import GapScores
 from ssa_fusion.evaluation.residuals import PASS_BREAK_S
 from ssa_fusion.formats.ccsds import common as ccsds_format
 
@@ -69,6 +74,26 @@ class OwnReport:
     gaps: list[tuple[float, float]]
     unknown_stations: list[str]
     """Stations of the measurements the settings do not know (no residuals for them)."""
+    truth: int = 0
+    """The states on /ssa/truth (a simulation's bag): what the estimates are judged against."""
+    after_passes: passes_.PassReport | None = None
+    """With a truth: the position error after each pass and at every truth epoch."""
+    between: GapScores | None = None
+    """With a truth: what the filter published between passes, scored."""
+
+    def truth_lines(self) -> list[str]:
+        """Return the position error against the truth as lines ([] without a truth)."""
+        if self.after_passes is None:
+            return []
+        lines = [f"against the bag's /ssa/truth ({self.truth} states):",
+                 self.after_passes.table()]
+        if self.between is not None and self.between.gap_epochs:
+            lines.append(evaluate.between_line(self.between))
+        return lines
+
+    def position_error(self) -> dict[str, Any] | None:
+        """Return report.json's position error against the truth (None without one)."""
+        return evaluate.position_error(self.after_passes, self.between, self.truth)
 
 
 def build(data: evaluate.BagData, settings: evaluate.Settings) -> OwnReport:
@@ -80,8 +105,10 @@ def build(data: evaluate.BagData, settings: evaluate.Settings) -> OwnReport:
     fused = [e.t for e in data.estimates if e.update_source == types.UpdateSource.SENSOR]
     unknown = ([] if c.kind == types.Kind.POSITION
                else uncovered_stations(c, {m.frame_id for m in real}))
+    after, between = evaluate.truth_scores(data, c)
     return OwnReport(settings, res, published, res_.nis_summary(published),
-                     res_.pass_rows(real, fused, res), res_.gaps(real), unknown)
+                     res_.pass_rows(real, fused, res), res_.gaps(real), unknown,
+                     len(data.truth), after, between)
 
 
 def utc(t: float) -> str:
@@ -138,16 +165,19 @@ def notes(rep: OwnReport) -> list[str]:
 
 
 def table(rep: OwnReport) -> str:
-    """Markdown: the passes table, then the notes."""
+    """Markdown: the passes table, then the notes, then the error against a truth."""
     rows = ["| " + " | ".join(PASS_COLUMNS) + " |", "|" + "---|" * len(PASS_COLUMNS)]
     rows += ["| " + " | ".join(cells) + " |" for cells in pass_cells(rep)]
-    return "\n".join(rows) + "\n\n" + "\n".join(notes(rep))
+    truth = rep.truth_lines()
+    return ("\n".join(rows) + "\n\n" + "\n".join(notes(rep))
+            + ("\n\n" + "\n".join(truth) if truth else ""))
 
 
 def summary(data: evaluate.BagData, rep: OwnReport) -> dict[str, Any]:
     """Return what report.json holds."""
     return {
-        "truth": False,
+        "truth": rep.after_passes is not None,
+        "position_error": rep.position_error(),
         "nis_inside_95": rep.nis.fraction if rep.nis.n else None,
         "nis_count": rep.nis.n,
         "residual_rms_sigma": (float(np.sqrt(np.mean(np.concatenate(
@@ -294,11 +324,17 @@ def page(rep: OwnReport, out: Path, title: str) -> None:
     head = "".join(f"<th>{html.escape(h)}</th>" for h in PASS_COLUMNS)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in row) + "</tr>"
                    for row in pass_cells(rep))
+    judged = (f"against the bag's /ssa/truth ({rep.truth} states), and by its residuals, "
+              "NIS and covariance" if rep.after_passes is not None else
+              "by its residuals, NIS and covariance (the bag has no /ssa/truth)")
     parts = [f"<h1>{html.escape(title)}</h1>",
-             "<p class=\"note\">A bag without simulated truth: the filter judged by its "
-             "residuals, NIS and covariance.</p>", "<h2>Passes</h2>",
+             f"<p class=\"note\">The filter judged {html.escape(judged)}.</p>",
+             "<h2>Passes</h2>",
              f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>",
              *(f'<p class="note">{html.escape(n)}</p>' for n in notes(rep))]
+    if rep.after_passes is not None:
+        parts += ["<h2>Position error against the truth</h2>",
+                  f"<pre>{html.escape(chr(10).join(rep.truth_lines()))}</pre>"]
     for name in PLOTS:
         png = out / name
         if png.exists():
