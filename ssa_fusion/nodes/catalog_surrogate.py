@@ -65,6 +65,7 @@ from ssa_fusion.nodes.kit.shards import (
     LIST_OBJECTS,
     content_filter,
     rows_shard_problems,
+    sensor_estimates,
     shard_problem,
     shard_range,
 )
@@ -165,15 +166,9 @@ class CatalogSurrogateNode(SsaNode):
         Its SENSOR rows are counted for lockstep (taken), forecasts (ours included) are
         ignored; a batch whose columns disagree is refused whole (``rejected_malformed``).
         """
-        m = len(msg.object_id)
-        if msg.update_source != UpdateSource.SENSOR:
-            self.diag.counts[NodeCause.IGNORED_NOT_SENSOR] += m  # forecasts, ours included
-            return
-        self.taken += m
-        try:
-            rows = messages.estimate_batch_from_msg(msg)
-        except ValueError as exc:
-            self.diag.count(Cause.REJECTED_MALFORMED, f"{TOPIC_ESTIMATE_BATCH}: {exc}", n=m)
+        taken, rows = sensor_estimates(self.diag, msg)
+        self.taken += taken
+        if rows is None:
             return
         rows = self._admit_rows(rows)
         if len(rows) and not self.clock_hold.hold_ahead(

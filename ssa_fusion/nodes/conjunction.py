@@ -43,7 +43,7 @@ from ssa_fusion.formats.ccsds.cdm_out import Conjunction, write_cdm
 from ssa_fusion.nodes.kit.base import SsaNode
 from ssa_fusion.nodes.kit.diagnostics import Count, NodeCause
 from ssa_fusion.nodes.kit.progress import TAKEN_ALL_ESTIMATES, ProgressReporter
-from ssa_fusion.nodes.kit.shards import content_filter
+from ssa_fusion.nodes.kit.shards import content_filter, sensor_estimates
 from ssa_fusion.params.tables.conjunction import PARAMETERS
 from ssa_fusion.params.units import Units, convert
 from ssa_fusion.ros import messages
@@ -117,15 +117,9 @@ class ConjunctionNode(SsaNode):
         Forecasts are ignored; a batch whose columns disagree is refused whole, and rows
         with a state or covariance the filter would refuse are counted by cause.
         """
-        m = len(msg.object_id)
-        if msg.update_source != UpdateSource.SENSOR:
-            self.diag.counts[NodeCause.IGNORED_NOT_SENSOR] += m
-            return
-        self.taken += m
-        try:
-            rows = messages.estimate_batch_from_msg(msg)
-        except ValueError as exc:
-            self.diag.count(Cause.REJECTED_MALFORMED, f"{TOPIC_ESTIMATE_BATCH}: {exc}", n=m)
+        taken, rows = sensor_estimates(self.diag, msg)
+        self.taken += taken
+        if rows is None:
             return
         problems = states_problems(rows.x, rows.P)
         for k in np.flatnonzero(problems != ""):
