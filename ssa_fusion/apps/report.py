@@ -21,7 +21,13 @@ from ssa_fusion.apps import evaluate, replay_catalog, report_figures
 from ssa_fusion.apps.args import add_settings, add_sites
 from ssa_fusion.apps.filter_setup import DataMix
 from ssa_fusion.apps.heartbeat import working
-from ssa_fusion.apps.report_figures import broken_line
+from ssa_fusion.apps.report_figures import (
+    beyond_legend,
+    broken_line,
+    hours,
+    mark_outside,
+    robust_limit,
+)
 from ssa_fusion.core.base import metrics, types
 from ssa_fusion.core.gaps import estimator as config
 from ssa_fusion.formats import sites as site_file
@@ -32,7 +38,12 @@ from ssa_fusion.ros.topics import TOPIC_CONFIG
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-STATE_LABELS = ("x [km]", "y [km]", "z [km]", "vx [km/s]", "vy [km/s]", "vz [km/s]")
+STATE_UNITS = ("km",) * 3 + ("km/s",) * 3
+STATE_LABELS = tuple(f"{name} [{unit}]" for name, unit in
+                     zip(("x", "y", "z", "vx", "vy", "vz"), STATE_UNITS, strict=True))
+SETTLED_PERCENTILE = 95.0
+"""The percentile of a state's 3σ over the run taken as its settled 3σ: a panel's least
+half-height (the first sigmas after the initial orbit determination lie above it)."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -213,7 +224,8 @@ def plot_sigma(data: evaluate.BagData, path: Path) -> None:
     """Plot the fused estimates' error per state with ±3σ to `path` (at epochs with a truth).
 
     No line joins epochs further apart than `GAP_BREAK_S` (the gaps between passes); the
-    outage is shaded.
+    outage is shaded. Each panel is scaled by the bulk of its errors, at least the settled
+    3σ (`robust_limit`); errors beyond are marked on its edge (`mark_outside`).
     """
     plt = report_figures.pyplot()
     truth = {e.t: e.x for e in data.truth}
@@ -228,11 +240,15 @@ def plot_sigma(data: evaluate.BagData, path: Path) -> None:
     for i, ax in enumerate(axes.T.ravel()):
         shade(ax, span)
         ax.plot(*broken_line(t, err[:, i], t[0], GAP_BREAK_S), lw=0.8, label="error")
-        hours, three = broken_line(t, 3 * sig[:, i], t[0], GAP_BREAK_S)
-        ax.plot(hours, three, "r--", lw=0.8, label="±3σ")
-        ax.plot(hours, -three, "r--", lw=0.8)
-        # the scale of the run, not of the initial orbit determination's first sigmas
-        ax.set_ylim(-1.5 * np.nanpercentile(three, 99), 1.5 * np.nanpercentile(three, 99))
+        h, three = broken_line(t, 3 * sig[:, i], t[0], GAP_BREAK_S)
+        ax.plot(h, three, "r--", lw=0.8, label="±3σ")
+        ax.plot(h, -three, "r--", lw=0.8)
+        # the scale of the run's bulk, not of the initial orbit determination's first
+        # sigmas nor of one error far out (marked on the edge)
+        lim = robust_limit(err[:, i], float(np.nanpercentile(3 * sig[:, i], SETTLED_PERCENTILE)))
+        mark_outside(ax, hours(t, t[0]), err[:, i], lim, STATE_UNITS[i])
+        if i:  # the first panel holds the figure's legend
+            beyond_legend(ax)
         ax.set_ylabel(STATE_LABELS[i])
         ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=8)
@@ -257,7 +273,9 @@ def _is_angle(kind: int, i: int) -> bool:
 def plot_forecasts(data: evaluate.BagData, path: Path) -> None:
     """Plot the forecasts against the withheld measurements to `path` (if any match).
 
-    Angles in degrees, without lines across their wrap or across gaps.
+    Angles in degrees, without lines across their wrap or across gaps; a forecast line
+    stops where the forecasts do (no line over withheld epochs without a forecast: broken
+    where forecasts are more than 1.5 withheld spacings apart).
     """
     if not data.forecasts or not data.withheld:
         return
@@ -268,16 +286,18 @@ def plot_forecasts(data: evaluate.BagData, path: Path) -> None:
         return
     t = np.array([m.t for m in f])
     zf = np.array([m.z for m in f])
-    zw = np.array([withheld[m.t] for m in f])
     kind = f[0].kind
+    tw = np.array(sorted(m.t for m in data.withheld if m.kind == kind))
+    zw = np.array([withheld[x] for x in tw])
+    step = 1.5 * float(np.median(np.diff(tw))) if len(tw) > 1 else GAP_BREAK_S
     labels = FORECAST_LABELS.get(types.Kind(kind), ())
     fig, axes = plt.subplots(zf.shape[1], 1, figsize=(8, 6), sharex=True)
     for i, ax in enumerate(np.atleast_1d(axes)):
         angle = _is_angle(kind, i)
-        ax.plot(*broken_line(t, zw[:, i], t[0], GAP_BREAK_S, angle), ".", ms=2,
+        ax.plot(*broken_line(tw, zw[:, i], tw[0], GAP_BREAK_S, angle), ".", ms=2,
                 label="withheld (sensor)")
-        ax.plot(*broken_line(t, zf[:, i], t[0], GAP_BREAK_S, angle), "-", lw=0.8,
-                label="forecast")
+        ax.plot(*broken_line(t, zf[:, i], tw[0], min(step, GAP_BREAK_S), angle), "-",
+                lw=0.8, label="forecast (where one was published)")
         ax.set_ylabel(labels[i] if i < len(labels) else f"z[{i}]")
         ax.grid(alpha=0.3)
     np.atleast_1d(axes)[0].legend(fontsize=8)

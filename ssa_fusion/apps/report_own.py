@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ssa_fusion.apps import evaluate, report_figures
-from ssa_fusion.apps.report_figures import broken_line, hours
+from ssa_fusion.apps.report_figures import broken_line, hours, mark_outside, robust_limit
 from ssa_fusion.core.base import types
 from ssa_fusion.core.gaps.estimator import uncovered_stations
 from ssa_fusion.evaluation import passes as passes_
@@ -224,39 +224,56 @@ def _xlabel(t0: float) -> str:
 
 
 def plot_residuals(rep: OwnReport, t0: float, path: Path) -> None:
-    """Plot per channel the pre-fit residuals by station against ±3σ of S and of R."""
+    """Plot per channel the pre-fit residuals by station against ±3σ of S and of R.
+
+    Each panel scaled by the bulk of its residuals, at least the settled 3σ of S; residuals
+    beyond are marked on its edge (`report_figures.mark_outside`).
+    """
     if not rep.residuals:
         return
     plt = report_figures.pyplot()
     kind = rep.residuals[0].kind
     same = [r for r in rep.residuals if r.kind == kind]
     channels = CHANNELS.get(kind, tuple((f"z[{i}]", "-", 1.0) for i in range(len(same[0].y))))
-    t = np.array([r.t for r in same])
     fig, axes = plt.subplots(len(channels), 1, figsize=(9, 2.4 * len(channels) + 0.8),
                              sharex=True)
-    stations = sorted({r.station for r in same})
-    for i, (ax, (name, unit, f)) in enumerate(zip(np.atleast_1d(axes), channels, strict=True)):
-        shade_gaps(ax, rep, t0)
-        y = np.array([r.y[i] for r in same]) * f
-        s3 = 3 * np.array([r.sigma[i] for r in same]) * f
-        r3 = 3 * np.array([r.sigma_r[i] for r in same]) * f
-        for sign in (1, -1):
-            ax.plot(*broken_line(t, sign * s3, t0, PASS_BREAK_S), "k--", lw=0.8,
-                    label="±3σ innovation (S = HPHᵀ + R)" if sign == 1 else None)
-            ax.plot(*broken_line(t, sign * r3, t0, PASS_BREAK_S), ":", color="tab:red",
-                    lw=0.8, label="±3σ measurement (R)" if sign == 1 else None)
-        for j, st in enumerate(stations):
-            k = np.array([r.station == st for r in same])
-            ax.plot(hours(t[k], t0), y[k], ".", ms=3, color=f"C{j}", label=st)
-        # the scale of the residuals and of the settled σ, not of the first σ after the IOD
-        lim = 1.2 * max(float(np.max(np.abs(y))), float(np.median(s3)))
-        ax.set_ylim(-lim, lim)
-        ax.set_ylabel(f"{name} [{unit}]")
-        ax.grid(alpha=0.3)
+    for i, (ax, channel) in enumerate(zip(np.atleast_1d(axes), channels, strict=True)):
+        residual_panel(ax, rep, same, i, channel, t0)
+        if i:  # the first panel holds the figure's legend
+            report_figures.beyond_legend(ax)
     above(np.atleast_1d(axes)[0])
     np.atleast_1d(axes)[-1].set_xlabel(_xlabel(t0))
     fig.suptitle("Pre-fit residuals (measurement − filter's prediction before the update)")
     report_figures.save(fig, path, dpi=100)
+
+
+def residual_panel(ax: Axes, rep: OwnReport, same: list[res_.Residual], i: int,
+                   channel: tuple[str, str, float], t0: float) -> int:
+    """Draw channel `i` of the residuals `same` (one kind) on `ax`: points, ±3σ, scale.
+
+    `channel` is (name, unit shown, factor from the core's unit); returns how many
+    residuals lie beyond the panel (marked on its edge).
+    """
+    name, unit, f = channel
+    shade_gaps(ax, rep, t0)
+    t = np.array([r.t for r in same])
+    y = np.array([r.y[i] for r in same]) * f
+    s3 = 3 * np.array([r.sigma[i] for r in same]) * f
+    r3 = 3 * np.array([r.sigma_r[i] for r in same]) * f
+    for sign in (1, -1):
+        ax.plot(*broken_line(t, sign * s3, t0, PASS_BREAK_S), "k--", lw=0.8,
+                label="±3σ innovation (S = HPHᵀ + R)" if sign == 1 else None)
+        ax.plot(*broken_line(t, sign * r3, t0, PASS_BREAK_S), ":", color="tab:red",
+                lw=0.8, label="±3σ measurement (R)" if sign == 1 else None)
+    for j, st in enumerate(sorted({r.station for r in same})):
+        k = np.array([r.station == st for r in same])
+        ax.plot(hours(t[k], t0), y[k], ".", ms=3, color=f"C{j}", label=st)
+    ax.set_ylabel(f"{name} [{unit}]")
+    ax.grid(alpha=0.3)
+    # the scale of the residuals' bulk and of the settled σ, not of one residual far out
+    # nor of the first σ after the initial orbit determination
+    return mark_outside(ax, hours(t, t0), y, robust_limit(y, float(np.median(s3))), unit,
+                        color="black")
 
 
 def plot_nis(rep: OwnReport, t0: float, path: Path) -> None:
