@@ -183,3 +183,27 @@ def test_the_residual_after_it_neither_scales_its_panel_nor_hides(outlier, monke
     drawn_at = np.concatenate([ln.get_xdata() for ln in _edge_marks(rng)])
     t0 = data.measurements[0].t
     assert np.isclose(drawn_at, (t_next - t0) / 3600.0, rtol=0, atol=1e-9).sum() == 1
+
+
+def test_a_forecast_line_stops_where_the_forecasts_do(monkeypatch, tmp_path):
+    """With ten minutes of the outage's forecasts left out (the withheld measurements all
+    kept; shorter than the 30 min that break any line, `GAP_BREAK_S`), the forecast line has
+    no segment over them: no line joins the last forecast before to the first after."""
+    data = evaluate.load(SAMPLE)
+    withheld = {m.t for m in data.withheld}
+    ts = sorted(m.t for m in data.forecasts if m.t in withheld)
+    a = ts[len(ts) // 2]
+    b = min(t for t in ts if t >= a + 600.0)
+    assert b - a < report.GAP_BREAK_S
+    data.forecasts = [m for m in data.forecasts if not a <= m.t < b]
+    drawn = _drawn(monkeypatch)
+    report.plot_forecasts(data, tmp_path / "forecast_vs_withheld.png")
+    ax = drawn["forecast_vs_withheld.png"].get_axes()[0]
+    line = next(ln for ln in ax.get_lines() if str(ln.get_label()).startswith("forecast"))
+    x = np.asarray(line.get_xdata(), dtype=float)
+    t0 = min(withheld)
+    before, after = (max(t for t in ts if t < a) - t0) / 3600.0, (b - t0) / 3600.0
+    i = int(np.flatnonzero(np.isclose(x, before, rtol=0, atol=1e-9))[0])
+    assert np.isnan(x[i + 1]) and x[i + 2] == pytest.approx(after)
+    points = next(ln for ln in ax.get_lines() if ln.get_label() == "withheld (sensor)")
+    assert np.isfinite(np.asarray(points.get_xdata(), float)).sum() == len(withheld)
