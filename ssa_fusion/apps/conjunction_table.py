@@ -4,7 +4,8 @@ The conjunction node publishes each re-screening on ``/ssa/conjunctions``
 (ssa_fusion_msgs/ConjunctionBatch); a batch replaces every approach of the objects it
 screened. `latest` replays the batches of a bag in order and returns what stands at its
 end; `table` prints the most likely of them (by Pc, then miss) as markdown, and
-`write_csv` writes every one.
+`write_csv` writes every one. Each approach keeps both states and covariances at TCA, for
+its encounter-plane picture (`conjunction_plots`).
 """
 
 from __future__ import annotations
@@ -35,7 +36,9 @@ class Conjunctions:
     rows : list of dict
         One per approach: ``primary``, ``secondary``, ``tca`` (Unix s), ``miss_m``,
         ``rtn_m`` (radial, along-track, cross-track of the secondary from the primary),
-        ``speed_km_s``, ``pc``, ``log10_pc``.
+        ``speed_km_s``, ``pc``, ``log10_pc``; ``x1``, ``x2`` (both GCRF states at TCA,
+        km, km/s, ndarray (6,)) and ``p1``, ``p2`` (their covariances, km², km²/s, km²/s²,
+        ndarray (6, 6), or None when the batch carried none).
     batches : int
         ConjunctionBatch messages read.
     screened : int
@@ -73,19 +76,23 @@ def latest(bag: Path) -> Conjunctions:
                 "miss_m": float(a.miss_km[k]) * 1e3,
                 "rtn_m": [float(v) * 1e3 for v in rtn[k, :3]],
                 "speed_km_s": float(np.linalg.norm(rtn[k, 3:])),
-                "pc": 10.0 ** lg if lg > -300 else 0.0, "log10_pc": lg}
+                "pc": 10.0 ** lg if lg > -300 else 0.0, "log10_pc": lg,
+                "x1": a.x1[k], "x2": a.x2[k],
+                "p1": None if a.p1 is None else a.p1[k],
+                "p2": None if a.p2 is None else a.p2[k]}
     rows = sorted(standing.values(), key=lambda r: (-r["log10_pc"], r["miss_m"]))
     return Conjunctions(rows, batches, screened, distance, hbr)
 
 
-def _pc(r: dict[str, Any]) -> str:
+def pc_text(r: dict[str, Any]) -> str:
+    """Return an approach's Pc as shown (3 digits; its log10 below the float range)."""
     return f"{r['pc']:.3g}" if r["pc"] > 0 else f"1e{r['log10_pc']:.1f}"
 
 
 def cells(c: Conjunctions, shown: int = SHOWN) -> list[list[str]]:
     """Return the table's cells: the `shown` most likely approaches."""
     return [[r["primary"], r["secondary"], iso(r["tca"]), f"{r['miss_m']:.1f}",
-             *(f"{v:.1f}" for v in r["rtn_m"]), f"{r['speed_km_s']:.3f}", _pc(r)]
+             *(f"{v:.1f}" for v in r["rtn_m"]), f"{r['speed_km_s']:.3f}", pc_text(r)]
             for r in c.rows[:shown]]
 
 

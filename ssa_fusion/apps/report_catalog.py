@@ -26,7 +26,8 @@ Written: ``report.json`` (summary, settings, association, the worst objects),
 objects as tables: bounded whatever the catalog's size). The catalog surrogates' gap
 forecasts (update source FORECAST) are counted, not scored. A run with the conjunction node
 also gets its table of close approaches (`conjunction_table`: the most likely printed,
-every one in ``conjunctions.csv``).
+every one in ``conjunctions.csv``) and the encounter plane of the most likely of them, one
+PNG each (`conjunction_plots`), listed in the printout and shown in ``report.html``.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from ssa_fusion.apps import conjunction_table, replay_catalog
+from ssa_fusion.apps import conjunction_plots, conjunction_table, replay_catalog
 from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
 from ssa_fusion.core.base.types import Kind, Source, StateEstimate, UpdateSource
 from ssa_fusion.core.catalog.batch_ekf import BatchEKF
@@ -383,8 +384,11 @@ def summary_json(rep: CatalogReport) -> dict[str, Any]:
             "message_counts": rep.counts}
 
 
-def write(rep: CatalogReport, out: Path, title: str) -> None:
-    """Write report.json, objects.csv (every object) and report.html into `out`."""
+def write(rep: CatalogReport, out: Path, title: str, more: list[str] | None = None) -> None:
+    """Write report.json, objects.csv (every object) and report.html into `out`.
+
+    `more`: HTML sections appended to report.html (the close approaches').
+    """
     out.mkdir(parents=True, exist_ok=True)
     (out / "report.json").write_text(json.dumps(summary_json(rep), indent=2))
     with (out / "objects.csv").open("w", newline="") as f:
@@ -402,7 +406,7 @@ def write(rep: CatalogReport, out: Path, title: str) -> None:
              *(f'<p class="note">{html.escape(x)}</p>' for x in lines(rep)),
              f"<h2>Worst {len(rep.worst)} by {html.escape(rep.ranked_by)}</h2>",
              _table(list(COLUMNS), worst_cells(rep)),
-             "<p class=\"note\">Every object: objects.csv beside this page.</p>"]
+             "<p class=\"note\">Every object: objects.csv beside this page.</p>", *(more or [])]
     (out / "report.html").write_text(
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
         f"<title>{html.escape(title)}</title>{STYLE}</head>\n<body>\n" + "\n".join(parts)
@@ -418,16 +422,40 @@ def run(args: argparse.Namespace, telling: list[bagio.BagMessage], reason: str,
         return 2
     try:
         rep = build(args.bag, telling, args.sites)
-        write(rep, out, f"ssa_fusion catalog report: {out.name}")
+        out.mkdir(parents=True, exist_ok=True)
+        said, section = conjunctions(args.bag, out)
+        write(rep, out, f"ssa_fusion catalog report: {out.name}", section)
     except (bagio.BagError, ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(f"{args.bag} is a catalog's bag ({reason}): each object scored on its own rows\n")
     print(table(rep))
     print(f"\nwrote {out}/report.json, {out}/objects.csv (every object) and {out}/report.html")
-    conj = conjunction_table.latest(args.bag)
-    if conj.batches:  # a run with the conjunction node
-        conjunction_table.write_csv(conj, out / "conjunctions.csv")
-        print("\n" + conjunction_table.table(conj)
-              + f"\nwrote {out}/conjunctions.csv (every approach)")
+    if said:
+        print("\n" + said)
     return 0
+
+
+def conjunctions(bag: Path, out: Path) -> tuple[str, list[str]]:
+    """Write a conjunction run's approaches into `out`: conjunctions.csv and encounter planes.
+
+    Returns what to print (the table, the files) and report.html's section; ("", []) for a
+    bag without /ssa/conjunctions.
+    """
+    from ssa_fusion.apps.report_html import _table
+
+    conj = conjunction_table.latest(bag)
+    if not conj.batches:
+        return "", []
+    conjunction_table.write_csv(conj, out / "conjunctions.csv")
+    pngs = conjunction_plots.plot_approaches(conj, out)
+    text = conjunction_table.table(conj)
+    said = (text + f"\nwrote {out}/conjunctions.csv (every approach)"
+            + (f"\n{conjunction_plots.listing(conj, pngs)}" if pngs else ""))
+    head = text.split("\n")[0]
+    section = ["<h2>Close approaches</h2>", f'<p class="note">{html.escape(head)}; every '
+               "one in conjunctions.csv beside this page.</p>",
+               _table(list(conjunction_table.COLUMNS), conjunction_table.cells(conj)),
+               *(f'<p><img src="{p.name}" alt="{html.escape(p.name)}" width="560"></p>'
+                 for p in pngs)]
+    return said, section
