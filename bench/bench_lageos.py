@@ -32,6 +32,16 @@ geopotential and no other force (state and biases solved), the full model withou
 tides, the full model with constant RTN accelerations solved; and the filter coasting: the
 laser filter run up to 18:00 and predicted to the same passes (its own bias states).
 
+And the learned gap correction on the J2 fit ("J2 + learned correction"): the J2-only fit
+of the points up to 18:00 plus the residual surrogate learnt against it
+(`core.gaps.fit_residual.correct_fit`, the gap forecaster's settings, Hill's equations with
+constant and once-per-revolution RTN accelerations in the J2 trajectory's frame), its
+anchors the object's states estimated from the same points: the full model's fit up to
+18:00 sampled every 300 s (the filter's publication period) over the fit span, with its
+realistic covariance (no CPF, nothing after the cut-off); predicted to the same 41 points
+with the J2 fit's range model and biases. What it learns is the full model's orbit less the
+J2 one, so it is judged against both: the J2 fit it corrects and the full model.
+
 Usage::
 
     python bench/bench_lageos.py
@@ -43,6 +53,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 import tempfile
 import time
@@ -58,9 +69,10 @@ from ssa_fusion.apps import laser_run
 from ssa_fusion.apps.cli import main as cli
 from ssa_fusion.apps.replay import replay_offline
 from ssa_fusion.core.base.metrics import chi2_bounds
-from ssa_fusion.core.base.types import UpdateSource
+from ssa_fusion.core.base.types import Measurement, UpdateSource
 from ssa_fusion.core.earth.frames import rtn_axes
 from ssa_fusion.core.earth.timescales import DAY_S, iso, parse_utc
+from ssa_fusion.core.gaps.fit_residual import correct_fit
 from ssa_fusion.core.measure.laser_model import LaserModels
 from ssa_fusion.core.motion import high_fidelity as hf
 from ssa_fusion.core.motion import propagation
@@ -78,11 +90,17 @@ TARGETS = {"residual_rms_m": 0.25, "cpf_3d_rms_m": 0.5, "predicted_rms_m": 1.0,
            "nis_inside": 0.90, "fit_wall_s": 2.0}
 M = 1000.0
 FULL = "full (20x20, Sun, Moon, tides, SRP; Cr)"
+J2 = "J2 only"
+LEARNED = "J2 + learned correction"
+ANCHOR_STEP_S = 300.0
+"""The learned correction's anchors are this far apart (s): the laser filter's publication
+period between passes (`laser_run.GAPS`)."""
 
 
 def _data_dir() -> Path:
-    for d in (DATA, Path(__file__).resolve().parents[3] / "shared" / "realdata"
-              / "lageos2-2016"):
+    shared = [Path(os.environ["SSA_FUSION_SHARED"])] if "SSA_FUSION_SHARED" in os.environ else []
+    for d in (*(p / "realdata" / "lageos2-2016" for p in shared), DATA,
+              Path(__file__).resolve().parents[3] / "shared" / "realdata" / "lageos2-2016"):
         if d.is_dir():
             return d
     raise SystemExit(f"no {DATA}: the LAGEOS-2 data are not beside the repository")
@@ -112,14 +130,25 @@ def _against_reference(bag: LaserBag, fit: batch_ls.BatchFit) -> tuple[float, li
     return float(np.sqrt(np.mean(np.sum(d**2, axis=1)))), [_rms(d[:, k]) for k in range(3)]
 
 
+def _later(bag: LaserBag, fit: batch_ls.BatchFit) -> list[Measurement]:
+    """Return the normal points of the passes 2-12 h after the fit's last point."""
+    last = max(fit.t_meas)
+    return [m for m in bag.measurements
+            if last + PREDICT_H[0] * 3600 <= m.t <= last + PREDICT_H[1] * 3600]
+
+
 def _predicted(bag: LaserBag, fit: batch_ls.BatchFit,
                models: LaserModels) -> tuple[float, float, int]:
     """Return the predicted range residual RMS (m), its RMS over the predicted sigma, count."""
-    last = max(fit.t_meas)
-    ms = [m for m in bag.measurements
-          if last + PREDICT_H[0] * 3600 <= m.t <= last + PREDICT_H[1] * 3600]
+    ms = _later(bag, fit)
+    return _range_check(ms, *fit.predict([m.t for m in ms]), fit, models)
+
+
+def _range_check(ms: list[Measurement], x: np.ndarray, P: np.ndarray,
+                 fit: batch_ls.BatchFit, models: LaserModels) -> tuple[float, float, int]:
+    """Return the range residual RMS (m) of states x, P (GCRF) at the points ``ms`` (with
+    ``fit``'s station biases, 0 for a station it has none of), its RMS over sigma, count."""
     t = np.array([m.t for m in ms])
-    x, P = fit.predict(t)
     pts = models.points(t, [m.frame_id for m in ms])
     bias = np.zeros(len(models.network.ids))
     for name, v in fit.measurement_params.items():
@@ -130,26 +159,50 @@ def _predicted(bag: LaserBag, fit: batch_ls.BatchFit,
     return _rms(res) * M, _rms(res / np.sqrt(var)), len(ms)
 
 
+def _learned(bag: LaserBag, j2: batch_ls.BatchFit, full: batch_ls.BatchFit) -> dict[str, Any]:
+    """The J2 fit up to the cut-off corrected by the learned residual (`correct_fit`).
+
+    Its anchors: the full model's fit of the same points (up to the cut-off), sampled every
+    `ANCHOR_STEP_S` over the fit span, with its realistic covariance; then
+    the J2 fit's own state at its epoch. Scored on the same points as the fits: in sample
+    (the points up to the cut-off) and the passes 2-12 h later.
+    """
+    models = _models_of(bag)
+    t = np.arange(j2.t - ANCHOR_STEP_S, min(j2.t_meas), -ANCHOR_STEP_S)[::-1]
+    r = correct_fit(j2, t, *full.predict(t))
+    assert r is not None, "the learned correction refused its fit"
+    before = [m for m in bag.measurements if m.t <= j2.t]
+    later = _later(bag, j2)
+    res, _, n_fit = _range_check(before, *r.predict([m.t for m in before]), j2, models)
+    pred, norm, n = _range_check(later, *r.predict([m.t for m in later]), j2, models)
+    return {"residual_rms_m": res, "residual_points": n_fit, "predicted_rms_m": pred,
+            "predicted_over_sigma": norm, "predicted_points": n, "anchors": r.n_anchors,
+            "max_residual_m": r.max_residual_km * M,
+            "j2_biases_m": {k: v * M for k, v in j2.measurement_params.items()}}
+
+
+def _models_of(bag: LaserBag) -> LaserModels:
+    """The laser network's range model of the bag (stations, meteo)."""
+    c = laser_run.estimator(bag)
+    assert c.laser is not None
+    return LaserModels(c.laser, bag.meteo)
+
+
 def _fit(bag: LaserBag, force: ForceSpec, until: float | None = None,
          accelerations: bool = False) -> batch_ls.BatchFit:
     """The laser fit with ``force`` (k_R with SRP), from the reference's nearest state."""
     ms = [m for m in bag.measurements if until is None or m.t <= until]
-    c = laser_run.estimator(bag)
-    assert c.laser is not None
-    models = LaserModels(c.laser, bag.meteo)
     guess = laser_od.first_guess(bag.reference_t, bag.reference_x, ms[-1].t)
-    return laser_od.fit(ms, models, guess, force, accelerations=accelerations)
+    return laser_od.fit(ms, _models_of(bag), guess, force, accelerations=accelerations)
 
 
-def _judge(bag: LaserBag, force: ForceSpec, accelerations: bool) -> dict[str, Any]:
-    """The three numbers of one model: residuals, the CPF, the prediction."""
-    c = laser_run.estimator(bag)
-    assert c.laser is not None
-    models = LaserModels(c.laser, bag.meteo)
+def _judge(bag: LaserBag, force: ForceSpec, accelerations: bool,
+           part: batch_ls.BatchFit) -> dict[str, Any]:
+    """The three numbers of one model: residuals, the CPF, the prediction (of ``part``,
+    its fit up to the cut-off)."""
     full = _fit(bag, force, accelerations=accelerations)
-    part = _fit(bag, force, parse_utc(CUTOFF), accelerations)
     d3, rtn = _against_reference(bag, full)
-    pred, norm, n = _predicted(bag, part, models)
+    pred, norm, n = _predicted(bag, part, _models_of(bag))
     res = np.array([r[0] for r in full.residuals]) * M
     # a fit that stopped on a step it could not take keeps its last linearisation's RMS
     sigma_m = math.sqrt(bag.measurements[0].R[0, 0]) * M
@@ -231,7 +284,7 @@ def _models() -> dict[str, tuple[ForceSpec, bool]]:
     g = egm96()
     full = laser_od.laser_force(g)
     return {FULL: (full, False),
-            "J2 only": (ForceSpec(g, 2, 0, sun=False, moon=False), False),
+            J2: (ForceSpec(g, 2, 0, sun=False, moon=False), False),
             "J2-J4 (zonal)": (ForceSpec(g, 4, 0, sun=False, moon=False), False),
             "full without solid tides": (replace(full, solid_tides=False), False),
             "full + RTN accelerations": (full, True)}
@@ -263,6 +316,14 @@ def _table(main: dict, filt: dict, walls: tuple[float, float],
     ]
 
 
+def _verdict(learned: float, j2: float, full: float) -> str:
+    """The learned correction's predicted RMS (m) against the J2 fit's and the full model's."""
+    return (f"{LEARNED}: predicted RMS {learned:.3f} m, "
+            f"{'beats' if learned < j2 else 'does NOT beat'} the J2 fit alone ({j2:.3f} m: "
+            f"{j2 / learned:.1f} times smaller); the full model's {full:.3f} m is "
+            f"{learned / full:.0f} times smaller still")
+
+
 def main() -> None:
     """Run the benchmark; print the tables; last line JSON."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -273,8 +334,12 @@ def main() -> None:
           f"{', '.join(bag.network.ids)}; CPF {len(bag.reference_t)} states; fit cut-off for "
           f"the predictions {CUTOFF}")
     walls = _fit_time(bag)
-    judged = {name: _judge(bag, force, acc) for name, (force, acc) in _models().items()}
+    cut = parse_utc(CUTOFF)
+    parts = {name: _fit(bag, force, cut, acc) for name, (force, acc) in _models().items()}
+    judged = {name: _judge(bag, force, acc, parts[name])
+              for name, (force, acc) in _models().items()}
     main_ = judged[FULL]
+    learned = _learned(bag, parts[J2], parts[FULL])
     filt = _filter(bag, stream)
     us = _kernel_us()
     print("\n| measure | target | measured | anchor | met |\n|---|---|---|---|---|")
@@ -291,10 +356,20 @@ def main() -> None:
               f"{j['predicted_rms_m']:.3f} m | {j['status']}, {j['edited']} edited |")
         if j["status"] != "converged":
             print(f"|   ({j['reason']}) | | | | |")
+    print(f"| {LEARNED} (the J2 fit to {CUTOFF} plus the residual learnt against the full "
+          f"model's fit of the same points, {learned['anchors']} anchors) | "
+          f"{learned['residual_rms_m']:.3f} m ({learned['residual_points']} up to the cut-off, "
+          f"the J2 fit's biases: " + ", ".join(f"{k.removeprefix('bias_')} {v:+.1f} m" for k, v
+                                               in learned["j2_biases_m"].items()) + ") "
+          f"| - | {learned['predicted_rms_m']:.3f} m ({learned['predicted_over_sigma']:.2f} "
+          f"sigma RMS) | largest residual learnt {learned['max_residual_m']:.1f} m |")
     print(f"| the laser filter coasting from {CUTOFF} | - | - | {filt['coast_rms_m']:.3f} m "
           f"({filt['coast_over_sigma']:.2f} sigma RMS) | {filt['fused']} fused |")
+    print("\n" + _verdict(learned["predicted_rms_m"], judged[J2]["predicted_rms_m"],
+                           main_["predicted_rms_m"]))
     print(json.dumps({"full": main_, "baselines": {k: v for k, v in judged.items()
                                                     if v is not main_},
+                      LEARNED: learned,
                       "filter": filt, "fit_wall_s": walls[1], "fit_wall_first_s": walls[0],
                       "us_per_call": us[0], "j2_us_per_call": us[1]}))
 

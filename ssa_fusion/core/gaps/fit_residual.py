@@ -42,7 +42,7 @@ import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from ssa_fusion.core.gaps.batch_gap import BatchGapForecaster
 from ssa_fusion.core.gaps.residual import (
@@ -56,7 +56,7 @@ from ssa_fusion.core.gaps.step_aside import Choice, StepAside
 from ssa_fusion.core.motion.force_model import PARAMETERS, trajectory
 from ssa_fusion.core.od.batch_ls import BatchFit
 
-__all__ = ["FIT_RESIDUAL", "FitResidualForecaster", "fit_propagator"]
+__all__ = ["FIT_RESIDUAL", "FitResidualForecaster", "correct_fit", "fit_propagator"]
 
 Array = NDArray[np.float64]
 
@@ -102,6 +102,33 @@ def fit_propagator(fit: BatchFit) -> Propagator:
         return out
 
     return propagate
+
+
+def _floored(r: ResidualFit) -> ResidualFit:
+    """Raise `r`'s held-out covariance scale to `COVARIANCE_SCALE_FLOOR`; return it."""
+    r.scale = (max(r.scale[0], COVARIANCE_SCALE_FLOOR), r.scale[1])
+    return r
+
+
+def correct_fit(fit: BatchFit, t: ArrayLike, x: ArrayLike, P: ArrayLike,
+                cfg: ResidualConfig = FIT_RESIDUAL) -> ResidualFit | None:
+    """Return the residual of `fit`'s model learnt against states estimated otherwise.
+
+    One learning step of `FitResidualForecaster` on given anchors: the states ``x``
+    (k, 6) GCRF km, km/s with covariances ``P`` (k, 6, 6) at epochs ``t`` (k,) s, increasing
+    and before the fit's epoch, then the fit's own state and realistic covariance at its
+    epoch (the last anchor: the residual's, and so the forecast's, origin); the placeholder
+    the fit's trajectory (`fit_propagator`). Its ``predict`` is the fit's trajectory plus
+    the learnt residual. None as `residual.ResidualSurrogate.fit` (too few anchors in
+    ``cfg.window_s``, a refused fit); ValueError for epochs out of order.
+    """
+    s = ResidualSurrogate(cfg, fit_propagator(fit))
+    for ti, xi, Pi in zip(np.asarray(t, float), np.asarray(x, float), np.asarray(P, float),
+                          strict=True):
+        s.add_anchor(float(ti), xi, Pi)
+    s.add_anchor(fit.t, fit.x, fit.covariance_realistic)
+    r = s.fit()
+    return None if r is None else _floored(r)
 
 
 def _no_placeholder(x0: Array, t0: float, t: Array) -> Array:
@@ -200,8 +227,7 @@ class FitResidualForecaster(BatchGapForecaster):
             r = s.fit()
             if r is None or not grid.size:
                 return
-            r.scale = (max(r.scale[0], COVARIANCE_SCALE_FLOOR), r.scale[1])
-            xs, Ps = r.predict(grid)
+            xs, Ps = _floored(r).predict(grid)
         except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError):
             return
         self.learned = r
