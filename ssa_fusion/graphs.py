@@ -22,7 +22,7 @@ from ssa_fusion.core.gaps.publisher import GapFill
 from ssa_fusion.formats.element_sets import Progress
 from ssa_fusion.params import settings
 from ssa_fusion.params.defaults import BAG_PATTERN
-from ssa_fusion.ros.readiness import OUTPUT, READERS
+from ssa_fusion.ros.readiness import LOCKSTEP_READERS, OUTPUT, READERS
 from ssa_fusion.ros.topics import (
     TOPIC_ASSOCIATED,
     TOPIC_DETECTION_TRUTH,
@@ -36,6 +36,8 @@ LIVE_SCENARIOS = [*(n for n, s in scenarios.SCENARIOS.items() if s.is_orbit), *s
 WAIT_FOR = ["/ssa/measurement=3", "/ssa/forecast=2", "/ssa/estimate=1", "/ssa/truth=1",
             "/ssa/withheld=1", "/clock=3"]
 """What sensor_sim waits for before it starts: every node's subscriptions."""
+OBJECT_LOCKSTEP = ["filter", "surrogate", "recorder"]
+"""The consumers one object's simulator waits for in lockstep."""
 
 
 def sim_seconds(s: scenarios.Scenario | sky.SkyScenario) -> float:
@@ -46,11 +48,18 @@ def sim_seconds(s: scenarios.Scenario | sky.SkyScenario) -> float:
 
 
 def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, seed: int,
-                    bag: Path) -> dict[str, dict[str, Any]]:
-    """Per-node parameters (SI units) that run scenario `s` live."""
+                    bag: Path, lockstep: bool = True) -> dict[str, dict[str, Any]]:
+    """Per-node parameters (SI units) that run scenario `s` live.
+
+    In lockstep (`nodes.kit.progress`: sim time waits for the filter, the surrogate and
+    the recorder; `time_scale` is a ceiling) unless `lockstep` is False (open loop: sim time
+    follows the wall clock).
+    """
     sensor: dict[str, Any] = {"scenario": s.name, "object_id": s.name,
                               "time_scale": time_scale, "seed": seed, "wait_for": WAIT_FOR,
-                              "wait_for_readers": READERS}
+                              "wait_for_readers": READERS + (LOCKSTEP_READERS if lockstep
+                                                             else []),
+                              "lockstep": OBJECT_LOCKSTEP if lockstep else [""]}
     if isinstance(s, sky.SkyScenario):  # the truth's cadence; the filter publishes at it
         sensor.update({"cadence": s.truth_cadence_s, "start": timescales.iso(s.t0),
                        "duration": s.duration_s})
@@ -60,8 +69,10 @@ def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, 
                        "after_gap": s.after_s})
         extra = {}
     estimator = s.estimator()
-    surrogate = {"use_sim_time": True, **settings.surrogate_params(estimator)}
-    filt = {"use_sim_time": True, **settings.filter_params(estimator), **extra}
+    surrogate = {"use_sim_time": True, **settings.surrogate_params(estimator),
+                 "lockstep": lockstep}
+    filt = {"use_sim_time": True, **settings.filter_params(estimator), **extra,
+            "lockstep": lockstep}
     if isinstance(s, sky.SkyScenario) and s.sites_file:  # stations of a sites file
         for node in (sensor, surrogate, filt):
             node["sites"] = s.sites_file

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 from ssa_fusion import graphs
 from ssa_fusion.apps import evaluate, report, runs
-from ssa_fusion.apps.args import add_discovery, add_domain_id, discovery, time_scale
+from ssa_fusion.apps.args import add_discovery, add_domain_id, time_scale
 from ssa_fusion.apps.progress_lines import ProgressLines
 from ssa_fusion.core.base.types import UpdateSource
 from ssa_fusion.core.gaps.publisher import GapFill
@@ -199,7 +199,6 @@ def late_warning(late: evaluate.LateForecasts, counters: dict[str, int]) -> str 
 def catalog_options_given(args: argparse.Namespace) -> list[str]:
     """Return the catalog-only options of `args` set away from their defaults."""
     given = {"--objects": args.objects != 0, "--synthetic": args.synthetic != 0,
-             "--time-scale max": math.isinf(args.time_scale), "--open-loop": not args.lockstep,
              "--shards": args.shards != 1, "--no-surrogate": not args.surrogate,
              "--surrogate-param": bool(args.surrogate_param),
              "--remote-shards": bool(args.remote_shards),
@@ -246,6 +245,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {', '.join(catalog_only)} apply to a catalog run (--catalog FILE)",
               file=sys.stderr)
         return 2
+    if math.isinf(args.time_scale) and not args.lockstep:
+        print("error: --time-scale max needs lockstep (without --open-loop): in the open "
+              "loop sim time follows the wall clock", file=sys.stderr)
+        return 2
     try:
         s = graphs.live_scenario(args.scenario, args.start, args.duration, args.sites,
                                  args.elements, ProgressLines(f"live: elements {args.elements}",
@@ -263,12 +266,17 @@ def run(args: argparse.Namespace) -> int:
     if dirs is None:
         return 2
     out, bag = dirs
-    params = graphs.node_parameters(s, args.time_scale, args.seed, bag)
+    scale = min(args.time_scale, graphs.MAX_TIME_SCALE)
+    params = graphs.node_parameters(s, scale, args.seed, bag, args.lockstep)
     sim_s = graphs.sim_seconds(s)
-    graph = Graph(out / "logs", args.domain_id, discovery(args))
-    print(f"live: {s.name}, {sim_s / 3600:.1f} h of sim time at {args.time_scale:g}x "
-          f"(~{sim_s / args.time_scale:.0f} s of simulation after start-up); ROS domain "
-          f"{graph.domain_id}; logs in {out}/logs", flush=True)
+    graph = runs.run_graph(args, out / "logs", "live")
+    if graph is None:
+        return 2
+    pace = ("in lockstep as fast as the nodes go" if math.isinf(args.time_scale) else
+            f"at {args.time_scale:g}x (~{sim_s / args.time_scale:.0f} s of simulation after "
+            f"start-up{', in lockstep' if args.lockstep else ', open loop'})")
+    print(f"live: {s.name}, {sim_s / 3600:.1f} h of sim time {pace}; ROS domain "
+          f"{graph.domain_id}, run {graph.run}; logs in {out}/logs", flush=True)
     t_start = time.monotonic()
     last_output = 0.0  # wall time (Unix s) the probe last saw an estimate or forecast arrive
     try:
@@ -283,8 +291,10 @@ def run(args: argparse.Namespace) -> int:
             graph.start_node(name, params=params[name])
         sensor = graph.start_node("sensor_sim", params=params["sensor_sim"])
         # a node that ends early (a recorder that cannot write its bag) ends the run at once:
-        # graph.close says which and why
-        if graph.wait_done_or_broken(sensor, timeout=60.0 + 3.0 * sim_s / args.time_scale):
+        # graph.close says which and why; in lockstep sim time waits for its nodes as long
+        # as they live: no limit
+        limit = math.inf if args.lockstep else 60.0 + 3.0 * sim_s / args.time_scale
+        if graph.wait_done_or_broken(sensor, timeout=limit):
             last_output = _drain(graph)
     finally:
         problems = graph.close()
@@ -317,7 +327,7 @@ def run(args: argparse.Namespace) -> int:
                "late_forecast_epochs": late.epochs, "forecast_epochs": late.forecast_epochs,
                "filter_counters": counters}
     (out / "live.json").write_text(json.dumps(summary, indent=2))
-    slow = None if ran is None else slow_warning(ran, sim_s, args.time_scale)
+    slow = None if ran is None or args.lockstep else slow_warning(ran, sim_s, args.time_scale)
     if slow:
         print(slow, file=sys.stderr)
     print(f"\nrecorded {sum(data.counts.values())} messages to {bag} in {wall:.1f} s")

@@ -75,7 +75,7 @@ from ssa_fusion.core.gaps.publisher import GapFill, GapPublisher, Published
 from ssa_fusion.core.measure.validation import MAX_CLOCK_LEAD_S, ahead_of_clock
 from ssa_fusion.formats import sites as site_file
 from ssa_fusion.params import settings as node_settings
-from ssa_fusion.ros import bagio, messages
+from ssa_fusion.ros import bag_runs, bagio, messages
 from ssa_fusion.ros.topics import (
     TOPIC_CLOCK,
     TOPIC_CONFIG,
@@ -118,6 +118,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run `ssa-fusion replay` (live over ROS 2, or ``--offline``); return the exit code."""
     try:
+        bag_runs.check_one_run(args.bag)  # a bag of two runs is no run to replay
         undecodable: Counter[str] = Counter()
         refused: Counter[tuple[str, str]] = Counter()
         # a catalog's bag is never read row by row as messages (millions of rows)
@@ -468,8 +469,9 @@ def write_offline(out: Path, stream: list[bagio.BagMessage], result: OfflineResu
 def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
                 c: EstimatorConfig) -> int:
     """Play the bag into surrogate + filter processes (estimator `c`) and record the run."""
+    from ssa_fusion.apps import runs
     from ssa_fusion.ros.player import Player
-    from ssa_fusion.ros.processes import Graph, ended_badly, recorded_short
+    from ssa_fusion.ros.processes import ended_badly, recorded_short
     from ssa_fusion.ros.readiness import OUTPUT, ReadyNodes, readers_of
 
     record = args.record or _sibling(args.bag, "_replay")
@@ -488,12 +490,14 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
                          **recorded_gaps(stream), **own}}
     logs = record.with_name(record.name + "_logs")
     try:
-        graph = Graph(logs, args.domain_id)
+        graph = runs.run_graph(args, logs, "replay")
     except OSError as exc:
         print(f"error: cannot use {record}: {exc}", file=sys.stderr)
         return 2
+    if graph is None:
+        return 2
     print(f"replay: {args.bag} at rate {args.rate:g} into surrogate + filter; ROS domain "
-          f"{graph.domain_id}; logs in {logs}", flush=True)
+          f"{graph.domain_id}, run {graph.run}; logs in {logs}", flush=True)
     t0 = time.monotonic()
     try:
         for n in ("recorder", "surrogate", "filter"):  # the recorder first: it hears all
@@ -515,7 +519,7 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
         published = {*player.pubs, TOPIC_CLOCK, TOPIC_FORECAST, TOPIC_ESTIMATE}
         needs = [*readers_of(published),
                  f"filter:{OUTPUT}{TOPIC_ESTIMATE}=2", f"surrogate:{OUTPUT}{TOPIC_FORECAST}=3"]
-        readers = ReadyNodes(graph.probe)
+        readers = ReadyNodes(graph.probe, graph.subscribe)
         graph.play(player, lambda: readers.ready(needs),
                    "surrogate, filter and recorder to match their publishers")
         graph.wait_quiet(lambda: tuple(len(x) for x in seen), quiet_s=1.0, limit_s=30.0)

@@ -434,22 +434,26 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
     arrived every ``batch_period`` wall s: per object the same estimates as the recorded
     run (module docstring), whatever the rate.
     """
+    from ssa_fusion.apps import runs
     from ssa_fusion.ros import qos
     from ssa_fusion.ros.interfaces import EstimateBatch
     from ssa_fusion.ros.player import Player
-    from ssa_fusion.ros.processes import Graph, ended_badly, recorded_short
+    from ssa_fusion.ros.processes import ended_badly, recorded_short
     from ssa_fusion.ros.readiness import OUTPUT, ReadyNodes
 
     names = [f"catalog_filter_{int(p['shard'])}" for p in chosen.shards]
     logs = record.with_name(record.name + "_logs")
     try:
-        graph = Graph(logs, args.domain_id)
+        graph = runs.run_graph(args, logs, "replay")
     except OSError as exc:
         print(f"error: cannot use {record}: {exc}", file=sys.stderr)
         return 2
+    if graph is None:
+        return 2
     played = [m for m in raw if m.topic in INPUTS]
     print(f"replay: {args.bag} at rate {args.rate:g} into {len(names)} catalog_filter "
-          f"process(es); ROS domain {graph.domain_id}; logs in {logs}", flush=True)
+          f"process(es); ROS domain {graph.domain_id}, run {graph.run}; logs in {logs}",
+          flush=True)
     t0 = time.monotonic()
     try:
         graph.start_node("recorder", params={"use_sim_time": True, "bag": str(record)})
@@ -458,9 +462,8 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
                              params=node_params(p, args.sites))
         player = Player(graph.probe, played, args.rate)
         rows: list[int] = []
-        graph.probe.create_subscription(EstimateBatch, TOPIC_ESTIMATE_BATCH,
-                                        lambda m: rows.append(len(m.object_id)),
-                                        qos.CATALOG_QOS)
+        graph.subscribe(EstimateBatch, TOPIC_ESTIMATE_BATCH,
+                        lambda m: rows.append(len(m.object_id)), qos.CATALOG_QOS)
         filters = {TOPIC_MEASUREMENT_BATCH, TOPIC_MEASUREMENT}
         graph.wait_for(player.subscribers_ready(
             {t: 1 + len(names) * (t in filters) for t in player.pubs}),
@@ -469,7 +472,7 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
                  *(f"{n}:{OUTPUT}{TOPIC_ESTIMATE_BATCH}" for n in names),
                  *(f"{who}:{t}" for t in sorted(filters & set(player.pubs))
                    for who in ("recorder", *names))]
-        readers = ReadyNodes(graph.probe)
+        readers = ReadyNodes(graph.probe, graph.subscribe)
         graph.play(player, lambda: readers.ready(needs),
                    "the catalog filter(s) and the recorder to match their publishers")
         graph.wait_quiet(lambda: sum(rows), quiet_s=1.0, limit_s=60.0)

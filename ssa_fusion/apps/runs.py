@@ -3,7 +3,8 @@
 `default_out` names a new directory (`out/live/<scenario>_<date-time>`), `link_latest`
 points `out/live/latest` at it, `run_dirs` makes it and picks the bag inside, and
 `sensor_wall_times` reads from sensor_sim's log when the simulation started and ended, and
-`ended_badly` says which node processes of a run did not end well.
+`ended_badly` says which node processes of a run did not end well. `run_graph` gives a run
+its identity and its ROS domain (`ros.run_identity`, `ros.domains`).
 """
 
 from __future__ import annotations
@@ -14,6 +15,12 @@ import re
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+from ssa_fusion.apps.args import discovery
+
+if TYPE_CHECKING:
+    from ssa_fusion.ros.processes import Graph
 
 LIVE_ROOT = Path("out/live")
 """Where runs go by default, one directory each."""
@@ -46,6 +53,25 @@ def ended_badly(problems: list[str]) -> bool:
     if problems:
         print("error: node process(es) ended badly:\n" + "\n\n".join(problems), file=sys.stderr)
     return bool(problems)
+
+
+def run_graph(args: argparse.Namespace, logs: Path, command: str) -> Graph | None:
+    """Return the graph of a new run in its ROS domain, or None after a one-line error.
+
+    A new run id (its nodes' namespace); ``--domain-id`` (or $ROS_DOMAIN_ID) if no one else
+    is in it (``--share-domain``: whoever is), else a free domain (`ros.domains.open_graph`).
+    `command` prefixes what it says of domains passed over.
+    """
+    from ssa_fusion.ros.domains import DomainInUseError, open_graph
+    from ssa_fusion.ros.run_identity import new_run_id
+
+    try:
+        return open_graph(logs, args.domain_id, new_run_id(), discovery(args),
+                          share=bool(getattr(args, "share_domain", False)),
+                          say=lambda text: print(f"{command}: {text}", flush=True))
+    except DomainInUseError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return None
 
 
 _LOG_STAMP = re.compile(r"\[(\d+(?:\.\d+)?)\]")

@@ -79,7 +79,6 @@ class SensorSimDefaults:
     shards: int = 1
     lockstep: tuple[str, ...] = ("",)
     lockstep_step: float = 300.0
-    lockstep_timeout: float = 30.0
     batch_rows: int = 20_000
     unlabelled: bool = False
 

@@ -37,6 +37,9 @@ their laser ranges (`ssa-fusion import crd`)."""
 TOPIC_REFERENCE = "/ssa/reference"
 """For evaluation only, never fused: an independent orbit of the object (StateEstimate,
 GCRF, zero covariance), e.g. a CPF prediction (`ssa-fusion import crd --reference`)."""
+TOPIC_RUN = "/ssa/run"
+"""The run a bag holds (std_msgs/String, JSON ``{"run": id, "namespace": ns}``): written by
+the recorder itself, once, at the first /clock; never published (`ros.run_identity`)."""
 TOPIC_DIAGNOSTICS = "/diagnostics"
 TOPIC_CONFIG = "/ssa/config"
 """The estimator settings in effect (std_msgs/String, JSON of `params.settings.config_message`),

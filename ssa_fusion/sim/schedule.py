@@ -10,7 +10,9 @@
   as rows (`CatalogRun.rows`), without a truth topic.
 
 `Pace` says which scheduled epochs are due: in the open loop those up to the clock (sim time
-following the wall clock), in lockstep one step at a time. Settings that give no run raise
+following the wall clock), in lockstep one step at a time: a catalog's steps of
+``lockstep_step`` (`Pace.step`), one object's from one scheduled epoch to the next, each in
+four phases (`Pace.object_step`, `Phase`). Settings that give no run raise
 `ScheduleError`, whose message names the parameters (the node reports it as a parameter
 error). Units: s (sim time is Unix s UTC for orbits), the core's km and rad.
 """
@@ -43,6 +45,40 @@ class Event(enum.IntEnum):
 
 Schedule = list[tuple[float, Event, types.Measurement | types.StateEstimate]]
 """Publications in epoch order: (epoch s, what, the message's content)."""
+
+
+class Phase(enum.IntEnum):
+    """A phase of one object's lockstep step to the next scheduled epoch e (`Pace.object_step`).
+
+    Each phase is published once every consumer took all of the one before.
+    """
+
+    CLOCK = 0
+    """/clock moves to e."""
+    FORECASTS = 1
+    """The surrogate forecasts the epochs it missed before e (up to the step's `t`)."""
+    DECISIONS = 2
+    """The filter publishes what it decides for the epochs before e (up to the step's `t`):
+    after the forecasts of those epochs reached it."""
+    EVENTS = 3
+    """The measurements, withheld measurements and truth at e."""
+
+
+RELEASE_MARGIN_S = 1e-3
+"""The releases before an epoch e end this much (s) before it: e's own measurement comes
+first, whatever round-off says of epochs computed on a grid."""
+
+
+@dataclass(frozen=True)
+class ObjectStep:
+    """One phase of one object's lockstep: what to publish (`phase`), at or up to `t` (s).
+
+    `events`: the schedule's indices to publish (`Phase.EVENTS` only).
+    """
+
+    phase: Phase
+    t: float
+    events: range = range(0)
 
 
 class ScheduleError(ValueError):
@@ -305,6 +341,10 @@ class Pace:
         Lockstep: the end of the last step published, s (at first: the first epoch).
     clock_behind : bool
         Lockstep: the last step's measurements are out and its clock not yet.
+    phase : Phase
+        One object's lockstep: the next phase (`object_step`).
+    released : float
+        One object's lockstep: the time up to which forecasts and decisions were released, s.
     """
 
     times: NDArray[np.float64]
@@ -312,6 +352,8 @@ class Pace:
     next: int = 0
     sim_now: float = field(init=False)
     clock_behind: bool = False
+    phase: Phase = Phase.CLOCK
+    released: float = -math.inf
 
     def __post_init__(self) -> None:
         """Start at the first epoch."""
@@ -340,3 +382,42 @@ class Pace:
         self.sim_now = target
         self.clock_behind = True
         return self.due(target)
+
+    @property
+    def object_done(self) -> bool:
+        """Return True once one object's lockstep published everything and its releases."""
+        return self.done and self.phase == Phase.CLOCK and self.released >= self.times[-1]
+
+    def object_step(self, ceiling: float) -> ObjectStep | None:
+        """Return the next phase of one object's lockstep (see `Phase`), now published.
+
+        For each scheduled epoch e in turn: /clock e (None while e is past `ceiling`, s: the
+        time scale's limit), the forecasts and then the decisions up to e -
+        `RELEASE_MARGIN_S` (left out when nothing new is released), the events at e; after
+        the last epoch, the forecasts and the decisions up to it. None once all is done.
+        """
+        if self.done:
+            end = float(self.times[-1])
+            if self.released >= end:
+                return None
+            if self.phase != Phase.DECISIONS:
+                self.phase = Phase.DECISIONS
+                return ObjectStep(Phase.FORECASTS, end)
+            self.phase, self.released = Phase.CLOCK, end
+            return ObjectStep(Phase.DECISIONS, end)
+        e = float(self.times[self.next])
+        release = e - RELEASE_MARGIN_S
+        if self.phase == Phase.CLOCK:
+            if e > ceiling:
+                return None
+            self.sim_now = e
+            self.phase = Phase.FORECASTS if release > self.released else Phase.EVENTS
+            return ObjectStep(Phase.CLOCK, e)
+        if self.phase == Phase.FORECASTS:
+            self.phase = Phase.DECISIONS
+            return ObjectStep(Phase.FORECASTS, release)
+        if self.phase == Phase.DECISIONS:
+            self.phase, self.released = Phase.EVENTS, release
+            return ObjectStep(Phase.DECISIONS, release)
+        self.phase = Phase.CLOCK
+        return ObjectStep(Phase.EVENTS, e, self.due(e))

@@ -332,6 +332,14 @@ class Surrogate:
         self._emitted = n_due
         return out
 
+    def due_through(self, t: float) -> list[Measurement]:
+        """Forecasts for the missed epochs up to `t` (s) not yet emitted, without the grace.
+
+        For a caller that knows every real measurement up to `t` has been added (a graph in
+        lockstep): nothing late can still come for them.
+        """
+        return self.due(t, _closing=True)
+
     def _fill_gap(self, last: Measurement, m: Measurement) -> None:
         """Fill the missed epochs between `last` and `m`, the real measurement ending a gap.
 

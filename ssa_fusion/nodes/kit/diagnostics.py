@@ -27,7 +27,8 @@ from rclpy.timer import Timer
 from ssa_fusion.core.base.types import Cause
 from ssa_fusion.ros.interfaces import DiagnosticArray, DiagnosticStatus, KeyValue, Message, Time
 from ssa_fusion.ros.readiness import MATCHED_KEY, MATCHED_READERS_KEY
-from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
+from ssa_fusion.ros.run_identity import RunGate, RunMembers
+from ssa_fusion.ros.topics import TOPIC_CLOCK, TOPIC_DIAGNOSTICS
 
 
 class NodeCause(enum.StrEnum):
@@ -39,8 +40,15 @@ class NodeCause(enum.StrEnum):
     IGNORED_NOT_SENSOR = "ignored_not_sensor"
     CONTENT_FILTER_UNAVAILABLE = "content_filter_unavailable"
     REJECTED_UNLABELLED_SHARDED = "rejected_unlabelled_sharded"
+    FOREIGN_RUN = "foreign_run"
+    """A message of another run or of a stranger: its writer is not in the node's run
+    (`ros.run_identity`); never used, never recorded."""
+    FOREIGN_CLOCK = "foreign_clock"
+    """A /clock of another run or of a stranger: the node's sim time ignores it."""
 
 
+GATE_PERIOD_S = 0.1
+"""Wall s between two looks at messages held until the ROS graph names their writer."""
 FINAL_REPORT_WAIT_S = 1.0
 """Wall s a stopping node waits for its last /diagnostics report to be acknowledged."""
 
@@ -68,7 +76,7 @@ class Count(enum.StrEnum):
     ESTIMATES = "estimates"
     MEASUREMENTS = "measurements"
     SCENE_UPDATES = "scene_updates"
-    LOCKSTEP_TIMEOUTS = "lockstep_timeouts"
+    LOCKSTEP_GONE = "lockstep_gone"
     EVICTED = "evicted"
     PUBLISHED_ASSOCIATED = "published_associated"
     PUBLISHED_RELABELLED = "published_relabelled"
@@ -83,8 +91,10 @@ RECORDED = "recorded "
 Key = Cause | NodeCause | Count | str
 """A counter's key (a str: a key made of a prefix and a topic)."""
 
-REJECTIONS = frozenset(k for k in (*Cause, *NodeCause) if k.name.startswith("REJECTED_"))
-"""The keys of refused input: once any is counted, the report's level is WARN."""
+REJECTIONS = frozenset(k for k in (*Cause, *NodeCause)
+                       if k.name.startswith(("REJECTED_", "FOREIGN_")))
+"""The keys of refused input (a stranger's included): once any is counted, the report's
+level is WARN."""
 INFO = frozenset({Cause.IGNORED_OTHER_OBJECT, Cause.IGNORED_BEFORE_IOD, Cause.IOD_PENDING,
                   Cause.IOD_FAILED, Cause.FORECAST_SUPERSEDED, Cause.REINITIALISED,
                   Cause.RESET_CLOCK_JUMP, Cause.HELD_UNTIL_CLOCK, Cause.PREDICTIONS_SKIPPED,
@@ -121,8 +131,13 @@ class Diagnostics:
         self._logged: set[str] = set()
         self._watched: list[Subscription[Message]] = []
         self._outputs: list[Publisher[Message]] = []
+        self.members = RunMembers(node)
+        """Which writers are of this node's run (`ros.run_identity`)."""
+        self._gates: list[RunGate] = []
         self._pub = node.create_publisher(DiagnosticArray, TOPIC_DIAGNOSTICS, QoSProfile(depth=10))
         wall_timer(node, period_s, self.publish)  # sim time may stand still (no /clock)
+        if self.members.has_run:
+            wall_timer(node, GATE_PERIOD_S, self.guard(self.release_held))
 
     def count(self, key: Key, detail: str = "", warn: bool | None = None, n: int = 1) -> None:
         """Count `n` (one) `key`; its first occurrence is logged (with `detail`).
@@ -153,11 +168,12 @@ class Diagnostics:
         writer sends before the reader's side of the match exists). A payload that does not
         decode as `msg_type` is counted (`rejected_malformed`), not lost; with `raw` the
         callback gets the bytes. `content_filter`: DDS delivers only the samples it accepts.
+        Only the run's messages reach `callback` (`ros.run_identity.RunGate`): another
+        run's or a stranger's are counted (`foreign_run`; on /clock `foreign_clock`).
         """
         guarded = self.guard(callback)
 
         def take(data: bytes) -> None:
-            self.activity += 1
             if raw:
                 guarded(data)
                 return
@@ -170,8 +186,21 @@ class Diagnostics:
                 return
             guarded(msg)
 
+        cause = NodeCause.FOREIGN_CLOCK if topic == TOPIC_CLOCK else NodeCause.FOREIGN_RUN
+        gate = RunGate(self.members, topic, take,
+                       lambda why: self.count(cause, f"{why}: ignored"))
+        self._gates.append(gate)
+
+        def arrive(data: bytes, info: object) -> None:
+            self.activity += 1
+            gate(data, info)
+
+        def arrive_any(data: bytes) -> None:  # a node without a run takes every writer's
+            self.activity += 1
+            take(data)
+
         sub = self.node.create_subscription(
-            msg_type, topic, take, qos, raw=True,
+            msg_type, topic, arrive if self.members.has_run else arrive_any, qos, raw=True,
             event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.publish()),
             content_filter_options=content_filter,
         )
@@ -192,6 +221,11 @@ class Diagnostics:
             event_callbacks=PublisherEventCallbacks(matched=lambda _info: self.publish()))
         self._outputs.append(pub)
         return pub
+
+    def release_held(self) -> None:
+        """Hand on the messages held until the ROS graph named their writers."""
+        for gate in self._gates:
+            gate.release()
 
     @property
     def has_inputs(self) -> bool:

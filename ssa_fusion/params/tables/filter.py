@@ -13,6 +13,7 @@ from ssa_fusion.params.shared import (
     STATION_RULE,
     clock_lead,
     filter_rows,
+    lockstep_row,
     measurement_stream,
     object_filter,
 )
@@ -35,6 +36,7 @@ PARAMETERS = ParameterTable("filter", (
           "what the predictions in a gap between passes are: the EKF coasting (`none`), or "
           "a forecast of the residual, of a batch fit, or of both", check=one_of(*GapFill)),
     clock_lead(FILTER.max_clock_lead),
+    lockstep_row("publishes its predictions and gap forecasts"),
 ), rules=(STATION_RULE,
           Rule(settings.FILTER_KEYS, partial(settings.estimator_problem, "filter"))))
 """The filter's parameters."""

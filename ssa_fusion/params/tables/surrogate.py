@@ -12,6 +12,7 @@ from ssa_fusion.params.rows import Param, ParameterTable, Rule
 from ssa_fusion.params.shared import (
     STATION_RULE,
     clock_lead,
+    lockstep_row,
     measurement_stream,
     object_filter,
 )
@@ -61,6 +62,8 @@ PARAMETERS = ParameterTable("surrogate", (
           unit="wall s", check=POSITIVE),
     object_filter(SURROGATE.object_id, "learn"),
     clock_lead(SURROGATE.max_clock_lead),
+    lockstep_row("forecasts the epochs it missed (without `grace`: every real measurement "
+                 "before the time released has reached it)"),
 ), rules=(Rule(("delays", "cadence", "buffer_length"), _fits),
           STATION_RULE,
           Rule(settings.SURROGATE_KEYS, partial(settings.estimator_problem, "surrogate"))))
