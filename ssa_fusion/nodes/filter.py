@@ -28,12 +28,14 @@ from ssa_fusion.nodes.kit.base import SsaNode
 from ssa_fusion.nodes.kit.diagnostics import PUBLISHED_BY_SOURCE
 from ssa_fusion.nodes.kit.progress import (
     DECIDED,
+    NEXT_DECISION,
     PUBLISHED_ESTIMATES,
     RELEASE_QOS,
     TAKEN,
     TAKEN_FORECASTS,
     TOPIC_RELEASE_DECISIONS,
     ProgressReporter,
+    time_ns,
 )
 from ssa_fusion.params import settings
 from ssa_fusion.params.checks import ParamValue
@@ -73,14 +75,14 @@ class FilterNode(SsaNode):
         if self.params.flag("lockstep"):
             self.subscribe(Clock, TOPIC_RELEASE_DECISIONS, self.on_release, RELEASE_QOS)
             self.run_clock.listen(lambda _data, _t: self.report())
-            self.progress = ProgressReporter(self, self.counters)
+            self.progress = ProgressReporter(self, self.counters, poll=False)
 
-    def counters(self) -> dict[str, int]:
-        """Return the lockstep progress: what it took, published and decided."""
+    def counters(self) -> dict[str, int | str]:
+        """Return the lockstep progress: what it took, published and decided, and will."""
         return {TAKEN: self.handled[TOPIC_MEASUREMENT],
                 TAKEN_FORECASTS: self.handled[TOPIC_FORECAST],
                 PUBLISHED_ESTIMATES: sum(self.diag.counts[k] for k in PUBLISHED_BY_SOURCE),
-                DECIDED: self.decided_ns}
+                DECIDED: self.decided_ns, NEXT_DECISION: time_ns(self.gaps.next_decision())}
 
     def on_release(self, msg: Clock) -> None:
         """Publish what is decided up to the time released (lockstep), and say so."""

@@ -115,7 +115,7 @@ class Recorder(SsaNode):
         self.failed: OSError | None = None  # why the bag cannot be written (then: exit 1)
         self.wall_timer(p.number("discover_period"), self.discover)
         self.wall_timer(p.number("flush_period"), self.flush)
-        self.progress = ProgressReporter(self, self.recorded)
+        self.progress = ProgressReporter(self, self.recorded, poll=False)
         self.run_clock.listen(self.on_clock)
         self._name_run()
         self.get_logger().info(f"recording to {bag}")

@@ -43,11 +43,14 @@ from ssa_fusion.nodes.kit.diagnostics import Count
 from ssa_fusion.nodes.kit.node_parameters import NodeParameters
 from ssa_fusion.nodes.kit.process import finish
 from ssa_fusion.nodes.kit.progress import (
+    NEXT_DECISION,
+    NEXT_DUE,
     RELEASE_QOS,
     REPORT_EVERY_S,
     TOPIC_RELEASE_DECISIONS,
     TOPIC_RELEASE_FORECASTS,
     Lockstep,
+    wants,
 )
 from ssa_fusion.nodes.kit.shards import shard_range
 from ssa_fusion.params.rows import ParameterError
@@ -248,23 +251,26 @@ class SensorSim(SsaNode):
     def step_object(self, ceiling: float) -> None:
         """Publish one object's next lockstep phase (time scale: `ceiling`), or end the run.
 
-        Called once the consumers took all of the phase before (`sim.schedule.Phase`).
+        Called once the consumers took all of the phase before (`sim.schedule.Phase`): a
+        release only a consumer has something for (its `NEXT_DUE`, `NEXT_DECISION`), then
+        the epoch's clock and events.
         """
         lockstep, pace = self.lockstep, self.pace
         assert lockstep is not None
-        step = pace.object_step(ceiling)
+        reports, nodes = lockstep.watch.reports, lockstep.nodes
+        step = pace.object_step(ceiling, lambda phase, t: wants(
+            reports, nodes, NEXT_DUE if phase == Phase.FORECASTS else NEXT_DECISION, t))
         if step is None:
             if pace.object_done:
                 self.done()
             return
-        if step.phase == Phase.CLOCK:
-            self.publish_clock(step.t)
-            lockstep.clock_ns = self.sim_stamp.sec * 1_000_000_000 + self.sim_stamp.nanosec
-        elif step.phase == Phase.EVENTS:
-            for i in step.events:
-                lockstep.object.published[self.publish_content(i)] += 1
-        else:
+        if step.phase != Phase.EVENTS:
             self.release(step)
+            return
+        self.publish_clock(step.t)  # the clock first: the events are received at it
+        lockstep.clock_ns = self.sim_stamp.sec * 1_000_000_000 + self.sim_stamp.nanosec
+        for i in step.events:
+            lockstep.object.published[self.publish_content(i)] += 1
 
     def release(self, step: ObjectStep) -> None:
         """Publish the release of `step` (forecasts or decisions up to its time)."""

@@ -25,11 +25,13 @@ from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_surrogate
 from ssa_fusion.nodes.kit.base import SsaNode
 from ssa_fusion.nodes.kit.diagnostics import Count
 from ssa_fusion.nodes.kit.progress import (
+    NEXT_DUE,
     RELEASE_QOS,
     RELEASED,
     TAKEN,
     TOPIC_RELEASE_FORECASTS,
     ProgressReporter,
+    time_ns,
 )
 from ssa_fusion.params import settings
 from ssa_fusion.params.checks import ParamValue
@@ -64,7 +66,8 @@ class SurrogateNode(SsaNode):
             self.progress = ProgressReporter(self, lambda: {
                 TAKEN: self.handled[TOPIC_MEASUREMENT],
                 Count.FORECASTS: self.diag.counts[Count.FORECASTS],
-                RELEASED: self.released_ns})
+                RELEASED: self.released_ns, NEXT_DUE: time_ns(self.core.next_due())},
+                poll=False)
 
     def on_release(self, msg: Clock) -> None:
         """Forecast the epochs missed up to the time released (lockstep), and say so."""

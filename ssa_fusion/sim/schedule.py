@@ -12,7 +12,7 @@
 `Pace` says which scheduled epochs are due: in the open loop those up to the clock (sim time
 following the wall clock), in lockstep one step at a time: a catalog's steps of
 ``lockstep_step`` (`Pace.step`), one object's from one scheduled epoch to the next, each in
-four phases (`Pace.object_step`, `Phase`). Settings that give no run raise
+up to three phases (`Pace.object_step`, `Phase`). Settings that give no run raise
 `ScheduleError`, whose message names the parameters (the node reports it as a parameter
 error). Units: s (sim time is Unix s UTC for orbits), the core's km and rad.
 """
@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -50,18 +51,17 @@ Schedule = list[tuple[float, Event, types.Measurement | types.StateEstimate]]
 class Phase(enum.IntEnum):
     """A phase of one object's lockstep step to the next scheduled epoch e (`Pace.object_step`).
 
-    Each phase is published once every consumer took all of the one before.
+    Each phase is published once every consumer took all of the one before; a release no
+    consumer has anything for is left out (`Pace.object_step`'s `wants`).
     """
 
-    CLOCK = 0
-    """/clock moves to e."""
-    FORECASTS = 1
+    FORECASTS = 0
     """The surrogate forecasts the epochs it missed before e (up to the step's `t`)."""
-    DECISIONS = 2
+    DECISIONS = 1
     """The filter publishes what it decides for the epochs before e (up to the step's `t`):
     after the forecasts of those epochs reached it."""
-    EVENTS = 3
-    """The measurements, withheld measurements and truth at e."""
+    EVENTS = 2
+    """/clock moves to e, then the measurements, withheld measurements and truth at e."""
 
 
 RELEASE_MARGIN_S = 1e-3
@@ -352,7 +352,7 @@ class Pace:
     next: int = 0
     sim_now: float = field(init=False)
     clock_behind: bool = False
-    phase: Phase = Phase.CLOCK
+    phase: Phase = Phase.FORECASTS
     released: float = -math.inf
 
     def __post_init__(self) -> None:
@@ -386,38 +386,32 @@ class Pace:
     @property
     def object_done(self) -> bool:
         """Return True once one object's lockstep published everything and its releases."""
-        return self.done and self.phase == Phase.CLOCK and self.released >= self.times[-1]
+        return self.done and self.phase == Phase.EVENTS
 
-    def object_step(self, ceiling: float) -> ObjectStep | None:
+    def object_step(self, ceiling: float,
+                    wants: Callable[[Phase, float], bool]) -> ObjectStep | None:
         """Return the next phase of one object's lockstep (see `Phase`), now published.
 
-        For each scheduled epoch e in turn: /clock e (None while e is past `ceiling`, s: the
-        time scale's limit), the forecasts and then the decisions up to e -
-        `RELEASE_MARGIN_S` (left out when nothing new is released), the events at e; after
-        the last epoch, the forecasts and the decisions up to it. None once all is done.
+        For each scheduled epoch e in turn: the forecasts and then the decisions up to e -
+        `RELEASE_MARGIN_S`, each only when `wants(phase, t)` says a consumer has something
+        to release up to t; then /clock e and the events at e (None while e is past
+        `ceiling`, s: the time scale's limit). After the last epoch, the releases up to it;
+        then None (`object_done`).
         """
+        while self.phase != Phase.EVENTS:
+            phase = self.phase
+            self.phase = Phase(phase + 1)
+            t = float(self.times[-1]) if self.done else float(self.times[self.next]) - \
+                RELEASE_MARGIN_S
+            if t > self.released and wants(phase, t):
+                if phase == Phase.DECISIONS:
+                    self.released = t
+                return ObjectStep(phase, t)
         if self.done:
-            end = float(self.times[-1])
-            if self.released >= end:
-                return None
-            if self.phase != Phase.DECISIONS:
-                self.phase = Phase.DECISIONS
-                return ObjectStep(Phase.FORECASTS, end)
-            self.phase, self.released = Phase.CLOCK, end
-            return ObjectStep(Phase.DECISIONS, end)
+            return None
         e = float(self.times[self.next])
-        release = e - RELEASE_MARGIN_S
-        if self.phase == Phase.CLOCK:
-            if e > ceiling:
-                return None
-            self.sim_now = e
-            self.phase = Phase.FORECASTS if release > self.released else Phase.EVENTS
-            return ObjectStep(Phase.CLOCK, e)
-        if self.phase == Phase.FORECASTS:
-            self.phase = Phase.DECISIONS
-            return ObjectStep(Phase.FORECASTS, release)
-        if self.phase == Phase.DECISIONS:
-            self.phase, self.released = Phase.EVENTS, release
-            return ObjectStep(Phase.DECISIONS, release)
-        self.phase = Phase.CLOCK
+        if e > ceiling:
+            return None
+        self.sim_now = e
+        self.phase = Phase.FORECASTS
         return ObjectStep(Phase.EVENTS, e, self.due(e))

@@ -332,6 +332,19 @@ class Surrogate:
         self._emitted = n_due
         return out
 
+    def next_due(self) -> float:
+        """Return the epoch (s) of the first missed epoch not forecast yet (inf: none can be).
+
+        `due_through` of any time before it returns nothing.
+        """
+        last, dt = self.last, self.cadence()
+        if last is None or not math.isfinite(dt) or dt <= 0:
+            return math.inf
+        k = self._emitted + 1
+        if k > math.floor(self.config.max_horizon_s / dt + 1e-9):
+            return math.inf
+        return last.t + k * dt
+
     def due_through(self, t: float) -> list[Measurement]:
         """Forecasts for the missed epochs up to `t` (s) not yet emitted, without the grace.
 

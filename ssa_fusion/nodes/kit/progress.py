@@ -34,6 +34,7 @@ and gives up on one only when it is gone (`Lockstep.gone`). The topics are not u
 
 from __future__ import annotations
 
+import math
 import time
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
@@ -80,6 +81,8 @@ RELEASE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                          reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.VOLATILE)
 """The releases: reliable, each one answered before the next is sent."""
+LIVENESS_PERIOD_S = 1.0
+"""Wall s between two looks at whether the consumers waited for still live."""
 REPORT_EVERY_S = 5.0
 """Wall s between two lines saying what lockstep still waits for."""
 
@@ -112,6 +115,28 @@ RELEASED = "released ns"
 """One object's surrogate: the time (ns) up to which it forecast what it missed."""
 DECIDED = "decided ns"
 """One object's filter: the time (ns) up to which it decided what to publish."""
+NEXT_DUE = "next due ns"
+"""One object's surrogate: the first epoch (ns) it would forecast ('inf': none)."""
+NEXT_DECISION = "next decision ns"
+"""One object's filter: the first time (ns) it would publish a prediction at ('inf': none)."""
+
+
+def time_ns(t: float) -> str:
+    """Return epoch `t` (s) as a progress value: integer ns, or 'inf'."""
+    return str(round(t * 1e9)) if math.isfinite(t) else "inf"
+
+
+def wants(reports: Mapping[str, Mapping[str, str]], nodes: Sequence[str], key: str,
+          t: float) -> bool:
+    """Return True when a node of `nodes` reports `key` (`NEXT_DUE`, `NEXT_DECISION`) <= `t` s.
+
+    A release up to `t` then gives it something to do (1 us of round-off allowed).
+    """
+    for name in nodes:
+        value = reports.get(name, {}).get(key, "inf")
+        if value.lstrip("-").isdigit() and int(value) * 1e-9 <= t + 1e-6:
+            return True
+    return False
 OBJECT_TOPICS = (TOPIC_MEASUREMENT, TOPIC_WITHHELD, TOPIC_TRUTH)
 """What the simulator of one object publishes, besides /clock."""
 
@@ -119,11 +144,13 @@ OBJECT_TOPICS = (TOPIC_MEASUREMENT, TOPIC_WITHHELD, TOPIC_TRUTH)
 class ProgressReporter:
     """Publish a node's progress counters (`counters()`: name -> value) when they change.
 
-    With them `CLOCK`: `clock()` (ns), by default the node's clock (sim time).
+    With them `CLOCK`: `clock()` (ns), by default the node's clock (sim time). The counters
+    are looked at every `REPORT_PERIOD_S` (`poll`), or when the node says they changed
+    (`nudge`; then the timer runs only to send what a nudge held back).
     """
 
     def __init__(self, node: Node, counters: Callable[[], Mapping[str, str | int]],
-                 clock: Callable[[], int] | None = None) -> None:
+                 clock: Callable[[], int] | None = None, poll: bool = True) -> None:
         self.node = node
         self.counters = counters
         self.clock = clock or (lambda: int(node.get_clock().now().nanoseconds))
@@ -131,16 +158,24 @@ class ProgressReporter:
         self._sent: dict[str, str] = {}
         self._sent_at = -1.0
         self._process = process_keys()
-        self.timer = wall_timer(node, REPORT_PERIOD_S, self.report)
+        self.poll = poll
+        self.timer = wall_timer(node, REPORT_PERIOD_S, self._tick)  # the first report
+
+    def _tick(self) -> None:
+        self.report()
+        if not self.poll:
+            self.timer.cancel()
 
     def nudge(self) -> None:
-        """Report now, unless a report went out within `REPORT_PERIOD_S` (the timer sends it).
+        """Report now, unless a report went out within `REPORT_PERIOD_S` (then soon after).
 
         After each message a lockstep consumer handles: sparse progress (a lockstep phase)
         is reported at once, dense progress (a burst) at most every `REPORT_PERIOD_S`.
         """
         if time.monotonic() - self._sent_at >= REPORT_PERIOD_S:
             self.report()
+        elif self.timer.is_canceled():
+            self.timer.reset()
 
     def report(self) -> None:
         """Publish the counters if any changed since the last report (with the process)."""
@@ -328,6 +363,7 @@ class Lockstep:
         """The consumers given up on: they are gone."""
         self.since: float | None = None
         """Wall time (monotonic) the current wait began (None: not waiting)."""
+        self._looked = -math.inf  # wall time (monotonic) liveness was last looked at
         self._by_shard: dict[int, tuple[int, NDArray[np.int64]]] = {}
 
     def sent_by_shard(self, shards: int) -> NDArray[np.int64]:
@@ -356,7 +392,8 @@ class Lockstep:
         for, however long.
         """
         missing = self.missing()
-        if missing:
+        if missing and now - self._looked >= LIVENESS_PERIOD_S:
+            self._looked = now
             listed = {n for n, _ns in self.node.get_node_names_and_namespaces()
                       if _ns == self.node.get_namespace()}
             lost = [n for n in self.nodes if any(m.startswith(f"{n} ") for m in missing)
