@@ -252,8 +252,8 @@ class SensorSim(SsaNode):
         """Publish one object's next lockstep phase (time scale: `ceiling`), or end the run.
 
         Called once the consumers took all of the phase before (`sim.schedule.Phase`): a
-        release only a consumer has something for (its `NEXT_DUE`, `NEXT_DECISION`), then
-        the epoch's clock and events.
+        release only a consumer has something for (its `NEXT_DUE`, `NEXT_DECISION`), the
+        epoch's clock, its events.
         """
         lockstep, pace = self.lockstep, self.pace
         assert lockstep is not None
@@ -264,13 +264,14 @@ class SensorSim(SsaNode):
             if pace.object_done:
                 self.done()
             return
-        if step.phase != Phase.EVENTS:
+        if step.phase == Phase.CLOCK:
+            self.publish_clock(step.t)
+            lockstep.clock_ns = self.sim_stamp.sec * 1_000_000_000 + self.sim_stamp.nanosec
+        elif step.phase == Phase.EVENTS:
+            for i in step.events:
+                lockstep.object.published[self.publish_content(i)] += 1
+        else:
             self.release(step)
-            return
-        self.publish_clock(step.t)  # the clock first: the events are received at it
-        lockstep.clock_ns = self.sim_stamp.sec * 1_000_000_000 + self.sim_stamp.nanosec
-        for i in step.events:
-            lockstep.object.published[self.publish_content(i)] += 1
 
     def release(self, step: ObjectStep) -> None:
         """Publish the release of `step` (forecasts or decisions up to its time)."""

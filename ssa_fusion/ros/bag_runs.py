@@ -5,7 +5,9 @@ A run's recorder takes its run's messages only and names the run once, on ``/ssa
 a recorder of an earlier version (or ``ros2 bag record``) in a ROS domain two runs shared.
 `check_one_run` refuses such a bag in one line: it names two runs on ``/ssa/run``, or its
 ``/clock`` goes back in time again and again (two simulators' clocks interleaved; one run's
-clock never goes back, a looping playback's once a loop).
+clock never goes back, a looping playback's once a loop). `same_messages` says whether two
+bags hold the same run's messages (a run in lockstep, repeated: the same bag on any
+machine).
 """
 
 from __future__ import annotations
@@ -63,3 +65,25 @@ def check_one_run(path: Path | str) -> None:
         raise MixedBagError(f"{path}: its /clock goes back {found.clock_backs} times: the "
                             "clocks of two runs interleaved (two runs recorded into one bag); "
                             "a report or replay scores one run")
+
+
+def same_messages(a: Path | str, b: Path | str) -> bool:
+    """Return whether bags `a` and `b` hold the same /ssa/* messages, /ssa/run left out.
+
+    Topic, log time and content, in log-time order (messages at one log time in any order).
+    The content is compared as CDR re-serialized by `rosbags` (zero padding): publishers
+    leave the alignment padding after a string unset, so raw bytes differ from run to run
+    where nothing does. /ssa/run says which run it is: every run its own.
+    """
+    from rosbags.rosbag2 import Reader
+
+    store = bagio.typestore()
+
+    def load(bag: Path | str) -> list[tuple[str, int, bytes]]:
+        with Reader(Path(bag)) as r:
+            return sorted((c.topic, t, bytes(store.serialize_cdr(
+                store.deserialize_cdr(d, c.msgtype), c.msgtype)))
+                for c, t, d in r.messages()
+                if c.topic.startswith("/ssa/") and c.topic != TOPIC_RUN)
+
+    return load(a) == load(b)

@@ -12,7 +12,7 @@
 `Pace` says which scheduled epochs are due: in the open loop those up to the clock (sim time
 following the wall clock), in lockstep one step at a time: a catalog's steps of
 ``lockstep_step`` (`Pace.step`), one object's from one scheduled epoch to the next, each in
-up to three phases (`Pace.object_step`, `Phase`). Settings that give no run raise
+up to four phases (`Pace.object_step`, `Phase`). Settings that give no run raise
 `ScheduleError`, whose message names the parameters (the node reports it as a parameter
 error). Units: s (sim time is Unix s UTC for orbits), the core's km and rad.
 """
@@ -60,8 +60,12 @@ class Phase(enum.IntEnum):
     DECISIONS = 1
     """The filter publishes what it decides for the epochs before e (up to the step's `t`):
     after the forecasts of those epochs reached it."""
-    EVENTS = 2
-    """/clock moves to e, then the measurements, withheld measurements and truth at e."""
+    CLOCK = 2
+    """/clock moves to e (alone: a message published after it in the same phase could reach
+    the recorder before it, a reliable writer's repair overtaking it, and be logged at the
+    clock before)."""
+    EVENTS = 3
+    """The measurements, withheld measurements and truth at e."""
 
 
 RELEASE_MARGIN_S = 1e-3
@@ -386,7 +390,7 @@ class Pace:
     @property
     def object_done(self) -> bool:
         """Return True once one object's lockstep published everything and its releases."""
-        return self.done and self.phase == Phase.EVENTS
+        return self.done and self.phase == Phase.CLOCK
 
     def object_step(self, ceiling: float,
                     wants: Callable[[Phase, float], bool]) -> ObjectStep | None:
@@ -394,11 +398,11 @@ class Pace:
 
         For each scheduled epoch e in turn: the forecasts and then the decisions up to e -
         `RELEASE_MARGIN_S`, each only when `wants(phase, t)` says a consumer has something
-        to release up to t; then /clock e and the events at e (None while e is past
-        `ceiling`, s: the time scale's limit). After the last epoch, the releases up to it;
+        to release up to t; then /clock e (None while e is past `ceiling`, s: the time
+        scale's limit), then the events at e. After the last epoch, the releases up to it;
         then None (`object_done`).
         """
-        while self.phase != Phase.EVENTS:
+        while self.phase in (Phase.FORECASTS, Phase.DECISIONS):
             phase = self.phase
             self.phase = Phase(phase + 1)
             t = float(self.times[-1]) if self.done else float(self.times[self.next]) - \
@@ -410,8 +414,11 @@ class Pace:
         if self.done:
             return None
         e = float(self.times[self.next])
-        if e > ceiling:
-            return None
-        self.sim_now = e
+        if self.phase == Phase.CLOCK:
+            if e > ceiling:
+                return None
+            self.sim_now = e
+            self.phase = Phase.EVENTS
+            return ObjectStep(Phase.CLOCK, e)
         self.phase = Phase.FORECASTS
         return ObjectStep(Phase.EVENTS, e, self.due(e))
