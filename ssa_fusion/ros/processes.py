@@ -11,7 +11,8 @@ the headless graph tests.
 A graph of a run (`run`: `ros.run_identity.new_run_id`) starts every node in the run's
 namespace and its probe there too; the probe's collections then take the run's messages
 only (`collect`; the others are counted in `foreign`). Every process's ROS log files go to
-the graph's log directory (``ROS_LOG_DIR``), never ``~/.ros/log``.
+the graph's log directory (``ROS_LOG_DIR``), never ``~/.ros/log``, and its shared-memory
+segments are the user's only (`ros.shm_privacy`).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
+from ssa_fusion.ros import shm_privacy
 from ssa_fusion.ros.discovery import LOOPBACK, Discovery
 from ssa_fusion.ros.executors import make_executor
 from ssa_fusion.ros.interfaces import Message
@@ -122,6 +124,7 @@ class Graph:
         self.env = dict(os.environ)
         self.env.update(ROS_DOMAIN_ID=str(self.domain_id), PYTHONUNBUFFERED="1",
                         ROS_LOG_DIR=str(self.workdir / "ros"))
+        os.environ.setdefault("ROS_LOG_DIR", self.env["ROS_LOG_DIR"])  # this process's too
         self.context = Context()
         rclpy.init(context=self.context, domain_id=self.domain_id)
         self.probe: Node = rclpy.create_node("ssa_fusion_probe", namespace=self.namespace,
@@ -130,6 +133,8 @@ class Graph:
         self._gates: list[RunGate] = []
         self.executor = make_executor(self.context, message_info=run is not None)
         self.executor.add_node(self.probe)
+        shm_privacy.make_private()
+        self._private_at = time.monotonic()
 
     # processes ---------------------------------------------------------------------------
     def start(self, name: str, cmd: list[str], expect_returncode: int | None = 0,
@@ -210,6 +215,9 @@ class Graph:
         self.executor.spin_once(timeout_sec=timeout)
         for gate in self._gates:
             gate.release()
+        if time.monotonic() - self._private_at >= shm_privacy.PERIOD_S:
+            shm_privacy.make_private()
+            self._private_at = time.monotonic()
 
     def wait_for(self, predicate: Callable[[], bool], timeout: float, what: str) -> None:
         """Spin the probe until `predicate()`; raise TimeoutError after `timeout` s (scaled).

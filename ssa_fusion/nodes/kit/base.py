@@ -8,6 +8,7 @@ core types, holds its parameters and timers, and calls the core:
 * its ``/diagnostics`` (`diag`: counts by cause, logged once, matched inputs);
 * input subscriptions whose callbacks cannot kill the node (`subscribe`), and wall timers
   (`wall_timer`);
+* its shared-memory segments, private to the user (`ros.shm_privacy`);
 * its run: only its run's messages reach its callbacks, its sim time follows only its run's
   ``/clock`` (`nodes.kit.run_clock`), and a stranger's are counted (`ros.run_identity`);
 * the clock hold: measurements that come before the first /clock wait for it
@@ -53,7 +54,7 @@ from ssa_fusion.nodes.kit.process import constructing, run, start_watchdog
 from ssa_fusion.nodes.kit.run_clock import RunClock
 from ssa_fusion.params.checks import ParamValue
 from ssa_fusion.params.rows import ParameterTable
-from ssa_fusion.ros import messages
+from ssa_fusion.ros import messages, shm_privacy
 from ssa_fusion.ros.interfaces import Message, String, Time
 from ssa_fusion.ros.qos import CONFIG_QOS
 from ssa_fusion.ros.topics import TOPIC_CONFIG, TOPIC_MEASUREMENT
@@ -83,11 +84,17 @@ class SsaNode(Node):
             self.params.reject_unknown()
             self.diag = Diagnostics(self, stamp=self.diagnostics_stamp)
             self.run_clock = RunClock(self)
+        self.private_segments()
+        self.wall_timer(shm_privacy.PERIOD_S, self.private_segments)
         self.clock_hold = ClockHold(self, self.diag)
         self.handled: Counter[str] = Counter()
         """Measurement messages handled for good (used or refused, not held), by topic."""
         self._jump_handles: list[object] = []
         self._settings_pub: Publisher[String] | None = None
+
+    def private_segments(self) -> None:
+        """Make the shared-memory segments of this process the user's only (`ros.shm_privacy`)."""
+        shm_privacy.make_private()
 
     # parameters ------------------------------------------------------------------------
     def on_parameters_set(self, changed: dict[str, ParamValue]) -> None:
