@@ -34,6 +34,7 @@ from pathlib import Path
 from bench_lockstep import burners as cpu_burners
 from probe_hostile import (
     CLI,
+    NODE_DIR,
     ROOT,
     Probe,
     Result,
@@ -312,6 +313,16 @@ def _noted(r: Result) -> tuple[str, str]:
     return ("silent", "; ".join(r.notes)) if r.notes else ("clean", "")
 
 
+def _refused_one_line_any(r: Result) -> tuple[str, str]:
+    """Refused (exit 1 or 2) in one error line."""
+    lines = [ln for ln in r.err.splitlines() if ln.startswith("error:")]
+    if r.rc == 0:
+        return "silent", "started (exit 0)"
+    if r.rc not in (1, 2) or len(lines) != 1:
+        return "unclean", f"exit {r.rc}, {len(lines)} error lines"
+    return "clean", ""
+
+
 def _refused_one_line(r: Result) -> tuple[str, str]:
     lines = [ln for ln in r.err.splitlines() if ln.startswith("error:")]
     if r.rc == 0:
@@ -356,6 +367,16 @@ def leftover_probes() -> Iterator[Probe]:
     yield Probe("16", "live: shared memory, sockets, logs the user's and under --out only",
                 run, lambda r: ("clean", "") if r.rc == 0 else ("unclean", f"exit {r.rc}"),
                 graph=True)
+
+    def secure(d: Path) -> tuple[Result, str]:
+        (d / "keys" / "enclaves" / "ssa").mkdir(parents=True)
+        argv = [str(NODE_DIR / "filter"), "--ros-args", "--enclave", "/ssa"]
+        env = {"ROS_SECURITY_ENABLE": "true", "ROS_SECURITY_STRATEGY": "Enforce",
+               "ROS_SECURITY_KEYSTORE": str(d / "keys"), "ROS_DOMAIN_ID": str(next(_DOMAINS))}
+        return run_cmd(argv, d / "run", 60.0, env=env), shell(argv) + "  (ROS_SECURITY_*)"
+
+    yield Probe("16", "ROS_SECURITY_ENABLE with wheels without DDS Security: one line", secure,
+                _refused_one_line_any, graph=True)
 
 
 def _open_segments(pid: int) -> list[str]:

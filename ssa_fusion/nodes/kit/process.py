@@ -152,6 +152,10 @@ def run(make_node: Callable[[], SsaNode], args: list[str] | None = None) -> int:
     except ParameterError as exc:
         print(f"error: {exc}", file=sys.stderr)
         code = EXIT_BAD_PARAMETERS
+    except _rclpy.RCLError as exc:  # rcl could not make the node: e.g. DDS Security asked of
+        # a middleware built without it (docs/SECURITY.md)
+        print(f"error: cannot start: {_first_line(str(exc))}", file=sys.stderr)
+        code = EXIT_FAILED
     finally:
         if node is not None:
             with contextlib.suppress(Exception):  # a context already shut down: no last word
