@@ -10,6 +10,7 @@ setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*"]),
+    package_data={"ssa_fusion.formats": ["data/*.gfc", "data/README.md"]},  # EGM96
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
@@ -38,6 +39,7 @@ setup(
             "foxglove_bridge = ssa_fusion.nodes.entry:foxglove_bridge",
             "catalog_filter = ssa_fusion.nodes.entry:catalog_filter",
             "catalog_surrogate = ssa_fusion.nodes.entry:catalog_surrogate",
+            "conjunction = ssa_fusion.nodes.entry:conjunction",
         ],
     },
 )

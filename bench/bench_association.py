@@ -71,10 +71,10 @@ from ssa_fusion.core.catalog.association import (
     AssociationConfig,
     Associator,
     DetectionFate,
+    Relabel,
     TrackEvent,
     TrackStatus,
 )
-from ssa_fusion.core.catalog.deferral import Relabel
 from ssa_fusion.core.earth.stations import SENSORS
 from ssa_fusion.core.filter.options import SKY_FILTER
 from ssa_fusion.evaluation.association import pass_swaps, score_association

@@ -52,6 +52,10 @@ ARMS = (GapFill.RESIDUAL, GapFill.BATCH_FIT)
 def _offline(job: tuple[int, int, float]) -> dict:
     return offline_run(*job, gap_forecasts=ARMS)
 
+TRUTH = "sgp4"
+"""The catalogs' truth: SGP4/SDP4 of their element sets (`sim.survey`; a high-fidelity
+world per object is the real-sky scenarios', `bench/bench_sky.py`)."""
+
 
 def _q(values: list[float]) -> str:
     a = np.asarray(values, float)
@@ -61,7 +65,7 @@ def _q(values: list[float]) -> str:
 
 def offline_part(seeds: tuple[int, ...], objects: int, hours: float, workers: int) -> dict:
     print(f"offline: {len(seeds)} seeds x {objects} objects x {hours:g} h, arms "
-          f"{', '.join(ARMS)}")
+          f"{', '.join(ARMS)} (truth: {TRUTH}, the catalog's element sets)")
     with ProcessPoolExecutor(max_workers=workers) as pool:
         runs = list(pool.map(_offline, [(s, objects, hours) for s in seeds]))
     out: dict = {"offline_seeds": list(seeds), "offline_objects": objects,
@@ -175,6 +179,7 @@ def main() -> None:
         for arm in ARMS:
             result.update(live_part(*live, arm=arm))
     result["mode"] = "quick" if args.quick else "full"
+    result["truth"] = TRUTH
     print(json.dumps(result))
 
 

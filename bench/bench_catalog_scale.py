@@ -74,7 +74,7 @@ def write_catalog(path: Path, objects: int, seed: int) -> dict[str, int]:
     bases = catalog_io.read_catalog(REAL)
     per, extra = divmod(objects, len(bases))
     counts: dict[str, int] = {}
-    first = 0
+    first = 1  # NORAD catalogue numbers start at 1
     with path.open("w") as f:
         for i, base in enumerate(bases):
             n = per + (i < extra)

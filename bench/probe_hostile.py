@@ -760,7 +760,7 @@ def cli_option_probes(large: bool = False) -> Iterator[Probe]:
 
             base = catalog_io.read_catalog(SAMPLE_TLE)[0]
             with path.open("w") as f:
-                for e in survey.synthetic_catalog(base, 170_000, seed=1, first_id=0):
+                for e in survey.synthetic_catalog(base, 170_000, seed=1, first_id=1):
                     line1, line2 = export_tle(e.satrec)
                     f.write(f"{e.name}\n{line1}\n{line2}\n")
                 f.write("LAST\n1 99999U garbage\n2 99999 garbage\n")

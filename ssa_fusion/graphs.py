@@ -25,6 +25,7 @@ from ssa_fusion.params.defaults import BAG_PATTERN
 from ssa_fusion.ros.readiness import LOCKSTEP_READERS, OUTPUT, READERS
 from ssa_fusion.ros.topics import (
     TOPIC_ASSOCIATED,
+    TOPIC_CONJUNCTIONS,
     TOPIC_DETECTION_TRUTH,
     TOPIC_ESTIMATE_BATCH,
     TOPIC_MEASUREMENT_BATCH,
@@ -48,12 +49,14 @@ def sim_seconds(s: scenarios.Scenario | sky.SkyScenario) -> float:
 
 
 def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, seed: int,
-                    bag: Path, lockstep: bool = True) -> dict[str, dict[str, Any]]:
+                    bag: Path, geometry_seed: int = -1, *,
+                    lockstep: bool = True) -> dict[str, dict[str, Any]]:
     """Per-node parameters (SI units) that run scenario `s` live.
 
     In lockstep (`nodes.kit.progress`: sim time waits for the filter, the surrogate and
     the recorder; `time_scale` is a ceiling) unless `lockstep` is False (open loop: sim time
-    follows the wall clock).
+    follows the wall clock). `geometry_seed`: a real-sky object's orbit turned as that
+    case's (`sky.case_geometry`; -1: its own).
     """
     sensor: dict[str, Any] = {"scenario": s.name, "object_id": s.name,
                               "time_scale": time_scale, "seed": seed, "wait_for": WAIT_FOR,
@@ -62,7 +65,8 @@ def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, 
                               "lockstep": OBJECT_LOCKSTEP if lockstep else [""]}
     if isinstance(s, sky.SkyScenario):  # the truth's cadence; the filter publishes at it
         sensor.update({"cadence": s.truth_cadence_s, "start": timescales.iso(s.t0),
-                       "duration": s.duration_s})
+                       "duration": s.duration_s, "truth": str(s.truth),
+                       "geometry_seed": geometry_seed})
         extra = {"predict_period": s.truth_cadence_s, "gap_forecast": str(s.gap_fill)}
     else:
         sensor.update({"cadence": s.cadence_s, "gap_start": s.track_s, "gap_length": s.gap_s,
@@ -163,6 +167,10 @@ class NodeSpec(NamedTuple):
     params: dict[str, Any]
 
 
+CONJUNCTION_LOCKSTEP_S = 1800.0
+"""Wall s the simulator waits for a step's consumers when the conjunction node is one (its
+first re-screening screens the whole catalog)."""
+
 MAX_TIME_SCALE = 1e9
 """The time scale of ``--time-scale max`` (a catalog in lockstep as fast as its slowest
 consumer): sim time a billion times faster than the wall clock is no ceiling at all."""
@@ -172,7 +180,8 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
                   sim_s: float, time_scale: float, seed: int, shards: int, surrogate: bool,
                   surrogate_extra: dict[str, Any], bag: Path | None,
                   start: str = "", lockstep: bool = True,
-                  unlabelled: bool = False) -> list[NodeSpec]:
+                  unlabelled: bool = False,
+                  conjunctions: Path | None = None) -> list[NodeSpec]:
     """Return the processes of a catalog run, in start order.
 
     The recorder (`bag`, None: its default), `shards` catalog_filter and, with `surrogate`,
@@ -190,6 +199,8 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
     associated on ``/ssa/measurement_associated``: the recorder hears both. ValueError
     with one line for a `start` that is not an epoch ssa_fusion represents, or for
     `unlabelled` with several `shards` (detections without ids have no shard to go to).
+    With `conjunctions` (a directory: its CDMs), the conjunction node re-screens the
+    shards' estimates (in the lockstep; the recorder hears its ``/ssa/conjunctions``).
     """
     if start:
         timescales.parse_utc(start)
@@ -208,6 +219,9 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
                *(f"{n}:{TOPIC_ESTIMATE_BATCH}={len(names) + len(gaps)}" for n in gaps),
                # and their side of it: the recorder and every surrogate hear each of them
                *(f"{n}:{OUTPUT}{TOPIC_ESTIMATE_BATCH}={1 + len(gaps)}" for n in [*names, *gaps])]
+    watch = ["conjunction"] if conjunctions is not None else []
+    readers += [*(f"{n}:{TOPIC_ESTIMATE_BATCH}={len(names) + len(gaps)}" for n in watch),
+                *(f"{n}:{OUTPUT}{TOPIC_CONJUNCTIONS}" for n in watch)]
     if unlabelled:
         readers += [f"recorder:{TOPIC_DETECTION_TRUTH}", f"recorder:{TOPIC_ASSOCIATED}={shards}",
                     *(f"{n}:{OUTPUT}{TOPIC_ASSOCIATED}" for n in names)]
@@ -227,12 +241,16 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
                                             **surrogate_extra, "use_sim_time": True,
                                             "shards": shards, "shard": k})
           for k, n in enumerate(gaps)),
+        *(NodeSpec("conjunction", n, {"use_sim_time": True, "cdm_dir": str(conjunctions)})
+          for n in watch),
         NodeSpec("sensor_sim", "sensor_sim", {
             "scenario": scenario.name, "catalog": str(Path(catalog).resolve()),
             "objects": objects, "synthetic": synthetic, "duration": float(sim_s),
             "time_scale": min(float(time_scale), MAX_TIME_SCALE), "seed": seed,
             "start": start, **own, "shards": shards, "unlabelled": unlabelled,
-            "lockstep": [*names, *gaps, "recorder"] if lockstep else [""],
+            "lockstep": [*names, *gaps, *watch, "recorder"] if lockstep else [""],
+            # a re-screening of a whole catalog (its first) may take minutes
+            **({"lockstep_timeout": CONJUNCTION_LOCKSTEP_S} if watch else {}),
             "wait_for": [f"{TOPIC_MEASUREMENT_BATCH}={shards + 1}",
                          f"{TOPIC_ESTIMATE_BATCH}={len(gaps) + 1}"],
             "wait_for_readers": readers}),

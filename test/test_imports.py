@@ -93,7 +93,8 @@ def test_node_executables_prepare_the_process_before_numpy_is_imported():
                        "recorder": "ssa_fusion.nodes.entry:recorder",
                        "foxglove_bridge": "ssa_fusion.nodes.entry:foxglove_bridge",
                        "catalog_filter": "ssa_fusion.nodes.entry:catalog_filter",
-                       "catalog_surrogate": "ssa_fusion.nodes.entry:catalog_surrogate"}
+                       "catalog_surrogate": "ssa_fusion.nodes.entry:catalog_surrogate",
+                       "conjunction": "ssa_fusion.nodes.entry:conjunction"}
     result = _run(textwrap.dedent("""
         import json, signal, sys
         import ssa_fusion.nodes.entry as entry

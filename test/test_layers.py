@@ -185,11 +185,46 @@ def test_the_core_rooms_import_down():
     assert not found, "imports against the core's rooms:\n" + "\n".join(found)
 
 
+ASSOCIATION = "ssa_fusion.core.catalog.association"
+ASSOCIATION_ORDER = ("config", "outcomes", "gating", "assignment", "registration", "tracklets",
+                     "deferral", "manager")
+"""The association package's modules, in the order its docstring lists them: each imports only
+those before it."""
+
+
+def association_violations(module: str, imported: set[str]) -> list[str]:
+    """The imports of an association module that reach one after it in `ASSOCIATION_ORDER`
+    (or the package's namespace, which imports them all)."""
+    own = module.rpartition(".")[2]
+    rank = ASSOCIATION_ORDER.index(own)
+    bad = []
+    for name in imported:
+        if not _under(name, ASSOCIATION) or name == ASSOCIATION:
+            continue
+        target = name.split(".")[4]
+        if target not in ASSOCIATION_ORDER or (target != own
+                                               and ASSOCIATION_ORDER.index(target) >= rank):
+            bad.append(f"{module} imports {name}")
+    return sorted(bad)
+
+
+def test_the_association_modules_import_in_their_order():
+    modules = {m: src for m, (src, pkg) in all_modules().items()
+               if _under(m, ASSOCIATION) and m != ASSOCIATION}
+    assert {m.rpartition(".")[2] for m in modules} == set(ASSOCIATION_ORDER)
+    found = [v for m, src in modules.items() for v in association_violations(m, imports_of(src, m))]
+    assert not found, "\n".join(found)
+    assert association_violations(f"{ASSOCIATION}.gating",
+                                  {f"{ASSOCIATION}.manager", f"{ASSOCIATION}.config.X"}) == [
+        f"{ASSOCIATION}.gating imports {ASSOCIATION}.manager"]
+    assert association_violations(f"{ASSOCIATION}.gating", {f"{ASSOCIATION}.Associator"})
+
+
 @pytest.mark.parametrize(("module", "source"), [
     ("ssa_fusion.core.base.types", "from ssa_fusion.core.earth import frames"),
     ("ssa_fusion.core.earth.frames", "from ..motion.kepler import propagate"),
     ("ssa_fusion.core.filter.ekf", "from ssa_fusion.core.gaps.residual import rtn_axes"),
-    ("ssa_fusion.core.catalog.deferral", "import ssa_fusion.core.conjunction.pc"),
+    ("ssa_fusion.core.catalog.association.deferral", "import ssa_fusion.core.conjunction.pc"),
     ("ssa_fusion.core.motion.dynamics", "from ssa_fusion.core import flat_module"),
 ])
 def test_room_checker_finds_an_import_up(module, source):
@@ -197,7 +232,7 @@ def test_room_checker_finds_an_import_up(module, source):
 
 
 @pytest.mark.parametrize(("module", "source"), [
-    ("ssa_fusion.core.catalog.deferral", "from ssa_fusion.core.filter import options"),
+    ("ssa_fusion.core.catalog.association.deferral", "from ssa_fusion.core.filter import options"),
     ("ssa_fusion.core.earth.frames", "from . import eop\nfrom ..base.constants import R_EARTH"),
     ("ssa_fusion.core.base.types", "import numpy"),
 ])

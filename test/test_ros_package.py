@@ -100,6 +100,9 @@ IMPORT_KEYS = {
     "numba": "python3-numba-pip",  # the batched EKF's compiled kernels (core/catalog/batch_ekf.py)
     "erfa": "python3-pyerfa-pip",  # frames and time scales (core/earth/frames.py, timescales.py)
     "astropy_iers_data": "python3-astropy-iers-data-pip",  # IERS EOP and leap seconds
+    "jplephem": "python3-jplephem-pip",  # the Sun and the Moon (core/earth/ephemeris.py)
+    "de421": "python3-de421-pip",  # JPL DE421, the ephemeris jplephem reads
+    "pymsis": "python3-pymsis-pip",  # NRLMSISE-00, the simulated air (sim/atmosphere.py)
     "threadpoolctl": None,  # optional: used when installed (ssa_fusion.limit_blas_threads)
     "pydmd": None,  # optional: the BOP-DMD variant of the gap study (studies.bopdmd)
 }

@@ -1,14 +1,15 @@
 """CCSDS in and out: `ssa-fusion export oem|tdm BAG` and `ssa-fusion import tdm FILE --bag OUT`.
 
-* **OEM** out of a bag (`ccsds_oem`): the filter's estimates (``/ssa/estimate``), one
+* **OEM** out of a bag (`formats.ccsds.oem`): the filter's estimates (``/ssa/estimate``), one
   segment per object (all objects, or ``--object ID``), state and covariance per epoch, UTC,
   in ``GCRF``, ``EME2000`` or ``TEME`` (``--frame``). A bag whose estimates say another
   frame than ``gcrf`` (``eci``: recorded before the frames were the real Earth's) is
-  refused.
-* **TDM** out of a bag (`ccsds_tdm_out`): its real range/azimuth/elevation (``AZEL``) and
+  refused. With ``--predict-until UTC`` (a laser bag's): the fitted orbit propagated beyond
+  the data with its covariance instead (`predict_oem`).
+* **TDM** out of a bag (`formats.ccsds.tdm_out`): its real range/azimuth/elevation (``AZEL``) and
   right ascension/declination (``RADEC``, ``ICRF`` or ``EME2000``) measurements
   (``/ssa/measurement``, SENSOR), UTC.
-* **TDM into a bag** (`ccsds_tdm_in`) that `ssa-fusion replay` runs through surrogate and
+* **TDM into a bag** (`formats.ccsds.tdm_in`) that `ssa-fusion replay` runs through surrogate and
   filter: range/az/el or ra/dec of one station and one object, epochs in UTC, TAI, TT or
   GPS, written on ``/ssa/measurement``, each logged at its stamp.
 
@@ -22,7 +23,7 @@ Both exports read estimates and measurements recorded as a catalog's batches
 (`bagio.read_records`).
 
 Files are written and read with the ``ccsds-ndm`` library (KVN or XML; reading tells the
-format from the content; `ccsds_format`). Conventions, and what is not supported:
+format from the content; `formats.ccsds.common`). Conventions, and what is not supported:
 docs/CCSDS.md.
 
 TDM carries no measurement noise. The noise of imported measurements is, in this order,
@@ -32,8 +33,9 @@ of one's own, `formats.sites`, which PARTICIPANTs may then name), else the built
 (`stations.SENSORS`).
 
 `cli` registers this module under two commands, ``export`` and ``import``; the parser's
-name (its last word) says which one `add_arguments` builds. Here: the bag read for the
-exports and written by the import, and the commands' options and runs.
+name (its last word) says which one `add_arguments` builds. Here only what is not the
+format's (that is all `formats.ccsds`'): the bag read for the exports and written by the
+import, and the commands' options and runs.
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ import argparse
 import contextlib
 import sys
 from collections import Counter, defaultdict
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
@@ -59,6 +61,8 @@ from ssa_fusion.formats.ccsds.common import (
     AngleFrame,
     CcsdsError,
     OemFrame,
+    counts_said,
+    ndm_format,
     write_ndm,
 )
 from ssa_fusion.formats.ccsds.oem import ephemerides, oem_document
@@ -218,6 +222,13 @@ def _add_export_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]
     q.add_argument("--out", type=Path, default=None,
                    help=f"file to write; must not exist (default: BAG.{name})")
     _add_format(q)
+    if name == "oem":
+        q.add_argument("--predict-until", default=None, metavar="UTC",
+                       help="instead of the estimates: the fitted orbit of the bag's laser "
+                            "ranges propagated from its epoch (the last range) to this epoch "
+                            "(ISO 8601, UTC), with its covariance")
+        q.add_argument("--step", type=float, default=60.0, metavar="S",
+                       help="with --predict-until: seconds between states (default 60)")
     q.set_defaults(_ccsds_run=run_it, _suffix=f".{name}")
 
 
@@ -264,24 +275,27 @@ def _export(args: argparse.Namespace) -> tuple[Path, str, BagContents]:
         bag.name.removesuffix(".mcap") + args._suffix)
     if out.exists():
         raise CcsdsError(f"{out} exists already; choose another --out")
-    return out, args.format or ("xml" if out.suffix == ".xml" else "kvn"), load_bag(bag)
-
-
-def _measurements_said(counts: Mapping[int, int]) -> str:
-    """Return measurement counts by kind as words: "20 range/az/el and 8 ra/dec"."""
-    return " and ".join(f"{n} {LAYOUTS[types.Kind(k)].what}" for k, n in sorted(counts.items()))
+    return out, ndm_format(out, args.format), load_bag(bag)
 
 
 def run_export_oem(args: argparse.Namespace) -> int:
     """Run `export oem`: write the bag's estimates as an OEM; return 0."""
     out, fmt, contents = _export(args)
-    require_gcrf(args.bag, contents, (TOPIC_ESTIMATE,), "estimates")
-    ephem = ephemerides(contents.estimates, args.object)
+    said = ""
+    if args.predict_until is not None:
+        from ssa_fusion.apps.predict_oem import predicted
+
+        states, said = predicted(args.bag, args.predict_until, args.step)
+        ephem = ephemerides(states, args.object)
+    else:
+        require_gcrf(args.bag, contents, (TOPIC_ESTIMATE,), "estimates")
+        ephem = ephemerides(contents.estimates, args.object)
     with removed_if_unfinished(out):
         write_ndm(oem_document(ephem, OemFrame(args.frame)), out, fmt)
     n = sum(len(v) for v in ephem.values())
     print(f"export oem: {n} states with covariance of {len(ephem)} object(s) "
-          f"({', '.join(ephem)}) in {args.frame}, UTC -> {out} ({fmt.upper()})")
+          f"({', '.join(ephem)}) in {args.frame}, UTC" + (f": {said}" if said else "")
+          + f" -> {out} ({fmt.upper()})")
     return 0
 
 
@@ -296,7 +310,7 @@ def run_export_tdm(args: argparse.Namespace) -> int:
     export = tdm_document(ms, AngleFrame(args.frame))
     with removed_if_unfinished(out):
         write_ndm(export.doc, out, fmt)
-    said = _measurements_said(export.counts)
+    said = counts_said(export.counts)
     left = (f", {export.skipped} forecasts or other kinds left out" if export.skipped else "")
     print(f"export tdm: {said} measurements in {len(export.doc.body.segment)} segment(s)"
           f"{left} -> {out} ({fmt.upper()})")
@@ -312,7 +326,7 @@ def _names(names: Sequence[str], most: int = 5) -> str:
 def run_import_tdm(args: argparse.Namespace) -> int:
     """Run `import tdm`: write the TDM's measurements to a new bag; return 0.
 
-    The file is read as a stream, then the bag written in epoch order (`ccsds_tdm_in`);
+    The file is read as a stream, then the bag written in epoch order (`formats.ccsds.tdm_in`);
     a line on stderr every few seconds says how far either has got.
     """
     if args.bag.exists():
@@ -327,7 +341,7 @@ def run_import_tdm(args: argparse.Namespace) -> int:
     used = imported.used_segments()
     objects = sorted({s.object_id for s in used})
     stations = sorted({s.station for s in used})
-    said = _measurements_said(imported.counts())
+    said = counts_said(imported.counts())
     with_sites = f" --sites {args.sites}" if args.sites else ""
     print(f"import tdm: {said} measurements of {_names(objects)} from "
           f"{_names(stations)}{imported.left_out()} -> {args.bag}; run it with "

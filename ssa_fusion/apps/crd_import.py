@@ -26,6 +26,7 @@ standard atmosphere (counted in the summary line).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from collections import Counter
 from collections.abc import Iterator
@@ -50,11 +51,18 @@ from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.laser_config import LaserConfig, laser_config_message
 from ssa_fusion.ros.topics import TOPIC_CONFIG, TOPIC_MEASUREMENT, TOPIC_METEO, TOPIC_REFERENCE
 
-SIGMA_M = 0.05
-"""Default noise of a normal point, m (1 sigma): what is left of a LAGEOS normal point
-after the model's terms, per station, is 3-6 cm."""
+SIGMA_M = 0.005
+"""Default noise of a normal point, m (1 sigma): its precision (the RMS of its bin over the
+square root of its ranges: 1-4 mm one-way for LAGEOS), the target's signature (1-2 mm) and
+the model's short-period errors; what is left after a fit and a bias per station (1-2 cm on
+LAGEOS) drifts through a pass, not white (`core.od.laser_od`)."""
 BIAS_SIGMA_M = 1.0
 """Default prior sigma of a station's range bias, m."""
+METEO_LEAD_S = 1e-3
+"""A meteorological record is stamped and logged this long before its epoch: CRD gives its
+epoch to the millisecond, rounded, so the record a station writes with a normal point may
+carry an epoch up to 0.5 ms after the point's; a millisecond earlier (below the record's
+resolution), it is known when the point is fused, offline and live alike."""
 WAVELENGTH_TOLERANCE_NM = 1.0
 """Wavelengths of one station's sessions that differ by more are refused."""
 
@@ -199,7 +207,7 @@ def _rows(ranges: LaserRanges, reference: ReferenceOrbit | None, sigma_km: float
     """Yield (log time ns, topic, message) of every message but the config, in time order."""
     rows: list[tuple[float, int, int]] = []  # (t, topic, index) sorted once
     rows += [(t, 0, i) for i, t in enumerate(ranges.t.tolist())]
-    rows += [(m.t, 1, i) for i, m in enumerate(ranges.meteo)]
+    rows += [(m.t - METEO_LEAD_S, 1, i) for i, m in enumerate(ranges.meteo)]
     if reference is not None:
         rows += [(t, 2, i) for i, t in enumerate(reference.t.tolist())]
     rows.sort()
@@ -214,7 +222,8 @@ def _rows(ranges: LaserRanges, reference: ReferenceOrbit | None, sigma_km: float
                                   frame_id=ids[ranges.station[i]])
             yield ns, TOPIC_MEASUREMENT, messages.measurement_to_msg(m, classes)
         elif topic == 1:
-            yield ns, TOPIC_METEO, messages.meteo_to_msg(ranges.meteo[i], classes)
+            early = dataclasses.replace(ranges.meteo[i], t=t)
+            yield ns, TOPIC_METEO, messages.meteo_to_msg(early, classes)
         else:
             assert reference is not None
             e = types.StateEstimate(t=t, x=reference.x[i], object_id=oids[0])
@@ -229,7 +238,7 @@ def _write_bag(out: Path, ranges: LaserRanges, config: LaserConfig,
     written: Counter[str] = Counter()
     first_ns = round(float(ranges.t.min()) * 1e9)
     if ranges.meteo:
-        first_ns = min(first_ns, round(min(m.t for m in ranges.meteo) * 1e9))
+        first_ns = min(first_ns, round((min(m.t for m in ranges.meteo) - METEO_LEAD_S) * 1e9))
     if reference is not None:
         first_ns = min(first_ns, round(float(reference.t.min()) * 1e9))
     with removed_if_unfinished(out):

@@ -25,6 +25,7 @@ import re
 import sys
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -33,10 +34,12 @@ from ssa_fusion.apps import evaluate, report, runs
 from ssa_fusion.apps.args import add_discovery, add_domain_id, time_scale
 from ssa_fusion.apps.progress_lines import ProgressLines
 from ssa_fusion.core.base.types import UpdateSource
+from ssa_fusion.core.earth import timescales
 from ssa_fusion.core.gaps.publisher import GapFill
 from ssa_fusion.ros.processes import Graph
 from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS, VISUAL_TOPICS
 from ssa_fusion.sim import scenarios, sky
+from ssa_fusion.sim.world import TruthModel
 
 if TYPE_CHECKING:
     from ssa_fusion.ros.interfaces import Message
@@ -63,7 +66,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, default=None,
                    help=f"output directory (default: {LIVE_ROOT}/<scenario>_<date-time>, "
                         f"also linked as {LIVE_ROOT}/latest)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0,
+                   help="noise seed; a real-sky scenario's object also starts later and on an "
+                        "orbit of its own for each seed (plane, phase, start epoch, as the "
+                        "benchmarks' cases: `sky.seeded_case`) unless --same-geometry, and a "
+                        "high-fidelity truth's space weather is drawn from it")
+    p.add_argument("--same-geometry", action="store_true",
+                   help="a real-sky scenario keeps its own orbit and start whatever --seed")
+    p.add_argument("--truth", choices=[str(t) for t in TruthModel],
+                   default=str(TruthModel.SGP4),
+                   help="a real-sky object's truth: sgp4 (default) or high_fidelity "
+                        "(sim/world.py: EGM96 20x20, Sun, Moon, SRP, NRLMSISE-00 drag)")
     p.add_argument("--start", default="", metavar="UTC",
                    help="first epoch, ISO 8601 UTC (e.g. 2025-06-01T00:00:00Z) of a real-sky "
                         "scenario (its object starts from the scenario's initial GCRF state "
@@ -229,17 +242,29 @@ def _drain(graph: Graph) -> float:
     return last_output
 
 
+def _case(s: scenarios.Scenario | sky.SkyScenario, args: argparse.Namespace
+          ) -> tuple[scenarios.Scenario | sky.SkyScenario, int]:
+    """Return the run's scenario and its geometry seed (-1: its own orbit).
+
+    A real-sky scenario gets the truth of ``--truth``, and, unless ``--same-geometry`` or
+    an element set's object (whose orbit is its own), the orbit of case ``--seed``
+    (`sky.case_geometry`) from the case's start (`sky.case_start_offset_s` after the
+    scenario's, unless ``--start``).
+    """
+    if not isinstance(s, sky.SkyScenario):
+        return s, -1
+    s = s.with_(truth=TruthModel(args.truth))
+    if args.same_geometry or s.element_set is not None:
+        return s, -1
+    if not args.start:
+        s = s.with_window(s.t0 + sky.case_start_offset_s(args.seed), s.duration_s)
+    return s, args.seed
+
+
 def run(args: argparse.Namespace) -> int:
     """Run `ssa-fusion live` (or, with ``--catalog``, `live_catalog.run`); return the exit code."""
     if getattr(args, "catalog", None) is not None:
-        from ssa_fusion.apps import live_catalog
-
-        if getattr(args, "gap_forecast", ""):
-            print("error: --gap-forecast applies to a real-sky scenario; a catalog's gaps: "
-                  "--surrogate-param gap_forecast=residual|batch_fit", file=sys.stderr)
-            return 2
-
-        return live_catalog.run(args)
+        return _run_catalog(args)
     catalog_only = catalog_options_given(args)
     if catalog_only:
         print(f"error: {', '.join(catalog_only)} apply to a catalog run (--catalog FILE)",
@@ -249,58 +274,112 @@ def run(args: argparse.Namespace) -> int:
         print("error: --time-scale max needs lockstep (without --open-loop): in the open "
               "loop sim time follows the wall clock", file=sys.stderr)
         return 2
+    chosen = _scenario(args)
+    if chosen is None:
+        return 2
+    s, geometry_seed = _case(chosen, args)
+    dirs = runs.run_dirs(args, s.name)
+    if dirs is None:
+        return 2
+    out, bag = dirs
+    scale = min(args.time_scale, graphs.MAX_TIME_SCALE)
+    params = graphs.node_parameters(s, scale, args.seed, bag, geometry_seed,
+                                    lockstep=args.lockstep)
+    sim_s = graphs.sim_seconds(s)
+    graph = runs.run_graph(args, out / "logs", "live")
+    if graph is None:
+        return 2
+    print(f"live: {s.name}, {sim_s / 3600:.1f} h of sim time {_pace(args, sim_s)}; ROS "
+          f"domain {graph.domain_id}, run {graph.run}; logs in {out}/logs", flush=True)
+    if isinstance(s, sky.SkyScenario):
+        print(f"live: {s.truth} truth from {timescales.iso(s.t0)}, "
+              + ("the scenario's own orbit" if geometry_seed < 0 else
+                 f"the orbit of case {geometry_seed} (--same-geometry: the scenario's own)"),
+              flush=True)
+    t_start = time.monotonic()
+    heard = _Heard()
+    try:
+        _run_graph(graph, params, args, sim_s, heard)
+    finally:
+        problems = graph.close()
+    if runs.ended_badly(problems):
+        return 1
+    return _report(args, s.name, out, bag, time.monotonic() - t_start, sim_s, heard)
+
+
+def _pace(args: argparse.Namespace, sim_s: float) -> str:
+    """Say how sim time goes: in lockstep as fast as the nodes go, or at a time scale."""
+    if math.isinf(args.time_scale):
+        return "in lockstep as fast as the nodes go"
+    return (f"at {args.time_scale:g}x (~{sim_s / args.time_scale:.0f} s of simulation after "
+            f"start-up{', in lockstep' if args.lockstep else ', open loop'})")
+
+
+def _run_catalog(args: argparse.Namespace) -> int:
+    """Run `live_catalog.run` (a ``--gap-forecast`` is a real-sky scenario's: exit code 2)."""
+    from ssa_fusion.apps import live_catalog
+
+    if getattr(args, "gap_forecast", ""):
+        print("error: --gap-forecast applies to a real-sky scenario; a catalog's gaps: "
+              "--surrogate-param gap_forecast=residual|batch_fit", file=sys.stderr)
+        return 2
+    return live_catalog.run(args)
+
+
+def _scenario(args: argparse.Namespace) -> scenarios.Scenario | sky.SkyScenario | None:
+    """Return the scenario the arguments name (None: said why on stderr)."""
     try:
         s = graphs.live_scenario(args.scenario, args.start, args.duration, args.sites,
                                  args.elements, ProgressLines(f"live: elements {args.elements}",
                                                               "objects").reading)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return None
     if args.gap_forecast:
         if not isinstance(s, sky.SkyScenario):
             print(f"error: --gap-forecast applies to the real-sky scenarios "
                   f"({', '.join(sky.SKY_SCENARIOS)})", file=sys.stderr)
-            return 2
+            return None
         s = s.with_(gap_fill=GapFill(args.gap_forecast))
-    dirs = runs.run_dirs(args, s.name)
-    if dirs is None:
-        return 2
-    out, bag = dirs
-    scale = min(args.time_scale, graphs.MAX_TIME_SCALE)
-    params = graphs.node_parameters(s, scale, args.seed, bag, args.lockstep)
-    sim_s = graphs.sim_seconds(s)
-    graph = runs.run_graph(args, out / "logs", "live")
-    if graph is None:
-        return 2
-    pace = ("in lockstep as fast as the nodes go" if math.isinf(args.time_scale) else
-            f"at {args.time_scale:g}x (~{sim_s / args.time_scale:.0f} s of simulation after "
-            f"start-up{', in lockstep' if args.lockstep else ', open loop'})")
-    print(f"live: {s.name}, {sim_s / 3600:.1f} h of sim time {pace}; ROS domain "
-          f"{graph.domain_id}, run {graph.run}; logs in {out}/logs", flush=True)
-    t_start = time.monotonic()
-    last_output = 0.0  # wall time (Unix s) the probe last saw an estimate or forecast arrive
-    try:
-        from ssa_fusion.ros.interfaces import DiagnosticArray
+    return s
 
-        diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
-        if getattr(args, "foxglove", False):
-            start_foxglove(graph, params, args.foxglove_port, lambda text: print(text, flush=True))
-            params["sensor_sim"]["wait_for_readers"] = [
-                *params["sensor_sim"]["wait_for_readers"], *FOXGLOVE_READERS]
-        for name in ("recorder", "surrogate", "filter"):
-            graph.start_node(name, params=params[name])
-        sensor = graph.start_node("sensor_sim", params=params["sensor_sim"])
-        # a node that ends early (a recorder that cannot write its bag) ends the run at once:
-        # graph.close says which and why; in lockstep sim time waits for its nodes as long
-        # as they live: no limit
-        limit = math.inf if args.lockstep else 60.0 + 3.0 * sim_s / args.time_scale
-        if graph.wait_done_or_broken(sensor, timeout=limit):
-            last_output = _drain(graph)
-    finally:
-        problems = graph.close()
-    if runs.ended_badly(problems):
-        return 1
-    wall = time.monotonic() - t_start
+
+@dataclass
+class _Heard:
+    """What the probe heard during a run.
+
+    The /diagnostics messages and the wall time (Unix s) it last saw an estimate or forecast
+    arrive (0: none).
+    """
+
+    diagnostics: Sequence[Message] = ()
+    last_output: float = 0.0
+
+
+def _run_graph(graph: Graph, params: dict[str, dict[str, Any]], args: argparse.Namespace,
+               sim_s: float, heard: _Heard) -> None:
+    """Start the graph's nodes (and Foxglove's bridge), wait for the simulator to end."""
+    from ssa_fusion.ros.interfaces import DiagnosticArray
+
+    heard.diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
+    if getattr(args, "foxglove", False):
+        start_foxglove(graph, params, args.foxglove_port, lambda text: print(text, flush=True))
+        params["sensor_sim"]["wait_for_readers"] = [
+            *params["sensor_sim"]["wait_for_readers"], *FOXGLOVE_READERS]
+    for name in ("recorder", "surrogate", "filter"):
+        graph.start_node(name, params=params[name])
+    sensor = graph.start_node("sensor_sim", params=params["sensor_sim"])
+    # a node that ends early (a recorder that cannot write its bag) ends the run at once:
+    # graph.close says which and why; in lockstep sim time waits for its nodes as long
+    # as they live: no limit
+    limit = math.inf if args.lockstep else 60.0 + 3.0 * sim_s / args.time_scale
+    if graph.wait_done_or_broken(sensor, timeout=limit):
+        heard.last_output = _drain(graph)
+
+
+def _report(args: argparse.Namespace, name: str, out: Path, bag: Path, wall: float,
+            sim_s: float, heard: _Heard) -> int:
+    """Evaluate the recorded run, write its report and live.json, print its table."""
     data = evaluate.load(bag)
     try:
         ev = evaluate.evaluate(data, seed=args.seed)  # with the settings recorded in the bag
@@ -318,11 +397,11 @@ def run(args: argparse.Namespace) -> int:
         return 1
     report.write(data, ev, out)
     late = evaluate.unfused_forecasts(data, ev.gap.t)
-    counters = filter_counters(diagnostics)
+    counters = filter_counters(heard.diagnostics)
     sim_wall = runs.sensor_wall_times(out / "logs" / "sensor_sim.err")
     # the simulation, and the estimation behind it until its last output reached the probe
-    ran = None if sim_wall is None else max(sim_wall[1], last_output) - sim_wall[0]
-    summary = {"scenario": s.name, "time_scale": args.time_scale, "wall_s": wall,
+    ran = None if sim_wall is None else max(sim_wall[1], heard.last_output) - sim_wall[0]
+    summary = {"scenario": name, "time_scale": args.time_scale, "wall_s": wall,
                "sim_wall_s": ran, "bag": str(bag), **report.summary(data, ev),
                "late_forecast_epochs": late.epochs, "forecast_epochs": late.forecast_epochs,
                "filter_counters": counters}

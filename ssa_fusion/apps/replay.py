@@ -57,7 +57,7 @@ from typing import Any
 
 import numpy as np
 
-from ssa_fusion.apps import evaluate, replay_catalog
+from ssa_fusion.apps import evaluate, replay_catalog, runs
 from ssa_fusion.apps.args import add_domain_id, add_settings, add_sites, positive_float
 from ssa_fusion.apps.partial import removed_if_unfinished
 from ssa_fusion.core.base import types
@@ -65,6 +65,7 @@ from ssa_fusion.core.base.types import KIND_NAMES, Cause
 from ssa_fusion.core.earth.frames import Frame, Station
 from ssa_fusion.core.earth.stations import find_station
 from ssa_fusion.core.filter.smoother import TrackerRecorder
+from ssa_fusion.core.filter.tracker import Tracker
 from ssa_fusion.core.gaps.estimator import (
     EstimatorConfig,
     make_surrogate,
@@ -72,10 +73,13 @@ from ssa_fusion.core.gaps.estimator import (
     uncovered_stations,
 )
 from ssa_fusion.core.gaps.publisher import GapFill, GapPublisher, Published
+from ssa_fusion.core.gaps.surrogate import Surrogate
+from ssa_fusion.core.measure.laser_model import LaserModels
 from ssa_fusion.core.measure.validation import MAX_CLOCK_LEAD_S, ahead_of_clock
 from ssa_fusion.formats import sites as site_file
 from ssa_fusion.params import settings as node_settings
 from ssa_fusion.ros import bag_runs, bagio, messages
+from ssa_fusion.ros.laser_bag import is_laser
 from ssa_fusion.ros.topics import (
     TOPIC_CLOCK,
     TOPIC_CONFIG,
@@ -91,6 +95,8 @@ from ssa_fusion.ros.topics import (
 
 PLAYED = (TOPIC_MEASUREMENT, TOPIC_TRUTH, TOPIC_WITHHELD)
 """Topics a replay plays back (estimates and forecasts are what it recomputes)."""
+KEPT = (TOPIC_METEO, TOPIC_REFERENCE)
+"""Topics an offline replay writes as recorded besides those it plays (a laser bag's)."""
 KNOWN = (*PLAYED, TOPIC_ESTIMATE, TOPIC_SMOOTHED, TOPIC_FORECAST, TOPIC_CLOCK, TOPIC_CONFIG,
          TOPIC_METEO, TOPIC_REFERENCE, "/diagnostics", "/rosout", "/parameter_events")
 
@@ -133,14 +139,18 @@ def run(args: argparse.Namespace) -> int:
             print(f"replay: {line}")
         if catalog is None:
             check_topics(args.bag, stream)
+            if is_laser(stream):
+                from ssa_fusion.apps import replay_laser  # it builds on this module
+
+                return replay_laser.run(args, stream)
             sites = site_file.load_stations(args.sites) if args.sites else ()
             chosen = settings(stream, args.scenario, args.params_file, sites)
     except (bagio.BagError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     if catalog is not None:
-        out = (args.out or _sibling(args.bag, "_offline") if args.offline
-               else args.record or _sibling(args.bag, "_replay"))
+        out = (args.out or sibling(args.bag, "_offline") if args.offline
+               else args.record or sibling(args.bag, "_replay"))
         return replay_catalog.run(args, telling, catalog, out)
     s = chosen.estimator
     print(f"replay: estimator settings: {chosen.origin}")
@@ -156,7 +166,7 @@ def run(args: argparse.Namespace) -> int:
         print("error: --smooth needs --offline (the smoother runs in the core)", file=sys.stderr)
         return 2
     if args.offline:
-        out = args.out or _sibling(args.bag, "_offline")
+        out = args.out or sibling(args.bag, "_offline")
         if out.exists():
             print(f"error: {out} exists already; choose another --out", file=sys.stderr)
             return 2
@@ -180,7 +190,7 @@ def run(args: argparse.Namespace) -> int:
     return replay_live(args, stream, s)
 
 
-def _sibling(bag: Path, suffix: str) -> Path:
+def sibling(bag: Path, suffix: str) -> Path:
     """Return the path beside `bag` named after it plus `suffix` (``.mcap`` dropped)."""
     base = bag.with_suffix("") if bag.suffix == ".mcap" else bag
     return base.with_name(base.name + suffix)
@@ -198,10 +208,6 @@ def check_topics(path: Path, stream: list[bagio.BagMessage]) -> None:
                          f"{', '.join(PLAYED)}")
     if not any(m.topic == TOPIC_MEASUREMENT for m in stream):
         raise ValueError(f"{path}: no {TOPIC_MEASUREMENT} messages to replay")
-    if any(m.topic == TOPIC_MEASUREMENT and m.msg.kind == types.Kind.LASER_RANGE
-           for m in stream):
-        raise ValueError(f"{path}: laser ranges (LASER_RANGE, `import crd`): the filter does "
-                         f"not fuse them yet")
     legacy = sorted({m.msg.header.frame_id for m in stream
                      if m.topic in (TOPIC_TRUTH, TOPIC_ESTIMATE)} - {Frame.GCRF})
     if legacy:
@@ -320,25 +326,49 @@ class OfflineResult:
     """Log time (ns) of the bag's last message."""
 
 
+class _NoForecasts:
+    """The surrogate of a stream it does not forecast (laser ranges): nothing, ever."""
+
+    def due(self, _t: float) -> list[types.Measurement]:
+        return []
+
+    def add(self, _m: types.Measurement) -> list[types.Measurement]:
+        return []
+
+    def reset(self) -> None:
+        """Nothing to forget."""
+
+
+def _offline_parts(stream: list[bagio.BagMessage], c: EstimatorConfig,
+                   gaps: Mapping[str, Any] | None, smooth: bool, tracker: Tracker | None
+                   ) -> tuple[GapPublisher, TrackerRecorder | None, Surrogate | _NoForecasts]:
+    """Return `replay_offline`'s publisher (its tracker inside), recorder and surrogate."""
+    g = gaps if gaps is not None else recorded_gaps(stream)
+    publisher = GapPublisher.of(tracker or make_tracker(c), float(g["predict_period"]),
+                                GapFill(g["gap_forecast"]), c)
+    recorder = TrackerRecorder(publisher.tracker) if smooth else None
+    # Forecasts always come from a fit on the buffer up to the last real measurement, so the
+    # live node's optional periodic refits (retrain_period) would change nothing here.
+    surrogate = _NoForecasts() if c.kind == types.Kind.LASER_RANGE else make_surrogate(
+        c.with_(surrogate=replace(c.surrogate, retrain_period_s=math.inf)))
+    return publisher, recorder, surrogate
+
+
 def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig,
-                   gaps: Mapping[str, Any] | None = None, smooth: bool = False) -> OfflineResult:
+                   gaps: Mapping[str, Any] | None = None, smooth: bool = False,
+                   tracker: Tracker | None = None) -> OfflineResult:
     """Run surrogate + filter of estimator `c` through the core over the bag's messages.
 
     The messages are taken in log-time order. The filter publishes what the filter node
     publishes (`core.gaps.publisher.GapPublisher`): the estimate of every fused measurement
     and, through a gap, predictions (or residual forecasts) on the grid of the filter's
     `gaps` parameters (``predict_period``, ``gap_forecast``; default: those recorded with
-    the bag), as the bag's /clock passes them, the rest once the bag ends. With `smooth`,
-    also the fused estimates smoothed (`core.filter.smoother.TrackerRecorder`).
+    the bag), as the bag's /clock passes them, the rest once the bag ends; with `smooth`
+    also smoothed (`TrackerRecorder`). `tracker` (default `make_tracker(c)`): a laser
+    filter takes the bag's meteorological records as they come; nothing forecasts ranges.
     """
-    g = gaps if gaps is not None else recorded_gaps(stream)
-    publisher = GapPublisher.of(make_tracker(c), float(g["predict_period"]),
-                                GapFill(g["gap_forecast"]), c)
-    recorder = TrackerRecorder(publisher.tracker) if smooth else None
-    # Forecasts always come from a fit on the buffer up to the last real measurement, so the
-    # live node's optional periodic refits (retrain_period) would change nothing here.
-    surrogate = make_surrogate(c.with_(surrogate=replace(c.surrogate, retrain_period_s=math.inf)))
-    result = OfflineResult()
+    publisher, recorder, surrogate = _offline_parts(stream, c, gaps, smooth, tracker)
+    model, result = publisher.tracker.model, OfflineResult()
     recorded = {messages.stamp_to_seconds(m.msg.header.stamp)
                 for m in stream if m.topic == TOPIC_FORECAST}
     pool: dict[float, types.Measurement] = {}
@@ -387,7 +417,9 @@ def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig,
                 else:  # released with m, as the node publishes them
                     forecast(f, msg.t_ns)
             fuse(m, msg.t_ns)
-        elif msg.topic == TOPIC_FORECAST:
+        elif msg.topic == TOPIC_METEO and isinstance(model, LaserModels):
+            model.add_meteo([messages.meteo_from_msg(msg.msg)])
+        elif msg.topic == TOPIC_FORECAST and isinstance(surrogate, Surrogate):
             t = messages.stamp_to_seconds(msg.msg.header.stamp)
             if t not in pool:
                 for f in surrogate.due(t + surrogate.config.grace * surrogate.cadence()):
@@ -434,7 +466,8 @@ def write_offline(out: Path, stream: list[bagio.BagMessage], result: OfflineResu
     the inputs that produced them, and the smoothed estimates (if any) after the last; the
     estimator settings the replay used (`settings_used`: ``/ssa/config`` JSON of the filter
     and the surrogate, latched, at the first log time), as the live nodes record theirs, so
-    that the bag alone says how it was made (frame, stations and sites, filter).
+    that the bag alone says how it was made (frame, stations and sites, filter). A laser
+    bag's meteorological records and reference orbit (`KEPT`) are kept as recorded.
     """
     classes = bagio.rosbags_classes()
     writer = bagio.BagWriter(out)
@@ -450,8 +483,11 @@ def write_offline(out: Path, stream: list[bagio.BagMessage], result: OfflineResu
                                (TOPIC_WITHHELD, "Measurement"), (TOPIC_FORECAST, "Measurement"),
                                (TOPIC_ESTIMATE, "StateEstimate")):
             writer.add_topic(topic, f"{bagio.MSG_PACKAGE}/msg/{msgtype}")
+        kept = {m.topic: m.msgtype for m in stream if m.topic in KEPT}
+        for topic, msgtype in kept.items():
+            writer.add_topic(topic, msgtype)
         rows = [(m.t_ns, 0, m.topic, messages.recode(m.msg, m.msgtype, classes))
-                for m in stream if m.topic in PLAYED]
+                for m in stream if m.topic in PLAYED or m.topic in kept]
         rows += [(t, 1, TOPIC_FORECAST, messages.measurement_to_msg(f, classes))
                  for t, f in result.forecasts]
         rows += [(t, 2, TOPIC_ESTIMATE, messages.estimate_to_msg(e, classes))
@@ -469,12 +505,11 @@ def write_offline(out: Path, stream: list[bagio.BagMessage], result: OfflineResu
 def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
                 c: EstimatorConfig) -> int:
     """Play the bag into surrogate + filter processes (estimator `c`) and record the run."""
-    from ssa_fusion.apps import runs
     from ssa_fusion.ros.player import Player
     from ssa_fusion.ros.processes import ended_badly, recorded_short
     from ssa_fusion.ros.readiness import OUTPUT, ReadyNodes, readers_of
 
-    record = args.record or _sibling(args.bag, "_replay")
+    record = args.record or sibling(args.bag, "_replay")
     if record.exists():
         print(f"error: {record} exists already; choose another --record", file=sys.stderr)
         return 2
@@ -488,14 +523,10 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
               "surrogate": {"use_sim_time": True, **node_settings.surrogate_params(c), **own},
               "filter": {"use_sim_time": True, **node_settings.filter_params(c),
                          **recorded_gaps(stream), **own}}
-    logs = record.with_name(record.name + "_logs")
-    try:
-        graph = runs.run_graph(args, logs, "replay")
-    except OSError as exc:
-        print(f"error: cannot use {record}: {exc}", file=sys.stderr)
+    opened = runs.replay_graph(args, record)
+    if opened is None:
         return 2
-    if graph is None:
-        return 2
+    graph, logs = opened
     print(f"replay: {args.bag} at rate {args.rate:g} into surrogate + filter; ROS domain "
           f"{graph.domain_id}, run {graph.run}; logs in {logs}", flush=True)
     t0 = time.monotonic()

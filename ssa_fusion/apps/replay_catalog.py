@@ -47,6 +47,7 @@ from typing import Any
 
 import numpy as np
 
+from ssa_fusion.apps import runs
 from ssa_fusion.apps.partial import removed_if_unfinished
 from ssa_fusion.core.base import types
 from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
@@ -434,7 +435,6 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
     arrived every ``batch_period`` wall s: per object the same estimates as the recorded
     run (module docstring), whatever the rate.
     """
-    from ssa_fusion.apps import runs
     from ssa_fusion.ros import qos
     from ssa_fusion.ros.interfaces import EstimateBatch
     from ssa_fusion.ros.player import Player
@@ -442,14 +442,10 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
     from ssa_fusion.ros.readiness import OUTPUT, ReadyNodes
 
     names = [f"catalog_filter_{int(p['shard'])}" for p in chosen.shards]
-    logs = record.with_name(record.name + "_logs")
-    try:
-        graph = runs.run_graph(args, logs, "replay")
-    except OSError as exc:
-        print(f"error: cannot use {record}: {exc}", file=sys.stderr)
+    opened = runs.replay_graph(args, record)
+    if opened is None:
         return 2
-    if graph is None:
-        return 2
+    graph, logs = opened
     played = [m for m in raw if m.topic in INPUTS]
     print(f"replay: {args.bag} at rate {args.rate:g} into {len(names)} catalog_filter "
           f"process(es); ROS domain {graph.domain_id}, run {graph.run}; logs in {logs}",

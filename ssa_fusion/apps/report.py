@@ -13,22 +13,22 @@ import argparse
 import json
 import sys
 from pathlib import Path
-from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ssa_fusion.apps import evaluate, replay_catalog
+from ssa_fusion.apps import evaluate, replay_catalog, report_figures
 from ssa_fusion.apps.args import add_settings, add_sites
+from ssa_fusion.apps.report_figures import broken_line
 from ssa_fusion.core.base import metrics, types
 from ssa_fusion.core.gaps import estimator as config
 from ssa_fusion.formats import sites as site_file
 from ssa_fusion.ros import bag_runs, bagio
+from ssa_fusion.ros.laser_bag import is_laser
 from ssa_fusion.ros.topics import TOPIC_CONFIG
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
-    from matplotlib.figure import Figure
 
 STATE_LABELS = ("x [km]", "y [km]", "z [km]", "vx [km/s]", "vy [km/s]", "vz [km/s]")
 
@@ -48,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
     A bag without simulated truth or outage (your own measurements, replayed) gets the
     report of `report_own`: residuals, NIS, σ through the gaps, passes; a catalog's bag
     (several objects, unlabelled detections, or the catalog_filter's settings) that of
-    `report_catalog`: each object scored on its own rows.
+    `report_catalog`: each object scored on its own rows; a laser-ranging bag that of
+    `report_laser`: the fit's residuals per station and pass, biases, NIS, the reference.
     """
     out = args.out or args.bag.with_name(args.bag.name + "_report")
     try:
@@ -68,6 +69,10 @@ def run(args: argparse.Namespace) -> int:
         from ssa_fusion.apps import report_catalog
 
         return report_catalog.run(args, telling, catalog, out)
+    if is_laser(telling):
+        from ssa_fusion.apps import report_laser
+
+        return report_laser.run(args, list(bagio.read_records(args.bag)), out)
     del telling
     try:
         data = evaluate.load(args.bag)
@@ -153,42 +158,9 @@ def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
     visual_mcap.write(data, out / "visual.mcap", stations)
 
 
-def _plt() -> ModuleType:
-    """Return the figure maker, `studies.plots` (`plots.subplots`).
-
-    Imported on first use: `report` works without plots.
-    """
-    from ssa_fusion.studies import plots
-
-    return plots
-
-
-def save(fig: Figure, path: Path, dpi: int = 100) -> None:
-    """Lay out and write `fig` as PNG (`plots.save`)."""
-    from ssa_fusion.studies import plots
-
-    plots.save(fig, path, dpi)
-
-
 GAP_BREAK_S = 1800.0
 """Samples further apart than this (s) are not joined by a line: a gap between passes, not a
 trend."""
-
-
-def line(t_s: np.ndarray, y: np.ndarray, t0: float, angle: bool = False
-         ) -> tuple[np.ndarray, np.ndarray]:
-    """Return (hours after `t0`, y) to plot as a line, NaN where it must not be drawn.
-
-    A NaN between samples more than `GAP_BREAK_S` apart and, for an `angle` (rad, shown in
-    deg), where it wraps (a jump over 180 deg): no line across a gap or across 0/360.
-    """
-    x = np.asarray(t_s, dtype=float)
-    v = np.degrees(np.asarray(y, dtype=float)) if angle else np.asarray(y, dtype=float)
-    cut = set((np.flatnonzero(np.diff(x) > GAP_BREAK_S) + 1).tolist())
-    if angle:
-        cut |= set((np.flatnonzero(np.abs(np.diff(v)) > 180.0) + 1).tolist())
-    where = sorted(cut)
-    return np.insert((x - t0) / 3600.0, where, np.nan), np.insert(v, where, np.nan)
 
 
 def outage_hours(data: evaluate.BagData, t0: float) -> tuple[float, float] | None:
@@ -207,7 +179,7 @@ def shade(ax: Axes, span: tuple[float, float] | None) -> None:
 
 def plot_arms(ev: evaluate.Evaluation, path: Path) -> None:
     """Plot every arm's position error over the gap (km, log scale) to `path`."""
-    plt = _plt()
+    plt = report_figures.pyplot()
     fig, ax = plt.subplots(figsize=(8, 4))
     g = ev.gap
     hours = (g.t - g.t[0]) / 3600.0
@@ -219,7 +191,7 @@ def plot_arms(ev: evaluate.Evaluation, path: Path) -> None:
     ax.set_title("Position error of every arm over the gap")
     ax.legend(fontsize=8)
     ax.grid(True, which="both", alpha=0.3)
-    save(fig, path, dpi=100)
+    report_figures.save(fig, path, dpi=100)
 
 
 def plot_sigma(data: evaluate.BagData, path: Path) -> None:
@@ -228,7 +200,7 @@ def plot_sigma(data: evaluate.BagData, path: Path) -> None:
     No line joins epochs further apart than `GAP_BREAK_S` (the gaps between passes); the
     outage is shaded.
     """
-    plt = _plt()
+    plt = report_figures.pyplot()
     truth = {e.t: e.x for e in data.truth}
     est = [e for e in data.estimates if e.t in truth and e.update_source != types.UpdateSource.NONE]
     if not est:
@@ -240,8 +212,8 @@ def plot_sigma(data: evaluate.BagData, path: Path) -> None:
     fig, axes = plt.subplots(3, 2, figsize=(10, 7), sharex=True)
     for i, ax in enumerate(axes.T.ravel()):
         shade(ax, span)
-        ax.plot(*line(t, err[:, i], t[0]), lw=0.8, label="error")
-        hours, three = line(t, 3 * sig[:, i], t[0])
+        ax.plot(*broken_line(t, err[:, i], t[0], GAP_BREAK_S), lw=0.8, label="error")
+        hours, three = broken_line(t, 3 * sig[:, i], t[0], GAP_BREAK_S)
         ax.plot(hours, three, "r--", lw=0.8, label="±3σ")
         ax.plot(hours, -three, "r--", lw=0.8)
         # the scale of the run, not of the initial orbit determination's first sigmas
@@ -252,7 +224,7 @@ def plot_sigma(data: evaluate.BagData, path: Path) -> None:
     for ax in axes[-1]:
         ax.set_xlabel("hours since the first estimate [h]")
     fig.suptitle("Error of the fused estimates (GCRF) against their ±3σ")
-    save(fig, path, dpi=100)
+    report_figures.save(fig, path, dpi=100)
 
 
 FORECAST_LABELS = {types.Kind.RANGE_AZ_EL: ("range [km]", "azimuth [deg]", "elevation [deg]"),
@@ -274,7 +246,7 @@ def plot_forecasts(data: evaluate.BagData, path: Path) -> None:
     """
     if not data.forecasts or not data.withheld:
         return
-    plt = _plt()
+    plt = report_figures.pyplot()
     withheld = {m.t: m.z for m in data.withheld}
     f = [m for m in data.forecasts if m.t in withheld]
     if not f:
@@ -287,14 +259,16 @@ def plot_forecasts(data: evaluate.BagData, path: Path) -> None:
     fig, axes = plt.subplots(zf.shape[1], 1, figsize=(8, 6), sharex=True)
     for i, ax in enumerate(np.atleast_1d(axes)):
         angle = _is_angle(kind, i)
-        ax.plot(*line(t, zw[:, i], t[0], angle), ".", ms=2, label="withheld (sensor)")
-        ax.plot(*line(t, zf[:, i], t[0], angle), "-", lw=0.8, label="forecast")
+        ax.plot(*broken_line(t, zw[:, i], t[0], GAP_BREAK_S, angle), ".", ms=2,
+                label="withheld (sensor)")
+        ax.plot(*broken_line(t, zf[:, i], t[0], GAP_BREAK_S, angle), "-", lw=0.8,
+                label="forecast")
         ax.set_ylabel(labels[i] if i < len(labels) else f"z[{i}]")
         ax.grid(alpha=0.3)
     np.atleast_1d(axes)[0].legend(fontsize=8)
     np.atleast_1d(axes)[-1].set_xlabel("hours into the gap [h]")
     fig.suptitle("Forecasts against the measurements withheld in the outage")
-    save(fig, path, dpi=100)
+    report_figures.save(fig, path, dpi=100)
 
 
 def plot_nis(data: evaluate.BagData, path: Path) -> None:
@@ -306,7 +280,7 @@ def plot_nis(data: evaluate.BagData, path: Path) -> None:
     est = [e for e in data.estimates if e.update_source != types.UpdateSource.NONE and e.nis > 0]
     if not est:
         return
-    plt = _plt()
+    plt = report_figures.pyplot()
     t = np.array([e.t for e in est])
     nis = np.array([e.nis for e in est])
     src = np.array([e.update_source for e in est])
@@ -328,4 +302,4 @@ def plot_nis(data: evaluate.BagData, path: Path) -> None:
     ax.set_title("Normalised innovation squared of the filter")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3, which="both")
-    save(fig, path, dpi=100)
+    report_figures.save(fig, path, dpi=100)

@@ -24,7 +24,9 @@ measurements against one track; this one never mixes objects
 Written: ``report.json`` (summary, settings, association, the worst objects),
 ``objects.csv`` (every object, one line each) and ``report.html`` (the summary and the worst
 objects as tables: bounded whatever the catalog's size). The catalog surrogates' gap
-forecasts (update source FORECAST) are counted, not scored.
+forecasts (update source FORECAST) are counted, not scored. A run with the conjunction node
+also gets its table of close approaches (`conjunction_table`: the most likely printed,
+every one in ``conjunctions.csv``).
 """
 
 from __future__ import annotations
@@ -41,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from ssa_fusion.apps import replay_catalog
+from ssa_fusion.apps import conjunction_table, replay_catalog
 from ssa_fusion.core.base.rows import EstimateRows, MeasurementRows
 from ssa_fusion.core.base.types import Kind, Source, StateEstimate, UpdateSource
 from ssa_fusion.core.catalog.batch_ekf import BatchEKF
@@ -139,54 +141,11 @@ def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> Cat
     """
     chosen = replay_catalog.catalog_settings(telling, sites)
     ekf = measurement_model(chosen.shards[0])
-    codes = cs.Codes()
-    meas = _Rows()
-    unlabelled = 0
-    truth_codes = cs.Codes()
-    truth = _Rows()
-    detections: list[MeasurementRows] = []
-    associated: list[MeasurementRows] = []
-    counts = Counter(m.topic for m in telling if m.topic == TOPIC_CONFIG)
-    for m in bagio.read_bag(bag, topics=[*replay_catalog.MEASURED, TOPIC_TRUTH,
-                                         TOPIC_DETECTION_TRUTH, TOPIC_ASSOCIATED]):
-        counts[m.topic] += 1
-        if m.topic in replay_catalog.MEASURED:
-            try:
-                rows = replay_catalog.measurement_rows(m)
-            except ValueError:
-                continue
-            unlabelled += int(np.count_nonzero(np.asarray(rows.object_id, dtype=str) == ""))
-            _add_measurements(rows, codes, ekf, meas)
-        elif m.topic == TOPIC_TRUTH and m.msgtype in TRUTH_TYPES:
-            e = (messages.estimate_batch_from_msg(m.msg) if m.msgtype == bagio.ESTIMATE_BATCH
-                 else _one(messages.estimate_from_msg(m.msg)))
-            truth.add(code=truth_codes.encode(e.object_id), t=e.t, x=e.x)
-        elif m.topic == TOPIC_DETECTION_TRUTH:
-            detections.append(messages.measurement_batch_from_msg(m.msg))
-        elif m.topic == TOPIC_ASSOCIATED:
-            a = messages.measurement_batch_from_msg(m.msg)
-            associated.append(a)
-            _add_measurements(a, codes, ekf, meas)
-    labels = _Labels(detections, associated)
+    got = _Measured.read(bag, telling, ekf)
+    codes, meas, truth = got.codes, got.meas, got.truth
+    labels = _Labels(got.detections, got.associated)
     has_truth = bool(truth.parts)
-    matcher = cs.Matcher(truth.get("code").astype(np.int64), truth.get("t"))
-    truth_x = truth.get("x", (0, 6))
-    truth_of: list[int] = []
-    est, fused = _Rows(), _Rows()
-    forecasts = 0
-    for m in bagio.read_bag(bag, topics=[TOPIC_ESTIMATE_BATCH]):
-        counts[m.topic] += 1
-        e = messages.estimate_batch_from_msg(m.msg)
-        if e.update_source == UpdateSource.FORECAST:
-            forecasts += len(e)
-            continue
-        c = codes.encode(e.object_id)
-        truth_of += [truth_codes.find(labels.truth_object(i)) for i in codes.ids[len(truth_of):]]
-        err = (cs.truth_errors(matcher, truth_x, np.asarray(truth_of, np.int64)[c], e.t, e.x,
-                               e.P) if has_truth else None)
-        est.add(code=c, **({"err": err.position_km, "nees": err.nees} if err else {}))
-        if e.update_source == UpdateSource.SENSOR:
-            fused.add(code=c, t=e.t, r=e.x[:, :3], nis=e.nis)
+    est, fused, forecasts = _read_estimates(bag, got, labels, has_truth)
     est_code = est.get("code").astype(np.int64)
     score = labels.score({codes.ids[c] for c in np.unique(est_code).tolist()})
     truth_object = [labels.truth_object(i) for i in codes.ids]
@@ -204,6 +163,92 @@ def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> Cat
                               f_nis[has_nis], res, truth_object)
     summary = cs.summary(scores, err, f_nis[has_nis], res)
     worst, ranked_by = cs.worst(scores, WORST)
+    notes = _notes(has_truth, got.unlabelled, bool(got.associated), forecasts)
+    return CatalogReport(scores, summary, worst, ranked_by, chosen.origin, chosen.shards,
+                         score, got.unlabelled, forecasts, notes, dict(got.counts))
+
+
+@dataclass
+class _Measured:
+    """The first read of a catalog bag: measurements, truth and associations.
+
+    ``codes`` numbers the measured objects (and tracks), ``meas`` their measurements,
+    ``truth_codes`` and ``truth`` the truth's objects and states; ``detections`` and
+    ``associated`` the unlabelled detections with their objects and with their tracks;
+    ``unlabelled`` the measurements without object id; ``counts`` the messages read by topic.
+    """
+
+    codes: cs.Codes = field(default_factory=cs.Codes)
+    meas: _Rows = field(default_factory=lambda: _Rows())
+    truth_codes: cs.Codes = field(default_factory=cs.Codes)
+    truth: _Rows = field(default_factory=lambda: _Rows())
+    detections: list[MeasurementRows] = field(default_factory=list)
+    associated: list[MeasurementRows] = field(default_factory=list)
+    unlabelled: int = 0
+    counts: Counter[str] = field(default_factory=Counter)
+
+    @classmethod
+    def read(cls, bag: Path, telling: list[bagio.BagMessage], ekf: BatchEKF) -> _Measured:
+        """Read the bag's measurements, truth and associations, message by message."""
+        out = cls()
+        out.counts.update(m.topic for m in telling if m.topic == TOPIC_CONFIG)
+        for m in bagio.read_bag(bag, topics=[*replay_catalog.MEASURED, TOPIC_TRUTH,
+                                             TOPIC_DETECTION_TRUTH, TOPIC_ASSOCIATED]):
+            out.counts[m.topic] += 1
+            if m.topic in replay_catalog.MEASURED:
+                try:
+                    rows = replay_catalog.measurement_rows(m)
+                except ValueError:
+                    continue
+                out.unlabelled += int(np.count_nonzero(np.asarray(rows.object_id,
+                                                                  dtype=str) == ""))
+                _add_measurements(rows, out.codes, ekf, out.meas)
+            elif m.topic == TOPIC_TRUTH and m.msgtype in TRUTH_TYPES:
+                e = (messages.estimate_batch_from_msg(m.msg)
+                     if m.msgtype == bagio.ESTIMATE_BATCH
+                     else _one(messages.estimate_from_msg(m.msg)))
+                out.truth.add(code=out.truth_codes.encode(e.object_id), t=e.t, x=e.x)
+            elif m.topic == TOPIC_DETECTION_TRUTH:
+                out.detections.append(messages.measurement_batch_from_msg(m.msg))
+            elif m.topic == TOPIC_ASSOCIATED:
+                a = messages.measurement_batch_from_msg(m.msg)
+                out.associated.append(a)
+                _add_measurements(a, out.codes, ekf, out.meas)
+        return out
+
+
+def _read_estimates(bag: Path, got: _Measured, labels: _Labels,
+                    has_truth: bool) -> tuple[_Rows, _Rows, int]:
+    """Read the estimates (the second read): errors against the truth, the fused ones' NIS.
+
+    Returns the estimates' rows (code, and with truth the position error km and NEES), the
+    fused ones' (code, epoch, position km, NIS) and the number of gap forecasts (counted,
+    not scored).
+    """
+    codes, truth_codes = got.codes, got.truth_codes
+    matcher = cs.Matcher(got.truth.get("code").astype(np.int64), got.truth.get("t"))
+    truth_x = got.truth.get("x", (0, 6))
+    truth_of: list[int] = []
+    est, fused = _Rows(), _Rows()
+    forecasts = 0
+    for m in bagio.read_bag(bag, topics=[TOPIC_ESTIMATE_BATCH]):
+        got.counts[m.topic] += 1
+        e = messages.estimate_batch_from_msg(m.msg)
+        if e.update_source == UpdateSource.FORECAST:
+            forecasts += len(e)
+            continue
+        c = codes.encode(e.object_id)
+        truth_of += [truth_codes.find(labels.truth_object(i)) for i in codes.ids[len(truth_of):]]
+        err = (cs.truth_errors(matcher, truth_x, np.asarray(truth_of, np.int64)[c], e.t, e.x,
+                               e.P) if has_truth else None)
+        est.add(code=c, **({"err": err.position_km, "nees": err.nees} if err else {}))
+        if e.update_source == UpdateSource.SENSOR:
+            fused.add(code=c, t=e.t, r=e.x[:, :3], nis=e.nis)
+    return est, fused, forecasts
+
+
+def _notes(has_truth: bool, unlabelled: int, associated: bool, forecasts: int) -> list[str]:
+    """Return what the report cannot score, in words."""
     notes = []
     if not has_truth:
         notes.append(f"no {TOPIC_TRUTH} in the bag: no position error or NEES (a live "
@@ -214,8 +259,7 @@ def build(bag: Path, telling: list[bagio.BagMessage], sites: Path | None) -> Cat
     if forecasts:
         notes.append(f"{forecasts} catalog-surrogate gap forecasts on {TOPIC_ESTIMATE_BATCH}: "
                      "counted, not scored")
-    return CatalogReport(scores, summary, worst, ranked_by, chosen.origin, chosen.shards,
-                         score, unlabelled, forecasts, notes, dict(counts))
+    return notes
 
 
 class _Labels:
@@ -381,4 +425,9 @@ def run(args: argparse.Namespace, telling: list[bagio.BagMessage], reason: str,
     print(f"{args.bag} is a catalog's bag ({reason}): each object scored on its own rows\n")
     print(table(rep))
     print(f"\nwrote {out}/report.json, {out}/objects.csv (every object) and {out}/report.html")
+    conj = conjunction_table.latest(args.bag)
+    if conj.batches:  # a run with the conjunction node
+        conjunction_table.write_csv(conj, out / "conjunctions.csv")
+        print("\n" + conjunction_table.table(conj)
+              + f"\nwrote {out}/conjunctions.csv (every approach)")
     return 0

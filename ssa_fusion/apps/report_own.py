@@ -32,7 +32,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ssa_fusion.apps import evaluate, report
+from ssa_fusion.apps import evaluate, report_figures
+from ssa_fusion.apps.report_figures import broken_line, hours
 from ssa_fusion.core.base import types
 from ssa_fusion.core.gaps.estimator import uncovered_stations
 from ssa_fusion.evaluation import residuals as res_
@@ -175,20 +176,10 @@ def write(data: evaluate.BagData, rep: OwnReport, out: Path, title: str) -> None
     page(rep, out, title)
 
 
-def _hours(t: np.ndarray | list[float], t0: float) -> np.ndarray:
-    return (np.asarray(t, dtype=float) - t0) / 3600.0
-
-
-def _broken(x_s: np.ndarray, y: np.ndarray, t0: float) -> tuple[np.ndarray, np.ndarray]:
-    """(hours after t0, y) with NaN between samples more than `PASS_BREAK_S` apart."""
-    cut = np.flatnonzero(np.diff(x_s) > PASS_BREAK_S) + 1
-    return np.insert(_hours(x_s, t0), cut, np.nan), np.insert(np.asarray(y, float), cut, np.nan)
-
-
 def shade_gaps(ax: Axes, rep: OwnReport, t0: float) -> None:
     """Shade the gaps between passes on `ax` (hours after `t0`), labelled once."""
     for i, (a, b) in enumerate(rep.gaps):
-        ax.axvspan(*_hours([a, b], t0), color="0.9", zorder=0,
+        ax.axvspan(*hours([a, b], t0), color="0.9", zorder=0,
                    label=f"gap between passes (> {PASS_BREAK_S:g} s)" if i == 0 else None)
 
 
@@ -206,7 +197,7 @@ def plot_residuals(rep: OwnReport, t0: float, path: Path) -> None:
     """Plot per channel the pre-fit residuals by station against ±3σ of S and of R."""
     if not rep.residuals:
         return
-    plt = report._plt()
+    plt = report_figures.pyplot()
     kind = rep.residuals[0].kind
     same = [r for r in rep.residuals if r.kind == kind]
     channels = CHANNELS.get(kind, tuple((f"z[{i}]", "-", 1.0) for i in range(len(same[0].y))))
@@ -220,13 +211,13 @@ def plot_residuals(rep: OwnReport, t0: float, path: Path) -> None:
         s3 = 3 * np.array([r.sigma[i] for r in same]) * f
         r3 = 3 * np.array([r.sigma_r[i] for r in same]) * f
         for sign in (1, -1):
-            ax.plot(*_broken(t, sign * s3, t0), "k--", lw=0.8,
+            ax.plot(*broken_line(t, sign * s3, t0, PASS_BREAK_S), "k--", lw=0.8,
                     label="±3σ innovation (S = HPHᵀ + R)" if sign == 1 else None)
-            ax.plot(*_broken(t, sign * r3, t0), ":", color="tab:red", lw=0.8,
-                    label="±3σ measurement (R)" if sign == 1 else None)
+            ax.plot(*broken_line(t, sign * r3, t0, PASS_BREAK_S), ":", color="tab:red",
+                    lw=0.8, label="±3σ measurement (R)" if sign == 1 else None)
         for j, st in enumerate(stations):
             k = np.array([r.station == st for r in same])
-            ax.plot(_hours(t[k], t0), y[k], ".", ms=3, color=f"C{j}", label=st)
+            ax.plot(hours(t[k], t0), y[k], ".", ms=3, color=f"C{j}", label=st)
         # the scale of the residuals and of the settled σ, not of the first σ after the IOD
         lim = 1.2 * max(float(np.max(np.abs(y))), float(np.median(s3)))
         ax.set_ylim(-lim, lim)
@@ -235,26 +226,26 @@ def plot_residuals(rep: OwnReport, t0: float, path: Path) -> None:
     above(np.atleast_1d(axes)[0])
     np.atleast_1d(axes)[-1].set_xlabel(_xlabel(t0))
     fig.suptitle("Pre-fit residuals (measurement − filter's prediction before the update)")
-    report.save(fig, path, dpi=100)
+    report_figures.save(fig, path, dpi=100)
 
 
 def plot_nis(rep: OwnReport, t0: float, path: Path) -> None:
     """Plot the published NIS of each fused real measurement against its 95 % χ² band."""
     if not rep.published:
         return
-    plt = report._plt()
+    plt = report_figures.pyplot()
     fig, ax = plt.subplots(figsize=(9, 3.5))
     shade_gaps(ax, rep, t0)
     t = np.array([v.t for v in rep.published])
     nis = np.array([v.nis for v in rep.published])
-    x0, x1 = float(_hours([t[0]], t0)[0]), float(_hours([t[-1]], t0)[0])
+    x0, x1 = float(hours([t[0]], t0)[0]), float(hours([t[-1]], t0)[0])
     for dof, (lo, hi) in sorted(rep.nis.band.items()):
         ax.fill_between([x0, x1], lo, hi, color="tab:green", alpha=0.15,
                         label=f"95 % χ² band [{lo:.2f}, {hi:.2f}] ({dof} dof)")
     stations = sorted({v.station for v in rep.published})
     for j, st in enumerate(stations):
         k = np.array([v.station == st for v in rep.published])
-        ax.plot(_hours(t[k], t0), nis[k], ".", ms=3, color=f"C{j}", label=st)
+        ax.plot(hours(t[k], t0), nis[k], ".", ms=3, color=f"C{j}", label=st)
     ax.set_yscale("log")
     ax.set_xlabel(_xlabel(t0))
     ax.set_ylabel("NIS [-]")
@@ -262,7 +253,7 @@ def plot_nis(rep: OwnReport, t0: float, path: Path) -> None:
                  f"{rep.nis.n} inside the 95 % band", pad=28)
     above(ax)
     ax.grid(alpha=0.3, which="both")
-    report.save(fig, path, dpi=100)
+    report_figures.save(fig, path, dpi=100)
 
 
 def plot_sigma(data: evaluate.BagData, rep: OwnReport, t0: float, path: Path) -> None:
@@ -274,19 +265,20 @@ def plot_sigma(data: evaluate.BagData, rep: OwnReport, t0: float, path: Path) ->
     fused = [e for e in data.estimates if e.update_source != types.UpdateSource.NONE]
     if not fused:
         return
-    plt = report._plt()
+    plt = report_figures.pyplot()
     fig, ax = plt.subplots(figsize=(9, 4))
     shade_gaps(ax, rep, t0)
     t, s = res_.position_sigma(fused)
-    ax.plot(*_broken(t, s, t0), "-", lw=1.2, color="tab:blue", label="filter, fused epochs")
+    ax.plot(*broken_line(t, s, t0, PASS_BREAK_S), "-", lw=1.2, color="tab:blue",
+            label="filter, fused epochs")
     predicted = [e for e in data.estimates if e.update_source == types.UpdateSource.NONE]
     if predicted:
         t, s = res_.position_sigma(predicted)
-        ax.plot(*_broken(t, s, t0), ":o", ms=3, lw=0.8, color="tab:blue",
+        ax.plot(*broken_line(t, s, t0, PASS_BREAK_S), ":o", ms=3, lw=0.8, color="tab:blue",
                 label="filter, predicted through the gaps")
     if data.smoothed:
         t, s = res_.position_sigma(data.smoothed)
-        ax.plot(*_broken(t, s, t0), "--", lw=1.2, color="tab:orange",
+        ax.plot(*broken_line(t, s, t0, PASS_BREAK_S), "--", lw=1.2, color="tab:orange",
                 label="smoothed (/ssa/estimate_smoothed)")
     ax.set_yscale("log")
     ax.set_xlabel(_xlabel(t0))
@@ -294,7 +286,7 @@ def plot_sigma(data: evaluate.BagData, rep: OwnReport, t0: float, path: Path) ->
     ax.set_title("Position uncertainty through the passes and gaps", pad=28)
     above(ax)
     ax.grid(alpha=0.3, which="both")
-    report.save(fig, path, dpi=100)
+    report_figures.save(fig, path, dpi=100)
 
 
 def page(rep: OwnReport, out: Path, title: str) -> None:

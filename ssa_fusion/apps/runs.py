@@ -1,10 +1,11 @@
 """Run directories of `ssa-fusion live`: one per run, named like rosbag2's bags, and the logs.
 
 `default_out` names a new directory (`out/live/<scenario>_<date-time>`), `link_latest`
-points `out/live/latest` at it, `run_dirs` makes it and picks the bag inside, and
-`sensor_wall_times` reads from sensor_sim's log when the simulation started and ended, and
-`ended_badly` says which node processes of a run did not end well. `run_graph` gives a run
-its identity and its ROS domain (`ros.run_identity`, `ros.domains`).
+points `out/live/latest` at it, `run_dirs` makes it and picks the bag inside,
+`sensor_wall_times` reads from sensor_sim's log when the simulation started and ended,
+`ended_badly` says which node processes of a run did not end well, `run_graph` gives a run
+its identity and its ROS domain (`ros.run_identity`, `ros.domains`), and `replay_graph`
+opens a replay's (`run_graph`) beside the bag it records.
 """
 
 from __future__ import annotations
@@ -121,3 +122,18 @@ def run_dirs(args: argparse.Namespace, name: str) -> tuple[Path, Path] | None:
         print(f"error: cannot use {out}: {exc}", file=sys.stderr)
         return None
     return out, bag
+
+
+def replay_graph(args: argparse.Namespace, record: Path) -> tuple[Graph, Path] | None:
+    """Return the graph of a replay recording to `record` (`run_graph`), and its logs directory.
+
+    The logs go beside the bag (its name + ``_logs``); None when that directory cannot be
+    used or no ROS domain can be had (said on stderr).
+    """
+    logs = record.with_name(record.name + "_logs")
+    try:
+        graph = run_graph(args, logs, "replay")
+    except OSError as exc:
+        print(f"error: cannot use {record}: {exc}", file=sys.stderr)
+        return None
+    return None if graph is None else (graph, logs)

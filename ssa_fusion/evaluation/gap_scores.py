@@ -28,8 +28,10 @@ from scipy.stats import chi2
 from ssa_fusion.core.base.metrics import nees
 from ssa_fusion.core.base.types import Measurement, StateEstimate
 from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker
+from ssa_fusion.core.gaps.fit_residual import FitResidualForecaster
 from ssa_fusion.core.gaps.publisher import GapFill, GapPublisher
 from ssa_fusion.core.measure.pass_windows import passes
+from ssa_fusion.core.od.batch_ls import BatchOptions
 
 LONG_GAP_S = 12 * 3600.0
 """Gaps longer than this (s) are scored on their own too."""
@@ -46,8 +48,32 @@ def published(c: EstimatorConfig, real: list[Measurement], t_truth: np.ndarray,
     clock advances to every truth epoch in turn, a measurement going before the tick of its
     own epoch.
     """
+    return publish_run(c, real, t_truth, fill).estimates
+
+
+@dataclass
+class PublishedRun:
+    """What the filter published (last estimate per epoch), and what its gaps cost.
+
+    ``cpu_s``: the process CPU time (s) of the gap forecaster's fits (and corrections);
+    ``choices``: how many gaps each `step_aside.Choice` took (a corrected fit's; else
+    empty).
+    """
+
+    estimates: dict[float, StateEstimate]
+    cpu_s: float
+    choices: dict[str, int]
+
+
+def publish_run(c: EstimatorConfig, real: list[Measurement], t_truth: np.ndarray,
+                fill: GapFill, options: BatchOptions | None = None) -> PublishedRun:
+    """Return `published`'s estimates with the forecaster's cost and choices.
+
+    ``options``: the gap fit's own options (e.g. the high-fidelity force model) instead of
+    the live ones (`GapPublisher.of`).
+    """
     period = float(t_truth[1] - t_truth[0])
-    pub = GapPublisher.of(make_tracker(c), period, fill, c)
+    pub = GapPublisher.of(make_tracker(c), period, fill, c, options)
     out: dict[float, StateEstimate] = {}
     events = sorted([(m.t, 0, i) for i, m in enumerate(real)]
                     + [(float(t), 1, -1) for t in t_truth])
@@ -55,7 +81,10 @@ def published(c: EstimatorConfig, real: list[Measurement], t_truth: np.ndarray,
         got = pub.advance(t, limit=10**6) if tick else pub.measurement(real[i])
         for e in got.estimates:
             out[e.t] = e
-    return out
+    f = pub.forecaster
+    choices = ({str(k): v for k, v in f.choices.items()}
+               if isinstance(f, FitResidualForecaster) else {})
+    return PublishedRun(out, float(getattr(f, "cpu_s", 0.0)), choices)
 
 
 @dataclass

@@ -31,6 +31,7 @@ from ssa_fusion.core.base.metrics import chi2_bounds
 from ssa_fusion.core.base.types import Kind, Measurement, Source, StateEstimate, UpdateSource
 from ssa_fusion.core.earth.frames import wrap_angle
 from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker
+from ssa_fusion.core.measure.laser_model import LaserModels
 from ssa_fusion.core.measure.measurement import StationModels
 from ssa_fusion.core.measure.pass_windows import PASS_BREAK_S, passes
 from ssa_fusion.core.measure.validation import OK, measurement_problem
@@ -105,6 +106,8 @@ def residuals(c: EstimatorConfig, estimates: Sequence[StateEstimate],
         if measurement_problem(m, tracker.kind, tracker.frame_id) != OK:
             continue  # a kind or a station the settings do not take
         one = model.get(m.kind, m.frame_id) if isinstance(model, StationModels) else model
+        if isinstance(one, LaserModels):
+            continue  # the published orbit holds no range biases: `laser_report`'s
         if one is None:
             continue
         prior = tracker.predict_from(fused[k - 1], m.t)

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import NoReturn
 
 from ssa_fusion.core.base.quoting import one_line, quote, shown
+from ssa_fusion.formats.files import raw_lines
 
 MAX_LINE = 1024
 """Longest line read, bytes (CRD and CPF lines are under 200, SINEX lines 80)."""
@@ -81,13 +82,7 @@ class RecordLines:
         except OSError as exc:
             self._fail_file(exc)
         with f:
-            while True:
-                try:
-                    raw = f.readline(MAX_LINE + 2)
-                except OSError as exc:
-                    self._fail_file(exc)
-                if not raw:
-                    return
+            for raw in raw_lines(f, MAX_LINE, self._fail_file):
                 self.line += 1
                 self.bytes_read += len(raw)
                 text = self._checked(raw)

@@ -57,6 +57,7 @@ from ssa_fusion.core.earth.stations import (
     SensorType,
 )
 from ssa_fusion.core.measure.validation import MAX_ID_CHARS
+from ssa_fusion.formats.files import read_bounded
 
 RESERVED_IDS = frozenset({*STATIONS, *SENSORS, *NETWORKS, "gcrf"})
 """Ids a site may not take: the built-in stations, sensor presets, networks, and ``gcrf``
@@ -295,9 +296,8 @@ def load_sites(path: Path | str) -> dict[str, Sensor]:
     import yaml
 
     try:
-        with Path(path).open("rb") as f:
-            raw = f.read(MAX_FILE_BYTES + 1)
-        if len(raw) > MAX_FILE_BYTES:
+        raw = read_bounded(path, MAX_FILE_BYTES)
+        if raw is None:
             raise SiteFileError(f"{path}: larger than {MAX_FILE_BYTES} bytes; a sites file "
                                 "holds a few hundred bytes per site")
         text = raw.decode("utf-8")

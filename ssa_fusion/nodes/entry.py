@@ -43,6 +43,7 @@ recorder = _executable("recorder")
 foxglove_bridge = _executable("foxglove_bridge")
 catalog_filter = _executable("catalog_filter")
 catalog_surrogate = _executable("catalog_surrogate")
+conjunction = _executable("conjunction")
 
 
 if __name__ == "__main__":

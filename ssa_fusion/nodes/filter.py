@@ -14,6 +14,11 @@ the surrogate's forecasts of those epochs reached it), and reports its progress
 (`nodes.kit.progress`). ``station`` names built-in stations
 (`core.earth.stations`) or those of the ``sites`` file (`formats.sites`).
 
+With ``kind`` laser_range it is the laser filter (`nodes.kit.laser`): the stations and the
+object of its ``laser`` parameter, the object's high-fidelity forces, the stations' range
+biases and Cr as states, started from its ``apriori`` orbit; it takes the stations'
+meteorological records on ``/ssa/meteo``.
+
     ros2 run ssa_fusion filter --ros-args -p use_sim_time:=true -p kind:=range_az_el
 """
 
@@ -21,9 +26,12 @@ from __future__ import annotations
 
 from functools import partial
 
-from ssa_fusion.core.base.types import Cause, Source
+from ssa_fusion.core.base.types import Cause, Kind, Source
+from ssa_fusion.core.gaps.batch_gap import BatchGapForecaster
 from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker
+from ssa_fusion.core.gaps.fit_residual import FitResidualForecaster
 from ssa_fusion.core.gaps.publisher import GapFill, GapPublisher, Published
+from ssa_fusion.nodes.kit import laser
 from ssa_fusion.nodes.kit.base import SsaNode
 from ssa_fusion.nodes.kit.diagnostics import PUBLISHED_BY_SOURCE
 from ssa_fusion.nodes.kit.progress import (
@@ -43,9 +51,10 @@ from ssa_fusion.params.tables.filter import PARAMETERS
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.interfaces import Clock
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
+from ssa_fusion.ros.interfaces import Meteo as MeteoMsg
 from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
 from ssa_fusion.ros.qos import DATA_QOS, DATA_WRITER_QOS
-from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_MEASUREMENT
+from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_FORECAST, TOPIC_MEASUREMENT, TOPIC_METEO
 
 TICK_S = 0.1
 """Wall s between two publications of the predictions due (at most 100 each)."""
@@ -60,6 +69,10 @@ class FilterNode(SsaNode):
         super().__init__()
         self.estimator = self._estimator()
         self.tracker = make_tracker(self.estimator, self.params.text("object_id"))
+        if self.estimator.kind == Kind.LASER_RANGE:
+            laser.start(self.tracker, self.estimator, self.params.values)
+            self.subscribe(MeteoMsg, TOPIC_METEO, partial(laser.on_meteo, self.tracker),
+                           DATA_QOS)
         self.gaps = GapPublisher.of(self.tracker, self.params.number("predict_period"),
                                     GapFill(self.params.text("gap_forecast")), self.estimator)
         self.publish_config()
@@ -98,7 +111,8 @@ class FilterNode(SsaNode):
 
     def _estimator(self) -> EstimatorConfig:
         """Return the estimator settings of the parameters in effect (core units)."""
-        return settings.node_estimator("filter", self.params.values)
+        c = settings.node_estimator("filter", self.params.values)
+        return laser.laser_estimator(self.params.values) if c.kind == Kind.LASER_RANGE else c
 
     def on_parameters_set(self, changed: dict[str, ParamValue]) -> None:
         """Put new tuning values or a new `predict_period` into effect (and record them)."""
@@ -162,6 +176,12 @@ class FilterNode(SsaNode):
         for e in out.estimates:
             self.pub.publish(messages.estimate_to_msg(e))
             self.diag.counts[PUBLISHED_BY_SOURCE[e.update_source]] += 1
+        f = self.gaps.forecaster
+        if isinstance(f, BatchGapForecaster):
+            self.diag.status["gap_covariance_factor"] = f"{f.scale.factor(0.0)[0]:.3g}"
+        if isinstance(f, FitResidualForecaster):
+            for choice, n in f.choices.items():
+                self.diag.status[f"gap_{choice}"] = str(n)
 
 
 def main(args: list[str] | None = None) -> int:

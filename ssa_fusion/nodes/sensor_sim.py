@@ -99,7 +99,8 @@ def plan_of(p: NodeParameters) -> Plan:
         gaps=tuple(p.numbers("gaps")), after_gap=p.number("after_gap"),
         noise_sigma=tuple(v / s for v, s in zip(noise, messages.z_scale(base.kind), strict=True))
         if len(noise) == 3 else None,
-        seed=p.integer("seed"), catalog=p.text("catalog"), objects=p.integer("objects"),
+        seed=p.integer("seed"), truth=p.text("truth"), geometry_seed=p.integer("geometry_seed"),
+        catalog=p.text("catalog"), objects=p.integer("objects"),
         synthetic=p.integer("synthetic"))
     try:
         return plan(name, base, real_sky, settings)

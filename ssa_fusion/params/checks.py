@@ -113,6 +113,15 @@ def non_negative_numbers(count: int, reason: str) -> Check:
     return Check(f"{count} values, each ≥ 0", test)
 
 
+def finite_numbers(count: int, reason: str) -> Check:
+    """Return the check of a list of `count` finite numbers (`reason` when not)."""
+    def test(v: ParamValue) -> str | None:
+        ok = isinstance(v, list) and len(v) == count and all(_finite(x) is not None for x in v)
+        return None if ok else reason
+
+    return Check(f"{count} finite values", test)
+
+
 def read_by(read: Callable[[str], object],
             empty_ok: bool = False) -> Callable[[ParamValue], str | None]:
     """Return a check that passes a value `read` takes, else gives `read`'s ValueError.

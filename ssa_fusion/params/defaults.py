@@ -67,6 +67,8 @@ class SensorSimDefaults:
     start: str = ""
     sites: str = ""
     elements: str = ""
+    truth: str = "sgp4"
+    geometry_seed: int = -1
     noise_sigma: tuple[float, ...] = (-1.0,)
     time_scale: float = 100.0
     seed: int = 0
@@ -131,6 +133,8 @@ class FilterDefaults:
     predict_period: float = 300.0
     max_clock_lead: float = MAX_CLOCK_LEAD_S
     gap_forecast: str = "none"
+    laser: str = ""
+    apriori: tuple[float, ...] = (0.0,) * 7
 
 
 @dataclass(frozen=True)
@@ -187,6 +191,25 @@ class CatalogSurrogateDefaults:
     max_objects: int = MAX_OBJECTS
 
 
+@dataclass(frozen=True)
+class ConjunctionDefaults:
+    """conjunction's defaults: the catalog's estimates re-screened (`core.conjunction.watch`).
+
+    Approaches within 5 km over the next day, re-screened every sim hour for the objects
+    whose estimates changed; a 20 m combined hard-body radius (CARA's default); CDMs of the
+    approaches with Pc >= 1e-5 when ``cdm_dir`` names a directory.
+    """
+
+    distance: float = 5000.0
+    horizon: float = DAY_S
+    rescreen_period: float = 3600.0
+    hard_body_radius: float = 20.0
+    motion_model: str = "j2"
+    cdm_dir: str = ""
+    cdm_min_pc: float = 1e-5
+    max_clock_lead: float = MAX_CLOCK_LEAD_S
+
+
 BAG_PATTERN = "out/bags/ssa_%Y%m%d_%H%M%S"
 """`time.strftime` pattern of the recorder's default bag directory (start time), under the
 working directory's ``out/`` (never the repository's tracked ``bags/``)."""
@@ -227,6 +250,7 @@ FILTER = FilterDefaults()
 RECORDER = RecorderDefaults()
 CATALOG_FILTER = CatalogFilterDefaults()
 CATALOG_SURROGATE = CatalogSurrogateDefaults()
+CONJUNCTION = ConjunctionDefaults()
 FOXGLOVE_BRIDGE = FoxgloveBridgeDefaults()
 
 NODES = {"sensor_sim": SENSOR_SIM, "surrogate": SURROGATE, "filter": FILTER,

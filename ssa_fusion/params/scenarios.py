@@ -52,6 +52,9 @@ DEFAULT_LIVE = "iss_j2_rae"
 NAMES = (*PAPER_SCENARIOS, *SKY_SCENARIOS)
 """What the ``scenario`` parameter takes."""
 
+TRUTHS = ("sgp4", "high_fidelity")
+"""What the ``truth`` parameter takes (`sim.world.TruthModel`'s values)."""
+
 
 def timing(name: str) -> Timing:
     """Return the paper scenario's timing of scenario `name` (a real-sky one: `DEFAULT_LIVE`'s).

@@ -143,6 +143,9 @@ def node_estimator(node: str, values: Mapping[str, Any]) -> EstimatorConfig:
     """
     if node == "filter":
         return estimator_from({k: values[k] for k in FILTER_KEYS}, {})
+    if values.get("kind") == KIND_NAMES[Kind.LASER_RANGE]:
+        raise ValueError("the surrogate does not forecast laser ranges (normal points "
+                         "minutes apart in passes hours apart: no stream to learn)")
     return estimator_from({}, {k: values[k] for k in SURROGATE_KEYS})
 
 

@@ -49,8 +49,8 @@ KINDS = {name: kind for kind, name in KIND_NAMES.items()}
 """The `kind` parameter's values: measurement kind by name."""
 
 
-def measurement_stream(kind: str, station: str, sites: str,
-                       verb: str) -> tuple[Param, Param, Param]:
+def measurement_stream(kind: str, station: str, sites: str, verb: str,
+                       kinds: tuple[str, ...] = tuple(KINDS)) -> tuple[Param, Param, Param]:
     """Return the rows of ``kind``, ``station`` and ``sites``: the measurements a node `verb`s.
 
     The station is the frame_id of range/az/el and ra/dec measurements ("gcrf" for
@@ -58,7 +58,7 @@ def measurement_stream(kind: str, station: str, sites: str,
     sites file ``sites`` (the rule `STATION_RULE` checks which).
     """
     return (Param("kind", kind, f"measurement kind it {verb} (sets the measurement model)",
-                  check=one_of(*KINDS)),
+                  check=one_of(*kinds)),
             Param("station", station,
                   "station (frame_id) of range/az/el or ra/dec measurements, or a network "
                   "of them, each measured with its station's model; ignored for position "

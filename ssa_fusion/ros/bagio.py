@@ -39,6 +39,7 @@ from ssa_fusion.ros.mcap_salvage import MAGIC as MCAP_MAGIC
 from ssa_fusion.ros.mcap_salvage import salvage
 
 if TYPE_CHECKING:
+    from mcap.records import Schema
     from rclpy.duration import Duration
     from rclpy.qos import QoSProfile
 
@@ -47,12 +48,14 @@ if TYPE_CHECKING:
 
 ROS_DISTRO = "kilted"
 MSG_PACKAGE = "ssa_fusion_msgs"
-MSG_TYPES = ("Measurement", "StateEstimate", "MeasurementBatch", "EstimateBatch", "Meteo")
+MSG_TYPES = ("Measurement", "StateEstimate", "MeasurementBatch", "EstimateBatch", "Meteo",
+             "ConjunctionBatch")
 MEASUREMENT = f"{MSG_PACKAGE}/msg/Measurement"
 STATE_ESTIMATE = f"{MSG_PACKAGE}/msg/StateEstimate"
 MEASUREMENT_BATCH = f"{MSG_PACKAGE}/msg/MeasurementBatch"
 ESTIMATE_BATCH = f"{MSG_PACKAGE}/msg/EstimateBatch"
 METEO = f"{MSG_PACKAGE}/msg/Meteo"
+CONJUNCTION_BATCH = f"{MSG_PACKAGE}/msg/ConjunctionBatch"
 
 
 class BagError(RuntimeError):
@@ -124,7 +127,8 @@ def rosbags_classes() -> MsgClasses:
                       t[f"{MSG_PACKAGE}/msg/Measurement"], t[f"{MSG_PACKAGE}/msg/StateEstimate"],
                       t[f"{MSG_PACKAGE}/msg/MeasurementBatch"],
                       t[f"{MSG_PACKAGE}/msg/EstimateBatch"], numpy_arrays=True,
-                      meteo=t[f"{MSG_PACKAGE}/msg/Meteo"])
+                      meteo=t[f"{MSG_PACKAGE}/msg/Meteo"],
+                      conjunction_batch=t[CONJUNCTION_BATCH])
 
 
 class BagFullError(OSError):
@@ -337,6 +341,20 @@ def _decode(deserialize: Callable[[bytes, str], Message], data: bytes, msgtype: 
         return None
 
 
+def _mcap_message(store: Typestore, path: Path, schema: Schema | None, topic: str, data: bytes,
+                  log_time: int, undecodable: Counter[str] | None) -> BagMessage | None:
+    """Return one MCAP record of `topic` as a `BagMessage` (None: its bytes do not decode).
+
+    `store`: the rosbags type store; `schema`: the record's MCAP schema (None: it has none).
+    BagError for a schema the store does not know.
+    """
+    if schema is None or schema.name not in store.fielddefs:
+        name = schema.name if schema else "(no schema)"
+        raise BagError(f"{path}: topic {topic} has unknown type {name}")
+    msg = _decode(store.deserialize_cdr, data, schema.name, topic, undecodable)
+    return None if msg is None else BagMessage(topic, schema.name, log_time, msg)
+
+
 def _read_mcap_file(path: Path, wanted: set[str] | None,
                     undecodable: Counter[str] | None = None) -> Iterator[BagMessage]:
     """Return the messages of a bare MCAP file (ROS 2 profile, CDR).
@@ -354,13 +372,10 @@ def _read_mcap_file(path: Path, wanted: set[str] | None,
                     topics=list(wanted) if wanted is not None else None, log_time_order=True):
                 if channel.message_encoding != "cdr":
                     raise BagError(f"{path}: topic {channel.topic} is not CDR encoded")
-                if schema is None or schema.name not in store.fielddefs:
-                    name = schema.name if schema else "(no schema)"
-                    raise BagError(f"{path}: topic {channel.topic} has unknown type {name}")
-                msg = _decode(store.deserialize_cdr, message.data, schema.name, channel.topic,
-                              undecodable)
-                if msg is not None:
-                    yield BagMessage(channel.topic, schema.name, message.log_time, msg)
+                got = _mcap_message(store, path, schema, channel.topic, message.data,
+                                    message.log_time, undecodable)
+                if got is not None:
+                    yield got
     except BagError:
         raise
     except (McapError, OSError, ValueError, EOFError) as exc:
@@ -406,14 +421,10 @@ def _recover_mcap_file(path: Path, wanted: set[str] | None,
         channel = found.channels.get(record.channel_id)
         if channel is None or (wanted is not None and channel.topic not in wanted):
             continue
-        schema = found.schemas.get(channel.schema_id)
-        if schema is None or schema.name not in store.fielddefs:
-            name = schema.name if schema else "(no schema)"
-            raise BagError(f"{path}: topic {channel.topic} has unknown type {name}")
-        msg = _decode(store.deserialize_cdr, record.data, schema.name, channel.topic,
-                      undecodable)
-        if msg is not None:
-            out.append(BagMessage(channel.topic, schema.name, record.log_time, msg))
+        got = _mcap_message(store, path, found.schemas.get(channel.schema_id), channel.topic,
+                            record.data, record.log_time, undecodable)
+        if got is not None:
+            out.append(got)
     out.sort(key=lambda m: m.t_ns)
     yield from out
 

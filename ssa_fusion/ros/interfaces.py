@@ -24,6 +24,7 @@ from rcl_interfaces.msg import (  # type: ignore[import-untyped]
 from rosgraph_msgs.msg import Clock  # type: ignore[import-untyped]
 from sensor_msgs.msg import NavSatFix, NavSatStatus  # type: ignore[import-untyped]
 from ssa_fusion_msgs.msg import (  # type: ignore[import-untyped]
+    ConjunctionBatch,
     EstimateBatch,
     Measurement,
     MeasurementBatch,
@@ -36,7 +37,8 @@ from visualization_msgs.msg import Marker, MarkerArray  # type: ignore[import-un
 Message: TypeAlias = Any
 """A ROS message instance (of an rclpy class or a rosbags dataclass): untyped."""
 
-__all__ = ["Clock", "ColorRGBA", "DiagnosticArray", "DiagnosticStatus", "EstimateBatch",
+__all__ = ["Clock", "ColorRGBA", "ConjunctionBatch", "DiagnosticArray", "DiagnosticStatus",
+           "EstimateBatch",
            "Header", "KeyValue", "Marker", "MarkerArray", "Measurement", "MeasurementBatch",
            "Message", "Meteo", "NavSatFix", "NavSatStatus",
            "ParameterDescriptor", "Point", "SetParametersResult", "StateEstimate", "String",

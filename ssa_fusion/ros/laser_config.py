@@ -115,7 +115,9 @@ def _from_json(body: dict[str, Any]) -> LaserConfig:
             float(s["wavelength_m"]) * 1e6, str(s["name"]))
         c.bias_km[sid] = float(s["range_bias_m"]) / KM
         c.bias_sigma_km[sid] = float(s["range_bias_sigma_m"]) / KM
+    c.meta = {k: v for k, v in body.items() if k not in ("stations", "objects")}
     for oid, o in body["objects"].items():
         c.com_km[oid] = float(o["com_offset_m"]) / KM
-    c.meta = {k: v for k, v in body.items() if k not in ("stations", "objects")}
+        c.meta.setdefault("objects", {})[oid] = {k: v for k, v in o.items()
+                                                 if k != "com_offset_m"}
     return c

@@ -156,7 +156,10 @@ def _chunk_fields(content: bytes) -> tuple[int, int, int, int, str, bytes] | Non
         records = content[pos + 8:]
     except (struct.error, UnicodeDecodeError):
         return None
-    if compression not in COMPRESSIONS or m != len(records) or start > end:
+    # a chunk of schemas and channels only (a flush before the first message) carries no
+    # time range: rosbags writes (2**63 - 1, 0) there
+    no_messages = (start, end) == (2**63 - 1, 0)
+    if compression not in COMPRESSIONS or m != len(records) or (start > end and not no_messages):
         return None
     if compression == "" and size != m:
         return None

@@ -26,6 +26,7 @@ from ssa_fusion.core.earth.timescales import EPOCH_MAX, iso
 from ssa_fusion.core.measure.troposphere import MeteoSample
 
 if TYPE_CHECKING:  # the message packages are imported when first needed (`rclpy_classes`)
+    from ssa_fusion.core.conjunction.watch import WatchUpdate
     from ssa_fusion.ros.interfaces import Message
 
 KM = 1000.0
@@ -71,11 +72,13 @@ class MsgClasses:
     estimate_batch: type[Message]
     numpy_arrays: bool = False
     meteo: type[Message] | None = None
+    conjunction_batch: type[Message] | None = None
 
 
 def rclpy_classes() -> MsgClasses:
     """Return the rclpy message classes (imported on the first call)."""
     from ssa_fusion.ros.interfaces import (
+        ConjunctionBatch,
         EstimateBatch,
         Header,
         Measurement,
@@ -86,7 +89,7 @@ def rclpy_classes() -> MsgClasses:
     )
 
     return MsgClasses(Time, Header, Measurement, StateEstimate, MeasurementBatch,
-                      EstimateBatch, meteo=Meteo)
+                      EstimateBatch, meteo=Meteo, conjunction_batch=ConjunctionBatch)
 
 
 _RCLPY: MsgClasses | None = None
@@ -165,6 +168,8 @@ def recode(msg: Message, msgtype: str, classes: MsgClasses | None = None) -> Mes
         return measurement_to_msg(measurement_from_msg(msg), classes)
     if msgtype == "ssa_fusion_msgs/msg/StateEstimate":
         return estimate_to_msg(estimate_from_msg(msg), classes)
+    if msgtype == "ssa_fusion_msgs/msg/Meteo":
+        return meteo_to_msg(meteo_from_msg(msg), classes)
     return msg
 
 
@@ -245,13 +250,17 @@ def meteo_from_msg(msg: Message) -> MeteoSample:
 
 
 def estimate_to_msg(e: types.StateEstimate, classes: MsgClasses | None = None) -> Message:
-    """Return core StateEstimate `e` (km, km/s) as an ssa_fusion_msgs/StateEstimate (m, m/s)."""
+    """Return core StateEstimate `e` (km, km/s) as an ssa_fusion_msgs/StateEstimate (m, m/s).
+
+    The message holds the orbit: a filter's further states (a laser filter's range biases
+    and k_R after ``[r, v]``) stay out of it.
+    """
     c = _default(classes)
     return c.estimate(
         header=c.header(stamp=seconds_to_stamp(e.t, c), frame_id=Frame.GCRF),
         object_id=e.object_id,
-        state=np.asarray(e.x, dtype=float) * _X_SCALE,
-        covariance=(np.asarray(e.P, dtype=float) * KM * KM).ravel(),
+        state=np.asarray(e.x, dtype=float)[:6] * _X_SCALE,
+        covariance=(np.asarray(e.P, dtype=float)[:6, :6] * KM * KM).ravel(),
         update_source=int(e.update_source),
         nis=float(e.nis),
         shard_key=shard_key(e.object_id),
@@ -425,3 +434,69 @@ def estimate_batch_from_msg(msg: Message) -> EstimateRows:
     return EstimateRows(t=ns_to_seconds(ns), object_id=list(msg.object_id),
                         x=x.reshape(m, 6) / _X_SCALE, P=cov.reshape(m, 6, 6) / (KM * KM),
                         nis=nis, update_source=source, shard_key=key)
+
+
+def conjunction_batch_to_msg(update: WatchUpdate, stamp: float,
+                             classes: MsgClasses | None = None) -> Message:
+    """Return a re-screening (km, km/s) as an ssa_fusion_msgs/ConjunctionBatch (m, m/s).
+
+    ``stamp``: the header's epoch (Unix s), the newest estimate screened. The approaches
+    must carry both covariances (ValueError otherwise, or for an epoch a ROS 2 Time cannot
+    carry).
+    """
+    c = _default(classes)
+    if c.conjunction_batch is None:
+        raise ValueError("these message classes have no ssa_fusion_msgs/ConjunctionBatch")
+    a = update.approaches
+    if a.p1 is None or a.p2 is None:
+        raise ValueError("a ConjunctionBatch carries both covariances: these have none")
+    pc = np.where(update.log10_pc > -300.0, 10.0 ** np.maximum(update.log10_pc, -300.0), 0.0)
+    return c.conjunction_batch(
+        header=c.header(stamp=seconds_to_stamp(stamp, c), frame_id=Frame.GCRF),
+        screened_id=list(update.screened),
+        window_start_ns=int(stamps_ns(np.array([update.window[0]]))[0]),
+        window_end_ns=int(stamps_ns(np.array([update.window[1]]))[0]),
+        screening_distance=float(update.distance_km) * KM,
+        hard_body_radius=float(update.hbr_km) * KM,
+        primary_id=a.primary_ids, secondary_id=a.secondary_ids,
+        tca_ns=_column(stamps_ns(a.tca), "q", c),
+        miss_distance=_column(a.miss_km * KM, "d", c),
+        relative_state_rtn=_column(a.relative_rtn() * KM, "d", c),
+        primary_state=_column(a.x1 * KM, "d", c), secondary_state=_column(a.x2 * KM, "d", c),
+        primary_covariance=_column(a.p1 * KM * KM, "d", c),
+        secondary_covariance=_column(a.p2 * KM * KM, "d", c),
+        pc=_column(np.minimum(pc, 1.0), "d", c), log10_pc=_column(update.log10_pc, "d", c))
+
+
+def conjunction_batch_from_msg(msg: Message) -> WatchUpdate:
+    """Return an ssa_fusion_msgs/ConjunctionBatch (m, m/s) as a `WatchUpdate` (km, km/s).
+
+    The approaches' ``object_ids`` are the batch's objects (screened first, then the
+    others in order of appearance). ValueError (one line) when its columns disagree.
+    """
+    from ssa_fusion.core.conjunction.close_approach import CloseApproaches  # the screening's
+    from ssa_fusion.core.conjunction.watch import WatchUpdate  # imports: only where used
+
+    m = len(msg.primary_id)
+    cols = {"secondary_id": msg.secondary_id, "tca_ns": msg.tca_ns,
+            "miss_distance": msg.miss_distance, "primary_state": msg.primary_state,
+            "secondary_state": msg.secondary_state,
+            "primary_covariance": msg.primary_covariance,
+            "secondary_covariance": msg.secondary_covariance, "log10_pc": msg.log10_pc}
+    _check_rows(m, cols, {"primary_state": 6, "secondary_state": 6,
+                          "primary_covariance": 36, "secondary_covariance": 36})
+    ids = list(dict.fromkeys([*msg.screened_id, *msg.primary_id, *msg.secondary_id]))
+    index = {o: k for k, o in enumerate(ids)}
+    x1 = np.asarray(msg.primary_state, dtype=float).reshape(m, 6) / KM
+    x2 = np.asarray(msg.secondary_state, dtype=float).reshape(m, 6) / KM
+    a = CloseApproaches(
+        tuple(ids), np.array([index[o] for o in msg.primary_id], dtype=np.int64),
+        np.array([index[o] for o in msg.secondary_id], dtype=np.int64),
+        ns_to_seconds(np.asarray(msg.tca_ns, dtype=np.int64)),
+        np.asarray(msg.miss_distance, dtype=float) / KM, x1, x2,
+        np.asarray(msg.primary_covariance, dtype=float).reshape(m, 6, 6) / (KM * KM),
+        np.asarray(msg.secondary_covariance, dtype=float).reshape(m, 6, 6) / (KM * KM))
+    window = ns_to_seconds(np.array([msg.window_start_ns, msg.window_end_ns], dtype=np.int64))
+    return WatchUpdate(list(msg.screened_id), a, np.asarray(msg.log10_pc, dtype=float),
+                       (float(window[0]), float(window[1])),
+                       float(msg.screening_distance) / KM, float(msg.hard_body_radius) / KM)

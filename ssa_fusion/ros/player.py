@@ -1,9 +1,9 @@
 """Play bag messages into a ROS graph with a `/clock` derived from their stamps.
 
 As `ros2 bag play --clock` does: `rate` sim seconds per wall second, reliable publishers,
-start only when the caller says the subscribers are there. Measurements and estimates one a
-message, and a catalog's MeasurementBatch (stamped with its last row's epoch, published with
-the catalog QoS and its recorded key range).
+start only when the caller says the subscribers are there. Measurements, estimates and
+meteorological records one a message, and a catalog's MeasurementBatch (stamped with its
+last row's epoch, published with the catalog QoS and its recorded key range).
 """
 
 from __future__ import annotations
@@ -42,7 +42,9 @@ class Player:
             msgtype = next(m.msgtype for m in stream if m.topic == topic)
             cls = {bagio.MEASUREMENT: self.classes.measurement,
                    bagio.STATE_ESTIMATE: self.classes.estimate,
-                   bagio.MEASUREMENT_BATCH: self.classes.measurement_batch}[msgtype]
+                   bagio.MEASUREMENT_BATCH: self.classes.measurement_batch,
+                   bagio.METEO: self.classes.meteo}[msgtype]
+            assert cls is not None  # Meteo: rclpy's classes have it
             qos = (CATALOG_WRITER_QOS if msgtype == bagio.MEASUREMENT_BATCH
                    else DATA_WRITER_QOS)
             self.pubs[topic] = node.create_publisher(cls, topic, qos)

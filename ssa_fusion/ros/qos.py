@@ -13,19 +13,17 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from ssa_fusion.ros.topics import CATALOG_DEPTH, DATA_DEPTH
 
-DATA_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=DATA_DEPTH,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
 
-CATALOG_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=CATALOG_DEPTH,
-    reliability=ReliabilityPolicy.RELIABLE,
-    durability=DurabilityPolicy.VOLATILE,
-)
+def reliable_stream(depth: int) -> QoSProfile:
+    """Return the QoS of a data stream: reliable, volatile, the last `depth` messages kept."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+DATA_QOS = reliable_stream(DATA_DEPTH)
+
+CATALOG_QOS = reliable_stream(CATALOG_DEPTH)
 
 WRITER_LIVELINESS_LEASE_S = 86_400.0
 """Liveliness lease (wall s) every data writer offers (`writer_qos`); readers keep the default

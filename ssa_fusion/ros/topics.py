@@ -40,6 +40,9 @@ GCRF, zero covariance), e.g. a CPF prediction (`ssa-fusion import crd --referenc
 TOPIC_RUN = "/ssa/run"
 """The run a bag holds (std_msgs/String, JSON ``{"run": id, "namespace": ns}``): written by
 the recorder itself, once, at the first /clock; never published (`ros.run_identity`)."""
+TOPIC_CONJUNCTIONS = "/ssa/conjunctions"
+"""Close approaches of a catalog (ssa_fusion_msgs/ConjunctionBatch): each re-screening of
+the objects whose estimates changed (the conjunction node)."""
 TOPIC_DIAGNOSTICS = "/diagnostics"
 TOPIC_CONFIG = "/ssa/config"
 """The estimator settings in effect (std_msgs/String, JSON of `params.settings.config_message`),

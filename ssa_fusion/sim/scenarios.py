@@ -27,6 +27,7 @@ from ssa_fusion.core.filter.options import FilterOptions
 from ssa_fusion.core.gaps import estimator as config
 from ssa_fusion.core.gaps.estimator import EstimatorConfig, Lift
 from ssa_fusion.core.gaps.surrogate import LIVE_SURROGATE
+from ssa_fusion.core.measure.laser_model import LaserModels
 from ssa_fusion.core.measure.measurement import PositionModel, RadecModel, RazelModel, StationModels
 from ssa_fusion.core.motion import dynamics
 
@@ -319,7 +320,7 @@ def measurement_model(s: Scenario) -> PositionModel | RazelModel | RadecModel:
     ValueError when its station names a network: a scenario is measured from one station.
     """
     model = config.measurement_model(s.estimator())
-    if isinstance(model, StationModels):
+    if isinstance(model, StationModels | LaserModels):
         raise ValueError(f"scenario {s.name!r}: station {s.station!r} is a network; a "
                          "scenario is measured from one station")
     return model

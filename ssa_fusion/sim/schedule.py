@@ -34,6 +34,7 @@ from ssa_fusion.core.earth.frames import Frame
 from ssa_fusion.formats import element_sets
 from ssa_fusion.sim import scenarios, sky, survey
 from ssa_fusion.sim.simulate import Simulation, simulate
+from ssa_fusion.sim.world import TruthModel
 
 
 class Event(enum.IntEnum):
@@ -112,7 +113,12 @@ class SimSettings:
         A paper scenario's noise standard deviation per channel in the core's units (km,
         rad); None: the scenario's.
     seed : int
-        Noise random seed.
+        Noise random seed (and a high-fidelity world's space weather).
+    truth : str
+        Real sky: the object's truth (`world.TruthModel`).
+    geometry_seed : int
+        Real sky: turn the orbit as case ``geometry_seed`` (`sky.case_geometry`); -1: the
+        scenario's own orbit.
     catalog : str
         Element sets of the objects to simulate instead of one ('' = none).
     objects, synthetic : int
@@ -130,6 +136,8 @@ class SimSettings:
     after_gap: float = 0.0
     noise_sigma: tuple[float, ...] | None = None
     seed: int = 0
+    truth: str = "sgp4"
+    geometry_seed: int = -1
     catalog: str = ""
     objects: int = 0
     synthetic: int = 0
@@ -264,17 +272,27 @@ def sky_plan(real_sky: sky.SkyScenario, s: SimSettings) -> Plan:
     t0 = real_sky.t0 if s.start is None else s.start
     span = s.duration or real_sky.duration_s
     check_window(t0, span)  # what with_window would refuse, as a parameter error
-    run = real_sky.with_window(t0, span).with_(truth_cadence_s=s.cadence)
+    run = real_sky.with_window(t0, span).with_(
+        truth_cadence_s=s.cadence, truth=TruthModel(s.truth),
+        world=real_sky.world.with_(weather_seed=s.seed))
+    if s.geometry_seed >= 0:
+        try:
+            run = run.with_geometry(*sky.case_geometry(s.geometry_seed))
+        except ValueError as exc:
+            raise ScheduleError(f"parameter 'geometry_seed': {exc}") from exc
     if list(s.gaps) != [0.0]:
         run = run.with_(outages=tuple((sky.ALL_STATIONS, s.gaps[i], s.gaps[i + 1])
                                       for i in range(0, len(s.gaps), 2)))
-    sim = sky.simulate_sky(run, seed=s.seed, object_id=s.object_id)
+    try:
+        sim = sky.simulate_sky(run, seed=s.seed, object_id=s.object_id)
+    except ValueError as exc:
+        raise ScheduleError(f"cannot simulate scenario {real_sky.name!r}: {exc}") from exc
     schedule = sky_schedule(sim, s.object_id)
     return Plan(schedule, None, np.array([e[0] for e in schedule]),
                 f"{len(sim.measurements)} measurements ({int(sim.withheld.sum())} withheld) "
                 f"from {', '.join(run.sensors)} from {timescales.iso(run.t0)} over "
                 f"{run.duration_s / 3600:g} h, truth every "
-                f"{s.cadence} s, outages {list(run.outages)}")
+                f"{s.cadence} s, outages {list(run.outages)}, {run.truth} truth")
 
 
 def catalog_plan(real_sky: sky.SkyScenario, s: SimSettings) -> Plan:

@@ -3,11 +3,14 @@
 A `SkyScenario` puts a network of sensors (`core.earth.stations.SENSORS`: radars measuring range,
 azimuth and elevation; optical sites measuring right ascension and declination at night, of
 a sunlit object) under an object whose truth is SGP4 with the drag term of a real element
-set. The natural gaps are those between passes (hours, in low orbit); on top of them a
-scheduled outage of one station or of the whole network withholds what it would have
-measured (the hypothetical arm fuses it). The truth is sampled at a regular cadence through
-every gap, where `evaluation.passes` and `evaluation.arms` score a filter (the study that runs
-both is `studies.sky_runs`).
+set, or (`SkyScenario.truth` = `world.TruthModel.HIGH_FIDELITY`) the numerical propagation
+of a world richer than any filter's model (`world`: EGM96 20 x 20, the Sun and the Moon,
+solar radiation pressure, NRLMSISE-00's air under synthetic space weather, optionally
+unannounced manoeuvres). The natural gaps are those between passes (hours, in low orbit); on
+top of them a scheduled outage of one station or of the whole network withholds what it
+would have measured (the hypothetical arm fuses it). The truth is sampled at a regular
+cadence through every gap, where `evaluation.passes` and `evaluation.arms` score a filter
+(the study that runs both is `studies.sky_runs`).
 
 Optical sites and the seasons: an optical site sees an object only while the site is dark
 (Sun below -12 deg) and the object sunlit and above the 20 deg mask. A 400 km orbit is
@@ -43,6 +46,7 @@ from ssa_fusion.core.motion.element_sets import CatalogEntry, catalog_states
 from ssa_fusion.formats import element_sets as catalog
 from ssa_fusion.formats import sites as site_file
 from ssa_fusion.sim.scenarios import ISS_BSTAR, ISS_ELEMENTS, ORBIT_EPOCH_UNIX
+from ssa_fusion.sim.world import TruthModel, World, world_truth
 
 SKY_Q = SKY_FILTER.noise.q
 """Process noise of the real-sky filters (`filter_options.SKY_FILTER`'s), (km/s^2)^2 s: 1e-13,
@@ -128,6 +132,11 @@ class SkyScenario:
     site_pool
         Sensor ids a study case may observe with instead of `sensors` (`network_choices`,
         `with_sensors`); empty (a single station): the case keeps `sensors`.
+    truth
+        The object's truth: SGP4 (`bstar`; an element set's own) or the high-fidelity
+        world (`world`).
+    world
+        What acts on the object in a high-fidelity truth (`world.World`).
     """
 
     name: str
@@ -155,6 +164,8 @@ class SkyScenario:
     elements_file: str = ""
     standard_magnitude: float = ISS_STANDARD_MAGNITUDE
     site_pool: tuple[str, ...] = ()
+    truth: TruthModel = TruthModel.SGP4
+    world: World = field(default_factory=World)
 
     def sensor(self, name: str) -> Sensor:
         """Return sensor `name`: a site of the scenario's sites file, else a built-in preset."""
@@ -293,6 +304,10 @@ class SkyScenario:
 
 
 _DAY = 86400.0
+SSO_WORLD = World(area_to_mass=0.01, cr=1.3, bc=60.0)
+"""The high-fidelity world of leo_optical's 800 km object: a small satellite (A/m 0.01
+m^2/kg, ballistic coefficient 60 kg/m^2); the ISS scenarios' is `world.World`'s default
+(A/m 0.004 m^2/kg, 120 kg/m^2: ~420 t, Cd 2.2, ~1600 m^2)."""
 NETWORK_SENSORS = ("millstone", "tira", "altair", "socorro", "maui", "diego_garcia")
 """The radar + optical network of `iss_network`: three radars and the three GEODSS sites."""
 SITE_POOL = ("millstone", "tira", "altair", "goldstone", "fylingdales", "socorro", "maui",
@@ -333,6 +348,7 @@ SKY_SCENARIOS: dict[str, SkyScenario] = {
             site_pool=TWILIGHT_SITE_POOL,
             x0=tuple(dynamics.elements_to_state(**SSO_ELEMENTS)),
             outages=(("maui", 1.0 * _DAY, 1.0 * _DAY),), gap_fill=GapFill.FIT_RESIDUAL,
+            world=SSO_WORLD,
             finding="optical sites only, a sun-synchronous LEO object: twilight passes"),
     ]
 }
@@ -363,6 +379,44 @@ class SkySimulation:
         return [m for m, w in zip(self.measurements, self.withheld, strict=True) if w]
 
 
+RAAN_SPREAD_DEG = 15.0
+"""How far (deg, either way) a seeded case turns its orbit's plane about the pole: far
+enough that the passes and the gaps differ from seed to seed, near enough that a scenario
+keeps its character (leo_optical's plane near the terminator, where optical sites see it)."""
+
+
+def case_geometry(seed: int) -> tuple[float, float]:
+    """Return the orbit turn of case `seed`: (node shift, phase shift), rad.
+
+    The node shift uniform in +-`RAAN_SPREAD_DEG`, the phase uniform in [0, 360) deg, from a
+    generator of its own (the measurement noise of `seed` is not disturbed).
+    """
+    rng = np.random.default_rng([seed, 7])
+    return (math.radians(rng.uniform(-RAAN_SPREAD_DEG, RAAN_SPREAD_DEG)),
+            rng.uniform(0.0, 2.0 * math.pi))
+
+
+def case_start_offset_s(seed: int) -> float:
+    """Return the start offset of live case `seed`: whole minutes uniform in [0, 24) h, s.
+
+    From a generator of its own (neither the noise nor the turn of `seed` is disturbed).
+    """
+    return 60.0 * float(np.random.default_rng([seed, 29]).integers(0, 24 * 60))
+
+
+def seeded_case(s: SkyScenario, seed: int) -> SkyScenario:
+    """Return scenario `s` from a start and with an orbit of its own for seed `seed`.
+
+    Its start `case_start_offset_s` later, its orbit turned (`case_geometry`), the world's
+    space weather drawn from `seed`: what `ssa-fusion live --seed` runs unless
+    ``--same-geometry``. An element set's object keeps its orbit (ValueError from
+    `SkyScenario.with_geometry`).
+    """
+    moved = s.with_window(s.t0 + case_start_offset_s(seed), s.duration_s)
+    return moved.with_geometry(*case_geometry(seed)).with_(
+        world=s.world.with_(weather_seed=seed))
+
+
 def _rotation(axis: np.ndarray, angle_rad: float) -> np.ndarray:
     """Return the 3x3 rotation by `angle_rad` about the unit vector `axis` (Rodrigues)."""
     k = np.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]],
@@ -374,10 +428,18 @@ def _rotation(axis: np.ndarray, angle_rad: float) -> np.ndarray:
 def truth(s: SkyScenario, t: np.ndarray) -> np.ndarray:
     """Return the true GCRF states (len(t), 6) at Unix epochs `t`.
 
-    SGP4/SDP4 of the scenario's element set (`SkyScenario.with_elements`), else SGP4
-    from `x0` at `t0` with the scenario's bstar. ValueError when SGP4 cannot propagate the
-    element set to an epoch (a decayed object).
+    High-fidelity truth (`SkyScenario.truth`): the world's propagation from the object's
+    state at `t0` (`x0`, or its element set's SGP4/SDP4 state there), tabulated once per
+    scenario (`world.world_truth`). SGP4 truth: SGP4/SDP4 of the scenario's element set
+    (`SkyScenario.with_elements`), else SGP4 from `x0` at `t0` with the scenario's bstar.
+    ValueError when SGP4 cannot propagate the element set to an epoch (a decayed object),
+    or the world's truth cannot be propagated.
     """
+    if s.truth == TruthModel.HIGH_FIDELITY:
+        x0 = s.x0 if s.element_set is None else tuple(
+            catalog_states([s.element_set], np.array([s.t0])).x[0, 0].tolist())
+        return world_truth(tuple(float(v) for v in x0), float(s.t0), float(s.duration_s),
+                           s.world).states(np.asarray(t, float))
     if s.element_set is not None:
         x: np.ndarray = catalog_states([s.element_set], np.asarray(t, float)).x[0]
         if not np.isfinite(x).all():

@@ -17,11 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ssa_fusion.core.gaps.residual import (
+from ssa_fusion.core.gaps.residual import ResidualConfig, fit_window
+from ssa_fusion.core.gaps.residual_frame import (
     Propagator,
-    ResidualConfig,
     apply_residual,
-    fit_window,
     to_eci_covariance,
 )
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 import time
 from collections import defaultdict
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -32,7 +32,7 @@ from ssa_fusion.core.catalog.gap_bank import GapBank, GapBankConfig, GapForecast
 from ssa_fusion.core.catalog.track_bank import TrackBank
 from ssa_fusion.core.earth.timescales import DAY_S, UNIX_EPOCH_JD
 from ssa_fusion.core.filter.options import FilterOptions
-from ssa_fusion.core.gaps import residual
+from ssa_fusion.core.gaps import residual_frame
 from ssa_fusion.core.gaps.forecaster import PLACEHOLDER_TRAJECTORY
 from ssa_fusion.core.gaps.publisher import GapFill
 from ssa_fusion.core.measure.measurement import StationModels
@@ -79,7 +79,7 @@ def gap_errors(entries: list[CatalogEntry], estimates: States, forecasts: States
         return {"gaps": 0, "forecasts": 0}
     pick = np.unique(np.linspace(0, len(gaps) - 1, min(max_gaps, len(gaps))).astype(int))
     by_id = {e.object_id: e for e in entries}
-    coast = residual.orbit_propagator(PLACEHOLDER_TRAJECTORY[MotionModel(motion_model)])
+    coast = residual_frame.orbit_propagator(PLACEHOLDER_TRAJECTORY[MotionModel(motion_model)])
     e_fc, e_coast, better = [], [], 0
     for i in pick.tolist():
         oid, t0, x0, tf, rf = gaps[i]
@@ -255,13 +255,10 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
     wall = _FrozenWall()
     base = gap_config or GapBankConfig(motion_model=MotionModel(s.motion_model))
     model = StationModels(stations, UNIX_EPOCH_JD)
-    arms = {GapFill(f): GapBank(replace(base, gap_forecast=GapFill(f)), wall=wall, model=model)
+    arms = {GapFill(f): _Arm(GapBank(replace(base, gap_forecast=GapFill(f)), wall=wall,
+                                     model=model))
             for f in gap_forecasts}
     estimates: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
-    forecasts: dict[GapFill, dict[str, list[tuple[float, np.ndarray]]]] = {
-        f: defaultdict(list) for f in arms}
-    made: dict[GapFill, list[GapForecast]] = {f: [] for f in arms}
-    c_fit = dict.fromkeys(arms, 0.0)
     c_filter = 0.0
     measurements = 0
     for step in estimate_batches(entries, s, hours, seed, batch_s):
@@ -269,47 +266,76 @@ def offline_run(seed: int, objects: int, hours: float, scenario: str = "iss_netw
         measurements += len(step.rows) if step.rows is not None else 0
         for j, (oid, t) in enumerate(step.fused):
             estimates[oid].append((t, step.x[j]))
-        for f, gaps in arms.items():
-            c = time.perf_counter()
-            if step.rows is not None:
-                gaps.on_measurements(step.rows)
-            for j, (oid, t) in enumerate(step.fused):
-                for g in gaps.on_estimate(oid, t, step.x[j], step.P[j]):
-                    forecasts[f][g.object_id].append((g.t, g.x))
-                    made[f].append(g)
-            c_fit[f] += time.perf_counter() - c
+        for arm in arms.values():
+            arm.take(step)
         wall.now += 1.0
-        for f, gaps in arms.items():
-            c = time.perf_counter()
-            for g in gaps.step(step.now):
-                forecasts[f][g.object_id].append((g.t, g.x))
-                made[f].append(g)
-            c_fit[f] += time.perf_counter() - c
-    shared = set.intersection(*({(o, t) for o, r in by_arm.items() for t, _ in r}
-                                for by_arm in forecasts.values()))
+        for arm in arms.values():
+            arm.advance(step.now)
+    shared = set.intersection(*({(o, t) for o, r in arm.forecasts.items() for t, _ in r}
+                                for arm in arms.values()))
     est = states_of(estimates)
-    scores = {}
-    for f, gaps in arms.items():
-        n_fits = gaps.counts["fitted"]
-        fc = states_of(forecasts[f])
-        one = gap_errors(entries, est, fc, s.motion_model, max_gaps)
-        one.update({"gap_forecast": str(f), "fits_made": n_fits,
-                    "fits_physics": gaps.counts["fitted_physics"],
-                    "fits_refused": gaps.counts["refused"], "surrogate_wall_s": c_fit[f],
-                    "surrogate_wall_s_per_object": c_fit[f] / objects,
-                    "window_bytes_per_object": gaps.windows.nbytes() / objects,
-                    "wall_s_per_fit": c_fit[f] / n_fits if n_fits else None,
-                    "nees": forecast_nees(entries, made[f]) if made[f] else None,
-                    "coverage": gap_coverage(est, fc, t_first, t_first + 3600.0 * hours,
-                                             base.pass_break_s)})
-        scores[str(f)] = one
+    coverage_window = (t_first, t_first + 3600.0 * hours, base.pass_break_s)
+    scores = {str(f): arm.scores(entries, est, s.motion_model, max_gaps, objects,
+                                 coverage_window)
+              for f, arm in arms.items()}
     common = {str(f): gap_errors(entries, est,
                                  states_of({o: [r for r in rows if (o, r[0]) in shared]
-                                            for o, rows in forecasts[f].items()}),
-                                 s.motion_model, max_gaps) for f in arms}
+                                            for o, rows in arm.forecasts.items()}),
+                                 s.motion_model, max_gaps) for f, arm in arms.items()}
     out = dict(scores[str(next(iter(arms)))])
     out.update({"seed": seed, "objects": objects, "hours": hours, "measurements": measurements,
                 "estimates": sum(len(v) for v in estimates.values()),
                 "filter_wall_s_per_object": c_filter / objects,
                 "arms": scores, "common": common})
     return out
+
+
+class _Arm:
+    """One arm of `offline_run`: its gap bank, the forecasts it made and its wall time, s."""
+
+    def __init__(self, bank: GapBank) -> None:
+        self.bank = bank
+        self.forecasts: dict[str, list[tuple[float, np.ndarray]]] = defaultdict(list)
+        self.made: list[GapForecast] = []
+        self.wall_s = 0.0
+
+    def _keep(self, made: Iterable[GapForecast]) -> None:
+        for g in made:
+            self.forecasts[g.object_id].append((g.t, g.x))
+            self.made.append(g)
+
+    def take(self, step: EstimateStep) -> None:
+        """Give the bank a step's measurements and estimates; keep the forecasts it makes."""
+        c = time.perf_counter()
+        if step.rows is not None:
+            self.bank.on_measurements(step.rows)
+        for j, (oid, t) in enumerate(step.fused):
+            self._keep(self.bank.on_estimate(oid, t, step.x[j], step.P[j]))
+        self.wall_s += time.perf_counter() - c
+
+    def advance(self, now: float) -> None:
+        """Let the bank fit and forecast up to `now` (Unix s); keep the forecasts."""
+        c = time.perf_counter()
+        self._keep(self.bank.step(now))
+        self.wall_s += time.perf_counter() - c
+
+    def scores(self, entries: list[CatalogEntry], est: States, motion_model: str,
+               max_gaps: int, objects: int,
+               coverage_window: tuple[float, float, float]) -> dict[str, Any]:
+        """Return the arm's scores (`offline_run`).
+
+        ``coverage_window``: `gap_coverage`'s start and end (Unix s) and pass break (s).
+        """
+        gaps = self.bank
+        n_fits = gaps.counts["fitted"]
+        fc = states_of(self.forecasts)
+        one = gap_errors(entries, est, fc, motion_model, max_gaps)
+        one.update({"gap_forecast": str(gaps.config.gap_forecast), "fits_made": n_fits,
+                    "fits_physics": gaps.counts["fitted_physics"],
+                    "fits_refused": gaps.counts["refused"], "surrogate_wall_s": self.wall_s,
+                    "surrogate_wall_s_per_object": self.wall_s / objects,
+                    "window_bytes_per_object": gaps.windows.nbytes() / objects,
+                    "wall_s_per_fit": self.wall_s / n_fits if n_fits else None,
+                    "nees": forecast_nees(entries, self.made) if self.made else None,
+                    "coverage": gap_coverage(est, fc, *coverage_window)})
+        return one

@@ -46,11 +46,12 @@ import numpy as np
 from ssa_fusion.core.base.metrics import chi2_bounds
 from ssa_fusion.core.base.types import Measurement, Source, StateEstimate, UpdateSource
 from ssa_fusion.core.earth.timescales import DAY_S, UNIX_EPOCH_JD
-from ssa_fusion.core.gaps import residual
+from ssa_fusion.core.gaps import residual, residual_frame
 from ssa_fusion.core.gaps.batch_gap import fit_passes, gap_window
 from ssa_fusion.core.gaps.estimator import measurement_model
 from ssa_fusion.evaluation import arms, passes
 from ssa_fusion.sim import sky
+from ssa_fusion.sim.world import TruthModel
 from ssa_fusion.studies import bopdmd, sky_runs, sky_study
 
 KEPLER_Q = 1e-7
@@ -122,6 +123,7 @@ class Case:
     variants: tuple[tuple[str, residual.ResidualConfig], ...]
     bopdmd: bool = True
     fit_anchors: bool = False
+    truth: str = "sgp4"
 
 
 def _anchors(estimates: Mapping[float, StateEstimate],
@@ -161,7 +163,7 @@ def run_placeholder(sim: sky.SkySimulation, placeholder: str,
     c = s.estimator()
     run = sky_runs.run_dmd_ekf(replace(sim, scenario=s))
     est = run.estimates if not run.forecasts else arms.run_filter(c, sim.real)
-    prop = residual.orbit_propagator(dyn)
+    prop = residual_frame.orbit_propagator(dyn)
     surrogates = {n: residual.ResidualSurrogate(cfg, prop) for n, cfg in case.variants}
     fit_anchored = ({f"{n}{FIT_SUFFIX}": residual.ResidualSurrogate(cfg, prop)
                      for n, cfg in case.variants} if case.fit_anchors else {})
@@ -225,10 +227,11 @@ def run_placeholder(sim: sky.SkySimulation, placeholder: str,
 
 def run_case(case: Case) -> dict[str, Any]:
     """Run one case: both placeholders, every gap scored (with its Hankel-DMD forecasts)."""
-    sim = sky.simulate_sky(sky_study.case_scenario(case.name, case.offset_h, case.seed),
-                           seed=case.seed)
+    sim = sky.simulate_sky(sky_study.case_scenario(case.name, case.offset_h, case.seed,
+                                                   TruthModel(case.truth)), seed=case.seed)
     gaps = [g for p in PLACEHOLDERS for g in run_placeholder(sim, p, case)]
-    return {"name": case.name, "offset_h": case.offset_h, "seed": case.seed, "gaps": gaps}
+    return {"name": case.name, "offset_h": case.offset_h, "seed": case.seed, "gaps": gaps,
+            "truth": case.truth}
 
 
 # --------------------------------------------------------------------------------------------
@@ -342,15 +345,16 @@ def summarise(name: str, runs: list[dict[str, Any]], min_span_h: float, variants
 def run_gap_study(names: list[str], seeds: tuple[int, ...], offsets_h: tuple[float, ...],
                   variants: dict[str, residual.ResidualConfig], bopdmd: bool = True,
                   fit_anchors: bool = False,
-                  workers: int = 2, progress: Callable[[str], None] | None = None
+                  workers: int = 2, progress: Callable[[str], None] | None = None,
+                  truth: TruthModel = TruthModel.SGP4
                   ) -> tuple[str, dict[str, dict[str, Any]], list[dict[str, Any]]]:
     """Run the scenarios over seeds x offsets; return (markdown, summaries, the raw runs).
 
-    The runs go to `workers` processes; the summaries are by scenario. The result does not
-    depend on `workers`.
+    The runs go to `workers` processes; the summaries are by scenario; every case's object
+    follows `truth`. The result does not depend on `workers`.
     """
     vs = tuple(variants.items())
-    todo = [Case(n, o, s, vs, bopdmd, fit_anchors)
+    todo = [Case(n, o, s, vs, bopdmd, fit_anchors, str(truth))
             for n in names for o in offsets_h for s in seeds]
     runs: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max(1, workers)) as pool:

@@ -392,48 +392,77 @@ def run(args: argparse.Namespace) -> int:
         results["scenarios"][s.name] = run_one(s, args.seed, nees_runs, out, plots)
         bar.step(s.name)
     if do_vdp:
-        sv = next(s for s in chosen if s.name == "vdp")
-        mus = VDP_MUS_QUICK if args.quick else VDP_MUS
-        results["vdp_sweep"] = experiments.vdp_sweep(sv, args.seed, mus)
-        if plots:
-            from ssa_fusion.studies import plots as pl
-            pl.vdp_sweep_plot(results["vdp_sweep"], out / "vdp_sweep.png")
+        _vdp_sweep(results, chosen, args, out, plots)
         bar.step("vdp sweep")
     if do_cons:
-        sc = scenarios.get(CONSISTENCY_SCENARIO)
-        if args.quick:
-            sc = quick_variant(sc)
-        cons_seeds = 3 if args.quick else CONSISTENCY_SEEDS
-        results["consistency"] = consistency_study(sc, cons_seeds, CONSISTENCY_RETRAIN_STEPS)
-        if plots:
-            from ssa_fusion.studies import plots as pl
-            pl.consistency_plot(results["consistency"], out / "consistency.png")
+        _consistency(results, args, out, plots)
         bar.step("consistency study")
+    _distributions(results, chosen, args)
+    if sky_names:
+        _sky(results, sky_names, args)
+    results["seconds"] = round(time.monotonic() - t0, 1)
+    return _write(results, out, args)
+
+
+def _vdp_sweep(results: dict[str, Any], chosen: list[scenarios.Scenario],
+               args: argparse.Namespace, out: Path, plots: bool) -> None:
+    """Run the Van der Pol sweep into ``results["vdp_sweep"]`` (and its plot)."""
+    sv = next(s for s in chosen if s.name == "vdp")
+    mus = VDP_MUS_QUICK if args.quick else VDP_MUS
+    results["vdp_sweep"] = experiments.vdp_sweep(sv, args.seed, mus)
+    if plots:
+        from ssa_fusion.studies import plots as pl
+        pl.vdp_sweep_plot(results["vdp_sweep"], out / "vdp_sweep.png")
+
+
+def _consistency(results: dict[str, Any], args: argparse.Namespace, out: Path,
+                 plots: bool) -> None:
+    """Run the consistency study into ``results["consistency"]`` (and its plot)."""
+    sc = scenarios.get(CONSISTENCY_SCENARIO)
+    if args.quick:
+        sc = quick_variant(sc)
+    cons_seeds = 3 if args.quick else CONSISTENCY_SEEDS
+    results["consistency"] = consistency_study(sc, cons_seeds, CONSISTENCY_RETRAIN_STEPS)
+    if plots:
+        from ssa_fusion.studies import plots as pl
+        pl.consistency_plot(results["consistency"], out / "consistency.png")
+
+
+def _distributions(results: dict[str, Any], chosen: list[scenarios.Scenario],
+                   args: argparse.Namespace) -> None:
+    """Run the distributions over the evaluation seeds (``--seeds``; 0: none)."""
     n_seeds = args.seeds if args.seeds is not None else (
         QUICK_SEEDS if args.quick else len(distributions.EVALUATION_SEEDS))
-    if n_seeds > 0:
-        seeds = distributions.EVALUATION_SEEDS[:n_seeds] if n_seeds <= len(
-            distributions.EVALUATION_SEEDS) else tuple(range(101, 101 + n_seeds))
-        offsets = (0.0,) if args.quick else distributions.START_OFFSETS_H
-        runs = sum(len(distributions.cases(s, seeds, offsets)) for s in chosen)
-        dbar = Progress(runs)
-        print(f"distributions: {len(seeds)} evaluation seeds ({seeds[0]}-{seeds[-1]}; settings "
-              f"were chosen on seeds {distributions.TUNING_SEEDS[0]}-"
-              f"{distributions.TUNING_SEEDS[-1]}), range/az/el from "
-              f"{len(offsets)} start epoch(s): {runs} runs"
-              + (" (--quick: fewer seeds and one start epoch)" if args.quick else ""),
-              file=sys.stderr)
-        results["distributions"] = distributions.run_distributions(
-            chosen, seeds, offsets, args.workers, dbar.step)
-    if sky_names:
-        sky_seeds = distributions.EVALUATION_SEEDS[:QUICK_SEEDS if args.quick else None]
-        sky_offsets = (0.0,) if args.quick else distributions.START_OFFSETS_H
-        sbar = Progress(len(sky_names) * len(sky_seeds) * len(sky_offsets))
-        print(f"real sky: {', '.join(sky_names)} over {len(sky_seeds)} evaluation seeds from "
-              f"{len(sky_offsets)} start epoch(s)", file=sys.stderr)
-        results["sky_markdown"], results["sky"] = sky_study.run_sky_study(
-            sky_names, sky_seeds, sky_offsets, args.workers or os.cpu_count() or 1, sbar.step)
-    results["seconds"] = round(time.monotonic() - t0, 1)
+    if n_seeds <= 0:
+        return
+    seeds = distributions.EVALUATION_SEEDS[:n_seeds] if n_seeds <= len(
+        distributions.EVALUATION_SEEDS) else tuple(range(101, 101 + n_seeds))
+    offsets = (0.0,) if args.quick else distributions.START_OFFSETS_H
+    runs = sum(len(distributions.cases(s, seeds, offsets)) for s in chosen)
+    dbar = Progress(runs)
+    print(f"distributions: {len(seeds)} evaluation seeds ({seeds[0]}-{seeds[-1]}; settings "
+          f"were chosen on seeds {distributions.TUNING_SEEDS[0]}-"
+          f"{distributions.TUNING_SEEDS[-1]}), range/az/el from "
+          f"{len(offsets)} start epoch(s): {runs} runs"
+          + (" (--quick: fewer seeds and one start epoch)" if args.quick else ""),
+          file=sys.stderr)
+    results["distributions"] = distributions.run_distributions(
+        chosen, seeds, offsets, args.workers, dbar.step)
+
+
+def _sky(results: dict[str, Any], sky_names: list[str], args: argparse.Namespace) -> None:
+    """Run the real-sky study of `sky_names` over the evaluation seeds."""
+    sky_seeds = distributions.EVALUATION_SEEDS[:QUICK_SEEDS if args.quick else None]
+    sky_offsets = (0.0,) if args.quick else distributions.START_OFFSETS_H
+    sbar = Progress(len(sky_names) * len(sky_seeds) * len(sky_offsets))
+    print(f"real sky: {', '.join(sky_names)} over {len(sky_seeds)} evaluation seeds from "
+          f"{len(sky_offsets)} start epoch(s)", file=sys.stderr)
+    results["sky_markdown"], results["sky"] = sky_study.run_sky_study(
+        sky_names, sky_seeds, sky_offsets, args.workers or os.cpu_count() or 1, sbar.step)
+
+
+def _write(results: dict[str, Any], out: Path, args: argparse.Namespace) -> int:
+    """Write results.json and results.md (and ``--update-doc``), print the tables."""
     (out / "results.json").write_text(json.dumps(_jsonable(results), indent=1))
     md = markdown(results)
     (out / "results.md").write_text(md)

@@ -254,3 +254,27 @@ def test_a_flipped_byte_in_the_sample_bag_never_traces_back(tmp_path, capsys):
     largest_chunk = max(e - s for s, e in _chunk_spans(bytes(data)))
     assert kept >= total - largest_chunk  # at most one chunk's messages lost (a bound)
     assert kept > 0.9 * total
+
+
+def test_a_flush_before_the_first_message_keeps_the_topics(tmp_path):
+    """The recorder flushes on a timer: its first chunk may hold the schemas and channels
+    and no message (no time range: rosbags writes start 2**63 - 1, end 0). A kill later
+    must still give every topic back, with its messages."""
+    classes, store = bagio.rosbags_classes(), bagio.typestore()
+    writer = bagio.BagWriter(tmp_path / "quiet")
+    for topic, msgtype in TOPICS.items():
+        writer.add_topic(topic, msgtype)
+    writer.flush()  # nothing heard yet
+    written = []
+    for i in range(PER_CHUNK):
+        topic, msg = _message(i, classes, store)
+        writer.write(topic, 1_700_000_000_000_000_000 + i, bytes(store.serialize_cdr(
+            msg, TOPICS[topic])))
+        written.append(topic)
+    writer.flush()
+    mcap = next((tmp_path / "quiet").glob("*.mcap"))
+    killed = tmp_path / "killed"
+    killed.mkdir()
+    (killed / "killed.mcap").write_bytes(mcap.read_bytes())  # SIGKILL: no summary
+    writer.close()
+    assert [m.topic for m in bagio.read_bag(killed)] == written

@@ -256,18 +256,18 @@ def test_report_on_your_own_radar_residuals_nis_sigma_and_passes(passes, replaye
     """
     from plot_checks import assert_readable  # test/apps on sys.path
 
-    from ssa_fusion.apps import report
+    from ssa_fusion.apps import report_figures
 
     _, sites, _, t = passes
     _, bag = replayed
     drawn = {}
-    saved = report.save
+    saved = report_figures.save
 
     def keep(fig, path, dpi=100):
         drawn[Path(path).name] = fig
         saved(fig, path, dpi)
 
-    monkeypatch.setattr(report, "save", keep)
+    monkeypatch.setattr(report_figures, "save", keep)
     out = tmp_path / "report"
     assert cli.main(["report", str(bag), "--sites", str(sites), "--out", str(out)]) == 0
     text = capsys.readouterr().out

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from plot_checks import assert_readable  # test/apps on sys.path
 
-from ssa_fusion.apps import evaluate, report
+from ssa_fusion.apps import evaluate, report, report_figures
 
 SAMPLE = Path(__file__).resolve().parents[2] / "bags" / "sample_iss_j2_rae"
 
@@ -21,20 +21,20 @@ def figures(tmp_path_factory):
     ev = evaluate.evaluate(data)
     out = tmp_path_factory.mktemp("plots")
     drawn = {}
-    saved = report.save
+    saved = report_figures.save
 
     def keep(fig, path, dpi=100):
         drawn[Path(path).name] = fig
         saved(fig, path, dpi)
 
-    report.save = keep
+    report_figures.save = keep
     try:
         report.plot_arms(ev, out / "arms.png")
         report.plot_sigma(data, out / "estimate_3sigma.png")
         report.plot_forecasts(data, out / "forecast_vs_withheld.png")
         report.plot_nis(data, out / "nis.png")
     finally:
-        report.save = saved
+        report_figures.save = saved
     assert all((out / name).stat().st_size > 10_000 for name in drawn)
     return drawn
 

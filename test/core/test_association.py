@@ -378,6 +378,7 @@ def test_a_tentative_track_that_stops_being_seen_is_dropped(train_obs):
 from ssa_fusion.core.catalog.association import (  # noqa: E402
     Gated,
     gate_long_arc,
+    linked_tracks,
     predict_scan,
     register,
 )
@@ -602,8 +603,9 @@ def test_tracks_on_one_orbit_close_together_are_linked_crossing_or_far_ones_not(
     fine = ScanPrediction(np.array([T0]), np.zeros(0, np.int64), zp[None],
                           np.tile(np.eye(3) * 1e-8, (1, n, 1, 1)), np.ones((1, n), bool),
                           np.zeros((1, n)), rate[None], np.full((1, n), 7.5))
-    assoc = Associator(SKY_FILTER, NETWORK)
-    near = assoc._close_tracks(fine, fine, np.arange(n))
+    cfg = AssociationConfig()
+    near = linked_tracks(fine, fine, np.arange(n), cfg.group_link_km,
+                         cfg.group_link_speed_fraction)
     # 0-1: 3 km, one velocity; 0-2: 1 km but crossing (~70 deg); 0-3: 20 km
     assert near.tolist() == [[True, True, False, False], [True, True, False, False],
                              [False, False, True, False], [False, False, False, True]]

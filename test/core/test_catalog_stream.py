@@ -29,7 +29,9 @@ from sgp4.api import Satrec
 from sgp4.io import compute_checksum
 
 from ssa_fusion.core.motion.element_sets import CatalogEntry
+from ssa_fusion.formats import element_set_checks, tle
 from ssa_fusion.formats import element_sets as catalog
+from ssa_fusion.formats import omm as omm_reader
 
 ROOT = Path(__file__).resolve().parents[2]
 CATALOGS = sorted((ROOT / "config" / "catalogs").iterdir())
@@ -83,15 +85,15 @@ def whole_xml(text: str, source: str) -> list[CatalogEntry]:
     seen: dict[str, str] = {}
     out = []
     for k, fields in enumerate(segments, 1):
-        entry = catalog._omm_entry(fields, f"{source}:segment {k}")
-        catalog._check_new(entry, seen)
+        entry = omm_reader.omm_entry(fields, f"{source}:segment {k}")
+        element_set_checks.check_new(entry, seen)
         out.append(entry)
     return out
 
 
 def whole_csv(text: str, source: str) -> list[CatalogEntry]:
     """`parse_omm_csv` as it was: every line in a list, then csv over them."""
-    numbered = list(catalog._numbered(text.splitlines()))
+    numbered = list(element_set_checks.numbered(text.splitlines()))
     rows = csv.DictReader(line for _, line in numbered)
     seen: dict[str, str] = {}
     out = []
@@ -101,8 +103,8 @@ def whole_csv(text: str, source: str) -> list[CatalogEntry]:
             where = f"{source}:{numbered[k][0]}"
             if None in fields:
                 raise ValueError(f"{where}: more values than the header has columns")
-            entry = catalog._omm_entry(dict(fields), where)
-            catalog._check_new(entry, seen)
+            entry = omm_reader.omm_entry(dict(fields), where)
+            element_set_checks.check_new(entry, seen)
             out.append(entry)
     except csv.Error as exc:
         line = numbered[min(k + 1, len(numbered) - 1)][0] if numbered else 0
@@ -471,7 +473,7 @@ def test_the_layout_pattern_says_what_the_columns_one_by_one_say(which, edits, c
         line[col] = c
     text = "".join(line) if checksum else "".join(line)[:68]
     template = LINE1 if which == 1 else LINE2
-    assert said(catalog._check_columns, text, template, which, "f:1") == \
+    assert said(tle.check_columns, text, template, which, "f:1") == \
         said(columns_one_by_one, text, template, which, "f:1")
 
 

@@ -1,9 +1,9 @@
-"""Decisions deferred over passes (`core.catalog.deferral`, `Associator` with ``defer_passes``):
-the ambiguous pairs of a scan against analytic costs, the pair's cost against its
-definition, and two objects of a train whose tracks the scan-wise assignment swaps in their
-second pass and the deferred decision puts back (truth labels as the reference): at the
-next pass, after a half-day gap with a common along-track error (the groups' registration
-takes it out), and through a catalog node's rows (the moved detections given out again)."""
+"""Decisions deferred over passes (`core.catalog.association.deferral`, `Associator` with
+``defer_passes``): the ambiguous pairs of a scan against analytic costs, the pair's cost against
+its definition, and two objects of a train whose tracks the scan-wise assignment swaps in their
+second pass and the deferred decision puts back (truth labels as the reference): at the next
+pass, after a half-day gap with a common along-track error (the groups' registration takes it
+out), and through a catalog node's rows (the moved detections given out again)."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ from ssa_fusion.core.catalog.association import (
     pair_cost,
     predict_scan,
 )
-from ssa_fusion.core.catalog.deferral import Fork, ambiguous_pairs, shadows_in
+from ssa_fusion.core.catalog.association.deferral import Fork, ambiguous_pairs, shadows_in
 from ssa_fusion.core.catalog.track_bank import TrackBank
 from ssa_fusion.core.catalog.unlabelled import UNLABELLED, RowAssociator, track_name
 from ssa_fusion.core.earth.stations import SENSORS

@@ -18,6 +18,7 @@ from ssa_fusion.core.gaps.batch_gap import BatchGapForecaster
 from ssa_fusion.core.gaps.estimator import EstimatorConfig, make_tracker, measurement_model
 from ssa_fusion.core.gaps.fit_residual import FitResidualForecaster
 from ssa_fusion.core.gaps.publisher import GapFill, GapPublisher
+from ssa_fusion.core.gaps.step_aside import Choice, StepAside
 
 T0 = 1.7e9 - (1.7e9 % 600.0)  # Unix s, on the forecast grid
 PERIOD = 600.0  # s, the forecast grid
@@ -156,3 +157,88 @@ def test_the_filter_s_fit_residual_fill_is_this_forecaster_and_restarts_each_pas
     plain = GapPublisher.of(make_tracker(c), 60.0, GapFill.BATCH_INIT, c)
     assert type(plain.forecaster) is BatchGapForecaster and plain.restart
     assert not GapPublisher.of(make_tracker(c), 60.0, GapFill.BATCH_FIT, c).restart
+
+
+# --------------------------------------------------------------------------------------------
+# Stepping aside: the correction is used only where it predicted the last passes better
+# --------------------------------------------------------------------------------------------
+def test_step_aside_rule_counts_and_picks_the_better_predictor():
+    """On positions with a known sigma, a prediction 3 sigma off against one 1 sigma off: the
+    smaller misfit wins, over the last two passes (an older win is forgotten), nothing
+    validated is the plain fit, and every decision is counted."""
+    model = measurement_model(EstimatorConfig(kind=Kind.POSITION))
+    x = np.array([7000.0, 0.0, 0.0, 0.0, 7.5, 0.0])
+    ms = [Measurement(float(t), x[:3], SIGMA**2 * np.eye(3), kind=Kind.POSITION,
+                      frame_id="gcrf") for t in range(5)]
+    near = x + np.array([SIGMA, 0, 0, 0, 0, 0])
+    far = x + np.array([3 * SIGMA, 0, 0, 0, 0, 0])
+    step = StepAside(passes=2)
+    assert step.decide() == Choice.UNVALIDATED
+    step.validate(ms, model, np.tile(far, (5, 1)), np.tile(near, (5, 1)))
+    assert step.misfits[-1] == pytest.approx((45.0, 5.0))  # 5 x 3^2, 5 x 1^2
+    assert step.decide() == Choice.CORRECTED
+    for _ in range(2):  # two passes where the plain fit predicted better
+        step.validate(ms, model, np.tile(near, (5, 1)), np.tile(far, (5, 1)))
+    assert step.decide() == Choice.PLAIN
+    step.validate(ms, model, np.tile(far, (5, 1)), np.tile(near, (5, 1)))
+    assert step.choice() == Choice.PLAIN  # 5 + 45 against 45 + 5: a tie is no win
+    step.validate(ms, model, np.tile(far, (5, 1)), np.tile(near, (5, 1)))
+    assert step.decide() == Choice.CORRECTED
+    assert step.counts == {Choice.UNVALIDATED: 1, Choice.CORRECTED: 2, Choice.PLAIN: 1}
+    step.validate(ms, model, np.full((5, 6), np.nan), np.tile(near, (5, 1)))
+    assert len(step.misfits) == 2  # a prediction that failed scores nothing
+
+
+def test_a_correction_that_learnt_the_truth_is_used(pushed):
+    """The along-track push of `pushed`: the correction predicted the last passes better,
+    so the last gap's forecast is the corrected one (and counted so)."""
+    f = pushed["fit_residual"][4]
+    assert f.step.last == Choice.CORRECTED and f.residual is f.learned is not None
+    assert f.choices[Choice.CORRECTED] >= 1
+
+
+class _Harmful(FitResidualForecaster):
+    """A forecaster whose learned correction is 20 km off along x (a correction gone wrong)."""
+
+    def _learn(self) -> None:
+        super()._learn()
+        for r in (self.learned, self.residual):
+            if r is not None and not getattr(r, "harmed", False):
+                predict = r.predict
+
+                def off(t, predict=predict):
+                    xs, Ps = predict(t)
+                    return xs + np.array([20.0, 0, 0, 0, 0, 0]), Ps
+
+                r.predict = off
+                r.harmed = True
+        if self.residual is not None:  # the table was corrected with the unharmed one
+            grid = np.array(sorted(self.table))
+            xs, Ps = self.residual.predict(grid)
+            self.table = {float(g): (xs[i], Ps[i]) for i, g in enumerate(grid)}
+
+
+def test_a_correction_that_hurts_steps_aside_to_the_fit(monkeypatch):
+    """A correction 20 km off: validated on the passes it predicts, it loses to the plain fit
+    and steps aside, so the last gap's forecast is exactly the plain fit's (never worse than
+    it), and the choices say so."""
+    import test_fit_residual as me
+
+    monkeypatch.setattr(me, "FitResidualForecaster", _Harmful)
+    arms = run(2e-9)
+    f = arms["fit_residual"][4]
+    assert isinstance(f, _Harmful) and f.learned is not None
+    assert f.step.last == Choice.PLAIN and f.residual is None
+    assert f.choices[Choice.PLAIN] >= 1
+    np.testing.assert_array_equal(arms["fit_residual"][1], arms["fit"][1])
+
+
+def test_the_covariance_published_is_the_fit_s_times_the_calibrated_factor(pushed):
+    """The gap fit publishes its fit's covariance times the factor its last passes measured
+    (`calibration`; never below 1)."""
+    t_gap, x, P, _, f = pushed["fit"]
+    k = f.scale.factor(t_gap - f.fitted_t)
+    assert len(f.scale.estimates) >= 3 and np.all(k >= 1.0)
+    xs, Ps = f.fit.predict(t_gap)
+    np.testing.assert_allclose(x, xs, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(P, Ps * k[:, None, None], rtol=1e-12, atol=0)

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from ssa_fusion.core.base import jit
-from ssa_fusion.core.catalog import batch_ekf
+from ssa_fusion.core.catalog import bank_kernels
 from ssa_fusion.core.motion import kepler, propagation
 
 PACKAGE = Path(jit.__file__).resolve().parents[1]
@@ -45,7 +45,7 @@ def test_kernels_are_cached_outside_the_source_tree_in_a_private_directory():
     if root is None:
         pytest.skip("no home directory: nothing is cached")
     for kernel in (kepler._kepler_kernel, propagation._gravity_stm_kernel,
-                   batch_ekf._update_kernel, batch_ekf._kepler_step_kernel):
+                   bank_kernels.update_kernel, bank_kernels.kepler_step_kernel):
         path = kernel._cache.cache_path
         if path is None:
             pytest.skip(f"no private cache directory under {root}: compiled in each process")

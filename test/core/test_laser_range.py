@@ -111,7 +111,7 @@ def _direct_range(station: LaserStation, x: np.ndarray, t: float) -> tuple[float
 def test_light_time_matches_a_direct_solution_and_the_moving_station_matters():
     ts = T0 + np.array([0.0, 600.0])
     x = np.array([_lageos_over(YARL, t) for t in ts])
-    g = lr.geometry([YARL], [0, 0], ts)
+    g = lr.geometry([YARL], [0, 0], ts, tides=False)  # the direct solution's station
     model = lr.two_way_range(g, None, x, com_km=0.0, shapiro=False)
     for i, t in enumerate(ts):
         up, dn = _direct_range(YARL, x[i], t)
@@ -144,6 +144,16 @@ def test_jacobian_matches_finite_differences():
         fb = (lr.two_way_range(g, air_, x, bias_km=0.002).range_km - m.range_km) / 0.001
         np.testing.assert_allclose(m.H_bias, fb, atol=1e-8)
         assert np.abs(m.H[:, 3:]).max() > 1e-3  # the light time's velocity partials are there
+
+
+def test_the_solid_tide_moves_the_station_by_centimetres_to_decimetres():
+    ts = T0 + np.arange(0.0, 86400.0, 3600.0)
+    moved = lr.geometry([YARL] * len(ts), np.arange(len(ts)), ts)
+    fixed = lr.geometry([YARL] * len(ts), np.arange(len(ts)), ts, tides=False)
+    d = np.linalg.norm(moved.site[:, :3] - fixed.site[:, :3], axis=1) * 1e3
+    print(f"\nYarragadee's tidal displacement over a day: {d.min():.3f}..{d.max():.3f} m")
+    assert 0.05 < d.max() < 0.4 and d.min() < d.max() / 2  # twice a day up and down
+    assert np.array_equal(moved.site[:, 3:], fixed.site[:, 3:])
 
 
 def test_terms_have_their_sizes():

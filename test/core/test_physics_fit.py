@@ -13,7 +13,7 @@ from scipy.stats import chi2
 
 from ssa_fusion.core.base.constants import MU_EARTH
 from ssa_fusion.core.catalog.gap_bank import GapBank, GapBankConfig
-from ssa_fusion.core.gaps import residual
+from ssa_fusion.core.gaps import residual, residual_design, residual_frame
 from ssa_fusion.core.gaps.forecaster import GapForecaster
 from ssa_fusion.core.gaps.residual import LIVE_RESIDUAL, PHYSICS_RESIDUAL
 from ssa_fusion.core.motion import dynamics
@@ -26,7 +26,7 @@ BOUND = float(chi2.ppf(0.95, 3))
 
 def _one_anchor_fit(sigma: float) -> residual.ResidualFit:
     cfg = replace(PHYSICS_RESIDUAL, accel_sigma=sigma)
-    f = residual.fit_residual(cfg, residual.orbit_propagator("j2"), np.array([0.0]), X0[None],
+    f = residual.fit_residual(cfg, residual_frame.orbit_propagator("j2"), np.array([0.0]), X0[None],
                               P_SMALL[None])
     assert f is not None
     return f
@@ -40,10 +40,10 @@ def test_one_pass_end_forecasts_the_placeholder_with_hills_response_to_the_prior
     _, _, cov_hi = f_hi.residual(t)
     np.testing.assert_allclose(res, 0.0, atol=1e-6)  # one anchor: nothing to correct (1 mm)
     x, _ = f_hi.predict(t)
-    np.testing.assert_allclose(x, residual.orbit_propagator("j2")(X0, 0.0, t), atol=1e-6)
+    np.testing.assert_allclose(x, residual_frame.orbit_propagator("j2")(X0, 0.0, t), atol=1e-6)
     # the prior's share: Hill's closed-form response to constant R, T, N accelerations
     # from rest (radial x, along-track y, cross-track z), per unit acceleration
-    n = 2 * math.pi / residual.period_of(X0)
+    n = 2 * math.pi / residual_frame.period_of(X0)
     c, s = np.cos(n * t), np.sin(n * t)
     x_r, x_t = (1 - c) / n ** 2, 2 * (n * t - s) / n ** 2
     y_r, y_t = 2 * (s - n * t) / n ** 2, (4 * (1 - c) - 1.5 * (n * t) ** 2) / n ** 2
@@ -77,7 +77,7 @@ def test_the_covariance_covers_an_unmodelled_acceleration_as_large_as_the_prior(
     truth = solve_ivp(rhs, (0.0, float(t.max())), X0, method="DOP853", rtol=1e-12,
                       atol=1e-12, dense_output=True).sol(t).T
     cfg = replace(PHYSICS_RESIDUAL, accel_sigma=sigma)
-    fit = residual.fit_residual(cfg, residual.orbit_propagator("two_body"), np.array([0.0]),
+    fit = residual.fit_residual(cfg, residual_frame.orbit_propagator("two_body"), np.array([0.0]),
                                 X0[None], P_SMALL[None])
     assert fit is not None
     x, P = fit.predict(t)
@@ -156,8 +156,8 @@ def test_the_closed_form_without_harmonics_equals_the_matrix_exponential(compone
 
     n = 2 * math.pi / 5560.0
     t = np.array([-86400.0, -3000.0, 0.0, 17.0, 5000.0, 60000.0, 86400.0])
-    got = residual.hill_design(t, n, 0.3, harmonics=0, components=components)
-    M = residual._hill_generator(n, 0.3, 0, components, n * n)
+    got = residual_design.hill_design(t, n, 0.3, harmonics=0, components=components)
+    M = residual_design.hill_generator(n, 0.3, 0, components, n * n)
     want = np.array([expm(M * tk)[:6] for tk in t])
     want[:, :, 6:] /= n * n
     scale = np.maximum(np.abs(want).max(axis=0), 1e-30)

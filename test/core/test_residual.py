@@ -9,7 +9,7 @@ from scipy.integrate import solve_ivp
 
 from ssa_fusion.core.base.constants import MU_EARTH
 from ssa_fusion.core.gaps import forecaster as gap_forecaster
-from ssa_fusion.core.gaps import residual
+from ssa_fusion.core.gaps import residual, residual_design, residual_frame
 from ssa_fusion.core.motion import dynamics
 from ssa_fusion.sim.scenarios import ISS_ELEMENTS
 
@@ -39,8 +39,8 @@ def test_curvilinear_round_trip():
     rng = np.random.default_rng(0)
     ref = np.tile(X0, (5, 1))
     x = ref + np.concatenate([rng.normal(0, 50, (5, 3)), rng.normal(0, 0.05, (5, 3))], axis=1)
-    res = residual.state_residual(ref, x)
-    back = residual.apply_residual(ref, res)
+    res = residual_frame.state_residual(ref, x)
+    back = residual_frame.apply_residual(ref, res)
     np.testing.assert_allclose(back[:, :3], x[:, :3], atol=1e-8)  # km
     np.testing.assert_allclose(back[:, 3:], x[:, 3:], atol=1e-6)  # km/s (differences)
 
@@ -50,7 +50,7 @@ def test_hill_design_matches_the_closed_form_response_to_a_constant_push():
     # y = -3/2 f t^2 + 4f/n^2 (1 - cos nt) (radial x, along-track y), at any sign of t
     n, f = 2 * math.pi / 5560.0, 1e-8
     t = np.array([-40000.0, -3000.0, 17.0, 5000.0, 60000.0])
-    D = residual.hill_design(t, n, 0.3, harmonics=0)
+    D = residual_design.hill_design(t, n, 0.3, harmonics=0)
     along_const = 6 + 1  # columns: z0 (6), then radial, along, cross constants
     z = D[:, :, along_const] * f
     np.testing.assert_allclose(z[:, 0], 2 * f / n * (t - np.sin(n * t) / n), rtol=1e-9,
@@ -71,13 +71,13 @@ def test_basis_fit_on_irregular_samples_recovers_an_analytic_signal():
     u = 2 * math.pi * t / period + 0.4
     ud = np.full_like(t, 2 * math.pi / period)
     cfg = residual.ResidualConfig(model="basis", degrees=(2, 2, 2))
-    B, _ = residual.basis(t, u, ud, 2, cfg.harmonics, True, period)
+    B, _ = residual_design.basis(t, u, ud, 2, cfg.harmonics, True, period)
     coef = np.array([0.3, -2.0, 0.05, 1.5, -0.7, 0.2, 0.1, 0.02, -0.03])
     y = B @ coef
     c, *_ = np.linalg.lstsq(B, y, rcond=None)
     np.testing.assert_allclose(c, coef, atol=1e-9)
     t_out = np.linspace(0, 86400.0, 50)
-    B_out, _ = residual.basis(t_out, 2 * math.pi * t_out / period + 0.4,
+    B_out, _ = residual_design.basis(t_out, 2 * math.pi * t_out / period + 0.4,
                               np.full(50, 2 * math.pi / period), 2, 2, True, period)
     np.testing.assert_allclose(B_out @ c, B_out @ coef, atol=1e-7)
 
@@ -92,7 +92,7 @@ def test_recovers_an_injected_constant_along_track_acceleration(model):
     x = _truth(f, np.concatenate([t_anchor, t_out]))
     xa, x_out = x[:len(t_anchor)], x[len(t_anchor):]
     P = np.tile(np.diag([1e-4] * 3 + [1e-10] * 3), (len(t_anchor), 1, 1))
-    prop = residual.orbit_propagator("two_body")
+    prop = residual_frame.orbit_propagator("two_body")
     fit = residual.fit_residual(residual.ResidualConfig(model=model), prop, t_anchor, xa, P)
     assert fit is not None
     assert fit.along_track_acceleration() == pytest.approx(f, rel=0.05)
@@ -117,7 +117,7 @@ def test_held_out_calibration_makes_an_overconfident_fit_honest():
     P = np.diag((sig_true / 10.0) ** 2)
     cfg = residual.ResidualConfig(model="hill", harmonics=0, window_s=86400.0,
                                   min_span_s=0.5 * 86400.0, prior_scale=1.0)
-    sur = residual.ResidualSurrogate(cfg, residual.orbit_propagator("two_body"))
+    sur = residual.ResidualSurrogate(cfg, residual_frame.orbit_propagator("two_body"))
     scored, made = [], []
     for k in range(len(t)):
         # score earlier calibrated fits here (out of sample), as the true error allows
@@ -156,7 +156,7 @@ def test_gap_forecaster_on_a_filter_stream_forecasts_the_gap_and_never_a_pass():
     got = [gf.forecast(float(t)) for t in t_gap]
     assert all(g is not None for g in got)
     truth = _truth(f, t_gap)
-    coast = residual.orbit_propagator("two_body")(x[-1], t_end, t_gap)
+    coast = residual_frame.orbit_propagator("two_body")(x[-1], t_end, t_gap)
     err = max(np.linalg.norm(g[0][:3] - xt[:3]) for g, xt in zip(got, truth, strict=True))
     err_coast = np.linalg.norm(coast[:, :3] - truth[:, :3], axis=1).max()
     assert err_coast > 10.0 and err < 0.05 * err_coast
@@ -171,7 +171,7 @@ def test_the_surrogate_keeps_only_what_later_fits_can_use():
     """On a stream of any length, the anchors older than the window before the newest and
     the held-out scores beyond the newest `calibration_samples` are let go."""
     cfg = residual.ResidualConfig(window_s=86400.0, calibration_samples=4)
-    sur = residual.ResidualSurrogate(cfg, residual.orbit_propagator("two_body"))
+    sur = residual.ResidualSurrogate(cfg, residual_frame.orbit_propagator("two_body"))
     P = np.eye(6)
     for k in range(200):
         sur.heldout.append((1.0, 0.1))  # as add_anchor would score earlier fits
@@ -181,7 +181,7 @@ def test_the_surrogate_keeps_only_what_later_fits_can_use():
 
 
 def test_the_placeholder_takes_epochs_in_any_order_repeats_included():
-    prop = residual.orbit_propagator("two_body")
+    prop = residual_frame.orbit_propagator("two_body")
     t = np.array([600.0, -300.0, 600.0, 0.0, 1200.0, -300.0])
     got = prop(X0, 0.0, t)
     once = prop(X0, 0.0, np.array([-300.0, 0.0, 600.0, 1200.0]))
@@ -194,7 +194,7 @@ def test_hill_design_on_a_uniform_grid_keeps_the_closed_form_for_a_day():
     # a day of 60 s steps, taken as products of one step's exponential between fresh ones
     n, f = 2 * math.pi / 5560.0, 1e-8
     t = 60.0 * np.arange(1, 1441) + 17.3
-    D = residual.hill_design(t, n, 0.3, harmonics=0)
+    D = residual_design.hill_design(t, n, 0.3, harmonics=0)
     z = D[:, :, 7] * f  # constant along-track push
     x = 2 * f / n * (t - np.sin(n * t) / n)
     y = -1.5 * f * t ** 2 + 4 * f / n ** 2 * (1 - np.cos(n * t))
@@ -221,7 +221,7 @@ def _hill_design_per_block(tau, n, u0, harmonics, components=(True, True, True))
     nb = len(blocks)
     M = np.zeros((6 * nb + q, 6 * nb + q))
     for b, (c, i) in enumerate(blocks):
-        M[6 * b:6 * b + 6, 6 * b:6 * b + 6] = residual.hill_matrix(n)
+        M[6 * b:6 * b + 6, 6 * b:6 * b + 6] = residual_design.hill_matrix(n)
         M[6 * b + 3 + c, 6 * nb + i] = 1.0
     M[6 * nb:, 6 * nb:] = Om
     out = np.zeros((len(tau), 6, 6 + nb))
@@ -241,7 +241,7 @@ def test_hill_design_equals_one_copy_of_the_state_per_forcing_term(harmonics, co
         u0 = rng.uniform(0.0, 2 * math.pi)
         tau = np.concatenate([-np.sort(rng.uniform(0.0, 2 * 86400.0, 20)),  # a window
                               600.0 * np.arange(1, 145) + 17.0])  # a day's grid
-        got = residual.hill_design(tau, n, u0, harmonics, components)
+        got = residual_design.hill_design(tau, n, u0, harmonics, components)
         want = _hill_design_per_block(tau, n, u0, harmonics, components)
         scale = np.abs(want).max(axis=0)  # per row and column, over the epochs
         assert np.all(got[:, scale == 0.0] == 0.0)  # structural zeros stay zero
@@ -256,8 +256,8 @@ def test_hill_design_matches_hill_integrated_under_a_once_per_revolution_push():
     # numerically (rtol 1e-12), a few hours either side of the anchor
     n, u0 = 2 * math.pi / 5560.0, 0.7
     tau = np.array([-20000.0, -7000.0, -300.0, 450.0, 9000.0, 21000.0])
-    D = residual.hill_design(tau, n, u0, harmonics=1)
-    A = residual.hill_matrix(n)
+    D = residual_design.hill_design(tau, n, u0, harmonics=1)
+    A = residual_design.hill_matrix(n)
     for c in range(3):
         col = 6 + 3 * c + 1  # axis c's cos u term
         for side in (tau[tau > 0], tau[tau < 0][::-1]):

@@ -17,7 +17,7 @@ SCRIPT = r"""
 import json, sys
 from dataclasses import asdict
 from numba.core.dispatcher import Dispatcher
-from ssa_fusion.core.catalog import batch_ekf
+from ssa_fusion.core.catalog import bank_kernels, batch_ekf
 from ssa_fusion.core.motion import kepler
 from ssa_fusion.core.motion import propagation
 from ssa_fusion.formats import element_sets as catalog
@@ -28,7 +28,8 @@ from ssa_fusion.params.defaults import CATALOG_FILTER
 from ssa_fusion.sim import survey
 
 def signatures():
-    return {f"{m.__name__}.{k}": len(v.signatures) for m in (batch_ekf, kepler, propagation)
+    return {f"{m.__name__}.{k}": len(v.signatures)
+            for m in (bank_kernels, batch_ekf, kepler, propagation)
             for k, v in vars(m).items() if isinstance(v, Dispatcher)}
 
 radars = [SENSORS[s] for s in NETWORKS["radar_network"]]

@@ -20,6 +20,7 @@ from ssa_fusion.nodes.kit.progress import (
     RELEASED,
     SHARD,
     TAKEN,
+    TAKEN_ALL_ESTIMATES,
     TAKEN_ESTIMATES,
     TAKEN_FORECASTS,
     Lockstep,
@@ -64,6 +65,15 @@ def test_each_shortfall_is_named():
     got = waiting(_reports(recorded=(11, 11)), NODES, 12, _sent([5, 7]))
     assert got == ["recorder (recorded 11 of 12 measurements)",
                    "recorder (recorded 11 of 12 estimates)"]
+
+
+def test_the_conjunction_node_waits_for_every_shards_estimates():
+    reports = {**_reports(), "conjunction": {TAKEN_ALL_ESTIMATES: "9"}}
+    nodes = [*NODES, "conjunction"]
+    assert waiting(reports, nodes, 12, _sent([5, 7])) == [
+        "conjunction (taken 9 of 10 estimates)"]  # shard 0 published 4, shard 1 6
+    reports["conjunction"][TAKEN_ALL_ESTIMATES] = "10"
+    assert waiting(reports, nodes, 12, _sent([5, 7])) == []
 
 
 def test_unlabelled_detections_wait_for_their_truth_and_associations_to_be_recorded():

@@ -19,7 +19,8 @@ DEFAULTS = {"sensor_sim": defaults.SENSOR_SIM, "surrogate": defaults.SURROGATE,
             "filter": defaults.FILTER, "recorder": defaults.RECORDER,
             "foxglove_bridge": defaults.FOXGLOVE_BRIDGE,
             "catalog_filter": defaults.CATALOG_FILTER,
-            "catalog_surrogate": defaults.CATALOG_SURROGATE}
+            "catalog_surrogate": defaults.CATALOG_SURROGATE,
+            "conjunction": defaults.CONJUNCTION}
 """Every node's defaults (`params.defaults`)."""
 MAX_DESCRIPTION = 200
 """Most characters of a row's description (``ros2 param describe`` prints it)."""

@@ -46,3 +46,13 @@ def test_the_computed_defaults_are_the_scenario_s(name):
 def test_the_scenario_check_refuses_a_scenario_that_is_not_an_orbit():
     assert PARAMETERS["scenario"].reason("iss_j2_rae") is None
     assert "must be one of" in PARAMETERS["scenario"].reason("pendulum")
+
+
+def test_the_truths_written_out_are_the_world_s():
+    """``truth`` takes exactly `sim.world.TruthModel`'s values (the parameters may not import
+    the simulated world)."""
+    from ssa_fusion.sim.world import TruthModel
+
+    assert tuple(str(t) for t in TruthModel) == written.TRUTHS
+    assert PARAMETERS["truth"].reason("high_fidelity") is None
+    assert "must be one of" in PARAMETERS["truth"].reason("sgp8")

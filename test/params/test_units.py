@@ -23,9 +23,12 @@ def test_si_to_core_divides_by_the_scale_and_back_multiplies():
 
 
 def test_only_the_lengths_of_the_filters_are_scaled():
-    """m against km: p0_sigma (m, m/s) by 1e3, q (m²/s³) by 1e6; nothing else of any table."""
+    """m against km: p0_sigma (m, m/s) by 1e3, q (m²/s³) by 1e6, the conjunction node's
+    distances (m) by 1e3; nothing else of any table."""
     scaled = {(node, p.name): p.scale for node in NODES for p in table_of(node)
               if p.scale != 1.0}
-    assert scaled == {(node, name): scale for node in ("filter", "catalog_filter")
-                      for name, scale in (("p0_sigma", 1e3), ("q", 1e6))}
+    assert scaled == {**{(node, name): scale for node in ("filter", "catalog_filter")
+                         for name, scale in (("p0_sigma", 1e3), ("q", 1e6))},
+                      ("conjunction", "distance"): 1e3,
+                      ("conjunction", "hard_body_radius"): 1e3}
     assert all(CATALOG_FILTER[p.name].scale == p.scale for p in settings.FILTER_ROWS)

@@ -31,6 +31,7 @@ from ssa_fusion.core.earth.frames import (
 from ssa_fusion.core.earth.stations import network_stations
 from ssa_fusion.ros import foxglove_scene as fs
 from ssa_fusion.ros import scene_geometry as geo
+from ssa_fusion.ros import topics
 from ssa_fusion.ros import visual_msgs as vm
 
 T = 1_718_000_000.0  # 2024-06-10, Unix s
@@ -219,9 +220,9 @@ def test_the_layout_shows_the_bridge_topics():
     assert set(kinds) == {"3D", "map", "Plot"}
     assert kinds["3D"]["followTf"] == fs.SCENE_FRAME
     # the same picture live (foxglove schemas) and from a recorded bag (ROS messages)
-    assert set(kinds["3D"]["topics"]) == {fs.SCENE_TOPIC, vm.MARKERS_TOPIC}
+    assert set(kinds["3D"]["topics"]) == {fs.SCENE_TOPIC, topics.MARKERS_TOPIC}
     assert set(kinds["map"]["topicColors"]) == {fs.TRACK_TOPIC, fs.TRUTH_TRACK_TOPIC,
-                                                vm.TRACK_TOPIC, vm.TRUTH_TRACK_TOPIC}
+                                                topics.TRACK_TOPIC, topics.TRUTH_TRACK_TOPIC}
     fields = [p["value"].split(".", 1) for p in kinds["Plot"]["paths"]]
     metric_fields = {f for topic, f in fields if topic == fs.METRICS_TOPIC}
     assert metric_fields and metric_fields <= set(fs.METRICS_SCHEMA["properties"])

@@ -51,7 +51,7 @@ import numpy as np
 from numba.core.dispatcher import Dispatcher
 from numpy.typing import NDArray
 
-__all__ = ["cache_directory", "cache_root", "f64", "jit", "source_digest"]
+__all__ = ["cache_directory", "cache_root", "f64", "jit", "jit_nogil", "source_digest"]
 
 _Fn = TypeVar("_Fn", bound=Callable[..., Any])
 
@@ -176,14 +176,14 @@ def cache_directory(fn: Callable[..., Any]) -> Path | None:
     return directory if all(_private(p) for p in ours) else None
 
 
-def jit(fn: _Fn) -> _Fn:
-    """Compile ``fn`` with numba (no fastmath, numpy's error model), cached (module docstring)."""
+def _compile(fn: _Fn, nogil: bool) -> _Fn:
+    """Compile ``fn`` as `jit` does; ``nogil``: release the GIL while it runs."""
     directory = cache_directory(fn)
     if directory is not None:
         saved = _NUMBA_CONFIG.CACHE_DIR
         _NUMBA_CONFIG.CACHE_DIR = str(directory)  # read by numba's locator when decorating
         try:
-            compiled = numba.njit(cache=True, error_model="numpy")(fn)
+            compiled = numba.njit(cache=True, error_model="numpy", nogil=nogil)(fn)
         except RuntimeError:  # numba: "cannot cache function ...: no locator available"
             compiled = None
         finally:
@@ -191,7 +191,17 @@ def jit(fn: _Fn) -> _Fn:
         path = getattr(getattr(compiled, "_cache", None), "cache_path", None)
         if isinstance(path, str) and Path(path).parent == directory:
             return cast(_Fn, compiled)
-    return cast(_Fn, numba.njit(error_model="numpy")(fn))
+    return cast(_Fn, numba.njit(error_model="numpy", nogil=nogil)(fn))
+
+
+def jit(fn: _Fn) -> _Fn:
+    """Compile ``fn`` with numba (no fastmath, numpy's error model), cached (module docstring)."""
+    return _compile(fn, nogil=False)
+
+
+def jit_nogil(fn: _Fn) -> _Fn:
+    """Compile ``fn`` as `jit`, releasing the GIL while it runs (threads run it at once)."""
+    return _compile(fn, nogil=True)
 
 
 def f64(a: NDArray[Any]) -> NDArray[np.float64]:

@@ -26,8 +26,9 @@ class Kind(enum.IntEnum):
     LASER_RANGE = 3
     """[range km]: a two-way laser range, c x the time of flight / 2 (the ILRS's one-way
     range), stamped at its transmit epoch at the station (one channel, the message's second
-    and third are 0; `core.measure.laser_range` models it). Not yet a kind the filter and
-    surrogate stream (`KIND_NAMES`)."""
+    and third are 0; `core.measure.laser_range` models it). The filter fuses it with a
+    laser network's model (`core.measure.laser_model`); the surrogate does not forecast it
+    (normal points minutes apart in passes hours apart: no stream to learn)."""
 
 
 class Source(enum.IntEnum):
@@ -93,8 +94,10 @@ class Cause(enum.StrEnum):
     UNRECORDED_BAG_FAILED = "unrecorded_bag_failed"
 
 
-KIND_NAMES = {Kind.POSITION: "position", Kind.RANGE_AZ_EL: "range_az_el", Kind.RA_DEC: "ra_dec"}
-"""The kinds the filter and surrogate stream, by the name of their ``kind`` parameter."""
+KIND_NAMES = {Kind.POSITION: "position", Kind.RANGE_AZ_EL: "range_az_el", Kind.RA_DEC: "ra_dec",
+              Kind.LASER_RANGE: "laser_range"}
+"""The kinds the filter streams, by the name of its ``kind`` parameter (the surrogate: all
+but LASER_RANGE)."""
 
 
 class MotionModel(enum.StrEnum):
@@ -120,6 +123,11 @@ class MotionModel(enum.StrEnum):
     """Van der Pol oscillator (nondimensional)."""
     CR3BP = "cr3bp"
     """Circular restricted three-body problem, Earth-Moon, rotating frame, nondimensional."""
+    HIGH_FIDELITY = "high_fidelity"
+    """The high-fidelity force model of one object (`core.motion.force_spec.ForceSpec`:
+    geopotential, Sun, Moon, solid tides, solar radiation pressure), integrated with its
+    state transition matrix (`core.motion.contexts.augmented_motion`); its ``motion_params``
+    say which (`formats.force_choice`)."""
 
 
 EPOCH_TOLERANCE_S = 1e-6

@@ -82,11 +82,13 @@ def last_passes_forecaster(model: MeasurementModel, period_s: float, clock_unix0
     A catalog's window: each object keeps only its last passes (`MeasurementWindows`), not
     the single-object filter's passes of the last `batch_gap.GAP_FIT_SPAN_H` hours, which
     would hold a day of a network's measurements (up to `batch_gap.GAP_FIT_MAX_MEASUREMENTS`
-    rows) for each of tens of thousands of objects.
+    rows) for each of tens of thousands of objects. Its covariance is the fit's own (no
+    calibration on the last passes, `batch_gap.BatchGapForecaster.calibrate`: a catalog
+    object's forecaster is made anew from its window, without the history it needs).
     """
     return BatchGapForecaster(model, period_s, clock_unix0=clock_unix0, passes=passes,
                               span_h=0.0, max_measurements=None, span_h_angles=0.0,
-                              pass_break_s=pass_break_s)
+                              pass_break_s=pass_break_s, calibrate=False)
 
 @dataclass(frozen=True)
 class GapBankConfig:

@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import sys
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from itertools import repeat
 
 import numpy as np
@@ -78,6 +78,75 @@ class BankResult:
 def station_bit(station: NDArray[np.int64]) -> NDArray[np.uint64]:
     """Return each station index's bit in `TrackBank.stations_at_t` (``1 << index % 64``)."""
     return np.left_shift(np.uint64(1), (station % 64).astype(np.uint64))
+
+
+@dataclass
+class _Batch:
+    """One `TrackBank.process` call's measurements and what became of them (input order).
+
+    ``rows`` (M,) each measurement's bank row (-1: the bank is full), ``station`` (M,) its
+    station index (-1: out of every round), ``cause`` as `BankResult.cause`; the estimates
+    produced so far in ``out_*`` (`emit`); ``rot`` the GCRF -> ITRF rotations of the
+    batch's epochs, computed at its first round of updates.
+    """
+
+    t: Array
+    z: Array
+    R: Array
+    object_ids: Sequence[str]
+    frame_ids: Sequence[str]
+    rows: NDArray[np.int64]
+    station: NDArray[np.int64]
+    cause: list[str]
+    out_i: list[NDArray[np.int64]] = field(default_factory=list)
+    out_x: list[Array] = field(default_factory=list)
+    out_cov: list[Array] = field(default_factory=list)
+    out_nis: list[Array] = field(default_factory=list)
+    rot: tuple[Array, NDArray[np.intp]] | None = None
+
+    def measurement(self, i: int) -> Measurement:
+        """Return row `i` as a Measurement for an IOD batch.
+
+        With its own z and R: the batch may keep it for hours, and views would keep the
+        whole batch's arrays alive with it.
+        """
+        return Measurement(float(self.t[i]), self.z[i].copy(), self.R[i].copy(),
+                           kind=Kind.RANGE_AZ_EL, object_id=self.object_ids[i],
+                           frame_id=self.frame_ids[i])
+
+    def emit(self, idx: NDArray[np.int64], x: Array, P: Array, nis: Array) -> None:
+        """Record the estimates the measurements ``idx`` produced."""
+        self.out_i.append(idx)
+        self.out_x.append(x)
+        self.out_cov.append(P)
+        self.out_nis.append(nis)
+
+    def result(self) -> BankResult:
+        """Return what the batch did (`BankResult`)."""
+        if self.out_i:
+            return BankResult(self.cause, np.concatenate(self.out_i), np.concatenate(self.out_x),
+                              np.concatenate(self.out_cov), np.concatenate(self.out_nis))
+        return BankResult(self.cause, np.zeros(0, np.int64), np.zeros((0, 6)),
+                          np.zeros((0, 6, 6)), np.zeros(0))
+
+
+def _rounds(rows: NDArray[np.int64], station: NDArray[np.int64]) -> list[NDArray[np.int64]]:
+    """Split a batch into rounds: the k-th measurement of each object goes in round k.
+
+    Each round's measurements in batch order, the empty rounds left out; only the
+    measurements with a station (``station >= 0``) take part.
+    """
+    m = rows.size
+    order = np.argsort(rows, kind="stable")  # by row, then in batch order
+    first = np.r_[True, rows[order][1:] != rows[order][:-1]]
+    start = np.maximum.accumulate(np.where(first, np.arange(m), 0))
+    rank = np.empty(m, dtype=np.int64)
+    rank[order] = np.arange(m) - start
+    live = np.flatnonzero(station >= 0)
+    by_round = live[np.argsort(rank[live], kind="stable")]
+    ends = np.searchsorted(rank[by_round], np.arange(int(rank.max(initial=-1)) + 2))
+    rounds = (by_round[ends[k]:ends[k + 1]] for k in range(ends.size - 1))
+    return [idx for idx in rounds if idx.size]
 
 
 class TrackBank:
@@ -274,8 +343,23 @@ class TrackBank:
         tt = np.array(t, dtype=float)  # copies: the caller's arrays may change later
         zz = np.array(z, dtype=float).reshape(-1, 3)
         RR = np.array(R, dtype=float).reshape(-1, 3, 3)
-        m = tt.size
         self._batch_t, self._iod_rotations = tt, None
+        batch = self._admit(tt, zz, RR, object_ids, frame_ids)
+        for idx in _rounds(batch.rows, batch.station):
+            idx = self._start_tracks(batch, idx)
+            if idx.size:
+                self._fuse_round(batch, idx)
+        self._batch_t, self._iod_rotations = np.zeros(0), None  # not a view: tt goes
+        return batch.result()
+
+    def _admit(self, tt: Array, zz: Array, RR: Array, object_ids: Sequence[str],
+               frame_ids: Sequence[str]) -> _Batch:
+        """Return the batch with its rows (new objects given one), stations, early rejections.
+
+        A measurement of an unknown station, of a full bank or at a non-finite epoch is
+        rejected here (its station set to -1: out of every round).
+        """
+        m = tt.size
         known = np.fromiter(map(self.rows.get, object_ids, repeat(-1, m)), np.int64, m)
         ok = (known >= 0) & np.isfinite(tt)
         np.maximum.at(self.seen, known[ok], tt[ok])  # before any eviction: this batch's
@@ -284,10 +368,6 @@ class TrackBank:
             rows[i] = self.row(object_ids[i], float(tt[i]))
         station = np.fromiter(map(self.ekf.index.get, frame_ids, repeat(-1, m)), np.int64, m)
         cause = [""] * m
-        out_i: list[NDArray[np.int64]] = []
-        out_x: list[Array] = []
-        out_P: list[Array] = []
-        out_nis: list[Array] = []
         for i in np.flatnonzero(station < 0).tolist():
             cause[i] = Cause.REJECTED_FRAME
         for i in np.flatnonzero(rows < 0).tolist():
@@ -296,90 +376,63 @@ class TrackBank:
         for i in np.flatnonzero(~np.isfinite(tt)).tolist():
             cause[i] = Cause.REJECTED_NONFINITE
             station[i] = -1  # out of every round
-        # rank of each measurement among its object's in this batch: its round
-        order = np.argsort(rows, kind="stable")  # by row, then in batch order
-        first = np.r_[True, rows[order][1:] != rows[order][:-1]]
-        start = np.maximum.accumulate(np.where(first, np.arange(m), 0))
-        rank = np.empty(m, dtype=np.int64)
-        rank[order] = np.arange(m) - start
-        rot: tuple[Array, NDArray[np.intp]] | None = None  # the batch's, at its first round
+        return _Batch(tt, zz, RR, object_ids, frame_ids, rows, station, cause)
 
-        def measurement(i: int) -> Measurement:
-            """Return row `i` as a Measurement for an IOD batch.
+    def _start_tracks(self, batch: _Batch, idx: NDArray[np.int64]) -> NDArray[np.int64]:
+        """Feed a round's untracked objects to their IODs (solved at once): the tracked rest."""
+        tracked = self.tracking[batch.rows[idx]]
+        waiting = idx[~tracked].tolist()  # initial orbit determination, solved at once
+        answers = self._initiate_many([int(batch.rows[i]) for i in waiting],
+                                      [batch.measurement(i) for i in waiting])
+        for i, started in zip(waiting, answers, strict=True):
+            if isinstance(started, str):
+                batch.cause[i] = started
+            else:
+                batch.emit(np.array([i]), started.x[None], started.P[None], np.zeros(1))
+        out: NDArray[np.int64] = idx[tracked]
+        return out
 
-            With its own z and R: the batch may keep it for hours, and views would keep the
-            whole batch's arrays alive with it.
-            """
-            return Measurement(float(tt[i]), zz[i].copy(), RR[i].copy(),
-                               kind=Kind.RANGE_AZ_EL, object_id=object_ids[i],
-                               frame_id=frame_ids[i])
+    def _fuse_round(self, batch: _Batch, idx: NDArray[np.int64]) -> None:
+        """Predict and fuse one round's measurements of tracked objects (`BatchEKF.step`).
 
-        # each round's measurements in batch order: the live ones sorted by round, once
-        live = np.flatnonzero(station >= 0)
-        by_round = live[np.argsort(rank[live], kind="stable")]
-        ends = np.searchsorted(rank[by_round], np.arange(int(rank.max(initial=-1)) + 2))
-        for k in range(ends.size - 1):
-            idx = by_round[ends[k]:ends[k + 1]]
-            if not idx.size:
-                continue
-            tracked = self.tracking[rows[idx]]
-            waiting = idx[~tracked].tolist()  # initial orbit determination, solved at once
-            answers = self._initiate_many([int(rows[i]) for i in waiting],
-                                          [measurement(i) for i in waiting])
-            for i, started in zip(waiting, answers, strict=True):
-                if isinstance(started, str):
-                    cause[i] = started
-                else:
-                    out_i.append(np.array([i]))
-                    out_x.append(started.x[None])
-                    out_P.append(started.P[None])
-                    out_nis.append(np.zeros(1))
-            idx = idx[tracked]
-            if not idx.size:
-                continue
-            r = rows[idx]
-            dt = tt[idx] - self.t[r]
-            bit = station_bit(station[idx])
-            again = (dt == 0) & ((self.stations_at_t[r] & bit) != 0)
-            for i in idx[dt < 0].tolist():
-                cause[i] = Cause.REJECTED_STALE
-            for i in idx[again].tolist():
-                cause[i] = Cause.REJECTED_DUPLICATE
-            go = (dt > 0) | ((dt == 0) & ~again)
-            idx, r, dt, bit = idx[go], r[go], dt[go], bit[go]
-            if not idx.size:
-                continue
-            if rot is None:
-                rot = self.ekf.rotations(tt)
-            res = self.ekf.step(self.x[r], self.P[r], dt, zz[idx], RR[idx], tt[idx],
-                                station[idx], rotations=(rot[0], rot[1][idx]))
-            ok = res.code == Code.FUSED
-            for i, c in zip(idx[~ok].tolist(), res.code[~ok].tolist(), strict=True):
-                cause[i] = REASONS[c]
-            gate = res.code == Code.GATE
-            self.gate_misses[r[ok]] = 0
-            self.gate_misses[r[gate]] += 1
-            limit = self.config.iod.reinit_after
-            if limit:
-                for i in idx[gate & (self.gate_misses[r] >= limit)].tolist():
-                    cause[i] = self._reinitialise(int(rows[i]), measurement(i))
-            if not ok.all():  # as a rule every one is fused: no copies then
-                idx, r, dt, bit = idx[ok], r[ok], dt[ok], bit[ok]
-                res = res._replace(x=res.x[ok], P=res.P[ok], nis=res.nis[ok])
-            self.x[r] = res.x
-            self.P[r] = res.P
-            self.stations_at_t[r] = np.where(dt == 0, self.stations_at_t[r], 0) | bit
-            self.t[r] = tt[idx]
-            out_i.append(idx)
-            out_x.append(res.x)
-            out_P.append(res.P)
-            out_nis.append(res.nis)
-        self._batch_t, self._iod_rotations = np.zeros(0), None  # not a view: tt goes
-        if out_i:
-            return BankResult(cause, np.concatenate(out_i), np.concatenate(out_x),
-                              np.concatenate(out_P), np.concatenate(out_nis))
-        return BankResult(cause, np.zeros(0, np.int64), np.zeros((0, 6)), np.zeros((0, 6, 6)),
-                          np.zeros(0))
+        Stale and duplicate measurements are rejected; a track beyond its gate
+        ``reinit_after`` times in a row starts its IOD again (`_reinitialise`).
+        """
+        tt, cause = batch.t, batch.cause
+        r = batch.rows[idx]
+        dt = tt[idx] - self.t[r]
+        bit = station_bit(batch.station[idx])
+        again = (dt == 0) & ((self.stations_at_t[r] & bit) != 0)
+        for i in idx[dt < 0].tolist():
+            cause[i] = Cause.REJECTED_STALE
+        for i in idx[again].tolist():
+            cause[i] = Cause.REJECTED_DUPLICATE
+        go = (dt > 0) | ((dt == 0) & ~again)
+        idx, r, dt, bit = idx[go], r[go], dt[go], bit[go]
+        if not idx.size:
+            return
+        if batch.rot is None:  # the batch's, at its first round
+            batch.rot = self.ekf.rotations(tt)
+        res = self.ekf.step(self.x[r], self.P[r], dt, batch.z[idx], batch.R[idx], tt[idx],
+                            batch.station[idx], rotations=(batch.rot[0], batch.rot[1][idx]))
+        ok = res.code == Code.FUSED
+        for i, c in zip(idx[~ok].tolist(), res.code[~ok].tolist(), strict=True):
+            cause[i] = REASONS[c]
+        gate = res.code == Code.GATE
+        self.gate_misses[r[ok]] = 0
+        self.gate_misses[r[gate]] += 1
+        limit = self.config.iod.reinit_after
+        if limit:
+            for i in idx[gate & (self.gate_misses[r] >= limit)].tolist():
+                cause[i] = self._reinitialise(int(batch.rows[i]), batch.measurement(i))
+        if not ok.all():  # as a rule every one is fused: no copies then
+            idx, r, dt, bit = idx[ok], r[ok], dt[ok], bit[ok]
+            res = res._replace(x=res.x[ok], P=res.P[ok], nis=res.nis[ok])
+        self.x[r] = res.x
+        self.P[r] = res.P
+        self.stations_at_t[r] = np.where(dt == 0, self.stations_at_t[r], 0) | bit
+        self.t[r] = tt[idx]
+        batch.emit(idx, res.x, res.P, res.nis)
 
     def _reinitialise(self, row: int, m: Measurement) -> str:
         """Drop the row's track (it lost its object) and start its IOD again from `m`."""

@@ -44,10 +44,10 @@ from ssa_fusion.core.catalog.association import (
     AssociationConfig,
     Associator,
     DetectionFate,
+    Relabel,
     TrackEvent,
     TrackStatus,
 )
-from ssa_fusion.core.catalog.deferral import Relabel
 from ssa_fusion.core.catalog.track_bank import BankResult, TrackBank
 from ssa_fusion.core.earth.frames import Station
 from ssa_fusion.core.earth.stations import SENSORS, Sensor

@@ -140,6 +140,19 @@ def _site(name: str, lat_deg: float, lon_deg: float, alt_km: float) -> Station:
     return Station(name, math.radians(lat_deg), math.radians(lon_deg), alt_km)
 
 
+def _radar(name: str, lat_deg: float, lon_deg: float, alt_km: float, mask_deg: float,
+           source: str) -> Sensor:
+    """Return a tracking radar at a site (deg, deg, km): `RADAR_SIGMA`, its mask in deg."""
+    return Sensor(_site(name, lat_deg, lon_deg, alt_km), SensorType.RADAR, RADAR_SIGMA,
+                  mask_deg, source=source)
+
+
+def _optical(name: str, lat_deg: float, lon_deg: float, alt_km: float, source: str) -> Sensor:
+    """Return an optical site (deg, deg, km): `OPTICAL_SIGMA`, a 20 deg mask, every 10 s."""
+    return Sensor(_site(name, lat_deg, lon_deg, alt_km), SensorType.OPTICAL, OPTICAL_SIGMA,
+                  20.0, cadence_s=10.0, source=source)
+
+
 RADAR_SIGMA = (0.020, math.radians(0.02), math.radians(0.02))
 """Tracking-radar noise: 20 m range, 0.02 deg azimuth and elevation."""
 OPTICAL_SIGMA = (1.5 * ARCSEC, 1.5 * ARCSEC)
@@ -152,70 +165,47 @@ SENSORS: dict[str, Sensor] = {
                        source="the paper's observer, Columbus, Ohio"),
     "columbus_paper": Sensor(COLUMBUS, SensorType.RADAR, PAPER_SIGMA, -90.0, cadence_s=30.0,
                              source="the paper's idealised sensor: sees through the Earth"),
-    "millstone": Sensor(
-        _site("millstone", 42.62, -71.49, 0.13), SensorType.RADAR, RADAR_SIGMA, 5.0,
-        source="Millstone Hill Radar, MIT Haystack Observatory, Westford MA "
-               "(haystack.mit.edu; en.wikipedia.org/wiki/Millstone_Hill)"),
-    "altair": Sensor(
-        _site("altair", 9.40, 167.48, 0.01), SensorType.RADAR, RADAR_SIGMA, 5.0,
-        source="ALTAIR, Reagan Test Site, Roi-Namur, Kwajalein Atoll "
-               "(en.wikipedia.org/wiki/ALTAIR)"),
-    "tira": Sensor(
-        _site("tira", 50.62, 7.13, 0.30), SensorType.RADAR, RADAR_SIGMA, 10.0,
-        source="TIRA, Fraunhofer FHR, Wachtberg, Germany "
-               "(fhr.fraunhofer.de; en.wikipedia.org/wiki/TIRA_(radar))"),
-    "socorro": Sensor(
-        _site("socorro", 33.82, -106.66, 1.51), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
-        cadence_s=10.0,
-        source="GEODSS Socorro, White Sands Missile Range, New Mexico "
-               "(en.wikipedia.org/wiki/GEODSS)"),
-    "maui": Sensor(
-        _site("maui", 20.71, -156.26, 3.06), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
-        cadence_s=10.0,
-        source="GEODSS Maui, Haleakala, Hawaii (en.wikipedia.org/wiki/GEODSS)"),
-    "diego_garcia": Sensor(
-        _site("diego_garcia", -7.41, 72.45, 0.01), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
-        cadence_s=10.0,
-        source="GEODSS Diego Garcia, British Indian Ocean Territory "
-               "(en.wikipedia.org/wiki/GEODSS)"),
-    "goldstone": Sensor(
-        _site("goldstone", 35.43, -116.89, 0.90), SensorType.RADAR, RADAR_SIGMA, 10.0,
-        source="Goldstone Deep Space Communications Complex, Fort Irwin, California "
-               "(en.wikipedia.org/wiki/Goldstone_Deep_Space_Communications_Complex)"),
-    "fylingdales": Sensor(
-        _site("fylingdales", 54.36, -0.67, 0.30), SensorType.RADAR, RADAR_SIGMA, 5.0,
-        source="RAF Fylingdales, North York Moors, England: a phased array with 360 deg "
-               "coverage (en.wikipedia.org/wiki/RAF_Fylingdales)"),
-    "ogs_tenerife": Sensor(
-        _site("ogs_tenerife", 28.30, -16.51, 2.39), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
-        cadence_s=10.0,
-        source="ESA Optical Ground Station, Teide Observatory, Tenerife "
-               "(en.wikipedia.org/wiki/ESA_Optical_Ground_Station)"),
-    "zimmerwald": Sensor(
-        _site("zimmerwald", 46.88, 7.47, 0.95), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
-        cadence_s=10.0,
-        source="Zimmerwald Observatory (ZIMLAT), University of Bern, Switzerland "
-               "(aiub.unibe.ch; en.wikipedia.org/wiki/Zimmerwald_Observatory)"),
-    "siding_spring": Sensor(
-        _site("siding_spring", -31.27, 149.06, 1.16), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
-        cadence_s=10.0,
-        source="Siding Spring Observatory, New South Wales, Australia "
-               "(en.wikipedia.org/wiki/Siding_Spring_Observatory)"),
-    "xinglong": Sensor(
-        _site("xinglong", 40.40, 117.58, 0.96), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
-        cadence_s=10.0,
-        source="Xinglong Observatory, National Astronomical Observatories of China, Hebei "
-               "(english.nao.cas.cn)"),
-    "calar_alto": Sensor(
-        _site("calar_alto", 37.22, -2.55, 2.17), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
-        cadence_s=10.0,
-        source="Calar Alto Observatory, Almeria, Spain "
-               "(en.wikipedia.org/wiki/Calar_Alto_Observatory)"),
-    "la_silla": Sensor(
-        _site("la_silla", -29.26, -70.73, 2.40), SensorType.OPTICAL, OPTICAL_SIGMA, 20.0,
-        cadence_s=10.0,
-        source="ESO La Silla Observatory, Coquimbo, Chile "
-               "(en.wikipedia.org/wiki/La_Silla_Observatory)"),
+    "millstone": _radar("millstone", 42.62, -71.49, 0.13, 5.0,
+        "Millstone Hill Radar, MIT Haystack Observatory, Westford MA "
+        "(haystack.mit.edu; en.wikipedia.org/wiki/Millstone_Hill)"),
+    "altair": _radar("altair", 9.40, 167.48, 0.01, 5.0,
+        "ALTAIR, Reagan Test Site, Roi-Namur, Kwajalein Atoll "
+        "(en.wikipedia.org/wiki/ALTAIR)"),
+    "tira": _radar("tira", 50.62, 7.13, 0.30, 10.0,
+        "TIRA, Fraunhofer FHR, Wachtberg, Germany "
+        "(fhr.fraunhofer.de; en.wikipedia.org/wiki/TIRA_(radar))"),
+    "socorro": _optical("socorro", 33.82, -106.66, 1.51,
+        "GEODSS Socorro, White Sands Missile Range, New Mexico "
+        "(en.wikipedia.org/wiki/GEODSS)"),
+    "maui": _optical("maui", 20.71, -156.26, 3.06,
+        "GEODSS Maui, Haleakala, Hawaii (en.wikipedia.org/wiki/GEODSS)"),
+    "diego_garcia": _optical("diego_garcia", -7.41, 72.45, 0.01,
+        "GEODSS Diego Garcia, British Indian Ocean Territory "
+        "(en.wikipedia.org/wiki/GEODSS)"),
+    "goldstone": _radar("goldstone", 35.43, -116.89, 0.90, 10.0,
+        "Goldstone Deep Space Communications Complex, Fort Irwin, California "
+        "(en.wikipedia.org/wiki/Goldstone_Deep_Space_Communications_Complex)"),
+    "fylingdales": _radar("fylingdales", 54.36, -0.67, 0.30, 5.0,
+        "RAF Fylingdales, North York Moors, England: a phased array with 360 deg "
+        "coverage (en.wikipedia.org/wiki/RAF_Fylingdales)"),
+    "ogs_tenerife": _optical("ogs_tenerife", 28.30, -16.51, 2.39,
+        "ESA Optical Ground Station, Teide Observatory, Tenerife "
+        "(en.wikipedia.org/wiki/ESA_Optical_Ground_Station)"),
+    "zimmerwald": _optical("zimmerwald", 46.88, 7.47, 0.95,
+        "Zimmerwald Observatory (ZIMLAT), University of Bern, Switzerland "
+        "(aiub.unibe.ch; en.wikipedia.org/wiki/Zimmerwald_Observatory)"),
+    "siding_spring": _optical("siding_spring", -31.27, 149.06, 1.16,
+        "Siding Spring Observatory, New South Wales, Australia "
+        "(en.wikipedia.org/wiki/Siding_Spring_Observatory)"),
+    "xinglong": _optical("xinglong", 40.40, 117.58, 0.96,
+        "Xinglong Observatory, National Astronomical Observatories of China, Hebei "
+        "(english.nao.cas.cn)"),
+    "calar_alto": _optical("calar_alto", 37.22, -2.55, 2.17,
+        "Calar Alto Observatory, Almeria, Spain "
+        "(en.wikipedia.org/wiki/Calar_Alto_Observatory)"),
+    "la_silla": _optical("la_silla", -29.26, -70.73, 2.40,
+        "ESO La Silla Observatory, Coquimbo, Chile "
+        "(en.wikipedia.org/wiki/La_Silla_Observatory)"),
 }
 """Sensor presets by id. ``columbus`` and ``columbus_paper`` are two sensors at one site
 (frame_id "columbus"): a real radar with a 10 deg mask, and the paper's idealised one. Beyond

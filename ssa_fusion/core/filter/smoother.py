@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ssa_fusion.core.base.types import Measurement, StateEstimate
-from ssa_fusion.core.filter.ekf import ExtendedKalmanFilter, bound_covariance, process_noise
+from ssa_fusion.core.filter.ekf import ExtendedKalmanFilter, bound_covariance
 from ssa_fusion.core.filter.initiation import Placeholder
 from ssa_fusion.core.filter.tracker import Outcome, Tracker
 
@@ -177,9 +177,9 @@ def steps_from_estimates(estimates: Sequence[StateEstimate], f: Placeholder,
 
 
 def tracker_noise(tracker: Tracker) -> NoiseFunction:
-    """Return the `Tracker`'s process noise as ``noise(x, dt)`` (white noise, its ``q``)."""
+    """Return the `Tracker`'s process noise as ``noise(x, dt)`` (`Tracker.process_noise`)."""
     def noise(_x: Array, dt: float) -> Array:
-        return process_noise(abs(dt), tracker.config.noise.q, dim=tracker.n // 2)
+        return tracker.process_noise(dt)
 
     return noise
 

@@ -42,7 +42,14 @@ when a measurement goes in front of fused ones. The admission and arbitration ru
   measurements in a row refused by the gate (a whole pass that disagrees with the
   prediction, typically after a gap longer than the process noise allows for), it forgets its
   state and starts a new IOD batch with the last of them (`Cause.REINITIALISED`);
-* `reset()` forgets everything (a backwards clock jump).
+* `reset()` forgets everything (a backwards clock jump);
+* a tracker given an a-priori orbit (`set_prior`: a prediction, such as the CPF a laser
+  station points with) starts its EKF from it at the first real measurement it takes,
+  instead of an IOD batch: laser ranges alone give no initial orbit.
+
+The state may hold more than the orbit (a laser filter's range biases and k_R after
+``[r, v]``): the white-noise acceleration of the process noise acts on the first
+``dynamic`` states only, the others are constants to the noise.
 
 It is the same code live (filter node) and offline (reproduce, replay), so both give the
 same estimates for the same input sequence.
@@ -67,6 +74,7 @@ from ssa_fusion.core.filter.ekf import ExtendedKalmanFilter, bound_covariance, p
 from ssa_fusion.core.filter.history import HISTORY_REAL, FusedHistory, FusedStep, Snapshot
 from ssa_fusion.core.filter.initiation import OrbitInitiator, Placeholder
 from ssa_fusion.core.filter.options import FilterOptions
+from ssa_fusion.core.measure.laser_model import LaserModels, LaserStationModel
 from ssa_fusion.core.measure.measurement import MeasurementModel, StationModels
 from ssa_fusion.core.measure.validation import OK, measurement_problem
 
@@ -133,20 +141,33 @@ class Tracker:
     is ``placeholder``) may be replaced at run time; ``f``, ``model`` and ``n`` are handed
     to the `initiation.OrbitInitiator` at construction and at each `reset`. ``frame_id``
     is the frame (station id, or "gcrf") measurements must be expressed in; "" = any (with
-    a station network: any of its stations).
+    a station network: any of its stations). ``dynamic`` (default ``n``): the leading
+    ``[pos, vel]`` states the process noise acts on.
     """
 
     def __init__(self, placeholder: Placeholder, model: MeasurementModel,
                  config: FilterOptions, n: int = 6, object_id: str = "",
-                 frame_id: str = "") -> None:
+                 frame_id: str = "", dynamic: int | None = None) -> None:
         self.f = placeholder
         self.model = model
         self.kind = model.kind
         self.config = config
         self.n = n
+        self.dynamic = n if dynamic is None else int(dynamic)
         self.object_id = object_id
         self.frame_id = frame_id
+        self.prior: StateEstimate | None = None
         self.reset()
+
+    def set_prior(self, e: StateEstimate) -> None:
+        """Start the EKF from the a-priori estimate ``e`` (of size n) at the first measurement.
+
+        Not from an IOD batch (module docstring); before initialisation only.
+        """
+        if len(e.x) != self.n or np.shape(e.P) != (self.n, self.n):
+            raise ValueError(f"an a-priori state of {len(e.x)} for a filter of {self.n}")
+        self.prior = StateEstimate(float(e.t), np.array(e.x, dtype=float),
+                                   np.array(e.P, dtype=float), self.object_id)
 
     # ----------------------------------------------------------------------------------
     def reset(self) -> None:
@@ -237,22 +258,32 @@ class Tracker:
         problem = measurement_problem(m, self.kind, self.frame_id)
         if problem == OK and m.horizon < 0.0:
             return Cause.REJECTED_HORIZON, f"forecast horizon {m.horizon} s < 0 at t={m.t}"
-        if (problem == OK and isinstance(self.model, StationModels)
+        if (problem == OK and isinstance(self.model, StationModels | LaserModels)
                 and self.model.get(m.kind, m.frame_id) is None):
             return (Cause.REJECTED_FRAME, f"station {m.frame_id!r} is not in the network "
                                           f"({', '.join(self.model.stations)})")
         return problem
 
-    def _model_for(self, m: Measurement) -> MeasurementModel:
+    def _model_for(self, m: Measurement) -> MeasurementModel | LaserStationModel:
         """Return the model that predicts `m` (its station's, for a network)."""
-        if isinstance(self.model, StationModels):
+        if isinstance(self.model, StationModels | LaserModels):
             model = self.model.get(m.kind, m.frame_id)
             assert model is not None  # validated
             return model
         return self.model
 
+    def process_noise(self, dt: float) -> np.ndarray:
+        """Return the process noise (n, n) of a prediction over ``dt`` s (module docstring)."""
+        d = self.dynamic
+        q = process_noise(abs(dt), self.config.noise.q, dim=d // 2)
+        if d == self.n:
+            return q
+        out = np.zeros((self.n, self.n))
+        out[:d, :d] = q
+        return out
+
     def _Q(self, dt: float) -> np.ndarray:
-        return process_noise(abs(dt), self.config.noise.q, dim=self.n // 2)
+        return self.process_noise(dt)
 
     def _step(self, m: Measurement, source: int) -> Outcome:
         """Predict to m.t and update with m (the EKF exists).
@@ -265,7 +296,7 @@ class Tracker:
         dt = m.t - self.t
         before = Snapshot(self.t, ekf.x, ekf.P)
         model, t = self._model_for(m), m.t
-        assert not isinstance(model, StationModels)
+        assert not isinstance(model, StationModels | LaserModels)
         noise = self.config.noise
         try:
             with np.errstate(over="raise", invalid="raise"):
@@ -391,7 +422,15 @@ class Tracker:
 
     # ----------------------------------------------------------------------------------
     def _initialise(self, m: Measurement) -> Outcome:
-        """Hand `m` to the IOD batch; start the EKF when the batch is solved."""
+        """Hand `m` to the IOD batch; start the EKF when it is solved (or from `set_prior`)."""
+        if self.prior is not None and m.source != Source.FORECAST:
+            self.ekf = ExtendedKalmanFilter(self.prior.x, self.prior.P)
+            self.t = self.prior.t
+            return self._fuse_real(m)
+        if isinstance(self.model, LaserModels):
+            return Outcome(rejected=Cause.IOD_PENDING,
+                           detail="laser ranges alone give no initial orbit: waiting for an "
+                                  "a-priori orbit")
         iod = self.config.iod
         got = self._initiator.add(m, iod.iod_samples, iod.p0_sigma, iod.iod_max_span_s)
         if isinstance(got, tuple):

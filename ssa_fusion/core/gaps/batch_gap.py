@@ -20,6 +20,7 @@ Units: km, km/s, s; states GCRF.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -27,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ssa_fusion.core.base.types import Kind, Measurement
 from ssa_fusion.core.earth.timescales import DAY_S
+from ssa_fusion.core.gaps.calibration import CovarianceScale
 from ssa_fusion.core.measure.measurement import MeasurementModel
 from ssa_fusion.core.measure.pass_windows import PASS_BREAK_S, passes, window_start
 from ssa_fusion.core.motion.force_model import ForceModel
@@ -244,15 +246,17 @@ _FAILED = (FitStatus.DIVERGED, FitStatus.UNDERDETERMINED)
 
 
 def fit_passes(window: list[Measurement], model: MeasurementModel, x_guess: ArrayLike,
-               t_guess: float, clock_unix0: float = 0.0) -> BatchFit | None:
-    """Fit `gap_fit_options(window)` to `window`; None if it fails.
+               t_guess: float, clock_unix0: float = 0.0,
+               options: BatchOptions | None = None) -> BatchFit | None:
+    """Fit `gap_fit_options(window)` (or ``options``) to `window`; None if it fails.
 
     It fails when it diverges, is underdetermined or has no model for a measurement.
     `clock_unix0`: Unix time (s) of t = 0 of the measurements' clock.
     """
     if not window:
         return None
-    opts = replace(gap_fit_options(window), clock_unix0=float(clock_unix0))
+    opts = replace(gap_fit_options(window) if options is None else options,
+                   clock_unix0=float(clock_unix0))
     try:
         fit = batch_ls.fit(window, model, np.asarray(x_guess, float)[:6], t_guess, opts)
     except ValueError:  # a measurement the fit has no model for
@@ -268,7 +272,10 @@ class BatchGapForecaster:
     `on_estimate` the filter's estimate after it. `forecast(t)` returns the fit's state and
     covariance at a grid epoch t of the gap, or None: t less than `pass_break_s` after the
     last estimate, beyond ``max_horizon_s``, or no fit (it failed); `prior(t)` the same at
-    any epoch t, the first measurement of the next pass.
+    any epoch t, the first measurement of the next pass. ``options``: the fit's (None:
+    `gap_fit_options` of each window); ``cpu_s``: the process CPU time its fits and their
+    tabulations took, s. With ``calibrate`` the covariances published are the fit's times
+    ``scale``'s factor, measured on the object's own last passes (`calibration`).
     """
 
     model: MeasurementModel
@@ -286,6 +293,10 @@ class BatchGapForecaster:
     fitted_t: float = -math.inf
     fit: BatchFit | None = None
     table: dict[float, tuple[Array, Array]] = field(default_factory=dict)
+    options: BatchOptions | None = None
+    cpu_s: float = 0.0
+    calibrate: bool = True
+    scale: CovarianceScale = field(default_factory=CovarianceScale)
 
     @property
     def rule(self) -> GapWindow:
@@ -336,17 +347,25 @@ class BatchGapForecaster:
             return None
         if not (np.isfinite(xs).all() and np.isfinite(Ps).all()):
             return None
-        return xs[0], Ps[0]
+        return xs[0], Ps[0] * float(self.scale.factor(float(t) - self.last[0])[0])
 
     def _refit(self) -> None:
-        """Fit the window once after each pass (at its last estimate) and tabulate the gap."""
+        """Fit the window once after each pass (at its last estimate) and tabulate the gap.
+
+        Before, the forecast published for the pass just ended is scored on its
+        measurements (`calibration.CovarianceScale`); the table's covariances are scaled
+        by the factor.
+        """
         assert self.last is not None
         t_end, x_end = self.last
         if self.fitted_t != t_end:  # a pass ended: fit once, tabulate the prediction
+            cpu = time.process_time()
+            self._calibrate(self.fitted_t, t_end)
             self.fitted_t = t_end
             self.table = {}
             window = self.window[self.rule.start(self.window, self.pass_break_s):]
-            self.fit = fit_passes(window, self.model, x_end, t_end, self.clock_unix0)
+            self.fit = fit_passes(window, self.model, x_end, t_end, self.clock_unix0,
+                                  self.options)
             k0 = math.floor(t_end / self.period_s) + 1
             k1 = math.floor((t_end + self.max_horizon_s) / self.period_s)
             grid = self.period_s * np.arange(k0, k1 + 1, dtype=float)
@@ -355,5 +374,28 @@ class BatchGapForecaster:
                     xs, Ps = self.fit.predict(grid)
                 except (ValueError, ArithmeticError, np.linalg.LinAlgError):
                     xs, Ps = np.full((grid.size, 6), np.nan), np.full((grid.size, 6, 6), np.nan)
+                Ps = Ps * self.scale.factor(grid - t_end)[:, None, None]
                 self.table = {float(g): (xs[i], Ps[i]) for i, g in enumerate(grid)
                               if np.isfinite(xs[i]).all() and np.isfinite(Ps[i]).all()}
+            self.cpu_s += time.process_time() - cpu
+
+    def _published_prediction(self, t: Array) -> tuple[Array, Array] | None:
+        """Return the last fit's unscaled forecast at epochs ``t`` (None: no fit)."""
+        if self.fit is None:
+            return None
+        return self.fit.predict(t)
+
+    def _calibrate(self, before: float, t_end: float) -> None:
+        """Score the forecast published at ``before`` on the pass that ended at ``t_end``."""
+        if not self.calibrate:
+            return
+        ms = [m for m in self.window if before < m.t <= t_end]
+        if not ms:
+            return
+        try:
+            got = self._published_prediction(np.array([m.t for m in ms]))
+        except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError):
+            return
+        if got is not None:
+            self.scale.update(ms, self.model, *got,
+                              horizon_s=float(np.mean([m.t for m in ms])) - before)

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from ssa_fusion.core.base.constants import MU_EARTH
-from ssa_fusion.core.base.types import KIND_NAMES, Kind, MotionModel
+from ssa_fusion.core.base.types import KIND_NAMES, Kind, MotionModel, StateEstimate
 from ssa_fusion.core.earth import frames
 from ssa_fusion.core.earth.frames import Frame, Station
 from ssa_fusion.core.earth.stations import NETWORKS, find_station, network_stations
@@ -30,6 +30,7 @@ from ssa_fusion.core.earth.timescales import DAY_S, UNIX_EPOCH_JD
 from ssa_fusion.core.filter.options import SKY_FILTER, FilterOptions
 from ssa_fusion.core.filter.tracker import Tracker
 from ssa_fusion.core.gaps.surrogate import LIVE_SURROGATE, EciLift, Surrogate, SurrogateConfig
+from ssa_fusion.core.measure.laser_model import LaserModels, LaserNetwork
 from ssa_fusion.core.measure.measurement import (
     MeasurementModel,
     PositionModel,
@@ -38,7 +39,10 @@ from ssa_fusion.core.measure.measurement import (
     StationModels,
 )
 from ssa_fusion.core.motion import dynamics, kepler
+from ssa_fusion.core.motion.contexts import augmented_motion
+from ssa_fusion.core.motion.force_spec import ForceSpec
 from ssa_fusion.core.motion.propagation import INTEGRATED_MODELS, integrate_stm
+from ssa_fusion.core.od import laser_od
 
 MotionFunction = Callable[[np.ndarray, float, float], tuple[np.ndarray, np.ndarray]]
 """f(x, dt, t0) -> (x1, F): a motion model and its state transition matrix, from the state
@@ -93,6 +97,13 @@ class EstimatorConfig:
     sites : tuple of frames.Station
         Stations of one's own (a sites file, `site_file`) that `station` may name besides
         the built-in ones; each ``name`` is its id (the ``frame_id`` of its measurements).
+    laser : LaserNetwork or None
+        The laser stations and the object (kind LASER_RANGE; from the bag's or the topic's
+        ``/ssa/config``, never in the recorded settings). The filter's state is then
+        ``[r, v, the stations' range biases, k_R]`` (`laser_filter`).
+    force : ForceSpec or None
+        The object's forces (motion model "high_fidelity"; built from ``motion_params``
+        by `formats.force_choice`, never in the recorded settings themselves).
     """
 
     kind: Kind = Kind.RANGE_AZ_EL
@@ -106,6 +117,8 @@ class EstimatorConfig:
     filter: FilterOptions = field(default_factory=FilterOptions)
     surrogate: SurrogateConfig = field(default_factory=SurrogateConfig)
     sites: tuple[Station, ...] = ()
+    laser: LaserNetwork | None = None
+    force: ForceSpec | None = None
 
     def __post_init__(self) -> None:
         """Coerce the enums and check the combination (ValueError naming the field)."""
@@ -199,6 +212,11 @@ def measurement_model(c: EstimatorConfig) -> MeasurementModel:
     """
     if c.kind == Kind.POSITION:
         return PositionModel(c.observed)
+    if c.kind == Kind.LASER_RANGE:
+        if c.laser is None:
+            raise ValueError("laser ranges need their network (stations, object): the "
+                             "/ssa/config of `ssa-fusion import crd`")
+        return LaserModels(c.laser)
     if c.is_network:
         return StationModels(network_stations(c.station, c.site_map), c.jd0, c.light_time,
                              c.refraction)
@@ -206,6 +224,41 @@ def measurement_model(c: EstimatorConfig) -> MeasurementModel:
     if c.kind == Kind.RA_DEC:
         return RadecModel(station, c.jd0, c.light_time)
     return RazelModel(station, c.jd0, c.light_time, c.refraction)
+
+
+def laser_filter(network: LaserNetwork, force: ForceSpec,
+                 motion_params: dict[str, float]) -> EstimatorConfig:
+    """Return the filter of a laser network's ranges of one object (`laser_od`'s physics).
+
+    Its state ``[r, v, the stations' range biases (network order), k_R]``; the motion model
+    "high_fidelity" of ``force`` (whose ``motion_params`` are recorded with the settings,
+    `formats.force_choice`), steps of `laser_od.MAX_STEP_S`; process noise
+    `laser_od.FILTER_Q` on the orbit; the a-priori sigma `laser_od.PRIOR_SIGMA`, each
+    bias's prior sigma, k_R's `laser_od.CR_SIGMA` (``p0_sigma``: the prior of
+    `Tracker.set_prior`); the default gate (gross errors only).
+    """
+    nb = len(network.ids)
+    _, bias_sigma = network.prior(network.ids)
+    pos, vel = laser_od.PRIOR_SIGMA
+    p0 = (pos,) * 3 + (vel,) * 3 + tuple(bias_sigma.tolist()) + (laser_od.CR_SIGMA,)
+    options = FilterOptions().with_(q=laser_od.FILTER_Q, p0_sigma=p0,
+                                    motion_model=MotionModel.HIGH_FIDELITY,
+                                    motion_params=motion_params,
+                                    max_step_s=laser_od.MAX_STEP_S)
+    return EstimatorConfig(kind=Kind.LASER_RANGE, station=",".join(network.ids) + ",",
+                           n=7 + nb, filter=options, laser=network, force=force)
+
+
+def laser_prior(c: EstimatorConfig, guess: StateEstimate) -> StateEstimate:
+    """Return the a-priori estimate of `laser_filter` ``c`` at ``guess.t``.
+
+    ``guess``'s orbit, each bias's prior mean, k_R = 1, the covariance of ``p0_sigma``.
+    """
+    assert c.laser is not None
+    mean, _ = c.laser.prior(c.laser.ids)
+    x = np.concatenate([np.asarray(guess.x, dtype=float)[:6], mean, [1.0]])
+    P = np.diag(np.square(np.asarray(c.filter.iod.p0_sigma, dtype=float)))
+    return StateEstimate(float(guess.t), x, P, guess.object_id)
 
 
 def motion(c: EstimatorConfig) -> MotionFunction:
@@ -221,6 +274,11 @@ def motion(c: EstimatorConfig) -> MotionFunction:
     """
     m = c.filter.motion
     model, params = m.motion_model, dict(m.motion_params)
+    if model == MotionModel.HIGH_FIDELITY:
+        if c.force is None:
+            raise ValueError("motion model high_fidelity needs its forces "
+                             "(EstimatorConfig.force, `formats.force_choice`)")
+        return augmented_motion(c.force, c.n, ("srp_scale",) if c.n > 6 else (), m.max_step_s)
     if model == MotionModel.KEPLER:
         mu = float(params.get("mu", MU_EARTH))
 
@@ -255,7 +313,7 @@ def make_tracker(c: EstimatorConfig, object_id: str = "") -> Tracker:
     `Tracker.config`.
     """
     return Tracker(motion(c), measurement_model(c), c.filter, n=c.n, object_id=object_id,
-                   frame_id=c.frame_id)
+                   frame_id=c.frame_id, dynamic=6 if c.kind == Kind.LASER_RANGE else None)
 
 
 def make_surrogate(c: EstimatorConfig) -> Surrogate:

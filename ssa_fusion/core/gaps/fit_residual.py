@@ -25,16 +25,21 @@ of pass ends, where those terms stand out. `FitResidualForecaster` joins them:
 
 Until the surrogate can fit (fewer than `ResidualConfig.min_anchors` anchors spanning
 `ResidualConfig.min_span_s`, or a refused fit) the forecast is the fit's own: the arm is
-never worse off than the fit for want of data. With no learnable residual (a truth the
-fit's model holds) the residual's accelerations come out within their noise, and the
-forecast stays near the fit's (`test_fit_residual`).
+never worse off than the fit for want of data. And the correction steps aside where it
+does not help (`step_aside`): at the end of each pass, the plain fit's and the corrected
+forecasts made at the end of the pass before predict the pass just measured; the corrected
+one is published through the next gap only where it predicted the last passes better
+(`step_aside.STEP_ASIDE_PASSES`), and each gap's choice is counted (`choices`). With no
+learnable residual (a truth the fit's model holds) the residual's accelerations come out
+within their noise, and the forecast stays near the fit's (`test_fit_residual`).
 
 Frames and units: GCRF km, km/s; times s on the measurements' clock (``clock_unix0``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import time
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,11 +47,12 @@ from numpy.typing import NDArray
 from ssa_fusion.core.gaps.batch_gap import BatchGapForecaster
 from ssa_fusion.core.gaps.residual import (
     LIVE_RESIDUAL,
-    Propagator,
     ResidualConfig,
     ResidualFit,
     ResidualSurrogate,
 )
+from ssa_fusion.core.gaps.residual_frame import Propagator
+from ssa_fusion.core.gaps.step_aside import Choice, StepAside
 from ssa_fusion.core.motion.force_model import PARAMETERS, trajectory
 from ssa_fusion.core.od.batch_ls import BatchFit
 
@@ -76,7 +82,7 @@ has not fitted yet), never chosen on an evaluation seed."""
 
 
 def fit_propagator(fit: BatchFit) -> Propagator:
-    """Return the trajectory of `fit`'s model as a `residual.Propagator`.
+    """Return the trajectory of `fit`'s model as a `residual_frame.Propagator`.
 
     Its force model (`BatchOptions.force`), its parameters (the fitted drag factor; the
     others nominal), its Earth's pole and integration step, from any state x0 (GCRF km,
@@ -108,13 +114,24 @@ class FitResidualForecaster(BatchGapForecaster):
 
     A `batch_gap.BatchGapForecaster` (the same window, fit and table; `on_measurement`,
     `on_estimate` and `forecast` are its) whose table and `prior` are corrected by
-    `surrogate` once it can fit. `residual`: the surrogate's fit at the last pass end
-    (None: the fit's own forecast is published).
+    `surrogate` once it can fit and where `step` finds the correction earned its place.
+    `learned`: the surrogate's fit at the last pass end (None: none); `residual`: the same
+    when it is published (None: the fit's own forecast is). `cpu_s` counts the
+    correction's work too. The plain fit's covariance is calibrated as the gap fit's
+    (`calibration`, on the plain fit's own predictions); the corrected one keeps the
+    surrogate's (its held-out scale, `residual`).
     """
 
     residual_cfg: ResidualConfig = FIT_RESIDUAL
     surrogate: ResidualSurrogate | None = None
     residual: ResidualFit | None = None
+    learned: ResidualFit | None = None
+    step: StepAside = field(default_factory=StepAside)
+
+    @property
+    def choices(self) -> dict[Choice, int]:
+        """How many gaps each choice took (`step_aside.Choice`)."""
+        return self.step.counts
 
     def __post_init__(self) -> None:
         """Make the surrogate (its placeholder is set from each fit)."""
@@ -140,12 +157,35 @@ class FitResidualForecaster(BatchGapForecaster):
         return xs[0], Ps[0]
 
     def _refit(self) -> None:
-        """Fit the window once after each pass; learn its state; correct the table."""
-        before = self.fitted_t
+        """Fit the window once after each pass; validate, learn, correct the table."""
+        before, old_fit, old_learned = self.fitted_t, self.fit, self.learned
         super()._refit()
         if self.fitted_t == before:
             return
-        self.residual = None
+        cpu = time.process_time()
+        self._validate(before, old_fit, old_learned)
+        self._learn()
+        self.cpu_s += time.process_time() - cpu
+
+    def _validate(self, before: float, fit: BatchFit | None,
+                  learned: ResidualFit | None) -> None:
+        """Score the forecasts made at ``before`` on the pass just ended (`step_aside`)."""
+        if fit is None or learned is None:
+            return
+        ms = [m for m in self.window if before < m.t <= self.fitted_t]
+        if not ms:
+            return
+        t = np.array([m.t for m in ms])
+        try:
+            plain = fit.predict(t)[0]
+            corrected = learned.predict(t)[0]
+        except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError):
+            return
+        self.step.validate(ms, self.model, plain, corrected)
+
+    def _learn(self) -> None:
+        """Learn against the new fit; correct the table where the correction earned it."""
+        self.residual = self.learned = None
         fit, s = self.fit, self.surrogate
         assert s is not None
         if fit is None:
@@ -163,6 +203,9 @@ class FitResidualForecaster(BatchGapForecaster):
             r.scale = (max(r.scale[0], COVARIANCE_SCALE_FLOOR), r.scale[1])
             xs, Ps = r.predict(grid)
         except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError):
+            return
+        self.learned = r
+        if self.step.decide() != Choice.CORRECTED:
             return
         self.residual = r
         for i, g in enumerate(grid.tolist()):

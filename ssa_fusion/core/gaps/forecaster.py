@@ -23,15 +23,15 @@ from ssa_fusion.core.gaps.residual import (
     ResidualConfig,
     ResidualFit,
     ResidualSurrogate,
-    orbit_propagator,
 )
+from ssa_fusion.core.gaps.residual_frame import orbit_propagator
 
 __all__ = ["PLACEHOLDER_TRAJECTORY", "TABULATE_FIRST_S", "GapForecaster"]
 
 Array = NDArray[np.float64]
 
 PLACEHOLDER_TRAJECTORY = {MotionModel.KEPLER: MotionModel.TWO_BODY, MotionModel.J2: MotionModel.J2}
-"""The trajectory (a `residual.orbit_propagator` model) of each filter motion model a gap
+"""The trajectory (a `residual_frame.orbit_propagator` model) of each filter motion model a gap
 forecaster serves."""
 
 TABULATE_FIRST_S = 3 * 3600.0

@@ -52,6 +52,7 @@ from ssa_fusion.core.gaps.batch_gap import BatchGapForecaster
 from ssa_fusion.core.gaps.estimator import EstimatorConfig, measurement_model
 from ssa_fusion.core.gaps.fit_residual import FitResidualForecaster
 from ssa_fusion.core.gaps.forecaster import GapForecaster
+from ssa_fusion.core.od.batch_ls import BatchOptions
 
 Array = NDArray[np.float64]
 
@@ -160,7 +161,7 @@ class GapPublisher:
 
     @classmethod
     def of(cls, tracker: Tracker, period_s: float, fill: GapFill,
-           c: EstimatorConfig) -> GapPublisher:
+           c: EstimatorConfig, options: BatchOptions | None = None) -> GapPublisher:
         """Return the publisher of the filter of `c` that fills its gaps with `fill`.
 
         With `GapFill.RESIDUAL`, the residual of the filter's motion model
@@ -169,6 +170,8 @@ class GapPublisher:
         (`batch_gap.BatchGapForecaster`), with `BATCH_INIT` the EKF's prior of each pass;
         with `GapFill.FIT_RESIDUAL` that fit corrected by the residual surrogate
         (`fit_residual.FitResidualForecaster`), also the EKF's prior of each pass.
+        ``options``: the fit's own (`batch_ls.BatchOptions`, e.g. the high-fidelity force
+        model) instead of `batch_gap.gap_fit_options` of each window.
         """
         fill = GapFill(fill)
         if fill == GapFill.NONE:
@@ -177,7 +180,8 @@ class GapPublisher:
         if fitted is not None:
             model, clock = measurement_model(c), (c.jd0 - UNIX_EPOCH_JD) * DAY_S
             return cls(tracker, period_s,
-                       lambda period: fitted(model, period, clock_unix0=clock),
+                       lambda period: fitted(model, period, clock_unix0=clock,
+                                             options=options),
                        restart=fill in _RESTARTED)
         motion = c.filter.motion.motion_model
         return cls(tracker, period_s,

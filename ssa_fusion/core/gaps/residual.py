@@ -37,168 +37,39 @@ is `studies.bopdmd` (a study, not part of the core).
 Frames and units: GCRF km, km/s; times s (any clock, e.g. Unix s); residual coordinates km and
 km/s in the placeholder trajectory's radial / along-track / cross-track (RTN) frame.
 
-One job, the residual model, in ~700 lines: its frame, basis, fit and held-out calibration
-are used only by one another.
+Here: the settings (`ResidualConfig`), the fit (`fit_residual`, `ResidualFit`) and the
+held-out calibration over a stream of pass ends (`ResidualSurrogate`); the frame and the
+placeholder's trajectory are `residual_frame`'s, the designs `residual_design`'s.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ssa_fusion.core.base.constants import MU_EARTH
-from ssa_fusion.core.base.types import MotionModel
-from ssa_fusion.core.earth import frames
-from ssa_fusion.core.earth.frames import rtn_axes
 from ssa_fusion.core.earth.timescales import DAY_S
-from ssa_fusion.core.motion.propagation import integrate_chain
+from ssa_fusion.core.gaps.residual_design import basis, hill_design
+from ssa_fusion.core.gaps.residual_frame import (
+    Propagator,
+    apply_residual,
+    argument_of_latitude,
+    period_of,
+    residual_sigmas,
+    state_residual,
+    to_eci_covariance,
+)
+
+__all__ = ["LIVE_RESIDUAL", "PHYSICS_ACCEL_SIGMA", "PHYSICS_RESIDUAL", "ResidualConfig",
+           "ResidualFit", "ResidualSurrogate", "basis_design", "design", "fit_residual",
+           "fit_window"]
 
 Array = NDArray[np.float64]
 
-Propagator = Callable[[Array, float, Array], Array]
-"""propagate(x0 (6,), t0 s, t (k,) s) -> (k, 6): the placeholder's trajectory from x0 at t0,
-sampled at t (before or after t0, any order)."""
 
-
-def orbit_propagator(model: MotionModel | str) -> Propagator:
-    """Return a placeholder trajectory as a `Propagator`.
-
-    The placeholder trajectory of `dynamics` model ``"two_body"`` or ``"j2"`` (GCRF, km,
-    km/s, epochs Unix s; J2 about the Earth's pole at the anchor, `frames.pole_frame`) as a
-    `Propagator`: integrated backwards and forwards from x0 as needed (epochs in
-    any order, repeats included), epoch to epoch outwards from t0 on either side, by
-    `propagation.integrate_chain` (fixed-step DOP853, steps of at most 60 s, compiled, one
-    call a side; each step's state the same numbers as `propagation.integrate_stm`'s;
-    within ~5e-9 relative of scipy's adaptive DOP853 at rtol 1e-10 over three days of a LEO
-    orbit, and ~40x faster). RuntimeError when the orbit cannot be propagated (a
-    non-finite result).
-    """
-
-    def propagate(x0: Array, t0: float, t: Array) -> Array:
-        pole = frames.pole_frame(t0)  # J2 about the Earth's pole (t0: Unix s)
-        t_all, back = np.unique(np.asarray(t, float), return_inverse=True)  # repeats too
-        out = np.empty((len(t_all), 6))
-        out[t_all == t0] = x0
-        for side in (t_all < t0, t_all > t0):
-            order = np.flatnonzero(side)  # increasing epochs
-            if not order.size:
-                continue
-            if t_all[order[0]] < t0:
-                order = order[::-1]  # backwards: decreasing epochs
-            steps = np.diff(np.concatenate([[float(t0)], t_all[order]]))  # epoch to epoch
-            xs, ok = integrate_chain(model, np.asarray(x0, float)[None], steps[None],
-                                     pole_frame=pole)
-            if not ok[0]:
-                raise RuntimeError(f"the {model} orbit cannot be propagated to every epoch "
-                                   f"from t={t0}")
-            out[order] = xs[0]
-        return out[back.reshape(-1)]
-
-    return propagate
-
-
-# --------------------------------------------------------------------------------------------
-# The curvilinear residual frame
-# --------------------------------------------------------------------------------------------
-def curvilinear(x_ref: ArrayLike, r: ArrayLike) -> Array:
-    """Return curvilinear coordinates of positions about reference states.
-
-    Positions r (k, 3) relative to reference states x_ref (k, 6), km: (|r| - |r_ref|,
-    |r_ref| * in-plane angle from r_ref, |r_ref| * angle out of the reference plane).
-    """
-    x = np.atleast_2d(np.asarray(x_ref, float))
-    r = np.atleast_2d(np.asarray(r, float))
-    ax = rtn_axes(x)
-    c = np.einsum("kij,kj->ki", ax, r)
-    rr = np.linalg.norm(x[:, :3], axis=1)
-    rn = np.linalg.norm(r, axis=1)
-    du = np.arctan2(c[:, 1], c[:, 0])
-    dw = np.arcsin(np.clip(c[:, 2] / rn, -1.0, 1.0))
-    return np.stack([rn - rr, rr * du, rr * dw], axis=1)
-
-
-def from_curvilinear(x_ref: ArrayLike, rho: ArrayLike) -> Array:
-    """Return the positions whose curvilinear coordinates are given.
-
-    The GCRF positions (k, 3) whose `curvilinear` coordinates about x_ref are rho (k, 3).
-    """
-    x = np.atleast_2d(np.asarray(x_ref, float))
-    rho = np.atleast_2d(np.asarray(rho, float))
-    ax = rtn_axes(x)
-    rr = np.linalg.norm(x[:, :3], axis=1)
-    du, dw = rho[:, 1] / rr, rho[:, 2] / rr
-    local = np.stack([np.cos(dw) * np.cos(du), np.cos(dw) * np.sin(du), np.sin(dw)], axis=1)
-    out: Array = (rr + rho[:, 0])[:, None] * np.einsum("kji,kj->ki", ax, local)
-    return out
-
-
-_H_S = 1.0
-"""Time step (s) of the central differences that give the residual's rate."""
-
-
-def _with_rate(fn: Callable[[Array, Array], Array], x_ref: ArrayLike, y: ArrayLike) -> Array:
-    """Return (fn(x_ref, y position), its rate) over +-`_H_S` of straight-line motion.
-
-    x_ref (k, 6) reference states and y (k, 6) [position, rate] move in straight lines for
-    +-h; the rate is the central difference of fn (the gravity both feel cancels to
-    O(1e-9) km over 1 s).
-    """
-    x_ref = np.atleast_2d(np.asarray(x_ref, float))
-    y = np.atleast_2d(np.asarray(y, float))
-    h = _H_S
-
-    def at(dt: float) -> Array:
-        ref = np.concatenate([x_ref[:, :3] + dt * x_ref[:, 3:], x_ref[:, 3:]], axis=1)
-        return fn(ref, y[:, :3] + dt * y[:, 3:])
-
-    return np.concatenate([fn(x_ref, y[:, :3]), (at(h) - at(-h)) / (2 * h)], axis=1)
-
-
-def state_residual(x_ref: ArrayLike, x: ArrayLike) -> Array:
-    """Return the curvilinear residual of states and its rate.
-
-    Residual (k, 6) of GCRF states x against reference states x_ref (both (k, 6)): the
-    `curvilinear` position residual (km) and its rate (km/s).
-    """
-    return _with_rate(curvilinear, x_ref, x)
-
-
-def apply_residual(x_ref: ArrayLike, res: ArrayLike) -> Array:
-    """Return the states whose `state_residual` is given.
-
-    The GCRF states (k, 6) whose `state_residual` against x_ref (k, 6) is res (k, 6).
-    """
-    return _with_rate(from_curvilinear, x_ref, res)
-
-
-def argument_of_latitude(x: ArrayLike) -> tuple[Array, Array]:
-    """Return the argument of latitude and its rate.
-
-    Argument of latitude u (rad, from the ascending node) and its rate |h|/|r|^2 (rad/s)
-    of GCRF states (k, 6).
-    """
-    x = np.atleast_2d(np.asarray(x, float))
-    r, v = x[:, :3], x[:, 3:]
-    h = np.cross(r, v)
-    hn = np.linalg.norm(h, axis=1)
-    node = np.stack([-h[:, 1], h[:, 0], np.zeros(len(h))], axis=1)  # z x h
-    nn = np.linalg.norm(node, axis=1)
-    node = np.where(nn[:, None] > 1e-12 * hn[:, None], node / np.maximum(nn, 1e-300)[:, None],
-                    np.array([1.0, 0.0, 0.0]))
-    y_axis = np.cross(h / hn[:, None], node)
-    u = np.arctan2(np.einsum("ki,ki->k", r, y_axis), np.einsum("ki,ki->k", r, node))
-    rn2 = np.einsum("ki,ki->k", r, r)
-    return u, hn / rn2
-
-
-# --------------------------------------------------------------------------------------------
-# The basis and the fit
-# --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class ResidualConfig:
     """Settings of the residual surrogate.
@@ -287,167 +158,6 @@ class ResidualConfig:
             raise ValueError(f"accel_sigma must be a finite number >= 0, got {self.accel_sigma}")
         if self.accel_sigma and self.model != "hill":
             raise ValueError("accel_sigma is a prior of the Hill model's accelerations")
-
-
-def basis(tau: ArrayLike, u: ArrayLike, udot: ArrayLike, degree: int, harmonics: int,
-          secular_harmonics: bool, period_s: float) -> tuple[Array, Array]:
-    """Return the free basis of one residual component and its derivative.
-
-    Basis functions of one residual component at times tau (s, from the gap start) and
-    their time derivatives: (B (k, m), dB/dtau (k, m), 1/s).
-
-    Columns: s^p (p = 0..degree, s = tau / period_s, orbits), cos ju and sin ju (j =
-    1..harmonics, u the argument of latitude, rad, with rate udot rad/s), and s cos u,
-    s sin u if `secular_harmonics`.
-    """
-    tau = np.asarray(tau, float)
-    u = np.asarray(u, float)
-    ud = np.asarray(udot, float)
-    s = tau / period_s
-    cols, dcols = [], []
-    for p in range(degree + 1):
-        cols.append(s ** p)
-        dcols.append(p * s ** max(p - 1, 0) / period_s if p else np.zeros_like(s))
-    for j in range(1, harmonics + 1):
-        c, sn = np.cos(j * u), np.sin(j * u)
-        cols += [c, sn]
-        dcols += [-j * sn * ud, j * c * ud]
-    if secular_harmonics:
-        c, sn = np.cos(u), np.sin(u)
-        cols += [s * c, s * sn]
-        dcols += [c / period_s - s * sn * ud, sn / period_s + s * c * ud]
-    return np.stack(cols, axis=1), np.stack(dcols, axis=1)
-
-
-def hill_matrix(n: float) -> Array:
-    """Return Hill's (Clohessy-Wiltshire) dynamics matrix.
-
-    Hill-Clohessy-Wiltshire dynamics (6, 6) of the residual [radial, along, cross, their
-    rates] about a circular orbit of mean motion n (rad/s): dz/dt = A z + [0; f].
-    """
-    A = np.zeros((6, 6))
-    A[:3, 3:] = np.eye(3)
-    A[3, 0], A[3, 4], A[4, 3], A[5, 2] = 3.0 * n * n, 2.0 * n, -2.0 * n, -n * n
-    return A
-
-
-REEXPONENTIATE = 16
-"""`hill_design` on a uniform grid: epochs between two matrix exponentials taken afresh."""
-
-
-def hill_design(tau: ArrayLike, n: float, u0: float, harmonics: int,
-                components: tuple[bool, bool, bool] = (True, True, True)) -> Array:
-    """Return the design of the Hill residual model.
-
-    Design (k, 6, 6 + m) of the Hill residual model at times tau (s from the anchor):
-    z(tau) = Phi(tau) z0 + sum_p a_p R_p(tau), whose parameters are the residual z0 at the
-    anchor (6: km, km/s) and empirical accelerations a_p (km/s^2) along the radial, along-
-    and cross-track axes, each a constant and harmonics cos ju, sin ju (j = 1..harmonics) of
-    the argument of latitude u = u0 + n tau (rad); m = 3 (1 + 2 harmonics), fewer where
-    `components` leaves an axis out. The forcing is generated by a linear oscillator
-    w (q: 1, cos ju, sin ju) appended to the state, so the design at tau is one matrix
-    exponential (exact, any sign of tau) of size 6 + 3 q (Van Loan's block form: the
-    top-right block of exp([[A, G], [0, I3 (x) Om^T]] tau), G = [e3 e4 e5] (I3 (x) w0^T),
-    is the integral of exp(A (tau - s)) e_(3+c) w_i(s) ds for every axis c and term i side
-    by side; G is taken times n^2, the scale of Hill's matrix, and the block divided by it:
-    an exponential of entries of one scale loses fewer digits: within 2e-12 of each entry's
-    largest value of the exponential taken in extended precision over two days, where one
-    copy of the residual state per (axis, term), a 6 (3 q) + q generator of unscaled
-    coupling, is within 5e-8, at ~50 times the flops). On a uniform grid (steps equal to
-    1 us) it is taken as exp(M h) times the previous epoch's, taken afresh every
-    `REEXPONENTIATE` epochs: over a day of 60 s steps the response to a constant push is
-    within 5e-13 of its closed form (relative to its largest value). Without harmonics (a
-    constant push per axis) it is the closed form itself (`hill_design_constant`).
-    """
-    from scipy.linalg import expm
-
-    tau = np.atleast_1d(np.asarray(tau, float))
-    if harmonics == 0:
-        return hill_design_constant(tau, n, components)
-    coupling = n * n
-    M = _hill_generator(n, u0, harmonics, components, coupling)
-    out = np.zeros((len(tau), 6, M.shape[0]))
-    order = np.argsort(tau, kind="stable")
-    after = tau[order] >= 0.0
-    for side in (order[after], order[~after][::-1]):  # outwards from tau = 0, both ways
-        E, prev, h_prev, step = np.eye(M.shape[0]), 0.0, math.nan, np.eye(M.shape[0])
-        for j, k in enumerate(side.tolist()):
-            h = round(float(tau[k]) - prev, 6)  # a grid's steps are one step (to 1 us)
-            if h == h_prev and j % REEXPONENTIATE:
-                E = step @ E  # exp(M tau_k) = exp(M h) exp(M tau_k-1)
-            else:
-                E = expm(M * tau[k])
-                if h != h_prev:
-                    step = expm(M * h)
-            prev, h_prev = float(tau[k]), h
-            out[k] = E[:6]
-    out[:, :, 6:] /= coupling
-    return out
-
-
-def hill_design_constant(tau: ArrayLike, n: float,
-                         components: tuple[bool, bool, bool] = (True, True, True)) -> Array:
-    """Return `hill_design` without harmonics in closed form.
-
-    Design (k, 6, 6 + m) at times tau (s from the anchor), any sign: Hill's (Clohessy-
-    Wiltshire) state transition of the residual [radial x, along-track y, cross-track z,
-    their rates] about a circular orbit of mean motion n (rad/s), then the response from rest
-    to a unit constant acceleration (km/s^2) along each axis `components` keeps (m of them):
-    radial x = (1 - c) / n^2, y = 2 (s - n t) / n^2; along-track x = 2 (n t - s) / n^2,
-    y = (4 (1 - c) - 3/2 n^2 t^2) / n^2; cross-track z = (1 - c) / n^2 (c = cos n t,
-    s = sin n t), rates their derivatives.
-    """
-    t = np.atleast_1d(np.asarray(tau, float))
-    nt = n * t
-    c, s = np.cos(nt), np.sin(nt)
-    out = np.zeros((len(t), 6, 6 + sum(components)))
-    x, y, z, vx, vy, vz = range(6)
-    out[:, x, x], out[:, x, vx], out[:, x, vy] = 4 - 3 * c, s / n, 2 * (1 - c) / n
-    out[:, y, x], out[:, y, y] = 6 * (s - nt), 1.0
-    out[:, y, vx], out[:, y, vy] = -2 * (1 - c) / n, 4 * s / n - 3 * t
-    out[:, z, z], out[:, z, vz] = c, s / n
-    out[:, vx, x], out[:, vx, vx], out[:, vx, vy] = 3 * n * s, c, 2 * s
-    out[:, vy, x], out[:, vy, vx], out[:, vy, vy] = -6 * n * (1 - c), -2 * s, 4 * c - 3
-    out[:, vz, z], out[:, vz, vz] = -n * s, c
-    push = {0: ((x, (1 - c) / n ** 2), (y, 2 * (s - nt) / n ** 2), (vx, s / n),
-                (vy, 2 * (c - 1) / n)),
-            1: ((x, 2 * (nt - s) / n ** 2), (y, (4 * (1 - c) - 1.5 * nt ** 2) / n ** 2),
-                (vx, 2 * (1 - c) / n), (vy, (4 * s - 3 * nt) / n)),
-            2: ((z, (1 - c) / n ** 2), (vz, s / n))}
-    col = 6
-    for axis in range(3):
-        if components[axis]:
-            for row, v in push[axis]:
-                out[:, row, col] = v
-            col += 1
-    return out
-
-
-def _hill_generator(n: float, u0: float, harmonics: int,
-                    components: tuple[bool, bool, bool], coupling: float = 1.0) -> Array:
-    """Return the generator M (6 + 3 q square, fewer axes: less) of `hill_design`.
-
-    Rows 0-5: Hill's matrix (`hill_matrix`) on the residual state and, in the velocity row
-    of each forced axis c, the oscillator's initial state w0 = (1, cos ju0, sin ju0) times
-    `coupling` over that axis's block of columns; then per forced axis the block Om^T, Om
-    the oscillator's generator (rotations at j n, rad/s).
-    """
-    q = 1 + 2 * harmonics
-    Om = np.zeros((q, q))
-    for j in range(1, harmonics + 1):
-        c, s_ = 2 * j - 1, 2 * j
-        Om[c, s_], Om[s_, c] = -j * n, j * n
-    w0 = np.ones(q)
-    for j in range(1, harmonics + 1):
-        w0[2 * j - 1], w0[2 * j] = math.cos(j * u0), math.sin(j * u0)
-    axes = [c for c in range(3) if components[c]]
-    M = np.zeros((6 + q * len(axes), 6 + q * len(axes)))
-    M[:6, :6] = hill_matrix(n)
-    for a, c in enumerate(axes):
-        cols = slice(6 + q * a, 6 + q * (a + 1))
-        M[3 + c, cols] = coupling * w0
-        M[cols, cols] = Om.T
-    return M
 
 
 def basis_design(tau: ArrayLike, u: ArrayLike, udot: ArrayLike, cfg: ResidualConfig,
@@ -564,52 +274,6 @@ def design(cfg: ResidualConfig, tau: ArrayLike, x_ref: ArrayLike, period_s: floa
                            cfg.accel_components)
     u, ud = argument_of_latitude(x_ref)
     return basis_design(tau, u, ud, cfg, period_s)
-
-
-def to_eci_covariance(x_ref: ArrayLike, cov: ArrayLike) -> Array:
-    """Map residual-frame covariances to GCRF.
-
-    Covariances (k, 6, 6) of residual-frame errors (position, rate) about x_ref (k, 6)
-    mapped to GCRF position and velocity: dr = M rho, dv = M (rho_dot + w x rho), with M the
-    frame's axes and w = (0, 0, |h|/|r|^2) its rotation rate (rad/s) in the frame.
-    """
-    x_ref = np.atleast_2d(np.asarray(x_ref, float))
-    ax = rtn_axes(x_ref)
-    _, w = argument_of_latitude(x_ref)
-    k = ax.shape[0]
-    Mt = np.transpose(ax, (0, 2, 1))
-    W = np.zeros((k, 3, 3))
-    W[:, 0, 1], W[:, 1, 0] = -w, w  # w x rho, w along the cross-track axis
-    J = np.zeros((k, 6, 6))
-    J[:, :3, :3] = J[:, 3:, 3:] = Mt
-    J[:, 3:, :3] = Mt @ W
-    out: Array = np.einsum("kij,kjl,kml->kim", J, np.asarray(cov, float), J)
-    return 0.5 * (out + np.transpose(out, (0, 2, 1)))
-
-
-def residual_sigmas(x_ref: ArrayLike, P: ArrayLike, floor: tuple[float, float]) -> Array:
-    """Return an estimate's standard deviations along the residual frame.
-
-    Standard deviations (k, 6) of estimates with GCRF covariances P (k, 6, 6) along the
-    residual frame's axes about x_ref (k, 6), floored at `floor` (km, km/s).
-    """
-    ax = rtn_axes(x_ref)
-    P = np.asarray(P, float)
-    sp = np.einsum("kij,kjl,kil->ki", ax, P[:, :3, :3], ax)
-    sv = np.einsum("kij,kjl,kil->ki", ax, P[:, 3:, 3:], ax)
-    out: Array = np.sqrt(np.concatenate([np.maximum(sp, floor[0] ** 2),
-                                         np.maximum(sv, floor[1] ** 2)], axis=1))
-    return out
-
-
-def period_of(x: ArrayLike) -> float:
-    """Osculating orbital period (s) of an GCRF state (6,) (two-body; inf if unbound)."""
-    x = np.asarray(x, float)
-    energy = 0.5 * float(x[3:] @ x[3:]) - MU_EARTH / float(np.linalg.norm(x[:3]))
-    if energy >= 0.0:
-        return math.inf
-    a = -MU_EARTH / (2.0 * energy)
-    return 2.0 * math.pi * math.sqrt(a ** 3 / MU_EARTH)
 
 
 class _Window(NamedTuple):

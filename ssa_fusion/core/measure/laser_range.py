@@ -11,16 +11,17 @@ centre of mass at t:
     c tau_down = |r_b - s(t + tau_up + tau_down)|
     range      = c (tau_up + tau_down) / 2 + d_trop(el) + d_shapiro - com + bias
 
-solved by fixed-point iteration (each step gains a factor |v|/c ~ 2e-5: 5 steps reach
-1e-15 s), with a = -mu r / |r|^3 (the rest of the acceleration moves r_b by < 1 um) and
-the station's GCRF position s(t) from its ITRF position at t (`laser_station`,
-`frames.itrs_to_gcrs`), moved on by its velocity and acceleration of the Earth's rotation
-(third order: < 1e-10 m). d_trop is the one-way Mendes-Pavlis delay at the elevation of
-r_b seen from the station (`troposphere`; the two legs' elevations differ by ~1e-5 rad),
-d_shapiro the mean of the two legs' relativistic delays in the Earth's field,
-(1 + gamma) GM/c^2 ln((|s| + |r_b| + rho) / (|s| + |r_b| - rho)) with gamma = 1 (~6 mm
-for LAGEOS), com the satellite's centre-of-mass offset (the reflectors face the station:
-0.251 m for LAGEOS, `LAGEOS_COM_KM`), bias a per-station range bias (a parameter).
+solved by fixed-point iteration (each step gains a factor |v|/c ~ 2e-5: 5 steps reach 1e-15
+s), with a = -mu r / |r|^3 (the rest of the acceleration moves r_b by < 1 um) and the
+station's GCRF position s(t) from its ITRF position at t (`laser_station`,
+`frames.itrs_to_gcrs`) displaced by the solid Earth tides (`station_tides`), moved on by its
+velocity and acceleration of the Earth's rotation (third order: < 1e-10 m). d_trop is the
+one-way Mendes-Pavlis delay at the elevation of r_b seen from the station (`troposphere`;
+the two legs' elevations differ by ~1e-5 rad), d_shapiro the mean of the two legs'
+relativistic delays in the Earth's field, (1 + gamma) GM/c^2 ln((|s| + |r_b| + rho) / (|s| +
+|r_b| - rho)) with gamma = 1 (~6 mm for LAGEOS), com the satellite's centre-of-mass offset
+(the reflectors face the station: 0.251 m for LAGEOS, `LAGEOS_COM_KM`), bias a per-station
+range bias (a parameter).
 
 Jacobian: of the geometric part with respect to x (the light-time equations differentiated,
 the station's motion included); the troposphere's and Shapiro's dependence on x (< 1e-5 of
@@ -40,6 +41,7 @@ from ssa_fusion.core.earth import eop as eop_
 from ssa_fusion.core.earth.frames import ERA_RATE, cip_gcrs, gcrs_to_itrs_matrix, itrs_to_gcrs
 from ssa_fusion.core.measure import troposphere
 from ssa_fusion.core.measure.laser_station import LaserStation, geodetic_of
+from ssa_fusion.core.measure.station_tides import solid_tide_displacement
 
 Array = NDArray[np.float64]
 
@@ -127,8 +129,12 @@ class LaserRange:
 
 
 def geometry(stations: list[LaserStation], index: ArrayLike, t: ArrayLike,
-             eop: eop_.EarthOrientation | None = None) -> LaserGeometry:
-    """Return the `LaserGeometry` of ranges from `stations[index[i]]` at transmit epochs `t`."""
+             eop: eop_.EarthOrientation | None = None, tides: bool = True) -> LaserGeometry:
+    """Return the `LaserGeometry` of ranges from `stations[index[i]]` at transmit epochs `t`.
+
+    With `tides` the stations are where the solid Earth tides have moved them
+    (`station_tides`: up to ~0.3 m).
+    """
     tt = np.asarray(t, dtype=float)
     idx = np.asarray(index, dtype=np.intp)
     site_itrs = np.zeros((len(tt), 3))
@@ -139,6 +145,8 @@ def geometry(stations: list[LaserStation], index: ArrayLike, t: ArrayLike,
     site = itrs_to_gcrs(np.concatenate([site_itrs, np.zeros_like(site_itrs)], -1), tt, eop)
     omega = ERA_RATE * cip_gcrs(tt, eop)
     lat, _, height = geodetic_of(site_itrs)
+    if tides and tt.size:
+        site[:, :3] += solid_tide_displacement(site[:, :3], lat, tt)
     return LaserGeometry(tt, site, np.cross(omega, site[:, 3:]), gcrs_to_itrs_matrix(tt, eop),
                          site_itrs, lat, height)
 

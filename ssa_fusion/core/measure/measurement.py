@@ -27,6 +27,7 @@ from ssa_fusion.core.earth.eop import default as eop_default
 from ssa_fusion.core.earth.frames import Station, enu_matrix, gcrs_to_itrs_floats, wrap_2pi
 from ssa_fusion.core.earth.refraction import refraction, refraction_rate
 from ssa_fusion.core.earth.timescales import DAY_S, UNIX_EPOCH_JD, install_leap_seconds
+from ssa_fusion.core.measure.laser_model import LaserModels
 
 
 class PositionModel:
@@ -312,5 +313,6 @@ class StationModels:
         return model
 
 
-MeasurementModel = PositionModel | RazelModel | RadecModel | StationModels
-"""What a tracker observes with: one model, or a station network's models."""
+MeasurementModel = PositionModel | RazelModel | RadecModel | StationModels | LaserModels
+"""What a tracker observes with: one model, a station network's models, or a laser network's
+(`laser_model.LaserModels`)."""

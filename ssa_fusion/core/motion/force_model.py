@@ -21,7 +21,8 @@ altitude ``|r| - re`` over a spherical Earth, ``v_rel = v - omega p x r`` with `
 pole); ``R = r/|r|``, ``N = (r x v)/|r x v|``, ``T = N x R``. The four parameters
 (`PARAMETERS`: ``drag_scale`` k_D, dimensionless, nominal 1; ``accel_r``, ``accel_t``,
 ``accel_n`` km/s^2, nominal 0) enter the state's motion and are what a fit can solve for or
-consider.
+consider; the fifth, ``srp_scale`` (nominal 1), is the high-fidelity model's factor on Cr
+(`force_spec`), which this model has no solar radiation pressure for.
 
 `trajectory` integrates one state with the augmented variational equations: the state
 transition matrix ``Phi = d x(t) / d x(t0)`` and the parameter sensitivities
@@ -51,26 +52,31 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ssa_fusion.core.base.constants import J2, J3, J4, MU_EARTH, OMEGA_EARTH, R_EARTH
 from ssa_fusion.core.base.jit import f64, jit
-from ssa_fusion.core.motion.propagation import _tableau, j2_gravity
+from ssa_fusion.core.motion.propagation import _tableau, j2_gravity, rk_advance, rk_stage
+
+if TYPE_CHECKING:
+    from ssa_fusion.core.motion.force_spec import ForceSpec
 
 __all__ = ["NOMINAL", "PARAMETERS", "ForceModel", "Trajectory", "acceleration",
-           "parameter_index", "trajectory"]
+           "drag_terms", "output_steps", "parameter_index", "store_output", "trajectory"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
 
-PARAMETERS = ("drag_scale", "accel_r", "accel_t", "accel_n")
+PARAMETERS = ("drag_scale", "accel_r", "accel_t", "accel_n", "srp_scale")
 """The parameters of the force model a fit can solve for or consider, in this order:
-drag factor k_D (dimensionless) and constant RTN empirical accelerations (km/s^2)."""
+drag factor k_D (dimensionless), constant RTN empirical accelerations (km/s^2) and the factor
+k_R on Cr of the high-fidelity model's solar radiation pressure (`force_spec`; none here)."""
 
-NOMINAL = (1.0, 0.0, 0.0, 0.0)
+NOMINAL = (1.0, 0.0, 0.0, 0.0, 1.0)
 """The parameters' nominal values (`PARAMETERS` order)."""
 
 _N_CONST = 14
@@ -167,6 +173,108 @@ def _zonal34(x: float, yy: float, zz: float, mu: float, re: float, j3: float, j4
 
 
 @jit
+def _zonal34_gradient(ar: Array, x: float, yy: float, zz: float, mu: float, re: float,
+                      j3: float, j4: float, px: float, py: float, pz: float) -> None:
+    """Add the J3 + J4 gravity gradient (central differences of `_zonal34`, 1/s^2) to ``ar``."""
+    h = ZONAL_STEP_KM
+    for j in range(3):
+        ex = h if j == 0 else 0.0
+        ey = h if j == 1 else 0.0
+        ez = h if j == 2 else 0.0
+        f0, f1, f2 = _zonal34(x + ex, yy + ey, zz + ez, mu, re, j3, j4, px, py, pz)
+        m0, m1, m2 = _zonal34(x - ex, yy - ey, zz - ez, mu, re, j3, j4, px, py, pz)
+        ar[0, j] += (f0 - m0) / (2.0 * h)
+        ar[1, j] += (f1 - m1) / (2.0 * h)
+        ar[2, j] += (f2 - m2) / (2.0 * h)
+
+
+@jit
+def drag_terms(x: float, y: float, z: float, vx: float, vy: float, vz: float, wx: float,
+               wy: float, wz: float, rho0: float, re: float, h0: float, scale_h: float,
+               k: float, kd: float, ar: Array, av: Array,
+               gradient: bool) -> tuple[float, float, float]:
+    """Return the drag acceleration with ``k_D = 1`` (km/s^2) at a GCRF state (km, km/s).
+
+    The co-rotating exponential atmosphere (module docstring): rotation ``w`` (rad/s, GCRF),
+    density ``rho0 exp(-(|r| - re - h0) / scale_h)`` (kg/m^3; km), ``k`` km/s^2 per
+    (km/s)^2 per kg/m^3 (the ballistic coefficient's). With ``gradient`` its partials times
+    ``kd`` are added to ``av`` (velocity) and ``ar`` (position).
+    """
+    ux = vx - (wy * z - wz * y)
+    uy = vy - (wz * x - wx * z)
+    uz = vz - (wx * y - wy * x)
+    un = math.sqrt(ux * ux + uy * uy + uz * uz)
+    r = math.sqrt(x * x + y * y + z * z)
+    rho = rho0 * math.exp(-(r - re - h0) / scale_h)
+    cr = k * rho  # km/s^2 per (km/s)^2
+    if gradient:
+        u = (ux, uy, uz)
+        wv = (wx, wy, wz)
+        rr = (x, y, z)
+        for i in range(3):
+            for j in range(3):
+                av[i, j] += -kd * cr * ((un if i == j else 0.0) + u[i] * u[j] / un)
+        kr = kd * cr * un / (scale_h * r)
+        for i in range(3):
+            # - D_v [w x]: column j of [w x] is w x e_j
+            d0 = av[i, 1] * wv[2] - av[i, 2] * wv[1]
+            d1 = av[i, 2] * wv[0] - av[i, 0] * wv[2]
+            d2 = av[i, 0] * wv[1] - av[i, 1] * wv[0]
+            ar[i, 0] += kr * u[i] * rr[0] - d0
+            ar[i, 1] += kr * u[i] * rr[1] - d1
+            ar[i, 2] += kr * u[i] * rr[2] - d2
+    return -cr * un * ux, -cr * un * uy, -cr * un * uz
+
+
+@jit
+def _rtn_axes(y: Array, r: float) -> tuple[tuple[float, float, float],
+                                          tuple[float, float, float],
+                                          tuple[float, float, float]]:
+    """Return the radial, transverse and normal unit vectors (GCRF) of the state ``y``."""
+    x, yy, zz = y[0], y[1], y[2]
+    vx, vy, vz = y[3], y[4], y[5]
+    hx, hy, hz = yy * vz - zz * vy, zz * vx - x * vz, x * vy - yy * vx
+    hn = math.sqrt(hx * hx + hy * hy + hz * hz)
+    rh = (x / r, yy / r, zz / r)
+    nh = (hx / hn, hy / hn, hz / hn)
+    th = (nh[1] * rh[2] - nh[2] * rh[1], nh[2] * rh[0] - nh[0] * rh[2],
+          nh[0] * rh[1] - nh[1] * rh[0])
+    return rh, th, nh
+
+
+@jit
+def _variational(y: Array, ncol: int, ar: Array, av: Array, which: IntArray,
+                 axes: tuple[tuple[float, float, float], tuple[float, float, float],
+                             tuple[float, float, float], tuple[float, float, float]],
+                 out: Array, s: int) -> None:
+    """``out[s, 6:]``: the derivative of [Phi | S] (the state's rows 6..).
+
+    ``ar``, ``av`` (3, 3): the acceleration's partials by position and velocity; ``axes``:
+    the drag acceleration with k_D = 1 and the radial, transverse, normal unit vectors
+    (the sensitivities to the parameters ``which``, `PARAMETERS`).
+    """
+    for j in range(ncol):
+        p0 = y[6 + j]
+        p1 = y[6 + ncol + j]
+        p2 = y[6 + 2 * ncol + j]
+        q0 = y[6 + 3 * ncol + j]
+        q1 = y[6 + 4 * ncol + j]
+        q2 = y[6 + 5 * ncol + j]
+        out[s, 6 + j] = q0
+        out[s, 6 + ncol + j] = q1
+        out[s, 6 + 2 * ncol + j] = q2
+        b0 = b1 = b2 = 0.0
+        if j >= 6:
+            b0, b1, b2 = axes[which[j - 6]]
+        out[s, 6 + 3 * ncol + j] = (ar[0, 0] * p0 + ar[0, 1] * p1 + ar[0, 2] * p2
+                                    + av[0, 0] * q0 + av[0, 1] * q1 + av[0, 2] * q2 + b0)
+        out[s, 6 + 4 * ncol + j] = (ar[1, 0] * p0 + ar[1, 1] * p1 + ar[1, 2] * p2
+                                    + av[1, 0] * q0 + av[1, 1] * q1 + av[1, 2] * q2 + b1)
+        out[s, 6 + 5 * ncol + j] = (ar[2, 0] * p0 + ar[2, 1] * p1 + ar[2, 2] * p2
+                                    + av[2, 0] * q0 + av[2, 1] * q1 + av[2, 2] * q2 + b2)
+
+
+@jit
 def _force_rhs(y: Array, ncol: int, c: Array, prm: Array, which: IntArray,
                out: Array, s: int) -> None:
     """``out[s] = dy/dt`` of the state + [Phi | S] system ``y`` (6 + 6 ncol,).
@@ -177,7 +285,6 @@ def _force_rhs(y: Array, ncol: int, c: Array, prm: Array, which: IntArray,
     mu, j2, re = c[0], c[1], c[2]
     px, py, pz = c[3], c[4], c[5]
     x, yy, zz = y[0], y[1], y[2]
-    vx, vy, vz = y[3], y[4], y[5]
     r = math.sqrt(x * x + yy * yy + zz * zz)
     ax, ay, az, g00, g01, g02, g11, g12, g22 = j2_gravity(x, yy, zz, mu, j2, re, px, py, pz)
     # gravity gradient (symmetric), row-major in a 3x3 array of the position partials
@@ -194,54 +301,17 @@ def _force_rhs(y: Array, ncol: int, c: Array, prm: Array, which: IntArray,
         ay += by
         az += bz
         if ncol:
-            h = ZONAL_STEP_KM
-            for j in range(3):
-                ex = h if j == 0 else 0.0
-                ey = h if j == 1 else 0.0
-                ez = h if j == 2 else 0.0
-                f0, f1, f2 = _zonal34(x + ex, yy + ey, zz + ez, mu, re, j3, j4, px, py, pz)
-                m0, m1, m2 = _zonal34(x - ex, yy - ey, zz - ez, mu, re, j3, j4, px, py, pz)
-                ar[0, j] += (f0 - m0) / (2.0 * h)
-                ar[1, j] += (f1 - m1) / (2.0 * h)
-                ar[2, j] += (f2 - m2) / (2.0 * h)
+            _zonal34_gradient(ar, x, yy, zz, mu, re, j3, j4, px, py, pz)
     anx = any_ = anz = 0.0  # the drag acceleration with k_D = 1
     if c[6] != 0.0:
-        om = c[11]
-        wx, wy, wz = om * px, om * py, om * pz
-        ux = vx - (wy * zz - wz * yy)
-        uy = vy - (wz * x - wx * zz)
-        uz = vz - (wx * yy - wy * x)
-        un = math.sqrt(ux * ux + uy * uy + uz * uz)
-        rho = c[8] * math.exp(-(r - re - c[9]) / c[10])
-        cr = c[7] * rho  # km/s^2 per (km/s)^2
-        anx, any_, anz = -cr * un * ux, -cr * un * uy, -cr * un * uz
         kd = prm[0]
+        om = c[11]
+        anx, any_, anz = drag_terms(x, yy, zz, y[3], y[4], y[5], om * px, om * py, om * pz,
+                                    c[8], c[2], c[9], c[10], c[7], kd, ar, av, True)
         ax += kd * anx
         ay += kd * any_
         az += kd * anz
-        u = (ux, uy, uz)
-        wv = (wx, wy, wz)
-        for i in range(3):
-            for j in range(3):
-                dv = -kd * cr * ((un if i == j else 0.0) + u[i] * u[j] / un)
-                av[i, j] = dv
-        rr = (x, yy, zz)
-        kr = kd * cr * un / (c[10] * r)
-        for i in range(3):
-            # - D_v [w x]: column j of [w x] is w x e_j
-            d0 = av[i, 1] * wv[2] - av[i, 2] * wv[1]
-            d1 = av[i, 2] * wv[0] - av[i, 0] * wv[2]
-            d2 = av[i, 0] * wv[1] - av[i, 1] * wv[0]
-            ar[i, 0] += kr * u[i] * rr[0] - d0
-            ar[i, 1] += kr * u[i] * rr[1] - d1
-            ar[i, 2] += kr * u[i] * rr[2] - d2
-    # the RTN axes
-    hx, hy, hz = yy * vz - zz * vy, zz * vx - x * vz, x * vy - yy * vx
-    hn = math.sqrt(hx * hx + hy * hy + hz * hz)
-    rh = (x / r, yy / r, zz / r)
-    nh = (hx / hn, hy / hn, hz / hn)
-    th = (nh[1] * rh[2] - nh[2] * rh[1], nh[2] * rh[0] - nh[0] * rh[2],
-          nh[0] * rh[1] - nh[1] * rh[0])
+    rh, th, nh = _rtn_axes(y, r)
     for i in range(3):
         ax_i = prm[1] * rh[i] + prm[2] * th[i] + prm[3] * nh[i]
         if i == 0:
@@ -250,36 +320,9 @@ def _force_rhs(y: Array, ncol: int, c: Array, prm: Array, which: IntArray,
             ay += ax_i
         else:
             az += ax_i
-    out[s, 0], out[s, 1], out[s, 2] = vx, vy, vz
+    out[s, 0], out[s, 1], out[s, 2] = y[3], y[4], y[5]
     out[s, 3], out[s, 4], out[s, 5] = ax, ay, az
-    an = (anx, any_, anz)
-    for j in range(ncol):
-        p0 = y[6 + j]
-        p1 = y[6 + ncol + j]
-        p2 = y[6 + 2 * ncol + j]
-        q0 = y[6 + 3 * ncol + j]
-        q1 = y[6 + 4 * ncol + j]
-        q2 = y[6 + 5 * ncol + j]
-        out[s, 6 + j] = q0
-        out[s, 6 + ncol + j] = q1
-        out[s, 6 + 2 * ncol + j] = q2
-        b0 = b1 = b2 = 0.0
-        if j >= 6:
-            p = which[j - 6]
-            if p == 0:
-                b0, b1, b2 = an[0], an[1], an[2]
-            elif p == 1:
-                b0, b1, b2 = rh[0], rh[1], rh[2]
-            elif p == 2:
-                b0, b1, b2 = th[0], th[1], th[2]
-            else:
-                b0, b1, b2 = nh[0], nh[1], nh[2]
-        out[s, 6 + 3 * ncol + j] = (ar[0, 0] * p0 + ar[0, 1] * p1 + ar[0, 2] * p2
-                                    + av[0, 0] * q0 + av[0, 1] * q1 + av[0, 2] * q2 + b0)
-        out[s, 6 + 4 * ncol + j] = (ar[1, 0] * p0 + ar[1, 1] * p1 + ar[1, 2] * p2
-                                    + av[1, 0] * q0 + av[1, 1] * q1 + av[1, 2] * q2 + b1)
-        out[s, 6 + 5 * ncol + j] = (ar[2, 0] * p0 + ar[2, 1] * p1 + ar[2, 2] * p2
-                                    + av[2, 0] * q0 + av[2, 1] * q1 + av[2, 2] * q2 + b2)
+    _variational(y, ncol, ar, av, which, ((anx, any_, anz), rh, th, nh), out, s)
 
 
 @jit
@@ -305,43 +348,46 @@ def _trajectory_kernel(x0: Array, dts: Array, max_step: float, c: Array, prm: Ar
     good = True
     for kk in range(dts.shape[0]):
         dt = dts[kk]
-        steps = math.ceil(abs(dt) / max_step) if good and dt - dt == 0.0 else 0
-        h = dt / max(steps, 1)
+        steps, h = output_steps(dt, max_step, good)
         for _ in range(steps):
-            for s in range(ns):
-                if s == 0:
-                    _force_rhs(y, ncol, c, prm, which, K, 0)
-                    continue
-                a0 = A[s, 0]
-                for q in range(ny):
-                    yt[q] = a0 * K[0, q]
-                for j in range(1, s):
-                    a = A[s, j]
-                    for q in range(ny):
-                        yt[q] += a * K[j, q]
-                for q in range(ny):
-                    yt[q] = y[q] + h * yt[q]
+            _force_rhs(y, ncol, c, prm, which, K, 0)
+            for s in range(1, ns):
+                rk_stage(y, h, A, K, s, ny, yt, False)
                 _force_rhs(yt, ncol, c, prm, which, K, s)
-            b0 = B[0]
-            for q in range(ny):
-                yt[q] = b0 * K[0, q]
-            for j in range(1, ns):
-                b = B[j]
-                for q in range(ny):
-                    yt[q] += b * K[j, q]
-            for q in range(ny):
-                y[q] = y[q] + h * yt[q]
-        nf = 0.0 if good and dt - dt == 0.0 else math.nan
-        for q in range(6):
-            xs[kk, q] = y[q]
-            nf += y[q] - y[q]
-        for i in range(6):
-            for j in range(ncol):
-                v = y[6 + i * ncol + j]
-                ys[kk, i, j] = v
-                nf += v - v
-        good = nf == 0.0
+            rk_advance(y, h, B, K, ny, yt, False)
+        good = store_output(y, ncol, dt, good, kk, xs, ys)
         ok[kk] = good
+
+
+@jit
+def output_steps(dt: float, max_step: float, good: bool) -> tuple[int, float]:
+    """Return the equal steps (how many, their length, s) to the next output ``dt`` s on.
+
+    ``ceil(|dt| / max_step)`` of them; none once the trajectory is no longer ``good`` or
+    ``dt`` is not finite.
+    """
+    steps = math.ceil(abs(dt) / max_step) if good and dt - dt == 0.0 else 0
+    return steps, dt / max(steps, 1)
+
+
+@jit
+def store_output(y: Array, ncol: int, dt: float, good: bool, kk: int, xs: Array,
+                 ys: Array) -> bool:
+    """Store output ``kk``: the state ``y[:6]`` in ``xs[kk]``, [Phi | S] (6, ncol) in ``ys[kk]``.
+
+    Returns whether the trajectory is still good: it was, ``dt`` is finite and so is
+    everything stored.
+    """
+    nf = 0.0 if good and dt - dt == 0.0 else math.nan
+    for q in range(6):
+        xs[kk, q] = y[q]
+        nf += y[q] - y[q]
+    for i in range(6 if ncol else 0):
+        for j in range(ncol):
+            v = y[6 + i * ncol + j]
+            ys[kk, i, j] = v
+            nf += v - v
+    return nf == 0.0
 
 
 @dataclass
@@ -370,7 +416,7 @@ class Trajectory:
     ok: BoolArray
 
 
-def trajectory(force: ForceModel, x0: ArrayLike, t0: float, t: ArrayLike,
+def trajectory(force: ForceModel | ForceSpec, x0: ArrayLike, t0: float, t: ArrayLike,
                params: ArrayLike = NOMINAL, which: Sequence[int] = (),
                max_step_s: float = 60.0, pole: ArrayLike | None = None) -> Trajectory:
     """Integrate ``x0`` (at ``t0``) to the epochs ``t`` with Phi and the sensitivities.
@@ -381,16 +427,18 @@ def trajectory(force: ForceModel, x0: ArrayLike, t0: float, t: ArrayLike,
 
     Parameters
     ----------
-    force : ForceModel
-        The force model.
+    force : ForceModel or force_spec.ForceSpec
+        The force model. A `force_spec.ForceSpec` (geopotential, Sun, Moon, SRP...) is
+        integrated by `high_fidelity.propagate` with the parameters given here (k_R = 1):
+        its epochs must then be Unix s UTC, and ``pole`` is not used.
     x0 : array_like (6,)
         GCRF state at ``t0``, km, km/s.
     t0 : float
         Its epoch, s.
     t : array_like (K,)
         Output epochs, s (any order, repeats allowed).
-    params : array_like (4,)
-        The parameters (`PARAMETERS` order; `NOMINAL` by default).
+    params : array_like (5,) or (4,)
+        The parameters (`PARAMETERS` order; `NOMINAL` by default; ``srp_scale`` unused).
     which : sequence of int
         Indices in `PARAMETERS` of the parameters whose sensitivities are wanted.
     max_step_s : float
@@ -402,11 +450,17 @@ def trajectory(force: ForceModel, x0: ArrayLike, t0: float, t: ArrayLike,
     -------
     Trajectory
     """
+    if not isinstance(force, ForceModel):
+        from ssa_fusion.core.motion import high_fidelity
+
+        return high_fidelity.propagate(force, x0, t0, t, params, which, max_step_s)
     tt = np.atleast_1d(np.asarray(t, dtype=float))
     x = f64(np.asarray(x0, dtype=float).reshape(6).copy())
     c = f64(force.constants(pole))
-    prm = f64(np.asarray(params, dtype=float).reshape(4).copy())
+    prm = f64(np.asarray(params, dtype=float).reshape(-1)[:4].copy())
     wh = np.ascontiguousarray(np.asarray(which, dtype=np.int64).reshape(-1))
+    if np.any(wh >= 4):
+        raise ValueError("srp_scale needs the high-fidelity model with SRP (force_spec)")
     A, B = _tableau()
     k = tt.shape[0]
     ncol = 6 + wh.shape[0]
@@ -437,7 +491,7 @@ def acceleration(force: ForceModel, x: ArrayLike, params: ArrayLike = NOMINAL,
         The force model.
     x : array_like (6,)
         GCRF state, km, km/s.
-    params : array_like (4,)
+    params : array_like (5,) or (4,)
         The parameters (`PARAMETERS` order).
     pole : array_like (3,), optional
         The Earth's pole (GCRF unit vector).
@@ -450,7 +504,7 @@ def acceleration(force: ForceModel, x: ArrayLike, params: ArrayLike = NOMINAL,
     y[:6] = np.asarray(x, dtype=float).reshape(6)
     out = np.empty((1, 42))
     _force_rhs(y, 6, f64(force.constants(pole)),
-               f64(np.asarray(params, dtype=float).reshape(4).copy()),
+               f64(np.asarray(params, dtype=float).reshape(-1)[:4].copy()),
                np.zeros(0, dtype=np.int64), out, 0)
     acc: Array = out[0, 3:6].copy()
     return acc

@@ -29,7 +29,7 @@ from ssa_fusion.core.base.jit import f64, jit
 from ssa_fusion.core.base.types import MotionModel
 from ssa_fusion.core.motion import dynamics
 
-__all__ = ["INTEGRATED_MODELS", "integrate_stm"]
+__all__ = ["INTEGRATED_MODELS", "integrate_stm", "rk_advance", "rk_stage"]
 
 Array = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -112,6 +112,46 @@ def _gravity_rhs(y: Array, mu: float, j2: float, re: float, px: float, py: float
 
 
 @jit
+def _combine(w: Array, K: Array, n: int, m: int, out: Array, skip_zeros: bool) -> None:
+    """``out[:m] = sum_j w[j] K[j, :m]`` over j < n, in the order of j.
+
+    With ``skip_zeros`` a zero coefficient's term is left out (``0 K`` adds nothing to a
+    finite sum).
+    """
+    w0 = w[0]
+    for c in range(m):
+        out[c] = w0 * K[0, c]
+    for j in range(1, n):
+        a = w[j]
+        if skip_zeros and a == 0.0:
+            continue
+        for c in range(m):
+            out[c] += a * K[j, c]
+
+
+@jit
+def rk_stage(y: Array, h: float, A: Array, K: Array, s: int, m: int, ys: Array,
+             skip_zeros: bool) -> None:
+    """``ys = y + h sum_j A[s, j] K[j]`` (j < s) over the first ``m`` elements.
+
+    The explicit Runge-Kutta stage state (tableau ``A``, stage derivatives ``K`` (stages,
+    m)), the sum as `_combine` takes it.
+    """
+    _combine(A[s], K, s, m, ys, skip_zeros)
+    for c in range(m):
+        ys[c] = y[c] + h * ys[c]
+
+
+@jit
+def rk_advance(y: Array, h: float, B: Array, K: Array, m: int, ys: Array,
+               skip_zeros: bool) -> None:
+    """``y += h sum_j B[j] K[j]``: one Runge-Kutta step's end (``ys`` holds the sum)."""
+    _combine(B, K, B.shape[0], m, ys, skip_zeros)
+    for c in range(m):
+        y[c] = y[c] + h * ys[c]
+
+
+@jit
 def _gravity_stm_kernel(x: Array, dt: Array, max_step: float, mu: float, j2: float, re: float,
                         pole: Array, A: Array, B: Array, x1: Array, phi: Array,
                         ok: BoolArray) -> None:
@@ -149,33 +189,11 @@ def _gravity_stm_kernel(x: Array, dt: Array, max_step: float, mu: float, j2: flo
         h = dt[i] / max(steps, 1)
         px, py, pz = pole[i, 0], pole[i, 1], pole[i, 2]
         for _ in range(steps):
-            for s in range(ns):
-                if s == 0:
-                    _gravity_rhs(y, mu, j2, re, px, py, pz, K, 0)
-                    continue
-                a0 = A[s, 0]
-                for c in range(m):
-                    ys[c] = a0 * K[0, c]
-                for j in range(1, s):
-                    a = A[s, j]
-                    if a == 0.0:  # 16 of DOP853's 66: adding 0 K leaves the sum as it is
-                        continue
-                    for c in range(m):
-                        ys[c] += a * K[j, c]
-                for c in range(m):
-                    ys[c] = y[c] + h * ys[c]
+            _gravity_rhs(y, mu, j2, re, px, py, pz, K, 0)
+            for s in range(1, ns):
+                rk_stage(y, h, A, K, s, m, ys, True)  # 16 of DOP853's 66 A are 0: skipped
                 _gravity_rhs(ys, mu, j2, re, px, py, pz, K, s)
-            b0 = B[0]
-            for c in range(m):
-                ys[c] = b0 * K[0, c]
-            for j in range(1, ns):
-                b = B[j]
-                if b == 0.0:  # 4 of 12
-                    continue
-                for c in range(m):
-                    ys[c] += b * K[j, c]
-            for c in range(m):
-                y[c] = y[c] + h * ys[c]
+            rk_advance(y, h, B, K, m, ys, True)  # 4 of 12 B are 0: skipped
         for c in range(6):
             x1[i, c] = y[c]
             nf += y[c] - y[c]
@@ -220,33 +238,11 @@ def _gravity_chain_kernel(x0: Array, dt: Array, max_step: float, mu: float, j2: 
             steps = math.ceil(abs(dt[i, k]) / max_step)
             h = dt[i, k] / max(steps, 1)
             for _ in range(steps):
-                for s in range(ns):
-                    if s == 0:
-                        _gravity_state_rhs(y, mu, j2, re, px, py, pz, K, 0)
-                        continue
-                    a0 = A[s, 0]
-                    for c in range(m):
-                        ys[c] = a0 * K[0, c]
-                    for j in range(1, s):
-                        a = A[s, j]
-                        if a == 0.0:
-                            continue
-                        for c in range(m):
-                            ys[c] += a * K[j, c]
-                    for c in range(m):
-                        ys[c] = y[c] + h * ys[c]
+                _gravity_state_rhs(y, mu, j2, re, px, py, pz, K, 0)
+                for s in range(1, ns):
+                    rk_stage(y, h, A, K, s, m, ys, True)
                     _gravity_state_rhs(ys, mu, j2, re, px, py, pz, K, s)
-                b0 = B[0]
-                for c in range(m):
-                    ys[c] = b0 * K[0, c]
-                for j in range(1, ns):
-                    b = B[j]
-                    if b == 0.0:
-                        continue
-                    for c in range(m):
-                        ys[c] += b * K[j, c]
-                for c in range(m):
-                    y[c] = y[c] + h * ys[c]
+                rk_advance(y, h, B, K, m, ys, True)
             for c in range(m):
                 out[i, k, c] = y[c]
                 nf += y[c] - y[c]

@@ -57,7 +57,8 @@ Covariances
       ``C`` the noise accumulated from the epoch outwards in epoch coordinates, and give the
       estimate ``P (J^T C_e J) P``; through a prediction the same noise accumulates from
       the epoch on (independent of the window's, for predictions after the epoch; into the
-      window, the epoch's covariance mapped back plus that noise: conservative);
+      window, the epoch's covariance mapped back plus that noise: conservative;
+      `window_noise`);
     * optionally (``scale_by_rms``) the formal part scaled by the weighted RMS squared when
       it exceeds 1 (the a-posteriori variance factor).
 
@@ -84,16 +85,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ssa_fusion.core.base.types import Measurement, StateEstimate
 from ssa_fusion.core.earth import frames
-from ssa_fusion.core.earth.frames import wrap_angle
 from ssa_fusion.core.filter.initiation import earth_orbit_problem
-from ssa_fusion.core.filter.process_noise import snc_batch
-from ssa_fusion.core.measure.measurement import (
-    MeasurementModel,
-    PositionModel,
-    RadecModel,
-    RazelModel,
-    StationModels,
-)
 from ssa_fusion.core.motion.force_model import (
     NOMINAL,
     PARAMETERS,
@@ -101,6 +93,8 @@ from ssa_fusion.core.motion.force_model import (
     parameter_index,
     trajectory,
 )
+from ssa_fusion.core.motion.force_spec import ForceSpec
+from ssa_fusion.core.od.fit_window import FitModel, FitWindow
 from ssa_fusion.core.od.gauss_newton import (
     FitStatus,
     Linearization,
@@ -108,9 +102,11 @@ from ssa_fusion.core.od.gauss_newton import (
     SolverOptions,
     gauss_newton,
 )
+from ssa_fusion.core.od.window_noise import accumulated_noise, window_noise, with_grid
 
 __all__ = ["BatchFit", "BatchOptions", "FitStatus", "Linearization", "Solution",
-           "SolverOptions", "fit", "gauss_newton", "grid"]
+           "SolverOptions", "fit", "gauss_newton", "grid", "whitened_predictions",
+           "whitened_residuals"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -126,17 +122,22 @@ class BatchOptions:
 
     Attributes
     ----------
-    force : ForceModel
-        Gravity (two-body + J2) and optional drag (`force_model`).
+    force : ForceModel or ForceSpec
+        Gravity (two-body + J2) and optional drag (`force_model`), or the high-fidelity
+        model (`force_spec.ForceSpec`: geopotential, Sun, Moon, tides, SRP; the
+        measurements' clock must then be Unix s UTC, ``clock_unix0`` 0).
     solve_for : tuple of str
         Parameters estimated with the state (`force_model.PARAMETERS`): ``drag_scale``
-        (needs ``force.drag``), ``accel_r``, ``accel_t``, ``accel_n``.
+        (needs ``force.drag``), ``accel_r``, ``accel_t``, ``accel_n``, ``srp_scale`` (a
+        factor on Cr: needs a `ForceSpec` with ``srp``).
     consider : tuple of str
         Parameters not estimated whose uncertainty goes into the realistic covariance.
-    param_sigma : tuple of 4 float
+    param_sigma : tuple of float
         A-priori standard deviations of the parameters (`PARAMETERS` order:
-        dimensionless, km/s^2 x 3): the prior of the solved ones (inf: none), the
-        uncertainty of the considered ones.
+        dimensionless, km/s^2 x 3, dimensionless): the prior of the solved ones (inf:
+        none), the uncertainty of the considered ones (the first four suffice without
+        ``srp_scale``). The measurement model's own parameters (a laser network's range
+        biases) take the priors it holds.
     snc_psd : tuple of 3 float
         State-noise compensation PSDs along R, T, N, km^2/s^3, of the realistic covariance
         (through the window and the predictions); 0: none.
@@ -153,10 +154,10 @@ class BatchOptions:
         Iterations, editing and convergence.
     """
 
-    force: ForceModel = field(default_factory=ForceModel)
+    force: ForceModel | ForceSpec = field(default_factory=ForceModel)
     solve_for: tuple[str, ...] = ()
     consider: tuple[str, ...] = ()
-    param_sigma: tuple[float, float, float, float] = (1.0, 1e-8, 1e-8, 1e-8)
+    param_sigma: tuple[float, ...] = (1.0, 1e-8, 1e-8, 1e-8, 1.0)
     snc_psd: tuple[float, float, float] = (0.0, 0.0, 0.0)
     scale_by_rms: bool = False
     max_step_s: float = 60.0
@@ -171,8 +172,18 @@ class BatchOptions:
         if set(self.solve_for) & set(self.consider):
             raise ValueError("a parameter cannot be both solved for and considered: "
                              f"{sorted(set(self.solve_for) & set(self.consider))}")
-        if "drag_scale" in (*self.solve_for, *self.consider) and not self.force.drag:
+        used = (*self.solve_for, *self.consider)
+        if "drag_scale" in used and not self.force.drag:
             raise ValueError("drag_scale needs a force model with drag (ForceModel.drag)")
+        if "srp_scale" in used and getattr(self.force, "srp", None) is None:
+            raise ValueError("srp_scale needs the high-fidelity model with SRP (ForceSpec.srp)")
+        if any(PARAMETERS.index(p) >= len(self.param_sigma) for p in used):
+            raise ValueError(f"param_sigma has {len(self.param_sigma)} values: "
+                             f"{len(PARAMETERS)} needed ({', '.join(PARAMETERS)})")
+
+    def sigma(self, names: Sequence[str]) -> Array:
+        """Return the ``param_sigma`` of the parameters ``names``."""
+        return np.array([self.param_sigma[i] for i in parameter_index(names)], dtype=float)
 
 
 @dataclass
@@ -191,9 +202,11 @@ class BatchFit:
         Every force-model parameter (`PARAMETERS`): the solved ones estimated, the others
         nominal.
     solve_for : tuple of str
-        The solved parameters, in the order of the solve-for vector after the state.
+        The solved force-model parameters, in the order of the solve-for vector after the
+        state.
     P, P_realistic : ndarray (n, n)
-        Formal and realistic covariance of [state, solved parameters] (module docstring).
+        Formal and realistic covariance of [state, solved force-model parameters,
+        measurement parameters] (module docstring).
     t_meas : ndarray (N,)
         The measurements' epochs, in the order given.
     residuals : list of ndarray
@@ -207,6 +220,9 @@ class BatchFit:
         The options of the fit.
     pole : ndarray (3,)
         The Earth's pole used (GCRF unit vector).
+    measurement_params : dict of str to float
+        The measurement model's solved parameters (a laser network's range biases, km), in
+        the order of the solve-for vector after the force-model parameters.
     """
 
     status: FitStatus
@@ -226,6 +242,7 @@ class BatchFit:
     accepted: BoolArray
     options: BatchOptions
     pole: Array
+    measurement_params: dict[str, float] = field(default_factory=dict)
     _sxc: Array = field(repr=False, default_factory=lambda: np.zeros((6, 0)))
     _P_base: Array = field(repr=False, default_factory=lambda: np.zeros((6, 6)))
 
@@ -243,6 +260,16 @@ class BatchFit:
     def covariance_realistic(self) -> Array:
         """Realistic covariance (6, 6) of the epoch state (module docstring), GCRF."""
         return self.P_realistic[:6, :6].copy()
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The solve-for vector's parameters after the state (P's rows 6..)."""
+        return (*self.solve_for, *self.measurement_params)
+
+    def sigma(self, name: str, realistic: bool = False) -> float:
+        """Return the standard deviation of solved parameter ``name`` (formal, realistic)."""
+        i = 6 + self.names.index(name)
+        return float(math.sqrt((self.P_realistic if realistic else self.P)[i, i]))
 
     def estimate(self, realistic: bool = True, object_id: str = "") -> StateEstimate:
         """Return the epoch state as a `types.StateEstimate` (GCRF km, km/s)."""
@@ -268,22 +295,23 @@ class BatchFit:
         tt = np.atleast_1d(np.asarray(t, dtype=float))
         psd = np.asarray(o.snc_psd, dtype=float)
         noise = realistic and bool(np.any(psd > 0.0))
-        epochs = _with_grid(self.t, tt, o.noise_step_s) if noise else tt
+        epochs = with_grid(self.t, tt, o.noise_step_s) if noise else tt
         cons = list(o.consider) if realistic else []
         which = parameter_index((*self.solve_for, *cons))
         prm = np.array([self.params[p] for p in PARAMETERS])
         tr = trajectory(o.force, self.x, self.t, epochs, prm, which.tolist(), o.max_step_s,
                         self.pole)
         ns = len(self.solve_for)
+        k = 6 + ns  # the measurement parameters do not move the orbit
         G = np.concatenate([tr.phi, tr.s[:, :, :ns]], axis=2)
-        base = self._P_base if realistic else self.P
+        base = (self._P_base if realistic else self.P)[:k, :k]
         P = G @ base @ np.swapaxes(G, 1, 2)
         if cons:
-            m = G @ self._sxc - tr.s[:, :, ns:]
+            m = G @ self._sxc[:k] - tr.s[:, :, ns:]
             sc = _consider_sigma(o)
             P += (m * sc * sc) @ np.swapaxes(m, 1, 2)
         if noise:
-            P += _accumulated_noise(self.t, epochs, tr.x, tr.phi, psd)
+            P += accumulated_noise(self.t, epochs, tr.x, tr.phi, psd)
         pos = np.searchsorted(epochs, tt) if noise else np.arange(tt.size)
         x_out: Array = tr.x[pos]
         P_out = P[pos]
@@ -310,122 +338,55 @@ def grid(t_from: float, t_to: float, step_s: float = 60.0) -> Array:
     return out
 
 
-def _with_grid(t0: float, t: Array, step: float) -> Array:
-    """Sorted union of the epochs ``t`` and the grid of ``step`` from t0 out to them."""
-    parts = [t, np.array([t0])]
-    for sign in (1.0, -1.0):
-        reach = float(np.max(sign * (t - t0), initial=0.0))
-        if reach > 0.0:
-            parts.append(t0 + sign * np.arange(1, math.ceil(reach / step)) * step)
-    return np.unique(np.concatenate(parts))
-
-
 def _consider_sigma(o: BatchOptions) -> Array:
     """Return the consider parameters' standard deviations (in the order of ``o.consider``)."""
-    return np.array([o.param_sigma[PARAMETERS.index(p)] for p in o.consider])
+    return o.sigma(o.consider)
 
 
-def _outward(t0: float, t: Array) -> list[IntArray]:
-    """Return the indices of ``t`` after and before ``t0`` (not at it), ordered outwards."""
-    out = []
-    for side in (t > t0, t < t0):
-        idx = np.flatnonzero(side)
-        out.append(idx[np.argsort(np.abs(t[idx] - t0), kind="stable")])
-    return out
+def whitened_residuals(measurements: Sequence[Measurement], model: FitModel,
+                       x: ArrayLike) -> Array:
+    """Return each measurement's squared whitened residual against the states ``x`` (N, 6).
 
-
-def _noise_increments(t0: float, t: Array, x: Array, phi: Array, psd: Array,
-                      idx: IntArray) -> Array:
-    """Process noise of each step outwards along ``idx``, in epoch coordinates (L, 6, 6).
-
-    Step l runs from the previous node (or t0) to node ``idx[l]``: SNC (`process_noise.snc`)
-    with the axes of that node's state, mapped to the epoch by ``Phi_l^-1``.
+    ``(z - h(x))^T R^-1 (z - h(x))`` per measurement (angles wrapped), ``x`` GCRF states at
+    the measurements' epochs: chi2 with len(z) degrees of freedom for a right state.
+    ValueError for a measurement the model cannot predict.
     """
-    tl = t[idx]
-    dts = np.diff(tl, prepend=t0)
-    q = snc_batch(x[idx], dts, psd)
-    inv = np.linalg.inv(phi[idx])
-    out: Array = inv @ q @ np.swapaxes(inv, 1, 2)
+    w = FitWindow(measurements, model)
+    r, _, _ = w.residuals(np.asarray(x, dtype=float).reshape(-1, 6),
+                          np.zeros((len(w.m), 6, 1)))  # no unknowns: one zero column
+    out: Array = np.asarray(np.bincount(w.rows(), weights=r * r, minlength=len(w.m)), float)
     return out
 
 
-def _accumulated_noise(t0: float, t: Array, x: Array, phi: Array, psd: Array) -> Array:
-    """Process noise accumulated from t0 to each epoch (K, 6, 6), GCRF (module docstring)."""
-    out = np.zeros((t.size, 6, 6))
-    for idx in _outward(t0, t):
-        if not idx.size:
-            continue
-        c = np.cumsum(_noise_increments(t0, t, x, phi, psd, idx), axis=0)
-        p = phi[idx]
-        out[idx] = p @ c @ np.swapaxes(p, 1, 2)
-    return out
+def whitened_predictions(measurements: Sequence[Measurement], model: FitModel,
+                         x: ArrayLike, P: ArrayLike) -> tuple[Array, Array]:
+    """Return the predicted measurements' misfit in the whitened eigenbasis of their covariance.
+
+    For each measurement, with ``W`` the inverse Cholesky factor of its R: the whitened
+    residual ``r = W (z - h(x))`` and the whitened predicted covariance ``S = W H P H^T W^T``
+    (``x`` (N, 6), ``P`` (N, 6, 6) GCRF states and covariances at their epochs). Returned
+    flat over every measurement's channels: ``lam`` the eigenvalues of its ``S`` and ``q2``
+    the squared components of ``r`` along their eigenvectors, so that the NIS with the
+    prediction's covariance scaled by k is ``sum(q2 / (k lam + 1))``.
+    ValueError for a measurement the model cannot predict.
+    """
+    w = FitWindow(measurements, model)
+    cov = np.asarray(P, dtype=float).reshape(-1, 6, 6)
+    vals, vecs = np.linalg.eigh(0.5 * (cov + np.swapaxes(cov, 1, 2)))
+    root = vecs * np.sqrt(np.maximum(vals, 0.0))[:, None, :]  # root root^T = P
+    r, J, _ = w.residuals(np.asarray(x, dtype=float).reshape(-1, 6), root)
+    J = J[:, :6]  # the state's columns (no measurement parameter here)
+    rows = w.rows()
+    lam, q2 = [], []
+    for i in range(len(w.m)):
+        mine = rows == i
+        e, v = np.linalg.eigh(J[mine] @ J[mine].T)
+        lam.append(np.maximum(e, 0.0))
+        q2.append((v.T @ r[mine]) ** 2)
+    return np.concatenate(lam), np.concatenate(q2)
 
 
-_OneModel = PositionModel | RazelModel | RadecModel
-"""The model of one measurement (a station network's picked per measurement)."""
-
-
-def _model_for(model: MeasurementModel, m: Measurement) -> _OneModel:
-    """Return the model that predicts ``m`` (its station's; ValueError if none)."""
-    if isinstance(model, StationModels):
-        got = model.get(m.kind, m.frame_id)
-        if got is None:
-            raise ValueError(f"no model for a measurement of kind {m.kind} from "
-                             f"{m.frame_id!r} (stations: {', '.join(model.stations)})")
-        return got
-    if int(m.kind) != int(model.kind):
-        raise ValueError(f"measurement of kind {m.kind} for a model of kind {model.kind}")
-    return model
-
-
-class _Window:
-    """The measurements of a fit, grouped by kind, with their whitening matrices."""
-
-    def __init__(self, measurements: Sequence[Measurement], model: MeasurementModel) -> None:
-        self.m = list(measurements)
-        self.t = np.array([m.t for m in self.m], dtype=float)
-        self.models = [_model_for(model, m) for m in self.m]
-        self.groups: list[tuple[IntArray, Array, Array, BoolArray]] = []
-        keys = [(len(m.z), tuple(md.angle_mask)) for m, md in zip(self.m, self.models,
-                                                                  strict=True)]
-        for key in dict.fromkeys(keys):  # one group per dimension and angle channels
-            idx = np.array([i for i, k in enumerate(keys) if k == key], dtype=np.int64)
-            R = np.array([np.asarray(self.m[i].R, dtype=float) for i in idx])
-            W = np.linalg.inv(np.linalg.cholesky(0.5 * (R + np.swapaxes(R, 1, 2))))
-            z = np.array([np.asarray(self.m[i].z, dtype=float) for i in idx])
-            mask = np.array(self.models[idx[0]].angle_mask, dtype=bool)
-            self.groups.append((idx, W, z, mask))
-
-    def rows(self) -> IntArray:
-        """Return the measurement of every row, in the order `residuals` stacks them."""
-        out: IntArray = np.concatenate([np.repeat(idx, W.shape[1])
-                                        for idx, W, _, _ in self.groups])
-        return out
-
-    def residuals(self, x: Array, G: Array) -> tuple[Array, Array, list[Array]]:
-        """Whitened residuals (rows,), partials (rows, c) and raw residuals per measurement.
-
-        ``x`` (N, 6) the states at the measurements, ``G`` (N, 6, c) their partials with
-        respect to the unknowns.
-        """
-        rs, js = [], []
-        raw: list[Array] = [np.zeros(0)] * len(self.m)
-        for idx, W, z, mask in self.groups:
-            zp = np.empty_like(z)
-            H = np.empty((idx.size, z.shape[1], 6))
-            for k, i in enumerate(idx):
-                zp[k], H[k] = self.models[i].h_and_H(x[i], float(self.t[i]))
-            res = z - zp
-            if mask.any():
-                res[:, mask] = wrap_angle(res[:, mask])
-            for k, i in enumerate(idx):
-                raw[i] = res[k]
-            rs.append(np.einsum("kij,kj->ki", W, res).reshape(-1))
-            js.append((W @ H @ G[idx]).reshape(-1, G.shape[2]))
-        return np.concatenate(rs), np.concatenate(js), raw
-
-
-def fit(measurements: Sequence[Measurement], model: MeasurementModel, x_guess: ArrayLike,
+def fit(measurements: Sequence[Measurement], model: FitModel, x_guess: ArrayLike,
         t_guess: float, options: BatchOptions | None = None, epoch: float | None = None,
         prior_cov: ArrayLike | None = None) -> BatchFit:
     """Fit an orbit (and the solve-for parameters) to a window of measurements.
@@ -434,10 +395,12 @@ def fit(measurements: Sequence[Measurement], model: MeasurementModel, x_guess: A
     ----------
     measurements : sequence of Measurement
         The window (real measurements; any order): range/az/el or ra/dec with the station
-        in ``frame_id``, or GCRF positions, stamped on the clock of ``model``.
-    model : MeasurementModel
+        in ``frame_id``, GCRF positions, or laser ranges, stamped on the clock of ``model``.
+    model : MeasurementModel or LaserModels
         The measurement model(s) (`config.measurement_model`: a station network's
-        `measurement.StationModels`, one station's model, or a `measurement.PositionModel`).
+        `measurement.StationModels`, one station's model, a `measurement.PositionModel`;
+        or a laser network's `laser_model.LaserModels`, whose stations' range biases are
+        then solved for too, each with its prior).
     x_guess : array_like (6,)
         First guess of the GCRF state (km, km/s) at ``t_guess`` (e.g. the filter's estimate).
     t_guess : float
@@ -456,30 +419,17 @@ def fit(measurements: Sequence[Measurement], model: MeasurementModel, x_guess: A
         Also when the fit did not converge (`BatchFit.status`, `BatchFit.reason`).
     """
     o = options or BatchOptions()
-    win = _Window(measurements, model)
+    win = FitWindow(measurements, model)
     if not win.m:
         raise ValueError("no measurements to fit")
     t0 = float(np.max(win.t)) if epoch is None else float(epoch)
     pole = frames.pole_frame(t0 + o.clock_unix0)[2].copy()
-    solve = parameter_index(o.solve_for)
-    cons = parameter_index(o.consider)
+    solve, cons = parameter_index(o.solve_for), parameter_index(o.consider)
     which = np.concatenate([solve, cons]).tolist()
-    ns, n = solve.size, 6 + solve.size
+    ns, nc = solve.size, cons.size
+    n = 6 + ns + len(win.params)
     base = np.array(NOMINAL, dtype=float)
-    xg = np.asarray(x_guess, dtype=float).reshape(6)
-    prior_x = None
-    if float(t_guess) != t0:
-        g = trajectory(o.force, xg, float(t_guess), [t0], base, (), o.max_step_s, pole)
-        xg, prior_x = g.x[0], g.phi[0]
-    sig = np.array([o.param_sigma[i] for i in solve], dtype=float)
-    info = np.zeros((n, n))
-    info[6:, 6:] = np.diag(np.where(np.isfinite(sig) & (sig > 0), 1.0 / sig**2, 0.0))
-    mean = np.concatenate([xg, base[solve]])
-    if prior_cov is not None:
-        pc = np.asarray(prior_cov, dtype=float)
-        if prior_x is not None:
-            pc = prior_x @ pc @ prior_x.T
-        info[:6, :6] = np.linalg.inv(0.5 * (pc + pc.T))
+    mean, info = _prior(o, win, x_guess, float(t_guess), t0, prior_cov, pole)
     rows = win.rows()
     last: dict[str, object] = {}
 
@@ -488,39 +438,76 @@ def fit(measurements: Sequence[Measurement], model: MeasurementModel, x_guess: A
         if problem:
             return f"the state is no Earth orbit ({problem})"
         prm = base.copy()
-        prm[solve] = v[6:]
+        prm[solve] = v[6:6 + ns]
         tr = trajectory(o.force, v[:6], t0, win.t, prm, which, o.max_step_s, pole)
         if not tr.ok.all():
             return "the trajectory is not finite"
         G = np.concatenate([tr.phi, tr.s], axis=2)
-        r, J, raw = win.residuals(tr.x, G)
+        r, J, raw = win.residuals(tr.x, G, v[6 + ns:])
+        # [state, solved, measurement parameters | considered]
+        J = np.concatenate([J[:, :6 + ns], J[:, 6 + ns + nc:], J[:, 6 + ns:6 + ns + nc]], 1)
         lin = Linearization(r, J[:, :n], rows, len(win.m))
         last.update(lin=lin, J=J, raw=raw)  # the partials of the consider parameters too
         return lin
 
     sol = gauss_newton(evaluate, mean, o.solver, mean, info if info.any() else None)
-    params = dict(zip(PARAMETERS, base.tolist(), strict=True))
-    for j, i in enumerate(solve):
-        params[PARAMETERS[int(i)]] = float(sol.x[6 + j])
     if last.get("lin") is not sol.lin or sol.lin is None:  # a rejected trial step was last
         last.clear()
-    raw = last.get("raw")
-    residuals = (list(raw) if isinstance(raw, list)
-                 else [np.full(len(m.z), math.nan) for m in win.m])
-    out = BatchFit(sol.status, sol.reason, sol.iterations, sol.rms, sol.rms_history, t0,
-                   sol.x[:6].copy(), params, tuple(o.solve_for), sol.P, sol.P.copy(),
-                   win.t, residuals,
-                   sol.score if sol.score.size == len(win.m) else np.full(len(win.m), np.nan),
-                   sol.accepted if sol.accepted.size == len(win.m)
-                   else np.zeros(len(win.m), dtype=bool), o, pole,
-                   np.zeros((n, cons.size)), sol.P.copy())
+    out = _result(sol, o, win, t0, pole, last.get("raw"), solve, nc)
     J_full = last.get("J")
     if sol.lin is not None and isinstance(J_full, np.ndarray) and np.isfinite(sol.P).all():
         _realistic(out, win, J_full, sol, n, ns)
     return out
 
 
-def _realistic(out: BatchFit, win: _Window, J_full: Array, sol: Solution, n: int,
+def _prior(o: BatchOptions, win: FitWindow, x_guess: ArrayLike, t_guess: float, t0: float,
+           prior_cov: ArrayLike | None, pole: Array) -> tuple[Array, Array]:
+    """Return the first guess of the solve-for vector at ``t0`` and its prior information.
+
+    The state's information is that of ``prior_cov`` mapped to ``t0`` (none without); the
+    force-model parameters' that of ``param_sigma``, the measurement parameters' their
+    model's priors (a sigma of inf or 0: no information).
+    """
+    solve = parameter_index(o.solve_for)
+    base = np.array(NOMINAL, dtype=float)
+    xg = np.asarray(x_guess, dtype=float).reshape(6)
+    prior_x = None
+    if t_guess != t0:
+        g = trajectory(o.force, xg, t_guess, [t0], base, (), o.max_step_s, pole)
+        xg, prior_x = g.x[0], g.phi[0]
+    sig = np.concatenate([o.sigma(o.solve_for), win.prior_sigma])
+    n = 6 + sig.size
+    info = np.zeros((n, n))
+    info[6:, 6:] = np.diag(np.where(np.isfinite(sig) & (sig > 0), 1.0 / sig**2, 0.0))
+    if prior_cov is not None:
+        pc = np.asarray(prior_cov, dtype=float)
+        if prior_x is not None:
+            pc = prior_x @ pc @ prior_x.T
+        info[:6, :6] = np.linalg.inv(0.5 * (pc + pc.T))
+    return np.concatenate([xg, base[solve], win.prior_mean]), info
+
+
+def _result(sol: Solution, o: BatchOptions, win: FitWindow, t0: float, pole: Array,
+            raw: object, solve: IntArray, nc: int) -> BatchFit:
+    """Return the `BatchFit` of a solution (its realistic covariance still the formal one)."""
+    ns = solve.size
+    params = dict(zip(PARAMETERS, NOMINAL, strict=True))
+    for j, i in enumerate(solve):
+        params[PARAMETERS[int(i)]] = float(sol.x[6 + j])
+    residuals = (list(raw) if isinstance(raw, list)
+                 else [np.full(len(m.z), math.nan) for m in win.m])
+    n = 6 + ns + len(win.params)
+    return BatchFit(sol.status, sol.reason, sol.iterations, sol.rms, sol.rms_history, t0,
+                    sol.x[:6].copy(), params, tuple(o.solve_for), sol.P, sol.P.copy(),
+                    win.t, residuals,
+                    sol.score if sol.score.size == len(win.m) else np.full(len(win.m), np.nan),
+                    sol.accepted if sol.accepted.size == len(win.m)
+                    else np.zeros(len(win.m), dtype=bool), o, pole,
+                    dict(zip(win.params, sol.x[6 + ns:].tolist(), strict=True)),
+                    np.zeros((n, nc)), sol.P.copy())
+
+
+def _realistic(out: BatchFit, win: FitWindow, J_full: Array, sol: Solution, n: int,
                ns: int) -> None:
     """Fill ``out``'s realistic covariance: consider parameters, process noise, RMS scale."""
     o = out.options
@@ -532,7 +519,10 @@ def _realistic(out: BatchFit, win: _Window, J_full: Array, sol: Solution, n: int
     base = scale * P
     psd = np.asarray(o.snc_psd, dtype=float)
     if np.any(psd > 0.0):
-        base = base + P @ _window_noise(out, win, J[:, :n], sol.lin.group[rows], psd) @ P
+        prm = np.array([out.params[p] for p in PARAMETERS])
+        base = base + P @ window_noise(o.force, out.x, out.t, prm, o.max_step_s, out.pole,
+                                       o.noise_step_s, win.t, J[:, :n], sol.lin.group[rows],
+                                       psd) @ P
     out._P_base = 0.5 * (base + base.T)
     real = out._P_base.copy()
     if o.consider:
@@ -543,32 +533,3 @@ def _realistic(out: BatchFit, win: _Window, J_full: Array, sol: Solution, n: int
     out.P_realistic = 0.5 * (real + real.T)
 
 
-def _window_noise(out: BatchFit, win: _Window, J: Array, group: IntArray,
-                  psd: Array) -> Array:
-    """``J^T C_e J`` (n, n) of the process noise between the measurements and the epoch.
-
-    ``J`` (rows, n) the accepted whitened partials (the state's columns first), ``group``
-    their measurements (module docstring).
-    """
-    o = out.options
-    t0 = out.t
-    epochs = _with_grid(t0, win.t, o.noise_step_s)
-    prm = np.array([out.params[p] for p in PARAMETERS])
-    tr = trajectory(o.force, out.x, t0, epochs, prm, (), o.max_step_s, out.pole)
-    n = J.shape[1]
-    a = np.zeros((len(win.m), 6, n))  # a_i = U_i^T J_i, U_i = the state columns of J_i
-    np.add.at(a, group, J[:, :6, None] * J[:, None, :])
-    node = np.searchsorted(epochs, win.t)
-    K = np.zeros((n, n))
-    for idx in _outward(t0, epochs):
-        if not idx.size:
-            continue
-        qbar = _noise_increments(t0, epochs, tr.x, tr.phi, psd, idx)
-        pos = np.empty(epochs.size, dtype=np.int64)
-        pos[idx] = np.arange(idx.size)
-        side = (win.t > t0) if epochs[idx[0]] > t0 else (win.t < t0)
-        a_node = np.zeros((idx.size, 6, n))
-        np.add.at(a_node, pos[node[side]], a[side])
-        A = np.cumsum(a_node[::-1], axis=0)[::-1]  # measurements at or beyond each node
-        K += np.einsum("lia,lij,ljb->ab", A, qbar, A)
-    return 0.5 * (K + K.T)

@@ -194,91 +194,137 @@ def gauss_newton(evaluate: Callable[[Array], Linearization | str], x0: ArrayLike
     -------
     Solution
     """
-    o = options or SolverOptions()
-    x = np.array(x0, dtype=float).reshape(-1)
-    n = x.size
-    rp: Array | None = None
-    mean = np.zeros(n) if prior_mean is None else np.asarray(prior_mean, float).reshape(n)
-    if prior_information is not None:
-        rp = _sqrt_information(np.asarray(prior_information, dtype=float))
-    history: list[float] = []
-    nan_p = np.full((n, n), math.nan)
-    accepted_prev: BoolArray | None = None
-    x_prev: Array | None = None
-    delta_prev = np.zeros(n)
-    rms_prev = corr_prev = cost_prev = math.inf
-    halvings = corrections = lins = 0
-    lin: Linearization | None = None
-    accepted = np.zeros(0, dtype=bool)
-    score = np.zeros(0)
+    return _Solver(evaluate, x0, options or SolverOptions(), prior_mean,
+                   prior_information).run()
 
-    def done(status: FitStatus, reason: str, P: Array, rms: float) -> Solution:
-        return Solution(x, P, status, reason, lins, rms, history, accepted, score, lin)
 
-    def prior_cost(v: Array) -> float:
-        return 0.0 if rp is None else float(np.sum((rp @ (mean - v)) ** 2))
+def _svd_step(A: Array, b: Array, n: int) -> tuple[Array, Array, float] | None:
+    """Return the correction, its covariance and size (in its sigma) from ``A dx = b``.
 
-    while True:
-        got = evaluate(x)
-        lins += 1
+    From a column-scaled SVD of the whitened system; None when it is singular.
+    """
+    d = 1.0 / np.maximum(np.linalg.norm(A, axis=0), 1e-300)
+    u, s, vt = np.linalg.svd(A * d, full_matrices=False)
+    if not s.size or s[-1] <= s[0] * 1e-13:
+        return None
+    ub = u.T @ b
+    delta = d * (vt.T @ (ub / s))
+    P = (d[:, None] * vt.T / (s * s)) @ (vt * d[None, :])
+    P = 0.5 * (P + P.T)
+    return delta, P, float(np.sqrt(ub @ ub / n))
+
+
+class _Solver:
+    """The iteration of `gauss_newton`, and its state from one linearisation to the next."""
+
+    def __init__(self, evaluate: Callable[[Array], Linearization | str], x0: ArrayLike,
+                 options: SolverOptions, prior_mean: ArrayLike | None,
+                 prior_information: ArrayLike | None) -> None:
+        self.evaluate = evaluate
+        self.o = options
+        self.x = np.array(x0, dtype=float).reshape(-1)
+        n = self.n = self.x.size
+        self.rp: Array | None = None
+        self.mean = np.zeros(n) if prior_mean is None else np.asarray(prior_mean, float).reshape(n)
+        if prior_information is not None:
+            self.rp = _sqrt_information(np.asarray(prior_information, dtype=float))
+        self.history: list[float] = []
+        self.nan_p = np.full((n, n), math.nan)
+        self.accepted_prev: BoolArray | None = None
+        self.x_prev: Array | None = None
+        self.delta_prev = np.zeros(n)
+        self.rms_prev = self.corr_prev = self.cost_prev = math.inf
+        self.halvings = self.corrections = self.lins = 0
+        self.lin: Linearization | None = None
+        self.accepted = np.zeros(0, dtype=bool)
+        self.score = np.zeros(0)
+
+    def _done(self, status: FitStatus, reason: str, P: Array, rms: float) -> Solution:
+        return Solution(self.x, P, status, reason, self.lins, rms, self.history,
+                        self.accepted, self.score, self.lin)
+
+    def _prior_cost(self, v: Array) -> float:
+        return 0.0 if self.rp is None else float(np.sum((self.rp @ (self.mean - v)) ** 2))
+
+    def run(self) -> Solution:
+        """Linearise, correct, halve a failed correction, until the fit ends."""
+        while True:
+            got = self.evaluate(self.x)
+            self.lins += 1
+            why = self._why(got)
+            if self.x_prev is not None and self.accepted_prev is not None and why:
+                if self.halvings < self.o.max_halvings:
+                    self.halvings += 1
+                    self.x = self.x_prev + self.delta_prev * 0.5**self.halvings
+                    continue
+                self.x = self.x_prev
+                return self._done(FitStatus.DIVERGED, f"correction {self.corrections}: {why}",
+                                  self.nan_p, self.rms_prev)
+            if why or isinstance(got, str):
+                return self._done(FitStatus.DIVERGED, f"first guess: {why}", self.nan_p,
+                                  math.nan)
+            end = self._correct(got)
+            if end is not None:
+                return end
+
+    def _why(self, got: Linearization | str) -> str:
+        """Return why the linearisation ``got`` cannot be used ("" when it can).
+
+        After a correction above the tolerance, also when it did not reduce the cost (a
+        correction below the tolerance is not judged by the cost: round-off).
+        """
         why = got if isinstance(got, str) else (
             "" if np.isfinite(got.r).all() and np.isfinite(got.J).all()
             else "non-finite residuals or partials")
-        if x_prev is not None and accepted_prev is not None:
-            if not why and not isinstance(got, str) and corr_prev > o.correction_tol:
-                # a correction below the tolerance is not judged by the cost (round-off)
-                rows = accepted_prev[got.group]
-                cost = float(np.sum(got.r[rows] ** 2)) + prior_cost(x)
-                if cost > cost_prev * (1.0 + 1e-12) + _ROUND_OFF**2 * rows.size:
-                    why = (f"no step along the correction reduces the weighted residuals "
-                           f"({o.max_halvings} halvings)")
-            if why:
-                if halvings < o.max_halvings:
-                    halvings += 1
-                    x = x_prev + delta_prev * 0.5**halvings
-                    continue
-                x = x_prev
-                return done(FitStatus.DIVERGED, f"correction {corrections}: {why}", nan_p,
-                            rms_prev)
-        if why or isinstance(got, str):
-            return done(FitStatus.DIVERGED, f"first guess: {why}", nan_p, math.nan)
-        lin = got
-        halvings = 0
-        score = np.zeros(lin.n_groups)
-        np.maximum.at(score, lin.group, np.abs(lin.r))
-        warm = corrections < max(1, o.warmup)
-        threshold = o.first_edit_sigma if warm else o.edit_sigma * max(1.0, rms_prev)
-        accepted = _edit(score, threshold, o.max_reject_fraction)
-        rows = accepted[lin.group]
+        if (self.x_prev is not None and self.accepted_prev is not None and not why
+                and not isinstance(got, str) and self.corr_prev > self.o.correction_tol):
+            rows = self.accepted_prev[got.group]
+            cost = float(np.sum(got.r[rows] ** 2)) + self._prior_cost(self.x)
+            if cost > self.cost_prev * (1.0 + 1e-12) + _ROUND_OFF**2 * rows.size:
+                why = (f"no step along the correction reduces the weighted residuals "
+                       f"({self.o.max_halvings} halvings)")
+        return why
+
+    def _correct(self, lin: Linearization) -> Solution | None:
+        """Edit, correct from ``lin``: the solution when the fit ends here, else None."""
+        o, n, rp = self.o, self.n, self.rp
+        self.lin = lin
+        self.halvings = 0
+        self.score = np.zeros(lin.n_groups)
+        np.maximum.at(self.score, lin.group, np.abs(lin.r))
+        warm = self.corrections < max(1, o.warmup)
+        threshold = o.first_edit_sigma if warm else o.edit_sigma * max(1.0, self.rms_prev)
+        self.accepted = _edit(self.score, threshold, o.max_reject_fraction)
+        rows = self.accepted[lin.group]
         A, b = lin.J[rows], lin.r[rows]
         rms = float(np.sqrt(np.mean(b * b))) if b.size else math.nan
-        history.append(rms)
+        self.history.append(rms)
         if b.size < n and rp is None:
-            return done(FitStatus.UNDERDETERMINED,
-                        f"{b.size} accepted measurement channels for {n} unknowns", nan_p, rms)
+            return self._done(FitStatus.UNDERDETERMINED,
+                              f"{b.size} accepted measurement channels for {n} unknowns",
+                              self.nan_p, rms)
         if rp is not None:
             A = np.vstack([A, rp])
-            b = np.concatenate([b, rp @ (mean - x)])
-        d = 1.0 / np.maximum(np.linalg.norm(A, axis=0), 1e-300)
-        u, s, vt = np.linalg.svd(A * d, full_matrices=False)
-        if not s.size or s[-1] <= s[0] * 1e-13:
-            return done(FitStatus.UNDERDETERMINED, "singular normal equations (an "
-                        "unobservable combination of the solve-for parameters)", nan_p, rms)
-        ub = u.T @ b
-        delta = d * (vt.T @ (ub / s))
-        P = (d[:, None] * vt.T / (s * s)) @ (vt * d[None, :])
-        P = 0.5 * (P + P.T)
-        corr = float(np.sqrt(ub @ ub / n))
-        same = accepted_prev is not None and np.array_equal(accepted, accepted_prev)
-        if same and not warm and (corr_prev <= o.correction_tol or rms <= _ROUND_OFF
-                                  or abs(rms - rms_prev) <= o.rms_rtol * rms_prev):
-            x = x + delta
-            return done(FitStatus.CONVERGED, f"converged after {lins} linearisations", P, rms)
-        if corrections == o.max_iterations:
-            return done(FitStatus.MAX_ITERATIONS, f"not converged in {o.max_iterations} "
-                        f"corrections (the last {corr:.3g} sigma)", P, rms)
-        cost_prev = float(b @ b)
-        x_prev, delta_prev = x, delta
-        x = x + delta
-        corrections += 1
-        accepted_prev, rms_prev, corr_prev = accepted, rms, corr
+            b = np.concatenate([b, rp @ (self.mean - self.x)])
+        step = _svd_step(A, b, n)
+        if step is None:
+            return self._done(FitStatus.UNDERDETERMINED, "singular normal equations (an "
+                              "unobservable combination of the solve-for parameters)",
+                              self.nan_p, rms)
+        delta, P, corr = step
+        same = self.accepted_prev is not None and np.array_equal(self.accepted,
+                                                                 self.accepted_prev)
+        if same and not warm and (self.corr_prev <= o.correction_tol or rms <= _ROUND_OFF
+                                  or abs(rms - self.rms_prev) <= o.rms_rtol * self.rms_prev):
+            self.x = self.x + delta
+            return self._done(FitStatus.CONVERGED,
+                              f"converged after {self.lins} linearisations", P, rms)
+        if self.corrections == o.max_iterations:
+            return self._done(FitStatus.MAX_ITERATIONS, f"not converged in {o.max_iterations} "
+                              f"corrections (the last {corr:.3g} sigma)", P, rms)
+        self.cost_prev = float(b @ b)
+        self.x_prev, self.delta_prev = self.x, delta
+        self.x = self.x + delta
+        self.corrections += 1
+        self.accepted_prev, self.rms_prev, self.corr_prev = self.accepted, rms, corr
+        return None

@@ -7,11 +7,12 @@
   (`AngleFrame`), the IAU 2006 frame bias (`frame_bias`) and the rotations out of the GCRF;
 * how a measurement kind is written into and read from a TDM segment (`Layout`: `AZEL`,
   `RADEC`);
-* writing NDM files (KVN or XML) with the ``ccsds-ndm`` library, imported on use (a TDM is
-  read as a stream by `ccsds_tdm_read`, which needs no model of the whole file).
+* writing NDM files (KVN or XML, `ndm_format` tells which from the file name) with the
+  ``ccsds-ndm`` library, imported on use (a TDM is read as a stream by `tdm_reader`, which
+  needs no model of the whole file); measurement counts in words (`counts_said`).
 
-The messages themselves: `ccsds_oem` (OEM out), `ccsds_tdm_out` (TDM out), `ccsds_tdm_in`
-(TDM in, read by `ccsds_tdm_read`); the commands: `ccsds`. Conventions: docs/CCSDS.md.
+The messages themselves: `oem` (OEM out), `tdm_out` (TDM out), `tdm_in` (TDM in, read by
+`tdm_reader`); the commands: `apps.ccsds`. Conventions: docs/CCSDS.md.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ import enum
 import functools
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType
@@ -165,6 +166,11 @@ class CcsdsError(ValueError):
     """Input that cannot become a CCSDS message or a bag; the message says why."""
 
 
+def counts_said(counts: Mapping[int, int]) -> str:
+    """Return measurement counts by kind (`types.Kind`) as words: "20 range/az/el and 8 ra/dec"."""
+    return " and ".join(f"{n} {LAYOUTS[types.Kind(k)].what}" for k, n in sorted(counts.items()))
+
+
 # ------------------------------------------------------------------------------------------
 # frames
 # ------------------------------------------------------------------------------------------
@@ -292,6 +298,14 @@ def ndm() -> tuple[NdmIo, type[NDMFileFormats], ModuleType, ModuleType, ModuleTy
 def creation_date() -> str:
     """Return the time now, UTC, as a CCSDS epoch to the second (``CREATION_DATE``)."""
     return f"{dt.datetime.now(dt.UTC):%Y-%m-%dT%H:%M:%S}"
+
+
+def ndm_format(out: Path, given: str | None = None) -> str:
+    """Return the NDM format of a file to write: `given` ("kvn", "xml"), else by its name.
+
+    ``xml`` for a name ending in ``.xml``, else ``kvn``.
+    """
+    return given or ("xml" if out.suffix == ".xml" else "kvn")
 
 
 def write_ndm(doc: object, out: Path, fmt: str) -> None:

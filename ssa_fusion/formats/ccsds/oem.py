@@ -33,7 +33,7 @@ from ssa_fusion.formats.ccsds.common import (
     parse_epoch,
 )
 
-if TYPE_CHECKING:  # ccsds-ndm is imported on use (`ccsds_format.ndm`)
+if TYPE_CHECKING:  # ccsds-ndm is imported on use (`common.ndm`)
     from ccsds_ndm.models.ndmxml4.ndmxml_4_0_0_master_4_0 import Oem
 
 _COV = ("x", "y", "z", "x_dot", "y_dot", "z_dot")

@@ -6,11 +6,11 @@ measurement) or ANGLE_1 / ANGLE_2 (right ascension / declination, deg, ``RADEC``
 ``GCRF``, ``ICRF`` or ``EME2000``: the two at one epoch make one RA_DEC measurement, in
 GCRF); epochs in ``UTC``, ``TAI``, ``TT`` or ``GPS`` (converted to UTC stamps,
 `timescales`). TDM carries no measurement noise: it is given per kind, else read from the
-metadata comment `ccsds_format.SIGMA_COMMENT` that `export tdm` writes, else the station's
+metadata comment `common.SIGMA_COMMENT` that `export tdm` writes, else the station's
 sensor (a sites file's, `formats.sites`, or the built-in preset, `stations.SENSORS`).
 Participants name built-in stations or those of a sites file (``--sites``).
 
-A file of any size: `read_tdm` reads it as a stream (`ccsds_tdm_read.TdmReader`), keeps
+A file of any size: `read_tdm` reads it as a stream (`tdm_reader.TdmReader`), keeps
 each epoch's values only until its measurement is complete, and keeps the measurements
 compactly (epoch, the TDM's values, the segment: ~100 bytes each with their sorting, 45 MB
 for a 100 MB file), so that the bag can be written in epoch order, one message at a time
@@ -491,7 +491,7 @@ def read_tdm(path: Path | str, sigma: Mapping[types.Kind, Sequence[float]] | Non
     sigma:`` comment, else its station's sensor. `sites`: stations of one's own by id
     (`formats.sites.load_sites`), which participants may name besides the built-in
     stations. CcsdsError (one bounded line naming the file, the line, the segment and the
-    keyword) for a file that is not a TDM (`ccsds_tdm_read`), a value that is not a number
+    keyword) for a file that is not a TDM (`tdm_reader`), a value that is not a number
     or an epoch, and what this importer does not support: time systems other than UTC,
     TAI, TT, GPS; angle types other than AZEL and RADEC; RADEC in frames other than GCRF,
     ICRF, EME2000; range units other than km; unknown stations; epochs outside

@@ -4,7 +4,7 @@ TDM (Tracking Data Message, CCSDS 503.0, version 2.0): the real range/azimuth/el
 (``ANGLE_TYPE = AZEL``) and right ascension/declination (``ANGLE_TYPE = RADEC``,
 astrometric, ``REFERENCE_FRAME = ICRF`` or ``EME2000``) measurements, one segment per
 object, station, kind and noise level, ``TIME_SYSTEM = UTC``; the noise in the metadata
-comment `ccsds_format.SIGMA_COMMENT`, which `ccsds_tdm_in` reads back.
+comment `common.SIGMA_COMMENT`, which `tdm_in` reads back.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from ssa_fusion.formats.ccsds.common import (
     rotate_radec,
 )
 
-if TYPE_CHECKING:  # ccsds-ndm is imported on use (`ccsds_format.ndm`)
+if TYPE_CHECKING:  # ccsds-ndm is imported on use (`common.ndm`)
     from ccsds_ndm.models.ndmxml4.ndmxml_4_0_0_master_4_0 import Tdm
 
 @dataclass

@@ -23,7 +23,7 @@ What it checks, each a `CcsdsError` of one line naming the file, the line and th
   per segment; a KVN data line is ``KEYWORD = EPOCH VALUE``, an optional ``[unit]`` after
   the value.
 
-Values are not interpreted here: `ccsds_tdm_in` parses the epochs and numbers and judges
+Values are not interpreted here: `tdm_in` parses the epochs and numbers and judges
 what a segment says.
 """
 
@@ -37,6 +37,7 @@ from typing import IO, TYPE_CHECKING, Any, NamedTuple, NoReturn
 
 from ssa_fusion.core.base.quoting import cut, one_line, quote, shown
 from ssa_fusion.formats.ccsds.common import CcsdsError
+from ssa_fusion.formats.files import raw_lines
 
 if TYPE_CHECKING:
     from lxml import etree
@@ -183,15 +184,7 @@ class TdmReader:
     # --------------------------------------------------------------------------------------
     def _lines(self, f: IO[bytes]) -> Iterator[tuple[int, str]]:
         """Yield (line number, text stripped) of the non-blank lines, each checked."""
-        n = 0
-        while True:
-            try:
-                raw = f.readline(MAX_LINE + 2)
-            except OSError as exc:
-                self._fail_file(exc)
-            if not raw:
-                return
-            n += 1
+        for n, raw in enumerate(raw_lines(f, MAX_LINE, self._fail_file), 1):
             self.bytes_read += len(raw)
             body = raw.rstrip(b"\r\n")
             if len(body) > MAX_LINE:

@@ -49,6 +49,7 @@ from ssa_fusion.nodes.kit.diagnostics import RECORDED, Count, wall_timer
 from ssa_fusion.nodes.kit.liveness import alive, process_keys
 from ssa_fusion.nodes.kit.shards import shard_range
 from ssa_fusion.ros.interfaces import DiagnosticStatus, KeyValue
+from ssa_fusion.ros.qos import reliable_stream
 from ssa_fusion.ros.topics import (
     TOPIC_ASSOCIATED,
     TOPIC_DETECTION_TRUTH,
@@ -77,9 +78,7 @@ TOPIC_RELEASE_FORECASTS = "/lockstep/forecasts"
 TOPIC_RELEASE_DECISIONS = "/lockstep/decisions"
 """One object's lockstep: the filter may publish what it decides for the epochs up to this
 time (``rosgraph_msgs/Clock``)."""
-RELEASE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                         reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.VOLATILE)
+RELEASE_QOS = reliable_stream(10)
 """The releases: reliable, each one answered before the next is sent."""
 LIVENESS_PERIOD_S = 1.0
 """Wall s between two looks at whether the consumers waited for still live."""
@@ -93,6 +92,8 @@ TAKEN = "taken"
 """A filter shard's measurements with a final fate: fused, refused or dropped."""
 TAKEN_ESTIMATES = "taken estimates"
 """A surrogate shard's filter estimates taken (used or refused)."""
+TAKEN_ALL_ESTIMATES = "taken all estimates"
+"""The conjunction node's estimates taken, of every filter shard (used or refused)."""
 SHARD = "shard"
 """A filter or surrogate shard's place, ``k/K``."""
 CLOCK = "clock ns"
@@ -231,7 +232,8 @@ def waiting(reports: Mapping[str, Mapping[str, str]], nodes: Sequence[str], sent
     nodes : sequence of str
         The consumers to wait for: catalog_filter shards (they report `TAKEN`, `SHARD` and
         ``published_sensor``), catalog_surrogate shards (`TAKEN_ESTIMATES`, `SHARD`, the
-        filter shard's estimates they wait for, and ``published_forecast``) and the recorder
+        filter shard's estimates they wait for, and ``published_forecast``), the conjunction
+        node (`TAKEN_ALL_ESTIMATES`: every filter shard's estimates) and the recorder
         (`RECORDED_MEASUREMENTS` and `RECORDED_ESTIMATES`, always both; `RECORDED_TRUTH`, as
         many as the measurements, and `RECORDED_ASSOCIATED`, the filters'
         ``published_associated``, where it reports them).
@@ -265,6 +267,9 @@ def waiting(reports: Mapping[str, Mapping[str, str]], nodes: Sequence[str], sent
             want = estimates.get(r[SHARD], 0)
             if _num(r, TAKEN_ESTIMATES) < want:
                 out.append(f"{name} (taken {_num(r, TAKEN_ESTIMATES)} of {want} estimates)")
+        if TAKEN_ALL_ESTIMATES in r and _num(r, TAKEN_ALL_ESTIMATES) < sum(estimates.values()):
+            out.append(f"{name} (taken {_num(r, TAKEN_ALL_ESTIMATES)} of "
+                       f"{sum(estimates.values())} estimates)")
         if RECORDED_MEASUREMENTS in r or RECORDED_ESTIMATES in r:
             if _num(r, RECORDED_MEASUREMENTS) < sent:
                 out.append(f"{name} (recorded {_num(r, RECORDED_MEASUREMENTS)} of {sent} "

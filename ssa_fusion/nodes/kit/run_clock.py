@@ -16,20 +16,18 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from rclpy.time import Time as RclTime
 
 from ssa_fusion.core.base.types import Cause
 from ssa_fusion.ros.interfaces import Clock
+from ssa_fusion.ros.qos import reliable_stream
 from ssa_fusion.ros.topics import TOPIC_CLOCK
 
 if TYPE_CHECKING:
     from ssa_fusion.nodes.kit.base import SsaNode
 
-CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                       reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.VOLATILE)
+CLOCK_QOS = reliable_stream(100)
 """The run's /clock: reliable (every step's clock arrives), a short queue."""
 
 ClockListener = Callable[[bytes, int], None]

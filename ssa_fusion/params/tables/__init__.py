@@ -13,7 +13,7 @@ if TYPE_CHECKING:
     from ssa_fusion.params.rows import ParameterTable
 
 NODES = ("sensor_sim", "surrogate", "filter", "recorder", "foxglove_bridge", "catalog_filter",
-         "catalog_surrogate")
+         "catalog_surrogate", "conjunction")
 """The nodes, in docs/NODES.md's order: each has an executable and a table here."""
 
 

@@ -138,6 +138,15 @@ _SCENARIO_ROWS = (
           "the scenario's sensors observe instead of the scenario's; '' = the scenario's",
           check=Check("'' or a readable element set file",
                       read_by(element_sets.read_catalog, empty_ok=True))),
+    Param("truth", SENSOR_SIM.truth,
+          "real-sky scenarios: the object's truth, `sgp4` (SGP4 with the scenario's B*) or "
+          "`high_fidelity` (`sim/world.py`: EGM96 20 x 20, Sun, Moon, SRP, NRLMSISE-00 drag "
+          "under space weather drawn from `seed`)",
+          check=one_of(*scenarios.TRUTHS)),
+    Param("geometry_seed", SENSOR_SIM.geometry_seed,
+          "real-sky scenarios: turn the object's orbit plane and phase as the benchmarks' "
+          "case of this seed does (`sky.case_geometry`); -1 = the scenario's own orbit",
+          check=at_least(-1)),
 )
 """The rows that choose what is simulated."""
 

@@ -10,6 +10,7 @@ from ssa_fusion.params.checks import NON_NEGATIVE, POSITIVE, Values, integer_in,
 from ssa_fusion.params.defaults import SURROGATE
 from ssa_fusion.params.rows import Param, ParameterTable, Rule
 from ssa_fusion.params.shared import (
+    KINDS,
     STATION_RULE,
     clock_lead,
     lockstep_row,
@@ -53,7 +54,8 @@ PARAMETERS = ParameterTable("surrogate", (
     Param("cadence", SURROGATE.cadence,
           "expected time between measurements; 0 = inferred from the buffered stamps",
           unit="s", check=NON_NEGATIVE, runtime=True),
-    *measurement_stream(SURROGATE.kind, SURROGATE.station, SURROGATE.sites, "learns"),
+    *measurement_stream(SURROGATE.kind, SURROGATE.station, SURROGATE.sites, "learns",
+                        tuple(k for k in KINDS if k != "laser_range")),
     Param("lift", SURROGATE.lift,
           "what the DMD learns: `none` (the measurement itself) or `eci` (range/az/el lifted "
           "to the GCRF position it implies; needs `kind` `range_az_el`)",

@@ -1,0 +1,68 @@
+"""Watching a live catalog (`core.conjunction.watch`): re-screening what changed.
+
+Against the screening of the whole catalog at once: the first re-screening (every object
+new) finds exactly its approaches; a later estimate of one object replaces exactly that
+object's approaches; older or non-finite estimates change nothing.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from planted_conjunctions import T0, planted
+
+from ssa_fusion.core.conjunction.ephemeris import StateEphemeris
+from ssa_fusion.core.conjunction.screening import ScreeningConfig, screen
+from ssa_fusion.core.conjunction.watch import ConjunctionWatch, WatchConfig
+
+SPAN = 6 * 3600.0
+
+
+def _pairs(ids: list[str], a, b) -> list[tuple[str, str]]:
+    return sorted(tuple(sorted((ids[i], ids[j]))) for i, j in zip(a, b, strict=True))
+
+
+def test_the_first_rescreening_is_the_screening_of_the_whole_catalog():
+    eph = planted(seed=7, n_background=40, n_pairs=15, span_s=SPAN)
+    n = len(eph.object_ids)
+    p = np.broadcast_to(np.diag([1e-2] * 3 + [1e-8] * 3), (n, 6, 6))
+    cfg = WatchConfig(screening=ScreeningConfig(distance_km=10.0), horizon_s=SPAN)
+    watch = ConjunctionWatch(cfg)
+    assert watch.update(list(eph.object_ids), eph.t0, eph.x0, p) == n
+    first = watch.rescreen(T0)
+    full = screen(eph, T0, T0 + SPAN, cfg.screening)
+    assert len(full) >= 8
+    assert sorted(first.screened) == sorted(eph.object_ids) and watch.pending == 0
+    ids = list(first.approaches.object_ids)
+    assert _pairs(ids, first.approaches.primary, first.approaches.secondary) == _pairs(
+        list(eph.object_ids), full.primary, full.secondary)
+    assert sorted(first.approaches.tca) == pytest.approx(sorted(full.tca), abs=1e-6)
+    assert np.isfinite(first.log10_pc).all() and first.approaches.p1 is not None
+
+    # a later estimate of one object: only its approaches, from its new state
+    k = int(full.primary[0])
+    oid = eph.object_ids[k]
+    t1 = T0 + 60.0
+    x1 = eph.exact([k], [t1])[0] + np.r_[0.0, 0.0, 0.5, 0, 0, 0]  # 500 m off
+    assert watch.update([oid], [t1], [x1], [p[0]]) == 1
+    assert watch.update([oid], [T0], [eph.x0[k]], [p[0]]) == 0  # older: ignored
+    assert watch.update(["nan"], [t1], [np.full(6, np.nan)], [p[0]]) == 0
+    again = watch.rescreen(t1)
+    assert again.screened == [oid]
+    got = again.approaches
+    assert got.primary_ids == [oid] * len(got) and len(got) >= 1
+    # the moved object's approaches are those of its new trajectory
+    epochs = np.full(n, T0)
+    epochs[k] = t1
+    states = eph.x0.copy()
+    states[k] = x1
+    fresh = screen(StateEphemeris(list(eph.object_ids), states, epochs, model="j2"), t1,
+                   t1 + SPAN, cfg.screening, primaries=[k])
+    assert sorted(got.tca) == pytest.approx(sorted(fresh.tca), abs=1e-6)
+    assert sorted(got.miss_km) == pytest.approx(sorted(fresh.miss_km), abs=1e-9)
+
+
+def test_nothing_changed_screens_nothing():
+    watch = ConjunctionWatch()
+    up = watch.rescreen(T0)
+    assert up.screened == [] and len(up.approaches) == 0
