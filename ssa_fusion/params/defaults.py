@@ -106,6 +106,7 @@ class SurrogateDefaults:
     check_period: float = 0.02
     object_id: str = ""
     max_clock_lead: float = MAX_CLOCK_LEAD_S
+    lockstep: bool = False
 
 
 @dataclass(frozen=True)
@@ -135,6 +136,7 @@ class FilterDefaults:
     gap_forecast: str = "none"
     laser: str = ""
     apriori: tuple[float, ...] = (0.0,) * 7
+    lockstep: bool = False
 
 
 @dataclass(frozen=True)

@@ -32,12 +32,11 @@ def clock_lead(default: float) -> Param:
                  unit="s", check=POSITIVE, runtime=True)
 
 
-def lockstep_row(what: str) -> Param:
+def lockstep_row(default: bool, what: str) -> Param:
     """Return the row of ``lockstep``: `what` the node does only when the simulator says."""
-    return Param("lockstep", False,
-                 f"{what} only up to the time sensor_sim releases (`/lockstep/...`, its "
-                 "`lockstep` names this node), never by the clock alone: false for any other "
-                 "graph (a replay, real sensors)")
+    return Param("lockstep", default,
+                 f"{what} only up to the time sensor_sim releases (`/lockstep/...`, naming it "
+                 "in `lockstep`); false in any other graph (a replay, real sensors)")
 
 
 def object_filter(default: str, what: str) -> Param:

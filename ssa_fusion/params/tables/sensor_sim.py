@@ -195,10 +195,9 @@ _CATALOG_ROWS = (
           "catalog: the measurements of a step (or tick) go out as this many batches, one "
           "per shard key range, each for one filter shard", check=at_least(1)),
     Param("lockstep", SENSOR_SIM.lockstep,
-          "the consumers (node names) sim time waits for: `/clock` advances once each has "
-          "taken all it was sent (a catalog: by `lockstep_step`; one object: to the next "
-          "scheduled epoch, its filter and surrogate with `lockstep` true), as long as each "
-          "lives (said every 5 wall s); `[\"\"]` = open loop"),
+          "the consumers (node names) sim time waits for, each to take all it was sent, as "
+          "long as it lives (a catalog: steps of `lockstep_step`; one object: epoch to "
+          "epoch); `[\"\"]` = open loop"),
     Param("lockstep_step", SENSOR_SIM.lockstep_step,
           "a catalog's lockstep: sim time per step (its measurements run ahead of the clock "
           "by up to this: keep it below the consumers' `max_clock_lead`)", unit="s",
