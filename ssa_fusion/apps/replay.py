@@ -88,6 +88,7 @@ from ssa_fusion.ros.topics import (
     TOPIC_MEASUREMENT,
     TOPIC_METEO,
     TOPIC_REFERENCE,
+    TOPIC_RUN,
     TOPIC_SMOOTHED,
     TOPIC_TRUTH,
     TOPIC_WITHHELD,
@@ -98,7 +99,8 @@ PLAYED = (TOPIC_MEASUREMENT, TOPIC_TRUTH, TOPIC_WITHHELD)
 KEPT = (TOPIC_METEO, TOPIC_REFERENCE)
 """Topics an offline replay writes as recorded besides those it plays (a laser bag's)."""
 KNOWN = (*PLAYED, TOPIC_ESTIMATE, TOPIC_SMOOTHED, TOPIC_FORECAST, TOPIC_CLOCK, TOPIC_CONFIG,
-         TOPIC_METEO, TOPIC_REFERENCE, "/diagnostics", "/rosout", "/parameter_events")
+         TOPIC_METEO, TOPIC_REFERENCE, TOPIC_RUN, "/diagnostics", "/rosout",
+         "/parameter_events")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
