@@ -21,6 +21,17 @@ that the accounting adds up (lost = published - received). Prints the summary; t
 is JSON. The targets it reports against (not asserted): >= 100x real time, 0 lost,
 <= 20 KiB per object.
 
+Each run's phases are timed apart, as the summary gives them: start-up (the command's start
+to the first measurement), running (first measurement to last estimate) and summary (last
+estimate to the summary printed); with each node's CPU time per measurement published and
+the simulator's peak resident memory (it computes the measurements a window at a time).
+
+``--base sample``: the flood instead, the sample's CBERS 2 spread into ``--objects`` LEO
+objects (as ``live --catalog config/catalogs/sample.tle --synthetic N``); its target:
+>= 20,000 measurements/s through the graph. ``--bad-sets``: ``config/catalogs/bad_sets.tle``
+appended to the catalog written (a real catalog carries such sets): the run leaves them out,
+names and counts them.
+
 ``--surrogate``: the same with a catalog_surrogate beside each filter shard (every gap
 fitted: lockstep waits for the fits), ``--hours`` more than a day (the residual fits once
 an object's pass ends span a day). Reports the fits made (of the learned residual and physics-only,
@@ -53,6 +64,10 @@ from ssa_fusion.sim import survey
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL = ROOT / "config" / "catalogs" / "celestrak_active_2025-07.tle"
+SAMPLE = ROOT / "config" / "catalogs" / "sample.tle"
+BAD_SETS = ROOT / "config" / "catalogs" / "bad_sets.tle"
+TARGET_FLOOD = 20_000.0  # measurements/s through the graph, --base sample
+TARGET_STARTUP_S = 30.0  # command start to the first measurement
 TARGET_SPEED = 100.0  # x real time, the filter path
 TARGET_KIB = 20.0  # per object, the filter processes
 TARGET_SPEED_SURROGATE = 20.0  # x real time, filter and surrogate shards
@@ -69,9 +84,15 @@ def regime(entry: CatalogEntry) -> str:
     return "GEO" if 0.9 < revs_per_day < 1.1 else "MEO"
 
 
-def write_catalog(path: Path, objects: int, seed: int) -> dict[str, int]:
-    """Write the spread catalog of `objects` as a TLE file; return objects per regime."""
-    bases = catalog_io.read_catalog(REAL)
+def write_catalog(path: Path, objects: int, seed: int, base: Path = REAL,
+                  bad_sets: bool = False) -> dict[str, int]:
+    """Write the spread catalog of `objects` as a TLE file; return objects per regime.
+
+    Every set of `base` spread (the sample's: its first only); `bad_sets`: `BAD_SETS` after.
+    """
+    bases = catalog_io.read_catalog(base)
+    if base == SAMPLE:
+        bases = bases[:1]
     per, extra = divmod(objects, len(bases))
     counts: dict[str, int] = {}
     first = 1  # NORAD catalogue numbers start at 1
@@ -85,6 +106,8 @@ def write_catalog(path: Path, objects: int, seed: int) -> dict[str, int]:
                 f.write(f"{e.name}\n{line1}\n{line2}\n")
             counts[regime(base)] = counts.get(regime(base), 0) + n
             first += n
+        if bad_sets:
+            f.write(BAD_SETS.read_text())
     return counts
 
 
@@ -172,12 +195,21 @@ def main() -> None:
                     help="run a catalog_surrogate beside each filter shard")
     ap.add_argument("--rss-period", type=float, default=60.0,
                     help="wall s between two samples of the shards' resident memory")
+    ap.add_argument("--base", choices=("real", "sample"), default="real",
+                    help="spread the 306 real sets (default) or the sample's CBERS 2 (the "
+                         "flood)")
+    ap.add_argument("--bad-sets", action="store_true",
+                    help="append config/catalogs/bad_sets.tle to the catalog written")
     args = ap.parse_args()
+    load_before = os.getloadavg()
+    print(f"load average at the start: {load_before[0]:.2f} {load_before[1]:.2f} "
+          f"{load_before[2]:.2f} on {os.cpu_count()} cores")
     with tempfile.TemporaryDirectory() as tmp:
         root = Path(tmp)
         cat = root / "catalog.tle"
         t = time.perf_counter()
-        regimes = write_catalog(cat, args.objects, args.seed)
+        regimes = write_catalog(cat, args.objects, args.seed,
+                                REAL if args.base == "real" else SAMPLE, args.bad_sets)
         print(f"catalog: {args.objects} objects {regimes}, written in "
               f"{time.perf_counter() - t:.1f} s ({cat.stat().st_size / 1e6:.1f} MB)")
         cmd = [str(Path(sys.executable).parent / "ssa-fusion"), "live", "--catalog", str(cat),
@@ -218,6 +250,12 @@ def main() -> None:
           f"{rss_mib:.0f} MiB resident at the end: {kib_per_object:.1f} KiB per catalog object "
           f"(target <= {TARGET_KIB:g})")
     extra = surrogate_summary(s) if args.surrogate else {}
+    extra.update(phase_summary(s))
+    load_after = os.getloadavg()
+    print(f"load average at the end: {load_after[0]:.2f} {load_after[1]:.2f} "
+          f"{load_after[2]:.2f}")
+    extra.update({"load_before": [round(v, 2) for v in load_before],
+                  "load_after": [round(v, 2) for v in load_after]})
     print(json.dumps({"objects": args.objects, "regimes": regimes, "hours": args.hours,
                       "shards": args.shards, "published": published, "received": received,
                       "lost": s["lost_measurements"], "sim_s": s["sim_s"],
@@ -226,6 +264,24 @@ def main() -> None:
                       "objects_with_estimates": s["objects_with_estimates"],
                       "rss_mib": round(rss_mib, 1),
                       "kib_per_object": round(kib_per_object, 2), **extra}))
+
+
+def phase_summary(s: dict[str, Any]) -> dict[str, Any]:
+    """Print the run's phases, CPU per node, simulator memory and skips; return them."""
+    def sec(key: str) -> str:
+        return "?" if s.get(key) is None else f"{s[key]:.1f} s"
+
+    print(f"phases: start-up {sec('startup_s')} (target <= {TARGET_STARTUP_S:g} s to the "
+          f"first measurement), running {sec('running_s')}, summary {sec('summary_s')}; "
+          f"{s.get('throughput_per_s') or 0:.0f} measurements/s through the graph (the flood's "
+          f"target >= {TARGET_FLOOD:g})")
+    print("CPU per measurement published: " + ", ".join(
+        f"{n} {v} us ({s['cpu_s'][n]:.1f} s)" for n, v in s["cpu_us_per_measurement"].items()))
+    print(f"sensor_sim peak RSS {s.get('simulator_peak_rss_mib')} MiB (target <= 1024); "
+          f"element sets left out: {s.get('element_sets_skipped', 0)}")
+    return {k: s.get(k) for k in ("startup_s", "running_s", "summary_s", "throughput_per_s",
+                                  "cpu_us_per_measurement", "cpu_s", "simulator_peak_rss_mib",
+                                  "element_sets_skipped")}
 
 
 def surrogate_summary(s: dict[str, Any]) -> dict[str, Any]:

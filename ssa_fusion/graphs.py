@@ -48,6 +48,18 @@ def sim_seconds(s: scenarios.Scenario | sky.SkyScenario) -> float:
     return s.track_s + s.gap_s + s.after_s
 
 
+def object_name(s: scenarios.Scenario | sky.SkyScenario) -> str:
+    """Return the ``object_id`` of the scenario's object: its own name where it has one.
+
+    An element set's object is named by its name line or ``OBJECT_NAME`` (its catalogue
+    number without one); a scenario's own object by the scenario's name.
+    """
+    entry = s.element_set if isinstance(s, sky.SkyScenario) else None
+    if entry is None:
+        return s.name
+    return entry.name.strip() or entry.object_id
+
+
 def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, seed: int,
                     bag: Path, geometry_seed: int = -1, *,
                     lockstep: bool = True) -> dict[str, dict[str, Any]]:
@@ -58,7 +70,7 @@ def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, 
     follows the wall clock). `geometry_seed`: a real-sky object's orbit turned as that
     case's (`sky.case_geometry`; -1: its own).
     """
-    sensor: dict[str, Any] = {"scenario": s.name, "object_id": s.name,
+    sensor: dict[str, Any] = {"scenario": s.name, "object_id": object_name(s),
                               "time_scale": time_scale, "seed": seed, "wait_for": WAIT_FOR,
                               "wait_for_readers": READERS + (LOCKSTEP_READERS if lockstep
                                                              else []),
@@ -167,10 +179,6 @@ class NodeSpec(NamedTuple):
     params: dict[str, Any]
 
 
-CONJUNCTION_LOCKSTEP_S = 1800.0
-"""Wall s the simulator waits for a step's consumers when the conjunction node is one (its
-first re-screening screens the whole catalog)."""
-
 MAX_TIME_SCALE = 1e9
 """The time scale of ``--time-scale max`` (a catalog in lockstep as fast as its slowest
 consumer): sim time a billion times faster than the wall clock is no ceiling at all."""
@@ -249,8 +257,6 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
             "time_scale": min(float(time_scale), MAX_TIME_SCALE), "seed": seed,
             "start": start, **own, "shards": shards, "unlabelled": unlabelled,
             "lockstep": [*names, *gaps, *watch, "recorder"] if lockstep else [""],
-            # a re-screening of a whole catalog (its first) may take minutes
-            **({"lockstep_timeout": CONJUNCTION_LOCKSTEP_S} if watch else {}),
             "wait_for": [f"{TOPIC_MEASUREMENT_BATCH}={shards + 1}",
                          f"{TOPIC_ESTIMATE_BATCH}={len(gaps) + 1}"],
             "wait_for_readers": readers}),

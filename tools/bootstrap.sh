@@ -13,6 +13,9 @@ STAMPS="$VENV/.bootstrap"
 PY_WANT="3.11"
 
 step() { CURRENT_STEP="$1"; echo "bootstrap: $1" >&2; }
+# long_step LOG LABEL COMMAND...: a line at least every BOOTSTRAP_TICK_S s while it runs
+# shellcheck source=tools/long_step.sh
+source "$ROOT/tools/long_step.sh"
 trap 'echo "bootstrap: FAILED at step: ${CURRENT_STEP:-start} (see output above)" >&2' ERR
 
 fingerprint() { cat "$@" | sha256sum | cut -c1-16; }
@@ -34,7 +37,8 @@ find_python() {
 # 1. virtual environment ----------------------------------------------------------------
 if [[ ! -x "$VENV/bin/python" ]]; then
   step "create .venv with Python $PY_WANT"
-  "$(find_python)" -m venv "$VENV"
+  PY_BASE="$(find_python)"
+  long_step "$VENV/.bootstrap-logs/venv.log" "venv" "$PY_BASE" -m venv "$VENV"
 fi
 PY="$VENV/bin/python"
 export PIP_DISABLE_PIP_VERSION_CHECK=1
@@ -42,8 +46,10 @@ export PIP_DISABLE_PIP_VERSION_CHECK=1
 # 2. pinned wheels ------------------------------------------------------------------------
 REQ_FP=$(fingerprint "$ROOT/requirements/ros.txt" "$ROOT/requirements/python.txt")
 if ! is_fresh requirements "$REQ_FP"; then
-  step "pip install requirements/ros.txt requirements/python.txt"
-  "$PY" -m pip install -q -r "$ROOT/requirements/ros.txt" -r "$ROOT/requirements/python.txt"
+  step "pip install requirements/ros.txt requirements/python.txt (a few minutes the first time)"
+  long_step "$VENV/.bootstrap-logs/pip.log" "pip" \
+    "$PY" -m pip install --progress-bar off -r "$ROOT/requirements/ros.txt" \
+    -r "$ROOT/requirements/python.txt"
   # The wheels' CMake exports name the build host's Python and numpy include dirs.
   step "point the ROS wheels' CMake exports at this interpreter"
   PYINC=$("$PY" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
@@ -65,12 +71,12 @@ if ! is_fresh msgs "$MSG_FP"; then
   BUILD="$VENV/.build/ssa_fusion_msgs"
   rm -rf "$BUILD"; mkdir -p "$BUILD"
   export AMENT_PREFIX_PATH="$VENV"
-  cmake -S "$ROOT/msg_defs" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release \
+  long_step "$BUILD.configure.log" "cmake configure" \
+    cmake -S "$ROOT/msg_defs" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release \
     -DCMAKE_PREFIX_PATH="$VENV" -DCMAKE_INSTALL_PREFIX="$VENV" \
-    -DPython3_EXECUTABLE="$PY" -DBUILD_TESTING=OFF >"$BUILD.log" 2>&1 ||
-    { tail -40 "$BUILD.log" >&2; false; }
-  cmake --build "$BUILD" -j "$(nproc)" >>"$BUILD.log" 2>&1 || { tail -40 "$BUILD.log" >&2; false; }
-  cmake --install "$BUILD" >>"$BUILD.log" 2>&1 || { tail -40 "$BUILD.log" >&2; false; }
+    -DPython3_EXECUTABLE="$PY" -DBUILD_TESTING=OFF
+  long_step "$BUILD.build.log" "cmake build" cmake --build "$BUILD" -j "$(nproc)"
+  long_step "$BUILD.install.log" "cmake install" cmake --install "$BUILD"
   step "check: import ssa_fusion_msgs in a clean environment"
   env -i "$PY" -c 'from ssa_fusion_msgs.msg import Measurement, StateEstimate'
   mark msgs "$MSG_FP"
@@ -80,7 +86,8 @@ fi
 PKG_FP=$(fingerprint "$ROOT/setup.py" "$ROOT/setup.cfg" "$ROOT/package.xml")
 if ! is_fresh package "$PKG_FP" || [[ ! -d "$VENV/lib/ssa_fusion" ]]; then
   step "pip install -e . (ssa_fusion)"
-  "$PY" -m pip install -q --no-deps --no-build-isolation -e "$ROOT"
+  long_step "$VENV/.bootstrap-logs/pip-e.log" "pip install -e ." \
+    "$PY" -m pip install --progress-bar off --no-deps --no-build-isolation -e "$ROOT"
   step "place node executables in .venv/lib/ssa_fusion for ros2 run"
   mkdir -p "$VENV/lib/ssa_fusion"
   "$PY" - "$VENV" <<'PYEOF'

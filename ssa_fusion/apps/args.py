@@ -107,7 +107,7 @@ def add_sites(p: argparse.ArgumentParser, what: str) -> None:
 
 
 def add_settings(p: argparse.ArgumentParser, verb: str, default: str) -> None:
-    """Add ``--scenario`` and ``--params-file``: the estimator settings to `verb` with.
+    """Add ``--scenario``, ``--params-file``, ``--filter``: the estimator settings to `verb` with.
 
     `default`: what is used without either.
     """
@@ -116,3 +116,11 @@ def add_settings(p: argparse.ArgumentParser, verb: str, default: str) -> None:
                         f"{default})")
     p.add_argument("--params-file", type=Path, default=None,
                    help=f"{verb} with the filter/surrogate settings of this ROS params YAML")
+    from ssa_fusion.apps.filter_setup import FilterSetup
+
+    p.add_argument("--filter", type=FilterSetup, choices=list(FilterSetup), default=None,
+                   metavar="{" + ",".join(FilterSetup) + "}", dest="setup",
+                   help=f"{verb} with this filter set-up for the bag's own measurements: "
+                        "radar (range/az/el), optical (ra/dec), network (both), position "
+                        "(default for a bag without recorded settings: the one its "
+                        "measurements call for)")

@@ -269,7 +269,7 @@ def _surrogates(status: dict[str, dict[str, str]], gap_nodes: list[str],
     for g in gap_nodes:
         st = status.get(g, {})
         surrogates[g] = {k: count(status, g, k) for k in (
-            "received", "fits_made", "fits_physics", "fits_refused", "fits_skipped",
+            "received", "fits_made", "fits_physics", "fits_refused", "fits_skipped", "fits_cut",
             "published_forecast", "forecasts_overtaken", "waiting_for_fit", "objects")}
         surrogates[g]["fit_seconds"] = float(st.get("fit_seconds", "0") or 0)
         surrogates[g]["object_ids"] = [x for x in st.get("object_ids", "").split(",") if x]
@@ -378,7 +378,34 @@ def table(s: dict[str, Any]) -> str:
     elif ge is not None:
         rows.append("gaps: no forecasts recorded (fits need pass ends over "
                     "min_span; see the surrogates' counts)")
-    return "\n".join(rows)
+    return "\n".join(rows + run_rows(s))
+
+
+def run_rows(s: dict[str, Any]) -> list[str]:
+    """Return the lines of what the run cost and what it left out or cut (`live_catalog.costs`)."""
+    rows = []
+    if s.get("element_sets_skipped"):
+        rows.append(f"element sets left out of the catalog: {s['element_sets_skipped']} "
+                    "(each named on stderr at the start)")
+    if s.get("startup_s") is not None or s.get("running_s") is not None:
+        def sec(v: float | None) -> str:
+            return "?" if v is None else f"{v:.1f} s"
+        rows.append(f"wall time: start-up (command to the first measurement) "
+                    f"{sec(s.get('startup_s'))}, running {sec(s.get('running_s'))}, summary "
+                    f"{sec(s.get('summary_s'))}")
+    if s.get("cpu_s"):
+        each = ", ".join(f"{n} {v:.1f} s ({s['cpu_us_per_measurement'][n]} us)"
+                         for n, v in s["cpu_s"].items())
+        rows.append(f"CPU per node (per measurement published): {each}")
+    if s.get("simulator_peak_rss_mib") is not None:
+        rows.append(f"sensor_sim peak RSS {s['simulator_peak_rss_mib']:.0f} MiB")
+    cut = {n: g.get("fits_cut", 0) for n, g in s.get("surrogates", {}).items()}
+    if any(cut.values()):
+        rows.append("fits cut by the stop (their gaps left to the filter's coasting): "
+                    + ", ".join(f"{n} {v}" for n, v in cut.items()))
+    for line in s.get("processes_ended_badly", []):
+        rows.append(f"ended badly: {line}")
+    return rows
 
 
 def conjunction_summary(bag: Path, status: dict[str, dict[str, str]],

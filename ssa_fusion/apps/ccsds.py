@@ -70,7 +70,7 @@ from ssa_fusion.formats.ccsds.tdm_in import read_tdm
 from ssa_fusion.formats.ccsds.tdm_out import tdm_document
 from ssa_fusion.formats.sites import SiteFileError, load_sites
 from ssa_fusion.ros import bagio, messages
-from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_MEASUREMENT, TOPIC_TRUTH
+from ssa_fusion.ros.topics import TOPIC_ESTIMATE, TOPIC_MEASUREMENT, TOPIC_SMOOTHED, TOPIC_TRUTH
 
 
 # ------------------------------------------------------------------------------------------
@@ -81,6 +81,8 @@ class BagContents:
     """What the exports read from a bag (core units), and the frames its states say."""
 
     estimates: list[types.StateEstimate] = field(default_factory=list)
+    smoothed: list[types.StateEstimate] = field(default_factory=list)
+    """`replay --offline --smooth`'s smoothed estimates (``/ssa/estimate_smoothed``)."""
     measurements: list[types.Measurement] = field(default_factory=list)
     state_frames: dict[str, set[str]] = field(default_factory=lambda: defaultdict(set))
     """``header.frame_id`` of the StateEstimate messages by topic (/ssa/estimate,
@@ -97,14 +99,15 @@ def load_bag(bag: Path) -> BagContents:
     out = BagContents()
     undecodable: Counter[str] = Counter()
     refused: Counter[tuple[str, str]] = Counter()
-    topics = (TOPIC_ESTIMATE, TOPIC_TRUTH, TOPIC_MEASUREMENT)
+    topics = (TOPIC_ESTIMATE, TOPIC_SMOOTHED, TOPIC_TRUTH, TOPIC_MEASUREMENT)
+    states = {TOPIC_ESTIMATE: out.estimates, TOPIC_SMOOTHED: out.smoothed}
     for m in bagio.read_records(bag, topics=topics, undecodable=undecodable, refused=refused):
         if m.topic == TOPIC_MEASUREMENT:
             out.measurements.append(messages.measurement_from_msg(m.msg))
             continue
         out.state_frames[m.topic].add(str(m.msg.header.frame_id))
-        if m.topic == TOPIC_ESTIMATE:
-            out.estimates.append(messages.estimate_from_msg(m.msg))
+        if m.topic in states:
+            states[m.topic].append(messages.estimate_from_msg(m.msg))
     for line in bagio.left_out(undecodable, refused):
         print(f"warning: {bag}: {line}", file=sys.stderr)
     return out
@@ -229,6 +232,9 @@ def _add_export_command(sub: argparse._SubParsersAction[argparse.ArgumentParser]
                             "(ISO 8601, UTC), with its covariance")
         q.add_argument("--step", type=float, default=60.0, metavar="S",
                        help="with --predict-until: seconds between states (default 60)")
+        q.add_argument("--smoothed", action="store_true",
+                       help="the smoothed estimates (/ssa/estimate_smoothed, the definitive "
+                            "orbit of `replay --offline --smooth`) instead of the filter's")
     q.set_defaults(_ccsds_run=run_it, _suffix=f".{name}")
 
 
@@ -280,6 +286,9 @@ def _export(args: argparse.Namespace) -> tuple[Path, str, BagContents]:
 
 def run_export_oem(args: argparse.Namespace) -> int:
     """Run `export oem`: write the bag's estimates as an OEM; return 0."""
+    if args.smoothed and args.predict_until is not None:
+        raise CcsdsError("--smoothed and --predict-until: one or the other (a prediction "
+                         "starts from the fit of a laser bag)")
     out, fmt, contents = _export(args)
     said = ""
     if args.predict_until is not None:
@@ -288,8 +297,15 @@ def run_export_oem(args: argparse.Namespace) -> int:
         states, said = predicted(args.bag, args.predict_until, args.step)
         ephem = ephemerides(states, args.object)
     else:
-        require_gcrf(args.bag, contents, (TOPIC_ESTIMATE,), "estimates")
-        ephem = ephemerides(contents.estimates, args.object)
+        topic = TOPIC_SMOOTHED if args.smoothed else TOPIC_ESTIMATE
+        states = contents.smoothed if args.smoothed else contents.estimates
+        if args.smoothed and not states:
+            raise CcsdsError(f"{args.bag} has no {TOPIC_SMOOTHED}: write them with "
+                             f"`ssa-fusion replay {args.bag} --offline --smooth` and export "
+                             f"from the bag it writes")
+        require_gcrf(args.bag, contents, (topic,), "estimates")
+        ephem = ephemerides(states, args.object)
+        said = "the smoothed estimates" if args.smoothed else ""
     with removed_if_unfinished(out):
         write_ndm(oem_document(ephem, OemFrame(args.frame)), out, fmt)
     n = sum(len(v) for v in ephem.values())
@@ -342,8 +358,10 @@ def run_import_tdm(args: argparse.Namespace) -> int:
     objects = sorted({s.object_id for s in used})
     stations = sorted({s.station for s in used})
     said = counts_said(imported.counts())
-    with_sites = f" --sites {args.sites}" if args.sites else ""
+    from ssa_fusion.apps.replay_outcome import suggestion  # estimation: imported when said
+
+    span = float(imported.t.max() - imported.t.min()) if len(imported) else 0.0
     print(f"import tdm: {said} measurements of {_names(objects)} from "
-          f"{_names(stations)}{imported.left_out()} -> {args.bag}; run it with "
-          f"`ssa-fusion replay {args.bag}{with_sites}`")
+          f"{_names(stations)}{imported.left_out()} -> {args.bag}\n"
+          + suggestion(args.bag, len(imported), span, args.sites))
     return 0

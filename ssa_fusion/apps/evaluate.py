@@ -1,26 +1,29 @@
 """Evaluate a bag the graph recorded: every arm of `ssa_fusion.evaluation.arms` over the gap.
 
-The arms (placeholder, coast, j2_coast, dmd_ekf, hypothetical_ekf) are defined and scored
+The arms (placeholder, coast, j2_coast, batch_fit, dmd_ekf, hypothetical_ekf) are defined and scored
 once, in `evaluation.arms`, for the offline study and for bags alike. Here the DMD-EKF arm
 is the filter's live estimates during the gap (`/ssa/estimate`); the gap epochs are the
 `/ssa/withheld` stamps; the truth is `/ssa/truth`.
 
 The estimator settings the other arms run with are, in this order: a ROS params file
-(`--params-file`), a paper scenario (`--scenario`), the settings the nodes recorded with the
-bag on `/ssa/config`, and for a bag without them (written by an older version or without
-ROS) the paper scenario of the measurement kind, said in the output.
+(`--params-file`), a paper scenario (`--scenario`), a filter set-up (`--filter`,
+`filter_setup`), the settings the nodes recorded with the bag on `/ssa/config`, and for a
+bag without them (your own data, or one written without ROS) the set-up its measurements
+call for (`filter_setup`: radar, optical, network or position, by their kinds and
+stations), said in the output.
 """
 
 from __future__ import annotations
 
 import sys
 from collections import Counter
-from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from ssa_fusion.apps.filter_setup import DataMix, FilterSetup, chosen_estimator
 from ssa_fusion.core.base import metrics, types
 from ssa_fusion.core.earth.frames import Frame, Station
 from ssa_fusion.core.earth.stations import find_station
@@ -104,65 +107,67 @@ class Settings:
     origin: str
 
 
-def settings_for_bag(recorded: list[str], kind: int, scenario: str = "",
-                     params_file: Path | None = None, stations: Iterable[str] = (),
-                     sites: tuple[Station, ...] = ()) -> Settings:
+def settings_for_bag(recorded: list[str], mix: DataMix, scenario: str = "",
+                     params_file: Path | None = None, sites: tuple[Station, ...] = (),
+                     setup: FilterSetup | None = None) -> Settings:
     """Return the estimator settings for a bag (see the module docstring for the order).
 
-    `recorded`: the bag's /ssa/config messages; `kind`: its measurement kind, for a bag
-    without them. ValueError: a bad params file, an unknown scenario or malformed recorded
-    settings.
+    `recorded`: the bag's /ssa/config messages; `mix`: its sensor measurements by station
+    and kind, whose own set-up (`filter_setup`) a bag without settings gets, or every bag
+    with `setup` (``--filter``). ValueError (one line): a bad params file, an unknown
+    scenario, malformed recorded settings, a set-up that takes none of the data, stations
+    no one knows.
 
-    `stations`: the station ids its measurements name (their frame_id); `sites`: stations
-    of one's own (a sites file), which the settings then know besides the built-in ones and
-    those recorded. With `sites`, or when the bag has no settings of its own, settings whose
-    stations do not include the bag's take the bag's (`config.for_stations`); a bag without
-    settings whose stations are not the default's gets the real-sky filter for them
-    (`config.station_estimator`).
+    `sites`: stations of one's own (a sites file), which the settings then know besides the
+    built-in ones and those recorded; with them, settings whose stations do not include the
+    bag's take the bag's (`config.for_stations`).
     """
-    chosen, default = _settings_for_bag(recorded, kind, scenario, params_file)
+    chosen = _settings_for_bag(recorded, mix, scenario, params_file, sites, setup)
     c = chosen.estimator
     if sites:
         own = {s.name: s for s in (*c.sites, *sites)}  # the file's win
         c = c.with_(sites=tuple(own.values()))
-    ids = sorted(set(stations))
-    if not ids or not (sites or default) or not config.uncovered_stations(c, ids):
+    ids = mix.stations(config.STATION_KINDS)
+    if not ids or not sites or not config.uncovered_stations(c, ids):
         return Settings(c, chosen.origin)
     known = [i for i in ids if find_station(i, c.site_map) is not None]
     if not known:
         return Settings(c, chosen.origin)
-    if default:
-        c = config.station_estimator(types.Kind(kind), ",".join(known) + ",", c.sites)
-        return Settings(c, f"the real-sky filter for the stations its measurements name "
-                           f"({', '.join(known)}; the bag has no {topics.TOPIC_CONFIG})")
     c = config.for_stations(c, known)
     return Settings(c, f"{chosen.origin}, with the stations its measurements name "
                        f"({', '.join(known)})")
 
 
-def _settings_for_bag(recorded: list[str], kind: int, scenario: str,
-                      params_file: Path | None) -> tuple[Settings, bool]:
-    """Return the settings by the module docstring's order; True if the kind's default."""
+def _settings_for_bag(recorded: list[str], mix: DataMix, scenario: str,
+                      params_file: Path | None, sites: tuple[Station, ...],
+                      setup: FilterSetup | None) -> Settings:
+    """Return the settings by the module docstring's order."""
     if params_file is not None:
-        return Settings(load_params_file(params_file),
-                        f"params file {params_file}"), False
+        return Settings(load_params_file(params_file), f"params file {params_file}")
     if scenario in sky.SKY_SCENARIOS:
-        return Settings(sky.SKY_SCENARIOS[scenario].estimator(), f"scenario {scenario}"), False
+        return Settings(sky.SKY_SCENARIOS[scenario].estimator(), f"scenario {scenario}")
     if scenario:
-        return Settings(scenarios.get(scenario).estimator(), f"scenario {scenario}"), False
-    estimator = settings.recorded_estimator(recorded)
+        return Settings(scenarios.get(scenario).estimator(), f"scenario {scenario}")
+    estimator = None if setup is not None else settings.recorded_estimator(recorded)
     if estimator is not None:
-        return Settings(estimator, f"recorded with the bag ({topics.TOPIC_CONFIG})"), False
-    s = scenarios.settings_for("", kind)
-    return Settings(s.estimator(), f"scenario {s.name} (the bag has no {topics.TOPIC_CONFIG}; "
-                                   f"the default for its measurement kind)"), True
+        return Settings(estimator, f"recorded with the bag ({topics.TOPIC_CONFIG})")
+    c, why = chosen_estimator(mix, setup, sites)
+    return Settings(c, why if setup is not None else
+                    f"{why} (the bag has no {topics.TOPIC_CONFIG})")
 
 
 class NoTruthError(ValueError):
-    """The bag lacks what an evaluation scores against.
+    """The bag lacks what the arms are scored against: the simulated truth (/ssa/truth).
 
-    A simulated outage's withheld measurements (/ssa/withheld) or the simulated truth
-    (/ssa/truth).
+    Or (`NoOutageError`) a simulated outage to score them over.
+    """
+
+
+class NoOutageError(NoTruthError):
+    """The bag has a truth but no outage to score the arms over (its estimates still are).
+
+    No /ssa/withheld, or an outage that withheld a few measurements between two truth
+    epochs.
     """
 
 
@@ -180,35 +185,89 @@ class Evaluation:
     between: GapScores | None = None
 
 
-def evaluate(data: BagData, scenario: str = "", seed: int = 0,
-             params_file: Path | None = None) -> Evaluation:
-    """Every arm over the bag's gap (see the module docstring)."""
-    if not data.withheld:
-        raise NoTruthError("the bag has no /ssa/withheld messages: no gap to evaluate")
+def require_outage(data: BagData) -> None:
+    """Raise NoTruthError (or NoOutageError) when `data` lacks a truth (or an outage)."""
     if not data.truth:
         raise NoTruthError("the bag has no /ssa/truth messages: nothing to compare against")
-    kind = data.measurements[0].kind if data.measurements else types.Kind.POSITION
-    chosen = settings_for_bag(data.config, kind, scenario, params_file)
+    if not data.withheld:
+        raise NoOutageError("the bag has no /ssa/withheld messages: no outage to score the "
+                            "arms over")
+
+
+def evaluate(data: BagData, scenario: str = "", seed: int = 0,
+             params_file: Path | None = None, setup: FilterSetup | None = None) -> Evaluation:
+    """Every arm over the bag's gap (see the module docstring)."""
+    require_outage(data)
+    chosen = settings_for_bag(data.config, DataMix.of(data.measurements), scenario, params_file,
+                              setup=setup)
     truth = {e.t: e.x for e in data.truth}
     t_gap = np.array(sorted({m.t for m in data.withheld}))
     network = chosen.estimator.is_network
     if network:  # stations measure off the truth's cadence: the truth epochs of the outage
         t_gap = passes_.outage_epochs(np.array(sorted(truth)), data.withheld)
+        if not len(t_gap):
+            w = [m.t for m in data.withheld]
+            raise NoOutageError(f"the outage withheld {len(w)} measurement(s) over "
+                                f"{max(w) - min(w):.0f} s, between two /ssa/truth epochs: no "
+                                f"outage epoch to score the arms over")
     missing = [t for t in t_gap if t not in truth]
-    if missing or not len(t_gap):
-        raise ValueError(f"/ssa/truth lacks {len(missing)} gap epochs (first t="
-                         f"{missing[0] if missing else 'none in the gap'})")
+    if missing:
+        raise ValueError(f"/ssa/truth lacks {len(missing)} gap epochs (first t={missing[0]})")
     x_true = np.array([truth[t] for t in t_gap])
     live = {e.t: e for e in data.estimates if e.update_source != types.UpdateSource.NONE}
     real = [m for m in data.measurements if m.source == types.Source.SENSOR]
     gap = evaluate_gap(chosen.estimator, live, real, data.withheld, t_gap, x_true, seed)
-    passes, between = None, None
-    if network:
-        t_all = np.array(sorted(truth))
-        x_all = np.array([truth[t] for t in t_all])
-        passes = passes_.pass_report(chosen.estimator, live, real, t_all, x_all)
-        between = score_gaps({e.t: e for e in data.estimates}, real, t_all, x_all)
+    passes, between = truth_scores(data, chosen.estimator) if network else (None, None)
     return Evaluation(gap, chosen, passes, between)
+
+
+def truth_scores(data: BagData, c: EstimatorConfig
+                 ) -> tuple[passes_.PassReport | None, GapScores | None]:
+    """Score the bag's estimates against its /ssa/truth: after each pass, between passes.
+
+    (None, None) without a truth or a fused estimate. `c`: the filter's settings (its
+    motion model predicts from the last estimate to a truth epoch without one).
+    """
+    live = {e.t: e for e in data.estimates if e.update_source != types.UpdateSource.NONE}
+    if not data.truth or not live:
+        return None, None
+    truth = {e.t: e.x for e in data.truth}
+    t_all = np.array(sorted(truth))
+    x_all = np.array([truth[t] for t in t_all])
+    real = [m for m in data.measurements if m.source == types.Source.SENSOR]
+    return (passes_.pass_report(c, live, real, t_all, x_all),
+            score_gaps({e.t: e for e in data.estimates}, real, t_all, x_all))
+
+
+def position_error(passes: passes_.PassReport | None, between: GapScores | None,
+                   truth_states: int) -> dict[str, Any] | None:
+    """Return what report.json holds of the position error against the truth (None: none).
+
+    From `truth_scores`: its mean and largest over the truth epochs, its median after the
+    passes and between them, the fraction of NEES in the 95 % band.
+    """
+    if passes is None:
+        return None
+    err = passes.pos_err_km
+    after = [row[3] for row in passes.passes]
+    return {"truth_states": truth_states, "epochs": len(err),
+            "mean_km": float(np.mean(err)) if len(err) else None,
+            "max_km": float(np.max(err)) if len(err) else None,
+            "after_pass_median_km": float(np.median(after)) if after else None,
+            "between_passes_median_km": (None if between is None or not between.gap_epochs
+                                         else between.err_median_km),
+            "nees_in_band": passes.nees_in_band if len(passes.nees) else None}
+
+
+def between_line(b: GapScores) -> str:
+    """Return what the filter published between passes, against the truth, as one line."""
+    long = (f"gaps > 12 h: {b.long_err_median_km:.3g} km over {b.long_gap_epochs} epochs"
+            if b.long_gap_epochs else "no gap > 12 h")
+    return (f"between passes, what the filter published ({b.gap_epochs} truth epochs): "
+            f"median position error {b.err_median_km:.3g} km ({long}); right "
+            f"after each pass {b.after_pass_median_km:.3g} km (median); position NEES "
+            f"inside chi2(3)'s 95 % bound at {100 * b.nees_in_95:.1f} % of the epochs, "
+            f"median {b.nees_median:.2f} (chi2(3)'s median: 2.37)")
 
 
 @dataclass
@@ -298,11 +357,5 @@ def table(ev: Evaluation) -> str:
         rows.append("\n" + ev.passes.table())
     b = ev.between
     if b is not None and b.gap_epochs:
-        long = (f"gaps > 12 h: {b.long_err_median_km:.3g} km over {b.long_gap_epochs} epochs"
-                if b.long_gap_epochs else "no gap > 12 h")
-        rows.append(f"\nbetween passes, what the filter published ({b.gap_epochs} truth epochs): "
-                    f"median position error {b.err_median_km:.3g} km ({long}); right "
-                    f"after each pass {b.after_pass_median_km:.3g} km (median); position NEES "
-                    f"inside chi2(3)'s 95 % bound at {100 * b.nees_in_95:.1f} % of the epochs, "
-                    f"median {b.nees_median:.2f} (chi2(3)'s median: 2.37)")
+        rows.append("\n" + between_line(b))
     return "\n".join(rows)

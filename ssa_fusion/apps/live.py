@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING, Any
 from ssa_fusion import graphs
 from ssa_fusion.apps import evaluate, report, runs
 from ssa_fusion.apps.args import add_discovery, add_domain_id, time_scale
+from ssa_fusion.apps.heartbeat import working
 from ssa_fusion.apps.progress_lines import ProgressLines
 from ssa_fusion.core.base.types import UpdateSource
 from ssa_fusion.core.earth import timescales
@@ -100,7 +101,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "fit_residual; default: the scenario's)")
     p.add_argument("--strict", action="store_true",
                    help="exit 1 when forecasts for gap epochs never went into the filter "
-                        "(they arrived late or were dropped, e.g. at too high a time scale)")
+                        "(they arrived late or were dropped, e.g. at too high a time scale); "
+                        "with --catalog: refuse the file at its first bad element set "
+                        "(default: each is left out, named on stderr with its file, line, "
+                        "object and reason, and counted in the summary)")
     p.add_argument("--foxglove", action="store_true",
                    help="also serve the graph live to Foxglove (foxglove_bridge node, "
                         "WebSocket on 127.0.0.1; layout: config/foxglove_layout.json)")
@@ -219,6 +223,26 @@ def catalog_options_given(args: argparse.Namespace) -> list[str]:
     return [name for name, set_ in given.items() if set_]
 
 
+def how_far(graph: Graph, sim_s: float) -> Callable[[], str]:
+    """Return what `working` says of a single-object run: its sim time and estimates so far.
+
+    From the estimates the probe hears (their stamps: sim time since the first).
+    """
+    from ssa_fusion.ros.interfaces import StateEstimate
+
+    heard = graph.collect(StateEstimate, "/ssa/estimate")
+
+    def say() -> str:
+        if not heard:
+            return "the nodes starting, no estimate yet"
+        first, last = (h.header.stamp for h in (heard[0], heard[-1]))
+        done = (last.sec - first.sec) + 1e-9 * (last.nanosec - first.nanosec)
+        return (f"sim time {done / 3600:.1f} of {sim_s / 3600:.1f} h, {len(heard)} "
+                "estimates")
+
+    return say
+
+
 def _drain(graph: Graph) -> float:
     """Let surrogate, filter and recorder finish what is in flight (until 1 s of quiet).
 
@@ -292,16 +316,17 @@ def run(args: argparse.Namespace) -> int:
     print(f"live: {s.name}, {sim_s / 3600:.1f} h of sim time {_pace(args, sim_s)}; ROS "
           f"domain {graph.domain_id}, run {graph.run}; logs in {out}/logs", flush=True)
     if isinstance(s, sky.SkyScenario):
-        print(f"live: {s.truth} truth from {timescales.iso(s.t0)}, "
-              + ("the scenario's own orbit" if geometry_seed < 0 else
-                 f"the orbit of case {geometry_seed} (--same-geometry: the scenario's own)"),
-              flush=True)
+        orbit = (f"object {graphs.object_name(s)} of {s.elements_file}" if s.element_set
+                 else "the scenario's own orbit" if geometry_seed < 0 else
+                 f"the orbit of case {geometry_seed} (--same-geometry: the scenario's own)")
+        print(f"live: {s.truth} truth from {timescales.iso(s.t0)}, {orbit}", flush=True)
     t_start = time.monotonic()
     heard = _Heard()
     try:
         _run_graph(graph, params, args, sim_s, heard)
     finally:
-        problems = graph.close()
+        with working("live", "stopping the nodes"):
+            problems = graph.close()
     if runs.ended_badly(problems):
         return 1
     return _report(args, s.name, out, bag, time.monotonic() - t_start, sim_s, heard)
@@ -366,36 +391,40 @@ def _run_graph(graph: Graph, params: dict[str, dict[str, Any]], args: argparse.N
         start_foxglove(graph, params, args.foxglove_port, lambda text: print(text, flush=True))
         params["sensor_sim"]["wait_for_readers"] = [
             *params["sensor_sim"]["wait_for_readers"], *FOXGLOVE_READERS]
-    for name in ("recorder", "surrogate", "filter"):
-        graph.start_node(name, params=params[name])
-    sensor = graph.start_node("sensor_sim", params=params["sensor_sim"])
-    # a node that ends early (a recorder that cannot write its bag) ends the run at once:
-    # graph.close says which and why; in lockstep sim time waits for its nodes as long
-    # as they live: no limit
-    limit = math.inf if args.lockstep else 60.0 + 3.0 * sim_s / args.time_scale
-    if graph.wait_done_or_broken(sensor, timeout=limit):
-        heard.last_output = _drain(graph)
+    with working("live", "running the graph", how_far(graph, sim_s)):
+        for name in ("recorder", "surrogate", "filter"):
+            graph.start_node(name, params=params[name])
+        sensor = graph.start_node("sensor_sim", params=params["sensor_sim"])
+        # a node that ends early (a recorder that cannot write its bag) ends the run at
+        # once: graph.close says which and why; in lockstep sim time waits for its nodes
+        # as long as they live: no limit
+        limit = math.inf if args.lockstep else 60.0 + 3.0 * sim_s / args.time_scale
+        if graph.wait_done_or_broken(sensor, timeout=limit):
+            heard.last_output = _drain(graph)
 
 
 def _report(args: argparse.Namespace, name: str, out: Path, bag: Path, wall: float,
             sim_s: float, heard: _Heard) -> int:
     """Evaluate the recorded run, write its report and live.json, print its table."""
-    data = evaluate.load(bag)
+    with working("live", "reading the bag"):
+        data = evaluate.load(bag)
     try:
-        ev = evaluate.evaluate(data, seed=args.seed)  # with the settings recorded in the bag
+        evaluate.require_outage(data)
+        with working("live", "scoring the arms over the outage"):
+            ev = evaluate.evaluate(data, seed=args.seed)  # with the settings the bag recorded
     except ValueError as exc:  # e.g. a real-sky seed whose outage fell where no pass was
         fused = any(e.update_source != UpdateSource.NONE for e in data.estimates)
         if isinstance(exc, evaluate.NoTruthError) and fused:
             # no outage to score the arms over: the filter judged as your own data is
             print(f"recorded {sum(data.counts.values())} messages to {bag} in {wall:.1f} s; "
-                  f"{exc} (no pass fell in the run's outage)")
+                  f"no arms to score (no pass fell in the run's outage)")
             own = argparse.Namespace(bag=bag, sites=args.sites or None, scenario="",
-                                     params_file=None)
+                                     params_file=None, setup=None, command="live")
             return report.run_own(own, data, out, str(exc))
         print(f"recorded {sum(data.counts.values())} messages to {bag} in {wall:.1f} s\n"
               f"error: the run cannot be evaluated: {exc}", file=sys.stderr)
         return 1
-    report.write(data, ev, out)
+    report.write(data, ev, out, "live")
     late = evaluate.unfused_forecasts(data, ev.gap.t)
     counters = filter_counters(heard.diagnostics)
     sim_wall = runs.sensor_wall_times(out / "logs" / "sensor_sim.err")

@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ssa_fusion import graphs
-from ssa_fusion.apps import conjunction_table, runs
+from ssa_fusion.apps import conjunction_table, run_costs, runs
 from ssa_fusion.apps.args import discovery
 from ssa_fusion.apps.catalog_summary import (
     conjunction_summary,
@@ -56,6 +56,7 @@ from ssa_fusion.core.base.types import UpdateSource
 from ssa_fusion.core.earth import timescales
 from ssa_fusion.core.motion.element_sets import CatalogEntry
 from ssa_fusion.formats import element_sets as catalog_io
+from ssa_fusion.formats.skipped import Skipped
 from ssa_fusion.params.defaults import CATALOG_SURROGATE
 from ssa_fusion.ros.discovery import Discovery
 from ssa_fusion.ros.processes import Graph, ros_arguments
@@ -176,14 +177,15 @@ def catalog_scenario(args: argparse.Namespace) -> sky.SkyScenario:
     return s.with_sites(sites) if sites else s
 
 
-def entries_of(args: argparse.Namespace,
-               progress: catalog_io.Progress | None = None) -> list[CatalogEntry]:
+def entries_of(args: argparse.Namespace, progress: catalog_io.Progress | None = None,
+               skip: Skipped | None = None) -> list[CatalogEntry]:
     """Return the objects the run simulates (as sensor_sim builds them from the options).
 
     ValueError (one line naming the file and line) for a catalog that cannot be read;
-    `progress`: `catalog_io.read_catalog`'s.
+    `progress`: `catalog_io.read_catalog`'s; `skip`: its bad element sets are left out and
+    counted there (as sensor_sim leaves them out), else the first refuses the file.
     """
-    entries = catalog_io.read_catalog(args.catalog, progress)
+    entries = catalog_io.read_catalog(args.catalog, progress, skip)
     if args.synthetic:
         entries = survey.synthetic_catalog(entries[0], args.synthetic, seed=args.seed)
     return entries[: args.objects] if args.objects else entries
@@ -262,9 +264,10 @@ def run(args: argparse.Namespace) -> int:
     if problem:
         print(f"error: {problem}", file=sys.stderr)
         return 2
+    skipped = None if getattr(args, "strict", False) else Skipped()
     try:
         entries = entries_of(args, ProgressLines(f"live: catalog {args.catalog}",
-                                                 "objects").reading)
+                                                 "objects").reading, skipped)
         t0 = timescales.parse_utc(args.start) if args.start else survey.catalog_start(entries)
         timescales.check_window(t0, args.duration * 3600.0)
     except ValueError as exc:
@@ -286,8 +289,8 @@ def run(args: argparse.Namespace) -> int:
     graph = runs.run_graph(args, out / "logs", "live")
     if graph is None:
         return 2
-    _announce(args, s, len(entries), specs, graph, remote, sim_s, unlabelled, out)
-    t_start = time.monotonic()
+    _announce(args, s, len(entries), specs, graph, remote, sim_s, unlabelled, out, skipped)
+    t_start, command_start = time.monotonic(), time.time()
     outcome = _Outcome()
     try:
         _run_graph(graph, specs, remote, args.lockstep, sim_s / args.time_scale, unlabelled,
@@ -298,8 +301,7 @@ def run(args: argparse.Namespace) -> int:
         timed_out = ""
     finally:
         problems = graph.close()
-    if runs.ended_badly(problems):
-        return 1
+    ended_badly = runs.ended_badly(problems)  # the summary still says what was done
     if timed_out:
         elsewhere = (f"; shard(s) {','.join(map(str, remote))} run on other hosts: were they "
                      "started there with the commands above, and can the hosts reach each "
@@ -311,20 +313,48 @@ def run(args: argparse.Namespace) -> int:
     ran = None if sim_wall is None else (sim_wall[0], max(sim_wall[1], outcome.last_output))
     names, gaps = _shard_names(specs)
     status = statuses(outcome.diagnostics)
-    summary = summarise(bag, entries, status, names, outcome.rss, ran, sim_s, gaps,
-                        unlabelled, t0, _pass_break(args))
+    try:
+        summary = summarise(bag, entries, status, names, outcome.rss, ran, sim_s, gaps,
+                            unlabelled, t0, _pass_break(args))
+    except (OSError, ValueError) as exc:  # a recorder killed mid-write: no bag to sum up
+        print(f"error: no summary: cannot read {bag}: {exc} (`ssa-fusion bag repair`)",
+              file=sys.stderr)
+        return 1
+    summary.update(costs(out / "logs" / "sensor_sim.err", outcome.cpu, command_start, ran,
+                         summary["published"]))
     summary.update({"catalog": str(args.catalog), "objects": len(entries), "scenario": s.name,
                     "time_scale": args.time_scale if math.isfinite(args.time_scale) else "max",
                     "lockstep": args.lockstep,
                     "shards": args.shards, "wall_s": wall, "unlabelled": unlabelled,
-                    "remote_nodes": [n.name for n in specs if is_remote(n, remote)]})
+                    "remote_nodes": [n.name for n in specs if is_remote(n, remote)],
+                    "element_sets_skipped": skipped.count if skipped else 0,
+                    "element_sets_skipped_lines": skipped.lines if skipped else [],
+                    "processes_ended_badly": [p.splitlines()[0] for p in problems],
+                    "summary_s": None if ran is None else time.time() - ran[1]})
     if conj is not None:
         summary["conjunctions"] = conjunction_summary(bag, status, conj)
     (out / "catalog.json").write_text(json.dumps(summary, indent=2))
     print(table(summary))
     if conj is not None:
         print(conjunction_table.table(conjunction_table.latest(bag)))
-    return 0 if summary["lost_measurements"] == 0 else 1
+    return 0 if summary["lost_measurements"] == 0 and not ended_badly else 1
+
+
+def costs(sensor_log: Path, cpu: dict[str, float], command_start: float,
+          ran: tuple[float, float] | None, published: int) -> dict[str, Any]:
+    """Return the run's phases (start-up, running) and each node's CPU time (`run_costs`).
+
+    `cpu`: CPU s of each node process still running at the end (the simulator's from its
+    log); per measurement published, in microseconds.
+    """
+    cpu = dict(cpu)
+    sim = run_costs.sensor_costs(sensor_log)
+    if sim is not None:
+        cpu["sensor_sim"] = sim[0]
+    per = {n: round(1e6 * v / published, 2) if published else None for n, v in cpu.items()}
+    return {**run_costs.phases(command_start, run_costs.first_measurement(sensor_log), ran),
+            "cpu_s": cpu, "cpu_us_per_measurement": per,
+            "simulator_peak_rss_mib": None if sim is None else sim[1]}
 
 
 def _shard_names(specs: Sequence[graphs.NodeSpec]) -> tuple[list[str], list[str]]:
@@ -335,12 +365,18 @@ def _shard_names(specs: Sequence[graphs.NodeSpec]) -> tuple[list[str], list[str]
 
 def _announce(args: argparse.Namespace, s: sky.SkyScenario, objects: int,
               specs: Sequence[graphs.NodeSpec], graph: Graph, remote: Sequence[int],
-              sim_s: float, unlabelled: bool, out: Path) -> None:
-    """Print what runs (and what the other hosts are to run, `remote_commands`)."""
+              sim_s: float, unlabelled: bool, out: Path, skipped: Skipped | None) -> None:
+    """Print what runs (and what the other hosts are to run, `remote_commands`).
+
+    The element sets `skipped` left out are named on stderr first.
+    """
     gaps = _shard_names(specs)[1]
     radars = (f"radars of {s.sites_file} ({', '.join(r.station.name for r in s.radars)})"
               if s.sites_file else f"radars of {s.name}")
-    print(f"live: catalog {args.catalog} ({objects} objects"
+    if skipped is not None and skipped.count:
+        print(skipped.summary(), file=sys.stderr)
+    left_out = f", {skipped.count} bad element sets left out" if skipped and skipped.count else ""
+    print(f"live: catalog {args.catalog} ({objects} objects{left_out}"
           f"{', unlabelled detections' if unlabelled else ''}), {radars}, "
           f"{sim_s / 3600:g} h of sim time {pace(args)}, {args.shards} filter "
           f"shard(s){' with a surrogate each' if gaps else ''}; ROS domain {graph.domain_id}; "
@@ -354,12 +390,13 @@ def _announce(args: argparse.Namespace, s: sky.SkyScenario, objects: int,
 class _Outcome:
     """What `_run_graph` heard.
 
-    The /diagnostics messages, the shards' resident memory (KiB) and the wall time (Unix s)
-    the last estimate arrived.
+    The /diagnostics messages, the shards' resident memory (KiB), the CPU time (s) of
+    each node process of this host and the wall time (Unix s) the last estimate arrived.
     """
 
     diagnostics: Sequence[Message] = ()
     rss: dict[str, int] = field(default_factory=dict)
+    cpu: dict[str, float] = field(default_factory=dict)
     last_output: float = field(default_factory=time.time)
 
 
@@ -390,14 +427,17 @@ def _run_graph(graph: Graph, specs: Sequence[graphs.NodeSpec], remote: Sequence[
     # the filters are done when their estimates stop (surrogates may still be fitting)
     graph.wait_quiet(lambda: seen[UpdateSource.SENSOR], quiet_s=1.0, limit_s=600.0)
     outcome.last_output = time.time() - 1.0  # wall time (Unix s) the last estimate arrived
-    # then one more report of every shard, counting all it did
+    # then one more report of every shard, counting all it did (a shard still busy gives
+    # its last when it is stopped: the summary comes either way)
     since = len(diagnostics)
-    graph.wait_for(lambda: set(names + gaps) <= {st.name for d in diagnostics[since:]
-                                                 for st in d.status}, 10.0,
-                   "a last /diagnostics report of every shard")
+    with contextlib.suppress(TimeoutError):
+        graph.wait_for(lambda: set(names + gaps) <= {st.name for d in diagnostics[since:]
+                                                     for st in d.status}, 10.0,
+                       "a last /diagnostics report of every shard")
     # and the recorder (last stopped, but stopped) has written all they published
     with contextlib.suppress(TimeoutError):  # the summary counts what it lacks
         graph.wait_for(lambda: unrecorded(statuses(diagnostics), names, gaps,
                                           unlabelled) == 0,
                        60.0, "the recorder to write every measurement and estimate")
     outcome.rss = {n: _rss_kib(started[n].popen.pid) for n in names + gaps if n in started}
+    outcome.cpu = {n: run_costs.cpu_s(p.popen.pid) for n, p in started.items()}

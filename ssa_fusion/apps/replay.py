@@ -28,7 +28,8 @@ The estimator settings are those recorded with the bag (``/ssa/config``) unless
 file, `formats.sites`), or for a bag without recorded settings, the filter takes the
 stations the bag's measurements name (`core.gaps.estimator.for_stations`; the real-sky filter,
 `core.gaps.estimator.station_estimator`, for a bag without settings whose stations are not the
-default's). An offline replay that produces no estimate says why (`why_no_estimate`).
+default's). An offline replay that produces no estimate says why
+(`replay_outcome.why_no_estimate`).
 
 A bag whose measurements are recorded as batches (``/ssa/measurement_batch``) is replayed, in
 both modes, as if recorded one message each: every row is the Measurement it means, at its
@@ -55,22 +56,20 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from ssa_fusion.apps import evaluate, replay_catalog, runs
+from ssa_fusion.apps import evaluate, replay_catalog, replay_outcome, runs
 from ssa_fusion.apps.args import add_domain_id, add_settings, add_sites, positive_float
+from ssa_fusion.apps.filter_setup import DataMix, FilterSetup
+from ssa_fusion.apps.heartbeat import working
 from ssa_fusion.apps.partial import removed_if_unfinished
 from ssa_fusion.core.base import types
-from ssa_fusion.core.base.types import KIND_NAMES, Cause
+from ssa_fusion.core.base.types import Cause
 from ssa_fusion.core.earth.frames import Frame, Station
-from ssa_fusion.core.earth.stations import find_station
 from ssa_fusion.core.filter.smoother import TrackerRecorder
 from ssa_fusion.core.filter.tracker import Tracker
 from ssa_fusion.core.gaps.estimator import (
     EstimatorConfig,
     make_surrogate,
     make_tracker,
-    uncovered_stations,
 )
 from ssa_fusion.core.gaps.publisher import GapFill, GapPublisher, Published
 from ssa_fusion.core.gaps.surrogate import Surrogate
@@ -146,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
 
                 return replay_laser.run(args, stream)
             sites = site_file.load_stations(args.sites) if args.sites else ()
-            chosen = settings(stream, args.scenario, args.params_file, sites)
+            chosen = settings(stream, args.scenario, args.params_file, sites, args.setup)
     except (bagio.BagError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -185,9 +184,12 @@ def run(args: argparse.Namespace) -> int:
               f"{len(result.forecasts)} forecasts"
               + (f", {len(result.smoothed)} smoothed" if args.smooth else "") + f" -> {out}")
         if not result.estimates:
-            print(f"replay: no estimate: {why_no_estimate(stream, result, s)}")
+            why = replay_outcome.why_no_estimate(stream, result, s)
+            print(f"error: no estimate: {why}", file=sys.stderr)
+            return 1
+        print(replay_outcome.judged(stream, result, s, out))
         if args.smooth:
-            print(smoothing_summary(stream, result))
+            print(replay_outcome.smoothing_summary(stream, result))
         return 0
     return replay_live(args, stream, s)
 
@@ -233,13 +235,14 @@ def drop_ahead_of_clock(stream: list[bagio.BagMessage]) -> tuple[list[bagio.BagM
 
 
 def settings(stream: list[bagio.BagMessage], scenario: str = "",
-             params_file: Path | None = None,
-             sites: tuple[Station, ...] = ()) -> evaluate.Settings:
+             params_file: Path | None = None, sites: tuple[Station, ...] = (),
+             setup: FilterSetup | None = None) -> evaluate.Settings:
     """Return the estimator settings to replay `stream` with.
 
-    As `evaluate.settings_for_bag` chooses them: params file, scenario, those recorded with the
-    bag, else the measurement kind's default; with `sites` (stations of one's own), or
-    without recorded settings, the filter takes the stations the measurements name.
+    As `evaluate.settings_for_bag` chooses them: params file, scenario, filter set-up
+    (`setup`), those recorded with the bag, else the set-up its measurements call for
+    (`filter_setup`); with `sites` (stations of one's own) the filter takes the stations
+    the measurements name.
 
     The bag's own cadence wins: if its measurements come at another interval than the
     settings' cadence (beyond the surrogate's jitter tolerance), the cadence is set to 0 and
@@ -247,60 +250,15 @@ def settings(stream: list[bagio.BagMessage], scenario: str = "",
     fixed 30 s cadence against 10 s data would find every interval off its grid and never
     fit). Data at the settings' cadence keep it, so a replay reproduces the live run.
     """
-    first = next(m for m in stream if m.topic == TOPIC_MEASUREMENT)
     recorded = [m.msg.data for m in stream if m.topic == TOPIC_CONFIG]
-    chosen = evaluate.settings_for_bag(recorded, first.msg.kind, scenario, params_file,
-                                       stations=bag_stations(stream), sites=sites)
+    mix = DataMix.of(messages.measurement_from_msg(m.msg) for m in stream
+                     if m.topic == TOPIC_MEASUREMENT)
+    chosen = evaluate.settings_for_bag(recorded, mix, scenario, params_file, sites, setup)
     c = chosen.estimator
     dt, cadence = bag_cadence(stream), c.surrogate.cadence_s
     if not math.isnan(dt) and cadence > 0 and abs(dt - cadence) > c.surrogate.jitter * cadence:
         chosen.estimator = c.with_(surrogate=replace(c.surrogate, cadence_s=0.0))
     return chosen
-
-
-def bag_stations(stream: list[bagio.BagMessage]) -> list[str]:
-    """Return the station ids (frame_id) the bag's sensor measurements name, sorted."""
-    return sorted({str(m.msg.header.frame_id) for m in stream
-                   if m.topic == TOPIC_MEASUREMENT and m.msg.source == types.Source.SENSOR})
-
-
-def why_no_estimate(stream: list[bagio.BagMessage], result: OfflineResult,
-                    c: EstimatorConfig) -> str:
-    """Return why an offline replay of `stream` with estimator `c` gave no estimate.
-
-    From what the filter refused (`OfflineResult.rejected`, by cause): no sensor
-    measurement, measurements of stations or a kind the settings do not take, an initial
-    orbit determination that never converged; else the refusals by cause.
-    """
-    n = sum(1 for m in stream if m.topic == TOPIC_MEASUREMENT
-            and m.msg.source == types.Source.SENSOR)
-    if not n:
-        return f"the bag has no sensor measurement (source SENSOR) on {TOPIC_MEASUREMENT}"
-    got = dict(result.rejected)
-    reasons = []
-    if got.get(Cause.REJECTED_FRAME):
-        ids = uncovered_stations(c, bag_stations(stream))
-        unknown = [i for i in ids if find_station(i, c.site_map) is None]
-        hint = (f"station id(s) {', '.join(unknown)} are neither built in nor in a sites "
-                f"file: define them in one and give it with --sites" if unknown else
-                "give --sites (the filter then takes the stations the measurements name) or "
-                "settings whose station includes them (--params-file, --scenario)")
-        reasons.append(f"{got.pop(Cause.REJECTED_FRAME)} measurement(s) from stations the "
-                       f"filter does not take ({', '.join(ids) or 'see the bag'}; its station "
-                       f"setting is {c.station!r}): {hint}")
-    if got.get(Cause.REJECTED_KIND):
-        reasons.append(f"{got.pop(Cause.REJECTED_KIND)} measurement(s) of another kind than "
-                       f"the settings' {KIND_NAMES[c.kind]}")
-    pending, failed = got.pop(Cause.IOD_PENDING, 0), got.pop(Cause.IOD_FAILED, 0)
-    if pending or failed:
-        iod = c.filter.iod
-        span = ("" if math.isinf(iod.iod_max_span_s)
-                else f" within {iod.iod_max_span_s:g} s (one pass)")
-        reasons.append(f"the initial orbit determination never converged ({pending} "
-                       f"measurement(s) waited for it, {failed} attempt(s) failed; it needs "
-                       f"{iod.iod_samples} real measurements of one station{span})")
-    reasons += [f"{k} {v}" for k, v in sorted(got.items()) if v]
-    return "; ".join(reasons) or f"the filter took none of the {n} measurement(s)"
 
 
 def bag_cadence(stream: list[bagio.BagMessage]) -> float:
@@ -438,23 +396,6 @@ def replay_offline(stream: list[bagio.BagMessage], c: EstimatorConfig,
     return result
 
 
-def smoothing_summary(stream: list[bagio.BagMessage], result: OfflineResult) -> str:
-    """Return the smoothed against the filtered position error at the truth's fused epochs."""
-    truth = {messages.stamp_to_seconds(m.msg.header.stamp): messages.estimate_from_msg(m.msg).x
-             for m in stream if m.topic == TOPIC_TRUTH}
-    filtered = {e.t: e for _, e in result.estimates
-                if e.update_source != types.UpdateSource.NONE}
-    both = [e for e in result.smoothed if e.t in truth and e.t in filtered]
-    if not both:
-        return ("smoothed: no fused epoch has a truth message in the bag (nothing to score; "
-                "the smoothed estimates are on /ssa/estimate_smoothed)")
-    err_s = [float(np.linalg.norm(e.x[:3] - truth[e.t][:3])) for e in both]
-    err_f = [float(np.linalg.norm(filtered[e.t].x[:3] - truth[e.t][:3])) for e in both]
-    return (f"smoothed against filtered, position error at the {len(both)} fused epochs with "
-            f"truth: median {statistics.median(err_s):.4g} vs {statistics.median(err_f):.4g}, "
-            f"largest {max(err_s):.4g} vs {max(err_f):.4g} (the bag's units: km for orbits)")
-
-
 def recorded_gaps(stream: list[bagio.BagMessage]) -> dict[str, Any]:
     """Return the filter's gap parameters recorded with the bag (else its defaults)."""
     return node_settings.recorded_gaps([m.msg.data for m in stream if m.topic == TOPIC_CONFIG])
@@ -529,13 +470,15 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
     if opened is None:
         return 2
     graph, logs = opened
-    print(f"replay: {args.bag} at rate {args.rate:g} into surrogate + filter; ROS domain "
-          f"{graph.domain_id}, run {graph.run}; logs in {logs}", flush=True)
+    played = [m for m in stream if m.topic in PLAYED]
+    print(f"replay: {args.bag} at rate {args.rate:g} into surrogate + filter: "
+          f"{replay_outcome.live_duration(played, args.rate)}; ROS domain {graph.domain_id}, "
+          f"run {graph.run}; logs in {logs}", flush=True)
     t0 = time.monotonic()
     try:
         for n in ("recorder", "surrogate", "filter"):  # the recorder first: it hears all
             graph.start_node(n, params=params[n])
-        player = Player(graph.probe, [m for m in stream if m.topic in PLAYED], args.rate)
+        player = Player(graph.probe, played, args.rate)
         from ssa_fusion.ros.interfaces import Measurement, StateEstimate
 
         # what the graph publishes, heard from the first to check the recording against
@@ -553,8 +496,14 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
         needs = [*readers_of(published),
                  f"filter:{OUTPUT}{TOPIC_ESTIMATE}=2", f"surrogate:{OUTPUT}{TOPIC_FORECAST}=3"]
         readers = ReadyNodes(graph.probe, graph.subscribe)
-        graph.play(player, lambda: readers.ready(needs),
-                   "surrogate, filter and recorder to match their publishers")
+
+        def how_far() -> str:
+            return (f"played {player.published} of {len(played)} messages, "
+                    f"{len(seen[0])} estimates")
+
+        with working("replay", "playing the bag", how_far):
+            graph.play(player, lambda: readers.ready(needs),
+                       "surrogate, filter and recorder to match their publishers")
         graph.wait_quiet(lambda: tuple(len(x) for x in seen), quiet_s=1.0, limit_s=30.0)
     finally:
         problems = graph.close()  # each stopped in turn, newest first

@@ -19,7 +19,15 @@ import numpy as np
 
 from ssa_fusion.apps import evaluate, replay_catalog, report_figures
 from ssa_fusion.apps.args import add_settings, add_sites
-from ssa_fusion.apps.report_figures import broken_line
+from ssa_fusion.apps.filter_setup import DataMix
+from ssa_fusion.apps.heartbeat import working
+from ssa_fusion.apps.report_figures import (
+    beyond_legend,
+    broken_line,
+    hours,
+    mark_outside,
+    robust_limit,
+)
 from ssa_fusion.core.base import metrics, types
 from ssa_fusion.core.gaps import estimator as config
 from ssa_fusion.formats import sites as site_file
@@ -30,7 +38,12 @@ from ssa_fusion.ros.topics import TOPIC_CONFIG
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
 
-STATE_LABELS = ("x [km]", "y [km]", "z [km]", "vx [km/s]", "vy [km/s]", "vz [km/s]")
+STATE_UNITS = ("km",) * 3 + ("km/s",) * 3
+STATE_LABELS = tuple(f"{name} [{unit}]" for name, unit in
+                     zip(("x", "y", "z", "vx", "vy", "vz"), STATE_UNITS, strict=True))
+SETTLED_PERCENTILE = 95.0
+"""The percentile of a state's 3σ over the run taken as its settled 3σ: a panel's least
+half-height (the first sigmas after the initial orbit determination lie above it)."""
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -76,7 +89,10 @@ def run(args: argparse.Namespace) -> int:
     del telling
     try:
         data = evaluate.load(args.bag)
-        ev = evaluate.evaluate(data, args.scenario, params_file=args.params_file)
+        evaluate.require_outage(data)
+        with working("report", "scoring the arms over the outage"):
+            ev = evaluate.evaluate(data, args.scenario, params_file=args.params_file,
+                                   setup=args.setup)
         write(data, ev, out)
     except evaluate.NoTruthError as exc:
         return run_own(args, data, out, str(exc))
@@ -106,17 +122,20 @@ def run_own(args: argparse.Namespace, data: evaluate.BagData, out: Path, why: st
         return 2
     try:
         sites = site_file.load_stations(args.sites) if args.sites else ()
-        real = [m for m in data.measurements if m.source == types.Source.SENSOR]
-        kind = real[0].kind if real else types.Kind.POSITION
-        chosen = evaluate.settings_for_bag(data.config, kind, args.scenario, args.params_file,
-                                           stations={m.frame_id for m in real}, sites=sites)
-        rep = report_own.build(data, chosen)
-        report_own.write(data, rep, out, title=f"ssa_fusion report: {out.name}")
+        chosen = evaluate.settings_for_bag(data.config, DataMix.of(data.measurements),
+                                           args.scenario, args.params_file, sites,
+                                           getattr(args, "setup", None))
+        with working(getattr(args, "command", "report"),
+                     "judging the estimates and drawing the plots"):
+            rep = report_own.build(data, chosen)
+            report_own.write(data, rep, out, title=f"ssa_fusion report: {out.name}")
     except (ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(f"{args.bag}: no simulated truth ({why}): the filter judged by its residuals, NIS "
-          f"and covariance\n")
+    judged = (f"judged against its /ssa/truth ({len(data.truth)} states) and by its residuals, "
+              f"NIS and covariance" if rep.after_passes is not None else
+              "no /ssa/truth: the filter judged by its residuals, NIS and covariance")
+    print(f"{args.bag}: {why}; {judged}\n")
     print(report_own.table(rep))
     drawn = [name for name in report_own.PLOTS if (out / name).exists()]
     print(f"\nwrote {out}/report.json, {out}/report.html"
@@ -135,27 +154,35 @@ def summary(data: evaluate.BagData, ev: evaluate.Evaluation) -> dict[str, Any]:
         "gap_epochs": len(g.t),
         "dmd_ekf_coverage": g.coverage,
         "dmd_ekf_propagated_epochs": g.predicted,
+        "position_error": evaluate.position_error(ev.passes, ev.between, len(data.truth)),
         "settings": ev.settings.origin,
         "estimator": config.to_dict(ev.settings.estimator),
         "message_counts": data.counts,
     }
 
 
-def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path) -> None:
-    """Write report.json, the PNG plots, report.html and visual.mcap (Foxglove) into `out`."""
+def write(data: evaluate.BagData, ev: evaluate.Evaluation, out: Path,
+          command: str = "report") -> None:
+    """Write report.json, the PNG plots, report.html and visual.mcap (Foxglove) into `out`.
+
+    Each of the three steps says itself on stderr (`heartbeat.working`), as `command`.
+    """
     out.mkdir(parents=True, exist_ok=True)
     (out / "report.json").write_text(json.dumps(summary(data, ev), indent=2))
-    plot_arms(ev, out / "arms.png")
-    plot_sigma(data, out / "estimate_3sigma.png")
-    plot_forecasts(data, out / "forecast_vs_withheld.png")
-    plot_nis(data, out / "nis.png")
+    with working(command, "drawing the plots"):
+        plot_arms(ev, out / "arms.png")
+        plot_sigma(data, out / "estimate_3sigma.png")
+        plot_forecasts(data, out / "forecast_vs_withheld.png")
+        plot_nis(data, out / "nis.png")
     from ssa_fusion.apps import report_html  # plotly: imported on first use, like the plots
 
-    report_html.write(data, ev, out / "report.html", title=f"ssa_fusion report: {out.name}")
+    with working(command, "writing report.html"):
+        report_html.write(data, ev, out / "report.html", title=f"ssa_fusion report: {out.name}")
     from ssa_fusion.apps import visual_mcap  # foxglove-sdk, likewise
 
     stations = {s.name: s for s, _ in report_html.run_stations(ev.settings.estimator)}
-    visual_mcap.write(data, out / "visual.mcap", stations)
+    with working(command, "writing visual.mcap (the Foxglove file)"):
+        visual_mcap.write(data, out / "visual.mcap", stations)
 
 
 GAP_BREAK_S = 1800.0
@@ -198,7 +225,8 @@ def plot_sigma(data: evaluate.BagData, path: Path) -> None:
     """Plot the fused estimates' error per state with ±3σ to `path` (at epochs with a truth).
 
     No line joins epochs further apart than `GAP_BREAK_S` (the gaps between passes); the
-    outage is shaded.
+    outage is shaded. Each panel is scaled by the bulk of its errors, at least the settled
+    3σ (`robust_limit`); errors beyond are marked on its edge (`mark_outside`).
     """
     plt = report_figures.pyplot()
     truth = {e.t: e.x for e in data.truth}
@@ -213,11 +241,15 @@ def plot_sigma(data: evaluate.BagData, path: Path) -> None:
     for i, ax in enumerate(axes.T.ravel()):
         shade(ax, span)
         ax.plot(*broken_line(t, err[:, i], t[0], GAP_BREAK_S), lw=0.8, label="error")
-        hours, three = broken_line(t, 3 * sig[:, i], t[0], GAP_BREAK_S)
-        ax.plot(hours, three, "r--", lw=0.8, label="±3σ")
-        ax.plot(hours, -three, "r--", lw=0.8)
-        # the scale of the run, not of the initial orbit determination's first sigmas
-        ax.set_ylim(-1.5 * np.nanpercentile(three, 99), 1.5 * np.nanpercentile(three, 99))
+        h, three = broken_line(t, 3 * sig[:, i], t[0], GAP_BREAK_S)
+        ax.plot(h, three, "r--", lw=0.8, label="±3σ")
+        ax.plot(h, -three, "r--", lw=0.8)
+        # the scale of the run's bulk, not of the initial orbit determination's first
+        # sigmas nor of one error far out (marked on the edge)
+        lim = robust_limit(err[:, i], float(np.nanpercentile(3 * sig[:, i], SETTLED_PERCENTILE)))
+        mark_outside(ax, hours(t, t[0]), err[:, i], lim, STATE_UNITS[i])
+        if i:  # the first panel holds the figure's legend
+            beyond_legend(ax)
         ax.set_ylabel(STATE_LABELS[i])
         ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=8)
@@ -242,7 +274,9 @@ def _is_angle(kind: int, i: int) -> bool:
 def plot_forecasts(data: evaluate.BagData, path: Path) -> None:
     """Plot the forecasts against the withheld measurements to `path` (if any match).
 
-    Angles in degrees, without lines across their wrap or across gaps.
+    Angles in degrees, without lines across their wrap or across gaps; a forecast line
+    stops where the forecasts do (no line over withheld epochs without a forecast: broken
+    where forecasts are more than 1.5 withheld spacings apart).
     """
     if not data.forecasts or not data.withheld:
         return
@@ -253,16 +287,18 @@ def plot_forecasts(data: evaluate.BagData, path: Path) -> None:
         return
     t = np.array([m.t for m in f])
     zf = np.array([m.z for m in f])
-    zw = np.array([withheld[m.t] for m in f])
     kind = f[0].kind
+    tw = np.array(sorted(m.t for m in data.withheld if m.kind == kind))
+    zw = np.array([withheld[x] for x in tw])
+    step = 1.5 * float(np.median(np.diff(tw))) if len(tw) > 1 else GAP_BREAK_S
     labels = FORECAST_LABELS.get(types.Kind(kind), ())
     fig, axes = plt.subplots(zf.shape[1], 1, figsize=(8, 6), sharex=True)
     for i, ax in enumerate(np.atleast_1d(axes)):
         angle = _is_angle(kind, i)
-        ax.plot(*broken_line(t, zw[:, i], t[0], GAP_BREAK_S, angle), ".", ms=2,
+        ax.plot(*broken_line(tw, zw[:, i], tw[0], GAP_BREAK_S, angle), ".", ms=2,
                 label="withheld (sensor)")
-        ax.plot(*broken_line(t, zf[:, i], t[0], GAP_BREAK_S, angle), "-", lw=0.8,
-                label="forecast")
+        ax.plot(*broken_line(t, zf[:, i], tw[0], min(step, GAP_BREAK_S), angle), "-",
+                lw=0.8, label="forecast (where one was published)")
         ax.set_ylabel(labels[i] if i < len(labels) else f"z[{i}]")
         ax.grid(alpha=0.3)
     np.atleast_1d(axes)[0].legend(fontsize=8)

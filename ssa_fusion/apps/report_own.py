@@ -1,8 +1,8 @@
-"""`ssa-fusion report BAG` for a bag without simulated truth: your own measurements.
+"""`ssa-fusion report BAG` for a bag without an outage to score arms over: your own data.
 
 A TDM imported with `import tdm` and estimated with `replay --offline [--smooth]` has no truth
-and no outage to score against. What is checked instead (the numbers from
-`evaluation.residuals`):
+and no outage to score against; a simulation whose outage fell where no pass was has its
+truth but no outage. What is checked (the numbers from `evaluation.residuals`):
 
 * ``residuals.png``: per channel, the pre-fit residual (measurement minus the filter's
   predicted measurement before the update) in the channel's units (range m, angles arcsec,
@@ -15,7 +15,10 @@ and no outage to score against. What is checked instead (the numbers from
   estimates when the bag holds ``/ssa/estimate_smoothed``; the gaps between passes shaded;
 * the passes table (per station pass: UTC span, measurements fused and not, largest
   elevation, RMS of the normalised residuals), printed and in ``report.html`` (the plots
-  and tables in one self-contained page) and ``report.json``.
+  and tables in one self-contained page) and ``report.json``;
+* with a truth on ``/ssa/truth`` (a simulation's bag): the position error after each pass
+  and between the passes (`evaluate.truth_scores`), printed and in ``report.json``
+  (``position_error``).
 
 No line is drawn between samples further apart than `residuals.PASS_BREAK_S` (a pass break).
 """
@@ -33,10 +36,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ssa_fusion.apps import evaluate, report_figures
-from ssa_fusion.apps.report_figures import broken_line, hours
+from ssa_fusion.apps.report_figures import broken_line, hours, mark_outside, robust_limit
 from ssa_fusion.core.base import types
 from ssa_fusion.core.gaps.estimator import uncovered_stations
+from ssa_fusion.evaluation import passes as passes_
 from ssa_fusion.evaluation import residuals as res_
+from ssa_fusion.evaluation.gap_scores import GapScores
 from ssa_fusion.evaluation.residuals import PASS_BREAK_S
 from ssa_fusion.formats.ccsds import common as ccsds_format
 
@@ -69,6 +74,26 @@ class OwnReport:
     gaps: list[tuple[float, float]]
     unknown_stations: list[str]
     """Stations of the measurements the settings do not know (no residuals for them)."""
+    truth: int = 0
+    """The states on /ssa/truth (a simulation's bag): what the estimates are judged against."""
+    after_passes: passes_.PassReport | None = None
+    """With a truth: the position error after each pass and at every truth epoch."""
+    between: GapScores | None = None
+    """With a truth: what the filter published between passes, scored."""
+
+    def truth_lines(self) -> list[str]:
+        """Return the position error against the truth as lines ([] without a truth)."""
+        if self.after_passes is None:
+            return []
+        lines = [f"against the bag's /ssa/truth ({self.truth} states):",
+                 self.after_passes.table()]
+        if self.between is not None and self.between.gap_epochs:
+            lines.append(evaluate.between_line(self.between))
+        return lines
+
+    def position_error(self) -> dict[str, Any] | None:
+        """Return report.json's position error against the truth (None without one)."""
+        return evaluate.position_error(self.after_passes, self.between, self.truth)
 
 
 def build(data: evaluate.BagData, settings: evaluate.Settings) -> OwnReport:
@@ -80,8 +105,10 @@ def build(data: evaluate.BagData, settings: evaluate.Settings) -> OwnReport:
     fused = [e.t for e in data.estimates if e.update_source == types.UpdateSource.SENSOR]
     unknown = ([] if c.kind == types.Kind.POSITION
                else uncovered_stations(c, {m.frame_id for m in real}))
+    after, between = evaluate.truth_scores(data, c)
     return OwnReport(settings, res, published, res_.nis_summary(published),
-                     res_.pass_rows(real, fused, res), res_.gaps(real), unknown)
+                     res_.pass_rows(real, fused, res), res_.gaps(real), unknown,
+                     len(data.truth), after, between)
 
 
 def utc(t: float) -> str:
@@ -138,16 +165,19 @@ def notes(rep: OwnReport) -> list[str]:
 
 
 def table(rep: OwnReport) -> str:
-    """Markdown: the passes table, then the notes."""
+    """Markdown: the passes table, then the notes, then the error against a truth."""
     rows = ["| " + " | ".join(PASS_COLUMNS) + " |", "|" + "---|" * len(PASS_COLUMNS)]
     rows += ["| " + " | ".join(cells) + " |" for cells in pass_cells(rep)]
-    return "\n".join(rows) + "\n\n" + "\n".join(notes(rep))
+    truth = rep.truth_lines()
+    return ("\n".join(rows) + "\n\n" + "\n".join(notes(rep))
+            + ("\n\n" + "\n".join(truth) if truth else ""))
 
 
 def summary(data: evaluate.BagData, rep: OwnReport) -> dict[str, Any]:
     """Return what report.json holds."""
     return {
-        "truth": False,
+        "truth": rep.after_passes is not None,
+        "position_error": rep.position_error(),
         "nis_inside_95": rep.nis.fraction if rep.nis.n else None,
         "nis_count": rep.nis.n,
         "residual_rms_sigma": (float(np.sqrt(np.mean(np.concatenate(
@@ -194,39 +224,56 @@ def _xlabel(t0: float) -> str:
 
 
 def plot_residuals(rep: OwnReport, t0: float, path: Path) -> None:
-    """Plot per channel the pre-fit residuals by station against ±3σ of S and of R."""
+    """Plot per channel the pre-fit residuals by station against ±3σ of S and of R.
+
+    Each panel scaled by the bulk of its residuals, at least the settled 3σ of S; residuals
+    beyond are marked on its edge (`report_figures.mark_outside`).
+    """
     if not rep.residuals:
         return
     plt = report_figures.pyplot()
     kind = rep.residuals[0].kind
     same = [r for r in rep.residuals if r.kind == kind]
     channels = CHANNELS.get(kind, tuple((f"z[{i}]", "-", 1.0) for i in range(len(same[0].y))))
-    t = np.array([r.t for r in same])
     fig, axes = plt.subplots(len(channels), 1, figsize=(9, 2.4 * len(channels) + 0.8),
                              sharex=True)
-    stations = sorted({r.station for r in same})
-    for i, (ax, (name, unit, f)) in enumerate(zip(np.atleast_1d(axes), channels, strict=True)):
-        shade_gaps(ax, rep, t0)
-        y = np.array([r.y[i] for r in same]) * f
-        s3 = 3 * np.array([r.sigma[i] for r in same]) * f
-        r3 = 3 * np.array([r.sigma_r[i] for r in same]) * f
-        for sign in (1, -1):
-            ax.plot(*broken_line(t, sign * s3, t0, PASS_BREAK_S), "k--", lw=0.8,
-                    label="±3σ innovation (S = HPHᵀ + R)" if sign == 1 else None)
-            ax.plot(*broken_line(t, sign * r3, t0, PASS_BREAK_S), ":", color="tab:red",
-                    lw=0.8, label="±3σ measurement (R)" if sign == 1 else None)
-        for j, st in enumerate(stations):
-            k = np.array([r.station == st for r in same])
-            ax.plot(hours(t[k], t0), y[k], ".", ms=3, color=f"C{j}", label=st)
-        # the scale of the residuals and of the settled σ, not of the first σ after the IOD
-        lim = 1.2 * max(float(np.max(np.abs(y))), float(np.median(s3)))
-        ax.set_ylim(-lim, lim)
-        ax.set_ylabel(f"{name} [{unit}]")
-        ax.grid(alpha=0.3)
+    for i, (ax, channel) in enumerate(zip(np.atleast_1d(axes), channels, strict=True)):
+        residual_panel(ax, rep, same, i, channel, t0)
+        if i:  # the first panel holds the figure's legend
+            report_figures.beyond_legend(ax)
     above(np.atleast_1d(axes)[0])
     np.atleast_1d(axes)[-1].set_xlabel(_xlabel(t0))
     fig.suptitle("Pre-fit residuals (measurement − filter's prediction before the update)")
     report_figures.save(fig, path, dpi=100)
+
+
+def residual_panel(ax: Axes, rep: OwnReport, same: list[res_.Residual], i: int,
+                   channel: tuple[str, str, float], t0: float) -> int:
+    """Draw channel `i` of the residuals `same` (one kind) on `ax`: points, ±3σ, scale.
+
+    `channel` is (name, unit shown, factor from the core's unit); returns how many
+    residuals lie beyond the panel (marked on its edge).
+    """
+    name, unit, f = channel
+    shade_gaps(ax, rep, t0)
+    t = np.array([r.t for r in same])
+    y = np.array([r.y[i] for r in same]) * f
+    s3 = 3 * np.array([r.sigma[i] for r in same]) * f
+    r3 = 3 * np.array([r.sigma_r[i] for r in same]) * f
+    for sign in (1, -1):
+        ax.plot(*broken_line(t, sign * s3, t0, PASS_BREAK_S), "k--", lw=0.8,
+                label="±3σ innovation (S = HPHᵀ + R)" if sign == 1 else None)
+        ax.plot(*broken_line(t, sign * r3, t0, PASS_BREAK_S), ":", color="tab:red",
+                lw=0.8, label="±3σ measurement (R)" if sign == 1 else None)
+    for j, st in enumerate(sorted({r.station for r in same})):
+        k = np.array([r.station == st for r in same])
+        ax.plot(hours(t[k], t0), y[k], ".", ms=3, color=f"C{j}", label=st)
+    ax.set_ylabel(f"{name} [{unit}]")
+    ax.grid(alpha=0.3)
+    # the scale of the residuals' bulk and of the settled σ, not of one residual far out
+    # nor of the first σ after the initial orbit determination
+    return mark_outside(ax, hours(t, t0), y, robust_limit(y, float(np.median(s3))), unit,
+                        color="black")
 
 
 def plot_nis(rep: OwnReport, t0: float, path: Path) -> None:
@@ -294,11 +341,17 @@ def page(rep: OwnReport, out: Path, title: str) -> None:
     head = "".join(f"<th>{html.escape(h)}</th>" for h in PASS_COLUMNS)
     body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in row) + "</tr>"
                    for row in pass_cells(rep))
+    judged = (f"against the bag's /ssa/truth ({rep.truth} states), and by its residuals, "
+              "NIS and covariance" if rep.after_passes is not None else
+              "by its residuals, NIS and covariance (the bag has no /ssa/truth)")
     parts = [f"<h1>{html.escape(title)}</h1>",
-             "<p class=\"note\">A bag without simulated truth: the filter judged by its "
-             "residuals, NIS and covariance.</p>", "<h2>Passes</h2>",
+             f"<p class=\"note\">The filter judged {html.escape(judged)}.</p>",
+             "<h2>Passes</h2>",
              f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>",
              *(f'<p class="note">{html.escape(n)}</p>' for n in notes(rep))]
+    if rep.after_passes is not None:
+        parts += ["<h2>Position error against the truth</h2>",
+                  f"<pre>{html.escape(chr(10).join(rep.truth_lines()))}</pre>"]
     for name in PLOTS:
         png = out / name
         if png.exists():

@@ -56,6 +56,7 @@ from typing import IO
 from ssa_fusion.core.motion.element_sets import CatalogEntry
 from ssa_fusion.formats.element_set_checks import numbered
 from ssa_fusion.formats.omm import omm_csv_entries, omm_xml_entries, parse_omm_csv, parse_omm_xml
+from ssa_fusion.formats.skipped import Skipped
 from ssa_fusion.formats.tle import parse_tle, tle_entries
 
 __all__ = ["CHUNK_BYTES", "PROGRESS_EVERY", "Progress", "parse_omm_csv", "parse_omm_xml",
@@ -72,7 +73,8 @@ Progress = Callable[[int, int, int], None]
 """``progress(bytes read, file size, objects so far)`` of `read_catalog`."""
 
 
-def read_catalog(path: Path | str, progress: Progress | None = None) -> list[CatalogEntry]:
+def read_catalog(path: Path | str, progress: Progress | None = None,
+                 skip: Skipped | None = None) -> list[CatalogEntry]:
     """Element sets of a TLE, 3LE, OMM/XML or OMM/CSV file (told from its content).
 
     The file is read as a stream (module docstring), as text in the locale's encoding (as
@@ -83,7 +85,10 @@ def read_catalog(path: Path | str, progress: Progress | None = None) -> list[Cat
     ValueError, naming the file and line: unreadable file, unknown or unsupported format
     (OMM/KVN), malformed line or field, an element set SGP4 refuses, an object id twice,
     no element set at all. Bytes that are not text in the encoding are said first, wherever
-    they are in the file (their position counted in bytes from its start).
+    they are in the file (their position counted in bytes from its start). With `skip`
+    (`formats.skipped`), a malformed or refused element set, or an object's second one, is
+    left out and counted there instead, and the read goes on; the file is still refused
+    when it has no element set left.
     """
     path = Path(path)
     source = str(path)
@@ -93,17 +98,18 @@ def read_catalog(path: Path | str, progress: Progress | None = None) -> list[Cat
         text = f.chunks()  # from the start again
         try:
             if head.startswith("<"):
-                entries = omm_xml_entries(text, source)
+                entries = omm_xml_entries(text, source, skip)
             elif head.startswith("CCSDS_OMM_VERS"):
                 raise ValueError(f"{path}: OMM in KVN is not supported (sgp4 reads OMM as XML "
                                  f"or CSV); convert it to one of those")
             elif "NORAD_CAT_ID" in head.split(","):
-                entries = omm_csv_entries(numbered(_lines(text)), source)
+                entries = omm_csv_entries(numbered(_lines(text)), source, skip)
             else:
-                entries = tle_entries(numbered(_lines(text)), source)
+                entries = tle_entries(numbered(_lines(text)), source, skip)
             out = _collected(entries, f, progress)
             if not out:
-                raise ValueError(f"{path}: no element sets in the file")
+                left = f" ({skip.count} left out: {skip.lines[0]})" if skip and skip.count else ""
+                raise ValueError(f"{path}: no element sets in the file{left}")
         except ValueError:
             for _ in text:  # the rest of the file: bytes that are not text say so first
                 pass

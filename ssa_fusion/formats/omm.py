@@ -18,12 +18,14 @@ from sgp4.api import Satrec
 
 from ssa_fusion.core.motion.element_sets import CatalogEntry
 from ssa_fusion.formats.element_set_checks import (
+    MAX_NAME,
     check_name,
     check_new,
     check_satrec,
     numbered,
     quote,
 )
+from ssa_fusion.formats.skipped import Skipped, skip_or_raise
 
 if TYPE_CHECKING:
     from lxml import etree
@@ -57,13 +59,18 @@ _OMM_EXPECTED = {"REF_FRAME": "TEME", "TIME_SYSTEM": "UTC", "CENTER_NAME": "EART
 """OMM metadata an SGP4 element set must have, when the file gives it."""
 
 
-def parse_omm_xml(text: str, source: str = "<string>") -> list[CatalogEntry]:
-    """Entries of CCSDS OMM XML `text` (one per ``segment``, as `sgp4.omm.parse_xml` reads)."""
+def parse_omm_xml(text: str, source: str = "<string>",
+                  skip: Skipped | None = None) -> list[CatalogEntry]:
+    """Entries of CCSDS OMM XML `text` (one per ``segment``, as `sgp4.omm.parse_xml` reads).
+
+    `skip`: leave bad segments out and count them there (`formats.skipped`).
+    """
     chunks = (text[i:i + CHUNK_CHARACTERS] for i in range(0, len(text), CHUNK_CHARACTERS))
-    return list(omm_xml_entries(chunks, source))
+    return list(omm_xml_entries(chunks, source, skip))
 
 
-def omm_xml_entries(chunks: Iterable[str], source: str) -> Iterator[CatalogEntry]:
+def omm_xml_entries(chunks: Iterable[str], source: str,
+                    skip: Skipped | None = None) -> Iterator[CatalogEntry]:
     """Yield the entries of the OMM XML text that `chunks` make, read as a stream.
 
     lxml's pull parser (no network, no DTD loaded, its limits on text size and depth held;
@@ -73,11 +80,12 @@ def omm_xml_entries(chunks: Iterable[str], source: str) -> Iterator[CatalogEntry
     segments still open, is dropped. Errors are raised as a parse of the whole document
     raised them: XML that is not well formed anywhere first, then a segment lacking a
     block, then the first segment whose element set is wrong (the segments after it are
-    only parsed).
+    only parsed). With `skip`, a segment lacking a block or whose element set is wrong is
+    counted there and left out (XML that is not well formed still refuses the file).
     """
     from lxml import etree
 
-    reader = _OmmXml(source)
+    reader = _OmmXml(source, skip)
     parser = etree.XMLPullParser(events=("start", "end"), tag="segment", remove_comments=True,
                                  remove_pis=True, no_network=True, load_dtd=False,
                                  huge_tree=False)
@@ -99,8 +107,9 @@ def omm_xml_entries(chunks: Iterable[str], source: str) -> Iterator[CatalogEntry
 class _OmmXml:
     """The segments of an OMM XML document, from its parser's events (`omm_xml_entries`)."""
 
-    def __init__(self, source: str) -> None:
+    def __init__(self, source: str, skip: Skipped | None = None) -> None:
         self.source = source
+        self.skip = skip
         self.root: etree._Element | None = None
         self.open: list[tuple[int, etree._Element]] = []
         """The segments started and not yet ended: (number from 1 in document order, it)."""
@@ -152,17 +161,25 @@ class _OmmXml:
             fields = self.ended.pop(self.judged)
             if self.lacking:
                 continue
+            where = f"{self.source}:segment {self.judged}"
             if fields is None:
+                lacks = ValueError(f"{self.source}: an OMM segment lacks (or has empty) "
+                                   f"metadata, data, meanElements or tleParameters")
+                if self.skip is not None:
+                    skip_or_raise(self.skip, lacks, where, "")
+                    continue
                 self.lacking = True
-                self.failure = ValueError(
-                    f"{self.source}: an OMM segment lacks (or has empty) metadata, data, "
-                    f"meanElements or tleParameters")
+                self.failure = lacks
             elif self.failure is None:
                 try:
-                    entry = omm_entry(fields, f"{self.source}:segment {self.judged}")
+                    entry = omm_entry(fields, where)
                     check_new(entry, self.seen)
                 except ValueError as exc:
-                    self.failure = exc
+                    if self.skip is None:
+                        self.failure = exc
+                    else:
+                        skip_or_raise(self.skip, exc, where, _omm_id(fields),
+                                      _omm_name(fields))
                 else:
                     yield entry
 
@@ -186,20 +203,23 @@ def _segment_fields(segment: etree._Element) -> dict[str, str | None] | None:
     return fields
 
 
-def parse_omm_csv(text: str, source: str = "<string>") -> list[CatalogEntry]:
+def parse_omm_csv(text: str, source: str = "<string>",
+                  skip: Skipped | None = None) -> list[CatalogEntry]:
     """Entries of CCSDS OMM CSV `text`.
 
     A header row of OMM keywords, then one row per object; lines starting with ``#`` are
-    comments.
+    comments. `skip`: leave bad rows out and count them there (`formats.skipped`).
     """
-    return list(omm_csv_entries(numbered(text.splitlines()), source))
+    return list(omm_csv_entries(numbered(text.splitlines()), source, skip))
 
 
-def omm_csv_entries(lines: Iterator[tuple[int, str]], source: str) -> Iterator[CatalogEntry]:
+def omm_csv_entries(lines: Iterator[tuple[int, str]], source: str,
+                    skip: Skipped | None = None) -> Iterator[CatalogEntry]:
     """Yield the entries of OMM CSV `lines` (numbered, as `numbered` yields them).
 
     Row k is named by the number of the (k+1)-th line (the header being the first); a row
-    csv cannot read by that of the line after the last row read.
+    csv cannot read by that of the line after the last row read. With `skip`, a row whose
+    element set is bad is counted there and left out.
     """
     numbers: list[int] = []  # of the lines read, from the `first`-th (from 0) on
     first = 0
@@ -222,13 +242,31 @@ def omm_csv_entries(lines: Iterator[tuple[int, str]], source: str) -> Iterator[C
             del numbers[:k - first]
             first = k
             where = f"{source}:{numbers[0]}"
-            if None in fields:
-                raise ValueError(f"{where}: more values than the header has columns")
-            entry = omm_entry(dict(fields), where)
-            check_new(entry, seen)
-            yield entry
+            try:
+                if None in fields:
+                    raise ValueError(f"{where}: more values than the header has columns")
+                entry = omm_entry(dict(fields), where)
+                check_new(entry, seen)
+            except ValueError as exc:
+                skip_or_raise(skip, exc, where, _omm_id(fields), _omm_name(fields))
+            else:
+                yield entry
     except csv.Error as exc:  # e.g. a field beyond csv's size limit (131,072 characters)
         raise ValueError(f"{source}:{number(k + 1)}: unreadable CSV row: {exc}") from None
+
+
+def _omm_id(fields: dict[str, Any]) -> str:
+    """Return an OMM's NORAD_CAT_ID as given (stripped, bounded), for a line about it."""
+    value = fields.get("NORAD_CAT_ID")
+    return quote(value.strip())[1:-1] if isinstance(value, str) else ""
+
+
+def _omm_name(fields: dict[str, Any]) -> str:
+    """Return an OMM's OBJECT_NAME for a line about it ('' unless plain printable text)."""
+    value = fields.get("OBJECT_NAME")
+    if not isinstance(value, str) or len(value) > MAX_NAME or not value.isprintable():
+        return ""
+    return value.strip()
 
 
 def omm_entry(fields: dict[str, Any], where: str) -> CatalogEntry:

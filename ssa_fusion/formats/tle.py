@@ -24,6 +24,7 @@ from ssa_fusion.formats.element_set_checks import (
     numbered,
     quote,
 )
+from ssa_fusion.formats.skipped import Skipped, skip_or_raise
 
 __all__ = ["check_columns", "parse_tle", "tle_entries"]
 
@@ -32,35 +33,67 @@ _ALPHA5 = "ABCDEFGHJKLMNPQRSTUVWXYZ"
 """Alpha-5's first characters (I and O are not used)."""
 
 
-def parse_tle(text: str, source: str = "<string>") -> list[CatalogEntry]:
-    """Entries of TLE/3LE `text` (see the module docstring); `source` names it in errors."""
-    return list(tle_entries(numbered(text.splitlines()), source))
+def parse_tle(text: str, source: str = "<string>",
+              skip: Skipped | None = None) -> list[CatalogEntry]:
+    """Entries of TLE/3LE `text` (see the module docstring); `source` names it in errors.
+
+    `skip`: leave bad element sets out and count them there (`formats.skipped`).
+    """
+    return list(tle_entries(numbered(text.splitlines()), source, skip))
 
 
-def tle_entries(lines: Iterator[tuple[int, str]], source: str) -> Iterator[CatalogEntry]:
-    """Yield the entries of TLE/3LE `lines` (numbered, as `numbered` yields them)."""
+def tle_entries(lines: Iterator[tuple[int, str]], source: str,
+                skip: Skipped | None = None) -> Iterator[CatalogEntry]:
+    """Yield the entries of TLE/3LE `lines` (numbered, as `numbered` yields them).
+
+    A bad element set (its name line, its two lines, or a line out of place) raises, or
+    with `skip` is counted there and left out: the read goes on at the next line that can
+    start a set.
+    """
     seen: dict[str, str] = {}
-    name, name_no = "", 0
-    for no, line in lines:
+    name, name_no, bad_name = "", 0, None
+    back: list[tuple[int, str]] = []  # a line read ahead, to be read again
+    while (item := back.pop() if back else next(lines, None)) is not None:
+        no, line = item
+        where = f"{source}:{no}"
         if line.startswith("1 "):
             nxt = next(lines, None)
-            if nxt is None or not nxt[1].startswith("2 "):
-                raise ValueError(f"{source}:{no}: TLE line 1 is not followed by its line 2")
-            entry = _tle_entry(line, nxt[1], name, f"{source}:{no}", f"{source}:{nxt[0]}")
-            check_new(entry, seen)
-            yield entry
-            name, name_no = "", 0
+            try:
+                if nxt is None or not nxt[1].startswith("2 "):
+                    if nxt is not None:
+                        back.append(nxt)
+                    raise ValueError(f"{where}: TLE line 1 is not followed by its line 2")
+                if bad_name is not None:
+                    raise bad_name
+                entry = _tle_entry(line, nxt[1], name, where, f"{source}:{nxt[0]}")
+                check_new(entry, seen)
+            except ValueError as exc:
+                skip_or_raise(skip, exc, where if bad_name is None else f"{source}:{name_no}",
+                              line[2:7].strip(), name)
+            else:
+                yield entry
+            name, name_no, bad_name = "", 0, None
         elif line.startswith("2 "):
-            raise ValueError(f"{source}:{no}: TLE line 2 without a line 1 before it")
-        elif name:
-            raise ValueError(f"{source}:{name_no}: name line {quote(name)} is not followed "
-                             f"by TLE lines (line {no} is neither)")
+            skip_or_raise(skip, ValueError(f"{where}: TLE line 2 without a line 1 before it"),
+                          where, line[2:7].strip())
+        elif name or bad_name is not None:
+            skip_or_raise(skip, bad_name or ValueError(
+                f"{source}:{name_no}: name line {quote(name)} is not followed by TLE lines "
+                f"(line {no} is neither)"), f"{source}:{name_no}", "", name)
+            name, name_no, bad_name = "", 0, None
+            back.append(item)
         else:
             name, name_no = (line[2:] if line.startswith("0 ") else line).strip(), no
-            check_name(name, f"{source}:{no}: name line")
-    if name:
-        raise ValueError(f"{source}:{name_no}: name line {quote(name)} at the end of the "
-                         f"file without TLE lines")
+            try:
+                check_name(name, f"{where}: name line")
+            except ValueError as exc:
+                if skip is None:
+                    raise
+                bad_name, name = exc, ""  # not echoed: its own error quotes it, bounded
+    if name or bad_name is not None:
+        skip_or_raise(skip, bad_name or ValueError(
+            f"{source}:{name_no}: name line {quote(name)} at the end of the file without "
+            f"TLE lines"), f"{source}:{name_no}", "", name)
 
 
 def check_columns(line: str, template: str, which: int, where: str) -> None:

@@ -129,14 +129,20 @@ class CatalogFilterNode(SsaNode):
         self._pending_rows: list[MeasurementRows] = []  # batches' rows admitted
         self._pending: list[Measurement] = []
         self.clock_hold.limit = CATALOG_DEPTH  # a stalled catalog's burst is held whole
-        self.wall_timer(p.number("batch_period"), self.fuse)
+        self.wakeup(p.number("batch_period"), self.fuse)
+        self._released_at = -1  # diag.activity at the last release of the heap
         self.wall_timer(RELEASE_HEAP_PERIOD_S, self.release_heap)
         self.reset_on_backward_jump(self.reset, "every track forgotten")
         self.progress = ProgressReporter(self, self.taken)
 
     def release_heap(self) -> None:
-        """Return the pages the fusions freed to the system (`memory.release_free_heap`)."""
-        release_free_heap()
+        """Return the pages the fusions freed to the system (`memory.release_free_heap`).
+
+        Not while nothing arrived since the last time: nothing was freed.
+        """
+        if self.diag.activity != self._released_at:
+            self._released_at = self.diag.activity
+            release_free_heap()
 
     def taken(self) -> dict[str, str | int]:
         """Return the lockstep progress: measurements with a final fate, estimates published.
@@ -330,18 +336,20 @@ class CatalogFilterNode(SsaNode):
         self._pending, self._pending_rows = [], []
         return in_epoch_order(parts)
 
-    def fuse(self) -> None:
+    def fuse(self) -> bool:
         """Fuse what arrived since the last batch (in epoch order) and publish the estimates.
 
         With what waited for the clock to catch up, once it has. The unlabelled rows
-        first, then the labelled ones (`core.catalog.fusion.CatalogFusion`).
+        first, then the labelled ones (`core.catalog.fusion.CatalogFusion`). Return whether
+        there was anything to fuse (`SsaNode.wakeup`).
         """
         self.replay_held()
         batch = self._pending_batch()
-        if batch is not None:
-            batch = self.unlabelled.take(self.fusion, batch, self.publish_estimates)
         if batch is None:
-            return
+            return False
+        batch = self.unlabelled.take(self.fusion, batch, self.publish_estimates)
+        if batch is None:
+            return True
         try:
             res = self.fusion.track(batch)
         except Exception:  # counted, then the guard logs the traceback as internal_error
@@ -354,6 +362,7 @@ class CatalogFilterNode(SsaNode):
             self.publish_estimates(fused_estimates(batch, res))
         self.diag.counts[Count.PUBLISHED_SENSOR] += int(res.fused.size)
         self._report(len(batch))
+        return True
 
     def publish_estimates(self, rows: EstimateRows) -> None:
         """Publish `rows` (their keys set from their ids) in batches of ``batch_rows``."""

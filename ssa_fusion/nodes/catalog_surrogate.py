@@ -7,7 +7,8 @@ its pass-end estimates (`core.gaps.residual`; until they span a day, `min_span`,
 forecast from the pass end, `physics_fit`), and publishes on ``/ssa/estimate_batch`` the
 object's forecast through each gap between passes (update source FORECAST, ``object_id``
 set; one batch per round) on the grid of multiples of `predict_period`, once `pass_break`
-sim s have passed without an estimate. The fits
+sim s have passed without an estimate. A stop (SIGINT, SIGTERM) cuts the fits still queued
+(counted ``fits_cut``): the node ends within a fit's time, with its last report. The fits
 (`core.catalog.gap_bank.GapBank`) take at most `fit_budget` of the wall time on average: a gap that
 ends before its turn is left to the filter's coasting and counted as ``skipped`` on
 ``/diagnostics``.
@@ -49,13 +50,14 @@ from ssa_fusion.core.gaps.residual import PHYSICS_RESIDUAL
 from ssa_fusion.core.measure.measurement import StationModels
 from ssa_fusion.core.measure.validation import (
     MAX_ID_CHARS,
-    OK,
+    ahead_of_clock,
     id_problem,
     rows_problems,
     state_problem,
     states_problems,
 )
 from ssa_fusion.formats.sites import load_station_map
+from ssa_fusion.nodes import STOP
 from ssa_fusion.nodes.kit.base import SsaNode
 from ssa_fusion.nodes.kit.diagnostics import Count, NodeCause
 from ssa_fusion.nodes.kit.progress import SHARD, TAKEN_ESTIMATES, ProgressReporter
@@ -63,6 +65,7 @@ from ssa_fusion.nodes.kit.shards import (
     LIST_OBJECTS,
     content_filter,
     rows_shard_problems,
+    sensor_estimates,
     shard_problem,
     shard_range,
 )
@@ -77,8 +80,8 @@ TICK_S = 0.01
 waits for the round at its clock: `nodes.kit.progress.CLOCK`)."""
 
 COUNTERS = {"fitted": Count.FITS_MADE, "fitted_physics": Count.FITS_PHYSICS,
-            "refused": Count.FITS_REFUSED,
-            "skipped": Count.FITS_SKIPPED, "overtaken": Count.FORECASTS_OVERTAKEN}
+            "refused": Count.FITS_REFUSED, "skipped": Count.FITS_SKIPPED,
+            "cut": Count.FITS_CUT, "overtaken": Count.FORECASTS_OVERTAKEN}
 """/diagnostics counters of the bank's counts (`GapBank.counts`)."""
 
 
@@ -120,7 +123,7 @@ class CatalogSurrogateNode(SsaNode):
             self.diag.count(NodeCause.CONTENT_FILTER_UNAVAILABLE,
                             "the DDS implementation does not filter by content: every "
                             "estimate arrives and those not taken are ignored here")
-        self.wall_timer(TICK_S, self.tick)
+        self.wakeup(TICK_S, self.tick)
         self.stepped_ns = 0  # the sim time (ns) the bank was last stepped at: lockstep
         self.progress = ProgressReporter(self, lambda: {
             SHARD: f"{self.shard}/{self.shards}", TAKEN_ESTIMATES: self.taken,
@@ -163,15 +166,9 @@ class CatalogSurrogateNode(SsaNode):
         Its SENSOR rows are counted for lockstep (taken), forecasts (ours included) are
         ignored; a batch whose columns disagree is refused whole (``rejected_malformed``).
         """
-        m = len(msg.object_id)
-        if msg.update_source != UpdateSource.SENSOR:
-            self.diag.counts[NodeCause.IGNORED_NOT_SENSOR] += m  # forecasts, ours included
-            return
-        self.taken += m
-        try:
-            rows = messages.estimate_batch_from_msg(msg)
-        except ValueError as exc:
-            self.diag.count(Cause.REJECTED_MALFORMED, f"{TOPIC_ESTIMATE_BATCH}: {exc}", n=m)
+        taken, rows = sensor_estimates(self.diag, msg)
+        self.taken += taken
+        if rows is None:
             return
         rows = self._admit_rows(rows)
         if len(rows) and not self.clock_hold.hold_ahead(
@@ -195,47 +192,55 @@ class CatalogSurrogateNode(SsaNode):
         return rows.take(np.flatnonzero(cause == ""))
 
     def _take_rows(self, rows: EstimateRows) -> None:
-        """Give each row to the bank, in order, and publish the forecasts they release.
+        """Give the rows to the bank, in order, and publish the forecasts they release.
 
-        The states and covariances are checked for the whole batch at once
-        (`validation.states_problems`), the rest row by row.
+        Checked for the whole batch at once, in this order, each refusal counted by cause:
+        stamped beyond ``max_clock_lead`` of the clock, without an object id, a state or
+        covariance the filter would refuse (`validation.states_problems`), an object beyond
+        ``max_objects``. The rest go to `GapBank.on_estimates`.
         """
-        out: list[GapForecast] = []
+        ids = np.asarray(rows.object_id, dtype=object)
+        now, lead = self.now_s(), self.max_clock_lead()
+        ahead = (rows.t > now + lead) if now > 0.0 else np.zeros(len(rows), dtype=bool)
+        if ahead.any():
+            i = int(np.argmax(ahead))
+            self.diag.count(Cause.REJECTED_FUTURE,
+                            ahead_of_clock(float(rows.t[i]), now, lead)[1], n=int(ahead.sum()))
+        no_id = ~ahead & (ids == "")
+        self.diag.count(NodeCause.REJECTED_OBJECT_ID,
+                        "an estimate without object_id: whose it is cannot be known",
+                        n=int(no_id.sum()))
         problems = states_problems(rows.x, rows.P)
-        for i, oid in enumerate(rows.object_id):  # per object: the bank's is a dict of them
-            t = float(rows.t[i])
-            if not self.ahead_of_clock(t):
-                out += self._take_one(oid, t, rows.x[i], rows.P[i], bool(problems[i]))
-        self.publish(out)
-
-    def _take_one(self, oid: str, t: float, x: np.ndarray, P: np.ndarray,
-                  unsound: bool = True) -> list[GapForecast]:
-        """Give one estimate (km, km/s) to the bank; return what it releases ([]: refused).
-
-        `unsound` False: its state and covariance passed `validation.states_problems`
-        (True: `validation.state_problem` checks them here).
-        """
-        if not oid:
-            self.diag.count(NodeCause.REJECTED_OBJECT_ID,
-                            "an estimate without object_id: whose it is cannot be known")
-            return []
-        cause, reason = state_problem(x, P) if unsound else OK
-        if cause:
-            self.diag.count(Cause(cause), f"object {oid!r} at t={t}: {reason}")
-            return []
-        if not self.bank.admits(oid):
+        unsound = ~ahead & ~no_id & (problems != "")
+        for cause in np.unique(problems[unsound]).tolist():
+            i = int(np.argmax(unsound & (problems == cause)))
+            self.diag.count(Cause(cause), f"object {ids[i]!r} at t={float(rows.t[i])}: "
+                            f"{state_problem(rows.x[i], rows.P[i])[1]}",
+                            n=int((unsound & (problems == cause)).sum()))
+        sound = np.flatnonzero(~ahead & ~no_id & ~unsound)
+        admitted = self.bank.admitted(ids[sound].tolist())
+        if not admitted.all():
+            oid = ids[sound[int(np.argmin(admitted))]]
             self.diag.count(Cause.REJECTED_BANK_FULL,
                             f"object {oid!r}: the bank holds max_objects "
-                            f"({self.bank.max_objects}) objects already")
-            return []
-        self.diag.counts[Count.RECEIVED] += 1
-        return self.bank.on_estimate(oid, t, x, P)
+                            f"({self.bank.max_objects}) objects already",
+                            n=int((~admitted).sum()))
+        take = sound[admitted]
+        self.diag.counts[Count.RECEIVED] += take.size
+        self.publish(self.bank.on_estimates(ids[take].tolist(), rows.t[take], rows.x[take],
+                                            rows.P[take]))
 
-    def tick(self) -> None:
-        """Take what waited for the clock; fit what the budget allows; publish what is due."""
+    def tick(self) -> bool:
+        """Take what waited for the clock; fit what the budget allows; publish what is due.
+
+        Return whether there was anything to do (`SsaNode.wakeup`): a new clock, forecasts
+        published, or fits still waiting for the budget.
+        """
         self.replay_held()
         now_ns = int(self.get_clock().now().nanoseconds)
-        self.publish(self.bank.step(now_ns * 1e-9))
+        out = self.bank.step(now_ns * 1e-9, stop=STOP.is_set)  # a stop cuts the fits left
+        self.publish(out)
+        moved = now_ns != self.stepped_ns
         self.stepped_ns = now_ns
         b, status = self.bank, self.diag.status
         for key, name in COUNTERS.items():
@@ -245,6 +250,7 @@ class CatalogSurrogateNode(SsaNode):
             status["object_ids"] = ",".join(b.object_ids)
         status["waiting_for_fit"] = str(b.waiting)
         status["fit_seconds"] = f"{b.fit_seconds:.1f}"
+        return moved or bool(out) or b.waiting > 0
 
     def publish(self, forecasts: list[GapForecast]) -> None:
         """Publish `forecasts` as one EstimateBatch (update source FORECAST), if any."""

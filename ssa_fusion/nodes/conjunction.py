@@ -43,7 +43,7 @@ from ssa_fusion.formats.ccsds.cdm_out import Conjunction, write_cdm
 from ssa_fusion.nodes.kit.base import SsaNode
 from ssa_fusion.nodes.kit.diagnostics import Count, NodeCause
 from ssa_fusion.nodes.kit.progress import TAKEN_ALL_ESTIMATES, ProgressReporter
-from ssa_fusion.nodes.kit.shards import content_filter
+from ssa_fusion.nodes.kit.shards import content_filter, sensor_estimates
 from ssa_fusion.params.tables.conjunction import PARAMETERS
 from ssa_fusion.params.units import Units, convert
 from ssa_fusion.ros import messages
@@ -100,7 +100,7 @@ class ConjunctionNode(SsaNode):
         self.taken = 0  # SENSOR estimate rows arrived (used or refused): lockstep progress
         self.next_s = -math.inf  # sim time of the next re-screening
         self.stepped_ns = 0  # the sim time (ns) acted on last: lockstep
-        self.wall_timer(TICK_S, self.tick)
+        self.wakeup(TICK_S, self.tick)
         self.progress = ProgressReporter(self, lambda: {TAKEN_ALL_ESTIMATES: self.taken},
                                          clock=lambda: self.stepped_ns)
         self.diag.counts[CDMS] = 0
@@ -117,15 +117,9 @@ class ConjunctionNode(SsaNode):
         Forecasts are ignored; a batch whose columns disagree is refused whole, and rows
         with a state or covariance the filter would refuse are counted by cause.
         """
-        m = len(msg.object_id)
-        if msg.update_source != UpdateSource.SENSOR:
-            self.diag.counts[NodeCause.IGNORED_NOT_SENSOR] += m
-            return
-        self.taken += m
-        try:
-            rows = messages.estimate_batch_from_msg(msg)
-        except ValueError as exc:
-            self.diag.count(Cause.REJECTED_MALFORMED, f"{TOPIC_ESTIMATE_BATCH}: {exc}", n=m)
+        taken, rows = sensor_estimates(self.diag, msg)
+        self.taken += taken
+        if rows is None:
             return
         problems = states_problems(rows.x, rows.P)
         for k in np.flatnonzero(problems != ""):
@@ -135,17 +129,19 @@ class ConjunctionNode(SsaNode):
         self.diag.counts[Count.RECEIVED] += ok.size
         self.watch.update([rows.object_id[k] for k in ok], rows.t[ok], rows.x[ok], rows.P[ok])
 
-    def tick(self) -> None:
+    def tick(self) -> bool:
         """Start the re-screening due at the clock; publish a finished one; report the clock.
 
         A re-screening runs in a thread of its own (the node keeps taking estimates and
         answering signals meanwhile); the clock reported for lockstep stays at the epoch it
-        started from until it is published.
+        started from until it is published. Return whether there is work (`SsaNode.wakeup`):
+        a re-screening running, or a new clock.
         """
         now_ns = int(self.get_clock().now().nanoseconds)
+        before = self.stepped_ns
         if self.job is not None:
             if self.job.is_alive():
-                return
+                return True
             self.job = None
             if self.done is not None:
                 update, at = self.done
@@ -156,10 +152,11 @@ class ConjunctionNode(SsaNode):
             self.next_s = now + self.params.number("rescreen_period")
             self.start(self.watch.snapshot(now), now)
             self.stepped_ns = now_ns
-            return
+            return True
         self.stepped_ns = now_ns
         self.diag.status["objects"] = str(self.watch.objects)
         self.diag.status["pending"] = str(self.watch.pending)
+        return self.stepped_ns != before
 
     def start(self, job: Rescreening, now: float) -> None:
         """Run `job` and its CDMs in a daemon thread (the process may end while it runs)."""

@@ -88,7 +88,7 @@ class FilterNode(SsaNode):
         if self.params.flag("lockstep"):
             self.subscribe(Clock, TOPIC_RELEASE_DECISIONS, self.on_release, RELEASE_QOS)
             self.run_clock.listen(lambda _data, _t: self.report())
-            self.progress = ProgressReporter(self, self.counters, poll=False)
+            self.progress = ProgressReporter(self, self.counters)
 
     def counters(self) -> dict[str, int | str]:
         """Return the lockstep progress: what it took, published and decided, and will."""

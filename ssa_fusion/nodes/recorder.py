@@ -4,10 +4,11 @@ Raw subscriptions hand over the CDR bytes as they arrived; they are written unch
 `rosbags`, stamped with the node's ROS time at reception (sim time under use_sim_time), as
 `ros2 bag record` does. Under sim time, what arrives before the first /clock (typically the
 latched /ssa/config) is held and stamped with the clock's first time, so the bag does not
-start at time 0, 55 years before its data (which `ros2 bag play` would wait through).
-Topics are discovered as publishers appear. The counts ``recorded <topic>`` on /diagnostics
-are messages, and rows for the batch types (MeasurementBatch, EstimateBatch: what a catalog
-run's accounting counts). The pending MCAP chunk is flushed to disk every
+start at time 0, 55 years before its data (which `ros2 bag play` would wait through). Topics
+are discovered as publishers appear (a scan every `discover_period` s, spaced out up to
+`DISCOVER_BACKOFF` times that while scans find nothing new). The counts ``recorded <topic>``
+on /diagnostics are messages, and rows for the batch types (MeasurementBatch, EstimateBatch:
+what a catalog run's accounting counts). The pending MCAP chunk is flushed to disk every
 `flush_period` s, which bounds what a SIGKILL can lose; SIGINT or SIGTERM close the bag with
 everything received. A disk too full for the next message and the bag's closing records
 (`bagio.BagWriter`) closes the bag whole, with every message before, and ends the node with
@@ -59,6 +60,10 @@ from ssa_fusion.ros.topics import (
 
 HOLD_LIMIT = 10_000
 """Most messages held until sim time starts (beyond, they are written stamped 0)."""
+DISCOVER_BACKOFF = 8
+"""The most `discover_period`s between two scans for new topics while none appears (a
+publisher that appears is then seen within 0.8 s by default; a scan asks DDS for the whole
+graph)."""
 
 
 def _import_type(type_name: str) -> type[Message]:
@@ -113,9 +118,10 @@ class Recorder(SsaNode):
         self._held: list[tuple[str, bytes]] = []  # received before sim time started
         self._rows: dict[str, Callable[[bytes], int]] = {}  # topic -> what a message counts
         self.failed: OSError | None = None  # why the bag cannot be written (then: exit 1)
-        self.wall_timer(p.number("discover_period"), self.discover)
+        self._scan_every, self._since_scan = 1, 0  # discovery backs off while nothing is new
+        self.wall_timer(p.number("discover_period"), self.discover_now_and_then)
         self.wall_timer(p.number("flush_period"), self.flush)
-        self.progress = ProgressReporter(self, self.recorded, poll=False)
+        self.progress = ProgressReporter(self, self.recorded)
         self.run_clock.listen(self.on_clock)
         self._name_run()
         self.get_logger().info(f"recording to {bag}")
@@ -156,8 +162,22 @@ class Recorder(SsaNode):
         """Return True when `topic` is to be recorded."""
         return topic in self.topics or topic.startswith(self.prefix)
 
-    def discover(self) -> None:
-        """Subscribe to wanted topics that gained a publisher since the last scan."""
+    def discover_now_and_then(self) -> None:
+        """Scan for new topics (`discover`), every tick at first, rarer while none is new.
+
+        Every `_scan_every` ticks: doubled after a scan that found nothing (up to
+        `DISCOVER_BACKOFF`), back to every tick after one that found a topic.
+        """
+        self._since_scan += 1
+        if self._since_scan < self._scan_every:
+            return
+        self._since_scan = 0
+        found = self.discover()
+        self._scan_every = 1 if found else min(2 * self._scan_every, DISCOVER_BACKOFF)
+
+    def discover(self) -> int:
+        """Subscribe to wanted topics that gained a publisher since the last scan; how many."""
+        before = len(self._subs)
         for topic, types in self.get_topic_names_and_types():
             if topic in self._subs or not self.wanted(topic):
                 continue
@@ -198,6 +218,7 @@ class Recorder(SsaNode):
             self._subs[topic] = self.subscribe(
                 msg_class, topic, partial(self.on_message, topic), qos, raw=True)
             self.get_logger().info(f"recording {topic} [{type_name}]")
+        return len(self._subs) - before
 
     def on_message(self, topic: str, data: bytes) -> None:
         """Write one message of `topic` (its CDR bytes), stamped with the node's clock.

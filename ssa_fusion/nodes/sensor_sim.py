@@ -30,6 +30,8 @@ the simulated world (`ssa_fusion.sim`).
 
 from __future__ import annotations
 
+import math
+import resource
 import time
 
 import numpy as np
@@ -70,6 +72,7 @@ from ssa_fusion.ros.topics import (
     TOPIC_WITHHELD,
 )
 from ssa_fusion.sim.schedule import (
+    CatalogPace,
     Event,
     ObjectStep,
     Pace,
@@ -80,6 +83,7 @@ from ssa_fusion.sim.schedule import (
     plan,
     resolve,
 )
+from ssa_fusion.sim.survey import Observations
 
 
 def plan_of(p: NodeParameters) -> Plan:
@@ -119,7 +123,10 @@ class SensorSim(SsaNode):
         p = self.params
         run = plan_of(p)
         self.schedule, self.catalog, self.times = run.schedule, run.catalog, run.times
-        self.pace = Pace(self.times, p.number("lockstep_step"))
+        self.lockstep_on = self.catalog is not None and any(p.texts("lockstep"))
+        step = p.number("lockstep_step")
+        self.pace: Pace | CatalogPace = Pace(self.times, step) if self.catalog is None else \
+            CatalogPace(self.catalog, step if self.lockstep_on else math.inf)
         self.catalog_keys = (messages.shard_keys(list(self.catalog.object_ids))
                              if self.catalog is not None else None)
         self.time_scale = p.number("time_scale")
@@ -136,6 +143,11 @@ class SensorSim(SsaNode):
         self.create_timer(p.number("tick"), self.step)
         self.get_logger().info(f"{p.text('scenario')}: {run.summary}, "
                                f"time scale {self.time_scale}x")
+        if self.catalog is not None and self.catalog.skipped.count:
+            skipped = self.catalog.skipped
+            self.diag.count(Count.ELEMENT_SETS_SKIPPED, skipped.lines[0], n=skipped.count)
+            for line in skipped.lines[1:]:
+                self.get_logger().warning(line)
 
     def _advertise(self) -> None:
         """Create the publishers (the detections' truth only for unlabelled detections)."""
@@ -158,9 +170,9 @@ class SensorSim(SsaNode):
         names = [n for n in p.texts("lockstep") if n]
         if not names:
             return None
-        if self.catalog is None or self.catalog_keys is None:
+        if self.catalog_keys is None:
             return Lockstep(self, names, None, self.diag.guard(self.step))
-        keys = self.catalog_keys.astype(np.int64)[self.catalog.observations.obj]
+        keys = self.catalog_keys.astype(np.int64)
         if self.unlabelled:  # what the batches carry: key 0
             keys = np.zeros_like(keys)
         return Lockstep(self, names, keys, self.diag.guard(self.step))
@@ -219,7 +231,7 @@ class SensorSim(SsaNode):
             else:
                 self.step_object(now)
             return
-        if self.catalog is not None:  # one clock per tick, ahead of the tick's measurements
+        if isinstance(self.pace, CatalogPace):  # one clock per tick, ahead of its measurements
             self.publish_clock(min(now, times[-1]))
             self.publish_catalog(self.pace.due(now))
         else:
@@ -257,7 +269,7 @@ class SensorSim(SsaNode):
         epoch's clock, its events.
         """
         lockstep, pace = self.lockstep, self.pace
-        assert lockstep is not None
+        assert lockstep is not None and isinstance(pace, Pace)
         reports, nodes = lockstep.watch.reports, lockstep.nodes
         step = pace.object_step(ceiling, lambda phase, t: wants(
             reports, nodes, NEXT_DUE if phase == Phase.FORECASTS else NEXT_DECISION, t))
@@ -295,7 +307,7 @@ class SensorSim(SsaNode):
         acted on T (`progress.CLOCK`), so nothing after T is seen at T.
         """
         lockstep, pace = self.lockstep, self.pace
-        assert lockstep is not None and self.catalog is not None
+        assert lockstep is not None and isinstance(pace, CatalogPace)
         if self.sim_stamp.sec == 0 or pace.clock_behind:
             # the last step's measurements are all taken: now its clock (the first: t0);
             # the next step's go once every consumer has acted on it
@@ -310,7 +322,6 @@ class SensorSim(SsaNode):
         if due is None:
             return
         self.publish_catalog(due)
-        lockstep.sent = pace.next
 
     def publish_clock(self, t: float) -> None:
         """Publish sim time `t` (s) on /clock."""
@@ -340,17 +351,17 @@ class SensorSim(SsaNode):
         self.diag.counts[Count.PUBLISHED] += 1
         return TOPIC_MEASUREMENT
 
-    def publish_catalog(self, due: range) -> None:
-        """Publish catalog measurements `due` in batches per shard key range.
+    def publish_catalog(self, due: Observations) -> None:
+        """Publish catalog measurements `due` (a window of the stream) in batches per shard.
 
         Their epochs are at or before the clock published (open loop), or at most one
         `lockstep_step` after it (lockstep). A range with no measurement gets no batch; one
         with more than ``batch_rows`` gets several, in epoch order. With `unlabelled`, each
         batch goes without its object ids, and with them on ``/ssa/detection_truth``.
         """
-        if self.catalog is None or self.catalog_keys is None or due.stop <= due.start:
+        if self.catalog is None or self.catalog_keys is None or not len(due):
             return
-        rows = self.catalog.rows(due.start, due.stop, self.catalog_keys)
+        rows = self.catalog.rows(due, self.catalog_keys)
         ranges = [shard_range(k, self.shards) for k in range(self.shards)]
         shard = np.searchsorted(np.array([hi for _, hi in ranges]), rows.shard_key)
         most = self.params.integer("batch_rows")
@@ -363,19 +374,33 @@ class SensorSim(SsaNode):
                         messages.measurement_batch_to_msg(batch, ranges[k]))
                     batch = without_labels(batch)
                 self.pub_batch.publish(messages.measurement_batch_to_msg(batch, ranges[k]))
-        self.diag.counts[Count.PUBLISHED] += due.stop - due.start
+        if not self.diag.counts[Count.PUBLISHED]:
+            self.get_logger().info("first measurements published")
+        self.diag.counts[Count.PUBLISHED] += len(due)
+        if self.lockstep is not None:
+            self.lockstep.published(due.obj)
+
+    def close(self) -> None:
+        """Stop the catalog's window thread (a node stopped before its schedule is done)."""
+        if isinstance(self.pace, CatalogPace):
+            self.pace.close()
+        super().close()
 
     def done(self) -> None:
         """End the run: wait for the readers' acknowledgements, report, exit 0."""
         self.finished = True
+        if isinstance(self.pace, CatalogPace):
+            self.pace.close()
         for pub in (self.pub_meas, self.pub_batch, self.pub_withheld, self.pub_truth,
                     self.pub_clock, self.pub_detection_truth):
             if pub is not None:
                 pub.wait_for_all_acked(Duration(seconds=5.0))
         self.diag.publish_last()
+        use = resource.getrusage(resource.RUSAGE_SELF)
         self.get_logger().info(
             f"schedule done: {self.diag.counts[Count.PUBLISHED]} measurements, "
-            f"{self.diag.counts[Count.WITHHELD]} withheld"
+            f"{self.diag.counts[Count.WITHHELD]} withheld; CPU "
+            f"{use.ru_utime + use.ru_stime:.1f} s, peak RSS {use.ru_maxrss / 1024:.0f} MiB"
         )
         finish()
 

@@ -66,8 +66,7 @@ class SurrogateNode(SsaNode):
             self.progress = ProgressReporter(self, lambda: {
                 TAKEN: self.handled[TOPIC_MEASUREMENT],
                 Count.FORECASTS: self.diag.counts[Count.FORECASTS],
-                RELEASED: self.released_ns, NEXT_DUE: time_ns(self.core.next_due())},
-                poll=False)
+                RELEASED: self.released_ns, NEXT_DUE: time_ns(self.core.next_due())})
 
     def on_release(self, msg: Clock) -> None:
         """Forecast the epochs missed up to the time released (lockstep), and say so."""

@@ -202,10 +202,15 @@ class Graph:
         return proc.popen.returncode
 
     def _await(self, proc: Proc, timeout: float) -> None:
-        """Wait for `proc` to exit; SIGKILL if still alive after `timeout` s (scaled)."""
-        try:
-            proc.popen.wait(self.scaled(timeout))
-        except subprocess.TimeoutExpired:
+        """Wait for `proc` to exit; SIGKILL if still alive after `timeout` s (scaled).
+
+        The probe spins meanwhile: what the process says last (its final /diagnostics)
+        reaches the probe's subscriptions.
+        """
+        deadline = time.monotonic() + self.scaled(timeout)
+        while proc.popen.poll() is None and time.monotonic() < deadline:
+            self.spin_once(0.05)
+        if proc.popen.poll() is None:
             proc.popen.kill()
             proc.popen.wait(5)
 

@@ -10,9 +10,10 @@
   as rows (`CatalogRun.rows`), without a truth topic.
 
 `Pace` says which scheduled epochs are due: in the open loop those up to the clock (sim time
-following the wall clock), in lockstep one step at a time: a catalog's steps of
-``lockstep_step`` (`Pace.step`), one object's from one scheduled epoch to the next, each in
-up to four phases (`Pace.object_step`, `Phase`). Settings that give no run raise
+following the wall clock), in lockstep one object's from one scheduled epoch to the next,
+each in up to four phases (`Pace.object_step`, `Phase`). `CatalogPace` does the same for a
+catalog's measurements, a window at a time (in lockstep steps of ``lockstep_step``,
+computed ahead). Settings that give no run raise
 `ScheduleError`, whose message names the parameters (the node reports it as a parameter
 error). Units: s (sim time is Unix s UTC for orbits), the core's km and rad.
 """
@@ -22,6 +23,7 @@ from __future__ import annotations
 import enum
 import math
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -32,6 +34,7 @@ from ssa_fusion.core.base.rows import MeasurementRows
 from ssa_fusion.core.earth import timescales
 from ssa_fusion.core.earth.frames import Frame
 from ssa_fusion.formats import element_sets
+from ssa_fusion.formats.skipped import Skipped
 from ssa_fusion.sim import scenarios, sky, survey
 from ssa_fusion.sim.simulate import Simulation, simulate
 from ssa_fusion.sim.world import TruthModel
@@ -145,40 +148,45 @@ class SimSettings:
 
 @dataclass(frozen=True)
 class CatalogRun:
-    """A catalog's measurements, and what their rows carry per object and per sensor.
+    """A catalog's measurements, a window at a time, and what their rows carry.
 
     Attributes
     ----------
-    observations : survey.Observations
-        Every measurement, in epoch order.
+    stream : survey.ObservationStream
+        Every measurement, in epoch order, computed a window of sim time at a time.
     object_ids : ndarray (N,) of str
         Each object's id (index: a measurement's ``obj``).
     frames : ndarray (S,) of str
         Each sensor's station (frame_id; index: a measurement's ``sensor``).
     R : ndarray (S, 3, 3)
         Each sensor's measurement noise covariance, km², rad².
+    skipped : Skipped
+        The bad element sets of the file, left out (`formats.skipped`).
     """
 
-    observations: survey.Observations
+    stream: survey.ObservationStream
     object_ids: NDArray[np.object_]
     frames: NDArray[np.object_]
     R: NDArray[np.float64]
+    skipped: Skipped = field(default_factory=Skipped)
 
-    def rows(self, start: int, stop: int, keys: NDArray[np.uint32]) -> MeasurementRows:
-        """Return measurements `start`..`stop`-1 as rows; `keys`: each object's shard key."""
-        obs, sl = self.observations, slice(start, stop)
+    def rows(self, obs: survey.Observations, keys: NDArray[np.uint32]) -> MeasurementRows:
+        """Return measurements `obs` (a window of `stream`) as rows.
+
+        `keys`: each object's shard key.
+        """
         return MeasurementRows(
-            t=obs.t[sl], object_id=self.object_ids[obs.obj[sl]].tolist(),
-            frame_id=self.frames[obs.sensor[sl]].tolist(), z=obs.z[sl],
-            R=self.R[obs.sensor[sl]], shard_key=keys[obs.obj[sl]])
+            t=obs.t, object_id=self.object_ids[obs.obj].tolist(),
+            frame_id=self.frames[obs.sensor].tolist(), z=obs.z, R=self.R[obs.sensor],
+            shard_key=keys[obs.obj])
 
 
 @dataclass(frozen=True)
 class Plan:
     """A run: its schedule (or catalog), the epochs to publish, and a line for the log.
 
-    `times` are the epochs in publication order, s: the schedule's, or the catalog's
-    measurements'.
+    `times` are the epochs in publication order, s: the schedule's; for a catalog its first
+    and last epoch (its measurements come window by window: `CatalogPace`).
     """
 
     schedule: Schedule
@@ -302,8 +310,9 @@ def catalog_plan(real_sky: sky.SkyScenario, s: SimSettings) -> Plan:
     set epoch). No truth in the schedule: the truth is SGP4 of the catalog, recomputed by
     whoever scores the run.
     """
+    skipped = Skipped()
     try:
-        entries = element_sets.read_catalog(s.catalog)
+        entries = element_sets.read_catalog(s.catalog, skip=skipped)
     except ValueError as exc:
         raise ScheduleError(f"parameter 'catalog' = {s.catalog!r}: {exc}") from exc
     if s.synthetic:
@@ -316,14 +325,15 @@ def catalog_plan(real_sky: sky.SkyScenario, s: SimSettings) -> Plan:
     t0 = survey.catalog_start(entries) if s.start is None else s.start
     span = s.duration or real_sky.duration_s
     check_window(t0, span)
-    obs = survey.observe_catalog(entries, radars, t0, span, seed=s.seed)
-    run = CatalogRun(obs, np.asarray(list(obs.object_ids), dtype=object),
-                     np.asarray([x.station.name for x in obs.sensors], dtype=object),
-                     np.array([r.R for r in radars], dtype=float))
-    return Plan([], run, obs.t,
-                f"catalog {s.catalog}: {len(entries)} objects, {len(obs)} measurements from "
+    stream = survey.ObservationStream(entries, radars, t0, span, seed=s.seed)
+    run = CatalogRun(stream, np.asarray(list(stream.object_ids), dtype=object),
+                     np.asarray([x.station.name for x in radars], dtype=object),
+                     np.array([r.R for r in radars], dtype=float), skipped)
+    left_out = f" ({skipped.count} bad element sets left out)" if skipped.count else ""
+    return Plan([], run, np.array([stream.start, stream.end]),
+                f"catalog {s.catalog}{left_out}: {len(entries)} objects measured by "
                 f"{', '.join(r.station.name for r in radars)} over {span / 3600:g} h "
-                f"from {timescales.iso(t0)}")
+                f"from {timescales.iso(t0)}, a window at a time")
 
 
 def plan(name: str, base: scenarios.Scenario, real_sky: sky.SkyScenario | None,
@@ -331,7 +341,8 @@ def plan(name: str, base: scenarios.Scenario, real_sky: sky.SkyScenario | None,
     """Return the run of scenario `name` (`resolve`'s `base` and `real_sky`) and settings `s`.
 
     A catalog needs a real-sky scenario. `ScheduleError` when the settings give nothing to
-    publish.
+    publish (a catalog always has its epochs: whether any object is seen then, its stream
+    tells as it goes).
     """
     if s.catalog:
         if real_sky is None:
@@ -440,3 +451,70 @@ class Pace:
             return ObjectStep(Phase.CLOCK, e)
         self.phase = Phase.FORECASTS
         return ObjectStep(Phase.EVENTS, e, self.due(e))
+
+class CatalogPace:
+    """Which of a catalog's measurements are due, a window at a time (`CatalogRun.stream`).
+
+    In the open loop `due` computes the window up to the clock. In lockstep `step` hands out
+    the next ``step_s`` of sim time's measurements, computed ahead: the first window is
+    started at once, and each next one in a worker thread as soon as the last is handed out,
+    while the consumers take it (SGP4 and numpy release the interpreter's lock for most of
+    it). At most the window handed out and the next one are in memory, whatever the run's
+    length. Attributes as `Pace`'s.
+    """
+
+    def __init__(self, run: CatalogRun, step_s: float = math.inf) -> None:
+        self.run, self.step_s = run, step_s
+        self.sim_now = run.stream.start
+        self.clock_behind = False
+        self.published = 0
+        """Measurements handed out so far."""
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="catalog_window") \
+            if math.isfinite(step_s) else None
+        self._ahead: Future[survey.Observations] | None = None
+        self._ahead_until = -math.inf
+        if self._pool is not None:
+            self._prepare(self.sim_now + step_s)
+
+    @property
+    def done(self) -> bool:
+        """Return True once every epoch of the stream is handed out."""
+        return self.run.stream.done and self._ahead is None
+
+    def due(self, now: float) -> survey.Observations:
+        """Return the measurements not handed out yet up to sim time `now` (s), now handed out."""
+        return self._out(self.run.stream.until(now))
+
+    def step(self, ceiling: float) -> survey.Observations | None:
+        """Return the next lockstep step's measurements, now handed out (its clock then behind).
+
+        None while its end would pass `ceiling` (s: the time scale's limit). Waits for the
+        window computed ahead if it is not ready yet.
+        """
+        target = self.sim_now + self.step_s
+        if target > ceiling:
+            return None
+        if self._ahead is not None and self._ahead_until == target:
+            window, self._ahead = self._ahead.result(), None
+        else:
+            window = self.run.stream.until(target)
+        self.sim_now = target
+        self.clock_behind = True
+        if not self.run.stream.done:
+            self._prepare(target + self.step_s)
+        return self._out(window)
+
+    def close(self) -> None:
+        """Stop the worker thread (a window in progress is finished and dropped)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+
+    def _prepare(self, until: float) -> None:
+        """Start computing the window up to `until` (s) in the worker thread."""
+        assert self._pool is not None and self._ahead is None
+        self._ahead_until = until
+        self._ahead = self._pool.submit(self.run.stream.until, until)
+
+    def _out(self, window: survey.Observations) -> survey.Observations:
+        self.published += len(window)
+        return window

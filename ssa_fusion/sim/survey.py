@@ -21,13 +21,20 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from sgp4.api import WGS72, Satrec
+from sgp4.api import WGS72, Satrec, SatrecArray
 
 from ssa_fusion.core.base.constants import MU_EARTH, R_EARTH
-from ssa_fusion.core.earth.frames import Station, razel_gcrs, site_gcrs
+from ssa_fusion.core.earth.frames import (
+    Station,
+    enu_matrix,
+    gcrs_to_itrs_matrix,
+    razel_itrs,
+    site_gcrs,
+    teme_to_gcrs_matrix,
+)
 from ssa_fusion.core.earth.stations import Sensor, SensorType
-from ssa_fusion.core.earth.timescales import DAY_S, UNIX_EPOCH_JD
-from ssa_fusion.core.motion.element_sets import CatalogEntry, catalog_states
+from ssa_fusion.core.earth.timescales import DAY_S, UNIX_EPOCH_JD, jd_utc
+from ssa_fusion.core.motion.element_sets import CatalogEntry
 
 SGP4_EPOCH_JD = 2433281.5
 """Julian date of SGP4's epoch origin (1949 December 31 00:00 UTC), for `Satrec.sgp4init`."""
@@ -126,7 +133,8 @@ def observe_catalog(entries: Sequence[CatalogEntry], sensors: Sequence[Sensor], 
     """Simulate radar measurements of a catalog (reproducible by `seed`).
 
     Every object of `entries` measured by `sensors` from Unix time `t0` for `duration_s` s,
-    one noise stream per sensor.
+    one noise stream per sensor: the windows of an `ObservationStream` over the whole span,
+    joined (the same measurements, whatever the windows).
 
     Each sensor measures at the multiples of its ``cadence_s`` after `t0` where the object
     is at or above its elevation mask (by azimuth where it has one) and within its maximum
@@ -135,48 +143,127 @@ def observe_catalog(entries: Sequence[CatalogEntry], sensors: Sequence[Sensor], 
     computed `chunk_states` (object x epoch) at a time, bounding memory at ~100 B each.
     ValueError for an optical sensor (only radars are supported here).
     """
-    n = len(entries)
-    ids = tuple(e.object_id for e in entries)
-    rngs = np.random.default_rng(seed).spawn(len(sensors))
-    t_out: list[NDArray[np.float64]] = [np.zeros(0)]
-    obj_out: list[NDArray[np.int64]] = [np.zeros(0, np.int64)]
-    sen_out: list[NDArray[np.int64]] = [np.zeros(0, np.int64)]
-    z_out: list[NDArray[np.float64]] = [np.zeros((0, 3))]
-    for k, (sensor, rng) in enumerate(zip(sensors, rngs, strict=True)):
-        if sensor.type != SensorType.RADAR:
-            raise ValueError(f"sensor at {sensor.station.name!r} is {sensor.type}: "
-                             "observe_catalog simulates radars only")
-        t_all = t0 + sensor.cadence_s * np.arange(int(duration_s // sensor.cadence_s) + 1)
-        step = max(1, chunk_states // max(n, 1))
-        ts: list[NDArray[np.float64]] = []
-        objs: list[NDArray[np.int64]] = []
-        zs: list[NDArray[np.float64]] = []
-        for i in range(0, t_all.size, step):
-            t = t_all[i:i + step]
-            x = catalog_states(entries, t).x  # (N, T, 6)
-            rae = razel_gcrs(x, t, sensor.station)  # (N, T, 3)
-            up = sensor.in_view(rae) & np.isfinite(rae).all(-1)
-            obj, ti = np.nonzero(up)
-            ts.append(np.asarray(t[ti], dtype=np.float64))
-            objs.append(obj.astype(np.int64))
-            zs.append(rae[obj, ti])
-        # noise drawn per sensor in (epoch, object) order: independent of `chunk_states`
-        tk, ok = np.concatenate(ts), np.concatenate(objs)
-        first = np.lexsort((ok, tk))
-        ts, objs = [tk[first]], [ok[first]]
-        z = np.concatenate(zs)[first]
-        z += rng.standard_normal(z.shape) * np.asarray(sensor.sigma, dtype=float)
-        z[:, 1] = np.mod(z[:, 1], 2.0 * math.pi)
-        t_out += ts
-        obj_out += objs
-        sen_out.append(np.full(z.shape[0], k, dtype=np.int64))
-        z_out.append(z)
-    t = np.concatenate(t_out).astype(np.float64)
-    obj, sen = (np.concatenate(a).astype(np.int64) for a in (obj_out, sen_out))
-    z = np.concatenate(z_out).astype(np.float64)
-    order = np.lexsort((obj, sen, t))
-    return Observations(np.asarray(t[order], dtype=np.float64), obj[order], sen[order],
-                        np.asarray(z[order], dtype=np.float64), ids, tuple(sensors))
+    stream = ObservationStream(entries, sensors, t0, duration_s, seed, chunk_states)
+    return stream.until(math.inf)
+
+
+class ObservationStream:
+    """A radar network's measurements of a catalog, a window of sim time at a time.
+
+    `until` returns the measurements of the epochs after the last window's up to a sim
+    time, in epoch order: each object's SGP4/SDP4 state is computed once per epoch of any
+    sensor (`sgp4.api.SatrecArray`, vectorised), turned from TEME to the ITRF by one matrix
+    per epoch (`frames.teme_to_gcrs_matrix` then `frames.gcrs_to_itrs_matrix`), and only
+    the objects above a sensor's lowest elevation and within its range get their range,
+    azimuth and elevation computed. Memory is bounded by the window's `chunk_states`
+    (object x epoch, ~100 B each) and its measurements, never the run's.
+
+    The noise is drawn per sensor in (epoch, object) order from one stream per sensor
+    (`seed`), so the measurements do not depend on how the span is cut into windows.
+    Parameters as `observe_catalog`'s; ValueError for an optical sensor.
+    """
+
+    def __init__(self, entries: Sequence[CatalogEntry], sensors: Sequence[Sensor], t0: float,
+                 duration_s: float, seed: int = 0, chunk_states: int = 2_000_000) -> None:
+        for sensor in sensors:
+            if sensor.type != SensorType.RADAR:
+                raise ValueError(f"sensor at {sensor.station.name!r} is {sensor.type}: "
+                                 "observe_catalog simulates radars only")
+        self.object_ids = tuple(e.object_id for e in entries)
+        self.sensors = tuple(sensors)
+        self._sats = SatrecArray([e.satrec for e in entries]) if entries else None
+        self._rngs = np.random.default_rng(seed).spawn(len(sensors))
+        self._grids = [t0 + s.cadence_s * np.arange(int(duration_s // s.cadence_s) + 1)
+                       for s in sensors]
+        self._next = [0] * len(sensors)
+        self._chunk = max(1, chunk_states // max(len(entries), 1))
+        self.start = float(t0)
+        """The first epoch, Unix s."""
+        self.end = max((float(g[-1]) for g in self._grids), default=float(t0))
+        """The last epoch of any sensor, Unix s."""
+
+    @property
+    def done(self) -> bool:
+        """Return True once every epoch of every sensor is in a window."""
+        return all(k >= g.size for k, g in zip(self._next, self._grids, strict=True))
+
+    def until(self, t_stop: float) -> Observations:
+        """Return the measurements of the epochs after the last window up to `t_stop` (s).
+
+        In epoch order (ties: sensor, then object order); empty when no epoch is due.
+        """
+        stops = [int(np.searchsorted(g, t_stop, side="right")) for g in self._grids]
+        epochs = [g[a:b] for g, a, b in zip(self._grids, self._next, stops, strict=True)]
+        self._next = stops
+        found: list[list[tuple[NDArray[np.float64], NDArray[np.int64]]]] = [
+            [] for _ in self.sensors]
+        found_z: list[list[NDArray[np.float64]]] = [[] for _ in self.sensors]
+        union = np.unique(np.concatenate(epochs)) if self._sats is not None else np.zeros(0)
+        for i in range(0, union.size, self._chunk):
+            t = union[i:i + self._chunk]
+            r = self._itrs(t)
+            for k, sensor in enumerate(self.sensors):
+                cols = np.flatnonzero(np.isin(t, epochs[k]))
+                obj, ti, rae = _in_view(sensor, r[:, cols])
+                found[k].append((t[cols][ti], obj))
+                found_z[k].append(rae)
+        return self._noisy(found, found_z)
+
+    def _itrs(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Return every object's ITRF position (N, T, 3) km at epochs `t`; NaN: SGP4 failed."""
+        assert self._sats is not None
+        jd, fr = jd_utc(t)
+        err, r, _ = self._sats.sgp4(jd, fr)
+        m = np.matmul(gcrs_to_itrs_matrix(t), teme_to_gcrs_matrix(t))  # (T, 3, 3)
+        out: NDArray[np.float64] = np.einsum("tij,ntj->nti", m, r)
+        out[err != 0] = np.nan
+        return out
+
+    def _noisy(self, found: list[list[tuple[NDArray[np.float64], NDArray[np.int64]]]],
+               found_z: list[list[NDArray[np.float64]]]) -> Observations:
+        """Return the sensors' measurements found, with their noise, in epoch order."""
+        t_out, obj_out, sen_out, z_out = [np.zeros(0)], [np.zeros(0, np.int64)], \
+            [np.zeros(0, np.int64)], [np.zeros((0, 3))]
+        for k, (sensor, rng) in enumerate(zip(self.sensors, self._rngs, strict=True)):
+            tk = np.concatenate([np.zeros(0)] + [t for t, _ in found[k]])
+            ok = np.concatenate([np.zeros(0, np.int64)] + [o for _, o in found[k]])
+            z = np.concatenate([np.zeros((0, 3))] + found_z[k])
+            first = np.lexsort((ok, tk))  # noise drawn per sensor in (epoch, object) order
+            z = z[first]
+            z += rng.standard_normal(z.shape) * np.asarray(sensor.sigma, dtype=float)
+            z[:, 1] = np.mod(z[:, 1], 2.0 * math.pi)
+            t_out.append(tk[first])
+            obj_out.append(ok[first])
+            sen_out.append(np.full(z.shape[0], k, dtype=np.int64))
+            z_out.append(z)
+        t = np.concatenate(t_out).astype(np.float64)
+        obj, sen = (np.concatenate(a).astype(np.int64) for a in (obj_out, sen_out))
+        z = np.concatenate(z_out).astype(np.float64)
+        order = np.lexsort((obj, sen, t))
+        return Observations(np.asarray(t[order], dtype=np.float64), obj[order], sen[order],
+                            np.asarray(z[order], dtype=np.float64), self.object_ids,
+                            self.sensors)
+
+
+def _in_view(sensor: Sensor, r_itrs: NDArray[np.float64]
+             ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+    """Return (object, epoch column, range/az/el) where `sensor` sees ITRF positions `r_itrs`.
+
+    `r_itrs` (N, T, 3) km. Only the positions above the sensor's lowest elevation and
+    within its range (with a margin of round-off) get range, azimuth and elevation
+    computed and `Sensor.in_view` applied.
+    """
+    station = sensor.station
+    rho = r_itrs - station.itrs
+    enu = rho @ enu_matrix(station.lat_rad, station.lon_rad).T
+    dist = np.sqrt(np.einsum("...i,...i->...", enu, enu))
+    lowest = math.sin(math.radians(max(-90.0, min(90.0, sensor.min_elevation_deg))))
+    with np.errstate(invalid="ignore"):
+        near = (enu[..., 2] >= (lowest - 1e-9) * dist) & (dist <= sensor.max_range_km * 1.0001)
+    obj, ti = np.nonzero(near)
+    rae = razel_itrs(r_itrs[obj, ti], station)
+    up = sensor.in_view(rae) & np.isfinite(rae).all(-1)
+    return obj[up].astype(np.int64), ti[up].astype(np.int64), rae[up]
 
 
 def synthetic_catalog(base: CatalogEntry, n: int, seed: int = 0,

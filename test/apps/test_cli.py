@@ -2,6 +2,7 @@
 and `live` never overwrites an earlier run."""
 
 import argparse
+import json
 import os
 import signal
 import time
@@ -179,15 +180,16 @@ def test_live_run_that_cannot_be_evaluated_says_why_without_a_traceback(tmp_path
     args = cli.build_parser().parse_args(["live", "--out", str(tmp_path / "run")])
     assert live.run(args) == 1
     err = capsys.readouterr().err
-    assert "error: the run cannot be evaluated: the bag has no /ssa/withheld messages" in err
+    assert "error: the run cannot be evaluated: the bag has no /ssa/truth messages" in err
     assert "recorded 3 messages" in err
 
 
-def test_a_live_run_whose_outage_withheld_nothing_gets_the_report_without_truth(
+def test_a_live_run_whose_outage_withheld_nothing_is_judged_against_its_truth(
         tmp_path, monkeypatch, capsys):
     """No pass fell in the outage (a short run, one's own sites): no arms to score, so the
-    run is judged as one's own data is (residuals, NIS, sigma, passes), exit 0; it was an
-    error, exit 1."""
+    run is judged as one's own data is (residuals, NIS, sigma, passes), exit 0 (it was an
+    error, exit 1), and against the truth the bag holds (it printed "no simulated truth" and
+    report.json said ``"truth": false``)."""
     from ssa_fusion.apps import evaluate
 
     data = evaluate.load(Path(SAMPLE))
@@ -200,7 +202,14 @@ def test_a_live_run_whose_outage_withheld_nothing_gets_the_report_without_truth(
     text = capsys.readouterr().out
     assert "no pass fell in the run's outage" in text
     assert "NIS inside the 95 % χ² band" in text
+    assert f"judged against its /ssa/truth ({len(data.truth)} states)" in text, text
+    assert "after each pass: median error" in text, text
     assert (out / "report.html").exists() and (out / "nis.png").exists()
+    saved = json.loads((out / "report.json").read_text())
+    error = saved["position_error"]
+    assert saved["truth"] is True and error["truth_states"] == len(data.truth)
+    assert 0.0 < error["after_pass_median_km"] < 50.0, error  # the paper's Keplerian EKF
+    assert "Position error against the truth" in (out / "report.html").read_text()
 
 
 @pytest.mark.parametrize("option", [["--objects", "5"], ["--shards", "2"], ["--no-surrogate"],

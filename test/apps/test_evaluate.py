@@ -58,7 +58,10 @@ def test_dmd_ekf_is_scored_over_the_whole_gap_with_the_filters_prediction():
 
 def test_settings_come_from_the_bag_else_the_kinds_default(tmp_path):
     data = synthetic()
-    assert evaluate.evaluate(data).settings.origin.startswith("scenario iss_j2_pos")
+    assert evaluate.evaluate(data).settings.origin.startswith(
+        "position, from the data (")  # the set-up the data call for (filter_setup)
+    assert "the paper's position filter (scenario iss_j2_pos)" in \
+        evaluate.evaluate(data).settings.origin
     est = scenarios.get("iss_j2_pos").estimator()
     recorded = settings.config_message("filter", est.with_(filter=est.filter.with_(q=3e-9)))
     data.config.append(recorded)

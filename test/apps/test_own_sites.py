@@ -186,7 +186,9 @@ def test_a_tdm_of_your_own_radar_replays_onto_its_orbit(passes, tmp_path, capsys
     assert cli.main(["replay", str(bag), "--offline", "--sites", str(sites),
                      "--out", str(replayed)]) == 0
     out = capsys.readouterr().out
-    assert "the real-sky filter for the stations its measurements name (nordlys;" in out, out
+    assert (f"radar, from the data ({len(t)} range/az/el from nordlys; --filter "
+            "radar|optical|network|position or --params-file choose another): the real-sky "
+            "filter for the stations of its measurements (nordlys)") in out, out
     fused = [e for e in evaluate.load(replayed).estimates
              if e.update_source == types.UpdateSource.SENSOR]
     second = [e for e in fused if e.t > T0 + 2.0 * 3600.0]
@@ -195,13 +197,12 @@ def test_a_tdm_of_your_own_radar_replays_onto_its_orbit(passes, tmp_path, capsys
     err = np.linalg.norm(np.array([e.x[:3] for e in second]) - truth[:, :3], axis=1)
     assert np.median(err) < 0.2 and err.max() < 0.5, (np.median(err), err.max())
 
-    # without the sites file the bag's station is unknown: no estimate, and why
-    assert cli.main(["replay", str(bag), "--offline", "--out", str(tmp_path / "no_sites")]) == 0
-    out = capsys.readouterr().out
-    assert ": 0 estimates" in out, out
-    why = next(line for line in out.splitlines() if line.startswith("replay: no estimate: "))
-    assert f"{len(t)} measurement(s) from stations the filter does not take (nordlys" in why
-    assert "nordlys are neither built in nor in a sites file" in why and "--sites" in why
+    # without the sites file the bag's station is unknown: refused in one line with the fix
+    assert cli.main(["replay", str(bag), "--offline", "--out", str(tmp_path / "no_sites")]) == 2
+    err = capsys.readouterr().err
+    assert err == ("error: station id(s) nordlys are neither built in nor in a sites file: "
+                   "define them in one (docs/SITES.md) and give it with --sites\n"), err
+    assert not (tmp_path / "no_sites").exists()
 
 
 def test_import_without_the_sites_file_is_refused_with_one_line(passes, tmp_path, capsys):
@@ -235,7 +236,7 @@ def test_report_on_measurements_without_estimates_says_to_replay_first(passes, r
     assert cli.main(["report", str(bag), "--out", str(tmp_path / "report")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(f"error: {bag}: the bag has no "
-                                                   f"/ssa/withheld messages"), err
+                                                   f"/ssa/truth messages"), err
     assert f"run `ssa-fusion replay {bag} --offline --smooth` (add --sites FILE" in err
     assert not (tmp_path / "report").exists()
 
@@ -342,8 +343,10 @@ def test_a_replay_whose_orbit_determination_never_converges_says_so(passes, tmp_
     bag = tmp_path / "bag"
     assert cli.main(["import", "tdm", str(short), "--sites", str(sites), "--bag", str(bag)]) == 0
     assert cli.main(["replay", str(bag), "--offline", "--sites", str(sites), "--out",
-                     str(tmp_path / "out")]) == 0
-    out = capsys.readouterr().out
-    assert ("replay: no estimate: the initial orbit determination never converged (5 "
+                     str(tmp_path / "out")]) == 1  # no estimate is no success
+    err = capsys.readouterr().err
+    assert ("error: no estimate: the initial orbit determination never converged (5 "
             "measurement(s) waited for it, 0 attempt(s) failed; it needs 7 real measurements "
-            "of one station within 300 s (one pass))") in out, out
+            "of one station within 300 s (one pass)): a pass of the data too short or too "
+            "sparse for it; a --params-file with a smaller iod_samples or a longer "
+            "iod_max_span starts it") in err, err

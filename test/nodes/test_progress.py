@@ -118,24 +118,27 @@ class _Node:
 
 
 def test_measurements_sent_per_shard_follow_the_shard_keys():
+    """Each object's measurements count for the shard of its key, as they are published."""
     ids = [f"{k:05d}" for k in range(300)]
     keys = np.array([messages.shard_key(o) for o in ids], dtype=np.int64)
     lock = Lockstep(_Node(), NODES, keys)
-    for sent in (0, 17, 300):  # grows as the simulator publishes
-        lock.sent = sent
+    objects = np.random.default_rng(3).integers(0, 300, 900)  # a measurement's object
+    for sent in (0, 17, 900):  # grows as the simulator publishes
+        lock.published(objects[lock.sent:sent])
+        assert lock.sent == sent
         for shards in (1, 2, 3):
-            want = [sum(shard_range(k, shards)[0] <= key <= shard_range(k, shards)[1]
-                        for key in keys[:sent]) for k in range(shards)]
+            want = [sum(shard_range(k, shards)[0] <= keys[o] <= shard_range(k, shards)[1]
+                        for o in objects[:sent]) for k in range(shards)]
             assert lock.sent_by_shard(shards).tolist() == want
 
 
 def test_a_consumer_that_lives_is_waited_for_however_long():
     """A stopped process (SIGSTOP: a closed lid, a swap storm) is alive: sim time waits."""
     node = _Node(listed=["recorder"])
-    lock = Lockstep(node, ["recorder"], np.zeros(0, dtype=np.int64))
+    lock = Lockstep(node, ["recorder"], np.zeros(1, dtype=np.int64))
     lock.watch.reports["recorder"] = {RECORDED_MEASUREMENTS: "0", RECORDED_ESTIMATES: "0",
                                       **process_keys()}  # this process: alive
-    lock.sent = 5
+    lock.published(np.zeros(5, dtype=np.int64))
     for now in (100.0, 160.0, 10_000.0):
         assert lock.go_on(now) == (False, ["recorder (recorded 0 of 5 measurements)"])
     assert lock.gone == [] and lock.since == 100.0
@@ -146,12 +149,12 @@ def test_a_consumer_that_lives_is_waited_for_however_long():
 def test_a_consumer_that_is_gone_is_named_and_no_longer_waited_for():
     """Its process ended (same host): at once; elsewhere: once the graph no longer lists it."""
     node = _Node(listed=["catalog_filter_1"])
-    lock = Lockstep(node, ["recorder", "catalog_filter_1"], np.zeros(0, dtype=np.int64))
+    lock = Lockstep(node, ["recorder", "catalog_filter_1"], np.zeros(1, dtype=np.int64))
     ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
                            capture_output=True, text=True, check=True)
     lock.watch.reports["recorder"] = {RECORDED_MEASUREMENTS: "0", RECORDED_ESTIMATES: "0",
                                       **process_keys(), PID: ended.stdout.strip()}
-    lock.sent = 5
+    lock.published(np.zeros(5, dtype=np.int64))
     go, missing = lock.go_on(100.0)  # the filter shard has not reported: listed, so alive
     assert (lock.gone, lock.nodes) == (["recorder"], ["catalog_filter_1"])
     assert (go, missing) == (False, ["catalog_filter_1 (no report yet)"])

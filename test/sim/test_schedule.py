@@ -1,17 +1,20 @@
 """`sim.schedule`: what the simulator node publishes when, without ROS. The epochs withheld
 are those of the outages, computed here by hand; the pace publishes each epoch once, in
-order, and lockstep steps by `step_s` under the ceiling (a catalog), or from epoch to epoch
-with the releases its consumers want before each (one object)."""
+order, and lockstep steps a catalog by `step_s` in windows computed ahead, or one object
+from epoch to epoch with the releases its consumers want before each."""
 
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from ssa_fusion.core.base import types
-from ssa_fusion.sim import scenarios, sky
+from ssa_fusion.formats.element_sets import read_catalog
+from ssa_fusion.sim import scenarios, sky, survey
 from ssa_fusion.sim.schedule import (
     RELEASE_MARGIN_S,
+    CatalogPace,
     Event,
     ObjectStep,
     Pace,
@@ -72,13 +75,39 @@ def test_a_catalog_run_gives_rows_of_its_measurements():
     settings = SimSettings(object_id="", cadence=60.0, duration=6 * 3600.0, catalog=str(SAMPLE),
                            objects=3, seed=1)
     run = plan("iss_radar_columbus", base, real_sky, settings)
-    obs = run.catalog.observations
-    assert run.schedule == [] and run.times is obs.t and len(obs) > 0
+    whole = survey.observe_catalog(read_catalog(SAMPLE)[:3], real_sky.radars, run.times[0],
+                                   6 * 3600.0, seed=1)
+    assert run.schedule == [] and len(whole) > 0
+    t0 = survey.catalog_start(read_catalog(SAMPLE)[:3])
+    assert run.times.tolist() == [t0, t0 + 6 * 3600.0]
+    obs = run.catalog.stream.until(whole.t[len(whole) // 2])
+    assert 0 < len(obs) < len(whole) and np.array_equal(obs.z, whole.z[:len(obs)])
     keys = np.arange(len(obs.object_ids), dtype=np.uint32) + 7
-    rows = run.catalog.rows(1, len(obs), keys)
-    assert rows.object_id == [obs.object_ids[k] for k in obs.obj[1:]]
-    assert set(rows.frame_id) == {"columbus"} and (rows.shard_key == obs.obj[1:] + 7).all()
-    assert np.array_equal(rows.t, obs.t[1:]) and rows.R.shape == (len(obs) - 1, 3, 3)
+    rows = run.catalog.rows(obs, keys)
+    assert rows.object_id == [obs.object_ids[k] for k in obs.obj]
+    assert set(rows.frame_id) == {"columbus"} and (rows.shard_key == obs.obj + 7).all()
+    assert np.array_equal(rows.t, obs.t) and rows.R.shape == (len(obs), 3, 3)
+
+
+def test_a_catalog_is_handed_out_in_lockstep_steps_computed_ahead():
+    """The steps' windows join into the whole run's measurements, each within its step."""
+    base, real_sky = resolve("iss_radar_columbus")
+    settings = SimSettings(object_id="", cadence=60.0, duration=6 * 3600.0, catalog=str(SAMPLE),
+                           objects=3, seed=1)
+    run = plan("iss_radar_columbus", base, real_sky, settings)
+    whole = survey.observe_catalog(read_catalog(SAMPLE)[:3], real_sky.radars, run.times[0],
+                                   6 * 3600.0, seed=1)
+    pace = CatalogPace(run.catalog, step_s=1800.0)
+    windows = []
+    while not pace.done:
+        before = pace.sim_now
+        w = pace.step(ceiling=math.inf)
+        assert w is not None and ((w.t > before) & (w.t <= pace.sim_now)).all()
+        windows.append(w)
+    pace.close()
+    assert len(windows) == 12 and pace.published == len(whole)
+    assert np.array_equal(np.concatenate([w.z for w in windows]), whole.z)
+    assert np.array_equal(np.concatenate([w.obj for w in windows]), whole.obj)
 
 
 def test_settings_that_give_no_run_are_schedule_errors_naming_the_parameters():
@@ -87,10 +116,6 @@ def test_settings_that_give_no_run_are_schedule_errors_naming_the_parameters():
         plan("leo_optical", base, real_sky,
              SimSettings(object_id="", cadence=60.0, catalog=str(SAMPLE)))
     base, real_sky = resolve("iss_radar_columbus")
-    with pytest.raises(ScheduleError, match="nothing to publish"):
-        plan("iss_radar_columbus", base, real_sky,
-             SimSettings(object_id="", cadence=60.0, duration=1.0, catalog=str(SAMPLE),
-                         objects=1))
     with pytest.raises(ScheduleError, match="parameter 'catalog' = "):
         plan("iss_radar_columbus", base, real_sky,
              SimSettings(object_id="", cadence=60.0, catalog=str(SAMPLE.parent)))

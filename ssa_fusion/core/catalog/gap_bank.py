@@ -45,7 +45,7 @@ from __future__ import annotations
 import math
 import time
 from collections import Counter
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -202,8 +202,8 @@ class GapBank:
         """``fitted`` (a fit with a forecast; ``fitted_batch_fit`` those of a batch fit,
         ``fitted_physics`` those of the physics-only fit, `GapBankConfig.physics`),
         ``refused`` (too few anchors, or the fit refused or failed), ``skipped`` (the gap
-        ended before its turn), ``forecasts``, ``overtaken``, ``measurements`` (kept in a
-        batch-fit window)."""
+        ended before its turn), ``cut`` (queued when the node stopped: `step`),
+        ``forecasts``, ``overtaken``, ``measurements`` (kept in a batch-fit window)."""
         self.fit_seconds = 0.0
         """Wall s spent fitting and scoring fits, in all (what the budget covers)."""
         self.windows = MeasurementWindows(config.fit_passes, config.pass_break_s,
@@ -338,6 +338,50 @@ class GapBank:
                                          int(rows.kind[i]), rows.frame_id[i])
         self.counts["measurements"] += kept
 
+    def admitted(self, object_ids: Sequence[str]) -> NDArray[np.bool_]:
+        """Return which of `object_ids` (rows in order) `admits`, as they would come one by one.
+
+        Those held, and new ones in order of first appearance while there is room.
+        """
+        if not len(object_ids):
+            return np.zeros(0, dtype=bool)
+        uniq, first, inverse = np.unique(np.asarray(object_ids, dtype=object),
+                                         return_index=True, return_inverse=True)
+        held = np.fromiter((u in self._rows for u in uniq.tolist()), bool, uniq.size)
+        new = np.flatnonzero(~held)
+        room = max(self.max_objects - len(self._ids), 0)
+        ok = held.copy()
+        ok[new[np.argsort(first[new], kind="stable")[:room]]] = True
+        out: NDArray[np.bool_] = ok[inverse.ravel()]
+        return out
+
+    def on_estimates(self, object_ids: Sequence[str], t: NDArray[np.float64],
+                     x: NDArray[np.float64], P: NDArray[np.float64]) -> list[GapForecast]:
+        """Take a batch of estimates (rows in order, as `on_estimate` takes them one by one).
+
+        Epochs t (M,) s, states x (M, 6) km, km/s GCRF, covariances P (M, 6, 6). Only the rows
+        that change what the bank ends with are handed to `on_estimate`: of each object in
+        the batch its first and its last, those `pass_break_s` or more from the one before
+        or after (a gap's end, a pass end) and those out of epoch order; the rows between
+        are each replaced by the next (the newest estimate of a pass is what is kept). Return
+        the forecasts released. The caller checks `admitted` first.
+        """
+        if not len(object_ids):
+            return []
+        codes = np.unique(np.asarray(object_ids, dtype=object), return_inverse=True)[1].ravel()
+        order = np.lexsort((np.arange(codes.size), codes))
+        c, tt = codes[order], np.asarray(t, dtype=float)[order]
+        same = c[1:] == c[:-1]
+        gap = np.where(same, np.diff(tt), np.inf)
+        odd = ~((gap >= 0.0) & (gap < self.config.pass_break_s))  # breaks, disorder, NaN
+        need = np.ones(codes.size, dtype=bool)
+        need[1:-1] = odd[:-1] | odd[1:]
+        keep = np.sort(order[need])
+        out: list[GapForecast] = []
+        for i in keep.tolist():
+            out += self.on_estimate(object_ids[i], float(t[i]), x[i], P[i])
+        return out
+
     def on_estimate(self, object_id: str, t: float, x: ArrayLike,
                     P: ArrayLike) -> list[GapForecast]:
         """Take an estimate of `object_id` that fused a real measurement.
@@ -375,12 +419,14 @@ class GapBank:
         self._last[r] = t
         return out
 
-    def step(self, now: float) -> list[GapForecast]:
+    def step(self, now: float, stop: Callable[[], bool] | None = None) -> list[GapForecast]:
         """Queue, fit and release at sim time `now` (s).
 
         Move the measurements up to `now` into the windows, queue the objects whose pass
         just ended, fit as many as the budget allows (newest pass end first), and return
-        every forecast now due.
+        every forecast now due. Once `stop()` is True (the node is stopping) the fits still
+        queued are cut: counted as ``cut``, their gaps left to the filter's coasting, never
+        queued again.
         """
         c = self.config
         self._admit_measurements(now)
@@ -394,6 +440,12 @@ class GapBank:
                                   c.fit_budget)  # no more than one wall second saved up
         self._wall_last = wall
         while (self._allowance > 0.0 or not c.fit_budget) and self._queued[:n].any():
+            if stop is not None and stop():
+                cut = np.flatnonzero(self._queued[:n])
+                self.counts["cut"] += cut.size
+                self._queued[cut] = False
+                self._fitted[cut] = last[cut]
+                break
             r = int(np.flatnonzero(self._queued[:n])[np.argmax(last[self._queued[:n]])])
             self._queued[r] = False
             spent = self._fit(r)  # the fit's own wall time accrues at the next step

@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 from ssa_fusion.core.base.constants import MU_EARTH
 from ssa_fusion.core.base.types import MotionModel
 from ssa_fusion.core.earth import frames
-from ssa_fusion.core.earth.frames import rtn_axes
+from ssa_fusion.core.earth.frames import cross3, rtn_axes
 from ssa_fusion.core.motion.propagation import integrate_chain
 
 __all__ = ["Propagator", "apply_residual", "argument_of_latitude", "curvilinear",
@@ -151,13 +151,13 @@ def argument_of_latitude(x: ArrayLike) -> tuple[Array, Array]:
     """
     x = np.atleast_2d(np.asarray(x, float))
     r, v = x[:, :3], x[:, 3:]
-    h = np.cross(r, v)
+    h = cross3(r, v)
     hn = np.linalg.norm(h, axis=1)
     node = np.stack([-h[:, 1], h[:, 0], np.zeros(len(h))], axis=1)  # z x h
     nn = np.linalg.norm(node, axis=1)
     node = np.where(nn[:, None] > 1e-12 * hn[:, None], node / np.maximum(nn, 1e-300)[:, None],
                     np.array([1.0, 0.0, 0.0]))
-    y_axis = np.cross(h / hn[:, None], node)
+    y_axis = cross3(h / hn[:, None], node)
     u = np.arctan2(np.einsum("ki,ki->k", r, y_axis), np.einsum("ki,ki->k", r, node))
     rn2 = np.einsum("ki,ki->k", r, r)
     return u, hn / rn2

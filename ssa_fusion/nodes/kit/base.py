@@ -52,6 +52,7 @@ from ssa_fusion.nodes.kit.diagnostics import Diagnostics, wall_timer
 from ssa_fusion.nodes.kit.node_parameters import NodeParameters
 from ssa_fusion.nodes.kit.process import constructing, run, start_watchdog
 from ssa_fusion.nodes.kit.run_clock import RunClock
+from ssa_fusion.nodes.kit.wakeup import Wakeup
 from ssa_fusion.params.checks import ParamValue
 from ssa_fusion.params.rows import ParameterTable
 from ssa_fusion.ros import messages, shm_privacy
@@ -91,6 +92,7 @@ class SsaNode(Node):
         """Measurement messages handled for good (used or refused, not held), by topic."""
         self._jump_handles: list[object] = []
         self._settings_pub: Publisher[String] | None = None
+        self._wakeups: list[Wakeup] = []
 
     def private_segments(self) -> None:
         """Make the shared-memory segments of this process the user's only (`ros.shm_privacy`)."""
@@ -116,6 +118,32 @@ class SsaNode(Node):
     def wall_timer(self, period_s: float, callback: Callable[[], None]) -> Timer:
         """Create a guarded timer on the steady (wall) clock (sim time may stand still)."""
         return wall_timer(self, period_s, self.diag.guard(callback))
+
+    def wakeup(self, period_s: float, work: Callable[[], bool | None]) -> Wakeup:
+        """Run `work` every `period_s` wall s while it has work (`nodes.kit.wakeup`).
+
+        `work` returns whether it did something (an exception is counted, as `wall_timer`'s,
+        and counts as nothing); it runs on while messages wait for the clock (`clock_hold`:
+        they are handed back, or refused, after a wall-time wait). Once idle, it runs again
+        after an input message, a change of the node's clock, or work done by another of the
+        node's wakeups.
+        """
+        if not self._wakeups:
+            self.diag.on_input.append(self.arm_wakeups)
+            self._jump_handles.append(self.get_clock().create_jump_callback(
+                JumpThreshold(min_forward=Duration(nanoseconds=1),
+                              min_backward=Duration(nanoseconds=-1), on_clock_change=True),
+                post_callback=lambda _jump: self.arm_wakeups()))
+        guarded = self.diag.guard(work)
+        w = Wakeup(self, period_s, lambda: bool(guarded()) or self.clock_hold.holding,
+                   after=self.arm_wakeups)
+        self._wakeups.append(w)
+        return w
+
+    def arm_wakeups(self) -> None:
+        """Arm every wakeup of the node (`wakeup`): something happened that may give work."""
+        for w in self._wakeups:
+            w.arm()
 
     def reset_on_backward_jump(self, reset: Callable[[], None], what: str) -> None:
         """Call `reset` when sim time jumps backwards (a bag loops), and count it.

@@ -56,6 +56,11 @@ class ClockHold:
         self.ahead: deque[_Ahead] = deque()
         self.passing = False  # handing back: nothing is held again
 
+    @property
+    def holding(self) -> bool:
+        """Return True while messages wait here (for the first clock, or ahead of it)."""
+        return bool(self.held or self.ahead)
+
     def hold_ahead(self, again: Callable[[], None], t: float, lead_s: float) -> bool:
         """Keep `again` and return True when stamp `t` (s) is too far ahead of the clock.
 

@@ -12,6 +12,7 @@ import inspect
 import traceback
 from collections import Counter
 from collections.abc import Callable
+from typing import TypeVar
 
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
@@ -29,6 +30,8 @@ from ssa_fusion.ros.interfaces import DiagnosticArray, DiagnosticStatus, KeyValu
 from ssa_fusion.ros.readiness import MATCHED_KEY, MATCHED_READERS_KEY
 from ssa_fusion.ros.run_identity import RunGate, RunMembers
 from ssa_fusion.ros.topics import TOPIC_CLOCK, TOPIC_DIAGNOSTICS
+
+T = TypeVar("T")
 
 
 class NodeCause(enum.StrEnum):
@@ -71,12 +74,14 @@ class Count(enum.StrEnum):
     FITS_PHYSICS = "fits_physics"
     FITS_REFUSED = "fits_refused"
     FITS_SKIPPED = "fits_skipped"
+    FITS_CUT = "fits_cut"
     FORECASTS_OVERTAKEN = "forecasts_overtaken"
     TRUTH = "truth"
     ESTIMATES = "estimates"
     MEASUREMENTS = "measurements"
     SCENE_UPDATES = "scene_updates"
     LOCKSTEP_GONE = "lockstep_gone"
+    ELEMENT_SETS_SKIPPED = "element_sets_skipped"
     EVICTED = "evicted"
     PUBLISHED_ASSOCIATED = "published_associated"
     PUBLISHED_RELABELLED = "published_relabelled"
@@ -127,7 +132,10 @@ class Diagnostics:
         self.counts: Counter[str] = Counter()
         self.status: dict[str, str] = {}
         self.activity = 0
-        """Messages received on the inputs (`subscribe`); a node drains until it stands."""
+        """Messages of the run received on the inputs (`subscribe`); a node drains until it
+        stands."""
+        self.on_input: list[Callable[[], None]] = []
+        """Called after each message of the run received on an input (`subscribe`)."""
         self._logged: set[str] = set()
         self._watched: list[Subscription[Message]] = []
         self._outputs: list[Publisher[Message]] = []
@@ -174,6 +182,9 @@ class Diagnostics:
         guarded = self.guard(callback)
 
         def take(data: bytes) -> None:
+            self.activity += 1
+            for hook in self.on_input:
+                hook()
             if raw:
                 guarded(data)
                 return
@@ -192,15 +203,10 @@ class Diagnostics:
         self._gates.append(gate)
 
         def arrive(data: bytes, info: object) -> None:
-            self.activity += 1
             gate(data, info)
 
-        def arrive_any(data: bytes) -> None:  # a node without a run takes every writer's
-            self.activity += 1
-            take(data)
-
-        sub = self.node.create_subscription(
-            msg_type, topic, arrive if self.members.has_run else arrive_any, qos, raw=True,
+        sub = self.node.create_subscription(  # a node without a run takes every writer's
+            msg_type, topic, arrive if self.members.has_run else take, qos, raw=True,
             event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.publish()),
             content_filter_options=content_filter,
         )
@@ -232,22 +238,24 @@ class Diagnostics:
         """Return True when the node subscribed to an input (`subscribe`)."""
         return bool(self._watched)
 
-    def guard(self, callback: Callable[..., None]) -> Callable[..., None]:
+    def guard(self, callback: Callable[..., T]) -> Callable[..., T | None]:
         """Wrap a subscription or timer callback: an exception is counted, not fatal.
 
         An unexpected exception is counted as ``internal_error`` (traceback logged once)
-        instead of killing the node. Executors may pass extra arguments (TimerInfo): only
-        those `callback` takes are passed on.
+        instead of killing the node (the wrapper then returns None; else what `callback`
+        returned). Executors may pass extra arguments (TimerInfo): only those `callback`
+        takes are passed on.
         """
         n_args = len(inspect.signature(callback).parameters)
 
-        def guarded(*args: object) -> None:
+        def guarded(*args: object) -> T | None:
             try:
-                callback(*args[:n_args])
+                return callback(*args[:n_args])
             except Exception as exc:
                 self.count(
                     Cause.INTERNAL_ERROR, f"{type(exc).__name__}: {exc}\n" + traceback.format_exc()
                 )
+                return None
 
         return guarded
 

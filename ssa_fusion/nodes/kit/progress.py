@@ -25,7 +25,8 @@ message's log time in the bag is the clock of its phase, the same on any machine
 
 Each consumer publishes its counters on `TOPIC_PROGRESS` (`ProgressReporter`: a
 ``diagnostic_msgs/DiagnosticStatus`` named after the node, latched, sent within
-`REPORT_PERIOD_S` of a change, or at once by `ProgressReporter.report`), with its process
+`REPORT_PERIOD_S` of a change while the node has work (`SsaNode.wakeup`), or at once by
+`ProgressReporter.nudge`), with its process
 (`nodes.kit.liveness`); the simulator keeps the latest of each (`ProgressWatch`), of its
 run only, and asks `Lockstep.go_on`. It waits as long as every consumer it waits for lives,
 and gives up on one only when it is gone (`Lockstep.gone`). The topics are not under
@@ -39,13 +40,14 @@ import time
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ssa_fusion.nodes.kit.diagnostics import RECORDED, Count, wall_timer
+from ssa_fusion.nodes.kit.diagnostics import RECORDED, Count
 from ssa_fusion.nodes.kit.liveness import alive, process_keys
 from ssa_fusion.nodes.kit.shards import shard_range
 from ssa_fusion.ros.interfaces import DiagnosticStatus, KeyValue
@@ -61,6 +63,9 @@ from ssa_fusion.ros.topics import (
     TOPIC_TRUTH,
     TOPIC_WITHHELD,
 )
+
+if TYPE_CHECKING:
+    from ssa_fusion.nodes.kit.base import SsaNode
 
 TOPIC_PROGRESS = "/lockstep"
 """Consumers' progress (``diagnostic_msgs/DiagnosticStatus``, name = node name)."""
@@ -138,6 +143,8 @@ def wants(reports: Mapping[str, Mapping[str, str]], nodes: Sequence[str], key: s
         if value.lstrip("-").isdigit() and int(value) * 1e-9 <= t + 1e-6:
             return True
     return False
+
+
 OBJECT_TOPICS = (TOPIC_MEASUREMENT, TOPIC_WITHHELD, TOPIC_TRUTH)
 """What the simulator of one object publishes, besides /clock."""
 
@@ -145,27 +152,22 @@ OBJECT_TOPICS = (TOPIC_MEASUREMENT, TOPIC_WITHHELD, TOPIC_TRUTH)
 class ProgressReporter:
     """Publish a node's progress counters (`counters()`: name -> value) when they change.
 
-    With them `CLOCK`: `clock()` (ns), by default the node's clock (sim time). The counters
-    are looked at every `REPORT_PERIOD_S` (`poll`), or when the node says they changed
-    (`nudge`; then the timer runs only to send what a nudge held back).
+    With them `CLOCK`: `clock()` (ns), by default the node's clock (sim time), and the
+    node's process (`nodes.kit.liveness`). Checked every `REPORT_PERIOD_S` while the node
+    has work, not while it waits (`SsaNode.wakeup`: its inputs, its clock and its other work
+    wake the check up); `nudge` reports at once what a message just handled changed.
     """
 
-    def __init__(self, node: Node, counters: Callable[[], Mapping[str, str | int]],
-                 clock: Callable[[], int] | None = None, poll: bool = True) -> None:
+    def __init__(self, node: SsaNode, counters: Callable[[], Mapping[str, str | int]],
+                 clock: Callable[[], int] | None = None) -> None:
         self.node = node
         self.counters = counters
         self.clock = clock or (lambda: int(node.get_clock().now().nanoseconds))
         self.pub = node.create_publisher(DiagnosticStatus, TOPIC_PROGRESS, PROGRESS_QOS)
         self._sent: dict[str, str] = {}
-        self._sent_at = -1.0
+        self._sent_at = -math.inf
         self._process = process_keys()
-        self.poll = poll
-        self.timer = wall_timer(node, REPORT_PERIOD_S, self._tick)  # the first report
-
-    def _tick(self) -> None:
-        self.report()
-        if not self.poll:
-            self.timer.cancel()
+        self.timer = node.wakeup(REPORT_PERIOD_S, self.report)
 
     def nudge(self) -> None:
         """Report now, unless a report went out within `REPORT_PERIOD_S` (then soon after).
@@ -175,21 +177,25 @@ class ProgressReporter:
         """
         if time.monotonic() - self._sent_at >= REPORT_PERIOD_S:
             self.report()
-        elif self.timer.is_canceled():
-            self.timer.reset()
+        else:
+            self.timer.arm()
 
-    def report(self) -> None:
-        """Publish the counters if any changed since the last report (with the process)."""
+    def report(self) -> bool:
+        """Publish the counters if any changed since the last report; return whether.
+
+        With them `CLOCK` and the process (`nodes.kit.liveness.process_keys`).
+        """
         now = {k: str(v) for k, v in self.counters().items()}
         now[CLOCK] = str(self.clock())
         now.update(self._process)
         if now == self._sent:
-            return
+            return False
         self._sent = now
         self._sent_at = time.monotonic()
         self.pub.publish(DiagnosticStatus(
             name=self.node.get_name(),
             values=[KeyValue(key=k, value=v) for k, v in now.items()]))
+        return True
 
 
 class ProgressWatch:
@@ -344,10 +350,12 @@ class Lockstep:
     node : Node
         The simulator (it subscribes to `TOPIC_PROGRESS`).
     nodes : sequence of str
-        The consumers to wait for (see `waiting`, `object_waiting`).
-    keys : ndarray of int (M,) or None
-        A catalog: the ``shard_key`` of each measurement of the schedule, in publication
-        order; None: one object (`object_waiting`, what was sent in `object`).
+        The consumers to wait for (see `waiting`, `object_waiting`), as long as they live
+        (`go_on`).
+    keys : ndarray of int (N,) or None
+        A catalog: the ``shard_key`` of each object (what its measurements carry);
+        `published` counts the measurements of each as they go out. None: one object
+        (`object_waiting`, what was sent in `object`).
     on_report : callable, optional
         Called after each progress report taken (the simulator goes on at once).
     """
@@ -359,7 +367,7 @@ class Lockstep:
         self.nodes = list(nodes)
         self.keys = keys
         self.sent = 0
-        """A catalog's measurements published so far (the simulator sets it)."""
+        """A catalog's measurements published so far (`published`)."""
         self.object = ObjectSent()
         """What one object's simulator has sent (it sets it)."""
         self.clock_ns = 0
@@ -369,16 +377,24 @@ class Lockstep:
         self.since: float | None = None
         """Wall time (monotonic) the current wait began (None: not waiting)."""
         self._looked = -math.inf  # wall time (monotonic) liveness was last looked at
+        self._per_object = np.zeros(0 if keys is None else len(keys), dtype=np.int64)
         self._by_shard: dict[int, tuple[int, NDArray[np.int64]]] = {}
+
+    def published(self, objects: NDArray[np.int64]) -> None:
+        """Count measurements just published, of the objects `objects` (indices in `keys`)."""
+        assert self.keys is not None
+        self._per_object += np.bincount(objects, minlength=len(self.keys))
+        self.sent += len(objects)
 
     def sent_by_shard(self, shards: int) -> NDArray[np.int64]:
         """Return the measurements published so far to each of `shards` shards (shards,)."""
-        n, counts = self._by_shard.get(shards, (0, np.zeros(shards, dtype=np.int64)))
-        if n < self.sent:
+        n, counts = self._by_shard.get(shards, (-1, np.zeros(shards, dtype=np.int64)))
+        if n != self.sent:
             assert self.keys is not None
             his = np.array([shard_range(k, shards)[1] for k in range(shards)])
-            shard = np.searchsorted(his, self.keys[n:self.sent])  # first range ending at/after
-            counts = counts + np.bincount(shard, minlength=shards)
+            shard = np.searchsorted(his, self.keys)  # the first range ending at/after the key
+            counts = np.bincount(shard, weights=self._per_object,
+                                 minlength=shards).astype(np.int64)
             self._by_shard[shards] = (self.sent, counts)
         return counts
 

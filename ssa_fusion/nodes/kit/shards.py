@@ -16,9 +16,13 @@ import numpy as np
 from numpy.typing import NDArray
 from rclpy.subscription_content_filter_options import ContentFilterOptions
 
-from ssa_fusion.nodes.kit.diagnostics import NodeCause
+from ssa_fusion.core.base.rows import EstimateRows
+from ssa_fusion.core.base.types import Cause, UpdateSource
+from ssa_fusion.nodes.kit.diagnostics import Diagnostics, NodeCause
 from ssa_fusion.ros import messages
+from ssa_fusion.ros.interfaces import Message
 from ssa_fusion.ros.messages import shard_range
+from ssa_fusion.ros.topics import TOPIC_ESTIMATE_BATCH
 
 LIST_OBJECTS = 200
 """Up to this many objects, a shard lists their ids on /diagnostics (``object_ids``)."""
@@ -86,3 +90,21 @@ def content_filter(shard: int, shards: int, condition: str = "",
     if not terms:
         return None
     return ContentFilterOptions(" AND ".join(terms), params)
+
+
+def sensor_estimates(diag: Diagnostics, msg: Message) -> tuple[int, EstimateRows | None]:
+    """Return (rows taken, their rows) of an EstimateBatch of the catalog's estimates.
+
+    A batch of forecasts (any source but SENSOR) is counted ``ignored_not_sensor``:
+    (0, None); a SENSOR batch is taken whole (its row count, for lockstep), and one whose
+    columns disagree is refused whole (``rejected_malformed``): (rows, None).
+    """
+    m = len(msg.object_id)
+    if msg.update_source != UpdateSource.SENSOR:
+        diag.counts[NodeCause.IGNORED_NOT_SENSOR] += m
+        return 0, None
+    try:
+        return m, messages.estimate_batch_from_msg(msg)
+    except ValueError as exc:
+        diag.count(Cause.REJECTED_MALFORMED, f"{TOPIC_ESTIMATE_BATCH}: {exc}", n=m)
+        return m, None
