@@ -46,23 +46,10 @@ def burners(n: int) -> Iterator[None]:
 
 
 def same_bag(a: Path, b: Path) -> bool:
-    """Whether two bags hold the same /ssa/* messages: topic, log time and content (in
-    log-time order; messages at one log time in any order). The content is compared as CDR
-    re-serialized by `rosbags` (zero padding): the publishers' CDR leaves the alignment
-    padding after a string unset, so raw bytes differ from run to run where nothing does."""
-    from rosbags.rosbag2 import Reader
+    """Whether two bags hold the same /ssa/* messages (`ros.bag_runs.same_messages`)."""
+    from ssa_fusion.ros.bag_runs import same_messages
 
-    from ssa_fusion.ros.bagio import typestore
-
-    store = typestore()
-
-    def load(bag: Path) -> list[tuple[str, int, bytes]]:
-        with Reader(bag) as r:
-            return sorted((c.topic, t, bytes(store.serialize_cdr(
-                store.deserialize_cdr(d, c.msgtype), c.msgtype)))
-                for c, t, d in r.messages() if c.topic.startswith("/ssa/"))
-
-    return load(a) == load(b)
+    return same_messages(a, b)
 
 
 def main() -> None:

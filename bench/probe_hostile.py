@@ -29,7 +29,9 @@ Classes of probes (a class number is the finding it re-creates):
     values in one TDM/XML observation, day 366 of a common year in a TLE, NUL in a name,
     catalogue number 00000, an XInclude in an OMM field, ``q: true`` in a params file);
 13. damaged bags: one flipped byte in a chunk, 4 kB of garbage inserted or written over at
-    one third: `bag repair` keeps every intact chunk and says what it lost.
+    one third: `bag repair` keeps every intact chunk and says what it lost;
+14. lockstep under load and pauses, 15. run identity and strangers, 16. what a run leaves to
+    other local users (shared memory, logs, sockets): `probe_sharing.py`.
 
 Each probe runs with a wall timeout; its outcome is one of ``clean`` (the expected exit
 code; where an error is expected, a bounded error line; no traceback in any output or node
@@ -1314,7 +1316,10 @@ def all_probes(args: argparse.Namespace, can_mount: bool) -> list[Probe]:
               *cli_option_probes(args.large), *cache_probes(), *silent_accept_probes(),
               *damaged_bag_probes()]
     if not args.no_graph:
-        probes += [*graph_probes(), *flood_probes(), *disk_probes(can_mount)]
+        from probe_sharing import sharing_probes
+
+        probes += [*graph_probes(), *flood_probes(), *disk_probes(can_mount),
+                   *sharing_probes()]
         if args.listen:
             probes += list(listen_probe())
     if args.only:

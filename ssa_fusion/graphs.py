@@ -22,7 +22,7 @@ from ssa_fusion.core.gaps.publisher import GapFill
 from ssa_fusion.formats.element_sets import Progress
 from ssa_fusion.params import settings
 from ssa_fusion.params.defaults import BAG_PATTERN
-from ssa_fusion.ros.readiness import OUTPUT, READERS
+from ssa_fusion.ros.readiness import LOCKSTEP_READERS, OUTPUT, READERS
 from ssa_fusion.ros.topics import (
     TOPIC_ASSOCIATED,
     TOPIC_CONJUNCTIONS,
@@ -37,6 +37,8 @@ LIVE_SCENARIOS = [*(n for n, s in scenarios.SCENARIOS.items() if s.is_orbit), *s
 WAIT_FOR = ["/ssa/measurement=3", "/ssa/forecast=2", "/ssa/estimate=1", "/ssa/truth=1",
             "/ssa/withheld=1", "/clock=3"]
 """What sensor_sim waits for before it starts: every node's subscriptions."""
+OBJECT_LOCKSTEP = ["filter", "surrogate", "recorder"]
+"""The consumers one object's simulator waits for in lockstep."""
 
 
 def sim_seconds(s: scenarios.Scenario | sky.SkyScenario) -> float:
@@ -59,15 +61,20 @@ def object_name(s: scenarios.Scenario | sky.SkyScenario) -> str:
 
 
 def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, seed: int,
-                    bag: Path, geometry_seed: int = -1) -> dict[str, dict[str, Any]]:
+                    bag: Path, geometry_seed: int = -1, *,
+                    lockstep: bool = True) -> dict[str, dict[str, Any]]:
     """Per-node parameters (SI units) that run scenario `s` live.
 
-    `geometry_seed`: a real-sky object's orbit turned as that case's (`sky.case_geometry`;
-    -1: its own).
+    In lockstep (`nodes.kit.progress`: sim time waits for the filter, the surrogate and
+    the recorder; `time_scale` is a ceiling) unless `lockstep` is False (open loop: sim time
+    follows the wall clock). `geometry_seed`: a real-sky object's orbit turned as that
+    case's (`sky.case_geometry`; -1: its own).
     """
     sensor: dict[str, Any] = {"scenario": s.name, "object_id": object_name(s),
                               "time_scale": time_scale, "seed": seed, "wait_for": WAIT_FOR,
-                              "wait_for_readers": READERS}
+                              "wait_for_readers": READERS + (LOCKSTEP_READERS if lockstep
+                                                             else []),
+                              "lockstep": OBJECT_LOCKSTEP if lockstep else [""]}
     if isinstance(s, sky.SkyScenario):  # the truth's cadence; the filter publishes at it
         sensor.update({"cadence": s.truth_cadence_s, "start": timescales.iso(s.t0),
                        "duration": s.duration_s, "truth": str(s.truth),
@@ -78,8 +85,10 @@ def node_parameters(s: scenarios.Scenario | sky.SkyScenario, time_scale: float, 
                        "after_gap": s.after_s})
         extra = {}
     estimator = s.estimator()
-    surrogate = {"use_sim_time": True, **settings.surrogate_params(estimator)}
-    filt = {"use_sim_time": True, **settings.filter_params(estimator), **extra}
+    surrogate = {"use_sim_time": True, **settings.surrogate_params(estimator),
+                 "lockstep": lockstep}
+    filt = {"use_sim_time": True, **settings.filter_params(estimator), **extra,
+            "lockstep": lockstep}
     if isinstance(s, sky.SkyScenario) and s.sites_file:  # stations of a sites file
         for node in (sensor, surrogate, filt):
             node["sites"] = s.sites_file
@@ -170,10 +179,6 @@ class NodeSpec(NamedTuple):
     params: dict[str, Any]
 
 
-CONJUNCTION_LOCKSTEP_S = 1800.0
-"""Wall s the simulator waits for a step's consumers when the conjunction node is one (its
-first re-screening screens the whole catalog)."""
-
 MAX_TIME_SCALE = 1e9
 """The time scale of ``--time-scale max`` (a catalog in lockstep as fast as its slowest
 consumer): sim time a billion times faster than the wall clock is no ceiling at all."""
@@ -252,8 +257,6 @@ def catalog_graph(scenario: sky.SkyScenario, catalog: Path, objects: int, synthe
             "time_scale": min(float(time_scale), MAX_TIME_SCALE), "seed": seed,
             "start": start, **own, "shards": shards, "unlabelled": unlabelled,
             "lockstep": [*names, *gaps, *watch, "recorder"] if lockstep else [""],
-            # a re-screening of a whole catalog (its first) may take minutes
-            **({"lockstep_timeout": CONJUNCTION_LOCKSTEP_S} if watch else {}),
             "wait_for": [f"{TOPIC_MEASUREMENT_BATCH}={shards + 1}",
                          f"{TOPIC_ESTIMATE_BATCH}={len(gaps) + 1}"],
             "wait_for_readers": readers}),

@@ -17,7 +17,10 @@ as soon as their condition holds, a larger factor never slows a passing test; ra
 import math
 import os
 import signal
-from collections.abc import Callable
+import subprocess
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from rclpy.qos import QoSProfile
@@ -93,5 +96,24 @@ def report_probe_matches(g: RosGraph, subs: list[Subscription[Any]],
     return [f"{name}:{sub.topic_name}" for sub in subs]
 
 
-__all__ = ["OBJECT_NODES", "TIMEOUT_FACTOR", "NodeProcess", "RosGraph", "report_probe_matches",
-           "run_object_graph"]
+@contextmanager
+def cpu_burners(n: int) -> Iterator[None]:
+    """Run `n` busy-loop processes (a loaded machine) for the duration of the block."""
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+    try:
+        yield
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()
+
+
+__all__ = [
+    "OBJECT_NODES",
+    "TIMEOUT_FACTOR",
+    "NodeProcess",
+    "RosGraph",
+    "cpu_burners",
+    "report_probe_matches",
+    "run_object_graph",
+]

@@ -44,15 +44,19 @@ def domain_id(text: str) -> int:
 
 
 def add_domain_id(p: argparse.ArgumentParser) -> None:
-    """Add `--domain-id` to `p`.
+    """Add `--domain-id` and `--share-domain` to `p`.
 
     It defaults to $ROS_DOMAIN_ID when that is set (so that ROS tools in the same shell see
-    the run), else to a free-looking id chosen by `graph.Graph`.
+    the run), else to a free domain (`ros.domains`: one without other participants). A
+    domain named that others use is refused unless `--share-domain`.
     """
     env = os.environ.get("ROS_DOMAIN_ID", "").strip()
     p.add_argument("--domain-id", type=domain_id, default=int(env) if env.isdigit() else None,
-                   help="ROS domain id (default: $ROS_DOMAIN_ID if set, else a free-looking "
-                        "one in 1..100)")
+                   help="ROS domain id (default: $ROS_DOMAIN_ID if set, else a free one in "
+                        "1..101, looked for); refused when other nodes are in it")
+    p.add_argument("--share-domain", action="store_true",
+                   help="run in --domain-id even if other nodes are in it (the run keeps to "
+                        "its own traffic, docs/SECURITY.md)")
 
 
 def static_peers(text: str) -> tuple[str, ...]:

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 from ssa_fusion import graphs
 from ssa_fusion.apps import evaluate, report, runs
-from ssa_fusion.apps.args import add_discovery, add_domain_id, discovery, time_scale
+from ssa_fusion.apps.args import add_discovery, add_domain_id, time_scale
 from ssa_fusion.apps.heartbeat import working
 from ssa_fusion.apps.progress_lines import ProgressLines
 from ssa_fusion.core.base.types import UpdateSource
@@ -216,7 +216,6 @@ def late_warning(late: evaluate.LateForecasts, counters: dict[str, int]) -> str 
 def catalog_options_given(args: argparse.Namespace) -> list[str]:
     """Return the catalog-only options of `args` set away from their defaults."""
     given = {"--objects": args.objects != 0, "--synthetic": args.synthetic != 0,
-             "--time-scale max": math.isinf(args.time_scale), "--open-loop": not args.lockstep,
              "--shards": args.shards != 1, "--no-surrogate": not args.surrogate,
              "--surrogate-param": bool(args.surrogate_param),
              "--remote-shards": bool(args.remote_shards),
@@ -295,6 +294,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"error: {', '.join(catalog_only)} apply to a catalog run (--catalog FILE)",
               file=sys.stderr)
         return 2
+    if math.isinf(args.time_scale) and not args.lockstep:
+        print("error: --time-scale max needs lockstep (without --open-loop): in the open "
+              "loop sim time follows the wall clock", file=sys.stderr)
+        return 2
     chosen = _scenario(args)
     if chosen is None:
         return 2
@@ -303,12 +306,15 @@ def run(args: argparse.Namespace) -> int:
     if dirs is None:
         return 2
     out, bag = dirs
-    params = graphs.node_parameters(s, args.time_scale, args.seed, bag, geometry_seed)
+    scale = min(args.time_scale, graphs.MAX_TIME_SCALE)
+    params = graphs.node_parameters(s, scale, args.seed, bag, geometry_seed,
+                                    lockstep=args.lockstep)
     sim_s = graphs.sim_seconds(s)
-    graph = Graph(out / "logs", args.domain_id, discovery(args))
-    print(f"live: {s.name}, {sim_s / 3600:.1f} h of sim time at {args.time_scale:g}x "
-          f"(~{sim_s / args.time_scale:.0f} s of simulation after start-up); ROS domain "
-          f"{graph.domain_id}; logs in {out}/logs", flush=True)
+    graph = runs.run_graph(args, out / "logs", "live")
+    if graph is None:
+        return 2
+    print(f"live: {s.name}, {sim_s / 3600:.1f} h of sim time {_pace(args, sim_s)}; ROS "
+          f"domain {graph.domain_id}, run {graph.run}; logs in {out}/logs", flush=True)
     if isinstance(s, sky.SkyScenario):
         orbit = (f"object {graphs.object_name(s)} of {s.elements_file}" if s.element_set
                  else "the scenario's own orbit" if geometry_seed < 0 else
@@ -324,6 +330,14 @@ def run(args: argparse.Namespace) -> int:
     if runs.ended_badly(problems):
         return 1
     return _report(args, s.name, out, bag, time.monotonic() - t_start, sim_s, heard)
+
+
+def _pace(args: argparse.Namespace, sim_s: float) -> str:
+    """Say how sim time goes: in lockstep as fast as the nodes go, or at a time scale."""
+    if math.isinf(args.time_scale):
+        return "in lockstep as fast as the nodes go"
+    return (f"at {args.time_scale:g}x (~{sim_s / args.time_scale:.0f} s of simulation after "
+            f"start-up{', in lockstep' if args.lockstep else ', open loop'})")
 
 
 def _run_catalog(args: argparse.Namespace) -> int:
@@ -382,8 +396,10 @@ def _run_graph(graph: Graph, params: dict[str, dict[str, Any]], args: argparse.N
             graph.start_node(name, params=params[name])
         sensor = graph.start_node("sensor_sim", params=params["sensor_sim"])
         # a node that ends early (a recorder that cannot write its bag) ends the run at
-        # once: graph.close says which and why
-        if graph.wait_done_or_broken(sensor, timeout=60.0 + 3.0 * sim_s / args.time_scale):
+        # once: graph.close says which and why; in lockstep sim time waits for its nodes
+        # as long as they live: no limit
+        limit = math.inf if args.lockstep else 60.0 + 3.0 * sim_s / args.time_scale
+        if graph.wait_done_or_broken(sensor, timeout=limit):
             heard.last_output = _drain(graph)
 
 
@@ -419,7 +435,7 @@ def _report(args: argparse.Namespace, name: str, out: Path, bag: Path, wall: flo
                "late_forecast_epochs": late.epochs, "forecast_epochs": late.forecast_epochs,
                "filter_counters": counters}
     (out / "live.json").write_text(json.dumps(summary, indent=2))
-    slow = None if ran is None else slow_warning(ran, sim_s, args.time_scale)
+    slow = None if ran is None or args.lockstep else slow_warning(ran, sim_s, args.time_scale)
     if slow:
         print(slow, file=sys.stderr)
     print(f"\nrecorded {sum(data.counts.values())} messages to {bag} in {wall:.1f} s")

@@ -85,9 +85,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="catalog: filter (and surrogate) processes, each owning the objects "
                         "of its shard (default 1)")
     p.add_argument("--open-loop", dest="lockstep", action="store_false",
-                   help="catalog: sim time follows the wall clock at --time-scale whatever "
-                        "the nodes keep up with (default: lockstep, `nodes.kit.progress`: each "
-                        "step waits until the shards and the recorder took the last)")
+                   help="sim time follows the wall clock at --time-scale whatever the nodes "
+                        "keep up with (default: lockstep, `nodes.kit.progress`: each step "
+                        "waits until the filter(s), surrogate(s) and the recorder took the "
+                        "last, as long as they live)")
     p.add_argument("--remote-shards", type=shard_list, default=(), metavar="K[,K...]",
                    help="catalog: shards (filter and surrogate) that run on other hosts: not "
                         "started here; the run prints their commands, waits for them and "
@@ -241,18 +242,19 @@ def is_remote(spec: graphs.NodeSpec, remote: Sequence[int]) -> bool:
 
 
 def remote_commands(specs: Sequence[graphs.NodeSpec], remote: Sequence[int], domain_id: int,
-                    reach: Discovery) -> list[tuple[int, str]]:
+                    reach: Discovery, namespace: str = "/") -> list[tuple[int, str]]:
     """Return (shard, shell command) of each process of the `remote` shards, in start order.
 
     What another host runs to be shard k of this graph: ``ros2 run`` of its executable with
     its node name and parameters, in ROS domain `domain_id` with the discovery range of
     `reach` (its static peers name other hosts: they are this host's to announce to, and one
-    side naming the other is enough).
+    side naming the other is enough), in the run's `namespace` (its identity).
     """
     env = [f"ROS_DOMAIN_ID={domain_id}", *Discovery(reach.range).exports()]
+    ns = ["-r", f"__ns:={namespace}"] if namespace != "/" else []
     return [(s.params["shard"],
              shlex.join([*env, "ros2", "run", "ssa_fusion", s.executable,
-                         *ros_arguments(s.params), "-r", f"__node:={s.name}"]))
+                         *ros_arguments(s.params), *ns, "-r", f"__node:={s.name}"]))
             for s in specs if is_remote(s, remote)]
 
 
@@ -284,7 +286,9 @@ def run(args: argparse.Namespace) -> int:
                           catalog_surrogate_params(args), bag, args.start, args.lockstep,
                           unlabelled, conj)
     remote = getattr(args, "remote_shards", ())
-    graph = Graph(out / "logs", args.domain_id, discovery(args))
+    graph = runs.run_graph(args, out / "logs", "live")
+    if graph is None:
+        return 2
     _announce(args, s, len(entries), specs, graph, remote, sim_s, unlabelled, out, skipped)
     t_start, command_start = time.monotonic(), time.time()
     outcome = _Outcome()
@@ -377,7 +381,8 @@ def _announce(args: argparse.Namespace, s: sky.SkyScenario, objects: int,
           f"{sim_s / 3600:g} h of sim time {pace(args)}, {args.shards} filter "
           f"shard(s){' with a surrogate each' if gaps else ''}; ROS domain {graph.domain_id}; "
           f"logs in {out}/logs", flush=True)
-    for k, command in remote_commands(specs, remote, graph.domain_id, graph.discovery):
+    for k, command in remote_commands(specs, remote, graph.domain_id, graph.discovery,
+                                      graph.namespace):
         print(f"  on shard {k}'s host: {command}", flush=True)
 
 
@@ -408,15 +413,14 @@ def _run_graph(graph: Graph, specs: Sequence[graphs.NodeSpec], remote: Sequence[
     diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
     outcome.diagnostics = diagnostics
     seen: Counter[int] = Counter()  # estimates (rows) heard, by update source
-    graph.probe.create_subscription(
-        EstimateBatch, TOPIC_ESTIMATE_BATCH,
-        lambda m: seen.update({m.update_source: len(m.object_id)}), CATALOG_QOS)
+    graph.subscribe(EstimateBatch, TOPIC_ESTIMATE_BATCH,
+                    lambda m: seen.update({m.update_source: len(m.object_id)}), CATALOG_QOS)
     started = {n.name: graph.start_node(n.executable, "-r", f"__node:={n.name}",
                                         name=n.name, params=n.params)
                for n in specs if not is_remote(n, remote)}
     sim = started["sensor_sim"]
     # else a node ended early (the recorder too): graph.close says which
-    # in lockstep no step waits longer than its timeout: no limit needed
+    # in lockstep sim time waits for its nodes as long as they live: no limit
     limit = math.inf if lockstep else 300.0 + 3.0 * wall_s
     if not graph.wait_done_or_broken(sim, limit):
         return

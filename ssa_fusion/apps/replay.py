@@ -77,7 +77,7 @@ from ssa_fusion.core.measure.laser_model import LaserModels
 from ssa_fusion.core.measure.validation import MAX_CLOCK_LEAD_S, ahead_of_clock
 from ssa_fusion.formats import sites as site_file
 from ssa_fusion.params import settings as node_settings
-from ssa_fusion.ros import bagio, messages
+from ssa_fusion.ros import bag_runs, bagio, messages
 from ssa_fusion.ros.laser_bag import is_laser
 from ssa_fusion.ros.topics import (
     TOPIC_CLOCK,
@@ -87,6 +87,7 @@ from ssa_fusion.ros.topics import (
     TOPIC_MEASUREMENT,
     TOPIC_METEO,
     TOPIC_REFERENCE,
+    TOPIC_RUN,
     TOPIC_SMOOTHED,
     TOPIC_TRUTH,
     TOPIC_WITHHELD,
@@ -97,7 +98,8 @@ PLAYED = (TOPIC_MEASUREMENT, TOPIC_TRUTH, TOPIC_WITHHELD)
 KEPT = (TOPIC_METEO, TOPIC_REFERENCE)
 """Topics an offline replay writes as recorded besides those it plays (a laser bag's)."""
 KNOWN = (*PLAYED, TOPIC_ESTIMATE, TOPIC_SMOOTHED, TOPIC_FORECAST, TOPIC_CLOCK, TOPIC_CONFIG,
-         TOPIC_METEO, TOPIC_REFERENCE, "/diagnostics", "/rosout", "/parameter_events")
+         TOPIC_METEO, TOPIC_REFERENCE, TOPIC_RUN, "/diagnostics", "/rosout",
+         "/parameter_events")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -123,6 +125,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run `ssa-fusion replay` (live over ROS 2, or ``--offline``); return the exit code."""
     try:
+        bag_runs.check_one_run(args.bag)  # a bag of two runs is no run to replay
         undecodable: Counter[str] = Counter()
         refused: Counter[tuple[str, str]] = Counter()
         # a catalog's bag is never read row by row as messages (millions of rows)
@@ -463,14 +466,14 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
               "surrogate": {"use_sim_time": True, **node_settings.surrogate_params(c), **own},
               "filter": {"use_sim_time": True, **node_settings.filter_params(c),
                          **recorded_gaps(stream), **own}}
-    opened = runs.replay_graph(record, args.domain_id)
+    opened = runs.replay_graph(args, record)
     if opened is None:
         return 2
     graph, logs = opened
     played = [m for m in stream if m.topic in PLAYED]
     print(f"replay: {args.bag} at rate {args.rate:g} into surrogate + filter: "
-          f"{replay_outcome.live_duration(played, args.rate)}; ROS domain {graph.domain_id}; "
-          f"logs in {logs}", flush=True)
+          f"{replay_outcome.live_duration(played, args.rate)}; ROS domain {graph.domain_id}, "
+          f"run {graph.run}; logs in {logs}", flush=True)
     t0 = time.monotonic()
     try:
         for n in ("recorder", "surrogate", "filter"):  # the recorder first: it hears all
@@ -492,7 +495,7 @@ def replay_live(args: argparse.Namespace, stream: list[bagio.BagMessage],
         published = {*player.pubs, TOPIC_CLOCK, TOPIC_FORECAST, TOPIC_ESTIMATE}
         needs = [*readers_of(published),
                  f"filter:{OUTPUT}{TOPIC_ESTIMATE}=2", f"surrogate:{OUTPUT}{TOPIC_FORECAST}=3"]
-        readers = ReadyNodes(graph.probe)
+        readers = ReadyNodes(graph.probe, graph.subscribe)
 
         def how_far() -> str:
             return (f"played {player.published} of {len(played)} messages, "

@@ -442,13 +442,14 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
     from ssa_fusion.ros.readiness import OUTPUT, ReadyNodes
 
     names = [f"catalog_filter_{int(p['shard'])}" for p in chosen.shards]
-    opened = runs.replay_graph(record, args.domain_id)
+    opened = runs.replay_graph(args, record)
     if opened is None:
         return 2
     graph, logs = opened
     played = [m for m in raw if m.topic in INPUTS]
     print(f"replay: {args.bag} at rate {args.rate:g} into {len(names)} catalog_filter "
-          f"process(es); ROS domain {graph.domain_id}; logs in {logs}", flush=True)
+          f"process(es); ROS domain {graph.domain_id}, run {graph.run}; logs in {logs}",
+          flush=True)
     t0 = time.monotonic()
     try:
         graph.start_node("recorder", params={"use_sim_time": True, "bag": str(record)})
@@ -457,9 +458,8 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
                              params=node_params(p, args.sites))
         player = Player(graph.probe, played, args.rate)
         rows: list[int] = []
-        graph.probe.create_subscription(EstimateBatch, TOPIC_ESTIMATE_BATCH,
-                                        lambda m: rows.append(len(m.object_id)),
-                                        qos.CATALOG_QOS)
+        graph.subscribe(EstimateBatch, TOPIC_ESTIMATE_BATCH,
+                        lambda m: rows.append(len(m.object_id)), qos.CATALOG_QOS)
         filters = {TOPIC_MEASUREMENT_BATCH, TOPIC_MEASUREMENT}
         graph.wait_for(player.subscribers_ready(
             {t: 1 + len(names) * (t in filters) for t in player.pubs}),
@@ -468,7 +468,7 @@ def replay_live(args: argparse.Namespace, raw: list[bagio.BagMessage],
                  *(f"{n}:{OUTPUT}{TOPIC_ESTIMATE_BATCH}" for n in names),
                  *(f"{who}:{t}" for t in sorted(filters & set(player.pubs))
                    for who in ("recorder", *names))]
-        readers = ReadyNodes(graph.probe)
+        readers = ReadyNodes(graph.probe, graph.subscribe)
         graph.play(player, lambda: readers.ready(needs),
                    "the catalog filter(s) and the recorder to match their publishers")
         graph.wait_quiet(lambda: sum(rows), quiet_s=1.0, limit_s=60.0)

@@ -70,6 +70,9 @@ def run(args: argparse.Namespace, stream: list[bagio.BagMessage], bag: LaserBag,
               "filter": filter_params(bag, setup)}
     logs = record.with_name(record.name + "_logs")
     try:
+        # no run of its own (`runs.replay_graph`): a node of a run spins rclpy's
+        # SingleThreadedExecutor, and the laser filter's updates then differ from the
+        # offline replay's
         graph = Graph(logs, args.domain_id)
     except OSError as exc:
         print(f"error: cannot use {record}: {exc}", file=sys.stderr)
@@ -93,7 +96,7 @@ def run(args: argparse.Namespace, stream: list[bagio.BagMessage], bag: LaserBag,
         published = {*player.pubs, TOPIC_CLOCK, TOPIC_ESTIMATE}
         needs = [*(r for r in readers_of(published) if not r.startswith("surrogate:")),
                  f"filter:{TOPIC_METEO}", f"filter:{OUTPUT}{TOPIC_ESTIMATE}=2"]
-        readers = ReadyNodes(graph.probe)
+        readers = ReadyNodes(graph.probe, graph.subscribe)
         graph.play(player, lambda: readers.ready(needs),
                    "filter and recorder to match their publishers")
         graph.wait_quiet(lambda: len(seen), quiet_s=1.0, limit_s=60.0)

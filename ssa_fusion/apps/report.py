@@ -31,7 +31,7 @@ from ssa_fusion.apps.report_figures import (
 from ssa_fusion.core.base import metrics, types
 from ssa_fusion.core.gaps import estimator as config
 from ssa_fusion.formats import sites as site_file
-from ssa_fusion.ros import bagio
+from ssa_fusion.ros import bag_runs, bagio
 from ssa_fusion.ros.laser_bag import is_laser
 from ssa_fusion.ros.topics import TOPIC_CONFIG
 
@@ -66,6 +66,7 @@ def run(args: argparse.Namespace) -> int:
     """
     out = args.out or args.bag.with_name(args.bag.name + "_report")
     try:
+        bag_runs.check_one_run(args.bag)  # a bag of two runs is no run to score
         # a catalog's bag (`replay_catalog.catalog_reason`, as `replay` tells it) is scored
         # object by object, never as one object's run; its recorded catalog_filter
         # settings tell it without holding its measurements

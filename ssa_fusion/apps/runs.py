@@ -1,10 +1,11 @@
 """Run directories of `ssa-fusion live`: one per run, named like rosbag2's bags, and the logs.
 
 `default_out` names a new directory (`out/live/<scenario>_<date-time>`), `link_latest`
-points `out/live/latest` at it, `run_dirs` makes it and picks the bag inside, and
+points `out/live/latest` at it, `run_dirs` makes it and picks the bag inside,
 `sensor_wall_times` reads from sensor_sim's log when the simulation started and ended,
-`ended_badly` says which node processes of a run did not end well, and `replay_graph` opens
-the graph of a replay beside the bag it records.
+`ended_badly` says which node processes of a run did not end well, `run_graph` gives a run
+its identity and its ROS domain (`ros.run_identity`, `ros.domains`), and `replay_graph`
+opens a replay's (`run_graph`) beside the bag it records.
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ import sys
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+from ssa_fusion.apps.args import discovery
 
 if TYPE_CHECKING:
     from ssa_fusion.ros.processes import Graph
@@ -51,6 +54,25 @@ def ended_badly(problems: list[str]) -> bool:
     if problems:
         print("error: node process(es) ended badly:\n" + "\n\n".join(problems), file=sys.stderr)
     return bool(problems)
+
+
+def run_graph(args: argparse.Namespace, logs: Path, command: str) -> Graph | None:
+    """Return the graph of a new run in its ROS domain, or None after a one-line error.
+
+    A new run id (its nodes' namespace); ``--domain-id`` (or $ROS_DOMAIN_ID) if no one else
+    is in it (``--share-domain``: whoever is), else a free domain (`ros.domains.open_graph`).
+    `command` prefixes what it says of domains passed over.
+    """
+    from ssa_fusion.ros.domains import DomainInUseError, open_graph
+    from ssa_fusion.ros.run_identity import new_run_id
+
+    try:
+        return open_graph(logs, args.domain_id, new_run_id(), discovery(args),
+                          share=bool(getattr(args, "share_domain", False)),
+                          say=lambda text: print(f"{command}: {text}", flush=True))
+    except DomainInUseError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return None
 
 
 _LOG_STAMP = re.compile(r"\[(\d+(?:\.\d+)?)\]")
@@ -102,17 +124,16 @@ def run_dirs(args: argparse.Namespace, name: str) -> tuple[Path, Path] | None:
     return out, bag
 
 
-def replay_graph(record: Path, domain_id: int | None) -> tuple[Graph, Path] | None:
-    """Return the graph of a replay recording to `record`, and its logs directory.
+def replay_graph(args: argparse.Namespace, record: Path) -> tuple[Graph, Path] | None:
+    """Return the graph of a replay recording to `record` (`run_graph`), and its logs directory.
 
     The logs go beside the bag (its name + ``_logs``); None when that directory cannot be
-    used (said on stderr).
+    used or no ROS domain can be had (said on stderr).
     """
-    from ssa_fusion.ros.processes import Graph
-
     logs = record.with_name(record.name + "_logs")
     try:
-        return Graph(logs, domain_id), logs
+        graph = run_graph(args, logs, "replay")
     except OSError as exc:
         print(f"error: cannot use {record}: {exc}", file=sys.stderr)
         return None
+    return None if graph is None else (graph, logs)

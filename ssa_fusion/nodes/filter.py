@@ -8,7 +8,10 @@ and through a gap predictions or residual forecasts on the grid of multiples of
 `predict_period`: what it publishes is `core.gaps.publisher.GapPublisher`'s policy, which
 the offline replay (`ssa-fusion replay --offline`) follows too. Rejected input is counted by
 cause on ``/diagnostics``. The settings in effect are published (latched) on
-``/ssa/config``, so every bag records them. ``station`` names built-in stations
+``/ssa/config``, so every bag records them. With ``lockstep`` it publishes its predictions
+and gap forecasts only up to the time sensor_sim releases on ``/lockstep/decisions`` (after
+the surrogate's forecasts of those epochs reached it), and reports its progress
+(`nodes.kit.progress`). ``station`` names built-in stations
 (`core.earth.stations`) or those of the ``sites`` file (`formats.sites`).
 
 With ``kind`` laser_range it is the laser filter (`nodes.kit.laser`): the stations and the
@@ -31,10 +34,22 @@ from ssa_fusion.core.gaps.publisher import GapFill, GapPublisher, Published
 from ssa_fusion.nodes.kit import laser
 from ssa_fusion.nodes.kit.base import SsaNode
 from ssa_fusion.nodes.kit.diagnostics import PUBLISHED_BY_SOURCE
+from ssa_fusion.nodes.kit.progress import (
+    DECIDED,
+    NEXT_DECISION,
+    PUBLISHED_ESTIMATES,
+    RELEASE_QOS,
+    TAKEN,
+    TAKEN_FORECASTS,
+    TOPIC_RELEASE_DECISIONS,
+    ProgressReporter,
+    time_ns,
+)
 from ssa_fusion.params import settings
 from ssa_fusion.params.checks import ParamValue
 from ssa_fusion.params.tables.filter import PARAMETERS
 from ssa_fusion.ros import messages
+from ssa_fusion.ros.interfaces import Clock
 from ssa_fusion.ros.interfaces import Measurement as MeasurementMsg
 from ssa_fusion.ros.interfaces import Meteo as MeteoMsg
 from ssa_fusion.ros.interfaces import StateEstimate as StateEstimateMsg
@@ -68,6 +83,31 @@ class FilterNode(SsaNode):
                            partial(self.on_measurement, topic=topic, source=source), DATA_QOS)
         self.wall_timer(TICK_S, self.predict)
         self.reset_on_backward_jump(self.gaps.reset, "filter reset")
+        self.decided_ns = 0
+        self.progress: ProgressReporter | None = None
+        if self.params.flag("lockstep"):
+            self.subscribe(Clock, TOPIC_RELEASE_DECISIONS, self.on_release, RELEASE_QOS)
+            self.run_clock.listen(lambda _data, _t: self.report())
+            self.progress = ProgressReporter(self, self.counters)
+
+    def counters(self) -> dict[str, int | str]:
+        """Return the lockstep progress: what it took, published and decided, and will."""
+        return {TAKEN: self.handled[TOPIC_MEASUREMENT],
+                TAKEN_FORECASTS: self.handled[TOPIC_FORECAST],
+                PUBLISHED_ESTIMATES: sum(self.diag.counts[k] for k in PUBLISHED_BY_SOURCE),
+                DECIDED: self.decided_ns, NEXT_DECISION: time_ns(self.gaps.next_decision())}
+
+    def on_release(self, msg: Clock) -> None:
+        """Publish what is decided up to the time released (lockstep), and say so."""
+        self.replay_held()
+        self.publish(self.gaps.advance(messages.stamp_to_seconds(msg.clock)))
+        self.decided_ns = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
+        self.report()
+
+    def report(self) -> None:
+        """Report the lockstep progress now (lockstep only)."""
+        if self.progress is not None:
+            self.progress.nudge()
 
     def _estimator(self) -> EstimatorConfig:
         """Return the estimator settings of the parameters in effect (core units)."""
@@ -100,16 +140,23 @@ class FilterNode(SsaNode):
             self.diag.count(Cause.REJECTED_SOURCE,
                             f"source {msg.source} on {topic}, which carries only source "
                             f"{int(source)} ({Source(source).name})")
+            self.handled[topic] += 1
+            self.report()
             return
         again = partial(self.on_measurement, msg, topic, source)
-        m = self.measurement_in(msg, again, self.tracker.object_id)
+        m = self.measurement_in(msg, again, self.tracker.object_id, topic)
         if m is not None:
             self.publish(self.gaps.measurement(m))
+        self.report()
 
     def predict(self) -> None:
-        """Take what waited for the clock; publish the predictions due by the clock."""
+        """Take what waited for the clock; publish the predictions due by the clock.
+
+        In lockstep the predictions wait for their release (`on_release`).
+        """
         self.replay_held()
-        self.publish(self.gaps.advance(self.now_s()))
+        if self.progress is None:
+            self.publish(self.gaps.advance(self.now_s()))
 
     def publish(self, out: Published) -> None:
         """Publish `out`'s estimates; count what the tracker refused and what was skipped."""

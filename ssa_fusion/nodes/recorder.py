@@ -15,23 +15,30 @@ everything received. A disk too full for the next message and the bag's closing 
 one line naming the bag and the reason, exit code 1; any other write error leaves what was
 flushed before readable (`ssa-fusion bag repair`).
 
+It records its run only (`ros.run_identity`): what another run or a stranger publishes on a
+recorded topic is counted (`foreign_run`, `foreign_clock`) and never written, and the bag
+names its run once, on ``/ssa/run``. Under sim time ``/clock`` is written from the node's own
+clock subscription, after the clock is set: a clock's log time is its own time.
+
     ros2 run ssa_fusion recorder --ros-args -p bag:=bags/run1
 """
 
 from __future__ import annotations
 
 import importlib
+import json
 from collections.abc import Callable
 from functools import partial
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 
 from ssa_fusion.core.base.types import Cause
 from ssa_fusion.nodes.kit.base import SsaNode
 from ssa_fusion.nodes.kit.diagnostics import RECORDED
 from ssa_fusion.nodes.kit.process import EXIT_FAILED, finish
 from ssa_fusion.nodes.kit.progress import (
+    OBJECT_TOPICS,
     RECORDED_ASSOCIATED,
     RECORDED_ESTIMATES,
     RECORDED_MEASUREMENTS,
@@ -40,9 +47,16 @@ from ssa_fusion.nodes.kit.progress import (
 )
 from ssa_fusion.params.rows import ParameterError
 from ssa_fusion.params.tables.recorder import PARAMETERS
-from ssa_fusion.ros.bagio import BagFullError, BagWriter, qos_from_rclpy
-from ssa_fusion.ros.interfaces import Message
-from ssa_fusion.ros.topics import DATA_DEPTH
+from ssa_fusion.ros.bagio import LATCHED_QOS, BagFullError, BagWriter, qos_from_rclpy
+from ssa_fusion.ros.interfaces import Message, String
+from ssa_fusion.ros.run_identity import run_of
+from ssa_fusion.ros.topics import (
+    DATA_DEPTH,
+    TOPIC_CLOCK,
+    TOPIC_ESTIMATE,
+    TOPIC_FORECAST,
+    TOPIC_RUN,
+)
 
 HOLD_LIMIT = 10_000
 """Most messages held until sim time starts (beyond, they are written stamped 0)."""
@@ -108,18 +122,40 @@ class Recorder(SsaNode):
         self.wall_timer(p.number("discover_period"), self.discover_now_and_then)
         self.wall_timer(p.number("flush_period"), self.flush)
         self.progress = ProgressReporter(self, self.recorded)
+        self.run_clock.listen(self.on_clock)
+        self._name_run()
         self.get_logger().info(f"recording to {bag}")
         self.discover()
 
-    def recorded(self) -> dict[str, int]:
-        """Return the lockstep progress: the batches' rows recorded (`nodes.kit.progress`).
+    def _name_run(self) -> None:
+        """Hold the bag's ``/ssa/run`` message (written at the first clock), in a run."""
+        run = run_of(self.get_namespace())
+        if run is None:
+            return
+        self.writer.add_topic(TOPIC_RUN, "std_msgs/msg/String", [LATCHED_QOS])
+        text = json.dumps({"run": run, "namespace": self.get_namespace()})
+        self._held.append((TOPIC_RUN, serialize_message(String(data=text))))
+        self.diag.counts[RECORDED + TOPIC_RUN] += 1
 
-        Measurements and estimates always; the unlabelled detections' truth and the
-        associated detections once their topic is recorded.
+    def on_clock(self, data: bytes, _t_ns: int) -> None:
+        """Write a /clock of the run (taken by the node's clock), once its topic is recorded."""
+        if self._subs.get(TOPIC_CLOCK) is self.run_clock:
+            self.on_message(TOPIC_CLOCK, data)
+        else:
+            self.progress.nudge()
+
+    def recorded(self) -> dict[str, int]:
+        """Return the lockstep progress: what it recorded (`nodes.kit.progress`).
+
+        A catalog's batches' rows of measurements and estimates always; the unlabelled
+        detections' truth and the associated detections once their topic is recorded; one
+        object's messages of each of its topics recorded.
         """
         keys = [RECORDED_MEASUREMENTS, RECORDED_ESTIMATES,
                 *(k for k in (RECORDED_TRUTH, RECORDED_ASSOCIATED)
-                  if k.removeprefix(RECORDED) in self._subs)]
+                  if k.removeprefix(RECORDED) in self._subs),
+                *(RECORDED + t for t in (*OBJECT_TOPICS, TOPIC_FORECAST, TOPIC_ESTIMATE)
+                  if t in self._subs)]
         return {k: self.diag.counts[k] for k in keys}
 
     def wanted(self, topic: str) -> bool:
@@ -160,6 +196,11 @@ class Recorder(SsaNode):
                 continue
             # as rosbag2 adapts: reliable / transient local only if every publisher offers it
             # (a latched topic, /ssa/config, is then received although published before)
+            if topic == TOPIC_CLOCK and self.run_clock.active:  # the node's clock writes it
+                self._subs[topic] = self.run_clock
+                self._rows[topic] = _one
+                self.get_logger().info(f"recording {topic} [{type_name}] (the run's clock)")
+                continue
             reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in pubs)
             latched = all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
                           for p in pubs)
@@ -203,6 +244,7 @@ class Recorder(SsaNode):
             self.diag.count(Cause.UNRECORDED_BAG_FAILED, str(exc))
             return
         self.diag.counts[RECORDED + topic] += n
+        self.progress.nudge()
 
     def _cannot_write(self, exc: OSError) -> None:
         """Say once why the bag cannot be written (a full disk), and end the node (exit 1).

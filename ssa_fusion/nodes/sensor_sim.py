@@ -10,9 +10,14 @@ Propagates the scenario's true orbit (two-body + J2, drag, or SGP4/SDP4), and pu
 * ``/ssa/detection_truth``: a catalog run with `unlabelled`: the detections with their true
   object ids (evaluation only; the measurement batches carry none: `core.catalog.unlabelled`);
 * ``/ssa/truth`` (ssa_fusion_msgs/StateEstimate, zero covariance): the true state;
-* ``/clock``: sim time, UTC (Unix seconds), advancing `time_scale` sim s per wall s; for
-  a catalog with ``lockstep`` consumers, by ``lockstep_step`` once they have taken the last
-  step's measurements, `time_scale` being a ceiling (`nodes.kit.progress`).
+* ``/clock``: sim time, UTC (Unix seconds), advancing `time_scale` sim s per wall s; with
+  ``lockstep`` consumers (the default of ``ssa-fusion live``), only once they have taken
+  all of the last step, `time_scale` being a ceiling (`nodes.kit.progress`): a catalog by
+  ``lockstep_step``, one object from one scheduled epoch to the next, with the releases of
+  the surrogate's forecasts and of the filter's decisions between (``/lockstep/forecasts``,
+  ``/lockstep/decisions``). Lockstep waits for a consumer as long as it lives, saying every
+  5 s what it waits for and since when; one that is gone is named and no longer waited for
+  (``lockstep_gone``).
 
 What it publishes when is the simulated world's (`sim.schedule`: a paper scenario's one
 idealised sensor at every epoch of its cadence, a real-sky scenario's stations above their
@@ -39,7 +44,16 @@ from ssa_fusion.nodes.kit.base import SsaNode
 from ssa_fusion.nodes.kit.diagnostics import Count
 from ssa_fusion.nodes.kit.node_parameters import NodeParameters
 from ssa_fusion.nodes.kit.process import finish
-from ssa_fusion.nodes.kit.progress import Lockstep
+from ssa_fusion.nodes.kit.progress import (
+    NEXT_DECISION,
+    NEXT_DUE,
+    RELEASE_QOS,
+    REPORT_EVERY_S,
+    TOPIC_RELEASE_DECISIONS,
+    TOPIC_RELEASE_FORECASTS,
+    Lockstep,
+    wants,
+)
 from ssa_fusion.nodes.kit.shards import shard_range
 from ssa_fusion.params.rows import ParameterError
 from ssa_fusion.params.tables.sensor_sim import PARAMETERS
@@ -60,7 +74,9 @@ from ssa_fusion.ros.topics import (
 from ssa_fusion.sim.schedule import (
     CatalogPace,
     Event,
+    ObjectStep,
     Pace,
+    Phase,
     Plan,
     ScheduleError,
     SimSettings,
@@ -144,17 +160,22 @@ class SensorSim(SsaNode):
         self.pub_detection_truth = self.create_publisher(
             MeasurementBatch, TOPIC_DETECTION_TRUTH, CATALOG_WRITER_QOS
         ) if self.unlabelled else None
+        self.pub_release = {
+            Phase.FORECASTS: self.create_publisher(Clock, TOPIC_RELEASE_FORECASTS, RELEASE_QOS),
+            Phase.DECISIONS: self.create_publisher(Clock, TOPIC_RELEASE_DECISIONS, RELEASE_QOS)}
 
     def _lockstep(self) -> Lockstep | None:
-        """Return the lockstep of a catalog's consumers (``lockstep``), or None: open loop."""
+        """Return the lockstep of the ``lockstep`` consumers, or None: open loop."""
         p = self.params
-        if self.catalog_keys is None or not self.lockstep_on:
+        names = [n for n in p.texts("lockstep") if n]
+        if not names:
             return None
+        if self.catalog_keys is None:
+            return Lockstep(self, names, None, self.diag.guard(self.step))
         keys = self.catalog_keys.astype(np.int64)
         if self.unlabelled:  # what the batches carry: key 0
             keys = np.zeros_like(keys)
-        return Lockstep(self, [n for n in p.texts("lockstep") if n], keys,
-                        p.number("lockstep_timeout"))
+        return Lockstep(self, names, keys, self.diag.guard(self.step))
 
     def diagnostics_stamp(self) -> Time:
         """Return the sim time last published on /clock: sim time, like the other nodes'."""
@@ -203,7 +224,12 @@ class SensorSim(SsaNode):
         times = self.times
         now = times[0] + (time.monotonic() - self.wall0) * self.time_scale
         if self.lockstep is not None:
-            self.step_lockstep(now)
+            if self.awaited(self.lockstep):
+                return
+            if self.catalog is not None:
+                self.step_lockstep(now)
+            else:
+                self.step_object(now)
             return
         if isinstance(self.pace, CatalogPace):  # one clock per tick, ahead of its measurements
             self.publish_clock(min(now, times[-1]))
@@ -214,6 +240,62 @@ class SensorSim(SsaNode):
         self.publish_clock(min(now, times[-1]))
         if self.pace.done:
             self.done()
+
+    def awaited(self, lockstep: Lockstep) -> bool:
+        """Return True while the consumers have not taken all of the last step.
+
+        Says every `REPORT_EVERY_S` wall s what is awaited and since when; names a consumer
+        that is gone (counted ``lockstep_gone``), which is no longer waited for.
+        """
+        now = time.monotonic()
+        go, missing = lockstep.go_on(now)
+        while lockstep.gone:
+            name = lockstep.gone.pop()
+            self.diag.count(Count.LOCKSTEP_GONE, f"lockstep: {name} is gone (its process ended "
+                            "or it left the ROS graph); sim time goes on without it")
+            self.get_logger().error(f"lockstep: {name} is gone; no longer waited for")
+        if not go and now >= self._next_wait_log:
+            self._next_wait_log = now + REPORT_EVERY_S
+            self.get_logger().info(lockstep.waiting_line(missing, now))
+        elif go:
+            self._next_wait_log = now + REPORT_EVERY_S
+        return not go
+
+    def step_object(self, ceiling: float) -> None:
+        """Publish one object's next lockstep phase (time scale: `ceiling`), or end the run.
+
+        Called once the consumers took all of the phase before (`sim.schedule.Phase`): a
+        release only a consumer has something for (its `NEXT_DUE`, `NEXT_DECISION`), the
+        epoch's clock, its events.
+        """
+        lockstep, pace = self.lockstep, self.pace
+        assert lockstep is not None and isinstance(pace, Pace)
+        reports, nodes = lockstep.watch.reports, lockstep.nodes
+        step = pace.object_step(ceiling, lambda phase, t: wants(
+            reports, nodes, NEXT_DUE if phase == Phase.FORECASTS else NEXT_DECISION, t))
+        if step is None:
+            if pace.object_done:
+                self.done()
+            return
+        if step.phase == Phase.CLOCK:
+            self.publish_clock(step.t)
+            lockstep.clock_ns = self.sim_stamp.sec * 1_000_000_000 + self.sim_stamp.nanosec
+        elif step.phase == Phase.EVENTS:
+            for i in step.events:
+                lockstep.object.published[self.publish_content(i)] += 1
+        else:
+            self.release(step)
+
+    def release(self, step: ObjectStep) -> None:
+        """Publish the release of `step` (forecasts or decisions up to its time)."""
+        assert self.lockstep is not None
+        stamp = messages.seconds_to_stamp(step.t)
+        ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        if step.phase == Phase.FORECASTS:
+            self.lockstep.object.released_forecasts_ns = ns
+        else:
+            self.lockstep.object.released_decisions_ns = ns
+        self.pub_release[step.phase].publish(Clock(clock=stamp))
 
     def step_lockstep(self, ceiling: float) -> None:
         """Publish the next step once the consumers took the last (time scale: `ceiling`).
@@ -226,16 +308,6 @@ class SensorSim(SsaNode):
         """
         lockstep, pace = self.lockstep, self.pace
         assert lockstep is not None and isinstance(pace, CatalogPace)
-        go, missing = lockstep.go_on(time.monotonic())
-        if not go:
-            if time.monotonic() >= self._next_wait_log:
-                self._next_wait_log = time.monotonic() + 5.0
-                self.get_logger().info(f"lockstep: waiting for {', '.join(missing)}")
-            return
-        if missing:
-            self.diag.count(Count.LOCKSTEP_TIMEOUTS,
-                            f"lockstep: went on after {lockstep.timeout_s:g} s without "
-                            f"{', '.join(missing)}")
         if self.sim_stamp.sec == 0 or pace.clock_behind:
             # the last step's measurements are all taken: now its clock (the first: t0);
             # the next step's go once every consumer has acted on it
@@ -260,19 +332,24 @@ class SensorSim(SsaNode):
 
     def publish_event(self, i: int) -> None:
         """Publish scheduled event `i` (after the clock of its epoch)."""
-        t, what, content = self.schedule[i]
-        self.publish_clock(t)
+        self.publish_clock(self.schedule[i][0])
+        self.publish_content(i)
+
+    def publish_content(self, i: int) -> str:
+        """Publish scheduled event `i`'s message; return its topic."""
+        _t, what, content = self.schedule[i]
         if what == Event.TRUTH:
             assert isinstance(content, types.StateEstimate)
             self.pub_truth.publish(messages.estimate_to_msg(content))
-            return
+            return TOPIC_TRUTH
         assert isinstance(content, types.Measurement)
         if what == Event.WITHHELD:
             self.pub_withheld.publish(messages.measurement_to_msg(content))
             self.diag.counts[Count.WITHHELD] += 1
-        else:
-            self.pub_meas.publish(messages.measurement_to_msg(content))
-            self.diag.counts[Count.PUBLISHED] += 1
+            return TOPIC_WITHHELD
+        self.pub_meas.publish(messages.measurement_to_msg(content))
+        self.diag.counts[Count.PUBLISHED] += 1
+        return TOPIC_MEASUREMENT
 
     def publish_catalog(self, due: Observations) -> None:
         """Publish catalog measurements `due` (a window of the stream) in batches per shard.

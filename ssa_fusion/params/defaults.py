@@ -81,7 +81,6 @@ class SensorSimDefaults:
     shards: int = 1
     lockstep: tuple[str, ...] = ("",)
     lockstep_step: float = 300.0
-    lockstep_timeout: float = 30.0
     batch_rows: int = 20_000
     unlabelled: bool = False
 
@@ -107,6 +106,7 @@ class SurrogateDefaults:
     check_period: float = 0.02
     object_id: str = ""
     max_clock_lead: float = MAX_CLOCK_LEAD_S
+    lockstep: bool = False
 
 
 @dataclass(frozen=True)
@@ -136,6 +136,7 @@ class FilterDefaults:
     gap_forecast: str = "none"
     laser: str = ""
     apriori: tuple[float, ...] = (0.0,) * 7
+    lockstep: bool = False
 
 
 @dataclass(frozen=True)

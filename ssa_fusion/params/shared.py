@@ -32,6 +32,13 @@ def clock_lead(default: float) -> Param:
                  unit="s", check=POSITIVE, runtime=True)
 
 
+def lockstep_row(default: bool, what: str) -> Param:
+    """Return the row of ``lockstep``: `what` the node does only when the simulator says."""
+    return Param("lockstep", default,
+                 f"{what} only up to the time sensor_sim releases (`/lockstep/...`, naming it "
+                 "in `lockstep`); false in any other graph (a replay, real sensors)")
+
+
 def object_filter(default: str, what: str) -> Param:
     """Return the row of ``object_id``: the node `what`s only this object ('' = any)."""
     return Param("object_id", default, f"{what} only this object; `\"\"` = any")

@@ -7,6 +7,12 @@ gives the caller a probe node in that domain to wait for topic matches and to re
 messages (never a fixed sleep), and tears every process down with SIGTERM (SIGKILL after a
 timeout), reporting exit codes and log tails. Used by `ssa-fusion live`/`replay` and by
 the headless graph tests.
+
+A graph of a run (`run`: `ros.run_identity.new_run_id`) starts every node in the run's
+namespace and its probe there too; the probe's collections then take the run's messages
+only (`collect`; the others are counted in `foreign`). Every process's ROS log files go to
+the graph's log directory (``ROS_LOG_DIR``), never ``~/.ros/log``, and its shared-memory
+segments are the user's only (`ros.shm_privacy`).
 """
 
 from __future__ import annotations
@@ -18,6 +24,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,11 +35,13 @@ from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
+from ssa_fusion.ros import shm_privacy
 from ssa_fusion.ros.discovery import LOOPBACK, Discovery
 from ssa_fusion.ros.executors import make_executor
 from ssa_fusion.ros.interfaces import Message
 from ssa_fusion.ros.player import Player
 from ssa_fusion.ros.qos import DATA_QOS
+from ssa_fusion.ros.run_identity import ROOT, RunGate, RunMembers, run_namespace
 
 NODE_BIN = Path(sys.prefix) / "lib" / "ssa_fusion"
 """Where the bootstrap places node executables (as `ros2 run ssa_fusion <node>` finds them)."""
@@ -100,21 +109,32 @@ class Graph:
     lets a slow run take longer and never slows a passing one."""
 
     def __init__(self, workdir: Path, domain_id: int | None = None,
-                 discovery: Discovery = LOOPBACK) -> None:
+                 discovery: Discovery = LOOPBACK, run: str | None = None) -> None:
         self.workdir = Path(workdir)
         self.workdir.mkdir(parents=True, exist_ok=True)
         self.domain_id = fresh_domain_id() if domain_id is None else domain_id
         self.discovery = discovery
+        self.run = run
+        self.namespace = ROOT if run is None else run_namespace(run)
         self.procs: list[Proc] = []
+        self.foreign: Counter[str] = Counter()
+        """Messages the probe's collections refused, by topic: not of the run."""
         discovery.apply(os.environ)  # the probe's too (read at rclpy.init)
         discovery.bind(os.environ, self.workdir)
         self.env = dict(os.environ)
-        self.env.update(ROS_DOMAIN_ID=str(self.domain_id), PYTHONUNBUFFERED="1")
+        self.env.update(ROS_DOMAIN_ID=str(self.domain_id), PYTHONUNBUFFERED="1",
+                        ROS_LOG_DIR=str(self.workdir / "ros"))
+        os.environ.setdefault("ROS_LOG_DIR", self.env["ROS_LOG_DIR"])  # this process's too
         self.context = Context()
         rclpy.init(context=self.context, domain_id=self.domain_id)
-        self.probe: Node = rclpy.create_node("ssa_fusion_probe", context=self.context)
-        self.executor = make_executor(self.context)
+        self.probe: Node = rclpy.create_node("ssa_fusion_probe", namespace=self.namespace,
+                                             context=self.context)
+        self.members = RunMembers(self.probe)
+        self._gates: list[RunGate] = []
+        self.executor = make_executor(self.context, message_info=run is not None)
         self.executor.add_node(self.probe)
+        shm_privacy.make_private()
+        self._private_at = time.monotonic()
 
     # processes ---------------------------------------------------------------------------
     def start(self, name: str, cmd: list[str], expect_returncode: int | None = 0,
@@ -124,6 +144,8 @@ class Graph:
         `env`: variables set for this process on top of the graph's.
         """
         out = self.workdir / f"{name}.out"
+        if self.run is not None and "--ros-args" in cmd:  # a node: in the run's namespace
+            cmd = [*cmd, "--ros-args", "-r", f"__ns:={self.namespace}"]
         err = self.workdir / f"{name}.err"
         popen = subprocess.Popen(cmd, env={**self.env, **(env or {})}, stdout=out.open("wb"),
                                  stderr=err.open("wb"), stdin=subprocess.DEVNULL,
@@ -196,6 +218,11 @@ class Graph:
     def spin_once(self, timeout: float = 0.05) -> None:
         """Run the probe's callbacks that are ready (waiting up to `timeout` s)."""
         self.executor.spin_once(timeout_sec=timeout)
+        for gate in self._gates:
+            gate.release()
+        if time.monotonic() - self._private_at >= shm_privacy.PERIOD_S:
+            shm_privacy.make_private()
+            self._private_at = time.monotonic()
 
     def wait_for(self, predicate: Callable[[], bool], timeout: float, what: str) -> None:
         """Spin the probe until `predicate()`; raise TimeoutError after `timeout` s (scaled).
@@ -225,10 +252,41 @@ class Graph:
 
     def collect(self, msg_type: type[Message], topic: str,
                 qos: QoSProfile = DATA_QOS) -> list[Message]:
-        """Subscribe the probe to `topic`; the returned list fills as messages arrive."""
+        """Subscribe the probe to `topic`; the returned list fills as messages arrive.
+
+        A graph of a run takes its run's messages only (the others count in `foreign`).
+        """
         received: list[Message] = []
-        self.probe.create_subscription(msg_type, topic, received.append, qos)
+        self.subscribe(msg_type, topic, received.append, qos)
         return received
+
+    def subscribe(self, msg_type: type[Message], topic: str,
+                  callback: Callable[[Message], None], qos: QoSProfile = DATA_QOS) -> None:
+        """Subscribe the probe to `topic`: `callback` gets the run's messages only."""
+        if self.run is None:
+            self.probe.create_subscription(msg_type, topic, callback, qos)
+            return
+
+        def refuse(_why: str) -> None:
+            self.foreign[topic] += 1
+
+        gate = RunGate(self.members, topic, callback, refuse)
+        self._gates.append(gate)
+        self.probe.create_subscription(msg_type, topic, gate, qos)
+
+    def others(self, look_s: float) -> list[str]:
+        """Return the nodes of other participants in the domain, after `look_s` wall s.
+
+        Their full names (namespace/name), the probe's own left out; hidden nodes (named
+        ``_...``: the ros2 command's daemon) too. Not scaled: how long discovery is given.
+        """
+        deadline = time.monotonic() + look_s
+        while time.monotonic() < deadline:
+            self.spin_once(0.05)
+        own = (self.probe.get_name(), self.probe.get_namespace())
+        return sorted(f"{ns.rstrip('/')}/{name}"
+                      for name, ns in self.probe.get_node_names_and_namespaces()
+                      if (name, ns) != own and not name.startswith("_"))
 
     def wait_quiet(self, counts: Callable[[], object], quiet_s: float, limit_s: float) -> None:
         """Spin until `counts()` has not changed for `quiet_s` s.

@@ -15,6 +15,7 @@ its first batch).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from ssa_fusion.ros.topics import (
@@ -49,6 +50,8 @@ READERS = [f"{node}:{topic}" for node, topics in (
     f"surrogate:{OUTPUT}{TOPIC_FORECAST}=2",  # the filter and the recorder
 ]
 """What the ssa_fusion graph's nodes must have matched (their side) before measurements flow."""
+LOCKSTEP_READERS = ["surrogate:/lockstep/forecasts", "filter:/lockstep/decisions"]
+"""In lockstep, also: the releases (`nodes.kit.progress`) reach the surrogate and the filter."""
 
 
 def readers_of(topics: set[str] | tuple[str, ...]) -> list[str]:
@@ -63,17 +66,22 @@ def readers_of(topics: set[str] | tuple[str, ...]) -> list[str]:
 class ReadyNodes:
     """The latest matched-publisher counts each node reported on /diagnostics.
 
-    By node name and topic (`reports`).
+    By node name and topic (`reports`). `subscribe` (``subscribe(type, topic, callback,
+    qos)``), when given, subscribes in its place: of the run only (an ssa_fusion node's, a
+    run graph's: other runs' nodes of the same names report too, in a shared domain).
     """
 
-    def __init__(self, node: Node) -> None:
+    def __init__(self, node: Node, subscribe: Callable[..., object] | None = None) -> None:
         self.reports: dict[str, dict[str, int]] = {}
         from rclpy.qos import QoSProfile
 
         from ssa_fusion.ros.interfaces import DiagnosticArray
 
-        self._sub = node.create_subscription(DiagnosticArray, TOPIC_DIAGNOSTICS, self._on,
-                                             QoSProfile(depth=100))
+        diag = getattr(node, "diag", None)
+        subscribe = subscribe or (diag.subscribe if diag is not None
+                                  else node.create_subscription)
+        self._sub = subscribe(DiagnosticArray, TOPIC_DIAGNOSTICS, self._on,
+                              QoSProfile(depth=100))
 
     def _on(self, msg: Message) -> None:
         """Take one /diagnostics report."""

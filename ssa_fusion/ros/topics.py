@@ -37,6 +37,9 @@ their laser ranges (`ssa-fusion import crd`)."""
 TOPIC_REFERENCE = "/ssa/reference"
 """For evaluation only, never fused: an independent orbit of the object (StateEstimate,
 GCRF, zero covariance), e.g. a CPF prediction (`ssa-fusion import crd --reference`)."""
+TOPIC_RUN = "/ssa/run"
+"""The run a bag holds (std_msgs/String, JSON ``{"run": id, "namespace": ns}``): written by
+the recorder itself, once, at the first /clock; never published (`ros.run_identity`)."""
 TOPIC_CONJUNCTIONS = "/ssa/conjunctions"
 """Close approaches of a catalog (ssa_fusion_msgs/ConjunctionBatch): each re-screening of
 the objects whose estimates changed (the conjunction node)."""

@@ -10,7 +10,10 @@
   as rows (`CatalogRun.rows`), without a truth topic.
 
 `Pace` says which scheduled epochs are due: in the open loop those up to the clock (sim time
-following the wall clock), in lockstep one step at a time. Settings that give no run raise
+following the wall clock), in lockstep one object's from one scheduled epoch to the next,
+each in up to four phases (`Pace.object_step`, `Phase`). `CatalogPace` does the same for a
+catalog's measurements, a window at a time (in lockstep steps of ``lockstep_step``,
+computed ahead). Settings that give no run raise
 `ScheduleError`, whose message names the parameters (the node reports it as a parameter
 error). Units: s (sim time is Unix s UTC for orbits), the core's km and rad.
 """
@@ -19,6 +22,7 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
@@ -46,6 +50,43 @@ class Event(enum.IntEnum):
 
 Schedule = list[tuple[float, Event, types.Measurement | types.StateEstimate]]
 """Publications in epoch order: (epoch s, what, the message's content)."""
+
+
+class Phase(enum.IntEnum):
+    """A phase of one object's lockstep step to the next scheduled epoch e (`Pace.object_step`).
+
+    Each phase is published once every consumer took all of the one before; a release no
+    consumer has anything for is left out (`Pace.object_step`'s `wants`).
+    """
+
+    FORECASTS = 0
+    """The surrogate forecasts the epochs it missed before e (up to the step's `t`)."""
+    DECISIONS = 1
+    """The filter publishes what it decides for the epochs before e (up to the step's `t`):
+    after the forecasts of those epochs reached it."""
+    CLOCK = 2
+    """/clock moves to e (alone: a message published after it in the same phase could reach
+    the recorder before it, a reliable writer's repair overtaking it, and be logged at the
+    clock before)."""
+    EVENTS = 3
+    """The measurements, withheld measurements and truth at e."""
+
+
+RELEASE_MARGIN_S = 1e-3
+"""The releases before an epoch e end this much (s) before it: e's own measurement comes
+first, whatever round-off says of epochs computed on a grid."""
+
+
+@dataclass(frozen=True)
+class ObjectStep:
+    """One phase of one object's lockstep: what to publish (`phase`), at or up to `t` (s).
+
+    `events`: the schedule's indices to publish (`Phase.EVENTS` only).
+    """
+
+    phase: Phase
+    t: float
+    events: range = range(0)
 
 
 class ScheduleError(ValueError):
@@ -333,6 +374,10 @@ class Pace:
         Lockstep: the end of the last step published, s (at first: the first epoch).
     clock_behind : bool
         Lockstep: the last step's measurements are out and its clock not yet.
+    phase : Phase
+        One object's lockstep: the next phase (`object_step`).
+    released : float
+        One object's lockstep: the time up to which forecasts and decisions were released, s.
     """
 
     times: NDArray[np.float64]
@@ -340,6 +385,8 @@ class Pace:
     next: int = 0
     sim_now: float = field(init=False)
     clock_behind: bool = False
+    phase: Phase = Phase.FORECASTS
+    released: float = -math.inf
 
     def __post_init__(self) -> None:
         """Start at the first epoch."""
@@ -369,6 +416,41 @@ class Pace:
         self.clock_behind = True
         return self.due(target)
 
+    @property
+    def object_done(self) -> bool:
+        """Return True once one object's lockstep published everything and its releases."""
+        return self.done and self.phase == Phase.CLOCK
+
+    def object_step(self, ceiling: float,
+                    wants: Callable[[Phase, float], bool]) -> ObjectStep | None:
+        """Return the next phase of one object's lockstep (see `Phase`), now published.
+
+        For each scheduled epoch e in turn: the forecasts and then the decisions up to e -
+        `RELEASE_MARGIN_S`, each only when `wants(phase, t)` says a consumer has something
+        to release up to t; then /clock e (None while e is past `ceiling`, s: the time
+        scale's limit), then the events at e. After the last epoch, the releases up to it;
+        then None (`object_done`).
+        """
+        while self.phase in (Phase.FORECASTS, Phase.DECISIONS):
+            phase = self.phase
+            self.phase = Phase(phase + 1)
+            t = float(self.times[-1]) if self.done else float(self.times[self.next]) - \
+                RELEASE_MARGIN_S
+            if t > self.released and wants(phase, t):
+                if phase == Phase.DECISIONS:
+                    self.released = t
+                return ObjectStep(phase, t)
+        if self.done:
+            return None
+        e = float(self.times[self.next])
+        if self.phase == Phase.CLOCK:
+            if e > ceiling:
+                return None
+            self.sim_now = e
+            self.phase = Phase.EVENTS
+            return ObjectStep(Phase.CLOCK, e)
+        self.phase = Phase.FORECASTS
+        return ObjectStep(Phase.EVENTS, e, self.due(e))
 
 class CatalogPace:
     """Which of a catalog's measurements are due, a window at a time (`CatalogRun.stream`).

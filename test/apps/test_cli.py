@@ -149,8 +149,9 @@ def test_an_output_need_waits_for_the_writers_side_of_the_match():
 class _FakeGraph:
     """Stands in for `ros.processes.Graph`: nodes 'run' and exit 0 at once."""
 
-    def __init__(self, *_args) -> None:
+    def __init__(self, *_args, **_kwargs) -> None:
         self.domain_id = 0
+        self.run = "20250101_000000_000_0000"
 
     def collect(self, *_args) -> list:
         return []
@@ -174,7 +175,7 @@ def test_live_run_that_cannot_be_evaluated_says_why_without_a_traceback(tmp_path
     ValueError out of `live` with a traceback; now it is one line, exit 1, the bag kept."""
     from ssa_fusion.apps import evaluate
 
-    monkeypatch.setattr(live, "Graph", _FakeGraph)
+    monkeypatch.setattr(runs, "run_graph", _FakeGraph)
     monkeypatch.setattr(evaluate, "load", lambda _bag: evaluate.BagData(counts={"/clock": 3}))
     args = cli.build_parser().parse_args(["live", "--out", str(tmp_path / "run")])
     assert live.run(args) == 1
@@ -193,7 +194,7 @@ def test_a_live_run_whose_outage_withheld_nothing_is_judged_against_its_truth(
 
     data = evaluate.load(Path(SAMPLE))
     data.withheld = []
-    monkeypatch.setattr(live, "Graph", _FakeGraph)
+    monkeypatch.setattr(runs, "run_graph", _FakeGraph)
     monkeypatch.setattr(evaluate, "load", lambda _bag: data)
     out = tmp_path / "run"
     args = cli.build_parser().parse_args(["live", "--out", str(out)])
@@ -311,7 +312,7 @@ def test_gap_forecast_sets_the_filters_gap_forecast(monkeypatch, tmp_path):
                 raise StoppedError
             return object()
 
-    monkeypatch.setattr(live, "Graph", Graph)
+    monkeypatch.setattr(runs, "run_graph", Graph)
     for option, want in (([], "batch_init"), (["--gap-forecast", "residual"], "residual")):
         args = cli.build_parser().parse_args(["live", "--out", str(tmp_path / want),
                                               "--scenario", "iss_radar_columbus", *option])

@@ -55,7 +55,7 @@ from ssa_fusion.sim.simulate import simulate
 SHORT = scenarios.DEFAULT_LIVE.with_(track_s=1200.0, gap_s=0.0, after_s=0.0, delays=5)
 SIM = simulate(SHORT, seed=1)
 T = SIM.t  # 41 epochs 30 s apart, range/az/el of the ISS from Columbus (km, rad)
-PARAMS = node_parameters(SHORT, time_scale=1000.0, seed=1, bag=Path("unused"))
+PARAMS = node_parameters(SHORT, time_scale=1000.0, seed=1, bag=Path("unused"), lockstep=False)
 KM = 1000.0
 
 
@@ -229,10 +229,11 @@ def test_nodes_report_when_their_subscriptions_have_matched(ros_graph):
     assert ready.unmatched(["filter:/ssa/measurement"]) == ["filter:/ssa/measurement"]
     g.probe.create_publisher(Measurement, "/ssa/measurement", DATA_QOS)
     g.wait_for(lambda: ready.ready(["filter:/ssa/measurement"]), 20.0, "filter matched")
-    # nothing publishes forecasts: that input is reported, and unmatched; nothing reads
-    # its estimates: its output ('>') is reported, and unmatched, until the probe does
+    # nothing publishes forecasts or /clock: those inputs are reported, and unmatched;
+    # nothing reads its estimates: its output ('>') is reported, and unmatched, until the
+    # probe does
     assert ready.reports["filter"] == {"/ssa/measurement": 1, "/ssa/forecast": 0,
-                                       ">/ssa/estimate": 0}
+                                       "/clock": 0, ">/ssa/estimate": 0}
     g.probe.create_subscription(StateEstimate, "/ssa/estimate", lambda _m: None, DATA_QOS)
     g.wait_for(lambda: ready.ready(["filter:>/ssa/estimate"]), 20.0, "filter's output matched")
     assert ready.reports["filter"][">/ssa/estimate"] == 1

@@ -29,11 +29,13 @@ CONFIG = Path(__file__).resolve().parents[2] / "config" / "default.yaml"
 WORKER = Path(__file__).with_name("declared_parameters.py")
 
 RUN_SETTINGS = {
-    # the demo's pace, and start only once every reader has matched (nothing is lost)
-    "sensor_sim": {"time_scale", "wait_for", "wait_for_readers"},
+    # the demo's pace, start only once every reader has matched (nothing is lost), and
+    # lockstep (the default of `ssa-fusion live`)
+    "sensor_sim": {"time_scale", "wait_for", "wait_for_readers", "lockstep"},
     # the default scenario's cadence, and its gap (+ one cadence) as the forecast horizon,
-    # as `ssa-fusion live` and the offline replay set them
-    "surrogate": {"cadence", "max_horizon"},
+    # as `ssa-fusion live` and the offline replay set them; lockstep
+    "surrogate": {"cadence", "max_horizon", "lockstep"},
+    "filter": {"lockstep"},
 }
 """Parameters the yaml sets to other values than the nodes' defaults, on purpose."""
 

@@ -1,20 +1,34 @@
 """Lockstep bookkeeping (`nodes.kit.progress`): what the simulator still waits for, from the
 consumers' latest reports, and the measurements sent to each shard."""
 
+import subprocess
+import sys
+
 import numpy as np
 
+from ssa_fusion.nodes.kit.liveness import PID, process_keys
 from ssa_fusion.nodes.kit.progress import (
     CLOCK,
+    DECIDED,
+    NEXT_DECISION,
+    NEXT_DUE,
+    PUBLISHED_ESTIMATES,
     RECORDED_ASSOCIATED,
     RECORDED_ESTIMATES,
     RECORDED_MEASUREMENTS,
     RECORDED_TRUTH,
+    RELEASED,
     SHARD,
     TAKEN,
     TAKEN_ALL_ESTIMATES,
     TAKEN_ESTIMATES,
+    TAKEN_FORECASTS,
     Lockstep,
+    ObjectSent,
+    object_waiting,
+    time_ns,
     waiting,
+    wants,
 )
 from ssa_fusion.nodes.kit.shards import shard_range
 from ssa_fusion.ros import messages
@@ -88,15 +102,26 @@ def test_the_next_step_waits_until_every_consumer_acted_on_the_clock():
 
 
 class _Node:
+    """What Lockstep asks of its node: the ROS graph's nodes (`listed`), its namespace."""
+
+    def __init__(self, listed=()):
+        self.listed = list(listed)
+
     def create_subscription(self, *args, **kwargs):
         return None
+
+    def get_node_names_and_namespaces(self):
+        return [(n, "/") for n in self.listed]
+
+    def get_namespace(self):
+        return "/"
 
 
 def test_measurements_sent_per_shard_follow_the_shard_keys():
     """Each object's measurements count for the shard of its key, as they are published."""
     ids = [f"{k:05d}" for k in range(300)]
     keys = np.array([messages.shard_key(o) for o in ids], dtype=np.int64)
-    lock = Lockstep(_Node(), NODES, keys, 30.0)
+    lock = Lockstep(_Node(), NODES, keys)
     objects = np.random.default_rng(3).integers(0, 300, 900)  # a measurement's object
     for sent in (0, 17, 900):  # grows as the simulator publishes
         lock.published(objects[lock.sent:sent])
@@ -107,16 +132,64 @@ def test_measurements_sent_per_shard_follow_the_shard_keys():
             assert lock.sent_by_shard(shards).tolist() == want
 
 
-def test_a_consumer_that_does_not_answer_is_left_after_the_timeout():
-    """For the rest of the run: a shard on a host that never started does not cost every
-    step the timeout."""
-    lock = Lockstep(_Node(), ["recorder", "catalog_filter_1"], np.zeros(1, dtype=np.int64),
-                    30.0)
-    lock.watch.reports["recorder"] = {RECORDED_MEASUREMENTS: "0", RECORDED_ESTIMATES: "0"}
-    assert lock.go_on(100.0) == (False, ["catalog_filter_1 (no report yet)"])
-    assert lock.go_on(129.0)[0] is False
-    assert lock.go_on(131.0) == (True, ["catalog_filter_1 (no report yet)"])
-    assert lock.nodes == ["recorder"]
-    assert lock.go_on(132.0) == (True, [])
-    lock.published(np.zeros(5, dtype=np.int64))  # the recorder is still waited for
-    assert lock.go_on(133.0) == (False, ["recorder (recorded 0 of 5 measurements)"])
+def test_a_consumer_that_lives_is_waited_for_however_long():
+    """A stopped process (SIGSTOP: a closed lid, a swap storm) is alive: sim time waits."""
+    node = _Node(listed=["recorder"])
+    lock = Lockstep(node, ["recorder"], np.zeros(1, dtype=np.int64))
+    lock.watch.reports["recorder"] = {RECORDED_MEASUREMENTS: "0", RECORDED_ESTIMATES: "0",
+                                      **process_keys()}  # this process: alive
+    lock.published(np.zeros(5, dtype=np.int64))
+    for now in (100.0, 160.0, 10_000.0):
+        assert lock.go_on(now) == (False, ["recorder (recorded 0 of 5 measurements)"])
+    assert lock.gone == [] and lock.since == 100.0
+    assert "waiting since" in lock.waiting_line(["recorder (x)"], 160.0)
+    assert "(60 s) for recorder (x)" in lock.waiting_line(["recorder (x)"], 160.0)
+
+
+def test_a_consumer_that_is_gone_is_named_and_no_longer_waited_for():
+    """Its process ended (same host): at once; elsewhere: once the graph no longer lists it."""
+    node = _Node(listed=["catalog_filter_1"])
+    lock = Lockstep(node, ["recorder", "catalog_filter_1"], np.zeros(1, dtype=np.int64))
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                           capture_output=True, text=True, check=True)
+    lock.watch.reports["recorder"] = {RECORDED_MEASUREMENTS: "0", RECORDED_ESTIMATES: "0",
+                                      **process_keys(), PID: ended.stdout.strip()}
+    lock.published(np.zeros(5, dtype=np.int64))
+    go, missing = lock.go_on(100.0)  # the filter shard has not reported: listed, so alive
+    assert (lock.gone, lock.nodes) == (["recorder"], ["catalog_filter_1"])
+    assert (go, missing) == (False, ["catalog_filter_1 (no report yet)"])
+    node.listed = []  # it left the graph (another host's process)
+    assert lock.go_on(100.5) == (False, ["catalog_filter_1 (no report yet)"])  # 1 s between
+    assert lock.go_on(101.5) == (True, [])
+    assert lock.gone == ["recorder", "catalog_filter_1"]
+
+
+def test_one_object_waits_for_every_message_forecast_and_estimate():
+    sent = ObjectSent(released_forecasts_ns=7, released_decisions_ns=5)
+    sent.published.update({"/ssa/measurement": 3, "/ssa/withheld": 1, "/ssa/truth": 4})
+    recorded = {f"recorded {t}": str(n) for t, n in (
+        ("/ssa/measurement", 3), ("/ssa/withheld", 1), ("/ssa/truth", 4),
+        ("/ssa/forecast", 2), ("/ssa/estimate", 6))}
+    reports = {
+        "filter": {TAKEN: "3", TAKEN_FORECASTS: "2", PUBLISHED_ESTIMATES: "6", DECIDED: "5",
+                   CLOCK: "9"},
+        "surrogate": {TAKEN: "3", "forecasts": "2", RELEASED: "7", CLOCK: "9"},
+        "recorder": {**recorded, CLOCK: "9"}}
+    nodes = ["filter", "surrogate", "recorder"]
+    assert object_waiting(reports, nodes, sent, clock_ns=9) == []
+    reports["surrogate"]["forecasts"] = "3"  # one more forecast: the filter and recorder lag
+    assert object_waiting(reports, nodes, sent, clock_ns=9) == [
+        "filter (taken forecasts 2 of 3)", "recorder (recorded /ssa/forecast 2 of 3)"]
+    reports["surrogate"]["forecasts"] = "2"
+    sent.released_decisions_ns = 8  # released, not decided yet
+    assert object_waiting(reports, nodes, sent, clock_ns=10) == [
+        "filter (at sim time ns 9 of 10)", "filter (decided up to ns 5 of 8)",
+        "surrogate (at sim time ns 9 of 10)", "recorder (at sim time ns 9 of 10)"]
+
+
+def test_a_release_is_wanted_only_by_a_consumer_with_something_due():
+    reports = {"surrogate": {NEXT_DUE: time_ns(100.0)}, "filter": {NEXT_DECISION: "inf"}}
+    assert wants(reports, ["surrogate", "filter"], NEXT_DUE, 100.0)
+    assert not wants(reports, ["surrogate", "filter"], NEXT_DUE, 99.9)
+    assert not wants(reports, ["surrogate", "filter"], NEXT_DECISION, 1e12)
+    assert not wants({}, ["filter"], NEXT_DECISION, 1e12)  # no report: nothing due

@@ -1,6 +1,7 @@
 """`sim.schedule`: what the simulator node publishes when, without ROS. The epochs withheld
 are those of the outages, computed here by hand; the pace publishes each epoch once, in
-order, and lockstep steps by `step_s` under the ceiling."""
+order, and lockstep steps a catalog by `step_s` in windows computed ahead, or one object
+from epoch to epoch with the releases its consumers want before each."""
 
 import math
 from pathlib import Path
@@ -12,9 +13,12 @@ from ssa_fusion.core.base import types
 from ssa_fusion.formats.element_sets import read_catalog
 from ssa_fusion.sim import scenarios, sky, survey
 from ssa_fusion.sim.schedule import (
+    RELEASE_MARGIN_S,
     CatalogPace,
     Event,
+    ObjectStep,
     Pace,
+    Phase,
     ScheduleError,
     SimSettings,
     check_window,
@@ -138,6 +142,38 @@ def test_lockstep_steps_by_its_step_under_the_ceiling():
     assert list(pace.step(ceiling=200.0)) == [4] and pace.done
 
 
+def test_one_objects_lockstep_releases_what_is_wanted_before_each_epoch():
+    """Each epoch: the forecasts, then the decisions, of the epochs before it (only when a
+    consumer has something due by then), then its clock, then its events; the releases up
+    to the last epoch at the end."""
+    pace = Pace(np.array([100.0, 130.0, 130.0, 160.0]))
+    due: dict[Phase, float] = {Phase.FORECASTS: 120.0, Phase.DECISIONS: float("inf")}
+    asked: list[tuple[Phase, float]] = []
+
+    def wants(phase: Phase, t: float) -> bool:
+        asked.append((phase, t))
+        return due[phase] <= t
+
+    def step(ceiling: float = 1e9) -> ObjectStep | None:
+        return pace.object_step(ceiling, wants)
+
+    before = 130.0 - RELEASE_MARGIN_S
+    assert step() == ObjectStep(Phase.CLOCK, 100.0)  # nothing due before 100
+    assert step() == ObjectStep(Phase.EVENTS, 100.0, range(0, 1))
+    assert step(ceiling=120.0) == ObjectStep(Phase.FORECASTS, before)
+    due[Phase.DECISIONS] = 125.0  # the filter, having fused those forecasts
+    assert step(ceiling=120.0) == ObjectStep(Phase.DECISIONS, before)
+    assert step(ceiling=120.0) is None  # 130 is past the ceiling
+    assert step() == ObjectStep(Phase.CLOCK, 130.0)
+    assert step() == ObjectStep(Phase.EVENTS, 130.0, range(1, 3))
+    due.update({Phase.FORECASTS: float("inf"), Phase.DECISIONS: float("inf")})
+    assert step() == ObjectStep(Phase.CLOCK, 160.0)
+    assert step() == ObjectStep(Phase.EVENTS, 160.0, range(3, 4))
+    assert not pace.object_done
+    due[Phase.DECISIONS] = 160.0  # the end: up to the last epoch
+    assert step() == ObjectStep(Phase.DECISIONS, 160.0)
+    assert step() is None and pace.object_done
+    assert asked[-2:] == [(Phase.FORECASTS, 160.0), (Phase.DECISIONS, 160.0)]
 def _sky_truth(**kw: object) -> np.ndarray:
     base, real_sky = resolve("iss_radar_columbus")
     settings = SimSettings(object_id="sat", cadence=600.0, duration=6 * 3600.0, **kw)

@@ -265,6 +265,19 @@ class GapPublisher:
         self._predict(now, limit, out)
         return out
 
+    def next_decision(self) -> float:
+        """Return the earliest sim time (s) at which `advance` would publish (inf: none).
+
+        The first prediction epoch due, once nothing was fused for `period_s` (none before
+        the filter starts, or without predictions).
+        """
+        tracker = self.tracker
+        if self.period_s <= 0 or not tracker.initialised:
+            return math.inf
+        after = max(tracker.t, self._predicted_at)
+        first = (math.floor(after / self.period_s) + 1) * self.period_s
+        return max(first, math.nextafter(tracker.t + self.period_s, math.inf))
+
     def _published(self, e: StateEstimate) -> StateEstimate:
         """Tag `e` with its object; an update's estimate goes to the forecaster too."""
         e.object_id = e.object_id or self.last_object

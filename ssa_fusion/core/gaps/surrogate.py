@@ -332,6 +332,27 @@ class Surrogate:
         self._emitted = n_due
         return out
 
+    def next_due(self) -> float:
+        """Return the epoch (s) of the first missed epoch not forecast yet (inf: none can be).
+
+        `due_through` of any time before it returns nothing.
+        """
+        last, dt = self.last, self.cadence()
+        if last is None or not math.isfinite(dt) or dt <= 0:
+            return math.inf
+        k = self._emitted + 1
+        if k > math.floor(self.config.max_horizon_s / dt + 1e-9):
+            return math.inf
+        return last.t + k * dt
+
+    def due_through(self, t: float) -> list[Measurement]:
+        """Forecasts for the missed epochs up to `t` (s) not yet emitted, without the grace.
+
+        For a caller that knows every real measurement up to `t` has been added (a graph in
+        lockstep): nothing late can still come for them.
+        """
+        return self.due(t, _closing=True)
+
     def _fill_gap(self, last: Measurement, m: Measurement) -> None:
         """Fill the missed epochs between `last` and `m`, the real measurement ending a gap.
 

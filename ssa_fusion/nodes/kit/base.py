@@ -8,6 +8,9 @@ core types, holds its parameters and timers, and calls the core:
 * its ``/diagnostics`` (`diag`: counts by cause, logged once, matched inputs);
 * input subscriptions whose callbacks cannot kill the node (`subscribe`), and wall timers
   (`wall_timer`);
+* its shared-memory segments, private to the user (`ros.shm_privacy`);
+* its run: only its run's messages reach its callbacks, its sim time follows only its run's
+  ``/clock`` (`nodes.kit.run_clock`), and a stranger's are counted (`ros.run_identity`);
 * the clock hold: measurements that come before the first /clock wait for it
   (`measurement_in`, `replay_held`), and a backwards jump of sim time resets what the node
   learnt (`reset_on_backward_jump`);
@@ -28,6 +31,7 @@ in ``__init__``::
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable
 from typing import ClassVar
 
@@ -47,13 +51,14 @@ from ssa_fusion.nodes.kit.clock_hold import ClockHold
 from ssa_fusion.nodes.kit.diagnostics import Diagnostics, wall_timer
 from ssa_fusion.nodes.kit.node_parameters import NodeParameters
 from ssa_fusion.nodes.kit.process import constructing, run, start_watchdog
+from ssa_fusion.nodes.kit.run_clock import RunClock
 from ssa_fusion.nodes.kit.wakeup import Wakeup
 from ssa_fusion.params.checks import ParamValue
 from ssa_fusion.params.rows import ParameterTable
-from ssa_fusion.ros import messages
+from ssa_fusion.ros import messages, shm_privacy
 from ssa_fusion.ros.interfaces import Message, String, Time
 from ssa_fusion.ros.qos import CONFIG_QOS
-from ssa_fusion.ros.topics import TOPIC_CONFIG
+from ssa_fusion.ros.topics import TOPIC_CONFIG, TOPIC_MEASUREMENT
 
 
 class SsaNode(Node):
@@ -79,10 +84,19 @@ class SsaNode(Node):
             self.params = NodeParameters(self, self.PARAMETERS, self.on_parameters_set)
             self.params.reject_unknown()
             self.diag = Diagnostics(self, stamp=self.diagnostics_stamp)
+            self.run_clock = RunClock(self)
+        self.private_segments()
+        self.wall_timer(shm_privacy.PERIOD_S, self.private_segments)
         self.clock_hold = ClockHold(self, self.diag)
+        self.handled: Counter[str] = Counter()
+        """Measurement messages handled for good (used or refused, not held), by topic."""
         self._jump_handles: list[object] = []
         self._settings_pub: Publisher[String] | None = None
         self._wakeups: list[Wakeup] = []
+
+    def private_segments(self) -> None:
+        """Make the shared-memory segments of this process the user's only (`ros.shm_privacy`)."""
+        shm_privacy.make_private()
 
     # parameters ------------------------------------------------------------------------
     def on_parameters_set(self, changed: dict[str, ParamValue]) -> None:
@@ -158,23 +172,25 @@ class SsaNode(Node):
         return self.diag.advertise(msg_type, topic, qos)
 
     def measurement_in(self, msg: Message, again: Callable[[], None],
-                       object_id: str) -> Measurement | None:
-        """Return the core measurement of Measurement message `msg`, or None.
+                       object_id: str, topic: str = TOPIC_MEASUREMENT) -> Measurement | None:
+        """Return the core measurement of Measurement message `msg` of `topic`, or None.
 
         None when it must wait for the first /clock (`again` handles it once the clock
         runs: `replay_held`), or when it is refused (counted by cause): of another object
         than `object_id` (unless ''), of no kind the core knows, or stamped more than
-        ``max_clock_lead`` ahead of the clock.
+        ``max_clock_lead`` ahead of the clock. Unless held, it counts as `handled`.
         """
         if self.clock_hold.hold(again):
             return None
+        m = None
         if object_id and msg.object_id != object_id:
             self.diag.count(Cause.IGNORED_OTHER_OBJECT, f"object_id {msg.object_id!r}")
-            return None
-        m = self.measurement_of(msg)
-        if m is None or self.clock_hold.hold_ahead(again, m.t, self.max_clock_lead()):
-            return None
-        return None if self.ahead_of_clock(m.t) else m
+        else:
+            m = self.measurement_of(msg)
+            if m is not None and self.clock_hold.hold_ahead(again, m.t, self.max_clock_lead()):
+                return None
+        self.handled[topic] += 1
+        return None if m is None or self.ahead_of_clock(m.t) else m
 
     def max_clock_lead(self) -> float:
         """Return ``max_clock_lead``: how far (s) a stamp may be ahead of the clock."""

@@ -28,7 +28,8 @@ from rclpy.timer import Timer
 from ssa_fusion.core.base.types import Cause
 from ssa_fusion.ros.interfaces import DiagnosticArray, DiagnosticStatus, KeyValue, Message, Time
 from ssa_fusion.ros.readiness import MATCHED_KEY, MATCHED_READERS_KEY
-from ssa_fusion.ros.topics import TOPIC_DIAGNOSTICS
+from ssa_fusion.ros.run_identity import RunGate, RunMembers
+from ssa_fusion.ros.topics import TOPIC_CLOCK, TOPIC_DIAGNOSTICS
 
 T = TypeVar("T")
 
@@ -42,8 +43,15 @@ class NodeCause(enum.StrEnum):
     IGNORED_NOT_SENSOR = "ignored_not_sensor"
     CONTENT_FILTER_UNAVAILABLE = "content_filter_unavailable"
     REJECTED_UNLABELLED_SHARDED = "rejected_unlabelled_sharded"
+    FOREIGN_RUN = "foreign_run"
+    """A message of another run or of a stranger: its writer is not in the node's run
+    (`ros.run_identity`); never used, never recorded."""
+    FOREIGN_CLOCK = "foreign_clock"
+    """A /clock of another run or of a stranger: the node's sim time ignores it."""
 
 
+GATE_PERIOD_S = 0.1
+"""Wall s between two looks at messages held until the ROS graph names their writer."""
 FINAL_REPORT_WAIT_S = 1.0
 """Wall s a stopping node waits for its last /diagnostics report to be acknowledged."""
 
@@ -72,7 +80,7 @@ class Count(enum.StrEnum):
     ESTIMATES = "estimates"
     MEASUREMENTS = "measurements"
     SCENE_UPDATES = "scene_updates"
-    LOCKSTEP_TIMEOUTS = "lockstep_timeouts"
+    LOCKSTEP_GONE = "lockstep_gone"
     ELEMENT_SETS_SKIPPED = "element_sets_skipped"
     EVICTED = "evicted"
     PUBLISHED_ASSOCIATED = "published_associated"
@@ -88,8 +96,10 @@ RECORDED = "recorded "
 Key = Cause | NodeCause | Count | str
 """A counter's key (a str: a key made of a prefix and a topic)."""
 
-REJECTIONS = frozenset(k for k in (*Cause, *NodeCause) if k.name.startswith("REJECTED_"))
-"""The keys of refused input: once any is counted, the report's level is WARN."""
+REJECTIONS = frozenset(k for k in (*Cause, *NodeCause)
+                       if k.name.startswith(("REJECTED_", "FOREIGN_")))
+"""The keys of refused input (a stranger's included): once any is counted, the report's
+level is WARN."""
 INFO = frozenset({Cause.IGNORED_OTHER_OBJECT, Cause.IGNORED_BEFORE_IOD, Cause.IOD_PENDING,
                   Cause.IOD_FAILED, Cause.FORECAST_SUPERSEDED, Cause.REINITIALISED,
                   Cause.RESET_CLOCK_JUMP, Cause.HELD_UNTIL_CLOCK, Cause.PREDICTIONS_SKIPPED,
@@ -122,14 +132,20 @@ class Diagnostics:
         self.counts: Counter[str] = Counter()
         self.status: dict[str, str] = {}
         self.activity = 0
-        """Messages received on the inputs (`subscribe`); a node drains until it stands."""
+        """Messages of the run received on the inputs (`subscribe`); a node drains until it
+        stands."""
         self.on_input: list[Callable[[], None]] = []
-        """Called after each message received on an input (`subscribe`)."""
+        """Called after each message of the run received on an input (`subscribe`)."""
         self._logged: set[str] = set()
         self._watched: list[Subscription[Message]] = []
         self._outputs: list[Publisher[Message]] = []
+        self.members = RunMembers(node)
+        """Which writers are of this node's run (`ros.run_identity`)."""
+        self._gates: list[RunGate] = []
         self._pub = node.create_publisher(DiagnosticArray, TOPIC_DIAGNOSTICS, QoSProfile(depth=10))
         wall_timer(node, period_s, self.publish)  # sim time may stand still (no /clock)
+        if self.members.has_run:
+            wall_timer(node, GATE_PERIOD_S, self.guard(self.release_held))
 
     def count(self, key: Key, detail: str = "", warn: bool | None = None, n: int = 1) -> None:
         """Count `n` (one) `key`; its first occurrence is logged (with `detail`).
@@ -160,6 +176,8 @@ class Diagnostics:
         writer sends before the reader's side of the match exists). A payload that does not
         decode as `msg_type` is counted (`rejected_malformed`), not lost; with `raw` the
         callback gets the bytes. `content_filter`: DDS delivers only the samples it accepts.
+        Only the run's messages reach `callback` (`ros.run_identity.RunGate`): another
+        run's or a stranger's are counted (`foreign_run`; on /clock `foreign_clock`).
         """
         guarded = self.guard(callback)
 
@@ -179,8 +197,16 @@ class Diagnostics:
                 return
             guarded(msg)
 
-        sub = self.node.create_subscription(
-            msg_type, topic, take, qos, raw=True,
+        cause = NodeCause.FOREIGN_CLOCK if topic == TOPIC_CLOCK else NodeCause.FOREIGN_RUN
+        gate = RunGate(self.members, topic, take,
+                       lambda why: self.count(cause, f"{why}: ignored"))
+        self._gates.append(gate)
+
+        def arrive(data: bytes, info: object) -> None:
+            gate(data, info)
+
+        sub = self.node.create_subscription(  # a node without a run takes every writer's
+            msg_type, topic, arrive if self.members.has_run else take, qos, raw=True,
             event_callbacks=SubscriptionEventCallbacks(matched=lambda _info: self.publish()),
             content_filter_options=content_filter,
         )
@@ -201,6 +227,11 @@ class Diagnostics:
             event_callbacks=PublisherEventCallbacks(matched=lambda _info: self.publish()))
         self._outputs.append(pub)
         return pub
+
+    def release_held(self) -> None:
+        """Hand on the messages held until the ROS graph named their writers."""
+        for gate in self._gates:
+            gate.release()
 
     @property
     def has_inputs(self) -> bool:

@@ -131,11 +131,14 @@ def run(make_node: Callable[[], SsaNode], args: list[str] | None = None) -> int:
         return EXIT_BAD_PARAMETERS
     node: SsaNode | None = None
     code = EXIT_OK
-    executor = make_executor()
+    executor: Executor | None = None
     try:
         if stop.is_set():  # interrupted while starting: nothing to do
             return code
         node = make_node()
+        # a node of a run reads each message's writer (its MessageInfo), which rclpy's
+        # EventsExecutor cannot hand over
+        executor = make_executor(message_info=node.diag.members.has_run)
         executor.add_node(node)
         while not stop.is_set():
             try:
@@ -149,6 +152,10 @@ def run(make_node: Callable[[], SsaNode], args: list[str] | None = None) -> int:
     except ParameterError as exc:
         print(f"error: {exc}", file=sys.stderr)
         code = EXIT_BAD_PARAMETERS
+    except _rclpy.RCLError as exc:  # rcl could not make the node: e.g. DDS Security asked of
+        # a middleware built without it (docs/SECURITY.md)
+        print(f"error: cannot start: {_first_line(str(exc))}", file=sys.stderr)
+        code = EXIT_FAILED
     finally:
         if node is not None:
             with contextlib.suppress(Exception):  # a context already shut down: no last word
@@ -157,7 +164,8 @@ def run(make_node: Callable[[], SsaNode], args: list[str] | None = None) -> int:
             node.destroy_node()
         elif _constructed:  # refused while starting: destroyed in order, as rclpy does
             _constructed.pop().destroy_node()
-        executor.shutdown()
+        if executor is not None:
+            executor.shutdown()
         rclpy.try_shutdown()
         # Python's finalization resets handlers it installed to SIG_DFL, so a late second
         # interrupt would kill the exiting process (-15/-2); ignored signals stay ignored.

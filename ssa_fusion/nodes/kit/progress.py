@@ -1,27 +1,45 @@
 """Lockstep sim time: what each consumer has taken, and when the simulator may go on.
 
-In lockstep (the default of simulated catalog runs) sensor_sim advances ``/clock`` by one
-step only once every consumer it names has taken all it was sent: each catalog_filter shard
-every measurement of its shard (fused, refused or dropped: nothing left waiting), the
-recorder every measurement and every estimate the shards and surrogates published. All
-count rows of the batches (MeasurementBatch, EstimateBatch), not messages. And it publishes
-the next step's measurements only once every consumer has acted on that clock (`CLOCK`:
-the filters and the recorder have it, a surrogate has stepped its bank at it), so that what
-a node does at a clock never races the next step's data: the bag's log times, the fits and
-the forecasts are the same on any machine. The time scale is then a ceiling, not a promise:
-on a loaded machine the run is slower, never lossy, and gives the same bag as on an idle
-one.
+In lockstep (the default of simulated runs) sensor_sim advances ``/clock`` only once every
+consumer it names has taken all it was sent, and its results are recorded; the time scale
+is then a ceiling, not a promise: on a loaded machine the run is slower, never lossy, and
+gives the same bag as on an idle one.
+
+A catalog (`waiting`) steps by ``lockstep_step``: each catalog_filter shard takes every
+measurement of its shard (fused, refused or dropped: nothing left waiting), the recorder
+every measurement and every estimate the shards and surrogates published, counted in rows
+of the batches (MeasurementBatch, EstimateBatch). It publishes the next step's measurements
+only once every consumer has acted on the clock (`CLOCK`: the filters and the recorder have
+it, a surrogate has stepped its bank at it), so that what a node does at a clock never races
+the next step's data.
+
+One object's graph (`object_waiting`, `ObjectSent`) steps from one scheduled epoch e to the
+next, in four phases (`sim.schedule.Phase`): ``/clock`` e; then the surrogate's forecasts of
+the epochs before e (`TOPIC_RELEASE_FORECASTS`: the surrogate forecasts what it missed up to
+the time released), taken by the filter; then the filter's decisions of those epochs
+(`TOPIC_RELEASE_DECISIONS`: its predictions or gap forecasts up to the time released), so
+that a forecast for a gap epoch always reaches the filter before it decides what to publish
+there; then the events at e (measurements, withheld ones, the truth). Each phase waits until
+the filter, the surrogate and the recorder have taken and recorded all of the one before: a
+message's log time in the bag is the clock of its phase, the same on any machine.
 
 Each consumer publishes its counters on `TOPIC_PROGRESS` (`ProgressReporter`: a
 ``diagnostic_msgs/DiagnosticStatus`` named after the node, latched, sent within
-`REPORT_PERIOD_S` of a change); the simulator keeps the latest of each (`ProgressWatch`) and
-asks `waiting` what it still waits for. The topic is not under ``/ssa/``, so it is not in
-the bag (whose content must not depend on the machine).
+`REPORT_PERIOD_S` of a change while the node has work (`SsaNode.wakeup`), or at once by
+`ProgressReporter.nudge`), with its process
+(`nodes.kit.liveness`); the simulator keeps the latest of each (`ProgressWatch`), of its
+run only, and asks `Lockstep.go_on`. It waits as long as every consumer it waits for lives,
+and gives up on one only when it is gone (`Lockstep.gone`). The topics are not under
+``/ssa/``, so they are not in the bag (whose content must not depend on the machine).
 """
 
 from __future__ import annotations
 
+import math
+import time
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -30,13 +48,20 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ssa_fusion.nodes.kit.diagnostics import RECORDED, Count
+from ssa_fusion.nodes.kit.liveness import alive, process_keys
 from ssa_fusion.nodes.kit.shards import shard_range
 from ssa_fusion.ros.interfaces import DiagnosticStatus, KeyValue
+from ssa_fusion.ros.qos import reliable_stream
 from ssa_fusion.ros.topics import (
     TOPIC_ASSOCIATED,
     TOPIC_DETECTION_TRUTH,
+    TOPIC_ESTIMATE,
     TOPIC_ESTIMATE_BATCH,
+    TOPIC_FORECAST,
+    TOPIC_MEASUREMENT,
     TOPIC_MEASUREMENT_BATCH,
+    TOPIC_TRUTH,
+    TOPIC_WITHHELD,
 )
 
 if TYPE_CHECKING:
@@ -52,6 +77,18 @@ PROGRESS_QOS = QoSProfile(
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
 """Latched: the simulator sees each consumer's last report even if it joined later."""
+TOPIC_RELEASE_FORECASTS = "/lockstep/forecasts"
+"""One object's lockstep: the surrogate may forecast the epochs it missed up to this time
+(``rosgraph_msgs/Clock``)."""
+TOPIC_RELEASE_DECISIONS = "/lockstep/decisions"
+"""One object's lockstep: the filter may publish what it decides for the epochs up to this
+time (``rosgraph_msgs/Clock``)."""
+RELEASE_QOS = reliable_stream(10)
+"""The releases: reliable, each one answered before the next is sent."""
+LIVENESS_PERIOD_S = 1.0
+"""Wall s between two looks at whether the consumers waited for still live."""
+REPORT_EVERY_S = 5.0
+"""Wall s between two lines saying what lockstep still waits for."""
 
 REPORT_PERIOD_S = 0.005
 """Wall s between a counter's change and its report (at most)."""
@@ -76,14 +113,49 @@ the topic: a run of unlabelled detections)."""
 RECORDED_ASSOCIATED = RECORDED + TOPIC_ASSOCIATED
 """The recorder's rows of associated detections recorded (reported once it records the
 topic)."""
+TAKEN_FORECASTS = "taken forecasts"
+"""One object's filter: the surrogate's forecasts it took (fused or refused)."""
+PUBLISHED_ESTIMATES = "published estimates"
+"""One object's filter: the estimates it published (updates, predictions, gap forecasts)."""
+RELEASED = "released ns"
+"""One object's surrogate: the time (ns) up to which it forecast what it missed."""
+DECIDED = "decided ns"
+"""One object's filter: the time (ns) up to which it decided what to publish."""
+NEXT_DUE = "next due ns"
+"""One object's surrogate: the first epoch (ns) it would forecast ('inf': none)."""
+NEXT_DECISION = "next decision ns"
+"""One object's filter: the first time (ns) it would publish a prediction at ('inf': none)."""
+
+
+def time_ns(t: float) -> str:
+    """Return epoch `t` (s) as a progress value: integer ns, or 'inf'."""
+    return str(round(t * 1e9)) if math.isfinite(t) else "inf"
+
+
+def wants(reports: Mapping[str, Mapping[str, str]], nodes: Sequence[str], key: str,
+          t: float) -> bool:
+    """Return True when a node of `nodes` reports `key` (`NEXT_DUE`, `NEXT_DECISION`) <= `t` s.
+
+    A release up to `t` then gives it something to do (1 us of round-off allowed).
+    """
+    for name in nodes:
+        value = reports.get(name, {}).get(key, "inf")
+        if value.lstrip("-").isdigit() and int(value) * 1e-9 <= t + 1e-6:
+            return True
+    return False
+
+
+OBJECT_TOPICS = (TOPIC_MEASUREMENT, TOPIC_WITHHELD, TOPIC_TRUTH)
+"""What the simulator of one object publishes, besides /clock."""
 
 
 class ProgressReporter:
     """Publish a node's progress counters (`counters()`: name -> value) when they change.
 
-    With them `CLOCK`: `clock()` (ns), by default the node's clock (sim time). Checked every
-    `REPORT_PERIOD_S` while the node has work, not while it waits (`SsaNode.wakeup`: its
-    inputs, its clock and its other work wake the check up).
+    With them `CLOCK`: `clock()` (ns), by default the node's clock (sim time), and the
+    node's process (`nodes.kit.liveness`). Checked every `REPORT_PERIOD_S` while the node
+    has work, not while it waits (`SsaNode.wakeup`: its inputs, its clock and its other work
+    wake the check up); `nudge` reports at once what a message just handled changed.
     """
 
     def __init__(self, node: SsaNode, counters: Callable[[], Mapping[str, str | int]],
@@ -93,15 +165,33 @@ class ProgressReporter:
         self.clock = clock or (lambda: int(node.get_clock().now().nanoseconds))
         self.pub = node.create_publisher(DiagnosticStatus, TOPIC_PROGRESS, PROGRESS_QOS)
         self._sent: dict[str, str] = {}
+        self._sent_at = -math.inf
+        self._process = process_keys()
         self.timer = node.wakeup(REPORT_PERIOD_S, self.report)
 
+    def nudge(self) -> None:
+        """Report now, unless a report went out within `REPORT_PERIOD_S` (then soon after).
+
+        After each message a lockstep consumer handles: sparse progress (a lockstep phase)
+        is reported at once, dense progress (a burst) at most every `REPORT_PERIOD_S`.
+        """
+        if time.monotonic() - self._sent_at >= REPORT_PERIOD_S:
+            self.report()
+        else:
+            self.timer.arm()
+
     def report(self) -> bool:
-        """Publish the counters if any changed since the last report; return whether."""
+        """Publish the counters if any changed since the last report; return whether.
+
+        With them `CLOCK` and the process (`nodes.kit.liveness.process_keys`).
+        """
         now = {k: str(v) for k, v in self.counters().items()}
         now[CLOCK] = str(self.clock())
+        now.update(self._process)
         if now == self._sent:
             return False
         self._sent = now
+        self._sent_at = time.monotonic()
         self.pub.publish(DiagnosticStatus(
             name=self.node.get_name(),
             values=[KeyValue(key=k, value=v) for k, v in now.items()]))
@@ -109,15 +199,27 @@ class ProgressReporter:
 
 
 class ProgressWatch:
-    """The latest progress report of each node (`reports`: node name -> counters)."""
+    """The latest progress report of each node (`reports`: node name -> counters).
 
-    def __init__(self, node: Node) -> None:
+    On an ssa_fusion node, of its run only (`Diagnostics.subscribe`: another run's
+    consumers of the same names report too, in a shared ROS domain). `on_report` is called
+    after each report taken.
+    """
+
+    def __init__(self, node: Node, on_report: Callable[[], None] | None = None) -> None:
         self.reports: dict[str, dict[str, str]] = {}
-        self._sub = node.create_subscription(DiagnosticStatus, TOPIC_PROGRESS, self._on,
-                                             PROGRESS_QOS)
+        self.on_report = on_report
+        diag = getattr(node, "diag", None)
+        if diag is not None:
+            self._sub = diag.subscribe(DiagnosticStatus, TOPIC_PROGRESS, self._on, PROGRESS_QOS)
+        else:
+            self._sub = node.create_subscription(DiagnosticStatus, TOPIC_PROGRESS, self._on,
+                                                 PROGRESS_QOS)
 
     def _on(self, msg: DiagnosticStatus) -> None:
         self.reports[msg.name] = {kv.key: kv.value for kv in msg.values}
+        if self.on_report is not None:
+            self.on_report()
 
 
 def _num(report: Mapping[str, str], key: str) -> int:
@@ -190,6 +292,56 @@ def waiting(reports: Mapping[str, Mapping[str, str]], nodes: Sequence[str], sent
     return out
 
 
+@dataclass
+class ObjectSent:
+    """What the simulator of one object has sent: counts by topic, clock, releases (ns)."""
+
+    published: Counter[str] = field(default_factory=Counter)
+    released_forecasts_ns: int = 0
+    released_decisions_ns: int = 0
+
+
+def _short(report: Mapping[str, str], key: str, want: int, what: str) -> str | None:
+    have = _num(report, key)
+    return f"({what} {have} of {want})" if have < want else None
+
+
+def object_waiting(reports: Mapping[str, Mapping[str, str]], nodes: Sequence[str],
+                   sent: ObjectSent, clock_ns: int = 0) -> list[str]:
+    """Return what one object's consumers have not taken yet ([] = the simulator may go on).
+
+    The filter reports `TAKEN` (its measurements), `TAKEN_FORECASTS`, `PUBLISHED_ESTIMATES`
+    and `DECIDED`; the surrogate `TAKEN`, its ``forecasts`` and `RELEASED`; the recorder
+    ``recorded <topic>`` of each topic it records: every measurement, withheld one and truth
+    sent, every forecast and estimate published. Each of them `CLOCK`.
+    """
+    mine = [reports.get(n, {}) for n in nodes]
+    forecasts = sum(_num(r, Count.FORECASTS) for r in mine if RELEASED in r)
+    estimates = sum(_num(r, PUBLISHED_ESTIMATES) for r in mine)
+    out = []
+    for name in nodes:
+        r = reports.get(name)
+        if r is None:
+            out.append(f"{name} (no report yet)")
+            continue
+        shorts = [
+            _short(r, CLOCK, clock_ns, "at sim time ns") if CLOCK in r else None,
+            _short(r, TAKEN, sent.published[TOPIC_MEASUREMENT], "taken measurements")
+            if TAKEN in r else None,
+            _short(r, TAKEN_FORECASTS, forecasts, "taken forecasts")
+            if TAKEN_FORECASTS in r else None,
+            _short(r, RELEASED, sent.released_forecasts_ns, "forecast up to ns")
+            if RELEASED in r else None,
+            _short(r, DECIDED, sent.released_decisions_ns, "decided up to ns")
+            if DECIDED in r else None,
+            *(_short(r, RECORDED + topic, want, f"recorded {topic}")
+              for topic, want in ((*((t, sent.published[t]) for t in OBJECT_TOPICS),
+                                   (TOPIC_FORECAST, forecasts), (TOPIC_ESTIMATE, estimates)))
+              if RECORDED + topic in r)]
+        out += [f"{name} {x}" for x in shorts if x]
+    return out
+
+
 class Lockstep:
     """The simulator's side of lockstep: whether it may publish the next step.
 
@@ -198,32 +350,39 @@ class Lockstep:
     node : Node
         The simulator (it subscribes to `TOPIC_PROGRESS`).
     nodes : sequence of str
-        The consumers to wait for (see `waiting`).
-    keys : ndarray of int (N,)
-        The ``shard_key`` of each object of the catalog (what its measurements carry);
-        `published` counts the measurements of each as they go out.
-    timeout_s : float
-        Wall s the simulator waits for a step's consumers before it goes on without the
-        late ones, for the rest of the run (a stopped or never started consumer must not
-        stop the run; `go_on` reports them).
+        The consumers to wait for (see `waiting`, `object_waiting`), as long as they live
+        (`go_on`).
+    keys : ndarray of int (N,) or None
+        A catalog: the ``shard_key`` of each object (what its measurements carry);
+        `published` counts the measurements of each as they go out. None: one object
+        (`object_waiting`, what was sent in `object`).
+    on_report : callable, optional
+        Called after each progress report taken (the simulator goes on at once).
     """
 
-    def __init__(self, node: Node, nodes: Sequence[str], keys: NDArray[np.int64],
-                 timeout_s: float) -> None:
-        self.watch = ProgressWatch(node)
+    def __init__(self, node: Node, nodes: Sequence[str], keys: NDArray[np.int64] | None,
+                 on_report: Callable[[], None] | None = None) -> None:
+        self.node = node
+        self.watch = ProgressWatch(node, on_report)
         self.nodes = list(nodes)
         self.keys = keys
-        self.timeout_s = timeout_s
         self.sent = 0
-        """Measurements published so far (`published`)."""
+        """A catalog's measurements published so far (`published`)."""
+        self.object = ObjectSent()
+        """What one object's simulator has sent (it sets it)."""
         self.clock_ns = 0
         """The sim time last published on /clock, ns (the simulator sets it)."""
-        self._per_object = np.zeros(len(keys), dtype=np.int64)
+        self.gone: list[str] = []
+        """The consumers given up on: they are gone."""
+        self.since: float | None = None
+        """Wall time (monotonic) the current wait began (None: not waiting)."""
+        self._looked = -math.inf  # wall time (monotonic) liveness was last looked at
+        self._per_object = np.zeros(0 if keys is None else len(keys), dtype=np.int64)
         self._by_shard: dict[int, tuple[int, NDArray[np.int64]]] = {}
-        self._since: float | None = None
 
     def published(self, objects: NDArray[np.int64]) -> None:
         """Count measurements just published, of the objects `objects` (indices in `keys`)."""
+        assert self.keys is not None
         self._per_object += np.bincount(objects, minlength=len(self.keys))
         self.sent += len(objects)
 
@@ -231,6 +390,7 @@ class Lockstep:
         """Return the measurements published so far to each of `shards` shards (shards,)."""
         n, counts = self._by_shard.get(shards, (-1, np.zeros(shards, dtype=np.int64)))
         if n != self.sent:
+            assert self.keys is not None
             his = np.array([shard_range(k, shards)[1] for k in range(shards)])
             shard = np.searchsorted(his, self.keys)  # the first range ending at/after the key
             counts = np.bincount(shard, weights=self._per_object,
@@ -238,22 +398,41 @@ class Lockstep:
             self._by_shard[shards] = (self.sent, counts)
         return counts
 
+    def missing(self) -> list[str]:
+        """Return what the consumers still waited for have not taken ([]: go on)."""
+        if self.keys is None:
+            return object_waiting(self.watch.reports, self.nodes, self.object, self.clock_ns)
+        return waiting(self.watch.reports, self.nodes, self.sent, self.sent_by_shard,
+                       self.clock_ns)
+
     def go_on(self, now: float) -> tuple[bool, list[str]]:
         """Return (whether the next step may be published, what is still awaited).
 
-        At wall time `now` (s, monotonic). True with a non-empty list: the consumers listed
-        took longer than `timeout_s`; they are no longer waited for.
+        At wall time `now` (s, monotonic). A consumer awaited that is gone (`alive`) is no
+        longer waited for: it goes to `gone` (the caller says so); one that lives is waited
+        for, however long.
         """
-        missing = waiting(self.watch.reports, self.nodes, self.sent, self.sent_by_shard,
-                          self.clock_ns)
+        missing = self.missing()
+        if missing and now - self._looked >= LIVENESS_PERIOD_S:
+            self._looked = now
+            listed = {n for n, _ns in self.node.get_node_names_and_namespaces()
+                      if _ns == self.node.get_namespace()}
+            lost = [n for n in self.nodes if any(m.startswith(f"{n} ") for m in missing)
+                    and not alive(self.watch.reports.get(n), n in listed)]
+            if lost:
+                self.gone += lost
+                self.nodes = [n for n in self.nodes if n not in lost]
+                missing = self.missing()
         if not missing:
-            self._since = None
+            self.since = None
             return True, []
-        if self._since is None:
-            self._since = now
-        if now - self._since > self.timeout_s:
-            self._since = None
-            self.nodes = [n for n in self.nodes if not any(m.startswith(f"{n} (")
-                                                           for m in missing)]
-            return True, missing
+        if self.since is None:
+            self.since = now
         return False, missing
+
+    def waiting_line(self, missing: Sequence[str], now: float) -> str:
+        """Return one line: since when (wall clock) and what lockstep waits for."""
+        since = self.since if self.since is not None else now
+        started = time.strftime("%H:%M:%S", time.localtime(time.time() - (now - since)))
+        return (f"lockstep: waiting since {started} ({now - since:.0f} s) for "
+                f"{', '.join(missing)}")

@@ -14,6 +14,7 @@ from ssa_fusion.params.shared import (
     STATION_RULE,
     clock_lead,
     filter_rows,
+    lockstep_row,
     measurement_stream,
     object_filter,
 )
@@ -43,6 +44,7 @@ PARAMETERS = ParameterTable("filter", (
           "what the predictions in a gap between passes are: the EKF coasting (`none`), or "
           "a forecast of the residual, of a batch fit, or of both", check=one_of(*GapFill)),
     clock_lead(FILTER.max_clock_lead),
+    lockstep_row(FILTER.lockstep, "publishes its predictions and gap forecasts"),
     Param("laser", FILTER.laser,
           "with `kind` laser_range: the stations and the object, `import crd`'s /ssa/config "
           "message (JSON); the filter is then the laser filter; `\"\"` = none",

@@ -105,14 +105,6 @@ def _unlabelled_needs_a_catalog_of_one_shard(values: Values) -> str | None:
     return None
 
 
-def _lockstep_needs_a_catalog(values: Values) -> str | None:
-    names = values["lockstep"]
-    assert isinstance(names, list)
-    if any(names) and not values["catalog"]:
-        return "lockstep is for catalog runs (`catalog`): their consumers report progress"
-    return None
-
-
 DEFAULT_CADENCE = scenarios.cadence(SENSOR_SIM.scenario)
 """The default scenario's cadence, s."""
 
@@ -203,19 +195,17 @@ _CATALOG_ROWS = (
           "catalog: the measurements of a step (or tick) go out as this many batches, one "
           "per shard key range, each for one filter shard", check=at_least(1)),
     Param("lockstep", SENSOR_SIM.lockstep,
-          "catalog: the consumers (node names) sim time waits for: `/clock` advances by "
-          "`lockstep_step` once each has taken all it was sent; `[\"\"]` = open loop"),
+          "the consumers (node names) sim time waits for, each to take all it was sent, as "
+          "long as it lives (a catalog: steps of `lockstep_step`; one object: epoch to "
+          "epoch); `[\"\"]` = open loop"),
     Param("lockstep_step", SENSOR_SIM.lockstep_step,
-          "lockstep: sim time per step (its measurements run ahead of the clock by up to "
-          "this: keep it below the consumers' `max_clock_lead`)", unit="s",
+          "a catalog's lockstep: sim time per step (its measurements run ahead of the clock "
+          "by up to this: keep it below the consumers' `max_clock_lead`)", unit="s",
           check=Check(f"in (0, {MAX_CLOCK_LEAD_S / 2:g}]", _step)),
     Param("batch_rows", SENSOR_SIM.batch_rows,
           "a catalog's measurements go in batches of at most this many rows (a shard's step "
           "is split: DDS keeps buffers as large as the largest message)",
           check=at_least(1)),
-    Param("lockstep_timeout", SENSOR_SIM.lockstep_timeout,
-          "lockstep: wall time a step waits for its consumers before it goes on without "
-          "them (counted `lockstep_timeouts`, and logged)", unit="wall s", check=POSITIVE),
     Param("unlabelled", SENSOR_SIM.unlabelled,
           "catalog: publish each scan's detections without object ids, as a radar reports "
           "them; their true ids go to `/ssa/detection_truth` (evaluation only); needs "
@@ -227,7 +217,6 @@ PARAMETERS = ParameterTable("sensor_sim", (*_SCENARIO_ROWS, *_SCHEDULE_ROWS, *_C
                             rules=(Rule(("unlabelled", "catalog", "shards"),
                                         _unlabelled_needs_a_catalog_of_one_shard),
                                    _needs_sky("catalog", "its radars observe the catalog"),
-                                   Rule(("lockstep", "catalog"), _lockstep_needs_a_catalog),
                                    _needs_sky("start", "a paper scenario keeps the paper's "
                                                        "epoch"),
                                    _needs_sky("sites", "its object is what the sites observe"),

@@ -13,6 +13,7 @@ from ssa_fusion.params.shared import (
     KINDS,
     STATION_RULE,
     clock_lead,
+    lockstep_row,
     measurement_stream,
     object_filter,
 )
@@ -63,6 +64,8 @@ PARAMETERS = ParameterTable("surrogate", (
           unit="wall s", check=POSITIVE),
     object_filter(SURROGATE.object_id, "learn"),
     clock_lead(SURROGATE.max_clock_lead),
+    lockstep_row(SURROGATE.lockstep,
+                 "forecasts the epochs it missed (without `grace`)"),
 ), rules=(Rule(("delays", "cadence", "buffer_length"), _fits),
           STATION_RULE,
           Rule(settings.SURROGATE_KEYS, partial(settings.estimator_problem, "surrogate"))))
