@@ -37,7 +37,14 @@ from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch_ros.actions import Node
 
-from ssa_fusion.graphs import READERS, WAIT_FOR, default_bag, live_scenario, node_parameters
+from ssa_fusion.graphs import (
+    LOCKSTEP_READERS,
+    READERS,
+    WAIT_FOR,
+    default_bag,
+    live_scenario,
+    node_parameters,
+)
 from ssa_fusion.ros.launch_events import launch_description, shutdown_handlers
 
 NODES = ("recorder", "surrogate", "filter", "sensor_sim")
@@ -91,8 +98,9 @@ def graph(context: Any) -> list[Any]:
     extra["recorder"].update(bag=bag)
     for name in ("recorder", "surrogate", "filter"):
         extra[name].update(use_sim_time=True)
-    # start once every node has matched its inputs (both sides of each DDS match)
-    extra["sensor_sim"].update(wait_for=WAIT_FOR, wait_for_readers=READERS)
+    # start once every node has matched its inputs (both sides of each DDS match), the
+    # lockstep topics too (the params file runs the graph in lockstep, as `live` does)
+    extra["sensor_sim"].update(wait_for=WAIT_FOR, wait_for_readers=READERS + LOCKSTEP_READERS)
     if args["time_scale"]:
         try:
             extra["sensor_sim"].update(time_scale=float(args["time_scale"]))

@@ -29,7 +29,7 @@ import pytest
 
 from ssa_fusion.graphs import WAIT_FOR, node_parameters
 from ssa_fusion.params.defaults import BAG_PATTERN
-from ssa_fusion.ros.readiness import READERS
+from ssa_fusion.ros.readiness import LOCKSTEP_READERS, READERS
 from ssa_fusion.sim import scenarios
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -157,7 +157,7 @@ def test_starts_the_four_nodes_over_the_params_file(launch):
         exe = Path(sys.prefix) / "lib" / "ssa_fusion" / name  # what ros2 launch runs
         assert exe.is_file(), exe
     sensor = nodes["sensor_sim"].kwargs["parameters"][1]
-    assert sensor == {"wait_for": WAIT_FOR, "wait_for_readers": READERS}
+    assert sensor == {"wait_for": WAIT_FOR, "wait_for_readers": READERS + LOCKSTEP_READERS}
     assert nodes["recorder"].kwargs["parameters"][1] == {"bag": "/tmp/run1", "use_sim_time": True}
 
 

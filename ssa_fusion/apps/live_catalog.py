@@ -58,6 +58,7 @@ from ssa_fusion.core.motion.element_sets import CatalogEntry
 from ssa_fusion.formats import element_sets as catalog_io
 from ssa_fusion.formats.skipped import Skipped
 from ssa_fusion.params.defaults import CATALOG_SURROGATE
+from ssa_fusion.ros.bagio import BagError
 from ssa_fusion.ros.discovery import Discovery
 from ssa_fusion.ros.processes import Graph, ros_arguments
 from ssa_fusion.ros.qos import CATALOG_QOS
@@ -316,7 +317,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         summary = summarise(bag, entries, status, names, outcome.rss, ran, sim_s, gaps,
                             unlabelled, t0, _pass_break(args))
-    except (OSError, ValueError) as exc:  # a recorder killed mid-write: no bag to sum up
+    except (OSError, ValueError, BagError) as exc:  # no bag, or a recorder killed mid-write
         print(f"error: no summary: cannot read {bag}: {exc} (`ssa-fusion bag repair`)",
               file=sys.stderr)
         return 1
