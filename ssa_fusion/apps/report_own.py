@@ -59,6 +59,8 @@ CHANNELS: dict[int, tuple[tuple[str, str, float], ...]] = {
 }
 """Per measurement kind, each channel's (name, unit shown, factor from the core's unit)."""
 PLOTS = ("residuals.png", "nis.png", "position_sigma.png")
+NIS_REPRODUCED = 1e-6
+"""Relative: the recomputed residuals' NIS against the filter's published one (rounding)."""
 
 
 @dataclass
@@ -141,18 +143,19 @@ def notes(rep: OwnReport) -> list[str]:
         out.append("no fused measurement with an innovation: no NIS")
     if rep.residuals:
         norm = np.concatenate([r.normalised for r in rep.residuals])
-        first = rep.residuals[0]
-        per = np.sqrt(np.mean(np.array([r.normalised for r in rep.residuals
-                                        if r.kind == first.kind]) ** 2, axis=0))
-        names = [c[0] for c in CHANNELS.get(first.kind, ())]
+        per = ", ".join(
+            f"{channel[0]} {v:.2f}" for same, channels in _by_kind(rep.residuals)
+            for channel, v in zip(channels, np.sqrt(np.mean(
+                np.array([r.normalised for r in same]) ** 2, axis=0)), strict=True))
         out.append(f"residual RMS in units of the innovation σ: {np.sqrt(np.mean(norm ** 2)):.2f}"
-                   f" over all channels (" + ", ".join(
-                       f"{names[i] if i < len(names) else i} {v:.2f}" for i, v in enumerate(per))
-                   + "; a consistent filter: about 1)")
+                   f" over all channels ({per}; a consistent filter: about 1)")
         worst = max(abs(r.nis / r.nis_filter - 1.0) for r in rep.residuals)
+        verdict = ("passed" if worst <= NIS_REPRODUCED else
+                   f"FAILED (more than {NIS_REPRODUCED:.0e}): the residuals recomputed here "
+                   "are not the filter's; are the settings the run's?")
         out.append(f"residuals: pre-fit (measurement minus the filter's predicted measurement "
-                   f"before its update; its NIS reproduces the filter's published one to "
-                   f"{worst:.1e} relative)")
+                   f"before its update); check that their NIS reproduces the filter's "
+                   f"published one: {verdict} ({worst:.1e} relative)")
     if rep.unknown_stations:
         out.append(f"no residuals for station(s) {', '.join(rep.unknown_stations)}: the "
                    f"settings do not take them (give their sites file with --sites)")
@@ -226,25 +229,42 @@ def _xlabel(t0: float) -> str:
 def plot_residuals(rep: OwnReport, t0: float, path: Path) -> None:
     """Plot per channel the pre-fit residuals by station against ±3σ of S and of R.
 
-    Each panel scaled by the bulk of its residuals, at least the settled 3σ of S; residuals
-    beyond are marked on its edge (`report_figures.mark_outside`).
+    One panel per channel of every measurement kind in the bag (a radar's range, azimuth
+    and elevation, then a telescope's right ascension and declination, ...). Each panel
+    scaled by the bulk of its residuals, at least the settled 3σ of S; residuals beyond are
+    marked on its edge (`report_figures.mark_outside`).
     """
     if not rep.residuals:
         return
     plt = report_figures.pyplot()
-    kind = rep.residuals[0].kind
-    same = [r for r in rep.residuals if r.kind == kind]
-    channels = CHANNELS.get(kind, tuple((f"z[{i}]", "-", 1.0) for i in range(len(same[0].y))))
-    fig, axes = plt.subplots(len(channels), 1, figsize=(9, 2.4 * len(channels) + 0.8),
+    panels = [(same, i, channel) for same, channels in _by_kind(rep.residuals)
+              for i, channel in enumerate(channels)]
+    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 2.4 * len(panels) + 0.8),
                              sharex=True)
-    for i, (ax, channel) in enumerate(zip(np.atleast_1d(axes), channels, strict=True)):
+    for k, (ax, (same, i, channel)) in enumerate(zip(np.atleast_1d(axes), panels,
+                                                     strict=True)):
         residual_panel(ax, rep, same, i, channel, t0)
-        if i:  # the first panel holds the figure's legend
+        if k:  # the first panel holds the figure's legend
             report_figures.beyond_legend(ax)
     above(np.atleast_1d(axes)[0])
     np.atleast_1d(axes)[-1].set_xlabel(_xlabel(t0))
     fig.suptitle("Pre-fit residuals (measurement − filter's prediction before the update)")
     report_figures.save(fig, path, dpi=100)
+
+
+def _by_kind(residuals: list[res_.Residual]) -> list[tuple[list[res_.Residual],
+                                                          tuple[tuple[str, str, float], ...]]]:
+    """Group `residuals` by measurement kind, in order of first appearance.
+
+    Each group comes with its kind's channels (name, unit shown, factor from the core's
+    unit).
+    """
+    out = []
+    for kind in dict.fromkeys(r.kind for r in residuals):
+        same = [r for r in residuals if r.kind == kind]
+        out.append((same, CHANNELS.get(kind, tuple((f"z[{i}]", "-", 1.0)
+                                                   for i in range(len(same[0].y))))))
+    return out
 
 
 def residual_panel(ax: Axes, rep: OwnReport, same: list[res_.Residual], i: int,
@@ -306,18 +326,25 @@ def plot_nis(rep: OwnReport, t0: float, path: Path) -> None:
 def plot_sigma(data: evaluate.BagData, rep: OwnReport, t0: float, path: Path) -> None:
     """Plot the 1-σ position uncertainty (km, log) of the estimates, gaps shaded.
 
-    Fused estimates (a line within each pass), the filter's predictions through the gaps
-    (markers, dotted), and the smoothed estimates when the bag holds them (dashed).
+    Estimates that fused a measurement (a line within each pass), those that fused a gap
+    forecast (green), the filter's predictions through the gaps (markers, dotted), and the
+    smoothed estimates when the bag holds them (dashed).
     """
-    fused = [e for e in data.estimates if e.update_source != types.UpdateSource.NONE]
-    if not fused:
+    fused = [e for e in data.estimates if e.update_source == types.UpdateSource.SENSOR]
+    forecast = [e for e in data.estimates if e.update_source == types.UpdateSource.FORECAST]
+    if not fused and not forecast:
         return
     plt = report_figures.pyplot()
     fig, ax = plt.subplots(figsize=(9, 4))
     shade_gaps(ax, rep, t0)
-    t, s = res_.position_sigma(fused)
-    ax.plot(*broken_line(t, s, t0, PASS_BREAK_S), "-", lw=1.2, color="tab:blue",
-            label="filter, fused epochs")
+    if fused:
+        t, s = res_.position_sigma(fused)
+        ax.plot(*broken_line(t, s, t0, PASS_BREAK_S), "-", lw=1.2, color="tab:blue",
+                label="filter, epochs of fused measurements")
+    if forecast:
+        t, s = res_.position_sigma(forecast)
+        ax.plot(*broken_line(t, s, t0, PASS_BREAK_S), "-", lw=1.0, color="tab:green",
+                label="filter, epochs of fused gap forecasts")
     predicted = [e for e in data.estimates if e.update_source == types.UpdateSource.NONE]
     if predicted:
         t, s = res_.position_sigma(predicted)

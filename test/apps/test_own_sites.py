@@ -297,7 +297,8 @@ def test_report_on_your_own_radar_residuals_nis_sigma_and_passes(passes, replaye
     assert n > 100 and 0.85 <= fraction <= 0.99, (fraction, n)
     rms = re.search(r"residual RMS in units of the innovation σ: ([\d.]+) over all", text)
     assert rms and 0.75 <= float(rms[1]) <= 1.25, text
-    agree = re.search(r"reproduces the filter's published one to ([\d.e+-]+) relative", text)
+    agree = re.search(r"reproduces the filter's published one: passed \(([\d.e+-]+) relative\)",
+                      text)
     assert agree and float(agree[1]) < 1e-6, text
     rows = [line.split("|")[1:-1] for line in text.splitlines()
             if re.match(r"\| \d+ \| ", line)]
