@@ -47,7 +47,8 @@ from probe_hostile import (
     stall,
 )
 
-SKY = ["--scenario", "iss_radar_columbus", "--duration", "4"]
+SKY = ["--scenario", "iss_radar_columbus", "--same-geometry", "--duration", "12"]
+"""A short real-sky run with passes and an outage (seed 0's own case sees no pass in 12 h)."""
 """A short real-sky run (4 h, lockstep at 1000x: seconds) for the identity probes."""
 TABLE = re.compile(r"^\| (placeholder|coast|j2_coast|batch_fit|dmd_ekf|hypothetical_ekf) \|.*$",
                    re.M)

@@ -8,6 +8,7 @@ import signal
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ssa_fusion.apps import args as cliargs
@@ -182,6 +183,25 @@ def test_live_run_that_cannot_be_evaluated_says_why_without_a_traceback(tmp_path
     err = capsys.readouterr().err
     assert "error: the run cannot be evaluated: the bag has no /ssa/truth messages" in err
     assert "recorded 3 messages" in err
+
+
+def test_a_live_run_in_which_no_station_saw_the_object_says_what_to_change(
+        tmp_path, monkeypatch, capsys):
+    """A truth but not one measurement (a seed's case whose passes all fall after a short
+    --duration): exit 1 with what to change, not "no /ssa/withheld messages"."""
+    from ssa_fusion.apps import evaluate
+    from ssa_fusion.core.base.types import StateEstimate
+
+    truth = [StateEstimate(60.0 * k, np.zeros(6)) for k in range(3)]
+    monkeypatch.setattr(runs, "run_graph", _FakeGraph)
+    monkeypatch.setattr(evaluate, "load", lambda _bag: evaluate.BagData(
+        counts={"/clock": 3, "/ssa/truth": 3}, truth=truth))
+    args = cli.build_parser().parse_args(["live", "--scenario", "iss_radar_columbus",
+                                          "--duration", "4", "--out", str(tmp_path / "run")])
+    assert live.run(args) == 1
+    err = capsys.readouterr().err
+    assert ("error: the run cannot be evaluated: no station saw the object in the run's 4 h "
+            "(0 measurements): a longer --duration, another --seed") in err, err
 
 
 def test_a_live_run_whose_outage_withheld_nothing_is_judged_against_its_truth(
