@@ -42,8 +42,10 @@ def wait_for(cond, timeout: float, what: str) -> None:
 def test_live_stops_every_node_and_closes_the_bag(sig, tmp_path):  # (test/apps/test_cli.py)
     domain = fresh_domain_id()
     out = tmp_path / "run"
+    # time scale 1000: the bag holds measurements ~4 s sooner than at 200; the whole run
+    # (63 sim ks, ~1 min) still lasts far beyond the signal
     cli = subprocess.Popen(
-        [sys.executable, "-m", "ssa_fusion.apps.cli", "live", "--time-scale", "200",
+        [sys.executable, "-m", "ssa_fusion.apps.cli", "live", "--time-scale", "1000",
          "--out", str(out), "--domain-id", str(domain)],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         env={**os.environ, "ROS_DOMAIN_ID": str(domain)})
