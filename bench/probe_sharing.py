@@ -47,8 +47,9 @@ from probe_hostile import (
     stall,
 )
 
-SKY = ["--scenario", "iss_radar_columbus", "--same-geometry", "--duration", "12"]
-"""A short real-sky run with passes and an outage (seed 0's own case sees no pass in 12 h)."""
+SKY = ["--scenario", "iss_network", "--duration", "12"]
+"""A short real-sky run whose filter starts before the outage (seed 0's case: passes from
+5.4 h; a single radar's case may see none in 12 h, or its first pass only in the outage)."""
 """A short real-sky run (4 h, lockstep at 1000x: seconds) for the identity probes."""
 TABLE = re.compile(r"^\| (placeholder|coast|j2_coast|batch_fit|dmd_ekf|hypothetical_ekf) \|.*$",
                    re.M)
