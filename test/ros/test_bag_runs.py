@@ -6,10 +6,12 @@ sample bag, and a clock that goes back once (a looping playback) pass."""
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from ssa_fusion.apps import cli
-from ssa_fusion.ros import bagio
+from ssa_fusion.core.base.types import StateEstimate
+from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.bag_runs import CLOCK_BACKS, MixedBagError, check_one_run, runs_in
 from ssa_fusion.ros.topics import TOPIC_CLOCK, TOPIC_RUN
 
@@ -65,3 +67,27 @@ def test_report_and_replay_refuse_a_bag_of_two_runs_in_one_line(tmp_path, capsys
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "holds 2 runs" in err[0], err
     assert not out.exists()
+
+
+def _truth_bag(path: Path, epochs: list[int], logged: list[int] | None = None) -> Path:
+    """Write a bag with one /ssa/truth of object "iss" at each of `epochs` (s), in order,
+    logged at `logged` (s; default: its own epoch, as a run in lockstep records)."""
+    w = bagio.BagWriter(path)
+    w.add_topic("/ssa/truth", "ssa_fusion_msgs/msg/StateEstimate")
+    for t, log in zip(epochs, logged or epochs, strict=True):
+        e = StateEstimate(float(t), np.zeros(6), object_id="iss")
+        w.write_msg("/ssa/truth", log * 10**9, messages.estimate_to_msg(e, bagio.rosbags_classes()))
+    w.close()
+    return path
+
+
+def test_a_run_recorded_twice_into_one_bag_is_refused_a_loop_is_not(tmp_path):
+    """Two recordings of a run in lockstep merged (the second 7 s later, log time = sim time):
+    the clocks never go back, but the truth repeats its epochs while new ones come."""
+    epochs = [T0 + 60 * k for k in range(40)]
+    merged = sorted(epochs + epochs)  # each epoch twice, interleaved
+    with pytest.raises(MixedBagError, match="repeats an object's epochs while 39 new ones"):
+        check_one_run(_truth_bag(tmp_path / "merged", merged))
+    looped = [T0 + 60 * k for k in range(2 * len(epochs))]  # a loop's log times go on
+    check_one_run(_truth_bag(tmp_path / "loop", epochs + epochs, looped))
+    check_one_run(_truth_bag(tmp_path / "one", epochs))
