@@ -17,7 +17,8 @@ Propagates the scenario's true orbit (two-body + J2, drag, or SGP4/SDP4), and pu
   the surrogate's forecasts and of the filter's decisions between (``/lockstep/forecasts``,
   ``/lockstep/decisions``). Lockstep waits for a consumer as long as it lives, saying every
   5 s what it waits for and since when; one that is gone is named and no longer waited for
-  (``lockstep_gone``).
+  (``lockstep_gone``), and so is one whose process lives but that DDS dropped (silent beyond
+  its participant lease), with the rows it lost (``lockstep_dropped``).
 
 What it publishes when is the simulated world's (`sim.schedule`: a paper scenario's one
 idealised sensor at every epoch of its cadence, a real-sky scenario's stations above their
@@ -245,7 +246,8 @@ class SensorSim(SsaNode):
         """Return True while the consumers have not taken all of the last step.
 
         Says every `REPORT_EVERY_S` wall s what is awaited and since when; names a consumer
-        that is gone (counted ``lockstep_gone``), which is no longer waited for.
+        that is gone (counted ``lockstep_gone``), which is no longer waited for, and one that
+        DDS dropped with what it lost (``lockstep_dropped``: one line each).
         """
         now = time.monotonic()
         go, missing = lockstep.go_on(now)
@@ -254,6 +256,14 @@ class SensorSim(SsaNode):
             self.diag.count(Count.LOCKSTEP_GONE, f"lockstep: {name} is gone (its process ended "
                             "or it left the ROS graph); sim time goes on without it")
             self.get_logger().error(f"lockstep: {name} is gone; no longer waited for")
+        while lockstep.dropped:
+            name, short = lockstep.dropped.pop()
+            self.diag.counts[Count.LOCKSTEP_DROPPED] += 1
+            self.get_logger().error(
+                f"lockstep: {name} lost what was sent to it while DDS had dropped it (its "
+                f"process silent beyond its participant lease: stopped?): "
+                f"{'; '.join(m.removeprefix(f'{name} ').strip('()') for m in short)}; "
+                f"no longer waited for ({Count.LOCKSTEP_DROPPED})")
         if not go and now >= self._next_wait_log:
             self._next_wait_log = now + REPORT_EVERY_S
             self.get_logger().info(lockstep.waiting_line(missing, now))

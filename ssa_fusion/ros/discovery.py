@@ -23,6 +23,16 @@ rmw_fastrtps does by default (synchronous publication, no data sharing). Those t
 all the variable changes (rmw_fastrtps 9, Kilted: its create_publisher and
 create_subscription): the ROS QoS given in code (history, depth, reliability, durability
 ...) are applied on top of the profile either way.
+
+It also gives every participant a lease of `PARTICIPANT_LEASE_S` (Fast DDS's default: 20 s).
+A participant that says nothing for its lease is dropped by the others, and a volatile
+writer that meets it again sends it nothing written before: a node stopped longer than the
+lease (SIGSTOP, a debugger, a swap storm) lost for good what was sent to it meanwhile, and
+in lockstep the simulator waited forever for rows that could no longer come (a recorder
+stopped 30 s in a catalog run). Lockstep tells a local consumer that ended from one that is
+silent by its process (`nodes.kit.liveness`), not by DDS, so the long lease costs it
+nothing; a crashed process stays matched (its writers' unacknowledged samples kept) until
+the lease runs out.
 """
 
 from __future__ import annotations
@@ -45,6 +55,13 @@ QOS_FROM_XML_VAR = "RMW_FASTRTPS_USE_QOS_FROM_XML"
 publication mode and data sharing from the XML profiles (``1``) rather than its own."""
 PROFILE_NAME = "fastdds_loopback.xml"
 """The file name `Discovery.bind` writes `LOOPBACK_PROFILE` to."""
+PARTICIPANT_LEASE_S = 600.0
+"""Wall s a participant of a graph on this host may stay silent before the others drop it
+(and, volatile, what was sent to it meanwhile): a node stopped that long (SIGSTOP, a
+debugger) loses nothing (module docstring). Announced every `ANNOUNCE_PERIOD_S`."""
+ANNOUNCE_PERIOD_S = 3.0
+"""Wall s between two announcements of a participant that its lease holds (Fast DDS's
+default)."""
 ENDPOINT_PROFILES = """\
     <data_writer profile_name="ssa_fusion_writer" is_default_profile="true">
       <qos>
@@ -63,7 +80,20 @@ ENDPOINT_PROFILES = """\
 """Every writer's and reader's defaults: dynamic history memory (``DYNAMIC``, Fast DDS's
 ``DYNAMIC_RESERVE_MEMORY_MODE``: buffers freed with their messages; module docstring), and
 what rmw_fastrtps sets by default otherwise (synchronous publication, data sharing off)."""
-LOOPBACK_PROFILE = f"""\
+def _duration(tag: str, seconds: float) -> str:
+    """Return a Fast DDS XML duration element `tag` of `seconds` (s, whole ns)."""
+    sec, nanosec = divmod(round(seconds * 1e9), 1_000_000_000)
+    return f"<{tag}><sec>{sec}</sec><nanosec>{nanosec}</nanosec></{tag}>"
+
+
+def loopback_profile(lease_s: float = PARTICIPANT_LEASE_S,
+                     announce_s: float = ANNOUNCE_PERIOD_S) -> str:
+    """Return the Fast DDS profiles of a graph on this host (`LOOPBACK_PROFILE`).
+
+    Every participant listens on loopback only, with a lease of `lease_s` wall s announced
+    every `announce_s` (module docstring), and `ENDPOINT_PROFILES`.
+    """
+    return f"""\
 <?xml version="1.0" encoding="UTF-8"?>
 <!-- ssa_fusion: every participant listens on loopback only (UDPv4 on lo, and shared memory) -->
 <dds xmlns="http://www.eprosima.com">
@@ -90,13 +120,22 @@ LOOPBACK_PROFILE = f"""\
           <transport_id>ssa_fusion_loopback_udp</transport_id>
         </userTransports>
         <useBuiltinTransports>false</useBuiltinTransports>
+        <builtin>
+          <discovery_config>
+            {_duration("leaseDuration", lease_s)}
+            {_duration("leaseAnnouncement", announce_s)}
+          </discovery_config>
+        </builtin>
       </rtps>
     </participant>
 {ENDPOINT_PROFILES}  </profiles>
 </dds>
 """
+
+
+LOOPBACK_PROFILE = loopback_profile()
 """Fast DDS's default transports (shared memory, UDPv4) with UDP on the loopback interface,
-and `ENDPOINT_PROFILES`."""
+a participant lease of `PARTICIPANT_LEASE_S`, and `ENDPOINT_PROFILES`."""
 _HOSTNAME = re.compile(r"^(?=.{1,253}$)[A-Za-z0-9]([A-Za-z0-9-]*[A-Za-z0-9])?"
                        r"(\.[A-Za-z0-9]([A-Za-z0-9-]*[A-Za-z0-9])?)*$")
 

@@ -164,6 +164,26 @@ def test_a_consumer_that_is_gone_is_named_and_no_longer_waited_for():
     assert lock.gone == ["recorder", "catalog_filter_1"]
 
 
+def test_a_live_consumer_that_dds_dropped_is_named_with_its_loss_and_not_waited_for():
+    """Its process lives (stopped) but the graph that listed it no longer does: DDS dropped
+    it after its lease, and what it was sent meanwhile never reaches it: waiting would be
+    forever. Not listed before (starting up, or another host's): not dropped."""
+    node = _Node(listed=["recorder"])
+    lock = Lockstep(node, ["recorder", "catalog_filter_1"], np.zeros(1, dtype=np.int64))
+    alive_here = {**process_keys()}  # this process: alive
+    lock.watch.reports["recorder"] = {RECORDED_MEASUREMENTS: "3", RECORDED_ESTIMATES: "0",
+                                      **alive_here}
+    lock.watch.reports["catalog_filter_1"] = {TAKEN: "0", SHARD: "0/1", **alive_here}
+    lock.published(np.zeros(5, dtype=np.int64))
+    assert lock.go_on(100.0)[0] is False and lock.dropped == []  # listed: waited for
+    node.listed = []
+    go, missing = lock.go_on(101.0)
+    assert lock.dropped == [("recorder", ["recorder (recorded 3 of 5 measurements)"])]
+    assert (go, missing, lock.nodes) == (
+        False, ["catalog_filter_1 (taken 0 of 5 measurements)"], ["catalog_filter_1"])
+    assert lock.gone == []  # never listed: not dropped, and its process lives: not gone
+
+
 def test_one_object_waits_for_every_message_forecast_and_estimate():
     sent = ObjectSent(released_forecasts_ns=7, released_decisions_ns=5)
     sent.published.update({"/ssa/measurement": 3, "/ssa/withheld": 1, "/ssa/truth": 4})

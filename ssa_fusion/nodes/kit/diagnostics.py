@@ -81,6 +81,7 @@ class Count(enum.StrEnum):
     MEASUREMENTS = "measurements"
     SCENE_UPDATES = "scene_updates"
     LOCKSTEP_GONE = "lockstep_gone"
+    LOCKSTEP_DROPPED = "lockstep_dropped"
     ELEMENT_SETS_SKIPPED = "element_sets_skipped"
     EVICTED = "evicted"
     PUBLISHED_ASSOCIATED = "published_associated"

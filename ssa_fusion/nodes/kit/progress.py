@@ -29,8 +29,11 @@ Each consumer publishes its counters on `TOPIC_PROGRESS` (`ProgressReporter`: a
 `ProgressReporter.nudge`), with its process
 (`nodes.kit.liveness`); the simulator keeps the latest of each (`ProgressWatch`), of its
 run only, and asks `Lockstep.go_on`. It waits as long as every consumer it waits for lives,
-and gives up on one only when it is gone (`Lockstep.gone`). The topics are not under
-``/ssa/``, so they are not in the bag (whose content must not depend on the machine).
+and gives up on one only when it is gone (`Lockstep.gone`) or when DDS dropped it, its
+process silent beyond its participant lease (`Lockstep.dropped`: what was sent to it
+meanwhile never reaches it; `ros.discovery.PARTICIPANT_LEASE_S` makes that lease long).
+The topics are not under ``/ssa/``, so they are not in the bag (whose content must not
+depend on the machine).
 """
 
 from __future__ import annotations
@@ -374,6 +377,11 @@ class Lockstep:
         """The sim time last published on /clock, ns (the simulator sets it)."""
         self.gone: list[str] = []
         """The consumers given up on: they are gone."""
+        self.dropped: list[tuple[str, list[str]]] = []
+        """The consumers given up on although their process lives: DDS dropped them (silent
+        beyond their participant lease, `ros.discovery.PARTICIPANT_LEASE_S`), and what was
+        sent to them meanwhile is lost to them; each with what it had not taken then."""
+        self._listed: set[str] = set()  # the consumers the ROS graph has listed at a look
         self.since: float | None = None
         """Wall time (monotonic) the current wait began (None: not waiting)."""
         self._looked = -math.inf  # wall time (monotonic) liveness was last looked at
@@ -410,18 +418,26 @@ class Lockstep:
 
         At wall time `now` (s, monotonic). A consumer awaited that is gone (`alive`) is no
         longer waited for: it goes to `gone` (the caller says so); one that lives is waited
-        for, however long.
+        for, however long, unless DDS dropped it: its process lives but the ROS graph that
+        listed it no longer does (silent beyond its participant lease), and what it was sent
+        meanwhile can never reach it (volatile writers); it goes to `dropped`, with what it
+        had not taken (the caller names the loss).
         """
         missing = self.missing()
         if missing and now - self._looked >= LIVENESS_PERIOD_S:
             self._looked = now
             listed = {n for n, _ns in self.node.get_node_names_and_namespaces()
                       if _ns == self.node.get_namespace()}
-            lost = [n for n in self.nodes if any(m.startswith(f"{n} ") for m in missing)
+            self._listed |= listed
+            short = {n: [m for m in missing if m.startswith(f"{n} ")] for n in self.nodes}
+            lost = [n for n in self.nodes if short[n]
                     and not alive(self.watch.reports.get(n), n in listed)]
-            if lost:
-                self.gone += lost
-                self.nodes = [n for n in self.nodes if n not in lost]
+            dropped = [n for n in self.nodes if short[n] and n not in lost
+                       and n in self._listed and n not in listed]
+            self.gone += lost
+            self.dropped += [(n, short[n]) for n in dropped]
+            if lost or dropped:
+                self.nodes = [n for n in self.nodes if n not in lost and n not in dropped]
                 missing = self.missing()
         if not missing:
             self.since = None
