@@ -10,8 +10,9 @@ the PID namespace). The simulator asks `alive`:
   the one that reported (same start time) and is no zombie: a stopped process (SIGSTOP) is
   alive, an ended one is gone at once;
 * any other (a shard on another host) is alive while the ROS graph lists its node (DDS drops a
-  participant after its lease expires, 20 s without a word from it by Fast DDS's default:
-  a remote consumer stopped that long counts as gone).
+  participant after its lease expires: 20 s without a word from it by Fast DDS's default,
+  as across hosts, 600 s in the profile a graph on one host runs with
+  (`ros.discovery.PARTICIPANT_LEASE_S`): a consumer stopped that long counts as gone).
 """
 
 from __future__ import annotations
