@@ -248,9 +248,18 @@ def later_part(tmp_path_factory) -> Path:
 @pytest.mark.graph
 def test_replay_over_ros2_loses_nothing_and_matches_offline(tmp_path, later_part):
     """The second half of the sample bag (`later_part`: the gap and its forecasts, half the
-    playback time of the whole) played over ROS 2 into surrogate + filter processes."""
+    playback time of the whole) played over ROS 2 into surrogate + filter processes.
+
+    Nothing played is lost, and the offline replay of the recording reproduces every
+    estimate up to the gap exactly. In the gap a ROS replay runs open loop: the filter
+    decides an epoch at its own wall tick (0.1 s: 200 s of sim time at rate 2000), so
+    whether a forecast published near that moment is fused depends on the machine's load
+    (the recorder hears it at another instant); both must fuse forecasts there, the
+    forecasts the graph fused being ones it recorded. (A run in lockstep is reproduced
+    exactly through its gap: test/graph/test_replay_equivalence.py.)
+    """
     record = tmp_path / "replayed"
-    assert cli.main(["replay", str(later_part), "--rate", "6000", "--record",
+    assert cli.main(["replay", str(later_part), "--rate", "2000", "--record",
                      str(record)]) == 0
     counts = Counter(m.topic for m in bagio.read_bag(record))
     played = Counter(m.topic for m in bagio.read_bag(later_part, topics=replay.PLAYED))
@@ -260,7 +269,18 @@ def test_replay_over_ros2_loses_nothing_and_matches_offline(tmp_path, later_part
     # what the replayed graph recorded, the offline replay of its bag reproduces
     offline = tmp_path / "offline"
     assert cli.main(["replay", str(record), "--offline", "--out", str(offline)]) == 0
-    assert_same_estimates(fused(record), fused(offline))
+    live, again = fused(record), fused(offline)
+    gap = min(t for t, e in [*live.items(), *again.items()]
+              if e.update_source == types.UpdateSource.FORECAST)
+    assert_same_estimates({t: e for t, e in live.items() if t < gap},
+                          {t: e for t, e in again.items() if t < gap})
+    assert len([t for t in live if t < gap]) > 500  # the fit's measurements before the gap
+    forecast_epochs = {messages.stamp_to_seconds(m.msg.header.stamp)
+                       for m in bagio.read_bag(record, topics=["/ssa/forecast"])}
+    for estimates in (live, again):
+        by_forecast = {t for t, e in estimates.items()
+                       if e.update_source == types.UpdateSource.FORECAST}
+        assert by_forecast and by_forecast <= forecast_epochs
 
 
 @pytest.mark.graph
