@@ -22,6 +22,8 @@ from pathlib import Path
 from ssa_fusion.ros import bagio, messages
 from ssa_fusion.ros.topics import TOPIC_CLOCK, TOPIC_RUN, TOPIC_TRUTH
 
+STATE_ESTIMATE = "ssa_fusion_msgs/msg/StateEstimate"
+"""The type of one object's /ssa/truth (a catalog's truth goes in batches)."""
 CLOCK_BACKS = 10
 """A bag whose /clock goes back more often than this (or whose /ssa/truth brings more new
 epochs than this after repeating one) holds more than one run."""
@@ -56,6 +58,8 @@ def runs_in(path: Path | str) -> BagRuns:
     repeated, interleaved = False, 0
     for m in bagio.read_bag(path, topics=[TOPIC_RUN, TOPIC_CLOCK, TOPIC_TRUTH]):
         if m.topic == TOPIC_TRUTH:
+            if m.msgtype != STATE_ESTIMATE:  # a catalog's truth rows: its clock tells
+                continue
             key = (m.msg.object_id, m.msg.header.stamp.sec * 10**9 + m.msg.header.stamp.nanosec)
             if key in truths:
                 repeated = True
