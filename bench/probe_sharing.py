@@ -49,8 +49,8 @@ from probe_hostile import (
 
 SKY = ["--scenario", "iss_network", "--duration", "12"]
 """A short real-sky run whose filter starts before the outage (seed 0's case: passes from
-5.4 h; a single radar's case may see none in 12 h, or its first pass only in the outage)."""
-"""A short real-sky run (4 h, lockstep at 1000x: seconds) for the identity probes."""
+5.4 h; a single radar's case may see none in 12 h, or its first pass only in the outage):
+the identity probes' run, lockstep at 1000x (under a minute)."""
 TABLE = re.compile(r"^\| (placeholder|coast|j2_coast|batch_fit|dmd_ekf|hypothetical_ekf) \|.*$",
                    re.M)
 CHOSEN = re.compile(r"ROS domain (\d+)")

@@ -421,14 +421,14 @@ def _report(args: argparse.Namespace, name: str, out: Path, bag: Path, wall: flo
             own = argparse.Namespace(bag=bag, sites=args.sites or None, scenario="",
                                      params_file=None, setup=None, command="live")
             return report.run_own(own, data, out, str(exc))
+        reason = str(exc)
         if isinstance(exc, evaluate.NoOutageError) and not data.measurements:  # no pass
-            exc = ValueError(
-                f"no station saw the object in the run's {sim_s / 3600.0:g} h (0 "
-                "measurements): a longer --duration, another --seed (each seed's case has "
-                "its own start and orbit plane; --same-geometry: the scenario's own), or "
-                "other --sites")
+            reason = (f"no station saw the object in the run's {sim_s / 3600.0:g} h (0 "
+                      "measurements): a longer --duration, another --seed (each seed's case "
+                      "has its own start and orbit plane; --same-geometry: the scenario's "
+                      "own), or other --sites")
         print(f"recorded {sum(data.counts.values())} messages to {bag} in {wall:.1f} s\n"
-              f"error: the run cannot be evaluated: {exc}", file=sys.stderr)
+              f"error: the run cannot be evaluated: {reason}", file=sys.stderr)
         return 1
     report.write(data, ev, out, "live")
     late = evaluate.unfused_forecasts(data, ev.gap.t)

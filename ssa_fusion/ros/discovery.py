@@ -80,6 +80,8 @@ ENDPOINT_PROFILES = """\
 """Every writer's and reader's defaults: dynamic history memory (``DYNAMIC``, Fast DDS's
 ``DYNAMIC_RESERVE_MEMORY_MODE``: buffers freed with their messages; module docstring), and
 what rmw_fastrtps sets by default otherwise (synchronous publication, data sharing off)."""
+
+
 def _duration(tag: str, seconds: float) -> str:
     """Return a Fast DDS XML duration element `tag` of `seconds` (s, whole ns)."""
     sec, nanosec = divmod(round(seconds * 1e9), 1_000_000_000)
