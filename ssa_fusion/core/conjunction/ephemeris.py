@@ -17,7 +17,7 @@ Units: epochs Unix s (UTC), states GCRF km and km/s, covariances km², km²/s, k
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -28,10 +28,11 @@ from ssa_fusion.core.earth.timescales import jd_utc
 from ssa_fusion.core.motion.element_sets import CatalogEntry, catalog_states
 from ssa_fusion.core.motion.propagation import integrate_chain, integrate_stm
 
-__all__ = ["ElementSetEphemeris", "Ephemeris", "StateEphemeris"]
+__all__ = ["Covariances", "ElementSetEphemeris", "Ephemeris", "StateEphemeris", "stm_chain"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
 
 ROTATION_STEP_S = 10.0
 """`ElementSetEphemeris.exact` takes the TEME -> GCRF rotation at epochs rounded to this, s."""
@@ -65,6 +66,20 @@ class Ephemeris(Protocol):
 
     def exact(self, index: ArrayLike, t: ArrayLike) -> Array:
         """Return the GCRF states (M, 6) of objects ``index`` (M,) at Unix epochs ``t`` (M,)."""
+        ...
+
+
+@runtime_checkable
+class Covariances(Protocol):
+    """An `Ephemeris` whose trajectories start from estimates with covariances.
+
+    ``p0`` is None when it holds none.
+    """
+
+    p0: Array | None
+
+    def covariance(self, index: ArrayLike, t: ArrayLike) -> Array:
+        """Covariances (M, 6, 6) of objects ``index`` at Unix epochs ``t``, GCRF."""
         ...
 
 
@@ -222,14 +237,50 @@ class StateEphemeris:
         """Covariances (M, 6, 6) of objects ``index`` carried to epochs ``t`` by the STM.
 
         ``Phi P0 Phi^T`` with Phi from each estimate's epoch (GCRF km², km²/s, km²/s²); NaN
-        when the ephemeris holds no covariance.
+        when the ephemeris holds no covariance. Each object is integrated once along its
+        own epochs in time order (`stm_chain`), however many of them it has: the cost is
+        its span, not the sum of the spans from its estimate.
         """
         idx = np.asarray(index, dtype=np.int64).ravel()
         tt = np.broadcast_to(np.asarray(t, dtype=float).ravel(), idx.shape)
         if self.p0 is None:
             return np.full((idx.size, 6, 6), np.nan)
-        _, phi, ok = integrate_stm(self.model, self.x0[idx], tt - self.t0[idx],
-                                   self.max_step_s, self._pole[idx])
+        phi, ok = stm_chain(self.model, self.x0, self.t0, idx, tt, self.max_step_s, self._pole)
         p: Array = phi @ self.p0[idx] @ np.swapaxes(phi, 1, 2)
         p[~ok] = np.nan
         return p
+
+
+def stm_chain(model: MotionModel, x0: Array, t0: Array, index: IntArray, t: Array,
+              max_step_s: float, pole: Array) -> tuple[Array, BoolArray]:
+    """State transition matrices (M, 6, 6) of objects ``index`` from ``t0[index]`` to ``t``.
+
+    Each object's rows are taken in time order: the k-th from the (k-1)-th's state, and its
+    matrix the product of the steps' (`propagation.integrate_stm`, one vectorised call per
+    rank k across the objects). States ``x0`` (N, 6) GCRF km, km/s at Unix epochs ``t0``
+    (N,); ``pole`` (N, 3, 3) each object's `frames.pole_frame`. Returns (Phi, ok (M,)):
+    ok False where the propagation failed on the way.
+    """
+    m = index.size
+    phi_out = np.zeros((m, 6, 6))
+    ok_out = np.zeros(m, dtype=np.bool_)
+    if not m:
+        return phi_out, ok_out
+    order = np.lexsort((t, index))
+    obj = index[order]
+    starts = np.flatnonzero(np.r_[True, obj[1:] != obj[:-1]])
+    group = np.cumsum(np.r_[True, obj[1:] != obj[:-1]]) - 1
+    rank = np.arange(m) - starts[group]
+    owner = obj[starts]
+    x, t_at = x0[owner].copy(), t0[owner].copy()
+    phi = np.broadcast_to(np.eye(6), (owner.size, 6, 6)).copy()
+    ok = np.ones(owner.size, dtype=np.bool_)
+    by_rank = np.argsort(rank, kind="stable")
+    cuts = np.flatnonzero(np.diff(rank[by_rank])) + 1
+    for rows in np.split(by_rank, cuts):  # rows of one rank: one per object, at most
+        g, at = group[rows], t[order[rows]]
+        x1, step, good = integrate_stm(model, x[g], at - t_at[g], max_step_s, pole[owner[g]])
+        phi[g] = step @ phi[g]
+        x[g], t_at[g], ok[g] = x1, at, ok[g] & good
+        phi_out[order[rows]], ok_out[order[rows]] = phi[g], ok[g]
+    return phi_out, ok_out

@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 from ssa_fusion.core.base.constants import MU_EARTH
 from ssa_fusion.core.conjunction import apsides, hermite, sieve, tca
 from ssa_fusion.core.conjunction.close_approach import ApproachBuffer, CloseApproaches, once
-from ssa_fusion.core.conjunction.ephemeris import Ephemeris, StateEphemeris
+from ssa_fusion.core.conjunction.ephemeris import Covariances, Ephemeris
 from ssa_fusion.core.earth.frames import cip_gcrs
 
 __all__ = ["ScreeningConfig", "screen"]
@@ -178,8 +178,8 @@ def screen(eph: Ephemeris, t_start: float, t_end: float,
     -------
     CloseApproaches
         By TCA; ``primary`` is one of ``primaries`` (the lower index when both are), the
-        states are the ephemeris's at TCA, and the covariances those a `StateEphemeris`
-        carries to TCA (when it holds them).
+        states are the ephemeris's at TCA, and the covariances those a `Covariances`
+        ephemeris carries to TCA (when it holds them).
     """
     cfg = config or ScreeningConfig()
     if not t_end > t_start:
@@ -210,7 +210,8 @@ def screen(eph: Ephemeris, t_start: float, t_end: float,
     if waiting:
         _polish(eph, tca.Roots.concat(waiting), cfg, window, found)
     out = found.result()
-    if isinstance(eph, StateEphemeris) and eph.p0 is not None:
-        out = replace(out, p1=eph.covariance(out.primary, out.tca),
-                      p2=eph.covariance(out.secondary, out.tca))
+    if isinstance(eph, Covariances) and eph.p0 is not None:
+        both = eph.covariance(np.concatenate([out.primary, out.secondary]),
+                              np.concatenate([out.tca, out.tca]))  # each object flown once
+        out = replace(out, p1=both[:len(out)], p2=both[len(out):])
     return out

@@ -3,10 +3,12 @@
 A catalog's estimates arrive in batches (each row an object's state and covariance at its
 own epoch). `ConjunctionWatch.update` keeps each object's newest estimate and marks it
 changed; `ConjunctionWatch.rescreen` screens the changed objects against every object known
-(`screening.screen` with them as primaries, on a `ephemeris.StateEphemeris` of the newest
-estimates flown with the filter's motion model) over ``[now, now + horizon_s]``, and
-replaces every approach that involved them: an approach is always the one of the newest
-estimates of both objects. Objects whose radial band (osculating perigee to apogee of the
+(`screening.screen` with them as primaries, the newest estimates flown with the filter's
+motion model) over ``[now, now + horizon_s]``, and replaces every approach that involved
+them: an approach is always the one of the newest estimates of both objects. The flown
+trajectories are kept between re-screenings (`trajectory_store.TrajectoryStore`, nodes on a
+fixed grid of epochs): an object whose estimate did not change is only carried on to the
+window's new end, not flown again. Objects whose radial band (osculating perigee to apogee of the
 estimate, widened by ``band_pad_km`` for what the window's perturbations move it) meets no
 changed object's are not flown at all.
 
@@ -17,7 +19,8 @@ s (UTC), km, km/s.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -25,8 +28,8 @@ from numpy.typing import ArrayLike, NDArray
 from ssa_fusion.core.base.types import MotionModel
 from ssa_fusion.core.conjunction.apsides import meets_any, osculating_apsides
 from ssa_fusion.core.conjunction.close_approach import CloseApproaches
-from ssa_fusion.core.conjunction.ephemeris import StateEphemeris
 from ssa_fusion.core.conjunction.screening import ScreeningConfig, screen
+from ssa_fusion.core.conjunction.trajectory_store import TrajectoryStore
 
 __all__ = ["ConjunctionWatch", "Rescreening", "WatchConfig", "WatchUpdate"]
 
@@ -50,6 +53,12 @@ class WatchConfig:
         The estimates' motion model (`propagation.INTEGRATED_MODELS`).
     band_pad_km : float
         Widening of each estimate's osculating radial band, km.
+    max_step_s : float
+        Longest DOP853 step of the flown trajectories, s (150 s: < 1 µm a day in LEO apart
+        from 60 s steps).
+    covariance_step_s : float
+        Longest DOP853 step of the state transition matrices that carry the covariances to
+        TCA, s (300 s: 1e-7 relative apart from 60 s steps over a day in LEO).
     """
 
     screening: ScreeningConfig = field(default_factory=lambda: ScreeningConfig(distance_km=5.0))
@@ -57,6 +66,8 @@ class WatchConfig:
     hbr_km: float = 0.02
     model: MotionModel = MotionModel.J2
     band_pad_km: float = 50.0
+    max_step_s: float = 150.0
+    covariance_step_s: float = 300.0
 
 
 @dataclass(frozen=True)
@@ -99,6 +110,8 @@ class ConjunctionWatch:
         self._x = np.zeros((0, 6))
         self._p = np.zeros((0, 6, 6))
         self._changed: set[int] = set()
+        self._store = TrajectoryStore(self.config.model, self.config.screening.node_step_s,
+                                      self.config.max_step_s, self.config.covariance_step_s)
 
     @property
     def objects(self) -> int:
@@ -167,7 +180,8 @@ class ConjunctionWatch:
         self._changed.clear()
         use = np.flatnonzero(self._near(changed)) if changed.any() else np.zeros(0, np.int64)
         return Rescreening([ids[k] for k in use], self._x[use], self._t[use], self._p[use],
-                           changed[use], (start, start + self.config.horizon_s), self.config)
+                           changed[use], (start, start + self.config.horizon_s), self.config,
+                           use, self._store)
 
     def rescreen(self, now: float | None = None) -> WatchUpdate:
         """Screen the changed objects against all (`snapshot`, then `Rescreening.run`)."""
@@ -189,6 +203,11 @@ class Rescreening:
     window : (float, float)
         Unix s.
     config : WatchConfig
+    rows : ndarray (M,) of int
+        Their rows in ``store``.
+    store : TrajectoryStore
+        The watch's trajectories: this re-screening's while it runs (the watch starts the
+        next one after it ended).
     """
 
     ids: list[str]
@@ -198,6 +217,8 @@ class Rescreening:
     changed: BoolArray
     window: tuple[float, float]
     config: WatchConfig
+    rows: NDArray[np.int64]
+    store: TrajectoryStore
 
     def run(self) -> WatchUpdate:
         """Screen (`screening.screen`); return the approaches with their Pc."""
@@ -206,6 +227,12 @@ class Rescreening:
         if not screened:
             return WatchUpdate([], CloseApproaches.empty(self.ids, covariances=True),
                                np.zeros(0), self.window, d, hbr)
-        eph = StateEphemeris(self.ids, self.x, self.t, self.config.model, covariance=self.p)
-        found = screen(eph, *self.window, self.config.screening, primaries=self.changed)
+        store = self.store
+        start = math.floor(self.window[0] / store.step_s) * store.step_s  # a node
+        store.keep_from(int(store.node(start)) - 1)
+        store.set_estimates(self.rows[self.changed], self.x[self.changed],
+                            self.t[self.changed])
+        eph = store.view(self.rows, self.p)
+        found = screen(eph, start, self.window[1], self.config.screening, primaries=self.changed)
+        found = replace(found.take(found.tca >= self.window[0]), object_ids=tuple(self.ids))
         return WatchUpdate(screened, found, found.log10_pc(hbr), self.window, d, hbr)
