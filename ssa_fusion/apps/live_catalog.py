@@ -52,6 +52,7 @@ from ssa_fusion.apps.catalog_summary import (
     table,
     unrecorded,
 )
+from ssa_fusion.apps.heartbeat import working
 from ssa_fusion.apps.progress_lines import ProgressLines
 from ssa_fusion.core.base.types import UpdateSource
 from ssa_fusion.core.earth import timescales
@@ -296,8 +297,9 @@ def run(args: argparse.Namespace) -> int:
     t_start, command_start = time.monotonic(), time.time()
     outcome = _Outcome()
     try:
-        _run_graph(graph, specs, remote, args.lockstep, sim_s / args.time_scale, unlabelled,
-                   outcome)
+        with working("live", "running the catalog graph", lambda: outcome.how_far(sim_s)):
+            _run_graph(graph, specs, remote, args.lockstep, sim_s / args.time_scale,
+                       unlabelled, outcome)
     except TimeoutError as exc:  # its message holds every log's tail: the first line says what
         timed_out = str(exc).splitlines()[0]
     else:
@@ -401,6 +403,27 @@ class _Outcome:
     rss: dict[str, int] = field(default_factory=dict)
     cpu: dict[str, float] = field(default_factory=dict)
     last_output: float = field(default_factory=time.time)
+    seen: Counter[int] = field(default_factory=Counter)
+    """Estimate rows heard, by update source."""
+    stamps: list[float] = field(default_factory=list)
+    """The first and the newest estimate batch's sim time heard (Unix s)."""
+
+    def hear(self, msg: Message) -> None:
+        """Count an EstimateBatch's rows; keep its sim time."""
+        self.seen.update({msg.update_source: len(msg.object_id)})
+        t = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        if self.stamps:
+            self.stamps[1:] = [max(t, self.stamps[-1])]
+        else:
+            self.stamps.append(t)
+
+    def how_far(self, sim_s: float) -> str:
+        """Say how far the run is (for `heartbeat.working`): sim time and estimates heard."""
+        if not self.stamps:
+            return "the nodes starting, no estimate yet"
+        done = self.stamps[-1] - self.stamps[0]
+        return (f"sim time {done / 3600:.1f} of {sim_s / 3600:.1f} h, "
+                f"{self.seen[UpdateSource.SENSOR]} estimates")
 
 
 def _run_graph(graph: Graph, specs: Sequence[graphs.NodeSpec], remote: Sequence[int],
@@ -415,9 +438,8 @@ def _run_graph(graph: Graph, specs: Sequence[graphs.NodeSpec], remote: Sequence[
     names, gaps = _shard_names(specs)
     diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
     outcome.diagnostics = diagnostics
-    seen: Counter[int] = Counter()  # estimates (rows) heard, by update source
-    graph.subscribe(EstimateBatch, TOPIC_ESTIMATE_BATCH,
-                    lambda m: seen.update({m.update_source: len(m.object_id)}), CATALOG_QOS)
+    seen = outcome.seen
+    graph.subscribe(EstimateBatch, TOPIC_ESTIMATE_BATCH, outcome.hear, CATALOG_QOS)
     started = {n.name: graph.start_node(n.executable, "-r", f"__node:={n.name}",
                                         name=n.name, params=n.params)
                for n in specs if not is_remote(n, remote)}

@@ -125,6 +125,14 @@ class ConjunctionNode(SsaNode):
         for k in np.flatnonzero(problems != ""):
             self.diag.count(Cause(problems[k]), f"object {rows.object_id[k]!r} at "
                             f"t={float(rows.t[k])}: its estimate is refused")
+        low = self.watch.too_low(rows.x)
+        for k in np.flatnonzero(np.isfinite(low) & (problems == "")):
+            problems[k] = Cause.REJECTED_IMPLAUSIBLE
+            self.diag.count(Cause.REJECTED_IMPLAUSIBLE,
+                            f"object {rows.object_id[k]!r} at t={float(rows.t[k])}: its "
+                            f"estimate's perigee is at {low[k]:.0f} km altitude (below "
+                            f"{self.config.min_perigee_km:g} km: it re-enters within a "
+                            "revolution); not screened until a later estimate")
         ok = np.flatnonzero((problems == "") & np.array([bool(o) for o in rows.object_id]))
         self.diag.counts[Count.RECEIVED] += ok.size
         self.watch.update([rows.object_id[k] for k in ok], rows.t[ok], rows.x[ok], rows.P[ok])

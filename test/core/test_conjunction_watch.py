@@ -65,6 +65,18 @@ def test_the_first_rescreening_is_the_screening_of_the_whole_catalog():
     assert sorted(got.miss_km) == pytest.approx(sorted(fresh.miss_km), abs=1e-7)
 
 
+def test_an_estimate_that_re_enters_is_not_flown():
+    eph = planted(seed=7, n_background=3, n_pairs=0, span_s=SPAN)
+    watch = ConjunctionWatch()
+    p = np.diag([1e-2] * 3 + [1e-8] * 3)
+    slow = eph.x0[:2].copy()
+    slow[0, 3:] *= 0.3  # its perigee deep inside the Earth
+    slow[1, 3:] *= 0.997  # its perigee ~80 km lower: still above 100 km
+    low = watch.too_low(slow)
+    assert low[0] < -3000.0 and np.isnan(low[1])
+    assert watch.update(["a", "b"], [T0, T0], slow, [p, p]) == 1 and watch.objects == 1
+
+
 def test_nothing_changed_screens_nothing():
     watch = ConjunctionWatch()
     up = watch.rescreen(T0)

@@ -54,8 +54,12 @@ def test_the_node_publishes_the_screenings_approaches_and_their_cdms(ros_graph, 
     bad = eph.x0[:1].copy()
     bad[0, 2] = np.nan
     est.publish(_batch(["999"], [T0], bad))
+    falling = eph.x0[:1].copy()
+    falling[0, 3:] *= 0.3  # at its apogee, its perigee deep inside the Earth
+    est.publish(_batch(["998"], [T0], falling))
     est.publish(_batch(ids[:2], eph.t0[:2], eph.x0[:2], types.UpdateSource.FORECAST))
-    diag.wait(g, "conjunction", {"received": len(ids), "rejected_nonfinite": 1})
+    diag.wait(g, "conjunction", {"received": len(ids), "rejected_nonfinite": 1,
+                                 "rejected_implausible": 1})
     clock.publish(Clock(clock=messages.seconds_to_stamp(T0 + 1.0)))
     g.wait_for(lambda: len(got) >= 1, 60.0, "a ConjunctionBatch")
     first = messages.conjunction_batch_from_msg(got[0])

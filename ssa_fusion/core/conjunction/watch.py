@@ -25,6 +25,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ssa_fusion.core.base.constants import R_EARTH
 from ssa_fusion.core.base.types import MotionModel
 from ssa_fusion.core.conjunction.apsides import meets_any, osculating_apsides
 from ssa_fusion.core.conjunction.close_approach import CloseApproaches
@@ -53,6 +54,10 @@ class WatchConfig:
         The estimates' motion model (`propagation.INTEGRATED_MODELS`).
     band_pad_km : float
         Widening of each estimate's osculating radial band, km.
+    min_perigee_km : float
+        Estimates whose osculating perigee altitude is below this are not flown (their orbit
+        meets the atmosphere's dense layers or the Earth: they re-enter within a revolution,
+        and flown through the Earth two-body + J2 accelerations grow without bound), km.
     max_step_s : float
         Longest DOP853 step of the flown trajectories, s (150 s: < 1 µm a day in LEO apart
         from 60 s steps).
@@ -66,6 +71,7 @@ class WatchConfig:
     hbr_km: float = 0.02
     model: MotionModel = MotionModel.J2
     band_pad_km: float = 50.0
+    min_perigee_km: float = 100.0
     max_step_s: float = 150.0
     covariance_step_s: float = 300.0
 
@@ -135,12 +141,14 @@ class ConjunctionWatch:
         """Keep the newest estimate of each object; return how many changed.
 
         ``t`` (M,) Unix s, ``x`` (M, 6) GCRF km, km/s, ``p`` (M, 6, 6) km², km²/s, km²/s².
-        An estimate older than the one held, or not finite, is ignored.
+        An estimate older than the one held, not finite, or whose perigee is too low
+        (`too_low`) is ignored.
         """
         tt = np.asarray(t, dtype=float).reshape(-1)
         xx = np.asarray(x, dtype=float).reshape(-1, 6)
         pp = np.asarray(p, dtype=float).reshape(-1, 6, 6)
         ok = np.isfinite(tt) & np.isfinite(xx).all(axis=1) & np.isfinite(pp).all(axis=(1, 2))
+        ok &= ~np.isfinite(self.too_low(xx))
         changed = 0
         for k, oid in enumerate(object_ids):
             if not ok[k]:
@@ -155,6 +163,17 @@ class ConjunctionWatch:
             self._changed.add(i)
             changed += 1
         return changed
+
+    def too_low(self, x: ArrayLike) -> Array:
+        """Return the perigee altitude (km) of states ``x`` (M, 6) too low to fly, else NaN.
+
+        Below ``config.min_perigee_km`` (`WatchConfig`); non-finite states are NaN.
+        """
+        with np.errstate(invalid="ignore"):
+            rp, _, _ = osculating_apsides(np.asarray(x, dtype=float).reshape(-1, 6))
+            alt = rp - R_EARTH
+            out: Array = np.where(alt < self.config.min_perigee_km, alt, np.nan)
+        return out
 
     def _near(self, primary: BoolArray) -> BoolArray:
         """Return the objects whose padded radial band meets some primary's (N,)."""
