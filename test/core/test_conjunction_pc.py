@@ -219,3 +219,24 @@ def test_degenerate_inputs() -> None:
     assert PcWarning.NPD_SECONDARY in res.warnings and 0 <= res.pc <= 1
     with pytest.raises(ValueError, match="hard-body radius"):
         collision_probability(*_fast_leo(), 0.0)
+
+
+def test_a_refinement_floor_leaves_only_tiny_pc_to_the_gauss_legendre_rule() -> None:
+    # random encounters, many of them with the two rules disagreeing (elongated, far)
+    rng = np.random.default_rng(0)
+    n = 150
+    s1 = 10 ** rng.uniform(-3, 1, n)
+    s2 = s1 * 10 ** rng.uniform(-3, 0, n)
+    th = rng.uniform(0, np.pi, n)
+    rot = np.stack([np.stack([np.cos(th), -np.sin(th)], 1), np.stack([np.sin(th), np.cos(th)], 1)],
+                   1)
+    cov = rot @ (np.eye(2)[None] * np.stack([s1**2, s2**2], 1)[:, :, None]) @ np.swapaxes(rot, 1, 2)
+    miss = rng.normal(size=(n, 2)) * 10 ** rng.uniform(-2, 0.7, (n, 1))
+    full = log10_pc_circle(miss, cov, 0.02)
+    floored = log10_pc_circle(miss, cov, 0.02, refine_below_log10=-15.0)
+    left = floored.unrefined
+    assert full.adaptive.sum() >= 40 and left.sum() >= 20 and not full.unrefined.any()
+    # the rest is refined as before, to the bit; what is left is tiny, by either rule
+    np.testing.assert_array_equal(full.log10_pc[~left], floored.log10_pc[~left])
+    assert (full.log10_pc[left] < -15.0).all() and (floored.log10_pc[left] < -15.0).all()
+    assert (floored.adaptive | left == full.adaptive).all()

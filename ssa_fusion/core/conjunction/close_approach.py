@@ -12,6 +12,7 @@ Units: epochs Unix s (UTC), GCRF km, km/s, covariances km², km²/s, km²/s².
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
@@ -93,14 +94,16 @@ class CloseApproaches:
             return np.zeros((0, 6))
         return relative_state_rtn(self.x1, self.x2)
 
-    def log10_pc(self, hbr_km: float) -> Array:
+    def log10_pc(self, hbr_km: float, refine_below_log10: float = -math.inf) -> Array:
         """Return each approach's 2D Pc (Foster) as its log10 (M,), NaN without covariances.
 
-        ``hbr_km``: the combined hard-body radius, km (`probability.pc2d_batch`).
+        ``hbr_km``: the combined hard-body radius, km; ``refine_below_log10``: the
+        refinement floor (`probability.pc2d_batch`).
         """
         if self.p1 is None or self.p2 is None or not len(self):
             return np.full(len(self), np.nan)
-        _, integral = pc2d_batch(self.x1, self.p1, self.x2, self.p2, hbr_km)
+        _, integral = pc2d_batch(self.x1, self.p1, self.x2, self.p2, hbr_km,
+                                 refine_below_log10)
         out: Array = np.asarray(integral.log10_pc, dtype=float)
         return out
 

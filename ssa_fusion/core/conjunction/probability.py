@@ -33,8 +33,8 @@ _NPD_TOL = 1e-12
 """An eigenvalue below -_NPD_TOL * the largest makes a covariance non-positive-definite."""
 
 
-def pc2d_batch(x1: ArrayLike, p1: ArrayLike, x2: ArrayLike, p2: ArrayLike, hbr_km: ArrayLike
-               ) -> tuple[Encounter, CircleIntegral]:
+def pc2d_batch(x1: ArrayLike, p1: ArrayLike, x2: ArrayLike, p2: ArrayLike, hbr_km: ArrayLike,
+               refine_below_log10: float = -math.inf) -> tuple[Encounter, CircleIntegral]:
     """2D Pc of n conjunctions at once (module docstring).
 
     Parameters
@@ -45,6 +45,8 @@ def pc2d_batch(x1: ArrayLike, p1: ArrayLike, x2: ArrayLike, p2: ArrayLike, hbr_k
         Inertial covariances, km² (only the position blocks are used).
     hbr_km : float or array_like (n,)
         Combined hard-body radii, km.
+    refine_below_log10 : float
+        `pc2d.log10_pc_circle`'s refinement floor (-inf: every Pc refined).
 
     Returns
     -------
@@ -52,7 +54,8 @@ def pc2d_batch(x1: ArrayLike, p1: ArrayLike, x2: ArrayLike, p2: ArrayLike, hbr_k
         The encounter planes and the Pc (``log10_pc``) of each conjunction.
     """
     enc = encounter_plane(x1, p1, x2, p2)
-    return enc, log10_pc_circle(enc.miss, enc.cov, hbr_km)
+    return enc, log10_pc_circle(enc.miss, enc.cov, hbr_km,
+                                refine_below_log10=refine_below_log10)
 
 
 def _npd(p: Array | None, flag: PcWarning) -> set[PcWarning]:

@@ -54,6 +54,11 @@ class WatchConfig:
         The estimates' motion model (`propagation.INTEGRATED_MODELS`).
     band_pad_km : float
         Widening of each estimate's osculating radial band, km.
+    pc_refine_below : float
+        Pc below which the 2D Pc keeps the Gauss-Legendre value where its two rules
+        disagree (`pc2d.log10_pc_circle`'s ``refine_below_log10``: no ~10 ms adaptive
+        integration for each of the thousands of approaches with a Pc of 1e-30 or 1e-300;
+        their values are the fine rule's, the decisions at 1e-4 to 1e-7 unaffected).
     min_perigee_km : float
         Estimates whose osculating perigee altitude is below this are not flown (their orbit
         meets the atmosphere's dense layers or the Earth: they re-enter within a revolution,
@@ -71,6 +76,7 @@ class WatchConfig:
     hbr_km: float = 0.02
     model: MotionModel = MotionModel.J2
     band_pad_km: float = 50.0
+    pc_refine_below: float = 1e-15
     min_perigee_km: float = 100.0
     max_step_s: float = 150.0
     covariance_step_s: float = 300.0
@@ -254,4 +260,5 @@ class Rescreening:
         eph = store.view(self.rows, self.p)
         found = screen(eph, start, self.window[1], self.config.screening, primaries=self.changed)
         found = replace(found.take(found.tca >= self.window[0]), object_ids=tuple(self.ids))
-        return WatchUpdate(screened, found, found.log10_pc(hbr), self.window, d, hbr)
+        log10_pc = found.log10_pc(hbr, math.log10(self.config.pc_refine_below))
+        return WatchUpdate(screened, found, log10_pc, self.window, d, hbr)
