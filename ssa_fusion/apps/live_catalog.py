@@ -384,8 +384,8 @@ def _announce(args: argparse.Namespace, s: sky.SkyScenario, objects: int,
     print(f"live: catalog {args.catalog} ({objects} objects{left_out}"
           f"{', unlabelled detections' if unlabelled else ''}), {radars}, "
           f"{sim_s / 3600:g} h of sim time {pace(args)}, {args.shards} filter "
-          f"shard(s){' with a surrogate each' if gaps else ''}; ROS domain {graph.domain_id}; "
-          f"logs in {out}/logs", flush=True)
+          f"shard(s){' with a surrogate each' if gaps else ''}; ROS domain {graph.domain_id}, "
+          f"run {graph.run}; logs in {out}/logs", flush=True)
     for k, command in remote_commands(specs, remote, graph.domain_id, graph.discovery,
                                       graph.namespace):
         print(f"  on shard {k}'s host: {command}", flush=True)

@@ -105,4 +105,7 @@ def test_a_recorder_stopped_beyond_its_lease_ends_the_run_with_its_loss_named(tm
         assert int(recorded) < int(sent)
         assert s[f"lost_{kind}"] >= int(sent) - int(recorded), (kind, s)
     assert f"lost: {s['lost_measurements']}" in stdout
+    # the first line names the run (its ROS namespace), as the one-object run's does
+    assert re.search(r"; ROS domain \d+, run \d{8}_\d{6}_\d{3}_[0-9a-f]{4}; logs in ",
+                     stdout.splitlines()[0])
     assert cli.returncode == 1  # measurements lost
