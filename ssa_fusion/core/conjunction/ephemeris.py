@@ -28,7 +28,8 @@ from ssa_fusion.core.earth.timescales import jd_utc
 from ssa_fusion.core.motion.element_sets import CatalogEntry, catalog_states
 from ssa_fusion.core.motion.propagation import integrate_chain, integrate_stm
 
-__all__ = ["Covariances", "ElementSetEphemeris", "Ephemeris", "StateEphemeris", "stm_chain"]
+__all__ = ["Covariances", "ElementSetEphemeris", "Ephemeris", "StateEphemeris",
+           "carried_covariance", "stm_chain"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -241,14 +242,27 @@ class StateEphemeris:
         own epochs in time order (`stm_chain`), however many of them it has: the cost is
         its span, not the sum of the spans from its estimate.
         """
-        idx = np.asarray(index, dtype=np.int64).ravel()
-        tt = np.broadcast_to(np.asarray(t, dtype=float).ravel(), idx.shape)
-        if self.p0 is None:
-            return np.full((idx.size, 6, 6), np.nan)
-        phi, ok = stm_chain(self.model, self.x0, self.t0, idx, tt, self.max_step_s, self._pole)
-        p: Array = phi @ self.p0[idx] @ np.swapaxes(phi, 1, 2)
-        p[~ok] = np.nan
-        return p
+        return carried_covariance(self.model, self.x0, self.t0, self.p0, self._pole, index, t,
+                                  self.max_step_s)
+
+
+def carried_covariance(model: MotionModel, x0: Array, t0: Array, p0: Array | None,
+                       pole: Array, index: ArrayLike, t: ArrayLike, max_step_s: float
+                       ) -> Array:
+    """Covariances (M, 6, 6) of objects ``index`` carried from their estimates to ``t``.
+
+    ``Phi P0 Phi^T`` with Phi of `stm_chain` (estimates ``x0`` (N, 6), ``t0`` (N,),
+    ``p0`` (N, 6, 6) GCRF; ``pole`` (N, 3, 3)); NaN where the propagation failed, and
+    everywhere when ``p0`` is None.
+    """
+    idx = np.asarray(index, dtype=np.int64).ravel()
+    tt = np.broadcast_to(np.asarray(t, dtype=float).ravel(), idx.shape)
+    if p0 is None:
+        return np.full((idx.size, 6, 6), np.nan)
+    phi, ok = stm_chain(model, x0, t0, idx, tt, max_step_s, pole)
+    p: Array = phi @ p0[idx] @ np.swapaxes(phi, 1, 2)
+    p[~ok] = np.nan
+    return p
 
 
 def stm_chain(model: MotionModel, x0: Array, t0: Array, index: IntArray, t: Array,

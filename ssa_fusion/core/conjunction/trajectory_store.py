@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ssa_fusion.core.base.types import MotionModel
-from ssa_fusion.core.conjunction.ephemeris import stm_chain
+from ssa_fusion.core.conjunction.ephemeris import carried_covariance
 from ssa_fusion.core.earth.frames import pole_frame
 from ssa_fusion.core.motion.propagation import integrate_chain
 
@@ -237,13 +237,6 @@ class StoreView:
 
     def covariance(self, index: ArrayLike, t: ArrayLike) -> Array:
         """Covariances (M, 6, 6) of objects ``index`` carried to epochs ``t`` by the STM."""
-        idx = np.asarray(index, dtype=np.int64).ravel()
-        tt = np.broadcast_to(np.asarray(t, dtype=float).ravel(), idx.shape)
-        if self.p0 is None:
-            return np.full((idx.size, 6, 6), np.nan)
-        s = self.store
-        phi, ok = stm_chain(s.model, s.x0[self.rows], s.t0[self.rows], idx, tt,
-                            s.covariance_step_s, s.pole[self.rows])
-        p: Array = phi @ self.p0[idx] @ np.swapaxes(phi, 1, 2)
-        p[~ok] = np.nan
-        return p
+        s, r = self.store, self.rows
+        return carried_covariance(s.model, s.x0[r], s.t0[r], self.p0, s.pole[r], index, t,
+                                  s.covariance_step_s)
