@@ -204,6 +204,10 @@ class ConjunctionWatch:
         changed[list(self._changed)] = True
         self._changed.clear()
         use = np.flatnonzero(self._near(changed)) if changed.any() else np.zeros(0, np.int64)
+        # screened in the order of their ids, not of their first estimates' arrival (two
+        # filter shards' batches interleave as DDS delivers them): the same approaches,
+        # with the same primaries, whatever the order
+        use = use[np.argsort(np.array([ids[k] for k in use], dtype=object), kind="stable")]
         return Rescreening([ids[k] for k in use], self._x[use], self._t[use], self._p[use],
                            changed[use], (start, start + self.config.horizon_s), self.config,
                            use, self._store)
