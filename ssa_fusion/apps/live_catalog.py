@@ -295,11 +295,10 @@ def run(args: argparse.Namespace) -> int:
         return 2
     _announce(args, s, len(entries), specs, graph, remote, sim_s, unlabelled, out, skipped)
     t_start, command_start = time.monotonic(), time.time()
-    outcome = _Outcome()
+    outcome = _Outcome(sim_s=sim_s)
     try:
-        with working("live", "running the catalog graph", lambda: outcome.how_far(sim_s)):
-            _run_graph(graph, specs, remote, args.lockstep, sim_s / args.time_scale,
-                       unlabelled, outcome)
+        _run_graph(graph, specs, remote, args.lockstep, sim_s / args.time_scale, unlabelled,
+                   outcome)
     except TimeoutError as exc:  # its message holds every log's tail: the first line says what
         timed_out = str(exc).splitlines()[0]
     else:
@@ -403,6 +402,8 @@ class _Outcome:
     rss: dict[str, int] = field(default_factory=dict)
     cpu: dict[str, float] = field(default_factory=dict)
     last_output: float = field(default_factory=time.time)
+    sim_s: float = 0.0
+    """The run's sim time, s."""
     seen: Counter[int] = field(default_factory=Counter)
     """Estimate rows heard, by update source."""
     stamps: list[float] = field(default_factory=list)
@@ -417,12 +418,12 @@ class _Outcome:
         else:
             self.stamps.append(t)
 
-    def how_far(self, sim_s: float) -> str:
+    def how_far(self) -> str:
         """Say how far the run is (for `heartbeat.working`): sim time and estimates heard."""
         if not self.stamps:
             return "the nodes starting, no estimate yet"
         done = self.stamps[-1] - self.stamps[0]
-        return (f"sim time {done / 3600:.1f} of {sim_s / 3600:.1f} h, "
+        return (f"sim time {done / 3600:.1f} of {self.sim_s / 3600:.1f} h, "
                 f"{self.seen[UpdateSource.SENSOR]} estimates")
 
 
@@ -433,39 +434,40 @@ def _run_graph(graph: Graph, specs: Sequence[graphs.NodeSpec], remote: Sequence[
     `wall_s`: the simulation's wall time at its pace, s. TimeoutError when the simulator, a
     shard or the recorder does not get there.
     """
-    from ssa_fusion.ros.interfaces import DiagnosticArray, EstimateBatch
+    with working("live", "running the catalog graph", outcome.how_far):
+        from ssa_fusion.ros.interfaces import DiagnosticArray, EstimateBatch
 
-    names, gaps = _shard_names(specs)
-    diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
-    outcome.diagnostics = diagnostics
-    seen = outcome.seen
-    graph.subscribe(EstimateBatch, TOPIC_ESTIMATE_BATCH, outcome.hear, CATALOG_QOS)
-    started = {n.name: graph.start_node(n.executable, "-r", f"__node:={n.name}",
-                                        name=n.name, params=n.params)
-               for n in specs if not is_remote(n, remote)}
-    sim = started["sensor_sim"]
-    # else a node ended early (the recorder too): graph.close says which
-    # in lockstep sim time waits for its nodes as long as they live: no limit
-    limit = math.inf if lockstep else 300.0 + 3.0 * wall_s
-    if not graph.wait_done_or_broken(sim, limit):
-        return
-    # the filters are done when their estimates stop (surrogates may still be fitting)
-    graph.wait_quiet(lambda: seen[UpdateSource.SENSOR], quiet_s=1.0, limit_s=600.0)
-    outcome.last_output = time.time() - 1.0  # wall time (Unix s) the last estimate arrived
-    # then one more report of every shard, counting all it did (a shard still busy gives
-    # its last when it is stopped: the summary comes either way)
-    since = len(diagnostics)
-    with contextlib.suppress(TimeoutError):
-        graph.wait_for(lambda: set(names + gaps) <= {st.name for d in diagnostics[since:]
-                                                     for st in d.status}, 10.0,
-                       "a last /diagnostics report of every shard")
-    # and the recorder (last stopped, but stopped) has written all they published; briefly
-    # when lockstep named a consumer DDS dropped: what it lost never comes
-    dropped = count(statuses(diagnostics), "sensor_sim", Count.LOCKSTEP_DROPPED)
-    with contextlib.suppress(TimeoutError):  # the summary counts what it lacks
-        graph.wait_for(lambda: unrecorded(statuses(diagnostics), names, gaps,
-                                          unlabelled) == 0,
-                       5.0 if dropped else 60.0,
-                       "the recorder to write every measurement and estimate")
-    outcome.rss = {n: _rss_kib(started[n].popen.pid) for n in names + gaps if n in started}
-    outcome.cpu = {n: run_costs.cpu_s(p.popen.pid) for n, p in started.items()}
+        names, gaps = _shard_names(specs)
+        diagnostics = graph.collect(DiagnosticArray, TOPIC_DIAGNOSTICS)
+        outcome.diagnostics = diagnostics
+        seen = outcome.seen
+        graph.subscribe(EstimateBatch, TOPIC_ESTIMATE_BATCH, outcome.hear, CATALOG_QOS)
+        started = {n.name: graph.start_node(n.executable, "-r", f"__node:={n.name}",
+                                            name=n.name, params=n.params)
+                   for n in specs if not is_remote(n, remote)}
+        sim = started["sensor_sim"]
+        # else a node ended early (the recorder too): graph.close says which
+        # in lockstep sim time waits for its nodes as long as they live: no limit
+        limit = math.inf if lockstep else 300.0 + 3.0 * wall_s
+        if not graph.wait_done_or_broken(sim, limit):
+            return
+        # the filters are done when their estimates stop (surrogates may still be fitting)
+        graph.wait_quiet(lambda: seen[UpdateSource.SENSOR], quiet_s=1.0, limit_s=600.0)
+        outcome.last_output = time.time() - 1.0  # wall time (Unix s) the last estimate arrived
+        # then one more report of every shard, counting all it did (a shard still busy gives
+        # its last when it is stopped: the summary comes either way)
+        since = len(diagnostics)
+        with contextlib.suppress(TimeoutError):
+            graph.wait_for(lambda: set(names + gaps) <= {st.name for d in diagnostics[since:]
+                                                         for st in d.status}, 10.0,
+                           "a last /diagnostics report of every shard")
+        # and the recorder (last stopped, but stopped) has written all they published; briefly
+        # when lockstep named a consumer DDS dropped: what it lost never comes
+        dropped = count(statuses(diagnostics), "sensor_sim", Count.LOCKSTEP_DROPPED)
+        with contextlib.suppress(TimeoutError):  # the summary counts what it lacks
+            graph.wait_for(lambda: unrecorded(statuses(diagnostics), names, gaps,
+                                              unlabelled) == 0,
+                           5.0 if dropped else 60.0,
+                           "the recorder to write every measurement and estimate")
+        outcome.rss = {n: _rss_kib(started[n].popen.pid) for n in names + gaps if n in started}
+        outcome.cpu = {n: run_costs.cpu_s(p.popen.pid) for n, p in started.items()}
