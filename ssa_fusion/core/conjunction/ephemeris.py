@@ -29,7 +29,7 @@ from ssa_fusion.core.motion.element_sets import CatalogEntry, catalog_states
 from ssa_fusion.core.motion.propagation import integrate_chain, integrate_stm
 
 __all__ = ["Covariances", "ElementSetEphemeris", "Ephemeris", "StateEphemeris",
-           "carried_covariance", "stm_chain"]
+           "carried_covariance", "index_and_epochs", "stm_chain"]
 
 Array = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -118,8 +118,7 @@ class ElementSetEphemeris:
         nearest multiple of `ROTATION_STEP_S` (it turns by < 1e-10 rad in that time: < 1 mm
         at GEO), the same for every object at one epoch.
         """
-        idx = np.asarray(index, dtype=np.int64).ravel()
-        tt = np.broadcast_to(np.asarray(t, dtype=float).ravel(), idx.shape)
+        idx, tt = index_and_epochs(index, t)
         out = np.full((idx.size, 6), np.nan)
         if not idx.size:
             return out
@@ -223,8 +222,7 @@ class StateEphemeris:
 
     def exact(self, index: ArrayLike, t: ArrayLike) -> Array:
         """Propagated states (M, 6) of objects ``index`` at Unix epochs ``t``, GCRF km, km/s."""
-        idx = np.asarray(index, dtype=np.int64).ravel()
-        tt = np.broadcast_to(np.asarray(t, dtype=float).ravel(), idx.shape).copy()
+        idx, tt = index_and_epochs(index, t)
         if not idx.size:
             return np.zeros((0, 6))
         x, ts = self._start(idx, tt)
@@ -246,6 +244,12 @@ class StateEphemeris:
                                   self.max_step_s)
 
 
+def index_and_epochs(index: ArrayLike, t: ArrayLike) -> tuple[IntArray, Array]:
+    """Return ``index`` as int64 (M,) and ``t`` (Unix s) broadcast to it, a copy (M,)."""
+    idx = np.asarray(index, dtype=np.int64).ravel()
+    return idx, np.broadcast_to(np.asarray(t, dtype=float).ravel(), idx.shape).copy()
+
+
 def carried_covariance(model: MotionModel, x0: Array, t0: Array, p0: Array | None,
                        pole: Array, index: ArrayLike, t: ArrayLike, max_step_s: float
                        ) -> Array:
@@ -255,8 +259,7 @@ def carried_covariance(model: MotionModel, x0: Array, t0: Array, p0: Array | Non
     ``p0`` (N, 6, 6) GCRF; ``pole`` (N, 3, 3)); NaN where the propagation failed, and
     everywhere when ``p0`` is None.
     """
-    idx = np.asarray(index, dtype=np.int64).ravel()
-    tt = np.broadcast_to(np.asarray(t, dtype=float).ravel(), idx.shape)
+    idx, tt = index_and_epochs(index, t)
     if p0 is None:
         return np.full((idx.size, 6, 6), np.nan)
     phi, ok = stm_chain(model, x0, t0, idx, tt, max_step_s, pole)

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ssa_fusion.core.base.types import MotionModel
-from ssa_fusion.core.conjunction.ephemeris import carried_covariance
+from ssa_fusion.core.conjunction.ephemeris import carried_covariance, index_and_epochs
 from ssa_fusion.core.earth.frames import pole_frame
 from ssa_fusion.core.motion.propagation import integrate_chain
 
@@ -231,8 +231,7 @@ class StoreView:
 
     def exact(self, index: ArrayLike, t: ArrayLike) -> Array:
         """States (M, 6) of objects ``index`` at Unix epochs ``t``, GCRF km, km/s."""
-        idx = np.asarray(index, dtype=np.int64).ravel()
-        tt = np.broadcast_to(np.asarray(t, dtype=float).ravel(), idx.shape).copy()
+        idx, tt = index_and_epochs(index, t)
         return self.store.exact(self.rows[idx], tt)
 
     def covariance(self, index: ArrayLike, t: ArrayLike) -> Array:
