@@ -140,7 +140,10 @@ class ConjunctionNode(SsaNode):
     def tick(self) -> bool:
         """Start the re-screening due at the clock; publish a finished one; report the clock.
 
-        A re-screening runs in a thread of its own (the node keeps taking estimates and
+        A re-screening starts only at the first look at a new clock, never later at the same
+        one: in lockstep, what the node took before that clock was published, whatever the
+        estimates of the next step that arrive meanwhile (the same re-screenings on any
+        machine). It runs in a thread of its own (the node keeps taking estimates and
         answering signals meanwhile); the clock reported for lockstep stays at the epoch it
         started from until it is published. Return whether there is work (`SsaNode.wakeup`):
         a re-screening running, or a new clock.
@@ -155,7 +158,8 @@ class ConjunctionNode(SsaNode):
                 update, at = self.done
                 self.done = None
                 self.publish(update, at)
-        elif now_ns and now_ns * 1e-9 >= self.next_s and self.watch.pending:  # /clock runs
+        elif (now_ns and now_ns != before and now_ns * 1e-9 >= self.next_s
+              and self.watch.pending):  # at a new clock only: what was taken before it
             now = now_ns * 1e-9
             self.next_s = now + self.params.number("rescreen_period")
             self.start(self.watch.snapshot(now), now)
