@@ -79,10 +79,22 @@ class Interrupted(BaseException):
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
+_RECEIVED: list[int] = []
+"""The stop signal received, if any (`_interrupt`)."""
+
+
 def _interrupt(signum: int, _frame: object) -> None:
     for sig in _STOP_SIGNALS:  # a second signal must not cut the cleanup short
         signal.signal(sig, signal.SIG_IGN)
+    _RECEIVED.append(signum)
     raise Interrupted(signum)
+
+
+def _stopped(command: str, signum: int) -> int:
+    """Say that `command` was stopped by signal `signum`; return its exit code, 128 + it."""
+    print(f"{command}: stopped by {signal.Signals(signum).name}; every process it started "
+          "was stopped", file=sys.stderr)
+    return 128 + signum
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -94,6 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     limit_blas_threads()  # before build_parser imports the commands, and with them numpy
     # from the first moment: a signal during the imports (a second or two) ends the same way
+    _RECEIVED.clear()
     previous = {sig: signal.signal(sig, _interrupt) for sig in _STOP_SIGNALS}
     command = "ssa-fusion"
     try:
@@ -102,9 +115,14 @@ def main(argv: list[str] | None = None) -> int:
         command = f"ssa-fusion {args.command}"
         return int(args._run(args) or 0)
     except Interrupted as exc:
-        print(f"{command}: stopped by {exc}; every process it started was stopped",
-              file=sys.stderr)
-        return 128 + exc.signum
+        return _stopped(command, exc.signum)
+    except Exception:
+        # raised inside a C extension's call back into Python (rclpy taking a message),
+        # Interrupted comes out as that extension's error (pybind11: "Unable to convert
+        # call argument"): the signal still stopped the command, its cleanup has run
+        if not _RECEIVED:
+            raise
+        return _stopped(command, _RECEIVED[0])
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)

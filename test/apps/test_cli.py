@@ -275,6 +275,36 @@ def test_a_stop_signal_runs_the_commands_cleanup_and_exits_128_plus_its_number(
     assert signal.getsignal(sig) == before  # the handlers are put back
 
 
+def test_a_stop_signal_that_a_c_extension_turned_into_its_own_error_still_stops_cleanly(
+        monkeypatch, capsys):
+    """The signal's exception raised inside rclpy's taking a message comes out as pybind11's
+    RuntimeError ("Unable to convert call argument ..."): still a stop, exit 143; the same
+    error without a signal is an error."""
+    def command(_args) -> int:
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(5.0)
+            return 0
+        except BaseException:  # as pybind11 does with an exception in a conversion
+            raise RuntimeError("Unable to convert call argument '0' to Python object") from None
+
+    def broken(_args) -> int:
+        raise RuntimeError("Unable to convert call argument '0' to Python object")
+
+    for run in (command, broken):
+        parser = type("Parser", (), {
+            "__init__": lambda self, _only=None: None,
+            "parse_args": lambda self, _argv, run=run: argparse.Namespace(command="report",
+                                                                          _run=run)})
+        monkeypatch.setattr(cli, "build_parser", parser)
+        if run is command:
+            assert cli.main(["report", "bag"]) == 128 + signal.SIGTERM
+            assert "stopped by SIGTERM" in capsys.readouterr().err
+        else:
+            with pytest.raises(RuntimeError, match="Unable to convert"):
+                cli.main(["report", "bag"])
+
+
 def _catches(pid: int, sig: int) -> bool:
     """Whether process `pid` has a handler for `sig` (/proc/PID/status SigCgt)."""
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
