@@ -14,6 +14,15 @@ os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 # Every graph a test starts picks a domain of its own; a ROS_DOMAIN_ID exported in the
 # developer's shell (which `ssa-fusion live/replay` would honour) must not pull them together.
 os.environ.pop("ROS_DOMAIN_ID", None)
+# Test processes side by side on one loopback (`pytest -n N`, tools/run_tests.sh) each pick
+# domains from their own part of 1..100, they and every run they start (the environment is
+# inherited): no worker's graph lands in a domain another worker's graph is in.
+_WORKER = os.environ.get("PYTEST_XDIST_WORKER")
+_WORKERS = os.environ.get("PYTEST_XDIST_WORKER_COUNT")
+if _WORKER and _WORKERS:
+    _span = 100 // int(_WORKERS)
+    _first = 1 + int(_WORKER.removeprefix("gw")) * _span
+    os.environ["SSA_FUSION_DOMAINS"] = f"{_first}-{_first + _span - 1}"
 
 # Imported here, before any test: sets the timeout factor (SSA_TEST_TIMEOUT_FACTOR) of every
 # Graph the tests create, also those `ssa-fusion replay` creates inside a test.

@@ -5,7 +5,8 @@ process id picks the same one in every container (each has its own PID 1). So be
 starts any node, its probe joins the domain and looks for participants (`LOOK_S`: discovery
 on this host takes 0.1-3.6 s): with ``--domain-id`` (or ``$ROS_DOMAIN_ID``) a domain in use
 is refused, unless the run is told to share it (it then keeps to its own traffic:
-`ros.run_identity`); without, random domains in 1..`AUTO_MAX` are tried until one is free.
+`ros.run_identity`); without, random domains of `processes.auto_domains` (1..101 unless
+``$SSA_FUSION_DOMAINS`` narrows them) are tried until one is free.
 
 Two runs that start at once see each other's probe: the older (`run_identity.older`: run ids
 begin with their start time) keeps the domain and the younger yields, so exactly one of them
@@ -19,14 +20,11 @@ from collections.abc import Callable
 from pathlib import Path
 
 from ssa_fusion.ros.discovery import LOOPBACK, Discovery
-from ssa_fusion.ros.processes import Graph
+from ssa_fusion.ros.processes import Graph, auto_domains
 from ssa_fusion.ros.run_identity import older, run_of
 
 LOOK_S = 2.0
 """Wall s a run's probe looks for other participants in a domain before it takes it."""
-AUTO_MAX = 101
-"""Free domains are looked for in 1..AUTO_MAX (their ports stay below Linux's ephemeral
-range)."""
 AUTO_TRIES = 20
 """Domains tried before a run without ``--domain-id`` gives up."""
 
@@ -75,12 +73,15 @@ def open_graph(workdir: Path, domain_id: int | None, run: str,
                           "another --domain-id, leave it out for a free one, or "
                           "--share-domain to run beside them")
     rng = rng or random.Random()
-    for domain in rng.sample(range(1, AUTO_MAX + 1), AUTO_TRIES):
+    domains = auto_domains()
+    tries = min(AUTO_TRIES, len(domains))
+    for domain in rng.sample(domains, tries):
         graph = Graph(workdir, domain, discovery, run)
         them = blocking(graph.others(look_s), run)
         if not them:
             return graph
         graph.close()
         say(f"ROS domain {domain} is in use ({_describe(them)}); trying another")
-    raise DomainInUseError(f"no free ROS domain found in {AUTO_TRIES} tries of 1..{AUTO_MAX}; "
+    raise DomainInUseError(f"no free ROS domain found in {tries} tries of "
+                      f"{domains.start}..{domains.stop - 1}; "
                       "name one with --domain-id (and --share-domain to share it)")

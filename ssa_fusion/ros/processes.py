@@ -48,10 +48,34 @@ NODE_BIN = Path(sys.prefix) / "lib" / "ssa_fusion"
 
 _domain_counter = itertools.count()
 
+DOMAINS_ENV = "SSA_FUSION_DOMAINS"
+"""Environment variable: the ROS domain ids a graph or run without a domain of its own picks
+from, ``first-last`` within 1..101 (default ``1-101``; their ports stay below Linux's ephemeral
+range). Processes that run side by side on one loopback (the test suite's workers) give each
+its own part, so that none picks a domain another one's graph is in."""
+
+
+def auto_domains() -> range:
+    """Return the domain ids `fresh_domain_id` and a run's free-domain search pick from.
+
+    `DOMAINS_ENV` (default 1..101); ValueError, naming the variable, when it is malformed.
+    """
+    raw = os.environ.get(DOMAINS_ENV, "").strip() or "1-101"
+    first, sep, last = raw.partition("-")
+    try:
+        lo, hi = int(first), int(last)
+    except ValueError:
+        lo = hi = 0
+    if not sep or not 1 <= lo <= hi <= 101:
+        raise ValueError(f"{DOMAINS_ENV}={raw!r}: give the ROS domain ids to pick from as "
+                         "first-last within 1-101 (e.g. 1-50)")
+    return range(lo, hi + 1)
+
 
 def fresh_domain_id() -> int:
-    """Return a ROS domain id in 1..100 unlikely to be shared with another graph or run."""
-    return 1 + (os.getpid() * 7 + next(_domain_counter)) % 100
+    """Return a ROS domain id of `auto_domains` unlikely to be shared with another graph or run."""
+    domains = auto_domains()
+    return domains[(os.getpid() * 7 + next(_domain_counter)) % len(domains)]
 
 
 def node_command(executable: str) -> list[str]:

@@ -37,6 +37,7 @@ def test_the_live_laser_filter_publishes_what_the_offline_replay_does(tmp_path):
     for a, b in zip(live, off, strict=True):
         assert a.t == b.t
         assert np.abs(a.x[:3] - b.x[:3]).max() < 1e-6  # 1 mm
-        # the propagations' contexts may span other days: round-off apart, the same
-        assert a.nis == pytest.approx(b.nis, rel=1e-4, abs=1e-9)
+        # the propagations' contexts may span other days: round-off apart, the same (a NIS
+        # near 0, 2e-4, differed by 2.5e-8 beside other tests: a residual 1e-6 sigma apart)
+        assert a.nis == pytest.approx(b.nis, rel=1e-4, abs=1e-6)
         np.testing.assert_allclose(a.P, b.P, rtol=1e-4, atol=1e-14)
