@@ -15,7 +15,7 @@ import pytest
 
 from ssa_fusion.core.base.types import Kind, Measurement
 from ssa_fusion.core.gaps import calibration
-from ssa_fusion.core.gaps.calibration import CovarianceScale, scale_estimate
+from ssa_fusion.core.gaps.calibration import CovarianceScale, ScaleRule, scale_estimate
 from ssa_fusion.core.gaps.estimator import EstimatorConfig, measurement_model
 from ssa_fusion.core.od.batch_ls import whitened_predictions
 
@@ -84,10 +84,26 @@ def test_covariance_scale_is_the_median_of_the_last_passes_at_one_horizon():
 def test_covariance_scale_follows_a_power_of_the_horizon():
     """Estimates k = 2 (h / 1 h)^1.5 at 1.5, 3, 12 and 16 h: the factor is that law at any
     horizon (an error growing faster through a gap than the covariance)."""
-    c = CovarianceScale(passes=6, power_law=True)
+    c = CovarianceScale(passes=6, rule=ScaleRule.POWER_LAW)
     for h in (1.5, 3.0, 12.0, 16.0):
         _update(c, 2.0 * h**1.5, 3600.0 * h)
     got = c.factor(3600.0 * np.array([1.0, 6.0, 24.0]))
     assert got == pytest.approx(2.0 * np.array([1.0, 6.0, 24.0]) ** 1.5, rel=1e-6)
-    c.power_law = False  # the default: the median of the estimates at every horizon
+    c.rule = ScaleRule.MEDIAN  # the median of the estimates at every horizon
     assert c.factor([3600.0, 86400.0]) == pytest.approx([2.0 * 6.0**1.5] * 2, rel=1e-6)  # 3, 12 h
+
+
+def test_covariance_scale_at_a_horizon_counts_the_passes_that_saw_that_far():
+    """One radar: short gaps (1.5 h, k 2) between the passes of a day, one long gap (12 h,
+    k 50) a day. The median says 2 everywhere; the long horizons take the long gaps' 50."""
+    c = CovarianceScale(passes=6)
+    assert c.rule is ScaleRule.HORIZON  # the default
+    for h, k in ((1.5, 2.0), (1.5, 2.5), (12.0, 50.0), (1.5, 1.5), (1.5, 2.0), (12.0, 70.0)):
+        _update(c, k, 3600.0 * h)
+    got = c.factor(3600.0 * np.array([0.5, 4.0, 6.0, 20.0, 24.0, 30.0]))
+    # medians of the log estimates: of an even count, the geometric mean of the middle two
+    every, long_ones = np.sqrt(2.0 * 2.5), np.sqrt(50.0 * 70.0)
+    assert got == pytest.approx([every, long_ones, long_ones, long_ones, long_ones,
+                                 long_ones], rel=1e-6)  # 30 h: beyond every pass, the 12 h ones
+    c.rule = ScaleRule.MEDIAN
+    assert c.factor(3600.0 * 20.0) == pytest.approx([every], rel=1e-6)
