@@ -113,6 +113,8 @@ def main(argv: list[str] | None = None) -> int:
         words = sys.argv[1:] if argv is None else argv
         args = build_parser(_command_in(words)).parse_args(words)
         command = f"ssa-fusion {args.command}"
+        if _RECEIVED:  # its Interrupted raised where Python ignores errors (an import's
+            raise Interrupted(_RECEIVED[0])  # module-lock callback) and lost: stop before running
         return int(args._run(args) or 0)
     except Interrupted as exc:
         return _stopped(command, exc.signum)

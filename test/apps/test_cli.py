@@ -6,6 +6,7 @@ import json
 import os
 import signal
 import time
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -303,6 +304,31 @@ def test_a_stop_signal_that_a_c_extension_turned_into_its_own_error_still_stops_
         else:
             with pytest.raises(RuntimeError, match="Unable to convert"):
                 cli.main(["report", "bag"])
+
+
+def test_a_stop_signal_whose_exception_python_ignored_during_the_imports_still_stops(
+        monkeypatch, capsys):
+    """A SIGTERM that lands in importlib's module-lock callback, where Python prints its
+    exception ("Exception ignored in ...") and goes on: the command does not start, exit 143
+    (it ran the whole graph before)."""
+    ran = []
+
+    def parser_whose_imports_swallow_the_signal(_only=None):
+        class Parser:
+            def parse_args(self, _argv):
+                class Module:
+                    pass
+                module = Module()
+                ref = weakref.ref(module, lambda _r: os.kill(os.getpid(), signal.SIGTERM))
+                del module  # the callback runs here; its exception is ignored
+                assert ref() is None
+                return argparse.Namespace(command="live", _run=lambda _a: ran.append(1) or 0)
+        return Parser()
+
+    monkeypatch.setattr(cli, "build_parser", parser_whose_imports_swallow_the_signal)
+    assert cli.main(["live"]) == 128 + signal.SIGTERM
+    assert not ran
+    assert "stopped by SIGTERM" in capsys.readouterr().err
 
 
 def _catches(pid: int, sig: int) -> bool:
