@@ -306,6 +306,7 @@ def test_a_stop_signal_that_a_c_extension_turned_into_its_own_error_still_stops_
                 cli.main(["report", "bag"])
 
 
+@pytest.mark.filterwarnings("ignore::pytest.PytestUnraisableExceptionWarning")
 def test_a_stop_signal_whose_exception_python_ignored_during_the_imports_still_stops(
         monkeypatch, capsys):
     """A SIGTERM that lands in importlib's module-lock callback, where Python prints its
