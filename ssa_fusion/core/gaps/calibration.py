@@ -21,8 +21,8 @@ does: a fit that lacks the tesseral harmonics errs by kilometres after half a da
 little after an orbit, and one radar's passes mostly score one-orbit horizons.
 ``MEDIAN``: the median of the estimates, at every horizon. ``HORIZON`` (the default): at a
 horizon h, the median of the estimates made at horizons of at least `REACH` h (those that
-saw that far); where none did, the median of those at the longest horizon. ``POWER_LAW``: a power
-of the horizon fitted to the estimates, ``log k = a + b log h`` (least squares; b within
+saw that far); where none did, the median of those at the longest horizon. ``POWER_LAW``: a
+power of the horizon fitted to the estimates, ``log k = a + b log h`` (least squares; b within
 [`MIN_POWER`, `MAX_POWER`]) when their horizons span at least a factor `HORIZON_SPREAD`
 (else the median). On tuning seed 1 of iss_radar_columbus with the high-fidelity truth
 (`bench/bench_sky.py`'s case) the live gap fit's median position NEES at gap epochs was
@@ -113,7 +113,6 @@ SCALE_RULE = ScaleRule.HORIZON
 """The rule of a new `CovarianceScale` (read when it is made)."""
 
 
-
 @dataclass
 class CovarianceScale:
     """The factor on a gap forecast's covariance, from the object's last passes.
@@ -151,12 +150,6 @@ class CovarianceScale:
         out: np.ndarray = np.clip(np.exp(a + b * np.log(h)), MIN_SCALE, MAX_SCALE)
         return out
 
-    def _append(self, horizon_s: float, k: float) -> None:
-        if math.isfinite(k):
-            self.estimates.append((float(horizon_s), k))
-            while len(self.estimates) > self.passes:
-                self.estimates.popleft()
-
     def update(self, measurements: Sequence[Measurement], model: MeasurementModel,
                x: ArrayLike, P: ArrayLike, horizon_s: float) -> None:
         """Estimate from a pass's ``measurements`` and the forecast (``x``, ``P``) made before.
@@ -171,7 +164,10 @@ class CovarianceScale:
             k = scale_estimate(*whitened_predictions(measurements, model, xs, Ps))
         except (ValueError, np.linalg.LinAlgError):
             return
-        self._append(horizon_s, k)
+        if math.isfinite(k):
+            self.estimates.append((float(horizon_s), k))
+            while len(self.estimates) > self.passes:
+                self.estimates.popleft()
 
 
 def _horizon_median(hs: np.ndarray, ks: np.ndarray, h: np.ndarray) -> np.ndarray:
