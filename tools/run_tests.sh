@@ -20,18 +20,19 @@ if [[ "${SSA_FUSION_NO_NETNS:-}" == "1" ]] || ! command -v ip >/dev/null 2>&1 ||
 fi
 ip netns del "$probe"
 
-# Each group runs on two pytest workers (pytest-xdist), a test file at a time per worker:
-# a graph test mostly waits on its node processes and the rest is one core's work, so four
-# workers keep 2 cores busy. Workers of one namespace pick their ROS domains from parts of
-# their own (test/conftest.py). The longest files come first, so none starts last.
-XDIST=(-n 2 --dist loadfile)
+# SSA_TEST_WORKERS=N runs each group on N pytest-xdist workers, a test file at a time per
+# worker (default 0: one process per group). With 2, four workers keep 2 cores busy (a fresh
+# clone 10-11 min instead of ~12.5), but graph tests that wait on DDS discovery (a run's
+# 2 s domain probe) failed under that load in 2 of 5 runs. Workers of one namespace pick
+# their ROS domains from parts of their own (test/conftest.py).
+XDIST=(-n "${SSA_TEST_WORKERS:-0}" --dist loadfile)
 log=$(mktemp -d)
 trap 'rm -rf "$log"' EXIT
 # The graphs' group writes to a log, printed when it ends; the rest shows its progress live.
-# One graph test file runs in the rest's group, so that the groups take about as long (side
-# by side on an idle 2-core machine, with test_live_signals, test_multihost_graph and
-# test_unlabelled_graph in the rest: the rest 512 s, the graphs 374 s).
-IN_REST=(test/graph/test_live_signals.py)
+# Three graph test files run in the rest's group, so that the groups take about as long
+# (on an idle 2-core machine the graph tests took ~370 s and the rest ~240 s side by side).
+IN_REST=(test/graph/test_live_signals.py test/graph/test_multihost_graph.py
+         test/graph/test_unlabelled_graph.py)
 GRAPHS=(test/graph/test_faults.py)
 for f in test/graph/test_*.py; do
   [[ "$f" == test/graph/test_faults.py ]] && continue
