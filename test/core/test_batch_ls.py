@@ -164,6 +164,27 @@ def test_noise_free_j2_truth_is_recovered(j2_world: World) -> None:
     assert max(np.abs(r).max() for r in f.residuals) < 1e-9
 
 
+def test_a_window_of_interleaved_kinds_recovers_the_truth(j2_world: World) -> None:
+    """Every third measurement a pair of angles: the fit takes each kind at its own state.
+
+    Two groups of rows (range and angles, angles alone) whose measurements interleave: a
+    group's states are those of its own measurements (a fit that took another's diverged or
+    raised IndexError on a radar network's windows).
+    """
+    w = j2_world
+    meas = w.measurements()
+    radec = MODELS.get(Kind.RA_DEC, "columbus")
+    assert radec is not None
+    mixed = [Measurement(m.t, radec.h(w.x[i], m.t), np.diag([1e-10, 1e-10, 0.0]), Kind.RA_DEC,
+                         frame_id="columbus") if i % 3 == 1 else m for i, m in enumerate(meas)]
+    guess = w.x_epoch + np.array([1.0, -0.5, 0.7, 1e-3, -5e-4, 2e-4])
+    f = bl.fit(mixed, MODELS, guess, w.epoch, bl.BatchOptions(solver=EXACT))
+    assert f.status == bl.FitStatus.CONVERGED, f.reason
+    np.testing.assert_allclose(f.x[:3], w.x_epoch[:3], rtol=0, atol=1e-8)
+    np.testing.assert_allclose(f.x[3:], w.x_epoch[3:], rtol=0, atol=1e-11)
+    assert max(np.abs(r).max() for r in f.residuals) < 1e-9
+
+
 def test_guess_at_another_epoch(j2_world: World) -> None:
     """A first guess at an epoch other than the fit's is propagated there first."""
     w = j2_world

@@ -128,7 +128,7 @@ class FitWindow:
         zp = np.empty((idx.size, len(self.m[idx[0]].z)))
         H = np.empty((idx.size, zp.shape[1], 6))
         for k, i in enumerate(idx):
-            zp[k], H[k] = self.models[i].h_and_H(x[i], float(self.t[i]))
+            zp[k], H[k] = self.models[i].h_and_H(x[k], float(self.t[i]))
         return zp, H, np.zeros((idx.size, zp.shape[1], 0))
 
     def residuals(self, x: Array, G: Array, p: ArrayLike = ()) -> tuple[Array, Array,
