@@ -29,6 +29,7 @@ from ssa_fusion.nodes.kit.progress import RECORDED_ESTIMATES, RECORDED_MEASUREME
 from ssa_fusion.nodes.kit.unlabelled import EVENT_PREFIX, FATE_PREFIX
 from ssa_fusion.params.defaults import CATALOG_FILTER, CATALOG_SURROGATE
 from ssa_fusion.ros import bagio, messages
+from ssa_fusion.ros.cdr_rows import estimate_batch_columns, measurement_batch_rows
 from ssa_fusion.ros.topics import (
     TOPIC_ASSOCIATED,
     TOPIC_DETECTION_TRUTH,
@@ -200,8 +201,15 @@ class _Recorded:
         """Read the bag's batches (with `unlabelled`, the truth and associated rows too)."""
         out = cls()
         topics = [TOPIC_MEASUREMENT_BATCH, TOPIC_ESTIMATE_BATCH]
+        # the measurements counted and the estimates read off their bytes (`cdr_rows`): their
+        # generic decoding took most of a day-long catalog run's summary
         for m in bagio.read_bag(bag, topics=topics + ([TOPIC_DETECTION_TRUTH, TOPIC_ASSOCIATED]
-                                                      if unlabelled else [])):
+                                                      if unlabelled else []),
+                                decoders={TOPIC_MEASUREMENT_BATCH: measurement_batch_rows,
+                                          TOPIC_ESTIMATE_BATCH: estimate_batch_columns}):
+            if m.topic == TOPIC_MEASUREMENT_BATCH:
+                out.rows[m.topic] += m.msg
+                continue
             out.rows[m.topic] += len(m.msg.object_id)
             if m.topic in (TOPIC_DETECTION_TRUTH, TOPIC_ASSOCIATED):
                 out.labelled[m.topic].append(messages.measurement_batch_from_msg(m.msg))

@@ -13,7 +13,7 @@ import errno
 import os
 import sys
 from collections import Counter
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -105,17 +105,12 @@ def qos_from_rclpy(profile: QoSProfile) -> Qos:
         ns = int(d.nanoseconds)
         return QosTime(ns // 1_000_000_000, ns % 1_000_000_000)
 
-    return Qos(
-        history=QosHistory(int(profile.history)),
-        depth=int(profile.depth),
-        reliability=QosReliability(int(profile.reliability)),
-        durability=QosDurability(int(profile.durability)),
-        deadline=t(profile.deadline),
-        lifespan=t(profile.lifespan),
-        liveliness=QosLiveliness(int(profile.liveliness)),
-        liveliness_lease_duration=t(profile.liveliness_lease_duration),
-        avoid_ros_namespace_conventions=bool(profile.avoid_ros_namespace_conventions),
-    )
+    return Qos(history=QosHistory(int(profile.history)), depth=int(profile.depth),
+               reliability=QosReliability(int(profile.reliability)),
+               durability=QosDurability(int(profile.durability)), deadline=t(profile.deadline),
+               lifespan=t(profile.lifespan), liveliness=QosLiveliness(int(profile.liveliness)),
+               liveliness_lease_duration=t(profile.liveliness_lease_duration),
+               avoid_ros_namespace_conventions=bool(profile.avoid_ros_namespace_conventions))
 
 
 def rosbags_classes() -> MsgClasses:
@@ -256,6 +251,10 @@ def set_ros_distro(path: Path, distro: str = ROS_DISTRO) -> None:
     meta.write_text(text)
 
 
+Decoders = Mapping[str, Callable[[bytes], Any]]
+"""Per topic, a function of a message's CDR bytes that stands for its full decoding."""
+
+
 @dataclass
 class BagMessage:
     """One message of a bag: its topic, type ("pkg/msg/Name"), log time (ns), message."""
@@ -267,7 +266,8 @@ class BagMessage:
 
 
 def read_bag(path: Path | str, topics: Iterable[str] | None = None,
-             undecodable: Counter[str] | None = None) -> Iterator[BagMessage]:
+             undecodable: Counter[str] | None = None,
+             decoders: Decoders | None = None) -> Iterator[BagMessage]:
     """Return the messages of a bag in log-time order.
 
     Deserialized with the Kilted + ssa_fusion_msgs typestore. `path` is a rosbag2
@@ -276,6 +276,9 @@ def read_bag(path: Path | str, topics: Iterable[str] | None = None,
     BagError naming topic and type. A message whose bytes do not decode as its type (a
     malformed payload the recorder stored as it arrived) is skipped and counted by topic
     in `undecodable` (when given): one bad message does not make the bag unreadable.
+    `decoders`: per topic, a function of the CDR bytes that replaces the full decoding (e.g.
+    `cdr_rows.measurement_batch_rows`, the rows alone); a ValueError of it counts the
+    message as undecodable.
     """
     path = Path(path)
     if not path.exists():
@@ -286,19 +289,19 @@ def read_bag(path: Path | str, topics: Iterable[str] | None = None,
         _check_mcap_magic(f)
     if path.is_file() and path.suffix == ".mcap":
         if _mcap_finished(path):
-            yield from _read_mcap_file(path, wanted, undecodable)
+            yield from _read_mcap_file(path, wanted, undecodable, decoders)
         else:
-            yield from _recover_mcap_file(path, wanted, undecodable)
+            yield from _recover_mcap_file(path, wanted, undecodable, decoders)
         return
     if not (path / "metadata.yaml").exists():
         # metadata.yaml and the MCAP summary are written at close: a recorder killed
         # (SIGKILL, power loss) leaves neither. Recover what was flushed to the .mcap.
         files = sorted(path.glob("*.mcap")) if path.is_dir() else []
         if not files:
-            raise BagError(
-                f"{path}: not a rosbag2 directory (no metadata.yaml) nor an .mcap file"
-            )
-        recovered = [m for f in files for m in _recover_mcap_file(f, wanted, undecodable)]
+            raise BagError(f"{path}: not a rosbag2 directory (no metadata.yaml) nor an .mcap "
+                           "file")
+        recovered = [m for f in files
+                     for m in _recover_mcap_file(f, wanted, undecodable, decoders)]
         yield from sorted(recovered, key=lambda m: m.t_ns)
         return
     from rosbags.highlevel import AnyReader
@@ -310,7 +313,8 @@ def read_bag(path: Path | str, topics: Iterable[str] | None = None,
                 return
             _check_types(path, [(c.topic, c.msgtype) for c in conns])
             for conn, t_ns, raw in reader.messages(connections=conns):
-                msg = _decode(reader.deserialize, raw, conn.msgtype, conn.topic, undecodable)
+                msg = _decode(reader.deserialize, raw, conn.msgtype, conn.topic, undecodable,
+                              decoders)
                 if msg is not None:
                     yield BagMessage(conn.topic, conn.msgtype, t_ns, msg)
     except BagError:
@@ -328,13 +332,15 @@ def _check_types(path: Path, topic_types: list[tuple[str, str]]) -> None:
 
 
 def _decode(deserialize: Callable[[bytes, str], Message], data: bytes, msgtype: str,
-            topic: str, undecodable: Counter[str] | None) -> Message | None:
+            topic: str, undecodable: Counter[str] | None,
+            decoders: Decoders | None = None) -> Message | None:
     """Return ``deserialize(data, msgtype)``, or None if the bytes are no such message.
 
-    None is counted under `topic` in `undecodable`.
+    `decoders`: as `read_bag`. None is counted under `topic` in `undecodable`.
     """
+    own = decoders.get(topic) if decoders else None
     try:
-        return deserialize(data, msgtype)
+        return own(data) if own is not None else deserialize(data, msgtype)
     except Exception:  # rosbags/CDR raise several unrelated types on malformed bytes
         if undecodable is not None:
             undecodable[topic] += 1
@@ -342,7 +348,8 @@ def _decode(deserialize: Callable[[bytes, str], Message], data: bytes, msgtype: 
 
 
 def _mcap_message(store: Typestore, path: Path, schema: Schema | None, topic: str, data: bytes,
-                  log_time: int, undecodable: Counter[str] | None) -> BagMessage | None:
+                  log_time: int, undecodable: Counter[str] | None,
+                  decoders: Decoders | None = None) -> BagMessage | None:
     """Return one MCAP record of `topic` as a `BagMessage` (None: its bytes do not decode).
 
     `store`: the rosbags type store; `schema`: the record's MCAP schema (None: it has none).
@@ -351,12 +358,13 @@ def _mcap_message(store: Typestore, path: Path, schema: Schema | None, topic: st
     if schema is None or schema.name not in store.fielddefs:
         name = schema.name if schema else "(no schema)"
         raise BagError(f"{path}: topic {topic} has unknown type {name}")
-    msg = _decode(store.deserialize_cdr, data, schema.name, topic, undecodable)
+    msg = _decode(store.deserialize_cdr, data, schema.name, topic, undecodable, decoders)
     return None if msg is None else BagMessage(topic, schema.name, log_time, msg)
 
 
 def _read_mcap_file(path: Path, wanted: set[str] | None,
-                    undecodable: Counter[str] | None = None) -> Iterator[BagMessage]:
+                    undecodable: Counter[str] | None = None,
+                    decoders: Decoders | None = None) -> Iterator[BagMessage]:
     """Return the messages of a bare MCAP file (ROS 2 profile, CDR).
 
     In log-time order via its index when it has one, else in file order.
@@ -373,7 +381,7 @@ def _read_mcap_file(path: Path, wanted: set[str] | None,
                 if channel.message_encoding != "cdr":
                     raise BagError(f"{path}: topic {channel.topic} is not CDR encoded")
                 got = _mcap_message(store, path, schema, channel.topic, message.data,
-                                    message.log_time, undecodable)
+                                    message.log_time, undecodable, decoders)
                 if got is not None:
                     yield got
     except BagError:
@@ -407,7 +415,8 @@ def _mcap_finished(path: Path) -> bool:
 
 
 def _recover_mcap_file(path: Path, wanted: set[str] | None,
-                       undecodable: Counter[str] | None = None) -> Iterator[BagMessage]:
+                       undecodable: Counter[str] | None = None,
+                       decoders: Decoders | None = None) -> Iterator[BagMessage]:
     """Return the messages of an MCAP file its writer never closed, in log-time order.
 
     No summary, no footer, maybe a torn last record or a damaged part: every intact record
@@ -422,7 +431,7 @@ def _recover_mcap_file(path: Path, wanted: set[str] | None,
         if channel is None or (wanted is not None and channel.topic not in wanted):
             continue
         got = _mcap_message(store, path, found.schemas.get(channel.schema_id), channel.topic,
-                            record.data, record.log_time, undecodable)
+                            record.data, record.log_time, undecodable, decoders)
         if got is not None:
             out.append(got)
     out.sort(key=lambda m: m.t_ns)
