@@ -39,20 +39,23 @@ kind, source, frame_id (length, NUL), stamp_ns, z (3), covariance (9), horizon."
 
 
 class _Cursor:
-    """Reads a CDR payload from its start (after the encapsulation header) on."""
+    """Reads a CDR message's fields in order; alignment counts from the encapsulation's end."""
 
     def __init__(self, data: bytes) -> None:
         order = _BYTE_ORDER.get(bytes(data[:2]))
         if order is None:
             raise ValueError(f"not plain CDR (encapsulation {bytes(data[:4])!r})")
-        self.body = bytes(data[_ENCAPSULATION:])
-        self.at = 0
+        self.body = data if isinstance(data, bytes) else bytes(data)  # not copied when bytes
+        self.at = _ENCAPSULATION
         self.end = "<" if order == "little" else ">"
+
+    def _align(self, n: int) -> None:
+        self.at += -(self.at - _ENCAPSULATION) % n
 
     def _need(self, n: int) -> None:
         if self.at + n > len(self.body):
-            raise ValueError(f"payload of {len(self.body)} bytes ends inside a field "
-                             f"(at byte {self.at}, {n} more needed)")
+            raise ValueError(f"payload of {len(self.body) - _ENCAPSULATION} bytes ends inside "
+                             f"a field ({n} bytes needed at byte {self.at - _ENCAPSULATION})")
 
     def u8(self) -> int:
         """Return the next uint8."""
@@ -62,7 +65,7 @@ class _Cursor:
 
     def u32(self) -> int:
         """Return the next uint32 (aligned to 4)."""
-        self.at += -self.at % 4
+        self._align(4)
         self._need(4)
         value: int = struct.unpack_from(self.end + "I", self.body, self.at)[0]
         self.at += 4
@@ -81,8 +84,10 @@ class _Cursor:
         body, fmt, at, size = self.body, self.end + "I", self.at, len(self.body)
         out: list[str] = []
         for _ in range(count):
-            at += -at % 4
-            n = struct.unpack_from(fmt, body, at)[0] if at + 4 <= size else size
+            at += -(at - _ENCAPSULATION) % 4
+            if at + 4 > size:
+                raise ValueError(f"payload ends before string {len(out)} of {count}")
+            n = struct.unpack_from(fmt, body, at)[0]
             at += 4 + n
             if at > size:
                 raise ValueError(f"payload of {size} bytes ends inside string {len(out)} of "
@@ -96,7 +101,7 @@ class _Cursor:
         n = self.u32()
         size = int(code[1:])
         if n:  # no padding before an empty sequence's (absent) first element
-            self.at += -self.at % size
+            self._align(size)
         self._need(n * size)
         out = np.frombuffer(self.body, self.end + code, n, self.at)
         self.at += n * size
@@ -142,20 +147,10 @@ def measurement_batch_rows(data: bytes) -> int:
     ValueError for bytes that are no such message: an unknown encapsulation, a payload
     shorter than its header, or a row count the payload cannot hold.
     """
-    order = _BYTE_ORDER.get(bytes(data[:2]))
-    if order is None:
-        raise ValueError(f"not plain CDR (encapsulation {bytes(data[:4])!r})")
-    body = memoryview(data)[_ENCAPSULATION:]
-
-    def word(at: int) -> int:
-        if at + 4 > len(body):
-            raise ValueError(f"payload of {len(body)} bytes ends inside its header")
-        return int.from_bytes(body[at:at + 4], order)
-
-    frame_len = word(8)  # after stamp.sec and stamp.nanosec
-    at = 12 + frame_len
-    at += -at % 4  # align for key_lo
-    rows = word(at + 8)  # after key_lo and key_hi
-    if rows * MEASUREMENT_ROW_MIN_BYTES > len(body) - at - 12:
-        raise ValueError(f"{rows} rows cannot fit in a payload of {len(body)} bytes")
+    c = _Cursor(data)
+    c.u32(), c.u32(), c.string(), c.u32(), c.u32()  # stamp, frame_id, key_lo, key_hi
+    rows = c.u32()
+    if rows * MEASUREMENT_ROW_MIN_BYTES > len(c.body) - c.at:
+        raise ValueError(f"{rows} rows cannot fit in a payload of "
+                         f"{len(c.body) - _ENCAPSULATION} bytes")
     return rows
