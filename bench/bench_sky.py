@@ -31,8 +31,9 @@ km^2/s^3 replace `batch_gap.GAP_FIT_SNC` / `GAP_FIT_SNC_ANGLES` for the run,
 (``--gap-fit-passes``, ``--gap-fit-span-h``, ``--gap-fit-span-h-angles``,
 ``--gap-fit-max-measurements``, ``--gap-fit-solve-t-span-h``: `batch_gap.GAP_FIT_PASSES`,
 `GAP_FIT_SPAN_H`, `GAP_FIT_SPAN_H_ANGLES`, `GAP_FIT_MAX_MEASUREMENTS`,
-`GAP_FIT_SOLVE_T_SPAN_H`). The evaluation seeds never choose a
-setting.
+`GAP_FIT_SOLVE_T_SPAN_H`) and the calibration of its covariance (``--scale-excess-power``,
+``--scale-min``: `calibration.EXCESS_POWER`, `calibration.MIN_SCALE`). The evaluation seeds
+never choose a setting.
 """
 
 from __future__ import annotations
@@ -50,7 +51,7 @@ from ssa_fusion import limit_blas_threads
 
 limit_blas_threads()
 
-from ssa_fusion.core.gaps import batch_gap  # noqa: E402
+from ssa_fusion.core.gaps import batch_gap, calibration  # noqa: E402
 from ssa_fusion.sim import sky  # noqa: E402
 from ssa_fusion.sim.world import TruthModel  # noqa: E402
 from ssa_fusion.studies import sky_study  # noqa: E402
@@ -166,16 +167,22 @@ def main() -> int:
             ("--gap-fit-span-h-angles", float, "the span (h) of the window of angles only"),
             ("--gap-fit-max-measurements", int, "the most measurements of the gap fit's window"),
             ("--gap-fit-solve-t-span-h", float, "the span (h) from which a ranged gap fit "
-                                                "solves for the along-track acceleration")):
+                                                "solves for the along-track acceleration"),
+            ("--scale-excess-power", float, "the power of the horizon with which the gap "
+                                            "covariance's calibration grows beyond the "
+                                            "horizons its passes saw"),
+            ("--scale-min", float, "the least factor the gap covariance's calibration may "
+                                   "put on the fit's covariance")):
         ap.add_argument(flag, type=kind, default=None, help=f"with --tuning: {what}")
     args = ap.parse_args()
     window = {"GAP_FIT_PASSES": args.gap_fit_passes, "GAP_FIT_SPAN_H": args.gap_fit_span_h,
               "GAP_FIT_SPAN_H_ANGLES": args.gap_fit_span_h_angles,
               "GAP_FIT_MAX_MEASUREMENTS": args.gap_fit_max_measurements,
               "GAP_FIT_SOLVE_T_SPAN_H": args.gap_fit_solve_t_span_h}
-    chosen = (args.gap_fit_snc, args.gap_fit_snc_angles, args.gap_fit_accel, *window.values())
+    chosen = (args.gap_fit_snc, args.gap_fit_snc_angles, args.gap_fit_accel,
+              args.scale_excess_power, args.scale_min, *window.values())
     if any(v is not None for v in chosen) and not args.tuning:
-        ap.error("--gap-fit-* options choose settings: --tuning only")
+        ap.error("--gap-fit-* and --scale-* options choose settings: --tuning only")
     if not 1 <= args.tuning_seeds <= len(TUNING_SEEDS):
         ap.error(f"--tuning-seeds: 1 to {len(TUNING_SEEDS)}")
     for name, value in window.items():
@@ -185,6 +192,10 @@ def main() -> int:
         batch_gap.GAP_FIT = replace(batch_gap.GAP_FIT, snc_psd=(args.gap_fit_snc,) * 3)
     if args.gap_fit_accel is not None:
         batch_gap.GAP_FIT = batch_gap.with_accel_sigma(batch_gap.GAP_FIT, args.gap_fit_accel)
+    if args.scale_excess_power is not None:
+        calibration.EXCESS_POWER = args.scale_excess_power
+    if args.scale_min is not None:
+        calibration.MIN_SCALE = args.scale_min
     if args.gap_fit_snc_angles is not None:
         batch_gap.GAP_FIT_ANGLES = replace(batch_gap.GAP_FIT_ANGLES,
                                            snc_psd=(args.gap_fit_snc_angles,) * 3)

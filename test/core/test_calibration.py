@@ -76,7 +76,8 @@ def test_covariance_scale_is_the_median_of_the_last_passes_at_one_horizon():
     for k in (3.0, 8.0, 1.0, 15.0):
         _update(c, k, 3600.0)
     assert [k for _, k in c.estimates] == pytest.approx([8.0, 1.0, 15.0], rel=1e-6)
-    assert c.factor([600.0, 3600.0, 86400.0]) == pytest.approx([8.0] * 3, rel=1e-6)
+    beyond = 1.0 + 7.0 * 24.0**calibration.EXCESS_POWER  # 24 h: beyond every pass's 1 h
+    assert c.factor([600.0, 3600.0, 86400.0]) == pytest.approx([8.0, 8.0, beyond], rel=1e-6)
     c.update(_positions(X, X[:, :3]), MODEL, np.full_like(X, np.nan), P_UNIT, 3600.0)
     assert len(c.estimates) == 3  # a forecast that failed estimates nothing
 
@@ -95,7 +96,8 @@ def test_covariance_scale_follows_a_power_of_the_horizon():
 
 def test_covariance_scale_at_a_horizon_counts_the_passes_that_saw_that_far():
     """One radar: short gaps (1.5 h, k 2) between the passes of a day, one long gap (12 h,
-    k 50) a day. The median says 2 everywhere; the long horizons take the long gaps' 50."""
+    k 50) a day. The median says 2 everywhere; the long horizons take the long gaps' 50, and
+    beyond 12 h its excess grows (`calibration.EXCESS_POWER`)."""
     c = CovarianceScale(passes=6)
     assert c.rule is ScaleRule.HORIZON  # the default
     for h, k in ((1.5, 2.0), (1.5, 2.5), (12.0, 50.0), (1.5, 1.5), (1.5, 2.0), (12.0, 70.0)):
@@ -103,7 +105,26 @@ def test_covariance_scale_at_a_horizon_counts_the_passes_that_saw_that_far():
     got = c.factor(3600.0 * np.array([0.5, 4.0, 6.0, 20.0, 24.0, 30.0]))
     # medians of the log estimates: of an even count, the geometric mean of the middle two
     every, long_ones = np.sqrt(2.0 * 2.5), np.sqrt(50.0 * 70.0)
-    assert got == pytest.approx([every, long_ones, long_ones, long_ones, long_ones,
-                                 long_ones], rel=1e-6)  # 30 h: beyond every pass, the 12 h ones
+    # 20, 24 and 30 h: beyond every pass's horizon, the excess of the 12 h ones grown
+    grown = (np.array([20.0, 24.0, 30.0]) / 12.0) ** calibration.EXCESS_POWER
+    beyond = 1.0 + (long_ones - 1.0) * grown
+    assert got == pytest.approx([every, long_ones, long_ones, *beyond], rel=1e-6)
     c.rule = ScaleRule.MEDIAN
     assert c.factor(3600.0 * 20.0) == pytest.approx([every], rel=1e-6)
+
+
+def test_covariance_scale_grows_its_excess_beyond_the_horizons_seen(monkeypatch):
+    """Beyond the longest horizon an estimate saw (3 h, k 5 and 7: their median sqrt(35)),
+    the excess over one grows as (h / 3 h)^p; a factor of one stays one (no excess seen)."""
+    monkeypatch.setattr(calibration, "EXCESS_POWER", 2.0)
+    c = CovarianceScale(passes=6)
+    for h, k in ((1.5, 2.0), (3.0, 5.0), (3.0, 7.0)):
+        _update(c, k, 3600.0 * h)
+    got = c.factor(3600.0 * np.array([2.0, 3.0, 6.0, 12.0]))
+    k_l = np.sqrt(35.0)
+    assert got == pytest.approx([k_l, k_l, 1.0 + (k_l - 1.0) * 4.0, 1.0 + (k_l - 1.0) * 16.0],
+                                rel=1e-6)
+    flat = CovarianceScale(passes=6)
+    for h in (1.5, 3.0):
+        _update(flat, 0.0, 3600.0 * h)  # the noise explains the misfit: MIN_SCALE
+    assert flat.factor(3600.0 * np.array([1.0, 24.0])) == pytest.approx([1.0, 1.0])
