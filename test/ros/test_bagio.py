@@ -1,4 +1,5 @@
-"""`bagio.read_bag`'s topic selection on a rosbag2 directory (the sample bag)."""
+"""`bagio`: reading a rosbag2 directory (topic selection, the sample bag) and writing one (a
+full disk, the chunks' zstd level)."""
 
 from pathlib import Path
 
@@ -85,3 +86,32 @@ def test_a_recording_short_of_what_was_heard_is_an_error(tmp_path, capsys):
     assert not recorded_short(bag, {"/ssa/raw": 6}, rows=lambda m: len(m.data))  # 0+2+4 rows
     assert recorded_short(bag, {"/ssa/raw": 7}, rows=lambda m: len(m.data))
     assert "6 recorded of 7" in capsys.readouterr().err
+
+
+def test_chunks_are_zstd_at_the_writers_level(tmp_path):
+    """Every chunk of a written bag is its records compressed by zstd at `ZSTD_LEVEL` (not
+    the library's default 3), and `mcap`'s own reader reads the messages back."""
+    from mcap.reader import make_reader
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+    from rosbags.rosbag2.storage_mcap import zstd
+
+    bag = tmp_path / "bag"
+    writer = bagio.BagWriter(bag)
+    writer.add_topic("/ssa/raw", "std_msgs/msg/String")
+    text = bagio.typestore().types["std_msgs/msg/String"]
+    for k in range(200):
+        writer.write_msg("/ssa/raw", k + 1, text(data=f"object {k % 7} at {k * 0.37:.3f} km"))
+        if k % 50 == 49:
+            writer.flush()
+    writer.close()
+    (path,) = bag.glob("*.mcap")
+    with path.open("rb") as f:
+        chunks = [r for r in StreamReader(f, emit_chunks=True).records if isinstance(r, Chunk)]
+    assert len(chunks) == 4 and all(c.compression == "zstd" for c in chunks)
+    for c in chunks:
+        records = zstd.decompress(c.data)
+        assert c.data == zstd.compress(records, level=bagio.ZSTD_LEVEL)
+        assert c.data != zstd.compress(records)  # the default level's frame differs
+    with path.open("rb") as f:
+        assert sum(1 for _ in make_reader(f).iter_messages()) == 200
