@@ -124,6 +124,7 @@ def test_covariance_scale_grows_its_excess_beyond_the_horizons_seen(monkeypatch)
     k_l = np.sqrt(35.0)
     assert got == pytest.approx([k_l, k_l, 1.0 + (k_l - 1.0) * 4.0, 1.0 + (k_l - 1.0) * 16.0],
                                 rel=1e-6)
+    assert c.factor(1e12)[0] == pytest.approx(1.0 + calibration.MAX_SCALE)  # bounded
     flat = CovarianceScale(passes=6)
     for h in (1.5, 3.0):
         _update(flat, 0.0, 3600.0 * h)  # the noise explains the misfit: MIN_SCALE

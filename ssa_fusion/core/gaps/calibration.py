@@ -23,15 +23,15 @@ the median of the estimates, at every horizon. ``HORIZON`` (the default): at a h
 the median of the estimates made at horizons of at least `REACH` h (those that saw that
 far); beyond the longest horizon h_L that any saw, the median k_L of those at h_L with its
 excess over one grown as a power of the horizon, ``1 + (k_L - 1) (h / h_L)^p``
-(`EXCESS_POWER` p; a factor below one stays as it is): a model error the fit's covariance
-missed at h_L grows on through the gap, and none is made up where the passes showed none.
-``POWER_LAW``: a power of the horizon fitted to the estimates, ``log k = a + b log h``
-(least squares; b within [`MIN_POWER`, `MAX_POWER`]) when their horizons span at least a
-factor `HORIZON_SPREAD` (else the median). On tuning seed 1 of iss_radar_columbus with the
-high-fidelity truth (`bench/bench_sky.py`'s case) the live gap fit's median position NEES at
-gap epochs was 21.1 with the power law, 11.5 with the median (440 uncalibrated): one radar
-sees a long gap's horizon once a day, too seldom for a law. `CovarianceScale.factor` gives
-the factor at any horizon.
+(`EXCESS_POWER` p; at most `MAX_SCALE`; a factor below one stays as it is): a model error
+the fit's covariance missed at h_L grows on through the gap, and none is made up where the
+passes showed none. ``POWER_LAW``: a power of the horizon fitted to the estimates,
+``log k = a + b log h`` (least squares; b within [`MIN_POWER`, `MAX_POWER`]) when their
+horizons span at least a factor `HORIZON_SPREAD` (else the median). On tuning seed 1 of
+iss_radar_columbus with the high-fidelity truth (`bench/bench_sky.py`'s case) the live gap
+fit's median position NEES at gap epochs was 21.1 with the power law, 11.5 with the median
+(440 uncalibrated): one radar sees a long gap's horizon once a day, too seldom for a law.
+`CovarianceScale.factor` gives the factor at any horizon.
 """
 
 from __future__ import annotations
@@ -200,7 +200,8 @@ def _horizon_median(hs: np.ndarray, ks: np.ndarray, h: np.ndarray) -> np.ndarray
     seen = hs[None, :] >= REACH * h[:, None]
     k_l = math.exp(float(np.median(ks[hs == hs.max()])))
     beyond = np.maximum(REACH * h / hs.max(), 1.0) ** EXCESS_POWER
-    out = np.log1p((k_l - 1.0) * beyond) if k_l > 1.0 else np.full(h.shape, math.log(k_l))
+    out = (np.log1p(np.minimum((k_l - 1.0) * beyond, MAX_SCALE)) if k_l > 1.0
+           else np.full(h.shape, math.log(k_l)))
     for pattern in np.unique(seen[seen.any(axis=1)], axis=0):  # few: the sets nest
         rows = (seen == pattern).all(axis=1)
         out[rows] = float(np.median(ks[pattern]))
