@@ -31,8 +31,9 @@ km^2/s^3 replace `batch_gap.GAP_FIT_SNC` / `GAP_FIT_SNC_ANGLES` for the run,
 (``--gap-fit-passes``, ``--gap-fit-span-h``, ``--gap-fit-span-h-angles``,
 ``--gap-fit-max-measurements``, ``--gap-fit-solve-t-span-h``: `batch_gap.GAP_FIT_PASSES`,
 `GAP_FIT_SPAN_H`, `GAP_FIT_SPAN_H_ANGLES`, `GAP_FIT_MAX_MEASUREMENTS`,
-`GAP_FIT_SOLVE_T_SPAN_H`) and the calibration of its covariance (``--scale-excess-power``,
-``--scale-min``: `calibration.EXCESS_POWER`, `calibration.MIN_SCALE`). The evaluation seeds
+`GAP_FIT_SOLVE_T_SPAN_H`) and the calibration of its covariance (``--gap-fit-scored-fits``,
+``--scale-excess-power``, ``--scale-min``: `batch_gap.GAP_FIT_SCORED_FITS`,
+`calibration.EXCESS_POWER`, `calibration.MIN_SCALE`). The evaluation seeds
 never choose a setting.
 """
 
@@ -168,6 +169,8 @@ def main() -> int:
             ("--gap-fit-max-measurements", int, "the most measurements of the gap fit's window"),
             ("--gap-fit-solve-t-span-h", float, "the span (h) from which a ranged gap fit "
                                                 "solves for the along-track acceleration"),
+            ("--gap-fit-scored-fits", int, "how many of the last gap fits the calibration "
+                                           "scores on each pass"),
             ("--scale-excess-power", float, "the power of the horizon with which the gap "
                                             "covariance's calibration grows beyond the "
                                             "horizons its passes saw"),
@@ -178,7 +181,8 @@ def main() -> int:
     window = {"GAP_FIT_PASSES": args.gap_fit_passes, "GAP_FIT_SPAN_H": args.gap_fit_span_h,
               "GAP_FIT_SPAN_H_ANGLES": args.gap_fit_span_h_angles,
               "GAP_FIT_MAX_MEASUREMENTS": args.gap_fit_max_measurements,
-              "GAP_FIT_SOLVE_T_SPAN_H": args.gap_fit_solve_t_span_h}
+              "GAP_FIT_SOLVE_T_SPAN_H": args.gap_fit_solve_t_span_h,
+              "GAP_FIT_SCORED_FITS": args.gap_fit_scored_fits}
     chosen = (args.gap_fit_snc, args.gap_fit_snc_angles, args.gap_fit_accel,
               args.scale_excess_power, args.scale_min, *window.values())
     if any(v is not None for v in chosen) and not args.tuning:

@@ -242,3 +242,16 @@ def test_the_covariance_published_is_the_fit_s_times_the_calibrated_factor(pushe
     xs, Ps = f.fit.predict(t_gap)
     np.testing.assert_allclose(x, xs, rtol=0, atol=1e-9)
     np.testing.assert_allclose(P, Ps * k[:, None, None], rtol=1e-12, atol=0)
+
+
+def test_each_pass_scores_the_last_fits_at_their_own_horizons(pushed):
+    """The calibration scores the last `batch_gap.GAP_FIT_SCORED_FITS` fits on each pass: the
+    last pass's estimates are at the horizons from each fit's epoch to the pass's mean epoch,
+    so they differ by the spans between the fits' epochs (the two fits kept in ``older``)."""
+    f = pushed["fit"][4]
+    assert f.scored_fits == 3 and len(f.older) == 2
+    (t_b, _), (t_c, _) = f.older
+    h = [a for a, _ in f.scale.estimates][-3:]
+    assert h[0] > h[1] > h[2] > 0.0
+    assert h[1] - h[2] == pytest.approx(t_c - t_b, abs=1e-6)
+    assert len(f.scale.estimates) == f.scale.passes == 18  # six passes' worth

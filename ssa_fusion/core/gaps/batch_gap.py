@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ssa_fusion.core.base.types import Kind, Measurement
 from ssa_fusion.core.earth.timescales import DAY_S
-from ssa_fusion.core.gaps.calibration import CovarianceScale
+from ssa_fusion.core.gaps.calibration import SCALE_PASSES, CovarianceScale
 from ssa_fusion.core.measure.measurement import MeasurementModel
 from ssa_fusion.core.measure.pass_windows import PASS_BREAK_S, passes, window_start
 from ssa_fusion.core.motion.force_model import ForceModel
@@ -187,6 +187,16 @@ before the calibration, `calibration`, widened it; 440 without). With the SGP4 t
 model error is far smaller, 5e-9 was right (median NEES 1.48 / 2.18): the setting is that
 of the world the filter runs in. The fit's state does not depend on it."""
 
+GAP_FIT_SCORED_FITS = 3
+"""How many of the last fits the calibration scores on each pass (`BatchGapForecaster`):
+the last one at one gap's horizon, the ones before at two and three. One radar's first
+passes, an orbit apart, then score horizons of several hours before its first long gap,
+and beyond them the excess grows less far (`calibration.EXCESS_POWER`). On the tuning runs
+with the high-fidelity truth (`bench/bench_sky.py --gaps-only --tuning`, seeds 1-3 x start
+0/8/16 h; median over runs of `batch_init`'s median position NEES at gap epochs / its
+coverage of chi2(3)'s 95 % bound): one radar 2.83 / 65.6 % with 1, 2.33 / 68.2 % with 3;
+the network 1.97 / 66.9 % and 2.33 / 69.8 %."""
+
 GAP_FIT_SOLVE_T_SPAN_H = math.inf
 """Hours a ranged window must span (first to last measurement) for its fit to solve for the
 constant along-track acceleration ``accel_t`` (a priori `GAP_FIT_ACCEL_SIGMA`) beside the
@@ -280,7 +290,10 @@ class BatchGapForecaster:
     any epoch t, the first measurement of the next pass. ``options``: the fit's (None:
     `gap_fit_options` of each window); ``cpu_s``: the process CPU time its fits and their
     tabulations took, s. With ``calibrate`` the covariances published are the fit's times
-    ``scale``'s factor, measured on the object's own last passes (`calibration`).
+    ``scale``'s factor, measured on the object's own last passes (`calibration`): each pass
+    scores the last ``scored_fits`` fits (``older``: the ones before the last, with the
+    epochs of their passes' ends), and ``scale`` keeps the estimates of `SCALE_PASSES`
+    passes.
     """
 
     model: MeasurementModel
@@ -301,7 +314,10 @@ class BatchGapForecaster:
     options: BatchOptions | None = None
     cpu_s: float = 0.0
     calibrate: bool = True
-    scale: CovarianceScale = field(default_factory=CovarianceScale)
+    scored_fits: int = field(default_factory=lambda: GAP_FIT_SCORED_FITS)
+    older: list[tuple[float, BatchFit]] = field(default_factory=list)
+    scale: CovarianceScale = field(default_factory=lambda: CovarianceScale(
+        passes=SCALE_PASSES * GAP_FIT_SCORED_FITS))
 
     @property
     def rule(self) -> GapWindow:
@@ -384,23 +400,24 @@ class BatchGapForecaster:
                               if np.isfinite(xs[i]).all() and np.isfinite(Ps[i]).all()}
             self.cpu_s += time.process_time() - cpu
 
-    def _published_prediction(self, t: Array) -> tuple[Array, Array] | None:
-        """Return the last fit's unscaled forecast at epochs ``t`` (None: no fit)."""
-        if self.fit is None:
-            return None
-        return self.fit.predict(t)
-
     def _calibrate(self, before: float, t_end: float) -> None:
-        """Score the forecast published at ``before`` on the pass that ended at ``t_end``."""
+        """Score the last ``scored_fits`` fits on the pass that ended at ``t_end``.
+
+        The last fit was published at ``before``, the ones before it (``older``) at their
+        own passes' ends: each is scored at its horizon, from there to the pass's mean epoch.
+        """
         if not self.calibrate:
             return
         ms = [m for m in self.window if before < m.t <= t_end]
-        if not ms:
-            return
-        try:
-            got = self._published_prediction(np.array([m.t for m in ms]))
-        except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError):
-            return
-        if got is not None:
-            self.scale.update(ms, self.model, *got,
-                              horizon_s=float(np.mean([m.t for m in ms])) - before)
+        t = np.array([m.t for m in ms])
+        for t_fit, fit in [*self.older, (before, self.fit)] if ms else []:
+            if fit is None:
+                continue
+            try:
+                x, P = fit.predict(t)
+            except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError):
+                continue
+            self.scale.update(ms, self.model, x, P, horizon_s=float(t.mean()) - t_fit)
+        if self.fit is not None:
+            self.older.append((before, self.fit))
+            del self.older[:max(len(self.older) - (self.scored_fits - 1), 0)]
