@@ -178,28 +178,28 @@ def main() -> int:
                                    "put on the fit's covariance")):
         ap.add_argument(flag, type=kind, default=None, help=f"with --tuning: {what}")
     args = ap.parse_args()
-    window = {"GAP_FIT_PASSES": args.gap_fit_passes, "GAP_FIT_SPAN_H": args.gap_fit_span_h,
-              "GAP_FIT_SPAN_H_ANGLES": args.gap_fit_span_h_angles,
-              "GAP_FIT_MAX_MEASUREMENTS": args.gap_fit_max_measurements,
-              "GAP_FIT_SOLVE_T_SPAN_H": args.gap_fit_solve_t_span_h,
-              "GAP_FIT_SCORED_FITS": args.gap_fit_scored_fits}
+    constants = {  # module constants a tuning run replaces, read where they are used
+        (batch_gap, "GAP_FIT_PASSES"): args.gap_fit_passes,
+        (batch_gap, "GAP_FIT_SPAN_H"): args.gap_fit_span_h,
+        (batch_gap, "GAP_FIT_SPAN_H_ANGLES"): args.gap_fit_span_h_angles,
+        (batch_gap, "GAP_FIT_MAX_MEASUREMENTS"): args.gap_fit_max_measurements,
+        (batch_gap, "GAP_FIT_SOLVE_T_SPAN_H"): args.gap_fit_solve_t_span_h,
+        (batch_gap, "GAP_FIT_SCORED_FITS"): args.gap_fit_scored_fits,
+        (calibration, "EXCESS_POWER"): args.scale_excess_power,
+        (calibration, "MIN_SCALE"): args.scale_min}
     chosen = (args.gap_fit_snc, args.gap_fit_snc_angles, args.gap_fit_accel,
-              args.scale_excess_power, args.scale_min, *window.values())
+              *constants.values())
     if any(v is not None for v in chosen) and not args.tuning:
         ap.error("--gap-fit-* and --scale-* options choose settings: --tuning only")
     if not 1 <= args.tuning_seeds <= len(TUNING_SEEDS):
         ap.error(f"--tuning-seeds: 1 to {len(TUNING_SEEDS)}")
-    for name, value in window.items():
+    for (module, name), value in constants.items():
         if value is not None:
-            setattr(batch_gap, name, value)
+            setattr(module, name, value)
     if args.gap_fit_snc is not None:  # the worker processes are forked: they inherit it
         batch_gap.GAP_FIT = replace(batch_gap.GAP_FIT, snc_psd=(args.gap_fit_snc,) * 3)
     if args.gap_fit_accel is not None:
         batch_gap.GAP_FIT = batch_gap.with_accel_sigma(batch_gap.GAP_FIT, args.gap_fit_accel)
-    if args.scale_excess_power is not None:
-        calibration.EXCESS_POWER = args.scale_excess_power
-    if args.scale_min is not None:
-        calibration.MIN_SCALE = args.scale_min
     if args.gap_fit_snc_angles is not None:
         batch_gap.GAP_FIT_ANGLES = replace(batch_gap.GAP_FIT_ANGLES,
                                            snc_psd=(args.gap_fit_snc_angles,) * 3)

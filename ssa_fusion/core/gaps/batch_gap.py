@@ -410,9 +410,8 @@ class BatchGapForecaster:
             return
         ms = [m for m in self.window if before < m.t <= t_end]
         t = np.array([m.t for m in ms])
-        for t_fit, fit in [*self.older, (before, self.fit)] if ms else []:
-            if fit is None:
-                continue
+        scored = [*self.older, (before, self.fit)] if ms else []
+        for t_fit, fit in [(a, f) for a, f in scored if f is not None]:
             try:
                 x, P = fit.predict(t)
             except (ValueError, RuntimeError, ArithmeticError, np.linalg.LinAlgError):
